@@ -1,0 +1,45 @@
+# beaconloc — top-level build.
+#   make            build the library and the bridge daemon
+#   make test       install what is missing, then run every test suite
+#   make demo       live run: simulator -> vcan0 -> bridge -> MAVLink
+# Each part keeps its own rules in a fragment included below; a fragment adds
+# its test targets to UNIT_TESTS / PY_TESTS so `make test` picks them up.
+
+BUILD   ?= build
+VENV    ?= .venv
+PY      := $(CURDIR)/$(VENV)/bin/python
+PYTEST  := $(PY) -m pytest
+SETUP_STAMP := $(VENV)/.beaconloc-setup
+
+CC      ?= gcc
+CXX     ?= g++
+
+.DEFAULT_GOAL := all
+.PHONY: all setup test test-unit test-py test-integration demo clean \
+        bench-speed bench-accuracy
+
+UNIT_TESTS :=
+PY_TESTS   :=
+
+# Installs Debian packages and the .venv (idempotent; quick when done).
+setup: $(SETUP_STAMP)
+$(SETUP_STAMP): .ci/setup .ci/requirements.txt hw_sim/pyproject.toml
+	bash .ci/setup
+
+# Fragments: lib/*.mk, bridge/*.mk, hw_sim/*.mk, tests/*/*.mk (alphabetical).
+include $(sort $(wildcard lib/*.mk)) $(sort $(wildcard bridge/*.mk)) \
+        $(sort $(wildcard hw_sim/*.mk)) $(sort $(wildcard tests/*/*.mk))
+
+all: $(ALL_TARGETS)
+
+test-unit: $(UNIT_TESTS)
+test-py: $(PY_TESTS)
+
+test: setup
+	$(MAKE) all
+	$(MAKE) test-unit
+	$(MAKE) test-py
+	$(MAKE) test-integration
+
+clean:
+	rm -rf $(BUILD)

@@ -1,0 +1,1 @@
+"""beaconloc hardware simulator."""

@@ -1,0 +1,69 @@
+/*
+ * beaconloc — common types of the public C API.
+ *
+ * Conventions for every bl_* function:
+ *   - The caller owns every struct; the library never allocates and never
+ *     reads a clock. Absolute times are int64 microseconds (`_us`) on one
+ *     monotonic timebase chosen by the caller.
+ *   - A fallible call returns BL_OK (0) or a negative bl_error code; on any
+ *     error the objects passed in are left exactly as they were.
+ *   - Bad *data* that is well-formed (an echo, an outlier) is not an error:
+ *     it is counted and reported through status fields.
+ *   - Units are in names: _m metres, _s seconds, _us microseconds, _rad
+ *     radians, _mps metres per second.
+ */
+#ifndef BEACONLOC_COMMON_H
+#define BEACONLOC_COMMON_H
+
+#include <stdint.h>
+#include <stdbool.h>
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Scalar type of the estimator, chosen at build time: define BL_USE_FLOAT=1
+ * for float32 (firmware without a double-precision FPU), default double. */
+#if defined(BL_USE_FLOAT) && BL_USE_FLOAT
+typedef float bl_real;
+#else
+typedef double bl_real;
+#endif
+
+/* Compile-time capacities (sizes of the caller-owned structs). */
+#ifndef BL_MAX_BEACONS
+#define BL_MAX_BEACONS 16
+#endif
+#ifndef BL_MAX_RECEIVERS
+#define BL_MAX_RECEIVERS 16
+#endif
+
+/* Error codes: every fallible call returns BL_OK or one of these. */
+typedef enum bl_error {
+    BL_OK = 0,
+    BL_EINVAL = -1,       /* NULL pointer, NaN/inf, or out-of-range argument */
+    BL_ECONFIG = -2,      /* configuration inconsistent (see bl_config_check) */
+    BL_ETIME = -3,        /* time went backwards or jumped beyond the limit */
+    BL_EBEACON = -4,      /* unknown beacon id */
+    BL_ENOTINIT = -5,     /* object not initialised, or estimate not available yet */
+    BL_EDEGENERATE = -6,  /* geometry cannot determine the solution (collinear, too few) */
+    BL_ENOCONVERGE = -7,  /* iteration did not converge within its limit */
+    BL_EFULL = -8         /* a fixed-capacity buffer is full */
+} bl_error;
+
+/* Short English text for an error code (static storage, never NULL). */
+const char *bl_strerror(int err);
+
+/* A beacon at a surveyed position in the site frame. */
+typedef struct bl_beacon {
+    bl_real x_m;
+    bl_real y_m;
+    bl_real z_m;
+} bl_beacon;
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* BEACONLOC_COMMON_H */
