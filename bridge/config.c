@@ -1,0 +1,461 @@
+/*
+ * beaconloc-bridge — site file and daemon settings (libinih).
+ */
+#include "config.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+#include <ini.h>
+
+#include "log.h"
+
+enum key_type { K_INT, K_REAL, K_STR, K_LOGLEVEL, K_ENDPOINT, K_IFNAME };
+
+struct key_desc {
+    const char *section; /* "beaconN" for the per-beacon sections */
+    const char *key;
+    enum key_type type;
+    size_t offset;       /* in struct bridge_config (or config_beacon) */
+    size_t size;         /* string capacity */
+    double min, max;     /* inclusive range for numbers */
+    bool min_open;       /* min excluded */
+};
+
+#define OFF(f) offsetof(struct bridge_config, f)
+#define BOFF(f) offsetof(struct config_beacon, f)
+#define NUM(sec, k, t, f, lo, hi, open) { sec, k, t, OFF(f), 0, lo, hi, open }
+#define STR(sec, k, t, f) { sec, k, t, OFF(f), sizeof(((struct bridge_config *)0)->f), 0, 0, false }
+
+static const struct key_desc keys[] = {
+    NUM("beacons", "count", K_INT, beacon_count, 1, CONFIG_MAX_BEACONS, false),
+    NUM("beacons", "period_s", K_REAL, period_s, 0, 10, true),
+    NUM("beacons", "double_pulse_spacing_s", K_REAL, double_pulse_spacing_s, 0, 1, true),
+    NUM("beacons", "burst_length_s", K_REAL, burst_length_s, 0, 1, true),
+    { "beaconN", "x_m", K_REAL, BOFF(x_m), 0, -1e4, 1e4, false },
+    { "beaconN", "y_m", K_REAL, BOFF(y_m), 0, -1e4, 1e4, false },
+    { "beaconN", "z_m", K_REAL, BOFF(z_m), 0, -1e4, 1e4, false },
+    NUM("receivers", "count", K_INT, receiver_count, 1, CONFIG_MAX_RECEIVERS, false),
+    NUM("receivers", "ring_radius_m", K_REAL, ring_radius_m, 0, 10, false),
+    NUM("receivers", "first_angle_deg", K_REAL, first_angle_deg, -360, 360, false),
+    NUM("receivers", "height_m", K_REAL, receiver_height_m, -1e4, 1e4, false),
+    NUM("receivers", "beamwidth_deg", K_REAL, beamwidth_deg, 0, 360, true),
+    NUM("robot", "wheel_base_m", K_REAL, wheel_base_m, 0, 100, true),
+    NUM("robot", "wheel_radius_m", K_REAL, wheel_radius_m, 0, 100, true),
+    NUM("robot", "ticks_per_rev", K_INT, ticks_per_rev, 1, 1000000, false),
+    NUM("robot", "encoder_rate_hz", K_REAL, encoder_rate_hz, 0, 100000, true),
+    NUM("noise", "sigma_arrival_s", K_REAL, sigma_arrival_s, 0, 1, true),
+    NUM("noise", "sigma_wheel_per_m", K_REAL, sigma_wheel_per_m, 0, 10, false),
+    NUM("noise", "speed_of_sound_mps", K_REAL, speed_of_sound_mps, 200, 500, false),
+    NUM("noise", "sigma_speed_of_sound_mps", K_REAL, sigma_speed_of_sound_mps, 0, 100, false),
+    NUM("noise", "gate_sigma", K_REAL, gate_sigma, 0, 1000, true),
+    STR("bridge", "can_interface", K_IFNAME, can_interface),
+    STR("bridge", "mavlink", K_ENDPOINT, mavlink),
+    NUM("bridge", "odometry_rate_hz", K_REAL, odometry_rate_hz, 0, 1000, true),
+    NUM("bridge", "system_id", K_INT, system_id, 1, 255, false),
+    NUM("bridge", "component_id", K_INT, component_id, 1, 255, false),
+    STR("bridge", "log_level", K_LOGLEVEL, log_level),
+    NUM("bridge", "status_interval_s", K_REAL, status_interval_s, 0, 86400, false),
+    NUM("bridge", "beacon_lost_s", K_REAL, beacon_lost_s, 0, 3600, true),
+    NUM("bridge", "echo_storm_ratio", K_REAL, echo_storm_ratio, 0, 1, true),
+};
+#define NKEYS (sizeof keys / sizeof keys[0])
+
+void config_defaults(struct bridge_config *cfg)
+{
+    memset(cfg, 0, sizeof *cfg);
+    cfg->beacon_count = 0;
+    cfg->period_s = 0.150;
+    cfg->double_pulse_spacing_s = 0.003;
+    cfg->burst_length_s = 0.0025;
+    cfg->receiver_count = 8;
+    cfg->ring_radius_m = 0.10;
+    cfg->first_angle_deg = 0.0;
+    cfg->receiver_height_m = 1.0;
+    cfg->beamwidth_deg = 90.0;
+    cfg->wheel_base_m = 0.50;
+    cfg->wheel_radius_m = 0.10;
+    cfg->ticks_per_rev = 4096;
+    cfg->encoder_rate_hz = 100;
+    cfg->sigma_arrival_s = 0.0002;
+    cfg->sigma_wheel_per_m = 0.01;
+    cfg->speed_of_sound_mps = 343.0;
+    cfg->sigma_speed_of_sound_mps = 5.0;
+    cfg->gate_sigma = 3.0;
+    snprintf(cfg->can_interface, sizeof cfg->can_interface, "vcan0");
+    snprintf(cfg->mavlink, sizeof cfg->mavlink, "udpout:127.0.0.1:14550");
+    cfg->odometry_rate_hz = 30;
+    cfg->system_id = 1;
+    cfg->component_id = 197;
+    snprintf(cfg->log_level, sizeof cfg->log_level, "info");
+    cfg->status_interval_s = 10;
+    cfg->beacon_lost_s = 2.0;
+    cfg->echo_storm_ratio = 0.3;
+}
+
+/* ---- parsing ---------------------------------------------------------- */
+
+struct parse_ctx {
+    struct bridge_config *cfg;
+    const char *path;
+    FILE *file;
+    int line;                        /* current line (counted by reader) */
+    int key_line[NKEYS];             /* line where a key was set, 0 = not */
+    int beacon_line[CONFIG_MAX_BEACONS]; /* first line of [beaconN] keys */
+    bool beacon_seen[CONFIG_MAX_BEACONS];
+    bool beacon_key_seen[CONFIG_MAX_BEACONS][3];
+    char *err;
+    size_t errlen;
+    bool failed;
+};
+
+static void fail(struct parse_ctx *ctx, int line, const char *section,
+                 const char *key, const char *fmt, ...)
+    __attribute__((format(printf, 5, 6)));
+
+static void fail(struct parse_ctx *ctx, int line, const char *section,
+                 const char *key, const char *fmt, ...)
+{
+    if (ctx->failed)
+        return; /* keep the first error */
+    ctx->failed = true;
+    char why[256];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(why, sizeof why, fmt, ap);
+    va_end(ap);
+    if (line > 0)
+        snprintf(ctx->err, ctx->errlen, "%s:%d: [%s] %s: %s", ctx->path, line,
+                 section, key, why);
+    else
+        snprintf(ctx->err, ctx->errlen, "%s: [%s] %s: %s", ctx->path, section,
+                 key, why);
+}
+
+/* "beacon<N>" with N a positive decimal: returns N, else 0. */
+static int beacon_section_number(const char *section)
+{
+    if (strncasecmp(section, "beacon", 6) != 0)
+        return 0;
+    const char *p = section + 6;
+    if (*p < '1' || *p > '9')
+        return 0;
+    char *end;
+    long n = strtol(p, &end, 10);
+    if (*end != '\0' || n > 1000000)
+        return 0;
+    return (int)n;
+}
+
+static bool our_section(const char *section)
+{
+    static const char *const ours[] = { "beacons", "receivers", "robot",
+                                        "noise", "bridge" };
+    for (size_t i = 0; i < sizeof ours / sizeof ours[0]; i++)
+        if (!strcasecmp(section, ours[i]))
+            return true;
+    return beacon_section_number(section) > 0;
+}
+
+static int parse_real(const char *s, double *out)
+{
+    char *end;
+    errno = 0;
+    double v = strtod(s, &end);
+    if (end == s || *end != '\0' || errno == ERANGE || !isfinite(v))
+        return -1;
+    *out = v;
+    return 0;
+}
+
+static int parse_long(const char *s, long *out)
+{
+    char *end;
+    errno = 0;
+    long v = strtol(s, &end, 10);
+    if (end == s || *end != '\0' || errno == ERANGE)
+        return -1;
+    *out = v;
+    return 0;
+}
+
+static bool endpoint_valid(const char *s)
+{
+    return !strncmp(s, "udpout:", 7) || !strncmp(s, "udpin:", 6) ||
+           !strncmp(s, "serial:", 7);
+}
+
+static int set_value(struct parse_ctx *ctx, const struct key_desc *d,
+                     void *base, const char *section, const char *value)
+{
+    char *field = (char *)base + d->offset;
+    switch (d->type) {
+    case K_INT: {
+        long v;
+        if (parse_long(value, &v) != 0) {
+            fail(ctx, ctx->line, section, d->key, "not an integer: '%s'", value);
+            return -1;
+        }
+        if ((double)v < d->min || (double)v > d->max) {
+            fail(ctx, ctx->line, section, d->key, "%ld out of range %g..%g", v,
+                 d->min, d->max);
+            return -1;
+        }
+        *(int *)(void *)field = (int)v;
+        return 0;
+    }
+    case K_REAL: {
+        double v;
+        if (parse_real(value, &v) != 0) {
+            fail(ctx, ctx->line, section, d->key, "not a number: '%s'", value);
+            return -1;
+        }
+        if ((d->min_open ? v <= d->min : v < d->min) || v > d->max) {
+            fail(ctx, ctx->line, section, d->key, "%g out of range %s%g..%g]",
+                 v, d->min_open ? "(" : "[", d->min, d->max);
+            return -1;
+        }
+        *(double *)(void *)field = v;
+        return 0;
+    }
+    case K_LOGLEVEL: {
+        enum log_level lv;
+        if (log_level_parse(value, &lv) != 0) {
+            fail(ctx, ctx->line, section, d->key,
+                 "unknown level '%s' (error, warning, info, debug)", value);
+            return -1;
+        }
+        break;
+    }
+    case K_ENDPOINT:
+        if (!endpoint_valid(value)) {
+            fail(ctx, ctx->line, section, d->key,
+                 "'%s' is not udpout:HOST:PORT, udpin:HOST:PORT or "
+                 "serial:DEVICE:BAUD", value);
+            return -1;
+        }
+        break;
+    case K_IFNAME:
+        if (value[0] == '\0' || strlen(value) >= 16 || strchr(value, '/') ||
+            strchr(value, ' ')) {
+            fail(ctx, ctx->line, section, d->key,
+                 "'%s' is not a network interface name", value);
+            return -1;
+        }
+        break;
+    case K_STR:
+        break;
+    }
+    if (strlen(value) >= d->size) {
+        fail(ctx, ctx->line, section, d->key, "longer than %zu characters",
+             d->size - 1);
+        return -1;
+    }
+    memcpy(field, value, strlen(value) + 1);
+    return 0;
+}
+
+static int handler(void *user, const char *section, const char *name,
+                   const char *value)
+{
+    struct parse_ctx *ctx = user;
+    if (ctx->failed)
+        return 1; /* only the first error is reported */
+    if (!our_section(section))
+        return 1; /* the simulator's ([site], [scenario], ...) */
+    int beacon = beacon_section_number(section);
+    if (beacon > CONFIG_MAX_BEACONS) {
+        fail(ctx, ctx->line, section, name,
+             "beacon number %d above the maximum %d", beacon,
+             CONFIG_MAX_BEACONS);
+        return 0;
+    }
+    for (size_t i = 0; i < NKEYS; i++) {
+        const struct key_desc *d = &keys[i];
+        bool sec_match = beacon ? !strcmp(d->section, "beaconN")
+                                : !strcasecmp(d->section, section);
+        if (!sec_match || strcasecmp(d->key, name))
+            continue;
+        if (beacon) {
+            int kidx = (int)(i - 4); /* x, y, z follow [beacons] keys */
+            int b = beacon - 1;
+            if (ctx->beacon_key_seen[b][kidx]) {
+                fail(ctx, ctx->line, section, name, "given twice");
+                return 0;
+            }
+            if (set_value(ctx, d, &ctx->cfg->beacon[b], section, value))
+                return 0;
+            ctx->beacon_key_seen[b][kidx] = true;
+            if (!ctx->beacon_seen[b])
+                ctx->beacon_line[b] = ctx->line;
+            ctx->beacon_seen[b] = true;
+            bool *set = kidx == 0 ? &ctx->cfg->beacon[b].set_x
+                      : kidx == 1 ? &ctx->cfg->beacon[b].set_y
+                                  : &ctx->cfg->beacon[b].set_z;
+            *set = true;
+            return 1;
+        }
+        if (ctx->key_line[i]) {
+            fail(ctx, ctx->line, section, name, "given twice (first on line %d)",
+                 ctx->key_line[i]);
+            return 0;
+        }
+        if (set_value(ctx, d, ctx->cfg, section, value))
+            return 0;
+        ctx->key_line[i] = ctx->line;
+        return 1;
+    }
+    fail(ctx, ctx->line, section, name, "unknown key");
+    return 0;
+}
+
+static char *line_reader(char *str, int num, void *stream)
+{
+    struct parse_ctx *ctx = stream;
+    char *r = fgets(str, num, ctx->file);
+    if (r)
+        ctx->line++;
+    return r;
+}
+
+static const struct key_desc *find_key(const char *section, const char *key,
+                                       size_t *index)
+{
+    for (size_t i = 0; i < NKEYS; i++)
+        if (!strcmp(keys[i].section, section) && !strcmp(keys[i].key, key)) {
+            *index = i;
+            return &keys[i];
+        }
+    return NULL;
+}
+
+/* Check with line numbers when ctx is given. */
+static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
+{
+    size_t ki = 0;
+    int count_line = 0;
+    if (find_key("beacons", "count", &ki) && ctx)
+        count_line = ctx->key_line[ki];
+    if (cfg->beacon_count < 1) {
+        fail(ctx, count_line, "beacons", "count",
+             "not set: the site file must give the beacons");
+        return -1;
+    }
+    for (int b = 0; b < cfg->beacon_count; b++) {
+        const struct config_beacon *bc = &cfg->beacon[b];
+        char sec[24];
+        snprintf(sec, sizeof sec, "beacon%d", b + 1);
+        if (!bc->set_x || !bc->set_y || !bc->set_z) {
+            int line = ctx ? ctx->beacon_line[b] : 0;
+            fail(ctx, line ? line : count_line, sec,
+                 !bc->set_x ? "x_m" : !bc->set_y ? "y_m" : "z_m",
+                 "missing (count = %d beacons)", cfg->beacon_count);
+            return -1;
+        }
+    }
+    for (int b = cfg->beacon_count; b < CONFIG_MAX_BEACONS; b++) {
+        const struct config_beacon *bc = &cfg->beacon[b];
+        if (bc->set_x || bc->set_y || bc->set_z) {
+            char sec[24];
+            snprintf(sec, sizeof sec, "beacon%d", b + 1);
+            fail(ctx, ctx ? ctx->beacon_line[b] : 0, sec, "x_m",
+                 "beacon beyond [beacons] count = %d", cfg->beacon_count);
+            return -1;
+        }
+    }
+    /* Beacon 1 must be distinguishable in time from its double pulse. */
+    if (cfg->double_pulse_spacing_s >= cfg->period_s) {
+        find_key("beacons", "double_pulse_spacing_s", &ki);
+        fail(ctx, ctx ? ctx->key_line[ki] : 0, "beacons",
+             "double_pulse_spacing_s", "%g s not below period_s %g s",
+             cfg->double_pulse_spacing_s, cfg->period_s);
+        return -1;
+    }
+    return 0;
+}
+
+int config_check(const struct bridge_config *cfg, char *err, size_t errlen)
+{
+    struct parse_ctx ctx = { .path = "config", .err = err, .errlen = errlen };
+    /* Without a file there are no line numbers; key_line stays zero. */
+    return check(cfg, &ctx);
+}
+
+_Static_assert(NKEYS <= CONFIG_MAX_KEYS, "CONFIG_MAX_KEYS too small");
+
+void config_format_error(const struct bridge_config *cfg, const char *section,
+                         const char *key, const char *why, char *err,
+                         size_t errlen)
+{
+    int line = 0;
+    int b = beacon_section_number(section);
+    if (b > 0 && b <= CONFIG_MAX_BEACONS) {
+        line = cfg->beacon_line[b - 1];
+    } else {
+        for (size_t i = 0; i < NKEYS; i++)
+            if (!strcmp(keys[i].section, section) && !strcmp(keys[i].key, key))
+                line = cfg->key_line[i];
+    }
+    const char *path = cfg->path[0] ? cfg->path : "defaults";
+    if (line > 0)
+        snprintf(err, errlen, "%s:%d: [%s] %s: %s", path, line, section, key,
+                 why);
+    else
+        snprintf(err, errlen, "%s: [%s] %s: %s", path, section, key, why);
+}
+
+int config_load_file(struct bridge_config *cfg, const char *path, char *err,
+                     size_t errlen)
+{
+    struct parse_ctx ctx = { .cfg = cfg, .path = path, .err = err,
+                             .errlen = errlen };
+    snprintf(cfg->path, sizeof cfg->path, "%s", path);
+    ctx.file = fopen(path, "r");
+    if (!ctx.file) {
+        snprintf(err, errlen, "%s: cannot open: %s", path, strerror(errno));
+        return -1;
+    }
+    int rc = ini_parse_stream(line_reader, &ctx, handler, &ctx);
+    fclose(ctx.file);
+    if (ctx.failed)
+        return -1;
+    for (size_t i = 0; i < NKEYS; i++)
+        if (ctx.key_line[i])
+            cfg->key_line[i] = ctx.key_line[i];
+    for (int b = 0; b < CONFIG_MAX_BEACONS; b++)
+        if (ctx.beacon_line[b])
+            cfg->beacon_line[b] = ctx.beacon_line[b];
+    if (rc != 0) {
+        /* inih's own syntax errors (no '=', unterminated section). */
+        snprintf(err, errlen, "%s:%d: syntax error (expected [section] or "
+                 "key = value)", path, rc);
+        return -1;
+    }
+    return check(cfg, &ctx) == 0 ? 0 : -1;
+}
+
+bool config_same_geometry(const struct bridge_config *a,
+                          const struct bridge_config *b)
+{
+    if (a->beacon_count != b->beacon_count || a->period_s != b->period_s ||
+        a->double_pulse_spacing_s != b->double_pulse_spacing_s ||
+        a->receiver_count != b->receiver_count ||
+        a->ring_radius_m != b->ring_radius_m ||
+        a->first_angle_deg != b->first_angle_deg ||
+        a->receiver_height_m != b->receiver_height_m ||
+        a->wheel_base_m != b->wheel_base_m ||
+        a->wheel_radius_m != b->wheel_radius_m ||
+        a->ticks_per_rev != b->ticks_per_rev)
+        return false;
+    for (int i = 0; i < a->beacon_count; i++)
+        if (a->beacon[i].x_m != b->beacon[i].x_m ||
+            a->beacon[i].y_m != b->beacon[i].y_m ||
+            a->beacon[i].z_m != b->beacon[i].z_m)
+            return false;
+    return true;
+}

@@ -1,0 +1,103 @@
+/*
+ * beaconloc-bridge — configuration in layers:
+ *   built-in defaults (config_defaults)
+ *   < site file given with --site (config_load_file, libinih)
+ *   < command line (applied by main.c after the file).
+ *
+ * The site file is the one the simulator reads (hw_sim/scenarios/NAME.ini).
+ * Our sections are [beacons], [beaconN], [receivers], [robot], [noise] and
+ * [bridge]; an unknown key in one of them is an error (a typo must not be
+ * silently ignored); every other section belongs to the simulator and is
+ * skipped. Errors read "file:line: [section] key: why".
+ */
+#ifndef BRIDGE_CONFIG_H
+#define BRIDGE_CONFIG_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#define CONFIG_MAX_BEACONS 16
+#define CONFIG_MAX_RECEIVERS 16
+#define CONFIG_ERR_LEN 512
+#define CONFIG_STR_LEN 128
+#define CONFIG_MAX_KEYS 40
+
+#define EX_CONFIG_STATUS 78 /* sysexits.h EX_CONFIG */
+
+struct config_beacon {
+    double x_m, y_m, z_m;
+    bool set_x, set_y, set_z; /* key given in the file */
+};
+
+struct bridge_config {
+    /* [beacons] */
+    int beacon_count;
+    double period_s;               /* nominal time between firings (T) */
+    double double_pulse_spacing_s; /* beacon 1's second burst delay */
+    double burst_length_s;
+    struct config_beacon beacon[CONFIG_MAX_BEACONS];
+    /* [receivers] */
+    int receiver_count;
+    double ring_radius_m;
+    double first_angle_deg;
+    double receiver_height_m;
+    double beamwidth_deg;
+    /* [robot] */
+    double wheel_base_m;
+    double wheel_radius_m;
+    int ticks_per_rev;
+    double encoder_rate_hz;
+    /* [noise] */
+    double sigma_arrival_s;
+    double sigma_wheel_per_m;
+    double speed_of_sound_mps;
+    double sigma_speed_of_sound_mps;
+    double gate_sigma;
+    /* [bridge] */
+    char can_interface[CONFIG_STR_LEN];
+    char mavlink[CONFIG_STR_LEN];
+    double odometry_rate_hz;
+    int system_id;
+    int component_id;
+    char log_level[16];
+    double status_interval_s;   /* status line period, 0 = off */
+    double beacon_lost_s;       /* beacon silent this long -> "lost" */
+    double echo_storm_ratio;    /* rejected/(accepted+rejected) over 5 s */
+    /* where each value came from, for error messages */
+    char path[256];             /* site file ("" = built-in defaults) */
+    int key_line[CONFIG_MAX_KEYS];
+    int beacon_line[CONFIG_MAX_BEACONS];
+};
+
+/*
+ * Format "file:line: [section] key: why" for a key of cfg (line from the
+ * last config_load_file; without it "file: [section] key: why", or
+ * "defaults: ..." when no file was read). Used for errors found after
+ * loading, e.g. by the estimator library's own check.
+ */
+void config_format_error(const struct bridge_config *cfg, const char *section,
+                         const char *key, const char *why, char *err,
+                         size_t errlen);
+
+/* Built-in defaults (the kleeman-lab daemon settings, no beacons). */
+void config_defaults(struct bridge_config *cfg);
+
+/*
+ * Read a site file over cfg (keys not in the file keep their value), then
+ * check the whole. Returns 0, or -1 with a message "file:line: [section]
+ * key: why" in err (cfg may then be partly updated: load into a copy when
+ * the old value must survive, as SIGHUP does).
+ */
+int config_load_file(struct bridge_config *cfg, const char *path, char *err,
+                     size_t errlen);
+
+/* Consistency check of a finished config (ranges, beacons complete).
+ * Returns 0 or -1 with a message (naming the key) in err. */
+int config_check(const struct bridge_config *cfg, char *err, size_t errlen);
+
+/* True when the two configs have the same estimator geometry (beacons,
+ * period, receivers, robot): SIGHUP then keeps the filter running. */
+bool config_same_geometry(const struct bridge_config *a,
+                          const struct bridge_config *b);
+
+#endif /* BRIDGE_CONFIG_H */

@@ -1,0 +1,30 @@
+/*
+ * beaconloc-bridge — --estimates FILE: every estimate as one CSV row,
+ *   t_us,x_m,y_m,theta_rad,v_mps,omega_radps,sos_mps,period_s,
+ *   var_x_m2,cov_xy_m2,var_y_m2,var_theta_rad2,reset_counter,quality
+ * t_us on the receiver-array node's clock (unwrapped int64 us), the time
+ * base of the simulator's truth CSV.
+ */
+#ifndef BRIDGE_ESTIMATES_CSV_H
+#define BRIDGE_ESTIMATES_CSV_H
+
+#include <stdint.h>
+#include <stdio.h>
+
+#include "estimator.h"
+
+struct estimates_csv {
+    FILE *f;
+    uint64_t rows;
+    uint64_t write_errors;
+};
+
+/* Create the file and write the header. Returns 0 or -errno. */
+int estimates_csv_open(struct estimates_csv *c, const char *path);
+/* Append one row. Returns 0 or -EIO (counted). */
+int estimates_csv_write(struct estimates_csv *c, const struct est_output *o,
+                        int quality);
+int estimates_csv_flush(struct estimates_csv *c);
+void estimates_csv_close(struct estimates_csv *c);
+
+#endif /* BRIDGE_ESTIMATES_CSV_H */

@@ -1,0 +1,621 @@
+/*
+ * beaconloc-bridge — estimator glue (sequencer, filter, node clocks, health).
+ */
+#include "estimator.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "log.h"
+
+/* Encoders silent this long: pulses are fused after a constant-velocity
+ * predict, and the silence is reported. */
+#define ENC_SILENCE_US 200000
+/* Encoders silent this long are reported (STATUSTEXT). */
+#define ENC_REPORT_US 500000
+/* Slack subtracted from "now" before popping pulses, covering node-clock
+ * mapping error and transmission order (us). */
+#define POP_SLACK_ENC_US 5000
+#define POP_SLACK_TICK_US 20000
+/* Persistent rejection (robot kidnapped, filter drifted): of the last
+ * REJECT_WINDOW first arrivals (two firing cycles of six beacons),
+ * REJECT_MIN rejected across at least REJECT_BEACONS beacons restarts the
+ * filter from the snapshot solver. Unlike a count of consecutive
+ * rejections, one beacon whose innovation happens to be absorbed by the
+ * firing time cannot hold the restart off. */
+#define REJECT_WINDOW 12
+#define REJECT_MIN 8
+#define REJECT_BEACONS 3
+/* Echo-storm evaluation window (us). */
+#define STORM_WINDOW_US 5000000
+#define STORM_MIN_PULSES 10
+
+/* ---- events ----------------------------------------------------------- */
+
+static void event(struct estimator *e, enum est_event_severity sev,
+                  const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+
+static void event(struct estimator *e, enum est_event_severity sev,
+                  const char *fmt, ...)
+{
+    struct est_event ev;
+    ev.severity = sev;
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(ev.text, sizeof ev.text, fmt, ap);
+    va_end(ap);
+    if (e->ev_len == EST_EVENT_QUEUE) { /* drop the oldest */
+        e->ev_head = (e->ev_head + 1) % EST_EVENT_QUEUE;
+        e->ev_len--;
+    }
+    e->events[(e->ev_head + e->ev_len) % EST_EVENT_QUEUE] = ev;
+    e->ev_len++;
+}
+
+bool estimator_next_event(struct estimator *e, struct est_event *ev)
+{
+    if (e->ev_len == 0)
+        return false;
+    *ev = e->events[e->ev_head];
+    e->ev_head = (e->ev_head + 1) % EST_EVENT_QUEUE;
+    e->ev_len--;
+    return true;
+}
+
+/* ---- configuration ---------------------------------------------------- */
+
+/* bl_config field -> site-file key, for the library's config check. */
+static const struct { const char *field, *section, *key; } field_keys[] = {
+    { "beacon_count", "beacons", "count" },
+    { "beacon_period_s", "beacons", "period_s" },
+    { "double_pulse_spacing_s", "beacons", "double_pulse_spacing_s" },
+    { "burst_length_s", "beacons", "burst_length_s" },
+    { "beacons", "beacon1", "x_m" },
+    { "receiver_count", "receivers", "count" },
+    { "ring_radius_m", "receivers", "ring_radius_m" },
+    { "first_angle_deg", "receivers", "first_angle_deg" },
+    { "receiver_height_m", "receivers", "height_m" },
+    { "beamwidth_deg", "receivers", "beamwidth_deg" },
+    { "wheel_base_m", "robot", "wheel_base_m" },
+    { "wheel_radius_m", "robot", "wheel_radius_m" },
+    { "ticks_per_rev", "robot", "ticks_per_rev" },
+    { "encoder_rate_hz", "robot", "encoder_rate_hz" },
+    { "sigma_arrival_s", "noise", "sigma_arrival_s" },
+    { "sigma_wheel_per_m", "noise", "sigma_wheel_per_m" },
+    { "speed_of_sound_mps", "noise", "speed_of_sound_mps" },
+    { "sigma_speed_of_sound_mps", "noise", "sigma_speed_of_sound_mps" },
+    { "gate_sigma", "noise", "gate_sigma" },
+};
+
+int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
+                          char *err, size_t errlen)
+{
+    bl_config c;
+    bl_config_default(&c);
+    c.beacon_count = (uint32_t)cfg->beacon_count;
+    c.beacon_period_s = (bl_real)cfg->period_s;
+    c.double_pulse_spacing_s = (bl_real)cfg->double_pulse_spacing_s;
+    c.burst_length_s = (bl_real)cfg->burst_length_s;
+    for (int i = 0; i < cfg->beacon_count && i < BL_MAX_BEACONS; i++) {
+        c.beacons[i].x_m = (bl_real)cfg->beacon[i].x_m;
+        c.beacons[i].y_m = (bl_real)cfg->beacon[i].y_m;
+        c.beacons[i].z_m = (bl_real)cfg->beacon[i].z_m;
+    }
+    c.receiver_count = (uint32_t)cfg->receiver_count;
+    c.ring_radius_m = (bl_real)cfg->ring_radius_m;
+    c.first_angle_deg = (bl_real)cfg->first_angle_deg;
+    c.angle_step_deg = 0; /* evenly spaced */
+    c.receiver_height_m = (bl_real)cfg->receiver_height_m;
+    c.beamwidth_deg = (bl_real)cfg->beamwidth_deg;
+    c.wheel_base_m = (bl_real)cfg->wheel_base_m;
+    c.wheel_radius_m = (bl_real)cfg->wheel_radius_m;
+    c.ticks_per_rev = (uint32_t)cfg->ticks_per_rev;
+    c.encoder_rate_hz = (bl_real)cfg->encoder_rate_hz;
+    c.sigma_arrival_s = (bl_real)cfg->sigma_arrival_s;
+    c.sigma_wheel_per_m = (bl_real)cfg->sigma_wheel_per_m;
+    c.speed_of_sound_mps = (bl_real)cfg->speed_of_sound_mps;
+    c.sigma_speed_of_sound_mps = (bl_real)cfg->sigma_speed_of_sound_mps;
+    c.gate_sigma = (bl_real)cfg->gate_sigma;
+    const char *bad = NULL;
+    int rc = bl_config_check(&c, &bad);
+    if (rc != BL_OK) {
+        const char *section = "beacons", *key = bad ? bad : "?";
+        for (size_t i = 0; bad && i < sizeof field_keys / sizeof field_keys[0]; i++)
+            if (!strcmp(field_keys[i].field, bad)) {
+                section = field_keys[i].section;
+                key = field_keys[i].key;
+            }
+        char why[160];
+        snprintf(why, sizeof why, "rejected by the estimator (%s: %s)",
+                 bad ? bad : "?", bl_strerror(rc));
+        config_format_error(cfg, section, key, why, err, errlen);
+        return -1;
+    }
+    *out = c;
+    return 0;
+}
+
+static int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
+                           bl_seq_config *out, char *err, size_t errlen)
+{
+    int rc = bl_sequencer_config_from_site(c, 0, out);
+    if (rc != BL_OK) {
+        char why[160];
+        snprintf(why, sizeof why,
+                 "beacon time windows overlap: period too short for the "
+                 "beacons' spread (%s)", bl_strerror(rc));
+        config_format_error(cfg, "beacons", "period_s", why, err, errlen);
+        return -1;
+    }
+    return 0;
+}
+
+static void reset_runtime(struct estimator *e)
+{
+    e->enc_have_ref = false;
+    e->was_started = false;
+    e->was_converged = false;
+    e->last_reset_seen = 0;
+    memset(e->beacon_lost, 0, sizeof e->beacon_lost);
+    memset(e->beacon_ever, 0, sizeof e->beacon_ever);
+    e->storm_acc = e->storm_rej = 0;
+    e->storm = false;
+    e->enc_seen = false;
+    e->enc_silent = false;
+    e->win_len = 0;
+}
+
+int estimator_init(struct estimator *e, const struct bridge_config *cfg,
+                   char *err, size_t errlen)
+{
+    memset(e, 0, sizeof *e);
+    if (estimator_make_config(cfg, &e->blcfg, err, errlen))
+        return -1;
+    if (make_seq_config(cfg, &e->blcfg, &e->seqcfg, err, errlen))
+        return -1;
+    int rc = bl_filter_init(&e->filter, &e->blcfg);
+    if (rc == BL_OK)
+        rc = bl_sequencer_init(&e->seq, &e->seqcfg);
+    if (rc != BL_OK) {
+        snprintf(err, errlen, "%s: estimator initialisation failed: %s",
+                 cfg->path[0] ? cfg->path : "defaults", bl_strerror(rc));
+        return -1;
+    }
+    node_clock_init(&e->rx_clock, NULL);
+    node_clock_init(&e->enc_clock, NULL);
+    /* wheel travel per tick (m): circumference 2·π·r over ticks per turn */
+    e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
+    e->beacon_lost_s = cfg->beacon_lost_s;
+    e->echo_storm_ratio = cfg->echo_storm_ratio;
+    reset_runtime(e);
+    return 0;
+}
+
+/* Start over with a fresh filter (pulses buffer until the next snapshot
+ * start); the published reset counter keeps counting. */
+static void reinit_filter(struct estimator *e, const char *why)
+{
+    bl_estimate est;
+    if (bl_filter_estimate(&e->filter, &est) == BL_OK && est.started)
+        e->reset_base += est.reset_counter + 1;
+    bl_filter_init(&e->filter, &e->blcfg);
+    bl_sequencer_clear_hint(&e->seq);
+    e->c.reinits++;
+    e->last_reset_seen = 0;
+    e->was_started = false;
+    e->was_converged = false;
+    event(e, EST_EV_WARNING, "re-initialised: %s", why);
+}
+
+int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg,
+                          char *err, size_t errlen)
+{
+    bl_config c;
+    bl_seq_config sc;
+    if (estimator_make_config(cfg, &c, err, errlen) ||
+        make_seq_config(cfg, &c, &sc, err, errlen))
+        return -1;
+    e->beacon_lost_s = cfg->beacon_lost_s;
+    e->echo_storm_ratio = cfg->echo_storm_ratio;
+    e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
+    if (bl_filter_update_config(&e->filter, &c) == BL_OK &&
+        memcmp(&sc, &e->seqcfg, sizeof sc) == 0) {
+        e->blcfg = c;
+        return 0;
+    }
+    e->blcfg = c;
+    e->seqcfg = sc;
+    bl_sequencer_init(&e->seq, &e->seqcfg);
+    reinit_filter(e, "site geometry changed");
+    reset_runtime(e);
+    return 1;
+}
+
+/* ---- pulses ----------------------------------------------------------- */
+
+static void beacon_ok(struct estimator *e, uint32_t b, int64_t t_us)
+{
+    if (b >= BL_MAX_BEACONS)
+        return;
+    e->beacon_last_ok_us[b] = t_us;
+    e->beacon_ever[b] = true;
+    if (e->beacon_lost[b]) {
+        e->beacon_lost[b] = false;
+        event(e, EST_EV_NOTICE, "beacon %u back", b + 1);
+    }
+}
+
+static void watch_rejections(struct estimator *e, uint32_t beacon,
+                             bool rejected)
+{
+    e->win_beacon[e->win_next] = (uint8_t)beacon;
+    e->win_rejected[e->win_next] = rejected;
+    e->win_next = (e->win_next + 1) % REJECT_WINDOW;
+    if (e->win_len < REJECT_WINDOW)
+        e->win_len++;
+}
+
+/* Restart from the snapshot when the watch says so; true if restarted. */
+static bool restart_if_persistent(struct estimator *e, int64_t rx_us)
+{
+    if (e->win_len < REJECT_WINDOW)
+        return false;
+    unsigned n = 0;
+    uint32_t mask = 0;
+    for (unsigned i = 0; i < REJECT_WINDOW; i++)
+        if (e->win_rejected[i]) {
+            n++;
+            mask |= 1u << e->win_beacon[i];
+        }
+    if (n < REJECT_MIN || __builtin_popcount(mask) < REJECT_BEACONS)
+        return false;
+    bl_estimate est;
+    bl_filter_estimate(&e->filter, &est);
+    int rc = bl_filter_start_snapshot(&e->filter, est.theta_rad,
+                                      e->blcfg.reset_sigma_theta_rad);
+    e->win_len = 0;
+    if (rc != BL_OK) {
+        log_debug("snapshot restart failed: %s", bl_strerror(rc));
+        return false;
+    }
+    e->c.snapshot_restarts++;
+    e->enc_have_ref = false; /* state time moved to the latest arrival */
+    e->last_update_rx_us = rx_us;
+    event(e, EST_EV_WARNING, "persistent rejection (%u of %d): restarted", n,
+          REJECT_WINDOW);
+    return true;
+}
+
+static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
+{
+    bl_estimate est;
+    bl_filter_estimate(&e->filter, &est);
+    if (est.started && pl->arrival_us - est.t_us > ENC_SILENCE_US) {
+        /* No encoder data up to this pulse: constant-velocity predict. */
+        int rc = bl_filter_predict(&e->filter, pl->arrival_us);
+        if (rc == BL_OK) {
+            e->c.cv_predicts++;
+            e->enc_have_ref = false; /* the silence is covered by this predict */
+        } else if (rc == BL_ETIME) {
+            reinit_filter(e, "no data for too long");
+        } else {
+            e->c.predict_errors++;
+        }
+    }
+    bl_pulse_result res;
+    int rc = bl_filter_fuse_pulse(&e->filter, (uint32_t)pl->beacon,
+                                  pl->arrival_us, pl->receiver, &res);
+    if (rc == BL_ETIME) {
+        reinit_filter(e, "stale filter");
+        rc = bl_filter_fuse_pulse(&e->filter, (uint32_t)pl->beacon,
+                                  pl->arrival_us, pl->receiver, &res);
+    }
+    if (rc != BL_OK) {
+        e->c.fuse_errors++;
+        log_debug("fuse_pulse beacon %d: %s", pl->beacon + 1, bl_strerror(rc));
+        return;
+    }
+    log_debug("pulse beacon %d rx %u at %lld%s: status %d innov %.1f us "
+              "sigma %.1f us ratio %.2f",
+              pl->beacon + 1, pl->receiver, (long long)pl->arrival_us,
+              pl->repeat ? " (repeat)" : "", (int)res.status,
+              (double)res.innovation_s * 1e6,
+              (double)res.innovation_sigma_s * 1e6, (double)res.test_ratio);
+    if (!pl->repeat && (res.status == BL_PULSE_ACCEPTED ||
+                        res.status == BL_PULSE_REJECTED))
+        watch_rejections(e, (uint32_t)pl->beacon,
+                         res.status == BL_PULSE_REJECTED);
+    switch (res.status) {
+    case BL_PULSE_ACCEPTED:
+        e->c.pulses_accepted++;
+        e->storm_acc++;
+        beacon_ok(e, (uint32_t)pl->beacon, pl->arrival_us);
+        break;
+    case BL_PULSE_REJECTED:
+        e->c.pulses_rejected++;
+        e->storm_rej++;
+        if (!restart_if_persistent(e, rx_us))
+            return;
+        break;
+    case BL_PULSE_BUFFERED:
+        e->c.pulses_buffered++;
+        return;
+    case BL_PULSE_STARTED:
+        e->c.pulses_accepted++;
+        beacon_ok(e, (uint32_t)pl->beacon, pl->arrival_us);
+        break;
+    case BL_PULSE_RESET:
+        e->c.pulses_accepted++;
+        break;
+    }
+    e->updated = true;
+    e->last_update_rx_us = rx_us;
+    /* Health bookkeeping on every update. */
+    bl_filter_estimate(&e->filter, &est);
+    if (est.started && !e->was_started) {
+        event(e, EST_EV_INFO, "filter started at x=%.2f y=%.2f",
+              (double)est.x_m, (double)est.y_m);
+        e->was_started = true;
+        e->last_reset_seen = est.reset_counter;
+        for (uint32_t b = 0; b < e->blcfg.beacon_count; b++)
+            e->beacon_last_ok_us[b] = pl->arrival_us;
+    }
+    if (est.reset_counter != e->last_reset_seen) {
+        e->last_reset_seen = est.reset_counter;
+        event(e, EST_EV_WARNING, "re-initialised from snapshot (reset %u)",
+              e->reset_base + est.reset_counter);
+    }
+    if (est.converged != e->was_converged) {
+        e->was_converged = est.converged;
+        event(e, est.converged ? EST_EV_INFO : EST_EV_WARNING, "%s",
+              est.converged ? "converged" : "not converged");
+    }
+}
+
+static void pop_ready(struct estimator *e, int64_t now_node_us, int64_t rx_us)
+{
+    bl_seq_pulse pl;
+    int rc;
+    while ((rc = bl_sequencer_pop(&e->seq, now_node_us, &pl)) == 1) {
+        e->c.pulses_in++;
+        if (pl.status == BL_SEQ_UNLOCKED) {
+            e->c.pulses_unassigned++;
+            continue;
+        }
+        if (pl.status != BL_SEQ_ASSIGNED || pl.beacon < 0) {
+            e->c.pulses_spurious++;
+            continue;
+        }
+        if (pl.repeat && !e->was_converged) {
+            /* A later arrival of a firing that already gave a pulse: an
+             * echo or a late direct path. Until the filter has converged its
+             * gate is too wide to tell (Kleeman 1992 §3.9: a 3.4 m longer
+             * echo path is inside a start-up gate), so only the first
+             * arrival is used; once converged the gate decides. */
+            e->c.repeats_skipped++;
+            continue;
+        }
+        fuse(e, &pl, rx_us);
+    }
+    if (rc < 0)
+        e->c.seq_errors++;
+}
+
+void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
+                     int64_t rx_us)
+{
+    int64_t t = node_clock_observe(&e->rx_clock, p->node_time_us, rx_us);
+    e->rx_seen = true;
+    if (e->rx_clock.last_event == NODE_CLOCK_RESTART) {
+        e->c.node_restarts++;
+        bl_sequencer_reset(&e->seq);
+        event(e, EST_EV_WARNING, "receiver node clock restarted");
+    }
+    if (t > e->latest_node_us)
+        e->latest_node_us = t;
+    bl_seq_detection d = {
+        .time_us = t,
+        .receiver = p->receiver,
+        .double_pulse = p->double_pulse,
+        .amplitude_mv = p->amplitude_mv,
+        .width_us = (uint16_t)(p->width_us > 65535 ? 65535 : p->width_us),
+    };
+    int rc = bl_sequencer_push(&e->seq, &d);
+    if (rc == BL_EFULL) {
+        pop_ready(e, t, rx_us);
+        rc = bl_sequencer_push(&e->seq, &d);
+        if (rc == BL_EFULL) { /* still full: close the oldest windows */
+            bl_seq_pulse pl;
+            while (bl_sequencer_pop(&e->seq, INT64_MAX / 4, &pl) == 1) {
+                e->c.pulses_in++;
+                if (pl.status == BL_SEQ_ASSIGNED && pl.beacon >= 0)
+                    fuse(e, &pl, rx_us);
+            }
+            rc = bl_sequencer_push(&e->seq, &d);
+        }
+    }
+    if (rc != BL_OK) {
+        e->c.seq_errors++;
+        log_debug("sequencer push: %s", bl_strerror(rc));
+    }
+    pop_ready(e, t, rx_us);
+}
+
+/* ---- encoders --------------------------------------------------------- */
+
+/* Signed difference of two 14-bit wrapping tick counts. */
+static int tick_delta(uint16_t now, uint16_t before)
+{
+    int d = (int)((now - before) & 0x3fff);
+    return d >= 0x2000 ? d - 0x4000 : d;
+}
+
+void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
+                        int64_t rx_us)
+{
+    int64_t te = node_clock_observe(&e->enc_clock, f->node_time_us, rx_us);
+    if (!e->rx_seen) {
+        /* No receiver-node clock to map onto yet: keep the ticks as the
+         * reference (they are cumulative, nothing is lost). */
+        e->c.unmapped_encoders++;
+        e->enc_left = f->left_ticks;
+        e->enc_right = f->right_ticks;
+        e->enc_have_ref = false;
+        return;
+    }
+    int64_t local = node_clock_to_local(&e->enc_clock, te);
+    int64_t t = node_clock_to_node(&e->rx_clock, local);
+    if (t > e->latest_node_us)
+        e->latest_node_us = t;
+    /* Pulses that arrived before this sample go first. */
+    pop_ready(e, t - POP_SLACK_ENC_US, rx_us);
+
+    bool had_ref = e->enc_have_ref;
+    int dl = tick_delta(f->left_ticks, e->enc_left);
+    int dr = tick_delta(f->right_ticks, e->enc_right);
+    int64_t gap = t - e->enc_last_node_us;
+    e->enc_left = f->left_ticks;
+    e->enc_right = f->right_ticks;
+    e->enc_have_ref = true;
+    int64_t last = e->enc_last_node_us;
+    e->enc_last_node_us = t;
+    if (e->enc_seen && gap > ENC_SILENCE_US)
+        e->c.encoder_gaps++;
+    if (e->enc_silent) {
+        e->enc_silent = false;
+        event(e, EST_EV_NOTICE, "encoders back after %.1f s",
+              (double)gap / 1e6);
+    }
+    e->enc_seen = true;
+    if (!had_ref)
+        return;
+    bl_estimate est;
+    bl_filter_estimate(&e->filter, &est);
+    if (!est.started)
+        return;
+    if (t <= est.t_us || last < est.t_us - ENC_SILENCE_US) {
+        /* Sample older than the state (the filter just started at a pulse)
+         * or the interval was already covered by a constant-velocity
+         * predict: take it as the new reference only. */
+        return;
+    }
+    /* wheel distance (m) = ticks · 2πr / ticks_per_rev */
+    double dl_m = dl * e->m_per_tick;
+    double dr_m = dr * e->m_per_tick;
+    int rc = bl_filter_predict_odometry(&e->filter, t, (bl_real)dl_m,
+                                        (bl_real)dr_m);
+    if (rc == BL_OK) {
+        e->c.predicts++;
+        e->updated = true;
+        e->last_update_rx_us = rx_us;
+    } else if (rc == BL_ETIME) {
+        reinit_filter(e, "no data for too long");
+    } else {
+        e->c.predict_errors++;
+        log_debug("predict_odometry: %s", bl_strerror(rc));
+    }
+}
+
+void estimator_status(struct estimator *e, const struct frame_status *s,
+                      int64_t rx_us)
+{
+    (void)rx_us;
+    if (s->flags & 0x4)
+        log_warn("node %u reports a sensor fault (flags 0x%x)", s->node_id,
+                 s->flags);
+    (void)e;
+}
+
+/* ---- periodic --------------------------------------------------------- */
+
+int64_t estimator_local_to_node(const struct estimator *e, int64_t local_us)
+{
+    if (!e->rx_seen)
+        return local_us;
+    return node_clock_to_node(&e->rx_clock, local_us);
+}
+
+void estimator_tick(struct estimator *e, int64_t local_now_us)
+{
+    if (!e->rx_seen)
+        return;
+    int64_t now = estimator_local_to_node(e, local_now_us);
+    pop_ready(e, now - POP_SLACK_TICK_US, 0);
+    if (!e->was_started)
+        return;
+    /* beacon lost: no accepted pulse for beacon_lost_s */
+    int64_t lost_us = (int64_t)(e->beacon_lost_s * 1e6);
+    for (uint32_t b = 0; b < e->blcfg.beacon_count; b++) {
+        if (!e->beacon_lost[b] && now - e->beacon_last_ok_us[b] > lost_us) {
+            e->beacon_lost[b] = true;
+            event(e, EST_EV_WARNING, "beacon %u lost", b + 1);
+        }
+    }
+    /* encoders silent (reported once; "back" when they resume) */
+    if (e->enc_seen && !e->enc_silent &&
+        now - e->enc_last_node_us > ENC_REPORT_US) {
+        e->enc_silent = true;
+        event(e, EST_EV_WARNING, "encoders silent");
+    }
+    /* echo storm: share of gated-out pulses over the window */
+    if (e->storm_window_start_us == 0)
+        e->storm_window_start_us = now;
+    if (now - e->storm_window_start_us >= STORM_WINDOW_US) {
+        uint32_t n = e->storm_acc + e->storm_rej;
+        double ratio = n ? (double)e->storm_rej / n : 0.0;
+        if (!e->storm && n >= STORM_MIN_PULSES && ratio > e->echo_storm_ratio) {
+            e->storm = true;
+            event(e, EST_EV_WARNING, "echo storm: %.0f%% of pulses rejected",
+                  100.0 * ratio);
+        } else if (e->storm && ratio < e->echo_storm_ratio / 2) {
+            e->storm = false;
+            event(e, EST_EV_NOTICE, "echo storm over");
+        }
+        e->storm_acc = e->storm_rej = 0;
+        e->storm_window_start_us = now;
+    }
+}
+
+bool estimator_take_update(struct estimator *e, int64_t *rx_us)
+{
+    if (!e->updated)
+        return false;
+    e->updated = false;
+    if (rx_us)
+        *rx_us = e->last_update_rx_us;
+    return true;
+}
+
+int estimator_output(const struct estimator *e, int64_t at_local_us,
+                     struct est_output *out)
+{
+    memset(out, 0, sizeof *out);
+    bl_estimate est;
+    int rc = BL_ENOTINIT;
+    if (at_local_us) {
+        int64_t t = estimator_local_to_node(e, at_local_us);
+        rc = bl_filter_estimate_at(&e->filter, t, &est);
+    }
+    if (rc != BL_OK)
+        rc = bl_filter_estimate(&e->filter, &est);
+    if (rc != BL_OK || !est.started)
+        return -1;
+    out->valid = true;
+    out->t_node_us = est.t_us;
+    out->t_local_us = e->rx_seen ? node_clock_to_local(&e->rx_clock, est.t_us)
+                                 : est.t_us;
+    out->x_m = est.x_m;
+    out->y_m = est.y_m;
+    out->theta_rad = est.theta_rad;
+    out->v_mps = est.v_mps;
+    out->omega_radps = est.omega_radps;
+    out->sos_mps = est.speed_of_sound_mps;
+    out->period_s = est.period_s;
+    for (int i = 0; i < 25; i++)
+        out->cov[i] = est.cov[i];
+    out->reset_counter = e->reset_base + est.reset_counter;
+    out->converged = est.converged;
+    return 0;
+}

@@ -1,0 +1,166 @@
+/*
+ * beaconloc-bridge — glue between decoded CAN frames and the estimator
+ * library (sequencer, filter, snapshot start), plus health events.
+ *
+ * Timebases:
+ *   local  the bridge clock: CLOCK_MONOTONIC us live, the log's clock in
+ *          replay; frames carry their receive time on it (rx_us).
+ *   node   the receiver-array node's clock, unwrapped to int64 us by
+ *          node_clock. The filter and the sequencer run on it: pulse arrival
+ *          times are used exactly as the node measured them (no mapping
+ *          noise on the time of flight); encoder samples are mapped
+ *          encoder node -> local -> receiver node. The estimates CSV's t_us
+ *          is on this clock, as is the simulator's truth.
+ *
+ * Encoders drive bl_filter_predict_odometry; pulses go through the
+ * sequencer, then bl_filter_fuse_pulse (which starts the filter from the
+ * snapshot solver once a cycle is complete, and re-initialises it after
+ * persistent rejection). When the encoders fall silent, pulses are fused
+ * after a constant-velocity predict. The reset counter published is the
+ * filter's plus every re-initialisation done here (geometry change on
+ * SIGHUP, receiver-node restart).
+ */
+#ifndef BRIDGE_ESTIMATOR_H
+#define BRIDGE_ESTIMATOR_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "beaconloc.h"
+#include "config.h"
+#include "frames.h"
+#include "node_clock.h"
+
+#define EST_EVENT_QUEUE 16
+#define EST_EVENT_LEN 64
+
+enum est_event_severity { EST_EV_INFO, EST_EV_NOTICE, EST_EV_WARNING };
+
+struct est_event {
+    enum est_event_severity severity;
+    char text[EST_EVENT_LEN];
+};
+
+struct est_counters {
+    uint64_t pulses_in;          /* sequencer output pulses */
+    uint64_t pulses_accepted;
+    uint64_t pulses_rejected;
+    uint64_t pulses_buffered;    /* before the start */
+    uint64_t pulses_unassigned;  /* sequencer could not number them */
+    uint64_t pulses_spurious;
+    uint64_t repeats_skipped;
+    uint64_t snapshot_restarts;  /* restarts by the persistent-rejection watch */    /* later arrivals skipped before convergence */
+    uint64_t fuse_errors;        /* library returned an error */
+    uint64_t predicts;           /* odometry predicts */
+    uint64_t cv_predicts;        /* constant-velocity predicts (encoders silent) */
+    uint64_t predict_errors;
+    uint64_t encoder_gaps;       /* encoder silences longer than the gap limit */
+    uint64_t unmapped_encoders;  /* encoder frames before the receiver clock */
+    uint64_t reinits;            /* re-initialisations done by the bridge */
+    uint64_t node_restarts;
+    uint64_t seq_errors;
+};
+
+/* One published estimate. */
+struct est_output {
+    bool valid;               /* filter started */
+    int64_t t_node_us;        /* receiver-node clock (unwrapped) */
+    int64_t t_local_us;       /* bridge clock */
+    double x_m, y_m, theta_rad, v_mps, omega_radps;
+    double sos_mps, period_s;
+    double cov[25];           /* x, y, theta, v, omega (row-major) */
+    uint32_t reset_counter;
+    bool converged;
+    int64_t source_rx_us;     /* local receive time of the frame behind it
+                                 (0 for an extrapolation) */
+};
+
+struct estimator {
+    bl_config blcfg;
+    bl_filter filter;
+    bl_sequencer seq;
+    bl_seq_config seqcfg;
+    struct node_clock rx_clock;   /* receiver array (node 1) */
+    struct node_clock enc_clock;  /* wheel encoders (node 2) */
+    bool rx_seen;                 /* rx_clock has an observation */
+    /* encoders */
+    bool enc_have_ref;            /* enc_left/right are the reference */
+    bool enc_seen;                /* an encoder frame was mapped */
+    bool enc_silent;              /* silence reported */
+    uint16_t enc_left, enc_right; /* last tick counts */
+    int64_t enc_last_node_us;     /* last encoder sample, receiver-node time */
+    double m_per_tick;
+    /* reset counter bookkeeping */
+    uint32_t reset_base;
+    uint32_t last_reset_seen;
+    bool was_started;
+    bool was_converged;
+    /* health */
+    double beacon_lost_s, echo_storm_ratio;
+    int64_t beacon_last_ok_us[BL_MAX_BEACONS];
+    bool beacon_lost[BL_MAX_BEACONS];
+    bool beacon_ever[BL_MAX_BEACONS];
+    int64_t storm_window_start_us;
+    uint32_t storm_acc, storm_rej;
+    bool storm;
+    /* persistent-rejection watch over the last EST_REJECT_WINDOW first
+     * arrivals (repeats excluded): bit set = rejected, with its beacon */
+    uint8_t win_beacon[16];
+    bool win_rejected[16];
+    unsigned win_len, win_next;
+    int64_t latest_node_us;       /* newest receiver-node time seen */
+    int64_t last_update_rx_us;    /* local rx time of the last update's frame */
+    bool updated;                 /* an update since estimator_take_update */
+    struct est_counters c;
+    struct est_event events[EST_EVENT_QUEUE];
+    unsigned ev_head, ev_len;
+};
+
+/*
+ * Build the library configs from cfg and initialise everything.
+ * Returns 0, or -1 with a message naming the site-file key in err.
+ */
+int estimator_init(struct estimator *e, const struct bridge_config *cfg,
+                   char *err, size_t errlen);
+
+/* Translate a bridge config to the library's (for tests and reload).
+ * Returns 0 or -1 with a message in err. */
+int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
+                          char *err, size_t errlen);
+
+/*
+ * New configuration (SIGHUP). Same geometry: tuning replaced, filter state
+ * kept (returns 0). Otherwise everything is re-initialised and the reset
+ * counter bumped (returns 1). -1 with err on a bad config (e unchanged).
+ */
+int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg,
+                          char *err, size_t errlen);
+
+/* Feed decoded frames with their local receive time. */
+void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
+                     int64_t rx_us);
+void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
+                        int64_t rx_us);
+void estimator_status(struct estimator *e, const struct frame_status *s,
+                      int64_t rx_us);
+
+/* Periodic work at local time now (pops pulses whose merge window closed
+ * while no later frame came, health checks). */
+void estimator_tick(struct estimator *e, int64_t local_now_us);
+
+/* True (once) when a filter update happened since the last call; *rx_us
+ * gets the local receive time of the frame that caused it. */
+bool estimator_take_update(struct estimator *e, int64_t *rx_us);
+
+/* The current estimate at the filter's state time (at_local_us = 0) or
+ * extrapolated to local time at_local_us (constant velocity). */
+int estimator_output(const struct estimator *e, int64_t at_local_us,
+                     struct est_output *out);
+
+/* Next pending health event; false when none. */
+bool estimator_next_event(struct estimator *e, struct est_event *ev);
+
+/* Local time -> receiver-node time (identity before the first frame). */
+int64_t estimator_local_to_node(const struct estimator *e, int64_t local_us);
+
+#endif /* BRIDGE_ESTIMATOR_H */

@@ -1,0 +1,1073 @@
+/*
+ * beaconloc-bridge — SocketCAN in, estimator, MAVLink 2 out.
+ *
+ * One epoll loop (mavlink-router style): one handler per file descriptor
+ * (CAN socket, MAVLink endpoint, signalfd, one timerfd per timer); signals
+ * only arrive through the signalfd, no work in handlers. In fast replay the
+ * log is read in a tight loop and the timers run on the log's clock, so
+ * the output rates are those of a live run. See docs/bridge.md.
+ */
+#include <errno.h>
+#include <getopt.h>
+#include <inttypes.h>
+#include <math.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/epoll.h>
+#include <sys/signalfd.h>
+#include <sys/timerfd.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "can_in.h"
+#include "config.h"
+#include "estimates_csv.h"
+#include "estimator.h"
+#include "frames.h"
+#include "log.h"
+#include "mavlink_out.h"
+#include "record.h"
+#include "replay.h"
+#include "stats.h"
+
+#define EX_OK_STATUS 0
+#define EX_USAGE_STATUS 64
+#define EX_NOINPUT_STATUS 66
+#define EX_SOFTWARE_STATUS 70
+#define EX_CANTCREAT_STATUS 73
+
+#define BRIDGE_VERSION "0.1.0"
+
+enum timer_id { T_ODOM, T_HEARTBEAT, T_SECOND, T_COUNT };
+
+struct timer {
+    int fd;               /* timerfd (live and paced replay), -1 in fast replay */
+    int64_t period_us;    /* on the bridge clock */
+    int64_t next_us;      /* fast replay: next deadline on the log clock */
+};
+
+enum mode { MODE_LIVE, MODE_REPLAY_FAST, MODE_REPLAY_PACED };
+
+struct options {
+    const char *site;
+    const char *can;
+    const char *mavlink;
+    const char *replay;
+    const char *record;
+    const char *estimates;
+    const char *stats;
+    const char *log_level;
+    double rate_hz;       /* 0 = not given */
+    int sysid, compid;    /* 0 = not given */
+    double speed;         /* paced replay speed factor, 0 = fast */
+    double status_interval_s; /* <0 = not given */
+};
+
+struct daemon {
+    struct options opt;
+    struct bridge_config cfg;
+    enum mode mode;
+    int epfd, sigfd;
+    struct timer timers[T_COUNT];
+    int mav_fd_registered;
+    struct can_in can;
+    bool can_registered;
+    bool can_down_logged;
+    int64_t can_down_since_us;
+    struct replay rp;
+    struct can_msg pending;   /* paced replay: next frame to deliver */
+    bool have_pending;
+    int replay_tfd;
+    int64_t log_first_us, mono_start_us;
+    int64_t log_now_us;       /* fast replay: log clock */
+    struct record rec;
+    bool recording;
+    struct estimates_csv csv;
+    bool csv_open;
+    struct mav_out mav;
+    struct frame_counters fc;
+    struct estimator est;
+    struct latency_hist lat;
+    int64_t lat_ref_mono_us;  /* when the frame being handled was received */
+    int64_t last_odom_local_us;
+    bool odom_sent_once;
+    uint64_t odom_sent, hb_sent;
+    uint64_t frames_total;
+    uint64_t seconds;
+    uint64_t last_bus_off;
+    bool running;
+    int exit_code;
+    int64_t run_start_mono_us;
+};
+
+static volatile sig_atomic_t dummy_flag; /* no work in signal handlers */
+
+/* ---- clocks ----------------------------------------------------------- */
+
+static int64_t mono_us(void) { return can_in_mono_us(); }
+
+static int64_t real_us(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (int64_t)ts.tv_sec * 1000000 + ts.tv_nsec / 1000;
+}
+
+/* The bridge clock: monotonic live, the log's clock in replay. */
+static int64_t now_local(const struct daemon *d)
+{
+    /* Replay (fast or paced): the log time of the frame or timer being
+     * handled; pacing only decides when that happens. */
+    return d->mode == MODE_LIVE ? mono_us() : d->log_now_us;
+}
+
+/* ---- usage / options -------------------------------------------------- */
+
+static void usage(FILE *f)
+{
+    fprintf(f,
+        "usage: beaconloc-bridge [--site FILE] [--can IFACE] [--mavlink ENDPOINT]\n"
+        "                        [--rate HZ] [--sysid N] [--compid N] [--log-level LEVEL]\n"
+        "                        [--replay LOG [--realtime | --speed X]] [--record LOG]\n"
+        "                        [--estimates CSV] [--stats JSON] [--status-interval S]\n"
+        "                        [--help] [--version]\n"
+        "  --site FILE        site file (beacons, receivers, robot, noise, [bridge])\n"
+        "  --can IFACE        SocketCAN interface (default vcan0)\n"
+        "  --mavlink EP       udpout:HOST:PORT | udpin:HOST:PORT | serial:DEV:BAUD\n"
+        "  --rate HZ          ODOMETRY rate (default 30)\n"
+        "  --sysid N --compid N   MAVLink ids (default 1, 197)\n"
+        "  --log-level L      error, warning, info, debug\n"
+        "  --replay LOG       read a candump log instead of the bus (as fast as possible)\n"
+        "  --realtime         pace the replay at the log's own speed\n"
+        "  --speed X          pace the replay at X times the log's speed\n"
+        "  --record LOG       write every frame read to a candump log\n"
+        "  --estimates CSV    write every estimate (receiver-node clock)\n"
+        "  --stats JSON       write counters and latency at exit\n"
+        "  --status-interval S  status line period in seconds (0 = off)\n"
+        "See docs/bridge.md.\n");
+}
+
+static int parse_double_opt(const char *name, const char *s, double lo,
+                            double hi, double *out)
+{
+    char *end;
+    errno = 0;
+    double v = strtod(s, &end);
+    if (end == s || *end || errno || !isfinite(v) || v <= lo || v > hi) {
+        fprintf(stderr, "error: command line: --%s: '%s' is not a number in "
+                "(%g, %g]\n", name, s, lo, hi);
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+static int parse_id_opt(const char *name, const char *s, int *out)
+{
+    char *end;
+    errno = 0;
+    long v = strtol(s, &end, 10);
+    if (end == s || *end || errno || v < 1 || v > 255) {
+        fprintf(stderr, "error: command line: --%s: '%s' is not an id 1..255\n",
+                name, s);
+        return -1;
+    }
+    *out = (int)v;
+    return 0;
+}
+
+/* Returns -1 to exit with *status. */
+static int parse_args(int argc, char **argv, struct options *o, int *status)
+{
+    enum { O_SITE = 256, O_CAN, O_MAV, O_RATE, O_SYSID, O_COMPID, O_LOGLEVEL,
+           O_REPLAY, O_REALTIME, O_SPEED, O_RECORD, O_ESTIMATES, O_STATS,
+           O_STATUS, O_VERSION };
+    static const struct option longopts[] = {
+        { "site", required_argument, 0, O_SITE },
+        { "can", required_argument, 0, O_CAN },
+        { "mavlink", required_argument, 0, O_MAV },
+        { "rate", required_argument, 0, O_RATE },
+        { "sysid", required_argument, 0, O_SYSID },
+        { "compid", required_argument, 0, O_COMPID },
+        { "log-level", required_argument, 0, O_LOGLEVEL },
+        { "replay", required_argument, 0, O_REPLAY },
+        { "realtime", no_argument, 0, O_REALTIME },
+        { "speed", required_argument, 0, O_SPEED },
+        { "record", required_argument, 0, O_RECORD },
+        { "estimates", required_argument, 0, O_ESTIMATES },
+        { "stats", required_argument, 0, O_STATS },
+        { "status-interval", required_argument, 0, O_STATUS },
+        { "help", no_argument, 0, 'h' },
+        { "version", no_argument, 0, O_VERSION },
+        { 0, 0, 0, 0 }
+    };
+    memset(o, 0, sizeof *o);
+    o->status_interval_s = -1;
+    int c;
+    opterr = 0;
+    while ((c = getopt_long(argc, argv, "h", longopts, NULL)) != -1) {
+        int rc = 0;
+        switch (c) {
+        case O_SITE: o->site = optarg; break;
+        case O_CAN: o->can = optarg; break;
+        case O_MAV: o->mavlink = optarg; break;
+        case O_RATE: rc = parse_double_opt("rate", optarg, 0, 1000, &o->rate_hz); break;
+        case O_SYSID: rc = parse_id_opt("sysid", optarg, &o->sysid); break;
+        case O_COMPID: rc = parse_id_opt("compid", optarg, &o->compid); break;
+        case O_LOGLEVEL: o->log_level = optarg; break;
+        case O_REPLAY: o->replay = optarg; break;
+        case O_REALTIME: o->speed = 1.0; break;
+        case O_SPEED: rc = parse_double_opt("speed", optarg, 0, 1e6, &o->speed); break;
+        case O_RECORD: o->record = optarg; break;
+        case O_ESTIMATES: o->estimates = optarg; break;
+        case O_STATS: o->stats = optarg; break;
+        case O_STATUS: {
+            double v;
+            if (!strcmp(optarg, "0"))
+                o->status_interval_s = 0;
+            else if (!(rc = parse_double_opt("status-interval", optarg, 0, 86400, &v)))
+                o->status_interval_s = v;
+            break;
+        }
+        case 'h': usage(stdout); *status = EX_OK_STATUS; return -1;
+        case O_VERSION:
+            printf("beaconloc-bridge %s\n", BRIDGE_VERSION);
+            *status = EX_OK_STATUS;
+            return -1;
+        default:
+            fprintf(stderr, "error: command line: unknown or incomplete option '%s'\n",
+                    argv[optind - 1]);
+            usage(stderr);
+            *status = EX_USAGE_STATUS;
+            return -1;
+        }
+        if (rc) {
+            *status = EX_CONFIG_STATUS;
+            return -1;
+        }
+    }
+    if (optind < argc) {
+        fprintf(stderr, "error: command line: unexpected argument '%s'\n", argv[optind]);
+        usage(stderr);
+        *status = EX_USAGE_STATUS;
+        return -1;
+    }
+    if (o->speed > 0 && !o->replay) {
+        fprintf(stderr, "error: command line: --realtime/--speed need --replay\n");
+        *status = EX_USAGE_STATUS;
+        return -1;
+    }
+    return 0;
+}
+
+/* Layers: defaults < site file < command line. Returns 0 or -1 (message
+ * printed). */
+static int build_config(const struct options *o, struct bridge_config *cfg)
+{
+    char err[CONFIG_ERR_LEN];
+    config_defaults(cfg);
+    if (o->site && config_load_file(cfg, o->site, err, sizeof err) != 0) {
+        fprintf(stderr, "error: %s\n", err);
+        return -1;
+    }
+    if (o->can) {
+        if (!o->can[0] || strlen(o->can) >= 16) {
+            fprintf(stderr, "error: command line: --can: '%s' is not an interface name\n", o->can);
+            return -1;
+        }
+        snprintf(cfg->can_interface, sizeof cfg->can_interface, "%s", o->can);
+    }
+    if (o->mavlink) {
+        if (strlen(o->mavlink) >= sizeof cfg->mavlink) {
+            fprintf(stderr, "error: command line: --mavlink: too long\n");
+            return -1;
+        }
+        snprintf(cfg->mavlink, sizeof cfg->mavlink, "%s", o->mavlink);
+    }
+    if (o->rate_hz > 0)
+        cfg->odometry_rate_hz = o->rate_hz;
+    if (o->sysid)
+        cfg->system_id = o->sysid;
+    if (o->compid)
+        cfg->component_id = o->compid;
+    if (o->log_level)
+        snprintf(cfg->log_level, sizeof cfg->log_level, "%s", o->log_level);
+    if (o->status_interval_s >= 0)
+        cfg->status_interval_s = o->status_interval_s;
+    enum log_level lv;
+    if (log_level_parse(cfg->log_level, &lv) != 0) {
+        fprintf(stderr, "error: command line: --log-level: unknown level '%s'\n",
+                cfg->log_level);
+        return -1;
+    }
+    struct mav_endpoint ep;
+    if (mav_endpoint_parse(cfg->mavlink, &ep) != 0) {
+        if (o->mavlink)
+            fprintf(stderr, "error: command line: --mavlink: '%s' is not "
+                    "udpout:HOST:PORT, udpin:HOST:PORT or serial:DEVICE:BAUD\n",
+                    cfg->mavlink);
+        else
+            config_format_error(cfg, "bridge", "mavlink", "not a valid endpoint",
+                                err, sizeof err),
+            fprintf(stderr, "error: %s\n", err);
+        return -1;
+    }
+    if (config_check(cfg, err, sizeof err) != 0) {
+        if (!o->site)
+            fprintf(stderr, "error: no beacons configured: give the site file with --site FILE\n");
+        else
+            fprintf(stderr, "error: %s\n", err);
+        return -1;
+    }
+    return 0;
+}
+
+/* ---- epoll helpers ---------------------------------------------------- */
+
+static int ep_add(struct daemon *d, int fd)
+{
+    struct epoll_event ev = { .events = EPOLLIN, .data.fd = fd };
+    if (epoll_ctl(d->epfd, EPOLL_CTL_ADD, fd, &ev) < 0) {
+        log_error("epoll_ctl add fd %d: %s", fd, strerror(errno));
+        return -errno;
+    }
+    return 0;
+}
+
+static void ep_del(struct daemon *d, int fd)
+{
+    if (fd >= 0)
+        epoll_ctl(d->epfd, EPOLL_CTL_DEL, fd, NULL);
+}
+
+static void sync_mav_fd(struct daemon *d)
+{
+    int fd = mav_out_fd(&d->mav);
+    if (fd == d->mav_fd_registered)
+        return;
+    if (d->mav_fd_registered >= 0)
+        ep_del(d, d->mav_fd_registered);
+    d->mav_fd_registered = -1;
+    if (fd >= 0 && ep_add(d, fd) == 0)
+        d->mav_fd_registered = fd;
+}
+
+/* ---- timers ----------------------------------------------------------- */
+
+static int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us)
+{
+    struct timer *t = &d->timers[id];
+    t->period_us = period_us;
+    if (d->mode != MODE_LIVE) { /* replay: timers on the log's clock */
+        t->next_us = d->log_now_us + period_us;
+        return 0;
+    }
+    int64_t mono_period = period_us;
+    struct itimerspec its = {
+        .it_interval = { mono_period / 1000000, (mono_period % 1000000) * 1000 },
+        .it_value = { mono_period / 1000000, (mono_period % 1000000) * 1000 },
+    };
+    if (t->fd < 0) {
+        t->fd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
+        if (t->fd < 0) {
+            log_error("timerfd_create: %s", strerror(errno));
+            return -errno;
+        }
+        if (ep_add(d, t->fd))
+            return -1;
+    }
+    if (timerfd_settime(t->fd, 0, &its, NULL) < 0) {
+        log_error("timerfd_settime: %s", strerror(errno));
+        return -errno;
+    }
+    return 0;
+}
+
+static int64_t odom_period_us(const struct daemon *d)
+{
+    return (int64_t)llround(1e6 / d->cfg.odometry_rate_hz);
+}
+
+/* ---- output ----------------------------------------------------------- */
+
+static int quality_of(const struct est_output *o)
+{
+    if (!o->converged)
+        return -1;
+    return mav_quality_from_cov(o->cov[0], o->cov[1], o->cov[6]);
+}
+
+static void send_odometry(struct daemon *d, const struct est_output *o,
+                          int64_t time_local_us)
+{
+    struct mav_odometry m;
+    mav_odometry_init(&m);
+    m.time_usec = (uint64_t)(time_local_us > 0 ? time_local_us : 0);
+    m.x_m = (float)o->x_m;
+    m.y_m = (float)o->y_m;
+    m.z_m = 0.0f; /* planar robot: z not estimated (covariance NaN) */
+    m.yaw_rad = (float)o->theta_rad;
+    m.vx_mps = (float)o->v_mps;
+    m.vy_mps = 0.0f; /* differential drive: no lateral velocity */
+    m.vz_mps = 0.0f;
+    m.yawrate_radps = (float)o->omega_radps;
+    /* pose rows/cols x, y, z, roll, pitch, yaw <- state x, y, theta */
+    static const int pose_map[6] = { 0, 1, -1, -1, -1, 2 };
+    /* velocity rows/cols vx, vy, vz, rollrate, pitchrate, yawrate <- v, omega */
+    static const int vel_map[6] = { 3, -1, -1, -1, -1, 4 };
+    for (int i = 0; i < 6; i++)
+        for (int j = 0; j < 6; j++) {
+            if (pose_map[i] >= 0 && pose_map[j] >= 0)
+                m.pose_cov[i][j] = (float)o->cov[pose_map[i] * 5 + pose_map[j]];
+            if (vel_map[i] >= 0 && vel_map[j] >= 0)
+                m.vel_cov[i][j] = (float)o->cov[vel_map[i] * 5 + vel_map[j]];
+        }
+    m.reset_counter = (uint8_t)o->reset_counter;
+    m.quality = (int8_t)quality_of(o);
+    int rc = mav_out_send_odometry(&d->mav, &m);
+    if (rc == 0)
+        d->odom_sent++;
+    else if (rc == -EINVAL)
+        log_warn("ODOMETRY not sent: estimate not finite");
+    d->last_odom_local_us = time_local_us;
+    d->odom_sent_once = true;
+}
+
+static enum mav_out_severity severity_of(enum est_event_severity s)
+{
+    switch (s) {
+    case EST_EV_WARNING: return MAV_OUT_SEV_WARNING;
+    case EST_EV_NOTICE: return MAV_OUT_SEV_NOTICE;
+    default: return MAV_OUT_SEV_INFO;
+    }
+}
+
+static void statustext(struct daemon *d, enum mav_out_severity sev,
+                       const char *text)
+{
+    char buf[MAV_OUT_STATUSTEXT_MAX + 1];
+    snprintf(buf, sizeof buf, "beaconloc: %.39s", text);
+    mav_out_send_statustext(&d->mav, sev, buf);
+}
+
+static void drain_events(struct daemon *d)
+{
+    struct est_event ev;
+    while (estimator_next_event(&d->est, &ev)) {
+        if (ev.severity == EST_EV_WARNING)
+            log_warn("%s", ev.text);
+        else
+            log_info("%s", ev.text);
+        statustext(d, severity_of(ev.severity), ev.text);
+    }
+}
+
+/* After a frame: publish what its update produced. */
+static void after_update(struct daemon *d)
+{
+    int64_t rx;
+    if (!estimator_take_update(&d->est, &rx))
+        return;
+    struct est_output o;
+    if (estimator_output(&d->est, 0, &o) != 0)
+        return;
+    if (d->csv_open)
+        estimates_csv_write(&d->csv, &o, quality_of(&o));
+    int64_t period = odom_period_us(d);
+    int64_t now = now_local(d);
+    /* Event-driven ODOMETRY, rate-limited to the configured rate (a 10 %
+     * allowance keeps sensor-paced sends from skipping a slot). */
+    if (!d->odom_sent_once || now - d->last_odom_local_us >= period * 9 / 10) {
+        send_odometry(d, &o, o.t_local_us > d->last_odom_local_us ? o.t_local_us : now);
+        d->last_odom_local_us = now;
+        latency_add(&d->lat, mono_us() - d->lat_ref_mono_us);
+    }
+}
+
+/* ---- frames ----------------------------------------------------------- */
+
+static void handle_frame(struct daemon *d, const struct can_msg *msg)
+{
+    d->frames_total++;
+    if (d->recording) {
+        int64_t t = d->mode == MODE_LIVE ? msg->rx_us + (real_us() - mono_us())
+                                         : msg->rx_us;
+        record_write(&d->rec, msg, t);
+    }
+    if (msg->flags & CAN_MSG_ERROR)
+        return; /* counted by can_in (live); a logged error frame: ignored */
+    struct frame f;
+    if (frame_decode(&d->fc, msg, &f) != FRAME_OK)
+        return;
+    switch (f.kind) {
+    case FRAME_PULSE: estimator_pulse(&d->est, &f.u.pulse, msg->rx_us); break;
+    case FRAME_ENCODERS: estimator_encoders(&d->est, &f.u.enc, msg->rx_us); break;
+    case FRAME_STATUS: estimator_status(&d->est, &f.u.status, msg->rx_us); break;
+    default: break;
+    }
+    after_update(d);
+}
+
+/* ---- status ----------------------------------------------------------- */
+
+static void status_line(struct daemon *d, const char *prefix)
+{
+    struct est_output o;
+    char est[200] = "estimate: none yet";
+    if (estimator_output(&d->est, 0, &o) == 0) {
+        double sxy = sqrt(fmax(o.cov[0], o.cov[6]));
+        snprintf(est, sizeof est,
+                 "x=%.3f y=%.3f th=%.3f sigma=%.3fm sos=%.1f q=%d resets=%u",
+                 o.x_m, o.y_m, o.theta_rad, sxy, o.sos_mps, quality_of(&o),
+                 o.reset_counter);
+    }
+    const struct frame_counters *fc = &d->fc;
+    log_info("%s: frames %" PRIu64 " (pulse %" PRIu64 " enc %" PRIu64
+             " status %" PRIu64 ") bad %" PRIu64 " unknown %" PRIu64
+             " range %" PRIu64 " lost %" PRIu64 " kdrop %" PRIu64
+             " errfr %" PRIu64 " | pulses ok %" PRIu64 " rej %" PRIu64
+             " | %s | odom %" PRIu64 " | latency p50 %" PRId64 " p99 %" PRId64 " us",
+             prefix, d->frames_total, fc->received[FRAME_PULSE],
+             fc->received[FRAME_ENCODERS], fc->received[FRAME_STATUS],
+             fc->malformed, fc->unknown_id, fc->out_of_range,
+             frame_lost_total(fc), d->can.c.kernel_drops,
+             d->can.c.error_frames, d->est.c.pulses_accepted,
+             d->est.c.pulses_rejected, est, d->odom_sent,
+             latency_quantile(&d->lat, 0.5), latency_quantile(&d->lat, 0.99));
+}
+
+/* ---- CAN -------------------------------------------------------------- */
+
+static void can_went_down(struct daemon *d, int err)
+{
+    if (d->can_registered) {
+        /* the fd is closed already by can_in; epoll dropped it */
+        d->can_registered = false;
+    }
+    if (!d->can_down_logged) {
+        log_warn("%s: %s; retrying every second", d->cfg.can_interface,
+                 strerror(err));
+        d->can_down_logged = true;
+        d->can_down_since_us = mono_us();
+        char text[64];
+        snprintf(text, sizeof text, "CAN %.15s down", d->cfg.can_interface);
+        statustext(d, MAV_OUT_SEV_ERROR, text);
+    }
+}
+
+static void can_try_open(struct daemon *d)
+{
+    if (d->mode != MODE_LIVE || d->can.fd >= 0)
+        return;
+    int rc = can_in_retry(&d->can);
+    if (rc != 0) {
+        can_went_down(d, -rc);
+        return;
+    }
+    if (ep_add(d, d->can.fd) == 0)
+        d->can_registered = true;
+    if (d->can_down_logged) {
+        log_info("%s: up again after %.1f s", d->cfg.can_interface,
+                 (double)(mono_us() - d->can_down_since_us) / 1e6);
+        char text[64];
+        snprintf(text, sizeof text, "CAN %.15s up", d->cfg.can_interface);
+        statustext(d, MAV_OUT_SEV_NOTICE, text);
+    } else {
+        log_info("%s: listening", d->cfg.can_interface);
+    }
+    d->can_down_logged = false;
+}
+
+static void can_readable(struct daemon *d)
+{
+    struct can_msg msg;
+    for (;;) {
+        int rc = can_in_read(&d->can, &msg);
+        if (rc == 0)
+            break;
+        if (rc == 2) {
+            if (d->can.c.bus_off != d->last_bus_off) {
+                d->last_bus_off = d->can.c.bus_off;
+                log_warn("%s: bus-off", d->cfg.can_interface);
+                statustext(d, MAV_OUT_SEV_CRITICAL, "CAN bus-off");
+            } else {
+                log_warn("%s: error frame (class 0x%x)", d->cfg.can_interface,
+                         d->can.last_error_class);
+            }
+            continue;
+        }
+        if (rc < 0) {
+            if (d->can.fd < 0) {
+                can_went_down(d, -rc);
+            } else {
+                log_warn("%s: read: %s", d->cfg.can_interface, strerror(-rc));
+            }
+            break;
+        }
+        d->lat_ref_mono_us = msg.rx_us; /* kernel receive time, monotonic */
+        handle_frame(d, &msg);
+    }
+    drain_events(d);
+}
+
+/* ---- timer handlers ---------------------------------------------------- */
+
+static void on_odom_timer(struct daemon *d, int64_t now)
+{
+    estimator_tick(&d->est, now);
+    d->lat_ref_mono_us = mono_us();
+    after_update(d);
+    drain_events(d);
+    int64_t period = odom_period_us(d);
+    if (d->odom_sent_once && now - d->last_odom_local_us < period)
+        return;
+    /* No sensor update in the last period: constant-velocity output. */
+    struct est_output o;
+    if (estimator_output(&d->est, now, &o) != 0)
+        return;
+    send_odometry(d, &o, now);
+    d->last_odom_local_us = now;
+}
+
+static void on_heartbeat(struct daemon *d, int64_t now)
+{
+    struct est_output o;
+    bool have = estimator_output(&d->est, 0, &o) == 0;
+    enum mav_out_state st = MAV_OUT_STATE_STANDBY;
+    if (d->mode == MODE_LIVE && d->can.fd < 0)
+        st = MAV_OUT_STATE_CRITICAL;
+    else if (have && o.converged)
+        st = MAV_OUT_STATE_ACTIVE;
+    if (mav_out_send_heartbeat(&d->mav, st) == 0)
+        d->hb_sent++;
+    if (have) {
+        uint32_t ms = (uint32_t)((uint64_t)now / 1000u);
+        mav_out_send_named_float(&d->mav, "sos_mps", (float)o.sos_mps, ms);
+        mav_out_send_named_float(&d->mav, "period_s", (float)o.period_s, ms);
+    }
+}
+
+static void on_second(struct daemon *d, int64_t now)
+{
+    (void)now;
+    d->seconds++;
+    can_try_open(d);
+    if (!mav_out_is_up(&d->mav)) {
+        if (mav_out_retry(&d->mav) == 0)
+            log_info("MAVLink endpoint %s open", d->cfg.mavlink);
+        sync_mav_fd(d);
+    }
+    if (d->recording)
+        record_flush(&d->rec);
+    if (d->csv_open)
+        estimates_csv_flush(&d->csv);
+    uint64_t every = (uint64_t)llround(d->cfg.status_interval_s);
+    if (every > 0 && d->seconds % every == 0)
+        status_line(d, "status");
+    log_flush();
+}
+
+static void fire_timer(struct daemon *d, enum timer_id id, int64_t now)
+{
+    switch (id) {
+    case T_ODOM: on_odom_timer(d, now); break;
+    case T_HEARTBEAT: on_heartbeat(d, now); break;
+    case T_SECOND: on_second(d, now); break;
+    default: break;
+    }
+}
+
+/* Fast replay: fire every timer due up to log time t, in time order. */
+static void soft_timers_advance(struct daemon *d, int64_t t)
+{
+    for (;;) {
+        int best = -1;
+        for (int i = 0; i < T_COUNT; i++)
+            if (d->timers[i].period_us > 0 && d->timers[i].next_us <= t &&
+                (best < 0 || d->timers[i].next_us < d->timers[best].next_us))
+                best = i;
+        if (best < 0)
+            return;
+        int64_t when = d->timers[best].next_us;
+        d->timers[best].next_us += d->timers[best].period_us;
+        if (d->timers[best].next_us <= t - 10 * d->timers[best].period_us)
+            d->timers[best].next_us = t; /* a gap in the log: do not replay it */
+        d->log_now_us = when;
+        fire_timer(d, (enum timer_id)best, when);
+    }
+}
+
+/* ---- signals ---------------------------------------------------------- */
+
+static void reload(struct daemon *d)
+{
+    if (!d->opt.site) {
+        log_info("SIGHUP: no site file to reload");
+        return;
+    }
+    struct bridge_config nc;
+    if (build_config(&d->opt, &nc) != 0) {
+        log_error("SIGHUP: %s not reloaded (keeping the running configuration)",
+                  d->opt.site);
+        return;
+    }
+    char err[CONFIG_ERR_LEN];
+    int rc = estimator_reconfigure(&d->est, &nc, err, sizeof err);
+    if (rc < 0) {
+        log_error("SIGHUP: %s (keeping the running configuration)", err);
+        return;
+    }
+    log_info("SIGHUP: %s reloaded; %s", d->opt.site,
+             rc == 0 ? "geometry unchanged, filter kept"
+                     : "geometry changed, estimator re-initialised");
+    bool new_ep = strcmp(nc.mavlink, d->cfg.mavlink) != 0 ||
+                  nc.system_id != d->cfg.system_id ||
+                  nc.component_id != d->cfg.component_id;
+    bool new_can = strcmp(nc.can_interface, d->cfg.can_interface) != 0;
+    bool new_rate = nc.odometry_rate_hz != d->cfg.odometry_rate_hz;
+    d->cfg = nc;
+    enum log_level lv;
+    if (log_level_parse(nc.log_level, &lv) == 0)
+        log_set_level(lv);
+    if (new_ep) {
+        mav_out_close(&d->mav);
+        int r = mav_out_open(&d->mav, d->cfg.mavlink, (unsigned)d->cfg.system_id,
+                             (unsigned)d->cfg.component_id);
+        if (r != 0)
+            log_warn("MAVLink endpoint %s: %s; retrying every second",
+                     d->cfg.mavlink, strerror(-r));
+        sync_mav_fd(d);
+    }
+    if (new_can && d->mode == MODE_LIVE) {
+        if (d->can.fd >= 0)
+            ep_del(d, d->can.fd);
+        can_in_close(&d->can);
+        d->can_registered = false;
+        struct can_in_counters keep = d->can.c;
+        can_in_init(&d->can, d->cfg.can_interface);
+        d->can.c = keep;
+        can_try_open(d);
+    }
+    if (new_rate)
+        timer_arm(d, T_ODOM, odom_period_us(d));
+    statustext(d, MAV_OUT_SEV_INFO, rc == 0 ? "config reloaded" : "config reloaded, re-initialised");
+}
+
+static void signal_readable(struct daemon *d)
+{
+    struct signalfd_siginfo si;
+    while (read(d->sigfd, &si, sizeof si) == (ssize_t)sizeof si) {
+        switch (si.ssi_signo) {
+        case SIGTERM:
+        case SIGINT:
+            log_info("%s: exiting", strsignal((int)si.ssi_signo));
+            d->running = false;
+            break;
+        case SIGHUP:
+            reload(d);
+            break;
+        default:
+            break;
+        }
+    }
+}
+
+/* Handle every ready descriptor; timeout_ms as for epoll_wait. */
+static void poll_once(struct daemon *d, int timeout_ms)
+{
+    struct epoll_event evs[16];
+    int n = epoll_wait(d->epfd, evs, 16, timeout_ms);
+    if (n < 0) {
+        if (errno != EINTR)
+            log_error("epoll_wait: %s", strerror(errno));
+        return;
+    }
+    for (int i = 0; i < n; i++) {
+        int fd = evs[i].data.fd;
+        if (fd == d->sigfd) {
+            signal_readable(d);
+        } else if (d->can_registered && fd == d->can.fd) {
+            can_readable(d);
+        } else if (fd == d->mav_fd_registered) {
+            int rc = mav_out_handle_input(&d->mav, now_local(d));
+            if (rc < 0 && !mav_out_is_up(&d->mav)) {
+                log_warn("MAVLink endpoint %s: %s; retrying every second",
+                         d->cfg.mavlink, strerror(-rc));
+                sync_mav_fd(d);
+            }
+        } else if (fd == d->replay_tfd) {
+            uint64_t exp;
+            (void)!read(fd, &exp, sizeof exp);
+            /* handled by the paced replay loop below */
+        } else {
+            for (int t = 0; t < T_COUNT; t++)
+                if (fd == d->timers[t].fd) {
+                    uint64_t exp;
+                    if (read(fd, &exp, sizeof exp) == (ssize_t)sizeof exp)
+                        fire_timer(d, (enum timer_id)t, now_local(d));
+                }
+        }
+    }
+}
+
+/* ---- run modes -------------------------------------------------------- */
+
+static void run_live(struct daemon *d)
+{
+    can_try_open(d);
+    while (d->running)
+        poll_once(d, -1);
+}
+
+static void run_replay_fast(struct daemon *d)
+{
+    struct can_msg msg;
+    bool first = true;
+    uint64_t n = 0;
+    int rc;
+    while (d->running && (rc = replay_next(&d->rp, &msg)) > 0) {
+        if (first) {
+            d->log_now_us = msg.rx_us;
+            d->log_first_us = msg.rx_us;
+            timer_arm(d, T_ODOM, odom_period_us(d));
+            timer_arm(d, T_HEARTBEAT, 1000000);
+            timer_arm(d, T_SECOND, 1000000);
+            first = false;
+        }
+        if (msg.rx_us < d->log_now_us)
+            msg.rx_us = d->log_now_us; /* log time never runs backwards here */
+        soft_timers_advance(d, msg.rx_us);
+        d->log_now_us = msg.rx_us;
+        d->lat_ref_mono_us = mono_us();
+        handle_frame(d, &msg);
+        if ((++n & 255) == 0) {
+            drain_events(d);
+            poll_once(d, 0); /* signals, MAVLink input */
+        }
+    }
+    drain_events(d);
+    if (rc < 0)
+        log_error("%s: read error: %s", d->opt.replay, strerror(-rc));
+}
+
+static void run_replay_paced(struct daemon *d)
+{
+    struct can_msg msg;
+    int rc = replay_next(&d->rp, &msg);
+    if (rc <= 0)
+        return;
+    d->log_first_us = msg.rx_us;
+    d->log_now_us = msg.rx_us;
+    d->mono_start_us = mono_us();
+    d->replay_tfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
+    if (d->replay_tfd < 0 || ep_add(d, d->replay_tfd)) {
+        log_error("replay timer: %s", strerror(errno));
+        return;
+    }
+    timer_arm(d, T_ODOM, odom_period_us(d));
+    timer_arm(d, T_HEARTBEAT, 1000000);
+    timer_arm(d, T_SECOND, 1000000);
+    /* Frames and timers are handled in log-time order, each when the
+     * paced clock (log_first + speed * elapsed wall time) reaches it. */
+    while (d->running) {
+        int64_t paced = d->log_first_us +
+            (int64_t)((double)(mono_us() - d->mono_start_us) * d->opt.speed);
+        while (rc > 0 && msg.rx_us <= paced) {
+            if (msg.rx_us < d->log_now_us)
+                msg.rx_us = d->log_now_us;
+            soft_timers_advance(d, msg.rx_us);
+            d->log_now_us = msg.rx_us;
+            d->lat_ref_mono_us = mono_us();
+            handle_frame(d, &msg);
+            rc = replay_next(&d->rp, &msg);
+        }
+        if (rc <= 0)
+            break;
+        soft_timers_advance(d, paced < msg.rx_us ? paced : msg.rx_us);
+        drain_events(d);
+        int64_t next = msg.rx_us;
+        for (int i = 0; i < T_COUNT; i++)
+            if (d->timers[i].period_us > 0 && d->timers[i].next_us < next)
+                next = d->timers[i].next_us;
+        int64_t due_mono = d->mono_start_us +
+            (int64_t)((double)(next - d->log_first_us) / d->opt.speed);
+        if (due_mono < 1)
+            due_mono = 1;
+        struct itimerspec its = { .it_value = { due_mono / 1000000,
+                                                (due_mono % 1000000) * 1000 } };
+        timerfd_settime(d->replay_tfd, TFD_TIMER_ABSTIME, &its, NULL);
+        poll_once(d, -1);
+    }
+    drain_events(d);
+    if (rc < 0)
+        log_error("%s: read error: %s", d->opt.replay, strerror(-rc));
+}
+
+/* ---- main ------------------------------------------------------------- */
+
+static void fill_report(struct daemon *d, struct stats_report *r)
+{
+    memset(r, 0, sizeof *r);
+    r->frames = &d->fc;
+    r->frames_total = d->frames_total;
+    r->kernel_drops = d->can.c.kernel_drops;
+    r->error_frames = d->can.c.error_frames;
+    r->bus_off = d->can.c.bus_off;
+    r->controller_errors = d->can.c.controller;
+    r->restarts = d->can.c.restarted;
+    r->bad_size_reads = d->can.c.bad_size;
+    r->can_downs = d->can.c.downs;
+    r->replay_bad_lines = d->rp.bad_lines;
+    struct est_output o;
+    r->estimator_resets = estimator_output(&d->est, 0, &o) == 0
+                              ? o.reset_counter : d->est.reset_base;
+    r->pulses_accepted = d->est.c.pulses_accepted;
+    r->pulses_rejected = d->est.c.pulses_rejected;
+    r->pulses_buffered = d->est.c.pulses_buffered;
+    r->pulses_unassigned = d->est.c.pulses_unassigned;
+    r->sequencer_spurious = d->est.c.pulses_spurious;
+    r->encoder_gaps = d->est.c.encoder_gaps;
+    r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
+    r->estimates = d->csv.rows;
+    r->odometry_sent = d->odom_sent;
+    r->heartbeat_sent = d->hb_sent;
+    r->mavlink_tx_errors = d->mav.stats.tx_errors;
+    r->timesync_answered = d->mav.stats.timesync_answered;
+    r->latency_samples = d->lat.count;
+    r->latency_p50_us = latency_quantile(&d->lat, 0.5);
+    r->latency_p99_us = latency_quantile(&d->lat, 0.99);
+    r->latency_max_us = d->lat.max_us;
+    r->run_time_s = (double)(mono_us() - d->run_start_mono_us) / 1e6;
+    if (d->mode != MODE_LIVE && r->run_time_s > 0)
+        r->replay_frames_per_s = (double)d->frames_total / r->run_time_s;
+}
+
+static struct daemon D; /* large (latency histogram): static storage */
+
+int main(int argc, char **argv)
+{
+    struct daemon *d = &D;
+    int status = 0;
+    (void)dummy_flag;
+    if (parse_args(argc, argv, &d->opt, &status) != 0)
+        return status;
+    if (build_config(&d->opt, &d->cfg) != 0)
+        return EX_CONFIG_STATUS;
+    enum log_level lv = LOG_INFO;
+    log_level_parse(d->cfg.log_level, &lv);
+    log_set_level(lv);
+    char err[CONFIG_ERR_LEN];
+    if (estimator_init(&d->est, &d->cfg, err, sizeof err) != 0) {
+        fprintf(stderr, "error: %s\n", err);
+        return EX_CONFIG_STATUS;
+    }
+    d->run_start_mono_us = mono_us();
+    d->mode = !d->opt.replay ? MODE_LIVE
+            : d->opt.speed > 0 ? MODE_REPLAY_PACED : MODE_REPLAY_FAST;
+    d->epfd = -1;
+    d->sigfd = -1;
+    d->replay_tfd = -1;
+    d->mav_fd_registered = -1;
+    for (int i = 0; i < T_COUNT; i++)
+        d->timers[i].fd = -1;
+    frame_counters_init(&d->fc);
+    latency_reset(&d->lat);
+    can_in_init(&d->can, d->cfg.can_interface);
+    d->running = true;
+
+    if (d->opt.replay) {
+        int rc = replay_open(&d->rp, d->opt.replay);
+        if (rc != 0) {
+            fprintf(stderr, "error: --replay %s: %s\n", d->opt.replay, strerror(-rc));
+            return EX_NOINPUT_STATUS;
+        }
+    }
+    if (d->opt.record) {
+        int rc = record_open(&d->rec, d->opt.record, d->cfg.can_interface);
+        if (rc != 0) {
+            fprintf(stderr, "error: --record %s: %s\n", d->opt.record, strerror(-rc));
+            return EX_CANTCREAT_STATUS;
+        }
+        d->recording = true;
+    }
+    if (d->opt.estimates) {
+        int rc = estimates_csv_open(&d->csv, d->opt.estimates);
+        if (rc != 0) {
+            fprintf(stderr, "error: --estimates %s: %s\n", d->opt.estimates, strerror(-rc));
+            return EX_CANTCREAT_STATUS;
+        }
+        d->csv_open = true;
+    }
+
+    signal(SIGPIPE, SIG_IGN);
+    sigset_t mask;
+    sigemptyset(&mask);
+    sigaddset(&mask, SIGTERM);
+    sigaddset(&mask, SIGINT);
+    sigaddset(&mask, SIGHUP);
+    if (sigprocmask(SIG_BLOCK, &mask, NULL) < 0 ||
+        (d->sigfd = signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC)) < 0 ||
+        (d->epfd = epoll_create1(EPOLL_CLOEXEC)) < 0 || ep_add(d, d->sigfd)) {
+        fprintf(stderr, "error: signalfd/epoll: %s\n", strerror(errno));
+        return EX_SOFTWARE_STATUS;
+    }
+
+    int rc = mav_out_open(&d->mav, d->cfg.mavlink, (unsigned)d->cfg.system_id,
+                          (unsigned)d->cfg.component_id);
+    if (rc == -EINVAL) {
+        fprintf(stderr, "error: mavlink endpoint '%s' rejected\n", d->cfg.mavlink);
+        return EX_CONFIG_STATUS;
+    }
+    if (rc != 0)
+        log_warn("MAVLink endpoint %s: %s; retrying every second",
+                 d->cfg.mavlink, strerror(-rc));
+    sync_mav_fd(d);
+
+    log_info("beaconloc-bridge %s: site %s, %d beacons, %s %s, MAVLink %s, "
+             "ODOMETRY %.0f Hz", BRIDGE_VERSION,
+             d->opt.site ? d->opt.site : "(defaults)", d->cfg.beacon_count,
+             d->opt.replay ? "replay" : "CAN",
+             d->opt.replay ? d->opt.replay : d->cfg.can_interface,
+             d->cfg.mavlink, d->cfg.odometry_rate_hz);
+
+    switch (d->mode) {
+    case MODE_LIVE:
+        if (timer_arm(d, T_ODOM, odom_period_us(d)) ||
+            timer_arm(d, T_HEARTBEAT, 1000000) ||
+            timer_arm(d, T_SECOND, 1000000))
+            return EX_SOFTWARE_STATUS;
+        run_live(d);
+        break;
+    case MODE_REPLAY_FAST:
+        run_replay_fast(d);
+        break;
+    case MODE_REPLAY_PACED:
+        run_replay_paced(d);
+        break;
+    }
+
+    struct stats_report rep;
+    fill_report(d, &rep);
+    status_line(d, "final");
+    if (d->mode != MODE_LIVE)
+        log_info("replay: %" PRIu64 " frames in %.3f s (%.0f frames/s), "
+                 "%" PRIu64 " bad lines", d->frames_total, rep.run_time_s,
+                 rep.replay_frames_per_s, d->rp.bad_lines);
+    if (d->opt.stats) {
+        rc = stats_write_json(&rep, d->opt.stats);
+        if (rc != 0)
+            log_error("--stats %s: %s", d->opt.stats, strerror(-rc));
+    }
+    if (d->csv_open)
+        estimates_csv_close(&d->csv);
+    if (d->recording)
+        record_close(&d->rec);
+    if (d->opt.replay)
+        replay_close(&d->rp);
+    can_in_close(&d->can);
+    mav_out_close(&d->mav);
+    log_flush();
+    return d->exit_code;
+}

@@ -1,0 +1,133 @@
+/*
+ * beaconloc-bridge — latency histogram and JSON statistics.
+ */
+#include "stats.h"
+
+#include <errno.h>
+#include <string.h>
+
+void latency_reset(struct latency_hist *h)
+{
+    memset(h, 0, sizeof *h);
+}
+
+static int bin_of(int64_t us)
+{
+    if (us < 0)
+        us = 0;
+    if (us < LAT_LINEAR)
+        return (int)us;
+    /* octave o: [4096·2^o, 4096·2^(o+1)), LAT_SUB equal bins */
+    int o = 63 - __builtin_clzll((unsigned long long)us) - 12;
+    if (o >= LAT_OCTAVES)
+        return LAT_BINS - 1;
+    int64_t base = (int64_t)LAT_LINEAR << o;
+    int sub = (int)((us - base) / (base / LAT_SUB));
+    return LAT_LINEAR + o * LAT_SUB + sub;
+}
+
+static int64_t bin_low(int b)
+{
+    if (b < LAT_LINEAR)
+        return b;
+    int o = (b - LAT_LINEAR) / LAT_SUB;
+    int sub = (b - LAT_LINEAR) % LAT_SUB;
+    int64_t base = (int64_t)LAT_LINEAR << o;
+    return base + sub * (base / LAT_SUB);
+}
+
+void latency_add(struct latency_hist *h, int64_t us)
+{
+    h->bins[bin_of(us)]++;
+    h->count++;
+    if (us > h->max_us)
+        h->max_us = us;
+}
+
+int64_t latency_quantile(const struct latency_hist *h, double q)
+{
+    if (h->count == 0)
+        return -1;
+    /* smallest value with at least ceil(q·n) samples at or below it */
+    uint64_t rank = (uint64_t)(q * (double)h->count);
+    if ((double)rank < q * (double)h->count)
+        rank++;
+    if (rank < 1)
+        rank = 1;
+    uint64_t acc = 0;
+    for (int b = 0; b < LAT_BINS; b++) {
+        acc += h->bins[b];
+        if (acc >= rank)
+            return bin_low(b);
+    }
+    return h->max_us;
+}
+
+int stats_write_json(const struct stats_report *r, const char *path)
+{
+    char tmp[4096];
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    FILE *f = fopen(tmp, "w");
+    if (!f)
+        return -errno;
+    const struct frame_counters *fc = r->frames;
+    fprintf(f, "{\n");
+    fprintf(f, "  \"frames_total\": %llu,\n", (unsigned long long)r->frames_total);
+    fprintf(f, "  \"frames_received\": {\"pulse_detection\": %llu, "
+               "\"wheel_encoders\": %llu, \"node_status\": %llu},\n",
+            (unsigned long long)fc->received[FRAME_PULSE],
+            (unsigned long long)fc->received[FRAME_ENCODERS],
+            (unsigned long long)fc->received[FRAME_STATUS]);
+    fprintf(f, "  \"frames_received_by_id\": {\"0x100\": %llu, \"0x110\": %llu, "
+               "\"0x120\": %llu},\n",
+            (unsigned long long)fc->received[FRAME_PULSE],
+            (unsigned long long)fc->received[FRAME_ENCODERS],
+            (unsigned long long)fc->received[FRAME_STATUS]);
+    fprintf(f, "  \"dropped_by_kernel\": %llu,\n", (unsigned long long)r->kernel_drops);
+    fprintf(f, "  \"malformed\": %llu,\n", (unsigned long long)fc->malformed);
+    fprintf(f, "  \"unknown_id\": %llu,\n", (unsigned long long)fc->unknown_id);
+    fprintf(f, "  \"out_of_range\": %llu,\n", (unsigned long long)fc->out_of_range);
+    fprintf(f, "  \"lost_by_counter\": %llu,\n", (unsigned long long)frame_lost_total(fc));
+    fprintf(f, "  \"lost_by_counter_per_frame\": {\"pulse_detection\": %llu, "
+               "\"wheel_encoders\": %llu, \"node_status\": %llu},\n",
+            (unsigned long long)fc->lost[FRAME_PULSE],
+            (unsigned long long)fc->lost[FRAME_ENCODERS],
+            (unsigned long long)fc->lost[FRAME_STATUS]);
+    fprintf(f, "  \"duplicates\": %llu,\n",
+            (unsigned long long)(fc->duplicates[0] + fc->duplicates[1] + fc->duplicates[2]));
+    fprintf(f, "  \"error_frames\": %llu,\n", (unsigned long long)r->error_frames);
+    fprintf(f, "  \"bus_off\": %llu,\n", (unsigned long long)r->bus_off);
+    fprintf(f, "  \"controller_errors\": %llu,\n", (unsigned long long)r->controller_errors);
+    fprintf(f, "  \"controller_restarts\": %llu,\n", (unsigned long long)r->restarts);
+    fprintf(f, "  \"bad_size_reads\": %llu,\n", (unsigned long long)r->bad_size_reads);
+    fprintf(f, "  \"interface_lost\": %llu,\n", (unsigned long long)r->can_downs);
+    fprintf(f, "  \"replay_bad_lines\": %llu,\n", (unsigned long long)r->replay_bad_lines);
+    fprintf(f, "  \"estimator_resets\": %llu,\n", (unsigned long long)r->estimator_resets);
+    fprintf(f, "  \"pulses_accepted\": %llu,\n", (unsigned long long)r->pulses_accepted);
+    fprintf(f, "  \"pulses_rejected\": %llu,\n", (unsigned long long)r->pulses_rejected);
+    fprintf(f, "  \"pulses_buffered\": %llu,\n", (unsigned long long)r->pulses_buffered);
+    fprintf(f, "  \"pulses_unassigned\": %llu,\n", (unsigned long long)r->pulses_unassigned);
+    fprintf(f, "  \"sequencer_spurious\": %llu,\n", (unsigned long long)r->sequencer_spurious);
+    fprintf(f, "  \"encoder_gaps\": %llu,\n", (unsigned long long)r->encoder_gaps);
+    fprintf(f, "  \"estimator_errors\": %llu,\n", (unsigned long long)r->predict_errors);
+    fprintf(f, "  \"estimates\": %llu,\n", (unsigned long long)r->estimates);
+    fprintf(f, "  \"odometry_sent\": %llu,\n", (unsigned long long)r->odometry_sent);
+    fprintf(f, "  \"heartbeat_sent\": %llu,\n", (unsigned long long)r->heartbeat_sent);
+    fprintf(f, "  \"mavlink_tx_errors\": %llu,\n", (unsigned long long)r->mavlink_tx_errors);
+    fprintf(f, "  \"timesync_answered\": %llu,\n", (unsigned long long)r->timesync_answered);
+    fprintf(f, "  \"latency_samples\": %llu,\n", (unsigned long long)r->latency_samples);
+    fprintf(f, "  \"latency_p50_us\": %lld,\n", (long long)r->latency_p50_us);
+    fprintf(f, "  \"latency_p99_us\": %lld,\n", (long long)r->latency_p99_us);
+    fprintf(f, "  \"latency_max_us\": %lld,\n", (long long)r->latency_max_us);
+    fprintf(f, "  \"replay_frames_per_s\": %.1f,\n", r->replay_frames_per_s);
+    fprintf(f, "  \"run_time_s\": %.3f\n", r->run_time_s);
+    fprintf(f, "}\n");
+    if (fclose(f) != 0) {
+        int e = errno;
+        remove(tmp);
+        return -e;
+    }
+    if (rename(tmp, path) != 0)
+        return -errno;
+    return 0;
+}

@@ -1,0 +1,52 @@
+/*
+ * beaconloc-bridge — latency histogram and the statistics report
+ * (status line, --stats FILE JSON at exit).
+ */
+#ifndef BRIDGE_STATS_H
+#define BRIDGE_STATS_H
+
+#include <stdint.h>
+#include <stdio.h>
+
+#include "frames.h"
+
+/* Latency histogram: exact 1 us bins below 4096 us, then 64 bins per
+ * power of two (relative resolution 1.6 %) up to 2^36 us. */
+#define LAT_LINEAR 4096
+#define LAT_SUB 64
+#define LAT_OCTAVES 24
+#define LAT_BINS (LAT_LINEAR + LAT_SUB * LAT_OCTAVES)
+
+struct latency_hist {
+    uint64_t count;
+    uint64_t bins[LAT_BINS];
+    int64_t max_us;
+};
+
+void latency_reset(struct latency_hist *h);
+void latency_add(struct latency_hist *h, int64_t us);
+/* Quantile q in [0,1] (us, lower edge of its bin); -1 when empty. */
+int64_t latency_quantile(const struct latency_hist *h, double q);
+
+/* Everything the JSON report holds (plain numbers, filled by main.c). */
+struct stats_report {
+    const struct frame_counters *frames;
+    uint64_t kernel_drops, error_frames, bus_off, controller_errors,
+        restarts, bad_size_reads, can_downs;
+    uint64_t replay_bad_lines;
+    uint64_t estimator_resets, pulses_accepted, pulses_rejected,
+        pulses_buffered, pulses_unassigned, sequencer_spurious,
+        encoder_gaps, predict_errors, estimates;
+    uint64_t odometry_sent, heartbeat_sent, mavlink_tx_errors,
+        timesync_answered;
+    int64_t latency_p50_us, latency_p99_us, latency_max_us;
+    uint64_t latency_samples;
+    double replay_frames_per_s; /* 0 when not replaying */
+    double run_time_s;          /* wall time of the run */
+    uint64_t frames_total;      /* frames read (bus or log) */
+};
+
+/* Write the report as one JSON object. Returns 0 or -errno. */
+int stats_write_json(const struct stats_report *r, const char *path);
+
+#endif /* BRIDGE_STATS_H */

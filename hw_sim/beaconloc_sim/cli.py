@@ -1,0 +1,142 @@
+"""beaconloc-sim: run a scenario onto a CAN bus or into a candump log; plot results."""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+
+from .inifile import ConfigError
+
+EX_USAGE, EX_DATAERR, EX_UNAVAILABLE, EX_CONFIG = 64, 65, 69, 78
+
+
+def _cmd_list(_args) -> int:
+    from .scenario import builtin_names, load_scenario
+    for name in builtin_names():
+        try:
+            scn = load_scenario(name)
+            print(f"{name:18s} {scn.duration_s:6.1f} s  {scn.description}")
+        except ConfigError as exc:
+            print(f"{name:18s} BROKEN: {exc}")
+    return 0
+
+
+def _cmd_run(args) -> int:
+    from . import can_out, outputs, simulate
+    from .scenario import load_scenario
+    if not (args.log or args.channel or args.truth or args.odometry or args.stats):
+        print("beaconloc-sim run: nothing to do; give --log, --channel, --truth, --odometry or --stats",
+              file=sys.stderr)
+        return EX_USAGE
+    if args.duration is not None and not args.duration > 0:
+        print("beaconloc-sim run: --duration must be > 0", file=sys.stderr)
+        return EX_USAGE
+    try:
+        scn = load_scenario(args.scenario, seed=args.seed, duration_s=args.duration)
+    except ConfigError as exc:
+        print(f"beaconloc-sim: {exc}", file=sys.stderr)
+        return EX_CONFIG
+    t0 = time.perf_counter()
+    result = simulate.run(scn)
+    sim_wall = time.perf_counter() - t0
+    channel = args.channel or scn.channel
+    if args.log:
+        can_out.write_log(result.frames, args.log, scn.log_epoch_s, channel)
+    if args.truth:
+        outputs.write_truth(args.truth, result)
+    if args.odometry:
+        outputs.write_odometry(args.odometry, result)
+    wall = time.perf_counter() - t0
+    lateness = None
+    sched = None
+    if args.channel:
+        import can
+        stop = {"flag": False}
+
+        def on_signal(_sig, _frm):
+            stop["flag"] = True
+        old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            bus = can.Bus(interface=args.interface, channel=args.channel)
+        except (can.CanError, OSError, ValueError, ImportError) as exc:
+            print(f"beaconloc-sim: cannot open CAN bus {args.interface}:{args.channel}: {exc}",
+                  file=sys.stderr)
+            return EX_UNAVAILABLE
+        sched = can_out.realtime_priority() if args.realtime else "SCHED_OTHER"
+        try:
+            lateness = can_out.send_live(result.frames, bus, stop=lambda: stop["flag"])
+        except can.CanError as exc:
+            print(f"beaconloc-sim: send failed on {args.channel}: {exc}", file=sys.stderr)
+            return EX_UNAVAILABLE
+        finally:
+            bus.shutdown()
+            for s, h in old.items():
+                signal.signal(s, h)
+        wall = time.perf_counter() - t0
+    if args.stats:
+        stats = outputs.run_stats(result, wall_time_s=wall, lateness_s=lateness,
+                                  sent=None if lateness is None else len(lateness))
+        stats["simulate_s"] = sim_wall
+        if lateness is not None:
+            stats["live"]["scheduling"] = sched
+            stats["live"]["interface"] = args.interface
+            stats["live"]["channel"] = args.channel
+        outputs.write_json(args.stats, stats)
+    return 0
+
+
+def _cmd_plot(args) -> int:
+    from . import plot
+    try:
+        plot.plot(args.truth, args.estimates, args.odometry, args.out)
+    except ValueError as exc:
+        print(f"beaconloc-sim plot: {exc}", file=sys.stderr)
+        return EX_DATAERR
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="beaconloc-sim", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+    sub.add_parser("list", help="list the built-in scenarios").set_defaults(func=_cmd_list)
+    r = sub.add_parser("run", help="simulate a scenario",
+                       description="Simulate a scenario: write a candump log as fast as possible "
+                                   "(--log) and/or send live on a CAN bus paced in real time "
+                                   "(--channel); ground truth, odometry, statistics.")
+    r.add_argument("scenario", help="built-in scenario name (see 'list') or a .scenario.ini path")
+    r.add_argument("--log", metavar="FILE", help="write a candump -L log of every frame")
+    r.add_argument("--channel", metavar="IFACE", help="send live on this CAN channel (e.g. vcan0)")
+    r.add_argument("--interface", default="socketcan",
+                   help="python-can interface for --channel (socketcan; virtual for tests)")
+    r.add_argument("--no-realtime", dest="realtime", action="store_false",
+                   help="live mode: do not ask for SCHED_FIFO priority (asked by default; "
+                        "needs root or CAP_SYS_NICE, falls back silently)")
+    r.add_argument("--truth", metavar="FILE", help="ground-truth CSV with the Cramer-Rao bound")
+    r.add_argument("--odometry", metavar="FILE", help="odometry-only dead-reckoning CSV")
+    r.add_argument("--stats", metavar="FILE", help="JSON statistics (frames per id, live lateness)")
+    r.add_argument("--seed", type=int, help="override the scenario's seed")
+    r.add_argument("--duration", type=float, metavar="S", help="override the duration, s")
+    r.set_defaults(func=_cmd_run)
+    pl = sub.add_parser("plot", help="plot truth vs estimate vs odometry")
+    pl.add_argument("--truth", required=True, metavar="FILE")
+    pl.add_argument("--estimates", required=True, metavar="FILE")
+    pl.add_argument("--odometry", metavar="FILE")
+    pl.add_argument("--out", required=True, metavar="PNG")
+    pl.set_defaults(func=_cmd_plot)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except BrokenPipeError:
+        return 0
+    except OSError as exc:
+        print(f"beaconloc-sim: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        return 74
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,190 @@
+"""Posterior Cramer-Rao bound (Tichavsky, Muravchik, Nehorai 1998).
+
+For x_{k+1} = f(x_k) + w_k, w ~ N(0, Q_k), and y_k = h(x_k) + v_k, v ~ N(0, R_k),
+the Fisher information J_k of the state obeys (Tichavsky et al. 1998, IEEE Trans.
+Signal Processing 46(5), the J_k recursion and its additive-Gaussian-noise case)
+
+    J_{k+1} = D22 - D21 (J_k + D11)^-1 D12,
+    D11 = E[F^T Q^-1 F],  D12 = -E[F^T] Q^-1 = D21^T,  D22 = Q^-1 + E[H^T R^-1 H],
+
+with F = df/dx and H = dh/dx; the bound on any estimator is E[e e^T] >= J^-1.
+Here the expectations are taken along the true path (F, H evaluated at the true
+state, the usual deterministic-trajectory form). By the matrix inversion lemma
+the same recursion reads J_{k+1} = (Q + F J_k^-1 F^T)^-1 + E[H^T R^-1 H], which
+also holds when Q is singular (states with no process noise: period, firing time).
+
+The state is the estimator's (lib/, Kleeman 1992 eq. 14 extended with omega):
+    [x_m, y_m, theta_rad, v_mps, omega_radps, s_mps, T_s, t0_s]
+propagated from one beacon firing to the next with the odometry as input
+(Kleeman 1992 eqs. 15 and 24; wheel noise as process noise) and measured by the
+arrival time of every direct pulse actually detected on every receiver
+(Kleeman 1992 eq. 21 with the receiver's 3D position on the ring) and by the
+odometry's speed and turn rate (Kleeman 1992 eq. 25), with the wheel noise.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+STATE = ("x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "s_mps", "T_s", "t0_s")
+IX, IY, ITH, IV, IW, IS, IT, IT0 = range(8)
+
+
+def tmn_step(J: np.ndarray, F: np.ndarray, Q: np.ndarray, H: np.ndarray | None = None,
+             R: np.ndarray | None = None) -> np.ndarray:
+    """One step of the Tichavsky et al. 1998 recursion, literally (Q must be invertible)."""
+    Qi = np.linalg.inv(Q)
+    # Tichavsky 1998, additive Gaussian noise: D11 = F^T Q^-1 F, D12 = -F^T Q^-1,
+    # D22 = Q^-1 + H^T R^-1 H
+    D11 = F.T @ Qi @ F
+    D12 = -F.T @ Qi
+    D21 = D12.T
+    D22 = Qi.copy()
+    if H is not None and H.size:
+        D22 = D22 + H.T @ np.linalg.solve(R, H)
+    # Tichavsky 1998 recursion: J_{k+1} = D22 - D21 (J_k + D11)^-1 D12
+    J_next = D22 - D21 @ np.linalg.solve(J + D11, D12)
+    return (J_next + J_next.T) / 2
+
+
+def info_step(J: np.ndarray, F: np.ndarray, Q: np.ndarray, H: np.ndarray | None = None,
+              R: np.ndarray | None = None) -> np.ndarray:
+    """The same step in the matrix-inversion-lemma form (valid for singular Q):
+    J_{k+1} = (Q + F J_k^-1 F^T)^-1 + H^T R^-1 H."""
+    P_pred = Q + F @ np.linalg.solve(J, F.T)
+    J_next = np.linalg.inv((P_pred + P_pred.T) / 2)
+    if H is not None and H.size:
+        J_next = J_next + H.T @ np.linalg.solve(R, H)
+    return (J_next + J_next.T) / 2
+
+
+def arrival_time_s(state: np.ndarray, beacon_m: np.ndarray, rx_angle_rad: np.ndarray,
+                   ring_radius_m: float, rx_height_m: float) -> np.ndarray:
+    """Kleeman 1992 eq. 21 at the receiver's 3D position on the ring:
+    t_i = t0 + d_i / (s - v (cos th, sin th, 0) . u_i), d_i = |p_rx - b_i|, u_i = (p_rx - b_i) / d_i,
+    p_rx = (x + r cos(th + phi), y + r sin(th + phi), h).
+    state: (8,) or (M, 8); result broadcasts to (..., n_rx)."""
+    st = np.asarray(state, dtype=float)
+    x, y, th, v, _w, s, _T, t0 = (st[..., i, None] for i in range(8))
+    px = x + ring_radius_m * np.cos(th + rx_angle_rad)
+    py = y + ring_radius_m * np.sin(th + rx_angle_rad)
+    dx, dy, dz = px - beacon_m[0], py - beacon_m[1], rx_height_m - beacon_m[2]
+    d = np.sqrt(dx * dx + dy * dy + dz * dz)
+    v_dot_u = v * (np.cos(th) * dx + np.sin(th) * dy) / d
+    return t0 + d / (s - v_dot_u)
+
+
+_STEPS = np.array([1e-4, 1e-4, 1e-6, 1e-4, 1e-4, 1e-3, 1e-6, 1e-6])
+
+
+def arrival_jacobian(state, beacon_m, rx_angle_rad, ring_radius_m, rx_height_m) -> np.ndarray:
+    """d(arrival)/d(state) for each receiver, (n_rx, 8), by central differences."""
+    delta = np.diag(_STEPS)
+    stacked = np.concatenate([state + delta, state - delta])          # (16, 8)
+    t = arrival_time_s(stacked, beacon_m, np.asarray(rx_angle_rad), ring_radius_m, rx_height_m)
+    return ((t[:8] - t[8:]) / (2 * _STEPS[:, None])).T
+
+
+@dataclass
+class BoundModel:
+    """Noise statistics the bound uses (the simulator's true ones)."""
+    sigma_arrival_s: float
+    sigma_wheel_per_m: float        # wheel travel std after 1 m (variance grows with distance), m
+    wheel_base_m: float
+    ring_radius_m: float
+    rx_height_m: float
+    m_per_tick: float               # encoder resolution, m
+    sigma_accel_mps2: float = 0.5   # random-walk intensity of v between firings
+    sigma_angacc_radps2: float = 1.0
+    prior_sigma: tuple = (1.0, 1.0, 0.5, 0.5, 0.5, 5.0, 1e-4, 0.1)   # in STATE units
+
+
+def process_model(state: np.ndarray, next_state: np.ndarray, d_left_m: float, d_right_m: float,
+                  dt_s: float, s_change_mps: float, m: BoundModel) -> tuple[np.ndarray, np.ndarray]:
+    """F and Q of one firing-to-firing step with odometry input (Kleeman 1992 eqs. 15, 24)."""
+    b = m.wheel_base_m
+    # differential-drive increments (Vander 2011 eq. 2): ds = (dL + dR)/2, dth = (dR - dL)/b
+    ds = (d_left_m + d_right_m) / 2
+    dth = (d_right_m - d_left_m) / b
+    mid = state[ITH] + dth / 2
+    c, s = math.cos(mid), math.sin(mid)
+    F = np.eye(8)
+    # x' = x + ds cos(th + dth/2), y' = y + ds sin(th + dth/2): d/dth
+    F[IX, ITH] = -ds * s
+    F[IY, ITH] = ds * c
+    # Kleeman 1992 eq. 15: t0(k+1) = t0(k) + T(k)
+    F[IT0, IT] = 1.0
+    # wheel noise: var(dL) = sigma^2 |dL| * 1 m (and dR), mapped by G = d(x, y, th)/d(dL, dR)
+    G = np.array([[c / 2 + ds * s / (2 * b), c / 2 - ds * s / (2 * b)],
+                  [s / 2 - ds * c / (2 * b), s / 2 + ds * c / (2 * b)],
+                  [-1 / b, 1 / b]])
+    var_w = m.sigma_wheel_per_m ** 2 * np.array([abs(d_left_m), abs(d_right_m)]) \
+        + m.m_per_tick ** 2 / 6   # two quantisation errors of variance tick^2/12 per increment
+    Q = np.zeros((8, 8))
+    Q[:3, :3] = G @ np.diag(var_w) @ G.T
+    Q[IV, IV] = (m.sigma_accel_mps2 * dt_s) ** 2 + (next_state[IV] - state[IV]) ** 2
+    Q[IW, IW] = (m.sigma_angacc_radps2 * dt_s) ** 2 + (next_state[IW] - state[IW]) ** 2
+    Q[IS, IS] = s_change_mps ** 2 + (1e-4) ** 2
+    Q[IT, IT] = 1e-20
+    Q[IT0, IT0] = 1e-16
+    return F, Q
+
+
+def odometry_rows() -> np.ndarray:
+    """Kleeman 1992 eq. 25: the odometry measures speed(k+1) = v(k+1) (and the turn rate omega)."""
+    H = np.zeros((2, 8))
+    H[0, IV] = 1.0
+    H[1, IW] = 1.0
+    return H
+
+
+def odometry_variances(d_left_m: float, d_right_m: float, dt_s: float, m: BoundModel) -> np.ndarray:
+    """Variance of the odometry speed (dL + dR) / (2 dt) and turn rate (dR - dL) / (b dt)
+    over one step, from the wheel noise and the tick quantisation."""
+    var_l = m.sigma_wheel_per_m ** 2 * abs(d_left_m) + m.m_per_tick ** 2 / 6
+    var_r = m.sigma_wheel_per_m ** 2 * abs(d_right_m) + m.m_per_tick ** 2 / 6
+    return np.array([(var_l + var_r) / (4 * dt_s ** 2),
+                     (var_l + var_r) / (m.wheel_base_m ** 2 * dt_s ** 2)])
+
+
+def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.ndarray,
+                    heard_rx_angles: list[np.ndarray], wheel_left_m: np.ndarray,
+                    wheel_right_m: np.ndarray, model: BoundModel) -> np.ndarray:
+    """Bound covariance J_k^-1 after each beacon firing k, shape (K, 8, 8).
+
+    states: (K, 8) true state at each firing (STATE order, t0 = firing time);
+    beacon_index: (K,) 0-based beacon fired; heard_rx_angles[k]: body angles of the
+    receivers that detected firing k's direct pulse; wheel_*_m: (K,) true cumulative
+    wheel travel at each firing (odometry input between firings).
+    """
+    K = len(states)
+    J = np.diag(1.0 / np.asarray(model.prior_sigma, dtype=float) ** 2)
+    out = np.empty((K, 8, 8))
+    # arrival noise plus the node clock's 1 us quantisation (uniform: variance 1 us^2 / 12)
+    R_one = model.sigma_arrival_s ** 2 + (1e-6) ** 2 / 12
+    for k in range(K):
+        if k > 0:
+            F, Q = process_model(states[k - 1], states[k], wheel_left_m[k] - wheel_left_m[k - 1],
+                                 wheel_right_m[k] - wheel_right_m[k - 1],
+                                 states[k, IT0] - states[k - 1, IT0],
+                                 states[k, IS] - states[k - 1, IS], model)
+        else:
+            F, Q = np.eye(8), np.diag(np.full(8, 1e-20))
+        angles = heard_rx_angles[k]
+        rows, variances = [], []
+        if len(angles):
+            rows.append(arrival_jacobian(states[k], beacons_m[beacon_index[k]], np.asarray(angles),
+                                         model.ring_radius_m, model.rx_height_m))
+            variances.append(np.full(len(angles), R_one))
+        if k > 0:
+            rows.append(odometry_rows())
+            variances.append(odometry_variances(wheel_left_m[k] - wheel_left_m[k - 1],
+                                                wheel_right_m[k] - wheel_right_m[k - 1],
+                                                states[k, IT0] - states[k - 1, IT0], model))
+        H = np.vstack(rows) if rows else None
+        R = np.diag(np.concatenate(variances)) if rows else None
+        J = info_step(J, F, Q, H, R)
+        out[k] = np.linalg.inv(J)
+    return out

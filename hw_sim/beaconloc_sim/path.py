@@ -1,0 +1,142 @@
+"""The robot's true path: a program of straights, arcs, turns on the spot and waits.
+
+Every pose is evaluated in closed form (unicycle kinematics with piecewise
+constant speed v_mps and turn rate omega_radps), so the acoustics can ask for
+the exact receiver position at any arrival instant.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Segment:
+    kind: str            # straight | arc | turn | wait
+    duration_s: float
+    v_mps: float
+    omega_radps: float
+
+
+class Trajectory:
+    """Closed-form pose, speed and wheel travel along a segment program.
+
+    ``kidnap`` = (time_s, dx_m, dy_m): from time_s on, the robot sits dx, dy
+    away from where the program puts it (carried; its wheels did not turn).
+    """
+
+    def __init__(self, start_x_m: float, start_y_m: float, start_theta_rad: float,
+                 segments: list[Segment], wheel_base_m: float,
+                 kidnap: tuple[float, float, float] | None = None):
+        self.segments = segments
+        self.wheel_base_m = wheel_base_m
+        self.kidnap = kidnap
+        n = len(segments)
+        self.t0_s = np.zeros(n + 1)
+        self.x0_m = np.zeros(n + 1)
+        self.y0_m = np.zeros(n + 1)
+        self.th0_rad = np.zeros(n + 1)
+        self.sl0_m = np.zeros(n + 1)     # left wheel ground travel at segment start
+        self.sr0_m = np.zeros(n + 1)
+        self.v_mps = np.zeros(n + 1)     # the extra last "segment" is standing still forever
+        self.w_radps = np.zeros(n + 1)
+        x, y, th, t, sl, sr = start_x_m, start_y_m, start_theta_rad, 0.0, 0.0, 0.0
+        for i, seg in enumerate(segments):
+            self.t0_s[i], self.x0_m[i], self.y0_m[i], self.th0_rad[i] = t, x, y, th
+            self.sl0_m[i], self.sr0_m[i] = sl, sr
+            self.v_mps[i], self.w_radps[i] = seg.v_mps, seg.omega_radps
+            x, y, th = (float(a) for a in self._advance(x, y, th, seg.v_mps, seg.omega_radps,
+                                                        seg.duration_s))
+            # differential drive: wheel speeds v -/+ omega * b / 2
+            sl += (seg.v_mps - seg.omega_radps * wheel_base_m / 2) * seg.duration_s
+            sr += (seg.v_mps + seg.omega_radps * wheel_base_m / 2) * seg.duration_s
+            t += seg.duration_s
+        self.t0_s[n], self.x0_m[n], self.y0_m[n], self.th0_rad[n] = t, x, y, th
+        self.sl0_m[n], self.sr0_m[n] = sl, sr
+        self.end_s = t
+
+    @staticmethod
+    def _advance(x, y, th, v, w, tau):
+        """Unicycle pose after tau seconds at constant v, w (exact integral)."""
+        x = np.asarray(x, dtype=float)
+        tau = np.asarray(tau, dtype=float)
+        w = np.asarray(w, dtype=float)
+        v = np.asarray(v, dtype=float)
+        th_end = th + w * tau
+        small = np.abs(w) < 1e-12
+        w_safe = np.where(small, 1.0, w)
+        # x(tau) = x0 + v/w (sin(th0 + w tau) - sin th0), limit w -> 0: x0 + v tau cos th0
+        dx = np.where(small, v * tau * np.cos(th), v / w_safe * (np.sin(th_end) - np.sin(th)))
+        dy = np.where(small, v * tau * np.sin(th), -v / w_safe * (np.cos(th_end) - np.cos(th)))
+        return x + dx, y + dy, th_end
+
+    def _index(self, t_s: np.ndarray) -> np.ndarray:
+        idx = np.searchsorted(self.t0_s, t_s, side="right") - 1
+        return np.clip(idx, 0, len(self.t0_s) - 1)
+
+    def state(self, t_s) -> dict[str, np.ndarray]:
+        """Pose and rates at time(s) t_s: x_m, y_m, theta_rad (unwrapped), v_mps, omega_radps."""
+        t = np.asarray(t_s, dtype=float)
+        i = self._index(t)
+        tau = np.maximum(t - self.t0_s[i], 0.0)
+        x, y, th = self._advance(self.x0_m[i], self.y0_m[i], self.th0_rad[i],
+                                 self.v_mps[i], self.w_radps[i], tau)
+        if self.kidnap is not None:
+            moved = t >= self.kidnap[0]
+            x = x + np.where(moved, self.kidnap[1], 0.0)
+            y = y + np.where(moved, self.kidnap[2], 0.0)
+        return {"x_m": x, "y_m": y, "theta_rad": th, "v_mps": self.v_mps[i],
+                "omega_radps": self.w_radps[i]}
+
+    def wheel_travel(self, t_s) -> tuple[np.ndarray, np.ndarray]:
+        """Cumulative ground travel of the left and right wheel at t_s, m."""
+        t = np.asarray(t_s, dtype=float)
+        i = self._index(t)
+        tau = np.maximum(t - self.t0_s[i], 0.0)
+        half = self.w_radps[i] * self.wheel_base_m / 2
+        return (self.sl0_m[i] + (self.v_mps[i] - half) * tau,
+                self.sr0_m[i] + (self.v_mps[i] + half) * tau)
+
+
+def parse_segment(text: str, default_speed_mps: float, turn_rate_radps: float) -> Segment:
+    """``straight LENGTH_M [SPEED_MPS]`` | ``arc ANGLE_DEG RADIUS_M [SPEED_MPS]`` |
+    ``turn ANGLE_DEG [RATE_DEGPS]`` | ``wait SECONDS``. Raises ValueError with the reason."""
+    words = text.split()
+    if not words:
+        raise ValueError("empty segment")
+    kind, args = words[0].lower(), words[1:]
+    try:
+        nums = [float(a) for a in args]
+    except ValueError:
+        raise ValueError(f"not a number in {text!r}") from None
+    if any(not math.isfinite(n) for n in nums):
+        raise ValueError(f"not a finite number in {text!r}")
+    want = {"straight": (1, 2), "arc": (2, 3), "turn": (1, 2), "wait": (1, 1)}
+    if kind not in want:
+        raise ValueError(f"unknown segment kind {kind!r} (straight, arc, turn, wait)")
+    lo, hi = want[kind]
+    if not lo <= len(nums) <= hi:
+        raise ValueError(f"{kind} takes {lo}..{hi} numbers, got {len(nums)}")
+    if kind == "wait":
+        if nums[0] <= 0:
+            raise ValueError("wait duration must be > 0")
+        return Segment("wait", nums[0], 0.0, 0.0)
+    if kind == "straight":
+        speed = nums[1] if len(nums) > 1 else default_speed_mps
+        if nums[0] <= 0 or speed <= 0:
+            raise ValueError("straight length and speed must be > 0")
+        return Segment("straight", nums[0] / speed, speed, 0.0)
+    if kind == "arc":
+        angle = math.radians(nums[0])
+        radius, speed = nums[1], (nums[2] if len(nums) > 2 else default_speed_mps)
+        if radius <= 0 or speed <= 0 or angle == 0:
+            raise ValueError("arc needs a non-zero angle (+ left, - right), radius > 0, speed > 0")
+        duration = abs(angle) * radius / speed
+        return Segment("arc", duration, speed, math.copysign(speed / radius, angle))
+    angle = math.radians(nums[0])
+    rate = math.radians(nums[1]) if len(nums) > 1 else turn_rate_radps
+    if angle == 0 or rate <= 0:
+        raise ValueError("turn needs a non-zero angle and a rate > 0")
+    return Segment("turn", abs(angle) / rate, 0.0, math.copysign(rate, angle))

@@ -1,0 +1,65 @@
+"""Plot a run: truth vs estimate vs odometry alone (xy), position error with the
+estimator's 3-sigma envelope and the Cramer-Rao bound, speed of sound."""
+from __future__ import annotations
+
+import numpy as np
+
+from .outputs import read_csv
+
+TRUTH_NEEDED = ("t_us", "x_m", "y_m", "sos_mps", "pcrb_pos_m")
+EST_NEEDED = ("t_us", "x_m", "y_m", "sos_mps", "var_x_m2", "var_y_m2")
+ODO_NEEDED = ("t_us", "x_m", "y_m")
+
+
+def match_truth(truth: dict, t_us: np.ndarray, column: str) -> np.ndarray:
+    """Truth column linearly interpolated at the estimate times (both on the receiver-array clock)."""
+    return np.interp(t_us, truth["t_us"], truth[column])
+
+
+def plot(truth_path, estimates_path, odometry_path, out_path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    truth = read_csv(truth_path, TRUTH_NEEDED)
+    est = read_csv(estimates_path, EST_NEEDED)
+    odo = read_csv(odometry_path, ODO_NEEDED) if odometry_path else None
+    if len(truth["t_us"]) < 2:
+        raise ValueError(f"{truth_path}: fewer than 2 rows")
+    inside = (est["t_us"] >= truth["t_us"][0]) & (est["t_us"] <= truth["t_us"][-1])
+    est = {k: v[inside] for k, v in est.items()}
+    if not len(est["t_us"]):
+        raise ValueError(f"{estimates_path}: no estimate inside the truth's time span "
+                         f"(t_us {int(truth['t_us'][0])}..{int(truth['t_us'][-1])})")
+    t0 = truth["t_us"][0]
+    t_est = (est["t_us"] - t0) * 1e-6
+    t_tru = (truth["t_us"] - t0) * 1e-6
+    err = np.hypot(est["x_m"] - match_truth(truth, est["t_us"], "x_m"),
+                   est["y_m"] - match_truth(truth, est["t_us"], "y_m"))
+    sigma = np.sqrt(np.maximum(est["var_x_m2"] + est["var_y_m2"], 0.0))
+
+    fig, ax = plt.subplots(1, 3, figsize=(17, 5.5))
+    ax[0].plot(truth["x_m"], truth["y_m"], "k-", lw=1.5, label="truth")
+    ax[0].plot(est["x_m"], est["y_m"], "C0-", lw=0.9, label="estimate")
+    if odo is not None:
+        ax[0].plot(odo["x_m"], odo["y_m"], "C3--", lw=0.9, label="odometry alone")
+    ax[0].set(xlabel="x (m)", ylabel="y (m)", title="path", aspect="equal")
+    ax[0].legend(loc="best")
+    ax[0].grid(alpha=0.3)
+
+    ax[1].semilogy(t_est, np.maximum(err, 1e-5) * 1e3, "C0-", lw=0.8, label="position error")
+    ax[1].semilogy(t_est, np.maximum(3 * sigma, 1e-5) * 1e3, "C1-", lw=0.8,
+                   label="estimator 3$\\sigma$")
+    ax[1].semilogy(t_tru, truth["pcrb_pos_m"] * 1e3, "k--", lw=1.0, label="Cramer-Rao bound (1$\\sigma$)")
+    ax[1].set(xlabel="time (s)", ylabel="mm", title="position error")
+    ax[1].legend(loc="best")
+    ax[1].grid(alpha=0.3, which="both")
+
+    ax[2].plot(t_tru, truth["sos_mps"], "k-", lw=1.5, label="truth")
+    ax[2].plot(t_est, est["sos_mps"], "C0-", lw=0.8, label="estimate")
+    ax[2].set(xlabel="time (s)", ylabel="m/s", title="speed of sound")
+    ax[2].legend(loc="best")
+    ax[2].grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out_path, dpi=110)
+    plt.close(fig)

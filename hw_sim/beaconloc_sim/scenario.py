@@ -1,0 +1,263 @@
+"""Scenario files ``hw_sim/scenarios/<name>.scenario.ini``: the site they use,
+the path, temperature, echoes, clocks, encoder imperfections, faults, duration, seed.
+See docs/simulator.md for every key."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .inifile import ConfigError, IniFile
+from .path import Trajectory, parse_segment
+from .site import SCENARIO_DIR, Site, load_site
+
+SUFFIX = ".scenario.ini"
+
+_KNOWN = {
+    "scenario": {"site", "description", "duration_s", "seed"},
+    "path": {"start", "speed_mps", "turn_rate_degps"},      # + segmentN
+    "environment": {"temperature_c", "temperature_profile", "air_absorption_db_per_m"},
+    "acoustics": {"source_level_mv", "threshold_mv", "amplitude_noise_rel", "rise_time_s",
+                  "wall_reflection", "floor_ceiling_reflection", "echo_probability",
+                  "strong_reflection", "late_arrival_probability", "late_arrival_delay_s",
+                  "late_arrival_gain", "double_pulse_tolerance_s", "detector_holdoff_s"},
+    "clocks": {"beacon_period_ppm", "first_firing_s", "rx_offset_us", "rx_drift_ppm",
+               "encoder_offset_us", "encoder_drift_ppm", "node_latency_s", "bus_bitrate_bps"},
+    "encoders": {"wheel_radius_bias", "slip_fraction", "sigma_wheel_per_m", "initial_ticks"},
+    "faults": {"encoder_silence", "kidnap", "beacon_outage"},
+    "output": {"truth_rate_hz", "log_epoch_s", "channel"},
+    # [obstacles]: segmentN = x1_m, y1_m, x2_m, y2_m
+}
+
+
+@dataclass
+class Scenario:
+    path: Path
+    name: str
+    description: str
+    site: Site
+    duration_s: float
+    seed: int
+    trajectory: Trajectory
+    # environment
+    temperature_profile: np.ndarray          # (K, 2): t_s, temperature_c (piecewise linear)
+    air_absorption_db_per_m: float
+    # acoustics
+    source_level_mv: float                   # on-axis amplitude 1 m from a beacon, direct path
+    threshold_mv: float                      # detector threshold
+    amplitude_noise_rel: float               # relative (log-normal) amplitude noise
+    rise_time_s: float                       # envelope rise time (Kleeman 1992 section 2: 0.6 ms)
+    wall_reflection: float                   # amplitude reflection coefficient of the 4 walls
+    floor_ceiling_reflection: float
+    echo_probability: float                  # share of firings whose wall echoes are strong
+    strong_reflection: float
+    late_arrival_probability: float          # share of firings with an extra late arrival
+    late_arrival_delay_s: tuple[float, float]
+    late_arrival_gain: tuple[float, float]
+    double_pulse_tolerance_s: float
+    detector_holdoff_s: float                # receiver ignores bursts this long after a detection
+    # clocks
+    beacon_period_ppm: float
+    first_firing_s: float
+    rx_offset_us: int
+    rx_drift_ppm: float
+    encoder_offset_us: int
+    encoder_drift_ppm: float
+    node_latency_s: tuple[float, float]
+    bus_bitrate_bps: float
+    # encoders
+    wheel_radius_bias: tuple[float, float]   # relative error of the true radius, left/right
+    slip_fraction: tuple[float, float]       # systematic extra wheel rotation, left/right
+    sigma_wheel_per_m: float
+    initial_ticks: tuple[int, int]
+    # faults
+    encoder_silence: tuple[float, float] | None
+    kidnap: tuple[float, float, float] | None
+    beacon_outage: tuple[float, float, tuple[int, ...]] | None
+    obstacles_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    # output
+    truth_rate_hz: float = 50.0
+    log_epoch_s: float = 1_700_000_000.0
+    channel: str = "vcan0"
+
+    def temperature_c(self, t_s) -> np.ndarray:
+        prof = self.temperature_profile
+        return np.interp(np.asarray(t_s, dtype=float), prof[:, 0], prof[:, 1])
+
+    @property
+    def true_period_s(self) -> float:
+        """Beacon controller's real firing interval: nominal T off by its clock drift."""
+        return self.site.period_s * (1.0 + self.beacon_period_ppm * 1e-6)
+
+
+def builtin_names() -> list[str]:
+    return sorted(p.name[: -len(SUFFIX)] for p in SCENARIO_DIR.glob("*" + SUFFIX))
+
+
+def resolve(name_or_path: str) -> Path:
+    """A built-in scenario name or a path to a .scenario.ini file."""
+    candidate = Path(name_or_path)
+    if candidate.suffix == ".ini" or candidate.exists():
+        if not candidate.is_file():
+            raise ConfigError(f"{name_or_path}: no such scenario file")
+        return candidate
+    builtin = SCENARIO_DIR / (name_or_path + SUFFIX)
+    if builtin.is_file():
+        return builtin
+    raise ConfigError(f"unknown scenario {name_or_path!r}; built-in: {', '.join(builtin_names())}")
+
+
+def _pair(ini, sec, key, default):
+    return tuple(ini.numbers(sec, key, 2, default=list(default)))
+
+
+def load_scenario(name_or_path: str, *, seed: int | None = None,
+                  duration_s: float | None = None) -> Scenario:
+    path = resolve(name_or_path)
+    ini = IniFile(path)
+    for sec, known in _KNOWN.items():
+        if sec != "path":
+            ini.check_known(sec, known)
+    for sec in ini.parser.sections():
+        if sec not in _KNOWN and sec != "obstacles":
+            raise ini.error(sec, None, "unknown section (known: " + ", ".join(sorted(_KNOWN)) +
+                            ", obstacles)")
+    site_file = ini.raw("scenario", "site")
+    site_path = (path.parent / site_file)
+    if not site_path.is_file():
+        raise ini.error("scenario", "site", f"site file not found: {site_path}")
+    site = load_site(site_path)
+
+    # -- path ----------------------------------------------------------------------
+    start = ini.numbers("path", "start", 3)
+    speed = ini.number("path", "speed_mps", 0.4, positive=True, maximum=5.0)
+    turn_rate = math.radians(ini.number("path", "turn_rate_degps", 30.0, positive=True))
+    seg_keys = sorted((k for k in ini.parser.options("path") if k.startswith("segment")),
+                      key=lambda k: int(k[7:]) if k[7:].isdigit() else -1)
+    segments = []
+    for key in seg_keys:
+        if not key[7:].isdigit():
+            raise ini.error("path", key, "segment keys are segment1, segment2, ...")
+        try:
+            segments.append(parse_segment(ini.raw("path", key), speed, turn_rate))
+        except ValueError as exc:
+            raise ini.error("path", key, str(exc)) from None
+    for key in ini.parser.options("path"):
+        if key not in _KNOWN["path"] and not key.startswith("segment"):
+            raise ini.error("path", key, "unknown key")
+    kidnap = None
+    if ini.has("faults", "kidnap"):
+        k = ini.numbers("faults", "kidnap", 3)
+        if k[0] < 0:
+            raise ini.error("faults", "kidnap", "time_s must be >= 0")
+        kidnap = (k[0], k[1], k[2])
+    trajectory = Trajectory(start[0], start[1], math.radians(start[2]), segments,
+                            site.wheel_base_m, kidnap)
+
+    # -- environment -----------------------------------------------------------------
+    if ini.has("environment", "temperature_profile"):
+        pts = []
+        for item in ini.raw("environment", "temperature_profile").split(","):
+            try:
+                t_txt, c_txt = item.split(":")
+                pts.append((float(t_txt), float(c_txt)))
+            except ValueError:
+                raise ini.error("environment", "temperature_profile",
+                                f"expected 't_s:temperature_c, ...', got {item.strip()!r}") from None
+        prof = np.array(pts, dtype=float)
+        if len(prof) == 0 or np.any(np.diff(prof[:, 0]) <= 0) or not np.all(np.isfinite(prof)):
+            raise ini.error("environment", "temperature_profile", "times must increase")
+    else:
+        temp = ini.number("environment", "temperature_c", 20.0, minimum=-50.0, maximum=60.0)
+        prof = np.array([[0.0, temp]])
+    if np.any(prof[:, 1] < -50) or np.any(prof[:, 1] > 60):
+        raise ini.error("environment", "temperature_profile", "temperature outside -50..60 C")
+
+    duration = ini.number("scenario", "duration_s", positive=True) if duration_s is None \
+        else float(duration_s)
+    if not duration > 0:
+        raise ConfigError("--duration must be > 0")
+    sc_seed = ini.integer("scenario", "seed", 1, minimum=0) if seed is None else int(seed)
+
+    obstacles = []
+    if ini.has("obstacles"):
+        for key in ini.parser.options("obstacles"):
+            if not (key.startswith("segment") and key[7:].isdigit()):
+                raise ini.error("obstacles", key, "obstacle keys are segment1, segment2, ...")
+            obstacles.append(ini.numbers("obstacles", key, 4))
+    outage = None
+    if ini.has("faults", "beacon_outage"):
+        vals = ini.numbers("faults", "beacon_outage")
+        if len(vals) < 3 or vals[1] <= 0 or any(v != int(v) or not 1 <= v <= site.beacon_count
+                                                 for v in vals[2:]):
+            raise ini.error("faults", "beacon_outage",
+                            f"expected 'start_s, duration_s, id[, id...]' with ids 1..{site.beacon_count}")
+        outage = (vals[0], vals[1], tuple(int(v) for v in vals[2:]))
+    silence = None
+    if ini.has("faults", "encoder_silence"):
+        s = ini.numbers("faults", "encoder_silence", 2)
+        if s[1] <= 0:
+            raise ini.error("faults", "encoder_silence", "duration_s must be > 0")
+        silence = (s[0], s[1])
+    initial_ticks = ini.numbers("encoders", "initial_ticks", 2, default=[16000, 300])
+    if any(v != int(v) or not 0 <= v < 16384 for v in initial_ticks):
+        raise ini.error("encoders", "initial_ticks", "ticks must be integers 0..16383")
+
+    def rng_pair(sec, key, default, lo=0.0):
+        vals = _pair(ini, sec, key, default)
+        if vals[0] < lo or vals[1] < vals[0]:
+            raise ini.error(sec, key, f"expected 'min, max' with {lo:g} <= min <= max")
+        return vals
+
+    return Scenario(
+        path=path,
+        name=path.name[: -len(SUFFIX)] if path.name.endswith(SUFFIX) else path.stem,
+        description=ini.raw("scenario", "description", ""),
+        site=site,
+        duration_s=duration,
+        seed=sc_seed,
+        trajectory=trajectory,
+        temperature_profile=prof,
+        air_absorption_db_per_m=ini.number("environment", "air_absorption_db_per_m", 1.3, minimum=0),
+        source_level_mv=ini.number("acoustics", "source_level_mv", 4000.0, positive=True),
+        threshold_mv=ini.number("acoustics", "threshold_mv", 50.0, positive=True),
+        amplitude_noise_rel=ini.number("acoustics", "amplitude_noise_rel", 0.1, minimum=0),
+        rise_time_s=ini.number("acoustics", "rise_time_s", 0.0006, minimum=0),
+        wall_reflection=ini.number("acoustics", "wall_reflection", 0.25, minimum=0, maximum=1),
+        floor_ceiling_reflection=ini.number("acoustics", "floor_ceiling_reflection", 0.5,
+                                            minimum=0, maximum=1),
+        echo_probability=ini.number("acoustics", "echo_probability", 0.0, minimum=0, maximum=1),
+        strong_reflection=ini.number("acoustics", "strong_reflection", 0.9, minimum=0, maximum=1),
+        late_arrival_probability=ini.number("acoustics", "late_arrival_probability", 0.0,
+                                            minimum=0, maximum=1),
+        late_arrival_delay_s=rng_pair("acoustics", "late_arrival_delay_s", (0.004, 0.030)),
+        late_arrival_gain=rng_pair("acoustics", "late_arrival_gain", (0.5, 1.0)),
+        double_pulse_tolerance_s=ini.number("acoustics", "double_pulse_tolerance_s", 0.001,
+                                            positive=True),
+        detector_holdoff_s=ini.number("acoustics", "detector_holdoff_s", 0.020, minimum=0.0,
+                                      maximum=1.0),
+        beacon_period_ppm=ini.number("clocks", "beacon_period_ppm", 50.0, minimum=-1000, maximum=1000),
+        first_firing_s=ini.number("clocks", "first_firing_s", 0.037, minimum=0),
+        rx_offset_us=ini.integer("clocks", "rx_offset_us", 2**32 - 30_000_000, minimum=0,
+                                 maximum=2**40),
+        rx_drift_ppm=ini.number("clocks", "rx_drift_ppm", 30.0, minimum=-1000, maximum=1000),
+        encoder_offset_us=ini.integer("clocks", "encoder_offset_us", 1_234_567_890, minimum=0,
+                                      maximum=2**40),
+        encoder_drift_ppm=ini.number("clocks", "encoder_drift_ppm", -45.0, minimum=-1000, maximum=1000),
+        node_latency_s=rng_pair("clocks", "node_latency_s", (0.0001, 0.0004)),
+        bus_bitrate_bps=ini.number("clocks", "bus_bitrate_bps", 500_000.0, positive=True),
+        wheel_radius_bias=_pair(ini, "encoders", "wheel_radius_bias", (0.0, 0.0)),
+        slip_fraction=_pair(ini, "encoders", "slip_fraction", (0.0, 0.0)),
+        sigma_wheel_per_m=ini.number("encoders", "sigma_wheel_per_m", site.sigma_wheel_per_m,
+                                     minimum=0),
+        initial_ticks=(int(initial_ticks[0]), int(initial_ticks[1])),
+        encoder_silence=silence,
+        kidnap=kidnap,
+        beacon_outage=outage,
+        obstacles_m=np.array(obstacles, dtype=float).reshape(-1, 4),
+        truth_rate_hz=ini.number("output", "truth_rate_hz", 50.0, positive=True, maximum=1000),
+        log_epoch_s=ini.number("output", "log_epoch_s", 1_700_000_000.0, minimum=0),
+        channel=ini.raw("output", "channel", "vcan0"),
+    )

@@ -1,0 +1,227 @@
+"""One simulation run: physics -> node behaviour -> CAN frames on the bus, plus
+ground truth, the odometry-only track and the posterior Cramer-Rao bound."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import can_out, crb
+from .clocks import NodeClock
+from .encoders import TICK_WRAP, dead_reckoning, ticks, wheel_rotation_rad
+from .physics import acoustics as ac
+from .physics.pulses import KIND_DIRECT, Detections, Firings, make_firings, simulate_detections
+from .scenario import Scenario
+
+NODE_RX, NODE_ENCODER = 1, 2          # DBC NODE_STATUS NodeId
+ID_PULSE, ID_ENCODERS, ID_STATUS = 0x100, 0x110, 0x120
+# classic CAN frame with 8 data bytes: 111 bits + typical stuffing, ~125 bit times
+FRAME_BITS = 125
+
+TRUTH_COLUMNS = ("t_us", "t_sim_s", "x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "sos_mps",
+                 "period_s", "temperature_c", "pcrb_x_m", "pcrb_y_m", "pcrb_pos_m")
+ODOMETRY_COLUMNS = ("t_us", "x_m", "y_m", "theta_rad")
+
+
+@dataclass
+class Frames:
+    """Frames in bus order. t_s: end of transmission = the bridge's receive time, sim seconds."""
+    t_s: np.ndarray
+    arb_id: np.ndarray
+    signals: list[dict]
+    data: list[bytes] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+
+@dataclass
+class SimResult:
+    scenario: Scenario
+    frames: Frames
+    truth: dict[str, np.ndarray]
+    odometry: dict[str, np.ndarray]
+    firings: Firings
+    detections: Detections
+    rx_clock: NodeClock
+    encoder_clock: NodeClock
+    pcrb_cov: np.ndarray              # (K, 8, 8) bound after each firing, crb.STATE order
+
+
+def wrap_angle(a):
+    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
+
+
+def run(scn: Scenario, *, encode: bool = True) -> SimResult:
+    site = scn.site
+    seeds = np.random.SeedSequence(scn.seed).spawn(4)
+    rng_pulse, rng_enc, rng_lat, rng_fire = (np.random.default_rng(s) for s in seeds)
+    rx_clock = NodeClock(scn.rx_offset_us, scn.rx_drift_ppm)
+    enc_clock = NodeClock(scn.encoder_offset_us, scn.encoder_drift_ppm)
+
+    firings = make_firings(scn, rng_fire)
+    det = simulate_detections(scn, firings, rng_pulse)
+
+    ready, ids, nodes, sigs = [], [], [], []
+    # -- PULSE_DETECTION: the node decides on DoublePulse after the double-pulse window ------
+    window_s = site.double_pulse_spacing_s + scn.double_pulse_tolerance_s
+    lat = rng_lat.uniform(*scn.node_latency_s, size=len(det.edge_s))
+    node_us = rx_clock.wrapped_us(det.edge_s)
+    for i in range(len(det.edge_s)):
+        ready.append(det.edge_s[i] + window_s + lat[i])
+        ids.append(ID_PULSE)
+        nodes.append(NODE_RX)
+        sigs.append({"NodeTime": int(node_us[i]), "Receiver": int(det.receiver[i]),
+                     "DoublePulse": int(det.double[i]),
+                     "Amplitude": int(round(det.amplitude_mv[i])),
+                     "Width": 2 * int(round(min(max(det.width_s[i], 0.0), 8190e-6) * 1e6 / 2))})
+
+    # -- WHEEL_ENCODERS at encoder_rate_hz of the encoder node's own clock -------------------
+    period_us = int(round(1e6 / site.encoder_rate_hz))
+    first = -(-scn.encoder_offset_us // period_us) * period_us
+    last_us = enc_clock.unwrapped_us(scn.duration_s)
+    enc_us = np.arange(first, last_us + 1, period_us, dtype=np.int64)
+    t_enc = enc_clock.true_time_s(enc_us)
+    travel_l, travel_r = scn.trajectory.wheel_travel(t_enc)
+    r_true_l = site.wheel_radius_m * (1.0 + scn.wheel_radius_bias[0])
+    r_true_r = site.wheel_radius_m * (1.0 + scn.wheel_radius_bias[1])
+    ticks_l = ticks(wheel_rotation_rad(travel_l, r_true_l, scn.slip_fraction[0],
+                                       scn.sigma_wheel_per_m, rng_enc),
+                    site.ticks_per_rev, scn.initial_ticks[0])
+    ticks_r = ticks(wheel_rotation_rad(travel_r, r_true_r, scn.slip_fraction[1],
+                                       scn.sigma_wheel_per_m, rng_enc),
+                    site.ticks_per_rev, scn.initial_ticks[1])
+    enc_sent = np.ones(len(t_enc), dtype=bool)
+    if scn.encoder_silence is not None:
+        s0, sd = scn.encoder_silence
+        enc_sent &= ~((t_enc >= s0) & (t_enc < s0 + sd))
+    lat = rng_lat.uniform(*scn.node_latency_s, size=len(t_enc))
+    for i in np.flatnonzero(enc_sent).tolist():
+        ready.append(t_enc[i] + lat[i])
+        ids.append(ID_ENCODERS)
+        nodes.append(NODE_ENCODER)
+        sigs.append({"NodeTime": int(enc_us[i] % (1 << 32)),
+                     "LeftTicks": int(ticks_l[i] % TICK_WRAP),
+                     "RightTicks": int(ticks_r[i] % TICK_WRAP)})
+
+    # -- NODE_STATUS at 1 Hz from both nodes ---------------------------------------------------
+    for node, clock, phase_us in ((NODE_RX, rx_clock, 250_000), (NODE_ENCODER, enc_clock, 750_000)):
+        first = -(-(clock.offset_us - phase_us) // 1_000_000) * 1_000_000 + phase_us
+        st_us = np.arange(first, clock.unwrapped_us(scn.duration_s) + 1, 1_000_000, dtype=np.int64)
+        t_st = clock.true_time_s(st_us)
+        lat = rng_lat.uniform(*scn.node_latency_s, size=len(t_st))
+        for i in range(len(t_st)):
+            if node == NODE_ENCODER and scn.encoder_silence is not None and \
+                    scn.encoder_silence[0] <= t_st[i] < sum(scn.encoder_silence):
+                continue
+            flags = 0
+            if node == NODE_RX:
+                recent = (det.edge_s > t_st[i] - 1.0) & (det.edge_s <= t_st[i])
+                flags |= 1 if np.any(det.saturated[recent]) else 0
+            ready.append(t_st[i] + lat[i])
+            ids.append(ID_STATUS)
+            nodes.append(node)
+            sigs.append({"NodeId": node, "Flags": flags,
+                         "Uptime": int(st_us[i] // 1_000_000) % (1 << 24),
+                         "TxErrorCount": 0, "RxErrorCount": 0, "Overruns": 0})
+
+    # -- bus: frames leave in order of readiness, one at a time ---------------------------------
+    ready_a = np.asarray(ready, dtype=float)
+    order = np.argsort(ready_a, kind="stable")
+    ready_a = ready_a[order]
+    ids_a = np.asarray(ids, dtype=np.int64)[order]
+    nodes_a = np.asarray(nodes, dtype=np.int64)[order]
+    sigs = [sigs[i] for i in order.tolist()]
+    frame_s = FRAME_BITS / scn.bus_bitrate_bps
+    # start_i = max(ready_i, start_{i-1} + frame): a running maximum of ready_i - i * frame
+    idx = np.arange(len(ready_a))
+    start = np.maximum.accumulate(ready_a - idx * frame_s) + idx * frame_s if len(idx) else ready_a
+    t_rx = start + frame_s
+    # rolling counters per frame id and node, in transmit order (DBC: mod 8 / 16 / 16)
+    modulo = {ID_PULSE: 8, ID_ENCODERS: 16, ID_STATUS: 16}
+    counters: dict[tuple[int, int], int] = {}
+    for i, sig in enumerate(sigs):
+        key = (int(ids_a[i]), int(nodes_a[i]))
+        c = counters.get(key, 0)
+        sig["Counter"] = c
+        counters[key] = (c + 1) % modulo[key[0]]
+    frames = Frames(t_rx, ids_a, sigs)
+    if encode:
+        frames.data = can_out.encode_all(frames)
+
+    truth = _truth(scn, rx_clock)
+    pcrb_cov = _pcrb(scn, firings, det, rx_clock)
+    _attach_bound(truth, firings, pcrb_cov, scn)
+    odometry = _odometry(scn, site, ticks_l[enc_sent], ticks_r[enc_sent], t_enc[enc_sent], rx_clock)
+    return SimResult(scn, frames, truth, odometry, firings, det, rx_clock, enc_clock, pcrb_cov)
+
+
+def _truth(scn: Scenario, rx_clock: NodeClock) -> dict[str, np.ndarray]:
+    n = int(math.floor(scn.duration_s * scn.truth_rate_hz + 1e-9)) + 1
+    t = np.arange(n) / scn.truth_rate_hz
+    st = scn.trajectory.state(t)
+    temp = scn.temperature_c(t)
+    return {
+        "t_us": rx_clock.unwrapped_us(t),
+        "t_sim_s": t,
+        "x_m": st["x_m"], "y_m": st["y_m"], "theta_rad": wrap_angle(st["theta_rad"]),
+        "v_mps": st["v_mps"], "omega_radps": st["omega_radps"],
+        "sos_mps": ac.speed_of_sound_mps(temp),
+        # the firing interval as the receiver-array node's clock measures it, s
+        "period_s": np.full(n, scn.true_period_s * (1.0 + scn.rx_drift_ppm * 1e-6)),
+        "temperature_c": temp,
+    }
+
+
+def bound_model(scn: Scenario) -> crb.BoundModel:
+    site = scn.site
+    return crb.BoundModel(
+        sigma_arrival_s=site.sigma_arrival_s, sigma_wheel_per_m=scn.sigma_wheel_per_m,
+        wheel_base_m=site.wheel_base_m, ring_radius_m=site.ring_radius_m,
+        rx_height_m=site.rx_height_m,
+        m_per_tick=2 * math.pi * site.wheel_radius_m / site.ticks_per_rev,
+        prior_sigma=(1.0, 1.0, 0.5, 0.5, 0.5, site.sigma_speed_of_sound_mps, 1e-4, 0.1))
+
+
+def _pcrb(scn: Scenario, firings: Firings, det: Detections, rx_clock: NodeClock) -> np.ndarray:
+    """Bound after each firing, with the receivers that really detected its direct pulse."""
+    k = len(firings.t_s)
+    if k == 0:
+        return np.zeros((0, 8, 8))
+    st = scn.trajectory.state(firings.t_s)
+    period_rx = scn.true_period_s * (1.0 + scn.rx_drift_ppm * 1e-6)
+    states = np.column_stack([st["x_m"], st["y_m"], st["theta_rad"], st["v_mps"], st["omega_radps"],
+                              firings.sos_mps, np.full(k, period_rx),
+                              rx_clock.unwrapped_us(firings.t_s) * 1e-6])
+    direct = (det.kind == KIND_DIRECT) & (det.burst == 1)
+    angles = scn.site.receiver_angles_rad()
+    heard = [[] for _ in range(k)]
+    for f, r in zip(det.firing[direct].tolist(), det.receiver[direct].tolist()):
+        heard[f].append(angles[r])
+    wl, wr = scn.trajectory.wheel_travel(firings.t_s)
+    return crb.pcrb_along_path(states, scn.site.beacons_m, firings.beacon,
+                               [np.array(h) for h in heard], wl, wr, bound_model(scn))
+
+
+def _attach_bound(truth, firings: Firings, cov: np.ndarray, scn: Scenario) -> None:
+    """Bound at each truth row: the posterior bound after the latest firing (prior before it)."""
+    t = truth["t_sim_s"]
+    i = np.searchsorted(firings.t_s, t, side="right") - 1
+    prior = bound_model(scn).prior_sigma
+    var_x = np.where(i >= 0, cov[np.maximum(i, 0), 0, 0] if len(cov) else 0, prior[0] ** 2)
+    var_y = np.where(i >= 0, cov[np.maximum(i, 0), 1, 1] if len(cov) else 0, prior[1] ** 2)
+    truth["pcrb_x_m"] = np.sqrt(var_x)
+    truth["pcrb_y_m"] = np.sqrt(var_y)
+    truth["pcrb_pos_m"] = np.sqrt(var_x + var_y)
+
+
+def _odometry(scn, site, ticks_l, ticks_r, t_enc, rx_clock) -> dict[str, np.ndarray]:
+    """Dead reckoning from the encoder frames actually sent, nominal geometry, true start pose."""
+    if len(t_enc) == 0:
+        return {c: np.zeros(0) for c in ODOMETRY_COLUMNS}
+    st0 = scn.trajectory.state(np.array([t_enc[0]]))
+    x, y, th = dead_reckoning(ticks_l % TICK_WRAP, ticks_r % TICK_WRAP, float(st0["x_m"][0]),
+                              float(st0["y_m"][0]), float(st0["theta_rad"][0]), site.wheel_radius_m,
+                              site.wheel_base_m, site.ticks_per_rev)
+    return {"t_us": rx_clock.unwrapped_us(t_enc), "x_m": x, "y_m": y, "theta_rad": wrap_angle(th)}

@@ -1,0 +1,20 @@
+# lib/bench.mk — make bench-speed: ns per pulse fusion / predict (double and
+# float), callgrind instructions per fusion, FilterPy's EKF update as the
+# reference, in one run (lib/bench/run_speed.py). Last line:
+#   speed fuse_pulse_ns=<n> predict_ns=<n> fuse_pulse_instr=<n> filterpy_ratio=<r>
+
+BENCH_DIR    := $(BUILD)/bench
+BENCH_CFLAGS := -std=c11 -O2 -Wall -Wextra -Werror -Ilib/include
+BENCH_HDRS   := $(wildcard lib/include/*.h lib/include/beaconloc/*.h)
+
+$(BENCH_DIR)/bench_speed_double: lib/bench/bench_speed.c $(BUILD)/lib/libbeaconloc.a $(BENCH_HDRS)
+	@mkdir -p $(@D)
+	$(CC) $(BENCH_CFLAGS) $< $(BUILD)/lib/libbeaconloc.a -lm -o $@
+
+$(BENCH_DIR)/bench_speed_float: lib/bench/bench_speed.c $(BUILD)/lib/float/libbeaconloc.a $(BENCH_HDRS)
+	@mkdir -p $(@D)
+	$(CC) $(BENCH_CFLAGS) -DBL_USE_FLOAT=1 $< $(BUILD)/lib/float/libbeaconloc.a -lm -o $@
+
+bench-speed: $(BENCH_DIR)/bench_speed_double $(BENCH_DIR)/bench_speed_float
+	$(PY) lib/bench/run_speed.py --double $(BENCH_DIR)/bench_speed_double \
+	    --float $(BENCH_DIR)/bench_speed_float --out-dir $(BENCH_DIR) --python $(PY)

@@ -1,0 +1,73 @@
+# lib/firmware.mk — Cortex-M4F fitness of libbeaconloc.
+#
+#   make size-m4        cross-build the library (float, -Os) and the bare-metal
+#                       example lib/examples/firmware_m4 (STM32F407 memory map)
+#                       with Debian's arm-none-eabi toolchain + newlib nano, then
+#                       print flash/RAM of the library and of the whole image,
+#                       sizeof(bl_filter), the worst per-function stack use
+#                       (-fstack-usage) and the worst call chain
+#                       (-fcallgraph-info=su). Last line machine-readable.
+#   make check-m4-build (in UNIT_TESTS) the cross build links with plain gcc
+#                       (no libstdc++) and references no heap / C++ runtime.
+#
+# Targets (issue 2): library <= 32 KiB flash, one filter <= 2 KiB RAM,
+# stack <= 2 KiB. Reported, not enforced.
+
+M4_PREFIX   ?= arm-none-eabi-
+M4_DIR      := $(BUILD)/m4
+M4_ARCH     := -mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard
+M4_COMMON   := $(M4_ARCH) -Os -g -ffunction-sections -fdata-sections -fstack-usage \
+               -fcallgraph-info=su -DBL_USE_FLOAT=1 -Ilib/include
+M4_CXXFLAGS := $(M4_COMMON) -std=c++17 -fno-exceptions -fno-rtti -fno-threadsafe-statics \
+               -DEIGEN_NO_MALLOC -DEIGEN_GEMM_TO_COEFFBASED_THRESHOLD=1000 -DEIGEN_NO_DEBUG \
+               -isystem /usr/include/eigen3 -Wall -Wextra -Werror -Wconversion -Wdouble-promotion
+M4_CFLAGS   := $(M4_COMMON) -std=c11 -Wall -Wextra -Werror -Wdouble-promotion
+M4_LDFLAGS  := $(M4_ARCH) --specs=nano.specs --specs=nosys.specs -nostartfiles \
+               -Tlib/examples/firmware_m4/stm32f4.ld -Wl,--gc-sections
+
+M4_LIB_SRCS := $(sort $(wildcard lib/src/*.cpp))
+M4_LIB_OBJS := $(patsubst lib/src/%.cpp,$(M4_DIR)/lib/%.o,$(M4_LIB_SRCS))
+M4_EX_SRCS  := $(sort $(wildcard lib/examples/firmware_m4/*.c))
+M4_EX_OBJS  := $(patsubst lib/examples/firmware_m4/%.c,$(M4_DIR)/example/%.o,$(M4_EX_SRCS))
+M4_HDRS     := $(wildcard lib/include/*.h lib/include/beaconloc/*.h lib/src/*.hpp lib/examples/firmware_m4/*.h)
+M4_ELF      := $(M4_DIR)/firmware_m4.elf
+
+$(M4_DIR)/lib/%.o: lib/src/%.cpp $(M4_HDRS) lib/firmware.mk
+	@mkdir -p $(@D)
+	$(M4_PREFIX)g++ $(M4_CXXFLAGS) -c $< -o $@
+
+$(M4_DIR)/example/%.o: lib/examples/firmware_m4/%.c $(M4_HDRS) lib/firmware.mk
+	@mkdir -p $(@D)
+	$(M4_PREFIX)gcc $(M4_CFLAGS) -c $< -o $@
+
+$(M4_DIR)/libbeaconloc.a: $(M4_LIB_OBJS)
+	rm -f $@
+	$(M4_PREFIX)ar rcs $@ $^
+
+# Linked with gcc, not g++: no libstdc++ on the firmware either.
+$(M4_ELF): $(M4_EX_OBJS) $(M4_DIR)/libbeaconloc.a lib/examples/firmware_m4/stm32f4.ld
+	$(M4_PREFIX)gcc $(M4_LDFLAGS) -Wl,-Map=$(M4_DIR)/firmware_m4.map $(M4_EX_OBJS) \
+	    $(M4_DIR)/libbeaconloc.a -lm -o $@
+
+# C++ runtime in the firmware image: a hard failure. Heap functions: reported
+# (with the library functions that reference them) but not failed here, the
+# library's own host check (check-lib-clink) owns the no-heap rule; size-m4
+# prints heap_refs in its last line.
+M4_CXXRT := '(__cxa_|__gxx_|_Znw|_Zna|_Zdl|_Zda|_ZSt|_Unwind_)'
+M4_HEAP  := '^(malloc|free|calloc|realloc|_malloc_r|_free_r)$$'
+
+.PHONY: size-m4 check-m4-build
+check-m4-build: $(M4_ELF)
+	@bad=$$($(M4_PREFIX)nm $(M4_ELF) | awk '{print $$NF}' | grep -E $(M4_CXXRT) || true); \
+	if [ -n "$$bad" ]; then echo "check-m4-build: FAIL: $(M4_ELF) contains C++ runtime: $$bad"; exit 1; fi; \
+	heap=$$($(M4_PREFIX)nm $(M4_ELF) | awk '{print $$NF}' | grep -E $(M4_HEAP) | tr '\n' ' '); \
+	if [ -n "$$heap" ]; then \
+	  who=$$(grep -h 'targetname: "\(malloc\|free\)"' $(M4_DIR)/lib/*.ci | sed 's/.*sourcename: "\([^"]*\)".*/\1/' | sort -u | $(M4_PREFIX)c++filt | cut -c1-160 | tr '\n' ';'); \
+	  echo "check-m4-build: WARNING: heap linked in ($$heap) referenced from: $$who"; fi; \
+	echo "check-m4-build: OK: $(M4_ELF) links (arm-none-eabi-gcc, newlib nano, no C++ runtime)"
+
+size-m4: $(M4_ELF)
+	$(PY) lib/examples/firmware_m4/size_report.py --elf $(M4_ELF) --map $(M4_DIR)/firmware_m4.map \
+	    --lib-objs $(M4_DIR)/lib --example-objs $(M4_DIR)/example --prefix $(M4_PREFIX)
+
+UNIT_TESTS += check-m4-build

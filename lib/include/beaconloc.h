@@ -1,0 +1,24 @@
+/*
+ * beaconloc — umbrella header of the estimator library: includes every
+ * public header under beaconloc/. C99, prefix bl_. See each header for the
+ * contracts; common.h for the conventions (units, errors, ownership).
+ */
+#ifndef BEACONLOC_H
+#define BEACONLOC_H
+
+#include "beaconloc/common.h"
+#include "beaconloc/config.h"
+#include "beaconloc/solver.h"
+#include "beaconloc/filter.h"
+#include "beaconloc/filter_model.h"
+/* Headers written by other modules; included when present. */
+#if defined(__has_include)
+#if __has_include("beaconloc/sequencer.h")
+#include "beaconloc/sequencer.h"
+#endif
+#if __has_include("beaconloc/firmware.h")
+#include "beaconloc/firmware.h"
+#endif
+#endif
+
+#endif /* BEACONLOC_H */

@@ -1,0 +1,117 @@
+/*
+ * beaconloc — site geometry and estimator tuning in one params struct.
+ *
+ * The fields of the site sections map 1:1 onto the keys of the INI site file
+ * (hw_sim/scenarios/kleeman-lab.ini): section [beacons] -> beacon_*,
+ * [beaconN] x_m/y_m/z_m -> beacons[N-1], [receivers] -> receiver_*,
+ * [robot] -> robot fields, [noise] -> noise fields. The comment after each
+ * field names its INI key. Fields under "tuning" have no INI key yet; their
+ * defaults come from bl_config_default(). [site] (room size, echoes) and
+ * [bridge] are not used by the estimator.
+ *
+ * Frame: site frame, x east, y north, z up, metres; angles counter-clockwise
+ * from +x. Beacon i (1-based in the site file and in the firing cycle) is
+ * beacons[i-1]; every API call takes the 0-based beacon index i-1.
+ */
+#ifndef BEACONLOC_CONFIG_H
+#define BEACONLOC_CONFIG_H
+
+#include "beaconloc/common.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct bl_config {
+    /* ---- [beacons] ---- */
+    uint32_t beacon_count;            /* count: N, 3..BL_MAX_BEACONS */
+    bl_real beacon_period_s;          /* period_s: nominal T between successive firings
+                                         (beacon 1 first, cycle 1..N), > 0 */
+    bl_real double_pulse_spacing_s;   /* double_pulse_spacing_s: beacon 1's second burst
+                                         after its first (used by the sequencer), >= 0 */
+    bl_real burst_length_s;           /* burst_length_s: length of one burst, >= 0 */
+    /* ---- [beacon1] .. [beaconN] ---- */
+    bl_beacon beacons[BL_MAX_BEACONS]; /* x_m, y_m, z_m of beacon i at beacons[i-1] */
+
+    /* ---- [receivers] ---- */
+    uint32_t receiver_count;          /* count: 1..BL_MAX_RECEIVERS */
+    bl_real ring_radius_m;            /* ring_radius_m: ring centred on the wheel-base
+                                         centre, >= 0 */
+    bl_real first_angle_deg;          /* first_angle_deg: body-frame angle of receiver 0
+                                         (0 = forward, +x body), CCW */
+    bl_real angle_step_deg;           /* angle_step_deg (optional key): body angle between
+                                         receiver k and k+1, CCW; 0 means evenly spaced,
+                                         360/receiver_count (the default) */
+    bl_real receiver_height_m;        /* height_m: z of every receiver in the site frame */
+    bl_real beamwidth_deg;            /* beamwidth_deg: full beam width at half amplitude
+                                         (simulator / sequencer), (0, 360] */
+
+    /* ---- [robot] ---- */
+    bl_real wheel_base_m;             /* wheel_base_m: distance between the wheels, > 0 */
+    bl_real wheel_radius_m;           /* wheel_radius_m: > 0 (ticks -> metres in the caller) */
+    uint32_t ticks_per_rev;           /* ticks_per_rev: encoder ticks per wheel turn, > 0 */
+    bl_real encoder_rate_hz;          /* encoder_rate_hz: nominal encoder frame rate, > 0 */
+
+    /* ---- [noise] ---- */
+    bl_real sigma_arrival_s;          /* sigma_arrival_s: σ of a pulse arrival time
+                                         (Kleeman 1992 §3.11: 0.2 ms), > 0 */
+    bl_real sigma_wheel_per_m;        /* sigma_wheel_per_m: odometry process noise: each
+                                         wheel's distance variance grows by this² · |d| (m²)
+                                         over a travel of |d| m (1 cm per metre), >= 0 */
+    bl_real speed_of_sound_mps;       /* speed_of_sound_mps: initial speed of sound, > 0 */
+    bl_real sigma_speed_of_sound_mps; /* sigma_speed_of_sound_mps: its initial σ (Kleeman
+                                         Fig. 8: 5 m/s), > 0 */
+    bl_real gate_sigma;               /* gate_sigma: innovation gate in σ (chi-square with
+                                         1 dof: reject if |innov| > gate_sigma·σ_innov), > 0 */
+
+    /* ---- tuning (no INI key; defaults from bl_config_default) ---- */
+    bl_real sigma_period_s;           /* initial σ of the beacon period T (s), > 0 */
+    bl_real startup_sigma_arrival_s;  /* σ arrival used until converged (Kleeman §3.9: high
+                                         variance during start-up), >= sigma_arrival_s */
+    bl_real startup_gate_sigma;       /* gate (σ) used until converged, >= gate_sigma */
+    bl_real converged_sigma_xy_m;     /* converged once sqrt(max(Pxx,Pyy)) is below this */
+    bl_real accel_noise_mps2;         /* process noise: σ of linear acceleration
+                                         (constant-velocity predict; odometry v/ω states), >= 0 */
+    bl_real angular_accel_noise_radps2; /* process noise: σ of angular acceleration, >= 0 */
+    bl_real heading_noise_rad_per_sqrt_s; /* odometry heading noise while moving: σ² grows by
+                                         this² per second (the "offset", Kleeman §3.10) ... */
+    bl_real heading_noise_fraction;   /* ... plus (this · |Δθ|)² per step (the "fraction of
+                                         the angle increment", §3.10), >= 0 */
+    bl_real stationary_noise_scale;   /* process-noise scale when stationary (0..1] (§3.10) */
+    bl_real speed_of_sound_drift_mps_per_sqrt_s; /* random walk of s, >= 0 */
+    bl_real period_drift_s_per_sqrt_s;           /* random walk of T, >= 0 */
+    bl_real firing_jitter_s;          /* σ of firing-time jitter per beacon slot, >= 0 */
+    uint32_t iekf_max_iterations;     /* IEKF relinearisations per pulse, 1..20 */
+    bl_real iekf_step_tolerance;      /* stop iterating when |Δposition| < this (m) */
+    uint32_t reset_reject_count;      /* K: re-initialise from the snapshot solver after K
+                                         consecutive rejections across >= 2 beacons; 0 = never */
+    bl_real initial_theta_rad;        /* heading assumed by the automatic snapshot start */
+    bl_real reset_sigma_theta_rad;    /* heading σ after a snapshot (re-)start, > 0 */
+    bl_real initial_sigma_v_mps;      /* σ of v after a snapshot (re-)start (v = 0), > 0 */
+    bl_real initial_sigma_omega_radps; /* σ of ω after a snapshot (re-)start (ω = 0), > 0 */
+    bl_real max_predict_gap_s;        /* a predict/fuse further ahead than this returns
+                                         BL_ETIME (stale filter: re-start it), > 0 */
+} bl_config;
+
+/* Fills *cfg with the kleeman-lab site (hw_sim/scenarios/kleeman-lab.ini)
+ * and the default tuning. Always succeeds for a non-NULL cfg.
+ * Errors: BL_EINVAL (cfg NULL). */
+int bl_config_default(bl_config *cfg);
+
+/* Checks every field (finite, in range, beacons 0..count-1 pairwise distinct,
+ * at least 3 beacons not collinear in x-y). Returns BL_OK or BL_ECONFIG
+ * (BL_EINVAL if cfg is NULL). Never modifies *cfg.
+ * If bad_field is non-NULL it receives the name of the first bad field
+ * (static storage, e.g. "beacon_period_s"), or NULL when BL_OK. */
+int bl_config_check(const bl_config *cfg, const char **bad_field);
+
+/* Receiver k's body-frame angle (rad): first_angle_deg + k·step, in radians.
+ * Errors: BL_EINVAL (NULL, k >= receiver_count). */
+int bl_config_receiver_angle(const bl_config *cfg, uint32_t receiver_index,
+                             bl_real *angle_rad);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* BEACONLOC_CONFIG_H */

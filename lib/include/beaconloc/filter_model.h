@@ -1,0 +1,49 @@
+/*
+ * beaconloc — the filter's models, evaluated at a given state (for tests,
+ * tuning and diagnostics; the filter uses the same code internally).
+ * State layout: BL_IX_* in filter.h.
+ */
+#ifndef BEACONLOC_FILTER_MODEL_H
+#define BEACONLOC_FILTER_MODEL_H
+
+#include "beaconloc/common.h"
+#include "beaconloc/config.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* One pulse, with times relative to the state time t_s. */
+typedef struct bl_pulse_geometry {
+    uint32_t beacon_index;   /* 0-based, < cfg->beacon_count */
+    uint32_t receiver_index; /* < cfg->receiver_count */
+    int32_t slot;            /* the pulse was fired at t0 + slot·T (slots counted from
+                                the reference firing t0) */
+    bl_real arrival_rel_s;   /* arrival time - t_s (s) */
+    bl_real epoch_rel_s;     /* epoch - t_s (s): t0 - t_s = epoch_rel_s + x[BL_IX_T0] */
+} bl_pulse_geometry;
+
+/* Arrival-time model (Kleeman 1992 eq. 21 with the receiver's position on
+ * the ring and 3D beacon distance): *h_rel_s = predicted arrival - t_s (s);
+ * H (8, optional) = ∂h/∂x. Errors: BL_EINVAL (NULL, bad index, non-finite,
+ * receiver on the beacon or s <= v). */
+int bl_model_pulse(const bl_config *cfg, const bl_real x[8], const bl_pulse_geometry *g,
+                   bl_real *h_rel_s, bl_real H[8]);
+
+/* Odometry transition (Kleeman 1992 eq. 24 input form; differential drive)
+ * over wheel increments d_left_m, d_right_m: x_out = f(x, u); F (8x8
+ * row-major, optional) = ∂f/∂x; G (8x2 row-major, optional) = ∂f/∂(dL, dR).
+ * v and ω pass through unchanged (the filter then fuses the wheel speeds as
+ * a measurement, Kleeman eq. 25). Errors: BL_EINVAL. */
+int bl_model_odometry(const bl_config *cfg, const bl_real x[8], bl_real d_left_m, bl_real d_right_m,
+                      bl_real x_out[8], bl_real F[64], bl_real G[16]);
+
+/* Constant-velocity transition over dt_s >= 0 (Kleeman 1992 eq. 15 with
+ * the turn rate as a state): x_out, F (optional). Errors: BL_EINVAL. */
+int bl_model_constant_velocity(const bl_real x[8], bl_real dt_s, bl_real x_out[8], bl_real F[64]);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* BEACONLOC_FILTER_MODEL_H */

@@ -1,0 +1,286 @@
+/*
+ * beaconloc — beacon sequencer: receiver detections -> numbered beacon pulses.
+ *
+ * The beacons fire one after the other, T apart, in the cycle 1..N (Kleeman
+ * 1992 §2: six beacons 150 ms apart; beacon 1 marked by two 2.5 ms bursts
+ * 3 ms apart; a ring of eight receivers at 45°). The receiver node reports
+ * one detection per burst per receiver. The sequencer turns that stream into
+ * pulses "beacon i arrived at t on receiver r":
+ *
+ *   1. Merging. One firing is heard by several receivers of the ring within
+ *      the ring's diameter / speed of sound. Detections within
+ *      merge_window_us of a pulse's earliest detection are merged into it;
+ *      the pulse reports the earliest detection (its time, receiver,
+ *      amplitude and width) and how many receivers heard it.
+ *   2. Beacon 1. A pulse is beacon 1's double pulse when a detection carries
+ *      the node's double-pulse flag, when a second burst follows the first
+ *      double_spacing_us ± double_tolerance_us later (on any receiver), or
+ *      when one envelope is at least double_width_min_us wide (both bursts
+ *      read as one). A double pulse (re)anchors the firing-time model.
+ *   3. Numbering. From beacon 1's arrival a1 the firing time of beacon 1 lies
+ *      in [a1 - max_flight_us, a1]; firing slot j (j = 0, 1, 2, ... after
+ *      beacon 1, beacon index j mod N) then arrives in
+ *          [a1 - max_flight_us + j·T - tol_j,  a1 + j·T + max_flight_us + tol_j]
+ *      with tol_j = window_margin_us + j·T·period_tolerance_ppm/1e6. With a
+ *      hint from the filter (predicted firing time t0 of some beacon and T,
+ *      with their σ) the firing time is known and the window halves:
+ *          [t0 + j·T - tol_j,  t0 + j·T + max_flight_us + tol_j].
+ *      A pulse is numbered by the slot whose window contains it, so missed
+ *      beacons (including a missed beacon 1) never shift the numbering of
+ *      the next ones; a pulse outside every window is spurious.
+ *   4. Firing-time model. T is tracked from successive arrivals of the same
+ *      beacon (the first pulse numbered in each slot): T_meas = Δt / Δslots,
+ *      smoothed with gain 1/period_gain_div, and only when within the period
+ *      tolerance. No beacon 1 for lock_timeout_cycles cycles, or
+ *      max_consecutive_spurious pulses in a row outside every window, loses
+ *      the lock; the next double pulse (or a hint) re-acquires it.
+ *
+ * Echoes: the sequencer does not reject echoes beyond merging. A later
+ * arrival in the window of a firing that already produced a pulse is passed
+ * on with the same beacon index and `repeat` set; the filter's innovation
+ * gate (Kleeman 1992 §3.9) decides. Only the filter knows where the robot is,
+ * so only it can tell a late direct path from an echo; dropping here would
+ * also drop the direct path whenever an echo comes first. An echo later than
+ * the window (longer than max_flight_us) is counted as spurious.
+ *
+ * Stream API: push every detection as it arrives (any order within a merge
+ * window), then pop pulses whose merge window has closed: a pulse is ready
+ * once now_us >= its earliest detection + close delay (merge window, or the
+ * double-pulse window if that is longer). Pass as now_us the current time
+ * minus the largest delivery latency of detections; pass INT64_MAX to flush.
+ * All times are int64 microseconds on the caller's monotonic timebase (the
+ * bridge maps the node's 32-bit wrapping clock onto it); any value with
+ * |t| <= BL_SEQ_TIME_LIMIT_US is valid, so 2^32 wraps are the caller's only
+ * concern and no arithmetic here can overflow.
+ *
+ * Memory: caller-owned structs, no heap, no globals, no clock reads. Cost:
+ * push and pop are O(BL_SEQ_MAX_PENDING + BL_MAX_RECEIVERS), integer
+ * arithmetic only (identical results in the float and double builds).
+ * Errors: every fallible call returns BL_OK (or a count, see pop) or a
+ * negative bl_error and then leaves *seq exactly as it was.
+ */
+#ifndef BEACONLOC_SEQUENCER_H
+#define BEACONLOC_SEQUENCER_H
+
+#include "beaconloc/common.h"
+#include "beaconloc/config.h"
+#include "beaconloc/filter.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Pulses held open (merge window not closed yet) at one time. */
+#ifndef BL_SEQ_MAX_PENDING
+#define BL_SEQ_MAX_PENDING 8
+#endif
+
+/* Valid range of every time argument: |t_us| <= 2^61 us (73,000 years), so
+ * the difference of two valid times never overflows int64. */
+#define BL_SEQ_TIME_LIMIT_US ((int64_t)1 << 61)
+
+/* Beacon index of a pulse that could not be numbered. */
+#define BL_SEQ_UNASSIGNED (-1)
+
+typedef struct bl_seq_config {
+    uint32_t beacon_count;          /* N beacons in the firing cycle, 1..BL_MAX_BEACONS */
+    uint32_t receiver_count;        /* receivers on the ring, 1..BL_MAX_RECEIVERS */
+    int64_t period_us;              /* nominal T between successive firings (us), > 0 */
+    int32_t period_tolerance_ppm;   /* |T_true - T| bound before T is tracked (ppm), 0..100000 */
+    int32_t max_flight_us;          /* longest direct flight: largest beacon-robot distance /
+                                       slowest speed of sound (us), > 0 */
+    int32_t merge_window_us;        /* ring diameter / speed of sound + noise margin (us), > 0 */
+    int32_t window_margin_us;       /* arrival noise margin on both sides of a window (us), >= 0 */
+    int32_t double_spacing_us;      /* beacon 1's second burst after its first (us); 0 = no
+                                       second-burst recognition (flag/width only) */
+    int32_t double_tolerance_us;    /* ± tolerance on double_spacing_us (us), >= 0 */
+    int32_t double_width_min_us;    /* one envelope at least this wide is a double pulse (us);
+                                       0 = off */
+    int32_t min_width_us;           /* narrower detections are spurious (us); 0 = off */
+    uint32_t lock_timeout_cycles;   /* lock lost after this many cycles without beacon 1, >= 1 */
+    uint32_t max_consecutive_spurious; /* lock lost after this many pulses in a row outside every
+                                       window; 0 = never */
+    uint32_t period_gain_div;       /* T smoothing: T += (T_meas - T) / period_gain_div, >= 1 */
+} bl_seq_config;
+
+/* One burst detected by one receiver (one PULSE_DETECTION CAN frame). */
+typedef struct bl_seq_detection {
+    int64_t time_us;       /* leading-edge arrival on the caller's timebase (us) */
+    uint32_t receiver;     /* receiver index on the ring, < receiver_count */
+    bool double_pulse;     /* node saw beacon 1's second burst (DoublePulse flag) */
+    uint16_t amplitude_mv; /* peak envelope amplitude (mV) */
+    uint16_t width_us;     /* envelope width above threshold (us) */
+} bl_seq_detection;
+
+typedef enum bl_seq_status {
+    BL_SEQ_ASSIGNED = 0,   /* numbered: beacon >= 0 */
+    BL_SEQ_UNLOCKED = 1,   /* no firing-time model yet (no double pulse, no hint) */
+    BL_SEQ_SPURIOUS = 2    /* model locked but the pulse lies outside every window */
+} bl_seq_status;
+
+/* One merged pulse, output of bl_sequencer_pop. */
+typedef struct bl_seq_pulse {
+    int64_t arrival_us;       /* earliest detection's time (us): the direct-path arrival */
+    int64_t fire_us;          /* sequencer's estimate of this beacon's firing time (us):
+                                 the hint's prediction, or without hint the middle of
+                                 the possible interval [a1 - max_flight, a1] + j·T;
+                                 0 when not assigned */
+    int32_t beacon;           /* 0-based beacon index (0 = beacon 1), or BL_SEQ_UNASSIGNED */
+    uint32_t receiver;        /* receiver of the earliest detection */
+    uint32_t receivers_heard; /* distinct receivers merged into this pulse, >= 1 */
+    uint16_t amplitude_mv;    /* earliest detection's amplitude (mV) */
+    uint16_t width_us;        /* earliest detection's width (us) */
+    bool double_pulse;        /* recognised as beacon 1's double pulse */
+    bool repeat;              /* this firing already produced a pulse: a late arrival,
+                                 probably an echo (left for the filter's gate) */
+    uint8_t status;           /* bl_seq_status */
+} bl_seq_pulse;
+
+/* Optional prediction from the filter that tightens the windows. */
+typedef struct bl_seq_hint {
+    int64_t fire_us;          /* predicted firing time of beacon `beacon` in any one cycle (us) */
+    uint32_t beacon;          /* 0-based index of the beacon fire_us refers to */
+    bl_real period_us;        /* predicted T (us), > 0 */
+    bl_real fire_sigma_us;    /* σ of fire_us (us), >= 0 */
+    bl_real period_sigma_us;  /* σ of period_us (us), >= 0 */
+} bl_seq_hint;
+
+/* Counters: read-only for the caller, uint32 wrapping. */
+typedef struct bl_seq_counters {
+    uint32_t detections;       /* detections accepted by push */
+    uint32_t pulses_out;       /* pulses returned by pop (any status) */
+    uint32_t merged;           /* detections merged into an earlier detection's pulse */
+    uint32_t second_bursts;    /* detections taken as beacon 1's second burst */
+    uint32_t double_pulses;    /* pulses recognised as beacon 1's double pulse */
+    uint32_t assigned;         /* pulses numbered (status ASSIGNED) */
+    uint32_t unassigned;       /* pulses out with status UNLOCKED */
+    uint32_t spurious;         /* pulses out with status SPURIOUS, plus too-narrow detections */
+    uint32_t repeats;          /* assigned pulses with repeat set (probable echoes) */
+    uint32_t double_conflicts; /* double pulses outside beacon 1's window while locked */
+    uint32_t locks_acquired;   /* unlocked -> locked transitions */
+    uint32_t locks_lost;       /* locked -> unlocked transitions */
+    uint32_t period_updates;   /* accepted T measurements */
+    uint32_t hint_rejections;  /* hints dropped because a double pulse contradicted them */
+} bl_seq_counters;
+
+/* Private: one pulse whose merge window is open. */
+typedef struct bl_seq_pending {
+    int64_t start_us;          /* earliest detection (us); windows count from it */
+    uint32_t receiver;
+    uint32_t rx_mask;          /* receivers heard (bit per receiver) */
+    uint16_t amplitude_mv;
+    uint16_t width_us;
+    bool double_pulse;
+} bl_seq_pending;
+
+/* The sequencer. Initialise with bl_sequencer_init; fields other than
+ * `counters` are private. Size: about 400 bytes. */
+typedef struct bl_sequencer {
+    bl_seq_config cfg;
+    bl_seq_counters counters;
+    /* ---- private ---- */
+    bl_seq_pending pending[BL_SEQ_MAX_PENDING];
+    uint32_t n_pending;
+    uint32_t magic;
+    int64_t horizon_us;             /* earliest time a new detection may have (us) */
+    bool locked;
+    bool hint_valid;
+    bool have_last;                 /* last_* valid */
+    uint32_t consecutive_spurious;
+    int64_t anchor_us;              /* beacon-1 arrival of the model (us) */
+    int64_t period_ns;              /* tracked T (ns) */
+    int32_t last_beacon;            /* beacon of the last assigned pulse */
+    int64_t last_fire_us;           /* its firing-time estimate (us) */
+    int64_t conflict_us;            /* last conflicting double pulse (us) */
+    uint32_t conflicts_in_row;
+    int64_t hint_fire_us;           /* hint: firing time of beacon hint_beacon (us) */
+    uint32_t hint_beacon;
+    int64_t hint_period_ns;
+    int64_t hint_fire_sigma_ns;
+    int64_t hint_period_sigma_ns;
+    int64_t beacon_last_us[BL_MAX_BEACONS];   /* first arrival of each beacon's last firing */
+    uint32_t beacon_seen_mask;      /* beacons with a valid beacon_last_us */
+} bl_sequencer;
+
+/* Model summary for logs and health reports. */
+typedef struct bl_seq_state {
+    bool locked;              /* firing-time model locked (by double pulse or hint) */
+    bool hint_active;         /* a hint is in use */
+    int64_t anchor_us;        /* last beacon-1 arrival used as anchor (us) */
+    bl_real period_us;        /* tracked T (us) */
+    uint32_t pending;         /* pulses waiting for their merge window to close */
+} bl_seq_state;
+
+/* Fills *cfg for the kleeman-lab site (6 beacons, 150 ms, 8 receivers on a
+ * 0.10 m ring, 12 m x 12 m room; max flight = 12·√2 m / 330 m/s). Errors:
+ * BL_EINVAL (NULL). */
+int bl_sequencer_config_default(bl_seq_config *cfg);
+
+/* Derives *out from the estimator's site config: beacon count, period,
+ * double-pulse spacing, receiver count; merge window = 2·ring radius /
+ * s_min + window margin; max flight = max_distance_m / s_min, where
+ * s_min = speed_of_sound_mps - 3·sigma_speed_of_sound_mps and
+ * max_distance_m <= 0 means "largest distance between two beacons plus the
+ * ring radius" (robot inside the beacons' hull). Tolerances keep their
+ * bl_sequencer_config_default values. *out is written only on success.
+ * Errors: BL_EINVAL (NULL, NaN), BL_ECONFIG (site config unusable or the
+ * resulting windows overlap, see bl_sequencer_config_check). */
+int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m,
+                                  bl_seq_config *out);
+
+/* Checks ranges and that the windows cannot overlap:
+ *   2·max_flight + 2·tol_N < T (the windows of successive firings are disjoint
+ *   for a whole cycle), merge_window < double_spacing - double_tolerance.
+ * Returns BL_OK, BL_ECONFIG, or BL_EINVAL (NULL). */
+int bl_sequencer_config_check(const bl_seq_config *cfg);
+
+/* Initialises *seq (unlocked, no pending pulse, counters zero).
+ * Errors: BL_EINVAL (NULL), BL_ECONFIG (cfg fails the check). */
+int bl_sequencer_init(bl_sequencer *seq, const bl_seq_config *cfg);
+
+/* Adds one detection. Cost O(BL_SEQ_MAX_PENDING + BL_MAX_RECEIVERS).
+ * Errors: BL_EINVAL (NULL, receiver >= receiver_count, |time| beyond
+ * BL_SEQ_TIME_LIMIT_US), BL_ENOTINIT, BL_ETIME (older than a pulse already
+ * popped: now_us given to pop ran ahead of the detections),
+ * BL_EFULL (BL_SEQ_MAX_PENDING pulses open: pop first, then push again). */
+int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det);
+
+/* Takes the oldest pulse whose merge window has closed at now_us, numbers it
+ * and writes it to *out. Returns 1 when a pulse was written, 0 (BL_OK) when
+ * none is ready (*out untouched), or a negative error: BL_EINVAL (NULL),
+ * BL_ENOTINIT. Call until it returns 0. Contract: every detection not pushed
+ * yet must be later than now_us (pass "now minus the largest delivery
+ * latency"); a detection that would have belonged to a pulse already popped
+ * is refused by push with BL_ETIME. INT64_MAX flushes everything. */
+int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out);
+
+/* Installs (or replaces) the filter's prediction of firing time and period.
+ * It locks the model and tightens every later window until cleared or
+ * contradicted by a double pulse (counted in hint_rejections).
+ * Errors: BL_EINVAL (NULL, NaN/inf, period <= 0 or outside the period
+ * tolerance of the nominal T, σ < 0, beacon >= beacon_count, time beyond the
+ * limit), BL_ENOTINIT. */
+int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint);
+
+/* Fills *hint from a started filter's estimate (t0 of beacon index 0,
+ * period, and their σ): the usual way to feed the filter's prediction back,
+ * e.g. after every fused pulse: bl_filter_estimate(&f, &est);
+ * bl_sequencer_hint_from_estimate(&est, &h); bl_sequencer_set_hint(&seq, &h).
+ * Errors: BL_EINVAL (NULL, NaN), BL_ENOTINIT (est->started false). */
+int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint);
+
+/* Drops the hint (the own model continues). Errors: BL_EINVAL, BL_ENOTINIT. */
+int bl_sequencer_clear_hint(bl_sequencer *seq);
+
+/* Forgets the lock, the hint and the pending pulses (counters kept), e.g.
+ * after the receiver node restarted. Errors: BL_EINVAL, BL_ENOTINIT. */
+int bl_sequencer_reset(bl_sequencer *seq);
+
+/* Model summary. Errors: BL_EINVAL (NULL), BL_ENOTINIT. */
+int bl_sequencer_state(const bl_sequencer *seq, bl_seq_state *st);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* BEACONLOC_SEQUENCER_H */

@@ -1,0 +1,82 @@
+# lib/lib.mk — the estimator library (libbeaconloc) and its cmocka tests.
+#
+#   build/lib/libbeaconloc.a         double (default; what the bridge links)
+#   build/lib/float/libbeaconloc.a   -DBL_USE_FLOAT=1
+#   build/lib/san/libbeaconloc.a     double with ASan/UBSan (tests only)
+#   make test-lib                    every tests/lib/test_*.c as its own cmocka
+#                                    executable against the double, float and
+#                                    sanitized builds, plus check-lib-clink
+#   make check-lib-clink             pure-C link (gcc prog.c lib.a -lm, no
+#                                    libstdc++) and `nm -u` audit of both archives
+#
+# Every lib/src/*.cpp is compiled into the library (wildcard); every
+# tests/lib/test_*.c except test_clink.c is a cmocka test (test_clink.c is the
+# plain C program of check-lib-clink: no cmocka, no C++ runtime).
+
+LIB_SRCS      := $(sort $(wildcard lib/src/*.cpp))
+LIB_HDRS      := $(wildcard lib/include/*.h lib/include/beaconloc/*.h lib/src/*.hpp)
+LIB_TEST_SRCS := $(filter-out tests/lib/test_clink.c,$(sort $(wildcard tests/lib/test_*.c)))
+LIB_TEST_NAMES := $(basename $(notdir $(LIB_TEST_SRCS)))
+
+# Extra libraries of one test: LIB_TEST_LDLIBS_<test name> (test_config reads
+# the site file with libinih, as the bridge does).
+LIB_TEST_LDLIBS_test_config := -linih
+
+LIB_WARN      := -Wall -Wextra -Werror -Wconversion -Wdouble-promotion -Wshadow
+# -fno-threadsafe-statics: no __cxa_guard_*; EIGEN_GEMM_TO_COEFFBASED_THRESHOLD:
+# keep fixed-size products off Eigen's GEMM kernel (which references malloc).
+LIB_CXXFLAGS  := -std=c++17 -O2 -fno-exceptions -fno-rtti -fno-threadsafe-statics \
+                 -DEIGEN_NO_MALLOC -DEIGEN_GEMM_TO_COEFFBASED_THRESHOLD=1000 \
+                 -isystem /usr/include/eigen3 -Ilib/include $(LIB_WARN)
+LIB_TEST_CFLAGS := -std=c11 -O1 -g -Ilib/include -Itests/lib -Wall -Wextra -Werror \
+                   -Wno-unused-parameter
+LIB_SAN       := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all
+
+# $(1) variant dir under build/lib ('' = default), $(2) extra compile flags,
+# $(3) extra test link flags
+define LIB_VARIANT
+$(BUILD)/lib/$(1)obj/%.o: lib/src/%.cpp $(LIB_HDRS) lib/lib.mk
+	@mkdir -p $$(@D)
+	$(CXX) $(LIB_CXXFLAGS) $(2) -c $$< -o $$@
+
+$(BUILD)/lib/$(1)libbeaconloc.a: $(patsubst lib/src/%.cpp,$(BUILD)/lib/$(1)obj/%.o,$(LIB_SRCS))
+	@mkdir -p $$(@D)
+	rm -f $$@
+	ar rcs $$@ $$^
+
+$(BUILD)/lib/$(1)tests/%: tests/lib/%.c $(BUILD)/lib/$(1)libbeaconloc.a $(LIB_HDRS)
+	@mkdir -p $$(@D)
+	$(CC) $(LIB_TEST_CFLAGS) $(2) $$< $(BUILD)/lib/$(1)libbeaconloc.a $(3) $$(LIB_TEST_LDLIBS_$$*) -lcmocka -lm -o $$@
+endef
+
+$(eval $(call LIB_VARIANT,,-DEIGEN_NO_DEBUG,))
+$(eval $(call LIB_VARIANT,float/,-DBL_USE_FLOAT=1 -DEIGEN_NO_DEBUG,))
+$(eval $(call LIB_VARIANT,san/,$(LIB_SAN) -g,$(LIB_SAN)))
+
+LIB_TEST_BINS := $(foreach v,/ /float/ /san/,$(addprefix $(BUILD)/lib$(v)tests/,$(LIB_TEST_NAMES)))
+
+ALL_TARGETS += $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
+UNIT_TESTS  += test-lib
+
+.PHONY: lib test-lib check-lib-clink
+lib: $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
+
+test-lib: $(LIB_TEST_BINS) check-lib-clink
+	@set -e; for t in $(LIB_TEST_BINS); do echo "== $$t"; $$t; done
+
+# Pure C program, plain gcc, no libstdc++: the link itself proves no C++
+# runtime is needed; nm -u proves no heap and no C++ runtime references.
+LIB_FORBIDDEN := '(__cxa_|__gxx_|_Znw|_Zna|_Zdl|_Zda|_ZSt|_Unwind_|^malloc$$|^free$$|^calloc$$|^realloc$$|operator)'
+check-lib-clink: tests/lib/test_clink.c $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
+	@mkdir -p $(BUILD)/lib/clink
+	gcc -std=c99 -pedantic -Wall -Wextra -Werror -Ilib/include tests/lib/test_clink.c \
+	    $(BUILD)/lib/libbeaconloc.a -lm -o $(BUILD)/lib/clink/clink_double
+	gcc -std=c99 -pedantic -Wall -Wextra -Werror -DBL_USE_FLOAT=1 -Ilib/include tests/lib/test_clink.c \
+	    $(BUILD)/lib/float/libbeaconloc.a -lm -o $(BUILD)/lib/clink/clink_float
+	$(BUILD)/lib/clink/clink_double
+	$(BUILD)/lib/clink/clink_float
+	@set -e; for a in $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a; do \
+	  bad=$$(nm -u $$a | awk 'NF>=2 {print $$2}' | grep -E $(LIB_FORBIDDEN) || true); \
+	  if [ -n "$$bad" ]; then echo "check-lib-clink: $$a references: $$bad"; exit 1; fi; \
+	  echo "check-lib-clink: $$a: nm -u clean ($$(nm -u $$a | awk 'NF>=2 {print $$2}' | sort -u | tr '\n' ' '))"; \
+	done

@@ -1,0 +1,913 @@
+// beaconloc — Kleeman's (1992) iterated EKF: ultrasonic beacon arrival
+// times + differential-drive dead reckoning (filter.h, filter_model.h).
+//
+// State x = [x_m y_m theta_rad v_mps omega_radps s_mps T_s t0_s] where t0 is
+// the firing time of the reference slot (beacon ref_beacon_) as an offset in
+// seconds from the int64 epoch epoch_us_. Kleeman's state (eq. 14) is
+// [x y v θ T t0 s]; the turn rate ω is added so that the constant-velocity
+// prediction and the moving-robot term see turns.
+#include "internal.hpp"
+
+#include <cstring>
+
+#include "beaconloc/filter.h"
+#include "beaconloc/filter_model.h"
+#include "beaconloc/solver.h"
+
+using bl::is_finite;
+using bl::real;
+
+namespace {
+
+constexpr int NX = BL_FILTER_NX;
+using V8 = bl::Mat<NX, 1>;
+using M8 = bl::Mat<NX, NX>;
+using R8 = Eigen::Matrix<real, 1, NX>;
+
+constexpr uint32_t kMagic = 0x424c4631u;  // "BLF1"
+constexpr uint32_t kFlagStarted = 1u;
+constexpr uint32_t kFlagConverged = 2u;
+constexpr uint32_t kFlagEverStarted = 4u;
+
+enum : int { X = BL_IX_X, Y = BL_IX_Y, TH = BL_IX_THETA, V = BL_IX_V, W = BL_IX_OMEGA,
+             S = BL_IX_S, T = BL_IX_T, T0 = BL_IX_T0 };
+
+inline Eigen::Map<V8> state(bl_filter *f) { return Eigen::Map<V8>(f->x_); }
+inline Eigen::Map<const V8> state(const bl_filter *f) { return Eigen::Map<const V8>(f->x_); }
+inline Eigen::Map<M8> cov(bl_filter *f) { return Eigen::Map<M8>(f->P_); }
+inline Eigen::Map<const M8> cov(const bl_filter *f) { return Eigen::Map<const M8>(f->P_); }
+
+bool initialised(const bl_filter *f) { return f != nullptr && f->magic_ == kMagic; }
+bool started(const bl_filter *f) { return initialised(f) && (f->flags_ & kFlagStarted); }
+
+real receiver_angle(const bl_config *cfg, uint32_t k)
+{
+    real a = 0;
+    (void)bl_config_receiver_angle(cfg, k, &a);
+    return a;
+}
+
+void symmetrise(M8 &P)
+{
+    const M8 Pt = P.transpose();
+    P = real(0.5) * (P + Pt);
+}
+
+// ---------------------------------------------------------------- models
+
+// Kleeman 1992 eq. 21 with the receiver on the ring and 3D distance.
+// Times relative to the state time t_s. Returns false where undefined.
+bool pulse_model(const bl_config *cfg, const V8 &x, const bl_pulse_geometry &g, real *h, R8 *H)
+{
+    const bl_beacon &b = cfg->beacons[g.beacon_index];
+    const real c = std::cos(x(TH)), sn = std::sin(x(TH));
+    // Firing time of the pulse relative to t_s: t_f = t0 + slot·T
+    // (Kleeman eq. 15: t0(k+1) = t0(k) + T per firing).
+    const real dt_fire = g.epoch_rel_s + x(T0) + real(g.slot) * x(T);
+    // Heading at arrival (receiver orientation), constant turn rate.
+    const real phi = x(TH) + x(W) * g.arrival_rel_s + receiver_angle(cfg, g.receiver_index);
+    const real rho = cfg->ring_radius_m;
+    // Receiver position at the firing time: wheel-base centre extrapolated
+    // with the constant velocity (Kleeman eq. 20 assumption) plus its ring
+    // offset.
+    bl::Vec3 delta;
+    delta(0) = x(X) + x(V) * dt_fire * c + rho * std::cos(phi) - b.x_m;
+    delta(1) = x(Y) + x(V) * dt_fire * sn + rho * std::sin(phi) - b.y_m;
+    delta(2) = cfg->receiver_height_m - b.z_m;
+    // Kleeman eq. 17 (3D): distance beacon -> receiver; eq. 18: unit vector.
+    const real d = delta.norm();
+    if (!(d > real(1e-6))) return false;
+    const bl::Vec3 u = delta / d;
+    bl::Vec3 vel;
+    vel << x(V) * c, x(V) * sn, real(0);
+    // Kleeman eq. 21: t_i = t0 + d_i / (s - v(cos θ, sin θ)·u_i).
+    const real D = x(S) - vel.dot(u);
+    if (!(D > real(1e-3))) return false;
+    *h = dt_fire + d / D;
+    if (H == nullptr) return true;
+
+    // Jacobian by the chain rule (Kleeman eq. 22; eq. 23 is the x entry:
+    // ∂t/∂x = (u_x + v·(e_x - u_x u)/D)/D — as printed, eq. 23 carries an extra
+    // 1/d_i that is dimensionally inconsistent; tests check these numerically).
+    // g = d/D: ∂g/∂delta = uᵀ/D + velᵀ(I - u uᵀ)/D²;  ∂g/∂vel = d uᵀ/D²;  ∂g/∂s = -d/D².
+    const bl::Vec3 dg_ddelta = u / D + (vel - u * vel.dot(u)) / (D * D);
+    const bl::Vec3 dg_dvel = u * (d / (D * D));
+    bl::Vec3 e_dir;  // ∂vel/∂v = ∂delta/∂t_f / v
+    e_dir << c, sn, real(0);
+    bl::Vec3 e_perp;
+    e_perp << -sn, c, real(0);
+    bl::Vec3 e_ring;  // ∂(ring offset)/∂phi
+    e_ring << -rho * std::sin(phi), rho * std::cos(phi), real(0);
+
+    R8 J = R8::Zero();
+    J(X) = dg_ddelta(0);
+    J(Y) = dg_ddelta(1);
+    J(TH) = dg_ddelta.dot(e_perp * (x(V) * dt_fire) + e_ring) + dg_dvel.dot(e_perp * x(V));
+    J(V) = dg_ddelta.dot(e_dir * dt_fire) + dg_dvel.dot(e_dir);
+    J(W) = dg_ddelta.dot(e_ring * g.arrival_rel_s);
+    J(S) = -d / (D * D);
+    const real dh_dtfire = real(1) + dg_ddelta.dot(e_dir * x(V));
+    J(T0) = dh_dtfire;
+    J(T) = dh_dtfire * real(g.slot);
+    *H = J;
+    return true;
+}
+
+// Differential-drive odometry, midpoint form (Kleeman 1992 eq. 24 input
+// form, Vander et al. 2011 eq. 2):
+//   Δc = (dL + dR)/2, Δθ = (dR - dL)/b,
+//   x' = x + Δc cos(θ + Δθ/2), y' = y + Δc sin(θ + Δθ/2), θ' = θ + Δθ.
+void odometry_model(real wheel_base_m, const V8 &x, real dl, real dr, V8 &xo, M8 *F,
+                    bl::Mat<NX, 2> *G)
+{
+    const real dc = real(0.5) * (dl + dr);
+    const real dth = (dr - dl) / wheel_base_m;
+    const real phi = x(TH) + real(0.5) * dth;
+    const real c = std::cos(phi), sn = std::sin(phi);
+    xo = x;
+    xo(X) = x(X) + dc * c;
+    xo(Y) = x(Y) + dc * sn;
+    xo(TH) = x(TH) + dth;
+    if (F) {
+        F->setIdentity();
+        (*F)(X, TH) = -dc * sn;
+        (*F)(Y, TH) = dc * c;
+    }
+    if (G) {
+        G->setZero();
+        const real k = real(1) / (real(2) * wheel_base_m);
+        (*G)(X, 0) = real(0.5) * c + dc * sn * k;
+        (*G)(X, 1) = real(0.5) * c - dc * sn * k;
+        (*G)(Y, 0) = real(0.5) * sn - dc * c * k;
+        (*G)(Y, 1) = real(0.5) * sn + dc * c * k;
+        (*G)(TH, 0) = -real(1) / wheel_base_m;
+        (*G)(TH, 1) = real(1) / wheel_base_m;
+    }
+}
+
+// Constant velocity and turn rate, midpoint heading (Kleeman 1992 eq. 15:
+// x(k+1) = x(k) + v T cos θ, ..., with θ(k+1) = θ(k) + ω T as in eq. 24).
+void cv_model(const V8 &x, real dt, V8 &xo, M8 *F)
+{
+    const real phi = x(TH) + real(0.5) * x(W) * dt;
+    const real c = std::cos(phi), sn = std::sin(phi);
+    xo = x;
+    xo(X) = x(X) + x(V) * dt * c;
+    xo(Y) = x(Y) + x(V) * dt * sn;
+    xo(TH) = x(TH) + x(W) * dt;
+    if (F) {
+        // Kleeman eq. 16 (linearised transition), extended by ω.
+        F->setIdentity();
+        (*F)(X, TH) = -x(V) * dt * sn;
+        (*F)(X, V) = dt * c;
+        (*F)(X, W) = -x(V) * dt * sn * real(0.5) * dt;
+        (*F)(Y, TH) = x(V) * dt * c;
+        (*F)(Y, V) = dt * sn;
+        (*F)(Y, W) = x(V) * dt * c * real(0.5) * dt;
+        (*F)(TH, W) = dt;
+    }
+}
+
+// Random walk of s and T over dt (speed-of-sound drift with temperature,
+// beacon clock drift).
+void add_parameter_noise(const bl_config *cfg, M8 &P, real dt)
+{
+    P(S, S) += cfg->speed_of_sound_drift_mps_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s * dt;
+    P(T, T) += cfg->period_drift_s_per_sqrt_s * cfg->period_drift_s_per_sqrt_s * dt;
+}
+
+// Constant-velocity prediction with white acceleration noise on v and ω.
+void cv_predict(const bl_config *cfg, V8 &x, M8 &P, real dt)
+{
+    V8 xo;
+    M8 F;
+    cv_model(x, dt, xo, &F);
+    // Kleeman eq. 6: P = Φ P Φᵀ + Q.
+    M8 Pn = F.lazyProduct(P).lazyProduct(F.transpose());
+    // Q from white acceleration a (σ accel_noise) and angular acceleration α:
+    // G_a = [½dt² cos θ, ½dt² sin θ, 0, dt, 0, ...], G_α = [0, 0, ½dt², 0, dt, ...].
+    V8 ga = V8::Zero(), gw = V8::Zero();
+    ga(X) = real(0.5) * dt * dt * std::cos(x(TH));
+    ga(Y) = real(0.5) * dt * dt * std::sin(x(TH));
+    ga(V) = dt;
+    gw(TH) = real(0.5) * dt * dt;
+    gw(W) = dt;
+    const real qa = cfg->accel_noise_mps2 * cfg->accel_noise_mps2;
+    const real qw = cfg->angular_accel_noise_radps2 * cfg->angular_accel_noise_radps2;
+    Pn.noalias() += (qa * ga) * ga.transpose();
+    Pn.noalias() += (qw * gw) * gw.transpose();
+    add_parameter_noise(cfg, Pn, dt);
+    symmetrise(Pn);
+    x = xo;
+    P = Pn;
+}
+
+// ------------------------------------------------------- time reference
+
+// t0 += k·T (the reference moves k firing slots; Kleeman eq. 15/16 row t0:
+// t0(k+1) = t0(k) + T), then whole microseconds move from the offset into
+// the int64 epoch so the offset stays below 1 µs in magnitude.
+void shift_reference(const bl_config *cfg, V8 &x, M8 &P, int64_t &epoch_us, uint32_t &ref, int64_t k)
+{
+    if (k != 0) {
+        const double t0 = double(x(T0)) + double(k) * double(x(T));
+        x(T0) = real(t0);
+        // P = F P Fᵀ with F = I + k e_t0 e_Tᵀ.
+        const real kr = real(k);
+        for (int j = 0; j < NX; ++j) P(T0, j) += kr * P(T, j);
+        for (int j = 0; j < NX; ++j) P(j, T0) += kr * P(j, T);
+        const int64_t n = int64_t(cfg->beacon_count);
+        ref = uint32_t(((int64_t(ref) + k) % n + n) % n);
+    }
+    const double off = double(x(T0));
+    const int64_t whole_us = int64_t(std::llround(off * 1e6));
+    epoch_us += whole_us;
+    x(T0) = real(off - double(whole_us) * 1e-6);
+}
+
+// Move the reference to the latest firing at or before t_us (keeps every
+// relative time in the filter small).
+void advance_reference(const bl_config *cfg, V8 &x, M8 &P, int64_t &epoch_us, uint32_t &ref, int64_t t_us)
+{
+    const double since = double(epoch_us - t_us) * -1e-6 - double(x(T0));  // t - t0 (s)
+    if (since <= 0) {
+        shift_reference(cfg, x, P, epoch_us, ref, 0);
+        return;
+    }
+    const int64_t k = int64_t(std::floor(since / double(x(T))));
+    shift_reference(cfg, x, P, epoch_us, ref, k > 0 ? k : 0);
+}
+
+// ------------------------------------------------------------- snapshot
+
+struct Snapshot {
+    bl_tdoa_problem prob;
+    int64_t ref_arrival_us;
+    uint32_t ref_beacon;
+};
+
+// Pulses of the latest firing cycle from the last-pulse table, as a TDOA
+// problem: each pulse's firing slot relative to the latest pulse is found
+// from the arrival spacing (flight-time differences < T/2).
+bool build_snapshot(const bl_filter *f, real s_mps, real T_s, real sigma_s, Snapshot &out)
+{
+    const bl_config *cfg = &f->cfg_;
+    const uint32_t n = cfg->beacon_count;
+    int64_t latest = 0;
+    uint32_t L = n;
+    for (uint32_t j = 0; j < n; ++j)
+        if ((f->last_valid_mask_ >> j) & 1u)
+            if (L == n || f->last_arrival_us_[j] > latest) {
+                latest = f->last_arrival_us_[j];
+                L = j;
+            }
+    if (L == n) return false;
+    std::memset(&out, 0, sizeof out);
+    uint32_t m = 0;
+    for (uint32_t j = 0; j < n; ++j) {
+        if (!((f->last_valid_mask_ >> j) & 1u)) continue;
+        int64_t d_us;
+        if (!bl::sub_us(f->last_arrival_us_[j], latest, &d_us)) continue;
+        const real dt = bl::us_to_s(d_us);  // <= 0
+        const real slot_r = std::round(dt / T_s);
+        if (!(slot_r > -real(n)) || slot_r > real(0)) continue;
+        const int64_t slot = int64_t(slot_r);
+        const int64_t expect = int64_t(j) - int64_t(L);
+        if (((slot - expect) % int64_t(n)) != 0) continue;  // not this beacon's slot
+        out.prob.beacons[m] = cfg->beacons[j];
+        out.prob.arrival_s[m] = dt;
+        out.prob.fire_offset_s[m] = real(slot) * T_s;
+        out.prob.sigma_s[m] = sigma_s;
+        ++m;
+    }
+    out.prob.count = m;
+    out.prob.speed_of_sound_mps = s_mps;
+    out.prob.receiver_z_m = cfg->receiver_height_m;
+    out.ref_arrival_us = latest;
+    out.ref_beacon = L;
+    return true;
+}
+
+// Start (or restart) *f from the snapshot of its last pulses. On failure
+// *f is untouched.
+int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real s_mps, real var_s, real T_s,
+                        real var_T, uint32_t min_beacons)
+{
+    const bl_config *cfg = &f->cfg_;
+    Snapshot snap;
+    if (!build_snapshot(f, s_mps, T_s, cfg->startup_sigma_arrival_s, snap)) return BL_EDEGENERATE;
+    if (snap.prob.count < min_beacons) return BL_EDEGENERATE;
+    bl_tdoa_solution sol;
+    const int rc = bl_solve_tdoa_2d(&snap.prob, &sol);
+    if (rc != BL_OK) return rc;
+    // An overdetermined fix must explain its pulses (an echo-polluted or
+    // moving-robot snapshot does not).
+    if (snap.prob.count > 3 && sol.residual_rms_s > real(3) * cfg->startup_sigma_arrival_s)
+        return BL_ENOCONVERGE;
+
+    V8 x = V8::Zero();
+    M8 P = M8::Zero();
+    x(X) = sol.x_m;
+    x(Y) = sol.y_m;
+    x(TH) = bl::wrap_angle(theta);
+    x(S) = s_mps;
+    x(T) = T_s;
+    x(T0) = sol.t0_s;  // firing of snap.ref_beacon relative to its arrival
+    const int idx[3] = {X, Y, T0};
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) P(idx[r], idx[c]) = sol.cov[r * 4 + c];
+    P(TH, TH) = sigma_theta * sigma_theta;
+    P(V, V) = cfg->initial_sigma_v_mps * cfg->initial_sigma_v_mps;
+    P(W, W) = cfg->initial_sigma_omega_radps * cfg->initial_sigma_omega_radps;
+    P(S, S) = var_s;
+    P(T, T) = var_T;
+    int64_t epoch = snap.ref_arrival_us;
+    uint32_t ref = snap.ref_beacon;
+    shift_reference(cfg, x, P, epoch, ref, 0);
+
+    state(f) = x;
+    cov(f) = P;
+    f->epoch_us_ = epoch;
+    f->ref_beacon_ = ref;
+    f->t_us_ = snap.ref_arrival_us;
+    if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
+    f->flags_ = kFlagStarted | kFlagEverStarted;
+    f->consecutive_rejections_ = 0;
+    f->rejection_beacon_mask_ = 0;
+    return BL_OK;
+}
+
+bool converged_now(const bl_config *cfg, const M8 &P)
+{
+    const real m = P(X, X) > P(Y, Y) ? P(X, X) : P(Y, Y);
+    return m < cfg->converged_sigma_xy_m * cfg->converged_sigma_xy_m;
+}
+
+void fill_estimate(const bl_filter *f, const V8 &x, const M8 &P, int64_t t_us, bl_estimate *est)
+{
+    const bl_config *cfg = &f->cfg_;
+    std::memset(est, 0, sizeof *est);
+    est->t_us = t_us;
+    est->started = started(f);
+    est->reset_counter = f->reset_count_;
+    est->consecutive_rejections = f->consecutive_rejections_;
+    for (uint32_t i = 0; i < BL_MAX_BEACONS; ++i) {
+        est->accepted[i] = f->accepted_[i];
+        est->rejected[i] = f->rejected_[i];
+    }
+    if (!est->started) return;
+    est->x_m = x(X);
+    est->y_m = x(Y);
+    est->theta_rad = bl::wrap_angle(x(TH));
+    est->v_mps = x(V);
+    est->omega_radps = x(W);
+    est->speed_of_sound_mps = x(S);
+    est->period_s = x(T);
+    // Firing time of beacon index 0 of the reference's cycle.
+    const double t0_b1_s = double(x(T0)) - double(f->ref_beacon_) * double(x(T));
+    est->t0_us = f->epoch_us_ + int64_t(std::llround(t0_b1_s * 1e6));
+    est->sigma_speed_of_sound_mps = std::sqrt(P(S, S));
+    est->sigma_period_s = std::sqrt(P(T, T));
+    est->sigma_t0_s = std::sqrt(P(T0, T0));
+    for (int r = 0; r < 5; ++r)
+        for (int c = 0; c < 5; ++c) est->cov[r * 5 + c] = P(r, c);
+    est->converged = (f->flags_ & kFlagConverged) != 0;
+    (void)cfg;
+}
+
+bool all_finite(const bl_real *v, int n)
+{
+    for (int i = 0; i < n; ++i)
+        if (!is_finite(v[i])) return false;
+    return true;
+}
+
+int check_time(const bl_filter *f, int64_t t_us)
+{
+    int64_t d_us;
+    if (t_us < f->t_us_ || !bl::sub_us(t_us, f->t_us_, &d_us)) return BL_ETIME;
+    const real gap = bl::us_to_s(d_us);
+    if (!(gap <= f->cfg_.max_predict_gap_s)) return BL_ETIME;
+    return BL_OK;
+}
+
+void commit(bl_filter *f, const V8 &x, const M8 &P)
+{
+    state(f) = x;
+    cov(f) = P;
+    if (converged_now(&f->cfg_, P)) f->flags_ |= kFlagConverged;
+}
+
+}  // namespace
+
+// ================================================================= API
+
+extern "C" int bl_filter_init(bl_filter *f, const bl_config *cfg)
+{
+    if (f == nullptr || cfg == nullptr) return BL_EINVAL;
+    if (bl_config_check(cfg, nullptr) != BL_OK) return BL_ECONFIG;
+    std::memset(f, 0, sizeof *f);
+    f->cfg_ = *cfg;
+    f->magic_ = kMagic;
+    return BL_OK;
+}
+
+extern "C" int bl_filter_update_config(bl_filter *f, const bl_config *cfg)
+{
+    if (f == nullptr || cfg == nullptr) return BL_EINVAL;
+    if (!initialised(f)) return BL_ENOTINIT;
+    if (bl_config_check(cfg, nullptr) != BL_OK) return BL_ECONFIG;
+    const bl_config *o = &f->cfg_;
+    if (cfg->beacon_count != o->beacon_count || cfg->receiver_count != o->receiver_count ||
+        cfg->ring_radius_m != o->ring_radius_m || cfg->first_angle_deg != o->first_angle_deg ||
+        cfg->angle_step_deg != o->angle_step_deg || cfg->receiver_height_m != o->receiver_height_m ||
+        cfg->wheel_base_m != o->wheel_base_m)
+        return BL_ECONFIG;
+    for (uint32_t i = 0; i < cfg->beacon_count; ++i)
+        if (cfg->beacons[i].x_m != o->beacons[i].x_m || cfg->beacons[i].y_m != o->beacons[i].y_m ||
+            cfg->beacons[i].z_m != o->beacons[i].z_m)
+            return BL_ECONFIG;
+    f->cfg_ = *cfg;
+    return BL_OK;
+}
+
+extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
+{
+    if (f == nullptr || p == nullptr) return BL_EINVAL;
+    if (!initialised(f)) return BL_ENOTINIT;
+    const bl_config *cfg = &f->cfg_;
+    const bl_real vals[] = {p->x_m, p->y_m, p->theta_rad, p->v_mps, p->omega_radps, p->sigma_xy_m,
+                            p->sigma_theta_rad, p->sigma_v_mps, p->sigma_omega_radps, p->sigma_t0_s};
+    if (!all_finite(vals, int(sizeof vals / sizeof vals[0]))) return BL_EINVAL;
+    if (!(p->sigma_xy_m > 0) || !(p->sigma_theta_rad > 0) || !(p->sigma_v_mps > 0) ||
+        !(p->sigma_omega_radps > 0) || !(p->sigma_t0_s > 0))
+        return BL_EINVAL;
+    if (p->t0_beacon_index >= cfg->beacon_count) return BL_EINVAL;
+    // The firing time must be near the pose time (within the predict gap).
+    int64_t d_us;
+    if (!bl::sub_us(p->t0_us, p->t_us, &d_us)) return BL_ETIME;
+    if (d_us > int64_t(1e12) || d_us < -int64_t(1e12) ||
+        std::fabs(bl::us_to_s(d_us)) > cfg->max_predict_gap_s + real(cfg->beacon_count) * cfg->beacon_period_s)
+        return BL_ETIME;
+
+    V8 x = V8::Zero();
+    M8 P = M8::Zero();
+    x(X) = p->x_m;
+    x(Y) = p->y_m;
+    x(TH) = bl::wrap_angle(p->theta_rad);
+    x(V) = p->v_mps;
+    x(W) = p->omega_radps;
+    x(S) = cfg->speed_of_sound_mps;
+    x(T) = cfg->beacon_period_s;
+    x(T0) = 0;
+    P(X, X) = P(Y, Y) = p->sigma_xy_m * p->sigma_xy_m;
+    P(TH, TH) = p->sigma_theta_rad * p->sigma_theta_rad;
+    P(V, V) = p->sigma_v_mps * p->sigma_v_mps;
+    P(W, W) = p->sigma_omega_radps * p->sigma_omega_radps;
+    P(S, S) = cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps;
+    P(T, T) = cfg->sigma_period_s * cfg->sigma_period_s;
+    P(T0, T0) = p->sigma_t0_s * p->sigma_t0_s;
+    int64_t epoch = p->t0_us;
+    uint32_t ref = p->t0_beacon_index;
+    advance_reference(cfg, x, P, epoch, ref, p->t_us);
+
+    state(f) = x;
+    cov(f) = P;
+    f->epoch_us_ = epoch;
+    f->ref_beacon_ = ref;
+    f->t_us_ = p->t_us;
+    if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
+    f->flags_ = kFlagStarted | kFlagEverStarted;
+    if (converged_now(cfg, P)) f->flags_ |= kFlagConverged;
+    f->consecutive_rejections_ = 0;
+    f->rejection_beacon_mask_ = 0;
+    return BL_OK;
+}
+
+extern "C" int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real sigma_theta_rad)
+{
+    if (f == nullptr) return BL_EINVAL;
+    if (!initialised(f)) return BL_ENOTINIT;
+    if (!is_finite(theta_rad) || !is_finite(sigma_theta_rad) || !(sigma_theta_rad > 0)) return BL_EINVAL;
+    const bl_config *cfg = &f->cfg_;
+    real s = cfg->speed_of_sound_mps, Tp = cfg->beacon_period_s;
+    real vs = cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps;
+    real vT = cfg->sigma_period_s * cfg->sigma_period_s;
+    if (started(f)) {
+        s = f->x_[S];
+        Tp = f->x_[T];
+        vs = cov(f)(S, S);
+        vT = cov(f)(T, T);
+    }
+    return start_from_snapshot(f, theta_rad, sigma_theta_rad, s, vs, Tp, vT, 3);
+}
+
+extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real d_right_m)
+{
+    if (f == nullptr) return BL_EINVAL;
+    if (!initialised(f)) return BL_ENOTINIT;
+    if (!is_finite(d_left_m) || !is_finite(d_right_m) || std::fabs(d_left_m) > real(10) ||
+        std::fabs(d_right_m) > real(10))
+        return BL_EINVAL;
+    if (!started(f)) return BL_ENOTINIT;
+    const int trc = check_time(f, t_us);
+    if (trc != BL_OK) return trc;
+    const bl_config *cfg = &f->cfg_;
+    const real dt = bl::us_to_s(t_us - f->t_us_);
+    V8 x = state(f);
+    M8 P = cov(f);
+
+    V8 xo;
+    M8 F;
+    bl::Mat<NX, 2> G;
+    odometry_model(cfg->wheel_base_m, x, d_left_m, d_right_m, xo, &F, &G);
+    // Kleeman eq. 6 with the input noise mapped through G: P = F P Fᵀ + G Q_u Gᵀ.
+    M8 Pn = F.lazyProduct(P).lazyProduct(F.transpose());
+    // Wheel noise: variance sigma_wheel_per_m² per metre rolled, per wheel.
+    const real k2 = cfg->sigma_wheel_per_m * cfg->sigma_wheel_per_m;
+    const real ql = k2 * std::fabs(d_left_m), qr = k2 * std::fabs(d_right_m);
+    Pn.noalias() += (ql * G.col(0)) * G.col(0).transpose();
+    Pn.noalias() += (qr * G.col(1)) * G.col(1).transpose();
+    // Motion type (Kleeman §3.10): stationary, straight or turning.
+    const bool moving = std::fabs(d_left_m) > real(1e-6) || std::fabs(d_right_m) > real(1e-6);
+    const real dth = (d_right_m - d_left_m) / cfg->wheel_base_m;
+    if (moving) {
+        // Heading variance: square of an offset plus a fraction of Δθ (§3.10).
+        const real fr = cfg->heading_noise_fraction * dth;
+        Pn(TH, TH) += cfg->heading_noise_rad_per_sqrt_s * cfg->heading_noise_rad_per_sqrt_s * dt + fr * fr;
+    }
+    // v and ω: random walk (white acceleration), smaller when stationary.
+    const real scale = moving ? real(1) : cfg->stationary_noise_scale;
+    const real sa = scale * cfg->accel_noise_mps2 * dt, sw = scale * cfg->angular_accel_noise_radps2 * dt;
+    Pn(V, V) += sa * sa;
+    Pn(W, W) += sw * sw;
+    add_parameter_noise(cfg, Pn, dt);
+    x = xo;
+    P = Pn;
+    if (dt > real(0)) {
+        // Kleeman eq. 25: the wheel speeds are a measurement of v (and ω):
+        // z_v = Δc/dt, z_ω = Δθ/dt, σ from the wheel noise, sequential
+        // scalar updates (Kleeman eqs. 7-11, Joseph form).
+        const real dc = real(0.5) * (d_left_m + d_right_m);
+        const real zs[2] = {dc / dt, dth / dt};
+        const real floor_v = real(1e-3);  // speed resolution floor (m/s, rad/s)
+        const real rv = (k2 * real(0.25) * (std::fabs(d_left_m) + std::fabs(d_right_m))) / (dt * dt) + floor_v * floor_v;
+        const real rw = (k2 * (std::fabs(d_left_m) + std::fabs(d_right_m)) /
+                         (cfg->wheel_base_m * cfg->wheel_base_m)) / (dt * dt) + floor_v * floor_v;
+        const real rs[2] = {rv, rw};
+        const int idx[2] = {V, W};
+        for (int m = 0; m < 2; ++m) {
+            const int i = idx[m];
+            const real sden = P(i, i) + rs[m];
+            const V8 K = P.col(i) / sden;
+            const real nu = zs[m] - x(i);
+            x += K * nu;
+            // Joseph form (Kleeman eq. 11) for H = e_i: (I - K e_iᵀ) P (I - K e_iᵀ)ᵀ + K R Kᵀ.
+            M8 IKH = M8::Identity();
+            IKH.col(i) -= K;
+            M8 Pj = IKH.lazyProduct(P).lazyProduct(IKH.transpose());
+            Pj.noalias() += (rs[m] * K) * K.transpose();
+            P = Pj;
+        }
+    }
+    symmetrise(P);
+    x(TH) = bl::wrap_angle(x(TH));
+    if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
+    int64_t epoch = f->epoch_us_;
+    uint32_t ref = f->ref_beacon_;
+    advance_reference(cfg, x, P, epoch, ref, t_us);
+    commit(f, x, P);
+    f->epoch_us_ = epoch;
+    f->ref_beacon_ = ref;
+    f->t_us_ = t_us;
+    return BL_OK;
+}
+
+extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
+{
+    if (f == nullptr) return BL_EINVAL;
+    if (!initialised(f) || !started(f)) return BL_ENOTINIT;
+    const int trc = check_time(f, t_us);
+    if (trc != BL_OK) return trc;
+    const bl_config *cfg = &f->cfg_;
+    V8 x = state(f);
+    M8 P = cov(f);
+    cv_predict(cfg, x, P, bl::us_to_s(t_us - f->t_us_));
+    x(TH) = bl::wrap_angle(x(TH));
+    if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
+    int64_t epoch = f->epoch_us_;
+    uint32_t ref = f->ref_beacon_;
+    advance_reference(cfg, x, P, epoch, ref, t_us);
+    commit(f, x, P);
+    f->epoch_us_ = epoch;
+    f->ref_beacon_ = ref;
+    f->t_us_ = t_us;
+    return BL_OK;
+}
+
+extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
+                                    uint32_t receiver_index, bl_pulse_result *result)
+{
+    if (f == nullptr) return BL_EINVAL;
+    if (!initialised(f)) return BL_ENOTINIT;
+    const bl_config *cfg = &f->cfg_;
+    if (beacon_index >= cfg->beacon_count) return BL_EBEACON;
+    if (receiver_index >= cfg->receiver_count) return BL_EINVAL;
+    bl_pulse_result res;
+    std::memset(&res, 0, sizeof res);
+
+    if (!started(f)) {
+        // Buffer for the snapshot start; start once a cycle gives >= 4 beacons
+        // (or all of them when fewer), so that the fix is overdetermined.
+        if (f->last_valid_mask_ != 0) {
+            // Keep the buffer on one timeline: a pulse far older than the
+            // buffered ones is a caller error.
+            for (uint32_t j = 0; j < cfg->beacon_count; ++j)
+                if ((f->last_valid_mask_ >> j) & 1u) {
+                    int64_t d_us;
+                    if (!bl::sub_us(f->last_arrival_us_[j], arrival_us, &d_us) ||
+                        bl::us_to_s(d_us) > cfg->max_predict_gap_s)
+                        return BL_ETIME;
+                }
+        }
+        f->last_arrival_us_[beacon_index] = arrival_us;
+        f->last_receiver_[beacon_index] = receiver_index;
+        f->last_valid_mask_ |= 1u << beacon_index;
+        res.status = BL_PULSE_BUFFERED;
+        const uint32_t need = cfg->beacon_count < 4 ? cfg->beacon_count : 4;
+        if (start_from_snapshot(f, cfg->initial_theta_rad, cfg->reset_sigma_theta_rad,
+                                cfg->speed_of_sound_mps,
+                                cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps,
+                                cfg->beacon_period_s, cfg->sigma_period_s * cfg->sigma_period_s,
+                                need) == BL_OK) {
+            res.status = BL_PULSE_STARTED;
+        }
+        if (result) *result = res;
+        return BL_OK;
+    }
+
+    int64_t dts_us;
+    if (!bl::sub_us(arrival_us, f->t_us_, &dts_us)) return BL_ETIME;
+    if (dts_us > int64_t(1e12) || dts_us < -int64_t(1e12) ||
+        !(std::fabs(bl::us_to_s(dts_us)) <= cfg->max_predict_gap_s))
+        return BL_ETIME;
+
+    V8 x = state(f);
+    M8 P = cov(f);
+    const uint32_t n = cfg->beacon_count;
+
+    // Which firing of this beacon: nearest to (arrival - predicted flight).
+    bl_pulse_geometry g;
+    g.beacon_index = beacon_index;
+    g.receiver_index = receiver_index;
+    g.arrival_rel_s = bl::us_to_s(dts_us);
+    g.epoch_rel_s = bl::us_to_s(f->epoch_us_ - f->t_us_);
+    {
+        const bl_beacon &b = cfg->beacons[beacon_index];
+        const real dx = x(X) - b.x_m, dy = x(Y) - b.y_m, dz = cfg->receiver_height_m - b.z_m;
+        const real flight = std::sqrt(dx * dx + dy * dy + dz * dz) / x(S);
+        const int64_t base = ((int64_t(beacon_index) - int64_t(f->ref_beacon_)) % int64_t(n) + int64_t(n)) %
+                             int64_t(n);
+        const real t0_rel = g.epoch_rel_s + x(T0);
+        const real cycles =
+            (g.arrival_rel_s - flight - t0_rel - real(base) * x(T)) / (real(n) * x(T));
+        if (!is_finite(cycles) || std::fabs(cycles) > real(1e6)) return BL_ETIME;
+        g.slot = int32_t(base + int64_t(std::lround(cycles)) * int64_t(n));
+    }
+
+    // Measurement noise: Kleeman §3.11 constant σ; §3.9 high variance while
+    // converging; plus the beacon controller's firing jitter.
+    const bool conv = (f->flags_ & kFlagConverged) != 0;
+    const real sa = conv ? cfg->sigma_arrival_s : cfg->startup_sigma_arrival_s;
+    const real R = sa * sa + cfg->firing_jitter_s * cfg->firing_jitter_s;
+    const real gate = conv ? cfg->gate_sigma : cfg->startup_gate_sigma;
+
+    real h0;
+    R8 H;
+    if (!pulse_model(cfg, x, g, &h0, &H)) return BL_EINVAL;
+    // Kleeman eq. 7: innovation; its variance H P Hᵀ + R (eq. 9's bracket).
+    const real nu0 = g.arrival_rel_s - h0;
+    const real S0 = H.dot(P * H.transpose()) + R;
+    res.innovation_s = nu0;
+    res.innovation_sigma_s = std::sqrt(S0);
+    res.test_ratio = std::fabs(nu0) / (gate * res.innovation_sigma_s);
+    const double fire_s = double(g.epoch_rel_s) + double(x(T0)) + double(g.slot) * double(x(T));
+    res.fire_us = f->t_us_ + int64_t(std::llround(fire_s * 1e6));
+
+    // Every pulse is kept (accepted or not) for a snapshot re-initialisation.
+    auto remember = [&]() {
+        f->last_arrival_us_[beacon_index] = arrival_us;
+        f->last_receiver_[beacon_index] = receiver_index;
+        f->last_valid_mask_ |= 1u << beacon_index;
+    };
+
+    if (!(res.test_ratio <= real(1))) {
+        // Chi-square gate (1 dof): an echoed or outlying arrival (Kleeman §3.9).
+        remember();
+        f->rejected_[beacon_index] += 1;
+        f->consecutive_rejections_ += 1;
+        f->rejection_beacon_mask_ |= 1u << beacon_index;
+        res.status = BL_PULSE_REJECTED;
+        uint32_t nb = 0;
+        for (uint32_t m = f->rejection_beacon_mask_; m; m &= m - 1) ++nb;
+        if (cfg->reset_reject_count > 0 && f->consecutive_rejections_ >= cfg->reset_reject_count && nb >= 2) {
+            // Persistent rejection: kidnapped or drifted. Re-initialise from the
+            // snapshot solver on the last cycle (keeps s and T, heading with a
+            // wide σ); if the snapshot fails, keep counting.
+            if (start_from_snapshot(f, x(TH), cfg->reset_sigma_theta_rad, x(S), P(S, S), x(T), P(T, T),
+                                    n < 4 ? n : 4) == BL_OK)
+                res.status = BL_PULSE_RESET;
+        }
+        if (result) *result = res;
+        return BL_OK;
+    }
+
+    // Iterated EKF (Kleeman §3.4; Jazwinski): relinearise at x_i,
+    //   K_i = P Hᵢᵀ (Hᵢ P Hᵢᵀ + R)⁻¹                           (eq. 9)
+    //   x_{i+1} = x̄ + K_i (z - h(x_i) - H_i (x̄ - x_i))          (eq. 8)
+    const V8 xbar = x;
+    V8 xi = xbar;
+    V8 K = V8::Zero();
+    real hi = h0;
+    R8 Hi = H;
+    uint32_t it = 0;
+    for (;;) {
+        const V8 PHt = P * Hi.transpose();
+        const real Si = Hi.dot(PHt) + R;
+        K = PHt / Si;
+        const V8 xn = xbar + K * (g.arrival_rel_s - hi - Hi.dot(xbar - xi));
+        ++it;
+        const real step = (xn.head<2>() - xi.head<2>()).norm();
+        xi = xn;
+        if (it >= cfg->iekf_max_iterations || step < cfg->iekf_step_tolerance) break;
+        if (!pulse_model(cfg, xi, g, &hi, &Hi)) {
+            // Relinearisation left the model's domain: keep the last valid step.
+            break;
+        }
+    }
+    // Joseph form (Kleeman eq. 11): P = (I - K H) P (I - K H)ᵀ + K R Kᵀ.
+    M8 IKH = M8::Identity();
+    IKH.noalias() -= K * Hi;
+    M8 Pn = IKH.lazyProduct(P).lazyProduct(IKH.transpose());
+    Pn.noalias() += (R * K) * K.transpose();
+    symmetrise(Pn);
+    xi(TH) = bl::wrap_angle(xi(TH));
+    if (!xi.allFinite() || !Pn.allFinite() || !(Pn(S, S) > 0) || !(xi(S) > 0) || !(xi(T) > 0))
+        return BL_EINVAL;  // numerically impossible update: refuse, state untouched
+
+    int64_t epoch = f->epoch_us_;
+    uint32_t ref = f->ref_beacon_;
+    // The reference follows the newest firing (Kleeman eq. 15: t0 += T per beacon).
+    shift_reference(cfg, xi, Pn, epoch, ref, g.slot > 0 ? g.slot : 0);
+    remember();
+    commit(f, xi, Pn);
+    f->epoch_us_ = epoch;
+    f->ref_beacon_ = ref;
+    f->accepted_[beacon_index] += 1;
+    f->fused_count_ += 1;
+    f->consecutive_rejections_ = 0;
+    f->rejection_beacon_mask_ = 0;
+    res.status = BL_PULSE_ACCEPTED;
+    res.iterations = it;
+    if (result) *result = res;
+    return BL_OK;
+}
+
+extern "C" int bl_filter_get_state(const bl_filter *f, bl_real x[BL_FILTER_NX],
+                                   bl_real P[BL_FILTER_NX * BL_FILTER_NX])
+{
+    if (f == nullptr) return BL_EINVAL;
+    if (!started(f)) return BL_ENOTINIT;
+    if (x) std::memcpy(x, f->x_, sizeof f->x_);
+    if (P) std::memcpy(P, f->P_, sizeof f->P_);
+    return BL_OK;
+}
+
+extern "C" int bl_filter_estimate(const bl_filter *f, bl_estimate *est)
+{
+    if (f == nullptr || est == nullptr) return BL_EINVAL;
+    if (!initialised(f)) return BL_ENOTINIT;
+    fill_estimate(f, state(f), cov(f), f->t_us_, est);
+    return BL_OK;
+}
+
+extern "C" int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estimate *est)
+{
+    if (f == nullptr || est == nullptr) return BL_EINVAL;
+    if (!started(f)) return BL_ENOTINIT;
+    const int trc = check_time(f, t_us);
+    if (trc != BL_OK) return trc;
+    V8 x = state(f);
+    M8 P = cov(f);
+    cv_predict(&f->cfg_, x, P, bl::us_to_s(t_us - f->t_us_));
+    fill_estimate(f, x, P, t_us, est);
+    return BL_OK;
+}
+
+extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_index, int64_t after_us,
+                                          bl_expected_pulse *out)
+{
+    if (f == nullptr || out == nullptr) return BL_EINVAL;
+    if (!started(f)) return BL_ENOTINIT;
+    const bl_config *cfg = &f->cfg_;
+    if (beacon_index >= cfg->beacon_count) return BL_EBEACON;
+    int64_t d_us;
+    if (!bl::sub_us(after_us, f->t_us_, &d_us)) return BL_ETIME;
+    if (d_us > int64_t(1e12) || d_us < -int64_t(1e12) ||
+        !(std::fabs(bl::us_to_s(d_us)) <= cfg->max_predict_gap_s))
+        return BL_ETIME;
+    const V8 x = state(f);
+    const M8 P = cov(f);
+    const uint32_t n = cfg->beacon_count;
+    const bl_beacon &b = cfg->beacons[beacon_index];
+    const real dx = x(X) - b.x_m, dy = x(Y) - b.y_m, dz = cfg->receiver_height_m - b.z_m;
+    const real flight = std::sqrt(dx * dx + dy * dy + dz * dz) / x(S);
+    const int64_t base =
+        ((int64_t(beacon_index) - int64_t(f->ref_beacon_)) % int64_t(n) + int64_t(n)) % int64_t(n);
+    const real t0_rel = bl::us_to_s(f->epoch_us_ - f->t_us_) + x(T0);  // t0 - t_s
+    const real after_rel = bl::us_to_s(d_us);
+    // Smallest slot of this beacon with firing + flight >= after.
+    const real cycles = std::ceil((after_rel - flight - t0_rel - real(base) * x(T)) / (real(n) * x(T)));
+    bl_pulse_geometry g;
+    g.beacon_index = beacon_index;
+    g.receiver_index = 0;
+    g.slot = int32_t(base + int64_t(cycles) * int64_t(n));
+    g.epoch_rel_s = bl::us_to_s(f->epoch_us_ - f->t_us_);
+    const real fire_rel = t0_rel + real(g.slot) * x(T);
+    g.arrival_rel_s = fire_rel + flight;
+    // Ring centre: evaluate with a zero ring radius.
+    bl_config c0 = *cfg;
+    c0.ring_radius_m = 0;
+    real h;
+    R8 H;
+    if (!pulse_model(&c0, x, g, &h, &H)) return BL_EINVAL;
+    const bool conv = (f->flags_ & kFlagConverged) != 0;
+    const real sa = conv ? cfg->sigma_arrival_s : cfg->startup_sigma_arrival_s;
+    bl_expected_pulse e;
+    e.fire_us = f->t_us_ + int64_t(std::llround(double(fire_rel) * 1e6));
+    e.arrival_us = f->t_us_ + int64_t(std::llround(double(h) * 1e6));
+    e.flight_s = h - fire_rel;
+    e.sigma_s = std::sqrt(H.dot(P * H.transpose()) + sa * sa + cfg->firing_jitter_s * cfg->firing_jitter_s);
+    *out = e;
+    return BL_OK;
+}
+
+// ------------------------------------------------------- model wrappers
+
+extern "C" int bl_model_pulse(const bl_config *cfg, const bl_real x[8], const bl_pulse_geometry *g,
+                              bl_real *h_rel_s, bl_real H[8])
+{
+    if (cfg == nullptr || x == nullptr || g == nullptr || h_rel_s == nullptr) return BL_EINVAL;
+    if (g->beacon_index >= cfg->beacon_count || g->beacon_index >= BL_MAX_BEACONS) return BL_EBEACON;
+    if (g->receiver_index >= cfg->receiver_count) return BL_EINVAL;
+    if (!all_finite(x, 8) || !is_finite(g->arrival_rel_s) || !is_finite(g->epoch_rel_s)) return BL_EINVAL;
+    const V8 xv = Eigen::Map<const V8>(x);
+    real h;
+    R8 J;
+    if (!pulse_model(cfg, xv, *g, &h, &J)) return BL_EINVAL;
+    *h_rel_s = h;
+    if (H) {
+        Eigen::Map<R8> Hm(H);
+        Hm = J;
+    }
+    return BL_OK;
+}
+
+extern "C" int bl_model_odometry(const bl_config *cfg, const bl_real x[8], bl_real d_left_m,
+                                 bl_real d_right_m, bl_real x_out[8], bl_real F[64], bl_real G[16])
+{
+    if (cfg == nullptr || x == nullptr || x_out == nullptr) return BL_EINVAL;
+    if (!all_finite(x, 8) || !is_finite(d_left_m) || !is_finite(d_right_m) || !(cfg->wheel_base_m > 0))
+        return BL_EINVAL;
+    V8 xo;
+    M8 Fm;
+    bl::Mat<NX, 2> Gm;
+    odometry_model(cfg->wheel_base_m, Eigen::Map<const V8>(x), d_left_m, d_right_m, xo, &Fm, &Gm);
+    Eigen::Map<V8> xm(x_out);
+    xm = xo;
+    if (F) {
+        Eigen::Map<M8> Fmap(F);
+        Fmap = Fm;
+    }
+    if (G) {
+        Eigen::Map<bl::Mat<NX, 2>> Gmap(G);
+        Gmap = Gm;
+    }
+    return BL_OK;
+}
+
+extern "C" int bl_model_constant_velocity(const bl_real x[8], bl_real dt_s, bl_real x_out[8], bl_real F[64])
+{
+    if (x == nullptr || x_out == nullptr) return BL_EINVAL;
+    if (!all_finite(x, 8) || !is_finite(dt_s) || dt_s < 0) return BL_EINVAL;
+    V8 xo;
+    M8 Fm;
+    cv_model(Eigen::Map<const V8>(x), dt_s, xo, &Fm);
+    Eigen::Map<V8> xm(x_out);
+    xm = xo;
+    if (F) {
+        Eigen::Map<M8> Fmap(F);
+        Fmap = Fm;
+    }
+    return BL_OK;
+}

@@ -1,0 +1,51 @@
+// beaconloc — private helpers shared by the library's translation units.
+// Eigen fixed-size types over bl_real; no heap (EIGEN_NO_MALLOC), no C++
+// runtime (no exceptions, RTTI, static constructors or iostreams).
+#ifndef BEACONLOC_INTERNAL_HPP
+#define BEACONLOC_INTERNAL_HPP
+
+#include <cmath>
+#include <cstdint>
+
+#include <Eigen/Core>
+#include <Eigen/LU>
+#include <Eigen/Cholesky>
+
+extern "C" {
+#include "beaconloc/common.h"
+#include "beaconloc/config.h"
+}
+
+namespace bl {
+
+using real = bl_real;
+template <int R, int C>
+using Mat = Eigen::Matrix<real, R, C, (C == 1 ? Eigen::ColMajor : Eigen::RowMajor)>;
+using Vec2 = Eigen::Matrix<real, 2, 1>;
+using Vec3 = Eigen::Matrix<real, 3, 1>;
+
+constexpr real kPi = real(3.14159265358979323846);
+constexpr real kDegToRad = kPi / real(180);
+
+inline bool is_finite(real v) { return std::isfinite(v); }
+
+// Angle wrapped to (-pi, pi].
+inline real wrap_angle(real a_rad)
+{
+    if (!is_finite(a_rad)) return a_rad;
+    if (a_rad > kPi || a_rad <= -kPi) {
+        a_rad = std::remainder(a_rad, real(2) * kPi);
+        if (a_rad <= -kPi) a_rad += real(2) * kPi;
+    }
+    return a_rad;
+}
+
+// *out = a - b; false when it overflows int64 (times from the caller are
+// untrusted).
+inline bool sub_us(int64_t a, int64_t b, int64_t *out) { return !__builtin_sub_overflow(a, b, out); }
+
+inline real us_to_s(int64_t dt_us) { return real(dt_us) * real(1e-6); }
+
+}  // namespace bl
+
+#endif

@@ -1,0 +1,252 @@
+// beaconloc — snapshot TDOA solvers (solver.h).
+//
+// Kleeman 1990 intersects hyperboloids of constant distance difference by
+// replacing them with their tangent planes at the current iterate (eqs. 1-8)
+// for four beacons in 3D. The same linearisation written for N beacons with
+// the common emission time as an extra unknown is weighted Gauss-Newton; for
+// the exactly determined case (3D N = 4) its step equals eq. 8.
+#include "internal.hpp"
+
+#include <cstring>
+
+#include "beaconloc/solver.h"
+
+using bl::is_finite;
+using bl::real;
+
+namespace {
+
+constexpr uint32_t kDefaultIterations = 10;
+#if defined(BL_USE_FLOAT) && BL_USE_FLOAT
+constexpr real kDefaultTolerance_m = real(1e-4);
+constexpr real kMinRcond = real(1e-6);
+#else
+constexpr real kDefaultTolerance_m = real(1e-6);
+constexpr real kMinRcond = real(1e-10);
+#endif
+
+bool problem_valid(const bl_tdoa_problem *p)
+{
+    if (p->count > BL_MAX_BEACONS) return false;
+    if (!is_finite(p->speed_of_sound_mps) || p->speed_of_sound_mps <= real(0)) return false;
+    if (!is_finite(p->receiver_z_m) || !is_finite(p->tolerance_m) || p->tolerance_m < real(0)) return false;
+    if (p->max_iterations > 100) return false;
+    if (p->use_guess && (!is_finite(p->guess_x_m) || !is_finite(p->guess_y_m) || !is_finite(p->guess_z_m)))
+        return false;
+    for (uint32_t j = 0; j < p->count; ++j) {
+        if (!is_finite(p->beacons[j].x_m) || !is_finite(p->beacons[j].y_m) || !is_finite(p->beacons[j].z_m))
+            return false;
+        if (!is_finite(p->arrival_s[j]) || !is_finite(p->fire_offset_s[j])) return false;
+        if (!is_finite(p->sigma_s[j]) || p->sigma_s[j] <= real(0)) return false;
+    }
+    return true;
+}
+
+// D = 2: unknowns (x, y, tau); D = 3: (x, y, z, tau), where tau = s·t0 (m)
+// so that every Jacobian column is dimensionless (good conditioning).
+template <int D>
+int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
+{
+    constexpr int n = D + 1;
+    using VecN = bl::Mat<n, 1>;
+    using MatN = bl::Mat<n, n>;
+    using VecD = bl::Mat<D, 1>;
+
+    if (prob == nullptr || out == nullptr) return BL_EINVAL;
+    if (!problem_valid(prob)) return BL_EINVAL;
+    const uint32_t N = prob->count;
+    if (N < uint32_t(n)) return BL_EDEGENERATE;
+
+    const real s = prob->speed_of_sound_mps;
+    const uint32_t max_it = prob->max_iterations ? prob->max_iterations : kDefaultIterations;
+    const real tol = prob->tolerance_m > real(0) ? prob->tolerance_m : kDefaultTolerance_m;
+
+    // Measured distances plus the unknown offset tau (Kleeman 1990 §2: "the
+    // data are the distances to beacons plus an unknown offset"):
+    //   rho_j = s·(arrival_j - fire_offset_j) = tau + |p - b_j|
+    real rho[BL_MAX_BEACONS];
+    real w[BL_MAX_BEACONS];  // weights 1/(s·sigma_j)² (1/m²)
+    real sig2_sum = 0;
+    for (uint32_t j = 0; j < N; ++j) {
+        rho[j] = s * (prob->arrival_s[j] - prob->fire_offset_s[j]);
+        const real sd = s * prob->sigma_s[j];
+        w[j] = real(1) / (sd * sd);
+        sig2_sum += prob->sigma_s[j] * prob->sigma_s[j];
+    }
+    const real sigma_rms_s = std::sqrt(sig2_sum / real(N));
+
+    auto beacon = [&](uint32_t j) {
+        bl::Vec3 b;
+        b << prob->beacons[j].x_m, prob->beacons[j].y_m, prob->beacons[j].z_m;
+        return b;
+    };
+    // Receiver position as a 3-vector (2D: z fixed).
+    auto point3 = [&](const VecD &p) {
+        bl::Vec3 q;
+        q(0) = p(0);
+        q(1) = p(1);
+        q(2) = D == 3 ? p(D - 1) : prob->receiver_z_m;
+        return q;
+    };
+
+    VecD p;
+    if (prob->use_guess) {
+        p(0) = prob->guess_x_m;
+        p(1) = prob->guess_y_m;
+        if (D == 3) p(D - 1) = prob->guess_z_m;
+    } else {
+        p.setZero();
+        for (uint32_t j = 0; j < N; ++j) {
+            p(0) += prob->beacons[j].x_m;
+            p(1) += prob->beacons[j].y_m;
+            if (D == 3) p(D - 1) += prob->beacons[j].z_m;
+        }
+        p /= real(N);
+    }
+    // Best tau for the start point: weighted mean of rho_j - d_j.
+    real tau = 0, wsum = 0;
+    for (uint32_t j = 0; j < N; ++j) {
+        tau += w[j] * (rho[j] - (point3(p) - beacon(j)).norm());
+        wsum += w[j];
+    }
+    tau /= wsum;
+
+    // Linearisation at (p, tau): Jacobian rows [u_jᵀ, 1] with u_j the unit
+    // vector from beacon j to p (Kleeman 1990 eq. 1: the tangent planes of
+    // the hyperboloids are spanned by these unit vectors), residuals e_j.
+    MatN A;
+    VecN g;
+    bl::Mat<BL_MAX_BEACONS, D> U;
+    auto linearise = [&](const VecD &pp, real tt) -> bool {
+        A.setZero();
+        g.setZero();
+        const bl::Vec3 q = point3(pp);
+        for (uint32_t j = 0; j < N; ++j) {
+            const bl::Vec3 delta = q - beacon(j);
+            const real d = delta.norm();
+            if (!(d > real(1e-9))) return false;  // on a beacon: gradient undefined
+            VecN row;
+            for (int k = 0; k < D; ++k) row(k) = delta(k) / d;
+            row(D) = real(1);
+            U.row(int(j)) = row.template head<D>().transpose();
+            const real e = rho[j] - tt - d;
+            // Weighted normal equations (Gauss-Newton): A = Jᵀ W J, g = Jᵀ W e.
+            A.noalias() += (w[j] * row) * row.transpose();
+            g.noalias() += (w[j] * e) * row;
+        }
+        return true;
+    };
+    // Pivoted LDLᵀ of the normal matrix; reciprocal condition estimate from
+    // the pivots after Jacobi scaling (dimensionless columns).
+    auto factor_ok = [&](Eigen::LDLT<MatN> &ldlt) -> bool {
+        VecN scale;
+        for (int k = 0; k < n; ++k) {
+            if (!(A(k, k) > real(0))) return false;
+            scale(k) = real(1) / std::sqrt(A(k, k));
+        }
+        const MatN As = scale.asDiagonal() * A * scale.asDiagonal();
+        Eigen::LDLT<MatN> sc(As);
+        if (sc.info() != Eigen::Success) return false;
+        const VecN dv = sc.vectorD();
+        const real dmax = dv.cwiseAbs().maxCoeff();
+        const real dmin = dv.minCoeff();
+        if (!(dmax > real(0)) || !(dmin > kMinRcond * dmax)) return false;
+        ldlt.compute(A);
+        return ldlt.info() == Eigen::Success;
+    };
+
+    uint32_t it = 0;
+    bool converged = false;
+    Eigen::LDLT<MatN> ldlt;
+    while (it < max_it) {
+        if (!linearise(p, tau) || !factor_ok(ldlt)) return BL_EDEGENERATE;
+        const VecN step = ldlt.solve(g);
+        if (!step.allFinite()) return BL_EDEGENERATE;
+        p += step.template head<D>();
+        tau += step(D);
+        ++it;
+        if (!p.allFinite() || p.cwiseAbs().maxCoeff() > real(1e7)) return BL_ENOCONVERGE;
+        if (step.template head<D>().norm() < tol) {
+            converged = true;
+            break;
+        }
+    }
+    // Covariance and error vector at the final point.
+    if (!linearise(p, tau) || !factor_ok(ldlt)) return BL_EDEGENERATE;
+    // (JᵀWJ)⁻¹ in units of (m, tau m); column by column (vector solves stay
+    // off Eigen's level-3 kernels, which reference malloc).
+    MatN cov_m;
+    for (int k = 0; k < n; ++k) cov_m.col(k) = ldlt.solve(VecN::Unit(k));
+
+    bl_tdoa_solution sol;
+    std::memset(&sol, 0, sizeof sol);
+    const bl::Vec3 q = point3(p);
+    sol.x_m = q(0);
+    sol.y_m = q(1);
+    sol.z_m = q(2);
+    sol.t0_s = tau / s;
+    // Unknown order (x, y, [z,] t0): t0 = tau / s scales its row and column.
+    for (int r = 0; r < n; ++r)
+        for (int c = 0; c < n; ++c) {
+            real v = cov_m(r, c);
+            if (r == D) v /= s;
+            if (c == D) v /= s;
+            sol.cov[r * 4 + c] = v;
+        }
+    real trace_p = 0;
+    for (int k = 0; k < D; ++k) trace_p += cov_m(k, k);
+    sol.pdop = std::sqrt(trace_p) / (sigma_rms_s * s);
+    real r2 = 0;
+    for (uint32_t j = 0; j < N; ++j) {
+        const real e = (rho[j] - tau - (q - beacon(j)).norm()) / s;
+        r2 += e * e;
+    }
+    sol.residual_rms_s = std::sqrt(r2 / real(N));
+    sol.iterations = it;
+    sol.converged = converged;
+
+    // Kleeman 1990 eq. 9 (exactly determined case): with g_1j = u_1 - u_j the
+    // distance differences d_1j move by g_1j·δr, so δr = G⁻¹ δd (eq. 8 is this
+    // inverse written with cross products for D = 3); the maximum-length error
+    // vector per unit ε is max over signs of G⁻¹ (1, ±1, ±1)ᵀ.
+    if (N == uint32_t(n)) {
+        bl::Mat<D, D> G;
+        for (int j = 1; j <= D; ++j) G.row(j - 1) = U.row(0) - U.row(j);
+        // Closed-form inverse (fixed 2x2 / 3x3: cofactors, no LU, no heap);
+        // the determinant is the triple product (g12 × g13)·g14 of eq. 8.
+        const real det = G.determinant();
+        real scale = 1;
+        for (int k = 0; k < D; ++k) scale *= G.row(k).norm();
+        if (std::fabs(det) > kMinRcond * scale && scale > real(0)) {
+            const bl::Mat<D, D> M = G.inverse();
+            real best = -1;
+            VecD best_v = VecD::Zero();
+            for (int signs = 0; signs < (1 << (D - 1)); ++signs) {
+                VecD e;
+                e(0) = real(1);
+                for (int k = 1; k < D; ++k) e(k) = (signs >> (k - 1)) & 1 ? real(-1) : real(1);
+                const VecD v = M * e;
+                if (v.norm() > best) {
+                    best = v.norm();
+                    best_v = v;
+                }
+            }
+            for (int k = 0; k < D; ++k) sol.error_vector[k] = best_v(k);
+            sol.error_vector_valid = true;
+        }
+    }
+    *out = sol;
+    return converged ? BL_OK : BL_ENOCONVERGE;
+}
+
+}  // namespace
+
+extern "C" int bl_solve_tdoa_2d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol)
+{
+    return solve<2>(prob, sol);
+}
+
+extern "C" int bl_solve_tdoa_3d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol)
+{
+    return solve<3>(prob, sol);
+}

@@ -1,0 +1,171 @@
+"""Accuracy benchmark: the real bridge in --replay mode on simulator logs,
+20 seeds each of echo-storm and kleeman-lab, judged against the simulator's
+truth and its posterior Cramer-Rao bound (Tichavsky et al. 1998).
+
+Measured after the first 20 s of each run (start-up excluded), pooled over
+the seeds:
+  rmse_mm        position RMSE of the bridge's estimates (estimates CSV,
+                 truth interpolated at each estimate's node-clock time)
+  pcrb_mm        RMS of the bound's position sigma (truth CSV pcrb_pos_m)
+                 at the same instants; ratio = rmse_mm / pcrb_mm
+  lateral_std_mm std of the signed distance from the estimate to the true
+                 path (Kleeman 1992 section 4, "path error": the deviation
+                 perpendicular to the path, left of travel positive)
+  sos_err_mps    RMS error of the speed-of-sound estimate
+  diverged       seeds whose run failed, produced no estimate, a non-finite
+                 one, or ended (last 10 s) with an RMS error above 0.5 m
+Last two lines (machine-readable):
+  accuracy scenario=echo-storm seeds=20 rmse_mm=.. pcrb_mm=.. ratio=.. lateral_std_mm=.. sos_err_mps=.. diverged=..
+  accuracy scenario=kleeman-lab seeds=20 ...
+"""
+from __future__ import annotations
+
+import argparse
+import configparser
+import json
+import math
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "tests" / "integration"))
+import harness as h  # noqa: E402
+
+SCENARIOS = ("echo-storm", "kleeman-lab")  # printed in this order
+SKIP_S = 20.0            # start-up excluded from every figure, s
+DIVERGED_RMS_M = 0.5     # final-10-s RMS error above this: diverged
+LATERAL_MIN_SPEED_MPS = 0.05  # the path's direction is undefined when still
+
+
+def site_of(scenario: str) -> Path:
+    path = h.SCENARIOS / f"{scenario}.scenario.ini"
+    cp = configparser.ConfigParser(inline_comment_prefixes=(";", "#"))
+    cp.read(path)
+    return path.parent / cp.get("scenario", "site")
+
+
+def lateral_error_m(truth: dict, t_us: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Signed distance (m) from each estimate to the true path near its time:
+    the estimate is projected on the true path's local direction at the same
+    instant, and the perpendicular component kept (left of travel positive).
+    NaN where the robot is (almost) still and the path has no direction."""
+    tx = h.truth_at(truth, t_us, "x_m")
+    ty = h.truth_at(truth, t_us, "y_m")
+    # Direction of travel from the truth's own velocity heading: theta for
+    # forward motion (v > 0), reversed for backward.
+    th = h.truth_at(truth, t_us, "theta_rad")
+    v = h.truth_at(truth, t_us, "v_mps")
+    ux, uy = np.cos(th) * np.sign(v), np.sin(th) * np.sign(v)
+    dx, dy = x - tx, y - ty
+    # Cross product u x d: left of travel positive (Kleeman 1992 sec. 4).
+    lat = ux * dy - uy * dx
+    lat[np.abs(v) < LATERAL_MIN_SPEED_MPS] = np.nan
+    return lat
+
+
+def one_run(bridge: Path, scenario: str, seed: int, out: Path) -> dict:
+    d = out / f"{scenario}-s{seed:02d}"
+    d.mkdir(parents=True, exist_ok=True)
+    log, truth_p, est_p = d / "bus.log", d / "truth.csv", d / "est.csv"
+    sim = subprocess.run([str(h.SIM), "run", scenario, "--log", str(log), "--truth", str(truth_p),
+                          "--seed", str(seed)], capture_output=True, text=True)
+    if sim.returncode != 0:
+        return {"seed": seed, "ok": False, "why": f"simulator exit {sim.returncode}: "
+                f"{sim.stderr.strip()[-300:]}"}
+    br = subprocess.run([str(bridge), "--site", str(site_of(scenario)), "--replay", str(log),
+                         "--estimates", str(est_p), "--stats", str(d / "stats.json"),
+                         "--mavlink", "udpout:127.0.0.1:9", "--status-interval", "0"],
+                        capture_output=True, text=True)
+    (d / "bridge.err").write_text(br.stderr)
+    if br.returncode != 0 or not est_p.exists():
+        return {"seed": seed, "ok": False, "why": f"bridge exit {br.returncode}: "
+                f"{br.stderr.strip()[-300:]}"}
+    truth = h.read_csv(truth_p, h.TRUTH_COLUMNS)
+    est = h.read_csv(est_p, h.EST_COLUMNS)
+    e = h.estimate_errors(est, truth)
+    sel = (e.t_s >= SKIP_S) & np.isfinite(h.truth_at(truth, est["t_us"], "x_m"))
+    if sel.sum() < 10:
+        return {"seed": seed, "ok": False, "why": "no estimates after 20 s"}
+    finite = np.isfinite(e.pos_m[sel]).all()
+    last = sel & (e.t_s >= e.t_s[sel][-1] - 10.0)
+    final_rms = float(np.sqrt(np.mean(e.pos_m[last] ** 2))) if finite else math.inf
+    lat = lateral_error_m(truth, est["t_us"][sel], est["x_m"][sel], est["y_m"][sel])
+    return {
+        "seed": seed, "ok": True,
+        "diverged": bool(not finite or final_rms > DIVERGED_RMS_M),
+        "err2": e.pos_m[sel] ** 2,
+        "pcrb2": h.truth_at(truth, est["t_us"][sel], "pcrb_pos_m") ** 2,
+        "lat": lat[np.isfinite(lat)],
+        "sos2": e.sos_err_mps[sel] ** 2,
+        "final_rms_m": final_rms,
+        "resets": int(e.reset_counter[-1]),
+    }
+
+
+def summarise(scenario: str, runs: list[dict]) -> tuple[str, dict]:
+    good = [r for r in runs if r["ok"]]
+    diverged = sum(1 for r in runs if not r["ok"] or r["diverged"])
+    if not good:
+        line = (f"accuracy scenario={scenario} seeds={len(runs)} rmse_mm=nan pcrb_mm=nan "
+                f"ratio=nan lateral_std_mm=nan sos_err_mps=nan diverged={diverged}")
+        return line, {"diverged": diverged}
+    err2 = np.concatenate([r["err2"] for r in good])
+    pcrb2 = np.concatenate([r["pcrb2"] for r in good])
+    lat = np.concatenate([r["lat"] for r in good])
+    sos2 = np.concatenate([r["sos2"] for r in good])
+    rmse_mm = math.sqrt(float(np.nanmean(err2))) * 1e3
+    pcrb_mm = math.sqrt(float(np.nanmean(pcrb2))) * 1e3
+    fig = {
+        "rmse_mm": rmse_mm, "pcrb_mm": pcrb_mm, "ratio": rmse_mm / pcrb_mm,
+        "lateral_std_mm": float(np.std(lat)) * 1e3 if lat.size else math.nan,
+        "sos_err_mps": math.sqrt(float(np.nanmean(sos2))), "diverged": diverged,
+    }
+    line = (f"accuracy scenario={scenario} seeds={len(runs)} rmse_mm={fig['rmse_mm']:.1f} "
+            f"pcrb_mm={fig['pcrb_mm']:.1f} ratio={fig['ratio']:.3f} "
+            f"lateral_std_mm={fig['lateral_std_mm']:.1f} sos_err_mps={fig['sos_err_mps']:.3f} "
+            f"diverged={diverged}")
+    return line, fig
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--bridge", default=str(h.BRIDGE))
+    ap.add_argument("--out", default=str(REPO / "build" / "bench" / "accuracy"))
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--scenarios", default=",".join(SCENARIOS))
+    args = ap.parse_args()
+    bridge, out = Path(args.bridge), Path(args.out)
+    if not bridge.exists():
+        print(f"accuracy: {bridge} not built", file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    lines, report = [], {}
+    for scenario in args.scenarios.split(","):
+        with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+            runs = list(pool.map(lambda s: one_run(bridge, scenario, s, out),
+                                 range(1, args.seeds + 1)))
+        for r in runs:
+            if not r["ok"]:
+                print(f"  {scenario} seed {r['seed']}: FAILED {r['why']}")
+            else:
+                print(f"  {scenario} seed {r['seed']:2d}: rmse "
+                      f"{math.sqrt(float(np.nanmean(r['err2']))) * 1e3:7.1f} mm, final 10 s "
+                      f"{r['final_rms_m'] * 1e3:7.1f} mm, resets {r['resets']}"
+                      f"{', DIVERGED' if r['diverged'] else ''}")
+        line, fig = summarise(scenario, runs)
+        report[scenario] = fig
+        lines.append(line)
+    (out / "accuracy.json").write_text(json.dumps(report, indent=1))
+    for line in lines:
+        print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

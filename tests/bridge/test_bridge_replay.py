@@ -1,0 +1,249 @@
+"""The real beaconloc-bridge binary in --replay mode on simulator logs,
+its MAVLink read back with pymavlink, its estimates and stats checked
+against the simulator's truth and the log's contents."""
+import csv
+import json
+import math
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+
+from conftest import LOG_EPOCH_S, SITE, mavlink_listener
+
+MAV = mavutil.mavlink
+
+
+def read_truth(path):
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    return data
+
+
+def collect(conn, stop, out):
+    while not stop.is_set():
+        msg = conn.recv_match(blocking=True, timeout=0.2)
+        if msg is not None and msg.get_type() != "BAD_DATA":
+            out.append(msg)
+    while True:  # drain what is left
+        msg = conn.recv_match(blocking=False)
+        if msg is None:
+            break
+        if msg.get_type() != "BAD_DATA":
+            out.append(msg)
+
+
+def run_bridge_with_listener(bridge_bin, args, port, timeout=120):
+    conn = mavlink_listener(port)
+    msgs, stop = [], threading.Event()
+    th = threading.Thread(target=collect, args=(conn, stop, msgs), daemon=True)
+    th.start()
+    proc = subprocess.run([str(bridge_bin), "--mavlink", f"udpout:127.0.0.1:{port}"] + args,
+                          capture_output=True, text=True, timeout=timeout)
+    time.sleep(0.3)
+    stop.set()
+    th.join(5)
+    conn.close()
+    return proc, msgs
+
+
+def log_frame_counts(log):
+    counts = {}
+    with open(log) as f:
+        for line in f:
+            fid = line.split()[2].split("#")[0]
+            counts[fid] = counts.get(fid, 0) + 1
+    return counts
+
+
+@pytest.fixture(scope="module")
+def replay_run(bridge_bin, kleeman_log, tmp_path_factory):
+    """Replay the 60 s log paced at 20x so a Python listener keeps up."""
+    log, truth = kleeman_log
+    out = tmp_path_factory.mktemp("replay")
+    from conftest import free_udp_port
+    port = free_udp_port()
+    est = out / "est.csv"
+    stats = out / "stats.json"
+    proc, msgs = run_bridge_with_listener(
+        bridge_bin, ["--site", str(SITE), "--replay", str(log), "--speed", "20",
+                     "--estimates", str(est), "--stats", str(stats)], port)
+    assert proc.returncode == 0, proc.stderr
+    return dict(log=log, truth=truth, est=est, stats=stats, proc=proc, msgs=msgs)
+
+
+def test_odometry_fields_and_rate(replay_run):
+    odo = [m for m in replay_run["msgs"] if m.get_type() == "ODOMETRY"]
+    assert len(odo) > 100, replay_run["proc"].stderr
+    for m in odo:
+        assert m.frame_id == MAV.MAV_FRAME_LOCAL_FRD
+        assert m.child_frame_id == MAV.MAV_FRAME_BODY_FRD
+        assert m.estimator_type == MAV.MAV_ESTIMATOR_TYPE_VISION
+        assert -1 <= m.quality <= 100
+        assert m.reset_counter == 0  # nominal run: never re-initialised
+        assert math.isfinite(m.x) and math.isfinite(m.y)
+        var_n, var_e = m.pose_covariance[0], m.pose_covariance[6]
+        assert var_n > 0 and var_e > 0
+        assert math.isnan(m.pose_covariance[11])  # var(down): not estimated
+    t = np.array([m.time_usec for m in odo], dtype=np.int64)
+    assert np.all(np.diff(t) > 0), "ODOMETRY time must increase"
+    rate_hz = (len(t) - 1) / ((t[-1] - t[0]) / 1e6)
+    assert 28.5 <= rate_hz <= 31.5, rate_hz  # configured 30 Hz, on the log's clock
+
+
+def test_odometry_positions_match_truth(replay_run):
+    truth = read_truth(replay_run["truth"])
+    odo = [m for m in replay_run["msgs"] if m.get_type() == "ODOMETRY"]
+    t_sim = np.array([m.time_usec / 1e6 - LOG_EPOCH_S for m in odo])
+    # LOCAL_FRD x = north = site y, y = east = site x (docs/mavlink.md)
+    x = np.array([m.y for m in odo])
+    y = np.array([m.x for m in odo])
+    keep = t_sim > 20.0  # after convergence
+    assert keep.sum() > 500
+    xt = np.interp(t_sim[keep], truth["t_sim_s"], truth["x_m"])
+    yt = np.interp(t_sim[keep], truth["t_sim_s"], truth["y_m"])
+    err = np.hypot(x[keep] - xt, y[keep] - yt)
+    # A wrong axis mapping, time base or unit gives metres; the estimator's
+    # own accuracy is measured by make bench-accuracy.
+    assert np.median(err) < 0.25, np.median(err)
+    assert np.percentile(err, 95) < 0.5, np.percentile(err, 95)
+
+
+def test_heartbeat_and_named_values(replay_run):
+    msgs = replay_run["msgs"]
+    hb = [m for m in msgs if m.get_type() == "HEARTBEAT"]
+    assert 50 <= len(hb) <= 62  # 1 Hz over a 60 s log
+    assert all(m.type == MAV.MAV_TYPE_ONBOARD_CONTROLLER for m in hb)
+    assert all(m.autopilot == MAV.MAV_AUTOPILOT_INVALID for m in hb)
+    nv = [m for m in msgs if m.get_type() == "NAMED_VALUE_FLOAT"]
+    sos = [m.value for m in nv if m.name == "sos_mps"]
+    per = [m.value for m in nv if m.name == "period_s"]
+    assert sos and per
+    assert 320 < np.median(sos) < 370
+    assert abs(np.median(per) - 0.150) < 0.001
+    texts = [m.text for m in msgs if m.get_type() == "STATUSTEXT"]
+    assert any("filter started" in t for t in texts), texts
+
+
+def test_estimates_csv_on_truth_clock(replay_run):
+    truth = read_truth(replay_run["truth"])
+    with open(replay_run["est"]) as f:
+        header = f.readline().strip().split(",")
+    assert header == ["t_us", "x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "sos_mps",
+                      "period_s", "var_x_m2", "cov_xy_m2", "var_y_m2", "var_theta_rad2",
+                      "reset_counter", "quality"]
+    est = np.genfromtxt(replay_run["est"], delimiter=",", names=True)
+    assert len(est) > 1000
+    assert np.all(np.diff(est["t_us"]) >= 0)
+    # same time base as the truth (receiver-node clock, unwrapped)
+    assert truth["t_us"][0] <= est["t_us"][0] <= truth["t_us"][-1]
+    assert est["t_us"][-1] <= truth["t_us"][-1] + 1e6
+    t0 = truth["t_us"][0]
+    keep = (est["t_us"] - t0) > 20e6
+    xt = np.interp(est["t_us"][keep], truth["t_us"], truth["x_m"])
+    yt = np.interp(est["t_us"][keep], truth["t_us"], truth["y_m"])
+    err = np.hypot(est["x_m"][keep] - xt, est["y_m"][keep] - yt)
+    assert np.sqrt(np.mean(err ** 2)) < 0.3
+    # speed from the encoders agrees with the truth (odometry glue: ticks -> m)
+    vt = np.interp(est["t_us"][keep], truth["t_us"], truth["v_mps"])
+    assert np.median(np.abs(est["v_mps"][keep] - vt)) < 0.03
+
+
+def test_stats_match_the_log(replay_run):
+    stats = json.loads(replay_run["stats"].read_text())
+    counts = log_frame_counts(replay_run["log"])
+    assert stats["frames_received"]["pulse_detection"] == counts["100"]
+    assert stats["frames_received"]["wheel_encoders"] == counts["110"]
+    assert stats["frames_received"]["node_status"] == counts["120"]
+    assert stats["frames_total"] == sum(counts.values())
+    for k in ("malformed", "unknown_id", "out_of_range", "lost_by_counter", "replay_bad_lines"):
+        assert stats[k] == 0, k
+    assert stats["pulses_accepted"] > 0.8 * (60 / 0.150) * 0.5
+    assert stats["latency_samples"] > 0
+    assert 0 <= stats["latency_p50_us"] <= stats["latency_p99_us"]
+    assert "final:" in replay_run["proc"].stderr
+    assert "latency p50" in replay_run["proc"].stderr
+
+
+def test_bad_frames_counted_good_frames_processed(bridge_bin, kleeman_log, tmp_path):
+    log, truth = kleeman_log
+    lines = log.read_text().splitlines()
+    out_lines, injected = [], {"malformed": 0, "unknown_id": 0, "out_of_range": 0, "bad": 0}
+    for i, line in enumerate(lines):
+        out_lines.append(line)
+        stamp, iface, frame = line.split()[:3]
+        if i % 7 == 3:   # malformed: our id with 7 data bytes
+            out_lines.append(f"{stamp} {iface} 110#01020304050607")
+            injected["malformed"] += 1
+        elif i % 7 == 4:  # unknown id
+            out_lines.append(f"{stamp} {iface} 321#0011223344556677")
+            injected["unknown_id"] += 1
+        elif i % 7 == 5 and frame.startswith("100#"):
+            # same pulse with receiver 15 (4-bit field, DBC range 0..7)
+            data = bytearray.fromhex(frame.split("#")[1])
+            data[4] |= 0x0F
+            out_lines.append(f"{stamp} {iface} 100#{data.hex().upper()}")
+            injected["out_of_range"] += 1
+        elif i % 97 == 6:
+            out_lines.append("this line is not candump")
+            injected["bad"] += 1
+    bad_log = tmp_path / "bad.log"
+    bad_log.write_text("\n".join(out_lines) + "\n")
+    stats_path = tmp_path / "stats.json"
+    est_path = tmp_path / "est.csv"
+    proc = subprocess.run([str(bridge_bin), "--site", str(SITE), "--replay", str(bad_log),
+                           "--mavlink", "udpout:127.0.0.1:9", "--stats", str(stats_path),
+                           "--estimates", str(est_path)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    stats = json.loads(stats_path.read_text())
+    assert stats["malformed"] == injected["malformed"]
+    assert stats["unknown_id"] == injected["unknown_id"]
+    assert stats["out_of_range"] == injected["out_of_range"]
+    assert stats["replay_bad_lines"] == injected["bad"]
+    counts = log_frame_counts(log)
+    assert stats["frames_received"]["pulse_detection"] == counts["100"]
+    assert stats["frames_received"]["wheel_encoders"] == counts["110"]
+    assert stats["lost_by_counter"] == 0
+    # the estimate is as good as without the junk
+    truth = read_truth(truth)
+    est = np.genfromtxt(est_path, delimiter=",", names=True)
+    keep = (est["t_us"] - truth["t_us"][0]) > 20e6
+    xt = np.interp(est["t_us"][keep], truth["t_us"], truth["x_m"])
+    yt = np.interp(est["t_us"][keep], truth["t_us"], truth["y_m"])
+    assert np.sqrt(np.mean((est["x_m"][keep] - xt) ** 2 + (est["y_m"][keep] - yt) ** 2)) < 0.3
+    # repeated warnings are summarised, not one line per bad line
+    assert proc.stderr.count("not a candump line") <= 5
+
+
+def test_fast_replay_odometry_on_log_clock(bridge_bin, kleeman_log, tmp_path):
+    """As fast as possible, the timers still run on the log's clock: the
+    number of ODOMETRY messages is 30 Hz of log time, not of wall time."""
+    log, _ = kleeman_log
+    stats_path = tmp_path / "stats.json"
+    proc = subprocess.run([str(bridge_bin), "--site", str(SITE), "--replay", str(log),
+                           "--mavlink", "udpout:127.0.0.1:9", "--stats", str(stats_path)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    stats = json.loads(stats_path.read_text())
+    # the filter starts after the first complete beacon cycle (~1 s)
+    assert 30 * 57 <= stats["odometry_sent"] <= 30 * 60 + 2
+    assert 58 <= stats["heartbeat_sent"] <= 61
+    assert stats["run_time_s"] < 10
+
+
+def test_record_replays_identically(bridge_bin, kleeman_log, tmp_path):
+    log, _ = kleeman_log
+    rec = tmp_path / "rec.log"
+    s1, s2 = tmp_path / "s1.json", tmp_path / "s2.json"
+    for src, stats, extra in ((log, s1, ["--record", str(rec)]), (rec, s2, [])):
+        proc = subprocess.run([str(bridge_bin), "--site", str(SITE), "--replay", str(src),
+                               "--mavlink", "udpout:127.0.0.1:9", "--stats", str(stats)] + extra,
+                              capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 0, proc.stderr
+    a, b = json.loads(s1.read_text()), json.loads(s2.read_text())
+    assert a["frames_received"] == b["frames_received"]
+    assert a["pulses_accepted"] == b["pulses_accepted"]
+    assert a["odometry_sent"] == b["odometry_sent"]

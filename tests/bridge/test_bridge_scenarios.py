@@ -1,0 +1,75 @@
+"""Fault scenarios of the simulator replayed through the real daemon: the
+estimator glue's re-initialisation, encoder-silence handling and health
+events (the same events go to the log and to STATUSTEXT)."""
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+from conftest import SITE, run_sim
+
+BEACON_CYCLE_S = 6 * 0.150
+
+
+def replay(bridge_bin, log, tmp_path, *extra):
+    est, stats = tmp_path / "est.csv", tmp_path / "stats.json"
+    p = subprocess.run([str(bridge_bin), "--site", str(SITE), "--replay", str(log),
+                        "--mavlink", "udpout:127.0.0.1:9", "--estimates", str(est),
+                        "--stats", str(stats), "--status-interval", "0", *extra],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    return p, np.genfromtxt(est, delimiter=",", names=True), json.loads(stats.read_text())
+
+
+def errors(est, truth):
+    xt = np.interp(est["t_us"], truth["t_us"], truth["x_m"])
+    yt = np.interp(est["t_us"], truth["t_us"], truth["y_m"])
+    t_sim = np.interp(est["t_us"], truth["t_us"], truth["t_sim_s"])
+    return t_sim, np.hypot(est["x_m"] - xt, est["y_m"] - yt)
+
+
+def test_kidnap_resets_and_recovers(bridge_bin, tmp_path):
+    log, truth_path = run_sim(tmp_path, "kidnap", 75)
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    t_sim, err = errors(est, truth)
+    before = (t_sim > 40) & (t_sim < 59.5)
+    assert np.all(est["reset_counter"][before] == 0)
+    assert np.percentile(err[before], 95) < 0.1
+    # carried 2 m at 60 s: the reset counter goes up and the error is back
+    # under 0.1 m within 5 beacon cycles of the kidnap's end
+    assert est["reset_counter"][-1] >= 1
+    assert stats["estimator_resets"] >= 1
+    back = t_sim > 61.0 + 5 * BEACON_CYCLE_S
+    assert np.all(err[back] < 0.1), float(err[back].max())
+    assert "re-initialised" in p.stderr or "restarted" in p.stderr
+
+
+def test_encoder_silence_reported_and_bridged(bridge_bin, tmp_path):
+    log, truth_path = run_sim(tmp_path, "encoder-silence", 45)
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    t_sim, err = errors(est, truth)
+    assert "encoders silent" in p.stderr
+    assert "encoders back after 2.0 s" in p.stderr
+    assert stats["encoder_gaps"] == 1
+    # estimates keep coming through the silence (pulses, constant velocity)
+    silent = (t_sim > 30.2) & (t_sim < 31.8)
+    assert silent.sum() >= 8
+    assert np.all(err[silent] < 0.25), float(err[silent].max())
+    after = t_sim > 34
+    assert np.percentile(err[after], 95) < 0.1
+    assert stats["estimator_resets"] == 0
+
+
+def test_echo_storm_detected_estimate_holds(bridge_bin, tmp_path):
+    log, truth_path = run_sim(tmp_path, "echo-storm", 40)
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    t_sim, err = errors(est, truth)
+    assert "echo storm" in p.stderr
+    assert stats["pulses_rejected"] > 100
+    keep = t_sim > 20
+    assert np.sqrt(np.mean(err[keep] ** 2)) < 0.1
+    assert stats["estimator_resets"] == 0

@@ -1,0 +1,378 @@
+/*
+ * cmocka: SocketCAN input (bridge/can_in.c) with -Wl,--wrap stand-ins for
+ * socket, setsockopt, ioctl, bind, recvmsg and close (this machine's kernel
+ * has no CAN). Checks the socket setup (kernel filters, error mask,
+ * timestamps, drop counter, buffer), a missing interface, reading frames
+ * with their control messages, error frames, odd sizes, and the interface
+ * going down and coming back.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <setjmp.h>
+#include <stdint.h>
+#include <errno.h>
+#include <string.h>
+#include <net/if.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <sys/time.h>
+#include <cmocka.h>
+
+#include <linux/can.h>
+#include <linux/can/error.h>
+#include <linux/can/raw.h>
+
+#include "can_in.h"
+
+#define FAKE_FD 977
+
+/* ---- stand-ins -------------------------------------------------------- */
+
+static int socket_errno;       /* socket() fails with this when set */
+static int ioctl_errno;        /* SIOCGIFINDEX fails with this when set */
+static int sockets_open;
+static int closes;
+static struct can_filter seen_filters[8];
+static int seen_filter_count;
+static can_err_mask_t seen_err_mask;
+static int seen_timestamp, seen_ovfl, seen_rcvbuf, seen_fd_frames;
+static int bound_ifindex;
+
+struct rx_item {
+    int err;                 /* recvmsg fails with this errno when != 0 */
+    size_t size;             /* bytes returned */
+    struct canfd_frame frame;
+    struct timeval ts;
+    bool has_ts;
+    uint32_t ovfl;
+    bool has_ovfl;
+};
+static struct rx_item rxq[16];
+static int rx_len, rx_pos;
+
+int __real_close(int fd);
+
+int __wrap_socket(int domain, int type, int protocol)
+{
+    assert_int_equal(domain, PF_CAN);
+    assert_int_equal(type & SOCK_RAW, SOCK_RAW);
+    assert_true(type & SOCK_NONBLOCK);
+    assert_int_equal(protocol, CAN_RAW);
+    if (socket_errno) {
+        errno = socket_errno;
+        return -1;
+    }
+    sockets_open++;
+    return FAKE_FD;
+}
+
+int __wrap_setsockopt(int fd, int level, int name, const void *val, socklen_t len)
+{
+    assert_int_equal(fd, FAKE_FD);
+    if (level == SOL_CAN_RAW && name == CAN_RAW_FILTER) {
+        seen_filter_count = (int)(len / sizeof(struct can_filter));
+        memcpy(seen_filters, val, len);
+    } else if (level == SOL_CAN_RAW && name == CAN_RAW_ERR_FILTER) {
+        memcpy(&seen_err_mask, val, sizeof seen_err_mask);
+    } else if (level == SOL_CAN_RAW && name == CAN_RAW_FD_FRAMES) {
+        seen_fd_frames = *(const int *)val;
+    } else if (level == SOL_SOCKET && name == SO_TIMESTAMP) {
+        seen_timestamp = *(const int *)val;
+    } else if (level == SOL_SOCKET && name == SO_RXQ_OVFL) {
+        seen_ovfl = *(const int *)val;
+    } else if (level == SOL_SOCKET && name == SO_RCVBUFFORCE) {
+        errno = EPERM; /* not CAP_NET_ADMIN: the code falls back */
+        return -1;
+    } else if (level == SOL_SOCKET && name == SO_RCVBUF) {
+        seen_rcvbuf = *(const int *)val;
+    }
+    return 0;
+}
+
+int __wrap_ioctl(int fd, unsigned long req, ...)
+{
+    assert_int_equal(fd, FAKE_FD);
+    assert_int_equal(req, SIOCGIFINDEX);
+    va_list ap;
+    va_start(ap, req);
+    struct ifreq *ifr = va_arg(ap, struct ifreq *);
+    va_end(ap);
+    if (ioctl_errno) {
+        errno = ioctl_errno;
+        return -1;
+    }
+    assert_string_equal(ifr->ifr_name, "can7");
+    ifr->ifr_ifindex = 42;
+    return 0;
+}
+
+int __wrap_bind(int fd, const struct sockaddr *addr, socklen_t len)
+{
+    assert_int_equal(fd, FAKE_FD);
+    assert_int_equal(len, sizeof(struct sockaddr_can));
+    const struct sockaddr_can *a = (const struct sockaddr_can *)(const void *)addr;
+    assert_int_equal(a->can_family, AF_CAN);
+    bound_ifindex = a->can_ifindex;
+    return 0;
+}
+
+int __wrap_close(int fd)
+{
+    if (fd == FAKE_FD) {
+        closes++;
+        sockets_open--;
+        return 0;
+    }
+    return __real_close(fd);
+}
+
+ssize_t __wrap_recvmsg(int fd, struct msghdr *mh, int flags)
+{
+    assert_int_equal(fd, FAKE_FD);
+    (void)flags;
+    if (rx_pos >= rx_len) {
+        errno = EAGAIN;
+        return -1;
+    }
+    struct rx_item *it = &rxq[rx_pos++];
+    if (it->err) {
+        errno = it->err;
+        return -1;
+    }
+    memcpy(mh->msg_iov[0].iov_base, &it->frame, it->size);
+    size_t used = 0;
+    struct cmsghdr *cm = CMSG_FIRSTHDR(mh);
+    if (it->has_ts) {
+        cm->cmsg_level = SOL_SOCKET;
+        cm->cmsg_type = SO_TIMESTAMP;
+        cm->cmsg_len = CMSG_LEN(sizeof(struct timeval));
+        memcpy(CMSG_DATA(cm), &it->ts, sizeof it->ts);
+        used += CMSG_SPACE(sizeof(struct timeval));
+        mh->msg_controllen = used;
+        cm = CMSG_NXTHDR(mh, cm);
+    }
+    if (it->has_ovfl) {
+        cm = (struct cmsghdr *)(void *)((char *)mh->msg_control + used);
+        cm->cmsg_level = SOL_SOCKET;
+        cm->cmsg_type = SO_RXQ_OVFL;
+        cm->cmsg_len = CMSG_LEN(sizeof(uint32_t));
+        memcpy(CMSG_DATA(cm), &it->ovfl, sizeof it->ovfl);
+        used += CMSG_SPACE(sizeof(uint32_t));
+    }
+    mh->msg_controllen = used;
+    return (ssize_t)it->size;
+}
+
+static int reset(void **state)
+{
+    (void)state;
+    socket_errno = ioctl_errno = 0;
+    sockets_open = closes = 0;
+    seen_filter_count = 0;
+    seen_err_mask = 0;
+    seen_timestamp = seen_ovfl = seen_rcvbuf = seen_fd_frames = 0;
+    bound_ifindex = 0;
+    rx_len = rx_pos = 0;
+    memset(rxq, 0, sizeof rxq);
+    return 0;
+}
+
+static struct rx_item *push_frame(canid_t id, uint8_t len, size_t size)
+{
+    struct rx_item *it = &rxq[rx_len++];
+    memset(it, 0, sizeof *it);
+    it->size = size;
+    it->frame.can_id = id;
+    it->frame.len = len;
+    for (uint8_t i = 0; i < len; i++)
+        it->frame.data[i] = (uint8_t)(0x10 + i);
+    return it;
+}
+
+/* ---- tests ------------------------------------------------------------ */
+
+static void test_open_sets_up_socket(void **state)
+{
+    (void)state;
+    struct can_in ci;
+    can_in_init(&ci, "can7");
+    assert_int_equal(can_in_open(&ci), 0);
+    assert_int_equal(ci.fd, FAKE_FD);
+    assert_int_equal(bound_ifindex, 42);
+    assert_int_equal(seen_filter_count, 3);
+    canid_t ids[3] = { seen_filters[0].can_id, seen_filters[1].can_id,
+                       seen_filters[2].can_id };
+    assert_int_equal(ids[0], 0x100);
+    assert_int_equal(ids[1], 0x110);
+    assert_int_equal(ids[2], 0x120);
+    for (int i = 0; i < 3; i++)
+        assert_int_equal(seen_filters[i].can_mask, CAN_SFF_MASK | CAN_EFF_FLAG);
+    assert_int_equal(seen_err_mask, CAN_ERR_BUSOFF | CAN_ERR_CRTL | CAN_ERR_RESTARTED);
+    assert_int_equal(seen_timestamp, 1);
+    assert_int_equal(seen_ovfl, 1);
+    assert_int_equal(seen_fd_frames, 1);
+    assert_int_equal(seen_rcvbuf, CAN_IN_RCVBUF_BYTES);
+    can_in_close(&ci);
+    assert_int_equal(sockets_open, 0);
+}
+
+static void test_missing_interface_not_fatal(void **state)
+{
+    (void)state;
+    struct can_in ci;
+    can_in_init(&ci, "can7");
+    ioctl_errno = ENODEV;
+    assert_int_equal(can_in_open(&ci), -ENODEV);
+    assert_int_equal(ci.fd, -1);
+    assert_int_equal(ci.last_errno, ENODEV);
+    assert_int_equal(sockets_open, 0); /* the half-set-up socket was closed */
+    struct can_msg m;
+    assert_int_equal(can_in_read(&ci, &m), -ENETDOWN);
+    /* kernel without CAN */
+    socket_errno = EAFNOSUPPORT;
+    assert_int_equal(can_in_retry(&ci), -EAFNOSUPPORT);
+    /* the interface appears */
+    socket_errno = 0;
+    ioctl_errno = 0;
+    assert_int_equal(can_in_retry(&ci), 0);
+    assert_int_equal(ci.fd, FAKE_FD);
+    assert_int_equal(ci.c.reopens, 0); /* first successful open */
+    can_in_close(&ci);
+}
+
+static void test_read_frames_timestamps_and_drops(void **state)
+{
+    (void)state;
+    struct can_in ci;
+    can_in_init(&ci, "can7");
+    assert_int_equal(can_in_open(&ci), 0);
+    struct timeval now;
+    gettimeofday(&now, NULL);
+    struct rx_item *a = push_frame(0x100, 8, CAN_MTU);
+    a->has_ts = true;
+    a->ts = now;
+    a->ts.tv_sec -= 1; /* received one second ago */
+    a->has_ovfl = true;
+    a->ovfl = 5;       /* kernel had dropped 5 before this socket read */
+    struct rx_item *b = push_frame(0x110, 8, CAN_MTU);
+    b->has_ovfl = true;
+    b->ovfl = 12;      /* 7 more dropped since */
+    struct rx_item *c = push_frame(0x120 | CAN_EFF_FLAG, 8, CAN_MTU);
+    (void)c;
+    struct rx_item *fd = push_frame(0x100, 12, CANFD_MTU);
+    (void)fd;
+
+    struct can_msg m;
+    int64_t mono = can_in_mono_us();
+    assert_int_equal(can_in_read(&ci, &m), 1);
+    assert_int_equal(m.id, 0x100);
+    assert_int_equal(m.len, 8);
+    assert_int_equal(m.flags, 0);
+    assert_int_equal(m.data[7], 0x17);
+    /* one second before now on the monotonic clock (10 ms tolerance) */
+    assert_in_range(mono - m.rx_us, 990000, 1010000);
+    assert_int_equal(ci.c.kernel_drops, 5);
+
+    assert_int_equal(can_in_read(&ci, &m), 1);
+    assert_int_equal(m.id, 0x110);
+    assert_int_equal(ci.c.kernel_drops, 12);
+
+    assert_int_equal(can_in_read(&ci, &m), 1);
+    assert_int_equal(m.id, 0x120);
+    assert_int_equal(m.flags, CAN_MSG_EXTENDED);
+
+    assert_int_equal(can_in_read(&ci, &m), 1); /* CAN FD-sized read */
+    assert_int_equal(m.flags, CAN_MSG_FD);
+    assert_int_equal(m.len, 12);
+
+    assert_int_equal(can_in_read(&ci, &m), 0); /* EAGAIN: drained */
+    assert_int_equal(ci.c.frames, 4);
+    can_in_close(&ci);
+}
+
+static void test_error_frames_and_bad_sizes(void **state)
+{
+    (void)state;
+    struct can_in ci;
+    can_in_init(&ci, "can7");
+    assert_int_equal(can_in_open(&ci), 0);
+    push_frame(0x100, 8, 10);  /* neither CAN_MTU nor CANFD_MTU: skipped */
+    push_frame(CAN_ERR_FLAG | CAN_ERR_BUSOFF, 8, CAN_MTU);
+    push_frame(CAN_ERR_FLAG | CAN_ERR_CRTL | CAN_ERR_RESTARTED, 8, CAN_MTU);
+    push_frame(0x110, 8, CAN_MTU);
+    struct can_msg m;
+    assert_int_equal(can_in_read(&ci, &m), 2);
+    assert_int_equal(m.flags, CAN_MSG_ERROR);
+    assert_int_equal(m.id, CAN_ERR_BUSOFF);
+    assert_int_equal(can_in_read(&ci, &m), 2);
+    assert_int_equal(can_in_read(&ci, &m), 1);
+    assert_int_equal(m.id, 0x110);
+    assert_int_equal(ci.c.bad_size, 1);
+    assert_int_equal(ci.c.error_frames, 2);
+    assert_int_equal(ci.c.bus_off, 1);
+    assert_int_equal(ci.c.controller, 1);
+    assert_int_equal(ci.c.restarted, 1);
+    assert_int_equal(ci.c.frames, 1);
+    can_in_close(&ci);
+}
+
+static void test_enetdown_then_back(void **state)
+{
+    (void)state;
+    struct can_in ci;
+    can_in_init(&ci, "can7");
+    assert_int_equal(can_in_open(&ci), 0);
+    push_frame(0x100, 8, CAN_MTU);
+    rxq[rx_len++].err = ENETDOWN;
+    struct can_msg m;
+    assert_int_equal(can_in_read(&ci, &m), 1);
+    assert_int_equal(can_in_read(&ci, &m), -ENETDOWN);
+    assert_int_equal(ci.fd, -1);          /* closed, not fatal */
+    assert_int_equal(closes, 1);
+    assert_int_equal(ci.c.downs, 1);
+    assert_int_equal(ci.last_errno, ENETDOWN);
+    /* still down: the retry fails while the interface is gone */
+    ioctl_errno = ENODEV;
+    assert_int_equal(can_in_retry(&ci), -ENODEV);
+    assert_int_equal(ci.fd, -1);
+    /* back */
+    ioctl_errno = 0;
+    assert_int_equal(can_in_retry(&ci), 0);
+    assert_int_equal(ci.c.reopens, 1);
+    push_frame(0x110, 8, CAN_MTU);
+    assert_int_equal(can_in_read(&ci, &m), 1);
+    assert_int_equal(m.id, 0x110);
+    /* ENODEV (interface deleted) is handled the same way */
+    rxq[rx_len++].err = ENODEV;
+    assert_int_equal(can_in_read(&ci, &m), -ENODEV);
+    assert_int_equal(ci.c.downs, 2);
+    assert_int_equal(sockets_open, 0);
+}
+
+static void test_eintr_retried(void **state)
+{
+    (void)state;
+    struct can_in ci;
+    can_in_init(&ci, "can7");
+    assert_int_equal(can_in_open(&ci), 0);
+    rxq[rx_len++].err = EINTR;
+    push_frame(0x120, 8, CAN_MTU);
+    struct can_msg m;
+    assert_int_equal(can_in_read(&ci, &m), 1);
+    assert_int_equal(m.id, 0x120);
+    assert_int_equal(ci.fd, FAKE_FD);
+    can_in_close(&ci);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup(test_open_sets_up_socket, reset),
+        cmocka_unit_test_setup(test_missing_interface_not_fatal, reset),
+        cmocka_unit_test_setup(test_read_frames_timestamps_and_drops, reset),
+        cmocka_unit_test_setup(test_error_frames_and_bad_sizes, reset),
+        cmocka_unit_test_setup(test_enetdown_then_back, reset),
+        cmocka_unit_test_setup(test_eintr_retried, reset),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

@@ -1,0 +1,254 @@
+/*
+ * cmocka: site-file parsing (bridge/config.c). Errors must name the file,
+ * the line, the section and the key; unknown simulator sections are
+ * ignored; a good file gives the values written in it.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <setjmp.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+#include <cmocka.h>
+
+#include "config.h"
+
+#define SITE "hw_sim/scenarios/kleeman-lab.ini"
+
+static const char *good_body =
+    "[site]\n"                       /* 1  simulator's: ignored */
+    "name = t\n"                     /* 2 */
+    "whatever_key = 1\n"             /* 3 */
+    "[beacons]\n"                    /* 4 */
+    "count = 3\n"                    /* 5 */
+    "period_s = 0.2\n"               /* 6 */
+    "[beacon1]\n"                    /* 7 */
+    "x_m = 0\n" "y_m = 0\n" "z_m = 1\n"       /* 8-10 */
+    "[beacon2]\n"                    /* 11 */
+    "x_m = 10\n" "y_m = 0\n" "z_m = 1\n"      /* 12-14 */
+    "[beacon3]\n"                    /* 15 */
+    "x_m = 5\n" "y_m = 9\n" "z_m = 1.5\n"     /* 16-18 */
+    "[bridge]\n"                     /* 19 */
+    "odometry_rate_hz = 50 ; inline comment\n"/* 20 */
+    "mavlink = udpin:0.0.0.0:14551\n";        /* 21 */
+
+static char path[64];
+
+static int make_file(const char *body)
+{
+    snprintf(path, sizeof path, "/tmp/test_config_XXXXXX");
+    int fd = mkstemp(path);
+    if (fd < 0)
+        return -1;
+    FILE *f = fdopen(fd, "w");
+    fputs(body, f);
+    fclose(f);
+    return 0;
+}
+
+static int teardown(void **state)
+{
+    (void)state;
+    if (path[0])
+        unlink(path);
+    path[0] = '\0';
+    return 0;
+}
+
+/* Load `body` (after `good_body` unless replace) and expect an error whose
+ * text, after the temp file name, is `expect`. */
+static void expect_error(const char *body, const char *expect)
+{
+    assert_int_equal(make_file(body), 0);
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    char err[CONFIG_ERR_LEN];
+    assert_int_equal(config_load_file(&cfg, path, err, sizeof err), -1);
+    char want[CONFIG_ERR_LEN + 64];
+    snprintf(want, sizeof want, "%s%s", path, expect);
+    if (strncmp(err, want, strlen(want)) != 0)
+        fail_msg("got '%s', want prefix '%s'", err, want);
+    unlink(path);
+    path[0] = '\0';
+}
+
+static void test_repo_site_file(void **state)
+{
+    (void)state;
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    char err[CONFIG_ERR_LEN] = "";
+    int rc = config_load_file(&cfg, SITE, err, sizeof err);
+    if (rc != 0)
+        fail_msg("%s", err);
+    assert_int_equal(cfg.beacon_count, 6);
+    assert_true(cfg.period_s == 0.150);
+    assert_true(cfg.beacon[2].x_m == 6.0 && cfg.beacon[2].y_m == 11.95);
+    assert_int_equal(cfg.receiver_count, 8);
+    assert_int_equal(cfg.ticks_per_rev, 4096);
+    assert_true(cfg.sigma_arrival_s == 0.0002);
+    assert_string_equal(cfg.can_interface, "vcan0");
+    assert_int_equal(cfg.component_id, 197);
+}
+
+static void test_values_and_defaults(void **state)
+{
+    (void)state;
+    assert_int_equal(make_file(good_body), 0);
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    char err[CONFIG_ERR_LEN] = "";
+    if (config_load_file(&cfg, path, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    assert_int_equal(cfg.beacon_count, 3);
+    assert_true(cfg.period_s == 0.2);
+    assert_true(cfg.beacon[2].z_m == 1.5);
+    assert_true(cfg.odometry_rate_hz == 50.0);
+    assert_string_equal(cfg.mavlink, "udpin:0.0.0.0:14551");
+    /* not in the file: built-in defaults */
+    assert_int_equal(cfg.system_id, 1);
+    assert_true(cfg.speed_of_sound_mps == 343.0);
+    assert_int_equal(cfg.key_line[1], 6); /* [beacons] period_s on line 6 */
+}
+
+static void test_unknown_key_in_our_section(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%s[noise]\ngate_sigma = 3\nsigma_arival_s = 0.1\n",
+             good_body);
+    expect_error(body, ":24: [noise] sigma_arival_s: unknown key");
+}
+
+static void test_not_a_number(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%s", good_body);
+    char *p = strstr(body, "x_m = 10");
+    memcpy(p, "x_m = ab", 8);
+    expect_error(body, ":12: [beacon2] x_m: not a number: 'ab'");
+}
+
+static void test_out_of_range_and_bad_values(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%s[robot]\nticks_per_rev = 0\n", good_body);
+    expect_error(body, ":23: [robot] ticks_per_rev: 0 out of range 1..1e+06");
+    snprintf(body, sizeof body, "%s[bridge2]\n[bridge]\nsystem_id = 300\n", good_body);
+    expect_error(body, ":24: [bridge] system_id: 300 out of range 1..255");
+    snprintf(body, sizeof body, "[bridge]\nmavlink = tcp:1.2.3.4:5\n%s", good_body);
+    expect_error(body, ":2: [bridge] mavlink: 'tcp:1.2.3.4:5' is not");
+    snprintf(body, sizeof body, "[bridge]\nlog_level = loud\n%s", good_body);
+    expect_error(body, ":2: [bridge] log_level: unknown level 'loud'");
+    snprintf(body, sizeof body, "[noise]\nspeed_of_sound_mps = nan\n%s", good_body);
+    expect_error(body, ":2: [noise] speed_of_sound_mps: not a number: 'nan'");
+}
+
+static void test_duplicate_key(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%s[beacons]\nperiod_s = 0.3\n", good_body);
+    expect_error(body, ":23: [beacons] period_s: given twice (first on line 6)");
+}
+
+static void test_beacons_incomplete_or_extra(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%s", good_body);
+    char *p = strstr(body, "z_m = 1.5\n");
+    memmove(p, p + 10, strlen(p + 10) + 1); /* drop beacon3's z_m */
+    expect_error(body, ":16: [beacon3] z_m: missing (count = 3 beacons)");
+    snprintf(body, sizeof body, "%s[beacon4]\nx_m = 1\n", good_body);
+    expect_error(body, ":23: [beacon4] x_m: beacon beyond [beacons] count = 3");
+    snprintf(body, sizeof body, "%s[beacon17]\nx_m = 1\n", good_body);
+    expect_error(body, ":23: [beacon17] x_m: beacon number 17 above the maximum 16");
+}
+
+static void test_syntax_error_and_missing_file(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%sthis line has no equals sign\n", good_body);
+    expect_error(body, ":22: syntax error");
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    char err[CONFIG_ERR_LEN];
+    assert_int_equal(config_load_file(&cfg, "/nonexistent/site.ini", err, sizeof err), -1);
+    assert_string_equal(err, "/nonexistent/site.ini: cannot open: No such file or directory");
+}
+
+static void test_no_beacons_is_an_error(void **state)
+{
+    (void)state;
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    char err[CONFIG_ERR_LEN];
+    assert_int_equal(config_check(&cfg, err, sizeof err), -1);
+    assert_non_null(strstr(err, "[beacons] count: not set"));
+}
+
+static void test_same_geometry(void **state)
+{
+    (void)state;
+    struct bridge_config a, b;
+    config_defaults(&a);
+    char err[CONFIG_ERR_LEN];
+    assert_int_equal(config_load_file(&a, SITE, err, sizeof err), 0);
+    b = a;
+    b.gate_sigma = 4.0;            /* tuning only */
+    b.odometry_rate_hz = 10;
+    assert_true(config_same_geometry(&a, &b));
+    b.beacon[3].x_m += 0.01;       /* a beacon moved */
+    assert_false(config_same_geometry(&a, &b));
+    b = a;
+    b.period_s = 0.2;
+    assert_false(config_same_geometry(&a, &b));
+}
+
+static void test_format_error_uses_lines(void **state)
+{
+    (void)state;
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    char err[CONFIG_ERR_LEN];
+    assert_int_equal(config_load_file(&cfg, SITE, err, sizeof err), 0);
+    config_format_error(&cfg, "noise", "gate_sigma", "too small", err, sizeof err);
+    /* line of gate_sigma in the repo's site file, found independently */
+    FILE *f = fopen(SITE, "r");
+    assert_non_null(f);
+    char line[256];
+    int n = 0, at = 0;
+    while (fgets(line, sizeof line, f)) {
+        n++;
+        if (!strncmp(line, "gate_sigma", 10))
+            at = n;
+    }
+    fclose(f);
+    char want[256];
+    snprintf(want, sizeof want, SITE ":%d: [noise] gate_sigma: too small", at);
+    assert_string_equal(err, want);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_repo_site_file),
+        cmocka_unit_test_teardown(test_values_and_defaults, teardown),
+        cmocka_unit_test(test_unknown_key_in_our_section),
+        cmocka_unit_test(test_not_a_number),
+        cmocka_unit_test(test_out_of_range_and_bad_values),
+        cmocka_unit_test(test_duplicate_key),
+        cmocka_unit_test(test_beacons_incomplete_or_extra),
+        cmocka_unit_test(test_syntax_error_and_missing_file),
+        cmocka_unit_test(test_no_beacons_is_an_error),
+        cmocka_unit_test(test_same_geometry),
+        cmocka_unit_test(test_format_error_uses_lines),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

@@ -1,0 +1,308 @@
+/*
+ * cmocka: the estimator glue (bridge/estimator.c) on a synthetic world:
+ * the kleeman-lab site, beacons firing in their cycle, a robot standing or
+ * driving straight, pulse-detection and encoder frames with their node
+ * clocks (offset, wrap of the 32-bit counters and of the 14-bit tick
+ * counts), fed in time order with their receive times. Checks the filter's
+ * start and accuracy through the glue, the tick-to-distance conversion,
+ * health events and SIGHUP reconfiguration.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <setjmp.h>
+#include <stdint.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <cmocka.h>
+
+#include "config.h"
+#include "estimator.h"
+#include "log.h"
+
+#define SITE "hw_sim/scenarios/kleeman-lab.ini"
+#define SOS_MPS 343.0
+#define RX_NODE_OFFSET_US 4294000000LL /* receiver node clock = bridge + this (wraps soon) */
+#define ENC_NODE_OFFSET_US 123456789LL
+#define DELAY_US 150                   /* CAN + kernel delay of every frame */
+
+struct world {
+    struct bridge_config cfg;
+    struct estimator est;
+    /* robot: straight line from (x0, y0) with heading th, speed v from t_move */
+    double x0, y0, th, v_mps;
+    int64_t t_move_us;
+    int64_t fire0_us;        /* beacon 1's first firing (bridge clock) */
+    int silent_beacon;       /* 0-based beacon index not heard, -1 none */
+    int64_t silent_from_us, silent_to_us;
+    double ticks0;           /* tick count at t = 0 (both wheels) */
+    uint8_t pulse_counter, enc_counter;
+};
+
+static struct world W;
+
+static void pose_at(const struct world *w, int64_t t_us, double *x, double *y)
+{
+    double d = t_us > w->t_move_us ? w->v_mps * (double)(t_us - w->t_move_us) / 1e6 : 0;
+    *x = w->x0 + d * cos(w->th);
+    *y = w->y0 + d * sin(w->th);
+}
+
+/* Arrival of beacon b's pulse fired at fire_us on the receiver facing it:
+ * t_a = t_f + |b - r(t_a)| / s, solved by fixed-point iteration. */
+static int64_t arrival(const struct world *w, int b, int64_t fire_us, int *receiver)
+{
+    const struct config_beacon *bc = &w->cfg.beacon[b];
+    int64_t ta = fire_us;
+    for (int it = 0; it < 5; it++) {
+        double x, y;
+        pose_at(w, ta, &x, &y);
+        double bearing = atan2(bc->y_m - y, bc->x_m - x) - w->th;
+        int n = w->cfg.receiver_count;
+        int k = (int)lround(bearing / (2 * M_PI / n));
+        k = ((k % n) + n) % n;
+        double a = w->th + k * 2 * M_PI / n;
+        double rx = x + w->cfg.ring_radius_m * cos(a);
+        double ry = y + w->cfg.ring_radius_m * sin(a);
+        double dz = bc->z_m - w->cfg.receiver_height_m;
+        double dist = sqrt((bc->x_m - rx) * (bc->x_m - rx) +
+                           (bc->y_m - ry) * (bc->y_m - ry) + dz * dz);
+        ta = fire_us + (int64_t)llround(dist / SOS_MPS * 1e6);
+        *receiver = k;
+    }
+    return ta;
+}
+
+static void send_pulse(struct world *w, int b, int64_t fire_us)
+{
+    int rx;
+    int64_t ta = arrival(w, b, fire_us, &rx);
+    struct frame_pulse p = {
+        .node_time_us = (uint32_t)(ta + RX_NODE_OFFSET_US),
+        .receiver = (uint8_t)rx, .double_pulse = b == 0,
+        .counter = w->pulse_counter++ & 7, .amplitude_mv = 800, .width_us = 2500,
+    };
+    estimator_pulse(&w->est, &p, ta + DELAY_US);
+}
+
+static void send_encoders(struct world *w, int64_t t_us)
+{
+    double x, y;
+    pose_at(w, t_us, &x, &y);
+    double d_m = hypot(x - w->x0, y - w->y0);
+    /* ticks = distance / (2πr) · ticks_per_rev, cumulative, modulo 2^14 */
+    double ticks = w->ticks0 + d_m / (2 * M_PI * w->cfg.wheel_radius_m) * w->cfg.ticks_per_rev;
+    uint16_t t14 = (uint16_t)((int64_t)floor(ticks) & 0x3fff);
+    struct frame_encoders f = {
+        .node_time_us = (uint32_t)(t_us + ENC_NODE_OFFSET_US),
+        .left_ticks = t14, .right_ticks = t14, .counter = w->enc_counter++ & 15,
+    };
+    estimator_encoders(&w->est, &f, t_us + DELAY_US);
+}
+
+/* Run the world from t_from to t_to (bridge clock, us): encoders at 100 Hz,
+ * beacons every 150 ms in the cycle 1..6, the 30 Hz tick. */
+static void run(struct world *w, int64_t t_from, int64_t t_to)
+{
+    const int64_t T = 150000;
+    int64_t next_enc = t_from - (t_from % 10000) + 10000;
+    int64_t k = (t_from - w->fire0_us) / T;
+    if (k < 0)
+        k = 0;
+    int64_t next_fire = w->fire0_us + k * T;
+    int64_t next_tick = t_from - (t_from % 33333) + 33333;
+    /* pulses are delivered at their arrival time: keep a small queue */
+    for (int64_t t = t_from; t < t_to;) {
+        int64_t fire_arrival_due = next_fire; /* the pulse is sent at arrival */
+        int b = (int)(((next_fire - w->fire0_us) / T) % 6);
+        int rx;
+        int64_t ta = arrival(w, b, next_fire, &rx);
+        (void)fire_arrival_due;
+        int64_t tn = next_enc;
+        if (ta < tn)
+            tn = ta;
+        if (next_tick < tn)
+            tn = next_tick;
+        if (tn >= t_to)
+            break;
+        t = tn;
+        if (tn == ta) {
+            bool silent = b == w->silent_beacon && next_fire >= w->silent_from_us &&
+                          next_fire < w->silent_to_us;
+            if (!silent)
+                send_pulse(w, b, next_fire);
+            next_fire += T;
+        } else if (tn == next_enc) {
+            send_encoders(w, tn);
+            next_enc += 10000;
+        } else {
+            estimator_tick(&w->est, tn);
+            next_tick += 33333;
+        }
+    }
+}
+
+static int setup(void **state)
+{
+    (void)state;
+    static FILE *devnull;
+    if (!devnull)
+        devnull = fopen("/dev/null", "w");
+    log_set_stream(devnull);
+    memset(&W, 0, sizeof W);
+    config_defaults(&W.cfg);
+    char err[CONFIG_ERR_LEN];
+    if (config_load_file(&W.cfg, SITE, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    W.cfg.speed_of_sound_mps = SOS_MPS;
+    if (estimator_init(&W.est, &W.cfg, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    W.x0 = 4.0;
+    W.y0 = 5.0;
+    W.th = 0.3;
+    W.t_move_us = INT64_MAX / 2;
+    W.fire0_us = 1000000 + 37000;
+    W.silent_beacon = -1;
+    W.ticks0 = 16000; /* near the 14-bit wrap */
+    return 0;
+}
+
+static void drain(struct estimator *e, char *all, size_t n)
+{
+    struct est_event ev;
+    all[0] = '\0';
+    while (estimator_next_event(e, &ev)) {
+        strncat(all, ev.text, n - strlen(all) - 2);
+        strncat(all, "\n", n - strlen(all) - 1);
+    }
+}
+
+static void test_static_robot_converges(void **state)
+{
+    (void)state;
+    run(&W, 1000000, 16000000);
+    struct est_output o;
+    assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+    assert_true(o.valid);
+    double err = hypot(o.x_m - W.x0, o.y_m - W.y0);
+    if (err > 0.03)
+        fail_msg("position error %.3f m", err);
+    assert_true(o.converged);
+    assert_int_equal(o.reset_counter, 0);
+    assert_true(fabs(o.v_mps) < 0.01);
+    assert_true(fabs(o.sos_mps - SOS_MPS) < 2.0);
+    assert_true(fabs(o.period_s - 0.150) < 1e-5);
+    /* the filter runs on the receiver node's clock (unwrapped past 2^32)
+     * and maps back onto the bridge clock */
+    assert_true(o.t_node_us > (1LL << 32));
+    assert_true(llabs(o.t_local_us + RX_NODE_OFFSET_US - o.t_node_us) < 50);
+    assert_true(W.est.c.pulses_accepted > 80);
+    assert_int_equal(W.est.c.seq_errors + W.est.c.fuse_errors + W.est.c.predict_errors, 0);
+    char ev[1024];
+    drain(&W.est, ev, sizeof ev);
+    assert_non_null(strstr(ev, "filter started"));
+    assert_non_null(strstr(ev, "converged"));
+    /* an update was flagged, with the receive time of its frame */
+    int64_t rx;
+    assert_true(estimator_take_update(&W.est, &rx));
+    assert_true(rx > 15000000 && rx <= 16000000 + DELAY_US);
+    assert_false(estimator_take_update(&W.est, &rx));
+}
+
+static void test_moving_robot_wrapping_ticks(void **state)
+{
+    (void)state;
+    W.x0 = 2.0;
+    W.y0 = 4.0;
+    W.th = 0.2;
+    W.v_mps = 0.4;
+    W.t_move_us = 8000000;
+    run(&W, 1000000, 26000000); /* 18 s at 0.4 m/s: 7.2 m, ticks wrap 2x */
+    struct est_output o;
+    assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+    double x, y;
+    pose_at(&W, o.t_local_us, &x, &y);
+    double err = hypot(o.x_m - x, o.y_m - y);
+    if (err > 0.05)
+        fail_msg("position error %.3f m", err);
+    if (fabs(o.v_mps - W.v_mps) > 0.01)
+        fail_msg("v %.4f m/s, want %.4f", o.v_mps, W.v_mps);
+    assert_true(fabs(remainder(o.theta_rad - W.th, 2 * M_PI)) < 0.05);
+    assert_true(W.est.c.predicts > 2000);
+    /* extrapolated output 100 ms later moves on at the speed */
+    struct est_output o2;
+    assert_int_equal(estimator_output(&W.est, o.t_local_us + 100000, &o2), 0);
+    double moved = hypot(o2.x_m - o.x_m, o2.y_m - o.y_m);
+    assert_true(fabs(moved - 0.04) < 0.005);
+}
+
+static void test_encoders_before_receiver_clock(void **state)
+{
+    (void)state;
+    for (int i = 0; i < 50; i++)
+        send_encoders(&W, 100000 + i * 10000);
+    assert_int_equal(W.est.c.unmapped_encoders, 50);
+    struct est_output o;
+    assert_int_equal(estimator_output(&W.est, 0, &o), -1); /* no pose yet */
+    run(&W, 1000000, 8000000);
+    assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+}
+
+static void test_beacon_lost_and_back(void **state)
+{
+    (void)state;
+    W.silent_beacon = 2;
+    W.silent_from_us = 10000000;
+    W.silent_to_us = 14000000;
+    run(&W, 1000000, 18000000);
+    char ev[2048];
+    drain(&W.est, ev, sizeof ev);
+    char *lost = strstr(ev, "beacon 3 lost");
+    char *back = strstr(ev, "beacon 3 back");
+    assert_non_null(lost);
+    assert_non_null(back);
+    assert_true(lost < back);
+    assert_null(strstr(ev, "beacon 1 lost"));
+    struct est_output o;
+    assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+    assert_true(hypot(o.x_m - W.x0, o.y_m - W.y0) < 0.03);
+}
+
+static void test_reconfigure(void **state)
+{
+    (void)state;
+    run(&W, 1000000, 12000000);
+    struct est_output before, after;
+    assert_int_equal(estimator_output(&W.est, 0, &before), 0);
+    char err[CONFIG_ERR_LEN];
+    struct bridge_config c = W.cfg;
+    c.gate_sigma = 4.0; /* tuning only */
+    assert_int_equal(estimator_reconfigure(&W.est, &c, err, sizeof err), 0);
+    assert_int_equal(estimator_output(&W.est, 0, &after), 0);
+    assert_true(after.x_m == before.x_m && after.y_m == before.y_m);
+    c.beacon[4].x_m -= 0.05; /* a beacon moved: start over */
+    assert_int_equal(estimator_reconfigure(&W.est, &c, err, sizeof err), 1);
+    assert_int_equal(estimator_output(&W.est, 0, &after), -1);
+    c.beacon_count = 2; /* refused, nothing changes */
+    c.beacon[2].set_x = false;
+    assert_int_equal(estimator_reconfigure(&W.est, &c, err, sizeof err), -1);
+    assert_non_null(strstr(err, "rejected by the estimator"));
+    W.cfg.beacon[4].x_m -= 0.05; /* the world agrees with the new site */
+    run(&W, 12000000, 20000000);
+    assert_int_equal(estimator_output(&W.est, 0, &after), 0);
+    assert_true(after.reset_counter >= 1);
+    assert_true(hypot(after.x_m - W.x0, after.y_m - W.y0) < 0.05);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup(test_static_robot_converges, setup),
+        cmocka_unit_test_setup(test_moving_robot_wrapping_ticks, setup),
+        cmocka_unit_test_setup(test_encoders_before_receiver_clock, setup),
+        cmocka_unit_test_setup(test_beacon_lost_and_back, setup),
+        cmocka_unit_test_setup(test_reconfigure, setup),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

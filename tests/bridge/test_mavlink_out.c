@@ -1,0 +1,969 @@
+/*
+ * cmocka tests of bridge/mavlink_out: every message packed by the module is
+ * read back from a real endpoint (UDP socket, pty) and decoded with the
+ * generated parser (mavlink_parse_char), field by field; endpoint parsing;
+ * udpin answering TIMESYNC; serial on a pty; a missing endpoint retried.
+ * (The test includes MAVLink to decode; the daemon's only MAVLink unit is
+ * bridge/mavlink_out.c.)
+ */
+#ifndef _GNU_SOURCE
+#define _GNU_SOURCE
+#endif
+
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include <cmocka.h>
+
+#include <common/mavlink.h>
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <pty.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include "mavlink_out.h"
+
+/* ---- helpers ----------------------------------------------------------- */
+
+/* A UDP socket bound to 127.0.0.1 on a free port. */
+static int udp_listener(uint16_t *port)
+{
+    int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    assert_true(fd >= 0);
+    struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = 0};
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    assert_int_equal(bind(fd, (struct sockaddr *)&a, sizeof a), 0);
+    socklen_t len = sizeof a;
+    assert_int_equal(getsockname(fd, (struct sockaddr *)&a, &len), 0);
+    *port = ntohs(a.sin_port);
+    return fd;
+}
+
+/* A port that was free a moment ago. */
+static uint16_t free_port(void)
+{
+    uint16_t port;
+    int fd = udp_listener(&port);
+    close(fd);
+    return port;
+}
+
+static bool wait_readable(int fd, int timeout_ms)
+{
+    struct pollfd p = {.fd = fd, .events = POLLIN};
+    return poll(&p, 1, timeout_ms) == 1 && (p.revents & POLLIN);
+}
+
+/* Read one MAVLink message from fd (a datagram, or a byte stream if
+ * `stream`) and decode it with the generated parser. False on timeout. */
+static bool read_msg(int fd, bool stream, mavlink_message_t *out)
+{
+    mavlink_status_t st;
+    uint8_t buf[600];
+    for (int tries = 0; tries < 1000; tries++) {
+        if (!wait_readable(fd, 1000))
+            return false;
+        ssize_t n = stream ? read(fd, buf, 1) : recv(fd, buf, sizeof buf, 0);
+        if (n <= 0)
+            return false;
+        for (ssize_t i = 0; i < n; i++)
+            if (mavlink_parse_char(MAVLINK_COMM_1, buf[i], out, &st) == MAVLINK_FRAMING_OK)
+                return true;
+    }
+    return false;
+}
+
+static bool nothing_to_read(int fd)
+{
+    return !wait_readable(fd, 50);
+}
+
+/* Pack a message as a peer (sysid/compid) would and return its wire bytes. */
+static uint16_t wire(const mavlink_message_t *msg, uint8_t *buf)
+{
+    return mavlink_msg_to_send_buffer(buf, msg);
+}
+
+/* Row-major upper-triangle index of (i, j), i <= j, in a 6x6. */
+static int ut_index(int i, int j)
+{
+    return i * 6 - i * (i - 1) / 2 + (j - i);
+}
+
+/* ---- endpoint strings -------------------------------------------------- */
+
+static void test_endpoint_parse_good(void **state)
+{
+    (void)state;
+    struct mav_endpoint ep;
+    assert_int_equal(mav_endpoint_parse("udpout:127.0.0.1:14550", &ep), 0);
+    assert_int_equal(ep.kind, MAV_ENDPOINT_UDPOUT);
+    assert_string_equal(ep.host, "127.0.0.1");
+    assert_int_equal(ep.port, 14550);
+    assert_int_equal(ep.baud, 0);
+
+    assert_int_equal(mav_endpoint_parse("udpin:0.0.0.0:14551", &ep), 0);
+    assert_int_equal(ep.kind, MAV_ENDPOINT_UDPIN);
+    assert_string_equal(ep.host, "0.0.0.0");
+    assert_int_equal(ep.port, 14551);
+
+    assert_int_equal(mav_endpoint_parse("udpin::65535", &ep), 0);
+    assert_string_equal(ep.host, "");
+    assert_int_equal(ep.port, 65535);
+
+    assert_int_equal(mav_endpoint_parse("udp:10.0.0.2:1", &ep), 0); /* mavutil alias */
+    assert_int_equal(ep.kind, MAV_ENDPOINT_UDPIN);
+    assert_int_equal(ep.port, 1);
+
+    assert_int_equal(mav_endpoint_parse("udpout:[::1]:14550", &ep), 0);
+    assert_string_equal(ep.host, "::1");
+    assert_int_equal(ep.port, 14550);
+
+    assert_int_equal(mav_endpoint_parse("udpout:gcs.local:14550", &ep), 0);
+    assert_string_equal(ep.host, "gcs.local");
+
+    assert_int_equal(mav_endpoint_parse("serial:/dev/ttyUSB0:57600", &ep), 0);
+    assert_int_equal(ep.kind, MAV_ENDPOINT_SERIAL);
+    assert_string_equal(ep.host, "/dev/ttyUSB0");
+    assert_int_equal(ep.baud, 57600);
+    assert_int_equal(ep.port, 0);
+
+    assert_int_equal(mav_endpoint_parse("serial:/dev/serial/by-id/usb-FTDI:921600", &ep), 0);
+    assert_string_equal(ep.host, "/dev/serial/by-id/usb-FTDI");
+    assert_int_equal(ep.baud, 921600);
+}
+
+static void test_endpoint_parse_bad(void **state)
+{
+    (void)state;
+    char longhost[300];
+    memset(longhost, 'a', sizeof longhost);
+    memcpy(longhost, "udpout:", 7);
+    strcpy(longhost + sizeof longhost - 7, ":14550");
+    const char *bad[] = {
+        "",
+        "udpout",
+        "tcp:127.0.0.1:5760",
+        "udpout:127.0.0.1",
+        "udpout:127.0.0.1:",
+        "udpout:127.0.0.1:0",
+        "udpout:127.0.0.1:65536",
+        "udpout:127.0.0.1:14x50",
+        "udpout:127.0.0.1:-1",
+        "udpout:127.0.0.1:+80",
+        "udpout::14550",        /* no destination */
+        "udpout:::1:14550",     /* IPv6 without brackets */
+        "udpout:[::1:14550",    /* unbalanced */
+        "udpout:[]:14550",
+        "UDPOUT:127.0.0.1:14550",
+        "serial:/dev/ttyS0:12345", /* not a standard rate */
+        "serial:/dev/ttyS0:",
+        "serial:ttyS0:57600",      /* not a path */
+        "serial:/dev/ttyS0",
+        "serial:/dev/ttyS0:99999999999",
+        longhost,
+    };
+    struct mav_endpoint ep, before;
+    memset(&ep, 0x5A, sizeof ep);
+    before = ep;
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        if (mav_endpoint_parse(bad[i], &ep) != -EINVAL)
+            fail_msg("accepted bad endpoint \"%s\"", bad[i]);
+        assert_memory_equal(&ep, &before, sizeof ep); /* untouched */
+    }
+    assert_int_equal(mav_endpoint_parse(NULL, &ep), -EINVAL);
+    assert_int_equal(mav_endpoint_parse("udpout:127.0.0.1:1", NULL), -EINVAL);
+}
+
+static void test_open_rejects_bad_arguments(void **state)
+{
+    (void)state;
+    struct mav_out m, before;
+    memset(&m, 0x33, sizeof m);
+    before = m;
+    assert_int_equal(mav_out_open(&m, "udpout:127.0.0.1:14550", 0, 197), -EINVAL);
+    assert_int_equal(mav_out_open(&m, "udpout:127.0.0.1:14550", 1, 256), -EINVAL);
+    assert_int_equal(mav_out_open(&m, "udpout:127.0.0.1:14550", 256, 1), -EINVAL);
+    assert_int_equal(mav_out_open(&m, "bogus", 1, 197), -EINVAL);
+    assert_int_equal(mav_out_open(NULL, NULL, 1, 197), -EINVAL);
+    assert_memory_equal(&m, &before, sizeof m);
+
+    /* A never-opened (all-zero) struct: fd 0 is stdin, not ours. */
+    struct mav_out z;
+    memset(&z, 0, sizeof z);
+    /* make sure descriptor 0 is open, so closing it by mistake would show */
+    int extra = -1;
+    if (fcntl(0, F_GETFD) == -1) {
+        extra = open("/dev/null", O_RDONLY);
+        assert_int_equal(extra, 0);
+    }
+    assert_int_equal(mav_out_fd(&z), -1);
+    assert_false(mav_out_is_up(&z));
+    assert_int_equal(mav_out_send_heartbeat(&z, MAV_OUT_STATE_ACTIVE), -ENOTCONN);
+    assert_int_equal(mav_out_handle_input(&z, 0), 0);
+    mav_out_close(&z);
+    assert_true(fcntl(0, F_GETFD) != -1); /* descriptor 0 untouched */
+    assert_int_equal(mav_out_retry(&z), -EINVAL);
+    if (extra == 0)
+        close(extra);
+}
+
+/* ---- messages over udpout ---------------------------------------------- */
+
+struct udp_fixture {
+    int rx_fd;
+    struct mav_out m;
+};
+
+static int udp_setup(void **state)
+{
+    static struct udp_fixture f;
+    uint16_t port;
+    f.rx_fd = udp_listener(&port);
+    char ep[64];
+    snprintf(ep, sizeof ep, "udpout:127.0.0.1:%u", (unsigned)port);
+    if (mav_out_open(&f.m, ep, 42, 197) != 0)
+        return -1;
+    mavlink_reset_channel_status(MAVLINK_COMM_1);
+    *state = &f;
+    return 0;
+}
+
+static int udp_teardown(void **state)
+{
+    struct udp_fixture *f = *state;
+    mav_out_close(&f->m);
+    close(f->rx_fd);
+    return 0;
+}
+
+/* A symmetric positive-definite 6x6 with every entry distinct (A A^T + I). */
+static void spd6(float c[6][6], double scale)
+{
+    double a[6][6];
+    for (int i = 0; i < 6; i++)
+        for (int j = 0; j < 6; j++)
+            a[i][j] = 0.1 * (double)(i + 1) + 0.07 * (double)((j * 5 + i * 3) % 7) - 0.2 * (double)(i == j);
+    for (int i = 0; i < 6; i++)
+        for (int j = 0; j < 6; j++) {
+            double s = (i == j) ? 1.0 : 0.0;
+            for (int k = 0; k < 6; k++)
+                s += a[i][k] * a[j][k];
+            c[i][j] = (float)(scale * s);
+        }
+}
+
+/* Expected covariance C' = P C P^T for the axis map P (rows: new axes). */
+static void rotate_cov(const double p[6][6], const float c[6][6], double out[6][6])
+{
+    for (int i = 0; i < 6; i++)
+        for (int j = 0; j < 6; j++) {
+            double s = 0.0;
+            for (int k = 0; k < 6; k++)
+                for (int l = 0; l < 6; l++)
+                    s += p[i][k] * (double)c[k][l] * p[j][l];
+            out[i][j] = s;
+        }
+}
+
+static void test_odometry_roundtrip(void **state)
+{
+    struct udp_fixture *f = *state;
+    struct mav_odometry o;
+    mav_odometry_init(&o);
+    o.time_usec = 1234567890123ULL;
+    o.x_m = 3.25f;
+    o.y_m = -2.5f;
+    o.z_m = 0.5f;
+    o.yaw_rad = 0.3f;
+    o.vx_mps = 0.7f;
+    o.vy_mps = 0.1f;
+    o.vz_mps = -0.05f;
+    o.yawrate_radps = 0.2f;
+    spd6(o.pose_cov, 1e-3);
+    spd6(o.vel_cov, 1e-2);
+    o.reset_counter = 7;
+    o.quality = 63;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), 0);
+    assert_int_equal(f->m.stats.tx_msgs, 1);
+
+    mavlink_message_t msg;
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_ODOMETRY);
+    assert_int_equal(msg.magic, MAVLINK_STX); /* MAVLink 2 framing */
+    assert_int_equal(msg.sysid, 42);
+    assert_int_equal(msg.compid, 197);
+    assert_int_equal(f->m.stats.tx_bytes, (uint64_t)msg.len + MAVLINK_NUM_NON_PAYLOAD_BYTES);
+    mavlink_odometry_t od;
+    mavlink_msg_odometry_decode(&msg, &od);
+    assert_true(od.time_usec == 1234567890123ULL);
+    assert_int_equal(od.frame_id, MAV_FRAME_LOCAL_FRD);
+    assert_int_equal(od.child_frame_id, MAV_FRAME_BODY_FRD);
+    assert_int_equal(od.estimator_type, MAV_ESTIMATOR_TYPE_VISION);
+    assert_int_equal(od.reset_counter, 7);
+    assert_int_equal(od.quality, 63);
+    /* Position: LOCAL_FRD x north = site y, y east = site x, z down = -up. */
+    assert_true(od.x == -2.5f && od.y == 3.25f && od.z == -0.5f);
+    /* Body FLU -> FRD. */
+    assert_true(od.vx == 0.7f && od.vy == -0.1f && od.vz == 0.05f);
+    assert_true(od.rollspeed == 0.0f && od.pitchspeed == 0.0f && od.yawspeed == -0.2f);
+    /* Quaternion of a pure yaw psi = pi/2 - 0.3 (CW from north): (cos psi/2, 0, 0, sin psi/2). */
+    double psi = M_PI / 2 - 0.3;
+    assert_true(fabs((double)od.q[0] - cos(psi / 2)) < 1e-6);
+    assert_true(fabs((double)od.q[1]) < 1e-7 && fabs((double)od.q[2]) < 1e-7);
+    assert_true(fabs((double)od.q[3] - sin(psi / 2)) < 1e-6);
+
+    /* Covariances: P C P^T with P built from the axis definitions. */
+    double pp[6][6] = {{0}}, pv[6][6] = {{0}};
+    /* pose: north <- site y; east <- site x; down <- -up; rotations alike */
+    pp[0][1] = 1;
+    pp[1][0] = 1;
+    pp[2][2] = -1;
+    pp[3][4] = 1;
+    pp[4][3] = 1;
+    pp[5][5] = -1;
+    /* body: forward <- forward; right <- -left; down <- -up; rates alike */
+    pv[0][0] = 1;
+    pv[1][1] = -1;
+    pv[2][2] = -1;
+    pv[3][3] = 1;
+    pv[4][4] = -1;
+    pv[5][5] = -1;
+    double ep[6][6], ev[6][6];
+    rotate_cov(pp, o.pose_cov, ep);
+    rotate_cov(pv, o.vel_cov, ev);
+    for (int i = 0; i < 6; i++)
+        for (int j = i; j < 6; j++) {
+            int k = ut_index(i, j);
+            if (fabs((double)od.pose_covariance[k] - ep[i][j]) > 1e-6 * fabs(ep[i][j]))
+                fail_msg("pose_covariance[%d] (%d,%d) = %g, expected %g", k, i, j,
+                         (double)od.pose_covariance[k], ep[i][j]);
+            if (fabs((double)od.velocity_covariance[k] - ev[i][j]) > 1e-6 * fabs(ev[i][j]))
+                fail_msg("velocity_covariance[%d] (%d,%d) = %g, expected %g", k, i, j,
+                         (double)od.velocity_covariance[k], ev[i][j]);
+        }
+    assert_int_equal(ut_index(5, 5), 20);
+}
+
+/* A 2D estimate: x, y, yaw known; z, roll, pitch not estimated -> NaN. A
+ * wholly unknown velocity covariance -> all NaN (first element NaN). */
+static void test_odometry_partial_covariance(void **state)
+{
+    struct udp_fixture *f = *state;
+    struct mav_odometry o;
+    mav_odometry_init(&o);
+    o.time_usec = 99;
+    o.yaw_rad = -2.5f; /* psi = pi/2 + 2.5 wraps to pi/2 + 2.5 - 2 pi */
+    o.pose_cov[0][0] = 0.04f;                        /* var x (east), m^2 */
+    o.pose_cov[1][1] = 0.09f;                        /* var y (north) */
+    o.pose_cov[0][1] = o.pose_cov[1][0] = 0.01f;     /* cov xy */
+    o.pose_cov[5][5] = 0.0025f;                      /* var yaw, rad^2 */
+    o.pose_cov[0][5] = o.pose_cov[5][0] = 0.002f;    /* cov x yaw */
+    o.pose_cov[1][5] = o.pose_cov[5][1] = -0.003f;   /* cov y yaw */
+    o.quality = -1;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), 0);
+    mavlink_message_t msg;
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    mavlink_odometry_t od;
+    mavlink_msg_odometry_decode(&msg, &od);
+    assert_int_equal(od.quality, -1);
+    const float *c = od.pose_covariance;
+    assert_true(c[ut_index(0, 0)] == 0.09f);   /* north */
+    assert_true(c[ut_index(1, 1)] == 0.04f);   /* east */
+    assert_true(c[ut_index(0, 1)] == 0.01f);
+    assert_true(c[ut_index(5, 5)] == 0.0025f);
+    assert_true(c[ut_index(0, 5)] == 0.003f);  /* north x (-yaw): -(-0.003) */
+    assert_true(c[ut_index(1, 5)] == -0.002f); /* east x (-yaw) */
+    int nan_count = 0;
+    for (int k = 0; k < MAV_COV_UT_LEN; k++)
+        nan_count += isnan(c[k]) ? 1 : 0;
+    assert_int_equal(nan_count, 21 - 6);
+    for (int i = 2; i < 5; i++)
+        for (int j = i; j < 6; j++)
+            assert_true(isnan(c[ut_index(i, j)]));
+    for (int k = 0; k < MAV_COV_UT_LEN; k++)
+        assert_true(isnan(od.velocity_covariance[k]));
+    /* Heading wrapped into (-pi, pi], recovered from the quaternion. */
+    float roll, pitch, yaw;
+    mavlink_quaternion_to_euler(od.q, &roll, &pitch, &yaw);
+    assert_true(fabs((double)yaw - (M_PI / 2 + 2.5 - 2 * M_PI)) < 1e-5);
+    assert_true(fabsf(roll) < 1e-6f && fabsf(pitch) < 1e-6f);
+    double norm = 0;
+    for (int i = 0; i < 4; i++)
+        norm += (double)od.q[i] * (double)od.q[i];
+    assert_true(fabs(norm - 1.0) < 1e-6);
+}
+
+static void test_odometry_rejects_bad_input(void **state)
+{
+    struct udp_fixture *f = *state;
+    struct mav_odometry good, o;
+    mav_odometry_init(&good);
+    good.pose_cov[0][0] = good.pose_cov[1][1] = 0.01f;
+    uint64_t sent = f->m.stats.tx_msgs;
+
+    o = good;
+    o.x_m = NAN;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), -EINVAL);
+    o = good;
+    o.yawrate_radps = INFINITY;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), -EINVAL);
+    o = good;
+    o.quality = 101;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), -EINVAL);
+    o = good;
+    o.quality = -2;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), -EINVAL);
+    o = good; /* asymmetric */
+    o.pose_cov[0][1] = 0.001f;
+    o.pose_cov[1][0] = 0.002f;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), -EINVAL);
+    o = good; /* a tiny asymmetry (float rounding) is accepted and averaged away */
+    o.pose_cov[0][1] = 0.0050000f;
+    o.pose_cov[1][0] = 0.0050001f;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), 0);
+    mavlink_message_t m1;
+    assert_true(read_msg(f->rx_fd, false, &m1));
+    mavlink_odometry_t od1;
+    mavlink_msg_odometry_decode(&m1, &od1);
+    assert_true(fabs((double)od1.pose_covariance[ut_index(0, 1)] - 0.00500005) < 1e-9);
+    sent++;
+    o = good; /* NaN on one side only */
+    o.pose_cov[0][1] = 0.001f;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), -EINVAL);
+    o = good; /* negative variance */
+    o.vel_cov[0][0] = -1.0f;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), -EINVAL);
+    o = good; /* partly known but the first FRD element (var north = site var y) unknown */
+    o.pose_cov[1][1] = NAN;
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), -EINVAL);
+    assert_int_equal(mav_out_send_odometry(&f->m, NULL), -EINVAL);
+
+    assert_int_equal(f->m.stats.tx_msgs, sent);
+    assert_int_equal(f->m.stats.tx_errors, 0);
+    assert_true(nothing_to_read(f->rx_fd));
+    /* and the good one goes out */
+    assert_int_equal(mav_out_send_odometry(&f->m, &good), 0);
+    mavlink_message_t msg;
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_ODOMETRY);
+}
+
+static void test_heartbeat_statustext_named_float(void **state)
+{
+    struct udp_fixture *f = *state;
+    mavlink_message_t msg;
+
+    assert_int_equal(mav_out_send_heartbeat(&f->m, MAV_OUT_STATE_ACTIVE), 0);
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    uint8_t seq0 = msg.seq;
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_HEARTBEAT);
+    mavlink_heartbeat_t hb;
+    mavlink_msg_heartbeat_decode(&msg, &hb);
+    assert_int_equal(hb.type, MAV_TYPE_ONBOARD_CONTROLLER);
+    assert_int_equal(hb.autopilot, MAV_AUTOPILOT_INVALID);
+    assert_int_equal(hb.system_status, MAV_STATE_ACTIVE);
+    assert_int_equal(hb.base_mode, 0);
+    assert_int_equal(hb.custom_mode, 0);
+    assert_int_equal(hb.mavlink_version, 3);
+    assert_int_equal(mav_out_send_heartbeat(&f->m, (enum mav_out_state)7), -EINVAL);
+
+    assert_int_equal(mav_out_send_statustext(&f->m, MAV_OUT_SEV_WARNING, "beacon 3 lost"), 0);
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    assert_int_equal(msg.seq, (uint8_t)(seq0 + 1)); /* sequence numbers count up */
+    mavlink_statustext_t st;
+    mavlink_msg_statustext_decode(&msg, &st);
+    assert_int_equal(st.severity, MAV_SEVERITY_WARNING);
+    assert_int_equal(strncmp(st.text, "beacon 3 lost", sizeof st.text), 0);
+    assert_int_equal(st.text[13], '\0');
+    assert_int_equal(st.id, 0);
+    assert_int_equal(st.chunk_seq, 0);
+
+    const char *longtext = "0123456789abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ";
+    assert_int_equal(mav_out_send_statustext(&f->m, MAV_OUT_SEV_INFO, longtext), 0);
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    mavlink_msg_statustext_decode(&msg, &st);
+    assert_memory_equal(st.text, longtext, 50); /* truncated to the field, no NUL needed */
+    assert_int_equal(mav_out_send_statustext(&f->m, (enum mav_out_severity)8, "x"), -EINVAL);
+    assert_int_equal(mav_out_send_statustext(&f->m, MAV_OUT_SEV_INFO, NULL), -EINVAL);
+
+    assert_int_equal(mav_out_send_named_float(&f->m, "sos_mps", 343.25f, 123456u), 0);
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    mavlink_named_value_float_t nv;
+    mavlink_msg_named_value_float_decode(&msg, &nv);
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_NAMED_VALUE_FLOAT);
+    assert_int_equal(strncmp(nv.name, "sos_mps", sizeof nv.name), 0);
+    assert_true(nv.value == 343.25f);
+    assert_int_equal(nv.time_boot_ms, 123456u);
+    assert_int_equal(mav_out_send_named_float(&f->m, "period_s12", 0.9f, 1), 0); /* exactly 10 */
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    mavlink_msg_named_value_float_decode(&msg, &nv);
+    assert_memory_equal(nv.name, "period_s12", 10);
+    assert_int_equal(mav_out_send_named_float(&f->m, "period_s123", 0.9f, 1), -EINVAL);
+    assert_int_equal(mav_out_send_named_float(&f->m, "", 0.9f, 1), -EINVAL);
+    assert_int_equal(mav_out_send_named_float(&f->m, "x", NAN, 1), -EINVAL);
+    assert_true(nothing_to_read(f->rx_fd));
+    assert_int_equal(f->m.stats.tx_msgs, 5);
+}
+
+/* ---- udpin: TIMESYNC answered to the last sender ----------------------- */
+
+static void test_udpin_answers_timesync(void **state)
+{
+    (void)state;
+    uint16_t port = free_port();
+    char ep[64];
+    snprintf(ep, sizeof ep, "udpin:127.0.0.1:%u", (unsigned)port);
+    struct mav_out m;
+    assert_int_equal(mav_out_open(&m, ep, 1, 197), 0);
+    assert_true(mav_out_is_up(&m));
+    assert_true(mav_out_fd(&m) >= 0);
+    /* Nobody has spoken yet: nothing to send to. */
+    assert_int_equal(mav_out_send_heartbeat(&m, MAV_OUT_STATE_STANDBY), -ENOTCONN);
+    assert_int_equal(m.stats.tx_no_peer, 1);
+
+    uint16_t peer_port;
+    int peer = udp_listener(&peer_port);
+    struct sockaddr_in dst = {.sin_family = AF_INET, .sin_port = htons(port)};
+    dst.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    uint8_t buf[MAVLINK_MAX_PACKET_LEN + 16];
+    mavlink_message_t req;
+
+    /* Garbage first, then a HEARTBEAT of an autopilot, then a TIMESYNC request. */
+    const uint8_t junk[] = {0xFD, 0x09, 0x00, 0x00, 0x00, 0x01, 0x01, 0x00, 0x00, 0x00, 1, 2, 3,
+                            4,    5,    6,    7,    8,    9,    0xAA, 0xBB};
+    assert_int_equal(sendto(peer, junk, sizeof junk, 0, (struct sockaddr *)&dst, sizeof dst), (ssize_t)sizeof junk);
+    mavlink_msg_heartbeat_pack(17, 1, &req, MAV_TYPE_GROUND_ROVER, MAV_AUTOPILOT_PX4, 0, 0, MAV_STATE_ACTIVE);
+    uint16_t n = wire(&req, buf);
+    assert_int_equal(sendto(peer, buf, n, 0, (struct sockaddr *)&dst, sizeof dst), n);
+    mavlink_msg_timesync_pack(17, 1, &req, 0, 123456789012LL);
+    n = wire(&req, buf);
+    assert_int_equal(sendto(peer, buf, n, 0, (struct sockaddr *)&dst, sizeof dst), n);
+
+    int parsed = 0;
+    for (int i = 0; i < 50 && parsed < 2; i++) {
+        assert_true(wait_readable(mav_out_fd(&m), 1000));
+        int r = mav_out_handle_input(&m, 5000000);
+        assert_true(r >= 0);
+        parsed += r;
+    }
+    assert_int_equal(parsed, 2);
+    assert_int_equal(m.stats.rx_msgs, 2);
+    assert_int_equal(m.stats.rx_parse_errors, 1);
+    assert_int_equal(m.peer_sysid, 17);
+    assert_int_equal(m.stats.timesync_answered, 1);
+    assert_true(m.have_peer);
+
+    mavlink_reset_channel_status(MAVLINK_COMM_1);
+    mavlink_message_t msg;
+    assert_true(read_msg(peer, false, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_TIMESYNC);
+    mavlink_timesync_t ts;
+    mavlink_msg_timesync_decode(&msg, &ts);
+    assert_true(ts.tc1 == 5000000LL * 1000); /* our time, ns */
+    assert_true(ts.ts1 == 123456789012LL);   /* mirrored */
+    assert_int_equal(msg.sysid, 1);
+    assert_int_equal(msg.compid, 197);
+
+    /* A TIMESYNC *response* (tc1 != 0) is not answered. */
+    mavlink_msg_timesync_pack(17, 1, &req, 999, 123);
+    n = wire(&req, buf);
+    assert_int_equal(sendto(peer, buf, n, 0, (struct sockaddr *)&dst, sizeof dst), n);
+    assert_true(wait_readable(mav_out_fd(&m), 1000));
+    assert_int_equal(mav_out_handle_input(&m, 6000000), 1);
+    assert_int_equal(m.stats.timesync_answered, 1);
+    assert_true(nothing_to_read(peer));
+
+    /* Now there is a peer: HEARTBEAT goes to it. */
+    assert_int_equal(mav_out_send_heartbeat(&m, MAV_OUT_STATE_ACTIVE), 0);
+    assert_true(read_msg(peer, false, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_HEARTBEAT);
+    /* Nothing pending: handle_input returns 0 without blocking. */
+    assert_int_equal(mav_out_handle_input(&m, 7000000), 0);
+
+    /* A second udpin on the same port is refused (not shared): it stays
+     * down with EADDRINUSE and is retried. */
+    struct mav_out m2;
+    assert_int_equal(mav_out_open(&m2, ep, 1, 197), -EADDRINUSE);
+    assert_false(mav_out_is_up(&m2));
+    assert_int_equal(mav_out_retry(&m2), -EADDRINUSE);
+
+    close(peer);
+    mav_out_close(&m);
+    assert_false(mav_out_is_up(&m));
+    mav_out_close(&m); /* idempotent */
+    /* the port is free again: the retry opens it */
+    assert_int_equal(mav_out_retry(&m2), 0);
+    assert_int_equal(m2.stats.reopens, 1);
+    mav_out_close(&m2);
+}
+
+/* IPv6: udpout to [::1] and udpin on [::1] answering a TIMESYNC. Skipped
+ * (reported as such) where the host has no IPv6 loopback. */
+static void test_ipv6_loopback(void **state)
+{
+    (void)state;
+    int rx = socket(AF_INET6, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    struct sockaddr_in6 a = {.sin6_family = AF_INET6, .sin6_addr = IN6ADDR_LOOPBACK_INIT};
+    if (rx < 0 || bind(rx, (struct sockaddr *)&a, sizeof a) < 0) {
+        if (rx >= 0)
+            close(rx);
+        skip();
+    }
+    socklen_t len = sizeof a;
+    assert_int_equal(getsockname(rx, (struct sockaddr *)&a, &len), 0);
+    char ep[64];
+    snprintf(ep, sizeof ep, "udpout:[::1]:%u", (unsigned)ntohs(a.sin6_port));
+    struct mav_out m;
+    assert_int_equal(mav_out_open(&m, ep, 1, 197), 0);
+    assert_int_equal(mav_out_send_heartbeat(&m, MAV_OUT_STATE_ACTIVE), 0);
+    mavlink_reset_channel_status(MAVLINK_COMM_1);
+    mavlink_message_t msg;
+    assert_true(read_msg(rx, false, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_HEARTBEAT);
+    mav_out_close(&m);
+
+    /* udpin on [::1]: the test socket `rx` is the peer. */
+    int probe = socket(AF_INET6, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    struct sockaddr_in6 b = {.sin6_family = AF_INET6, .sin6_addr = IN6ADDR_LOOPBACK_INIT};
+    assert_int_equal(bind(probe, (struct sockaddr *)&b, sizeof b), 0);
+    len = sizeof b;
+    assert_int_equal(getsockname(probe, (struct sockaddr *)&b, &len), 0);
+    close(probe);
+    snprintf(ep, sizeof ep, "udpin:[::1]:%u", (unsigned)ntohs(b.sin6_port));
+    assert_int_equal(mav_out_open(&m, ep, 1, 197), 0);
+    uint8_t buf[MAVLINK_MAX_PACKET_LEN];
+    mavlink_message_t req;
+    mavlink_msg_timesync_pack(9, 1, &req, 0, 77);
+    uint16_t n = wire(&req, buf);
+    assert_int_equal(sendto(rx, buf, n, 0, (struct sockaddr *)&b, sizeof b), n);
+    assert_true(wait_readable(mav_out_fd(&m), 1000));
+    assert_int_equal(mav_out_handle_input(&m, 3), 1);
+    assert_true(read_msg(rx, false, &msg));
+    mavlink_timesync_t ts;
+    mavlink_msg_timesync_decode(&msg, &ts);
+    assert_true(ts.tc1 == 3000 && ts.ts1 == 77);
+    mav_out_close(&m);
+    close(rx);
+}
+
+/* udpin with an empty host binds every address (mavutil's udpin:0.0.0.0). */
+static void test_udpin_any_address(void **state)
+{
+    (void)state;
+    uint16_t port = free_port();
+    char ep[64];
+    snprintf(ep, sizeof ep, "udpin::%u", (unsigned)port);
+    struct mav_out m;
+    assert_int_equal(mav_out_open(&m, ep, 1, 197), 0);
+    uint16_t peer_port;
+    int peer = udp_listener(&peer_port);
+    struct sockaddr_in dst = {.sin_family = AF_INET, .sin_port = htons(port)};
+    dst.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    uint8_t buf[MAVLINK_MAX_PACKET_LEN];
+    mavlink_message_t req;
+    mavlink_msg_timesync_pack(9, 1, &req, 0, 5);
+    uint16_t n = wire(&req, buf);
+    assert_int_equal(sendto(peer, buf, n, 0, (struct sockaddr *)&dst, sizeof dst), n);
+    assert_true(wait_readable(mav_out_fd(&m), 1000));
+    assert_int_equal(mav_out_handle_input(&m, 1), 1);
+    assert_int_equal(m.stats.timesync_answered, 1);
+    mavlink_message_t msg;
+    mavlink_reset_channel_status(MAVLINK_COMM_1);
+    assert_true(read_msg(peer, false, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_TIMESYNC);
+    close(peer);
+    mav_out_close(&m);
+}
+
+/* ---- serial on a pty ---------------------------------------------------- */
+
+static void test_serial_pty(void **state)
+{
+    (void)state;
+    int master, slave;
+    assert_int_equal(openpty(&master, &slave, NULL, NULL, NULL), 0);
+    char path[128];
+    assert_int_equal(ttyname_r(slave, path, sizeof path), 0);
+    char ep[200];
+    snprintf(ep, sizeof ep, "serial:%s:115200", path);
+    struct mav_out m;
+    assert_int_equal(mav_out_open(&m, ep, 3, 197), 0);
+    assert_true(mav_out_is_up(&m));
+
+    /* The port is raw 8N1 at 115200. */
+    struct termios t;
+    assert_int_equal(tcgetattr(slave, &t), 0);
+    assert_int_equal(t.c_lflag & (ICANON | ECHO | ISIG), 0);
+    assert_int_equal(t.c_oflag & OPOST, 0);
+    assert_int_equal(t.c_cflag & CSIZE, CS8);
+    assert_int_equal(t.c_cflag & PARENB, 0);
+    assert_true(cfgetospeed(&t) == B115200);
+    close(slave); /* the module holds its own descriptor */
+
+    assert_int_equal(mav_out_send_heartbeat(&m, MAV_OUT_STATE_BOOT), 0);
+    assert_int_equal(mav_out_send_named_float(&m, "period_s", 0.9f, 10), 0);
+    mavlink_reset_channel_status(MAVLINK_COMM_1);
+    mavlink_message_t msg;
+    assert_true(read_msg(master, true, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_HEARTBEAT);
+    assert_int_equal(msg.sysid, 3);
+    assert_int_equal(mavlink_msg_heartbeat_get_system_status(&msg), MAV_STATE_BOOT);
+    assert_true(read_msg(master, true, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_NAMED_VALUE_FLOAT);
+    mavlink_named_value_float_t nv;
+    mavlink_msg_named_value_float_decode(&msg, &nv);
+    assert_true(nv.value == 0.9f);
+
+    /* TIMESYNC request written by the "autopilot" end, answered on the port. */
+    uint8_t buf[MAVLINK_MAX_PACKET_LEN];
+    mavlink_message_t req;
+    mavlink_msg_timesync_pack(1, 1, &req, 0, 42);
+    uint16_t n = wire(&req, buf);
+    assert_int_equal(write(master, buf, n), n);
+    int parsed = 0;
+    for (int i = 0; i < 50 && parsed < 1; i++) {
+        assert_true(wait_readable(mav_out_fd(&m), 1000));
+        int r = mav_out_handle_input(&m, 1000);
+        assert_true(r >= 0);
+        parsed += r;
+    }
+    assert_int_equal(parsed, 1);
+    assert_true(read_msg(master, true, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_TIMESYNC);
+    /* (decode, not the get_ helpers: those load int64 from a packed,
+     * possibly misaligned buffer, which UBSan rightly flags) */
+    mavlink_timesync_t ts;
+    mavlink_msg_timesync_decode(&msg, &ts);
+    assert_true(ts.tc1 == 1000000);
+    assert_true(ts.ts1 == 42);
+
+    /* The other end goes away (hang-up: reads return end of file), the port is closed and
+     * the device (gone with its last user) cannot be reopened yet. */
+    close(master);
+    int r = mav_out_handle_input(&m, 2000);
+    assert_int_equal(r, -EIO);
+    assert_false(mav_out_is_up(&m));
+    assert_true(mav_out_retry(&m) < 0);
+    uint64_t errs = m.stats.tx_errors;
+    assert_int_equal(mav_out_send_heartbeat(&m, MAV_OUT_STATE_CRITICAL), -ENOTCONN);
+    assert_int_equal(m.stats.tx_errors, errs + 1);
+    mav_out_close(&m);
+}
+
+/* A saturated serial line drops whole messages and never tears a frame:
+ * nobody reads the pty until sends come back busy; then every byte that
+ * went out parses as complete frames, as many as were counted sent. */
+static void test_serial_saturated_never_tears_frames(void **state)
+{
+    (void)state;
+    int master, slave;
+    assert_int_equal(openpty(&master, &slave, NULL, NULL, NULL), 0);
+    char path[128], ep[200];
+    assert_int_equal(ttyname_r(slave, path, sizeof path), 0);
+    snprintf(ep, sizeof ep, "serial:%s:9600", path);
+    struct mav_out m;
+    assert_int_equal(mav_out_open(&m, ep, 5, 197), 0);
+    close(slave);
+    struct mav_odometry o;
+    mav_odometry_init(&o);
+    o.pose_cov[0][0] = o.pose_cov[1][1] = 0.01f;
+    int i, busy_seen = 0;
+    for (i = 0; i < 100000 && busy_seen < 5; i++) {
+        o.time_usec = (uint64_t)i;
+        int r = mav_out_send_odometry(&m, &o);
+        assert_true(r == 0 || r == -EAGAIN);
+        busy_seen += r == -EAGAIN;
+    }
+    assert_int_equal(busy_seen, 5);
+    assert_int_equal(m.stats.tx_busy, 5);
+    assert_int_equal(m.stats.tx_errors, 5);
+    uint64_t sent = m.stats.tx_msgs, sent_bytes = m.stats.tx_bytes;
+    assert_true(sent >= 1);
+    print_message("pty filled after %llu messages (%llu bytes)\n", (unsigned long long)sent,
+                  (unsigned long long)m.stats.tx_bytes);
+
+    /* Drain the line, then one more message (which also finishes any
+     * partly written frame first). */
+    mavlink_status_t st;
+    mavlink_message_t msg;
+    mavlink_reset_channel_status(MAVLINK_COMM_2);
+    uint64_t parsed = 0, bad = 0, expect_t = 0, drained = 0;
+    uint8_t buf[4096];
+    for (int round = 0; round < 2; round++) {
+        for (;;) {
+            if (!wait_readable(master, 200))
+                break;
+            ssize_t n = read(master, buf, sizeof buf);
+            if (n <= 0)
+                break;
+            if (round == 0)
+                drained += (uint64_t)n;
+            for (ssize_t k = 0; k < n; k++) {
+                uint8_t r = mavlink_parse_char(MAVLINK_COMM_2, buf[k], &msg, &st);
+                if (r == MAVLINK_FRAMING_OK) {
+                    parsed++;
+                    if (msg.msgid == MAVLINK_MSG_ID_ODOMETRY) {
+                        mavlink_odometry_t od;
+                        mavlink_msg_odometry_decode(&msg, &od);
+                        /* in order, none lost among those counted sent */
+                        assert_true(od.time_usec == expect_t);
+                        expect_t++;
+                    }
+                } else if (r == MAVLINK_FRAMING_BAD_CRC) {
+                    bad++;
+                }
+            }
+        }
+        if (round == 0)
+            assert_int_equal(mav_out_send_heartbeat(&m, MAV_OUT_STATE_ACTIVE), 0);
+    }
+    print_message("drained %llu bytes before the last send (a torn tail was pending: %s)\n",
+                  (unsigned long long)drained, drained < sent_bytes ? "yes" : "no");
+    assert_int_equal(bad, 0);
+    assert_int_equal(parsed, sent + 1);
+    assert_int_equal(expect_t, sent);
+    mav_out_close(&m);
+    close(master);
+}
+
+/* ---- a missing endpoint is not fatal and is retried ------------------- */
+
+static void test_missing_serial_is_retried(void **state)
+{
+    (void)state;
+    char dir[] = "/tmp/h4b-mavXXXXXX";
+    assert_non_null(mkdtemp(dir));
+    char link[256], ep[300];
+    snprintf(link, sizeof link, "%s/autopilot", dir);
+    snprintf(ep, sizeof ep, "serial:%s:57600", link);
+
+    struct mav_out m;
+    assert_int_equal(mav_out_open(&m, ep, 1, 197), -ENOENT);
+    assert_false(mav_out_is_up(&m));
+    assert_int_equal(mav_out_fd(&m), -1);
+    assert_int_equal(m.last_errno, ENOENT);
+    assert_int_equal(mav_out_send_heartbeat(&m, MAV_OUT_STATE_STANDBY), -ENOTCONN);
+    assert_int_equal(mav_out_send_statustext(&m, MAV_OUT_SEV_INFO, "x"), -ENOTCONN);
+    assert_int_equal(m.stats.tx_errors, 2);
+    assert_int_equal(m.stats.tx_msgs, 0);
+    assert_int_equal(mav_out_retry(&m), -ENOENT);
+    assert_int_equal(m.stats.reopens, 0);
+
+    /* A file that is not a terminal: refused with ENOTTY, still down. */
+    FILE *fp = fopen(link, "w");
+    assert_non_null(fp);
+    fclose(fp);
+    assert_int_equal(mav_out_retry(&m), -ENOTTY);
+    assert_false(mav_out_is_up(&m));
+    unlink(link);
+
+    /* The device appears (a pty behind the path): the retry opens it. */
+    int master, slave;
+    assert_int_equal(openpty(&master, &slave, NULL, NULL, NULL), 0);
+    char path[128];
+    assert_int_equal(ttyname_r(slave, path, sizeof path), 0);
+    assert_int_equal(symlink(path, link), 0);
+    assert_int_equal(mav_out_retry(&m), 0);
+    assert_true(mav_out_is_up(&m));
+    assert_int_equal(m.stats.reopens, 1);
+    assert_int_equal(mav_out_retry(&m), 0); /* cheap when up */
+    assert_int_equal(m.stats.reopens, 1);
+    assert_int_equal(mav_out_send_heartbeat(&m, MAV_OUT_STATE_ACTIVE), 0);
+    mavlink_reset_channel_status(MAVLINK_COMM_1);
+    mavlink_message_t msg;
+    assert_true(read_msg(master, true, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_HEARTBEAT);
+    assert_int_equal(m.stats.tx_msgs, 1);
+
+    mav_out_close(&m);
+    close(slave);
+    close(master);
+    unlink(link);
+    rmdir(dir);
+}
+
+/* udpout to a port where nobody listens: sends do not block or crash; any
+ * failure (ICMP port unreachable) is counted, and the endpoint stays up. */
+static void test_udpout_nobody_listening(void **state)
+{
+    (void)state;
+    char ep[64];
+    snprintf(ep, sizeof ep, "udpout:127.0.0.1:%u", (unsigned)free_port());
+    struct mav_out m;
+    assert_int_equal(mav_out_open(&m, ep, 1, 197), 0);
+    for (int i = 0; i < 20; i++) {
+        int r = mav_out_send_heartbeat(&m, MAV_OUT_STATE_ACTIVE);
+        assert_true(r == 0 || r == -ECONNREFUSED);
+        assert_true(mav_out_handle_input(&m, i) >= 0);
+    }
+    assert_int_equal(m.stats.tx_msgs + m.stats.tx_errors, 20);
+    assert_true(mav_out_is_up(&m));
+    mav_out_close(&m);
+}
+
+/* ---- quality ------------------------------------------------------------ */
+
+static void test_quality_from_cov(void **state)
+{
+    (void)state;
+    assert_int_equal(mav_quality_from_cov(1e-6, 0, 1e-6), 100);     /* 1 mm */
+    assert_int_equal(mav_quality_from_cov(1e-4, 0, 1e-4), 100);     /* 1 cm */
+    assert_int_equal(mav_quality_from_cov(1.0, 0, 1.0), 1);         /* 1 m */
+    assert_int_equal(mav_quality_from_cov(0.0101, 0, 0.0101), 50);  /* 0.1005 m: 50.39 */
+    assert_int_equal(mav_quality_from_cov(25.0, 0, 1e-4), 1);       /* 5 m along x */
+    /* sigma = 10^-1.5 m = 3.16 cm: 100 - 49.5 * log10(3.16) = 100 - 49.5 * 0.5 = 75.25 -> 75. */
+    assert_int_equal(mav_quality_from_cov(1e-3, 0, 1e-3), 75);
+    /* the worst axis counts: the same 3.16 cm along y only */
+    assert_int_equal(mav_quality_from_cov(1e-6, 0, 1e-3), 75);
+    /* rotating the ellipse by 30 deg keeps the quality */
+    double c = cos(M_PI / 6), s = sin(M_PI / 6), l1 = 1e-3, l2 = 1e-5;
+    assert_int_equal(mav_quality_from_cov(c * c * l1 + s * s * l2, c * s * (l1 - l2), s * s * l1 + c * c * l2), 75);
+    /* monotonic in sigma */
+    int prev = 101;
+    for (double sig = 0.005; sig < 2.0; sig *= 1.3) {
+        int q = mav_quality_from_cov(sig * sig, 0, sig * sig);
+        assert_true(q >= 1 && q <= 100 && q <= prev);
+        prev = q;
+    }
+    /* not a covariance: -1 */
+    assert_int_equal(mav_quality_from_cov(NAN, 0, 1), -1);
+    assert_int_equal(mav_quality_from_cov(1, INFINITY, 1), -1);
+    assert_int_equal(mav_quality_from_cov(-1e-4, 0, 1e-4), -1);
+    assert_int_equal(mav_quality_from_cov(1e-4, 2e-4, 1e-4), -1); /* |rho| > 1 */
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_endpoint_parse_good),
+        cmocka_unit_test(test_endpoint_parse_bad),
+        cmocka_unit_test(test_open_rejects_bad_arguments),
+        cmocka_unit_test_setup_teardown(test_odometry_roundtrip, udp_setup, udp_teardown),
+        cmocka_unit_test_setup_teardown(test_odometry_partial_covariance, udp_setup, udp_teardown),
+        cmocka_unit_test_setup_teardown(test_odometry_rejects_bad_input, udp_setup, udp_teardown),
+        cmocka_unit_test_setup_teardown(test_heartbeat_statustext_named_float, udp_setup, udp_teardown),
+        cmocka_unit_test(test_udpin_answers_timesync),
+        cmocka_unit_test(test_ipv6_loopback),
+        cmocka_unit_test(test_udpin_any_address),
+        cmocka_unit_test(test_serial_pty),
+        cmocka_unit_test(test_serial_saturated_never_tears_frames),
+        cmocka_unit_test(test_missing_serial_is_retried),
+        cmocka_unit_test(test_udpout_nobody_listening),
+        cmocka_unit_test(test_quality_from_cov),
+    };
+    return cmocka_run_group_tests_name("mavlink_out", tests, NULL, NULL);
+}

@@ -1,0 +1,127 @@
+/*
+ * cmocka: latency histogram quantiles (bridge/stats.c), the JSON report,
+ * and log repeat summarising (bridge/log.c).
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <setjmp.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+#include <cmocka.h>
+
+#include "log.h"
+#include "stats.h"
+
+static struct latency_hist h;
+
+static void test_quantiles_exact_below_4ms(void **state)
+{
+    (void)state;
+    latency_reset(&h);
+    assert_int_equal(latency_quantile(&h, 0.5), -1);
+    /* 1..1000 us, shuffled order does not matter */
+    for (int i = 1000; i >= 1; i--)
+        latency_add(&h, i);
+    assert_int_equal(latency_quantile(&h, 0.5), 500);
+    assert_int_equal(latency_quantile(&h, 0.99), 990);
+    assert_int_equal(latency_quantile(&h, 1.0), 1000);
+    assert_int_equal(h.max_us, 1000);
+}
+
+static void test_quantiles_log_bins(void **state)
+{
+    (void)state;
+    latency_reset(&h);
+    for (int i = 0; i < 98; i++)
+        latency_add(&h, 100);
+    latency_add(&h, 50000);  /* 50 ms */
+    latency_add(&h, 900000); /* 0.9 s */
+    assert_int_equal(latency_quantile(&h, 0.5), 100);
+    int64_t p99 = latency_quantile(&h, 0.99);
+    /* bin lower edge within 1/64 of the value */
+    assert_in_range(p99, 50000 - 50000 / 64, 50000);
+    assert_int_equal(h.max_us, 900000);
+    latency_add(&h, -5); /* clock step: clamped into the first bin */
+    assert_int_equal(h.count, 101);
+}
+
+static void test_json_report(void **state)
+{
+    (void)state;
+    struct frame_counters fc;
+    frame_counters_init(&fc);
+    fc.received[FRAME_PULSE] = 11;
+    fc.received[FRAME_ENCODERS] = 22;
+    fc.malformed = 3;
+    fc.lost[FRAME_ENCODERS] = 4;
+    struct stats_report r = { .frames = &fc, .kernel_drops = 5,
+                              .latency_p50_us = 42, .latency_p99_us = 99,
+                              .replay_frames_per_s = 12345.6 };
+    char path[] = "/tmp/test_stats_XXXXXX";
+    int fd = mkstemp(path);
+    close(fd);
+    assert_int_equal(stats_write_json(&r, path), 0);
+    FILE *f = fopen(path, "r");
+    char buf[8192];
+    size_t n = fread(buf, 1, sizeof buf - 1, f);
+    buf[n] = '\0';
+    fclose(f);
+    unlink(path);
+    assert_non_null(strstr(buf, "\"pulse_detection\": 11"));
+    assert_non_null(strstr(buf, "\"wheel_encoders\": 22"));
+    assert_non_null(strstr(buf, "\"malformed\": 3,"));
+    assert_non_null(strstr(buf, "\"lost_by_counter\": 4,"));
+    assert_non_null(strstr(buf, "\"dropped_by_kernel\": 5,"));
+    assert_non_null(strstr(buf, "\"latency_p99_us\": 99,"));
+    assert_non_null(strstr(buf, "\"replay_frames_per_s\": 12345.6,"));
+    assert_int_equal(stats_write_json(&r, "/nonexistent/dir/s.json") < 0, 1);
+}
+
+static void test_log_repeats_summarised(void **state)
+{
+    (void)state;
+    char path[] = "/tmp/test_log_XXXXXX";
+    int fd = mkstemp(path);
+    close(fd);
+    FILE *f = fopen(path, "w+");
+    log_set_stream(f);
+    log_set_level(LOG_INFO);
+    unsigned long before = log_suppressed_total();
+    for (int i = 0; i < 533; i++)
+        log_warn("can0: %s", "Network is down");
+    log_info("other");
+    log_debug("hidden at info level");
+    log_info("other");
+    log_flush();
+    log_set_stream(NULL);
+    rewind(f);
+    char text[1024];
+    size_t n = fread(text, 1, sizeof text - 1, f);
+    text[n] = '\0';
+    fclose(f);
+    unlink(path);
+    assert_string_equal(text,
+                        "warning: can0: Network is down\n"
+                        "warning: last message repeated 532 times\n"
+                        "info: other\n"
+                        "info: last message repeated 1 times\n");
+    assert_int_equal(log_suppressed_total() - before, 533);
+    enum log_level lv;
+    assert_int_equal(log_level_parse("debug", &lv), 0);
+    assert_int_equal(lv, LOG_DEBUG);
+    assert_int_equal(log_level_parse("verbose", &lv), -1);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_quantiles_exact_below_4ms),
+        cmocka_unit_test(test_quantiles_log_bins),
+        cmocka_unit_test(test_json_report),
+        cmocka_unit_test(test_log_repeats_summarised),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

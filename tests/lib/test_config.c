@@ -1,0 +1,295 @@
+/* cmocka tests of the configuration (config.h): defaults equal the
+ * kleeman-lab site file (read with libinih), every site-file key of the
+ * estimator's sections maps onto a field, every check rejects its bad value
+ * and names the field. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <string.h>
+#include <stdlib.h>
+#include <stdio.h>
+#include <math.h>
+#include <cmocka.h>
+#include <ini.h>
+
+#include "beaconloc.h"
+
+#define IS_FLOAT (sizeof(bl_real) == 4)
+#define PI 3.14159265358979323846
+
+static void test_defaults_pass_check(void **state)
+{
+    (void)state;
+    bl_config cfg, copy;
+    const char *bad = "sentinel";
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    copy = cfg;
+    assert_int_equal(bl_config_check(&cfg, &bad), BL_OK);
+    assert_null(bad);
+    assert_memory_equal(&cfg, &copy, sizeof cfg);
+    assert_int_equal(bl_config_default(NULL), BL_EINVAL);
+    assert_int_equal(bl_config_check(NULL, &bad), BL_EINVAL);
+}
+
+/* ---- site file via libinih ---- */
+typedef struct site_ctx {
+    bl_config cfg;
+    int keys;         /* keys of the estimator's sections seen */
+    int unknown;      /* keys there without a field */
+    char first_unknown[128];
+} site_ctx;
+
+static int set_real(bl_real *f, const char *v)
+{
+    char *end;
+    const double d = strtod(v, &end);
+    if (end == v) return 0;
+    *f = (bl_real)d;
+    return 1;
+}
+static int set_u32(uint32_t *f, const char *v)
+{
+    char *end;
+    const long d = strtol(v, &end, 10);
+    if (end == v || d < 0) return 0;
+    *f = (uint32_t)d;
+    return 1;
+}
+
+static int site_handler(void *user, const char *section, const char *key, const char *value)
+{
+    site_ctx *c = user;
+    bl_config *g = &c->cfg;
+    int ok = -1; /* -1: not an estimator section */
+#define R(sec, k, field) else if (!strcmp(section, sec) && !strcmp(key, k)) ok = set_real(&g->field, value)
+#define U(sec, k, field) else if (!strcmp(section, sec) && !strcmp(key, k)) ok = set_u32(&g->field, value)
+    if (0) {
+    }
+    U("beacons", "count", beacon_count);
+    R("beacons", "period_s", beacon_period_s);
+    R("beacons", "double_pulse_spacing_s", double_pulse_spacing_s);
+    R("beacons", "burst_length_s", burst_length_s);
+    U("receivers", "count", receiver_count);
+    R("receivers", "ring_radius_m", ring_radius_m);
+    R("receivers", "first_angle_deg", first_angle_deg);
+    R("receivers", "angle_step_deg", angle_step_deg);
+    R("receivers", "height_m", receiver_height_m);
+    R("receivers", "beamwidth_deg", beamwidth_deg);
+    R("robot", "wheel_base_m", wheel_base_m);
+    R("robot", "wheel_radius_m", wheel_radius_m);
+    U("robot", "ticks_per_rev", ticks_per_rev);
+    R("robot", "encoder_rate_hz", encoder_rate_hz);
+    R("noise", "sigma_arrival_s", sigma_arrival_s);
+    R("noise", "sigma_wheel_per_m", sigma_wheel_per_m);
+    R("noise", "speed_of_sound_mps", speed_of_sound_mps);
+    R("noise", "sigma_speed_of_sound_mps", sigma_speed_of_sound_mps);
+    R("noise", "gate_sigma", gate_sigma);
+    else if (!strncmp(section, "beacon", 6) && section[6] >= '1' && section[6] <= '9') {
+        const int n = atoi(section + 6);
+        if (n < 1 || n > BL_MAX_BEACONS) ok = 0;
+        else if (!strcmp(key, "x_m")) ok = set_real(&g->beacons[n - 1].x_m, value);
+        else if (!strcmp(key, "y_m")) ok = set_real(&g->beacons[n - 1].y_m, value);
+        else if (!strcmp(key, "z_m")) ok = set_real(&g->beacons[n - 1].z_m, value);
+        else ok = 0;
+    } else if (!strcmp(section, "beacons") || !strcmp(section, "receivers") || !strcmp(section, "robot") ||
+               !strcmp(section, "noise")) {
+        ok = 0;
+    }
+#undef R
+#undef U
+    if (ok == -1) return 1; /* [site], [bridge]: not the estimator's */
+    c->keys++;
+    if (!ok) {
+        if (!c->unknown) snprintf(c->first_unknown, sizeof c->first_unknown, "[%s] %s", section, key);
+        c->unknown++;
+    }
+    return 1;
+}
+
+static void test_site_file_matches_defaults(void **state)
+{
+    (void)state;
+    const char *path = getenv("BL_SITE_FILE");
+    if (!path) path = "hw_sim/scenarios/kleeman-lab.ini";
+    site_ctx c;
+    memset(&c, 0, sizeof c);
+    assert_int_equal(bl_config_default(&c.cfg), BL_OK);
+    bl_config def = c.cfg;
+    memset(&c.cfg.beacons, 0, sizeof c.cfg.beacons); /* must come from the file */
+    c.cfg.beacon_count = 0;
+    const int rc = ini_parse(path, site_handler, &c);
+    if (rc != 0) print_error("ini_parse(%s) = %d\n", path, rc);
+    assert_int_equal(rc, 0);
+    if (c.unknown) print_error("site key without a bl_config field: %s\n", c.first_unknown);
+    assert_int_equal(c.unknown, 0);
+    assert_true(c.keys >= 19 + 3 * 6);
+    /* every value of the file equals the built-in default */
+    assert_int_equal(c.cfg.beacon_count, def.beacon_count);
+    for (uint32_t i = 0; i < def.beacon_count; ++i) {
+        assert_true(c.cfg.beacons[i].x_m == def.beacons[i].x_m);
+        assert_true(c.cfg.beacons[i].y_m == def.beacons[i].y_m);
+        assert_true(c.cfg.beacons[i].z_m == def.beacons[i].z_m);
+    }
+    assert_memory_equal(&c.cfg, &def, sizeof def);
+    assert_int_equal(bl_config_check(&c.cfg, NULL), BL_OK);
+}
+
+/* Each rule: a bad value gives BL_ECONFIG naming the field, and a fixed
+ * copy passes again. */
+typedef void (*mutator)(bl_config *);
+#define MUT(name, body) static void name(bl_config *c) { body; }
+MUT(m_count_low, c->beacon_count = 2)
+MUT(m_count_high, c->beacon_count = BL_MAX_BEACONS + 1)
+MUT(m_period_neg, c->beacon_period_s = -0.1f)
+MUT(m_period_nan, c->beacon_period_s = (bl_real)NAN)
+MUT(m_dps, c->double_pulse_spacing_s = 1)
+MUT(m_burst, c->burst_length_s = (bl_real)-1e-3)
+MUT(m_beacon_inf, c->beacons[3].y_m = (bl_real)INFINITY)
+MUT(m_beacon_dup, c->beacons[4] = c->beacons[1])
+MUT(m_beacon_collinear, for (int i = 0; i < 6; ++i) { c->beacons[i].x_m = (bl_real)i; c->beacons[i].y_m = (bl_real)(2 * i); })
+MUT(m_rx_count, c->receiver_count = 0)
+MUT(m_rx_count_high, c->receiver_count = BL_MAX_RECEIVERS + 1)
+MUT(m_ring, c->ring_radius_m = -0.1f)
+MUT(m_first_angle, c->first_angle_deg = (bl_real)NAN)
+MUT(m_step, c->angle_step_deg = 400)
+MUT(m_height, c->receiver_height_m = (bl_real)INFINITY)
+MUT(m_beam, c->beamwidth_deg = 0)
+MUT(m_wheel_base, c->wheel_base_m = 0)
+MUT(m_wheel_radius, c->wheel_radius_m = -1)
+MUT(m_ticks, c->ticks_per_rev = 0)
+MUT(m_enc_rate, c->encoder_rate_hz = 0)
+MUT(m_sigma_arr, c->sigma_arrival_s = 0)
+MUT(m_sigma_wheel, c->sigma_wheel_per_m = -0.01f)
+MUT(m_sos, c->speed_of_sound_mps = 0)
+MUT(m_sigma_sos, c->sigma_speed_of_sound_mps = 0)
+MUT(m_gate, c->gate_sigma = (bl_real)NAN)
+MUT(m_sigma_T, c->sigma_period_s = 0)
+MUT(m_startup_sigma, c->startup_sigma_arrival_s = c->sigma_arrival_s / 2)
+MUT(m_startup_gate, c->startup_gate_sigma = c->gate_sigma / 2)
+MUT(m_conv, c->converged_sigma_xy_m = 0)
+MUT(m_accel, c->accel_noise_mps2 = -1)
+MUT(m_alpha, c->angular_accel_noise_radps2 = (bl_real)NAN)
+MUT(m_heading, c->heading_noise_rad_per_sqrt_s = -1)
+MUT(m_frac, c->heading_noise_fraction = 2)
+MUT(m_stat, c->stationary_noise_scale = 0)
+MUT(m_sos_drift, c->speed_of_sound_drift_mps_per_sqrt_s = -1)
+MUT(m_T_drift, c->period_drift_s_per_sqrt_s = (bl_real)INFINITY)
+MUT(m_jitter, c->firing_jitter_s = 1)
+MUT(m_iter0, c->iekf_max_iterations = 0)
+MUT(m_iter_high, c->iekf_max_iterations = 21)
+MUT(m_tol, c->iekf_step_tolerance = -1)
+MUT(m_theta0, c->initial_theta_rad = (bl_real)NAN)
+MUT(m_reset_theta, c->reset_sigma_theta_rad = 0)
+MUT(m_sig_v, c->initial_sigma_v_mps = 0)
+MUT(m_sig_w, c->initial_sigma_omega_radps = -1)
+MUT(m_gap, c->max_predict_gap_s = 0)
+
+static void test_every_check(void **state)
+{
+    (void)state;
+    static const struct {
+        mutator m;
+        const char *field;
+    } cases[] = {
+        {m_count_low, "beacon_count"}, {m_count_high, "beacon_count"}, {m_period_neg, "beacon_period_s"},
+        {m_period_nan, "beacon_period_s"}, {m_dps, "double_pulse_spacing_s"}, {m_burst, "burst_length_s"},
+        {m_beacon_inf, "beacons"}, {m_beacon_dup, "beacons"}, {m_beacon_collinear, "beacons"},
+        {m_rx_count, "receiver_count"}, {m_rx_count_high, "receiver_count"}, {m_ring, "ring_radius_m"},
+        {m_first_angle, "first_angle_deg"}, {m_step, "angle_step_deg"}, {m_height, "receiver_height_m"},
+        {m_beam, "beamwidth_deg"}, {m_wheel_base, "wheel_base_m"}, {m_wheel_radius, "wheel_radius_m"},
+        {m_ticks, "ticks_per_rev"}, {m_enc_rate, "encoder_rate_hz"}, {m_sigma_arr, "sigma_arrival_s"},
+        {m_sigma_wheel, "sigma_wheel_per_m"}, {m_sos, "speed_of_sound_mps"},
+        {m_sigma_sos, "sigma_speed_of_sound_mps"}, {m_gate, "gate_sigma"}, {m_sigma_T, "sigma_period_s"},
+        {m_startup_sigma, "startup_sigma_arrival_s"}, {m_startup_gate, "startup_gate_sigma"},
+        {m_conv, "converged_sigma_xy_m"}, {m_accel, "accel_noise_mps2"},
+        {m_alpha, "angular_accel_noise_radps2"}, {m_heading, "heading_noise_rad_per_sqrt_s"},
+        {m_frac, "heading_noise_fraction"}, {m_stat, "stationary_noise_scale"},
+        {m_sos_drift, "speed_of_sound_drift_mps_per_sqrt_s"}, {m_T_drift, "period_drift_s_per_sqrt_s"},
+        {m_jitter, "firing_jitter_s"}, {m_iter0, "iekf_max_iterations"}, {m_iter_high, "iekf_max_iterations"},
+        {m_tol, "iekf_step_tolerance"}, {m_theta0, "initial_theta_rad"}, {m_reset_theta, "reset_sigma_theta_rad"},
+        {m_sig_v, "initial_sigma_v_mps"}, {m_sig_w, "initial_sigma_omega_radps"}, {m_gap, "max_predict_gap_s"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+        bl_config cfg, copy;
+        assert_int_equal(bl_config_default(&cfg), BL_OK);
+        cases[i].m(&cfg);
+        copy = cfg;
+        const char *bad = NULL;
+        const int rc = bl_config_check(&cfg, &bad);
+        if (rc != BL_ECONFIG || !bad || strcmp(bad, cases[i].field))
+            print_error("case %zu: rc %d field %s (want %s)\n", i, rc, bad ? bad : "(null)", cases[i].field);
+        assert_int_equal(rc, BL_ECONFIG);
+        assert_non_null(bad);
+        assert_string_equal(bad, cases[i].field);
+        assert_memory_equal(&cfg, &copy, sizeof cfg);
+        /* the filter refuses it too */
+        bl_filter f;
+        memset(&f, 0x5a, sizeof f);
+        bl_filter before = f;
+        assert_int_equal(bl_filter_init(&f, &cfg), BL_ECONFIG);
+        assert_memory_equal(&f, &before, sizeof f);
+    }
+}
+
+static void test_beacon_count_uses_only_first_n(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.beacons[10].x_m = (bl_real)NAN; /* beyond count: ignored */
+    cfg.beacons[7] = cfg.beacons[0];    /* duplicate beyond count: ignored */
+    assert_int_equal(bl_config_check(&cfg, NULL), BL_OK);
+    cfg.beacon_count = 11;
+    assert_int_equal(bl_config_check(&cfg, NULL), BL_ECONFIG);
+}
+
+static void test_receiver_angles(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    bl_real a = 123;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    for (uint32_t k = 0; k < 8; ++k) {
+        assert_int_equal(bl_config_receiver_angle(&cfg, k, &a), BL_OK);
+        assert_true(fabs((double)a - k * PI / 4) < 1e-6);
+    }
+    a = 123;
+    assert_int_equal(bl_config_receiver_angle(&cfg, 8, &a), BL_EINVAL);
+    assert_true(a == 123);
+    assert_int_equal(bl_config_receiver_angle(NULL, 0, &a), BL_EINVAL);
+    assert_int_equal(bl_config_receiver_angle(&cfg, 0, NULL), BL_EINVAL);
+    cfg.first_angle_deg = 10;
+    cfg.angle_step_deg = -30; /* clockwise ring */
+    assert_int_equal(bl_config_receiver_angle(&cfg, 3, &a), BL_OK);
+    assert_true(fabs((double)a - (10 - 90) * PI / 180) < 1e-6);
+}
+
+static void test_strerror(void **state)
+{
+    (void)state;
+    const int codes[] = {BL_OK, BL_EINVAL, BL_ECONFIG, BL_ETIME, BL_EBEACON, BL_ENOTINIT,
+                         BL_EDEGENERATE, BL_ENOCONVERGE, BL_EFULL};
+    const size_t n = sizeof codes / sizeof codes[0];
+    for (size_t i = 0; i < n; ++i) {
+        const char *s = bl_strerror(codes[i]);
+        assert_non_null(s);
+        assert_true(strlen(s) > 1);
+        assert_string_not_equal(s, bl_strerror(-1000));
+        for (size_t j = 0; j < i; ++j) assert_string_not_equal(s, bl_strerror(codes[j]));
+    }
+    assert_string_equal(bl_strerror(-1000), "unknown error");
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_defaults_pass_check),
+        cmocka_unit_test(test_site_file_matches_defaults),
+        cmocka_unit_test(test_every_check),
+        cmocka_unit_test(test_beacon_count_uses_only_first_n),
+        cmocka_unit_test(test_receiver_angles),
+        cmocka_unit_test(test_strerror),
+    };
+    return cmocka_run_group_tests_name(IS_FLOAT ? "config (float)" : "config (double)", tests, NULL, NULL);
+}

@@ -1,0 +1,826 @@
+/* cmocka tests of the estimator (filter.h, filter_model.h).
+ * A synthetic robot is simulated here (seeded RNG): differential drive with
+ * encoder ticks, beacons firing on a drifting schedule, pulses arriving at
+ * the receiver on the ring that faces the beacon (exact moving-robot flight
+ * time), arrival noise and echoes. Built against double, float and
+ * sanitized libraries. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <string.h>
+#include <stdlib.h>
+#include <math.h>
+#include <cmocka.h>
+
+#include "beaconloc.h"
+
+#define IS_FLOAT (sizeof(bl_real) == 4)
+#define PI 3.14159265358979323846
+
+/* ---- seeded RNG (xorshift64*) ---- */
+static uint64_t rng_state = 1;
+static void rng_seed(uint64_t s) { rng_state = s ? s : 1; }
+static double rng_uniform(void)
+{
+    rng_state ^= rng_state >> 12;
+    rng_state ^= rng_state << 25;
+    rng_state ^= rng_state >> 27;
+    return (double)((rng_state * 2685821657736338717ull) >> 11) * (1.0 / 9007199254740992.0);
+}
+static double rng_gauss(void)
+{
+    double u1 = rng_uniform(), u2 = rng_uniform();
+    if (u1 < 1e-300) u1 = 1e-300;
+    return sqrt(-2.0 * log(u1)) * cos(2 * PI * u2);
+}
+static double wrap(double a)
+{
+    while (a > PI) a -= 2 * PI;
+    while (a <= -PI) a += 2 * PI;
+    return a;
+}
+
+/* ================================================================ model
+ * Jacobians against central differences. */
+
+static void random_state(bl_real x[8])
+{
+    x[BL_IX_X] = (bl_real)(1 + 10 * rng_uniform());
+    x[BL_IX_Y] = (bl_real)(1 + 10 * rng_uniform());
+    x[BL_IX_THETA] = (bl_real)(2 * PI * rng_uniform() - PI);
+    x[BL_IX_V] = (bl_real)(2 * rng_uniform() - 1);
+    x[BL_IX_OMEGA] = (bl_real)(2 * rng_uniform() - 1);
+    x[BL_IX_S] = (bl_real)(330 + 30 * rng_uniform());
+    x[BL_IX_T] = (bl_real)(0.15 * (1 + 1e-4 * rng_gauss()));
+    x[BL_IX_T0] = (bl_real)(1e-6 * rng_gauss());
+}
+
+/* Central difference of f at x along every state axis; compares with the
+ * analytic row/matrix. step and tolerance relative to the scale of each
+ * state (float needs larger steps). */
+static const double state_scale[8] = {1, 1, 1, 1, 1, 100, 0.01, 0.01};
+
+static void test_pulse_jacobian(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.beacons[2].z_m = (bl_real)2.5; /* a ceiling-height beacon: 3D distance */
+    rng_seed(11);
+    const double rel = IS_FLOAT ? 1e-3 : 1e-5;
+    for (int trial = 0; trial < 300; ++trial) {
+        bl_real x[8], H[8], h;
+        random_state(x);
+        bl_pulse_geometry g;
+        g.beacon_index = (uint32_t)(trial % 6);
+        g.receiver_index = (uint32_t)(trial % 8);
+        g.slot = trial % 13 - 3;
+        g.epoch_rel_s = (bl_real)(-0.4 * rng_uniform());
+        g.arrival_rel_s = (bl_real)(0.05 * rng_gauss());
+        assert_int_equal(bl_model_pulse(&cfg, x, &g, &h, H), BL_OK);
+        for (int i = 0; i < 8; ++i) {
+            const double step = rel * state_scale[i];
+            bl_real xp[8], xm[8], hp, hm;
+            memcpy(xp, x, sizeof xp);
+            memcpy(xm, x, sizeof xm);
+            xp[i] = (bl_real)(x[i] + step);
+            xm[i] = (bl_real)(x[i] - step);
+            const double dstep = (double)xp[i] - (double)xm[i];
+            assert_int_equal(bl_model_pulse(&cfg, xp, &g, &hp, NULL), BL_OK);
+            assert_int_equal(bl_model_pulse(&cfg, xm, &g, &hm, NULL), BL_OK);
+            const double num = ((double)hp - (double)hm) / dstep;
+            /* scale of ∂h/∂x_i: ~1/s for positions, 1 for t0 */
+            /* float: h carries ~3e-8 s of rounding, divided by the 2·step */
+            const double tol = IS_FLOAT ? 2e-2 * fabs(num) + 1e-7 / (rel * state_scale[i])
+                                        : 1e-6 * fabs(num) + 1e-9 / state_scale[i];
+            if (!(fabs(num - H[i]) <= tol))
+                print_error("trial %d state %d: analytic %g numeric %g\n", trial, i, (double)H[i], num);
+            assert_true(fabs(num - H[i]) <= tol);
+        }
+    }
+}
+
+static void test_odometry_jacobian(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    rng_seed(12);
+    const double rel = IS_FLOAT ? 1e-3 : 1e-6;
+    for (int trial = 0; trial < 300; ++trial) {
+        bl_real x[8], xo[8], F[64], G[16];
+        random_state(x);
+        const bl_real dl = (bl_real)(0.2 * rng_gauss()), dr = (bl_real)(0.2 * rng_gauss());
+        assert_int_equal(bl_model_odometry(&cfg, x, dl, dr, xo, F, G), BL_OK);
+        for (int i = 0; i < 8; ++i) {
+            bl_real xp[8], xm[8], op[8], om[8];
+            memcpy(xp, x, sizeof xp);
+            memcpy(xm, x, sizeof xm);
+            xp[i] = (bl_real)(x[i] + rel * state_scale[i]);
+            xm[i] = (bl_real)(x[i] - rel * state_scale[i]);
+            const double dstep = (double)xp[i] - (double)xm[i];
+            assert_int_equal(bl_model_odometry(&cfg, xp, dl, dr, op, NULL, NULL), BL_OK);
+            assert_int_equal(bl_model_odometry(&cfg, xm, dl, dr, om, NULL, NULL), BL_OK);
+            for (int r = 0; r < 8; ++r) {
+                const double num = ((double)op[r] - (double)om[r]) / dstep;
+                assert_true(fabs(num - F[r * 8 + i]) <= (IS_FLOAT ? 2e-2 : 1e-6) * (fabs(num) + 1));
+            }
+        }
+        for (int u = 0; u < 2; ++u) {
+            const double step = IS_FLOAT ? 1e-3 : 1e-7;
+            bl_real op[8], om[8];
+            assert_int_equal(bl_model_odometry(&cfg, x, (bl_real)(dl + (u == 0 ? step : 0)),
+                                               (bl_real)(dr + (u == 1 ? step : 0)), op, NULL, NULL), BL_OK);
+            assert_int_equal(bl_model_odometry(&cfg, x, (bl_real)(dl - (u == 0 ? step : 0)),
+                                               (bl_real)(dr - (u == 1 ? step : 0)), om, NULL, NULL), BL_OK);
+            for (int r = 0; r < 8; ++r) {
+                const double num = ((double)op[r] - (double)om[r]) / (2 * step);
+                assert_true(fabs(num - G[r * 2 + u]) <= (IS_FLOAT ? 2e-2 : 1e-6) * (fabs(num) + 1));
+            }
+        }
+    }
+}
+
+static void test_cv_jacobian(void **state)
+{
+    (void)state;
+    rng_seed(13);
+    const double rel = IS_FLOAT ? 1e-3 : 1e-6;
+    for (int trial = 0; trial < 300; ++trial) {
+        bl_real x[8], xo[8], F[64];
+        random_state(x);
+        const bl_real dt = (bl_real)(0.5 * rng_uniform());
+        assert_int_equal(bl_model_constant_velocity(x, dt, xo, F), BL_OK);
+        for (int i = 0; i < 8; ++i) {
+            bl_real xp[8], xm[8], op[8], om[8];
+            memcpy(xp, x, sizeof xp);
+            memcpy(xm, x, sizeof xm);
+            xp[i] = (bl_real)(x[i] + rel * state_scale[i]);
+            xm[i] = (bl_real)(x[i] - rel * state_scale[i]);
+            const double dstep = (double)xp[i] - (double)xm[i];
+            assert_int_equal(bl_model_constant_velocity(xp, dt, op, NULL), BL_OK);
+            assert_int_equal(bl_model_constant_velocity(xm, dt, om, NULL), BL_OK);
+            for (int r = 0; r < 8; ++r) {
+                const double num = ((double)op[r] - (double)om[r]) / dstep;
+                assert_true(fabs(num - F[r * 8 + i]) <= (IS_FLOAT ? 2e-2 : 1e-6) * (fabs(num) + 1));
+            }
+        }
+    }
+    /* the odometry model with increments v·dt, ω·dt agrees with CV over dt */
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    bl_real x[8], a[8], b[8];
+    random_state(x);
+    const double dt = 0.01, half = 0.5 * (double)cfg.wheel_base_m;
+    const bl_real dl = (bl_real)((x[BL_IX_V] - x[BL_IX_OMEGA] * half) * dt);
+    const bl_real dr = (bl_real)((x[BL_IX_V] + x[BL_IX_OMEGA] * half) * dt);
+    assert_int_equal(bl_model_odometry(&cfg, x, dl, dr, a, NULL, NULL), BL_OK);
+    assert_int_equal(bl_model_constant_velocity(x, (bl_real)dt, b, NULL), BL_OK);
+    for (int r = 0; r < 3; ++r) assert_true(fabs((double)a[r] - (double)b[r]) < (IS_FLOAT ? 1e-5 : 1e-12));
+}
+
+/* The model's arrival time equals the exact arrival of a pulse chasing a
+ * receiver that moves in a straight line (eq. 21 is exact for constant
+ * velocity, ω = 0, ring radius 0 and beacon and receiver at one height). */
+static void test_pulse_model_moving_robot(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.ring_radius_m = 0;
+    bl_real x[8] = {0};
+    x[BL_IX_X] = 3;
+    x[BL_IX_Y] = 4;
+    x[BL_IX_THETA] = (bl_real)0.7;
+    x[BL_IX_V] = (bl_real)1.5;
+    x[BL_IX_S] = 343;
+    x[BL_IX_T] = (bl_real)0.15;
+    bl_pulse_geometry g = {.beacon_index = 3, .receiver_index = 0, .slot = 2,
+                           .arrival_rel_s = 0, .epoch_rel_s = (bl_real)-0.2};
+    bl_real h;
+    assert_int_equal(bl_model_pulse(&cfg, x, &g, &h, NULL), BL_OK);
+    /* exact: solve |p(tf) + v·dir·τ - b| = s·τ by bisection */
+    const double tf = -0.2 + 2 * 0.15;
+    const double px = 3 + 1.5 * cos(0.7) * tf, py = 4 + 1.5 * sin(0.7) * tf;
+    const double bx = cfg.beacons[3].x_m, by = cfg.beacons[3].y_m;
+    double lo = 0, hi = 1;
+    for (int i = 0; i < 200; ++i) {
+        const double tau = 0.5 * (lo + hi);
+        const double dx = px + 1.5 * cos(0.7) * tau - bx, dy = py + 1.5 * sin(0.7) * tau - by;
+        if (sqrt(dx * dx + dy * dy) > 343 * tau) lo = tau; else hi = tau;
+    }
+    /* eq. 21 linearises the chase (u fixed at the firing position): error
+     * below 1 µs for 1.5 m/s over ~20 ms of flight */
+    assert_true(fabs((double)h - (tf + lo)) < (IS_FLOAT ? 2e-6 : 1e-6));
+    /* and the moving-robot term matters: ignoring it is off by > 50 µs */
+    bl_real x0[8];
+    memcpy(x0, x, sizeof x0);
+    x0[BL_IX_V] = 0;
+    const double dx = px - bx, dy = py - by;
+    assert_true(fabs((tf + sqrt(dx * dx + dy * dy) / 343) - (tf + lo)) > 50e-6);
+}
+
+/* ============================================================ simulator */
+
+#define SIM_DT 0.005           /* truth step (s) */
+#define SIM_MAX (200 * 300)    /* up to 300 s of truth */
+#define ENC_EVERY 2            /* encoder frame every 2 truth steps (100 Hz) */
+
+typedef struct sim_params {
+    double duration_s;
+    double still_s;            /* stationary at the start */
+    double s_true_mps;
+    double T_true_s;
+    double t0_true_s;          /* first firing of beacon 1 (s after sim start) */
+    double sigma_arrival_s;
+    double echo_prob;          /* probability a pulse arrives late (echo) */
+    double kidnap_at_s;        /* < 0: never */
+    double kidnap_dx_m, kidnap_dy_m;
+    int64_t time_offset_us;    /* added to every time handed to the filter */
+    double initial_sos_mps;    /* speed of sound the filter starts from */
+    uint64_t seed;
+} sim_params;
+
+typedef struct sim_truth {
+    int n;
+    double x[SIM_MAX + 1], y[SIM_MAX + 1], th[SIM_MAX + 1], v[SIM_MAX + 1], w[SIM_MAX + 1];
+} sim_truth;
+
+static sim_truth truth;
+
+static void truth_at(double t, double *x, double *y, double *th)
+{
+    double k = t / SIM_DT;
+    if (k < 0) k = 0;
+    int i = (int)floor(k);
+    if (i >= truth.n) i = truth.n - 1;
+    const double f = k - i;
+    *x = truth.x[i] + f * (truth.x[i + 1] - truth.x[i]);
+    *y = truth.y[i] + f * (truth.y[i + 1] - truth.y[i]);
+    *th = truth.th[i] + f * wrap(truth.th[i + 1] - truth.th[i]);
+}
+
+/* Circle of radius 3 m round the room centre, speed modulated, after a
+ * stationary start; a kidnap teleports the robot. */
+static void sim_generate_truth(const sim_params *sp)
+{
+    truth.n = (int)(sp->duration_s / SIM_DT) + 1;
+    assert_true(truth.n <= SIM_MAX);
+    double x = 6, y = 3, th = 0;
+    for (int i = 0; i <= truth.n; ++i) {
+        const double t = i * SIM_DT;
+        double v = 0, w = 0;
+        if (t >= sp->still_s) {
+            v = 0.4 + 0.2 * sin(2 * PI * (t - sp->still_s) / 15.0);
+            w = v / 3.0;
+        }
+        truth.x[i] = x;
+        truth.y[i] = y;
+        truth.th[i] = th;
+        truth.v[i] = v;
+        truth.w[i] = w;
+        /* exact arc over SIM_DT */
+        const double dth = w * SIM_DT;
+        if (fabs(dth) > 1e-12) {
+            x += v / w * (sin(th + dth) - sin(th));
+            y -= v / w * (cos(th + dth) - cos(th));
+        } else {
+            x += v * SIM_DT * cos(th);
+            y += v * SIM_DT * sin(th);
+        }
+        th = wrap(th + dth);
+        if (sp->kidnap_at_s >= 0 && t < sp->kidnap_at_s && t + SIM_DT >= sp->kidnap_at_s) {
+            x += sp->kidnap_dx_m;
+            y += sp->kidnap_dy_m;
+        }
+    }
+}
+
+typedef struct sim_pulse {
+    double arrival_s;
+    uint32_t beacon, receiver;
+    int echo;
+} sim_pulse;
+
+#define MAX_PULSES 4000
+static sim_pulse pulses[MAX_PULSES];
+static int n_pulses;
+
+static int cmp_pulse(const void *a, const void *b)
+{
+    const double d = ((const sim_pulse *)a)->arrival_s - ((const sim_pulse *)b)->arrival_s;
+    return d < 0 ? -1 : d > 0;
+}
+
+static void sim_generate_pulses(const sim_params *sp, const bl_config *cfg)
+{
+    n_pulses = 0;
+    for (int k = 0;; ++k) {
+        const double tf = sp->t0_true_s + k * sp->T_true_s;
+        if (tf > sp->duration_s - 0.2) break;
+        const uint32_t b = (uint32_t)(k % (int)cfg->beacon_count);
+        const bl_beacon *bc = &cfg->beacons[b];
+        double x, y, th;
+        truth_at(tf, &x, &y, &th);
+        /* receiver facing the beacon */
+        const double bearing = wrap(atan2(bc->y_m - y, bc->x_m - x) - th);
+        const double step = 2 * PI / cfg->receiver_count;
+        uint32_t rx = (uint32_t)lround(wrap(bearing) / step + cfg->receiver_count) % cfg->receiver_count;
+        const double alpha = rx * step;
+        /* flight time: fixed point on |r(ta) - b| = s (ta - tf) */
+        double ta = tf + 0.02;
+        for (int it = 0; it < 20; ++it) {
+            truth_at(ta, &x, &y, &th);
+            const double rxp = x + cfg->ring_radius_m * cos(th + alpha);
+            const double ryp = y + cfg->ring_radius_m * sin(th + alpha);
+            const double dz = cfg->receiver_height_m - bc->z_m;
+            const double d = sqrt((rxp - bc->x_m) * (rxp - bc->x_m) + (ryp - bc->y_m) * (ryp - bc->y_m) + dz * dz);
+            ta = tf + d / sp->s_true_mps;
+        }
+        sim_pulse p = {ta + sp->sigma_arrival_s * rng_gauss(), b, rx, 0};
+        if (sp->echo_prob > 0 && rng_uniform() < sp->echo_prob) {
+            p.arrival_s += 0.003 + 0.02 * rng_uniform(); /* 1..8 m longer path */
+            p.echo = 1;
+        }
+        assert_true(n_pulses < MAX_PULSES);
+        pulses[n_pulses++] = p;
+    }
+    qsort(pulses, (size_t)n_pulses, sizeof pulses[0], cmp_pulse);
+}
+
+typedef struct sim_stats {
+    int samples;        /* estimates compared after settle_s */
+    int within_3sigma;  /* |ex| <= 3σx and |ey| <= 3σy */
+    double sum_e2;      /* position error² sum */
+    double max_e;
+    double final_e;     /* position error at the end */
+    double final_sos;
+    double final_sigma_sos;
+    double final_T;
+    int nan_seen;
+    int started;
+    uint32_t resets;
+    uint32_t accepted, rejected;
+    int echoes, echoes_rejected, direct_rejected;
+    double max_abs_t0_offset_s;
+    double final_theta_err;
+} sim_stats;
+
+static int64_t to_us(const sim_params *sp, double t_s) { return sp->time_offset_us + (int64_t)llround(t_s * 1e6); }
+
+static void sim_run(const sim_params *sp, const bl_config *cfg_in, double settle_s, sim_stats *st)
+{
+    bl_config cfg = *cfg_in;
+    cfg.speed_of_sound_mps = (bl_real)sp->initial_sos_mps;
+    rng_seed(sp->seed);
+    sim_generate_truth(sp);
+    sim_generate_pulses(sp, &cfg);
+    memset(st, 0, sizeof *st);
+
+    bl_filter f;
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    const double tick = 2 * PI * (double)cfg.wheel_radius_m / cfg.ticks_per_rev; /* m per tick */
+    double wheel_l = 0, wheel_r = 0;   /* true wheel travel (m) */
+    long ticks_l = 0, ticks_r = 0;     /* reported ticks (quantised, noisy) */
+    long prev_l = 0, prev_r = 0;
+    int next_pulse = 0;
+    const double half = 0.5 * (double)cfg.wheel_base_m;
+    for (int i = 1; i < truth.n; ++i) {
+        const double t = i * SIM_DT;
+        /* true wheel motion over the previous step, plus slip noise */
+        const double v = truth.v[i - 1], w = truth.w[i - 1];
+        const double dl = (v - w * half) * SIM_DT, dr = (v + w * half) * SIM_DT;
+        wheel_l += dl + 0.003 * sqrt(fabs(dl)) * rng_gauss();
+        wheel_r += dr + 0.003 * sqrt(fabs(dr)) * rng_gauss();
+        if (i % ENC_EVERY) continue;
+        ticks_l = lround(wheel_l / tick);
+        ticks_r = lround(wheel_r / tick);
+        if (st->started) {
+            const int rc = bl_filter_predict_odometry(&f, to_us(sp, t), (bl_real)((ticks_l - prev_l) * tick),
+                                                      (bl_real)((ticks_r - prev_r) * tick));
+            assert_int_equal(rc, BL_OK);
+        }
+        prev_l = ticks_l;
+        prev_r = ticks_r;
+        while (next_pulse < n_pulses && pulses[next_pulse].arrival_s <= t) {
+            const sim_pulse *p = &pulses[next_pulse++];
+            bl_pulse_result res;
+            const int rc = bl_filter_fuse_pulse(&f, p->beacon, to_us(sp, p->arrival_s), p->receiver, &res);
+            assert_int_equal(rc, BL_OK);
+            if (res.status == BL_PULSE_STARTED) st->started = 1;
+            if (p->echo) {
+                st->echoes++;
+                if (res.status == BL_PULSE_REJECTED) st->echoes_rejected++;
+            } else if (res.status == BL_PULSE_REJECTED && t > settle_s) {
+                st->direct_rejected++;
+            }
+        }
+        if (!st->started) continue;
+        bl_estimate e;
+        assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+        bl_real xs[8];
+        assert_int_equal(bl_filter_get_state(&f, xs, NULL), BL_OK);
+        if (fabs((double)xs[BL_IX_T0]) > st->max_abs_t0_offset_s) st->max_abs_t0_offset_s = fabs((double)xs[BL_IX_T0]);
+        if (!isfinite(e.x_m) || !isfinite(e.y_m) || !isfinite(e.theta_rad) || !isfinite(e.cov[0]) ||
+            !isfinite(e.speed_of_sound_mps))
+            st->nan_seen++;
+        double tx, ty, tth;
+        truth_at(t, &tx, &ty, &tth);
+        const double ex = e.x_m - tx, ey = e.y_m - ty;
+        const double err = sqrt(ex * ex + ey * ey);
+        if (t >= settle_s) {
+            st->samples++;
+            if (fabs(ex) <= 3 * sqrt(e.cov[0]) && fabs(ey) <= 3 * sqrt(e.cov[6])) st->within_3sigma++;
+            st->sum_e2 += err * err;
+            if (err > st->max_e) st->max_e = err;
+        }
+        st->final_e = err;
+        st->final_sos = e.speed_of_sound_mps;
+        st->final_sigma_sos = e.sigma_speed_of_sound_mps;
+        st->final_T = e.period_s;
+        st->resets = e.reset_counter;
+        st->final_theta_err = fabs(wrap(e.theta_rad - tth));
+    }
+    bl_estimate e;
+    assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+    for (uint32_t b = 0; b < cfg.beacon_count; ++b) {
+        st->accepted += e.accepted[b];
+        st->rejected += e.rejected[b];
+    }
+}
+
+static sim_params default_sim(void)
+{
+    sim_params sp;
+    memset(&sp, 0, sizeof sp);
+    sp.duration_s = 90;
+    sp.still_s = 10;
+    sp.s_true_mps = 346.1; /* 25 °C */
+    sp.T_true_s = 0.150 * (1 + 40e-6);
+    sp.t0_true_s = 0.0123;
+    sp.sigma_arrival_s = 2e-4;
+    sp.echo_prob = 0;
+    sp.kidnap_at_s = -1;
+    sp.initial_sos_mps = 343;
+    sp.seed = 2026;
+    return sp;
+}
+
+static void print_stats(const char *name, const sim_stats *st)
+{
+    print_message("%s: samples %d within3σ %.1f%% rms %.1f mm max %.1f mm final %.1f mm sos %.2f±%.2f "
+                  "T %.7f resets %u acc %u rej %u echoes %d/%d rejected, direct rejected %d, heading err %.3f\n",
+                  name, st->samples, 100.0 * st->within_3sigma / (st->samples ? st->samples : 1),
+                  1000 * sqrt(st->sum_e2 / (st->samples ? st->samples : 1)), 1000 * st->max_e,
+                  1000 * st->final_e, st->final_sos, st->final_sigma_sos, st->final_T, st->resets,
+                  st->accepted, st->rejected, st->echoes_rejected, st->echoes, st->direct_rejected,
+                  st->final_theta_err);
+}
+
+/* Moving robot: starts itself from the snapshot, converges, and its error
+ * stays within 3σ of its own covariance >= 95 % of the time. */
+static void test_moving_robot_consistent(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    sim_params sp = default_sim();
+    sim_stats st;
+    sim_run(&sp, &cfg, 25.0, &st);
+    print_stats("moving", &st);
+    assert_true(st.started);
+    assert_int_equal(st.nan_seen, 0);
+    assert_true(st.samples > 5000);
+    assert_true(st.within_3sigma >= 0.95 * st.samples);
+    assert_true(sqrt(st.sum_e2 / st.samples) < 0.05); /* Kleeman 1992: 40 mm path-error σ */
+    assert_true(st.max_e < 0.20);
+    assert_int_equal(st.resets, 0);
+    assert_true(fabs(st.final_sos - sp.s_true_mps) < 1.0);
+    assert_true(fabs(st.final_T - sp.T_true_s) < 2e-6);
+    assert_true(st.final_theta_err < 0.05);
+}
+
+/* Kleeman 1992 Fig. 8: from 330, 343 and 360 m/s (σ 5 m/s) the speed of
+ * sound converges to the truth. */
+static void test_speed_of_sound_convergence(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    const double guesses[3] = {330, 343, 360};
+    for (int g = 0; g < 3; ++g) {
+        sim_params sp = default_sim();
+        sp.initial_sos_mps = guesses[g];
+        sp.seed = 100 + (uint64_t)g;
+        sim_stats st;
+        sim_run(&sp, &cfg, 40.0, &st);
+        print_stats(g == 0 ? "sos 330" : g == 1 ? "sos 343" : "sos 360", &st);
+        assert_true(st.started);
+        assert_int_equal(st.nan_seen, 0);
+        assert_true(fabs(st.final_sos - sp.s_true_mps) < 1.0);
+        assert_true(fabs(st.final_sos - sp.s_true_mps) < 3 * st.final_sigma_sos + 0.05);
+        assert_true(st.final_sigma_sos < 1.0);
+        assert_true(st.final_e < 0.10);
+    }
+}
+
+/* Echoes (late arrivals) are rejected by the gate; direct pulses are not. */
+static void test_echoes_rejected(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    sim_params sp = default_sim();
+    sp.echo_prob = 0.10;
+    sp.seed = 77;
+    sim_stats st;
+    sim_run(&sp, &cfg, 25.0, &st);
+    print_stats("echoes", &st);
+    assert_true(st.echoes > 40);
+    assert_true(st.echoes_rejected >= 0.9 * st.echoes);
+    assert_true(st.direct_rejected <= 0.02 * (int)st.accepted + 2);
+    assert_true(sqrt(st.sum_e2 / st.samples) < 0.06);
+    assert_true(st.within_3sigma >= 0.95 * st.samples);
+}
+
+/* Robot kidnapped (lifted 3 m away): persistent rejection re-initialises
+ * from the snapshot solver, the reset counter bumps, the error recovers. */
+static void test_kidnap_recovers(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    sim_params sp = default_sim();
+    sp.duration_s = 80;
+    sp.kidnap_at_s = 40;
+    sp.kidnap_dx_m = 2.0;
+    sp.kidnap_dy_m = 2.5;
+    sp.seed = 5;
+    sim_stats st;
+    sim_run(&sp, &cfg, 70.0, &st);
+    print_stats("kidnap", &st);
+    assert_true(st.resets >= 1 && st.resets <= 3);
+    assert_true(st.final_e < 0.10);
+    assert_true(st.max_e < 0.25); /* over the last 10 s */
+}
+
+/* float32 at a 24 h clock offset: same accuracy as at 0, the t0 offset in
+ * the state stays below 1 µs, no NaN. */
+static void test_24h_epoch(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    sim_params sp = default_sim();
+    sp.duration_s = 120;
+    sim_stats a, b;
+    sim_run(&sp, &cfg, 30.0, &a);
+    sp.time_offset_us = (int64_t)86400 * 1000000 + 123457;
+    sim_run(&sp, &cfg, 30.0, &b);
+    print_stats("t=0", &a);
+    print_stats("t=24h", &b);
+    assert_int_equal(a.nan_seen + b.nan_seen, 0);
+    assert_true(b.max_abs_t0_offset_s < 1e-6);
+    const double ra = sqrt(a.sum_e2 / a.samples), rb = sqrt(b.sum_e2 / b.samples);
+    assert_true(rb < 0.05);
+    assert_true(fabs(rb - ra) < 0.2 * ra + 0.002);
+    assert_true(b.within_3sigma >= 0.95 * b.samples);
+}
+
+/* ===================================================== gate and API use */
+
+/* A converged stationary filter at a known pose (explicit start). */
+static void converged_filter(bl_filter *f, const bl_config *cfg, int64_t *t_us, double px, double py)
+{
+    assert_int_equal(bl_filter_init(f, cfg), BL_OK);
+    bl_filter_prior pr;
+    memset(&pr, 0, sizeof pr);
+    pr.t_us = 1000000;
+    pr.x_m = (bl_real)(px + 0.05);
+    pr.y_m = (bl_real)(py - 0.05);
+    pr.theta_rad = 0;
+    pr.sigma_xy_m = (bl_real)0.2;
+    pr.sigma_theta_rad = (bl_real)0.1;
+    pr.sigma_v_mps = (bl_real)0.1;
+    pr.sigma_omega_radps = (bl_real)0.1;
+    pr.t0_us = 1000000;
+    pr.t0_beacon_index = 0;
+    pr.sigma_t0_s = (bl_real)1e-3;
+    assert_int_equal(bl_filter_start(f, &pr), BL_OK);
+    int64_t t = 1000000;
+    rng_seed(99);
+    for (int k = 0; k < 6 * 30; ++k) {
+        const uint32_t b = (uint32_t)(k % 6);
+        const double tf = 1.0 + k * (double)cfg->beacon_period_s;
+        const double dx = px + (double)cfg->ring_radius_m - cfg->beacons[b].x_m, dy = py - cfg->beacons[b].y_m;
+        const double ta = tf + sqrt(dx * dx + dy * dy) / 343.0 + 2e-4 * rng_gauss();
+        const int64_t ta_us = (int64_t)llround(ta * 1e6);
+        while (t + 10000 <= ta_us) {
+            t += 10000;
+            assert_int_equal(bl_filter_predict_odometry(f, t, 0, 0), BL_OK);
+        }
+        bl_pulse_result r;
+        assert_int_equal(bl_filter_fuse_pulse(f, b, ta_us, 0, &r), BL_OK);
+    }
+    *t_us = t;
+}
+
+static void test_gate(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.speed_of_sound_mps = 343;
+    cfg.ring_radius_m = 0; /* expected_arrival is for the ring centre */
+    static bl_filter f;
+    int64_t t;
+    const double px = 4, py = 5;
+    converged_filter(&f, &cfg, &t, px, py);
+    bl_estimate e;
+    assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+    assert_true(e.converged);
+    assert_true(fabs(e.x_m - px) < 0.05 && fabs(e.y_m - py) < 0.05);
+
+    /* next pulse of beacon 0 as expected by the filter */
+    bl_expected_pulse xp;
+    assert_int_equal(bl_filter_expected_arrival(&f, 0, t, &xp), BL_OK);
+    const double dx = px + (double)cfg.ring_radius_m - cfg.beacons[0].x_m, dy = py - cfg.beacons[0].y_m;
+    const double fire_true = 1.0 + 6 * 30 * 0.15;
+    const double arr_true = fire_true + sqrt(dx * dx + dy * dy) / 343.0;
+    print_message("expected fire %.6f (true %.6f) arrival %.6f (true %.6f) sigma %.6f\n", (double)xp.fire_us * 1e-6,
+                  fire_true, (double)xp.arrival_us * 1e-6, arr_true, (double)xp.sigma_s);
+    /* the firing time is known to its own σ (t0 trades off against s) */
+    assert_true(fabs((double)xp.fire_us * 1e-6 - fire_true) < 3 * (double)e.sigma_t0_s + 2e-6);
+    assert_true(e.sigma_t0_s < 2e-4);
+    assert_true(fabs((double)xp.arrival_us * 1e-6 - arr_true) < 3 * (double)xp.sigma_s + 1e-6);
+    assert_true(xp.sigma_s > 1.5e-4 && xp.sigma_s < 1e-3);
+
+    bl_real x0[8], P0[64], x1[8], P1[64];
+    assert_int_equal(bl_filter_get_state(&f, x0, P0), BL_OK);
+    /* an echo: 5 ms late (1.7 m longer path) */
+    const int64_t ta_us = (int64_t)llround(arr_true * 1e6);
+    bl_pulse_result r;
+    assert_int_equal(bl_filter_fuse_pulse(&f, 0, ta_us + 5000, 0, &r), BL_OK);
+    assert_int_equal(r.status, BL_PULSE_REJECTED);
+    assert_true(r.test_ratio > 1);
+    assert_true(fabs((double)r.innovation_s - 5e-3) < 3 * (double)r.innovation_sigma_s);
+    assert_int_equal(bl_filter_get_state(&f, x1, P1), BL_OK);
+    assert_memory_equal(x0, x1, sizeof x0);
+    assert_memory_equal(P0, P1, sizeof P0);
+    bl_estimate e2;
+    assert_int_equal(bl_filter_estimate(&f, &e2), BL_OK);
+    assert_int_equal(e2.rejected[0], e.rejected[0] + 1);
+    assert_int_equal(e2.consecutive_rejections, 1);
+    /* the direct pulse of the same firing passes and is fused */
+    assert_int_equal(bl_filter_fuse_pulse(&f, 0, ta_us, 0, &r), BL_OK);
+    assert_int_equal(r.status, BL_PULSE_ACCEPTED);
+    assert_true(r.test_ratio < 1);
+    assert_true(r.iterations >= 1);
+    assert_true(fabs((double)r.fire_us * 1e-6 - fire_true) < 3 * (double)e.sigma_t0_s + 2e-6);
+    assert_int_equal(bl_filter_estimate(&f, &e2), BL_OK);
+    assert_int_equal(e2.accepted[0], e.accepted[0] + 1);
+    assert_int_equal(e2.consecutive_rejections, 0);
+    /* the gate scales with gate_sigma: a pulse 2.5σ late passes at 5σ, not at 2σ */
+    const int64_t t2 = ta_us + (int64_t)llround(6 * 0.15e6);
+    assert_int_equal(bl_filter_expected_arrival(&f, 0, t2 - 100000, &xp), BL_OK);
+    bl_filter g = f;
+    bl_config c2 = cfg;
+    c2.gate_sigma = 2;
+    assert_int_equal(bl_filter_update_config(&g, &c2), BL_OK);
+    const double late = 2.5 * (double)xp.sigma_s;
+    assert_int_equal(bl_filter_fuse_pulse(&g, 0, xp.arrival_us + (int64_t)llround(late * 1e6), 0, &r), BL_OK);
+    assert_int_equal(r.status, BL_PULSE_REJECTED);
+    g = f;
+    c2.gate_sigma = 5;
+    c2.startup_gate_sigma = 5;
+    assert_int_equal(bl_filter_update_config(&g, &c2), BL_OK);
+    assert_int_equal(bl_filter_fuse_pulse(&g, 0, xp.arrival_us + (int64_t)llround(late * 1e6), 0, &r), BL_OK);
+    assert_int_equal(r.status, BL_PULSE_ACCEPTED);
+}
+
+static void test_api_misuse_leaves_state(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    static bl_filter f, ref;
+    int64_t t;
+    converged_filter(&f, &cfg, &t, 6, 6);
+    ref = f;
+    bl_pulse_result r;
+    bl_estimate e;
+    bl_expected_pulse xp;
+#define SAME() assert_memory_equal(&f, &ref, sizeof f)
+    assert_int_equal(bl_filter_predict_odometry(NULL, t + 1, 0, 0), BL_EINVAL);
+    assert_int_equal(bl_filter_predict_odometry(&f, t + 10000, (bl_real)NAN, 0), BL_EINVAL); SAME();
+    assert_int_equal(bl_filter_predict_odometry(&f, t + 10000, 0, (bl_real)INFINITY), BL_EINVAL); SAME();
+    assert_int_equal(bl_filter_predict_odometry(&f, t + 10000, 0, 100), BL_EINVAL); SAME();
+    assert_int_equal(bl_filter_predict_odometry(&f, t - 1, 0, 0), BL_ETIME); SAME();
+    assert_int_equal(bl_filter_predict_odometry(&f, t + 3600000000LL, 0, 0), BL_ETIME); SAME();
+    assert_int_equal(bl_filter_predict(&f, t - 1), BL_ETIME); SAME();
+    assert_int_equal(bl_filter_predict(&f, INT64_MAX), BL_ETIME); SAME();
+    assert_int_equal(bl_filter_fuse_pulse(&f, 6, t, 0, &r), BL_EBEACON); SAME();
+    assert_int_equal(bl_filter_fuse_pulse(&f, 0xffffffffu, t, 0, &r), BL_EBEACON); SAME();
+    assert_int_equal(bl_filter_fuse_pulse(&f, 0, t, 8, &r), BL_EINVAL); SAME();
+    assert_int_equal(bl_filter_fuse_pulse(&f, 0, t - 10000000, 0, &r), BL_ETIME); SAME();
+    assert_int_equal(bl_filter_fuse_pulse(&f, 0, INT64_MIN, 0, &r), BL_ETIME); SAME();
+    assert_int_equal(bl_filter_fuse_pulse(NULL, 0, t, 0, &r), BL_EINVAL);
+    assert_int_equal(bl_filter_expected_arrival(&f, 6, t, &xp), BL_EBEACON); SAME();
+    assert_int_equal(bl_filter_expected_arrival(&f, 0, t, NULL), BL_EINVAL); SAME();
+    assert_int_equal(bl_filter_expected_arrival(&f, 0, t + 100000000, &xp), BL_ETIME); SAME();
+    assert_int_equal(bl_filter_estimate_at(&f, t - 1, &e), BL_ETIME); SAME();
+    assert_int_equal(bl_filter_estimate_at(&f, t + 20000, &e), BL_OK); SAME(); /* const */
+    assert_int_equal(bl_filter_start_snapshot(&f, (bl_real)NAN, 1), BL_EINVAL); SAME();
+    assert_int_equal(bl_filter_start_snapshot(&f, 0, 0), BL_EINVAL); SAME();
+    bl_filter_prior pr;
+    memset(&pr, 0, sizeof pr);
+    pr.t_us = t;
+    pr.sigma_xy_m = 1;
+    pr.sigma_theta_rad = 1;
+    pr.sigma_v_mps = 1;
+    pr.sigma_omega_radps = 0; /* bad */
+    pr.sigma_t0_s = 1;
+    pr.t0_us = t;
+    assert_int_equal(bl_filter_start(&f, &pr), BL_EINVAL); SAME();
+    pr.sigma_omega_radps = 1;
+    pr.x_m = (bl_real)NAN;
+    assert_int_equal(bl_filter_start(&f, &pr), BL_EINVAL); SAME();
+    pr.x_m = 1;
+    pr.t0_beacon_index = 6;
+    assert_int_equal(bl_filter_start(&f, &pr), BL_EINVAL); SAME();
+    bl_config bad = cfg;
+    bad.beacon_period_s = -1;
+    assert_int_equal(bl_filter_init(&f, &bad), BL_ECONFIG); SAME();
+    assert_int_equal(bl_filter_update_config(&f, &bad), BL_ECONFIG); SAME();
+    bad = cfg;
+    bad.beacons[1].x_m = 1; /* geometry change: must re-init */
+    assert_int_equal(bl_filter_update_config(&f, &bad), BL_ECONFIG); SAME();
+    assert_int_equal(bl_filter_init(&f, NULL), BL_EINVAL); SAME();
+#undef SAME
+    /* never initialised (zeroed) */
+    static bl_filter z;
+    memset(&z, 0, sizeof z);
+    assert_int_equal(bl_filter_fuse_pulse(&z, 0, 0, 0, &r), BL_ENOTINIT);
+    assert_int_equal(bl_filter_predict(&z, 0), BL_ENOTINIT);
+    assert_int_equal(bl_filter_estimate(&z, &e), BL_ENOTINIT);
+    /* initialised, not started */
+    assert_int_equal(bl_filter_init(&z, &cfg), BL_OK);
+    assert_int_equal(bl_filter_predict_odometry(&z, 10, 0, 0), BL_ENOTINIT);
+    assert_int_equal(bl_filter_estimate_at(&z, 10, &e), BL_ENOTINIT);
+    assert_int_equal(bl_filter_expected_arrival(&z, 0, 10, &xp), BL_ENOTINIT);
+    assert_int_equal(bl_filter_start_snapshot(&z, 0, 1), BL_EDEGENERATE);
+    assert_int_equal(bl_filter_estimate(&z, &e), BL_OK);
+    assert_false(e.started);
+}
+
+/* estimate_at extrapolates with constant velocity without changing the filter. */
+static void test_estimate_at(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    bl_filter f;
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    bl_filter_prior pr;
+    memset(&pr, 0, sizeof pr);
+    pr.t_us = 5000000;
+    pr.x_m = 2;
+    pr.y_m = 3;
+    pr.theta_rad = (bl_real)(PI / 2);
+    pr.v_mps = 1;
+    pr.sigma_xy_m = (bl_real)0.01;
+    pr.sigma_theta_rad = (bl_real)0.01;
+    pr.sigma_v_mps = (bl_real)0.01;
+    pr.sigma_omega_radps = (bl_real)0.01;
+    pr.t0_us = 4900000;
+    pr.sigma_t0_s = (bl_real)1e-4;
+    assert_int_equal(bl_filter_start(&f, &pr), BL_OK);
+    bl_estimate a, b;
+    assert_int_equal(bl_filter_estimate(&f, &a), BL_OK);
+    assert_int_equal(bl_filter_estimate_at(&f, 5500000, &b), BL_OK);
+    assert_true(fabs(b.x_m - 2) < 1e-5 && fabs(b.y_m - 3.5) < 1e-5);
+    assert_true(b.cov[6] > a.cov[6]); /* σy grows */
+    assert_true(b.t_us == 5500000 && a.t_us == 5000000);
+    /* t0 reported for beacon 1 of the reference cycle, on the caller's clock */
+    assert_true(llabs(a.t0_us - 4900000) % 900000 <= 1 || llabs(a.t0_us - 4900000) % 900000 >= 899999);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_pulse_jacobian),
+        cmocka_unit_test(test_odometry_jacobian),
+        cmocka_unit_test(test_cv_jacobian),
+        cmocka_unit_test(test_pulse_model_moving_robot),
+        cmocka_unit_test(test_gate),
+        cmocka_unit_test(test_api_misuse_leaves_state),
+        cmocka_unit_test(test_estimate_at),
+        cmocka_unit_test(test_moving_robot_consistent),
+        cmocka_unit_test(test_speed_of_sound_convergence),
+        cmocka_unit_test(test_echoes_rejected),
+        cmocka_unit_test(test_kidnap_recovers),
+        cmocka_unit_test(test_24h_epoch),
+    };
+    return cmocka_run_group_tests_name(IS_FLOAT ? "filter (float)" : "filter (double)", tests, NULL, NULL);
+}

@@ -1,0 +1,123 @@
+"""The beaconloc-sim command: run (log, truth, odometry, stats, live), plot, list; determinism."""
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from beaconloc_sim import cli
+
+from conftest import site_with
+
+TRUTH_HEADER = ("t_us,t_sim_s,x_m,y_m,theta_rad,v_mps,omega_radps,sos_mps,period_s,temperature_c,"
+                "pcrb_x_m,pcrb_y_m,pcrb_pos_m").split(",")
+EST_HEADER = ("t_us,x_m,y_m,theta_rad,v_mps,omega_radps,sos_mps,period_s,var_x_m2,cov_xy_m2,"
+              "var_y_m2,var_theta_rad2,reset_counter,quality").split(",")
+BIN = Path(sys.executable).with_name("beaconloc-sim")
+
+
+def test_run_writes_parseable_log_truth_odometry_stats(tmp_path):
+    out = {k: tmp_path / f"{k}" for k in ("log", "truth", "odo", "stats")}
+    proc = subprocess.run([str(BIN), "run", "kleeman-lab", "--duration", "30", "--log", str(out["log"]),
+                           "--truth", str(out["truth"]), "--odometry", str(out["odo"]),
+                           "--stats", str(out["stats"])], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    msgs = list(can.CanutilsLogReader(str(out["log"])))
+    stats = json.loads(out["stats"].read_text())
+    assert stats["frames"]["total"] == len(msgs)
+    for fid in (0x100, 0x110, 0x120):
+        assert stats["frames"][f"0x{fid:03X}"] == sum(m.arbitration_id == fid for m in msgs)
+    assert stats["frames"]["0x110"] == pytest.approx(30 * 100, abs=2)      # 100 Hz encoders
+    assert stats["frames"]["0x120"] == pytest.approx(2 * 30, abs=2)       # 1 Hz from 2 nodes
+    with open(out["truth"]) as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == TRUTH_HEADER
+    truth = np.array(rows[1:], dtype=float)
+    assert len(truth) == 30 * 50 + 1
+    t_us = truth[:, 0]
+    assert np.all(np.diff(t_us) > 0) and t_us.max() > 2**32        # unwrapped across the wrap
+    assert np.allclose(np.diff(truth[:, 1]), 0.02)
+    assert np.all(truth[:, 12] > 0)
+    with open(out["odo"]) as fh:
+        assert next(csv.reader(fh)) == ["t_us", "x_m", "y_m", "theta_rad"]
+
+
+def test_identical_seeds_give_identical_logs(tmp_path):
+    logs = []
+    for i, seed in enumerate((5, 5, 6)):
+        path = tmp_path / f"{i}.log"
+        assert cli.main(["run", "echo-storm", "--duration", "10", "--seed", str(seed),
+                         "--log", str(path)]) == 0
+        logs.append(path.read_bytes())
+    assert logs[0] == logs[1]
+    assert logs[0] != logs[2]
+
+
+def test_bad_site_file_exits_78_naming_file_line_key(tmp_path, capsys):
+    (tmp_path / "s.ini").write_text(site_with(beacon3__x_m="abc"))
+    scn = tmp_path / "bad.scenario.ini"
+    scn.write_text("[scenario]\nsite = s.ini\nduration_s = 1\n[path]\nstart = 1, 1, 0\n")
+    assert cli.main(["run", str(scn), "--log", str(tmp_path / "x.log")]) == 78
+    assert "s.ini:" in capsys.readouterr().err
+    assert not (tmp_path / "x.log").exists()
+
+
+def test_plot_writes_png(tmp_path):
+    truth_p, odo_p = tmp_path / "truth.csv", tmp_path / "odo.csv"
+    assert cli.main(["run", "kleeman-lab", "--duration", "20", "--truth", str(truth_p),
+                     "--odometry", str(odo_p)]) == 0
+    with open(truth_p) as fh:
+        rows = list(csv.DictReader(fh))
+    rng = np.random.default_rng(0)
+    est_p = tmp_path / "est.csv"
+    with open(est_p, "w") as fh:
+        fh.write(",".join(EST_HEADER) + "\n")
+        for r in rows[::2]:
+            x = float(r["x_m"]) + rng.normal(0, 0.02)
+            y = float(r["y_m"]) + rng.normal(0, 0.02)
+            fh.write(f"{r['t_us']},{x},{y},{r['theta_rad']},{r['v_mps']},{r['omega_radps']},"
+                     f"{float(r['sos_mps']) + 0.5},{r['period_s']},4e-4,0,4e-4,1e-3,0,50\n")
+    out = tmp_path / "plot.png"
+    assert cli.main(["plot", "--truth", str(truth_p), "--estimates", str(est_p),
+                     "--odometry", str(odo_p), "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t_us,x_m\n1,2\n")
+    assert cli.main(["plot", "--truth", str(truth_p), "--estimates", str(bad),
+                     "--out", str(tmp_path / "p2.png")]) == 65
+
+
+def test_live_on_virtual_bus_sends_every_frame(tmp_path):
+    """Live mode over python-can's virtual interface; a second bus on the channel receives all."""
+    channel = f"beaconloc-test-{id(tmp_path)}"
+    rx = can.Bus(interface="virtual", channel=channel)
+    got = []
+    done = threading.Event()
+
+    def reader():
+        while not done.is_set():
+            m = rx.recv(timeout=0.05)
+            if m is not None:
+                got.append(m)
+    th = threading.Thread(target=reader)
+    th.start()
+    stats_p = tmp_path / "stats.json"
+    try:
+        assert cli.main(["run", "kleeman-lab", "--duration", "1.5", "--channel", channel,
+                         "--interface", "virtual", "--stats", str(stats_p)]) == 0
+    finally:
+        done.set()
+        th.join()
+        rx.shutdown()
+    stats = json.loads(stats_p.read_text())
+    assert stats["live"]["frames_sent"] == stats["frames"]["total"] == len(got)
+    assert {m.arbitration_id for m in got} == {0x100, 0x110, 0x120}
+    lat = stats["live"]["lateness_us"]
+    assert 0 <= lat["p50"] <= lat["p99"] <= lat["max"]

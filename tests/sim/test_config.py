@@ -1,0 +1,97 @@
+"""Bad site and scenario files give errors naming the file, the line and the key."""
+from __future__ import annotations
+
+import pytest
+
+from beaconloc_sim.inifile import ConfigError
+from beaconloc_sim.scenario import builtin_names, load_scenario
+from beaconloc_sim.site import load_site
+
+from conftest import SITE_TEXT, site_with
+
+GOOD_BODY = "duration_s = 5\n[path]\nstart = 3, 3, 0\nsegment1 = straight 1\n"
+
+
+def _line_of(text: str, needle: str, after: str = "") -> int:
+    start = text.index(after) if after else 0
+    return text[:text.index(needle, start)].count("\n") + 1
+
+
+def test_builtin_scenarios_all_load():
+    names = builtin_names()
+    for required in ("kleeman-lab", "echo-storm", "beacon-outage", "temperature-ramp",
+                     "encoder-silence", "kidnap"):
+        assert required in names
+    for name in names:
+        scn = load_scenario(name)
+        assert scn.duration_s == 120 and scn.site.beacon_count == 6
+
+
+def test_bad_site_number_names_file_line_key(make_scenario, tmp_path):
+    text = site_with(beacon3__x_m="abc")
+    path = make_scenario(GOOD_BODY, text)
+    line = _line_of(text, "x_m = abc", "[beacon3]")
+    with pytest.raises(ConfigError) as err:
+        load_scenario(str(path))
+    site_name = path.with_name("site1.ini").name
+    assert str(err.value) == f"{site_name}:{line}: [beacon3] x_m: not a number: 'abc'"
+
+
+@pytest.mark.parametrize("override, section, key, why", [
+    ({"receivers__count": "9"}, "receivers", "count", "must be <= 8, got 9"),
+    ({"robot__wheel_radius_m": "-0.1"}, "robot", "wheel_radius_m", "must be > 0, got -0.1"),
+    ({"beacons__count": "7"}, "beacons", "count", "count = 7 but [beacon7] is missing"),
+    ({"noise__sigma_arrival_s": "nan"}, "noise", "sigma_arrival_s", "not a finite number: 'nan'"),
+])
+def test_bad_site_values(tmp_path, override, section, key, why):
+    text = site_with(**override)
+    (tmp_path / "s.ini").write_text(text)
+    (section_name, key_name), = [k.split("__") for k in override]
+    line = _line_of(text, f"{key_name} =", f"[{section_name}]")
+    with pytest.raises(ConfigError) as err:
+        load_site(tmp_path / "s.ini")
+    assert str(err.value).startswith(f"s.ini:{line}: [{section}] {key}")
+    assert why in str(err.value)
+
+
+def test_unknown_site_key_is_an_error(tmp_path):
+    text = SITE_TEXT.replace("[robot]\n", "[robot]\nwheel_bse_m = 0.5\n")
+    (tmp_path / "s.ini").write_text(text)
+    line = _line_of(text, "wheel_bse_m")
+    with pytest.raises(ConfigError, match=rf"^s.ini:{line}: \[robot\] wheel_bse_m: unknown key"):
+        load_site(tmp_path / "s.ini")
+
+
+@pytest.mark.parametrize("body, line, section, key, why", [
+    ("duration_s = 5\n[path]\nstart = 3, 3\nsegment1 = straight 1\n", 5, "path", "start",
+     "expected 3 comma-separated numbers"),
+    ("duration_s = 5\n[path]\nstart = 3, 3, 0\nsegment1 = straight 1\nsegment2 = jump 3\n", 7,
+     "path", "segment2", "unknown segment kind 'jump'"),
+    ("duration_s = 5\n[path]\nstart = 3, 3, 0\nsegment1 = arc 90 x\n", 6, "path", "segment1",
+     "not a number"),
+    ("duration_s = fast\n[path]\nstart = 3, 3, 0\n", 3, "scenario", "duration_s",
+     "not a number: 'fast'"),
+    (GOOD_BODY + "[faults]\nbeacon_outage = 10, 5, 9\n", 8, "faults", "beacon_outage", "ids 1..6"),
+    (GOOD_BODY + "[acoustics]\nechoes = 3\n", 8, "acoustics", "echoes", "unknown key"),
+    (GOOD_BODY + "[environment]\ntemperature_profile = 0:20, 10\n", 8, "environment",
+     "temperature_profile", "expected 't_s:temperature_c"),
+])
+def test_bad_scenario_values(make_scenario, body, line, section, key, why):
+    path = make_scenario(body)
+    with pytest.raises(ConfigError) as err:
+        load_scenario(str(path))
+    assert str(err.value).startswith(f"{path.name}:{line}: [{section}] {key}: ")
+    assert why in str(err.value)
+
+
+def test_missing_site_file_and_unknown_scenario(tmp_path):
+    scn = tmp_path / "x.scenario.ini"
+    scn.write_text("[scenario]\nsite = nowhere.ini\nduration_s = 1\n[path]\nstart = 1, 1, 0\n")
+    with pytest.raises(ConfigError, match=r"^x.scenario.ini:2: \[scenario\] site: site file not found"):
+        load_scenario(str(scn))
+    with pytest.raises(ConfigError, match="unknown scenario 'no-such'.*kleeman-lab"):
+        load_scenario("no-such")
+    bad = tmp_path / "bad.scenario.ini"
+    bad.write_text("site = a.ini\n")
+    with pytest.raises(ConfigError, match=r"^bad.scenario.ini:1: key before any \[section\]"):
+        load_scenario(str(bad))

@@ -1,0 +1,293 @@
+"""Run a command on a real kernel CAN bus: directly where the host has vcan,
+otherwise inside one virtme-ng VM (qemu, --disable-kvm).
+
+    run_in_vm.py [options] COMMAND [ARGS...]
+
+COMMAND runs with the repository as working directory, vcan0 up, and the
+results folder in $BL_RESULTS (the only place it may write: the guest sees
+the host's files read-only). tests/vm/guest-init.sh does the guest side.
+
+Exit status: the command's own, or non-zero when it did not run at all
+(the VM did not boot in time, no vcan, timeout, no exit code written) and,
+with --junit, when the pytest report is missing or counts zero tests.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+GUEST_INIT = REPO / "tests" / "vm" / "guest-init.sh"
+
+
+def log(msg: str) -> None:
+    print(f"run-in-vm: {msg}", flush=True)
+
+
+def host_has_vcan() -> bool:
+    """True when this kernel can host a vcan bus (AF_CAN and the vcan driver)."""
+    try:
+        socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW).close()
+    except (OSError, AttributeError):
+        return False
+    if subprocess.run(["ip", "link", "show", "vcan0"], capture_output=True).returncode == 0:
+        return True
+    probe = f"blprobe{os.getpid() % 10000}"
+    ok = subprocess.run(["ip", "link", "add", "dev", probe, "type", "vcan"],
+                        capture_output=True).returncode == 0
+    if ok:
+        subprocess.run(["ip", "link", "del", "dev", probe], capture_output=True)
+    return ok
+
+
+def pick_kernel() -> tuple[Path, str]:
+    """The newest /boot/vmlinuz-VER whose /lib/modules/VER has the vcan module:
+    the guest loads modules from the host's tree, so the two must match."""
+    found = []
+    for vmlinuz in sorted(Path("/boot").glob("vmlinuz-*")):
+        ver = vmlinuz.name[len("vmlinuz-"):]
+        can_dir = Path("/lib/modules") / ver / "kernel" / "drivers" / "net" / "can"
+        if any(can_dir.glob("vcan.ko*")) and os.access(vmlinuz, os.R_OK):
+            found.append((vmlinuz, ver))
+    if not found:
+        raise SystemExit("run-in-vm: no /boot/vmlinuz-* with a matching /lib/modules/*/"
+                         "kernel/drivers/net/can/vcan.ko (install linux-image-amd64: "
+                         "make setup)")
+    return found[-1]
+
+
+def clean_results(results: Path) -> None:
+    results.mkdir(parents=True, exist_ok=True)
+    for child in results.iterdir():
+        if child.is_dir() and not child.is_symlink():
+            shutil.rmtree(child)
+        else:
+            child.unlink()
+
+
+def tail_new(path: Path, pos: int) -> int:
+    """Print what was appended to path since byte pos; return the new pos."""
+    try:
+        with path.open("rb") as fh:
+            fh.seek(pos)
+            data = fh.read()
+    except FileNotFoundError:
+        return pos
+    if data:
+        sys.stdout.write(data.decode("utf-8", "replace"))
+        sys.stdout.flush()
+    return pos + len(data)
+
+
+def kill_group(proc: subprocess.Popen) -> None:
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=10)
+    except (ProcessLookupError, subprocess.TimeoutExpired):
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait()
+
+
+def run(args: argparse.Namespace, results: Path) -> tuple[str, int | None]:
+    """Start the command (VM or direct); wait, tailing --tail; return
+    (how it ended, exit code read from the results folder or None)."""
+    guest_cmd = [str(GUEST_INIT), str(results), *args.command]
+    env = dict(os.environ)
+    env["PATH"] = f"{REPO / '.venv' / 'bin'}:{env.get('PATH', '')}"
+    if args.ifaces:
+        env["BL_VCAN_IFACES"] = args.ifaces
+    if args.mode == "direct":
+        log("host has vcan: running directly")
+        argv = guest_cmd
+        boot_timeout = None
+    else:
+        vmlinuz, ver = pick_kernel()
+        vng = REPO / ".venv" / "bin" / "vng"
+        if not vng.exists():
+            raise SystemExit("run-in-vm: .venv/bin/vng missing (virtme-ng): run make setup")
+        if not shutil.which("qemu-system-x86_64"):
+            raise SystemExit("run-in-vm: qemu-system-x86_64 missing (qemu-system-x86): run make setup")
+        # The guest's shell needs the command as one string; quote each part.
+        exec_str = " ".join(_shquote(a) for a in guest_cmd)
+        if args.ifaces:
+            exec_str = f"BL_VCAN_IFACES={_shquote(args.ifaces)} {exec_str}"
+        argv = [str(vng), "--run", str(vmlinuz), "--disable-kvm", "--user", "root",
+                "--cpus", str(args.cpus), "--memory", args.memory,
+                "--rwdir", str(results), "--exec", exec_str]
+        log(f"booting {vmlinuz.name} in virtme-ng (--disable-kvm, {args.cpus} cpus, "
+            f"{args.memory}); boot timeout {args.boot_timeout:.0f} s")
+        boot_timeout = args.boot_timeout
+    console = (results / "console.log").open("wb")
+    t_start = time.monotonic()
+    proc = subprocess.Popen(argv, cwd=REPO, env=env, stdin=subprocess.DEVNULL,
+                            stdout=console, stderr=subprocess.STDOUT,
+                            start_new_session=True)
+    tail_path = results / args.tail if args.tail else None
+    tail_pos = 0
+    booted_at = None
+    how = "finished"
+    try:
+        while proc.poll() is None:
+            time.sleep(0.5)
+            now = time.monotonic() - t_start
+            if booted_at is None and (results / "booted").exists():
+                booted_at = now
+                if args.mode == "vm":
+                    log(f"guest booted after {now:.0f} s")
+            if tail_path is not None:
+                tail_pos = tail_new(tail_path, tail_pos)
+            if boot_timeout is not None and booted_at is None and now > boot_timeout:
+                how = f"VM did not boot within {boot_timeout:.0f} s"
+                kill_group(proc)
+                break
+            if now > args.timeout:
+                how = f"timed out after {args.timeout:.0f} s"
+                kill_group(proc)
+                break
+    except KeyboardInterrupt:
+        kill_group(proc)
+        raise
+    finally:
+        console.close()
+    if tail_path is not None:
+        tail_new(tail_path, tail_pos)
+    log(f"{'guest' if args.mode == 'vm' else 'command'} ran {time.monotonic() - t_start:.0f} s")
+    code_file = results / "exit-code"
+    if not code_file.exists():
+        if how == "finished":
+            how = "the command never reported an exit code (VM crashed or never booted)"
+        return how, None
+    try:
+        return how, int(code_file.read_text().strip())
+    except ValueError:
+        return "unreadable exit-code file", None
+
+
+def _shquote(s: str) -> str:
+    if s and all(c.isalnum() or c in "@%+=:,./-_" for c in s):
+        return s
+    return "'" + s.replace("'", "'\"'\"'") + "'"
+
+
+def report_junit(path: Path, max_chars: int) -> tuple[int, int, str]:
+    """Print failures with their logs and the summary; return (tests, bad, summary)."""
+    if not path.exists():
+        return 0, 0, "no junit report"
+    root = ET.parse(path).getroot()
+    suites = [root] if root.tag == "testsuite" else list(root.iter("testsuite"))
+    tests = failures = errors = skipped = 0
+    shown: dict[str, str] = {}  # failure text -> first case that showed it
+    for s in suites:
+        tests += int(s.get("tests", 0))
+        failures += int(s.get("failures", 0))
+        errors += int(s.get("errors", 0))
+        skipped += int(s.get("skipped", 0))
+        for case in s.iter("testcase"):
+            bad = case.find("failure")
+            if bad is None:
+                bad = case.find("error")
+            if bad is None:
+                continue
+            name = f"{case.get('classname', '')}::{case.get('name', '')}"
+            print(f"\n=============== FAILED {name} ===============")
+            key = (bad.get("message") or "") + (bad.text or "")
+            if key in shown:  # a module fixture's failure, once per case
+                print(f"(same failure as {shown[key]})")
+                continue
+            shown[key] = name
+            print((bad.get("message") or "")[:max_chars])
+            print((bad.text or "")[-max_chars:])
+            for tag in ("system-out", "system-err"):
+                el = case.find(tag)
+                if el is not None and el.text and el.text.strip():
+                    print(f"--------------- {tag} ---------------")
+                    print(el.text[-max_chars:])
+    passed = tests - failures - errors - skipped
+    summary = f"{passed} passed, {failures + errors} failed, {skipped} skipped"
+    return tests, failures + errors, summary
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--results", default=str(REPO / "build" / "vm"),
+                    help="results folder (the VM's --rwdir); emptied first")
+    ap.add_argument("--mode", choices=("auto", "vm", "direct"), default="auto",
+                    help="auto: direct where the host has vcan, else a VM")
+    ap.add_argument("--boot-timeout", type=float, default=420.0, help="seconds")
+    ap.add_argument("--timeout", type=float, default=2700.0,
+                    help="seconds for boot plus command")
+    ap.add_argument("--cpus", type=int, default=2)
+    ap.add_argument("--memory", default="2G")
+    ap.add_argument("--ifaces", default="", help="vcan interfaces to create (default vcan0)")
+    ap.add_argument("--junit", default="", help="pytest junit xml (relative to results): "
+                    "print its failures and summary, fail on zero tests")
+    ap.add_argument("--tail", default="", help="file in results to show live")
+    ap.add_argument("--max-chars", type=int, default=6000,
+                    help="characters of each failure's log to print")
+    ap.add_argument("command", nargs=argparse.REMAINDER)
+    args = ap.parse_args()
+    if not args.command:
+        ap.error("no command")
+    results = Path(args.results).resolve()
+    clean_results(results)
+    if args.mode == "auto":
+        args.mode = "direct" if host_has_vcan() else "vm"
+    how, code = run(args, results)
+
+    failed = False
+    bus_log = results / "bus.log"
+    if code is None:
+        log(f"FAILED: {how}")
+        for name in ("bus.log", "script.log", "console.log"):
+            p = results / name
+            if p.exists():
+                print(f"--------------- {name} (tail) ---------------")
+                print(p.read_text(errors="replace")[-args.max_chars:])
+        return 2
+    if code == 90:
+        log("FAILED: the CAN bus could not be brought up")
+        print(bus_log.read_text(errors="replace") if bus_log.exists() else "(no bus.log)")
+        return 2
+    if bus_log.exists():
+        for line in bus_log.read_text(errors="replace").splitlines():
+            if line.startswith("vcan round trip"):
+                log(line)
+    if how != "finished":
+        log(f"FAILED: {how}")
+        failed = True
+    if args.junit:
+        tests, bad, summary = report_junit(results / args.junit, args.max_chars)
+        script_log = results / "script.log"
+        if tests == 0:
+            log(f"FAILED: {summary}: zero tests ran")
+            if script_log.exists():
+                print(script_log.read_text(errors="replace")[-args.max_chars:])
+            failed = True
+        log(f"integration ({'VM' if args.mode == 'vm' else 'host vcan'}): {summary}")
+        print(summary)
+        if bad:
+            failed = True
+    if code != 0:
+        log(f"FAILED: command exited {code} (log: {results / 'script.log'})")
+        if not args.junit:
+            p = results / "script.log"
+            if p.exists():
+                print(p.read_text(errors="replace")[-args.max_chars:])
+        failed = True
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
