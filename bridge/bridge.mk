@@ -2,10 +2,12 @@
 # (tests/bridge/test_*.c), its pytest suite and its replay benchmark.
 #   make build/bridge/beaconloc-bridge   the daemon
 #   make test-bridge                     every tests/bridge/test_*.c (cmocka)
-#   make test-bridge-py                  pytest tests/bridge/
+#   make test-bridge-py                  pytest tests/bridge/ (also builds the
+#                                        ASan/UBSan daemon beaconloc-bridge-asan)
 #   make bench-bridge                    replay throughput + latency
 
 BRIDGE_BIN      := $(BUILD)/bridge/beaconloc-bridge
+BRIDGE_ASAN_BIN := $(BUILD)/bridge/beaconloc-bridge-asan
 BRIDGE_OBJDIR   := $(BUILD)/bridge/obj
 BRIDGE_SANDIR   := $(BUILD)/bridge/san
 BRIDGE_TESTDIR  := $(BUILD)/tests/bridge
@@ -69,6 +71,12 @@ $(BRIDGE_BIN): $(BRIDGE_OBJS) $(BRIDGE_LIB)
 	@mkdir -p $(@D)
 	$(CC) -o $@ $(BRIDGE_OBJS) $(BRIDGE_LIB) $(BRIDGE_LDLIBS)
 
+# The daemon built with ASan/UBSan, for the pytest suite's fuzz test.
+$(BRIDGE_ASAN_BIN): $(BRIDGE_SANOBJS) $(BRIDGE_SANDIR)/main.o $(BRIDGE_LIB)
+	@mkdir -p $(@D)
+	$(CC) $(BRIDGE_SANFLAGS) -o $@ $(BRIDGE_SANDIR)/main.o $(BRIDGE_SANOBJS) \
+	    $(BRIDGE_LIB) $(BRIDGE_LDLIBS)
+
 # cmocka tests: one executable per tests/bridge/test_*.c, built with
 # ASan/UBSan against sanitized bridge objects (all but main.o). A test that
 # stands in for syscalls lists its wraps in BRIDGE_WRAP_<name>.
@@ -86,10 +94,17 @@ test-bridge: $(BRIDGE_TESTS)
 	@set -e; for t in $(BRIDGE_TESTS); do echo "== $$t"; \
 	    ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 $$t; done
 
-test-bridge-py: $(BRIDGE_BIN)
+# Test-only LD_PRELOAD shim standing in for a CAN socket (no CAN in this
+# kernel) so pytest can drive the daemon's live path.
+BRIDGE_FAKECAN := $(BRIDGE_TESTDIR)/fake_can_preload.so
+$(BRIDGE_FAKECAN): tests/bridge/fake_can_preload.c
+	@mkdir -p $(@D)
+	$(CC) -std=c11 -O2 -Wall -Wextra -Werror -shared -fPIC -o $@ $< -ldl
+
+test-bridge-py: $(BRIDGE_BIN) $(BRIDGE_ASAN_BIN) $(BRIDGE_FAKECAN)
 	$(PYTEST) -q tests/bridge
 
 bench-bridge: $(BRIDGE_BIN)
 	$(PY) tests/bridge/bench_replay.py --bridge $(BRIDGE_BIN) --out $(BUILD)/bench/bridge
 
--include $(BRIDGE_OBJS:.o=.d) $(BRIDGE_SANOBJS:.o=.d) $(patsubst tests/bridge/%.c,$(BRIDGE_TESTDIR)/obj/%.d,$(BRIDGE_TESTS_C))
+-include $(BRIDGE_OBJS:.o=.d) $(BRIDGE_SANOBJS:.o=.d) $(BRIDGE_SANDIR)/main.d $(patsubst tests/bridge/%.c,$(BRIDGE_TESTDIR)/obj/%.d,$(BRIDGE_TESTS_C))

@@ -62,6 +62,8 @@ static int sockopt(int fd, int level, int name, const void *val, socklen_t len,
     return 0;
 }
 
+static bool can_in_link_up(struct can_in *ci);
+
 int can_in_open(struct can_in *ci)
 {
     if (ci->fd >= 0)
@@ -121,28 +123,56 @@ int can_in_open(struct can_in *ci)
     ci->fd = fd;
     ci->last_errno = 0;
     ci->have_ovfl = false;
+    ci->link_down = false;
     if (ci->ever_open)
         ci->c.reopens++;
     ci->ever_open = true;
-    return 0;
+    return can_in_link_up(ci) ? 0 : -ENETDOWN;
 fail:
     close(fd);
     ci->last_errno = -rc;
     return rc;
 }
 
+/* IFF_UP of the bound interface; sets link_down accordingly. */
+static bool can_in_link_up(struct can_in *ci)
+{
+    struct ifreq ifr;
+    memset(&ifr, 0, sizeof ifr);
+    snprintf(ifr.ifr_name, sizeof ifr.ifr_name, "%s", ci->ifname);
+    if (ioctl(ci->fd, SIOCGIFFLAGS, &ifr) < 0) {
+        ci->last_errno = errno;
+        ci->link_down = true;
+        return false;
+    }
+    ci->link_down = !(ifr.ifr_flags & IFF_UP);
+    ci->last_errno = ci->link_down ? ENETDOWN : 0;
+    return !ci->link_down;
+}
+
 int can_in_retry(struct can_in *ci)
 {
-    return ci->fd >= 0 ? 0 : can_in_open(ci);
+    if (ci->fd < 0)
+        return can_in_open(ci);
+    if (!ci->link_down)
+        return 0;
+    if (can_in_link_up(ci))
+        return 0;
+    if (ci->last_errno == ENODEV || ci->last_errno == ENXIO) {
+        /* the interface was deleted meanwhile: reopen by name */
+        can_in_close(ci);
+        return can_in_open(ci);
+    }
+    return -ENETDOWN;
 }
 
+/* The interface is gone (not just down): the socket must be reopened. */
 static bool is_link_gone(int e)
 {
-    return e == ENETDOWN || e == ENODEV || e == ENXIO || e == EBADF ||
-           e == ENETUNREACH;
+    return e == ENODEV || e == ENXIO || e == EBADF;
 }
 
-static void count_error_frame(struct can_in *ci, canid_t id)
+void can_in_count_error_frame(struct can_in *ci, uint32_t id)
 {
     ci->c.error_frames++;
     if (id & CAN_ERR_BUSOFF)
@@ -172,13 +202,26 @@ int can_in_read(struct can_in *ci, struct can_msg *msg)
                 continue;
             if (e == EAGAIN || e == EWOULDBLOCK)
                 return 0;
+            if (e == ENETDOWN || e == ENETUNREACH) {
+                if (!ci->link_down)
+                    ci->c.downs++;
+                ci->link_down = true;
+                ci->last_errno = ENETDOWN;
+                return -ENETDOWN;
+            }
             if (is_link_gone(e)) {
-                ci->c.downs++;
+                if (!ci->link_down)
+                    ci->c.downs++;
+                ci->link_down = true;
                 ci->last_errno = e;
                 can_in_close(ci);
             }
             return -e;
         }
+        if (n == 0)
+            return 0; /* nothing (a CAN_RAW socket never reads 0 bytes) */
+        ci->link_down = false; /* something arrived: the link is up */
+        ci->last_errno = 0;
         if (n != (ssize_t)CAN_MTU && n != (ssize_t)CANFD_MTU) {
             ci->c.bad_size++;
             continue;
@@ -214,7 +257,7 @@ int can_in_read(struct can_in *ci, struct can_msg *msg)
             msg->rx_us = mono;
         msg->flags = 0;
         if (frame.can_id & CAN_ERR_FLAG) {
-            count_error_frame(ci, frame.can_id);
+            can_in_count_error_frame(ci, frame.can_id);
             msg->flags = CAN_MSG_ERROR;
             msg->id = frame.can_id & CAN_ERR_MASK;
             msg->len = 0;

@@ -3,9 +3,15 @@
  * candump: kernel filters for our ids, error frames, kernel receive
  * timestamps (SO_TIMESTAMP), kernel drop count (SO_RXQ_OVFL), a large
  * receive buffer, CAN FD-sized reads accepted, non-blocking, drained until
- * EAGAIN. An interface that is missing at start or goes away (ENETDOWN,
- * ENODEV) is not fatal: can_in_read() reports it, the socket is closed, and
- * the daemon calls can_in_retry() once a second until it is back.
+ * EAGAIN.
+ *
+ * An interface that is missing at start or goes away is not fatal; the
+ * daemon calls can_in_retry() once a second until it is back:
+ *   - missing (ENODEV at open) or deleted (ENODEV/ENXIO on read): the
+ *     socket is closed and reopened by name;
+ *   - down (ENETDOWN on read, or not IFF_UP at open): the bound socket is
+ *     kept, so frames flow again the moment the link is up (no frame lost
+ *     to a reopen delay); can_in_retry() checks IFF_UP to report "up".
  */
 #ifndef BRIDGE_CAN_IN_H
 #define BRIDGE_CAN_IN_H
@@ -33,6 +39,7 @@ struct can_in {
     int fd;                      /* -1 while down */
     char ifname[16];
     int last_errno;              /* why it is down (0 when up) */
+    bool link_down;              /* socket open, interface not up */
     uint32_t last_ovfl;          /* last SO_RXQ_OVFL value seen (cumulative in kernel) */
     bool have_ovfl;
     bool ever_open;
@@ -44,13 +51,14 @@ struct can_in {
 void can_in_init(struct can_in *ci, const char *ifname);
 
 /*
- * Open and bind the socket. Returns 0, or -errno (ENODEV: no such
- * interface; ENETDOWN; EAFNOSUPPORT: kernel without CAN); on failure the
- * object stays down (fd -1) and can_in_retry() tries again.
+ * Open and bind the socket. Returns 0, or -errno: ENODEV no such interface,
+ * EAFNOSUPPORT kernel without CAN (socket closed, fd -1), or ENETDOWN: the
+ * interface exists but is down (socket kept open and bound, link_down set).
+ * can_in_retry() tries again.
  */
 int can_in_open(struct can_in *ci);
 
-/* Try to open when down; 0 when up (already or now), -errno otherwise. */
+/* Open when closed, or check a down link; 0 when up, -errno otherwise. */
 int can_in_retry(struct can_in *ci);
 
 void can_in_close(struct can_in *ci);
@@ -59,10 +67,15 @@ void can_in_close(struct can_in *ci);
  * Read one frame. Returns 1 with *msg filled (rx_us = kernel receive time
  * converted onto CLOCK_MONOTONIC, us), 0 when nothing is pending (EAGAIN),
  * 2 when an error frame was read and counted (msg->flags has
- * CAN_MSG_ERROR, msg->id the CAN_ERR_* class bits), or -errno when the
- * interface went away (socket closed; retry later) or on another error.
+ * CAN_MSG_ERROR, msg->id the CAN_ERR_* class bits), or -errno: -ENETDOWN
+ * link down (socket kept, link_down set), -ENODEV/-ENXIO interface gone
+ * (socket closed), or another read error. A frame read clears link_down.
  */
 int can_in_read(struct can_in *ci, struct can_msg *msg);
+
+/* Count an error frame of class bits id (CAN_ERR_* of linux/can/error.h);
+ * used for error frames found in a replayed log. */
+void can_in_count_error_frame(struct can_in *ci, uint32_t id);
 
 /* Monotonic microseconds now. */
 int64_t can_in_mono_us(void);

@@ -43,6 +43,7 @@ static const struct key_desc keys[] = {
     NUM("receivers", "count", K_INT, receiver_count, 1, CONFIG_MAX_RECEIVERS, false),
     NUM("receivers", "ring_radius_m", K_REAL, ring_radius_m, 0, 10, false),
     NUM("receivers", "first_angle_deg", K_REAL, first_angle_deg, -360, 360, false),
+    NUM("receivers", "angle_step_deg", K_REAL, angle_step_deg, -360, 360, false),
     NUM("receivers", "height_m", K_REAL, receiver_height_m, -1e4, 1e4, false),
     NUM("receivers", "beamwidth_deg", K_REAL, beamwidth_deg, 0, 360, true),
     NUM("robot", "wheel_base_m", K_REAL, wheel_base_m, 0, 100, true),
@@ -282,7 +283,7 @@ static int handler(void *user, const char *section, const char *name,
         if (!sec_match || strcasecmp(d->key, name))
             continue;
         if (beacon) {
-            int kidx = (int)(i - 4); /* x, y, z follow [beacons] keys */
+            int kidx = d->key[0] - 'x'; /* x_m, y_m, z_m -> 0, 1, 2 */
             int b = beacon - 1;
             if (ctx->beacon_key_seen[b][kidx]) {
                 fail(ctx, ctx->line, section, name, "given twice");
@@ -447,6 +448,7 @@ bool config_same_geometry(const struct bridge_config *a,
         a->receiver_count != b->receiver_count ||
         a->ring_radius_m != b->ring_radius_m ||
         a->first_angle_deg != b->first_angle_deg ||
+        a->angle_step_deg != b->angle_step_deg ||
         a->receiver_height_m != b->receiver_height_m ||
         a->wheel_base_m != b->wheel_base_m ||
         a->wheel_radius_m != b->wheel_radius_m ||

@@ -40,6 +40,7 @@ struct bridge_config {
     int receiver_count;
     double ring_radius_m;
     double first_angle_deg;
+    double angle_step_deg;      /* 0 = evenly spaced (360/count) */
     double receiver_height_m;
     double beamwidth_deg;
     /* [robot] */

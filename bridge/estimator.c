@@ -76,6 +76,7 @@ static const struct { const char *field, *section, *key; } field_keys[] = {
     { "receiver_count", "receivers", "count" },
     { "ring_radius_m", "receivers", "ring_radius_m" },
     { "first_angle_deg", "receivers", "first_angle_deg" },
+    { "angle_step_deg", "receivers", "angle_step_deg" },
     { "receiver_height_m", "receivers", "height_m" },
     { "beamwidth_deg", "receivers", "beamwidth_deg" },
     { "wheel_base_m", "robot", "wheel_base_m" },
@@ -106,7 +107,7 @@ int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
     c.receiver_count = (uint32_t)cfg->receiver_count;
     c.ring_radius_m = (bl_real)cfg->ring_radius_m;
     c.first_angle_deg = (bl_real)cfg->first_angle_deg;
-    c.angle_step_deg = 0; /* evenly spaced */
+    c.angle_step_deg = (bl_real)cfg->angle_step_deg; /* 0: evenly spaced */
     c.receiver_height_m = (bl_real)cfg->receiver_height_m;
     c.beamwidth_deg = (bl_real)cfg->beamwidth_deg;
     c.wheel_base_m = (bl_real)cfg->wheel_base_m;
@@ -185,7 +186,8 @@ int estimator_init(struct estimator *e, const struct bridge_config *cfg,
     }
     node_clock_init(&e->rx_clock, NULL);
     node_clock_init(&e->enc_clock, NULL);
-    /* wheel travel per tick (m): circumference 2·π·r over ticks per turn */
+    /* wheel travel per tick (m): circumference 2·π·r over ticks per turn
+     * (input of Kleeman 1992 §3.8, eq. 24) */
     e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
     e->beacon_lost_s = cfg->beacon_lost_s;
     e->echo_storm_ratio = cfg->echo_storm_ratio;
@@ -501,7 +503,10 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
          * predict: take it as the new reference only. */
         return;
     }
-    /* wheel distance (m) = ticks · 2πr / ticks_per_rev */
+    /* Wheel increments are the dead-reckoning input of Kleeman 1992 §3.8
+     * (eq. 24 takes the heading increment as an input; the library forms
+     * Δθ = (d_r − d_l) / wheel_base and the speed from them). Each wheel's
+     * distance from its ticks: d = n_ticks · 2πr / ticks_per_rev (m). */
     double dl_m = dl * e->m_per_tick;
     double dr_m = dr * e->m_per_tick;
     int rc = bl_filter_predict_odometry(&e->filter, t, (bl_real)dl_m,

@@ -73,8 +73,9 @@ struct daemon {
     struct timer timers[T_COUNT];
     int mav_fd_registered;
     struct can_in can;
-    bool can_registered;
+    int can_fd_registered;    /* fd in epoll, -1 none */
     bool can_down_logged;
+    bool can_ever_up;
     int64_t can_down_since_us;
     struct replay rp;
     struct can_msg pending;   /* paced replay: next frame to deliver */
@@ -464,7 +465,8 @@ static void drain_events(struct daemon *d)
     }
 }
 
-/* After a frame: publish what its update produced. */
+/* After a frame (or a tick that fused a late pulse): publish what the
+ * update produced. */
 static void after_update(struct daemon *d)
 {
     int64_t rx;
@@ -479,11 +481,22 @@ static void after_update(struct daemon *d)
     int64_t now = now_local(d);
     /* Event-driven ODOMETRY, rate-limited to the configured rate (a 10 %
      * allowance keeps sensor-paced sends from skipping a slot). */
-    if (!d->odom_sent_once || now - d->last_odom_local_us >= period * 9 / 10) {
-        send_odometry(d, &o, o.t_local_us > d->last_odom_local_us ? o.t_local_us : now);
-        d->last_odom_local_us = now;
-        latency_add(&d->lat, mono_us() - d->lat_ref_mono_us);
+    if (d->odom_sent_once && now - d->last_odom_local_us < period * 9 / 10)
+        return;
+    int64_t t = o.t_local_us;
+    if (d->odom_sent_once && t <= d->last_odom_local_us) {
+        /* the state is older than the last message: extrapolate to now so
+         * that time_usec only increases */
+        t = now;
+        if (estimator_output(&d->est, now, &o) != 0)
+            return;
     }
+    send_odometry(d, &o, t);
+    d->last_odom_local_us = now;
+    /* latency from the frame's receive time to this send; an update made
+     * by the timer (rx 0) is not a frame's latency */
+    if (rx != 0)
+        latency_add(&d->lat, mono_us() - d->lat_ref_mono_us);
 }
 
 /* ---- frames ----------------------------------------------------------- */
@@ -496,8 +509,12 @@ static void handle_frame(struct daemon *d, const struct can_msg *msg)
                                          : msg->rx_us;
         record_write(&d->rec, msg, t);
     }
-    if (msg->flags & CAN_MSG_ERROR)
-        return; /* counted by can_in (live); a logged error frame: ignored */
+    if (msg->flags & CAN_MSG_ERROR) {
+        /* live: counted by can_in; replay: an error frame in the log */
+        if (d->mode != MODE_LIVE)
+            can_in_count_error_frame(&d->can, msg->id);
+        return;
+    }
     struct frame f;
     if (frame_decode(&d->fc, msg, &f) != FRAME_OK)
         return;
@@ -542,10 +559,8 @@ static void status_line(struct daemon *d, const char *prefix)
 
 static void can_went_down(struct daemon *d, int err)
 {
-    if (d->can_registered) {
-        /* the fd is closed already by can_in; epoll dropped it */
-        d->can_registered = false;
-    }
+    if (d->can.fd < 0)
+        d->can_fd_registered = -1; /* closed: epoll dropped it */
     if (!d->can_down_logged) {
         log_warn("%s: %s; retrying every second", d->cfg.can_interface,
                  strerror(err));
@@ -557,27 +572,42 @@ static void can_went_down(struct daemon *d, int err)
     }
 }
 
-static void can_try_open(struct daemon *d)
+static void can_came_up(struct daemon *d)
 {
-    if (d->mode != MODE_LIVE || d->can.fd >= 0)
-        return;
-    int rc = can_in_retry(&d->can);
-    if (rc != 0) {
-        can_went_down(d, -rc);
-        return;
-    }
-    if (ep_add(d, d->can.fd) == 0)
-        d->can_registered = true;
     if (d->can_down_logged) {
         log_info("%s: up again after %.1f s", d->cfg.can_interface,
                  (double)(mono_us() - d->can_down_since_us) / 1e6);
         char text[64];
         snprintf(text, sizeof text, "CAN %.15s up", d->cfg.can_interface);
         statustext(d, MAV_OUT_SEV_NOTICE, text);
-    } else {
+    } else if (!d->can_ever_up) {
         log_info("%s: listening", d->cfg.can_interface);
     }
+    d->can_ever_up = true;
     d->can_down_logged = false;
+}
+
+/* Open the socket, or check a down link (1 s timer and start). */
+static void can_try_open(struct daemon *d)
+{
+    if (d->mode != MODE_LIVE)
+        return;
+    if (d->can.fd >= 0 && !d->can.link_down && d->can_fd_registered == d->can.fd)
+        return;
+    uint64_t reopens = d->can.c.reopens;
+    int rc = can_in_retry(&d->can);
+    if (d->can.c.reopens != reopens)
+        d->can_fd_registered = -1; /* a new socket (maybe the same number) */
+    /* A bound socket on a down link is kept and watched: frames flow the
+     * moment the link is up again. A reopened socket is a new fd (the old
+     * one left epoll when it was closed). */
+    if (d->can.fd >= 0 && d->can_fd_registered != d->can.fd &&
+        ep_add(d, d->can.fd) == 0)
+        d->can_fd_registered = d->can.fd;
+    if (rc != 0)
+        can_went_down(d, -rc);
+    else
+        can_came_up(d);
 }
 
 static void can_readable(struct daemon *d)
@@ -599,14 +629,16 @@ static void can_readable(struct daemon *d)
             continue;
         }
         if (rc < 0) {
-            if (d->can.fd < 0) {
+            if (d->can.fd < 0 || d->can.link_down)
                 can_went_down(d, -rc);
-            } else {
+            else
                 log_warn("%s: read: %s", d->cfg.can_interface, strerror(-rc));
-            }
             break;
         }
+        if (d->can_down_logged)
+            can_came_up(d);
         d->lat_ref_mono_us = msg.rx_us; /* kernel receive time, monotonic */
+        log_debug("PROBE read-lag %lld", (long long)(mono_us() - msg.rx_us));
         handle_frame(d, &msg);
     }
     drain_events(d);
@@ -617,7 +649,6 @@ static void can_readable(struct daemon *d)
 static void on_odom_timer(struct daemon *d, int64_t now)
 {
     estimator_tick(&d->est, now);
-    d->lat_ref_mono_us = mono_us();
     after_update(d);
     drain_events(d);
     int64_t period = odom_period_us(d);
@@ -636,7 +667,7 @@ static void on_heartbeat(struct daemon *d, int64_t now)
     struct est_output o;
     bool have = estimator_output(&d->est, 0, &o) == 0;
     enum mav_out_state st = MAV_OUT_STATE_STANDBY;
-    if (d->mode == MODE_LIVE && d->can.fd < 0)
+    if (d->mode == MODE_LIVE && (d->can.fd < 0 || d->can.link_down))
         st = MAV_OUT_STATE_CRITICAL;
     else if (have && o.converged)
         st = MAV_OUT_STATE_ACTIVE;
@@ -744,7 +775,7 @@ static void reload(struct daemon *d)
         if (d->can.fd >= 0)
             ep_del(d, d->can.fd);
         can_in_close(&d->can);
-        d->can_registered = false;
+        d->can_fd_registered = -1;
         struct can_in_counters keep = d->can.c;
         can_in_init(&d->can, d->cfg.can_interface);
         d->can.c = keep;
@@ -788,7 +819,7 @@ static void poll_once(struct daemon *d, int timeout_ms)
         int fd = evs[i].data.fd;
         if (fd == d->sigfd) {
             signal_readable(d);
-        } else if (d->can_registered && fd == d->can.fd) {
+        } else if (d->can_fd_registered >= 0 && fd == d->can_fd_registered) {
             can_readable(d);
         } else if (fd == d->mav_fd_registered) {
             int rc = mav_out_handle_input(&d->mav, now_local(d));
@@ -929,6 +960,16 @@ static void fill_report(struct daemon *d, struct stats_report *r)
     r->pulses_unassigned = d->est.c.pulses_unassigned;
     r->sequencer_spurious = d->est.c.pulses_spurious;
     r->encoder_gaps = d->est.c.encoder_gaps;
+    const bl_seq_counters *sc = &d->est.seq.counters;
+    r->seq_detections = sc->detections;
+    r->seq_merged = sc->merged;
+    r->seq_double_pulses = sc->double_pulses;
+    r->seq_double_conflicts = sc->double_conflicts;
+    r->seq_locks_acquired = sc->locks_acquired;
+    r->seq_locks_lost = sc->locks_lost;
+    r->seq_repeats = sc->repeats;
+    r->repeats_skipped = d->est.c.repeats_skipped;
+    r->snapshot_restarts = d->est.c.snapshot_restarts;
     r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;
@@ -970,6 +1011,7 @@ int main(int argc, char **argv)
     d->sigfd = -1;
     d->replay_tfd = -1;
     d->mav_fd_registered = -1;
+    d->can_fd_registered = -1;
     for (int i = 0; i < T_COUNT; i++)
         d->timers[i].fd = -1;
     frame_counters_init(&d->fc);

@@ -108,6 +108,17 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"pulses_buffered\": %llu,\n", (unsigned long long)r->pulses_buffered);
     fprintf(f, "  \"pulses_unassigned\": %llu,\n", (unsigned long long)r->pulses_unassigned);
     fprintf(f, "  \"sequencer_spurious\": %llu,\n", (unsigned long long)r->sequencer_spurious);
+    fprintf(f, "  \"sequencer\": {\"detections\": %llu, \"merged\": %llu, "
+               "\"double_pulses\": %llu, \"double_conflicts\": %llu, "
+               "\"locks_acquired\": %llu, \"locks_lost\": %llu, \"repeats\": %llu},\n",
+            (unsigned long long)r->seq_detections, (unsigned long long)r->seq_merged,
+            (unsigned long long)r->seq_double_pulses,
+            (unsigned long long)r->seq_double_conflicts,
+            (unsigned long long)r->seq_locks_acquired,
+            (unsigned long long)r->seq_locks_lost, (unsigned long long)r->seq_repeats);
+    fprintf(f, "  \"repeats_skipped_before_convergence\": %llu,\n",
+            (unsigned long long)r->repeats_skipped);
+    fprintf(f, "  \"snapshot_restarts\": %llu,\n", (unsigned long long)r->snapshot_restarts);
     fprintf(f, "  \"encoder_gaps\": %llu,\n", (unsigned long long)r->encoder_gaps);
     fprintf(f, "  \"estimator_errors\": %llu,\n", (unsigned long long)r->predict_errors);
     fprintf(f, "  \"estimates\": %llu,\n", (unsigned long long)r->estimates);

@@ -39,6 +39,10 @@ struct stats_report {
         encoder_gaps, predict_errors, estimates;
     uint64_t odometry_sent, heartbeat_sent, mavlink_tx_errors,
         timesync_answered;
+    /* sequencer counters (bl_seq_counters) */
+    uint64_t seq_detections, seq_merged, seq_double_pulses,
+        seq_double_conflicts, seq_locks_acquired, seq_locks_lost,
+        seq_repeats, repeats_skipped, snapshot_restarts;
     int64_t latency_p50_us, latency_p99_us, latency_max_us;
     uint64_t latency_samples;
     double replay_frames_per_s; /* 0 when not replaying */

@@ -7,6 +7,10 @@
 #                       sizeof(bl_filter), the worst per-function stack use
 #                       (-fstack-usage) and the worst call chain
 #                       (-fcallgraph-info=su). Last line machine-readable.
+#   make run-m4-qemu    the same firmware with a simulated board on QEMU's
+#                       netduinoplus2 (Cortex-M4F): tracks a moving robot,
+#                       exit status from the error vs truth (needs the Debian
+#                       package qemu-system-arm).
 #   make check-m4-build (in UNIT_TESTS) the cross build links with plain gcc
 #                       (no libstdc++) and references no heap / C++ runtime.
 #
@@ -56,6 +60,26 @@ $(M4_ELF): $(M4_EX_OBJS) $(M4_DIR)/libbeaconloc.a lib/examples/firmware_m4/stm32
 M4_CXXRT := '(__cxa_|__gxx_|_Znw|_Zna|_Zdl|_Zda|_ZSt|_Unwind_)'
 M4_HEAP  := '^(malloc|free|calloc|realloc|_malloc_r|_free_r)$$'
 
+# The same firmware (main.c, startup, linker script) with the simulated board
+# (sim/board_sim.c instead of board.c), run on QEMU's netduinoplus2
+# (STM32F405, Cortex-M4F): semihosting prints the tracking error against
+# the truth and sets QEMU's exit status.
+M4_SIM_ELF  := $(M4_DIR)/firmware_m4_sim.elf
+M4_SIM_OBJS := $(filter-out $(M4_DIR)/example/board.o,$(M4_EX_OBJS)) $(M4_DIR)/example/sim/board_sim.o
+QEMU_ARM    ?= qemu-system-arm
+
+$(M4_DIR)/example/sim/%.o: lib/examples/firmware_m4/sim/%.c $(M4_HDRS) lib/firmware.mk
+	@mkdir -p $(@D)
+	$(M4_PREFIX)gcc $(M4_CFLAGS) -c $< -o $@
+
+$(M4_SIM_ELF): $(M4_SIM_OBJS) $(M4_DIR)/libbeaconloc.a lib/examples/firmware_m4/stm32f4.ld
+	$(M4_PREFIX)gcc $(M4_LDFLAGS) $(M4_SIM_OBJS) $(M4_DIR)/libbeaconloc.a -lm -o $@
+
+.PHONY: run-m4-qemu
+run-m4-qemu: $(M4_SIM_ELF)
+	timeout 300 $(QEMU_ARM) -M netduinoplus2 -nographic -monitor none -serial none \
+	    -semihosting-config enable=on,target=native -kernel $(M4_SIM_ELF)
+
 .PHONY: size-m4 check-m4-build
 check-m4-build: $(M4_ELF)
 	@bad=$$($(M4_PREFIX)nm $(M4_ELF) | awk '{print $$NF}' | grep -E $(M4_CXXRT) || true); \
@@ -71,3 +95,8 @@ size-m4: $(M4_ELF)
 	    --lib-objs $(M4_DIR)/lib --example-objs $(M4_DIR)/example --prefix $(M4_PREFIX)
 
 UNIT_TESTS += check-m4-build
+# The emulator run joins the unit tests wherever qemu-system-arm is installed
+# (Debian package qemu-system-arm; .ci/setup should install it).
+ifneq ($(shell command -v $(QEMU_ARM) 2>/dev/null),)
+UNIT_TESTS += run-m4-qemu
+endif

@@ -13,9 +13,10 @@
  * timer's own cost (median of empty intervals) is subtracted.
  *
  * Usage: bench_speed [--reps N] [--seconds S] [--dump FILE] [--no-timing]
- *   --dump FILE   write, per fused pulse of the first rep, the filter's prior
+ *   --dump FILE   write, per fused pulse of an extra untimed pass, the filter's prior
  *                 (state, covariance, pulse geometry) for the FilterPy run
  *   --no-timing   one rep, no timing (for valgrind --tool=callgrind)
+ * Also times the beacon sequencer (push + pop per detection, batch-timed).
  * Output: human-readable lines, last line
  *   bench_speed real=<double|float> fuse_pulse_ns=<median> predict_ns=<median>
  *               fuse_calls=<n> predict_calls=<n> accepted=<n> rejected=<n>
@@ -31,6 +32,7 @@
 
 #include "beaconloc/config.h"
 #include "beaconloc/filter.h"
+#include "beaconloc/sequencer.h"
 
 #define PI_RAD 3.14159265358979323846
 #define SOUND_MPS 343.0          /* true speed of sound (m/s) */
@@ -148,6 +150,8 @@ static int64_t median(int64_t *v, size_t n) {
     return n ? v[n / 2] : 0;
 }
 
+static const char *real_name_of(void) { return sizeof(bl_real) == sizeof(double) ? "double" : "float"; }
+
 static void die(const char *what, int rc) {
     fprintf(stderr, "bench_speed: %s: %s\n", what, bl_strerror(rc));
     exit(1);
@@ -205,7 +209,10 @@ int main(int argc, char **argv) {
     uint32_t accepted = 0, rejected = 0;
     double err2 = 0;
     size_t n_err = 0;
-    for (int r = 0; r < reps; ++r) {
+    /* r = -1: untimed pass that writes the dump (the prior copy it needs
+     * would warm the cache for the timed calls) */
+    for (int r = dump ? -1 : 0; r < reps; ++r) {
+        const int timed = timing && r >= 0;
         bl_filter f;
         if ((rc = bl_filter_init(&f, &cfg)) != BL_OK) die("bl_filter_init", rc);
         double x0, y0, th0;
@@ -229,20 +236,21 @@ int main(int argc, char **argv) {
         for (size_t k = 0; k < n_ev; ++k) {
             const event_t *e = &ev[k];
             if (e->kind == 0) {
-                const int64_t a = timing ? now_ns() : 0;
+                const int64_t a = timed ? now_ns() : 0;
                 rc = bl_filter_predict_odometry(&f, e->t_us, (bl_real)e->dl_m, (bl_real)e->dr_m);
-                if (timing) pred_ns[np++] = now_ns() - a - timer_ns;
+                if (timed) pred_ns[np++] = now_ns() - a - timer_ns;
                 if (rc != BL_OK) die("bl_filter_predict_odometry", rc);
             } else {
                 bl_pulse_result res;
-                bl_filter prior = f;
-                const int64_t a = timing ? now_ns() : 0;
+                bl_filter prior;
+                if (r < 0) prior = f;
+                const int64_t a = timed ? now_ns() : 0;
                 rc = bl_filter_fuse_pulse(&f, e->beacon, e->t_us, e->receiver, &res);
-                if (timing) fuse_ns[nf++] = now_ns() - a - timer_ns;
+                if (timed) fuse_ns[nf++] = now_ns() - a - timer_ns;
                 if (rc != BL_OK) die("bl_filter_fuse_pulse", rc);
-                if (res.status == BL_PULSE_ACCEPTED) accepted++;
-                if (res.status == BL_PULSE_REJECTED) rejected++;
-                if (dump && r == 0) {
+                if (r >= 0 && res.status == BL_PULSE_ACCEPTED) accepted++;
+                if (r >= 0 && res.status == BL_PULSE_REJECTED) rejected++;
+                if (r < 0) {
                     for (int i = 0; i < BL_FILTER_NX; ++i) {
                         /* t0 as firing time of this pulse relative to the state time */
                         const double v = i == BL_IX_T0 ? (double)(res.fire_us - prior.t_us_) * 1e-6 : (double)prior.x_[i];
@@ -266,7 +274,53 @@ int main(int argc, char **argv) {
         }
     }
     if (dump) fclose(dump);
-    const char *real_name = sizeof(bl_real) == sizeof(double) ? "double" : "float";
+
+    /* Sequencer: each pulse of the stream heard by three neighbouring
+     * receivers 0.15 ms apart (beacon 1 flagged as double), pushed and
+     * popped the way a main loop does; timed in batches (a call is too
+     * short to time alone). */
+    int64_t seq_ns_per_det = 0;
+    size_t seq_dets = 0;
+    if (timing) {
+        bl_seq_config sc;
+        if ((rc = bl_sequencer_config_from_site(&cfg, 0, &sc)) != BL_OK) die("bl_sequencer_config_from_site", rc);
+        int64_t *batch_ns = calloc((size_t)reps, sizeof(int64_t));
+        if (batch_ns == NULL) die("calloc", BL_EFULL);
+        for (int r = 0; r < reps; ++r) {
+            bl_sequencer seq;
+            if ((rc = bl_sequencer_init(&seq, &sc)) != BL_OK) die("bl_sequencer_init", rc);
+            size_t dets = 0, assigned = 0;
+            const int64_t a = now_ns();
+            for (size_t k = 0; k < n_ev; ++k) {
+                if (ev[k].kind != 1) continue;
+                for (uint32_t j = 0; j < 3; ++j) {
+                    bl_seq_detection d;
+                    d.time_us = ev[k].t_us + 150 * (int64_t)j;
+                    d.receiver = (ev[k].receiver + j) % cfg.receiver_count;
+                    d.double_pulse = ev[k].beacon == 0;
+                    d.amplitude_mv = 1000;
+                    d.width_us = 2500;
+                    bl_seq_pulse pl;
+                    while (bl_sequencer_pop(&seq, d.time_us, &pl) == 1) assigned += pl.status == BL_SEQ_ASSIGNED;
+                    if ((rc = bl_sequencer_push(&seq, &d)) != BL_OK) die("bl_sequencer_push", rc);
+                    dets++;
+                }
+            }
+            bl_seq_pulse pl;
+            while (bl_sequencer_pop(&seq, INT64_MAX, &pl) == 1) assigned += pl.status == BL_SEQ_ASSIGNED;
+            batch_ns[r] = (now_ns() - a) / (int64_t)dets;
+            seq_dets = dets;
+            if (assigned + 6 < n_pulses) {
+                fprintf(stderr, "bench_speed: sequencer numbered only %zu of %zu pulses\n", assigned, n_pulses);
+                return 1;
+            }
+        }
+        seq_ns_per_det = median(batch_ns, (size_t)reps);
+        free(batch_ns);
+        printf("%s: sequencer push+pop %lld ns per detection (%zu detections, 3 receivers per pulse)\n", real_name_of(),
+               (long long)seq_ns_per_det, seq_dets);
+    }
+    const char *real_name = real_name_of();
     const int64_t fuse_med = timing ? median(fuse_ns, nf) : 0;
     const int64_t pred_med = timing ? median(pred_ns, np) : 0;
     if (timing) {

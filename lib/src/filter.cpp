@@ -49,8 +49,35 @@ real receiver_angle(const bl_config *cfg, uint32_t k)
 
 void symmetrise(M8 &P)
 {
-    const M8 Pt = P.transpose();
-    P = real(0.5) * (P + Pt);
+    for (int r = 0; r < NX; ++r)
+        for (int c = r + 1; c < NX; ++c) P(r, c) = P(c, r) = real(0.5) * (P(r, c) + P(c, r));
+}
+
+// Kleeman eq. 6 for a transition Jacobian F = I + D with few non-zero
+// entries D(r, c) (the models touch 2..7 entries): P = F P Fᵀ computed in
+// place as P += D P (row updates), then P += P Dᵀ (column updates), O(n) per
+// entry and no 8x8 temporary. In place is exact when every row used as a
+// source c is updated (as a target r) only after its last use: the entry
+// lists below put the heading row (source of x, y; target of ω) last.
+struct SparseEntry {
+    int r, c;
+    real v;
+};
+void propagate(M8 &P, const SparseEntry *d, int nd)
+{
+    for (int k = 0; k < nd; ++k) P.row(d[k].r) += d[k].v * P.row(d[k].c);
+    for (int k = 0; k < nd; ++k) P.col(d[k].r) += d[k].v * P.col(d[k].c);
+}
+
+// Joseph form (Kleeman eq. 11) for a scalar measurement, expanded:
+// (I - K H) P (I - K H)ᵀ + K R Kᵀ = P - K uᵀ - u Kᵀ + (H u + R) K Kᵀ with
+// u = P Hᵀ. Holds for any gain K (the IEKF's last-iterate gain included),
+// O(n²) instead of two 8x8 products.
+void joseph_update(M8 &P, const V8 &K, const V8 &u, real s)
+{
+    P.noalias() -= K * u.transpose();
+    P.noalias() -= u * K.transpose();
+    P.noalias() += (s * K) * K.transpose();
 }
 
 // ---------------------------------------------------------------- models
@@ -117,8 +144,12 @@ bool pulse_model(const bl_config *cfg, const V8 &x, const bl_pulse_geometry &g, 
 // form, Vander et al. 2011 eq. 2):
 //   Δc = (dL + dR)/2, Δθ = (dR - dL)/b,
 //   x' = x + Δc cos(θ + Δθ/2), y' = y + Δc sin(θ + Δθ/2), θ' = θ + Δθ.
-void odometry_model(real wheel_base_m, const V8 &x, real dl, real dr, V8 &xo, M8 *F,
-                    bl::Mat<NX, 2> *G)
+// Jacobians: F = I + {(x,θ): -Δc sin φ, (y,θ): Δc cos φ}; G = ∂(x,y,θ)/∂(dL,dR).
+struct OdoJac {
+    real fx_th, fy_th;
+    real g[3][2];  // rows x, y, θ; columns dL, dR
+};
+void odometry_model(real wheel_base_m, const V8 &x, real dl, real dr, V8 &xo, OdoJac *J)
 {
     const real dc = real(0.5) * (dl + dr);
     const real dth = (dr - dl) / wheel_base_m;
@@ -128,26 +159,25 @@ void odometry_model(real wheel_base_m, const V8 &x, real dl, real dr, V8 &xo, M8
     xo(X) = x(X) + dc * c;
     xo(Y) = x(Y) + dc * sn;
     xo(TH) = x(TH) + dth;
-    if (F) {
-        F->setIdentity();
-        (*F)(X, TH) = -dc * sn;
-        (*F)(Y, TH) = dc * c;
-    }
-    if (G) {
-        G->setZero();
+    if (J) {
+        J->fx_th = -dc * sn;
+        J->fy_th = dc * c;
         const real k = real(1) / (real(2) * wheel_base_m);
-        (*G)(X, 0) = real(0.5) * c + dc * sn * k;
-        (*G)(X, 1) = real(0.5) * c - dc * sn * k;
-        (*G)(Y, 0) = real(0.5) * sn - dc * c * k;
-        (*G)(Y, 1) = real(0.5) * sn + dc * c * k;
-        (*G)(TH, 0) = -real(1) / wheel_base_m;
-        (*G)(TH, 1) = real(1) / wheel_base_m;
+        J->g[0][0] = real(0.5) * c + dc * sn * k;
+        J->g[0][1] = real(0.5) * c - dc * sn * k;
+        J->g[1][0] = real(0.5) * sn - dc * c * k;
+        J->g[1][1] = real(0.5) * sn + dc * c * k;
+        J->g[2][0] = -real(1) / wheel_base_m;
+        J->g[2][1] = real(1) / wheel_base_m;
     }
 }
 
 // Constant velocity and turn rate, midpoint heading (Kleeman 1992 eq. 15:
 // x(k+1) = x(k) + v T cos θ, ..., with θ(k+1) = θ(k) + ω T as in eq. 24).
-void cv_model(const V8 &x, real dt, V8 &xo, M8 *F)
+// Jacobian (Kleeman eq. 16 extended by ω) as the 7 entries of F - I, in the
+// order propagate() needs (heading row last).
+constexpr int kCvEntries = 7;
+void cv_model(const V8 &x, real dt, V8 &xo, SparseEntry *d)
 {
     const real phi = x(TH) + real(0.5) * x(W) * dt;
     const real c = std::cos(phi), sn = std::sin(phi);
@@ -155,16 +185,14 @@ void cv_model(const V8 &x, real dt, V8 &xo, M8 *F)
     xo(X) = x(X) + x(V) * dt * c;
     xo(Y) = x(Y) + x(V) * dt * sn;
     xo(TH) = x(TH) + x(W) * dt;
-    if (F) {
-        // Kleeman eq. 16 (linearised transition), extended by ω.
-        F->setIdentity();
-        (*F)(X, TH) = -x(V) * dt * sn;
-        (*F)(X, V) = dt * c;
-        (*F)(X, W) = -x(V) * dt * sn * real(0.5) * dt;
-        (*F)(Y, TH) = x(V) * dt * c;
-        (*F)(Y, V) = dt * sn;
-        (*F)(Y, W) = x(V) * dt * c * real(0.5) * dt;
-        (*F)(TH, W) = dt;
+    if (d) {
+        d[0] = {X, TH, -x(V) * dt * sn};
+        d[1] = {X, V, dt * c};
+        d[2] = {X, W, -x(V) * dt * sn * real(0.5) * dt};
+        d[3] = {Y, TH, x(V) * dt * c};
+        d[4] = {Y, V, dt * sn};
+        d[5] = {Y, W, x(V) * dt * c * real(0.5) * dt};
+        d[6] = {TH, W, dt};
     }
 }
 
@@ -180,10 +208,11 @@ void add_parameter_noise(const bl_config *cfg, M8 &P, real dt)
 void cv_predict(const bl_config *cfg, V8 &x, M8 &P, real dt)
 {
     V8 xo;
-    M8 F;
-    cv_model(x, dt, xo, &F);
-    // Kleeman eq. 6: P = Φ P Φᵀ + Q.
-    M8 Pn = F.lazyProduct(P).lazyProduct(F.transpose());
+    SparseEntry d[kCvEntries];
+    cv_model(x, dt, xo, d);
+    // Kleeman eq. 6: P = Φ P Φᵀ + Q (Φ = I + the 7 entries of cv_model).
+    M8 &Pn = P;
+    propagate(Pn, d, kCvEntries);
     // Q from white acceleration a (σ accel_noise) and angular acceleration α:
     // G_a = [½dt² cos θ, ½dt² sin θ, 0, dt, 0, ...], G_α = [0, 0, ½dt², 0, dt, ...].
     V8 ga = V8::Zero(), gw = V8::Zero();
@@ -199,7 +228,6 @@ void cv_predict(const bl_config *cfg, V8 &x, M8 &P, real dt)
     add_parameter_noise(cfg, Pn, dt);
     symmetrise(Pn);
     x = xo;
-    P = Pn;
 }
 
 // ------------------------------------------------------- time reference
@@ -518,16 +546,20 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     M8 P = cov(f);
 
     V8 xo;
-    M8 F;
-    bl::Mat<NX, 2> G;
-    odometry_model(cfg->wheel_base_m, x, d_left_m, d_right_m, xo, &F, &G);
-    // Kleeman eq. 6 with the input noise mapped through G: P = F P Fᵀ + G Q_u Gᵀ.
-    M8 Pn = F.lazyProduct(P).lazyProduct(F.transpose());
-    // Wheel noise: variance sigma_wheel_per_m² per metre rolled, per wheel.
+    OdoJac J;
+    odometry_model(cfg->wheel_base_m, x, d_left_m, d_right_m, xo, &J);
+    // Kleeman eq. 6 with the input noise mapped through G: P = F P Fᵀ + G Q_u Gᵀ
+    // (F = I + the two heading entries of odometry_model).
+    M8 &Pn = P;
+    const SparseEntry d[] = {{X, TH, J.fx_th}, {Y, TH, J.fy_th}};
+    propagate(Pn, d, 2);
+    // Wheel noise: variance sigma_wheel_per_m² per metre rolled, per wheel;
+    // G Q_u Gᵀ touches only the (x, y, θ) block.
     const real k2 = cfg->sigma_wheel_per_m * cfg->sigma_wheel_per_m;
-    const real ql = k2 * std::fabs(d_left_m), qr = k2 * std::fabs(d_right_m);
-    Pn.noalias() += (ql * G.col(0)) * G.col(0).transpose();
-    Pn.noalias() += (qr * G.col(1)) * G.col(1).transpose();
+    const real qu[2] = {k2 * std::fabs(d_left_m), k2 * std::fabs(d_right_m)};
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+            Pn(r, c) += J.g[r][0] * qu[0] * J.g[c][0] + J.g[r][1] * qu[1] * J.g[c][1];
     // Motion type (Kleeman §3.10): stationary, straight or turning.
     const bool moving = std::fabs(d_left_m) > real(1e-6) || std::fabs(d_right_m) > real(1e-6);
     const real dth = (d_right_m - d_left_m) / cfg->wheel_base_m;
@@ -543,7 +575,6 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     Pn(W, W) += sw * sw;
     add_parameter_noise(cfg, Pn, dt);
     x = xo;
-    P = Pn;
     if (dt > real(0)) {
         // Kleeman eq. 25: the wheel speeds are a measurement of v (and ω):
         // z_v = Δc/dt, z_ω = Δθ/dt, σ from the wheel noise, sequential
@@ -562,12 +593,9 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
             const V8 K = P.col(i) / sden;
             const real nu = zs[m] - x(i);
             x += K * nu;
-            // Joseph form (Kleeman eq. 11) for H = e_i: (I - K e_iᵀ) P (I - K e_iᵀ)ᵀ + K R Kᵀ.
-            M8 IKH = M8::Identity();
-            IKH.col(i) -= K;
-            M8 Pj = IKH.lazyProduct(P).lazyProduct(IKH.transpose());
-            Pj.noalias() += (rs[m] * K) * K.transpose();
-            P = Pj;
+            // Joseph form (Kleeman eq. 11) for H = e_i (u = P e_i).
+            const V8 u = P.col(i);
+            joseph_update(P, K, u, sden);
         }
     }
     symmetrise(P);
@@ -687,7 +715,7 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
     if (!pulse_model(cfg, x, g, &h0, &H)) return BL_EINVAL;
     // Kleeman eq. 7: innovation; its variance H P Hᵀ + R (eq. 9's bracket).
     const real nu0 = g.arrival_rel_s - h0;
-    const real S0 = H.dot(P * H.transpose()) + R;
+    const real S0 = H.dot(P.lazyProduct(H.transpose())) + R;
     res.innovation_s = nu0;
     res.innovation_sigma_s = std::sqrt(S0);
     res.test_ratio = std::fabs(nu0) / (gate * res.innovation_sigma_s);
@@ -732,7 +760,7 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
     R8 Hi = H;
     uint32_t it = 0;
     for (;;) {
-        const V8 PHt = P * Hi.transpose();
+        const V8 PHt = P.lazyProduct(Hi.transpose());
         const real Si = Hi.dot(PHt) + R;
         K = PHt / Si;
         const V8 xn = xbar + K * (g.arrival_rel_s - hi - Hi.dot(xbar - xi));
@@ -745,11 +773,11 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
             break;
         }
     }
-    // Joseph form (Kleeman eq. 11): P = (I - K H) P (I - K H)ᵀ + K R Kᵀ.
-    M8 IKH = M8::Identity();
-    IKH.noalias() -= K * Hi;
-    M8 Pn = IKH.lazyProduct(P).lazyProduct(IKH.transpose());
-    Pn.noalias() += (R * K) * K.transpose();
+    // Joseph form (Kleeman eq. 11): P = (I - K H) P (I - K H)ᵀ + K R Kᵀ, with H
+    // and K of the last iterate.
+    const V8 u = P.lazyProduct(Hi.transpose());
+    M8 Pn = P;
+    joseph_update(Pn, K, u, Hi.dot(u) + R);
     symmetrise(Pn);
     xi(TH) = bl::wrap_angle(xi(TH));
     if (!xi.allFinite() || !Pn.allFinite() || !(Pn(S, S) > 0) || !(xi(S) > 0) || !(xi(T) > 0))
@@ -847,7 +875,7 @@ extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_in
     e.fire_us = f->t_us_ + int64_t(std::llround(double(fire_rel) * 1e6));
     e.arrival_us = f->t_us_ + int64_t(std::llround(double(h) * 1e6));
     e.flight_s = h - fire_rel;
-    e.sigma_s = std::sqrt(H.dot(P * H.transpose()) + sa * sa + cfg->firing_jitter_s * cfg->firing_jitter_s);
+    e.sigma_s = std::sqrt(H.dot(P.lazyProduct(H.transpose())) + sa * sa + cfg->firing_jitter_s * cfg->firing_jitter_s);
     *out = e;
     return BL_OK;
 }
@@ -880,18 +908,21 @@ extern "C" int bl_model_odometry(const bl_config *cfg, const bl_real x[8], bl_re
     if (!all_finite(x, 8) || !is_finite(d_left_m) || !is_finite(d_right_m) || !(cfg->wheel_base_m > 0))
         return BL_EINVAL;
     V8 xo;
-    M8 Fm;
-    bl::Mat<NX, 2> Gm;
-    odometry_model(cfg->wheel_base_m, Eigen::Map<const V8>(x), d_left_m, d_right_m, xo, &Fm, &Gm);
+    OdoJac J;
+    odometry_model(cfg->wheel_base_m, Eigen::Map<const V8>(x), d_left_m, d_right_m, xo, &J);
     Eigen::Map<V8> xm(x_out);
     xm = xo;
     if (F) {
         Eigen::Map<M8> Fmap(F);
-        Fmap = Fm;
+        Fmap.setIdentity();
+        Fmap(X, TH) = J.fx_th;
+        Fmap(Y, TH) = J.fy_th;
     }
     if (G) {
         Eigen::Map<bl::Mat<NX, 2>> Gmap(G);
-        Gmap = Gm;
+        Gmap.setZero();
+        for (int r = 0; r < 3; ++r)
+            for (int c = 0; c < 2; ++c) Gmap(r, c) = J.g[r][c];
     }
     return BL_OK;
 }
@@ -901,13 +932,14 @@ extern "C" int bl_model_constant_velocity(const bl_real x[8], bl_real dt_s, bl_r
     if (x == nullptr || x_out == nullptr) return BL_EINVAL;
     if (!all_finite(x, 8) || !is_finite(dt_s) || dt_s < 0) return BL_EINVAL;
     V8 xo;
-    M8 Fm;
-    cv_model(Eigen::Map<const V8>(x), dt_s, xo, &Fm);
+    SparseEntry d[kCvEntries];
+    cv_model(Eigen::Map<const V8>(x), dt_s, xo, d);
     Eigen::Map<V8> xm(x_out);
     xm = xo;
     if (F) {
         Eigen::Map<M8> Fmap(F);
-        Fmap = Fm;
+        Fmap.setIdentity();
+        for (int k = 0; k < kCvEntries; ++k) Fmap(d[k].r, d[k].c) += d[k].v;
     }
     return BL_OK;
 }

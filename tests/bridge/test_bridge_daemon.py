@@ -12,7 +12,7 @@ import time
 import pytest
 from pymavlink import mavutil
 
-from conftest import SITE, mavlink_listener
+from bridge_helpers import SITE, mavlink_listener
 
 MAV = mavutil.mavlink
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from pymavlink import mavutil
 
-from conftest import LOG_EPOCH_S, SITE, mavlink_listener
+from bridge_helpers import LOG_EPOCH_S, SITE, mavlink_listener
 
 MAV = mavutil.mavlink
 
@@ -63,7 +63,7 @@ def replay_run(bridge_bin, kleeman_log, tmp_path_factory):
     """Replay the 60 s log paced at 20x so a Python listener keeps up."""
     log, truth = kleeman_log
     out = tmp_path_factory.mktemp("replay")
-    from conftest import free_udp_port
+    from bridge_helpers import free_udp_port
     port = free_udp_port()
     est = out / "est.csv"
     stats = out / "stats.json"
@@ -189,6 +189,9 @@ def test_bad_frames_counted_good_frames_processed(bridge_bin, kleeman_log, tmp_p
         elif i % 97 == 6:
             out_lines.append("this line is not candump")
             injected["bad"] += 1
+        if i == 1000:  # error frames: bus-off (0x40), controller problem (0x04)
+            out_lines.append(f"{stamp} {iface} 20000040#0000000000000000")
+            out_lines.append(f"{stamp} {iface} 20000004#0004000000000000")
     bad_log = tmp_path / "bad.log"
     bad_log.write_text("\n".join(out_lines) + "\n")
     stats_path = tmp_path / "stats.json"
@@ -203,6 +206,8 @@ def test_bad_frames_counted_good_frames_processed(bridge_bin, kleeman_log, tmp_p
     assert stats["unknown_id"] == injected["unknown_id"]
     assert stats["out_of_range"] == injected["out_of_range"]
     assert stats["replay_bad_lines"] == injected["bad"]
+    assert stats["error_frames"] == 2
+    assert stats["bus_off"] == 1 and stats["controller_errors"] == 1
     counts = log_frame_counts(log)
     assert stats["frames_received"]["pulse_detection"] == counts["100"]
     assert stats["frames_received"]["wheel_encoders"] == counts["110"]

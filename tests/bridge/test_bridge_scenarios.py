@@ -7,7 +7,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import SITE, run_sim
+from bridge_helpers import SITE, run_sim
 
 BEACON_CYCLE_S = 6 * 0.150
 

@@ -30,6 +30,8 @@
 
 static int socket_errno;       /* socket() fails with this when set */
 static int ioctl_errno;        /* SIOCGIFINDEX fails with this when set */
+static bool if_up;             /* SIOCGIFFLAGS reports IFF_UP */
+static int flags_errno;        /* SIOCGIFFLAGS fails with this when set */
 static int sockets_open;
 static int closes;
 static struct can_filter seen_filters[8];
@@ -92,11 +94,20 @@ int __wrap_setsockopt(int fd, int level, int name, const void *val, socklen_t le
 int __wrap_ioctl(int fd, unsigned long req, ...)
 {
     assert_int_equal(fd, FAKE_FD);
-    assert_int_equal(req, SIOCGIFINDEX);
     va_list ap;
     va_start(ap, req);
     struct ifreq *ifr = va_arg(ap, struct ifreq *);
     va_end(ap);
+    assert_string_equal(ifr->ifr_name, "can7");
+    if (req == SIOCGIFFLAGS) {
+        if (flags_errno) {
+            errno = flags_errno;
+            return -1;
+        }
+        ifr->ifr_flags = if_up ? (IFF_UP | IFF_RUNNING | IFF_NOARP) : IFF_NOARP;
+        return 0;
+    }
+    assert_int_equal(req, SIOCGIFINDEX);
     if (ioctl_errno) {
         errno = ioctl_errno;
         return -1;
@@ -166,7 +177,8 @@ ssize_t __wrap_recvmsg(int fd, struct msghdr *mh, int flags)
 static int reset(void **state)
 {
     (void)state;
-    socket_errno = ioctl_errno = 0;
+    socket_errno = ioctl_errno = flags_errno = 0;
+    if_up = true;
     sockets_open = closes = 0;
     seen_filter_count = 0;
     seen_err_mask = 0;
@@ -327,25 +339,69 @@ static void test_enetdown_then_back(void **state)
     struct can_msg m;
     assert_int_equal(can_in_read(&ci, &m), 1);
     assert_int_equal(can_in_read(&ci, &m), -ENETDOWN);
-    assert_int_equal(ci.fd, -1);          /* closed, not fatal */
-    assert_int_equal(closes, 1);
+    /* link down: the bound socket is kept (frames flow again as soon as
+     * the link is up), not fatal */
+    assert_int_equal(ci.fd, FAKE_FD);
+    assert_true(ci.link_down);
+    assert_int_equal(closes, 0);
     assert_int_equal(ci.c.downs, 1);
     assert_int_equal(ci.last_errno, ENETDOWN);
-    /* still down: the retry fails while the interface is gone */
-    ioctl_errno = ENODEV;
-    assert_int_equal(can_in_retry(&ci), -ENODEV);
-    assert_int_equal(ci.fd, -1);
-    /* back */
-    ioctl_errno = 0;
+    /* still down: retry says so, without reopening */
+    if_up = false;
+    assert_int_equal(can_in_retry(&ci), -ENETDOWN);
+    assert_int_equal(ci.fd, FAKE_FD);
+    /* up again */
+    if_up = true;
     assert_int_equal(can_in_retry(&ci), 0);
-    assert_int_equal(ci.c.reopens, 1);
+    assert_false(ci.link_down);
+    assert_int_equal(ci.c.reopens, 0);
     push_frame(0x110, 8, CAN_MTU);
     assert_int_equal(can_in_read(&ci, &m), 1);
     assert_int_equal(m.id, 0x110);
-    /* ENODEV (interface deleted) is handled the same way */
+    /* a frame also tells the link is up */
+    rxq[rx_len++].err = ENETDOWN;
+    assert_int_equal(can_in_read(&ci, &m), -ENETDOWN);
+    assert_int_equal(ci.c.downs, 2);
+    push_frame(0x120, 8, CAN_MTU);
+    assert_int_equal(can_in_read(&ci, &m), 1);
+    assert_false(ci.link_down);
+    /* ENODEV (interface deleted): closed, reopened by name */
     rxq[rx_len++].err = ENODEV;
     assert_int_equal(can_in_read(&ci, &m), -ENODEV);
-    assert_int_equal(ci.c.downs, 2);
+    assert_int_equal(ci.c.downs, 3);
+    assert_int_equal(ci.fd, -1);
+    assert_int_equal(sockets_open, 0);
+    ioctl_errno = ENODEV;
+    assert_int_equal(can_in_retry(&ci), -ENODEV);
+    ioctl_errno = 0;
+    assert_int_equal(can_in_retry(&ci), 0);
+    assert_int_equal(ci.c.reopens, 1);
+    can_in_close(&ci);
+}
+
+static void test_open_on_down_interface(void **state)
+{
+    (void)state;
+    struct can_in ci;
+    can_in_init(&ci, "can7");
+    if_up = false;
+    /* bound but down: reported, socket kept for when it comes up */
+    assert_int_equal(can_in_open(&ci), -ENETDOWN);
+    assert_int_equal(ci.fd, FAKE_FD);
+    assert_true(ci.link_down);
+    assert_int_equal(bound_ifindex, 42);
+    assert_int_equal(can_in_retry(&ci), -ENETDOWN);
+    /* deleted while down: the retry reopens by name */
+    flags_errno = ENODEV;
+    ioctl_errno = ENODEV;
+    assert_int_equal(can_in_retry(&ci), -ENODEV);
+    assert_int_equal(ci.fd, -1);
+    flags_errno = ioctl_errno = 0;
+    if_up = true;
+    assert_int_equal(can_in_retry(&ci), 0);
+    assert_int_equal(ci.fd, FAKE_FD);
+    assert_false(ci.link_down);
+    can_in_close(&ci);
     assert_int_equal(sockets_open, 0);
 }
 
@@ -372,6 +428,7 @@ int main(void)
         cmocka_unit_test_setup(test_read_frames_timestamps_and_drops, reset),
         cmocka_unit_test_setup(test_error_frames_and_bad_sizes, reset),
         cmocka_unit_test_setup(test_enetdown_then_back, reset),
+        cmocka_unit_test_setup(test_open_on_down_interface, reset),
         cmocka_unit_test_setup(test_eintr_retried, reset),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

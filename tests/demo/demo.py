@@ -45,7 +45,8 @@ def main() -> int:
         lst = rig.listen()
         rig.start_bridge()
         say("bridge up (HEARTBEAT received); starting the simulator")
-        sim = rig.start_sim("kleeman-lab", duration_s=args.duration)
+        sim = rig.start_sim("kleeman-lab", duration_s=args.duration,
+                            extra=["--odometry", str(out / "odometry.csv")])
         t0 = time.monotonic()
         beacons = {}
         seen_text = 0

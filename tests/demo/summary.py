@@ -28,6 +28,8 @@ def main() -> int:
     png = out / "kleeman-lab.png"
     cmd = [str(REPO / ".venv" / "bin" / "beaconloc-sim"), "plot", "--truth", str(out / "truth.csv"),
            "--estimates", str(out / "est.csv"), "--out", str(png)]
+    if (out / "odometry.csv").exists():
+        cmd += ["--odometry", str(out / "odometry.csv")]
     r = subprocess.run(cmd)
     if r.returncode != 0 or not png.exists():
         print(f"demo: plot failed ({' '.join(cmd)})")

@@ -161,9 +161,10 @@ class NodeClockProbe:
         import cantools
         self._db = cantools.database.load_file(str(DBC))
         self._pulse = self._db.get_message_by_name("PULSE_DETECTION")
-        self.bus = can.Bus(interface="socketcan", channel=iface,
-                           can_filters=[{"can_id": self._pulse.frame_id, "can_mask": 0x7FF}],
+        ours = [{"can_id": m.frame_id, "can_mask": 0x7FF} for m in self._db.messages]
+        self.bus = can.Bus(interface="socketcan", channel=iface, can_filters=ours,
                            receive_own_messages=False)
+        self.first_rx_mono_s: float | None = None  # first frame of any of our ids
         self.rx_real_s: list[float] = []
         self.node_us: list[int] = []
         # CLOCK_REALTIME - CLOCK_MONOTONIC (python-can stamps in realtime).
@@ -175,7 +176,11 @@ class NodeClockProbe:
     def _run(self) -> None:
         while not self._stop.is_set():
             msg = self.bus.recv(timeout=0.2)
-            if msg is None or msg.arbitration_id != self._pulse.frame_id or msg.dlc != 8:
+            if msg is None:
+                continue
+            if self.first_rx_mono_s is None:
+                self.first_rx_mono_s = msg.timestamp - self.real_minus_mono_s
+            if msg.arbitration_id != self._pulse.frame_id or msg.dlc != 8:
                 continue
             try:
                 sig = self._pulse.decode(msg.data)
@@ -440,8 +445,8 @@ class LiveRun:
     scenario: str
     sim_rc: int
     bridge_rc: int | None
-    t_sim_start_mono_s: float
-    t_sim_end_mono_s: float
+    t_sim_start_mono_s: float  # the simulator's first frame on the bus (CLOCK_MONOTONIC, s)
+    t_sim_end_mono_s: float    # the simulator process ended
     timesync_sent: dict  # ts1 -> monotonic send time, s
     odometry: list
     heartbeats: list
@@ -490,12 +495,18 @@ def run_live(rig: Rig, scenario: str, duration_s: float, *, seed: int | None = N
     rig.start_bridge(site=site, extra=bridge_extra)
     probe = rig.watch_node_clock()
     sim = rig.start_sim(scenario, duration_s=duration_s, seed=seed)
-    t0 = time.monotonic()
+    # Times count from the simulator's first frame on the bus (its start-up,
+    # slow in an emulated VM, is not part of the scenario).
+    launch_deadline = time.monotonic() + 240.0
+    while probe.first_rx_mono_s is None:
+        assert sim.alive(), f"simulator exited {sim.popen.returncode} before sending\n{rig.logs()}"
+        assert time.monotonic() < launch_deadline, f"no frame from the simulator\n{rig.logs()}"
+        time.sleep(0.05)
+    t0 = probe.first_rx_mono_s
     pending = sorted(actions or [], key=lambda a: a[0])
     timesync_sent = {}
     next_ts = t0 + timesync_every_s if timesync_every_s else math.inf
-    # Python start-up in an emulated VM is slow: allow it on top of the run.
-    deadline = t0 + duration_s + 240.0
+    deadline = t0 + duration_s + 60.0
     while sim.alive():
         now = time.monotonic()
         assert now < deadline, f"simulator still running after {now - t0:.0f} s\n{rig.logs()}"

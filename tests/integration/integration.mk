@@ -2,16 +2,23 @@
 # tests/demo). The bus lives in a virtme-ng VM where the host has no vcan.
 #   make test-integration [IT_ARGS='-k nominal']   the pytest suite, one VM boot
 #   make bench-accuracy                            20 seeds x 2 scenarios, --replay
-#   make demo                                      kleeman-lab live, plot in build/demo/
+#   make demo [DEMO_S=120]                         kleeman-lab live, plot in build/demo/
 #   make vm-check                                  boot, python-can round trip on vcan0
+#   make test-vm-runner                            the runner's own tests (in make test-py)
 
 IT_RESULTS   := $(BUILD)/vm
 DEMO_OUT     := $(BUILD)/demo
 IT_BRIDGE    := $(BUILD)/bridge/beaconloc-bridge
 VM_RUN       := tests/vm/run-in-vm.sh
 IT_ARGS      ?=
+DEMO_S       ?= 120
 
-.PHONY: test-integration bench-accuracy demo vm-check
+.PHONY: test-integration bench-accuracy demo vm-check test-vm-runner
+
+# The runner's own logic (host side, no VM): part of `make test-py`.
+PY_TESTS += test-vm-runner
+test-vm-runner: $(SETUP_STAMP)
+	PYTHONDONTWRITEBYTECODE=1 $(PYTEST) -p no:cacheprovider -q tests/vm/test_run_in_vm.py
 
 test-integration: $(SETUP_STAMP) $(IT_BRIDGE)
 	$(VM_RUN) --results $(IT_RESULTS) --junit junit.xml \
@@ -24,5 +31,5 @@ bench-accuracy: $(SETUP_STAMP) $(IT_BRIDGE)
 	$(PY) tests/bench/accuracy.py --bridge $(IT_BRIDGE) --out $(BUILD)/bench/accuracy
 
 demo: $(SETUP_STAMP) $(IT_BRIDGE)
-	$(VM_RUN) --results $(DEMO_OUT) --tail live.txt tests/demo/demo.sh
+	$(VM_RUN) --results $(DEMO_OUT) --tail live.txt tests/demo/demo.sh $(DEMO_S)
 	$(PY) tests/demo/summary.py $(DEMO_OUT)

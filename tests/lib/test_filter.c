@@ -20,7 +20,6 @@
 
 /* ---- seeded RNG (xorshift64*) ---- */
 static uint64_t rng_state = 1;
-static void rng_seed(uint64_t s) { rng_state = s ? s : 1; }
 static double rng_uniform(void)
 {
     rng_state ^= rng_state >> 12;
@@ -28,17 +27,30 @@ static double rng_uniform(void)
     rng_state ^= rng_state >> 27;
     return (double)((rng_state * 2685821657736338717ull) >> 11) * (1.0 / 9007199254740992.0);
 }
-static double rng_gauss(void)
+static int rng_have_spare;
+static double rng_spare;
+static void rng_seed(uint64_t s)
 {
+    rng_state = s ? s : 1;
+    rng_have_spare = 0;
+}
+static double rng_gauss(void) /* Box-Muller, both outputs used */
+{
+    if (rng_have_spare) {
+        rng_have_spare = 0;
+        return rng_spare;
+    }
     double u1 = rng_uniform(), u2 = rng_uniform();
     if (u1 < 1e-300) u1 = 1e-300;
-    return sqrt(-2.0 * log(u1)) * cos(2 * PI * u2);
+    const double r = sqrt(-2.0 * log(u1));
+    rng_spare = r * sin(2 * PI * u2);
+    rng_have_spare = 1;
+    return r * cos(2 * PI * u2);
 }
 static double wrap(double a)
 {
-    while (a > PI) a -= 2 * PI;
-    while (a <= -PI) a += 2 * PI;
-    return a;
+    a = remainder(a, 2 * PI);
+    return a <= -PI ? a + 2 * PI : a;
 }
 
 /* ================================================================ model
@@ -223,9 +235,8 @@ static void test_pulse_model_moving_robot(void **state)
 
 /* ============================================================ simulator */
 
-#define SIM_DT 0.005           /* truth step (s) */
-#define SIM_MAX (200 * 300)    /* up to 300 s of truth */
-#define ENC_EVERY 2            /* encoder frame every 2 truth steps (100 Hz) */
+#define SIM_DT 0.01            /* wheel step (s) */
+#define ENC_EVERY 1            /* encoder frame every step (100 Hz) */
 
 typedef struct sim_params {
     double duration_s;
@@ -242,58 +253,28 @@ typedef struct sim_params {
     uint64_t seed;
 } sim_params;
 
-typedef struct sim_truth {
-    int n;
-    double x[SIM_MAX + 1], y[SIM_MAX + 1], th[SIM_MAX + 1], v[SIM_MAX + 1], w[SIM_MAX + 1];
-} sim_truth;
+static const sim_params *sim_sp;
 
-static sim_truth truth;
-
+/* Truth, analytic: stationary at (6, 3) heading +x, then round a circle of
+ * radius 3 m about the room centre, counter-clockwise, speed
+ * v = 0.4 + 0.2 sin(2π τ / 15 s) (so ω = v / 3); a kidnap adds an offset. */
+static void truth_vw(double t, double *v, double *w)
+{
+    const double tau = t - sim_sp->still_s;
+    *v = tau < 0 ? 0 : 0.4 + 0.2 * sin(2 * PI * tau / 15.0);
+    *w = *v / 3.0;
+}
 static void truth_at(double t, double *x, double *y, double *th)
 {
-    double k = t / SIM_DT;
-    if (k < 0) k = 0;
-    int i = (int)floor(k);
-    if (i >= truth.n) i = truth.n - 1;
-    const double f = k - i;
-    *x = truth.x[i] + f * (truth.x[i + 1] - truth.x[i]);
-    *y = truth.y[i] + f * (truth.y[i + 1] - truth.y[i]);
-    *th = truth.th[i] + f * wrap(truth.th[i + 1] - truth.th[i]);
-}
-
-/* Circle of radius 3 m round the room centre, speed modulated, after a
- * stationary start; a kidnap teleports the robot. */
-static void sim_generate_truth(const sim_params *sp)
-{
-    truth.n = (int)(sp->duration_s / SIM_DT) + 1;
-    assert_true(truth.n <= SIM_MAX);
-    double x = 6, y = 3, th = 0;
-    for (int i = 0; i <= truth.n; ++i) {
-        const double t = i * SIM_DT;
-        double v = 0, w = 0;
-        if (t >= sp->still_s) {
-            v = 0.4 + 0.2 * sin(2 * PI * (t - sp->still_s) / 15.0);
-            w = v / 3.0;
-        }
-        truth.x[i] = x;
-        truth.y[i] = y;
-        truth.th[i] = th;
-        truth.v[i] = v;
-        truth.w[i] = w;
-        /* exact arc over SIM_DT */
-        const double dth = w * SIM_DT;
-        if (fabs(dth) > 1e-12) {
-            x += v / w * (sin(th + dth) - sin(th));
-            y -= v / w * (cos(th + dth) - cos(th));
-        } else {
-            x += v * SIM_DT * cos(th);
-            y += v * SIM_DT * sin(th);
-        }
-        th = wrap(th + dth);
-        if (sp->kidnap_at_s >= 0 && t < sp->kidnap_at_s && t + SIM_DT >= sp->kidnap_at_s) {
-            x += sp->kidnap_dx_m;
-            y += sp->kidnap_dy_m;
-        }
+    const double tau = t - sim_sp->still_s;
+    double phi = 0; /* angle travelled round the circle = heading */
+    if (tau > 0) phi = (0.4 * tau + 0.2 * 15.0 / (2 * PI) * (1 - cos(2 * PI * tau / 15.0))) / 3.0;
+    *x = 6 + 3 * sin(phi);
+    *y = 6 - 3 * cos(phi);
+    *th = wrap(phi);
+    if (sim_sp->kidnap_at_s >= 0 && t >= sim_sp->kidnap_at_s) {
+        *x += sim_sp->kidnap_dx_m;
+        *y += sim_sp->kidnap_dy_m;
     }
 }
 
@@ -303,56 +284,42 @@ typedef struct sim_pulse {
     int echo;
 } sim_pulse;
 
-#define MAX_PULSES 4000
-static sim_pulse pulses[MAX_PULSES];
-static int n_pulses;
-
-static int cmp_pulse(const void *a, const void *b)
+/* Pulse of firing k (beacon k mod N at t0 + k·T): received by the receiver
+ * facing the beacon; flight time from |r(ta) - b| = s (ta - tf) by fixed
+ * point on the true path; Gaussian arrival noise; sometimes an echo. */
+static sim_pulse sim_pulse_of(const sim_params *sp, const bl_config *cfg, long k)
 {
-    const double d = ((const sim_pulse *)a)->arrival_s - ((const sim_pulse *)b)->arrival_s;
-    return d < 0 ? -1 : d > 0;
-}
-
-static void sim_generate_pulses(const sim_params *sp, const bl_config *cfg)
-{
-    n_pulses = 0;
-    for (int k = 0;; ++k) {
-        const double tf = sp->t0_true_s + k * sp->T_true_s;
-        if (tf > sp->duration_s - 0.2) break;
-        const uint32_t b = (uint32_t)(k % (int)cfg->beacon_count);
-        const bl_beacon *bc = &cfg->beacons[b];
-        double x, y, th;
-        truth_at(tf, &x, &y, &th);
-        /* receiver facing the beacon */
-        const double bearing = wrap(atan2(bc->y_m - y, bc->x_m - x) - th);
-        const double step = 2 * PI / cfg->receiver_count;
-        uint32_t rx = (uint32_t)lround(wrap(bearing) / step + cfg->receiver_count) % cfg->receiver_count;
-        const double alpha = rx * step;
-        /* flight time: fixed point on |r(ta) - b| = s (ta - tf) */
-        double ta = tf + 0.02;
-        for (int it = 0; it < 20; ++it) {
-            truth_at(ta, &x, &y, &th);
-            const double rxp = x + cfg->ring_radius_m * cos(th + alpha);
-            const double ryp = y + cfg->ring_radius_m * sin(th + alpha);
-            const double dz = cfg->receiver_height_m - bc->z_m;
-            const double d = sqrt((rxp - bc->x_m) * (rxp - bc->x_m) + (ryp - bc->y_m) * (ryp - bc->y_m) + dz * dz);
-            ta = tf + d / sp->s_true_mps;
-        }
-        sim_pulse p = {ta + sp->sigma_arrival_s * rng_gauss(), b, rx, 0};
-        if (sp->echo_prob > 0 && rng_uniform() < sp->echo_prob) {
-            p.arrival_s += 0.003 + 0.02 * rng_uniform(); /* 1..8 m longer path */
-            p.echo = 1;
-        }
-        assert_true(n_pulses < MAX_PULSES);
-        pulses[n_pulses++] = p;
+    const double tf = sp->t0_true_s + (double)k * sp->T_true_s;
+    const uint32_t b = (uint32_t)(k % (long)cfg->beacon_count);
+    const bl_beacon *bc = &cfg->beacons[b];
+    double x, y, th;
+    truth_at(tf, &x, &y, &th);
+    const double bearing = wrap(atan2(bc->y_m - y, bc->x_m - x) - th);
+    const double step = 2 * PI / cfg->receiver_count;
+    const uint32_t rx = (uint32_t)lround(bearing / step + cfg->receiver_count) % cfg->receiver_count;
+    const double alpha = rx * step;
+    double ta = tf + 0.02;
+    for (int it = 0; it < 6; ++it) { /* contracts by v/s per step */
+        truth_at(ta, &x, &y, &th);
+        const double rxp = x + cfg->ring_radius_m * cos(th + alpha);
+        const double ryp = y + cfg->ring_radius_m * sin(th + alpha);
+        const double dz = cfg->receiver_height_m - bc->z_m;
+        const double d = sqrt((rxp - bc->x_m) * (rxp - bc->x_m) + (ryp - bc->y_m) * (ryp - bc->y_m) + dz * dz);
+        ta = tf + d / sp->s_true_mps;
     }
-    qsort(pulses, (size_t)n_pulses, sizeof pulses[0], cmp_pulse);
+    sim_pulse p = {ta + sp->sigma_arrival_s * rng_gauss(), b, rx, 0};
+    if (sp->echo_prob > 0 && rng_uniform() < sp->echo_prob) {
+        p.arrival_s += 0.003 + 0.02 * rng_uniform(); /* 1..8 m longer path */
+        p.echo = 1;
+    }
+    return p;
 }
 
 typedef struct sim_stats {
     int samples;        /* estimates compared after settle_s */
     int within_3sigma;  /* |ex| <= 3σx and |ey| <= 3σy */
     double sum_e2;      /* position error² sum */
+    double sum_nees;    /* 2D position NEES sum (chi-square, 2 dof if consistent) */
     double max_e;
     double final_e;     /* position error at the end */
     double final_sos;
@@ -365,6 +332,7 @@ typedef struct sim_stats {
     int echoes, echoes_rejected, direct_rejected;
     double max_abs_t0_offset_s;
     double final_theta_err;
+    long sample_every;  /* compare every n-th encoder frame (input; 0/1 = all) */
 } sim_stats;
 
 static int64_t to_us(const sim_params *sp, double t_s) { return sp->time_offset_us + (int64_t)llround(t_s * 1e6); }
@@ -374,49 +342,52 @@ static void sim_run(const sim_params *sp, const bl_config *cfg_in, double settle
     bl_config cfg = *cfg_in;
     cfg.speed_of_sound_mps = (bl_real)sp->initial_sos_mps;
     rng_seed(sp->seed);
-    sim_generate_truth(sp);
-    sim_generate_pulses(sp, &cfg);
+    sim_sp = sp;
+    const long every = st->sample_every;
     memset(st, 0, sizeof *st);
+    st->sample_every = every;
 
-    bl_filter f;
+    static bl_filter f;
     assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
     const double tick = 2 * PI * (double)cfg.wheel_radius_m / cfg.ticks_per_rev; /* m per tick */
     double wheel_l = 0, wheel_r = 0;   /* true wheel travel (m) */
-    long ticks_l = 0, ticks_r = 0;     /* reported ticks (quantised, noisy) */
-    long prev_l = 0, prev_r = 0;
-    int next_pulse = 0;
+    long prev_l = 0, prev_r = 0;       /* reported cumulative ticks */
+    long next_fire = 0;
+    sim_pulse next = sim_pulse_of(sp, &cfg, next_fire);
     const double half = 0.5 * (double)cfg.wheel_base_m;
-    for (int i = 1; i < truth.n; ++i) {
-        const double t = i * SIM_DT;
-        /* true wheel motion over the previous step, plus slip noise */
-        const double v = truth.v[i - 1], w = truth.w[i - 1];
+    const long steps = lround(sp->duration_s / SIM_DT);
+    for (long i = 1; i <= steps; ++i) {
+        const double t = (double)i * SIM_DT;
+        /* true wheel motion over the step (midpoint speeds), plus slip noise */
+        double v, w;
+        truth_vw(t - 0.5 * SIM_DT, &v, &w);
         const double dl = (v - w * half) * SIM_DT, dr = (v + w * half) * SIM_DT;
-        wheel_l += dl + 0.003 * sqrt(fabs(dl)) * rng_gauss();
-        wheel_r += dr + 0.003 * sqrt(fabs(dr)) * rng_gauss();
+        wheel_l += dl + 0.004 * sqrt(fabs(dl)) * rng_gauss();
+        wheel_r += dr + 0.004 * sqrt(fabs(dr)) * rng_gauss();
         if (i % ENC_EVERY) continue;
-        ticks_l = lround(wheel_l / tick);
-        ticks_r = lround(wheel_r / tick);
+        const long ticks_l = lround(wheel_l / tick), ticks_r = lround(wheel_r / tick);
         if (st->started) {
-            const int rc = bl_filter_predict_odometry(&f, to_us(sp, t), (bl_real)((ticks_l - prev_l) * tick),
-                                                      (bl_real)((ticks_r - prev_r) * tick));
+            const int rc = bl_filter_predict_odometry(&f, to_us(sp, t), (bl_real)((double)(ticks_l - prev_l) * tick),
+                                                      (bl_real)((double)(ticks_r - prev_r) * tick));
             assert_int_equal(rc, BL_OK);
         }
         prev_l = ticks_l;
         prev_r = ticks_r;
-        while (next_pulse < n_pulses && pulses[next_pulse].arrival_s <= t) {
-            const sim_pulse *p = &pulses[next_pulse++];
+        while (next.arrival_s <= t) {
             bl_pulse_result res;
-            const int rc = bl_filter_fuse_pulse(&f, p->beacon, to_us(sp, p->arrival_s), p->receiver, &res);
+            const int rc = bl_filter_fuse_pulse(&f, next.beacon, to_us(sp, next.arrival_s), next.receiver, &res);
             assert_int_equal(rc, BL_OK);
             if (res.status == BL_PULSE_STARTED) st->started = 1;
-            if (p->echo) {
+            if (next.echo) {
                 st->echoes++;
                 if (res.status == BL_PULSE_REJECTED) st->echoes_rejected++;
             } else if (res.status == BL_PULSE_REJECTED && t > settle_s) {
                 st->direct_rejected++;
             }
+            next = sim_pulse_of(sp, &cfg, ++next_fire);
         }
         if (!st->started) continue;
+        if (st->sample_every > 1 && (i / ENC_EVERY) % st->sample_every) continue;
         bl_estimate e;
         assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
         bl_real xs[8];
@@ -433,6 +404,10 @@ static void sim_run(const sim_params *sp, const bl_config *cfg_in, double settle
             st->samples++;
             if (fabs(ex) <= 3 * sqrt(e.cov[0]) && fabs(ey) <= 3 * sqrt(e.cov[6])) st->within_3sigma++;
             st->sum_e2 += err * err;
+            {
+                const double a = e.cov[0], b = e.cov[1], c = e.cov[6];
+                st->sum_nees += (c * ex * ex - 2 * b * ex * ey + a * ey * ey) / (a * c - b * b);
+            }
             if (err > st->max_e) st->max_e = err;
         }
         st->final_e = err;
@@ -469,9 +444,9 @@ static sim_params default_sim(void)
 
 static void print_stats(const char *name, const sim_stats *st)
 {
-    print_message("%s: samples %d within3σ %.1f%% rms %.1f mm max %.1f mm final %.1f mm sos %.2f±%.2f "
+    print_message("%s: NEES %.2f samples %d within3σ %.1f%% rms %.1f mm max %.1f mm final %.1f mm sos %.2f±%.2f "
                   "T %.7f resets %u acc %u rej %u echoes %d/%d rejected, direct rejected %d, heading err %.3f\n",
-                  name, st->samples, 100.0 * st->within_3sigma / (st->samples ? st->samples : 1),
+                  name, st->sum_nees / (st->samples ? st->samples : 1), st->samples, 100.0 * st->within_3sigma / (st->samples ? st->samples : 1),
                   1000 * sqrt(st->sum_e2 / (st->samples ? st->samples : 1)), 1000 * st->max_e,
                   1000 * st->final_e, st->final_sos, st->final_sigma_sos, st->final_T, st->resets,
                   st->accepted, st->rejected, st->echoes_rejected, st->echoes, st->direct_rejected,
@@ -486,7 +461,7 @@ static void test_moving_robot_consistent(void **state)
     bl_config cfg;
     assert_int_equal(bl_config_default(&cfg), BL_OK);
     sim_params sp = default_sim();
-    sim_stats st;
+    sim_stats st = {0};
     sim_run(&sp, &cfg, 25.0, &st);
     print_stats("moving", &st);
     assert_true(st.started);
@@ -496,6 +471,9 @@ static void test_moving_robot_consistent(void **state)
     assert_true(sqrt(st.sum_e2 / st.samples) < 0.05); /* Kleeman 1992: 40 mm path-error σ */
     assert_true(st.max_e < 0.20);
     assert_int_equal(st.resets, 0);
+    /* covariance neither far too optimistic nor far too conservative:
+     * mean NEES of a consistent filter is 2 (2 dof) */
+    assert_true(st.sum_nees / st.samples > 0.7 && st.sum_nees / st.samples < 3.5);
     assert_true(fabs(st.final_sos - sp.s_true_mps) < 1.0);
     assert_true(fabs(st.final_T - sp.T_true_s) < 2e-6);
     assert_true(st.final_theta_err < 0.05);
@@ -509,20 +487,24 @@ static void test_speed_of_sound_convergence(void **state)
     bl_config cfg;
     assert_int_equal(bl_config_default(&cfg), BL_OK);
     const double guesses[3] = {330, 343, 360};
+    double final[3];
     for (int g = 0; g < 3; ++g) {
-        sim_params sp = default_sim();
+        sim_params sp = default_sim(); /* the same data for the three guesses, as in Fig. 8 */
+        sp.duration_s = 180;
         sp.initial_sos_mps = guesses[g];
-        sp.seed = 100 + (uint64_t)g;
-        sim_stats st;
+        sim_stats st = {0};
         sim_run(&sp, &cfg, 40.0, &st);
         print_stats(g == 0 ? "sos 330" : g == 1 ? "sos 343" : "sos 360", &st);
         assert_true(st.started);
         assert_int_equal(st.nan_seen, 0);
-        assert_true(fabs(st.final_sos - sp.s_true_mps) < 1.0);
-        assert_true(fabs(st.final_sos - sp.s_true_mps) < 3 * st.final_sigma_sos + 0.05);
-        assert_true(st.final_sigma_sos < 1.0);
+        assert_true(st.final_sigma_sos < 0.6);
+        assert_true(fabs(st.final_sos - sp.s_true_mps) < 3 * st.final_sigma_sos);
         assert_true(st.final_e < 0.10);
+        final[g] = st.final_sos;
     }
+    /* all three end on the same value */
+    assert_true(fabs(final[0] - final[1]) < 1.0 && fabs(final[1] - final[2]) < 1.0 &&
+                fabs(final[0] - final[2]) < 1.0); /* from 30 m/s apart */
 }
 
 /* Echoes (late arrivals) are rejected by the gate; direct pulses are not. */
@@ -534,7 +516,7 @@ static void test_echoes_rejected(void **state)
     sim_params sp = default_sim();
     sp.echo_prob = 0.10;
     sp.seed = 77;
-    sim_stats st;
+    sim_stats st = {0};
     sim_run(&sp, &cfg, 25.0, &st);
     print_stats("echoes", &st);
     assert_true(st.echoes > 40);
@@ -557,7 +539,7 @@ static void test_kidnap_recovers(void **state)
     sp.kidnap_dx_m = 2.0;
     sp.kidnap_dy_m = 2.5;
     sp.seed = 5;
-    sim_stats st;
+    sim_stats st = {0};
     sim_run(&sp, &cfg, 70.0, &st);
     print_stats("kidnap", &st);
     assert_true(st.resets >= 1 && st.resets <= 3);
@@ -574,7 +556,7 @@ static void test_24h_epoch(void **state)
     assert_int_equal(bl_config_default(&cfg), BL_OK);
     sim_params sp = default_sim();
     sp.duration_s = 120;
-    sim_stats a, b;
+    sim_stats a = {0}, b = {0};
     sim_run(&sp, &cfg, 30.0, &a);
     sp.time_offset_us = (int64_t)86400 * 1000000 + 123457;
     sim_run(&sp, &cfg, 30.0, &b);
@@ -586,6 +568,43 @@ static void test_24h_epoch(void **state)
     assert_true(rb < 0.05);
     assert_true(fabs(rb - ra) < 0.2 * ra + 0.002);
     assert_true(b.within_3sigma >= 0.95 * b.samples);
+}
+
+/* Really 24 h of simulated time at the nominal rates (100 Hz encoders,
+ * 6.7 pulses/s): 8.6 million predicts and 576,000 pulses. No NaN, no loss
+ * of accuracy (the last hour as good as the first), t0 offset below 1 µs.
+ * Skipped in the sanitizer build (too slow there; the 24 h-offset test
+ * above covers the clock arithmetic). */
+static void test_24h_real(void **state)
+{
+    (void)state;
+#if defined(__SANITIZE_ADDRESS__)
+    skip();
+#else
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    sim_params sp = default_sim();
+    sp.duration_s = 3600;
+    sim_stats first = {0}, day = {0};
+    first.sample_every = 100;
+    sim_run(&sp, &cfg, 30.0, &first);
+    sp.duration_s = 86400;
+    day.sample_every = 100;
+    sim_run(&sp, &cfg, 30.0, &day);
+    print_stats("1 h", &first);
+    print_stats("24 h", &day);
+    assert_int_equal(day.nan_seen, 0);
+    assert_true(day.samples > 86000);
+    assert_true(day.max_abs_t0_offset_s < 1e-6);
+    const double r1 = sqrt(first.sum_e2 / first.samples), r24 = sqrt(day.sum_e2 / day.samples);
+    assert_true(r24 < 0.05);
+    assert_true(r24 < 1.2 * r1 + 0.002);
+    assert_true(day.final_e < 0.15);
+    assert_true(day.within_3sigma >= 0.95 * day.samples);
+    assert_true(fabs(day.final_sos - sp.s_true_mps) < 1.0);
+    assert_true(fabs(day.final_T - sp.T_true_s) < 1e-6);
+    assert_int_equal(day.resets, 0);
+#endif
 }
 
 /* ===================================================== gate and API use */
@@ -821,6 +840,7 @@ int main(void)
         cmocka_unit_test(test_echoes_rejected),
         cmocka_unit_test(test_kidnap_recovers),
         cmocka_unit_test(test_24h_epoch),
+        cmocka_unit_test(test_24h_real),
     };
     return cmocka_run_group_tests_name(IS_FLOAT ? "filter (float)" : "filter (double)", tests, NULL, NULL);
 }

@@ -128,6 +128,26 @@ bool board_burst_pop(board_burst *out) {
 
 uint32_t board_burst_overruns(void) { return overruns; }
 
+/* Debugger-visible copy of the latest pose. */
+volatile board_pose board_last_pose;
+
+void board_publish(const board_pose *pose) {
+    board_last_pose.t_us = pose->t_us;
+    board_last_pose.x_m = pose->x_m;
+    board_last_pose.y_m = pose->y_m;
+    board_last_pose.theta_rad = pose->theta_rad;
+    board_last_pose.v_mps = pose->v_mps;
+    board_last_pose.var_x_m2 = pose->var_x_m2;
+    board_last_pose.var_y_m2 = pose->var_y_m2;
+    board_last_pose.reset_counter = pose->reset_counter;
+    board_last_pose.pulses_fused = pose->pulses_fused;
+    board_last_pose.pulses_rejected = pose->pulses_rejected;
+    board_last_pose.sequencer_spurious = pose->sequencer_spurious;
+    board_last_pose.burst_overruns = pose->burst_overruns;
+    board_last_pose.errors = pose->errors;
+    board_last_pose.converged = pose->converged;
+}
+
 /* Shared by every EXTI line 0..7: time each edge, queue complete bursts. */
 static void exti_receivers(void) {
     const uint32_t now = TIM_CNT(TIM2_BASE);

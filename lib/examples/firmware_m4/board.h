@@ -46,4 +46,18 @@ bool board_burst_pop(board_burst *out);
 /* Bursts lost because the queue was full (since reset). */
 uint32_t board_burst_overruns(void);
 
+/* The pose the firmware publishes (to CAN/UART on a real robot). */
+typedef struct board_pose {
+    int64_t t_us;
+    float x_m, y_m, theta_rad, v_mps;
+    float var_x_m2, var_y_m2;     /* position variances (m^2) */
+    uint32_t reset_counter;
+    uint32_t pulses_fused, pulses_rejected, sequencer_spurious, burst_overruns, errors;
+    bool converged;
+} board_pose;
+
+/* Hands the latest pose to the outside world (here: a debugger-visible
+ * buffer; the simulated board checks it against the truth). */
+void board_publish(const board_pose *pose);
+
 #endif

@@ -7,8 +7,7 @@
  *   bl_sequencer_pop (merge window closed) -> bl_filter_fuse_pulse
  *   filter estimate -> bl_sequencer_set_hint (tighter windows once converged)
  *   encoders every 10 ms -> bl_filter_predict_odometry
- *   estimate -> fw_pose (read by a debugger, or sent on CAN/UART by the
- *               application)
+ *   estimate -> board_publish (debugger buffer here; CAN/UART on a robot)
  *
  * Built with -DBL_USE_FLOAT=1 (float32 state on the single-precision FPU).
  * Everything is statically allocated; the library never allocates and never
@@ -28,17 +27,8 @@
 #define ODOMETRY_PERIOD_US 10000   /* 100 Hz, the site's encoder_rate_hz */
 #define TWO_PI 6.28318530717958647692f
 
-/* Published pose, for a debugger or the application's telemetry. */
-typedef struct fw_pose {
-    int64_t t_us;
-    float x_m, y_m, theta_rad, v_mps;
-    float var_x_m2, var_y_m2;     /* position variances (m^2) */
-    uint32_t reset_counter;
-    uint32_t pulses_fused, pulses_rejected, sequencer_spurious, burst_overruns, errors;
-    bool converged;
-} fw_pose;
-
-volatile fw_pose fw_out;
+/* Counters and the latest estimate, handed to board_publish(). */
+static board_pose fw_out;
 
 /* One filter instance and its sequencer; static, so their size shows in
  * .bss (nm -S fw_filter gives sizeof(bl_filter) for the size report). */
@@ -58,6 +48,7 @@ static void publish(const bl_estimate *est) {
     fw_out.reset_counter = est->reset_counter;
     fw_out.sequencer_spurious = fw_seq.counters.spurious;
     fw_out.burst_overruns = board_burst_overruns();
+    board_publish(&fw_out);
 }
 
 static void fuse(const bl_seq_pulse *p) {

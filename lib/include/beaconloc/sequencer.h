@@ -16,22 +16,30 @@
  *      the node's double-pulse flag, when a second burst follows the first
  *      double_spacing_us ± double_tolerance_us later (on any receiver), or
  *      when one envelope is at least double_width_min_us wide (both bursts
- *      read as one). A double pulse (re)anchors the firing-time model.
- *   3. Numbering. From beacon 1's arrival a1 the firing time of beacon 1 lies
+ *      read as one). A double pulse (re)anchors the firing-time model. A
+ *      double pulse where the locked model expects another beacon (an echo
+ *      3 ms late mimics the second burst) is numbered as that beacon and
+ *      counted in double_conflicts; only a second conflicting double whole
+ *      cycles later, with no consistent beacon 1 in between, relocks.
+ *   3. Numbering (Kleeman 1992 eq. 19: arrival = firing + flight, flight in
+ *      [0, max_flight_us]). From beacon 1's arrival a1 its firing time lies
  *      in [a1 - max_flight_us, a1]; firing slot j (j = 0, 1, 2, ... after
  *      beacon 1, beacon index j mod N) then arrives in
  *          [a1 - max_flight_us + j·T - tol_j,  a1 + j·T + max_flight_us + tol_j]
  *      with tol_j = window_margin_us + j·T·period_tolerance_ppm/1e6. With a
  *      hint from the filter (predicted firing time t0 of some beacon and T,
- *      with their σ) the firing time is known and the window halves:
- *          [t0 + j·T - tol_j,  t0 + j·T + max_flight_us + tol_j].
- *      A pulse is numbered by the slot whose window contains it, so missed
- *      beacons (including a missed beacon 1) never shift the numbering of
- *      the next ones; a pulse outside every window is spurious.
+ *      with their σ) the firing time is known and the window is half as wide:
+ *          [t0 + k·T - tol_k,  t0 + k·T + max_flight_us + tol_k],
+ *      tol_k = window_margin_us + 3·(σ_t0 + |k|·σ_T); the hint is dropped
+ *      when its windows would overlap (stale) or a double pulse contradicts
+ *      it. A pulse is numbered by the slot whose window contains it, so
+ *      missed beacons (including a missed beacon 1) never shift the
+ *      numbering of the next ones; a pulse outside every window is spurious.
  *   4. Firing-time model. T is tracked from successive arrivals of the same
- *      beacon (the first pulse numbered in each slot): T_meas = Δt / Δslots,
- *      smoothed with gain 1/period_gain_div, and only when within the period
- *      tolerance. No beacon 1 for lock_timeout_cycles cycles, or
+ *      beacon (the first pulse numbered in each firing): T_meas = Δt / (m·N)
+ *      for m whole cycles, smoothed with gain 1/period_gain_div, accepted
+ *      within the period tolerance. No beacon 1 for lock_timeout_cycles
+ *      cycles (a double pulse may still confirm one cycle more), or
  *      max_consecutive_spurious pulses in a row outside every window, loses
  *      the lock; the next double pulse (or a hint) re-acquires it.
  *
@@ -40,8 +48,12 @@
  * on with the same beacon index and `repeat` set; the filter's innovation
  * gate (Kleeman 1992 §3.9) decides. Only the filter knows where the robot is,
  * so only it can tell a late direct path from an echo; dropping here would
- * also drop the direct path whenever an echo comes first. An echo later than
- * the window (longer than max_flight_us) is counted as spurious.
+ * also drop the direct path whenever an echo comes first. An echo outside
+ * every window is counted as spurious; one delayed by more than about
+ * T - max_flight_us can fall into the next firing's window and is numbered
+ * as the next beacon (without `repeat` if it comes first): again the
+ * filter's gate rejects it. With a hint the windows are tight enough that
+ * echoes later than max_flight_us after the firing are spurious.
  *
  * Stream API: push every detection as it arrives (any order within a merge
  * window), then pop pulses whose merge window has closed: a pulse is ready
@@ -174,7 +186,7 @@ typedef struct bl_seq_pending {
 } bl_seq_pending;
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
- * `counters` are private. Size: about 400 bytes. */
+ * `counters` are private. Size: 560 bytes (x86-64 and Cortex-M4). */
 typedef struct bl_sequencer {
     bl_seq_config cfg;
     bl_seq_counters counters;

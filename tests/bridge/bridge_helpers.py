@@ -1,0 +1,53 @@
+"""Helpers of the bridge's pytest suite (a uniquely named module, so that
+other suites' conftest.py files cannot shadow it)."""
+import shutil
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+BRIDGE = REPO / "build" / "bridge" / "beaconloc-bridge"
+SITE = REPO / "hw_sim" / "scenarios" / "kleeman-lab.ini"
+# Log timestamps are this epoch + simulated time (hw_sim scenario default
+# [output] log_epoch_s, not overridden by the scenarios used here).
+LOG_EPOCH_S = 1_700_000_000.0
+
+
+def sim_command():
+    exe = Path(sys.executable).with_name("beaconloc-sim")
+    if exe.exists():
+        return [str(exe)]
+    found = shutil.which("beaconloc-sim")
+    if found:
+        return [found]
+    return [sys.executable, "-m", "beaconloc_sim.cli"]
+
+
+def run_sim(out_dir: Path, scenario: str, duration_s: float, seed=None):
+    """Simulate a scenario into a candump log; returns (log, truth CSV)."""
+    log = out_dir / f"{scenario}.log"
+    truth = out_dir / f"{scenario}.truth.csv"
+    cmd = sim_command() + ["run", scenario, "--log", str(log), "--truth", str(truth),
+                           "--duration", str(duration_s)]
+    if seed is not None:
+        cmd += ["--seed", str(seed)]
+    subprocess.run(cmd, check=True, capture_output=True, timeout=300)
+    return log, truth
+
+
+def free_udp_port():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def mavlink_listener(port):
+    """pymavlink UDP listener with a large receive buffer."""
+    from pymavlink import mavutil
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
+    try:
+        conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+    except OSError:
+        pass
+    return conn

@@ -1,0 +1,66 @@
+"""Host-side checks of the VM runner: it must never report success for a
+suite that failed or did not run."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import run_in_vm  # noqa: E402
+
+RUNNER = Path(__file__).resolve().parent / "run_in_vm.py"
+
+JUNIT = """<?xml version="1.0" encoding="utf-8"?>
+<testsuites><testsuite name="pytest" errors="{errors}" failures="{failures}" skipped="{skipped}"
+ tests="{tests}">
+{cases}
+</testsuite></testsuites>"""
+
+
+def _junit(path: Path, cases: list[str], errors=0, failures=0, skipped=0) -> Path:
+    path.write_text(JUNIT.format(errors=errors, failures=failures, skipped=skipped,
+                                 tests=len(cases), cases="\n".join(cases)))
+    return path
+
+
+def test_report_counts_and_shows_each_failure_once(tmp_path, capsys):
+    boom = '<failure message="boom">trace</failure><system-out>bridge log tail</system-out>'
+    cases = ['<testcase classname="a" name="ok"/>',
+             f'<testcase classname="a" name="f1">{boom}</testcase>',
+             f'<testcase classname="a" name="f2">{boom}</testcase>',
+             '<testcase classname="a" name="s"><skipped message="x"/></testcase>']
+    tests, bad, summary = run_in_vm.report_junit(_junit(tmp_path / "j.xml", cases,
+                                                        failures=2, skipped=1), 1000)
+    out = capsys.readouterr().out
+    assert (tests, bad) == (4, 2)
+    assert summary == "1 passed, 2 failed, 1 skipped"
+    assert out.count("bridge log tail") == 1 and "same failure as a::f1" in out
+
+
+def test_report_missing_junit_counts_zero_tests(tmp_path):
+    assert run_in_vm.report_junit(tmp_path / "none.xml", 100) == (0, 0, "no junit report")
+
+
+def _run(tmp_path, *args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(RUNNER), "--results", str(tmp_path / "r"),
+                           "--mode", "direct", *args], capture_output=True, text=True, timeout=120)
+
+
+def test_direct_mode_without_a_bus_fails(tmp_path):
+    """On a host without vcan, forcing direct mode must fail (exit 2, bus
+    log shown), never pass the suite by not running it."""
+    if run_in_vm.host_has_vcan():
+        pytest.skip("this host has vcan: the bus comes up, nothing to refuse")
+    p = _run(tmp_path, "--junit", "junit.xml", "true")
+    assert p.returncode == 2, p.stdout + p.stderr
+    assert "CAN bus could not be brought up" in p.stdout
+    assert (tmp_path / "r" / "exit-code").read_text().strip() == "90"
+
+
+def test_pick_kernel_has_matching_modules():
+    vmlinuz, ver = run_in_vm.pick_kernel()
+    assert vmlinuz.name == f"vmlinuz-{ver}"
+    assert any((Path("/lib/modules") / ver / "kernel/drivers/net/can").glob("vcan.ko*"))
