@@ -63,7 +63,7 @@ struct bridge_config {
     char log_level[16];
     double status_interval_s;   /* status line period, 0 = off */
     double beacon_lost_s;       /* beacon silent this long -> "lost" */
-    double echo_storm_ratio;    /* rejected/(accepted+rejected) over 5 s */
+    double echo_storm_ratio;    /* (echoes+rejected)/all arrivals over 5 s */
     /* where each value came from, for error messages */
     char path[256];             /* site file ("" = built-in defaults) */
     int key_line[CONFIG_MAX_KEYS];

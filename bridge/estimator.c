@@ -6,6 +6,7 @@
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "log.h"
@@ -13,6 +14,8 @@
 /* Encoders silent this long: pulses are fused after a constant-velocity
  * predict, and the silence is reported. */
 #define ENC_SILENCE_US 200000
+/* Fastest plausible wheel (m/s): a larger count difference is a glitch. */
+#define MAX_WHEEL_MPS 10.0
 /* Encoders silent this long are reported (STATUSTEXT). */
 #define ENC_REPORT_US 500000
 /* Slack subtracted from "now" before popping pulses, covering node-clock
@@ -161,7 +164,7 @@ static void reset_runtime(struct estimator *e)
     e->last_reset_seen = 0;
     memset(e->beacon_lost, 0, sizeof e->beacon_lost);
     memset(e->beacon_ever, 0, sizeof e->beacon_ever);
-    e->storm_acc = e->storm_rej = 0;
+    e->storm_acc = e->storm_rej = e->storm_echo = 0;
     e->storm = false;
     e->enc_seen = false;
     e->enc_silent = false;
@@ -390,13 +393,17 @@ static void pop_ready(struct estimator *e, int64_t now_node_us, int64_t rx_us)
             e->c.pulses_spurious++;
             continue;
         }
-        if (pl.repeat && !e->was_converged) {
-            /* A later arrival of a firing that already gave a pulse: an
-             * echo or a late direct path. Until the filter has converged its
-             * gate is too wide to tell (Kleeman 1992 §3.9: a 3.4 m longer
-             * echo path is inside a start-up gate), so only the first
-             * arrival is used; once converged the gate decides. */
+        if (pl.repeat) {
+            /* A later arrival of a firing that already gave a pulse. The
+             * direct path is the shortest, so this is an echo (or a
+             * multi-receiver straggler) in all but freak cases. It is not
+             * fused: before convergence the start-up gate is wide enough to
+             * accept a 3.4 m longer wall echo (Kleeman 1992 §3.9), and after
+             * it a stream of gated-out echoes would still feed the
+             * library's persistent-rejection reset and replace the last
+             * direct pulse it keeps per beacon for the snapshot restart. */
             e->c.repeats_skipped++;
+            e->storm_echo++;
             continue;
         }
         fuse(e, &pl, rx_us);
@@ -475,9 +482,25 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
     pop_ready(e, t - POP_SLACK_ENC_US, rx_us);
 
     bool had_ref = e->enc_have_ref;
+    if (e->enc_clock.last_event == NODE_CLOCK_RESTART) {
+        /* The encoder node restarted: its counts restarted too, the
+         * difference to the old reference means nothing. */
+        had_ref = false;
+        e->c.node_restarts++;
+        event(e, EST_EV_WARNING, "encoder node clock restarted");
+    }
     int dl = tick_delta(f->left_ticks, e->enc_left);
     int dr = tick_delta(f->right_ticks, e->enc_right);
     int64_t gap = t - e->enc_last_node_us;
+    /* More ticks than MAX_WHEEL_MPS allows since the last sample (at least
+     * one sample period): not a wheel, a glitch or a missed restart. */
+    double max_ticks = MAX_WHEEL_MPS * ((double)(gap > 10000 ? gap : 10000) / 1e6) /
+                       e->m_per_tick;
+    if (had_ref && (abs(dl) > max_ticks || abs(dr) > max_ticks)) {
+        e->c.encoder_jumps++;
+        log_warn("encoder counts jumped (%d, %d ticks): new reference", dl, dr);
+        had_ref = false;
+    }
     e->enc_left = f->left_ticks;
     e->enc_right = f->right_ticks;
     e->enc_have_ref = true;
@@ -568,17 +591,20 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
     if (e->storm_window_start_us == 0)
         e->storm_window_start_us = now;
     if (now - e->storm_window_start_us >= STORM_WINDOW_US) {
-        uint32_t n = e->storm_acc + e->storm_rej;
-        double ratio = n ? (double)e->storm_rej / n : 0.0;
+        /* share of arrivals that were echoes (later arrivals of a firing)
+         * or rejected by the gate */
+        uint32_t bad = e->storm_rej + e->storm_echo;
+        uint32_t n = e->storm_acc + bad;
+        double ratio = n ? (double)bad / n : 0.0;
         if (!e->storm && n >= STORM_MIN_PULSES && ratio > e->echo_storm_ratio) {
             e->storm = true;
-            event(e, EST_EV_WARNING, "echo storm: %.0f%% of pulses rejected",
+            event(e, EST_EV_WARNING, "echo storm: %.0f%% echoes or rejected",
                   100.0 * ratio);
         } else if (e->storm && ratio < e->echo_storm_ratio / 2) {
             e->storm = false;
             event(e, EST_EV_NOTICE, "echo storm over");
         }
-        e->storm_acc = e->storm_rej = 0;
+        e->storm_acc = e->storm_rej = e->storm_echo = 0;
         e->storm_window_start_us = now;
     }
 }

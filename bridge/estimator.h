@@ -55,6 +55,7 @@ struct est_counters {
     uint64_t cv_predicts;        /* constant-velocity predicts (encoders silent) */
     uint64_t predict_errors;
     uint64_t encoder_gaps;       /* encoder silences longer than the gap limit */
+    uint64_t encoder_jumps;      /* implausible count differences (new reference) */
     uint64_t unmapped_encoders;  /* encoder frames before the receiver clock */
     uint64_t reinits;            /* re-initialisations done by the bridge */
     uint64_t node_restarts;
@@ -101,7 +102,7 @@ struct estimator {
     bool beacon_lost[BL_MAX_BEACONS];
     bool beacon_ever[BL_MAX_BEACONS];
     int64_t storm_window_start_us;
-    uint32_t storm_acc, storm_rej;
+    uint32_t storm_acc, storm_rej, storm_echo;
     bool storm;
     /* persistent-rejection watch over the last EST_REJECT_WINDOW first
      * arrivals (repeats excluded): bit set = rejected, with its beacon */

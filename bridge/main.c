@@ -638,7 +638,6 @@ static void can_readable(struct daemon *d)
         if (d->can_down_logged)
             can_came_up(d);
         d->lat_ref_mono_us = msg.rx_us; /* kernel receive time, monotonic */
-        log_debug("PROBE read-lag %lld", (long long)(mono_us() - msg.rx_us));
         handle_frame(d, &msg);
     }
     drain_events(d);
@@ -732,6 +731,8 @@ static void soft_timers_advance(struct daemon *d, int64_t t)
 
 /* ---- signals ---------------------------------------------------------- */
 
+static void fill_report(struct daemon *d, struct stats_report *r);
+
 static void reload(struct daemon *d)
 {
     if (!d->opt.site) {
@@ -798,6 +799,16 @@ static void signal_readable(struct daemon *d)
             break;
         case SIGHUP:
             reload(d);
+            break;
+        case SIGUSR1: /* report now: status line and the --stats file */
+            status_line(d, "status");
+            if (d->opt.stats) {
+                struct stats_report rep;
+                fill_report(d, &rep);
+                int rc = stats_write_json(&rep, d->opt.stats);
+                if (rc != 0)
+                    log_error("--stats %s: %s", d->opt.stats, strerror(-rc));
+            }
             break;
         default:
             break;
@@ -970,6 +981,8 @@ static void fill_report(struct daemon *d, struct stats_report *r)
     r->seq_repeats = sc->repeats;
     r->repeats_skipped = d->est.c.repeats_skipped;
     r->snapshot_restarts = d->est.c.snapshot_restarts;
+    r->encoder_jumps = d->est.c.encoder_jumps;
+    r->node_restarts = d->est.c.node_restarts;
     r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;
@@ -1049,6 +1062,7 @@ int main(int argc, char **argv)
     sigaddset(&mask, SIGTERM);
     sigaddset(&mask, SIGINT);
     sigaddset(&mask, SIGHUP);
+    sigaddset(&mask, SIGUSR1);
     if (sigprocmask(SIG_BLOCK, &mask, NULL) < 0 ||
         (d->sigfd = signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC)) < 0 ||
         (d->epfd = epoll_create1(EPOLL_CLOEXEC)) < 0 || ep_add(d, d->sigfd)) {

@@ -116,9 +116,11 @@ int stats_write_json(const struct stats_report *r, const char *path)
             (unsigned long long)r->seq_double_conflicts,
             (unsigned long long)r->seq_locks_acquired,
             (unsigned long long)r->seq_locks_lost, (unsigned long long)r->seq_repeats);
-    fprintf(f, "  \"repeats_skipped_before_convergence\": %llu,\n",
+    fprintf(f, "  \"repeats_skipped\": %llu,\n",
             (unsigned long long)r->repeats_skipped);
     fprintf(f, "  \"snapshot_restarts\": %llu,\n", (unsigned long long)r->snapshot_restarts);
+    fprintf(f, "  \"encoder_jumps\": %llu,\n", (unsigned long long)r->encoder_jumps);
+    fprintf(f, "  \"node_restarts\": %llu,\n", (unsigned long long)r->node_restarts);
     fprintf(f, "  \"encoder_gaps\": %llu,\n", (unsigned long long)r->encoder_gaps);
     fprintf(f, "  \"estimator_errors\": %llu,\n", (unsigned long long)r->predict_errors);
     fprintf(f, "  \"estimates\": %llu,\n", (unsigned long long)r->estimates);

@@ -42,7 +42,8 @@ struct stats_report {
     /* sequencer counters (bl_seq_counters) */
     uint64_t seq_detections, seq_merged, seq_double_pulses,
         seq_double_conflicts, seq_locks_acquired, seq_locks_lost,
-        seq_repeats, repeats_skipped, snapshot_restarts;
+        seq_repeats, repeats_skipped, snapshot_restarts, encoder_jumps,
+        node_restarts;
     int64_t latency_p50_us, latency_p99_us, latency_max_us;
     uint64_t latency_samples;
     double replay_frames_per_s; /* 0 when not replaying */

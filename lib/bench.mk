@@ -18,3 +18,15 @@ $(BENCH_DIR)/bench_speed_float: lib/bench/bench_speed.c $(BUILD)/lib/float/libbe
 bench-speed: $(BENCH_DIR)/bench_speed_double $(BENCH_DIR)/bench_speed_float
 	$(PY) lib/bench/run_speed.py --double $(BENCH_DIR)/bench_speed_double \
 	    --float $(BENCH_DIR)/bench_speed_float --out-dir $(BENCH_DIR) --python $(PY)
+
+# make bench-sequencer: numbering accuracy of the sequencer on every hw_sim
+# scenario's detections against the simulator's ground truth
+# (lib/bench/bench_sequencer.py). Last line:
+#   sequencer scenarios=<n> seeds=<n> direct=<n> numbered_pct=<%> wrong_direct=<n> wrong_echo=<n> spurious=<n> unlocked=<n>
+.PHONY: bench-sequencer
+$(BENCH_DIR)/seq_replay: lib/bench/seq_replay.c $(BUILD)/lib/libbeaconloc.a $(BENCH_HDRS)
+	@mkdir -p $(@D)
+	$(CC) $(BENCH_CFLAGS) $< $(BUILD)/lib/libbeaconloc.a -lm -o $@
+
+bench-sequencer: $(BENCH_DIR)/seq_replay
+	$(PY) lib/bench/bench_sequencer.py --replay $(BENCH_DIR)/seq_replay

@@ -11,6 +11,8 @@
 #                       netduinoplus2 (Cortex-M4F): tracks a moving robot,
 #                       exit status from the error vs truth (needs the Debian
 #                       package qemu-system-arm).
+#   make bench-m4       instructions per fuse_pulse / predict / sequencer
+#                       detection on the emulated M4 (QEMU -icount).
 #   make check-m4-build (in UNIT_TESTS) the cross build links with plain gcc
 #                       (no libstdc++) and references no heap / C++ runtime.
 #
@@ -74,6 +76,19 @@ $(M4_DIR)/example/sim/%.o: lib/examples/firmware_m4/sim/%.c $(M4_HDRS) lib/firmw
 
 $(M4_SIM_ELF): $(M4_SIM_OBJS) $(M4_DIR)/libbeaconloc.a lib/examples/firmware_m4/stm32f4.ld
 	$(M4_PREFIX)gcc $(M4_LDFLAGS) $(M4_SIM_OBJS) $(M4_DIR)/libbeaconloc.a -lm -o $@
+
+# Instruction counts per call on the emulated M4 (QEMU -icount: 1 instruction
+# = 1 ns of virtual time, read through SysTick). Last line machine-readable.
+M4_BENCH_ELF := $(M4_DIR)/bench_m4.elf
+$(M4_BENCH_ELF): $(M4_DIR)/example/sim/bench_m4.o $(M4_DIR)/example/startup_stm32f4.o $(M4_DIR)/libbeaconloc.a \
+                 lib/examples/firmware_m4/stm32f4.ld
+	$(M4_PREFIX)gcc $(M4_LDFLAGS) $(M4_DIR)/example/sim/bench_m4.o $(M4_DIR)/example/startup_stm32f4.o \
+	    $(M4_DIR)/libbeaconloc.a -lm -o $@
+
+.PHONY: bench-m4
+bench-m4: $(M4_BENCH_ELF)
+	timeout 600 $(QEMU_ARM) -M netduinoplus2 -nographic -monitor none -serial none -icount shift=0 \
+	    -semihosting-config enable=on,target=native -kernel $(M4_BENCH_ELF)
 
 .PHONY: run-m4-qemu
 run-m4-qemu: $(M4_SIM_ELF)

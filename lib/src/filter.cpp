@@ -84,7 +84,8 @@ void joseph_update(M8 &P, const V8 &K, const V8 &u, real s)
 
 // Kleeman 1992 eq. 21 with the receiver on the ring and 3D distance.
 // Times relative to the state time t_s. Returns false where undefined.
-bool pulse_model(const bl_config *cfg, const V8 &x, const bl_pulse_geometry &g, real *h, R8 *H)
+bool pulse_model(const bl_config *cfg, const V8 &x, const bl_pulse_geometry &g, real *h, R8 *H,
+                 bool ring_centre = false)
 {
     const bl_beacon &b = cfg->beacons[g.beacon_index];
     const real c = std::cos(x(TH)), sn = std::sin(x(TH));
@@ -93,7 +94,7 @@ bool pulse_model(const bl_config *cfg, const V8 &x, const bl_pulse_geometry &g, 
     const real dt_fire = g.epoch_rel_s + x(T0) + real(g.slot) * x(T);
     // Heading at arrival (receiver orientation), constant turn rate.
     const real phi = x(TH) + x(W) * g.arrival_rel_s + receiver_angle(cfg, g.receiver_index);
-    const real rho = cfg->ring_radius_m;
+    const real rho = ring_centre ? real(0) : cfg->ring_radius_m;
     // Receiver position at the firing time: wheel-base centre extrapolated
     // with the constant velocity (Kleeman eq. 20 assumption) plus its ring
     // offset.
@@ -316,23 +317,34 @@ bool build_snapshot(const bl_filter *f, real s_mps, real T_s, real sigma_s, Snap
     return true;
 }
 
-// Start (or restart) *f from the snapshot of its last pulses. On failure
-// *f is untouched.
-int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real s_mps, real var_s, real T_s,
-                        real var_T, uint32_t min_beacons)
+// The snapshot fix of the last cycle (the problem lives only in this frame;
+// noinline keeps it off the callers' stacks).
+__attribute__((noinline)) int solve_snapshot(const bl_filter *f, real s_mps, real T_s, uint32_t min_beacons,
+                                             bl_tdoa_solution *sol, int64_t *ref_arrival_us,
+                                             uint32_t *ref_beacon)
 {
     const bl_config *cfg = &f->cfg_;
     Snapshot snap;
     if (!build_snapshot(f, s_mps, T_s, cfg->startup_sigma_arrival_s, snap)) return BL_EDEGENERATE;
     if (snap.prob.count < min_beacons) return BL_EDEGENERATE;
-    bl_tdoa_solution sol;
-    const int rc = bl_solve_tdoa_2d(&snap.prob, &sol);
+    const int rc = bl_solve_tdoa_2d(&snap.prob, sol);
     if (rc != BL_OK) return rc;
     // An overdetermined fix must explain its pulses (an echo-polluted or
     // moving-robot snapshot does not).
-    if (snap.prob.count > 3 && sol.residual_rms_s > real(3) * cfg->startup_sigma_arrival_s)
+    if (snap.prob.count > 3 && sol->residual_rms_s > real(3) * cfg->startup_sigma_arrival_s)
         return BL_ENOCONVERGE;
+    *ref_arrival_us = snap.ref_arrival_us;
+    *ref_beacon = snap.ref_beacon;
+    return BL_OK;
+}
 
+// State and covariance from a snapshot fix: position and t0 (with their
+// covariance) from the solver, heading given, v = ω = 0, s and T given.
+__attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_solution &sol, int64_t ref_arrival_us,
+                                              uint32_t ref_beacon, real theta, real sigma_theta, real s_mps,
+                                              real var_s, real T_s, real var_T)
+{
+    const bl_config *cfg = &f->cfg_;
     V8 x = V8::Zero();
     M8 P = M8::Zero();
     x(X) = sol.x_m;
@@ -340,7 +352,7 @@ int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real s_mps, 
     x(TH) = bl::wrap_angle(theta);
     x(S) = s_mps;
     x(T) = T_s;
-    x(T0) = sol.t0_s;  // firing of snap.ref_beacon relative to its arrival
+    x(T0) = sol.t0_s;  // firing of ref_beacon relative to its arrival
     const int idx[3] = {X, Y, T0};
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c) P(idx[r], idx[c]) = sol.cov[r * 4 + c];
@@ -349,19 +361,32 @@ int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real s_mps, 
     P(W, W) = cfg->initial_sigma_omega_radps * cfg->initial_sigma_omega_radps;
     P(S, S) = var_s;
     P(T, T) = var_T;
-    int64_t epoch = snap.ref_arrival_us;
-    uint32_t ref = snap.ref_beacon;
+    int64_t epoch = ref_arrival_us;
+    uint32_t ref = ref_beacon;
     shift_reference(cfg, x, P, epoch, ref, 0);
 
     state(f) = x;
     cov(f) = P;
     f->epoch_us_ = epoch;
     f->ref_beacon_ = ref;
-    f->t_us_ = snap.ref_arrival_us;
+    f->t_us_ = ref_arrival_us;
     if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
     f->flags_ = kFlagStarted | kFlagEverStarted;
     f->consecutive_rejections_ = 0;
     f->rejection_beacon_mask_ = 0;
+}
+
+// Start (or restart) *f from the snapshot of its last pulses. On failure
+// *f is untouched.
+int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real s_mps, real var_s, real T_s,
+                        real var_T, uint32_t min_beacons)
+{
+    bl_tdoa_solution sol;
+    int64_t ref_arrival_us = 0;
+    uint32_t ref_beacon = 0;
+    const int rc = solve_snapshot(f, s_mps, T_s, min_beacons, &sol, &ref_arrival_us, &ref_beacon);
+    if (rc != BL_OK) return rc;
+    apply_snapshot(f, sol, ref_arrival_us, ref_beacon, theta, sigma_theta, s_mps, var_s, T_s, var_T);
     return BL_OK;
 }
 
@@ -633,47 +658,16 @@ extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
     return BL_OK;
 }
 
-extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
-                                    uint32_t receiver_index, bl_pulse_result *result)
+namespace {
+// fuse_pulse on a started filter: slot attribution, gate, IEKF, Joseph.
+// Own frame (noinline): the 8x8 work matrices are gone before the caller
+// may re-initialise from the snapshot solver.
+__attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
+                                           uint32_t receiver_index, bl_pulse_result *result)
 {
-    if (f == nullptr) return BL_EINVAL;
-    if (!initialised(f)) return BL_ENOTINIT;
     const bl_config *cfg = &f->cfg_;
-    if (beacon_index >= cfg->beacon_count) return BL_EBEACON;
-    if (receiver_index >= cfg->receiver_count) return BL_EINVAL;
     bl_pulse_result res;
     std::memset(&res, 0, sizeof res);
-
-    if (!started(f)) {
-        // Buffer for the snapshot start; start once a cycle gives >= 4 beacons
-        // (or all of them when fewer), so that the fix is overdetermined.
-        if (f->last_valid_mask_ != 0) {
-            // Keep the buffer on one timeline: a pulse far older than the
-            // buffered ones is a caller error.
-            for (uint32_t j = 0; j < cfg->beacon_count; ++j)
-                if ((f->last_valid_mask_ >> j) & 1u) {
-                    int64_t d_us;
-                    if (!bl::sub_us(f->last_arrival_us_[j], arrival_us, &d_us) ||
-                        bl::us_to_s(d_us) > cfg->max_predict_gap_s)
-                        return BL_ETIME;
-                }
-        }
-        f->last_arrival_us_[beacon_index] = arrival_us;
-        f->last_receiver_[beacon_index] = receiver_index;
-        f->last_valid_mask_ |= 1u << beacon_index;
-        res.status = BL_PULSE_BUFFERED;
-        const uint32_t need = cfg->beacon_count < 4 ? cfg->beacon_count : 4;
-        if (start_from_snapshot(f, cfg->initial_theta_rad, cfg->reset_sigma_theta_rad,
-                                cfg->speed_of_sound_mps,
-                                cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps,
-                                cfg->beacon_period_s, cfg->sigma_period_s * cfg->sigma_period_s,
-                                need) == BL_OK) {
-            res.status = BL_PULSE_STARTED;
-        }
-        if (result) *result = res;
-        return BL_OK;
-    }
-
     int64_t dts_us;
     if (!bl::sub_us(arrival_us, f->t_us_, &dts_us)) return BL_ETIME;
     if (dts_us > int64_t(1e12) || dts_us < -int64_t(1e12) ||
@@ -736,17 +730,7 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
         f->consecutive_rejections_ += 1;
         f->rejection_beacon_mask_ |= 1u << beacon_index;
         res.status = BL_PULSE_REJECTED;
-        uint32_t nb = 0;
-        for (uint32_t m = f->rejection_beacon_mask_; m; m &= m - 1) ++nb;
-        if (cfg->reset_reject_count > 0 && f->consecutive_rejections_ >= cfg->reset_reject_count && nb >= 2) {
-            // Persistent rejection: kidnapped or drifted. Re-initialise from the
-            // snapshot solver on the last cycle (keeps s and T, heading with a
-            // wide σ); if the snapshot fails, keep counting.
-            if (start_from_snapshot(f, x(TH), cfg->reset_sigma_theta_rad, x(S), P(S, S), x(T), P(T, T),
-                                    n < 4 ? n : 4) == BL_OK)
-                res.status = BL_PULSE_RESET;
-        }
-        if (result) *result = res;
+        *result = res;
         return BL_OK;
     }
 
@@ -776,7 +760,7 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
     // Joseph form (Kleeman eq. 11): P = (I - K H) P (I - K H)ᵀ + K R Kᵀ, with H
     // and K of the last iterate.
     const V8 u = P.lazyProduct(Hi.transpose());
-    M8 Pn = P;
+    M8 &Pn = P;  // in place: P is not needed after u
     joseph_update(Pn, K, u, Hi.dot(u) + R);
     symmetrise(Pn);
     xi(TH) = bl::wrap_angle(xi(TH));
@@ -797,6 +781,69 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
     f->rejection_beacon_mask_ = 0;
     res.status = BL_PULSE_ACCEPTED;
     res.iterations = it;
+    *result = res;
+    return BL_OK;
+}
+
+
+}  // namespace
+
+extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
+                                    uint32_t receiver_index, bl_pulse_result *result)
+{
+    if (f == nullptr) return BL_EINVAL;
+    if (!initialised(f)) return BL_ENOTINIT;
+    const bl_config *cfg = &f->cfg_;
+    if (beacon_index >= cfg->beacon_count) return BL_EBEACON;
+    if (receiver_index >= cfg->receiver_count) return BL_EINVAL;
+    bl_pulse_result res;
+    std::memset(&res, 0, sizeof res);
+
+    if (!started(f)) {
+        // Buffer for the snapshot start; start once a cycle gives >= 4 beacons
+        // (or all of them when fewer), so that the fix is overdetermined.
+        if (f->last_valid_mask_ != 0) {
+            // Keep the buffer on one timeline: a pulse far older than the
+            // buffered ones is a caller error.
+            for (uint32_t j = 0; j < cfg->beacon_count; ++j)
+                if ((f->last_valid_mask_ >> j) & 1u) {
+                    int64_t d_us;
+                    if (!bl::sub_us(f->last_arrival_us_[j], arrival_us, &d_us) ||
+                        bl::us_to_s(d_us) > cfg->max_predict_gap_s)
+                        return BL_ETIME;
+                }
+        }
+        f->last_arrival_us_[beacon_index] = arrival_us;
+        f->last_receiver_[beacon_index] = receiver_index;
+        f->last_valid_mask_ |= 1u << beacon_index;
+        res.status = BL_PULSE_BUFFERED;
+        const uint32_t need = cfg->beacon_count < 4 ? cfg->beacon_count : 4;
+        if (start_from_snapshot(f, cfg->initial_theta_rad, cfg->reset_sigma_theta_rad,
+                                cfg->speed_of_sound_mps,
+                                cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps,
+                                cfg->beacon_period_s, cfg->sigma_period_s * cfg->sigma_period_s,
+                                need) == BL_OK) {
+            res.status = BL_PULSE_STARTED;
+        }
+        if (result) *result = res;
+        return BL_OK;
+    }
+
+    const int rc = fuse_started(f, beacon_index, arrival_us, receiver_index, &res);
+    if (rc != BL_OK) return rc;
+    if (res.status == BL_PULSE_REJECTED) {
+        uint32_t nb = 0;
+        for (uint32_t m = f->rejection_beacon_mask_; m; m &= m - 1) ++nb;
+        if (cfg->reset_reject_count > 0 && f->consecutive_rejections_ >= cfg->reset_reject_count && nb >= 2) {
+            // Persistent rejection: kidnapped or drifted. Re-initialise from the
+            // snapshot solver on the last cycle (keeps s and T, heading with a
+            // wide σ); if the snapshot fails, keep counting.
+            const uint32_t n = cfg->beacon_count;
+            if (start_from_snapshot(f, f->x_[TH], cfg->reset_sigma_theta_rad, f->x_[S], f->P_[S * NX + S],
+                                    f->x_[T], f->P_[T * NX + T], n < 4 ? n : 4) == BL_OK)
+                res.status = BL_PULSE_RESET;
+        }
+    }
     if (result) *result = res;
     return BL_OK;
 }
@@ -864,11 +911,9 @@ extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_in
     const real fire_rel = t0_rel + real(g.slot) * x(T);
     g.arrival_rel_s = fire_rel + flight;
     // Ring centre: evaluate with a zero ring radius.
-    bl_config c0 = *cfg;
-    c0.ring_radius_m = 0;
     real h;
     R8 H;
-    if (!pulse_model(&c0, x, g, &h, &H)) return BL_EINVAL;
+    if (!pulse_model(cfg, x, g, &h, &H, true)) return BL_EINVAL;
     const bool conv = (f->flags_ & kFlagConverged) != 0;
     const real sa = conv ? cfg->sigma_arrival_s : cfg->startup_sigma_arrival_s;
     bl_expected_pulse e;

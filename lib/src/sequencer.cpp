@@ -203,63 +203,70 @@ void number_pulse(bl_sequencer *s, bl_seq_pulse *p) {
 
     if (p->double_pulse) {
         s->counters.double_pulses++;
-        bool consistent = false;
+        // Which beacon the model expects here: the hint's windows if a hint
+        // is in use, else the own model's (one extra cycle allowed: the
+        // double pulse itself confirms the slot).
+        Assignment e = {false, BL_SEQ_UNASSIGNED, 0};
+        bool have_expect = false;
+        bool from_hint = false;
         if (s->hint_valid) {
-            Assignment h = {false, BL_SEQ_UNASSIGNED, 0};
-            if (number_by_hint(s, t, &h) && h.assigned && h.beacon == 0) {
-                consistent = true;
-                a = h;
+            if (number_by_hint(s, t, &e)) {
+                have_expect = true;
+                from_hint = true;
             } else {
-                s->hint_valid = false;   // the hint contradicts beacon 1's signature
-                s->counters.hint_rejections++;
+                s->hint_valid = false;   // stale
             }
         }
-        if (!consistent && s->locked) {
-            Assignment m = {false, BL_SEQ_UNASSIGNED, 0};
-            if (!number_by_model(s, t, own_max_slot(c) + c.beacon_count, &m)) {
-                lose_lock(s);   // timed out: re-acquire on this double pulse
-            } else if (m.assigned && m.beacon == 0) {
-                consistent = true;
-                a = m;
+        if (!have_expect && s->locked) {
+            if (number_by_model(s, t, own_max_slot(c) + c.beacon_count, &e)) {
+                have_expect = true;
             } else {
-                // A double pulse where another beacon is expected: an echo
-                // mimicking the second burst, or a wrong lock. Relock only
-                // when a second conflicting double, whole cycles later and
-                // with no consistent beacon 1 in between, confirms it.
-                s->counters.double_conflicts++;
-                const int64_t cycle_us = s->period_ns * c.beacon_count / kNsPerUs;
-                bool confirmed = false;
-                if (s->conflicts_in_row > 0) {
-                    const int64_t dt = t - s->conflict_us;
-                    const int64_t m_cycles = round_div(dt, cycle_us);
-                    confirmed = m_cycles >= 1 && m_cycles <= static_cast<int64_t>(c.lock_timeout_cycles) &&
-                                abs64(dt - m_cycles * cycle_us) <=
-                                    static_cast<int64_t>(c.max_flight_us) +
-                                        own_tol_us(c, s->period_ns, m_cycles * c.beacon_count);
-                }
-                if (confirmed) {
-                    lose_lock(s);
-                    relocked = was_locked;
-                } else {
-                    s->conflicts_in_row++;
-                    s->conflict_us = t;
-                    a = m;   // treat as an ordinary pulse of its window
-                    p->double_pulse = false;
-                    numbered = true;
-                }
+                lose_lock(s);   // timed out: re-acquire on this double pulse
+            }
+        }
+        if (have_expect && e.assigned && e.beacon == 0) {
+            a = e;   // beacon 1 where expected
+            if (!from_hint) a.fire_us = t - c.max_flight_us / 2;
+            anchor_at(s, t);
+            numbered = true;
+        } else if (have_expect) {
+            // A double pulse where another beacon (or nothing) is expected:
+            // an echo 3 ms after a direct path mimics the second burst, or
+            // the model is wrong. Renumber only when a second conflicting
+            // double, whole cycles later and with no consistent beacon 1 in
+            // between, confirms it; until then number it as expected.
+            s->counters.double_conflicts++;
+            const int64_t cycle_us = s->period_ns * c.beacon_count / kNsPerUs;
+            bool confirmed = false;
+            if (s->conflicts_in_row > 0) {
+                const int64_t dt = t - s->conflict_us;
+                const int64_t m_cycles = round_div(dt, cycle_us);
+                confirmed = m_cycles >= 1 && m_cycles <= static_cast<int64_t>(c.lock_timeout_cycles) &&
+                            abs64(dt - m_cycles * cycle_us) <=
+                                static_cast<int64_t>(c.max_flight_us) +
+                                    own_tol_us(c, s->period_ns, m_cycles * c.beacon_count);
+            }
+            if (confirmed) {
+                if (s->hint_valid) s->counters.hint_rejections++;
+                lose_lock(s);
+                relocked = was_locked;
+            } else {
+                s->conflicts_in_row++;
+                s->conflict_us = t;
+                a = e;
+                p->double_pulse = false;
+                numbered = true;
             }
         }
         if (!numbered) {
-            if (!consistent) {
-                // Acquire (or re-acquire) the lock on this double pulse.
-                if (was_locked) relocked = true;
-                a.assigned = true;
-                a.beacon = 0;
-                s->have_last = false;
-                s->beacon_seen_mask = 0;
-            }
+            // Acquire (or re-acquire) the lock on this double pulse.
+            if (was_locked) relocked = true;
+            a.assigned = true;
+            a.beacon = 0;
+            a.fire_us = t - c.max_flight_us / 2;
+            s->have_last = false;
+            s->beacon_seen_mask = 0;
             anchor_at(s, t);
-            if (!s->hint_valid) a.fire_us = t - c.max_flight_us / 2;
             numbered = true;
         }
     } else {
@@ -431,7 +438,7 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det) {
         bl_seq_pending &g = seq->pending[i];
         if (abs64(t - g.start_us) > c.merge_window_us) continue;
         g.rx_mask |= bit;
-        if (det->double_pulse || wide) g.double_pulse = true;
+        if (det->double_pulse || wide) g.double_mask |= bit;
         if (t < g.start_us) {
             g.start_us = t;
             g.receiver = det->receiver;
@@ -459,8 +466,8 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det) {
             // after) are swallowed only once the pulse is marked double.
             const int64_t lo = static_cast<int64_t>(c.double_spacing_us) - c.double_tolerance_us;
             const int64_t hi = static_cast<int64_t>(c.double_spacing_us) + c.double_tolerance_us;
-            if (d >= lo && (d <= hi || (g.double_pulse && d <= hi + c.merge_window_us))) {
-                g.double_pulse = true;
+            if (d >= lo && (d <= hi || (g.double_mask != 0 && d <= hi + c.merge_window_us))) {
+                g.double_mask |= bit;
                 seq->counters.second_bursts++;
                 seq->counters.detections++;
                 return BL_OK;
@@ -480,7 +487,7 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det) {
     g.rx_mask = bit;
     g.amplitude_mv = det->amplitude_mv;
     g.width_us = det->width_us;
-    g.double_pulse = det->double_pulse || wide;
+    g.double_mask = (det->double_pulse || wide) ? bit : 0u;
     seq->n_pending++;
     seq->counters.detections++;
     return BL_OK;
@@ -502,12 +509,17 @@ int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out) {
     p.arrival_us = g.start_us;
     p.beacon = BL_SEQ_UNASSIGNED;
     p.receiver = g.receiver;
-    uint32_t heard = 0;
+    uint32_t heard = 0, signed_rx = 0;
     for (uint32_t m = g.rx_mask; m != 0; m &= m - 1) ++heard;
+    for (uint32_t m = g.double_mask; m != 0; m &= m - 1) ++signed_rx;
+    uint32_t either = 0;
+    for (uint32_t m = g.rx_mask | g.double_mask; m != 0; m &= m - 1) ++either;
     p.receivers_heard = heard;
     p.amplitude_mv = g.amplitude_mv;
     p.width_us = g.width_us;
-    p.double_pulse = g.double_pulse;
+    // Beacon 1 when at least half the receivers that heard the pulse show
+    // its signature.
+    p.double_pulse = signed_rx > 0 && 2 * signed_rx >= either;
     number_pulse(seq, &p);
     seq->counters.pulses_out++;
     *out = p;

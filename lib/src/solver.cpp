@@ -64,15 +64,15 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
     // Measured distances plus the unknown offset tau (Kleeman 1990 §2: "the
     // data are the distances to beacons plus an unknown offset"):
     //   rho_j = s·(arrival_j - fire_offset_j) = tau + |p - b_j|
-    real rho[BL_MAX_BEACONS];
-    real w[BL_MAX_BEACONS];  // weights 1/(s·sigma_j)² (1/m²)
-    real sig2_sum = 0;
-    for (uint32_t j = 0; j < N; ++j) {
-        rho[j] = s * (prob->arrival_s[j] - prob->fire_offset_s[j]);
+    // (computed on the fly: no per-beacon arrays on the stack)
+    auto rho_of = [&](uint32_t j) { return s * (prob->arrival_s[j] - prob->fire_offset_s[j]); };
+    // weights 1/(s·sigma_j)² (1/m²)
+    auto w_of = [&](uint32_t j) {
         const real sd = s * prob->sigma_s[j];
-        w[j] = real(1) / (sd * sd);
-        sig2_sum += prob->sigma_s[j] * prob->sigma_s[j];
-    }
+        return real(1) / (sd * sd);
+    };
+    real sig2_sum = 0;
+    for (uint32_t j = 0; j < N; ++j) sig2_sum += prob->sigma_s[j] * prob->sigma_s[j];
     const real sigma_rms_s = std::sqrt(sig2_sum / real(N));
 
     auto beacon = [&](uint32_t j) {
@@ -106,8 +106,8 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
     // Best tau for the start point: weighted mean of rho_j - d_j.
     real tau = 0, wsum = 0;
     for (uint32_t j = 0; j < N; ++j) {
-        tau += w[j] * (rho[j] - (point3(p) - beacon(j)).norm());
-        wsum += w[j];
+        tau += w_of(j) * (rho_of(j) - (point3(p) - beacon(j)).norm());
+        wsum += w_of(j);
     }
     tau /= wsum;
 
@@ -116,7 +116,7 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
     // the hyperboloids are spanned by these unit vectors), residuals e_j.
     MatN A;
     VecN g;
-    bl::Mat<BL_MAX_BEACONS, D> U;
+    bl::Mat<n, D> U;  // unit vectors of the first n beacons (eq. 9)
     auto linearise = [&](const VecD &pp, real tt) -> bool {
         A.setZero();
         g.setZero();
@@ -128,11 +128,11 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
             VecN row;
             for (int k = 0; k < D; ++k) row(k) = delta(k) / d;
             row(D) = real(1);
-            U.row(int(j)) = row.template head<D>().transpose();
-            const real e = rho[j] - tt - d;
+            if (j < uint32_t(n)) U.row(int(j)) = row.template head<D>().transpose();
+            const real e = rho_of(j) - tt - d;
             // Weighted normal equations (Gauss-Newton): A = Jᵀ W J, g = Jᵀ W e.
-            A.noalias() += (w[j] * row) * row.transpose();
-            g.noalias() += (w[j] * e) * row;
+            A.noalias() += (w_of(j) * row) * row.transpose();
+            g.noalias() += (w_of(j) * e) * row;
         }
         return true;
     };
@@ -178,7 +178,8 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
     MatN cov_m;
     for (int k = 0; k < n; ++k) cov_m.col(k) = ldlt.solve(VecN::Unit(k));
 
-    bl_tdoa_solution sol;
+    // From here on nothing fails: fill *out in place (no copy on the stack).
+    bl_tdoa_solution &sol = *out;
     std::memset(&sol, 0, sizeof sol);
     const bl::Vec3 q = point3(p);
     sol.x_m = q(0);
@@ -198,7 +199,7 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
     sol.pdop = std::sqrt(trace_p) / (sigma_rms_s * s);
     real r2 = 0;
     for (uint32_t j = 0; j < N; ++j) {
-        const real e = (rho[j] - tau - (q - beacon(j)).norm()) / s;
+        const real e = (rho_of(j) - tau - (q - beacon(j)).norm()) / s;
         r2 += e * e;
     }
     sol.residual_rms_s = std::sqrt(r2 / real(N));
@@ -235,7 +236,6 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
             sol.error_vector_valid = true;
         }
     }
-    *out = sol;
     return converged ? BL_OK : BL_ENOCONVERGE;
 }
 

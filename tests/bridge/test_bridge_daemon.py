@@ -1,6 +1,6 @@
 """The real beaconloc-bridge binary as a daemon: bad configuration exits 78
 naming file, line and key; a missing CAN interface is not fatal; HEARTBEAT
-and TIMESYNC over UDP; SIGHUP reloads (keeping or re-initialising the
+and TIMESYNC over UDP; SIGUSR1 reports; SIGHUP reloads (keeping or re-initialising the
 filter, refusing a bad file); SIGTERM exits cleanly with a final status line
 and the --stats JSON."""
 import json
@@ -129,6 +129,13 @@ def test_missing_can_not_fatal_heartbeat_timesync_sigterm(live_bridge):
     assert ts is not None and ts.tc1 > 0
     time.sleep(2.5)  # a few retries
     assert proc.poll() is None, "daemon exited without CAN"
+    # SIGUSR1: statistics written now, the daemon keeps running
+    assert not live_bridge["stats"].exists()
+    proc.send_signal(signal.SIGUSR1)
+    time.sleep(0.5)
+    assert proc.poll() is None
+    early = json.loads(live_bridge["stats"].read_text())
+    assert early["heartbeat_sent"] >= 2
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=10)
     assert proc.returncode == 0, err

@@ -293,6 +293,23 @@ static void test_reconfigure(void **state)
     assert_true(hypot(after.x_m - W.x0, after.y_m - W.y0) < 0.05);
 }
 
+static void test_encoder_glitch_ignored(void **state)
+{
+    (void)state;
+    run(&W, 1000000, 12000000);
+    /* one corrupted sample: counts 5000 ticks (0.77 m) off in 10 ms */
+    double saved = W.ticks0;
+    W.ticks0 += 5000;
+    send_encoders(&W, 12005000);
+    W.ticks0 = saved;
+    run(&W, 12010000, 16000000);
+    assert_int_equal(W.est.c.encoder_jumps, 2); /* off, and back */
+    struct est_output o;
+    assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+    assert_true(hypot(o.x_m - W.x0, o.y_m - W.y0) < 0.03);
+    assert_true(fabs(o.v_mps) < 0.01);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -301,6 +318,7 @@ int main(void)
         cmocka_unit_test_setup(test_encoders_before_receiver_clock, setup),
         cmocka_unit_test_setup(test_beacon_lost_and_back, setup),
         cmocka_unit_test_setup(test_reconfigure, setup),
+        cmocka_unit_test_setup(test_encoder_glitch_ignored, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -71,7 +71,9 @@ def main() -> int:
             odo = lst.messages("ODOMETRY", since=time.monotonic() - 1.0)
             t = time.monotonic() - t0
             if not odo:
-                say(f"{t:6.1f}  (no ODOMETRY yet)")
+                if int(t) % 5 == 0:
+                    say(f"{t:6.1f}  waiting for the first estimate (simulator starting, "
+                        f"filter not started yet)")
                 continue
             m = odo[-1].msg
             x, y = h.odometry_site_xy(m)

@@ -319,7 +319,7 @@ class Proc:
         return self.popen.returncode
 
 
-@dataclass
+@dataclass(repr=False)
 class Rig:
     """One test's bus, bridge, simulator and MAVLink listener."""
     workdir: Path
@@ -346,6 +346,9 @@ class Rig:
     @property
     def sim_stats(self) -> Path:
         return self.workdir / "sim-stats.json"
+
+    def __repr__(self) -> str:
+        return f"Rig({self.workdir.name}, {self.iface})"
 
     def listen(self) -> MavlinkListener:
         if self.listener is None:
@@ -439,7 +442,7 @@ def sim_frames_sent(stats: dict) -> int:
 # One live run
 # --------------------------------------------------------------------------
 
-@dataclass
+@dataclass(repr=False)
 class LiveRun:
     rig: Rig
     scenario: str
@@ -456,6 +459,9 @@ class LiveRun:
     bridge_stats: dict | None = None
     sim_stats: dict | None = None
     node_map: object = None
+
+    def __repr__(self) -> str:
+        return f"LiveRun({self.scenario} on {self.rig!r})"
 
     def errors(self) -> Errors:
         assert self.est is not None, "the bridge wrote no --estimates CSV"

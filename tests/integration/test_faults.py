@@ -13,7 +13,7 @@ import numpy as np
 
 import harness as h
 
-RUN_S = 45.0
+RUN_S = 40.0
 RECOVERED_RMS_M = 0.10
 
 
@@ -54,7 +54,7 @@ def test_interface_down_and_up_mid_run(rig):
             _ip("link", "set", "up", bridge_iface)
             marks["up"] = time.monotonic()
 
-        run = h.run_live(rig, "kleeman-lab", RUN_S, actions=[(20.0, down), (24.0, up)])
+        run = h.run_live(rig, "kleeman-lab", RUN_S, actions=[(18.0, down), (22.0, up)])
     finally:
         subprocess.run(["cangw", "-F"], capture_output=True)
         subprocess.run(["ip", "link", "del", "dev", bridge_iface], capture_output=True)
@@ -124,7 +124,7 @@ def test_flood_of_malformed_and_unknown_frames(rig):
             errors.append(exc)
 
     flooder = threading.Thread(target=flood)
-    run = h.run_live(rig, "kleeman-lab", RUN_S, actions=[(15.0, lambda r: flooder.start())])
+    run = h.run_live(rig, "kleeman-lab", RUN_S, actions=[(12.0, lambda r: flooder.start())])
     flooder.join(timeout=60)
     assert not errors, f"flood thread failed: {errors}"
     assert run.bridge_rc == 0, rig.logs()
@@ -156,7 +156,7 @@ def test_sigterm_then_restart(rig):
         state["stats_written"] = r.bridge_stats.exists()
         r.start_bridge(name="bridge2")
 
-    run = h.run_live(rig, "kleeman-lab", 55.0, actions=[(15.0, stop_and_restart)])
+    run = h.run_live(rig, "kleeman-lab", 50.0, actions=[(15.0, stop_and_restart)])
     assert state["rc"] == 0, rig.logs()
     assert state["stop_s"] < 5.0, f"SIGTERM took {state['stop_s']:.1f} s"
     assert state["stats_written"], "no --stats JSON after SIGTERM"
@@ -204,8 +204,8 @@ def test_sighup_reloads_changed_site_file(rig):
         marks["t2"] = time.monotonic()
         next(p for p in r.procs if p.name == "bridge").popen.send_signal(signal.SIGHUP)
 
-    run = h.run_live(rig, "kleeman-lab", 45.0, site=site,
-                     actions=[(15.0, reload_rate), (30.0, reload_broken)])
+    run = h.run_live(rig, "kleeman-lab", 40.0, site=site,
+                     actions=[(12.0, reload_rate), (26.0, reload_broken)])
     assert run.bridge_rc == 0, rig.logs()
     t = [x.t_mono_s for x in run.odometry]
     before = [x for x in t if marks["t1"] - 8 <= x < marks["t1"]]

@@ -20,7 +20,7 @@ def test_kidnap_reinitialises_and_recovers(rig):
     t_down = t_kidnap
     if sc.encoder_silence is not None:
         t_down = max(t_down, sc.encoder_silence[0] + sc.encoder_silence[1])
-    duration = min(sc.duration_s, t_down + 25.0)
+    duration = min(sc.duration_s, t_down + 15.0)
     run = h.run_live(rig, "kidnap", duration)
     assert run.bridge_rc == 0, rig.logs()
 

@@ -12,6 +12,7 @@ import harness as h
 
 DURATION_S = 60.0
 ODOMETRY_RATE_HZ = 30.0  # [bridge] odometry_rate_hz of kleeman-lab.ini
+QUALITY_BY_S = 30.0      # quality >= 0 (converged) this long after the first frame
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +82,7 @@ def test_quality_after_convergence(run):
     t = np.array([x.t_mono_s for x in odo]) - run.t_sim_start_mono_s
     first = np.flatnonzero(q >= 0)
     assert first.size, "quality never became >= 0"
-    assert t[first[0]] < h.CONVERGED_AFTER_S, f"converged only after {t[first[0]]:.1f} s"
+    assert t[first[0]] < QUALITY_BY_S, f"converged only after {t[first[0]]:.1f} s"
     during = (t >= t[first[0]]) & (t <= run.t_sim_end_mono_s - run.t_sim_start_mono_s)
     assert np.all(q[during] >= 0), f"quality fell back to -1 {np.sum(q[during] < 0)} times"
     assert np.all(q <= 100)

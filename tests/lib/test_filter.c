@@ -225,12 +225,15 @@ static void test_pulse_model_moving_robot(void **state)
     /* eq. 21 linearises the chase (u fixed at the firing position): error
      * below 1 µs for 1.5 m/s over ~20 ms of flight */
     assert_true(fabs((double)h - (tf + lo)) < (IS_FLOAT ? 2e-6 : 1e-6));
-    /* and the moving-robot term matters: ignoring it is off by > 50 µs */
-    bl_real x0[8];
+    /* and the moving-robot term matters: the same model with v = 0 (robot
+     * frozen at its firing-time position) is off by > 50 µs */
+    bl_real x0[8], h0;
     memcpy(x0, x, sizeof x0);
     x0[BL_IX_V] = 0;
-    const double dx = px - bx, dy = py - by;
-    assert_true(fabs((tf + sqrt(dx * dx + dy * dy) / 343) - (tf + lo)) > 50e-6);
+    x0[BL_IX_X] = (bl_real)px; /* keep the firing-time position */
+    x0[BL_IX_Y] = (bl_real)py;
+    assert_int_equal(bl_model_pulse(&cfg, x0, &g, &h0, NULL), BL_OK);
+    assert_true(fabs((double)h0 - (tf + lo)) > 50e-6);
 }
 
 /* ============================================================ simulator */
@@ -505,6 +508,27 @@ static void test_speed_of_sound_convergence(void **state)
     /* all three end on the same value */
     assert_true(fabs(final[0] - final[1]) < 1.0 && fabs(final[1] - final[2]) < 1.0 &&
                 fabs(final[0] - final[2]) < 1.0); /* from 30 m/s apart */
+}
+
+/* The automatic start does not know the heading (one snapshot cannot see
+ * it): starting 1 rad off, with σ 1 rad, the filter learns it from motion. */
+static void test_heading_learned_from_motion(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    const double offsets[4] = {1.0, -1.0, 1.5, -1.5};
+    for (int k = 0; k < 4; ++k) {
+        cfg.initial_theta_rad = (bl_real)offsets[k]; /* truth starts at 0 */
+        sim_params sp = default_sim();
+        sp.seed = 300 + (uint64_t)k;
+        sim_stats st = {0};
+        sim_run(&sp, &cfg, 30.0, &st);
+        print_stats("heading", &st);
+        assert_true(st.final_theta_err < 0.05);
+        assert_true(sqrt(st.sum_e2 / st.samples) < 0.05);
+        assert_true(st.within_3sigma >= 0.95 * st.samples);
+    }
 }
 
 /* Echoes (late arrivals) are rejected by the gate; direct pulses are not. */
@@ -791,6 +815,70 @@ static void test_api_misuse_leaves_state(void **state)
     assert_int_equal(bl_filter_start_snapshot(&z, 0, 1), BL_EDEGENERATE);
     assert_int_equal(bl_filter_estimate(&z, &e), BL_OK);
     assert_false(e.started);
+    /* buffering before the start: bad arguments leave it untouched too */
+    assert_int_equal(bl_filter_fuse_pulse(&z, 0, 5000000, 0, &r), BL_OK);
+    assert_int_equal(r.status, BL_PULSE_BUFFERED);
+    static bl_filter zref;
+    zref = z;
+    assert_int_equal(bl_filter_fuse_pulse(&z, 6, 5100000, 0, &r), BL_EBEACON);
+    assert_int_equal(bl_filter_fuse_pulse(&z, 1, 5100000, 9, &r), BL_EINVAL);
+    assert_int_equal(bl_filter_fuse_pulse(&z, 1, 5000000 - 3000000, 0, &r), BL_ETIME); /* 3 s older */
+    assert_int_equal(bl_filter_fuse_pulse(&z, 1, INT64_MIN, 0, &r), BL_ETIME);
+    assert_memory_equal(&z, &zref, sizeof z);
+}
+
+/* Iterated EKF (Kleeman §3.4): from a prior 1 m off, one precise pulse.
+ * The iteration stops as soon as the step is below the tolerance (not at
+ * the cap) and the posterior explains the measurement. */
+static double posterior_residual_us(uint32_t iterations, uint32_t *used)
+{
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.ring_radius_m = 0;
+    cfg.sigma_arrival_s = cfg.startup_sigma_arrival_s = (bl_real)2e-6;
+    cfg.firing_jitter_s = 0;
+    cfg.startup_gate_sigma = cfg.gate_sigma = 100;
+    cfg.iekf_max_iterations = iterations;
+    cfg.iekf_step_tolerance = (bl_real)(IS_FLOAT ? 1e-4 : 1e-6);
+    static bl_filter f;
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    bl_filter_prior pr;
+    memset(&pr, 0, sizeof pr);
+    pr.t_us = 2000000;
+    pr.x_m = (bl_real)(6.0 + 0.8); /* truth (6, 6) */
+    pr.y_m = (bl_real)(6.0 - 0.6);
+    pr.sigma_xy_m = 1;
+    pr.sigma_theta_rad = (bl_real)0.1;
+    pr.sigma_v_mps = (bl_real)0.01;
+    pr.sigma_omega_radps = (bl_real)0.01;
+    pr.t0_us = 2000000; /* beacon 1 fires at 2 s */
+    pr.t0_beacon_index = 0;
+    pr.sigma_t0_s = (bl_real)1e-6;
+    assert_int_equal(bl_filter_start(&f, &pr), BL_OK);
+    /* beacon 3 (index 2) fires at 2.3 s */
+    const double dx = 6 - cfg.beacons[2].x_m, dy = 6 - cfg.beacons[2].y_m;
+    const int64_t arrival_us = 2300000 + (int64_t)llround(sqrt(dx * dx + dy * dy) / 343.0 * 1e6);
+    bl_pulse_result r;
+    assert_int_equal(bl_filter_fuse_pulse(&f, 2, arrival_us, 0, &r), BL_OK);
+    assert_int_equal(r.status, BL_PULSE_ACCEPTED);
+    *used = r.iterations;
+    bl_expected_pulse xp;
+    assert_int_equal(bl_filter_expected_arrival(&f, 2, arrival_us - 20000, &xp), BL_OK);
+    assert_true(llabs(xp.fire_us - 2300000) < 5);
+    return fabs((double)(xp.arrival_us - arrival_us));
+}
+
+static void test_iekf_relinearisation(void **state)
+{
+    (void)state;
+    uint32_t used_ekf, used_iekf;
+    const double ekf = posterior_residual_us(1, &used_ekf);
+    const double iekf = posterior_residual_us(8, &used_iekf);
+    print_message("posterior residual: EKF %.0f us, IEKF %.0f us (%u iterations)\n", ekf, iekf, used_iekf);
+    assert_int_equal(used_ekf, 1);
+    assert_true(used_iekf >= 2 && used_iekf < 8); /* converged before the cap */
+    assert_true(ekf <= 5);
+    assert_true(iekf <= 2);
 }
 
 /* estimate_at extrapolates with constant velocity without changing the filter. */
@@ -835,8 +923,10 @@ int main(void)
         cmocka_unit_test(test_gate),
         cmocka_unit_test(test_api_misuse_leaves_state),
         cmocka_unit_test(test_estimate_at),
+        cmocka_unit_test(test_iekf_relinearisation),
         cmocka_unit_test(test_moving_robot_consistent),
         cmocka_unit_test(test_speed_of_sound_convergence),
+        cmocka_unit_test(test_heading_learned_from_motion),
         cmocka_unit_test(test_echoes_rejected),
         cmocka_unit_test(test_kidnap_recovers),
         cmocka_unit_test(test_24h_epoch),

@@ -175,7 +175,7 @@ DEMANGLE_PREFIX = "arm-none-eabi-"
 def short(node):
     """Readable function name: demangled, without arguments and templates."""
     name = re.sub(r"^[^:]+\.(c|cc|cpp):", "", node)
-    name = name.split(" [with ")[0]
+    name = name.split(" [with ")[0].split(" [clone ")[0]
     if name.startswith("_Z"):
         base = name.split(".")[0]
         try:

@@ -19,15 +19,30 @@
  *     on encoder frame:  bl_filter_predict_odometry(&f, t_us, d_left_m, d_right_m);
  *     on beacon pulse:   bl_filter_fuse_pulse(&f, beacon_index, arrival_us, rx, &res);
  *     to publish:        bl_filter_estimate_at(&f, now_us, &est);
- * The filter starts itself from the snapshot solver once it has buffered
- * pulses of one firing cycle (>= 3 beacons), or explicitly with
- * bl_filter_start() (known pose and firing time) or bl_filter_start_snapshot().
+ * The filter starts itself from the snapshot solver (bl_solve_tdoa_2d) once
+ * the buffered pulses of the latest firing cycle cover 4 beacons (all of
+ * them if the site has 3) and the fix explains them (residual < 3 σ of
+ * cfg.startup_sigma_arrival_s), heading cfg.initial_theta_rad with σ
+ * cfg.reset_sigma_theta_rad; or explicitly with bl_filter_start() (known
+ * pose and firing time) or bl_filter_start_snapshot().
+ *
+ * Start-up (Kleeman §3.9): until the position σ first falls below
+ * cfg.converged_sigma_xy_m, arrivals get σ cfg.startup_sigma_arrival_s and
+ * the gate cfg.startup_gate_sigma; then cfg.sigma_arrival_s and
+ * cfg.gate_sigma (the converged flag latches until the next (re)start).
+ * Persistent rejection: after cfg.reset_reject_count consecutive gate
+ * rejections spanning >= 2 beacons, the filter re-initialises from the
+ * snapshot of the last cycle's pulses (kept per beacon, accepted or not),
+ * keeping s and T, heading with σ cfg.reset_sigma_theta_rad, and bumps
+ * the reset counter (fuse_pulse returns status BL_PULSE_RESET).
  *
  * Errors: every function returns BL_OK or a negative bl_error and, on error,
  * leaves *f byte-identical. Bad *data* (echoes, outliers) is not an error:
  * it is rejected by the innovation gate and counted per beacon.
- * Cost: fuse_pulse is O(8²) per IEKF iteration; predict O(8³); no heap;
- * stack use < 2 KiB. Not thread-safe per instance; instances are independent.
+ * Cost: fuse_pulse O(8²) per IEKF iteration (<= cfg.iekf_max_iterations),
+ * predict O(8²) (sparse Jacobians); no heap; worst stack chain < 2 KiB on
+ * Cortex-M4F (make size-m4). Not thread-safe per instance; instances are
+ * independent.
  */
 #ifndef BEACONLOC_FILTER_H
 #define BEACONLOC_FILTER_H
@@ -149,7 +164,8 @@ int bl_filter_update_config(bl_filter *f, const bl_config *cfg);
 
 /* Start (or restart) from a known prior. Counts as a reset if the filter
  * was already started. Errors: BL_EINVAL (NULL, non-finite, σ <= 0,
- * beacon index >= count), BL_ENOTINIT. */
+ * beacon index >= count), BL_ENOTINIT, BL_ETIME (t0_us further from t_us
+ * than cfg.max_predict_gap_s plus one firing cycle). */
 int bl_filter_start(bl_filter *f, const bl_filter_prior *prior);
 
 /* Start (or restart) from the snapshot solver on the buffered last pulse
@@ -157,7 +173,8 @@ int bl_filter_start(bl_filter *f, const bl_filter_prior *prior);
  * observable from one snapshot, so it is given (σ sigma_theta_rad > 0).
  * The state time becomes the latest buffered arrival.
  * Errors: BL_EINVAL, BL_ENOTINIT, BL_EDEGENERATE (fewer than 3 beacons in
- * the last cycle or singular geometry), BL_ENOCONVERGE. */
+ * the last cycle or singular geometry), BL_ENOCONVERGE (no convergence, or
+ * with > 3 beacons a residual above 3σ of cfg.startup_sigma_arrival_s). */
 int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real sigma_theta_rad);
 
 /* Predict to t_us with wheel increments since the previous predict:
@@ -184,7 +201,9 @@ int bl_filter_predict(bl_filter *f, int64_t t_us);
  * result may be NULL.
  * Errors: BL_EINVAL (NULL f), BL_EBEACON (beacon_index >= count),
  * BL_EINVAL (receiver_index >= receiver_count), BL_ENOTINIT (not init),
- * BL_ETIME (|arrival - state time| > cfg.max_predict_gap_s). */
+ * BL_ETIME (|arrival - state time| > cfg.max_predict_gap_s; before the
+ * start: arrival older than a buffered pulse by more than that),
+ * BL_EINVAL (the update would leave the state non-finite: refused). */
 int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
                          uint32_t receiver_index, bl_pulse_result *result);
 

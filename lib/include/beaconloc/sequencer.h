@@ -12,15 +12,18 @@
  *      merge_window_us of a pulse's earliest detection are merged into it;
  *      the pulse reports the earliest detection (its time, receiver,
  *      amplitude and width) and how many receivers heard it.
- *   2. Beacon 1. A pulse is beacon 1's double pulse when a detection carries
- *      the node's double-pulse flag, when a second burst follows the first
- *      double_spacing_us ± double_tolerance_us later (on any receiver), or
- *      when one envelope is at least double_width_min_us wide (both bursts
- *      read as one). A double pulse (re)anchors the firing-time model. A
- *      double pulse where the locked model expects another beacon (an echo
- *      3 ms late mimics the second burst) is numbered as that beacon and
- *      counted in double_conflicts; only a second conflicting double whole
- *      cycles later, with no consistent beacon 1 in between, relocks.
+ *   2. Beacon 1. A receiver shows beacon 1's signature when its detection
+ *      carries the node's double-pulse flag, when a second burst follows the
+ *      pulse double_spacing_us ± double_tolerance_us later, or when its
+ *      envelope is at least double_width_min_us wide (both bursts read as
+ *      one). The pulse is beacon 1's double pulse when at least half the
+ *      receivers that heard it show the signature (an echo 3 ms after the
+ *      direct path mimics the second burst, mostly on a few receivers). A
+ *      double pulse (re)anchors the model. A double pulse where the hint or
+ *      the locked model expects another beacon (or no firing) is numbered as
+ *      expected and counted in double_conflicts; only a second conflicting
+ *      double whole cycles later, with no consistent beacon 1 in between,
+ *      drops the hint and relocks on it.
  *   3. Numbering (Kleeman 1992 eq. 19: arrival = firing + flight, flight in
  *      [0, max_flight_us]). From beacon 1's arrival a1 its firing time lies
  *      in [a1 - max_flight_us, a1]; firing slot j (j = 0, 1, 2, ... after
@@ -31,8 +34,8 @@
  *      with their σ) the firing time is known and the window is half as wide:
  *          [t0 + k·T - tol_k,  t0 + k·T + max_flight_us + tol_k],
  *      tol_k = window_margin_us + 3·(σ_t0 + |k|·σ_T); the hint is dropped
- *      when its windows would overlap (stale) or a double pulse contradicts
- *      it. A pulse is numbered by the slot whose window contains it, so
+ *      when its windows would overlap (stale) or double pulses contradict
+ *      it twice (see 2). A pulse is numbered by the slot whose window contains it, so
  *      missed beacons (including a missed beacon 1) never shift the
  *      numbering of the next ones; a pulse outside every window is spurious.
  *   4. Firing-time model. T is tracked from successive arrivals of the same
@@ -168,11 +171,11 @@ typedef struct bl_seq_counters {
     uint32_t unassigned;       /* pulses out with status UNLOCKED */
     uint32_t spurious;         /* pulses out with status SPURIOUS, plus too-narrow detections */
     uint32_t repeats;          /* assigned pulses with repeat set (probable echoes) */
-    uint32_t double_conflicts; /* double pulses outside beacon 1's window while locked */
+    uint32_t double_conflicts; /* double pulses where the hint/model expects another beacon */
     uint32_t locks_acquired;   /* unlocked -> locked transitions */
     uint32_t locks_lost;       /* locked -> unlocked transitions */
     uint32_t period_updates;   /* accepted T measurements */
-    uint32_t hint_rejections;  /* hints dropped because a double pulse contradicted them */
+    uint32_t hint_rejections;  /* hints dropped because double pulses contradicted them */
 } bl_seq_counters;
 
 /* Private: one pulse whose merge window is open. */
@@ -182,7 +185,7 @@ typedef struct bl_seq_pending {
     uint32_t rx_mask;          /* receivers heard (bit per receiver) */
     uint16_t amplitude_mv;
     uint16_t width_us;
-    bool double_pulse;
+    uint32_t double_mask;      /* receivers showing beacon 1's signature */
 } bl_seq_pending;
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
@@ -267,8 +270,8 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det);
 int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out);
 
 /* Installs (or replaces) the filter's prediction of firing time and period.
- * It locks the model and tightens every later window until cleared or
- * contradicted by a double pulse (counted in hint_rejections).
+ * It locks the model and tightens every later window until cleared, stale,
+ * or contradicted by two double pulses (counted in hint_rejections).
  * Errors: BL_EINVAL (NULL, NaN/inf, period <= 0 or outside the period
  * tolerance of the nominal T, σ < 0, beacon >= beacon_count, time beyond the
  * limit), BL_ENOTINIT. */

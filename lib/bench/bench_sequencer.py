@@ -1,0 +1,110 @@
+#!/usr/bin/env python3
+"""make bench-sequencer: numbering accuracy of the beacon sequencer on the
+hardware simulator's detections, against its ground truth.
+
+For every built-in hw_sim scenario (echo storms, beacon outages, kidnap,
+temperature ramp, ...) the simulator's receiver-node detections (the
+content of its PULSE_DETECTION frames: node time unwrapped to int64 us,
+receiver, DoublePulse flag, amplitude, width) run through the C sequencer
+(seq_replay). Every output pulse is traced back to the detection it reports
+(its earliest), whose truth says which firing, which beacon and whether the
+burst came by the direct path, a wall/floor echo or a late arrival.
+
+Counted per scenario and in total:
+  direct     firings heard by at least one receiver on the direct path
+  numbered   of those, firings whose first pulse was numbered (any status
+             ASSIGNED) with the right beacon
+  wrong      pulses numbered with a beacon other than the one that fired
+             (the sequencer's real failure; echoes numbered as their own
+             beacon are right, echoes spilling into the next beacon's window
+             are wrong and are counted separately as wrong_echo)
+Last line:
+  sequencer scenarios=<n> seeds=<n> direct=<n> numbered_pct=<%> wrong_direct=<n> wrong_echo=<n> spurious=<n> unlocked=<n>
+"""
+import argparse
+import subprocess
+import sys
+
+import numpy as np
+
+from beaconloc_sim import simulate
+from beaconloc_sim.physics.pulses import KIND_DIRECT
+from beaconloc_sim.scenario import builtin_names, load_scenario
+
+
+def run_scenario(name, replay, seed, duration):
+    scn = load_scenario(name, seed=seed, duration_s=duration)
+    res = simulate.run(scn, encode=False)
+    det = res.detections
+    t_us = res.rx_clock.unwrapped_us(det.edge_s).astype(np.int64)
+    order = np.argsort(t_us, kind="stable")
+    lines = []
+    for i in order.tolist():
+        width_us = int(round(det.width_s[i] * 1e6))
+        lines.append(f"{t_us[i]} {int(det.receiver[i])} {int(bool(det.double[i]))} "
+                     f"{int(det.amplitude_mv[i])} {min(width_us, 65535)}")
+    out = subprocess.run([replay], input="\n".join(lines) + "\n", capture_output=True, text=True)
+    if out.returncode != 0:
+        sys.exit(f"bench-sequencer: seq_replay failed on {name}: {out.stderr}")
+    key = {(int(t_us[i]), int(det.receiver[i])): i for i in range(len(t_us))}
+    fire_beacon = res.firings.beacon
+    direct_firings = set(int(det.firing[i]) for i in range(len(t_us)) if det.kind[i] == KIND_DIRECT)
+    first_pulse_of_firing = {}
+    wrong_direct = wrong_echo = spurious = unlocked = 0
+    counters = {}
+    for line in out.stdout.splitlines():
+        if line.startswith("counters "):
+            counters = dict(kv.split("=") for kv in line.split()[1:])
+            continue
+        arrival, rx, beacon, status, repeat, _dbl, _heard = (int(v) for v in line.split())
+        i = key.get((arrival, rx))
+        if i is None:
+            sys.exit(f"bench-sequencer: pulse {line!r} does not match a detection")
+        f = int(det.firing[i])
+        if status == 1:
+            unlocked += 1
+            continue
+        if status == 2:
+            spurious += 1
+            continue
+        if beacon != int(fire_beacon[f]):
+            if det.kind[i] == KIND_DIRECT:
+                wrong_direct += 1
+            else:
+                wrong_echo += 1
+        if f not in first_pulse_of_firing:
+            first_pulse_of_firing[f] = (beacon == int(fire_beacon[f]), det.kind[i] == KIND_DIRECT)
+    numbered = sum(1 for f in direct_firings if first_pulse_of_firing.get(f, (False, False))[0])
+    return dict(direct=len(direct_firings), numbered=numbered, wrong_direct=wrong_direct, wrong_echo=wrong_echo,
+                spurious=spurious, unlocked=unlocked, counters=counters)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--replay", required=True, help="seq_replay executable")
+    ap.add_argument("--seeds", default="1,2,3,4,5", help="comma-separated simulator seeds, each runs every scenario")
+    ap.add_argument("--duration", type=float, default=None, help="override each scenario's duration, s")
+    a = ap.parse_args()
+    tot = dict(direct=0, numbered=0, wrong_direct=0, wrong_echo=0, spurious=0, unlocked=0)
+    names = builtin_names()
+    seeds = [int(v) for v in a.seeds.split(",") if v.strip()]
+    print(f"{'scenario':18s} {'seed':>4s} {'direct':>7s} {'numbered':>9s} {'wrong':>6s} {'wrong_echo':>10s} "
+          f"{'spurious':>8s} {'unlocked':>8s} {'repeats':>7s} {'conflicts':>9s} {'locks_lost':>10s}")
+    for seed in seeds:
+        for name in names:
+            r = run_scenario(name, a.replay, seed, a.duration)
+            c = r["counters"]
+            pct = 100.0 * r["numbered"] / max(r["direct"], 1)
+            print(f"{name:18s} {seed:4d} {r['direct']:7d} {pct:8.2f}% {r['wrong_direct']:6d} {r['wrong_echo']:10d} "
+                  f"{r['spurious']:8d} {r['unlocked']:8d} {c.get('repeats', '?'):>7s} "
+                  f"{c.get('double_conflicts', '?'):>9s} {c.get('locks_lost', '?'):>10s}")
+            for k in tot:
+                tot[k] += r[k]
+    pct = 100.0 * tot["numbered"] / max(tot["direct"], 1)
+    print(f"sequencer scenarios={len(names)} seeds={len(seeds)} direct={tot['direct']} numbered_pct={pct:.2f} "
+          f"wrong_direct={tot['wrong_direct']} wrong_echo={tot['wrong_echo']} spurious={tot['spurious']} "
+          f"unlocked={tot['unlocked']}")
+
+
+if __name__ == "__main__":
+    main()
