@@ -90,6 +90,9 @@ $(BRIDGE_TESTDIR)/test_%: $(BRIDGE_TESTDIR)/obj/test_%.o $(BRIDGE_SANOBJS) $(BRI
 	$(CC) $(BRIDGE_SANFLAGS) -o $@ $< $(BRIDGE_SANOBJS) $(BRIDGE_LIB) \
 	    $(BRIDGE_WRAP_test_$*) -lcmocka $(BRIDGE_LDLIBS)
 
+# keep the test objects (intermediate files of the pattern chain)
+.PRECIOUS: $(BRIDGE_TESTDIR)/obj/%.o
+
 test-bridge: $(BRIDGE_TESTS)
 	@set -e; for t in $(BRIDGE_TESTS); do echo "== $$t"; \
 	    ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 $$t; done

@@ -207,6 +207,7 @@ static void reinit_filter(struct estimator *e, const char *why)
         e->reset_base += est.reset_counter + 1;
     bl_filter_init(&e->filter, &e->blcfg);
     bl_sequencer_clear_hint(&e->seq);
+    e->hint_set = false;
     e->c.reinits++;
     e->last_reset_seen = 0;
     e->was_started = false;
@@ -293,6 +294,36 @@ static bool restart_if_persistent(struct estimator *e, int64_t rx_us)
     return true;
 }
 
+/* While the filter has converged, its firing-time prediction (t0 of
+ * beacon 1 and the period, with their σ) is handed to the sequencer: the
+ * windows tighten and the numbering survives a silent beacon 1, whose
+ * double pulse otherwise anchors the sequencer's own model. The hint is
+ * dropped when the filter is not converged (and on every re-init). */
+static void update_hint(struct estimator *e, const bl_estimate *est)
+{
+    if (!est->started || !est->converged) {
+        if (e->hint_set) {
+            bl_sequencer_clear_hint(&e->seq);
+            e->hint_set = false;
+        }
+        return;
+    }
+    bl_seq_hint h = {
+        .fire_us = est->t0_us,
+        .beacon = 0,
+        .period_us = est->period_s * (bl_real)1e6,
+        .fire_sigma_us = est->sigma_t0_s * (bl_real)1e6,
+        .period_sigma_us = est->sigma_period_s * (bl_real)1e6,
+    };
+    int rc = bl_sequencer_set_hint(&e->seq, &h);
+    if (rc == BL_OK) {
+        e->hint_set = true;
+    } else {
+        e->c.hint_errors++;
+        log_debug("sequencer hint refused: %s", bl_strerror(rc));
+    }
+}
+
 static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
 {
     bl_estimate est;
@@ -372,6 +403,7 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
         event(e, EST_EV_WARNING, "re-initialised from snapshot (reset %u)",
               e->reset_base + est.reset_counter);
     }
+    update_hint(e, &est);
     if (est.converged != e->was_converged) {
         e->was_converged = est.converged;
         event(e, est.converged ? EST_EV_INFO : EST_EV_WARNING, "%s",

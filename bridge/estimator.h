@@ -60,6 +60,7 @@ struct est_counters {
     uint64_t reinits;            /* re-initialisations done by the bridge */
     uint64_t node_restarts;
     uint64_t seq_errors;
+    uint64_t hint_errors;        /* hints the sequencer refused */
 };
 
 /* One published estimate. */
@@ -96,6 +97,7 @@ struct estimator {
     uint32_t last_reset_seen;
     bool was_started;
     bool was_converged;
+    bool hint_set;                /* the sequencer has the filter's hint */
     /* health */
     double beacon_lost_s, echo_storm_ratio;
     int64_t beacon_last_ok_us[BL_MAX_BEACONS];

@@ -249,6 +249,7 @@ typedef struct sim_params {
     double t0_true_s;          /* first firing of beacon 1 (s after sim start) */
     double sigma_arrival_s;
     double echo_prob;          /* probability a pulse arrives late (echo) */
+    double miss_prob;          /* probability a pulse is not heard at all */
     double kidnap_at_s;        /* < 0: never */
     double kidnap_dx_m, kidnap_dy_m;
     int64_t time_offset_us;    /* added to every time handed to the filter */
@@ -285,6 +286,7 @@ typedef struct sim_pulse {
     double arrival_s;
     uint32_t beacon, receiver;
     int echo;
+    int missed;
 } sim_pulse;
 
 /* Pulse of firing k (beacon k mod N at t0 + k·T): received by the receiver
@@ -310,7 +312,8 @@ static sim_pulse sim_pulse_of(const sim_params *sp, const bl_config *cfg, long k
         const double d = sqrt((rxp - bc->x_m) * (rxp - bc->x_m) + (ryp - bc->y_m) * (ryp - bc->y_m) + dz * dz);
         ta = tf + d / sp->s_true_mps;
     }
-    sim_pulse p = {ta + sp->sigma_arrival_s * rng_gauss(), b, rx, 0};
+    sim_pulse p = {ta + sp->sigma_arrival_s * rng_gauss(), b, rx, 0, 0};
+    if (sp->miss_prob > 0 && rng_uniform() < sp->miss_prob) p.missed = 1;
     if (sp->echo_prob > 0 && rng_uniform() < sp->echo_prob) {
         p.arrival_s += 0.003 + 0.02 * rng_uniform(); /* 1..8 m longer path */
         p.echo = 1;
@@ -336,6 +339,7 @@ typedef struct sim_stats {
     double max_abs_t0_offset_s;
     double final_theta_err;
     long sample_every;  /* compare every n-th encoder frame (input; 0/1 = all) */
+    double sum_v_est, sum_v_true; /* speed bias check */
 } sim_stats;
 
 static int64_t to_us(const sim_params *sp, double t_s) { return sp->time_offset_us + (int64_t)llround(t_s * 1e6); }
@@ -377,6 +381,10 @@ static void sim_run(const sim_params *sp, const bl_config *cfg_in, double settle
         prev_l = ticks_l;
         prev_r = ticks_r;
         while (next.arrival_s <= t) {
+            if (next.missed) {
+                next = sim_pulse_of(sp, &cfg, ++next_fire);
+                continue;
+            }
             bl_pulse_result res;
             const int rc = bl_filter_fuse_pulse(&f, next.beacon, to_us(sp, next.arrival_s), next.receiver, &res);
             assert_int_equal(rc, BL_OK);
@@ -412,6 +420,10 @@ static void sim_run(const sim_params *sp, const bl_config *cfg_in, double settle
                 st->sum_nees += (c * ex * ex - 2 * b * ex * ey + a * ey * ey) / (a * c - b * b);
             }
             if (err > st->max_e) st->max_e = err;
+            double tv, tw;
+            truth_vw(t, &tv, &tw);
+            st->sum_v_est += e.v_mps;
+            st->sum_v_true += tv;
         }
         st->final_e = err;
         st->final_sos = e.speed_of_sound_mps;
@@ -447,9 +459,9 @@ static sim_params default_sim(void)
 
 static void print_stats(const char *name, const sim_stats *st)
 {
-    print_message("%s: NEES %.2f samples %d within3σ %.1f%% rms %.1f mm max %.1f mm final %.1f mm sos %.2f±%.2f "
+    print_message("%s: v ratio %.4f NEES %.2f samples %d within3σ %.1f%% rms %.1f mm max %.1f mm final %.1f mm sos %.2f±%.2f "
                   "T %.7f resets %u acc %u rej %u echoes %d/%d rejected, direct rejected %d, heading err %.3f\n",
-                  name, st->sum_nees / (st->samples ? st->samples : 1), st->samples, 100.0 * st->within_3sigma / (st->samples ? st->samples : 1),
+                  name, st->sum_v_true > 0 ? st->sum_v_est / st->sum_v_true : 0.0, st->sum_nees / (st->samples ? st->samples : 1), st->samples, 100.0 * st->within_3sigma / (st->samples ? st->samples : 1),
                   1000 * sqrt(st->sum_e2 / (st->samples ? st->samples : 1)), 1000 * st->max_e,
                   1000 * st->final_e, st->final_sos, st->final_sigma_sos, st->final_T, st->resets,
                   st->accepted, st->rejected, st->echoes_rejected, st->echoes, st->direct_rejected,
@@ -529,6 +541,46 @@ static void test_heading_learned_from_motion(void **state)
         assert_true(sqrt(st.sum_e2 / st.samples) < 0.05);
         assert_true(st.within_3sigma >= 0.95 * st.samples);
     }
+}
+
+/* Beacon outages (Vander et al. 2011 test 20-50 %): 40 % of the pulses
+ * never arrive; the filter starts, converges and tracks regardless. */
+static void test_missing_pulses(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    sim_params sp = default_sim();
+    sp.miss_prob = 0.4;
+    sp.seed = 41;
+    sim_stats st = {0};
+    sim_run(&sp, &cfg, 30.0, &st);
+    print_stats("40% missing", &st);
+    assert_true(st.started);
+    assert_int_equal(st.resets, 0);
+    assert_true(st.accepted > 300 && st.accepted < 400); /* ~60 % of 600 */
+    assert_true(sqrt(st.sum_e2 / st.samples) < 0.06);
+    assert_true(st.within_3sigma >= 0.95 * st.samples);
+}
+
+/* Ceiling beacons (z 2.8 m, receivers at 1 m): 3D distances throughout,
+ * including the snapshot start. */
+static void test_ceiling_beacons(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    for (uint32_t i = 0; i < cfg.beacon_count; ++i) cfg.beacons[i].z_m = (bl_real)2.8;
+    sim_params sp = default_sim();
+    sp.seed = 28;
+    sim_stats st = {0};
+    sim_run(&sp, &cfg, 25.0, &st);
+    print_stats("ceiling", &st);
+    assert_true(st.started);
+    assert_int_equal(st.resets, 0);
+    assert_true(sqrt(st.sum_e2 / st.samples) < 0.05);
+    assert_true(st.within_3sigma >= 0.95 * st.samples);
+    assert_true(fabs(st.final_sos - sp.s_true_mps) < 3 * st.final_sigma_sos);
 }
 
 /* Echoes (late arrivals) are rejected by the gate; direct pulses are not. */
@@ -742,6 +794,31 @@ static void test_gate(void **state)
     assert_int_equal(r.status, BL_PULSE_ACCEPTED);
 }
 
+/* Explicit restart from the snapshot of the last cycle on a running filter:
+ * position from the solver, reset counter bumped, heading as given. */
+static void test_start_snapshot_restart(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    static bl_filter f;
+    int64_t t;
+    converged_filter(&f, &cfg, &t, 7, 4);
+    bl_estimate e;
+    assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+    assert_int_equal(e.reset_counter, 0);
+    assert_int_equal(bl_filter_start_snapshot(&f, (bl_real)0.3, (bl_real)0.2), BL_OK);
+    assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+    assert_true(e.started);
+    assert_int_equal(e.reset_counter, 1);
+    assert_false(e.converged); /* back to start-up noise until it converges again */
+    /* the ring offset (receiver 0, 0.1 m ahead) is inside the snapshot's σ */
+    assert_true(fabs(e.x_m - 7) < 0.3 && fabs(e.y_m - 4) < 0.3);
+    assert_true(fabs(e.theta_rad - 0.3) < 1e-6);
+    assert_true(fabs(sqrt(e.cov[12]) - 0.2) < 1e-6); /* (θ, θ) of the 5x5 */
+    assert_true(fabs(e.x_m - 7) < 3 * sqrt(e.cov[0]) && fabs(e.y_m - 4) < 3 * sqrt(e.cov[6]));
+}
+
 static void test_api_misuse_leaves_state(void **state)
 {
     (void)state;
@@ -922,12 +999,15 @@ int main(void)
         cmocka_unit_test(test_pulse_model_moving_robot),
         cmocka_unit_test(test_gate),
         cmocka_unit_test(test_api_misuse_leaves_state),
+        cmocka_unit_test(test_start_snapshot_restart),
         cmocka_unit_test(test_estimate_at),
         cmocka_unit_test(test_iekf_relinearisation),
         cmocka_unit_test(test_moving_robot_consistent),
         cmocka_unit_test(test_speed_of_sound_convergence),
         cmocka_unit_test(test_heading_learned_from_motion),
         cmocka_unit_test(test_echoes_rejected),
+        cmocka_unit_test(test_missing_pulses),
+        cmocka_unit_test(test_ceiling_beacons),
         cmocka_unit_test(test_kidnap_recovers),
         cmocka_unit_test(test_24h_epoch),
         cmocka_unit_test(test_24h_real),

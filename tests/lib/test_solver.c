@@ -286,6 +286,38 @@ static void test_site_2d_exact(void **state)
     }
 }
 
+/* 3D overdetermined: eight beacons on the corners of a room-sized box. */
+static void test_3d_overdetermined(void **state)
+{
+    (void)state;
+    rng_seed(3);
+    for (int r = 0; r < 200; ++r) {
+        bl_tdoa_problem p;
+        memset(&p, 0, sizeof p);
+        p.count = 8;
+        p.speed_of_sound_mps = 343;
+        const double goal[3] = {1 + 8 * rng_uniform(), 1 + 6 * rng_uniform(), 0.2 + 2.5 * rng_uniform()};
+        for (int j = 0; j < 8; ++j) {
+            p.beacons[j].x_m = (bl_real)((j & 1) ? 10.0 : 0.0);
+            p.beacons[j].y_m = (bl_real)((j & 2) ? 8.0 : 0.0);
+            p.beacons[j].z_m = (bl_real)((j & 4) ? 3.0 : 0.0);
+            p.fire_offset_s[j] = (bl_real)(0.1 * j);
+            p.arrival_s[j] = (bl_real)(0.003 + 0.1 * j + dist3(goal, &p.beacons[j]) / 343.0);
+            p.sigma_s[j] = (bl_real)2e-4;
+        }
+        bl_tdoa_solution sol;
+        int rc = bl_solve_tdoa_3d(&p, &sol);
+        if (IS_FLOAT && rc == BL_ENOCONVERGE) rc = BL_OK;
+        assert_int_equal(rc, BL_OK);
+        const double tol = IS_FLOAT ? 5e-3 : 1e-6;
+        assert_true(fabs(sol.x_m - goal[0]) < tol && fabs(sol.y_m - goal[1]) < tol &&
+                    fabs(sol.z_m - goal[2]) < tol);
+        assert_true(fabs(sol.t0_s - 0.003) < (IS_FLOAT ? 1e-5 : 1e-9));
+        assert_false(sol.error_vector_valid);
+        assert_true(sol.cov[2 * 4 + 2] > 0 && sol.cov[3 * 4 + 3] > 0);
+    }
+}
+
 /* The reported covariance matches the scatter of noisy solutions (NEES). */
 static void test_site_2d_covariance_consistent(void **state)
 {
@@ -438,6 +470,7 @@ int main(void)
         cmocka_unit_test(test_step_equals_eq8),
         cmocka_unit_test(test_convergence_1e5_in_4_iterations),
         cmocka_unit_test(test_site_2d_exact),
+        cmocka_unit_test(test_3d_overdetermined),
         cmocka_unit_test(test_site_2d_covariance_consistent),
         cmocka_unit_test(test_2d_three_beacons),
         cmocka_unit_test(test_degenerate),
