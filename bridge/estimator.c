@@ -359,8 +359,31 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
               pl->repeat ? " (repeat)" : "", (int)res.status,
               (double)res.innovation_s * 1e6,
               (double)res.innovation_sigma_s * 1e6, (double)res.test_ratio);
-    if (!pl->repeat && (res.status == BL_PULSE_ACCEPTED ||
-                        res.status == BL_PULSE_REJECTED))
+    /* An innovation longer than the longest flight cannot come from a
+     * position error inside the site: the pulse was given the wrong beacon
+     * number (the sequencer slipped a slot, e.g. anchored on an echo that
+     * looked like beacon 1's double pulse while beacon 1 was silent). Two
+     * in a row while the filter is converged: re-synchronise the sequencer
+     * from the filter's firing times instead of blaming the pose. */
+    bool misnumbered = res.status == BL_PULSE_REJECTED && e->was_converged &&
+        fabs((double)res.innovation_s) * 1e6 > (double)e->seqcfg.max_flight_us;
+    if (misnumbered) {
+        e->c.numbering_errors++;
+        if (++e->misnumbered_in_row >= 2) {
+            bl_estimate now_est;
+            bl_filter_estimate(&e->filter, &now_est);
+            bl_sequencer_reset(&e->seq);
+            e->hint_set = false;
+            update_hint(e, &now_est);
+            e->misnumbered_in_row = 0;
+            e->c.seq_resyncs++;
+            event(e, EST_EV_WARNING, "beacon numbering re-synchronised");
+        }
+    } else if (res.status == BL_PULSE_ACCEPTED) {
+        e->misnumbered_in_row = 0;
+    }
+    if (!pl->repeat && !misnumbered && (res.status == BL_PULSE_ACCEPTED ||
+                                        res.status == BL_PULSE_REJECTED))
         watch_rejections(e, (uint32_t)pl->beacon,
                          res.status == BL_PULSE_REJECTED);
     switch (res.status) {

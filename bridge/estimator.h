@@ -61,6 +61,8 @@ struct est_counters {
     uint64_t node_restarts;
     uint64_t seq_errors;
     uint64_t hint_errors;        /* hints the sequencer refused */
+    uint64_t numbering_errors;   /* innovations longer than any flight */
+    uint64_t seq_resyncs;        /* sequencer re-synchronised from the filter */
 };
 
 /* One published estimate. */
@@ -98,6 +100,7 @@ struct estimator {
     bool was_started;
     bool was_converged;
     bool hint_set;                /* the sequencer has the filter's hint */
+    unsigned misnumbered_in_row;  /* rejected pulses with impossible innovations */
     /* health */
     double beacon_lost_s, echo_storm_ratio;
     int64_t beacon_last_ok_us[BL_MAX_BEACONS];

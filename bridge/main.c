@@ -983,6 +983,8 @@ static void fill_report(struct daemon *d, struct stats_report *r)
     r->snapshot_restarts = d->est.c.snapshot_restarts;
     r->encoder_jumps = d->est.c.encoder_jumps;
     r->node_restarts = d->est.c.node_restarts;
+    r->numbering_errors = d->est.c.numbering_errors;
+    r->seq_resyncs = d->est.c.seq_resyncs;
     r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;

@@ -121,6 +121,8 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"snapshot_restarts\": %llu,\n", (unsigned long long)r->snapshot_restarts);
     fprintf(f, "  \"encoder_jumps\": %llu,\n", (unsigned long long)r->encoder_jumps);
     fprintf(f, "  \"node_restarts\": %llu,\n", (unsigned long long)r->node_restarts);
+    fprintf(f, "  \"numbering_errors\": %llu,\n", (unsigned long long)r->numbering_errors);
+    fprintf(f, "  \"sequencer_resyncs\": %llu,\n", (unsigned long long)r->seq_resyncs);
     fprintf(f, "  \"encoder_gaps\": %llu,\n", (unsigned long long)r->encoder_gaps);
     fprintf(f, "  \"estimator_errors\": %llu,\n", (unsigned long long)r->predict_errors);
     fprintf(f, "  \"estimates\": %llu,\n", (unsigned long long)r->estimates);

@@ -43,7 +43,7 @@ struct stats_report {
     uint64_t seq_detections, seq_merged, seq_double_pulses,
         seq_double_conflicts, seq_locks_acquired, seq_locks_lost,
         seq_repeats, repeats_skipped, snapshot_restarts, encoder_jumps,
-        node_restarts;
+        node_restarts, numbering_errors, seq_resyncs;
     int64_t latency_p50_us, latency_p99_us, latency_max_us;
     uint64_t latency_samples;
     double replay_frames_per_s; /* 0 when not replaying */

@@ -437,6 +437,23 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det) {
     for (uint32_t i = 0; i < seq->n_pending; ++i) {
         bl_seq_pending &g = seq->pending[i];
         if (abs64(t - g.start_us) > c.merge_window_us) continue;
+        if (t < g.start_us) {
+            // New earliest detection: rebase every member's offset on it
+            // (offsets stay within 2 merge windows < T <= 10 s: int32).
+            const int32_t shift = static_cast<int32_t>(g.start_us - t);
+            for (uint32_t m = g.rx_mask; m != 0; m &= m - 1) {
+                const uint32_t r = static_cast<uint32_t>(__builtin_ctz(m));
+                g.rx_offset_us[r] += shift;
+            }
+        }
+        const int64_t start_new = t < g.start_us ? t : g.start_us;
+        const int32_t off = static_cast<int32_t>(t - start_new);
+        // A receiver keeps its own earliest detection (a later one of the
+        // same receiver in the window is an echo of the same firing).
+        if ((g.rx_mask & bit) == 0 || off < g.rx_offset_us[det->receiver]) {
+            g.rx_offset_us[det->receiver] = off;
+            g.rx_amplitude_mv[det->receiver] = det->amplitude_mv;
+        }
         g.rx_mask |= bit;
         if (det->double_pulse || wide) g.double_mask |= bit;
         if (t < g.start_us) {
@@ -488,6 +505,8 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det) {
     g.amplitude_mv = det->amplitude_mv;
     g.width_us = det->width_us;
     g.double_mask = (det->double_pulse || wide) ? bit : 0u;
+    g.rx_offset_us[det->receiver] = 0;
+    g.rx_amplitude_mv[det->receiver] = det->amplitude_mv;
     seq->n_pending++;
     seq->counters.detections++;
     return BL_OK;
@@ -515,6 +534,25 @@ int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out) {
     uint32_t either = 0;
     for (uint32_t m = g.rx_mask | g.double_mask; m != 0; m &= m - 1) ++either;
     p.receivers_heard = heard;
+    // Members: every receiver's own earliest detection, sorted by time
+    // (insertion sort, at most BL_MAX_RECEIVERS entries; on equal times the
+    // pulse's own earliest receiver first, then by receiver index since the
+    // mask is walked in increasing receiver order).
+    for (uint32_t m = g.rx_mask; m != 0; m &= m - 1) {
+        const uint32_t r = static_cast<uint32_t>(__builtin_ctz(m));
+        bl_seq_member mem;
+        mem.arrival_us = g.start_us + g.rx_offset_us[r];
+        mem.receiver = r;
+        mem.amplitude_mv = g.rx_amplitude_mv[r];
+        uint32_t k = p.member_count;
+        while (k > 0 && (p.members[k - 1].arrival_us > mem.arrival_us ||
+                         (p.members[k - 1].arrival_us == mem.arrival_us && r == g.receiver))) {
+            p.members[k] = p.members[k - 1];
+            --k;
+        }
+        p.members[k] = mem;
+        p.member_count++;
+    }
     p.amplitude_mv = g.amplitude_mv;
     p.width_us = g.width_us;
     // Beacon 1 when at least half the receivers that heard the pulse show

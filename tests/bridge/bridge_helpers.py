@@ -26,8 +26,9 @@ def sim_command():
 
 def run_sim(out_dir: Path, scenario: str, duration_s: float, seed=None):
     """Simulate a scenario into a candump log; returns (log, truth CSV)."""
-    log = out_dir / f"{scenario}.log"
-    truth = out_dir / f"{scenario}.truth.csv"
+    name = Path(scenario).name.replace(".scenario.ini", "")  # name or path
+    log = out_dir / f"{name}.log"
+    truth = out_dir / f"{name}.truth.csv"
     cmd = sim_command() + ["run", scenario, "--log", str(log), "--truth", str(truth),
                            "--duration", str(duration_s)]
     if seed is not None:

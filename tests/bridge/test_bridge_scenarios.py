@@ -74,3 +74,29 @@ def test_echo_storm_detected_estimate_holds(bridge_bin, tmp_path):
     keep = t_sim > 20
     assert np.sqrt(np.mean(err[keep] ** 2)) < 0.1
     assert stats["estimator_resets"] == 0
+
+
+def test_beacon1_outage_numbering_holds(bridge_bin, tmp_path):
+    """Beacon 1 (the double pulse that anchors the sequencer) and beacon 4
+    silent from 40 s to 60 s: the numbering is kept from the filter's
+    firing times, no re-initialisation, the error stays small."""
+    src = (SITE.parent / "beacon-outage.scenario.ini").read_text()
+    lines = []
+    for line in src.splitlines():
+        if line.startswith("beacon_outage"):
+            line = "beacon_outage = 40, 20, 1, 4"
+        elif line.startswith("site ="):
+            line = f"site = {SITE}"
+        elif line.startswith("duration_s"):
+            line = "duration_s = 70"
+        lines.append(line)
+    scn = tmp_path / "beacon1-outage.scenario.ini"
+    scn.write_text("\n".join(lines) + "\n")
+    log, truth_path = run_sim(tmp_path, str(scn), 70)
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    t_sim, err = errors(est, truth)
+    assert "beacon 1 lost" in p.stderr and "beacon 1 back" in p.stderr
+    keep = t_sim > 20
+    assert np.max(err[keep]) < 0.15, float(np.max(err[keep]))
+    assert stats["estimator_resets"] == 0

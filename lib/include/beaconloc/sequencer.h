@@ -11,7 +11,13 @@
  *      the ring's diameter / speed of sound. Detections within
  *      merge_window_us of a pulse's earliest detection are merged into it;
  *      the pulse reports the earliest detection (its time, receiver,
- *      amplitude and width) and how many receivers heard it.
+ *      amplitude and width), how many receivers heard it, and every member:
+ *      each receiver's own earliest detection (receiver, time, amplitude),
+ *      sorted by time. Fuse every member with its own receiver index: each
+ *      is an independent measurement of the same firing (the Cramér–Rao
+ *      bound counts them all), while the earliest of several noisy
+ *      detections alone is biased early by an amount that depends on how
+ *      many receivers heard it.
  *   2. Beacon 1. A receiver shows beacon 1's signature when its detection
  *      carries the node's double-pulse flag, when a second burst follows the
  *      pulse double_spacing_us ± double_tolerance_us later, or when its
@@ -133,6 +139,13 @@ typedef enum bl_seq_status {
     BL_SEQ_SPURIOUS = 2    /* model locked but the pulse lies outside every window */
 } bl_seq_status;
 
+/* One receiver's detection merged into a pulse. */
+typedef struct bl_seq_member {
+    int64_t arrival_us;       /* this receiver's earliest detection in the merge window (us) */
+    uint32_t receiver;        /* receiver index on the ring */
+    uint16_t amplitude_mv;    /* its peak envelope amplitude (mV) */
+} bl_seq_member;
+
 /* One merged pulse, output of bl_sequencer_pop. */
 typedef struct bl_seq_pulse {
     int64_t arrival_us;       /* earliest detection's time (us): the direct-path arrival */
@@ -149,6 +162,12 @@ typedef struct bl_seq_pulse {
     bool repeat;              /* this firing already produced a pulse: a late arrival,
                                  probably an echo (left for the filter's gate) */
     uint8_t status;           /* bl_seq_status */
+    uint32_t member_count;    /* = receivers_heard: valid entries of members[] */
+    bl_seq_member members[BL_MAX_RECEIVERS]; /* one per receiver that heard the pulse,
+                                 sorted by arrival_us; members[0] is the
+                                 earliest detection (= arrival_us, receiver
+                                 above). A receiver's
+                                 beacon-1 second burst is not a member. */
 } bl_seq_pulse;
 
 /* Optional prediction from the filter that tightens the windows. */
@@ -186,10 +205,14 @@ typedef struct bl_seq_pending {
     uint16_t amplitude_mv;
     uint16_t width_us;
     uint32_t double_mask;      /* receivers showing beacon 1's signature */
+    int32_t rx_offset_us[BL_MAX_RECEIVERS];   /* per receiver in rx_mask: its earliest
+                                                 detection - start_us (us, >= 0) */
+    uint16_t rx_amplitude_mv[BL_MAX_RECEIVERS];
 } bl_seq_pending;
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
- * `counters` are private. Size: 560 bytes (x86-64 and Cortex-M4). */
+ * `counters` are private. Size: 1,328 bytes on x86-64 with BL_MAX_RECEIVERS 16
+ * (BL_SEQ_MAX_PENDING · (24 + 6·BL_MAX_RECEIVERS) + 336). */
 typedef struct bl_sequencer {
     bl_seq_config cfg;
     bl_seq_counters counters;
