@@ -434,6 +434,45 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
     }
 }
 
+/* Fuses every receiver that heard the firing as its own measurement
+ * (bl_seq_pulse.members: each receiver's earliest detection, sorted by
+ * time), each with its own position on the ring (Kleeman 1992 eq. 21).
+ * The receivers' arrival noises are independent, so this is what the
+ * Cramér–Rao bound counts; fusing only the earliest detection throws
+ * the others away and is biased early (the minimum of several noisy
+ * times), by an amount that shrinks with distance as fewer receivers
+ * hear a far beacon: a speed-of-sound bias. A firing given a wrong
+ * beacon number is one numbering error, not one per receiver: its
+ * other members are not fused. */
+static void fuse_members(struct estimator *e, const bl_seq_pulse *pl,
+                         int64_t rx_us)
+{
+    if (pl->member_count == 0 || pl->member_count > BL_MAX_RECEIVERS) {
+        fuse(e, pl, rx_us);
+        return;
+    }
+    const uint32_t acc_before = e->storm_acc, rej_before = e->storm_rej;
+    bl_seq_pulse one = *pl;
+    for (uint32_t m = 0; m < pl->member_count; m++) {
+        one.arrival_us = pl->members[m].arrival_us;
+        one.receiver = pl->members[m].receiver;
+        one.amplitude_mv = pl->members[m].amplitude_mv;
+        uint64_t misnumbered_before = e->c.numbering_errors;
+        fuse(e, &one, rx_us);
+        if (e->c.numbering_errors != misnumbered_before)
+            break;
+    }
+    /* The echo-storm watch compares firings (echoes are counted once per
+     * firing): the firing counts as accepted when any member was, else as
+     * rejected when any member was. */
+    if (e->storm_acc != acc_before) {
+        e->storm_acc = acc_before + 1;
+        e->storm_rej = rej_before;
+    } else if (e->storm_rej != rej_before) {
+        e->storm_rej = rej_before + 1;
+    }
+}
+
 static void pop_ready(struct estimator *e, int64_t now_node_us, int64_t rx_us)
 {
     bl_seq_pulse pl;
@@ -461,7 +500,7 @@ static void pop_ready(struct estimator *e, int64_t now_node_us, int64_t rx_us)
             e->storm_echo++;
             continue;
         }
-        fuse(e, &pl, rx_us);
+        fuse_members(e, &pl, rx_us);
     }
     if (rc < 0)
         e->c.seq_errors++;
@@ -495,7 +534,7 @@ void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
             while (bl_sequencer_pop(&e->seq, INT64_MAX / 4, &pl) == 1) {
                 e->c.pulses_in++;
                 if (pl.status == BL_SEQ_ASSIGNED && pl.beacon >= 0)
-                    fuse(e, &pl, rx_us);
+                    fuse_members(e, &pl, rx_us);
             }
             rc = bl_sequencer_push(&e->seq, &d);
         }

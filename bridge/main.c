@@ -93,6 +93,7 @@ struct daemon {
     struct latency_hist lat;
     int64_t lat_ref_mono_us;  /* when the frame being handled was received */
     int64_t last_odom_local_us;
+    int64_t next_odom_due_us;   /* next ODOMETRY slot on a fixed grid (local us) */
     bool odom_sent_once;
     uint64_t odom_sent, hb_sent;
     uint64_t frames_total;
@@ -400,6 +401,17 @@ static int quality_of(const struct est_output *o)
     return mav_quality_from_cov(o->cov[0], o->cov[1], o->cov[6]);
 }
 
+/* ODOMETRY slots lie on a fixed grid (due += period), so the long-run rate is
+ * the configured one whatever the phase of the sensor frames that trigger the
+ * sends; after a stall of more than one period the grid restarts at now. */
+static void odom_advance_slot(struct daemon *d, int64_t now)
+{
+    int64_t period = odom_period_us(d);
+    d->next_odom_due_us += period;
+    if (d->next_odom_due_us <= now)
+        d->next_odom_due_us = now + period;
+}
+
 static void send_odometry(struct daemon *d, const struct est_output *o,
                           int64_t time_local_us)
 {
@@ -477,11 +489,10 @@ static void after_update(struct daemon *d)
         return;
     if (d->csv_open)
         estimates_csv_write(&d->csv, &o, quality_of(&o));
-    int64_t period = odom_period_us(d);
     int64_t now = now_local(d);
-    /* Event-driven ODOMETRY, rate-limited to the configured rate (a 10 %
-     * allowance keeps sensor-paced sends from skipping a slot). */
-    if (d->odom_sent_once && now - d->last_odom_local_us < period * 9 / 10)
+    /* Event-driven ODOMETRY: the first update at or after the slot's due time
+     * is sent at once (low latency), at most one send per slot. */
+    if (d->odom_sent_once && now < d->next_odom_due_us)
         return;
     int64_t t = o.t_local_us;
     if (d->odom_sent_once && t <= d->last_odom_local_us) {
@@ -493,6 +504,7 @@ static void after_update(struct daemon *d)
     }
     send_odometry(d, &o, t);
     d->last_odom_local_us = now;
+    odom_advance_slot(d, now);
     /* latency from the frame's receive time to this send; an update made
      * by the timer (rx 0) is not a frame's latency */
     if (rx != 0)
@@ -659,6 +671,7 @@ static void on_odom_timer(struct daemon *d, int64_t now)
         return;
     send_odometry(d, &o, now);
     d->last_odom_local_us = now;
+    odom_advance_slot(d, now);
 }
 
 static void on_heartbeat(struct daemon *d, int64_t now)

@@ -37,6 +37,8 @@ struct world {
     int silent_beacon;       /* 0-based beacon index not heard, -1 none */
     int64_t silent_from_us, silent_to_us;
     double ticks0;           /* tick count at t = 0 (both wheels) */
+    int rx_per_pulse;        /* receivers hearing each firing: 1 (facing) or 3 (and neighbours) */
+    int firings_sent;
     uint8_t pulse_counter, enc_counter;
 };
 
@@ -49,9 +51,10 @@ static void pose_at(const struct world *w, int64_t t_us, double *x, double *y)
     *y = w->y0 + d * sin(w->th);
 }
 
-/* Arrival of beacon b's pulse fired at fire_us on the receiver facing it:
+/* Arrival of beacon b's pulse fired at fire_us on the receiver facing it
+ * (dk = 0) or dk places further round the ring:
  * t_a = t_f + |b - r(t_a)| / s, solved by fixed-point iteration. */
-static int64_t arrival(const struct world *w, int b, int64_t fire_us, int *receiver)
+static int64_t arrival_rx(const struct world *w, int b, int64_t fire_us, int dk, int *receiver)
 {
     const struct config_beacon *bc = &w->cfg.beacon[b];
     int64_t ta = fire_us;
@@ -60,7 +63,7 @@ static int64_t arrival(const struct world *w, int b, int64_t fire_us, int *recei
         pose_at(w, ta, &x, &y);
         double bearing = atan2(bc->y_m - y, bc->x_m - x) - w->th;
         int n = w->cfg.receiver_count;
-        int k = (int)lround(bearing / (2 * M_PI / n));
+        int k = (int)lround(bearing / (2 * M_PI / n)) + dk;
         k = ((k % n) + n) % n;
         double a = w->th + k * 2 * M_PI / n;
         double rx = x + w->cfg.ring_radius_m * cos(a);
@@ -74,16 +77,33 @@ static int64_t arrival(const struct world *w, int b, int64_t fire_us, int *recei
     return ta;
 }
 
+static int64_t arrival(const struct world *w, int b, int64_t fire_us, int *receiver)
+{
+    return arrival_rx(w, b, fire_us, 0, receiver);
+}
+
+/* One frame per receiver that hears the firing, in order of arrival. */
 static void send_pulse(struct world *w, int b, int64_t fire_us)
 {
-    int rx;
-    int64_t ta = arrival(w, b, fire_us, &rx);
-    struct frame_pulse p = {
-        .node_time_us = (uint32_t)(ta + RX_NODE_OFFSET_US),
-        .receiver = (uint8_t)rx, .double_pulse = b == 0,
-        .counter = w->pulse_counter++ & 7, .amplitude_mv = 800, .width_us = 2500,
-    };
-    estimator_pulse(&w->est, &p, ta + DELAY_US);
+    int rx[3];
+    int64_t ta[3];
+    int n = w->rx_per_pulse == 3 ? 3 : 1;
+    for (int i = 0; i < n; i++)
+        ta[i] = arrival_rx(w, b, fire_us, n == 3 ? i - 1 : 0, &rx[i]);
+    for (int i = 1; i < n; i++) /* insertion sort by arrival */
+        for (int j = i; j > 0 && ta[j] < ta[j - 1]; j--) {
+            int64_t t = ta[j]; ta[j] = ta[j - 1]; ta[j - 1] = t;
+            int r = rx[j]; rx[j] = rx[j - 1]; rx[j - 1] = r;
+        }
+    for (int i = 0; i < n; i++) {
+        struct frame_pulse p = {
+            .node_time_us = (uint32_t)(ta[i] + RX_NODE_OFFSET_US),
+            .receiver = (uint8_t)rx[i], .double_pulse = b == 0,
+            .counter = w->pulse_counter++ & 7, .amplitude_mv = 800, .width_us = 2500,
+        };
+        estimator_pulse(&w->est, &p, ta[i] + DELAY_US);
+    }
+    w->firings_sent++;
 }
 
 static void send_encoders(struct world *w, int64_t t_us)
@@ -117,6 +137,14 @@ static void run(struct world *w, int64_t t_from, int64_t t_to)
         int b = (int)(((next_fire - w->fire0_us) / T) % 6);
         int rx;
         int64_t ta = arrival(w, b, next_fire, &rx);
+        if (w->rx_per_pulse == 3) { /* deliver at the earliest of the three */
+            int r2;
+            for (int dk = -1; dk <= 1; dk += 2) {
+                int64_t t2 = arrival_rx(w, b, next_fire, dk, &r2);
+                if (t2 < ta)
+                    ta = t2;
+            }
+        }
         int64_t tn = next_enc;
         if (ta < tn)
             tn = ta;
@@ -162,6 +190,7 @@ static int setup(void **state)
     W.fire0_us = 1000000 + 37000;
     W.silent_beacon = -1;
     W.ticks0 = 16000; /* near the 14-bit wrap */
+    W.rx_per_pulse = 1;
     return 0;
 }
 
@@ -206,6 +235,35 @@ static void test_static_robot_converges(void **state)
     assert_true(estimator_take_update(&W.est, &rx));
     assert_true(rx > 15000000 && rx <= 16000000 + DELAY_US);
     assert_false(estimator_take_update(&W.est, &rx));
+}
+
+/* A firing heard by three receivers gives three frames; the sequencer
+ * merges them into one pulse whose members are all fused, each with its own
+ * receiver position on the ring (one measurement per receiver, as the
+ * Cramér–Rao bound counts them), not only the earliest. */
+static void test_every_receiver_of_a_pulse_fused(void **state)
+{
+    (void)state;
+    W.rx_per_pulse = 3;
+    W.t_move_us = 6000000;
+    W.v_mps = 0.3;
+    run(&W, 1000000, 16000000);
+    struct est_output o;
+    assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+    assert_true(o.valid && o.converged);
+    double x, y;
+    pose_at(&W, o.t_local_us, &x, &y);
+    double err = hypot(o.x_m - x, o.y_m - y);
+    if (err > 0.02)
+        fail_msg("position error %.3f m", err);
+    assert_int_equal(W.est.seq.counters.merged, 2 * (uint32_t)W.firings_sent);
+    /* all three members of (nearly) every firing went to the filter */
+    uint64_t fused = W.est.c.pulses_accepted + W.est.c.pulses_rejected + W.est.c.pulses_buffered;
+    if (fused < 3 * (uint64_t)W.firings_sent - 12)
+        fail_msg("%llu measurements fused from %d firings", (unsigned long long)fused,
+                 W.firings_sent);
+    assert_true(W.est.c.pulses_rejected <= 3);
+    assert_int_equal(W.est.c.seq_errors + W.est.c.fuse_errors + W.est.c.predict_errors, 0);
 }
 
 static void test_moving_robot_wrapping_ticks(void **state)
@@ -319,6 +377,7 @@ int main(void)
         cmocka_unit_test_setup(test_beacon_lost_and_back, setup),
         cmocka_unit_test_setup(test_reconfigure, setup),
         cmocka_unit_test_setup(test_encoder_glitch_ignored, setup),
+        cmocka_unit_test_setup(test_every_receiver_of_a_pulse_fused, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
