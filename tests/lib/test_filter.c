@@ -959,6 +959,56 @@ static void test_iekf_relinearisation(void **state)
 }
 
 /* estimate_at extrapolates with constant velocity without changing the filter. */
+/* Speed from noisy wheel increments (Kleeman 1992 eq. 25 as a measurement
+ * of v): wheel noise with variance sigma_wheel_per_m² per metre rolled, as
+ * hw_sim draws it. The filter's mean v must equal the mean measured speed:
+ * a measurement variance taken from the measured increments themselves
+ * weights the larger (noisier) ones less and biases v ~1 % low. */
+static void test_odometry_speed_unbiased(void **state)
+{
+    (void)state;
+    rng_seed(77);
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    bl_filter f;
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    bl_filter_prior pr;
+    memset(&pr, 0, sizeof pr);
+    pr.t_us = 1000000;
+    pr.x_m = 1;
+    pr.y_m = 6;
+    pr.v_mps = (bl_real)0.45;
+    pr.sigma_xy_m = (bl_real)0.01;
+    pr.sigma_theta_rad = (bl_real)0.01;
+    pr.sigma_v_mps = (bl_real)0.05;
+    pr.sigma_omega_radps = (bl_real)0.05;
+    pr.t0_us = 950000;
+    pr.sigma_t0_s = (bl_real)1e-4;
+    assert_int_equal(bl_filter_start(&f, &pr), BL_OK);
+    const double v_mps = 0.45, dt_s = 0.01, sw = (double)cfg.sigma_wheel_per_m;
+    const double d_m = v_mps * dt_s;
+    double sum_v = 0, sum_z = 0;
+    int n = 0;
+    for (int k = 1; k <= 30000; ++k) {
+        const double dl = d_m + sw * sqrt(d_m) * rng_gauss();
+        const double dr = d_m + sw * sqrt(d_m) * rng_gauss();
+        assert_int_equal(bl_filter_predict_odometry(&f, 1000000 + (int64_t)k * 10000, (bl_real)dl, (bl_real)dr),
+                         BL_OK);
+        if (k > 100) {
+            bl_estimate est;
+            assert_int_equal(bl_filter_estimate(&f, &est), BL_OK);
+            sum_v += (double)est.v_mps;
+            sum_z += 0.5 * (dl + dr) / dt_s;
+            n++;
+        }
+    }
+    const double mean_v = sum_v / n, mean_z = sum_z / n;
+    /* the measured mean is the truth up to its noise (0.047 m/s per sample) */
+    assert_true(fabs(mean_z - v_mps) < 0.002);
+    if (fabs(mean_v - mean_z) > 0.001 * v_mps)
+        fail_msg("filter mean v %.5f vs measured %.5f m/s", mean_v, mean_z);
+}
+
 static void test_estimate_at(void **state)
 {
     (void)state;
@@ -1001,6 +1051,7 @@ int main(void)
         cmocka_unit_test(test_api_misuse_leaves_state),
         cmocka_unit_test(test_start_snapshot_restart),
         cmocka_unit_test(test_estimate_at),
+        cmocka_unit_test(test_odometry_speed_unbiased),
         cmocka_unit_test(test_iekf_relinearisation),
         cmocka_unit_test(test_moving_robot_consistent),
         cmocka_unit_test(test_speed_of_sound_convergence),

@@ -51,19 +51,28 @@ static void publish(const bl_estimate *est) {
     board_publish(&fw_out);
 }
 
+/* Every receiver that heard the firing is its own measurement (the
+ * pulse's members, each with its own position on the ring, Kleeman 1992
+ * eq. 21): fusing them all uses the information the Cramér–Rao bound
+ * counts, and avoids the early bias of the earliest of several noisy
+ * detections. */
 static void fuse(const bl_seq_pulse *p) {
     if (p->status != BL_SEQ_ASSIGNED) return;   /* unlocked / spurious: counted */
-    bl_pulse_result res;
-    const int rc = bl_filter_fuse_pulse(&fw_filter, (uint32_t)p->beacon, p->arrival_us, p->receiver, &res);
-    if (rc != BL_OK) {
-        fw_out.errors++;
-        return;
+    uint32_t fused = 0;
+    for (uint32_t m = 0; m < p->member_count; ++m) {
+        bl_pulse_result res;
+        const int rc = bl_filter_fuse_pulse(&fw_filter, (uint32_t)p->beacon, p->members[m].arrival_us,
+                                            p->members[m].receiver, &res);
+        if (rc != BL_OK) {
+            fw_out.errors++;
+        } else if (res.status == BL_PULSE_REJECTED) {
+            fw_out.pulses_rejected++;
+        } else {
+            fw_out.pulses_fused++;
+            fused++;
+        }
     }
-    if (res.status == BL_PULSE_REJECTED) {
-        fw_out.pulses_rejected++;
-        return;
-    }
-    fw_out.pulses_fused++;
+    if (fused == 0) return;
     bl_estimate est;
     if (bl_filter_estimate(&fw_filter, &est) == BL_OK && est.converged) {
         bl_seq_hint hint;
