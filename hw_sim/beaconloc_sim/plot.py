@@ -39,7 +39,7 @@ def plot(truth_path, estimates_path, odometry_path, out_path) -> None:
     sigma = np.sqrt(np.maximum(est["var_x_m2"] + est["var_y_m2"], 0.0))
 
     fig, ax = plt.subplots(1, 3, figsize=(17, 5.5))
-    ax[0].plot(truth["x_m"], truth["y_m"], "k-", lw=1.5, label="truth")
+    ax[0].plot(truth["x_m"], truth["y_m"], "k-", lw=1.5, label="truth", zorder=3)
     ax[0].plot(est["x_m"], est["y_m"], "C0-", lw=0.9, label="estimate")
     if odo is not None:
         ax[0].plot(odo["x_m"], odo["y_m"], "C3--", lw=0.9, label="odometry alone")

@@ -201,7 +201,7 @@ int main(int argc, char **argv) {
             perror(dump_path);
             return 1;
         }
-        fprintf(dump, "# per fused pulse: 8 state, 64 covariance (row-major), z_s (arrival - state time),"
+        fprintf(dump, "# per fused pulse: BL_FILTER_NX state, NX² covariance (row-major), z_s (arrival - state time),"
                       " fire_rel_s (firing - state time), beacon, receiver, sigma_arrival_s\n");
     }
 

@@ -3,7 +3,7 @@
 
 Reads the priors bench_speed --dump wrote (the C filter's state and
 covariance before each fused pulse of the moving-robot stream), and for each
-pulse runs filterpy.kalman.ExtendedKalmanFilter.update with the same 8-state,
+pulse runs filterpy.kalman.ExtendedKalmanFilter.update with the same 10-state,
 the same measurement model (Kleeman 1992 eq. 21 with the receiver on the
 ring, 3D distance and the moving-robot term, as lib/src/filter.cpp
 pulse_model) and its analytic Jacobian (eq. 22), R = sigma_arrival². Only
@@ -24,7 +24,8 @@ import time
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-X, Y, TH, V, W, S, T, T0 = range(8)
+X, Y, TH, V, W, S, T, T0, KL, KR = range(10)
+NX = 10  # BL_FILTER_NX (lib/include/beaconloc/filter.h): + wheel scales k_l, k_r
 
 # kleeman-lab receiver ring and beacons (bl_config_default, hw_sim/scenarios/kleeman-lab.ini)
 RING_RADIUS_M = 0.10
@@ -70,7 +71,7 @@ def h_jacobian(x, beacon, receiver, arrival_rel_s):
     e_dir = np.array([c, sn, 0.0])
     e_perp = np.array([-sn, c, 0.0])
     e_ring = np.array([-RING_RADIUS_M * math.sin(phi), RING_RADIUS_M * math.cos(phi), 0.0])
-    H = np.zeros((1, 8))
+    H = np.zeros((1, NX))  # the wheel scales do not enter eq. 21
     H[0, X] = dg_ddelta[0]
     H[0, Y] = dg_ddelta[1]
     H[0, TH] = dg_ddelta @ (e_perp * (x[V] * dt_fire) + e_ring) + dg_dvel @ (e_perp * x[V])
@@ -88,17 +89,18 @@ def main():
     ap.add_argument("--reps", type=int, default=3)
     a = ap.parse_args()
     rows = np.loadtxt(a.priors, comments="#", ndmin=2)
-    if rows.shape[0] == 0 or rows.shape[1] != 8 + 64 + 5:
-        sys.exit(f"filterpy_ekf: {a.priors}: expected rows of 77 numbers, got {rows.shape}")
+    if rows.shape[0] == 0 or rows.shape[1] != NX + NX * NX + 5:
+        sys.exit(f"filterpy_ekf: {a.priors}: expected rows of {NX + NX * NX + 5} numbers, got {rows.shape}")
 
-    ekf = ExtendedKalmanFilter(dim_x=8, dim_z=1)
+    ekf = ExtendedKalmanFilter(dim_x=NX, dim_z=1)
     times = []
     innov = []
     for rep in range(a.reps):
         for row in rows:
-            x0 = row[:8].reshape(8, 1)
-            P0 = row[8:72].reshape(8, 8)
-            z_s, _fire_rel, beacon, receiver, sigma = row[72], row[73], int(row[74]), int(row[75]), row[76]
+            x0 = row[:NX].reshape(NX, 1)
+            P0 = row[NX:NX + NX * NX].reshape(NX, NX)
+            z_s, _fire_rel, beacon, receiver, sigma = row[NX + NX * NX:]
+            beacon, receiver = int(beacon), int(receiver)
             ekf.x = x0.copy()
             ekf.P = P0.copy()
             R = np.array([[sigma * sigma]])

@@ -1,11 +1,19 @@
 // beaconloc — Kleeman's (1992) iterated EKF: ultrasonic beacon arrival
 // times + differential-drive dead reckoning (filter.h, filter_model.h).
 //
-// State x = [x_m y_m theta_rad v_mps omega_radps s_mps T_s t0_s] where t0 is
-// the firing time of the reference slot (beacon ref_beacon_) as an offset in
-// seconds from the int64 epoch epoch_us_. Kleeman's state (eq. 14) is
-// [x y v θ T t0 s]; the turn rate ω is added so that the constant-velocity
-// prediction and the moving-robot term see turns.
+// State x = [x_m y_m theta_rad v_mps omega_radps s_mps T_s t0_s k_l k_r] where
+// t0 is the firing time of the reference slot (beacon ref_beacon_) as an
+// offset in seconds from the int64 epoch epoch_us_. Kleeman's state (eq. 14)
+// is [x y v θ T t0 s]; the turn rate ω is added so that the constant-velocity
+// prediction and the moving-robot term see turns, and the wheel scale
+// factors k_l, k_r (true wheel distance = k · measured increment; systematic
+// odometry error of unequal / wrong wheel radii, Hoppenot & Colle §4.2,
+// Borenstein's type-A/B errors) so that the beacons calibrate the odometry
+// online (augmented-state EKF for unknown constant parameters, as for s and
+// T). Left/right rather than common + differential: each maps onto one
+// physical wheel radius (the error source), both are observable from
+// straight runs (k_l + k_r via distance) and turns (k_r - k_l via heading),
+// and the Jacobians stay diagonal in the wheels.
 #include "internal.hpp"
 
 #include <cstring>
@@ -17,12 +25,13 @@
 using bl::is_finite;
 using bl::real;
 
+
 namespace {
 
 constexpr int NX = BL_FILTER_NX;
-using V8 = bl::Mat<NX, 1>;
-using M8 = bl::Mat<NX, NX>;
-using R8 = Eigen::Matrix<real, 1, NX>;
+using VX = bl::Mat<NX, 1>;
+using MX = bl::Mat<NX, NX>;
+using RX = Eigen::Matrix<real, 1, NX>;
 
 constexpr uint32_t kMagic = 0x424c4631u;  // "BLF1"
 constexpr uint32_t kFlagStarted = 1u;
@@ -30,12 +39,12 @@ constexpr uint32_t kFlagConverged = 2u;
 constexpr uint32_t kFlagEverStarted = 4u;
 
 enum : int { X = BL_IX_X, Y = BL_IX_Y, TH = BL_IX_THETA, V = BL_IX_V, W = BL_IX_OMEGA,
-             S = BL_IX_S, T = BL_IX_T, T0 = BL_IX_T0 };
+             S = BL_IX_S, T = BL_IX_T, T0 = BL_IX_T0, KL = BL_IX_KL, KR = BL_IX_KR };
 
-inline Eigen::Map<V8> state(bl_filter *f) { return Eigen::Map<V8>(f->x_); }
-inline Eigen::Map<const V8> state(const bl_filter *f) { return Eigen::Map<const V8>(f->x_); }
-inline Eigen::Map<M8> cov(bl_filter *f) { return Eigen::Map<M8>(f->P_); }
-inline Eigen::Map<const M8> cov(const bl_filter *f) { return Eigen::Map<const M8>(f->P_); }
+inline Eigen::Map<VX> state(bl_filter *f) { return Eigen::Map<VX>(f->x_); }
+inline Eigen::Map<const VX> state(const bl_filter *f) { return Eigen::Map<const VX>(f->x_); }
+inline Eigen::Map<MX> cov(bl_filter *f) { return Eigen::Map<MX>(f->P_); }
+inline Eigen::Map<const MX> cov(const bl_filter *f) { return Eigen::Map<const MX>(f->P_); }
 
 bool initialised(const bl_filter *f) { return f != nullptr && f->magic_ == kMagic; }
 bool started(const bl_filter *f) { return initialised(f) && (f->flags_ & kFlagStarted); }
@@ -47,23 +56,23 @@ real receiver_angle(const bl_config *cfg, uint32_t k)
     return a;
 }
 
-void symmetrise(M8 &P)
+void symmetrise(MX &P)
 {
     for (int r = 0; r < NX; ++r)
         for (int c = r + 1; c < NX; ++c) P(r, c) = P(c, r) = real(0.5) * (P(r, c) + P(c, r));
 }
 
 // Kleeman eq. 6 for a transition Jacobian F = I + D with few non-zero
-// entries D(r, c) (the models touch 2..7 entries): P = F P Fᵀ computed in
+// entries D(r, c) (the models touch 2..8 entries): P = F P Fᵀ computed in
 // place as P += D P (row updates), then P += P Dᵀ (column updates), O(n) per
-// entry and no 8x8 temporary. In place is exact when every row used as a
+// entry and no NxN temporary. In place is exact when every row used as a
 // source c is updated (as a target r) only after its last use: the entry
 // lists below put the heading row (source of x, y; target of ω) last.
 struct SparseEntry {
     int r, c;
     real v;
 };
-void propagate(M8 &P, const SparseEntry *d, int nd)
+void propagate(MX &P, const SparseEntry *d, int nd)
 {
     for (int k = 0; k < nd; ++k) P.row(d[k].r) += d[k].v * P.row(d[k].c);
     for (int k = 0; k < nd; ++k) P.col(d[k].r) += d[k].v * P.col(d[k].c);
@@ -72,8 +81,8 @@ void propagate(M8 &P, const SparseEntry *d, int nd)
 // Joseph form (Kleeman eq. 11) for a scalar measurement, expanded:
 // (I - K H) P (I - K H)ᵀ + K R Kᵀ = P - K uᵀ - u Kᵀ + (H u + R) K Kᵀ with
 // u = P Hᵀ. Holds for any gain K (the IEKF's last-iterate gain included),
-// O(n²) instead of two 8x8 products.
-void joseph_update(M8 &P, const V8 &K, const V8 &u, real s)
+// O(n²) instead of two NxN products.
+void joseph_update(MX &P, const VX &K, const VX &u, real s)
 {
     P.noalias() -= K * u.transpose();
     P.noalias() -= u * K.transpose();
@@ -84,7 +93,7 @@ void joseph_update(M8 &P, const V8 &K, const V8 &u, real s)
 
 // Kleeman 1992 eq. 21 with the receiver on the ring and 3D distance.
 // Times relative to the state time t_s. Returns false where undefined.
-bool pulse_model(const bl_config *cfg, const V8 &x, const bl_pulse_geometry &g, real *h, R8 *H,
+bool pulse_model(const bl_config *cfg, const VX &x, const bl_pulse_geometry &g, real *h, RX *H,
                  bool ring_centre = false)
 {
     const bl_beacon &b = cfg->beacons[g.beacon_index];
@@ -127,7 +136,7 @@ bool pulse_model(const bl_config *cfg, const V8 &x, const bl_pulse_geometry &g, 
     bl::Vec3 e_ring;  // ∂(ring offset)/∂phi
     e_ring << -rho * std::sin(phi), rho * std::cos(phi), real(0);
 
-    R8 J = R8::Zero();
+    RX J = RX::Zero();
     J(X) = dg_ddelta(0);
     J(Y) = dg_ddelta(1);
     J(TH) = dg_ddelta.dot(e_perp * (x(V) * dt_fire) + e_ring) + dg_dvel.dot(e_perp * x(V));
@@ -142,16 +151,20 @@ bool pulse_model(const bl_config *cfg, const V8 &x, const bl_pulse_geometry &g, 
 }
 
 // Differential-drive odometry, midpoint form (Kleeman 1992 eq. 24 input
-// form, Vander et al. 2011 eq. 2):
+// form, Vander et al. 2011 eq. 2) on the calibrated wheel distances
+// dL = k_l·mL, dR = k_r·mR (mL, mR the measured increments):
 //   Δc = (dL + dR)/2, Δθ = (dR - dL)/b,
 //   x' = x + Δc cos(θ + Δθ/2), y' = y + Δc sin(θ + Δθ/2), θ' = θ + Δθ.
-// Jacobians: F = I + {(x,θ): -Δc sin φ, (y,θ): Δc cos φ}; G = ∂(x,y,θ)/∂(dL,dR).
+// Jacobians: F = I + {(x,θ): -Δc sin φ, (y,θ): Δc cos φ} + {(r, k_l): g_r0·mL,
+// (r, k_r): g_r1·mR} (chain rule through dL, dR); g = ∂(x,y,θ)/∂(dL,dR), so
+// ∂f/∂(mL, mR) = g·diag(k_l, k_r).
 struct OdoJac {
     real fx_th, fy_th;
-    real g[3][2];  // rows x, y, θ; columns dL, dR
+    real g[3][2];  // rows x, y, θ; columns dL, dR (calibrated distances)
 };
-void odometry_model(real wheel_base_m, const V8 &x, real dl, real dr, V8 &xo, OdoJac *J)
+void odometry_model(real wheel_base_m, const VX &x, real ml, real mr, VX &xo, OdoJac *J)
 {
+    const real dl = x(KL) * ml, dr = x(KR) * mr;
     const real dc = real(0.5) * (dl + dr);
     const real dth = (dr - dl) / wheel_base_m;
     const real phi = x(TH) + real(0.5) * dth;
@@ -178,7 +191,7 @@ void odometry_model(real wheel_base_m, const V8 &x, real dl, real dr, V8 &xo, Od
 // Jacobian (Kleeman eq. 16 extended by ω) as the 7 entries of F - I, in the
 // order propagate() needs (heading row last).
 constexpr int kCvEntries = 7;
-void cv_model(const V8 &x, real dt, V8 &xo, SparseEntry *d)
+void cv_model(const VX &x, real dt, VX &xo, SparseEntry *d)
 {
     const real phi = x(TH) + real(0.5) * x(W) * dt;
     const real c = std::cos(phi), sn = std::sin(phi);
@@ -198,25 +211,31 @@ void cv_model(const V8 &x, real dt, V8 &xo, SparseEntry *d)
 }
 
 // Random walk of s and T over dt (speed-of-sound drift with temperature,
-// beacon clock drift).
-void add_parameter_noise(const bl_config *cfg, M8 &P, real dt)
+// beacon clock drift) and of the wheel scales (tyre wear, load); none when
+// calibration is off (sigma_wheel_scale = 0: the scales stay exactly 1).
+void add_parameter_noise(const bl_config *cfg, MX &P, real dt)
 {
     P(S, S) += cfg->speed_of_sound_drift_mps_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s * dt;
     P(T, T) += cfg->period_drift_s_per_sqrt_s * cfg->period_drift_s_per_sqrt_s * dt;
+    if (cfg->sigma_wheel_scale > real(0)) {
+        const real qk = cfg->wheel_scale_drift_per_sqrt_s * cfg->wheel_scale_drift_per_sqrt_s * dt;
+        P(KL, KL) += qk;
+        P(KR, KR) += qk;
+    }
 }
 
 // Constant-velocity prediction with white acceleration noise on v and ω.
-void cv_predict(const bl_config *cfg, V8 &x, M8 &P, real dt)
+void cv_predict(const bl_config *cfg, VX &x, MX &P, real dt)
 {
-    V8 xo;
+    VX xo;
     SparseEntry d[kCvEntries];
     cv_model(x, dt, xo, d);
     // Kleeman eq. 6: P = Φ P Φᵀ + Q (Φ = I + the 7 entries of cv_model).
-    M8 &Pn = P;
+    MX &Pn = P;
     propagate(Pn, d, kCvEntries);
     // Q from white acceleration a (σ accel_noise) and angular acceleration α:
     // G_a = [½dt² cos θ, ½dt² sin θ, 0, dt, 0, ...], G_α = [0, 0, ½dt², 0, dt, ...].
-    V8 ga = V8::Zero(), gw = V8::Zero();
+    VX ga = VX::Zero(), gw = VX::Zero();
     ga(X) = real(0.5) * dt * dt * std::cos(x(TH));
     ga(Y) = real(0.5) * dt * dt * std::sin(x(TH));
     ga(V) = dt;
@@ -236,7 +255,7 @@ void cv_predict(const bl_config *cfg, V8 &x, M8 &P, real dt)
 // t0 += k·T (the reference moves k firing slots; Kleeman eq. 15/16 row t0:
 // t0(k+1) = t0(k) + T), then whole microseconds move from the offset into
 // the int64 epoch so the offset stays below 1 µs in magnitude.
-void shift_reference(const bl_config *cfg, V8 &x, M8 &P, int64_t &epoch_us, uint32_t &ref, int64_t k)
+void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k)
 {
     if (k != 0) {
         const double t0 = double(x(T0)) + double(k) * double(x(T));
@@ -256,7 +275,7 @@ void shift_reference(const bl_config *cfg, V8 &x, M8 &P, int64_t &epoch_us, uint
 
 // Move the reference to the latest firing at or before t_us (keeps every
 // relative time in the filter small).
-void advance_reference(const bl_config *cfg, V8 &x, M8 &P, int64_t &epoch_us, uint32_t &ref, int64_t t_us)
+void advance_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t t_us)
 {
     const double since = double(epoch_us - t_us) * -1e-6 - double(x(T0));  // t - t0 (s)
     if (since <= 0) {
@@ -265,6 +284,25 @@ void advance_reference(const bl_config *cfg, V8 &x, M8 &P, int64_t &epoch_us, ui
     }
     const int64_t k = int64_t(std::floor(since / double(x(T))));
     shift_reference(cfg, x, P, epoch_us, ref, k > 0 ? k : 0);
+}
+
+// Wheel scales at a (re)start: a robot property, not a pose one, so a
+// started filter keeps its calibration (and its covariance block); a first
+// start begins at 1 with σ cfg.sigma_wheel_scale.
+void start_wheel_scales(const bl_filter *f, VX &x, MX &P)
+{
+    if (f->flags_ & kFlagStarted) {
+        const auto xs = state(f);
+        const auto Ps = cov(f);
+        x(KL) = xs(KL);
+        x(KR) = xs(KR);
+        P(KL, KL) = Ps(KL, KL);
+        P(KL, KR) = P(KR, KL) = Ps(KL, KR);
+        P(KR, KR) = Ps(KR, KR);
+    } else {
+        x(KL) = x(KR) = real(1);
+        P(KL, KL) = P(KR, KR) = f->cfg_.sigma_wheel_scale * f->cfg_.sigma_wheel_scale;
+    }
 }
 
 // ------------------------------------------------------------- snapshot
@@ -345,8 +383,8 @@ __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_soluti
                                               real var_s, real T_s, real var_T)
 {
     const bl_config *cfg = &f->cfg_;
-    V8 x = V8::Zero();
-    M8 P = M8::Zero();
+    VX x = VX::Zero();
+    MX P = MX::Zero();
     x(X) = sol.x_m;
     x(Y) = sol.y_m;
     x(TH) = bl::wrap_angle(theta);
@@ -361,6 +399,7 @@ __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_soluti
     P(W, W) = cfg->initial_sigma_omega_radps * cfg->initial_sigma_omega_radps;
     P(S, S) = var_s;
     P(T, T) = var_T;
+    start_wheel_scales(f, x, P);
     int64_t epoch = ref_arrival_us;
     uint32_t ref = ref_beacon;
     shift_reference(cfg, x, P, epoch, ref, 0);
@@ -390,13 +429,13 @@ int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real s_mps, 
     return BL_OK;
 }
 
-bool converged_now(const bl_config *cfg, const M8 &P)
+bool converged_now(const bl_config *cfg, const MX &P)
 {
     const real m = P(X, X) > P(Y, Y) ? P(X, X) : P(Y, Y);
     return m < cfg->converged_sigma_xy_m * cfg->converged_sigma_xy_m;
 }
 
-void fill_estimate(const bl_filter *f, const V8 &x, const M8 &P, int64_t t_us, bl_estimate *est)
+void fill_estimate(const bl_filter *f, const VX &x, const MX &P, int64_t t_us, bl_estimate *est)
 {
     const bl_config *cfg = &f->cfg_;
     std::memset(est, 0, sizeof *est);
@@ -422,6 +461,10 @@ void fill_estimate(const bl_filter *f, const V8 &x, const M8 &P, int64_t t_us, b
     est->sigma_speed_of_sound_mps = std::sqrt(P(S, S));
     est->sigma_period_s = std::sqrt(P(T, T));
     est->sigma_t0_s = std::sqrt(P(T0, T0));
+    est->wheel_scale_left = x(KL);
+    est->wheel_scale_right = x(KR);
+    est->sigma_wheel_scale_left = std::sqrt(P(KL, KL));
+    est->sigma_wheel_scale_right = std::sqrt(P(KR, KR));
     for (int r = 0; r < 5; ++r)
         for (int c = 0; c < 5; ++c) est->cov[r * 5 + c] = P(r, c);
     est->converged = (f->flags_ & kFlagConverged) != 0;
@@ -444,7 +487,7 @@ int check_time(const bl_filter *f, int64_t t_us)
     return BL_OK;
 }
 
-void commit(bl_filter *f, const V8 &x, const M8 &P)
+void commit(bl_filter *f, const VX &x, const MX &P)
 {
     state(f) = x;
     cov(f) = P;
@@ -474,7 +517,8 @@ extern "C" int bl_filter_update_config(bl_filter *f, const bl_config *cfg)
     if (cfg->beacon_count != o->beacon_count || cfg->receiver_count != o->receiver_count ||
         cfg->ring_radius_m != o->ring_radius_m || cfg->first_angle_deg != o->first_angle_deg ||
         cfg->angle_step_deg != o->angle_step_deg || cfg->receiver_height_m != o->receiver_height_m ||
-        cfg->wheel_base_m != o->wheel_base_m)
+        cfg->wheel_base_m != o->wheel_base_m ||
+        (cfg->sigma_wheel_scale > real(0)) != (o->sigma_wheel_scale > real(0)))
         return BL_ECONFIG;
     for (uint32_t i = 0; i < cfg->beacon_count; ++i)
         if (cfg->beacons[i].x_m != o->beacons[i].x_m || cfg->beacons[i].y_m != o->beacons[i].y_m ||
@@ -503,8 +547,8 @@ extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
         std::fabs(bl::us_to_s(d_us)) > cfg->max_predict_gap_s + real(cfg->beacon_count) * cfg->beacon_period_s)
         return BL_ETIME;
 
-    V8 x = V8::Zero();
-    M8 P = M8::Zero();
+    VX x = VX::Zero();
+    MX P = MX::Zero();
     x(X) = p->x_m;
     x(Y) = p->y_m;
     x(TH) = bl::wrap_angle(p->theta_rad);
@@ -520,6 +564,7 @@ extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
     P(S, S) = cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps;
     P(T, T) = cfg->sigma_period_s * cfg->sigma_period_s;
     P(T0, T0) = p->sigma_t0_s * p->sigma_t0_s;
+    start_wheel_scales(f, x, P);
     int64_t epoch = p->t0_us;
     uint32_t ref = p->t0_beacon_index;
     advance_reference(cfg, x, P, epoch, ref, p->t_us);
@@ -567,27 +612,38 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     if (trc != BL_OK) return trc;
     const bl_config *cfg = &f->cfg_;
     const real dt = bl::us_to_s(t_us - f->t_us_);
-    V8 x = state(f);
-    M8 P = cov(f);
+    VX x = state(f);
+    MX P = cov(f);
 
-    V8 xo;
+    VX xo;
     OdoJac J;
     odometry_model(cfg->wheel_base_m, x, d_left_m, d_right_m, xo, &J);
     // Kleeman eq. 6 with the input noise mapped through G: P = F P Fᵀ + G Q_u Gᵀ
-    // (F = I + the two heading entries of odometry_model).
-    M8 &Pn = P;
-    const SparseEntry d[] = {{X, TH, J.fx_th}, {Y, TH, J.fy_th}};
-    propagate(Pn, d, 2);
-    // Wheel noise: variance sigma_wheel_per_m² per metre rolled, per wheel;
-    // G Q_u Gᵀ touches only the (x, y, θ) block.
+    // (F = I + the two heading entries and the six wheel-scale entries of
+    // odometry_model; heading row last as a target, see propagate()).
+    MX &Pn = P;
+    const SparseEntry d[] = {{X, TH, J.fx_th},
+                             {Y, TH, J.fy_th},
+                             {X, KL, J.g[0][0] * d_left_m},
+                             {X, KR, J.g[0][1] * d_right_m},
+                             {Y, KL, J.g[1][0] * d_left_m},
+                             {Y, KR, J.g[1][1] * d_right_m},
+                             {TH, KL, J.g[2][0] * d_left_m},
+                             {TH, KR, J.g[2][1] * d_right_m}};
+    // Without calibration (σ 0) the scale rows/columns of P are zero: skip them.
+    propagate(Pn, d, cfg->sigma_wheel_scale > real(0) ? 8 : 2);
+    // Wheel noise: variance sigma_wheel_per_m² per metre rolled, per wheel,
+    // on the measured increments (∂f/∂m = g·k); G Q_u Gᵀ touches only the
+    // (x, y, θ) block.
     const real k2 = cfg->sigma_wheel_per_m * cfg->sigma_wheel_per_m;
-    const real qu[2] = {k2 * std::fabs(d_left_m), k2 * std::fabs(d_right_m)};
+    const real qu[2] = {k2 * std::fabs(d_left_m) * x(KL) * x(KL), k2 * std::fabs(d_right_m) * x(KR) * x(KR)};
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)
             Pn(r, c) += J.g[r][0] * qu[0] * J.g[c][0] + J.g[r][1] * qu[1] * J.g[c][1];
     // Motion type (Kleeman §3.10): stationary, straight or turning.
     const bool moving = std::fabs(d_left_m) > real(1e-6) || std::fabs(d_right_m) > real(1e-6);
-    const real dth = (d_right_m - d_left_m) / cfg->wheel_base_m;
+    const real cl = x(KL) * d_left_m, cr = x(KR) * d_right_m;  // calibrated distances (m)
+    const real dth = (cr - cl) / cfg->wheel_base_m;
     if (moving) {
         // Heading variance: square of an offset plus a fraction of Δθ (§3.10).
         const real fr = cfg->heading_noise_fraction * dth;
@@ -602,9 +658,16 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     x = xo;
     if (dt > real(0)) {
         // Kleeman eq. 25: the wheel speeds are a measurement of v (and ω):
-        // z_v = Δc/dt, z_ω = Δθ/dt, σ from the wheel noise, sequential
-        // scalar updates (Kleeman eqs. 7-11, Joseph form).
-        const real dc = real(0.5) * (d_left_m + d_right_m);
+        // z_v = Δc/dt, z_ω = Δθ/dt from the calibrated distances k̂·m (the
+        // current scale estimates taken as known), σ from the wheel noise,
+        // sequential scalar updates (Kleeman eqs. 7-11, Joseph form).
+        // The scales are deliberately not coupled into this measurement:
+        // there the measured increments are the regressor of k (errors in
+        // variables) and the update attenuates k and v step after step
+        // (tried: k, v -> 0 under the simulated increment noise; as a
+        // Schmidt consider update still ~2 % low v). k is calibrated by the
+        // beacons through the position it moves (F's k columns above).
+        const real dc = real(0.5) * (cl + cr);
         const real zs[2] = {dc / dt, dth / dt};
         const real floor_v = real(1e-3);  // speed resolution floor (m/s, rad/s)
         // The wheel noise variance grows with the distance rolled; it is
@@ -624,11 +687,11 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
         for (int m = 0; m < 2; ++m) {
             const int i = idx[m];
             const real sden = P(i, i) + rs[m];
-            const V8 K = P.col(i) / sden;
+            const VX K = P.col(i) / sden;
             const real nu = zs[m] - x(i);
             x += K * nu;
             // Joseph form (Kleeman eq. 11) for H = e_i (u = P e_i).
-            const V8 u = P.col(i);
+            const VX u = P.col(i);
             joseph_update(P, K, u, sden);
         }
     }
@@ -652,8 +715,8 @@ extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
     const int trc = check_time(f, t_us);
     if (trc != BL_OK) return trc;
     const bl_config *cfg = &f->cfg_;
-    V8 x = state(f);
-    M8 P = cov(f);
+    VX x = state(f);
+    MX P = cov(f);
     cv_predict(cfg, x, P, bl::us_to_s(t_us - f->t_us_));
     x(TH) = bl::wrap_angle(x(TH));
     if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
@@ -669,7 +732,7 @@ extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
 
 namespace {
 // fuse_pulse on a started filter: slot attribution, gate, IEKF, Joseph.
-// Own frame (noinline): the 8x8 work matrices are gone before the caller
+// Own frame (noinline): the NxN work matrices are gone before the caller
 // may re-initialise from the snapshot solver.
 __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
                                            uint32_t receiver_index, bl_pulse_result *result)
@@ -683,8 +746,8 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
         !(std::fabs(bl::us_to_s(dts_us)) <= cfg->max_predict_gap_s))
         return BL_ETIME;
 
-    V8 x = state(f);
-    M8 P = cov(f);
+    VX x = state(f);
+    MX P = cov(f);
     const uint32_t n = cfg->beacon_count;
 
     // Which firing of this beacon: nearest to (arrival - predicted flight).
@@ -714,7 +777,7 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     const real gate = conv ? cfg->gate_sigma : cfg->startup_gate_sigma;
 
     real h0;
-    R8 H;
+    RX H;
     if (!pulse_model(cfg, x, g, &h0, &H)) return BL_EINVAL;
     // Kleeman eq. 7: innovation; its variance H P Hᵀ + R (eq. 9's bracket).
     const real nu0 = g.arrival_rel_s - h0;
@@ -746,17 +809,17 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     // Iterated EKF (Kleeman §3.4; Jazwinski): relinearise at x_i,
     //   K_i = P Hᵢᵀ (Hᵢ P Hᵢᵀ + R)⁻¹                           (eq. 9)
     //   x_{i+1} = x̄ + K_i (z - h(x_i) - H_i (x̄ - x_i))          (eq. 8)
-    const V8 xbar = x;
-    V8 xi = xbar;
-    V8 K = V8::Zero();
+    const VX xbar = x;
+    VX xi = xbar;
+    VX K = VX::Zero();
     real hi = h0;
-    R8 Hi = H;
+    RX Hi = H;
     uint32_t it = 0;
     for (;;) {
-        const V8 PHt = P.lazyProduct(Hi.transpose());
+        const VX PHt = P.lazyProduct(Hi.transpose());
         const real Si = Hi.dot(PHt) + R;
         K = PHt / Si;
-        const V8 xn = xbar + K * (g.arrival_rel_s - hi - Hi.dot(xbar - xi));
+        const VX xn = xbar + K * (g.arrival_rel_s - hi - Hi.dot(xbar - xi));
         ++it;
         const real step = (xn.head<2>() - xi.head<2>()).norm();
         xi = xn;
@@ -768,8 +831,8 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     }
     // Joseph form (Kleeman eq. 11): P = (I - K H) P (I - K H)ᵀ + K R Kᵀ, with H
     // and K of the last iterate.
-    const V8 u = P.lazyProduct(Hi.transpose());
-    M8 &Pn = P;  // in place: P is not needed after u
+    const VX u = P.lazyProduct(Hi.transpose());
+    MX &Pn = P;  // in place: P is not needed after u
     joseph_update(Pn, K, u, Hi.dot(u) + R);
     symmetrise(Pn);
     xi(TH) = bl::wrap_angle(xi(TH));
@@ -881,8 +944,8 @@ extern "C" int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estima
     if (!started(f)) return BL_ENOTINIT;
     const int trc = check_time(f, t_us);
     if (trc != BL_OK) return trc;
-    V8 x = state(f);
-    M8 P = cov(f);
+    VX x = state(f);
+    MX P = cov(f);
     cv_predict(&f->cfg_, x, P, bl::us_to_s(t_us - f->t_us_));
     fill_estimate(f, x, P, t_us, est);
     return BL_OK;
@@ -900,8 +963,8 @@ extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_in
     if (d_us > int64_t(1e12) || d_us < -int64_t(1e12) ||
         !(std::fabs(bl::us_to_s(d_us)) <= cfg->max_predict_gap_s))
         return BL_ETIME;
-    const V8 x = state(f);
-    const M8 P = cov(f);
+    const VX x = state(f);
+    const MX P = cov(f);
     const uint32_t n = cfg->beacon_count;
     const bl_beacon &b = cfg->beacons[beacon_index];
     const real dx = x(X) - b.x_m, dy = x(Y) - b.y_m, dz = cfg->receiver_height_m - b.z_m;
@@ -921,7 +984,7 @@ extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_in
     g.arrival_rel_s = fire_rel + flight;
     // Ring centre: evaluate with a zero ring radius.
     real h;
-    R8 H;
+    RX H;
     if (!pulse_model(cfg, x, g, &h, &H, true)) return BL_EINVAL;
     const bool conv = (f->flags_ & kFlagConverged) != 0;
     const real sa = conv ? cfg->sigma_arrival_s : cfg->startup_sigma_arrival_s;
@@ -936,62 +999,70 @@ extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_in
 
 // ------------------------------------------------------- model wrappers
 
-extern "C" int bl_model_pulse(const bl_config *cfg, const bl_real x[8], const bl_pulse_geometry *g,
-                              bl_real *h_rel_s, bl_real H[8])
+extern "C" int bl_model_pulse(const bl_config *cfg, const bl_real x[BL_FILTER_NX], const bl_pulse_geometry *g,
+                              bl_real *h_rel_s, bl_real H[BL_FILTER_NX])
 {
     if (cfg == nullptr || x == nullptr || g == nullptr || h_rel_s == nullptr) return BL_EINVAL;
     if (g->beacon_index >= cfg->beacon_count || g->beacon_index >= BL_MAX_BEACONS) return BL_EBEACON;
     if (g->receiver_index >= cfg->receiver_count) return BL_EINVAL;
-    if (!all_finite(x, 8) || !is_finite(g->arrival_rel_s) || !is_finite(g->epoch_rel_s)) return BL_EINVAL;
-    const V8 xv = Eigen::Map<const V8>(x);
+    if (!all_finite(x, NX) || !is_finite(g->arrival_rel_s) || !is_finite(g->epoch_rel_s)) return BL_EINVAL;
+    const VX xv = Eigen::Map<const VX>(x);
     real h;
-    R8 J;
+    RX J;
     if (!pulse_model(cfg, xv, *g, &h, &J)) return BL_EINVAL;
     *h_rel_s = h;
     if (H) {
-        Eigen::Map<R8> Hm(H);
+        Eigen::Map<RX> Hm(H);
         Hm = J;
     }
     return BL_OK;
 }
 
-extern "C" int bl_model_odometry(const bl_config *cfg, const bl_real x[8], bl_real d_left_m,
-                                 bl_real d_right_m, bl_real x_out[8], bl_real F[64], bl_real G[16])
+extern "C" int bl_model_odometry(const bl_config *cfg, const bl_real x[BL_FILTER_NX], bl_real d_left_m,
+                                 bl_real d_right_m, bl_real x_out[BL_FILTER_NX], bl_real F[BL_FILTER_NX * BL_FILTER_NX],
+                                 bl_real G[BL_FILTER_NX * 2])
 {
     if (cfg == nullptr || x == nullptr || x_out == nullptr) return BL_EINVAL;
-    if (!all_finite(x, 8) || !is_finite(d_left_m) || !is_finite(d_right_m) || !(cfg->wheel_base_m > 0))
+    if (!all_finite(x, NX) || !is_finite(d_left_m) || !is_finite(d_right_m) || !(cfg->wheel_base_m > 0))
         return BL_EINVAL;
-    V8 xo;
+    VX xo;
     OdoJac J;
-    odometry_model(cfg->wheel_base_m, Eigen::Map<const V8>(x), d_left_m, d_right_m, xo, &J);
-    Eigen::Map<V8> xm(x_out);
+    odometry_model(cfg->wheel_base_m, Eigen::Map<const VX>(x), d_left_m, d_right_m, xo, &J);
+    Eigen::Map<VX> xm(x_out);
     xm = xo;
     if (F) {
-        Eigen::Map<M8> Fmap(F);
+        Eigen::Map<MX> Fmap(F);
         Fmap.setIdentity();
         Fmap(X, TH) = J.fx_th;
         Fmap(Y, TH) = J.fy_th;
+        for (int r = 0; r < 3; ++r) {
+            Fmap(r, KL) = J.g[r][0] * d_left_m;
+            Fmap(r, KR) = J.g[r][1] * d_right_m;
+        }
     }
     if (G) {
         Eigen::Map<bl::Mat<NX, 2>> Gmap(G);
         Gmap.setZero();
-        for (int r = 0; r < 3; ++r)
-            for (int c = 0; c < 2; ++c) Gmap(r, c) = J.g[r][c];
+        for (int r = 0; r < 3; ++r) {
+            Gmap(r, 0) = J.g[r][0] * x[KL];
+            Gmap(r, 1) = J.g[r][1] * x[KR];
+        }
     }
     return BL_OK;
 }
 
-extern "C" int bl_model_constant_velocity(const bl_real x[8], bl_real dt_s, bl_real x_out[8], bl_real F[64])
+extern "C" int bl_model_constant_velocity(const bl_real x[BL_FILTER_NX], bl_real dt_s, bl_real x_out[BL_FILTER_NX],
+                                          bl_real F[BL_FILTER_NX * BL_FILTER_NX])
 {
     if (x == nullptr || x_out == nullptr) return BL_EINVAL;
-    if (!all_finite(x, 8) || !is_finite(dt_s) || dt_s < 0) return BL_EINVAL;
-    V8 xo;
+    if (!all_finite(x, NX) || !is_finite(dt_s) || dt_s < 0) return BL_EINVAL;
+    VX xo;
     SparseEntry d[kCvEntries];
-    cv_model(Eigen::Map<const V8>(x), dt_s, xo, d);
-    Eigen::Map<V8> xm(x_out);
+    cv_model(Eigen::Map<const VX>(x), dt_s, xo, d);
+    Eigen::Map<VX> xm(x_out);
     xm = xo;
     if (F) {
-        Eigen::Map<M8> Fmap(F);
+        Eigen::Map<MX> Fmap(F);
         Fmap.setIdentity();
         for (int k = 0; k < kCvEntries; ++k) Fmap(d[k].r, d[k].c) += d[k].v;
     }

@@ -80,6 +80,7 @@ static int site_handler(void *user, const char *section, const char *key, const 
     R("robot", "wheel_radius_m", wheel_radius_m);
     U("robot", "ticks_per_rev", ticks_per_rev);
     R("robot", "encoder_rate_hz", encoder_rate_hz);
+    R("robot", "sigma_wheel_scale", sigma_wheel_scale); /* optional key */
     R("noise", "sigma_arrival_s", sigma_arrival_s);
     R("noise", "sigma_wheel_per_m", sigma_wheel_per_m);
     R("noise", "speed_of_sound_mps", speed_of_sound_mps);
@@ -184,6 +185,9 @@ MUT(m_reset_theta, c->reset_sigma_theta_rad = 0)
 MUT(m_sig_v, c->initial_sigma_v_mps = 0)
 MUT(m_sig_w, c->initial_sigma_omega_radps = -1)
 MUT(m_gap, c->max_predict_gap_s = 0)
+MUT(m_wscale_neg, c->sigma_wheel_scale = -0.01f)
+MUT(m_wscale_high, c->sigma_wheel_scale = 0.6f)
+MUT(m_wscale_drift, c->wheel_scale_drift_per_sqrt_s = (bl_real)NAN)
 
 static void test_every_check(void **state)
 {
@@ -209,6 +213,8 @@ static void test_every_check(void **state)
         {m_jitter, "firing_jitter_s"}, {m_iter0, "iekf_max_iterations"}, {m_iter_high, "iekf_max_iterations"},
         {m_tol, "iekf_step_tolerance"}, {m_theta0, "initial_theta_rad"}, {m_reset_theta, "reset_sigma_theta_rad"},
         {m_sig_v, "initial_sigma_v_mps"}, {m_sig_w, "initial_sigma_omega_radps"}, {m_gap, "max_predict_gap_s"},
+        {m_wscale_neg, "sigma_wheel_scale"}, {m_wscale_high, "sigma_wheel_scale"},
+        {m_wscale_drift, "wheel_scale_drift_per_sqrt_s"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
         bl_config cfg, copy;

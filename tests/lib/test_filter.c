@@ -16,6 +16,7 @@
 #include "beaconloc.h"
 
 #define IS_FLOAT (sizeof(bl_real) == 4)
+#define NX BL_FILTER_NX
 #define PI 3.14159265358979323846
 
 /* ---- seeded RNG (xorshift64*) ---- */
@@ -56,7 +57,7 @@ static double wrap(double a)
 /* ================================================================ model
  * Jacobians against central differences. */
 
-static void random_state(bl_real x[8])
+static void random_state(bl_real x[NX])
 {
     x[BL_IX_X] = (bl_real)(1 + 10 * rng_uniform());
     x[BL_IX_Y] = (bl_real)(1 + 10 * rng_uniform());
@@ -66,12 +67,14 @@ static void random_state(bl_real x[8])
     x[BL_IX_S] = (bl_real)(330 + 30 * rng_uniform());
     x[BL_IX_T] = (bl_real)(0.15 * (1 + 1e-4 * rng_gauss()));
     x[BL_IX_T0] = (bl_real)(1e-6 * rng_gauss());
+    x[BL_IX_KL] = (bl_real)(1 + 0.05 * rng_gauss());
+    x[BL_IX_KR] = (bl_real)(1 + 0.05 * rng_gauss());
 }
 
 /* Central difference of f at x along every state axis; compares with the
  * analytic row/matrix. step and tolerance relative to the scale of each
  * state (float needs larger steps). */
-static const double state_scale[8] = {1, 1, 1, 1, 1, 100, 0.01, 0.01};
+static const double state_scale[NX] = {1, 1, 1, 1, 1, 100, 0.01, 0.01, 1, 1};
 
 static void test_pulse_jacobian(void **state)
 {
@@ -82,7 +85,7 @@ static void test_pulse_jacobian(void **state)
     rng_seed(11);
     const double rel = IS_FLOAT ? 1e-3 : 1e-5;
     for (int trial = 0; trial < 300; ++trial) {
-        bl_real x[8], H[8], h;
+        bl_real x[NX], H[NX], h;
         random_state(x);
         bl_pulse_geometry g;
         g.beacon_index = (uint32_t)(trial % 6);
@@ -91,9 +94,9 @@ static void test_pulse_jacobian(void **state)
         g.epoch_rel_s = (bl_real)(-0.4 * rng_uniform());
         g.arrival_rel_s = (bl_real)(0.05 * rng_gauss());
         assert_int_equal(bl_model_pulse(&cfg, x, &g, &h, H), BL_OK);
-        for (int i = 0; i < 8; ++i) {
+        for (int i = 0; i < NX; ++i) {
             const double step = rel * state_scale[i];
-            bl_real xp[8], xm[8], hp, hm;
+            bl_real xp[NX], xm[NX], hp, hm;
             memcpy(xp, x, sizeof xp);
             memcpy(xm, x, sizeof xm);
             xp[i] = (bl_real)(x[i] + step);
@@ -121,12 +124,12 @@ static void test_odometry_jacobian(void **state)
     rng_seed(12);
     const double rel = IS_FLOAT ? 1e-3 : 1e-6;
     for (int trial = 0; trial < 300; ++trial) {
-        bl_real x[8], xo[8], F[64], G[16];
+        bl_real x[NX], xo[NX], F[NX * NX], G[NX * 2];
         random_state(x);
         const bl_real dl = (bl_real)(0.2 * rng_gauss()), dr = (bl_real)(0.2 * rng_gauss());
         assert_int_equal(bl_model_odometry(&cfg, x, dl, dr, xo, F, G), BL_OK);
-        for (int i = 0; i < 8; ++i) {
-            bl_real xp[8], xm[8], op[8], om[8];
+        for (int i = 0; i < NX; ++i) {
+            bl_real xp[NX], xm[NX], op[NX], om[NX];
             memcpy(xp, x, sizeof xp);
             memcpy(xm, x, sizeof xm);
             xp[i] = (bl_real)(x[i] + rel * state_scale[i]);
@@ -134,19 +137,19 @@ static void test_odometry_jacobian(void **state)
             const double dstep = (double)xp[i] - (double)xm[i];
             assert_int_equal(bl_model_odometry(&cfg, xp, dl, dr, op, NULL, NULL), BL_OK);
             assert_int_equal(bl_model_odometry(&cfg, xm, dl, dr, om, NULL, NULL), BL_OK);
-            for (int r = 0; r < 8; ++r) {
+            for (int r = 0; r < NX; ++r) {
                 const double num = ((double)op[r] - (double)om[r]) / dstep;
-                assert_true(fabs(num - F[r * 8 + i]) <= (IS_FLOAT ? 2e-2 : 1e-6) * (fabs(num) + 1));
+                assert_true(fabs(num - F[r * NX + i]) <= (IS_FLOAT ? 2e-2 : 1e-6) * (fabs(num) + 1));
             }
         }
         for (int u = 0; u < 2; ++u) {
             const double step = IS_FLOAT ? 1e-3 : 1e-7;
-            bl_real op[8], om[8];
+            bl_real op[NX], om[NX];
             assert_int_equal(bl_model_odometry(&cfg, x, (bl_real)(dl + (u == 0 ? step : 0)),
                                                (bl_real)(dr + (u == 1 ? step : 0)), op, NULL, NULL), BL_OK);
             assert_int_equal(bl_model_odometry(&cfg, x, (bl_real)(dl - (u == 0 ? step : 0)),
                                                (bl_real)(dr - (u == 1 ? step : 0)), om, NULL, NULL), BL_OK);
-            for (int r = 0; r < 8; ++r) {
+            for (int r = 0; r < NX; ++r) {
                 const double num = ((double)op[r] - (double)om[r]) / (2 * step);
                 assert_true(fabs(num - G[r * 2 + u]) <= (IS_FLOAT ? 2e-2 : 1e-6) * (fabs(num) + 1));
             }
@@ -160,12 +163,12 @@ static void test_cv_jacobian(void **state)
     rng_seed(13);
     const double rel = IS_FLOAT ? 1e-3 : 1e-6;
     for (int trial = 0; trial < 300; ++trial) {
-        bl_real x[8], xo[8], F[64];
+        bl_real x[NX], xo[NX], F[NX * NX];
         random_state(x);
         const bl_real dt = (bl_real)(0.5 * rng_uniform());
         assert_int_equal(bl_model_constant_velocity(x, dt, xo, F), BL_OK);
-        for (int i = 0; i < 8; ++i) {
-            bl_real xp[8], xm[8], op[8], om[8];
+        for (int i = 0; i < NX; ++i) {
+            bl_real xp[NX], xm[NX], op[NX], om[NX];
             memcpy(xp, x, sizeof xp);
             memcpy(xm, x, sizeof xm);
             xp[i] = (bl_real)(x[i] + rel * state_scale[i]);
@@ -173,17 +176,18 @@ static void test_cv_jacobian(void **state)
             const double dstep = (double)xp[i] - (double)xm[i];
             assert_int_equal(bl_model_constant_velocity(xp, dt, op, NULL), BL_OK);
             assert_int_equal(bl_model_constant_velocity(xm, dt, om, NULL), BL_OK);
-            for (int r = 0; r < 8; ++r) {
+            for (int r = 0; r < NX; ++r) {
                 const double num = ((double)op[r] - (double)om[r]) / dstep;
-                assert_true(fabs(num - F[r * 8 + i]) <= (IS_FLOAT ? 2e-2 : 1e-6) * (fabs(num) + 1));
+                assert_true(fabs(num - F[r * NX + i]) <= (IS_FLOAT ? 2e-2 : 1e-6) * (fabs(num) + 1));
             }
         }
     }
     /* the odometry model with increments v·dt, ω·dt agrees with CV over dt */
     bl_config cfg;
     assert_int_equal(bl_config_default(&cfg), BL_OK);
-    bl_real x[8], a[8], b[8];
+    bl_real x[NX], a[NX], b[NX];
     random_state(x);
+    x[BL_IX_KL] = x[BL_IX_KR] = 1; /* measured = true increments */
     const double dt = 0.01, half = 0.5 * (double)cfg.wheel_base_m;
     const bl_real dl = (bl_real)((x[BL_IX_V] - x[BL_IX_OMEGA] * half) * dt);
     const bl_real dr = (bl_real)((x[BL_IX_V] + x[BL_IX_OMEGA] * half) * dt);
@@ -201,7 +205,7 @@ static void test_pulse_model_moving_robot(void **state)
     bl_config cfg;
     assert_int_equal(bl_config_default(&cfg), BL_OK);
     cfg.ring_radius_m = 0;
-    bl_real x[8] = {0};
+    bl_real x[NX] = {0};
     x[BL_IX_X] = 3;
     x[BL_IX_Y] = 4;
     x[BL_IX_THETA] = (bl_real)0.7;
@@ -227,7 +231,7 @@ static void test_pulse_model_moving_robot(void **state)
     assert_true(fabs((double)h - (tf + lo)) < (IS_FLOAT ? 2e-6 : 1e-6));
     /* and the moving-robot term matters: the same model with v = 0 (robot
      * frozen at its firing-time position) is off by > 50 µs */
-    bl_real x0[8], h0;
+    bl_real x0[NX], h0;
     memcpy(x0, x, sizeof x0);
     x0[BL_IX_V] = 0;
     x0[BL_IX_X] = (bl_real)px; /* keep the firing-time position */
@@ -254,6 +258,8 @@ typedef struct sim_params {
     double kidnap_dx_m, kidnap_dy_m;
     int64_t time_offset_us;    /* added to every time handed to the filter */
     double initial_sos_mps;    /* speed of sound the filter starts from */
+    double wheel_scale_l, wheel_scale_r; /* true wheel travel / reported travel (1 = nominal
+                                            radius; 1.03 = wheel 3 % larger than configured) */
     uint64_t seed;
 } sim_params;
 
@@ -340,6 +346,7 @@ typedef struct sim_stats {
     double final_theta_err;
     long sample_every;  /* compare every n-th encoder frame (input; 0/1 = all) */
     double sum_v_est, sum_v_true; /* speed bias check */
+    double final_kl, final_kr, final_sigma_kl, final_sigma_kr; /* wheel scales */
 } sim_stats;
 
 static int64_t to_us(const sim_params *sp, double t_s) { return sp->time_offset_us + (int64_t)llround(t_s * 1e6); }
@@ -372,7 +379,9 @@ static void sim_run(const sim_params *sp, const bl_config *cfg_in, double settle
         wheel_l += dl + 0.004 * sqrt(fabs(dl)) * rng_gauss();
         wheel_r += dr + 0.004 * sqrt(fabs(dr)) * rng_gauss();
         if (i % ENC_EVERY) continue;
-        const long ticks_l = lround(wheel_l / tick), ticks_r = lround(wheel_r / tick);
+        /* a wheel of radius k·r_nominal rolls k·tick per tick */
+        const long ticks_l = lround(wheel_l / (tick * sp->wheel_scale_l));
+        const long ticks_r = lround(wheel_r / (tick * sp->wheel_scale_r));
         if (st->started) {
             const int rc = bl_filter_predict_odometry(&f, to_us(sp, t), (bl_real)((double)(ticks_l - prev_l) * tick),
                                                       (bl_real)((double)(ticks_r - prev_r) * tick));
@@ -401,7 +410,7 @@ static void sim_run(const sim_params *sp, const bl_config *cfg_in, double settle
         if (st->sample_every > 1 && (i / ENC_EVERY) % st->sample_every) continue;
         bl_estimate e;
         assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
-        bl_real xs[8];
+        bl_real xs[NX];
         assert_int_equal(bl_filter_get_state(&f, xs, NULL), BL_OK);
         if (fabs((double)xs[BL_IX_T0]) > st->max_abs_t0_offset_s) st->max_abs_t0_offset_s = fabs((double)xs[BL_IX_T0]);
         if (!isfinite(e.x_m) || !isfinite(e.y_m) || !isfinite(e.theta_rad) || !isfinite(e.cov[0]) ||
@@ -431,6 +440,10 @@ static void sim_run(const sim_params *sp, const bl_config *cfg_in, double settle
         st->final_T = e.period_s;
         st->resets = e.reset_counter;
         st->final_theta_err = fabs(wrap(e.theta_rad - tth));
+        st->final_kl = e.wheel_scale_left;
+        st->final_kr = e.wheel_scale_right;
+        st->final_sigma_kl = e.sigma_wheel_scale_left;
+        st->final_sigma_kr = e.sigma_wheel_scale_right;
     }
     bl_estimate e;
     assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
@@ -453,6 +466,7 @@ static sim_params default_sim(void)
     sp.echo_prob = 0;
     sp.kidnap_at_s = -1;
     sp.initial_sos_mps = 343;
+    sp.wheel_scale_l = sp.wheel_scale_r = 1;
     sp.seed = 2026;
     return sp;
 }
@@ -492,6 +506,45 @@ static void test_moving_robot_consistent(void **state)
     assert_true(fabs(st.final_sos - sp.s_true_mps) < 1.0);
     assert_true(fabs(st.final_T - sp.T_true_s) < 2e-6);
     assert_true(st.final_theta_err < 0.05);
+}
+
+/* Online wheel-scale calibration: wheels 3 % larger (left) and 3 % smaller
+ * (right) than configured (Hoppenot & Colle 1997 §4.2's asymmetric radius
+ * error). With calibration on (σ 0.05) both scales converge to the truth
+ * within 3σ of their own σ, the σ shrinks well below the bias, the position
+ * stays within its 3σ >= 95 % of the time, and the error is smaller than
+ * the same run's without calibration (which must be hurt by the bias). */
+static void test_wheel_scale_calibration(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    sim_params sp = default_sim();
+    sp.duration_s = 150;
+    sp.wheel_scale_l = 1.03;
+    sp.wheel_scale_r = 0.97;
+    sim_stats off = {0}, on = {0};
+    assert_true(cfg.sigma_wheel_scale == 0); /* default: off */
+    sim_run(&sp, &cfg, 40.0, &off);
+    print_stats("wheel bias, calibration off", &off);
+    cfg.sigma_wheel_scale = (bl_real)0.05;
+    assert_int_equal(bl_config_check(&cfg, NULL), BL_OK);
+    sim_run(&sp, &cfg, 40.0, &on);
+    print_stats("wheel bias, calibration on", &on);
+    print_message("wheel scales: left %.4f±%.4f (true %.2f), right %.4f±%.4f (true %.2f)\n", on.final_kl,
+                  on.final_sigma_kl, sp.wheel_scale_l, on.final_kr, on.final_sigma_kr, sp.wheel_scale_r);
+    assert_true(on.started);
+    assert_int_equal(on.nan_seen, 0);
+    assert_int_equal(on.resets, 0);
+    assert_true(fabs(on.final_kl - sp.wheel_scale_l) <= 3 * on.final_sigma_kl);
+    assert_true(fabs(on.final_kr - sp.wheel_scale_r) <= 3 * on.final_sigma_kr);
+    assert_true(on.final_sigma_kl < 0.01 && on.final_sigma_kr < 0.01); /* learned, not the prior */
+    assert_true(on.within_3sigma >= 0.95 * on.samples);
+    const double rms_on = sqrt(on.sum_e2 / on.samples), rms_off = sqrt(off.sum_e2 / off.samples);
+    assert_true(rms_on < 0.05);
+    assert_true(rms_on < rms_off);
+    /* the speed measured through the calibrated wheels stays unbiased */
+    assert_true(fabs(on.sum_v_est / on.sum_v_true - 1) < 0.01);
 }
 
 /* Kleeman 1992 Fig. 8: from 330, 343 and 360 m/s (σ 5 m/s) the speed of
@@ -751,7 +804,7 @@ static void test_gate(void **state)
     assert_true(fabs((double)xp.arrival_us * 1e-6 - arr_true) < 3 * (double)xp.sigma_s + 1e-6);
     assert_true(xp.sigma_s > 1.5e-4 && xp.sigma_s < 1e-3);
 
-    bl_real x0[8], P0[64], x1[8], P1[64];
+    bl_real x0[NX], P0[NX * NX], x1[NX], P1[NX * NX];
     assert_int_equal(bl_filter_get_state(&f, x0, P0), BL_OK);
     /* an echo: 5 ms late (1.7 m longer path) */
     const int64_t ta_us = (int64_t)llround(arr_true * 1e6);
@@ -1056,6 +1109,7 @@ int main(void)
         cmocka_unit_test(test_moving_robot_consistent),
         cmocka_unit_test(test_speed_of_sound_convergence),
         cmocka_unit_test(test_heading_learned_from_motion),
+        cmocka_unit_test(test_wheel_scale_calibration),
         cmocka_unit_test(test_echoes_rejected),
         cmocka_unit_test(test_missing_pulses),
         cmocka_unit_test(test_ceiling_beacons),

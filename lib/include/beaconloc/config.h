@@ -51,6 +51,13 @@ typedef struct bl_config {
     bl_real wheel_radius_m;           /* wheel_radius_m: > 0 (ticks -> metres in the caller) */
     uint32_t ticks_per_rev;           /* ticks_per_rev: encoder ticks per wheel turn, > 0 */
     bl_real encoder_rate_hz;          /* encoder_rate_hz: nominal encoder frame rate, > 0 */
+    bl_real sigma_wheel_scale;        /* sigma_wheel_scale (optional key, default 0 = off):
+                                         initial σ (dimensionless) of each of the two
+                                         wheel-scale states (true wheel distance = scale ·
+                                         measured increment; both start at 1), 0..0.5;
+                                         0 = no online calibration (scales stay exactly 1,
+                                         the filter is the uncalibrated one); e.g. 0.03 for
+                                         wheels known only to ±3 % */
 
     /* ---- [noise] ---- */
     bl_real sigma_arrival_s;          /* sigma_arrival_s: σ of a pulse arrival time
@@ -80,6 +87,8 @@ typedef struct bl_config {
     bl_real stationary_noise_scale;   /* process-noise scale when stationary (0..1] (§3.10) */
     bl_real speed_of_sound_drift_mps_per_sqrt_s; /* random walk of s, >= 0 */
     bl_real period_drift_s_per_sqrt_s;           /* random walk of T, >= 0 */
+    bl_real wheel_scale_drift_per_sqrt_s;        /* random walk of each wheel scale
+                                                    (1/√s: σ² grows by this² per s), >= 0 */
     bl_real firing_jitter_s;          /* σ of firing-time jitter per beacon slot, >= 0 */
     uint32_t iekf_max_iterations;     /* IEKF relinearisations per pulse, 1..20 */
     bl_real iekf_step_tolerance;      /* stop iterating when |Δposition| < this (m) */

@@ -2,12 +2,15 @@
  * beaconloc — the estimator: Kleeman's (1992) iterated EKF for ultrasonic
  * beacon arrival times plus differential-drive dead reckoning.
  *
- * State (8): x_m, y_m (wheel-base centre, site frame), theta_rad (heading,
+ * State (10): x_m, y_m (wheel-base centre, site frame), theta_rad (heading,
  * CCW from +x), v_mps (forward speed), omega_radps (turn rate),
  * s_mps (speed of sound), T_s (beacon period), t0 (firing time of a
  * reference beacon slot; held as a small offset in seconds from an int64
  * microsecond epoch that moves forward with every fused pulse, so float32
- * keeps sub-microsecond resolution for days of uptime).
+ * keeps sub-microsecond resolution for days of uptime), k_left, k_right
+ * (wheel scale factors, dimensionless: true wheel distance = k · measured
+ * increment; start at 1 with σ cfg.sigma_wheel_scale, random walk
+ * cfg.wheel_scale_drift_per_sqrt_s; learned online from the beacons).
  *
  * Time: every absolute time is int64 microseconds on one monotonic timebase
  * chosen by the caller (e.g. the bridge's CLOCK_MONOTONIC, or the receiver
@@ -55,7 +58,7 @@ extern "C" {
 #endif
 
 /* State dimension and indices (documentation / tests; storage is private). */
-#define BL_FILTER_NX 8
+#define BL_FILTER_NX 10
 enum {
     BL_IX_X = 0,     /* x_m */
     BL_IX_Y = 1,     /* y_m */
@@ -64,7 +67,9 @@ enum {
     BL_IX_OMEGA = 4, /* omega_radps */
     BL_IX_S = 5,     /* speed of sound, m/s */
     BL_IX_T = 6,     /* beacon period, s */
-    BL_IX_T0 = 7     /* firing time offset from the epoch, s */
+    BL_IX_T0 = 7,    /* firing time offset from the epoch, s */
+    BL_IX_KL = 8,    /* left wheel scale (true distance / measured), 1 */
+    BL_IX_KR = 9     /* right wheel scale, 1 */
 };
 
 /* Caller-owned filter. All members are PRIVATE (storage only, so the
@@ -134,6 +139,8 @@ typedef struct bl_estimate {
                                    latest fused pulse; beacon i fires at
                                    t0_us + i·period_s (+ k·count·period_s) */
     bl_real sigma_speed_of_sound_mps, sigma_period_s, sigma_t0_s;
+    bl_real wheel_scale_left, wheel_scale_right; /* calibrated wheel scales (1 = nominal) */
+    bl_real sigma_wheel_scale_left, sigma_wheel_scale_right;
     /* Covariance of (x_m, y_m, theta_rad, v_mps, omega_radps), row-major 5x5. */
     bl_real cov[25];
     bool started;               /* a pose exists (else only counters are valid) */
@@ -158,12 +165,15 @@ int bl_filter_init(bl_filter *f, const bl_config *cfg);
 
 /* Replace the tuning of an initialised filter, keeping its state, when the
  * geometry (beacon count/positions, receiver ring) is unchanged.
- * Errors: BL_EINVAL, BL_ENOTINIT, BL_ECONFIG (bad cfg, or geometry changed:
+ * Errors: BL_EINVAL, BL_ENOTINIT, BL_ECONFIG (bad cfg, or geometry changed,
+ * or wheel-scale calibration switched on/off (sigma_wheel_scale 0 <-> > 0):
  * re-init instead). */
 int bl_filter_update_config(bl_filter *f, const bl_config *cfg);
 
 /* Start (or restart) from a known prior. Counts as a reset if the filter
- * was already started. Errors: BL_EINVAL (NULL, non-finite, σ <= 0,
+ * was already started. The wheel scales (robot properties) are kept by any
+ * restart of a started filter; a first start sets them to 1 with σ
+ * cfg.sigma_wheel_scale. Errors: BL_EINVAL (NULL, non-finite, σ <= 0,
  * beacon index >= count), BL_ENOTINIT, BL_ETIME (t0_us further from t_us
  * than cfg.max_predict_gap_s plus one firing cycle). */
 int bl_filter_start(bl_filter *f, const bl_filter_prior *prior);
@@ -179,8 +189,10 @@ int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real sigma_thet
 
 /* Predict to t_us with wheel increments since the previous predict:
  * d_left_m, d_right_m = distance each wheel rolled in (state time, t_us]
- * (differential drive, Kleeman 1992 eq. 24 input form). Process noise by
- * motion type (stationary / straight / turning, Kleeman §3.10).
+ * as measured with the nominal wheel radius (differential drive, Kleeman
+ * 1992 eq. 24 input form); the filter multiplies them by its calibrated
+ * wheel scales. Process noise by motion type (stationary / straight /
+ * turning, Kleeman §3.10).
  * Errors: BL_EINVAL (non-finite, |d| > 10 m), BL_ENOTINIT (not started),
  * BL_ETIME (t_us < state time, or beyond cfg.max_predict_gap_s). */
 int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real d_right_m);

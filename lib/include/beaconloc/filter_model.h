@@ -8,6 +8,7 @@
 
 #include "beaconloc/common.h"
 #include "beaconloc/config.h"
+#include "beaconloc/filter.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -25,22 +26,27 @@ typedef struct bl_pulse_geometry {
 
 /* Arrival-time model (Kleeman 1992 eq. 21 with the receiver's position on
  * the ring and 3D beacon distance): *h_rel_s = predicted arrival - t_s (s);
- * H (8, optional) = ∂h/∂x. Errors: BL_EINVAL (NULL, bad index, non-finite,
+ * H (BL_FILTER_NX, optional) = ∂h/∂x. Errors: BL_EINVAL (NULL, bad index, non-finite,
  * receiver on the beacon or s <= v). */
-int bl_model_pulse(const bl_config *cfg, const bl_real x[8], const bl_pulse_geometry *g,
-                   bl_real *h_rel_s, bl_real H[8]);
+int bl_model_pulse(const bl_config *cfg, const bl_real x[BL_FILTER_NX], const bl_pulse_geometry *g,
+                   bl_real *h_rel_s, bl_real H[BL_FILTER_NX]);
 
 /* Odometry transition (Kleeman 1992 eq. 24 input form; differential drive)
- * over wheel increments d_left_m, d_right_m: x_out = f(x, u); F (8x8
- * row-major, optional) = ∂f/∂x; G (8x2 row-major, optional) = ∂f/∂(dL, dR).
+ * over measured wheel increments d_left_m, d_right_m, scaled by the state's
+ * wheel scales (true distances k_left·d_left_m, k_right·d_right_m):
+ * x_out = f(x, u); F (NXxNX row-major, optional) = ∂f/∂x (including the
+ * wheel-scale columns); G (NXx2 row-major, optional) = ∂f/∂(dL, dR) of the
+ * measured increments.
  * v and ω pass through unchanged (the filter then fuses the wheel speeds as
  * a measurement, Kleeman eq. 25). Errors: BL_EINVAL. */
-int bl_model_odometry(const bl_config *cfg, const bl_real x[8], bl_real d_left_m, bl_real d_right_m,
-                      bl_real x_out[8], bl_real F[64], bl_real G[16]);
+int bl_model_odometry(const bl_config *cfg, const bl_real x[BL_FILTER_NX], bl_real d_left_m, bl_real d_right_m,
+                      bl_real x_out[BL_FILTER_NX], bl_real F[BL_FILTER_NX * BL_FILTER_NX],
+                      bl_real G[BL_FILTER_NX * 2]);
 
 /* Constant-velocity transition over dt_s >= 0 (Kleeman 1992 eq. 15 with
  * the turn rate as a state): x_out, F (optional). Errors: BL_EINVAL. */
-int bl_model_constant_velocity(const bl_real x[8], bl_real dt_s, bl_real x_out[8], bl_real F[64]);
+int bl_model_constant_velocity(const bl_real x[BL_FILTER_NX], bl_real dt_s, bl_real x_out[BL_FILTER_NX],
+                               bl_real F[BL_FILTER_NX * BL_FILTER_NX]);
 
 #ifdef __cplusplus
 }
