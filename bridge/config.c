@@ -50,6 +50,7 @@ static const struct key_desc keys[] = {
     NUM("robot", "wheel_radius_m", K_REAL, wheel_radius_m, 0, 100, true),
     NUM("robot", "ticks_per_rev", K_INT, ticks_per_rev, 1, 1000000, false),
     NUM("robot", "encoder_rate_hz", K_REAL, encoder_rate_hz, 0, 100000, true),
+    NUM("robot", "sigma_wheel_scale", K_REAL, sigma_wheel_scale, 0, 0.5, false),
     NUM("noise", "sigma_arrival_s", K_REAL, sigma_arrival_s, 0, 1, true),
     NUM("noise", "sigma_wheel_per_m", K_REAL, sigma_wheel_per_m, 0, 10, false),
     NUM("noise", "speed_of_sound_mps", K_REAL, speed_of_sound_mps, 200, 500, false),
@@ -64,6 +65,7 @@ static const struct key_desc keys[] = {
     NUM("bridge", "status_interval_s", K_REAL, status_interval_s, 0, 86400, false),
     NUM("bridge", "beacon_lost_s", K_REAL, beacon_lost_s, 0, 3600, true),
     NUM("bridge", "echo_storm_ratio", K_REAL, echo_storm_ratio, 0, 1, true),
+    NUM("bridge", "max_coast_s", K_REAL, max_coast_s, 0, 3600, true),
 };
 #define NKEYS (sizeof keys / sizeof keys[0])
 
@@ -97,6 +99,7 @@ void config_defaults(struct bridge_config *cfg)
     cfg->status_interval_s = 10;
     cfg->beacon_lost_s = 2.0;
     cfg->echo_storm_ratio = 0.3;
+    cfg->max_coast_s = 10.0;
 }
 
 /* ---- parsing ---------------------------------------------------------- */

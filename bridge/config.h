@@ -48,6 +48,7 @@ struct bridge_config {
     double wheel_radius_m;
     int ticks_per_rev;
     double encoder_rate_hz;
+    double sigma_wheel_scale;   /* online wheel-scale calibration: initial σ, 0 = off */
     /* [noise] */
     double sigma_arrival_s;
     double sigma_wheel_per_m;
@@ -64,6 +65,8 @@ struct bridge_config {
     double status_interval_s;   /* status line period, 0 = off */
     double beacon_lost_s;       /* beacon silent this long -> "lost" */
     double echo_storm_ratio;    /* (echoes+rejected)/all arrivals over 5 s */
+    double max_coast_s;         /* no data this long: the filter re-starts; until then
+                                   constant-velocity output with growing covariance */
     /* where each value came from, for error messages */
     char path[256];             /* site file ("" = built-in defaults) */
     int key_line[CONFIG_MAX_KEYS];

@@ -86,11 +86,13 @@ static const struct { const char *field, *section, *key; } field_keys[] = {
     { "wheel_radius_m", "robot", "wheel_radius_m" },
     { "ticks_per_rev", "robot", "ticks_per_rev" },
     { "encoder_rate_hz", "robot", "encoder_rate_hz" },
+    { "sigma_wheel_scale", "robot", "sigma_wheel_scale" },
     { "sigma_arrival_s", "noise", "sigma_arrival_s" },
     { "sigma_wheel_per_m", "noise", "sigma_wheel_per_m" },
     { "speed_of_sound_mps", "noise", "speed_of_sound_mps" },
     { "sigma_speed_of_sound_mps", "noise", "sigma_speed_of_sound_mps" },
     { "gate_sigma", "noise", "gate_sigma" },
+    { "max_predict_gap_s", "bridge", "max_coast_s" },
 };
 
 int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
@@ -117,11 +119,17 @@ int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
     c.wheel_radius_m = (bl_real)cfg->wheel_radius_m;
     c.ticks_per_rev = (uint32_t)cfg->ticks_per_rev;
     c.encoder_rate_hz = (bl_real)cfg->encoder_rate_hz;
+    c.sigma_wheel_scale = (bl_real)cfg->sigma_wheel_scale;
     c.sigma_arrival_s = (bl_real)cfg->sigma_arrival_s;
     c.sigma_wheel_per_m = (bl_real)cfg->sigma_wheel_per_m;
     c.speed_of_sound_mps = (bl_real)cfg->speed_of_sound_mps;
     c.sigma_speed_of_sound_mps = (bl_real)cfg->sigma_speed_of_sound_mps;
     c.gate_sigma = (bl_real)cfg->gate_sigma;
+    /* A CAN outage (interface down, a node rebooting) shorter than this is
+     * coasted through: constant-velocity predict, P grows, the pulses pull
+     * the state back afterwards; longer, the filter re-starts from the
+     * snapshot solver. */
+    c.max_predict_gap_s = (bl_real)cfg->max_coast_s;
     const char *bad = NULL;
     int rc = bl_config_check(&c, &bad);
     if (rc != BL_OK) {
@@ -328,8 +336,13 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
 {
     bl_estimate est;
     bl_filter_estimate(&e->filter, &est);
-    if (est.started && pl->arrival_us - est.t_us > ENC_SILENCE_US) {
-        /* No encoder data up to this pulse: constant-velocity predict. */
+    /* Encoders silent (none for ENC_SILENCE_US before this pulse), or no
+     * state update for that long: constant-velocity predict to the pulse,
+     * so the process noise of the whole interval is in P before the fusion
+     * (the pulse model alone extrapolates with v and omega, no noise). */
+    bool enc_stale = !e->enc_seen || pl->arrival_us - e->enc_last_node_us > ENC_SILENCE_US;
+    if (est.started && ((enc_stale && pl->arrival_us > est.t_us) ||
+                        pl->arrival_us - est.t_us > ENC_SILENCE_US)) {
         int rc = bl_filter_predict(&e->filter, pl->arrival_us);
         if (rc == BL_OK) {
             e->c.cv_predicts++;
@@ -614,11 +627,31 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
     bl_filter_estimate(&e->filter, &est);
     if (!est.started)
         return;
-    if (t <= est.t_us || last < est.t_us - ENC_SILENCE_US) {
-        /* Sample older than the state (the filter just started at a pulse)
-         * or the interval was already covered by a constant-velocity
-         * predict: take it as the new reference only. */
+    if (t <= est.t_us || last < est.t_us - ENC_SILENCE_US || gap > ENC_SILENCE_US) {
+        /* Sample older than the state (the filter just started at a pulse),
+         * the interval was already covered by a constant-velocity predict,
+         * or the increment spans a silence (frames lost, the interface was
+         * down): one increment over seconds hides the path's shape (an arc
+         * then a straight is not one chord), so it is not used as
+         * odometry; the silence is covered by constant velocity with its
+         * growing covariance. Take the sample as the new reference only. */
         return;
+    }
+    if (last > est.t_us) {
+        /* The state is older than this increment's start (the reference
+         * was taken after the last update, e.g. the first sample after a
+         * silence): constant velocity up to the reference first, so the
+         * increment is divided by its own interval, not a longer one. */
+        int prc = bl_filter_predict(&e->filter, last);
+        if (prc == BL_OK) {
+            e->c.cv_predicts++;
+        } else if (prc == BL_ETIME) {
+            reinit_filter(e, "no data for too long");
+            return;
+        } else {
+            e->c.predict_errors++;
+            return;
+        }
     }
     /* Wheel increments are the dead-reckoning input of Kleeman 1992 §3.8
      * (eq. 24 takes the heading increment as an input; the library forms
@@ -722,6 +755,9 @@ int estimator_output(const struct estimator *e, int64_t at_local_us,
     if (at_local_us) {
         int64_t t = estimator_local_to_node(e, at_local_us);
         rc = bl_filter_estimate_at(&e->filter, t, &est);
+        if (rc == BL_ETIME && bl_filter_estimate(&e->filter, &est) == BL_OK &&
+            est.started && t > est.t_us)
+            return -1; /* beyond max_coast_s: no stale pose with a stale covariance */
     }
     if (rc != BL_OK)
         rc = bl_filter_estimate(&e->filter, &est);

@@ -81,6 +81,10 @@ class Scenario:
     truth_rate_hz: float = 50.0
     log_epoch_s: float = 1_700_000_000.0
     channel: str = "vcan0"
+    # The scenario file's own duration: a shorter --duration simulates the whole
+    # file's run and keeps its first duration_s, so a short run is the prefix of
+    # the full one (same noise, same echoes) rather than another draw. None = duration_s.
+    realization_s: float | None = None
 
     def temperature_c(self, t_s) -> np.ndarray:
         prof = self.temperature_profile
@@ -260,4 +264,5 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         truth_rate_hz=ini.number("output", "truth_rate_hz", 50.0, positive=True, maximum=1000),
         log_epoch_s=ini.number("output", "log_epoch_s", 1_700_000_000.0, minimum=0),
         channel=ini.raw("output", "channel", "vcan0"),
+        realization_s=max(duration, ini.number("scenario", "duration_s", positive=True)),
     )

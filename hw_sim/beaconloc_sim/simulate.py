@@ -2,6 +2,7 @@
 ground truth, the odometry-only track and the posterior Cramer-Rao bound."""
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -54,6 +55,37 @@ def wrap_angle(a):
 
 
 def run(scn: Scenario, *, encode: bool = True) -> SimResult:
+    """Simulate scn. A run shorter than the scenario file's is the prefix of the
+    file's full run: the noise is drawn for the whole run (numpy draws vectors
+    sized by the run), then everything after duration_s is cut."""
+    full = scn.realization_s
+    if full is not None and full > scn.duration_s:
+        return _prefix(_run(dataclasses.replace(scn, duration_s=full), encode=encode), scn)
+    return _run(scn, encode=encode)
+
+
+def _prefix(res: SimResult, scn: Scenario) -> SimResult:
+    """The first scn.duration_s of a longer run (frames received, truth, odometry,
+    firings and the bound after them, detections of those firings)."""
+    d = scn.duration_s
+    fr = res.frames
+    keep = np.flatnonzero(fr.t_s <= d)
+    frames = Frames(fr.t_s[keep], fr.arb_id[keep], [fr.signals[i] for i in keep.tolist()],
+                    [fr.data[i] for i in keep.tolist()] if fr.data else [])
+    truth = {k: v[res.truth["t_sim_s"] <= d + 1e-9] for k, v in res.truth.items()}
+    end_us = res.rx_clock.unwrapped_us(d)
+    odometry = {k: v[res.odometry["t_us"] <= end_us] for k, v in res.odometry.items()}
+    n_fire = int(np.searchsorted(res.firings.t_s, d, side="right"))
+    firings = Firings(*(getattr(res.firings, f.name)[:n_fire]
+                        for f in dataclasses.fields(Firings)))
+    dsel = (res.detections.edge_s <= d) & (res.detections.firing < n_fire)
+    det = Detections(*(getattr(res.detections, f.name)[dsel]
+                       for f in dataclasses.fields(Detections)))
+    return SimResult(scn, frames, truth, odometry, firings, det, res.rx_clock, res.encoder_clock,
+                     res.pcrb_cov[:n_fire])
+
+
+def _run(scn: Scenario, *, encode: bool = True) -> SimResult:
     site = scn.site
     seeds = np.random.SeedSequence(scn.seed).spawn(4)
     rng_pulse, rng_enc, rng_lat, rng_fire = (np.random.default_rng(s) for s in seeds)

@@ -22,7 +22,8 @@ _KNOWN = {
     "beacons": {"count", "period_s", "double_pulse_spacing_s", "burst_length_s"},
     "beacon": {"x_m", "y_m", "z_m"},
     "receivers": {"count", "ring_radius_m", "first_angle_deg", "height_m", "beamwidth_deg"},
-    "robot": {"wheel_base_m", "wheel_radius_m", "ticks_per_rev", "encoder_rate_hz"},
+    "robot": {"wheel_base_m", "wheel_radius_m", "ticks_per_rev", "encoder_rate_hz",
+              "sigma_wheel_scale"},   # the last is the estimator's (bridge), not physics
     "noise": {"sigma_arrival_s", "sigma_wheel_per_m", "speed_of_sound_mps",
               "sigma_speed_of_sound_mps", "gate_sigma"},
 }

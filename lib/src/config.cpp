@@ -54,7 +54,7 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->heading_noise_rad_per_sqrt_s = real(0.005);
     cfg->heading_noise_fraction = real(0.02);
     cfg->stationary_noise_scale = real(0.01);
-    cfg->speed_of_sound_drift_mps_per_sqrt_s = real(0.01);
+    cfg->speed_of_sound_drift_mps_per_sqrt_s = real(0.2);
     cfg->period_drift_s_per_sqrt_s = real(1e-8);
     cfg->wheel_scale_drift_per_sqrt_s = real(1e-5);  // 6e-4 per hour: tyre wear / load change
     cfg->firing_jitter_s = real(10e-6);

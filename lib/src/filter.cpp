@@ -491,7 +491,17 @@ void commit(bl_filter *f, const VX &x, const MX &P)
 {
     state(f) = x;
     cov(f) = P;
-    if (converged_now(&f->cfg_, P)) f->flags_ |= kFlagConverged;
+    if (converged_now(&f->cfg_, P)) {
+        f->flags_ |= kFlagConverged;
+    } else {
+        // Lost again (a long coast without pulses: P grew): back to the
+        // start-up variance and gate of Kleeman §3.9 until it re-converges,
+        // so a few pulses linearised metres away cannot collapse P around a
+        // wrong point. Hysteresis: lost above 2x the converged sigma.
+        const real m = P(X, X) > P(Y, Y) ? P(X, X) : P(Y, Y);
+        const real lost = real(2) * f->cfg_.converged_sigma_xy_m;
+        if (m > lost * lost) f->flags_ &= ~kFlagConverged;
+    }
 }
 
 }  // namespace

@@ -146,6 +146,24 @@ static void test_out_of_range_and_bad_values(void **state)
     expect_error(body, ":2: [bridge] log_level: unknown level 'loud'");
     snprintf(body, sizeof body, "[noise]\nspeed_of_sound_mps = nan\n%s", good_body);
     expect_error(body, ":2: [noise] speed_of_sound_mps: not a number: 'nan'");
+    snprintf(body, sizeof body, "%s[robot]\nsigma_wheel_scale = 0.8\n", good_body);
+    expect_error(body, ":23: [robot] sigma_wheel_scale: 0.8 out of range [0..0.5]");
+}
+
+/* The optional wheel-scale calibration key reaches the estimator's config. */
+static void test_wheel_scale_calibration_key(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%s[robot]\nsigma_wheel_scale = 0.03\n", good_body);
+    assert_int_equal(make_file(body), 0);
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    assert_true(cfg.sigma_wheel_scale == 0.0); /* off by default */
+    char err[CONFIG_ERR_LEN] = "";
+    if (config_load_file(&cfg, path, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    assert_true(cfg.sigma_wheel_scale == 0.03);
 }
 
 static void test_duplicate_key(void **state)
@@ -243,6 +261,7 @@ int main(void)
         cmocka_unit_test(test_unknown_key_in_our_section),
         cmocka_unit_test(test_not_a_number),
         cmocka_unit_test(test_out_of_range_and_bad_values),
+        cmocka_unit_test_teardown(test_wheel_scale_calibration_key, teardown),
         cmocka_unit_test(test_duplicate_key),
         cmocka_unit_test(test_beacons_incomplete_or_extra),
         cmocka_unit_test(test_syntax_error_and_missing_file),

@@ -85,7 +85,10 @@ typedef struct bl_config {
     bl_real heading_noise_fraction;   /* ... plus (this · |Δθ|)² per step (the "fraction of
                                          the angle increment", §3.10), >= 0 */
     bl_real stationary_noise_scale;   /* process-noise scale when stationary (0..1] (§3.10) */
-    bl_real speed_of_sound_drift_mps_per_sqrt_s; /* random walk of s, >= 0 */
+    bl_real speed_of_sound_drift_mps_per_sqrt_s; /* random walk of s (m/s/√s), >= 0; default
+                                         0.2: follows a 5 °C/min air-temperature ramp
+                                         within ~1 m/s (temperature-ramp scenario);
+                                         0.01 for still air gives a tighter s */
     bl_real period_drift_s_per_sqrt_s;           /* random walk of T, >= 0 */
     bl_real wheel_scale_drift_per_sqrt_s;        /* random walk of each wheel scale
                                                     (1/√s: σ² grows by this² per s), >= 0 */

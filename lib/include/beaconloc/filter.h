@@ -32,7 +32,9 @@
  * Start-up (Kleeman §3.9): until the position σ first falls below
  * cfg.converged_sigma_xy_m, arrivals get σ cfg.startup_sigma_arrival_s and
  * the gate cfg.startup_gate_sigma; then cfg.sigma_arrival_s and
- * cfg.gate_sigma (the converged flag latches until the next (re)start).
+ * cfg.gate_sigma. The flag is cleared again when the position σ grows
+ * above 2·cfg.converged_sigma_xy_m (a long coast without pulses), which
+ * brings back the start-up σ and gate until it re-converges.
  * Persistent rejection: after cfg.reset_reject_count consecutive gate
  * rejections spanning >= 2 beacons, the filter re-initialises from the
  * snapshot of the last cycle's pulses (kept per beacon, accepted or not),
@@ -144,7 +146,8 @@ typedef struct bl_estimate {
     /* Covariance of (x_m, y_m, theta_rad, v_mps, omega_radps), row-major 5x5. */
     bl_real cov[25];
     bool started;               /* a pose exists (else only counters are valid) */
-    bool converged;             /* position σ below cfg.converged_sigma_xy_m */
+    bool converged;             /* position σ fell below cfg.converged_sigma_xy_m
+                                   and has not grown above twice that since */
     uint32_t reset_counter;     /* +1 on every (re-)initialisation after the first start */
     uint32_t consecutive_rejections;
     uint32_t accepted[BL_MAX_BEACONS]; /* per beacon index: pulses fused */
