@@ -46,7 +46,7 @@ PY_TESTS    += test-bridge-py
 
 .PHONY: test-bridge test-bridge-py bench-bridge
 
-$(BRIDGE_CAN_C) $(BRIDGE_CAN_H) &: $(BRIDGE_DBC)
+$(BRIDGE_CAN_C) $(BRIDGE_CAN_H) &: $(BRIDGE_DBC) .ci/requirements.txt | $(SETUP_STAMP)
 	@mkdir -p $(BRIDGE_CANGEN)
 	$(PY) -m cantools generate_c_source --database-name beaconloc_can \
 	    -o $(BRIDGE_CANGEN) $(BRIDGE_DBC)
@@ -104,10 +104,10 @@ $(BRIDGE_FAKECAN): tests/bridge/fake_can_preload.c
 	@mkdir -p $(@D)
 	$(CC) -std=c11 -O2 -Wall -Wextra -Werror -shared -fPIC -o $@ $< -ldl
 
-test-bridge-py: $(BRIDGE_BIN) $(BRIDGE_ASAN_BIN) $(BRIDGE_FAKECAN)
+test-bridge-py: $(BRIDGE_BIN) $(BRIDGE_ASAN_BIN) $(BRIDGE_FAKECAN) | $(SETUP_STAMP)
 	$(PYTEST) -q tests/bridge
 
-bench-bridge: $(BRIDGE_BIN)
+bench-bridge: $(BRIDGE_BIN) | $(SETUP_STAMP)
 	$(PY) tests/bridge/bench_replay.py --bridge $(BRIDGE_BIN) --out $(BUILD)/bench/bridge
 
 -include $(BRIDGE_OBJS:.o=.d) $(BRIDGE_SANOBJS:.o=.d) $(BRIDGE_SANDIR)/main.d $(patsubst tests/bridge/%.c,$(BRIDGE_TESTDIR)/obj/%.d,$(BRIDGE_TESTS_C))

@@ -6,8 +6,8 @@
 
 PY_TESTS += test-sim
 
-test-sim:
+test-sim: | $(SETUP_STAMP)
 	$(PYTEST) -q -p no:cacheprovider tests/sim
 
-bench-sim:
+bench-sim: | $(SETUP_STAMP)
 	$(PY) tests/sim/bench_sim.py

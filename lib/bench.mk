@@ -15,7 +15,7 @@ $(BENCH_DIR)/bench_speed_float: lib/bench/bench_speed.c $(BUILD)/lib/float/libbe
 	@mkdir -p $(@D)
 	$(CC) $(BENCH_CFLAGS) -DBL_USE_FLOAT=1 $< $(BUILD)/lib/float/libbeaconloc.a -lm -o $@
 
-bench-speed: $(BENCH_DIR)/bench_speed_double $(BENCH_DIR)/bench_speed_float
+bench-speed: $(BENCH_DIR)/bench_speed_double $(BENCH_DIR)/bench_speed_float | $(SETUP_STAMP)
 	$(PY) lib/bench/run_speed.py --double $(BENCH_DIR)/bench_speed_double \
 	    --float $(BENCH_DIR)/bench_speed_float --out-dir $(BENCH_DIR) --python $(PY)
 
@@ -28,5 +28,5 @@ $(BENCH_DIR)/seq_replay: lib/bench/seq_replay.c $(BUILD)/lib/libbeaconloc.a $(BE
 	@mkdir -p $(@D)
 	$(CC) $(BENCH_CFLAGS) $< $(BUILD)/lib/libbeaconloc.a -lm -o $@
 
-bench-sequencer: $(BENCH_DIR)/seq_replay
+bench-sequencer: $(BENCH_DIR)/seq_replay | $(SETUP_STAMP)
 	$(PY) lib/bench/bench_sequencer.py --replay $(BENCH_DIR)/seq_replay

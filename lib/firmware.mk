@@ -105,7 +105,7 @@ check-m4-build: $(M4_ELF)
 	  echo "check-m4-build: WARNING: heap linked in ($$heap) referenced from: $$who"; fi; \
 	echo "check-m4-build: OK: $(M4_ELF) links (arm-none-eabi-gcc, newlib nano, no C++ runtime)"
 
-size-m4: $(M4_ELF)
+size-m4: $(M4_ELF) | $(SETUP_STAMP)
 	$(PY) lib/examples/firmware_m4/size_report.py --elf $(M4_ELF) --map $(M4_DIR)/firmware_m4.map \
 	    --lib-objs $(M4_DIR)/lib --example-objs $(M4_DIR)/example --prefix $(M4_PREFIX)
 
