@@ -21,7 +21,8 @@ ID_PULSE, ID_ENCODERS, ID_STATUS = 0x100, 0x110, 0x120
 FRAME_BITS = 125
 
 TRUTH_COLUMNS = ("t_us", "t_sim_s", "x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "sos_mps",
-                 "period_s", "temperature_c", "pcrb_x_m", "pcrb_y_m", "pcrb_pos_m")
+                 "period_s", "temperature_c", "pcrb_x_m", "pcrb_y_m", "pcrb_pos_m", "pcrb_lateral_m",
+                 "pcrb_sos_mps")
 ODOMETRY_COLUMNS = ("t_us", "x_m", "y_m", "theta_rad")
 
 
@@ -241,11 +242,23 @@ def _attach_bound(truth, firings: Firings, cov: np.ndarray, scn: Scenario) -> No
     t = truth["t_sim_s"]
     i = np.searchsorted(firings.t_s, t, side="right") - 1
     prior = bound_model(scn).prior_sigma
-    var_x = np.where(i >= 0, cov[np.maximum(i, 0), 0, 0] if len(cov) else 0, prior[0] ** 2)
-    var_y = np.where(i >= 0, cov[np.maximum(i, 0), 1, 1] if len(cov) else 0, prior[1] ** 2)
+    ix, iy, isos = crb.IX, crb.IY, crb.IS
+
+    def bound(a: int, b: int, prior_var: float) -> np.ndarray:
+        return np.where(i >= 0, cov[np.maximum(i, 0), a, b] if len(cov) else 0, prior_var)
+
+    var_x, var_y = bound(ix, ix, prior[ix] ** 2), bound(iy, iy, prior[iy] ** 2)
+    cov_xy = bound(ix, iy, 0.0)
     truth["pcrb_x_m"] = np.sqrt(var_x)
     truth["pcrb_y_m"] = np.sqrt(var_y)
     truth["pcrb_pos_m"] = np.sqrt(var_x + var_y)
+    # Bound on the lateral path error (Kleeman 1992 sec. 4): the variance along the
+    # unit normal n = (-sin th, cos th) of the true heading, n^T C n, m^2.
+    th = truth["theta_rad"]
+    nx, ny = -np.sin(th), np.cos(th)
+    truth["pcrb_lateral_m"] = np.sqrt(np.maximum(nx * nx * var_x + 2 * nx * ny * cov_xy
+                                                 + ny * ny * var_y, 0.0))
+    truth["pcrb_sos_mps"] = np.sqrt(bound(isos, isos, prior[isos] ** 2))
 
 
 def _odometry(scn, site, ticks_l, ticks_r, t_enc, rx_clock) -> dict[str, np.ndarray]:

@@ -12,6 +12,10 @@ the seeds:
                  path (Kleeman 1992 section 4, "path error": the deviation
                  perpendicular to the path, left of travel positive)
   sos_err_mps    RMS error of the speed-of-sound estimate
+  (and, on a line of their own before the last two: the bound's lateral and
+  speed-of-sound figures at the same instants, lateral_pcrb_mm = RMS of
+  pcrb_lateral_m, sos_pcrb_mps = RMS of pcrb_sos_mps, so these two figures
+  too are stated against the physical limit)
   diverged       seeds whose run failed, produced no estimate, a non-finite
                  one, or ended (last 10 s) with an RMS error above 0.5 m
 Last two lines (machine-readable):
@@ -100,6 +104,8 @@ def one_run(bridge: Path, scenario: str, seed: int, out: Path) -> dict:
         "err2": e.pos_m[sel] ** 2,
         "pcrb2": h.truth_at(truth, est["t_us"][sel], "pcrb_pos_m") ** 2,
         "lat": lat[np.isfinite(lat)],
+        "lat_pcrb2": h.truth_at(truth, est["t_us"][sel], "pcrb_lateral_m")[np.isfinite(lat)] ** 2,
+        "sos_pcrb2": h.truth_at(truth, est["t_us"][sel], "pcrb_sos_mps") ** 2,
         "sos2": e.sos_err_mps[sel] ** 2,
         "final_rms_m": final_rms,
         "resets": int(e.reset_counter[-1]),
@@ -124,6 +130,9 @@ def summarise(scenario: str, runs: list[dict]) -> tuple[str, dict]:
         "lateral_std_mm": float(np.std(lat)) * 1e3 if lat.size else math.nan,
         "sos_err_mps": math.sqrt(float(np.nanmean(sos2))), "diverged": diverged,
     }
+    fig["lateral_pcrb_mm"] = math.sqrt(float(np.nanmean(np.concatenate(
+        [r["lat_pcrb2"] for r in good])))) * 1e3
+    fig["sos_pcrb_mps"] = math.sqrt(float(np.nanmean(np.concatenate([r["sos_pcrb2"] for r in good]))))
     line = (f"accuracy scenario={scenario} seeds={len(runs)} rmse_mm={fig['rmse_mm']:.1f} "
             f"pcrb_mm={fig['pcrb_mm']:.1f} ratio={fig['ratio']:.3f} "
             f"lateral_std_mm={fig['lateral_std_mm']:.1f} sos_err_mps={fig['sos_err_mps']:.3f} "
@@ -161,6 +170,10 @@ def main() -> int:
         line, fig = summarise(scenario, runs)
         report[scenario] = fig
         lines.append(line)
+        if "lateral_pcrb_mm" in fig:
+            print(f"bound scenario={scenario} lateral_std_mm={fig['lateral_std_mm']:.1f} "
+                  f"lateral_pcrb_mm={fig['lateral_pcrb_mm']:.1f} sos_err_mps={fig['sos_err_mps']:.3f} "
+                  f"sos_pcrb_mps={fig['sos_pcrb_mps']:.3f}")
     (out / "accuracy.json").write_text(json.dumps(report, indent=1))
     for line in lines:
         print(line)

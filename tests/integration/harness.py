@@ -232,7 +232,7 @@ class NodeClockProbe:
 # --------------------------------------------------------------------------
 
 TRUTH_COLUMNS = ("t_us,t_sim_s,x_m,y_m,theta_rad,v_mps,omega_radps,sos_mps,period_s,"
-                 "temperature_c,pcrb_x_m,pcrb_y_m,pcrb_pos_m").split(",")
+                 "temperature_c,pcrb_x_m,pcrb_y_m,pcrb_pos_m,pcrb_lateral_m,pcrb_sos_mps").split(",")
 EST_COLUMNS = ("t_us,x_m,y_m,theta_rad,v_mps,omega_radps,sos_mps,period_s,var_x_m2,"
                "cov_xy_m2,var_y_m2,var_theta_rad2,reset_counter,quality").split(",")
 

@@ -17,7 +17,7 @@ from beaconloc_sim import cli
 from conftest import site_with
 
 TRUTH_HEADER = ("t_us,t_sim_s,x_m,y_m,theta_rad,v_mps,omega_radps,sos_mps,period_s,temperature_c,"
-                "pcrb_x_m,pcrb_y_m,pcrb_pos_m").split(",")
+                "pcrb_x_m,pcrb_y_m,pcrb_pos_m,pcrb_lateral_m,pcrb_sos_mps").split(",")
 EST_HEADER = ("t_us,x_m,y_m,theta_rad,v_mps,omega_radps,sos_mps,period_s,var_x_m2,cov_xy_m2,"
               "var_y_m2,var_theta_rad2,reset_counter,quality").split(",")
 BIN = Path(sys.executable).with_name("beaconloc-sim")

@@ -62,3 +62,25 @@ def test_bound_along_path_shrinks_with_more_beacons_and_grows_in_outage():
     outage = (t > 45) & (t < 60)
     assert pos[settled].max() < 0.06                  # a few cm with six beacons
     assert np.median(pos[outage]) > np.median(pos[settled])
+
+
+def test_lateral_and_speed_of_sound_bounds_follow_the_path():
+    """pcrb_lateral_m is the bound across the true path: on the first straight
+    (heading 0, east) it is the y bound, on the second (heading 90 deg, north)
+    the x bound; pcrb_sos_mps starts at the prior and shrinks."""
+    res = simulate.run(load_scenario("kleeman-lab", duration_s=40))
+    tr = res.truth
+    th = np.unwrap(tr["theta_rad"])
+    moving = np.abs(tr["v_mps"]) > 0.1
+    east = moving & (np.abs(th) < 1e-6) & (tr["t_sim_s"] > 8)
+    north = moving & (np.abs(th - np.pi / 2) < 1e-6)
+    assert east.sum() > 50 and north.sum() > 50, (east.sum(), north.sum())
+    assert tr["pcrb_lateral_m"][east] == pytest.approx(tr["pcrb_y_m"][east], rel=1e-9)
+    assert tr["pcrb_lateral_m"][north] == pytest.approx(tr["pcrb_x_m"][north], rel=1e-9)
+    # Across a diagonal of the covariance the lateral bound lies between the axes'.
+    lo = np.minimum(tr["pcrb_x_m"], tr["pcrb_y_m"])
+    assert np.all(tr["pcrb_lateral_m"] <= tr["pcrb_pos_m"] + 1e-12)
+    assert np.all(tr["pcrb_lateral_m"] > 0.0) and np.any(tr["pcrb_lateral_m"] > lo)
+    sos = tr["pcrb_sos_mps"]
+    assert sos[0] == pytest.approx(res.scenario.site.sigma_speed_of_sound_mps)
+    assert sos[-1] < 0.5 * sos[0]
