@@ -36,7 +36,7 @@ BRIDGE_MAVDEP   := $(if $(wildcard bridge/mavlink_out.h),$(BRIDGE_MAVSTAMP))
 
 BRIDGE_CPPFLAGS := -D_GNU_SOURCE -Ibridge -Ilib/include -I$(BRIDGE_CANGEN) \
                    -isystem $(BRIDGE_MAVGEN)
-BRIDGE_CFLAGS   := -std=c11 -O2 -g -Wall -Wextra -Werror -MMD -MP
+BRIDGE_CFLAGS   := -std=c11 -O2 -g -Wall -Wextra -Werror -Wconversion -Wdouble-promotion -MMD -MP
 BRIDGE_SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer
 BRIDGE_LDLIBS   := -linih -lm
 
@@ -80,7 +80,7 @@ $(BRIDGE_ASAN_BIN): $(BRIDGE_SANOBJS) $(BRIDGE_SANDIR)/main.o $(BRIDGE_LIB)
 # cmocka tests: one executable per tests/bridge/test_*.c, built with
 # ASan/UBSan against sanitized bridge objects (all but main.o). A test that
 # stands in for syscalls lists its wraps in BRIDGE_WRAP_<name>.
-BRIDGE_WRAP_test_can_in := -Wl,--wrap=socket,--wrap=bind,--wrap=ioctl,--wrap=setsockopt,--wrap=recvmsg,--wrap=close
+BRIDGE_WRAP_test_can_in := -Wl,--wrap=socket,--wrap=bind,--wrap=ioctl,--wrap=setsockopt,--wrap=getsockopt,--wrap=recvmsg,--wrap=close
 
 $(BRIDGE_TESTDIR)/obj/%.o: tests/bridge/%.c $(BRIDGE_CAN_H) $(BRIDGE_MAVDEP)
 	@mkdir -p $(@D)
@@ -105,7 +105,7 @@ $(BRIDGE_FAKECAN): tests/bridge/fake_can_preload.c
 	$(CC) -std=c11 -O2 -Wall -Wextra -Werror -shared -fPIC -o $@ $< -ldl
 
 test-bridge-py: $(BRIDGE_BIN) $(BRIDGE_ASAN_BIN) $(BRIDGE_FAKECAN) | $(SETUP_STAMP)
-	$(PYTEST) -q tests/bridge
+	BL_BUILD=$(abspath $(BUILD)) $(PYTEST) -q tests/bridge
 
 bench-bridge: $(BRIDGE_BIN) | $(SETUP_STAMP)
 	$(PY) tests/bridge/bench_replay.py --bridge $(BRIDGE_BIN) --out $(BUILD)/bench/bridge

@@ -64,6 +64,24 @@ static int sockopt(int fd, int level, int name, const void *val, socklen_t len,
 
 static bool can_in_link_up(struct can_in *ci);
 
+/* Read the receive buffer back: the kernel doubles what it grants (for its
+ * bookkeeping) and SO_RCVBUF caps the request at net.core.rmem_max, so a
+ * value below twice the request means the buffer is smaller than asked;
+ * say so, since a small buffer drops frames in bursts. Not fatal. */
+static void check_rcvbuf(int fd, int asked, const char *ifname)
+{
+    int got = 0;
+    socklen_t len = sizeof got;
+    if (getsockopt(fd, SOL_SOCKET, SO_RCVBUF, &got, &len) < 0) {
+        log_warn("%s: getsockopt SO_RCVBUF: %s", ifname, strerror(errno));
+        return;
+    }
+    if ((long long)got < 2LL * asked)
+        log_warn("%s: receive buffer %d bytes, asked for %d (capped by "
+                 "net.core.rmem_max; raise it or give CAP_NET_ADMIN)",
+                 ifname, got / 2, asked);
+}
+
 int can_in_open(struct can_in *ci)
 {
     if (ci->fd >= 0)
@@ -89,9 +107,12 @@ int can_in_open(struct can_in *ci)
                       sizeof err_mask, "CAN_RAW_ERR_FILTER", ci->ifname)))
         goto fail;
     /* Accept CAN FD frames too (they are counted as malformed, not lost);
-     * older kernels without FD support refuse this: not fatal. */
+     * older kernels without FD support refuse this: not fatal, but said
+     * (the kernel then drops FD frames before we see them). */
     int one = 1;
-    (void)setsockopt(fd, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &one, sizeof one);
+    if (sockopt(fd, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &one, sizeof one,
+                "CAN_RAW_FD_FRAMES", ci->ifname) != 0)
+        log_warn("%s: CAN FD frames will not be seen (not counted)", ci->ifname);
     if ((rc = sockopt(fd, SOL_SOCKET, SO_TIMESTAMP, &one, sizeof one,
                       "SO_TIMESTAMP", ci->ifname)))
         goto fail;
@@ -104,6 +125,7 @@ int can_in_open(struct can_in *ci)
     if (setsockopt(fd, SOL_SOCKET, SO_RCVBUFFORCE, &rcvbuf, sizeof rcvbuf) < 0)
         (void)sockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf,
                       "SO_RCVBUF", ci->ifname);
+    check_rcvbuf(fd, rcvbuf, ci->ifname);
 
     struct ifreq ifr;
     memset(&ifr, 0, sizeof ifr);
@@ -260,7 +282,9 @@ int can_in_read(struct can_in *ci, struct can_msg *msg)
             can_in_count_error_frame(ci, frame.can_id);
             msg->flags = CAN_MSG_ERROR;
             msg->id = frame.can_id & CAN_ERR_MASK;
-            msg->len = 0;
+            /* the controller details (linux/can/error.h), kept for --record */
+            msg->len = frame.len > CAN_MAX_DLEN ? CAN_MAX_DLEN : frame.len;
+            memcpy(msg->data, frame.data, msg->len);
             return 2;
         }
         ci->c.frames++;

@@ -67,7 +67,8 @@ void can_in_close(struct can_in *ci);
  * Read one frame. Returns 1 with *msg filled (rx_us = kernel receive time
  * converted onto CLOCK_MONOTONIC, us), 0 when nothing is pending (EAGAIN),
  * 2 when an error frame was read and counted (msg->flags has
- * CAN_MSG_ERROR, msg->id the CAN_ERR_* class bits), or -errno: -ENETDOWN
+ * CAN_MSG_ERROR, msg->id the CAN_ERR_* class bits, msg->data the
+ * controller details, rx_us set as for a frame), or -errno: -ENETDOWN
  * link down (socket kept, link_down set), -ENODEV/-ENXIO interface gone
  * (socket closed), or another read error. A frame read clears link_down.
  */

@@ -109,6 +109,7 @@ struct parse_ctx {
     const char *path;
     FILE *file;
     int line;                        /* current line (counted by reader) */
+    int section_line;                /* line of the last [section] header */
     int key_line[NKEYS];             /* line where a key was set, 0 = not */
     int beacon_line[CONFIG_MAX_BEACONS]; /* first line of [beaconN] keys */
     bool beacon_seen[CONFIG_MAX_BEACONS];
@@ -156,14 +157,24 @@ static int beacon_section_number(const char *section)
     return (int)n;
 }
 
+/* The sections a site file holds: ours, plus [site] (the simulator's room:
+ * hw_sim/beaconloc_sim/site.py reads [site], [beacons], [beaconN],
+ * [receivers], [robot], [noise] and leaves [bridge] to us; scenario
+ * settings live in their own *.scenario.ini files). */
+static const char *const our_sections[] = { "beacons", "receivers", "robot",
+                                            "noise", "bridge" };
+
 static bool our_section(const char *section)
 {
-    static const char *const ours[] = { "beacons", "receivers", "robot",
-                                        "noise", "bridge" };
-    for (size_t i = 0; i < sizeof ours / sizeof ours[0]; i++)
-        if (!strcasecmp(section, ours[i]))
+    for (size_t i = 0; i < sizeof our_sections / sizeof our_sections[0]; i++)
+        if (!strcasecmp(section, our_sections[i]))
             return true;
     return beacon_section_number(section) > 0;
+}
+
+static bool simulator_section(const char *section)
+{
+    return !strcasecmp(section, "site");
 }
 
 static int parse_real(const char *s, double *out)
@@ -270,8 +281,22 @@ static int handler(void *user, const char *section, const char *name,
     struct parse_ctx *ctx = user;
     if (ctx->failed)
         return 1; /* only the first error is reported */
-    if (!our_section(section))
-        return 1; /* the simulator's ([site], [scenario], ...) */
+    if (simulator_section(section))
+        return 1; /* the simulator's [site] (room size for echoes) */
+    if (!our_section(section)) {
+        /* A misspelt section would silently drop its keys. */
+        if (section[0] == '\0')
+            snprintf(ctx->err, ctx->errlen, "%s:%d: %s: key before any [section]",
+                     ctx->path, ctx->line, name);
+        else
+            snprintf(ctx->err, ctx->errlen, "%s:%d: [%s] unknown section (a site "
+                     "file holds [site], [beacons], [beacon1]..[beacon%d], "
+                     "[receivers], [robot], [noise], [bridge])", ctx->path,
+                     ctx->section_line > 0 ? ctx->section_line : ctx->line,
+                     section, CONFIG_MAX_BEACONS);
+        ctx->failed = true;
+        return 0;
+    }
     int beacon = beacon_section_number(section);
     if (beacon > CONFIG_MAX_BEACONS) {
         fail(ctx, ctx->line, section, name,
@@ -322,8 +347,12 @@ static char *line_reader(char *str, int num, void *stream)
 {
     struct parse_ctx *ctx = stream;
     char *r = fgets(str, num, ctx->file);
-    if (r)
+    if (r) {
         ctx->line++;
+        const char *p = r + strspn(r, " \t");
+        if (*p == '[')
+            ctx->section_line = ctx->line;
+    }
     return r;
 }
 
@@ -448,6 +477,7 @@ bool config_same_geometry(const struct bridge_config *a,
 {
     if (a->beacon_count != b->beacon_count || a->period_s != b->period_s ||
         a->double_pulse_spacing_s != b->double_pulse_spacing_s ||
+        a->burst_length_s != b->burst_length_s ||
         a->receiver_count != b->receiver_count ||
         a->ring_radius_m != b->ring_radius_m ||
         a->first_angle_deg != b->first_angle_deg ||

@@ -7,8 +7,10 @@
  * The site file is the one the simulator reads (hw_sim/scenarios/NAME.ini).
  * Our sections are [beacons], [beaconN], [receivers], [robot], [noise] and
  * [bridge]; an unknown key in one of them is an error (a typo must not be
- * silently ignored); every other section belongs to the simulator and is
- * skipped. Errors read "file:line: [section] key: why".
+ * silently ignored). [site] is the simulator's (room size) and skipped; any
+ * other section with keys is an error too ("file:line: [section] unknown
+ * section", line of its header), like a key before the first section.
+ * Errors read "file:line: [section] key: why".
  */
 #ifndef BRIDGE_CONFIG_H
 #define BRIDGE_CONFIG_H
@@ -99,8 +101,11 @@ int config_load_file(struct bridge_config *cfg, const char *path, char *err,
  * Returns 0 or -1 with a message (naming the key) in err. */
 int config_check(const struct bridge_config *cfg, char *err, size_t errlen);
 
-/* True when the two configs have the same estimator geometry (beacons,
- * period, receivers, robot): SIGHUP then keeps the filter running. */
+/* True when the two configs have the same estimator geometry: beacons
+ * (count, positions, period, double-pulse spacing, burst length), receiver
+ * ring (count, radius, angles, height) and robot (wheel base, wheel
+ * radius, ticks per turn). Tuning ([noise], sigma_wheel_scale, beamwidth,
+ * encoder rate, [bridge]) is not geometry. SIGHUP then keeps the filter. */
 bool config_same_geometry(const struct bridge_config *a,
                           const struct bridge_config *b);
 

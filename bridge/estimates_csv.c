@@ -25,6 +25,7 @@ int estimates_csv_write(struct estimates_csv *c, const struct est_output *o,
     if (!c->f)
         return -EBADF;
     /* cov: row-major 5x5 of (x, y, theta, v, omega) */
+    errno = 0;
     int n = fprintf(c->f,
                     "%lld,%.6f,%.6f,%.7f,%.6f,%.7f,%.4f,%.9f,%.6e,%.6e,%.6e,"
                     "%.6e,%u,%d\n",
@@ -34,7 +35,7 @@ int estimates_csv_write(struct estimates_csv *c, const struct est_output *o,
                     o->reset_counter, quality);
     if (n < 0) {
         c->write_errors++;
-        return -EIO;
+        return errno ? -errno : -EIO;
     }
     c->rows++;
     return 0;
@@ -42,16 +43,22 @@ int estimates_csv_write(struct estimates_csv *c, const struct est_output *o,
 
 int estimates_csv_flush(struct estimates_csv *c)
 {
+    errno = 0;
     if (c->f && fflush(c->f) != 0) {
         c->write_errors++;
-        return -errno;
+        return errno ? -errno : -EIO;
     }
     return 0;
 }
 
-void estimates_csv_close(struct estimates_csv *c)
+int estimates_csv_close(struct estimates_csv *c)
 {
-    if (c->f && fclose(c->f) != 0)
+    int rc = 0;
+    errno = 0;
+    if (c->f && fclose(c->f) != 0) {
         c->write_errors++;
+        rc = errno ? -errno : -EIO;
+    }
     c->f = NULL;
+    return rc;
 }

@@ -21,10 +21,12 @@ struct estimates_csv {
 
 /* Create the file and write the header. Returns 0 or -errno. */
 int estimates_csv_open(struct estimates_csv *c, const char *path);
-/* Append one row. Returns 0 or -EIO (counted). */
+/* Append one row. Returns 0 or -errno (counted in write_errors; buffered:
+ * an error may only show at a later write or at the flush). */
 int estimates_csv_write(struct estimates_csv *c, const struct est_output *o,
                         int quality);
+/* Flush, close: 0 or -errno (counted). */
 int estimates_csv_flush(struct estimates_csv *c);
-void estimates_csv_close(struct estimates_csv *c);
+int estimates_csv_close(struct estimates_csv *c);
 
 #endif /* BRIDGE_ESTIMATES_CSV_H */

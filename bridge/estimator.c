@@ -34,6 +34,9 @@
 /* Echo-storm evaluation window (us). */
 #define STORM_WINDOW_US 5000000
 #define STORM_MIN_PULSES 10
+/* The receiver node's double-pulse tolerance: it holds each detection for
+ * double_pulse_spacing_s + this before sending it (docs/protocol.md). */
+#define DOUBLE_PULSE_TOLERANCE_US 1000
 
 /* ---- events ----------------------------------------------------------- */
 
@@ -164,6 +167,30 @@ static int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
     return 0;
 }
 
+int64_t estimator_pulse_hold_us(const struct bridge_config *cfg)
+{
+    return (int64_t)llround(cfg->double_pulse_spacing_s * 1e6) + DOUBLE_PULSE_TOLERANCE_US;
+}
+
+/* Field by field (no padding, no accidental fields). */
+static bool seq_config_equal(const bl_seq_config *a, const bl_seq_config *b)
+{
+    return a->beacon_count == b->beacon_count &&
+           a->receiver_count == b->receiver_count &&
+           a->period_us == b->period_us &&
+           a->period_tolerance_ppm == b->period_tolerance_ppm &&
+           a->max_flight_us == b->max_flight_us &&
+           a->merge_window_us == b->merge_window_us &&
+           a->window_margin_us == b->window_margin_us &&
+           a->double_spacing_us == b->double_spacing_us &&
+           a->double_tolerance_us == b->double_tolerance_us &&
+           a->double_width_min_us == b->double_width_min_us &&
+           a->min_width_us == b->min_width_us &&
+           a->lock_timeout_cycles == b->lock_timeout_cycles &&
+           a->max_consecutive_spurious == b->max_consecutive_spurious &&
+           a->period_gain_div == b->period_gain_div;
+}
+
 static void reset_runtime(struct estimator *e)
 {
     e->enc_have_ref = false;
@@ -183,6 +210,8 @@ int estimator_init(struct estimator *e, const struct bridge_config *cfg,
                    char *err, size_t errlen)
 {
     memset(e, 0, sizeof *e);
+    e->cfg = *cfg;
+    e->pulse_hold_us = estimator_pulse_hold_us(cfg);
     if (estimator_make_config(cfg, &e->blcfg, err, errlen))
         return -1;
     if (make_seq_config(cfg, &e->blcfg, &e->seqcfg, err, errlen))
@@ -223,6 +252,8 @@ static void reinit_filter(struct estimator *e, const char *why)
     event(e, EST_EV_WARNING, "re-initialised: %s", why);
 }
 
+static void update_hint(struct estimator *e, const bl_estimate *est);
+
 int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg,
                           char *err, size_t errlen)
 {
@@ -233,14 +264,31 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg,
         return -1;
     e->beacon_lost_s = cfg->beacon_lost_s;
     e->echo_storm_ratio = cfg->echo_storm_ratio;
-    e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
-    if (bl_filter_update_config(&e->filter, &c) == BL_OK &&
-        memcmp(&sc, &e->seqcfg, sizeof sc) == 0) {
+    /* Same geometry (beacons, period, receiver ring, wheels; config.c) and
+     * the library agrees (it also refuses switching the wheel-scale
+     * calibration on or off): tuning only, the filter keeps its state. */
+    if (config_same_geometry(&e->cfg, cfg) &&
+        bl_filter_update_config(&e->filter, &c) == BL_OK) {
         e->blcfg = c;
+        e->cfg = *cfg;
+        if (!seq_config_equal(&sc, &e->seqcfg)) {
+            /* The windows follow the speed-of-sound tuning (max flight,
+             * merge window): new windows, the filter's hint at once so the
+             * numbering goes on without waiting for beacon 1. */
+            e->seqcfg = sc;
+            bl_sequencer_init(&e->seq, &e->seqcfg);
+            e->hint_set = false;
+            bl_estimate est;
+            if (bl_filter_estimate(&e->filter, &est) == BL_OK)
+                update_hint(e, &est);
+        }
         return 0;
     }
+    e->cfg = *cfg;
     e->blcfg = c;
     e->seqcfg = sc;
+    e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
+    e->pulse_hold_us = estimator_pulse_hold_us(cfg);
     bl_sequencer_init(&e->seq, &e->seqcfg);
     reinit_filter(e, "site geometry changed");
     reset_runtime(e);
@@ -271,8 +319,20 @@ static void watch_rejections(struct estimator *e, uint32_t beacon,
         e->win_len++;
 }
 
-/* Restart from the snapshot when the watch says so; true if restarted. */
-static bool restart_if_persistent(struct estimator *e, int64_t rx_us)
+/* A measurement carried by the frame received at rx_us (local; 0 = not
+ * known) went into the state. */
+static void measurement_fused(struct estimator *e, int64_t rx_us)
+{
+    e->updated = true;
+    e->last_update_rx_us = rx_us;
+    e->measurement_seq++;
+    if (rx_us > e->last_data_rx_us)
+        e->last_data_rx_us = rx_us;
+}
+
+/* Restart from the snapshot when the watch says so; true if restarted
+ * (the caller counts the pulse as the measurement fused). */
+static bool restart_if_persistent(struct estimator *e)
 {
     if (e->win_len < REJECT_WINDOW)
         return false;
@@ -296,7 +356,6 @@ static bool restart_if_persistent(struct estimator *e, int64_t rx_us)
     }
     e->c.snapshot_restarts++;
     e->enc_have_ref = false; /* state time moved to the latest arrival */
-    e->last_update_rx_us = rx_us;
     event(e, EST_EV_WARNING, "persistent rejection (%u of %d): restarted", n,
           REJECT_WINDOW);
     return true;
@@ -332,6 +391,7 @@ static void update_hint(struct estimator *e, const bl_estimate *est)
     }
 }
 
+/* rx_us: local receive time of the frame that carried this detection. */
 static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
 {
     bl_estimate est;
@@ -408,7 +468,7 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
     case BL_PULSE_REJECTED:
         e->c.pulses_rejected++;
         e->storm_rej++;
-        if (!restart_if_persistent(e, rx_us))
+        if (!restart_if_persistent(e))
             return;
         break;
     case BL_PULSE_BUFFERED:
@@ -422,10 +482,11 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
         e->c.pulses_accepted++;
         break;
     }
-    e->updated = true;
-    e->last_update_rx_us = rx_us;
+    measurement_fused(e, rx_us);
     /* Health bookkeeping on every update. */
     bl_filter_estimate(&e->filter, &est);
+    if (est.started)
+        e->ever_started = true;
     if (est.started && !e->was_started) {
         event(e, EST_EV_INFO, "filter started at x=%.2f y=%.2f",
               (double)est.x_m, (double)est.y_m);
@@ -447,6 +508,21 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
     }
 }
 
+/* Local receive time of the pulse frame that carried the detection at
+ * node time node_us on `receiver` (the sequencer gives back the detection
+ * times it was given); 0 when it is no longer remembered. */
+static int64_t pulse_rx_of(const struct estimator *e, int64_t node_us,
+                           uint32_t receiver)
+{
+    for (unsigned i = 0; i < EST_PULSE_RX_RING; i++) {
+        unsigned k = (e->pulse_rx_next + EST_PULSE_RX_RING - 1 - i) % EST_PULSE_RX_RING;
+        if (e->pulse_rx[k].rx_us != 0 && e->pulse_rx[k].node_us == node_us &&
+            e->pulse_rx[k].receiver == receiver)
+            return e->pulse_rx[k].rx_us;
+    }
+    return 0;
+}
+
 /* Fuses every receiver that heard the firing as its own measurement
  * (bl_seq_pulse.members: each receiver's earliest detection, sorted by
  * time), each with its own position on the ring (Kleeman 1992 eq. 21).
@@ -457,11 +533,10 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
  * hear a far beacon: a speed-of-sound bias. A firing given a wrong
  * beacon number is one numbering error, not one per receiver: its
  * other members are not fused. */
-static void fuse_members(struct estimator *e, const bl_seq_pulse *pl,
-                         int64_t rx_us)
+static void fuse_members(struct estimator *e, const bl_seq_pulse *pl)
 {
     if (pl->member_count == 0 || pl->member_count > BL_MAX_RECEIVERS) {
-        fuse(e, pl, rx_us);
+        fuse(e, pl, pulse_rx_of(e, pl->arrival_us, pl->receiver));
         return;
     }
     const uint32_t acc_before = e->storm_acc, rej_before = e->storm_rej;
@@ -471,7 +546,7 @@ static void fuse_members(struct estimator *e, const bl_seq_pulse *pl,
         one.receiver = pl->members[m].receiver;
         one.amplitude_mv = pl->members[m].amplitude_mv;
         uint64_t misnumbered_before = e->c.numbering_errors;
-        fuse(e, &one, rx_us);
+        fuse(e, &one, pulse_rx_of(e, one.arrival_us, one.receiver));
         if (e->c.numbering_errors != misnumbered_before)
             break;
     }
@@ -486,7 +561,7 @@ static void fuse_members(struct estimator *e, const bl_seq_pulse *pl,
     }
 }
 
-static void pop_ready(struct estimator *e, int64_t now_node_us, int64_t rx_us)
+static void pop_ready(struct estimator *e, int64_t now_node_us)
 {
     bl_seq_pulse pl;
     int rc;
@@ -513,7 +588,7 @@ static void pop_ready(struct estimator *e, int64_t now_node_us, int64_t rx_us)
             e->storm_echo++;
             continue;
         }
-        fuse_members(e, &pl, rx_us);
+        fuse_members(e, &pl);
     }
     if (rc < 0)
         e->c.seq_errors++;
@@ -522,8 +597,15 @@ static void pop_ready(struct estimator *e, int64_t now_node_us, int64_t rx_us)
 void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
                      int64_t rx_us)
 {
-    int64_t t = node_clock_observe(&e->rx_clock, p->node_time_us, rx_us);
+    /* The clock fit sees the frame as if sent the moment the detection was
+     * made: minus the node's hold (see estimator.h, "Timebases"). */
+    int64_t t = node_clock_observe(&e->rx_clock, p->node_time_us,
+                                   rx_us - e->pulse_hold_us);
     e->rx_seen = true;
+    e->pulse_rx[e->pulse_rx_next].node_us = t;
+    e->pulse_rx[e->pulse_rx_next].rx_us = rx_us;
+    e->pulse_rx[e->pulse_rx_next].receiver = p->receiver;
+    e->pulse_rx_next = (e->pulse_rx_next + 1) % EST_PULSE_RX_RING;
     if (e->rx_clock.last_event == NODE_CLOCK_RESTART) {
         e->c.node_restarts++;
         bl_sequencer_reset(&e->seq);
@@ -540,14 +622,14 @@ void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
     };
     int rc = bl_sequencer_push(&e->seq, &d);
     if (rc == BL_EFULL) {
-        pop_ready(e, t, rx_us);
+        pop_ready(e, t);
         rc = bl_sequencer_push(&e->seq, &d);
         if (rc == BL_EFULL) { /* still full: close the oldest windows */
             bl_seq_pulse pl;
             while (bl_sequencer_pop(&e->seq, INT64_MAX / 4, &pl) == 1) {
                 e->c.pulses_in++;
                 if (pl.status == BL_SEQ_ASSIGNED && pl.beacon >= 0)
-                    fuse_members(e, &pl, rx_us);
+                    fuse_members(e, &pl);
             }
             rc = bl_sequencer_push(&e->seq, &d);
         }
@@ -556,7 +638,7 @@ void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
         e->c.seq_errors++;
         log_debug("sequencer push: %s", bl_strerror(rc));
     }
-    pop_ready(e, t, rx_us);
+    pop_ready(e, t);
 }
 
 /* ---- encoders --------------------------------------------------------- */
@@ -572,6 +654,14 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
                         int64_t rx_us)
 {
     int64_t te = node_clock_observe(&e->enc_clock, f->node_time_us, rx_us);
+    if (e->enc_clock.last_event == NODE_CLOCK_OUT_OF_ORDER ||
+        e->enc_clock.last_event == NODE_CLOCK_DUPLICATE) {
+        /* Not newer than a sample already used: its ticks are already in
+         * the reference (cumulative counts); taking it as the reference
+         * would count the distance since it twice. */
+        e->c.stale_encoders++;
+        return;
+    }
     if (!e->rx_seen) {
         /* No receiver-node clock to map onto yet: keep the ticks as the
          * reference (they are cumulative, nothing is lost). */
@@ -586,7 +676,7 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
     if (t > e->latest_node_us)
         e->latest_node_us = t;
     /* Pulses that arrived before this sample go first. */
-    pop_ready(e, t - POP_SLACK_ENC_US, rx_us);
+    pop_ready(e, t - POP_SLACK_ENC_US);
 
     bool had_ref = e->enc_have_ref;
     if (e->enc_clock.last_event == NODE_CLOCK_RESTART) {
@@ -663,8 +753,7 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
                                         (bl_real)dr_m);
     if (rc == BL_OK) {
         e->c.predicts++;
-        e->updated = true;
-        e->last_update_rx_us = rx_us;
+        measurement_fused(e, rx_us);
     } else if (rc == BL_ETIME) {
         reinit_filter(e, "no data for too long");
     } else {
@@ -697,7 +786,7 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
     if (!e->rx_seen)
         return;
     int64_t now = estimator_local_to_node(e, local_now_us);
-    pop_ready(e, now - POP_SLACK_TICK_US, 0);
+    pop_ready(e, now - POP_SLACK_TICK_US);
     if (!e->was_started)
         return;
     /* beacon lost: no accepted pulse for beacon_lost_s */
@@ -778,5 +867,31 @@ int estimator_output(const struct estimator *e, int64_t at_local_us,
         out->cov[i] = est.cov[i];
     out->reset_counter = e->reset_base + est.reset_counter;
     out->converged = est.converged;
+    out->source_rx_us = e->last_update_rx_us;
+    out->measurement_seq = e->measurement_seq;
     return 0;
+}
+
+void estimator_health(const struct estimator *e, int64_t local_now_us,
+                      struct est_health *h)
+{
+    memset(h, 0, sizeof *h);
+    bl_estimate est;
+    h->finite = true;
+    if (bl_filter_estimate(&e->filter, &est) == BL_OK && est.started) {
+        h->started = true;
+        h->converged = est.converged;
+        double v[] = { est.x_m, est.y_m, est.theta_rad, est.v_mps, est.omega_radps };
+        for (size_t i = 0; i < sizeof v / sizeof v[0]; i++)
+            h->finite = h->finite && isfinite(v[i]);
+        for (int i = 0; i < 25; i++)
+            h->finite = h->finite && isfinite((double)est.cov[i]);
+    }
+    h->ever_started = e->ever_started || h->started;
+    h->since_update_us = e->last_data_rx_us > 0 ? local_now_us - e->last_data_rx_us
+                                                : INT64_MAX;
+    h->window_len = e->win_len;
+    for (unsigned i = 0; i < e->win_len && i < REJECT_WINDOW; i++)
+        if (e->win_rejected[(e->win_next + REJECT_WINDOW - 1 - i) % REJECT_WINDOW])
+            h->window_rejected++;
 }

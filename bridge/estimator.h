@@ -11,6 +11,22 @@
  *          noise on the time of flight); encoder samples are mapped
  *          encoder node -> local -> receiver node. The estimates CSV's t_us
  *          is on this clock, as is the simulator's truth.
+ *   The receiver node holds every detection for the double-pulse window
+ *   before it sends it (docs/protocol.md: spacing + 1 ms tolerance after
+ *   NodeTime), the encoder node sends its samples at once. That hold is
+ *   subtracted from a pulse frame's receive time before it enters the
+ *   receiver clock's fit, so both fits map a node time onto the local time
+ *   of the event itself (plus the bus's minimum latency, about equal for
+ *   both nodes), and an encoder sample lands at its true receiver-node time
+ *   instead of 4 ms early (docs/mavlink.md, "Node clocks").
+ *
+ * Ordering: the frame layer (frames.c) drops duplicated and late frames by
+ * their rolling counters. An encoder sample that still is not newer than
+ * the last one (node clock OUT_OF_ORDER / DUPLICATE) is dropped here too
+ * (stale_encoders), before it can touch the tick reference: the counts are
+ * cumulative, the newer sample already holds its distance. Pulse stamps
+ * need not increase (the receivers' frames of one firing leave in the order
+ * of their own latency), so pulses are not dropped on the clock's flags.
  *
  * Encoders drive bl_filter_predict_odometry; pulses go through the
  * sequencer, then bl_filter_fuse_pulse (which starts the filter from the
@@ -49,7 +65,7 @@ struct est_counters {
     uint64_t pulses_unassigned;  /* sequencer could not number them */
     uint64_t pulses_spurious;
     uint64_t repeats_skipped;
-    uint64_t snapshot_restarts;  /* restarts by the persistent-rejection watch */    /* later arrivals skipped before convergence */
+    uint64_t snapshot_restarts;  /* restarts by the persistent-rejection watch */
     uint64_t fuse_errors;        /* library returned an error */
     uint64_t predicts;           /* odometry predicts */
     uint64_t cv_predicts;        /* constant-velocity predicts (encoders silent) */
@@ -63,6 +79,7 @@ struct est_counters {
     uint64_t hint_errors;        /* hints the sequencer refused */
     uint64_t numbering_errors;   /* innovations longer than any flight */
     uint64_t seq_resyncs;        /* sequencer re-synchronised from the filter */
+    uint64_t stale_encoders;     /* encoder samples not newer than the last: dropped */
 };
 
 /* One published estimate. */
@@ -75,11 +92,31 @@ struct est_output {
     double cov[25];           /* x, y, theta, v, omega (row-major) */
     uint32_t reset_counter;
     bool converged;
-    int64_t source_rx_us;     /* local receive time of the frame behind it
-                                 (0 for an extrapolation) */
+    /* The newest measurement fused into this estimate (an extrapolation
+     * carries the same one): the local receive time of the frame that
+     * carried it (pulse or encoder frame; 0 = not known), and the number of
+     * measurements fused so far (a send carries a new measurement when this
+     * differs from the previous send's). */
+    int64_t source_rx_us;
+    uint64_t measurement_seq;
 };
 
+/* What the HEARTBEAT's system_status is decided from (health.h). */
+struct est_health {
+    bool started;             /* the filter has a state now */
+    bool ever_started;        /* it had one at some time since estimator_init */
+    bool converged;
+    bool finite;              /* the state and covariance are finite */
+    int64_t since_update_us;  /* local time since the newest fused measurement's
+                                 frame was received (INT64_MAX: none yet) */
+    unsigned window_len;      /* first arrivals in the persistent-rejection watch */
+    unsigned window_rejected; /* of those, rejected by the gate */
+};
+
+#define EST_PULSE_RX_RING 64 /* recent pulse frames remembered for their receive time */
+
 struct estimator {
+    struct bridge_config cfg;     /* the site as configured (geometry for SIGHUP) */
     bl_config blcfg;
     bl_filter filter;
     bl_sequencer seq;
@@ -115,7 +152,14 @@ struct estimator {
     bool win_rejected[16];
     unsigned win_len, win_next;
     int64_t latest_node_us;       /* newest receiver-node time seen */
-    int64_t last_update_rx_us;    /* local rx time of the last update's frame */
+    int64_t pulse_hold_us;        /* the receiver node's hold of a detection (us) */
+    /* receive time of the recent pulse frames, by (node time, receiver) */
+    struct { int64_t node_us, rx_us; uint32_t receiver; } pulse_rx[EST_PULSE_RX_RING];
+    unsigned pulse_rx_next;
+    int64_t last_update_rx_us;    /* local rx time of the newest fused measurement's frame */
+    uint64_t measurement_seq;     /* measurements fused (pulses and encoder increments) */
+    int64_t last_data_rx_us;      /* newest receive time of a fused measurement's frame */
+    bool ever_started;
     bool updated;                 /* an update since estimator_take_update */
     struct est_counters c;
     struct est_event events[EST_EVENT_QUEUE];
@@ -155,8 +199,17 @@ void estimator_status(struct estimator *e, const struct frame_status *s,
 void estimator_tick(struct estimator *e, int64_t local_now_us);
 
 /* True (once) when a filter update happened since the last call; *rx_us
- * gets the local receive time of the frame that caused it. */
+ * gets the local receive time of the frame that carried the newest
+ * measurement fused (0 when not known). */
 bool estimator_take_update(struct estimator *e, int64_t *rx_us);
+
+/* Health figures at local time now (for the HEARTBEAT). */
+void estimator_health(const struct estimator *e, int64_t local_now_us,
+                      struct est_health *h);
+
+/* The receiver node's hold of a detection before it sends the frame, us:
+ * the double-pulse decision window, spacing + 1 ms (docs/protocol.md). */
+int64_t estimator_pulse_hold_us(const struct bridge_config *cfg);
 
 /* The current estimate at the filter's state time (at_local_us = 0) or
  * extrapolated to local time at_local_us (constant velocity). */

@@ -22,29 +22,75 @@ const char *frame_kind_name(enum frame_kind kind)
     }
 }
 
-uint64_t frame_lost_total(const struct frame_counters *c)
+static uint64_t sum_kinds(const uint64_t *v)
 {
     uint64_t n = 0;
     for (int k = 0; k < FRAME_KIND_COUNT; k++)
-        n += c->lost[k];
+        n += v[k];
     return n;
 }
 
-/* Rolling counter check: a step of 1 (mod modulo) is normal, 0 a duplicate,
- * anything else means (step - 1) frames were lost in between (at least: a
- * counter cannot tell whole laps). */
-static void track(uint64_t *lost, uint64_t *dups, bool *seen, uint8_t *last,
-                  uint8_t counter, unsigned modulo)
+uint64_t frame_lost_total(const struct frame_counters *c) { return sum_kinds(c->lost); }
+uint64_t frame_duplicates_total(const struct frame_counters *c) { return sum_kinds(c->duplicates); }
+uint64_t frame_out_of_order_total(const struct frame_counters *c) { return sum_kinds(c->out_of_order); }
+
+static void remember(struct frame_track *t, const uint8_t *data)
 {
-    if (*seen) {
-        unsigned step = (counter + modulo - *last) % modulo;
-        if (step == 0)
-            (*dups)++;
-        else
-            *lost += step - 1u;
+    memcpy(t->recent[t->recent_next], data, sizeof t->recent[0]);
+    t->recent_next = (t->recent_next + 1) % FRAME_RECENT;
+    if (t->recent_len < FRAME_RECENT)
+        t->recent_len++;
+}
+
+/* Pulse frames of one firing leave the receiver node out of NodeTime order
+ * by up to the firing's spread over the ring (0.2 m / 343 m/s = 0.6 ms)
+ * plus the node's latency jitter (0.3 ms): a late pulse frame may be newer
+ * than the newest by this much (us). */
+#define PULSE_STAMP_SLACK_US 2000
+
+/* Rolling counter of one track (contract at the top of frames.h): counter
+ * modulo `modulo`, stamp = the frame's node time (wrapping 32-bit) or
+ * uptime, a late frame's stamp below newest + slack, data = its 8 bytes.
+ * Returns FRAME_OK, FRAME_DUPLICATE or FRAME_OUT_OF_ORDER, with the
+ * counters of kind k updated. */
+static enum frame_result track(struct frame_counters *c, enum frame_kind k,
+                               struct frame_track *t, uint8_t counter,
+                               unsigned modulo, uint32_t stamp, int32_t slack,
+                               const uint8_t *data)
+{
+    for (uint32_t i = 0; i < t->recent_len; i++)
+        if (!memcmp(t->recent[i], data, sizeof t->recent[0])) {
+            c->duplicates[k]++;
+            return FRAME_DUPLICATE;
+        }
+    remember(t, data);
+    if (!t->seen) {
+        t->seen = true;
+        t->last = counter;
+        t->newest_stamp = stamp;
+        t->missing = 0;
+        return FRAME_OK;
     }
-    *seen = true;
-    *last = counter;
+    unsigned behind = (t->last + modulo - counter) % modulo;
+    if (behind >= 1 && behind <= modulo / 2 && (t->missing >> behind & 1u) &&
+        (int32_t)(stamp - t->newest_stamp) < slack) {
+        /* A frame counted lost has come after all, late. */
+        t->missing &= ~(1u << behind);
+        if (c->lost[k] > 0)
+            c->lost[k]--;
+        c->out_of_order[k]++;
+        return FRAME_OUT_OF_ORDER;
+    }
+    unsigned step = (counter + modulo - t->last) % modulo;
+    if (step == 0)
+        step = modulo; /* a different frame with the same counter: a lap */
+    c->lost[k] += step - 1u;
+    /* the frames skipped are 1..step-1 behind the new newest */
+    uint32_t window = ((1u << modulo) - 1u) & ~1u;
+    t->missing = ((t->missing << step) | ((1u << step) - 2u)) & window;
+    t->last = counter;
+    t->newest_stamp = stamp;
+    return FRAME_OK;
 }
 
 static enum frame_result decode_pulse(struct frame_counters *c,
@@ -68,9 +114,8 @@ static enum frame_result decode_pulse(struct frame_counters *c,
     out->u.pulse.amplitude_mv =
         (uint16_t)beaconloc_can_pulse_detection_amplitude_decode(m.amplitude);
     out->u.pulse.width_us = beaconloc_can_pulse_detection_width_decode(m.width);
-    track(&c->lost[FRAME_PULSE], &c->duplicates[FRAME_PULSE],
-          &c->seen[FRAME_PULSE], &c->last_counter[FRAME_PULSE], m.counter, 8u);
-    return FRAME_OK;
+    return track(c, FRAME_PULSE, &c->track[FRAME_PULSE], m.counter, 8u,
+                 m.node_time, PULSE_STAMP_SLACK_US, data);
 }
 
 static enum frame_result decode_encoders(struct frame_counters *c,
@@ -89,10 +134,8 @@ static enum frame_result decode_encoders(struct frame_counters *c,
     out->u.enc.left_ticks = m.left_ticks;
     out->u.enc.right_ticks = m.right_ticks;
     out->u.enc.counter = m.counter;
-    track(&c->lost[FRAME_ENCODERS], &c->duplicates[FRAME_ENCODERS],
-          &c->seen[FRAME_ENCODERS], &c->last_counter[FRAME_ENCODERS],
-          m.counter, 16u);
-    return FRAME_OK;
+    return track(c, FRAME_ENCODERS, &c->track[FRAME_ENCODERS], m.counter, 16u,
+                 m.node_time, 0, data);
 }
 
 static enum frame_result decode_status(struct frame_counters *c,
@@ -116,10 +159,8 @@ static enum frame_result decode_status(struct frame_counters *c,
     out->u.status.tx_errors = m.tx_error_count;
     out->u.status.rx_errors = m.rx_error_count;
     out->u.status.overruns = m.overruns;
-    track(&c->lost[FRAME_STATUS], &c->duplicates[FRAME_STATUS],
-          &c->status_seen[m.node_id], &c->status_last[m.node_id], m.counter,
-          16u);
-    return FRAME_OK;
+    return track(c, FRAME_STATUS, &c->status[m.node_id], m.counter, 16u,
+                 m.uptime, 0, data);
 }
 
 enum frame_result frame_decode(struct frame_counters *c,
@@ -150,6 +191,8 @@ enum frame_result frame_decode(struct frame_counters *c,
     case FRAME_UNKNOWN_ID: c->unknown_id++; break;
     case FRAME_MALFORMED: c->malformed++; break;
     case FRAME_OUT_OF_RANGE: c->out_of_range++; break;
+    case FRAME_DUPLICATE:    /* counted by track() */
+    case FRAME_OUT_OF_ORDER: break;
     }
     return r;
 }

@@ -8,6 +8,25 @@
  * Bad data is never an error: a frame that is not one of ours, has the
  * wrong length, or carries a signal outside its DBC range is counted in
  * struct frame_counters and dropped; the caller goes on with the next frame.
+ *
+ * Rolling counters (per frame id; per node for NODE_STATUS):
+ *   - a step of 1 is normal; a step of s > 1 counts s - 1 frames lost
+ *     (a step of 0 with a different payload: a whole lap, modulo - 1 lost);
+ *   - a duplicate is a frame whose 8 bytes equal one of the last
+ *     FRAME_RECENT frames of its track (a re-delivery: the node time and the
+ *     counter in the payload make every genuine frame differ): counted in
+ *     duplicates[] and dropped (FRAME_DUPLICATE);
+ *   - an out-of-order frame (delivered late, after a newer one) is one whose
+ *     counter lies 1..modulo/2 steps behind the newest, at a place counted
+ *     as lost when the newer frame came, and whose node time (uptime for
+ *     NODE_STATUS) is older than the newest frame's (for pulse frames: not
+ *     newer by more than 2 ms, see below): it is not lost after
+ *     all (lost is decremented), it is counted in out_of_order[] and dropped
+ *     (FRAME_OUT_OF_ORDER), because the data path has moved past it (wheel
+ *     ticks are cumulative: the newer frame already holds its distance).
+ *   Pulse frames of one firing from different receivers leave the node in
+ *   the order of their own latency, so their NodeTimes need not increase;
+ *   their counters (transmit order) do, and only the counter decides here.
  */
 #ifndef BRIDGE_FRAMES_H
 #define BRIDGE_FRAMES_H
@@ -50,7 +69,9 @@ enum frame_result {
     FRAME_OK = 0,
     FRAME_UNKNOWN_ID,   /* not one of the DBC ids (or extended id) */
     FRAME_MALFORMED,    /* wrong length, RTR, FD, or error-flagged */
-    FRAME_OUT_OF_RANGE  /* a signal outside its DBC range */
+    FRAME_OUT_OF_RANGE, /* a signal outside its DBC range */
+    FRAME_DUPLICATE,    /* the same frame again (see the top of this file) */
+    FRAME_OUT_OF_ORDER  /* a frame delivered after a newer one */
 };
 
 struct frame_pulse {
@@ -89,20 +110,31 @@ struct frame {
 };
 
 #define FRAME_MAX_NODES 16
+#define FRAME_RECENT 4 /* payloads remembered per track for duplicates */
 
-/* Counters of frame_decode() and frame_track_counter(). */
+/* Rolling-counter state of one frame id (of one node for NODE_STATUS). */
+struct frame_track {
+    bool seen;
+    uint8_t last;          /* counter of the newest frame */
+    uint32_t newest_stamp; /* its node time (NODE_STATUS: uptime, s) */
+    uint32_t missing;      /* bit b set: the frame b counter steps behind the
+                              newest was counted lost (b = 1..modulo-1) */
+    uint8_t recent[FRAME_RECENT][8]; /* payloads of the last frames */
+    uint32_t recent_len, recent_next;
+};
+
+/* Counters of frame_decode(). */
 struct frame_counters {
-    uint64_t received[FRAME_KIND_COUNT]; /* decoded fine, per kind */
+    uint64_t received[FRAME_KIND_COUNT]; /* decoded fine and passed on, per kind */
     uint64_t unknown_id;
     uint64_t malformed;
     uint64_t out_of_range;
-    uint64_t lost[FRAME_KIND_COUNT];      /* gaps in rolling counters */
-    uint64_t duplicates[FRAME_KIND_COUNT];/* same counter twice in a row */
+    uint64_t lost[FRAME_KIND_COUNT];      /* gaps in rolling counters (frames never seen) */
+    uint64_t duplicates[FRAME_KIND_COUNT];/* the same frame again: dropped */
+    uint64_t out_of_order[FRAME_KIND_COUNT]; /* delivered after a newer one: dropped */
     /* rolling-counter state */
-    bool seen[FRAME_KIND_COUNT];
-    uint8_t last_counter[FRAME_KIND_COUNT];
-    bool status_seen[FRAME_MAX_NODES];
-    uint8_t status_last[FRAME_MAX_NODES];
+    struct frame_track track[FRAME_KIND_COUNT];  /* pulse, encoders (status unused) */
+    struct frame_track status[FRAME_MAX_NODES];  /* NODE_STATUS per node id */
 };
 
 void frame_counters_init(struct frame_counters *c);
@@ -110,13 +142,16 @@ void frame_counters_init(struct frame_counters *c);
 /*
  * Decode msg into *out. Returns FRAME_OK, or the reason it was dropped
  * (also counted in *c). On FRAME_OK the kind's received counter is bumped
- * and the rolling counter is checked (lost/duplicate counted).
+ * and the rolling counter is checked (lost counted). FRAME_DUPLICATE and
+ * FRAME_OUT_OF_ORDER frames are decoded (*out filled) but must not be used.
  */
 enum frame_result frame_decode(struct frame_counters *c,
                                const struct can_msg *msg, struct frame *out);
 
-/* Frames lost by counter, all kinds. */
+/* Frames lost by counter, duplicates, out of order: all kinds. */
 uint64_t frame_lost_total(const struct frame_counters *c);
+uint64_t frame_duplicates_total(const struct frame_counters *c);
+uint64_t frame_out_of_order_total(const struct frame_counters *c);
 
 const char *frame_kind_name(enum frame_kind kind);
 

@@ -26,6 +26,7 @@
 #include "estimates_csv.h"
 #include "estimator.h"
 #include "frames.h"
+#include "health.h"
 #include "log.h"
 #include "mavlink_out.h"
 #include "record.h"
@@ -49,6 +50,16 @@ struct timer {
 };
 
 enum mode { MODE_LIVE, MODE_REPLAY_FAST, MODE_REPLAY_PACED };
+
+/* Replay: when each recent frame was read (its "kernel receive time" for
+ * the latency), by its receive time on the log clock. Long enough for a
+ * pulse held by the sequencer (tens of ms of log time) at any frame rate
+ * the bus carries. */
+#define FRAME_REF_RING 1024
+struct frame_ref {
+    int64_t rx_us;    /* on the bridge clock (the log's in replay) */
+    int64_t mono_us;  /* CLOCK_MONOTONIC when it was read */
+};
 
 struct options {
     const char *site;
@@ -91,7 +102,10 @@ struct daemon {
     struct frame_counters fc;
     struct estimator est;
     struct latency_hist lat;
-    int64_t lat_ref_mono_us;  /* when the frame being handled was received */
+    struct frame_ref fref[FRAME_REF_RING]; /* replay: read times of recent frames */
+    unsigned fref_next;
+    uint64_t last_sent_measurement; /* measurement_seq of the last ODOMETRY sent */
+    bool record_err_logged, csv_err_logged;
     int64_t last_odom_local_us;
     int64_t next_odom_due_us;   /* next ODOMETRY slot on a fixed grid (local us) */
     bool odom_sent_once;
@@ -103,8 +117,6 @@ struct daemon {
     int exit_code;
     int64_t run_start_mono_us;
 };
-
-static volatile sig_atomic_t dummy_flag; /* no work in signal handlers */
 
 /* ---- clocks ----------------------------------------------------------- */
 
@@ -332,16 +344,28 @@ static int ep_add(struct daemon *d, int fd)
 {
     struct epoll_event ev = { .events = EPOLLIN, .data.fd = fd };
     if (epoll_ctl(d->epfd, EPOLL_CTL_ADD, fd, &ev) < 0) {
-        log_error("epoll_ctl add fd %d: %s", fd, strerror(errno));
-        return -errno;
+        int e = errno;
+        log_error("epoll_ctl add fd %d: %s", fd, strerror(e));
+        return -e;
     }
     return 0;
 }
 
-static void ep_del(struct daemon *d, int fd)
+/* Returns 0 or -errno (logged). A descriptor its owner has closed already
+ * (EBADF, or ENOENT when the number was reused) has left the set with its
+ * close: that is not an error. */
+static int ep_del(struct daemon *d, int fd)
 {
-    if (fd >= 0)
-        epoll_ctl(d->epfd, EPOLL_CTL_DEL, fd, NULL);
+    if (fd < 0)
+        return 0;
+    if (epoll_ctl(d->epfd, EPOLL_CTL_DEL, fd, NULL) < 0) {
+        int e = errno;
+        if (e == EBADF || e == ENOENT)
+            return 0;
+        log_warn("epoll_ctl del fd %d: %s", fd, strerror(e));
+        return -e;
+    }
+    return 0;
 }
 
 static void sync_mav_fd(struct daemon *d)
@@ -350,7 +374,7 @@ static void sync_mav_fd(struct daemon *d)
     if (fd == d->mav_fd_registered)
         return;
     if (d->mav_fd_registered >= 0)
-        ep_del(d, d->mav_fd_registered);
+        (void)ep_del(d, d->mav_fd_registered); /* logged; the fd is replaced */
     d->mav_fd_registered = -1;
     if (fd >= 0 && ep_add(d, fd) == 0)
         d->mav_fd_registered = fd;
@@ -358,6 +382,17 @@ static void sync_mav_fd(struct daemon *d)
 
 /* ---- timers ----------------------------------------------------------- */
 
+static const char *timer_name(enum timer_id id)
+{
+    switch (id) {
+    case T_ODOM: return "ODOMETRY";
+    case T_HEARTBEAT: return "HEARTBEAT";
+    case T_SECOND: return "1 s";
+    default: return "?";
+    }
+}
+
+/* Returns 0 or -errno (logged). */
 static int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us)
 {
     struct timer *t = &d->timers[id];
@@ -374,15 +409,19 @@ static int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us)
     if (t->fd < 0) {
         t->fd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
         if (t->fd < 0) {
-            log_error("timerfd_create: %s", strerror(errno));
-            return -errno;
+            int e = errno;
+            log_error("%s timer: timerfd_create: %s", timer_name(id), strerror(e));
+            return -e;
         }
-        if (ep_add(d, t->fd))
-            return -1;
+        int rc = ep_add(d, t->fd);
+        if (rc)
+            return rc;
     }
     if (timerfd_settime(t->fd, 0, &its, NULL) < 0) {
-        log_error("timerfd_settime: %s", strerror(errno));
-        return -errno;
+        int e = errno;
+        log_error("%s timer: timerfd_settime %" PRId64 " us: %s", timer_name(id),
+                  period_us, strerror(e));
+        return -e;
     }
     return 0;
 }
@@ -410,6 +449,45 @@ static void odom_advance_slot(struct daemon *d, int64_t now)
     d->next_odom_due_us += period;
     if (d->next_odom_due_us <= now)
         d->next_odom_due_us = now + period;
+}
+
+/* Replay: remember when the frame with receive time rx_us was read. */
+static void frame_ref_note(struct daemon *d, int64_t rx_us)
+{
+    d->fref[d->fref_next].rx_us = rx_us;
+    d->fref[d->fref_next].mono_us = mono_us();
+    d->fref_next = (d->fref_next + 1) % FRAME_REF_RING;
+}
+
+/* The latency reference of the frame received at rx_us (bridge clock):
+ * live its kernel receive time (rx_us itself, CLOCK_MONOTONIC); in replay
+ * the moment it was read from the log. 0 when unknown. */
+static int64_t frame_ref_mono(const struct daemon *d, int64_t rx_us)
+{
+    if (rx_us == 0)
+        return 0;
+    if (d->mode == MODE_LIVE)
+        return rx_us;
+    for (unsigned i = 1; i <= FRAME_REF_RING; i++) {
+        const struct frame_ref *r = &d->fref[(d->fref_next + FRAME_REF_RING - i) % FRAME_REF_RING];
+        if (r->mono_us != 0 && r->rx_us == rx_us)
+            return r->mono_us;
+    }
+    return 0;
+}
+
+/* Latency (docs/bridge.md, "Output timing"): an ODOMETRY sent carries the
+ * newest measurement fused into the estimate; if that one was not in an
+ * earlier message, one sample: send time minus the receive time of the
+ * frame that carried it, whatever triggered the send. */
+static void measure_latency(struct daemon *d, const struct est_output *o)
+{
+    if (o->measurement_seq == d->last_sent_measurement)
+        return; /* nothing new in it: an extrapolation of what was sent */
+    d->last_sent_measurement = o->measurement_seq;
+    int64_t ref = frame_ref_mono(d, o->source_rx_us);
+    if (ref != 0)
+        latency_add(&d->lat, mono_us() - ref);
 }
 
 static void send_odometry(struct daemon *d, const struct est_output *o,
@@ -440,9 +518,10 @@ static void send_odometry(struct daemon *d, const struct est_output *o,
     m.reset_counter = (uint8_t)o->reset_counter;
     m.quality = (int8_t)quality_of(o);
     int rc = mav_out_send_odometry(&d->mav, &m);
-    if (rc == 0)
+    if (rc == 0) {
         d->odom_sent++;
-    else if (rc == -EINVAL)
+        measure_latency(d, o);
+    } else if (rc == -EINVAL)
         log_warn("ODOMETRY not sent: estimate not finite");
     d->last_odom_local_us = time_local_us;
     d->odom_sent_once = true;
@@ -477,18 +556,31 @@ static void drain_events(struct daemon *d)
     }
 }
 
+/* A write to --record or --estimates failed (rc = -errno): counted by the
+ * writer; logged once per file, with the reason. */
+static void write_failed(const char *opt, const char *path, int rc, bool *logged)
+{
+    if (*logged)
+        return;
+    *logged = true;
+    log_error("%s %s: write failed: %s (counted in write_errors; logged once)",
+              opt, path, strerror(-rc));
+}
+
 /* After a frame (or a tick that fused a late pulse): publish what the
  * update produced. */
 static void after_update(struct daemon *d)
 {
-    int64_t rx;
-    if (!estimator_take_update(&d->est, &rx))
+    if (!estimator_take_update(&d->est, NULL))
         return;
     struct est_output o;
     if (estimator_output(&d->est, 0, &o) != 0)
         return;
-    if (d->csv_open)
-        estimates_csv_write(&d->csv, &o, quality_of(&o));
+    if (d->csv_open) {
+        int rc = estimates_csv_write(&d->csv, &o, quality_of(&o));
+        if (rc != 0)
+            write_failed("--estimates", d->opt.estimates, rc, &d->csv_err_logged);
+    }
     int64_t now = now_local(d);
     /* Event-driven ODOMETRY: the first update at or after the slot's due time
      * is sent at once (low latency), at most one send per slot. */
@@ -505,31 +597,47 @@ static void after_update(struct daemon *d)
     send_odometry(d, &o, t);
     d->last_odom_local_us = now;
     odom_advance_slot(d, now);
-    /* latency from the frame's receive time to this send; an update made
-     * by the timer (rx 0) is not a frame's latency */
-    if (rx != 0)
-        latency_add(&d->lat, mono_us() - d->lat_ref_mono_us);
 }
 
 /* ---- frames ----------------------------------------------------------- */
 
+/* An error frame (live or from the log, counted already): bus-off is an
+ * event, the others a warning (repeats are summarised by the log). */
+static void error_frame_seen(struct daemon *d)
+{
+    const char *src = d->mode == MODE_LIVE ? d->cfg.can_interface : d->opt.replay;
+    if (d->can.c.bus_off != d->last_bus_off) {
+        d->last_bus_off = d->can.c.bus_off;
+        log_warn("%s: bus-off", src);
+        statustext(d, MAV_OUT_SEV_CRITICAL, "CAN bus-off");
+    } else {
+        log_warn("%s: error frame (class 0x%x)", src, d->can.last_error_class);
+    }
+}
+
+/* Every frame read, live or replayed, data or error frame, comes here. */
 static void handle_frame(struct daemon *d, const struct can_msg *msg)
 {
     d->frames_total++;
+    if (d->mode != MODE_LIVE)
+        frame_ref_note(d, msg->rx_us);
     if (d->recording) {
         int64_t t = d->mode == MODE_LIVE ? msg->rx_us + (real_us() - mono_us())
                                          : msg->rx_us;
-        record_write(&d->rec, msg, t);
+        int rc = record_write(&d->rec, msg, t);
+        if (rc != 0)
+            write_failed("--record", d->opt.record, rc, &d->record_err_logged);
     }
     if (msg->flags & CAN_MSG_ERROR) {
-        /* live: counted by can_in; replay: an error frame in the log */
+        /* live: counted by can_in when read; replay: an error frame in the log */
         if (d->mode != MODE_LIVE)
             can_in_count_error_frame(&d->can, msg->id);
+        error_frame_seen(d);
         return;
     }
     struct frame f;
     if (frame_decode(&d->fc, msg, &f) != FRAME_OK)
-        return;
+        return; /* counted: bad, unknown, out of range, duplicate, late */
     switch (f.kind) {
     case FRAME_PULSE: estimator_pulse(&d->est, &f.u.pulse, msg->rx_us); break;
     case FRAME_ENCODERS: estimator_encoders(&d->est, &f.u.enc, msg->rx_us); break;
@@ -555,15 +663,18 @@ static void status_line(struct daemon *d, const char *prefix)
     const struct frame_counters *fc = &d->fc;
     log_info("%s: frames %" PRIu64 " (pulse %" PRIu64 " enc %" PRIu64
              " status %" PRIu64 ") bad %" PRIu64 " unknown %" PRIu64
-             " range %" PRIu64 " lost %" PRIu64 " kdrop %" PRIu64
-             " errfr %" PRIu64 " | pulses ok %" PRIu64 " rej %" PRIu64
-             " | %s | odom %" PRIu64 " | latency p50 %" PRId64 " p99 %" PRId64 " us",
+             " range %" PRIu64 " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64
+             " kdrop %" PRIu64 " errfr %" PRIu64 " | pulses ok %" PRIu64
+             " rej %" PRIu64 " | %s | odom %" PRIu64 " werr %" PRIu64
+             " | latency p50 %" PRId64 " p99 %" PRId64 " us",
              prefix, d->frames_total, fc->received[FRAME_PULSE],
              fc->received[FRAME_ENCODERS], fc->received[FRAME_STATUS],
              fc->malformed, fc->unknown_id, fc->out_of_range,
-             frame_lost_total(fc), d->can.c.kernel_drops,
+             frame_lost_total(fc), frame_duplicates_total(fc),
+             frame_out_of_order_total(fc), d->can.c.kernel_drops,
              d->can.c.error_frames, d->est.c.pulses_accepted,
              d->est.c.pulses_rejected, est, d->odom_sent,
+             d->rec.write_errors + d->csv.write_errors,
              latency_quantile(&d->lat, 0.5), latency_quantile(&d->lat, 0.99));
 }
 
@@ -629,17 +740,6 @@ static void can_readable(struct daemon *d)
         int rc = can_in_read(&d->can, &msg);
         if (rc == 0)
             break;
-        if (rc == 2) {
-            if (d->can.c.bus_off != d->last_bus_off) {
-                d->last_bus_off = d->can.c.bus_off;
-                log_warn("%s: bus-off", d->cfg.can_interface);
-                statustext(d, MAV_OUT_SEV_CRITICAL, "CAN bus-off");
-            } else {
-                log_warn("%s: error frame (class 0x%x)", d->cfg.can_interface,
-                         d->can.last_error_class);
-            }
-            continue;
-        }
         if (rc < 0) {
             if (d->can.fd < 0 || d->can.link_down)
                 can_went_down(d, -rc);
@@ -649,8 +749,7 @@ static void can_readable(struct daemon *d)
         }
         if (d->can_down_logged)
             can_came_up(d);
-        d->lat_ref_mono_us = msg.rx_us; /* kernel receive time, monotonic */
-        handle_frame(d, &msg);
+        handle_frame(d, &msg); /* rc 1 a frame, rc 2 an error frame (counted) */
     }
     drain_events(d);
 }
@@ -678,15 +777,16 @@ static void on_heartbeat(struct daemon *d, int64_t now)
 {
     struct est_output o;
     bool have = estimator_output(&d->est, 0, &o) == 0;
-    enum mav_out_state st = MAV_OUT_STATE_STANDBY;
-    if (d->mode == MODE_LIVE && (d->can.fd < 0 || d->can.link_down))
-        st = MAV_OUT_STATE_CRITICAL;
-    else if (have && o.converged)
-        st = MAV_OUT_STATE_ACTIVE;
-    if (mav_out_send_heartbeat(&d->mav, st) == 0)
+    struct est_health h;
+    estimator_health(&d->est, now, &h);
+    bool can_down = d->mode == MODE_LIVE && (d->can.fd < 0 || d->can.link_down);
+    if (mav_out_send_heartbeat(&d->mav, health_state(&h, can_down)) == 0)
         d->hb_sent++;
     if (have) {
-        uint32_t ms = (uint32_t)((uint64_t)now / 1000u);
+        /* time_boot_ms: since the daemon started (live) or since the log's
+         * first frame (replay); wraps after 49.7 days */
+        int64_t since = now - (d->mode == MODE_LIVE ? d->run_start_mono_us : d->log_first_us);
+        uint32_t ms = (uint32_t)((uint64_t)(since > 0 ? since : 0) / 1000u);
         mav_out_send_named_float(&d->mav, "sos_mps", (float)o.sos_mps, ms);
         mav_out_send_named_float(&d->mav, "period_s", (float)o.period_s, ms);
     }
@@ -702,10 +802,16 @@ static void on_second(struct daemon *d, int64_t now)
             log_info("MAVLink endpoint %s open", d->cfg.mavlink);
         sync_mav_fd(d);
     }
-    if (d->recording)
-        record_flush(&d->rec);
-    if (d->csv_open)
-        estimates_csv_flush(&d->csv);
+    if (d->recording) {
+        int rc = record_flush(&d->rec);
+        if (rc != 0)
+            write_failed("--record", d->opt.record, rc, &d->record_err_logged);
+    }
+    if (d->csv_open) {
+        int rc = estimates_csv_flush(&d->csv);
+        if (rc != 0)
+            write_failed("--estimates", d->opt.estimates, rc, &d->csv_err_logged);
+    }
     uint64_t every = (uint64_t)llround(d->cfg.status_interval_s);
     if (every > 0 && d->seconds % every == 0)
         status_line(d, "status");
@@ -777,6 +883,10 @@ static void reload(struct daemon *d)
     if (log_level_parse(nc.log_level, &lv) == 0)
         log_set_level(lv);
     if (new_ep) {
+        /* out of the set before the close: the new socket may get the same
+         * number, and sync_mav_fd() must then add it */
+        (void)ep_del(d, d->mav_fd_registered);
+        d->mav_fd_registered = -1;
         mav_out_close(&d->mav);
         int r = mav_out_open(&d->mav, d->cfg.mavlink, (unsigned)d->cfg.system_id,
                              (unsigned)d->cfg.component_id);
@@ -787,7 +897,7 @@ static void reload(struct daemon *d)
     }
     if (new_can && d->mode == MODE_LIVE) {
         if (d->can.fd >= 0)
-            ep_del(d, d->can.fd);
+            (void)ep_del(d, d->can.fd); /* logged; the socket is closed next */
         can_in_close(&d->can);
         d->can_fd_registered = -1;
         struct can_in_counters keep = d->can.c;
@@ -795,8 +905,9 @@ static void reload(struct daemon *d)
         d->can.c = keep;
         can_try_open(d);
     }
-    if (new_rate)
-        timer_arm(d, T_ODOM, odom_period_us(d));
+    if (new_rate && timer_arm(d, T_ODOM, odom_period_us(d)) != 0)
+        log_error("SIGHUP: ODOMETRY rate %.1f Hz not applied to the timer",
+                  d->cfg.odometry_rate_hz);
     statustext(d, MAV_OUT_SEV_INFO, rc == 0 ? "config reloaded" : "config reloaded, re-initialised");
 }
 
@@ -853,9 +964,9 @@ static void poll_once(struct daemon *d, int timeout_ms)
                 sync_mav_fd(d);
             }
         } else if (fd == d->replay_tfd) {
-            uint64_t exp;
-            (void)!read(fd, &exp, sizeof exp);
-            /* handled by the paced replay loop below */
+            uint64_t exp; /* expirations: the paced loop decides what is due */
+            if (read(fd, &exp, sizeof exp) < 0 && errno != EAGAIN)
+                log_warn("replay pacing timer: read: %s", strerror(errno));
         } else {
             for (int t = 0; t < T_COUNT; t++)
                 if (fd == d->timers[t].fd) {
@@ -876,6 +987,20 @@ static void run_live(struct daemon *d)
         poll_once(d, -1);
 }
 
+/* The three timers at their periods. Returns 0 or -errno (logged, exit
+ * code set). */
+static int arm_all_timers(struct daemon *d)
+{
+    int rc = timer_arm(d, T_ODOM, odom_period_us(d));
+    if (rc == 0)
+        rc = timer_arm(d, T_HEARTBEAT, 1000000);
+    if (rc == 0)
+        rc = timer_arm(d, T_SECOND, 1000000);
+    if (rc != 0)
+        d->exit_code = EX_SOFTWARE_STATUS;
+    return rc;
+}
+
 static void run_replay_fast(struct daemon *d)
 {
     struct can_msg msg;
@@ -886,16 +1011,14 @@ static void run_replay_fast(struct daemon *d)
         if (first) {
             d->log_now_us = msg.rx_us;
             d->log_first_us = msg.rx_us;
-            timer_arm(d, T_ODOM, odom_period_us(d));
-            timer_arm(d, T_HEARTBEAT, 1000000);
-            timer_arm(d, T_SECOND, 1000000);
+            if (arm_all_timers(d) != 0)
+                return;
             first = false;
         }
         if (msg.rx_us < d->log_now_us)
             msg.rx_us = d->log_now_us; /* log time never runs backwards here */
         soft_timers_advance(d, msg.rx_us);
         d->log_now_us = msg.rx_us;
-        d->lat_ref_mono_us = mono_us();
         handle_frame(d, &msg);
         if ((++n & 255) == 0) {
             drain_events(d);
@@ -917,13 +1040,15 @@ static void run_replay_paced(struct daemon *d)
     d->log_now_us = msg.rx_us;
     d->mono_start_us = mono_us();
     d->replay_tfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
-    if (d->replay_tfd < 0 || ep_add(d, d->replay_tfd)) {
-        log_error("replay timer: %s", strerror(errno));
+    if (d->replay_tfd < 0) {
+        log_error("replay pacing timer: timerfd_create: %s", strerror(errno));
+        d->exit_code = EX_SOFTWARE_STATUS;
         return;
     }
-    timer_arm(d, T_ODOM, odom_period_us(d));
-    timer_arm(d, T_HEARTBEAT, 1000000);
-    timer_arm(d, T_SECOND, 1000000);
+    if (ep_add(d, d->replay_tfd) != 0 || arm_all_timers(d) != 0) {
+        d->exit_code = EX_SOFTWARE_STATUS;
+        return;
+    }
     /* Frames and timers are handled in log-time order, each when the
      * paced clock (log_first + speed * elapsed wall time) reaches it. */
     while (d->running) {
@@ -934,7 +1059,6 @@ static void run_replay_paced(struct daemon *d)
                 msg.rx_us = d->log_now_us;
             soft_timers_advance(d, msg.rx_us);
             d->log_now_us = msg.rx_us;
-            d->lat_ref_mono_us = mono_us();
             handle_frame(d, &msg);
             rc = replay_next(&d->rp, &msg);
         }
@@ -952,7 +1076,13 @@ static void run_replay_paced(struct daemon *d)
             due_mono = 1;
         struct itimerspec its = { .it_value = { due_mono / 1000000,
                                                 (due_mono % 1000000) * 1000 } };
-        timerfd_settime(d->replay_tfd, TFD_TIMER_ABSTIME, &its, NULL);
+        if (timerfd_settime(d->replay_tfd, TFD_TIMER_ABSTIME, &its, NULL) < 0) {
+            /* without it the loop below would wait forever */
+            log_error("replay pacing timer: timerfd_settime at %" PRId64 " us: %s",
+                      due_mono, strerror(errno));
+            d->exit_code = EX_SOFTWARE_STATUS;
+            break;
+        }
         poll_once(d, -1);
     }
     drain_events(d);
@@ -975,6 +1105,9 @@ static void fill_report(struct daemon *d, struct stats_report *r)
     r->bad_size_reads = d->can.c.bad_size;
     r->can_downs = d->can.c.downs;
     r->replay_bad_lines = d->rp.bad_lines;
+    r->record_write_errors = d->rec.write_errors;
+    r->estimates_write_errors = d->csv.write_errors;
+    r->stale_encoders = d->est.c.stale_encoders;
     struct est_output o;
     r->estimator_resets = estimator_output(&d->est, 0, &o) == 0
                               ? o.reset_counter : d->est.reset_base;
@@ -1019,7 +1152,6 @@ int main(int argc, char **argv)
 {
     struct daemon *d = &D;
     int status = 0;
-    (void)dummy_flag;
     if (parse_args(argc, argv, &d->opt, &status) != 0)
         return status;
     if (build_config(&d->opt, &d->cfg) != 0)
@@ -1071,7 +1203,8 @@ int main(int argc, char **argv)
         d->csv_open = true;
     }
 
-    signal(SIGPIPE, SIG_IGN);
+    if (signal(SIGPIPE, SIG_IGN) == SIG_ERR) /* a send to a closed peer: -EPIPE, not death */
+        log_warn("signal SIGPIPE: %s", strerror(errno));
     sigset_t mask;
     sigemptyset(&mask);
     sigaddset(&mask, SIGTERM);
@@ -1105,9 +1238,7 @@ int main(int argc, char **argv)
 
     switch (d->mode) {
     case MODE_LIVE:
-        if (timer_arm(d, T_ODOM, odom_period_us(d)) ||
-            timer_arm(d, T_HEARTBEAT, 1000000) ||
-            timer_arm(d, T_SECOND, 1000000))
+        if (arm_all_timers(d) != 0)
             return EX_SOFTWARE_STATUS;
         run_live(d);
         break;
@@ -1119,6 +1250,17 @@ int main(int argc, char **argv)
         break;
     }
 
+    /* Flush first, so that a write error is in the final figures. */
+    if (d->recording) {
+        int frc = record_flush(&d->rec);
+        if (frc != 0)
+            write_failed("--record", d->opt.record, frc, &d->record_err_logged);
+    }
+    if (d->csv_open) {
+        int frc = estimates_csv_flush(&d->csv);
+        if (frc != 0)
+            write_failed("--estimates", d->opt.estimates, frc, &d->csv_err_logged);
+    }
     struct stats_report rep;
     fill_report(d, &rep);
     status_line(d, "final");
@@ -1131,10 +1273,10 @@ int main(int argc, char **argv)
         if (rc != 0)
             log_error("--stats %s: %s", d->opt.stats, strerror(-rc));
     }
-    if (d->csv_open)
-        estimates_csv_close(&d->csv);
-    if (d->recording)
-        record_close(&d->rec);
+    if (d->csv_open && (rc = estimates_csv_close(&d->csv)) != 0)
+        log_error("--estimates %s: close: %s", d->opt.estimates, strerror(-rc));
+    if (d->recording && (rc = record_close(&d->rec)) != 0)
+        log_error("--record %s: close: %s", d->opt.record, strerror(-rc));
     if (d->opt.replay)
         replay_close(&d->rp);
     can_in_close(&d->can);

@@ -58,9 +58,14 @@ int record_write(struct record *r, const struct can_msg *msg, int64_t t_us)
         return -EBADF;
     char line[256];
     int n = record_format(line, sizeof line, msg, t_us, r->ifname);
-    if (n < 0 || fwrite(line, 1, (size_t)n, r->f) != (size_t)n) {
+    if (n < 0) {
         r->write_errors++;
-        return n < 0 ? -EINVAL : -EIO;
+        return -EINVAL;
+    }
+    errno = 0;
+    if (fwrite(line, 1, (size_t)n, r->f) != (size_t)n) {
+        r->write_errors++;
+        return errno ? -errno : -EIO;
     }
     r->frames++;
     return 0;
@@ -68,18 +73,22 @@ int record_write(struct record *r, const struct can_msg *msg, int64_t t_us)
 
 int record_flush(struct record *r)
 {
+    errno = 0;
     if (r->f && fflush(r->f) != 0) {
         r->write_errors++;
-        return -errno;
+        return errno ? -errno : -EIO;
     }
     return 0;
 }
 
-void record_close(struct record *r)
+int record_close(struct record *r)
 {
-    if (r->f) {
-        if (fclose(r->f) != 0)
-            r->write_errors++;
+    int rc = 0;
+    errno = 0;
+    if (r->f && fclose(r->f) != 0) {
+        r->write_errors++;
+        rc = errno ? -errno : -EIO;
     }
     r->f = NULL;
+    return rc;
 }

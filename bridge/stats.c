@@ -63,6 +63,17 @@ int64_t latency_quantile(const struct latency_hist *h, double q)
     return h->max_us;
 }
 
+/* "NAME": total, "NAME_per_frame": {one count per frame kind} (stats JSON). */
+static void write_per_frame(FILE *f, const char *name, uint64_t total, const uint64_t *by_kind)
+{
+    fprintf(f, "  \"%s\": %llu,\n", name, (unsigned long long)total);
+    fprintf(f, "  \"%s_per_frame\": {\"pulse_detection\": %llu, "
+               "\"wheel_encoders\": %llu, \"node_status\": %llu},\n",
+            name, (unsigned long long)by_kind[FRAME_PULSE],
+            (unsigned long long)by_kind[FRAME_ENCODERS],
+            (unsigned long long)by_kind[FRAME_STATUS]);
+}
+
 int stats_write_json(const struct stats_report *r, const char *path)
 {
     char tmp[4096];
@@ -87,14 +98,10 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"malformed\": %llu,\n", (unsigned long long)fc->malformed);
     fprintf(f, "  \"unknown_id\": %llu,\n", (unsigned long long)fc->unknown_id);
     fprintf(f, "  \"out_of_range\": %llu,\n", (unsigned long long)fc->out_of_range);
-    fprintf(f, "  \"lost_by_counter\": %llu,\n", (unsigned long long)frame_lost_total(fc));
-    fprintf(f, "  \"lost_by_counter_per_frame\": {\"pulse_detection\": %llu, "
-               "\"wheel_encoders\": %llu, \"node_status\": %llu},\n",
-            (unsigned long long)fc->lost[FRAME_PULSE],
-            (unsigned long long)fc->lost[FRAME_ENCODERS],
-            (unsigned long long)fc->lost[FRAME_STATUS]);
-    fprintf(f, "  \"duplicates\": %llu,\n",
-            (unsigned long long)(fc->duplicates[0] + fc->duplicates[1] + fc->duplicates[2]));
+    write_per_frame(f, "lost_by_counter", frame_lost_total(fc), fc->lost);
+    write_per_frame(f, "duplicates", frame_duplicates_total(fc), fc->duplicates);
+    write_per_frame(f, "out_of_order", frame_out_of_order_total(fc), fc->out_of_order);
+    fprintf(f, "  \"stale_encoder_samples\": %llu,\n", (unsigned long long)r->stale_encoders);
     fprintf(f, "  \"error_frames\": %llu,\n", (unsigned long long)r->error_frames);
     fprintf(f, "  \"bus_off\": %llu,\n", (unsigned long long)r->bus_off);
     fprintf(f, "  \"controller_errors\": %llu,\n", (unsigned long long)r->controller_errors);
@@ -102,6 +109,11 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"bad_size_reads\": %llu,\n", (unsigned long long)r->bad_size_reads);
     fprintf(f, "  \"interface_lost\": %llu,\n", (unsigned long long)r->can_downs);
     fprintf(f, "  \"replay_bad_lines\": %llu,\n", (unsigned long long)r->replay_bad_lines);
+    fprintf(f, "  \"write_errors\": %llu,\n",
+            (unsigned long long)(r->record_write_errors + r->estimates_write_errors));
+    fprintf(f, "  \"write_errors_per_file\": {\"record\": %llu, \"estimates\": %llu},\n",
+            (unsigned long long)r->record_write_errors,
+            (unsigned long long)r->estimates_write_errors);
     fprintf(f, "  \"estimator_resets\": %llu,\n", (unsigned long long)r->estimator_resets);
     fprintf(f, "  \"pulses_accepted\": %llu,\n", (unsigned long long)r->pulses_accepted);
     fprintf(f, "  \"pulses_rejected\": %llu,\n", (unsigned long long)r->pulses_rejected);

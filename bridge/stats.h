@@ -34,6 +34,8 @@ struct stats_report {
     uint64_t kernel_drops, error_frames, bus_off, controller_errors,
         restarts, bad_size_reads, can_downs;
     uint64_t replay_bad_lines;
+    uint64_t record_write_errors, estimates_write_errors; /* --record, --estimates */
+    uint64_t stale_encoders;
     uint64_t estimator_resets, pulses_accepted, pulses_rejected,
         pulses_buffered, pulses_unassigned, sequencer_spurious,
         encoder_gaps, predict_errors, estimates;

@@ -14,7 +14,10 @@
 #   make bench-m4       instructions per fuse_pulse / predict / sequencer
 #                       detection on the emulated M4 (QEMU -icount).
 #   make check-m4-build (in UNIT_TESTS) the cross build links with plain gcc
-#                       (no libstdc++) and references no heap / C++ runtime.
+#                       (no libstdc++); fails if the image contains C++
+#                       runtime or heap functions, or if the cross-built
+#                       library archive references any (nm -u), as
+#                       check-lib-clink does for the host builds.
 #
 # Targets (issue 2): library <= 32 KiB flash, one filter <= 2 KiB RAM,
 # stack <= 2 KiB. Reported, not enforced.
@@ -55,12 +58,12 @@ $(M4_ELF): $(M4_EX_OBJS) $(M4_DIR)/libbeaconloc.a lib/examples/firmware_m4/stm32
 	$(M4_PREFIX)gcc $(M4_LDFLAGS) -Wl,-Map=$(M4_DIR)/firmware_m4.map $(M4_EX_OBJS) \
 	    $(M4_DIR)/libbeaconloc.a -lm -o $@
 
-# C++ runtime in the firmware image: a hard failure. Heap functions: reported
-# (with the library functions that reference them) but not failed here, the
-# library's own host check (check-lib-clink) owns the no-heap rule; size-m4
-# prints heap_refs in its last line.
+# C++ runtime or heap functions in the firmware image, or referenced by the
+# cross-built library (which --gc-sections could hide from the image): a
+# hard failure, with the library functions that reference the heap (from
+# -fcallgraph-info). size-m4 prints heap_refs in its last line.
 M4_CXXRT := '(__cxa_|__gxx_|_Znw|_Zna|_Zdl|_Zda|_ZSt|_Unwind_)'
-M4_HEAP  := '^(malloc|free|calloc|realloc|_malloc_r|_free_r)$$'
+M4_HEAP  := '^(malloc|free|calloc|realloc|_malloc_r|_free_r|_calloc_r|_realloc_r)$$'
 
 # The same firmware (main.c, startup, linker script) with the simulated board
 # (sim/board_sim.c instead of board.c), run on QEMU's netduinoplus2
@@ -100,10 +103,12 @@ check-m4-build: $(M4_ELF)
 	@bad=$$($(M4_PREFIX)nm $(M4_ELF) | awk '{print $$NF}' | grep -E $(M4_CXXRT) || true); \
 	if [ -n "$$bad" ]; then echo "check-m4-build: FAIL: $(M4_ELF) contains C++ runtime: $$bad"; exit 1; fi; \
 	heap=$$($(M4_PREFIX)nm $(M4_ELF) | awk '{print $$NF}' | grep -E $(M4_HEAP) | tr '\n' ' '); \
-	if [ -n "$$heap" ]; then \
-	  who=$$(grep -h 'targetname: "\(malloc\|free\)"' $(M4_DIR)/lib/*.ci | sed 's/.*sourcename: "\([^"]*\)".*/\1/' | sort -u | $(M4_PREFIX)c++filt | cut -c1-160 | tr '\n' ';'); \
-	  echo "check-m4-build: WARNING: heap linked in ($$heap) referenced from: $$who"; fi; \
-	echo "check-m4-build: OK: $(M4_ELF) links (arm-none-eabi-gcc, newlib nano, no C++ runtime)"
+	libheap=$$($(M4_PREFIX)nm -u $(M4_DIR)/libbeaconloc.a | awk 'NF>=2 {print $$2}' | grep -E $(M4_HEAP)'|'$(M4_CXXRT) | sort -u | tr '\n' ' '); \
+	if [ -n "$$heap$$libheap" ]; then \
+	  who=$$(grep -h 'targetname: "\(malloc\|free\|calloc\|realloc\)"' $(M4_DIR)/lib/*.ci | sed 's/.*sourcename: "\([^"]*\)".*/\1/' | sort -u | $(M4_PREFIX)c++filt | cut -c1-160 | tr '\n' ';'); \
+	  echo "check-m4-build: FAIL: heap / C++ runtime: image has ($$heap), library references ($$libheap); referenced from: $$who"; \
+	  exit 1; fi; \
+	echo "check-m4-build: OK: $(M4_ELF) links (arm-none-eabi-gcc, newlib nano, no C++ runtime, no heap in the image or the library)"
 
 size-m4: $(M4_ELF) | $(SETUP_STAMP)
 	$(PY) lib/examples/firmware_m4/size_report.py --elf $(M4_ELF) --map $(M4_DIR)/firmware_m4.map \

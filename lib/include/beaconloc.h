@@ -11,14 +11,6 @@
 #include "beaconloc/solver.h"
 #include "beaconloc/filter.h"
 #include "beaconloc/filter_model.h"
-/* Headers written by other modules; included when present. */
-#if defined(__has_include)
-#if __has_include("beaconloc/sequencer.h")
 #include "beaconloc/sequencer.h"
-#endif
-#if __has_include("beaconloc/firmware.h")
-#include "beaconloc/firmware.h"
-#endif
-#endif
 
 #endif /* BEACONLOC_H */

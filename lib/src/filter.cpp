@@ -213,6 +213,14 @@ void cv_model(const VX &x, real dt, VX &xo, SparseEntry *d)
 // Random walk of s and T over dt (speed-of-sound drift with temperature,
 // beacon clock drift) and of the wheel scales (tyre wear, load); none when
 // calibration is off (sigma_wheel_scale = 0: the scales stay exactly 1).
+// Our model: Kleeman 1992 eq. 15 holds s and T constant (s(k+1) = s(k),
+// T(k+1) = T(k)) and estimates them as unknown constants; a Wiener process
+// (variance growing linearly in time, q·dt) lets them follow slow changes
+// (s moves ~0.6 m/s per °C of air temperature) without assuming a rate:
+//   σ_s² += q_s·dt,  q_s = speed_of_sound_drift_mps_per_sqrt_s²  ((m/s)²/s)
+//   σ_T² += q_T·dt,  q_T = period_drift_s_per_sqrt_s²            (s²/s)
+//   σ_k² += q_k·dt,  q_k = wheel_scale_drift_per_sqrt_s²          (1/s)
+// with dt in s.
 void add_parameter_noise(const bl_config *cfg, MX &P, real dt)
 {
     P(S, S) += cfg->speed_of_sound_drift_mps_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s * dt;
@@ -233,8 +241,18 @@ void cv_predict(const bl_config *cfg, VX &x, MX &P, real dt)
     // Kleeman eq. 6: P = Φ P Φᵀ + Q (Φ = I + the 7 entries of cv_model).
     MX &Pn = P;
     propagate(Pn, d, kCvEntries);
-    // Q from white acceleration a (σ accel_noise) and angular acceleration α:
-    // G_a = [½dt² cos θ, ½dt² sin θ, 0, dt, 0, ...], G_α = [0, 0, ½dt², 0, dt, ...].
+    // Q: our model (Kleeman §3.10 assigns Q by motion type but gives no
+    // formula): the piecewise-constant white acceleration model (the
+    // "discrete white noise acceleration" model of Bar-Shalom, Li &
+    // Kirubarajan 2001, ch. 6): over the step the robot has an unknown
+    // constant linear acceleration a (σ_a = accel_noise_mps2, m/s²) and
+    // angular acceleration α (σ_α = angular_accel_noise_radps2, rad/s²),
+    // independent, so Q = σ_a² G_a G_aᵀ + σ_α² G_α G_αᵀ with
+    //   G_a = ∂(x, y, θ, v, ω)/∂a = [½dt² cos θ, ½dt² sin θ, 0, dt, 0]  (s², s),
+    //   G_α = ∂(x, y, θ, v, ω)/∂α = [0, 0, ½dt², 0, dt]              (s², s),
+    // e.g. Q_xx = (½dt²·σ_a)² cos²θ m², Q_vv = (dt·σ_a)² (m/s)². As in
+    // that model, Q depends on how an interval is split into predicts (one
+    // step of 2dt adds twice the v variance of two steps of dt).
     VX ga = VX::Zero(), gw = VX::Zero();
     ga(X) = real(0.5) * dt * dt * std::cos(x(TH));
     ga(Y) = real(0.5) * dt * dt * std::sin(x(TH));
@@ -400,6 +418,7 @@ __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_soluti
     P(S, S) = var_s;
     P(T, T) = var_T;
     start_wheel_scales(f, x, P);
+    symmetrise(P);  // the solver's covariance is symmetric only to rounding
     int64_t epoch = ref_arrival_us;
     uint32_t ref = ref_beacon;
     shift_reference(cfg, x, P, epoch, ref, 0);
@@ -413,6 +432,16 @@ __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_soluti
     f->flags_ = kFlagStarted | kFlagEverStarted;
     f->consecutive_rejections_ = 0;
     f->rejection_beacon_mask_ = 0;
+}
+
+// The last-pulse table the snapshot (re)start reads: every pulse fuse_pulse
+// was given and did not refuse as an error (fused, gated out, buffered before
+// the start or while stale), one entry per beacon, the newest wins.
+void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index)
+{
+    f->last_arrival_us_[beacon_index] = arrival_us;
+    f->last_receiver_[beacon_index] = receiver_index;
+    f->last_valid_mask_ |= 1u << beacon_index;
 }
 
 // Start (or restart) *f from the snapshot of its last pulses. On failure
@@ -642,24 +671,44 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
                              {TH, KR, J.g[2][1] * d_right_m}};
     // Without calibration (σ 0) the scale rows/columns of P are zero: skip them.
     propagate(Pn, d, cfg->sigma_wheel_scale > real(0) ? 8 : 2);
-    // Wheel noise: variance sigma_wheel_per_m² per metre rolled, per wheel,
-    // on the measured increments (∂f/∂m = g·k); G Q_u Gᵀ touches only the
-    // (x, y, θ) block.
+    // Wheel noise (Kleeman eq. 6's Q through the input Jacobian; the wheel
+    // model is ours: each wheel's measured distance has variance
+    // sigma_wheel_per_m² · |d| (m²) — grows linearly with the distance
+    // rolled, independent per wheel, as hw_sim draws slip), Q_u =
+    // diag(σ_w²|mL| k_l², σ_w²|mR| k_r²) on the calibrated distances
+    // (∂f/∂m = g·k); G Q_u Gᵀ touches only the (x, y, θ) block.
     const real k2 = cfg->sigma_wheel_per_m * cfg->sigma_wheel_per_m;
     const real qu[2] = {k2 * std::fabs(d_left_m) * x(KL) * x(KL), k2 * std::fabs(d_right_m) * x(KR) * x(KR)};
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)
             Pn(r, c) += J.g[r][0] * qu[0] * J.g[c][0] + J.g[r][1] * qu[1] * J.g[c][1];
-    // Motion type (Kleeman §3.10): stationary, straight or turning.
+    // Motion type (Kleeman 1992 §3.10): "stationary, no acceleration,
+    // straight ramp and curve"; "the incorporation of the dead-reckoning
+    // heading information as an input sets the heading variance to the
+    // square of an offset plus a fraction of the angle increment Δθ of
+    // equation (24)". Stationary = no wheel travel (|d| <= 1 µm each).
     const bool moving = std::fabs(d_left_m) > real(1e-6) || std::fabs(d_right_m) > real(1e-6);
     const real cl = x(KL) * d_left_m, cr = x(KR) * d_right_m;  // calibrated distances (m)
-    const real dth = (cr - cl) / cfg->wheel_base_m;
+    const real dth = (cr - cl) / cfg->wheel_base_m;             // Δθ, Kleeman eq. 24 (rad)
     if (moving) {
-        // Heading variance: square of an offset plus a fraction of Δθ (§3.10).
+        // §3.10 gives no formula; our reading, with the offset as a random
+        // walk (so it does not depend on the encoder rate) and the fraction
+        // proportional to |Δθ| (so a turn adds more than a straight step of
+        // the same wheel travel; that Δθ term is the only difference
+        // between §3.10's "straight" and "curve"):
+        //   σ_θ² += σ_off²·dt + (f·Δθ)²   (rad²)
+        // σ_off = heading_noise_rad_per_sqrt_s (rad/√s), f =
+        // heading_noise_fraction (1), dt in s.
         const real fr = cfg->heading_noise_fraction * dth;
         Pn(TH, TH) += cfg->heading_noise_rad_per_sqrt_s * cfg->heading_noise_rad_per_sqrt_s * dt + fr * fr;
     }
-    // v and ω: random walk (white acceleration), smaller when stationary.
+    // v and ω: random walk of the piecewise-constant acceleration model (as
+    // in cv_predict, our model): σ_v² += (s·σ_a·dt)² ((m/s)²), σ_ω² +=
+    // (s·σ_α·dt)² ((rad/s)²), with s = 1 moving and
+    // stationary_noise_scale when stationary (§3.10's "stationary" type:
+    // a standing robot does not accelerate unnoticed). §3.10's "no
+    // acceleration" vs "straight ramp" is not distinguished: the wheel
+    // speeds below measure v every step.
     const real scale = moving ? real(1) : cfg->stationary_noise_scale;
     const real sa = scale * cfg->accel_noise_mps2 * dt, sw = scale * cfg->angular_accel_noise_radps2 * dt;
     Pn(V, V) += sa * sa;
@@ -686,6 +735,16 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
         // a variance computed from the measurement itself gives the larger
         // (noisier) measured speeds less weight and biases v low (by ~1 %
         // with 0.01/√m wheel noise at 0.45 m/s and 100 Hz samples).
+        // Variances by first-order propagation of the wheel noise model
+        // above (ours; Kleeman eq. 25 gives the measurement, not its
+        // variance): Var(dL) = σ_w²·|dL|, Var(dR) = σ_w²·|dR| (m²),
+        // independent, and z_v = (dL + dR)/(2 dt), z_ω = (dR − dL)/(b dt):
+        //   R_v = σ_w² (|dL| + |dR|) / (4 dt²) + floor²   ((m/s)²)
+        //   R_ω = σ_w² (|dL| + |dR|) / (b² dt²) + floor²  ((rad/s)²)
+        // (b = wheel_base_m, dt s). Neglected: their covariance
+        // σ_w²(|dR| − |dL|)/(2 b dt²) (non-zero in turns; the two scalar
+        // updates are sequential and independent), and the correlation with
+        // the same wheels' noise already added to (x, y, θ) above.
         const real half_b = real(0.5) * cfg->wheel_base_m;
         const real dl_pred_m = std::fabs(x(V) - x(W) * half_b) * dt;
         const real dr_pred_m = std::fabs(x(V) + x(W) * half_b) * dt;
@@ -750,11 +809,8 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     const bl_config *cfg = &f->cfg_;
     bl_pulse_result res;
     std::memset(&res, 0, sizeof res);
-    int64_t dts_us;
-    if (!bl::sub_us(arrival_us, f->t_us_, &dts_us)) return BL_ETIME;
-    if (dts_us > int64_t(1e12) || dts_us < -int64_t(1e12) ||
-        !(std::fabs(bl::us_to_s(dts_us)) <= cfg->max_predict_gap_s))
-        return BL_ETIME;
+    // The caller (classify_arrival) checked |arrival - state time| <= max_predict_gap_s.
+    const int64_t dts_us = arrival_us - f->t_us_;
 
     VX x = state(f);
     MX P = cov(f);
@@ -799,11 +855,7 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     res.fire_us = f->t_us_ + int64_t(std::llround(fire_s * 1e6));
 
     // Every pulse is kept (accepted or not) for a snapshot re-initialisation.
-    auto remember = [&]() {
-        f->last_arrival_us_[beacon_index] = arrival_us;
-        f->last_receiver_[beacon_index] = receiver_index;
-        f->last_valid_mask_ |= 1u << beacon_index;
-    };
+    auto remember = [&]() { remember_pulse(f, beacon_index, arrival_us, receiver_index); };
 
     if (!(res.test_ratio <= real(1))) {
         // Chi-square gate (1 dof): an echoed or outlying arrival (Kleeman §3.9).
@@ -867,6 +919,66 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     return BL_OK;
 }
 
+// Where an arrival lies against the state time t_s.
+enum class Arrival {
+    kFresh,   // |arrival - t_s| <= max_predict_gap_s: fused (fuse_started)
+    kStale,   // arrival > t_s + max_predict_gap_s: no predict for that long (fuse_stale)
+    kTooOld   // arrival < t_s - max_predict_gap_s: time went backwards (BL_ETIME)
+};
+Arrival classify_arrival(const bl_filter *f, int64_t arrival_us)
+{
+    int64_t d_us;
+    if (!bl::sub_us(arrival_us, f->t_us_, &d_us)) return arrival_us < f->t_us_ ? Arrival::kTooOld : Arrival::kStale;
+    if (d_us > int64_t(1e12)) return Arrival::kStale;
+    if (d_us < -int64_t(1e12)) return Arrival::kTooOld;
+    const real d_s = bl::us_to_s(d_us);
+    if (d_s > f->cfg_.max_predict_gap_s) return Arrival::kStale;
+    if (-d_s > f->cfg_.max_predict_gap_s) return Arrival::kTooOld;
+    return Arrival::kFresh;
+}
+
+// Variance of a random-walk parameter after gap_s (s) without updates:
+// var + q·gap (the add_parameter_noise model), capped at the configured
+// initial variance var0 (unless var is already above it): after a long gap
+// the parameter is known no worse than at a first start.
+real grown_variance(real var, real q, real gap_s, real var0)
+{
+    const real grown = var + q * gap_s;
+    const real cap = var > var0 ? var : var0;
+    return grown < cap ? grown : cap;
+}
+
+// fuse_pulse on a stale filter (no predict for more than max_predict_gap_s
+// before this arrival: encoders silent, the caller paused, or a caller that
+// fuses pulses without predicting). The pose cannot be extrapolated that
+// far, so the pulse goes into the last-pulse table (BUFFERED) and the filter
+// re-initialises itself from the snapshot of the table's latest cycle as
+// soon as that covers min(4, N) beacons and explains them (RESET, reset
+// counter bumped; state time = the latest arrival). The table's entries from
+// before the gap are more than a cycle older than this pulse and are left
+// out of that snapshot (build_snapshot). Kept across the restart: heading
+// (σ cfg.reset_sigma_theta_rad), s and T with their variance grown by their
+// random walk over the gap (grown_variance), the wheel scales. Until the
+// restart the stale state itself is untouched. Inline in fuse_pulse: the
+// snapshot solver's stack chain starts there, as for persistent rejection.
+inline bl_pulse_status fuse_stale(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index)
+{
+    const bl_config *cfg = &f->cfg_;
+    remember_pulse(f, beacon_index, arrival_us, receiver_index);
+    int64_t gap_us;
+    if (!bl::sub_us(arrival_us, f->t_us_, &gap_us) || gap_us > int64_t(1e13)) gap_us = int64_t(1e13);
+    const real gap_s = bl::us_to_s(gap_us);
+    const real qs = cfg->speed_of_sound_drift_mps_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s;
+    const real qT = cfg->period_drift_s_per_sqrt_s * cfg->period_drift_s_per_sqrt_s;
+    const real var_s =
+        grown_variance(f->P_[S * NX + S], qs, gap_s, cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps);
+    const real var_T = grown_variance(f->P_[T * NX + T], qT, gap_s, cfg->sigma_period_s * cfg->sigma_period_s);
+    const uint32_t n = cfg->beacon_count;
+    if (start_from_snapshot(f, f->x_[TH], cfg->reset_sigma_theta_rad, f->x_[S], var_s, f->x_[T], var_T,
+                            n < 4 ? n : 4) == BL_OK)
+        return BL_PULSE_RESET;
+    return BL_PULSE_BUFFERED;
+}
 
 }  // namespace
 
@@ -895,9 +1007,7 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
                         return BL_ETIME;
                 }
         }
-        f->last_arrival_us_[beacon_index] = arrival_us;
-        f->last_receiver_[beacon_index] = receiver_index;
-        f->last_valid_mask_ |= 1u << beacon_index;
+        remember_pulse(f, beacon_index, arrival_us, receiver_index);
         res.status = BL_PULSE_BUFFERED;
         const uint32_t need = cfg->beacon_count < 4 ? cfg->beacon_count : 4;
         if (start_from_snapshot(f, cfg->initial_theta_rad, cfg->reset_sigma_theta_rad,
@@ -911,6 +1021,14 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
         return BL_OK;
     }
 
+    switch (classify_arrival(f, arrival_us)) {
+    case Arrival::kTooOld: return BL_ETIME;  // a caller error: state untouched
+    case Arrival::kStale:
+        res.status = fuse_stale(f, beacon_index, arrival_us, receiver_index);
+        if (result) *result = res;
+        return BL_OK;
+    case Arrival::kFresh: break;
+    }
     const int rc = fuse_started(f, beacon_index, arrival_us, receiver_index, &res);
     if (rc != BL_OK) return rc;
     if (res.status == BL_PULSE_REJECTED) {

@@ -11,6 +11,8 @@
 #include <stdint.h>
 #include <string.h>
 
+#include <cmath>
+
 namespace {
 
 constexpr uint32_t kMagic = 0x5E9B1C01u;
@@ -19,6 +21,8 @@ constexpr int64_t kMaxPeriodUs = 10000000;   // 10 s
 constexpr int64_t kMinPeriodUs = 1000;       // 1 ms
 constexpr uint32_t kMaxTimeoutCycles = 1000;
 constexpr uint32_t kMaxGainDiv = 1000000;
+
+bool finite_real(bl_real v) { return std::isfinite(v); }
 
 bool time_ok(int64_t t_us) { return t_us <= BL_SEQ_TIME_LIMIT_US && t_us >= -BL_SEQ_TIME_LIMIT_US; }
 
@@ -345,11 +349,21 @@ int bl_sequencer_config_default(bl_seq_config *cfg) {
 
 int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m, bl_seq_config *out) {
     if (site == nullptr || out == nullptr) return BL_EINVAL;
-    if (!(max_distance_m == max_distance_m) || max_distance_m > static_cast<bl_real>(1e6)) return BL_EINVAL;
+    if (!finite_real(max_distance_m) || max_distance_m > static_cast<bl_real>(1e6)) return BL_EINVAL;
     bl_seq_config c;
     bl_sequencer_config_default(&c);
     if (site->beacon_count < 1 || site->beacon_count > BL_MAX_BEACONS) return BL_ECONFIG;
     if (site->receiver_count < 1 || site->receiver_count > BL_MAX_RECEIVERS) return BL_ECONFIG;
+    // NaN/inf in any field used here is a bad argument (BL_EINVAL). Checked
+    // first: every comparison with a NaN is false, so a range check written
+    // as "x > max" lets a NaN through (the beacon loop below did).
+    if (!finite_real(site->speed_of_sound_mps) || !finite_real(site->sigma_speed_of_sound_mps) ||
+        !finite_real(site->beacon_period_s) || !finite_real(site->double_pulse_spacing_s) || !finite_real(site->burst_length_s) ||
+        !finite_real(site->ring_radius_m) || !finite_real(site->receiver_height_m))
+        return BL_EINVAL;
+    for (uint32_t i = 0; i < site->beacon_count; ++i)
+        if (!finite_real(site->beacons[i].x_m) || !finite_real(site->beacons[i].y_m) || !finite_real(site->beacons[i].z_m))
+            return BL_EINVAL;
     const bl_real s_min = site->speed_of_sound_mps - 3 * site->sigma_speed_of_sound_mps;
     if (!(s_min > static_cast<bl_real>(100)) || !(s_min < static_cast<bl_real>(1000))) return BL_ECONFIG;
     if (!(site->beacon_period_s > 0) || !(site->beacon_period_s <= static_cast<bl_real>(10))) return BL_ECONFIG;
@@ -375,7 +389,7 @@ int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m,
             }
         }
         const bl_real d2 = dxy2_max + dz_max * dz_max;
-        if (!(d2 == d2) || d2 > static_cast<bl_real>(1e12)) return BL_ECONFIG;
+        if (!(d2 <= static_cast<bl_real>(1e12))) return BL_ECONFIG;  // beyond 1000 km (or overflowed)
         // Newton iteration for sqrt (no libm dependency of the result's range).
         bl_real r = d2 > 1 ? d2 : 1;
         for (int it = 0; it < 60; ++it) r = static_cast<bl_real>(0.5) * (r + d2 / r);
@@ -597,9 +611,7 @@ int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint) {
     h.period_us = est->period_s * us_per_s;
     h.fire_sigma_us = est->sigma_t0_s * us_per_s;
     h.period_sigma_us = est->sigma_period_s * us_per_s;
-    if (!(h.period_us == h.period_us) || !(h.fire_sigma_us == h.fire_sigma_us) ||
-        !(h.period_sigma_us == h.period_sigma_us))
-        return BL_EINVAL;
+    if (!finite_real(h.period_us) || !finite_real(h.fire_sigma_us) || !finite_real(h.period_sigma_us)) return BL_EINVAL;
     *hint = h;
     return BL_OK;
 }

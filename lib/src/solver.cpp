@@ -8,6 +8,7 @@
 #include "internal.hpp"
 
 #include <cstring>
+#include <limits>
 
 #include "beaconloc/solver.h"
 
@@ -40,6 +41,24 @@ bool problem_valid(const bl_tdoa_problem *p)
         if (!is_finite(p->sigma_s[j]) || p->sigma_s[j] <= real(0)) return false;
     }
     return true;
+}
+
+// *out after a divergence: the last iterate (position q, emission time t0_s,
+// it steps), nothing evaluated there (NaN), converged false (solver.h).
+__attribute__((noinline)) void write_diverged(const bl::Vec3 &q, real t0_s, uint32_t it, bl_tdoa_solution *out)
+{
+    bl_tdoa_solution &sol = *out;
+    std::memset(&sol, 0, sizeof sol);
+    sol.x_m = q(0);
+    sol.y_m = q(1);
+    sol.z_m = q(2);
+    sol.t0_s = t0_s;
+    const real nan = std::numeric_limits<real>::quiet_NaN();
+    for (real &c : sol.cov) c = nan;
+    sol.pdop = nan;
+    sol.residual_rms_s = nan;
+    sol.iterations = it;
+    sol.converged = false;
 }
 
 // D = 2: unknowns (x, y, tau); D = 3: (x, y, z, tau), where tau = s·t0 (m)
@@ -162,10 +181,29 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
         if (!linearise(p, tau) || !factor_ok(ldlt)) return BL_EDEGENERATE;
         const VecN step = ldlt.solve(g);
         if (!step.allFinite()) return BL_EDEGENERATE;
+        ++it;
+        // The next iterate p + step, checked before it is taken (scalar loop:
+        // no vector temporary on the stack).
+        bool finite = is_finite(tau + step(D));
+        real reach_m = 0;  // largest |coordinate| of the next iterate (m)
+        for (int k = 0; k < D; ++k) {
+            const real c = p(k) + step(k);
+            finite = finite && is_finite(c);
+            if (std::fabs(c) > reach_m) reach_m = std::fabs(c);
+        }
+        if (!finite || reach_m > real(1e7)) {
+            // Diverged (the iterate left any site, |coordinate| > 10,000 km):
+            // report the last iterate (the runaway one, or the one before it
+            // if that is not finite); nothing is evaluated there.
+            if (finite) {
+                p += step.template head<D>();
+                tau += step(D);
+            }
+            write_diverged(point3(p), tau / s, it, out);
+            return BL_ENOCONVERGE;
+        }
         p += step.template head<D>();
         tau += step(D);
-        ++it;
-        if (!p.allFinite() || p.cwiseAbs().maxCoeff() > real(1e7)) return BL_ENOCONVERGE;
         if (step.template head<D>().norm() < tol) {
             converged = true;
             break;
@@ -177,6 +215,9 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
     // off Eigen's level-3 kernels, which reference malloc).
     MatN cov_m;
     for (int k = 0; k < n; ++k) cov_m.col(k) = ldlt.solve(VecN::Unit(k));
+    // The column solves are symmetric only to rounding: make it exact.
+    for (int r = 0; r < n; ++r)
+        for (int c = r + 1; c < n; ++c) cov_m(r, c) = cov_m(c, r) = real(0.5) * (cov_m(r, c) + cov_m(c, r));
 
     // From here on nothing fails: fill *out in place (no copy on the stack).
     bl_tdoa_solution &sol = *out;
@@ -194,6 +235,14 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
             if (c == D) v /= s;
             sol.cov[r * 4 + c] = v;
         }
+    // Position dilution of precision, the GNSS definition with the emission
+    // time in the clock-bias role (tau = s·t0 m, like c·dt): PDOP =
+    // sqrt(trace of the position block of (JᵀJ)⁻¹) (dimensionless; e.g.
+    // Langley, "Dilution of precision", GPS World, May 1999). Kleeman 1990
+    // defines no DOP (eq. 9's error vector is its worst-case analogue).
+    // Here the weights are 1/(s σ_j)², so (JᵀWJ)⁻¹ = (s σ)²(JᵀJ)⁻¹ for equal
+    // σ_j = σ; with unequal σ_j, σ is their rms:
+    //   pdop = sqrt(cov_xx + cov_yy [+ cov_zz]) (m) / (σ_rms (s) · s (m/s)).
     real trace_p = 0;
     for (int k = 0; k < D; ++k) trace_p += cov_m(k, k);
     sol.pdop = std::sqrt(trace_p) / (sigma_rms_s * s);

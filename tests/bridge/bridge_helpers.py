@@ -1,5 +1,6 @@
 """Helpers of the bridge's pytest suite (a uniquely named module, so that
 other suites' conftest.py files cannot shadow it)."""
+import os
 import shutil
 import socket
 import subprocess
@@ -7,7 +8,9 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-BRIDGE = REPO / "build" / "bridge" / "beaconloc-bridge"
+# The build folder: $BL_BUILD (make test-bridge-py passes its BUILD), else build/.
+BUILD = Path(os.environ.get("BL_BUILD", REPO / "build"))
+BRIDGE = BUILD / "bridge" / "beaconloc-bridge"
 SITE = REPO / "hw_sim" / "scenarios" / "kleeman-lab.ini"
 # Log timestamps are this epoch + simulated time (hw_sim scenario default
 # [output] log_epoch_s, not overridden by the scenarios used here).

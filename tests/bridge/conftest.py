@@ -12,7 +12,7 @@ from bridge_helpers import BRIDGE, free_udp_port, run_sim  # noqa: E402
 @pytest.fixture(scope="session")
 def bridge_bin():
     if not BRIDGE.exists():
-        pytest.fail(f"{BRIDGE} not built (make build/bridge/beaconloc-bridge)")
+        pytest.fail(f"{BRIDGE} not built (make test-bridge-py builds it; BL_BUILD selects the build folder)")
     return BRIDGE
 
 

@@ -53,6 +53,13 @@ def test_bad_site_exits_78_naming_file_line_key(bridge_bin, tmp_path):
     n = line_of(bad, "x_m = eleven")
     assert f"{bad}:{n}: [beacon4] x_m: not a number: 'eleven'" in p.stderr
 
+    # a misspelt section would drop its keys silently
+    bad = site_with(tmp_path, "section.ini", replace=("[bridge]", "[bridg]"))
+    p = run(bridge_bin, "--site", str(bad), "--replay", "/dev/null")
+    assert p.returncode == 78
+    n = line_of(bad, "[bridg]")
+    assert f"{bad}:{n}: [bridg] unknown section" in p.stderr
+
 
 def test_estimator_rejects_geometry_exit_78(bridge_bin, tmp_path):
     # three beacons on one line: the library's config check refuses it and

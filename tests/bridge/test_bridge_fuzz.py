@@ -57,9 +57,10 @@ def test_random_frames_accounted_never_crash(binary, kleeman_log, tmp_path):
     s = json.loads(stats_path.read_text())
     decoded = sum(s["frames_received"].values())
     # every frame read is exactly one of: decoded, malformed, unknown id,
-    # out of range, error frame
+    # out of range, error frame, duplicate, late (out of order)
     assert s["frames_total"] == (decoded + s["malformed"] + s["unknown_id"]
-                                 + s["out_of_range"] + s["error_frames"])
+                                 + s["out_of_range"] + s["error_frames"]
+                                 + s["duplicates"] + s["out_of_order"])
     assert s["malformed"] > 0 and s["unknown_id"] > 0 and s["out_of_range"] > 0
     assert s["replay_bad_lines"] > 0
     assert s["frames_total"] + s["replay_bad_lines"] == len(lines) + len(good_lines) - \

@@ -20,6 +20,7 @@ from bridge_helpers import BRIDGE, SITE, mavlink_listener
 
 SHIM = BRIDGE.parents[1] / "tests" / "bridge" / "fake_can_preload.so"
 FEED_S = 12.0
+ERR_CRTL = 0x20000004  # CAN_ERR_FLAG | CAN_ERR_CRTL
 
 
 def log_frames(log, seconds):
@@ -41,6 +42,7 @@ def test_live_path_with_fake_can(bridge_bin, kleeman_log, tmp_path, udp_port):
     frames = log_frames(log, FEED_S)
     sock_path = tmp_path / "can.sock"
     stats_path, est_path = tmp_path / "stats.json", tmp_path / "est.csv"
+    rec_path = tmp_path / "rec.log"
     conn = mavlink_listener(udp_port)
     msgs, stop = [], threading.Event()
 
@@ -57,6 +59,7 @@ def test_live_path_with_fake_can(bridge_bin, kleeman_log, tmp_path, udp_port):
     proc = subprocess.Popen([str(bridge_bin), "--site", str(SITE), "--can", "fake0",
                              "--mavlink", f"udpout:127.0.0.1:{udp_port}",
                              "--stats", str(stats_path), "--estimates", str(est_path),
+                             "--record", str(rec_path),
                              "--status-interval", "2"],
                             stderr=subprocess.PIPE, text=True, env=env)
     try:
@@ -69,12 +72,14 @@ def test_live_path_with_fake_can(bridge_bin, kleeman_log, tmp_path, udp_port):
         can, _ = srv.accept()
         start = time.monotonic()
         t0 = frames[0][0]
-        for t, fid, data in frames:
+        for i, (t, fid, data) in enumerate(frames):
             delay = start + (t - t0) - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
             # struct can_frame: can_id u32, len u8, 3 pad bytes, data[8]
             can.send(struct.pack("<IB3x8s", fid, len(data), data.ljust(8, b"\0")))
+            if i == len(frames) // 2:  # one error frame: controller problem, RX warning
+                can.send(struct.pack("<IB3x8s", ERR_CRTL, 8, bytes([0, 0x04]) + bytes(6)))
         time.sleep(0.5)
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=10)
@@ -89,10 +94,16 @@ def test_live_path_with_fake_can(bridge_bin, kleeman_log, tmp_path, udp_port):
     assert "fake0: up again" in err
     assert "final:" in err
     stats = json.loads(stats_path.read_text())
-    # every frame sent arrived and was decoded
-    assert stats["frames_total"] == len(frames)
+    # every frame sent arrived and was decoded; the error frame is read,
+    # counted and recorded like any frame (as in replay)
+    assert stats["frames_total"] == len(frames) + 1
     assert sum(stats["frames_received"].values()) == len(frames)
+    assert stats["error_frames"] == 1 and stats["controller_errors"] == 1
     assert stats["lost_by_counter"] == 0
+    recorded = rec_path.read_text().splitlines()
+    assert len(recorded) == len(frames) + 1
+    assert sum(" 20000004#0004000000000000" in ln for ln in recorded) == 1
+    assert "fake0: error frame (class 0x4)" in err
     assert stats["latency_samples"] > 100
     assert 0 <= stats["latency_p50_us"] <= stats["latency_p99_us"]
     # ODOMETRY at the configured rate on the daemon's monotonic clock

@@ -123,6 +123,20 @@ def test_heartbeat_and_named_values(replay_run):
     assert sos and per
     assert 320 < np.median(sos) < 370
     assert abs(np.median(per) - 0.150) < 0.001
+    # time_boot_ms counts from the log's first frame (not the log's epoch,
+    # which overflows 32 bits of ms)
+    ms = [m.time_boot_ms for m in nv if m.name == "sos_mps"]
+    assert all(0 < a < b for a, b in zip(ms, ms[1:])) and ms[-1] <= 61000, ms[-3:]
+    # system_status: BOOT until the filter starts, ACTIVE once it has
+    # converged on a nominal run, never worse
+    st = [m.system_status for m in hb]
+    first_hb = next(i for i, m in enumerate(msgs) if m.get_type() == "HEARTBEAT")
+    started = any(m.get_type() == "ODOMETRY" for m in msgs[:first_hb])
+    assert (st[0] != MAV.MAV_STATE_BOOT) == started, (st[:3], started)
+    n_boot = st.count(MAV.MAV_STATE_BOOT)
+    assert st[:n_boot] == [MAV.MAV_STATE_BOOT] * n_boot, st  # only before the start
+    assert st[-1] == MAV.MAV_STATE_ACTIVE
+    assert set(st) <= {MAV.MAV_STATE_BOOT, MAV.MAV_STATE_STANDBY, MAV.MAV_STATE_ACTIVE}, st
     texts = [m.text for m in msgs if m.get_type() == "STATUSTEXT"]
     assert any("filter started" in t for t in texts), texts
 
@@ -252,3 +266,104 @@ def test_record_replays_identically(bridge_bin, kleeman_log, tmp_path):
     assert a["frames_received"] == b["frames_received"]
     assert a["pulses_accepted"] == b["pulses_accepted"]
     assert a["odometry_sent"] == b["odometry_sent"]
+
+
+def test_duplicate_and_late_frames_dropped(bridge_bin, kleeman_log, tmp_path):
+    """A frame delivered twice, and a pair delivered in swapped order (the
+    newer first), of each measurement frame: the repeats are duplicates, the
+    older of each pair is late; both are dropped and counted on their own,
+    and no frame is counted lost (a counter one step back is not 15 lost)."""
+    log, truth = kleeman_log
+    lines = log.read_text().splitlines()
+    fid = [ln.split()[2].split("#")[0] for ln in lines]
+    out = list(lines)
+    done = set()
+    # swap the first consecutive pair of each id after 10 s of log (5 s
+    # later for the second id, so the edits do not overlap)
+    for want, start in (("110", 2000), ("100", 3000)):
+        i = next(i for i in range(start, len(lines) - 1) if fid[i] == fid[i + 1] == want)
+        out[i], out[i + 1] = lines[i + 1], lines[i]
+        done.add(i)
+        done.add(i + 1)
+    # repeat one frame of each id (not one of the swapped ones)
+    for want, start in (("110", 4000), ("100", 5000)):
+        i = next(i for i in range(start, len(lines)) if fid[i] == want and i not in done)
+        out[i] = out[i] + "\n" + lines[i]
+    edited = tmp_path / "edited.log"
+    edited.write_text("\n".join(out) + "\n")
+    stats_path, est_path = tmp_path / "stats.json", tmp_path / "est.csv"
+    proc = subprocess.run([str(bridge_bin), "--site", str(SITE), "--replay", str(edited),
+                           "--mavlink", "udpout:127.0.0.1:9", "--stats", str(stats_path),
+                           "--estimates", str(est_path)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(stats_path.read_text())
+    assert s["frames_total"] == len(lines) + 2
+    assert s["duplicates_per_frame"] == {"pulse_detection": 1, "wheel_encoders": 1,
+                                         "node_status": 0}
+    assert s["out_of_order_per_frame"] == {"pulse_detection": 1, "wheel_encoders": 1,
+                                           "node_status": 0}
+    assert s["duplicates"] == 2 and s["out_of_order"] == 2
+    assert s["lost_by_counter"] == 0
+    counts = log_frame_counts(log)
+    assert s["frames_received"]["pulse_detection"] == counts["100"] - 1
+    assert s["frames_received"]["wheel_encoders"] == counts["110"] - 1
+    assert " dup 2 late 2 " in proc.stderr.split("final:")[1]
+    # the estimate is as good as on the clean log
+    t = read_truth(truth)
+    est = np.genfromtxt(est_path, delimiter=",", names=True)
+    keep = (est["t_us"] - t["t_us"][0]) > 20e6
+    xt = np.interp(est["t_us"][keep], t["t_us"], t["x_m"])
+    yt = np.interp(est["t_us"][keep], t["t_us"], t["y_m"])
+    assert np.sqrt(np.mean((est["x_m"][keep] - xt) ** 2 + (est["y_m"][keep] - yt) ** 2)) < 0.1
+
+
+def test_write_failures_counted_and_logged_once(bridge_bin, kleeman_log, tmp_path):
+    """--record and --estimates on a full disk (/dev/full: every write
+    fails with ENOSPC): the replay goes on, each file's failures are counted
+    and said once, with the reason."""
+    log, _ = kleeman_log
+    stats_path = tmp_path / "stats.json"
+    proc = subprocess.run([str(bridge_bin), "--site", str(SITE), "--replay", str(log),
+                           "--mavlink", "udpout:127.0.0.1:9", "--stats", str(stats_path),
+                           "--record", "/dev/full", "--estimates", "/dev/full"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(stats_path.read_text())
+    per = s["write_errors_per_file"]
+    assert per["record"] > 0 and per["estimates"] > 0, per
+    assert s["write_errors"] == per["record"] + per["estimates"]
+    assert proc.stderr.count("--record /dev/full: write failed: No space left on device") == 1
+    assert proc.stderr.count("--estimates /dev/full: write failed: No space left on device") == 1
+    assert f" werr {s['write_errors']} " in proc.stderr.split("final:")[1]
+    assert s["odometry_sent"] > 1000  # the data path did not stop
+
+
+def test_paced_latency_counts_held_pulses(bridge_bin, kleeman_log, tmp_path):
+    """Paced replay of pulses only (encoder frames removed): each pulse is
+    held by the sequencer until the periodic tick pops it (20 ms of pop
+    slack after its arrival, ticks every 33 ms) and is first carried by the
+    ODOMETRY sent then. The latency is measured from that pulse frame's own
+    receive time, which is the node's 4 ms hold after the arrival: so it is
+    at least the slack less the hold (16 ms), and below the slack plus a
+    tick period plus the merge window and scheduling."""
+    log, _ = kleeman_log
+    lines = log.read_text().splitlines()
+    t0 = float(lines[0].split()[0][1:-1])
+    keep = [ln for ln in lines if float(ln.split()[0][1:-1]) - t0 < 8.0
+            and ln.split()[2].startswith(("100#", "120#"))]
+    pulses = tmp_path / "pulses.log"
+    pulses.write_text("\n".join(keep) + "\n")
+    stats_path = tmp_path / "stats.json"
+    proc = subprocess.run([str(bridge_bin), "--site", str(SITE), "--replay", str(pulses),
+                           "--realtime", "--mavlink", "udpout:127.0.0.1:9",
+                           "--stats", str(stats_path), "--status-interval", "0"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(stats_path.read_text())
+    assert s["pulses_accepted"] > 100, proc.stderr
+    # one sample per send that carries a newly fused pulse: about one per
+    # firing after the start (6.7 per s over ~6 s)
+    assert 25 <= s["latency_samples"] <= s["odometry_sent"]
+    assert s["latency_p50_us"] >= 12000, s
+    assert s["latency_p99_us"] < 150000, s

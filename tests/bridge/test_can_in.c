@@ -1,8 +1,9 @@
 /*
  * cmocka: SocketCAN input (bridge/can_in.c) with -Wl,--wrap stand-ins for
- * socket, setsockopt, ioctl, bind, recvmsg and close (this machine's kernel
- * has no CAN). Checks the socket setup (kernel filters, error mask,
- * timestamps, drop counter, buffer), a missing interface, reading frames
+ * socket, setsockopt, getsockopt, ioctl, bind, recvmsg and close (this
+ * machine's kernel has no CAN). Checks the socket setup (kernel filters,
+ * error mask, timestamps, drop counter, buffer read back, FD frames refused
+ * by an old kernel: said, not fatal), a missing interface, reading frames
  * with their control messages, error frames, odd sizes, and the interface
  * going down and coming back.
  */
@@ -15,6 +16,8 @@
 #include <net/if.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <sys/time.h>
 #include <cmocka.h>
 
@@ -23,6 +26,7 @@
 #include <linux/can/raw.h>
 
 #include "can_in.h"
+#include "log.h"
 
 #define FAKE_FD 977
 
@@ -39,6 +43,9 @@ static int seen_filter_count;
 static can_err_mask_t seen_err_mask;
 static int seen_timestamp, seen_ovfl, seen_rcvbuf, seen_fd_frames;
 static int bound_ifindex;
+static int fd_frames_errno;    /* CAN_RAW_FD_FRAMES fails with this when set */
+static int rmem_max;           /* SO_RCVBUF is capped at this (net.core.rmem_max) */
+static int granted_rcvbuf;     /* what getsockopt(SO_RCVBUF) reads back */
 
 struct rx_item {
     int err;                 /* recvmsg fails with this errno when != 0 */
@@ -77,6 +84,10 @@ int __wrap_setsockopt(int fd, int level, int name, const void *val, socklen_t le
     } else if (level == SOL_CAN_RAW && name == CAN_RAW_ERR_FILTER) {
         memcpy(&seen_err_mask, val, sizeof seen_err_mask);
     } else if (level == SOL_CAN_RAW && name == CAN_RAW_FD_FRAMES) {
+        if (fd_frames_errno) {
+            errno = fd_frames_errno;
+            return -1;
+        }
         seen_fd_frames = *(const int *)val;
     } else if (level == SOL_SOCKET && name == SO_TIMESTAMP) {
         seen_timestamp = *(const int *)val;
@@ -87,7 +98,19 @@ int __wrap_setsockopt(int fd, int level, int name, const void *val, socklen_t le
         return -1;
     } else if (level == SOL_SOCKET && name == SO_RCVBUF) {
         seen_rcvbuf = *(const int *)val;
+        /* the kernel: min(val, rmem_max), doubled for its bookkeeping */
+        granted_rcvbuf = 2 * (seen_rcvbuf < rmem_max ? seen_rcvbuf : rmem_max);
     }
+    return 0;
+}
+
+int __wrap_getsockopt(int fd, int level, int name, void *val, socklen_t *len)
+{
+    assert_int_equal(fd, FAKE_FD);
+    assert_int_equal(level, SOL_SOCKET);
+    assert_int_equal(name, SO_RCVBUF);
+    assert_int_equal(*len, sizeof(int));
+    *(int *)val = granted_rcvbuf;
     return 0;
 }
 
@@ -184,6 +207,9 @@ static int reset(void **state)
     seen_err_mask = 0;
     seen_timestamp = seen_ovfl = seen_rcvbuf = seen_fd_frames = 0;
     bound_ifindex = 0;
+    fd_frames_errno = 0;
+    rmem_max = 16 * 1024 * 1024;
+    granted_rcvbuf = 0;
     rx_len = rx_pos = 0;
     memset(rxq, 0, sizeof rxq);
     return 0;
@@ -226,6 +252,46 @@ static void test_open_sets_up_socket(void **state)
     assert_int_equal(seen_rcvbuf, CAN_IN_RCVBUF_BYTES);
     can_in_close(&ci);
     assert_int_equal(sockets_open, 0);
+}
+
+/* Run can_in_open with the log captured; returns what was logged (static). */
+static const char *open_logged(struct can_in *ci, int *rc)
+{
+    static char text[4096];
+    FILE *f = fmemopen(text, sizeof text, "w");
+    assert_non_null(f);
+    log_set_stream(f);
+    *rc = can_in_open(ci);
+    log_flush();
+    log_set_stream(NULL);
+    fclose(f);
+    return text;
+}
+
+/* net.core.rmem_max below the 4 MiB asked (no CAP_NET_ADMIN): the buffer
+ * read back is smaller, which is said with both sizes; an old kernel
+ * without CAN FD refuses CAN_RAW_FD_FRAMES: said, the socket works. */
+static void test_setup_shortfalls_reported(void **state)
+{
+    (void)state;
+    struct can_in ci;
+    can_in_init(&ci, "can7");
+    int rc;
+    const char *log = open_logged(&ci, &rc);
+    assert_int_equal(rc, 0);
+    assert_null(strstr(log, "receive buffer")); /* granted in full: nothing said */
+    assert_null(strstr(log, "CAN_RAW_FD_FRAMES"));
+    can_in_close(&ci);
+
+    rmem_max = 212992;
+    fd_frames_errno = ENOPROTOOPT;
+    can_in_init(&ci, "can7");
+    log = open_logged(&ci, &rc);
+    assert_int_equal(rc, 0);
+    assert_int_equal(ci.fd, FAKE_FD);
+    assert_non_null(strstr(log, "can7: receive buffer 212992 bytes, asked for 4194304"));
+    assert_non_null(strstr(log, "can7: setsockopt CAN_RAW_FD_FRAMES: Protocol not available"));
+    can_in_close(&ci);
 }
 
 static void test_missing_interface_not_fatal(void **state)
@@ -316,6 +382,10 @@ static void test_error_frames_and_bad_sizes(void **state)
     assert_int_equal(can_in_read(&ci, &m), 2);
     assert_int_equal(m.flags, CAN_MSG_ERROR);
     assert_int_equal(m.id, CAN_ERR_BUSOFF);
+    /* the controller details stay with it (recorded by --record) */
+    assert_int_equal(m.len, 8);
+    assert_int_equal(m.data[1], 0x11);
+    assert_true(m.rx_us > 0);
     assert_int_equal(can_in_read(&ci, &m), 2);
     assert_int_equal(can_in_read(&ci, &m), 1);
     assert_int_equal(m.id, 0x110);
@@ -424,6 +494,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup(test_open_sets_up_socket, reset),
+        cmocka_unit_test_setup(test_setup_shortfalls_reported, reset),
         cmocka_unit_test_setup(test_missing_interface_not_fatal, reset),
         cmocka_unit_test_setup(test_read_frames_timestamps_and_drops, reset),
         cmocka_unit_test_setup(test_error_frames_and_bad_sizes, reset),

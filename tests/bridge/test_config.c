@@ -1,7 +1,8 @@
 /*
  * cmocka: site-file parsing (bridge/config.c). Errors must name the file,
- * the line, the section and the key; unknown simulator sections are
- * ignored; a good file gives the values written in it.
+ * the line, the section and the key; the simulator's [site] is skipped,
+ * any other unknown section is an error; a good file gives the values
+ * written in it.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -122,6 +123,25 @@ static void test_unknown_key_in_our_section(void **state)
     expect_error(body, ":24: [noise] sigma_arival_s: unknown key");
 }
 
+/* A misspelt section would drop its keys silently: it is an error naming
+ * the line of its header; so is a key before the first section. [site] (the
+ * simulator's room) is not ours but belongs in a site file. */
+static void test_unknown_section(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%s; comment\n[bridg]\nodometry_rate_hz = 20\n", good_body);
+    expect_error(body, ":23: [bridg] unknown section (a site file holds [site], [beacons], "
+                       "[beacon1]..[beacon16], [receivers], [robot], [noise], [bridge])");
+    snprintf(body, sizeof body, "%s[beacon0]\n\nx_m = 1\n", good_body);
+    expect_error(body, ":22: [beacon0] unknown section");
+    snprintf(body, sizeof body, "%s[scenario]\nseed = 3\n", good_body);
+    expect_error(body, ":22: [scenario] unknown section");
+    snprintf(body, sizeof body, "gate_sigma = 3\n%s", good_body);
+    expect_error(body, ":1: gate_sigma: key before any [section]");
+    /* the repo's site file: [site] and all of ours, accepted (test_repo_site_file) */
+}
+
 static void test_not_a_number(void **state)
 {
     (void)state;
@@ -227,6 +247,28 @@ static void test_same_geometry(void **state)
     b = a;
     b.period_s = 0.2;
     assert_false(config_same_geometry(&a, &b));
+    /* tuning that moves the sequencer's windows is still not geometry */
+    b = a;
+    b.speed_of_sound_mps = 340.0;
+    b.sigma_speed_of_sound_mps = 9.0;
+    b.sigma_arrival_s = 0.0003;
+    b.max_coast_s = 5.0;
+    assert_true(config_same_geometry(&a, &b));
+    /* each geometry field on its own */
+    b = a; b.burst_length_s = 0.002;         assert_false(config_same_geometry(&a, &b));
+    b = a; b.double_pulse_spacing_s = 0.004; assert_false(config_same_geometry(&a, &b));
+    b = a; b.receiver_count = 6;             assert_false(config_same_geometry(&a, &b));
+    b = a; b.ring_radius_m = 0.12;           assert_false(config_same_geometry(&a, &b));
+    b = a; b.first_angle_deg = 22.5;         assert_false(config_same_geometry(&a, &b));
+    b = a; b.angle_step_deg = 40;            assert_false(config_same_geometry(&a, &b));
+    b = a; b.receiver_height_m = 0.9;        assert_false(config_same_geometry(&a, &b));
+    b = a; b.wheel_base_m = 0.51;            assert_false(config_same_geometry(&a, &b));
+    b = a; b.wheel_radius_m = 0.101;         assert_false(config_same_geometry(&a, &b));
+    b = a; b.ticks_per_rev = 2048;           assert_false(config_same_geometry(&a, &b));
+    b = a; b.beacon_count = 5;               assert_false(config_same_geometry(&a, &b));
+    b = a; b.beacon[5].z_m = 1.1;            assert_false(config_same_geometry(&a, &b));
+    /* beyond count: not part of the site */
+    b = a; b.beacon[9].x_m = 3.0;            assert_true(config_same_geometry(&a, &b));
 }
 
 static void test_format_error_uses_lines(void **state)
@@ -259,6 +301,7 @@ int main(void)
         cmocka_unit_test(test_repo_site_file),
         cmocka_unit_test_teardown(test_values_and_defaults, teardown),
         cmocka_unit_test(test_unknown_key_in_our_section),
+        cmocka_unit_test(test_unknown_section),
         cmocka_unit_test(test_not_a_number),
         cmocka_unit_test(test_out_of_range_and_bad_values),
         cmocka_unit_test_teardown(test_wheel_scale_calibration_key, teardown),

@@ -3,7 +3,8 @@
  * the kleeman-lab site, beacons firing in their cycle, a robot standing or
  * driving straight, pulse-detection and encoder frames with their node
  * clocks (offset, wrap of the 32-bit counters and of the 14-bit tick
- * counts), fed in time order with their receive times. Checks the filter's
+ * counts), fed in time order with their receive times (a pulse frame leaves
+ * the receiver node PULSE_HOLD_US after its NodeTime). Checks the filter's
  * start and accuracy through the glue, the tick-to-distance conversion,
  * health events and SIGHUP reconfiguration.
  */
@@ -26,6 +27,9 @@
 #define RX_NODE_OFFSET_US 4289967296LL /* receiver node clock = bridge + this: wraps at 5 s */
 #define ENC_NODE_OFFSET_US 123456789LL
 #define DELAY_US 150                   /* CAN + kernel delay of every frame */
+/* The receiver node holds a detection for the double-pulse window
+ * (double_pulse_spacing_s 3 ms + 1 ms) before it sends the frame. */
+#define PULSE_HOLD_US 4000
 
 struct world {
     struct bridge_config cfg;
@@ -40,6 +44,13 @@ struct world {
     int rx_per_pulse;        /* receivers hearing each firing: 1 (facing) or 3 (and neighbours) */
     int firings_sent;
     uint8_t pulse_counter, enc_counter;
+    bool encoders_off;       /* encoder node silent */
+    /* receive times of the pulse frames sent (ring), and what the updates
+     * said about the frame behind them */
+    int64_t pulse_rx[64];
+    unsigned pulse_rx_n;
+    bool check_updates;
+    int updates_seen, updates_bad;
 };
 
 static struct world W;
@@ -82,6 +93,22 @@ static int64_t arrival(const struct world *w, int b, int64_t fire_us, int *recei
     return arrival_rx(w, b, fire_us, 0, receiver);
 }
 
+/* With check_updates: an update reported after a frame received at now_us
+ * (or a tick at now_us) must name a pulse frame received before it
+ * (encoders off: only pulses are fused). */
+static void check_update(struct world *w, int64_t now_us)
+{
+    int64_t rx;
+    if (!w->check_updates || !estimator_take_update(&w->est, &rx))
+        return;
+    w->updates_seen++;
+    bool known = false;
+    for (unsigned i = 0; i < 64 && i < w->pulse_rx_n; i++)
+        known = known || w->pulse_rx[i] == rx;
+    if (!known || rx > now_us)
+        w->updates_bad++;
+}
+
 /* One frame per receiver that hears the firing, in order of arrival. */
 static void send_pulse(struct world *w, int b, int64_t fire_us)
 {
@@ -101,12 +128,16 @@ static void send_pulse(struct world *w, int b, int64_t fire_us)
             .receiver = (uint8_t)rx[i], .double_pulse = b == 0,
             .counter = w->pulse_counter++ & 7, .amplitude_mv = 800, .width_us = 2500,
         };
-        estimator_pulse(&w->est, &p, ta[i] + DELAY_US);
+        int64_t rx_us = ta[i] + PULSE_HOLD_US + DELAY_US;
+        estimator_pulse(&w->est, &p, rx_us);
+        check_update(w, rx_us);
+        w->pulse_rx[w->pulse_rx_n++ % 64] = rx_us;
     }
     w->firings_sent++;
 }
 
-static void send_encoders(struct world *w, int64_t t_us)
+/* The sample taken at t_us (bridge clock), received at rx_us. */
+static void send_encoders_rx(struct world *w, int64_t t_us, int64_t rx_us)
 {
     double x, y;
     pose_at(w, t_us, &x, &y);
@@ -118,7 +149,12 @@ static void send_encoders(struct world *w, int64_t t_us)
         .node_time_us = (uint32_t)(t_us + ENC_NODE_OFFSET_US),
         .left_ticks = t14, .right_ticks = t14, .counter = w->enc_counter++ & 15,
     };
-    estimator_encoders(&w->est, &f, t_us + DELAY_US);
+    estimator_encoders(&w->est, &f, rx_us);
+}
+
+static void send_encoders(struct world *w, int64_t t_us)
+{
+    send_encoders_rx(w, t_us, t_us + DELAY_US);
 }
 
 /* Run the world from t_from to t_to (bridge clock, us): encoders at 100 Hz,
@@ -132,7 +168,8 @@ static void run(struct world *w, int64_t t_from, int64_t t_to)
         k = 0;
     int64_t next_fire = w->fire0_us + k * T;
     int64_t next_tick = t_from - (t_from % 33333) + 33333;
-    /* each event in time order; a pulse is delivered at its arrival */
+    /* each event in time order; a pulse is delivered at its arrival plus
+     * the receiver node's hold */
     for (;;) {
         int b = (int)(((next_fire - w->fire0_us) / T) % 6);
         int rx;
@@ -145,6 +182,7 @@ static void run(struct world *w, int64_t t_from, int64_t t_to)
                     ta = t2;
             }
         }
+        ta += PULSE_HOLD_US;
         int64_t tn = next_enc;
         if (ta < tn)
             tn = ta;
@@ -159,10 +197,12 @@ static void run(struct world *w, int64_t t_from, int64_t t_to)
                 send_pulse(w, b, next_fire);
             next_fire += T;
         } else if (tn == next_enc) {
-            send_encoders(w, tn);
+            if (!w->encoders_off)
+                send_encoders(w, tn);
             next_enc += 10000;
         } else {
             estimator_tick(&w->est, tn);
+            check_update(w, tn);
             next_tick += 33333;
         }
     }
@@ -368,6 +408,148 @@ static void test_encoder_glitch_ignored(void **state)
     assert_true(fabs(o.v_mps) < 0.01);
 }
 
+
+/* Encoder samples land on the receiver node's clock at their own time: the
+ * receiver node's hold of each detection (4 ms) is not mistaken for clock
+ * offset (docs/mavlink.md, "Node clocks"). */
+static void test_encoders_mapped_at_their_time(void **state)
+{
+    (void)state;
+    run(&W, 1000000, 10000000);
+    /* last sample at 9.99 s on the bridge clock; the receiver node's clock
+     * reads bridge + RX_NODE_OFFSET_US */
+    int64_t want = 9990000 + RX_NODE_OFFSET_US;
+    if (llabs(W.est.enc_last_node_us - want) > 100)
+        fail_msg("encoder sample mapped to %lld, want %lld (off %lld us)",
+                 (long long)W.est.enc_last_node_us, (long long)want,
+                 (long long)(W.est.enc_last_node_us - want));
+}
+
+/* A late encoder frame (older than one already used) is dropped before it
+ * touches the tick reference: the newer sample holds its distance already,
+ * so taking it as the reference would count that distance twice. */
+static void test_late_encoder_frame_dropped(void **state)
+{
+    (void)state;
+    W.x0 = 2.0;
+    W.y0 = 4.0;
+    W.th = 0.2;
+    W.v_mps = 0.4;
+    W.t_move_us = 6000000;
+    run(&W, 1000000, 12000000);
+    /* for 4 s, every other sample comes late, just after the next one (a
+     * reordering interface): 200 late frames */
+    for (int64_t t = 12000000; t < 16000000; t += 20000) {
+        W.encoders_off = true;
+        run(&W, t, t + 10001);
+        send_encoders(&W, t + 10000);  /* the newer one, on time */
+        uint16_t ref = W.est.enc_left;
+        int64_t ref_t = W.est.enc_last_node_us;
+        send_encoders_rx(&W, t, t + 10000 + DELAY_US + 50); /* the older one, after it */
+        assert_int_equal(W.est.enc_left, ref);
+        assert_true(W.est.enc_last_node_us == ref_t);
+        run(&W, t + 10001, t + 20000);
+        W.encoders_off = false;
+    }
+    assert_int_equal(W.est.c.stale_encoders, 200);
+    run(&W, 16000000, 17000000);
+    struct est_output o;
+    assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+    double x, y;
+    pose_at(&W, o.t_local_us, &x, &y);
+    double err = hypot(o.x_m - x, o.y_m - y);
+    if (err > 0.05)
+        fail_msg("position error %.3f m", err);
+    if (fabs(o.v_mps - W.v_mps) > 0.02)
+        fail_msg("v %.4f m/s, want %.4f (distance counted twice?)", o.v_mps, W.v_mps);
+}
+
+/* A pulse the sequencer holds (merge window, pop slack) and that is fused
+ * later, by the periodic tick or by a later frame, is reported with the
+ * receive time of its own frame: the latency figure starts there. */
+static void test_held_pulse_reports_its_own_frame(void **state)
+{
+    (void)state;
+    run(&W, 1000000, 12000000);
+    assert_true(W.est.c.pulses_accepted > 40);
+    int64_t rx;
+    (void)estimator_take_update(&W.est, &rx);
+    W.encoders_off = true; /* pulses only from here: each one is held */
+    W.check_updates = true;
+    run(&W, 12000000, 16000000);
+    /* about 26 firings in 4 s, each fused once it is popped */
+    if (W.updates_seen < 20)
+        fail_msg("%d updates", W.updates_seen);
+    assert_int_equal(W.updates_bad, 0);
+    struct est_output o;
+    assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+    assert_true(o.source_rx_us > 15000000 && o.source_rx_us < 16000000);
+    assert_true(o.measurement_seq > 100);
+    /* an extrapolation carries the same newest measurement */
+    struct est_output o2;
+    assert_int_equal(estimator_output(&W.est, 16000000, &o2), 0);
+    assert_true(o2.source_rx_us == o.source_rx_us);
+    assert_true(o2.measurement_seq == o.measurement_seq);
+}
+
+/* SIGHUP with tuning that moves the sequencer's windows (speed of sound
+ * and its sigma set max flight and merge window) is not a geometry change:
+ * the filter keeps its state and goes on; wheels, a beacon or the
+ * calibration switch are. */
+static void test_reconfigure_tuning_keeps_filter(void **state)
+{
+    (void)state;
+    run(&W, 1000000, 12000000);
+    struct est_output before, after;
+    assert_int_equal(estimator_output(&W.est, 0, &before), 0);
+    assert_true(before.converged);
+    char err[CONFIG_ERR_LEN];
+    struct bridge_config c = W.cfg;
+    c.speed_of_sound_mps = 345.0;
+    c.sigma_speed_of_sound_mps = 8.0;
+    bl_seq_config old_seq = W.est.seqcfg;
+    assert_int_equal(estimator_reconfigure(&W.est, &c, err, sizeof err), 0);
+    assert_true(W.est.seqcfg.max_flight_us != old_seq.max_flight_us); /* new windows */
+    assert_int_equal(estimator_output(&W.est, 0, &after), 0);
+    assert_true(after.x_m == before.x_m && after.y_m == before.y_m);
+    assert_int_equal(after.reset_counter, before.reset_counter);
+    uint64_t accepted = W.est.c.pulses_accepted;
+    run(&W, 12000000, 16000000);
+    assert_int_equal(estimator_output(&W.est, 0, &after), 0);
+    assert_true(after.converged);
+    assert_int_equal(after.reset_counter, before.reset_counter);
+    assert_true(W.est.c.pulses_accepted > accepted + 20);
+    assert_true(hypot(after.x_m - W.x0, after.y_m - W.y0) < 0.03);
+    /* geometry: the wheel radius */
+    struct bridge_config g = c;
+    g.wheel_radius_m *= 1.01;
+    assert_int_equal(estimator_reconfigure(&W.est, &g, err, sizeof err), 1);
+    /* the calibration switched on: the library refuses to keep the state */
+    run(&W, 16000000, 24000000);
+    g.sigma_wheel_scale = 0.02;
+    assert_int_equal(estimator_reconfigure(&W.est, &g, err, sizeof err), 1);
+}
+
+/* Health figures for the HEARTBEAT: none before the start, fresh and
+ * converged after it, stale when nothing has been fused for a while. */
+static void test_health_figures(void **state)
+{
+    (void)state;
+    struct est_health h;
+    estimator_health(&W.est, 1000000, &h);
+    assert_false(h.started);
+    assert_false(h.ever_started);
+    assert_true(h.since_update_us == INT64_MAX);
+    run(&W, 1000000, 12000000);
+    estimator_health(&W.est, 12000000, &h);
+    assert_true(h.started && h.ever_started && h.converged && h.finite);
+    assert_true(h.since_update_us >= 0 && h.since_update_us < 20000);
+    assert_int_equal(h.window_len, 12);
+    assert_true(h.window_rejected <= 1);
+    estimator_health(&W.est, 14500000, &h); /* 2.5 s without a frame */
+    assert_true(h.since_update_us > 2400000);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -378,6 +560,11 @@ int main(void)
         cmocka_unit_test_setup(test_reconfigure, setup),
         cmocka_unit_test_setup(test_encoder_glitch_ignored, setup),
         cmocka_unit_test_setup(test_every_receiver_of_a_pulse_fused, setup),
+        cmocka_unit_test_setup(test_encoders_mapped_at_their_time, setup),
+        cmocka_unit_test_setup(test_late_encoder_frame_dropped, setup),
+        cmocka_unit_test_setup(test_held_pulse_reports_its_own_frame, setup),
+        cmocka_unit_test_setup(test_reconfigure_tuning_keeps_filter, setup),
+        cmocka_unit_test_setup(test_health_figures, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

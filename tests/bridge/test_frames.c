@@ -1,6 +1,7 @@
 /*
  * cmocka: CAN frame decoding (bridge/frames.c) through the generated codec,
- * bad frames counted and dropped, rolling-counter losses.
+ * bad frames counted and dropped, rolling-counter losses, duplicated and
+ * late (reordered) frames dropped and counted, each on its own.
  * Frames are built with the cantools-generated pack functions, so the test
  * checks our use of the codec against the DBC, not a copy of its layout.
  */
@@ -160,14 +161,16 @@ static void test_rolling_counters(void **state)
     struct frame_counters c;
     frame_counters_init(&c);
     struct frame f;
-    /* encoders: modulo 16; 14, 15, 0 in order, then 3 (1 and 2 lost) */
+    /* encoders: modulo 16; 14, 15, 0 in order, then 3 (1 and 2 lost),
+     * then 3 again with another stamp: a whole lap of 16 went by (15 lost) */
     static const uint8_t seq[] = { 14, 15, 0, 3, 3 };
     for (size_t i = 0; i < sizeof seq; i++) {
         struct can_msg m = enc_msg((uint32_t)i, 0, 0, seq[i]);
         assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
     }
-    assert_int_equal(c.lost[FRAME_ENCODERS], 2);
-    assert_int_equal(c.duplicates[FRAME_ENCODERS], 1);
+    assert_int_equal(c.lost[FRAME_ENCODERS], 2 + 15);
+    assert_int_equal(c.duplicates[FRAME_ENCODERS], 0);
+    assert_int_equal(c.received[FRAME_ENCODERS], 5);
     /* pulses: modulo 8; 6, 7, 0, 1 then 5 (2, 3, 4 lost) */
     static const uint8_t pseq[] = { 6, 7, 0, 1, 5 };
     for (size_t i = 0; i < sizeof pseq; i++) {
@@ -183,7 +186,122 @@ static void test_rolling_counters(void **state)
         assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
     }
     assert_int_equal(c.lost[FRAME_STATUS], 1); /* node 1: 6 -> 8 */
-    assert_int_equal(frame_lost_total(&c), 6);
+    assert_int_equal(frame_lost_total(&c), 21);
+    assert_int_equal(frame_duplicates_total(&c) + frame_out_of_order_total(&c), 0);
+}
+
+/* The same frame twice (a re-delivery): dropped, counted as a duplicate,
+ * not as lost, and the next frame is in order; also a repeat of a frame
+ * two back. */
+static void test_duplicates_dropped(void **state)
+{
+    (void)state;
+    struct frame_counters c;
+    frame_counters_init(&c);
+    struct frame f;
+    struct can_msg a = enc_msg(1000, 10, 10, 4), b = enc_msg(11000, 20, 20, 5),
+                   n = enc_msg(21000, 30, 30, 6);
+    assert_int_equal(frame_decode(&c, &a, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &b, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &b, &f), FRAME_DUPLICATE);
+    assert_int_equal(frame_decode(&c, &a, &f), FRAME_DUPLICATE);
+    assert_int_equal(frame_decode(&c, &n, &f), FRAME_OK);
+    assert_int_equal(c.duplicates[FRAME_ENCODERS], 2);
+    assert_int_equal(c.received[FRAME_ENCODERS], 3);
+    assert_int_equal(c.lost[FRAME_ENCODERS], 0);
+    assert_int_equal(c.out_of_order[FRAME_ENCODERS], 0);
+    /* pulses: two receivers hearing one firing at the same microsecond are
+     * two frames (receiver and counter differ), not a duplicate */
+    struct can_msg p1 = pulse_msg(5000, 2, 0, 0, 900, 1250);
+    struct can_msg p2 = pulse_msg(5000, 3, 0, 1, 900, 1250);
+    assert_int_equal(frame_decode(&c, &p1, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &p2, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &p2, &f), FRAME_DUPLICATE);
+    assert_int_equal(c.duplicates[FRAME_PULSE], 1);
+    /* status: per node */
+    struct can_msg s1 = status_msg(1, 3, 0);
+    assert_int_equal(frame_decode(&c, &s1, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &s1, &f), FRAME_DUPLICATE);
+    assert_int_equal(c.duplicates[FRAME_STATUS], 1);
+    assert_int_equal(frame_duplicates_total(&c), 4);
+    assert_int_equal(frame_lost_total(&c), 0);
+}
+
+/* A frame delivered after a newer one: at first its place counts as lost;
+ * when it comes it is not lost after all (no ~15 lost for a counter that
+ * went back by one), counted as out of order and dropped; the frames after
+ * it are in order again. */
+static void test_out_of_order_dropped(void **state)
+{
+    (void)state;
+    struct frame_counters c;
+    frame_counters_init(&c);
+    struct frame f;
+    /* encoders, counters 3, 5, 4, 6 with their node times */
+    struct can_msg e3 = enc_msg(30000, 3, 3, 3), e4 = enc_msg(40000, 4, 4, 4),
+                   e5 = enc_msg(50000, 5, 5, 5), e6 = enc_msg(60000, 6, 6, 6);
+    assert_int_equal(frame_decode(&c, &e3, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &e5, &f), FRAME_OK);
+    assert_int_equal(c.lost[FRAME_ENCODERS], 1);
+    assert_int_equal(frame_decode(&c, &e4, &f), FRAME_OUT_OF_ORDER);
+    assert_int_equal(c.lost[FRAME_ENCODERS], 0);
+    assert_int_equal(c.out_of_order[FRAME_ENCODERS], 1);
+    assert_int_equal(frame_decode(&c, &e6, &f), FRAME_OK);
+    assert_int_equal(c.lost[FRAME_ENCODERS], 0);
+    /* again, across the counter's wrap: 14, 1, 15, 0 (15 and 0 late) */
+    struct can_msg w14 = enc_msg(140000, 1, 1, 14), w15 = enc_msg(150000, 1, 1, 15),
+                   w0 = enc_msg(160000, 1, 1, 0), w1 = enc_msg(170000, 1, 1, 1);
+    frame_counters_init(&c);
+    assert_int_equal(frame_decode(&c, &w14, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &w1, &f), FRAME_OK);
+    assert_int_equal(c.lost[FRAME_ENCODERS], 2);
+    assert_int_equal(frame_decode(&c, &w15, &f), FRAME_OUT_OF_ORDER);
+    assert_int_equal(frame_decode(&c, &w0, &f), FRAME_OUT_OF_ORDER);
+    assert_int_equal(c.lost[FRAME_ENCODERS], 0);
+    assert_int_equal(c.out_of_order[FRAME_ENCODERS], 2);
+    assert_int_equal(c.duplicates[FRAME_ENCODERS], 0);
+    /* a place that was not counted lost is no late frame: 2, 3, then 2
+     * with a new stamp is a restart of the counter (15 lost), passed on */
+    frame_counters_init(&c);
+    struct can_msg a = enc_msg(1000, 0, 0, 2), b = enc_msg(2000, 0, 0, 3),
+                   r = enc_msg(900, 0, 0, 2);
+    assert_int_equal(frame_decode(&c, &a, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &b, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &r, &f), FRAME_OK);
+    assert_int_equal(c.out_of_order[FRAME_ENCODERS], 0);
+    assert_int_equal(c.lost[FRAME_ENCODERS], 14);
+    /* pulses (modulo 8): 6, 0, 7: the 7 was late; its NodeTime must be
+     * older than the newest frame's */
+    frame_counters_init(&c);
+    struct can_msg p6 = pulse_msg(6000, 1, 0, 6, 900, 1250),
+                   p0 = pulse_msg(8000, 1, 0, 0, 900, 1250),
+                   p7 = pulse_msg(7000, 2, 0, 7, 900, 1250);
+    assert_int_equal(frame_decode(&c, &p6, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &p0, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &p7, &f), FRAME_OUT_OF_ORDER);
+    assert_int_equal(c.lost[FRAME_PULSE], 0);
+    assert_int_equal(c.out_of_order[FRAME_PULSE], 1);
+    assert_int_equal(frame_out_of_order_total(&c), 1);
+    /* two receivers of one firing, swapped on the way, whose NodeTimes were
+     * already out of order at the node (latency jitter): still late */
+    struct can_msg q1 = pulse_msg(9300, 4, 0, 1, 900, 1250),
+                   q2 = pulse_msg(9100, 5, 0, 2, 900, 1250);
+    assert_int_equal(frame_decode(&c, &q2, &f), FRAME_OK);
+    assert_int_equal(frame_decode(&c, &q1, &f), FRAME_OUT_OF_ORDER);
+    assert_int_equal(c.lost[FRAME_PULSE], 0);
+    assert_int_equal(c.out_of_order[FRAME_PULSE], 2);
+    /* ... and 4 lost in a burst (6, [7, 0, 1, 2], 3) whose place 3 was
+     * skipped a while before stays a gap, not a late frame: its stamp is
+     * newer */
+    frame_counters_init(&c);
+    static const uint8_t pc[] = { 1, 2, 4, 5, 6, 3 };
+    static const uint32_t pt[] = { 1000, 2000, 4000, 5000, 6000, 11000 };
+    for (size_t i = 0; i < sizeof pc; i++) {
+        struct can_msg m = pulse_msg(pt[i], 1, 0, pc[i], 900, 1250);
+        assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
+    }
+    assert_int_equal(c.lost[FRAME_PULSE], 1 + 4);
+    assert_int_equal(c.out_of_order[FRAME_PULSE], 0);
 }
 
 int main(void)
@@ -195,6 +313,8 @@ int main(void)
         cmocka_unit_test(test_unknown_ids),
         cmocka_unit_test(test_out_of_range),
         cmocka_unit_test(test_rolling_counters),
+        cmocka_unit_test(test_duplicates_dropped),
+        cmocka_unit_test(test_out_of_order_dropped),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -57,9 +57,13 @@ static void test_json_report(void **state)
     fc.received[FRAME_ENCODERS] = 22;
     fc.malformed = 3;
     fc.lost[FRAME_ENCODERS] = 4;
+    fc.duplicates[FRAME_PULSE] = 6;
+    fc.duplicates[FRAME_STATUS] = 1;
+    fc.out_of_order[FRAME_ENCODERS] = 8;
     struct stats_report r = { .frames = &fc, .kernel_drops = 5,
                               .latency_p50_us = 42, .latency_p99_us = 99,
-                              .replay_frames_per_s = 12345.6 };
+                              .replay_frames_per_s = 12345.6,
+                              .record_write_errors = 9, .estimates_write_errors = 2 };
     char path[] = "/tmp/test_stats_XXXXXX";
     int fd = mkstemp(path);
     close(fd);
@@ -77,6 +81,14 @@ static void test_json_report(void **state)
     assert_non_null(strstr(buf, "\"dropped_by_kernel\": 5,"));
     assert_non_null(strstr(buf, "\"latency_p99_us\": 99,"));
     assert_non_null(strstr(buf, "\"replay_frames_per_s\": 12345.6,"));
+    assert_non_null(strstr(buf, "\"duplicates\": 7,"));
+    assert_non_null(strstr(buf, "\"duplicates_per_frame\": {\"pulse_detection\": 6, "
+                                "\"wheel_encoders\": 0, \"node_status\": 1}"));
+    assert_non_null(strstr(buf, "\"out_of_order\": 8,"));
+    assert_non_null(strstr(buf, "\"out_of_order_per_frame\": {\"pulse_detection\": 0, "
+                                "\"wheel_encoders\": 8, \"node_status\": 0}"));
+    assert_non_null(strstr(buf, "\"write_errors\": 11,"));
+    assert_non_null(strstr(buf, "\"write_errors_per_file\": {\"record\": 9, \"estimates\": 2}"));
     assert_int_equal(stats_write_json(&r, "/nonexistent/dir/s.json") < 0, 1);
 }
 

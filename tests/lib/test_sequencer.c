@@ -235,10 +235,57 @@ static void test_config_from_site(void **state) {
     bl_seq_config before = c;
     assert_int_equal(bl_sequencer_config_from_site(&site, (bl_real)40.0, &c), BL_ECONFIG);
     assert_memory_equal(&before, &c, sizeof c);
-    site.speed_of_sound_mps = (bl_real)NAN;
-    assert_int_equal(bl_sequencer_config_from_site(&site, 0, &c), BL_ECONFIG);
+    /* NaN/inf anywhere in what the derivation reads: BL_EINVAL (common.h),
+     * *out untouched. Before: NaN speed of sound gave BL_ECONFIG, and NaN
+     * beacon coordinates or receiver height gave BL_OK (the farthest-pair
+     * comparisons skip a NaN). */
+    const bl_real bad_values[3] = {(bl_real)NAN, (bl_real)INFINITY, (bl_real)-INFINITY};
+    for (int v = 0; v < 3; ++v) {
+        const bl_real bad = bad_values[v];
+        for (int field = 0; field < 11; ++field) {
+            bl_config s2 = site;
+            bl_real max_d = 0;
+            switch (field) {
+            case 0: s2.speed_of_sound_mps = bad; break;
+            case 1: s2.sigma_speed_of_sound_mps = bad; break;
+            case 2: s2.beacon_period_s = bad; break;
+            case 3: s2.double_pulse_spacing_s = bad; break;
+            case 4: s2.burst_length_s = bad; break;
+            case 5: s2.ring_radius_m = bad; break;
+            case 6: s2.receiver_height_m = bad; break;
+            case 7: s2.beacons[0].x_m = bad; break;
+            case 8: s2.beacons[N_BEACONS - 1].y_m = bad; break;
+            case 9: s2.beacons[2].z_m = bad; break;
+            case 10: max_d = bad; break;
+            }
+            c = before;
+            if (bl_sequencer_config_from_site(&s2, max_d, &c) != BL_EINVAL)
+                fail_msg("field %d = %g: expected BL_EINVAL", field, (double)bad);
+            assert_memory_equal(&before, &c, sizeof c);
+            /* also with an explicit distance, where the beacons are not needed */
+            if (field != 10) {
+                assert_int_equal(bl_sequencer_config_from_site(&s2, (bl_real)16.97, &c), BL_EINVAL);
+                assert_memory_equal(&before, &c, sizeof c);
+            }
+        }
+    }
+    /* a NaN beyond beacon_count is not read */
+    bl_config s3 = site;
+    s3.beacons[N_BEACONS].x_m = (bl_real)NAN;
+    assert_int_equal(bl_sequencer_config_from_site(&s3, 0, &c), BL_OK);
+    /* finite but unusable stays BL_ECONFIG */
+    s3 = site;
+    s3.beacons[1].x_m = (bl_real)1e7; /* 10,000 km away */
+    c = before;
+    assert_int_equal(bl_sequencer_config_from_site(&s3, 0, &c), BL_ECONFIG);
     assert_memory_equal(&before, &c, sizeof c);
+    s3 = site;
+    s3.speed_of_sound_mps = (bl_real)20; /* s_min below 100 m/s */
+    assert_int_equal(bl_sequencer_config_from_site(&s3, 0, &c), BL_ECONFIG);
+    assert_memory_equal(&before, &c, sizeof c);
+    assert_int_equal(bl_sequencer_config_from_site(&site, (bl_real)2e6, &c), BL_EINVAL);
     assert_int_equal(bl_sequencer_config_from_site(NULL, 0, &c), BL_EINVAL);
+    assert_int_equal(bl_sequencer_config_from_site(&site, 0, NULL), BL_EINVAL);
 }
 
 /* Steady stream with the node's double-pulse flag: everything before the
@@ -889,8 +936,13 @@ static void test_api_misuse(void **state) {
     assert_true(fabs((double)h.period_us - 150100.0) < 0.1);
     assert_true(fabs((double)h.fire_sigma_us - 200.0) < 0.01);
     assert_true(fabs((double)h.period_sigma_us - 1.0) < 0.001);
+    const bl_seq_hint h_ok = h;
     est.period_s = (bl_real)NAN;
     assert_int_equal(bl_sequencer_hint_from_estimate(&est, &h), BL_EINVAL);
+    est.period_s = (bl_real)0.1501;
+    est.sigma_t0_s = (bl_real)INFINITY;
+    assert_int_equal(bl_sequencer_hint_from_estimate(&est, &h), BL_EINVAL);
+    assert_memory_equal(&h, &h_ok, sizeof h);
 
     /* reset forgets pending pulses and the horizon, keeps counters */
     const uint32_t dets = seq.counters.detections;

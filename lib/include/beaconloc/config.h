@@ -101,8 +101,11 @@ typedef struct bl_config {
     bl_real reset_sigma_theta_rad;    /* heading σ after a snapshot (re-)start, > 0 */
     bl_real initial_sigma_v_mps;      /* σ of v after a snapshot (re-)start (v = 0), > 0 */
     bl_real initial_sigma_omega_radps; /* σ of ω after a snapshot (re-)start (ω = 0), > 0 */
-    bl_real max_predict_gap_s;        /* a predict/fuse further ahead than this returns
-                                         BL_ETIME (stale filter: re-start it), > 0 */
+    bl_real max_predict_gap_s;        /* longest extrapolation of the state (s), (0, 3600]:
+                                         a predict further ahead returns BL_ETIME; a
+                                         pulse further ahead finds the filter stale and
+                                         it re-initialises itself from the snapshot of
+                                         the fresh pulses (filter.h, "Time gaps") */
 } bl_config;
 
 /* Fills *cfg with the kleeman-lab site (hw_sim/scenarios/kleeman-lab.ini)

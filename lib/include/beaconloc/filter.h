@@ -40,14 +40,38 @@
  * snapshot of the last cycle's pulses (kept per beacon, accepted or not),
  * keeping s and T, heading with σ cfg.reset_sigma_theta_rad, and bumps
  * the reset counter (fuse_pulse returns status BL_PULSE_RESET).
+ * Time gaps: the state is never extrapolated further than
+ * cfg.max_predict_gap_s. A pulse arriving later than that after the state
+ * time (no predict for that long: encoders silent, the caller paused, or a
+ * caller that fuses pulses without predicting) makes the filter *stale*:
+ * fuse_pulse keeps the pulse in the snapshot table (status BUFFERED, BL_OK)
+ * and, as soon as the table's latest cycle covers min(4, N) beacons and the
+ * fix explains them, re-initialises from that snapshot (status RESET,
+ * reset counter bumped, state time = the latest arrival; heading kept with
+ * σ cfg.reset_sigma_theta_rad, s and T kept with their variance grown by
+ * their random walk over the gap, wheel scales kept). Pulses from before
+ * the gap are more than a cycle older and take no part. Until then the
+ * stale state stays as it was: predict and estimate_at to the present
+ * return BL_ETIME, bl_filter_estimate() reports the old t_us. So the filter
+ * never locks itself out; a caller that never predicts gets a reset every
+ * max_predict_gap_s (and no process noise between them): call
+ * bl_filter_predict() (constant velocity) up to each arrival instead.
  *
  * Errors: every function returns BL_OK or a negative bl_error and, on error,
- * leaves *f byte-identical. Bad *data* (echoes, outliers) is not an error:
- * it is rejected by the innovation gate and counted per beacon.
- * Cost: fuse_pulse O(8²) per IEKF iteration (<= cfg.iekf_max_iterations),
- * predict O(8²) (sparse Jacobians); no heap; worst stack chain < 2 KiB on
- * Cortex-M4F (make size-m4). Not thread-safe per instance; instances are
- * independent.
+ * leaves *f byte-identical. Errors are bad arguments (NULL, NaN/inf, out
+ * of range, an index beyond the configured count, time going backwards: a
+ * predict before the state time, a pulse older than it by more than
+ * cfg.max_predict_gap_s) or requests that cannot be met (a predict further
+ * ahead than that, a snapshot start without enough pulses, an update that
+ * would leave the state non-finite); each function lists its own. Bad
+ * *data* (echoes, outliers) is not an error: it is rejected by the
+ * innovation gate and counted per beacon; a stale filter (above) is not an
+ * error either.
+ * Cost (BL_FILTER_NX = 10 states): fuse_pulse O(NX²) = O(10²) per IEKF
+ * iteration (<= cfg.iekf_max_iterations), predict O(NX²) (sparse
+ * Jacobians); a snapshot (re)start adds one bl_solve_tdoa_2d; no heap;
+ * worst stack chain < 2 KiB on Cortex-M4F (make size-m4). Not thread-safe
+ * per instance; instances are independent.
  */
 #ifndef BEACONLOC_FILTER_H
 #define BEACONLOC_FILTER_H
@@ -115,12 +139,15 @@ typedef struct bl_filter_prior {
 typedef enum bl_pulse_status {
     BL_PULSE_ACCEPTED = 0, /* fused */
     BL_PULSE_REJECTED = 1, /* outside the innovation gate (echo / outlier); counted */
-    BL_PULSE_BUFFERED = 2, /* filter not started yet: kept for the snapshot start */
+    BL_PULSE_BUFFERED = 2, /* filter not started yet, or stale after a time gap
+                              (see "Time gaps" above): kept for the snapshot
+                              (re)start */
     BL_PULSE_STARTED = 3,  /* this pulse completed a cycle: filter started from the
                               snapshot solver */
-    BL_PULSE_RESET = 4     /* persistent rejection: filter re-initialised from the
-                              snapshot solver on the last cycle's pulses; reset
-                              counter bumped */
+    BL_PULSE_RESET = 4     /* persistent rejection, or a stale filter's first
+                              complete cycle after a time gap: re-initialised
+                              from the snapshot solver on the last cycle's
+                              pulses; reset counter bumped */
 } bl_pulse_status;
 
 typedef struct bl_pulse_result {
@@ -143,7 +170,10 @@ typedef struct bl_estimate {
     bl_real sigma_speed_of_sound_mps, sigma_period_s, sigma_t0_s;
     bl_real wheel_scale_left, wheel_scale_right; /* calibrated wheel scales (1 = nominal) */
     bl_real sigma_wheel_scale_left, sigma_wheel_scale_right;
-    /* Covariance of (x_m, y_m, theta_rad, v_mps, omega_radps), row-major 5x5. */
+    /* Covariance of (x_m, y_m, theta_rad, v_mps, omega_radps), row-major 5x5,
+     * entry (r, c) in unit(r)·unit(c): m² for (x, y) and their product, rad²,
+     * (m/s)², (rad/s)² on the diagonal; e.g. (x, θ) m·rad, (x, v) m²/s,
+     * (θ, ω) rad²/s, (v, ω) m·rad/s². */
     bl_real cov[25];
     bool started;               /* a pose exists (else only counters are valid) */
     bool converged;             /* position σ fell below cfg.converged_sigma_xy_m
@@ -184,7 +214,10 @@ int bl_filter_start(bl_filter *f, const bl_filter_prior *prior);
 /* Start (or restart) from the snapshot solver on the buffered last pulse
  * of each beacon (those of the latest firing cycle); heading is not
  * observable from one snapshot, so it is given (σ sigma_theta_rad > 0).
- * The state time becomes the latest buffered arrival.
+ * The buffer holds the last pulse per beacon of every fuse_pulse call that
+ * returned BL_OK (fused, gated out, buffered before the start or while
+ * stale). The state time becomes the latest buffered arrival. A started
+ * filter keeps its s, T (with their variances) and wheel scales.
  * Errors: BL_EINVAL, BL_ENOTINIT, BL_EDEGENERATE (fewer than 3 beacons in
  * the last cycle or singular geometry), BL_ENOCONVERGE (no convergence, or
  * with > 3 beacons a residual above 3σ of cfg.startup_sigma_arrival_s). */
@@ -194,15 +227,35 @@ int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real sigma_thet
  * d_left_m, d_right_m = distance each wheel rolled in (state time, t_us]
  * as measured with the nominal wheel radius (differential drive, Kleeman
  * 1992 eq. 24 input form); the filter multiplies them by its calibrated
- * wheel scales. Process noise by motion type (stationary / straight /
- * turning, Kleeman §3.10).
- * Errors: BL_EINVAL (non-finite, |d| > 10 m), BL_ENOTINIT (not started),
- * BL_ETIME (t_us < state time, or beyond cfg.max_predict_gap_s). */
+ * wheel scales, then fuses the wheel speeds as a measurement of v, ω
+ * (Kleeman eq. 25).
+ * Process noise by motion type (Kleeman 1992 §3.10, which names the types
+ * but gives no formula; this is our reading), from the increments:
+ *   stationary (both |d| <= 1 µm): no pose noise (no wheel travel, no
+ *     heading noise); the v, ω random walk scaled by
+ *     cfg.stationary_noise_scale;
+ *   moving: each wheel's distance variance cfg.sigma_wheel_per_m²·|d| (m²)
+ *     mapped onto x, y, θ, plus the heading variance "offset plus a fraction
+ *     of the angle increment Δθ = (d_r − d_l)/wheel_base (eq. 24)":
+ *     σ_θ² += heading_noise_rad_per_sqrt_s²·dt + (heading_noise_fraction·Δθ)²;
+ *   straight vs turning is that Δθ term only: a turning step adds
+ *     (fraction·Δθ)² rad² more heading variance than a straight one with
+ *     the same wheel travel. §3.10's "no acceleration" vs "straight ramp"
+ *     is not distinguished: v is measured by the wheels every step.
+ * Errors: BL_EINVAL (NULL, non-finite, |d| > 10 m, or a non-finite result:
+ * refused), BL_ENOTINIT (not initialised / not started), BL_ETIME (t_us <
+ * state time, or more than cfg.max_predict_gap_s after it: the filter is
+ * stale, see "Time gaps" above; it restarts itself from the next cycle of
+ * pulses, or call bl_filter_start()). */
 int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real d_right_m);
 
-/* Predict to t_us with the constant-velocity model (no encoders).
+/* Predict to t_us with the constant-velocity model (no encoders): Kleeman
+ * 1992 eq. 15 with the turn rate as a state, white acceleration noise
+ * cfg.accel_noise_mps2, cfg.angular_accel_noise_radps2.
  * Do not mix with predict_odometry over the same interval; to publish
- * between sensor updates use bl_filter_estimate_at(). Errors as above. */
+ * between sensor updates use bl_filter_estimate_at().
+ * Errors: BL_EINVAL (NULL, non-finite result), BL_ENOTINIT, BL_ETIME (as
+ * predict_odometry). */
 int bl_filter_predict(bl_filter *f, int64_t t_us);
 
 /* Fuse one pulse of beacon beacon_index (0-based) heard by receiver
@@ -213,35 +266,42 @@ int bl_filter_predict(bl_filter *f, int64_t t_us);
  * is found from the predicted t0 and T (nearest firing of that beacon).
  * Not started: the pulse is buffered (status BUFFERED) and the filter starts
  * itself from the snapshot when a cycle is complete (status STARTED).
+ * Stale (arrival more than cfg.max_predict_gap_s after the state time): the
+ * pulse is buffered (BUFFERED) and the filter restarts itself from the
+ * snapshot when the fresh pulses complete a cycle (RESET); see "Time gaps".
  * result may be NULL.
- * Errors: BL_EINVAL (NULL f), BL_EBEACON (beacon_index >= count),
- * BL_EINVAL (receiver_index >= receiver_count), BL_ENOTINIT (not init),
- * BL_ETIME (|arrival - state time| > cfg.max_predict_gap_s; before the
- * start: arrival older than a buffered pulse by more than that),
- * BL_EINVAL (the update would leave the state non-finite: refused). */
+ * Errors: BL_EINVAL (NULL f), BL_ENOTINIT (not init), BL_EBEACON
+ * (beacon_index >= count), BL_EINVAL (receiver_index >= receiver_count),
+ * BL_ETIME (arrival more than cfg.max_predict_gap_s *before* the state
+ * time; before the start: older than a buffered pulse by more than that),
+ * BL_EINVAL (the receiver is on the beacon, or the update would leave the
+ * state non-finite: refused). */
 int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
                          uint32_t receiver_index, bl_pulse_result *result);
 
 /* Raw state and covariance (layout BL_IX_*; t0 relative to the internal
- * epoch), for diagnostics and tests. Either pointer may be NULL.
- * Errors: BL_EINVAL, BL_ENOTINIT (not started). */
+ * epoch; P row-major NXxNX in the units of the states, e.g. P[T0][T0] s²),
+ * for diagnostics and tests. Either pointer may be NULL.
+ * Errors: BL_EINVAL (NULL f), BL_ENOTINIT (not started). */
 int bl_filter_get_state(const bl_filter *f, bl_real x[BL_FILTER_NX],
                         bl_real P[BL_FILTER_NX * BL_FILTER_NX]);
 
 /* Current estimate (at the state time). Counters are valid even before the
- * start (est->started false). Errors: BL_EINVAL, BL_ENOTINIT (not init). */
+ * start (est->started false). Errors: BL_EINVAL (NULL), BL_ENOTINIT (not
+ * init). */
 int bl_filter_estimate(const bl_filter *f, bl_estimate *est);
 
 /* Estimate extrapolated to t_us (>= state time, within max_predict_gap_s)
  * with the constant-velocity model, without changing the filter.
- * Errors: BL_EINVAL, BL_ENOTINIT (not started), BL_ETIME. */
+ * Errors: BL_EINVAL (NULL), BL_ENOTINIT (not started), BL_ETIME (t_us
+ * before the state time or more than max_predict_gap_s after it). */
 int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estimate *est);
 
 /* Predicted next pulse of beacon beacon_index: the firing whose predicted
  * arrival at the ring centre is the first at or after after_us.
- * For the sequencer's windows. Errors: BL_EINVAL, BL_EBEACON,
- * BL_ENOTINIT (not started), BL_ETIME (|after_us - state time| >
- * cfg.max_predict_gap_s). */
+ * For the sequencer's windows. Errors: BL_EINVAL (NULL, or the model is
+ * undefined there: ring centre on the beacon), BL_ENOTINIT (not started),
+ * BL_EBEACON, BL_ETIME (|after_us - state time| > cfg.max_predict_gap_s). */
 int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_index, int64_t after_us,
                                bl_expected_pulse *out);
 

@@ -1,7 +1,8 @@
 /*
  * beaconloc — the filter's models, evaluated at a given state (for tests,
  * tuning and diagnostics; the filter uses the same code internally).
- * State layout: BL_IX_* in filter.h.
+ * State layout: BL_IX_* in filter.h. cfg is read, not checked: pass one
+ * that bl_config_check accepts. Outputs are written only on success.
  */
 #ifndef BEACONLOC_FILTER_MODEL_H
 #define BEACONLOC_FILTER_MODEL_H
@@ -26,8 +27,11 @@ typedef struct bl_pulse_geometry {
 
 /* Arrival-time model (Kleeman 1992 eq. 21 with the receiver's position on
  * the ring and 3D beacon distance): *h_rel_s = predicted arrival - t_s (s);
- * H (BL_FILTER_NX, optional) = ∂h/∂x. Errors: BL_EINVAL (NULL, bad index, non-finite,
- * receiver on the beacon or s <= v). */
+ * H (BL_FILTER_NX, optional) = ∂h/∂x (s per unit of each state).
+ * Errors: BL_EINVAL (NULL cfg/x/g/h_rel_s, receiver_index >= receiver_count,
+ * non-finite x or times, receiver within 1 µm of the beacon, or
+ * s - v·u <= 1e-3 m/s: the pulse cannot catch the receiver),
+ * BL_EBEACON (beacon_index >= cfg->beacon_count). */
 int bl_model_pulse(const bl_config *cfg, const bl_real x[BL_FILTER_NX], const bl_pulse_geometry *g,
                    bl_real *h_rel_s, bl_real H[BL_FILTER_NX]);
 
@@ -36,15 +40,18 @@ int bl_model_pulse(const bl_config *cfg, const bl_real x[BL_FILTER_NX], const bl
  * wheel scales (true distances k_left·d_left_m, k_right·d_right_m):
  * x_out = f(x, u); F (NXxNX row-major, optional) = ∂f/∂x (including the
  * wheel-scale columns); G (NXx2 row-major, optional) = ∂f/∂(dL, dR) of the
- * measured increments.
+ * measured increments (m/m for x, y; rad/m for θ).
  * v and ω pass through unchanged (the filter then fuses the wheel speeds as
- * a measurement, Kleeman eq. 25). Errors: BL_EINVAL. */
+ * a measurement, Kleeman eq. 25).
+ * Errors: BL_EINVAL (NULL cfg/x/x_out, non-finite x or increments,
+ * cfg->wheel_base_m <= 0). */
 int bl_model_odometry(const bl_config *cfg, const bl_real x[BL_FILTER_NX], bl_real d_left_m, bl_real d_right_m,
                       bl_real x_out[BL_FILTER_NX], bl_real F[BL_FILTER_NX * BL_FILTER_NX],
                       bl_real G[BL_FILTER_NX * 2]);
 
 /* Constant-velocity transition over dt_s >= 0 (Kleeman 1992 eq. 15 with
- * the turn rate as a state): x_out, F (optional). Errors: BL_EINVAL. */
+ * the turn rate as a state): x_out, F (optional).
+ * Errors: BL_EINVAL (NULL x/x_out, non-finite x or dt_s, dt_s < 0). */
 int bl_model_constant_velocity(const bl_real x[BL_FILTER_NX], bl_real dt_s, bl_real x_out[BL_FILTER_NX],
                                bl_real F[BL_FILTER_NX * BL_FILTER_NX]);
 

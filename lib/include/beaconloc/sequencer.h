@@ -261,8 +261,14 @@ int bl_sequencer_config_default(bl_seq_config *cfg);
  * max_distance_m <= 0 means "largest distance between two beacons plus the
  * ring radius" (robot inside the beacons' hull). Tolerances keep their
  * bl_sequencer_config_default values. *out is written only on success.
- * Errors: BL_EINVAL (NULL, NaN), BL_ECONFIG (site config unusable or the
- * resulting windows overlap, see bl_sequencer_config_check). */
+ * Errors: BL_EINVAL (NULL; NaN/inf in max_distance_m or in a site field
+ * used here: speed_of_sound_mps, sigma_speed_of_sound_mps, beacon_period_s,
+ * double_pulse_spacing_s, burst_length_s, ring_radius_m, receiver_height_m,
+ * beacons[0..beacon_count-1]; max_distance_m > 1e6 m), BL_ECONFIG (finite
+ * but unusable: beacon or receiver count out of range, s_min outside
+ * (100, 1000) m/s, period outside (0, 10] s, spacing or burst not in
+ * [0, period), ring radius not in [0, 100) m, distances beyond 1000 km, or
+ * the resulting windows overlap, see bl_sequencer_config_check). */
 int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m,
                                   bl_seq_config *out);
 
@@ -296,15 +302,17 @@ int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out);
  * It locks the model and tightens every later window until cleared, stale,
  * or contradicted by two double pulses (counted in hint_rejections).
  * Errors: BL_EINVAL (NULL, NaN/inf, period <= 0 or outside the period
- * tolerance of the nominal T, σ < 0, beacon >= beacon_count, time beyond the
- * limit), BL_ENOTINIT. */
+ * tolerance of the nominal T, σ < 0 or σ > the nominal T, beacon >=
+ * beacon_count, time beyond the limit), BL_ENOTINIT. */
 int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint);
 
 /* Fills *hint from a started filter's estimate (t0 of beacon index 0,
  * period, and their σ): the usual way to feed the filter's prediction back,
  * e.g. after every fused pulse: bl_filter_estimate(&f, &est);
  * bl_sequencer_hint_from_estimate(&est, &h); bl_sequencer_set_hint(&seq, &h).
- * Errors: BL_EINVAL (NULL, NaN), BL_ENOTINIT (est->started false). */
+ * *hint is written only on success.
+ * Errors: BL_EINVAL (NULL, NaN/inf period or σ), BL_ENOTINIT (est->started
+ * false). */
 int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint);
 
 /* Drops the hint (the own model continues). Errors: BL_EINVAL, BL_ENOTINIT. */

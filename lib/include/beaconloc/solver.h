@@ -54,8 +54,9 @@ typedef struct bl_tdoa_solution {
      * row-major 4x4; 2D uses the top-left 3x3 (x, y, t0), the rest is 0. Units
      * m², m·s, s². Valid when the model is right and sigma_s are true σ. */
     bl_real cov[16];
-    bl_real pdop;                        /* sqrt(trace of position covariance) / (σ·s) with
-                                            σ the rms of sigma_s: dilution of precision */
+    bl_real pdop;                        /* position dilution of precision (1):
+                                            sqrt(trace of the position covariance) (m) /
+                                            (σ·s) (m), σ the rms of sigma_s (s) */
     /* Kleeman 1990 eq. 9: maximum-length error vector (m per m of
      * distance-difference error ε), exactly determined case only (3D N = 4,
      * 2D N = 3; else all 0, error_vector_valid false). */
@@ -67,15 +68,24 @@ typedef struct bl_tdoa_solution {
 } bl_tdoa_solution;
 
 /* Solve in 2D (x, y, t0) / 3D (x, y, z, t0).
- * Returns BL_OK with *sol filled;
- *   BL_EINVAL      NULL, NaN/inf input, sigma <= 0, s <= 0, count > BL_MAX_BEACONS;
+ * Returns BL_OK with *sol filled (converged = true);
+ *   BL_EINVAL      NULL, NaN/inf input (the guess only when use_guess),
+ *                  sigma <= 0, s <= 0, count > BL_MAX_BEACONS,
+ *                  max_iterations > 100, tolerance_m < 0; *sol untouched;
  *   BL_EDEGENERATE count too small, or the geometry cannot fix the solution at
  *                  some iterate (normal matrix singular / ill-conditioned:
  *                  coincident or collinear beacons, receiver in the beacons' plane
  *                  in 3D); *sol untouched — never a wrong answer;
- *   BL_ENOCONVERGE max_iterations steps taken without the step falling below
- *                  tolerance; *sol holds the last iterate with converged = false
- *                  (useful to study convergence; do not use it as a fix).
+ *   BL_ENOCONVERGE *sol holds the last iterate with converged = false and
+ *                  iterations the steps taken (useful to study convergence; do
+ *                  not use it as a fix), in two cases:
+ *                  - max_iterations steps without the step falling below
+ *                    tolerance: cov, pdop, residual and error vector are
+ *                    evaluated at the last iterate as for BL_OK;
+ *                  - divergence: an iterate left any site (a coordinate beyond
+ *                    1e7 m, or not finite): position and t0 of that iterate (of
+ *                    the one before if it is not finite); cov, pdop and
+ *                    residual_rms_s are NaN, error_vector_valid false.
  * Reentrant; no state. */
 int bl_solve_tdoa_2d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol);
 int bl_solve_tdoa_3d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol);
