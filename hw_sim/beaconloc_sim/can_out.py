@@ -73,7 +73,7 @@ def realtime_priority(priority: int = 10) -> str:
         return "SCHED_OTHER"
 
 
-def send_live(frames, bus: can.BusABC, *, spin_s: float = 0.0005, stop=None) -> np.ndarray:
+def send_live(frames, bus: can.BusABC, *, spin_s: float = 0.0015, stop=None) -> np.ndarray:
     """Send every frame at its simulated time, paced in real time.
 
     Absolute deadlines from one monotonic start instant (no drift accumulates):
