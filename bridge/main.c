@@ -567,6 +567,22 @@ static void write_failed(const char *opt, const char *path, int rc, bool *logged
               opt, path, strerror(-rc));
 }
 
+/* Flush --record and --estimates; a failure is counted by the writer and
+ * logged once per file. */
+static void flush_outputs(struct daemon *d)
+{
+    if (d->recording) {
+        int rc = record_flush(&d->rec);
+        if (rc != 0)
+            write_failed("--record", d->opt.record, rc, &d->record_err_logged);
+    }
+    if (d->csv_open) {
+        int rc = estimates_csv_flush(&d->csv);
+        if (rc != 0)
+            write_failed("--estimates", d->opt.estimates, rc, &d->csv_err_logged);
+    }
+}
+
 /* After a frame (or a tick that fused a late pulse): publish what the
  * update produced. */
 static void after_update(struct daemon *d)
@@ -802,16 +818,7 @@ static void on_second(struct daemon *d, int64_t now)
             log_info("MAVLink endpoint %s open", d->cfg.mavlink);
         sync_mav_fd(d);
     }
-    if (d->recording) {
-        int rc = record_flush(&d->rec);
-        if (rc != 0)
-            write_failed("--record", d->opt.record, rc, &d->record_err_logged);
-    }
-    if (d->csv_open) {
-        int rc = estimates_csv_flush(&d->csv);
-        if (rc != 0)
-            write_failed("--estimates", d->opt.estimates, rc, &d->csv_err_logged);
-    }
+    flush_outputs(d);
     uint64_t every = (uint64_t)llround(d->cfg.status_interval_s);
     if (every > 0 && d->seconds % every == 0)
         status_line(d, "status");
@@ -1251,16 +1258,7 @@ int main(int argc, char **argv)
     }
 
     /* Flush first, so that a write error is in the final figures. */
-    if (d->recording) {
-        int frc = record_flush(&d->rec);
-        if (frc != 0)
-            write_failed("--record", d->opt.record, frc, &d->record_err_logged);
-    }
-    if (d->csv_open) {
-        int frc = estimates_csv_flush(&d->csv);
-        if (frc != 0)
-            write_failed("--estimates", d->opt.estimates, frc, &d->csv_err_logged);
-    }
+    flush_outputs(d);
     struct stats_report rep;
     fill_report(d, &rep);
     status_line(d, "final");
