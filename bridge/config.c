@@ -13,6 +13,8 @@
 
 #include <ini.h>
 
+#include "beaconloc.h"
+
 #include "log.h"
 
 enum key_type { K_INT, K_REAL, K_STR, K_LOGLEVEL, K_ENDPOINT, K_IFNAME };
@@ -56,6 +58,10 @@ static const struct key_desc keys[] = {
     NUM("noise", "speed_of_sound_mps", K_REAL, speed_of_sound_mps, 200, 500, false),
     NUM("noise", "sigma_speed_of_sound_mps", K_REAL, sigma_speed_of_sound_mps, 0, 100, false),
     NUM("noise", "gate_sigma", K_REAL, gate_sigma, 0, 1000, true),
+#define TUNING_KEY(key, field, type, lo, hi, open)                             \
+    NUM("tuning", #key, type, tuning.key, lo, hi, open),
+    BRIDGE_TUNING_KEYS(TUNING_KEY)
+#undef TUNING_KEY
     STR("bridge", "can_interface", K_IFNAME, can_interface),
     STR("bridge", "mavlink", K_ENDPOINT, mavlink),
     NUM("bridge", "odometry_rate_hz", K_REAL, odometry_rate_hz, 0, 1000, true),
@@ -90,6 +96,13 @@ void config_defaults(struct bridge_config *cfg)
     cfg->speed_of_sound_mps = 343.0;
     cfg->sigma_speed_of_sound_mps = 5.0;
     cfg->gate_sigma = 3.0;
+    /* [tuning]: the library's defaults */
+    bl_config lib;
+    bl_config_default(&lib);
+#define TUNING_DEFAULT(key, field, type, lo, hi, open)                         \
+    cfg->tuning.key = (BRIDGE_TUNING_CTYPE_##type)lib.field;
+    BRIDGE_TUNING_KEYS(TUNING_DEFAULT)
+#undef TUNING_DEFAULT
     snprintf(cfg->can_interface, sizeof cfg->can_interface, "vcan0");
     snprintf(cfg->mavlink, sizeof cfg->mavlink, "udpout:127.0.0.1:14550");
     cfg->odometry_rate_hz = 30;
@@ -162,7 +175,7 @@ static int beacon_section_number(const char *section)
  * [receivers], [robot], [noise] and leaves [bridge] to us; scenario
  * settings live in their own *.scenario.ini files). */
 static const char *const our_sections[] = { "beacons", "receivers", "robot",
-                                            "noise", "bridge" };
+                                            "noise", "tuning", "bridge" };
 
 static bool our_section(const char *section)
 {
@@ -291,7 +304,7 @@ static int handler(void *user, const char *section, const char *name,
         else
             snprintf(ctx->err, ctx->errlen, "%s:%d: [%s] unknown section (a site "
                      "file holds [site], [beacons], [beacon1]..[beacon%d], "
-                     "[receivers], [robot], [noise], [bridge])", ctx->path,
+                     "[receivers], [robot], [noise], [tuning], [bridge])", ctx->path,
                      ctx->section_line > 0 ? ctx->section_line : ctx->line,
                      section, CONFIG_MAX_BEACONS);
         ctx->failed = true;

@@ -5,8 +5,8 @@
  *   < command line (applied by main.c after the file).
  *
  * The site file is the one the simulator reads (hw_sim/scenarios/NAME.ini).
- * Our sections are [beacons], [beaconN], [receivers], [robot], [noise] and
- * [bridge]; an unknown key in one of them is an error (a typo must not be
+ * Our sections are [beacons], [beaconN], [receivers], [robot], [noise],
+ * [tuning] (the estimator's tuning, bridge/tuning.h) and [bridge]; an unknown key in one of them is an error (a typo must not be
  * silently ignored). [site] is the simulator's (room size) and skipped; any
  * other section with keys is an error too ("file:line: [section] unknown
  * section", line of its header), like a key before the first section.
@@ -18,11 +18,13 @@
 #include <stdbool.h>
 #include <stddef.h>
 
+#include "tuning.h"
+
 #define CONFIG_MAX_BEACONS 16
 #define CONFIG_MAX_RECEIVERS 16
 #define CONFIG_ERR_LEN 512
 #define CONFIG_STR_LEN 128
-#define CONFIG_MAX_KEYS 40
+#define CONFIG_MAX_KEYS 64
 
 #define EX_CONFIG_STATUS 78 /* sysexits.h EX_CONFIG */
 
@@ -57,6 +59,8 @@ struct bridge_config {
     double speed_of_sound_mps;
     double sigma_speed_of_sound_mps;
     double gate_sigma;
+    /* [tuning]: the library's tuning fields (bridge/tuning.h) */
+    struct bridge_tuning tuning;
     /* [bridge] */
     char can_interface[CONFIG_STR_LEN];
     char mavlink[CONFIG_STR_LEN];
@@ -104,8 +108,8 @@ int config_check(const struct bridge_config *cfg, char *err, size_t errlen);
 /* True when the two configs have the same estimator geometry: beacons
  * (count, positions, period, double-pulse spacing, burst length), receiver
  * ring (count, radius, angles, height) and robot (wheel base, wheel
- * radius, ticks per turn). Tuning ([noise], sigma_wheel_scale, beamwidth,
- * encoder rate, [bridge]) is not geometry. SIGHUP then keeps the filter. */
+ * radius, ticks per turn). Tuning ([noise], [tuning], sigma_wheel_scale,
+ * beamwidth, encoder rate, [bridge]) is not geometry. SIGHUP then keeps the filter. */
 bool config_same_geometry(const struct bridge_config *a,
                           const struct bridge_config *b);
 

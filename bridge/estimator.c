@@ -96,7 +96,14 @@ static const struct { const char *field, *section, *key; } field_keys[] = {
     { "sigma_speed_of_sound_mps", "noise", "sigma_speed_of_sound_mps" },
     { "gate_sigma", "noise", "gate_sigma" },
     { "max_predict_gap_s", "bridge", "max_coast_s" },
+#define TUNING_FIELD_KEY(key, field, type, lo, hi, open) { #field, "tuning", #key },
+    BRIDGE_TUNING_KEYS(TUNING_FIELD_KEY)
+#undef TUNING_FIELD_KEY
 };
+
+/* C type of a tuning field in bl_config, by its key type (bridge/tuning.h). */
+#define LIB_CTYPE_K_REAL bl_real
+#define LIB_CTYPE_K_INT uint32_t
 
 int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
                           char *err, size_t errlen)
@@ -128,6 +135,11 @@ int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
     c.speed_of_sound_mps = (bl_real)cfg->speed_of_sound_mps;
     c.sigma_speed_of_sound_mps = (bl_real)cfg->sigma_speed_of_sound_mps;
     c.gate_sigma = (bl_real)cfg->gate_sigma;
+    /* [tuning] (the parse ranges keep the integers >= 0) */
+#define TUNING_APPLY(key, field, type, lo, hi, open)                           \
+    c.field = (LIB_CTYPE_##type)cfg->tuning.key;
+    BRIDGE_TUNING_KEYS(TUNING_APPLY)
+#undef TUNING_APPLY
     /* A CAN outage (interface down, a node rebooting) shorter than this is
      * coasted through: constant-velocity predict, P grows, the pulses pull
      * the state back afterwards; longer, the filter re-starts from the

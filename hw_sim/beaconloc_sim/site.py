@@ -1,7 +1,9 @@
 """The site file: beacons, receiver ring, robot, noise (shared with the bridge).
 
 Format: ``hw_sim/scenarios/kleeman-lab.ini``. The simulator reads every section
-except ``[bridge]`` (the daemon's own settings).
+except ``[bridge]`` and ``[tuning]`` (the daemon's settings and the estimator's
+tuning, checked by the bridge); any other section is an error, as in the bridge
+(bridge/config.c), so a misspelt one cannot drop its keys silently.
 """
 from __future__ import annotations
 
@@ -27,6 +29,8 @@ _KNOWN = {
     "noise": {"sigma_arrival_s", "sigma_wheel_per_m", "speed_of_sound_mps",
               "sigma_speed_of_sound_mps", "gate_sigma"},
 }
+# Sections of a site file that are not the simulator's (their keys are the bridge's to check).
+_NOT_OURS = ("bridge", "tuning")
 
 
 @dataclass(frozen=True)
@@ -78,8 +82,14 @@ def load_site(path: str | Path) -> Site:
         ini.check_known(sec, _KNOWN["beacon"])
         beacons.append([ini.number(sec, "x_m"), ini.number(sec, "y_m"), ini.number(sec, "z_m")])
     for sec in ini.parser.sections():
-        if sec.startswith("beacon") and sec[6:].isdigit() and not 1 <= int(sec[6:]) <= count:
-            raise ini.error(sec, None, f"beacon beyond [beacons] count = {count}")
+        if sec.startswith("beacon") and sec[6:].isdigit() and sec[6] != "0":
+            if not 1 <= int(sec[6:]) <= count:
+                raise ini.error(sec, None, f"beacon beyond [beacons] count = {count}")
+        elif sec not in _KNOWN or sec == "beacon":
+            if sec not in _NOT_OURS:
+                raise ini.error(sec, None, "unknown section (a site file holds [site], [beacons], "
+                                "[beacon1]..[beaconN], [receivers], [robot], [noise], [tuning], "
+                                "[bridge])")
     site = Site(
         path=Path(path),
         name=ini.raw("site", "name", Path(path).stem),

@@ -14,7 +14,9 @@
 #include <unistd.h>
 #include <cmocka.h>
 
+#include "beaconloc.h"
 #include "config.h"
+#include "estimator.h"
 
 #define SITE "hw_sim/scenarios/kleeman-lab.ini"
 
@@ -132,7 +134,7 @@ static void test_unknown_section(void **state)
     char body[2048];
     snprintf(body, sizeof body, "%s; comment\n[bridg]\nodometry_rate_hz = 20\n", good_body);
     expect_error(body, ":23: [bridg] unknown section (a site file holds [site], [beacons], "
-                       "[beacon1]..[beacon16], [receivers], [robot], [noise], [bridge])");
+                       "[beacon1]..[beacon16], [receivers], [robot], [noise], [tuning], [bridge])");
     snprintf(body, sizeof body, "%s[beacon0]\n\nx_m = 1\n", good_body);
     expect_error(body, ":22: [beacon0] unknown section");
     snprintf(body, sizeof body, "%s[scenario]\nseed = 3\n", good_body);
@@ -184,6 +186,64 @@ static void test_wheel_scale_calibration_key(void **state)
     if (config_load_file(&cfg, path, err, sizeof err) != 0)
         fail_msg("%s", err);
     assert_true(cfg.sigma_wheel_scale == 0.03);
+}
+
+/* [tuning]: every key defaults to the library's own value; a key given
+ * reaches the estimator's bl_config; a bad value names its line and key,
+ * and so does the library's cross-check of the whole. */
+static void test_tuning_section(void **state)
+{
+    (void)state;
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    bl_config lib;
+    bl_config_default(&lib);
+    assert_true(cfg.tuning.speed_of_sound_drift_mps_per_sqrt_s ==
+                lib.speed_of_sound_drift_mps_per_sqrt_s);
+    assert_int_equal(cfg.tuning.iekf_max_iterations, (int)lib.iekf_max_iterations);
+    assert_true(cfg.tuning.iekf_step_tolerance_m == lib.iekf_step_tolerance);
+    assert_true(cfg.tuning.initial_sigma_omega_radps == lib.initial_sigma_omega_radps);
+
+    char body[2048];
+    snprintf(body, sizeof body, "%s[tuning]\nspeed_of_sound_drift_mps_per_sqrt_s = 0.02\n"
+             "iekf_max_iterations = 6\nheading_noise_fraction = 0\n", good_body);
+    assert_int_equal(make_file(body), 0);
+    char err[CONFIG_ERR_LEN] = "";
+    if (config_load_file(&cfg, path, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    unlink(path);
+    path[0] = '\0';
+    assert_true(cfg.tuning.speed_of_sound_drift_mps_per_sqrt_s == 0.02);
+    assert_int_equal(cfg.tuning.iekf_max_iterations, 6);
+    assert_true(cfg.tuning.heading_noise_fraction == 0.0);
+    bl_config c;
+    assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), 0);
+    assert_true(c.speed_of_sound_drift_mps_per_sqrt_s == (bl_real)0.02);
+    assert_int_equal(c.iekf_max_iterations, 6);
+    assert_true(c.heading_noise_fraction == 0);
+    /* not given: the library's default */
+    assert_true(c.accel_noise_mps2 == lib.accel_noise_mps2);
+    assert_int_equal(c.reset_reject_count, lib.reset_reject_count);
+
+    snprintf(body, sizeof body, "%s[tuning]\niekf_max_iterations = 0\n", good_body);
+    expect_error(body, ":23: [tuning] iekf_max_iterations: 0 out of range 1..20");
+    snprintf(body, sizeof body, "%s[tuning]\nstationary_noise_scale = 0\n", good_body);
+    expect_error(body, ":23: [tuning] stationary_noise_scale: 0 out of range (0..1]");
+    snprintf(body, sizeof body, "%s[tuning]\nspeed_of_sound_drift = 0.1\n", good_body);
+    expect_error(body, ":23: [tuning] speed_of_sound_drift: unknown key");
+
+    /* parses, but the library refuses it against [noise] sigma_arrival_s */
+    snprintf(body, sizeof body, "%s[tuning]\n\nstartup_sigma_arrival_s = 0.0001\n", good_body);
+    assert_int_equal(make_file(body), 0);
+    config_defaults(&cfg);
+    if (config_load_file(&cfg, path, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), -1);
+    char want[CONFIG_ERR_LEN + 64];
+    snprintf(want, sizeof want, "%s:24: [tuning] startup_sigma_arrival_s: rejected by the "
+             "estimator", path);
+    if (strncmp(err, want, strlen(want)) != 0)
+        fail_msg("got '%s', want prefix '%s'", err, want);
 }
 
 static void test_duplicate_key(void **state)
@@ -305,6 +365,7 @@ int main(void)
         cmocka_unit_test(test_not_a_number),
         cmocka_unit_test(test_out_of_range_and_bad_values),
         cmocka_unit_test_teardown(test_wheel_scale_calibration_key, teardown),
+        cmocka_unit_test_teardown(test_tuning_section, teardown),
         cmocka_unit_test(test_duplicate_key),
         cmocka_unit_test(test_beacons_incomplete_or_extra),
         cmocka_unit_test(test_syntax_error_and_missing_file),

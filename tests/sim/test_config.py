@@ -1,6 +1,9 @@
 """Bad site and scenario files give errors naming the file, the line and the key."""
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
 import pytest
 
 from beaconloc_sim.inifile import ConfigError
@@ -60,6 +63,28 @@ def test_unknown_site_key_is_an_error(tmp_path):
     line = _line_of(text, "wheel_bse_m")
     with pytest.raises(ConfigError, match=rf"^s.ini:{line}: \[robot\] wheel_bse_m: unknown key"):
         load_site(tmp_path / "s.ini")
+
+
+@pytest.mark.parametrize("header", ["bridg", "beacon0", "beacon", "tunning"])
+def test_unknown_site_section_is_an_error(tmp_path, header):
+    """As in the bridge: a misspelt section would drop its keys silently."""
+    text = SITE_TEXT + f"\n; a comment\n[{header}]\nkey = 1\n"
+    (tmp_path / "s.ini").write_text(text)
+    line = _line_of(text, f"[{header}]")
+    with pytest.raises(ConfigError, match=rf"^s.ini:{line}: \[{header}\]: unknown section"):
+        load_site(tmp_path / "s.ini")
+
+
+def test_bridge_and_tuning_sections_are_left_to_the_bridge(tmp_path):
+    """[tuning] (the estimator's) and [bridge] are read by the bridge, not the physics."""
+    assert "[bridge]" in SITE_TEXT
+    (tmp_path / "plain.ini").write_text(SITE_TEXT)
+    (tmp_path / "tuned.ini").write_text(
+        SITE_TEXT + "\n[tuning]\nspeed_of_sound_drift_mps_per_sqrt_s = 0.02\n")
+    plain, tuned = load_site(tmp_path / "plain.ini"), load_site(tmp_path / "tuned.ini")
+    for f in dataclasses.fields(plain):
+        if f.name != "path":
+            assert np.array_equal(getattr(plain, f.name), getattr(tuned, f.name)), f.name
 
 
 @pytest.mark.parametrize("body, line, section, key, why", [

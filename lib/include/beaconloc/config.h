@@ -5,8 +5,10 @@
  * (hw_sim/scenarios/kleeman-lab.ini): section [beacons] -> beacon_*,
  * [beaconN] x_m/y_m/z_m -> beacons[N-1], [receivers] -> receiver_*,
  * [robot] -> robot fields, [noise] -> noise fields. The comment after each
- * field names its INI key. Fields under "tuning" have no INI key yet; their
- * defaults come from bl_config_default(). [site] (room size, echoes) and
+ * field names its INI key. Fields under "tuning" default to
+ * bl_config_default(); the bridge reads them from the site file's optional
+ * [tuning] section, one key per field named as the field (iekf_step_tolerance
+ * as iekf_step_tolerance_m; bridge/tuning.h). [site] (room size, echoes) and
  * [bridge] are not used by the estimator.
  *
  * Frame: site frame, x east, y north, z up, metres; angles counter-clockwise
@@ -71,7 +73,7 @@ typedef struct bl_config {
     bl_real gate_sigma;               /* gate_sigma: innovation gate in σ (chi-square with
                                          1 dof: reject if |innov| > gate_sigma·σ_innov), > 0 */
 
-    /* ---- tuning (no INI key; defaults from bl_config_default) ---- */
+    /* ---- tuning ([tuning] in the bridge's site file; defaults from bl_config_default) ---- */
     bl_real sigma_period_s;           /* initial σ of the beacon period T (s), > 0 */
     bl_real startup_sigma_arrival_s;  /* σ arrival used until converged (Kleeman §3.9: high
                                          variance during start-up), >= sigma_arrival_s */
