@@ -18,6 +18,9 @@ the seeds:
   too are stated against the physical limit)
   diverged       seeds whose run failed, produced no estimate, a non-finite
                  one, or ended (last 10 s) with an RMS error above 0.5 m
+Options: --scenarios, --seeds, and --tuning KEY=VALUE (repeatable) to run the
+bridge with the site file's [tuning] section set so (docs/bridge.md), e.g. a
+smaller speed-of-sound random walk; the figures are then of that tuning.
 Last two lines (machine-readable):
   accuracy scenario=echo-storm seeds=20 rmse_mm=.. pcrb_mm=.. ratio=.. lateral_std_mm=.. sos_err_mps=.. diverged=..
   accuracy scenario=kleeman-lab seeds=20 ...
@@ -71,7 +74,23 @@ def lateral_error_m(truth: dict, t_us: np.ndarray, x: np.ndarray, y: np.ndarray)
     return lat
 
 
-def one_run(bridge: Path, scenario: str, seed: int, out: Path) -> dict:
+def tuned_site(scenario: str, tuning: list[str], out: Path) -> Path:
+    """The scenario's site file, with a [tuning] section of KEY=VALUE items appended."""
+    site = site_of(scenario)
+    if not tuning:
+        return site
+    lines = []
+    for item in tuning:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise SystemExit(f"accuracy: --tuning {item!r}: expected KEY=VALUE")
+        lines.append(f"{key.strip()} = {value.strip()}")
+    path = out / f"{scenario}-tuned.ini"
+    path.write_text(site.read_text() + "\n[tuning]\n" + "\n".join(lines) + "\n")
+    return path
+
+
+def one_run(bridge: Path, scenario: str, seed: int, out: Path, site: Path) -> dict:
     d = out / f"{scenario}-s{seed:02d}"
     d.mkdir(parents=True, exist_ok=True)
     log, truth_p, est_p = d / "bus.log", d / "truth.csv", d / "est.csv"
@@ -80,7 +99,7 @@ def one_run(bridge: Path, scenario: str, seed: int, out: Path) -> dict:
     if sim.returncode != 0:
         return {"seed": seed, "ok": False, "why": f"simulator exit {sim.returncode}: "
                 f"{sim.stderr.strip()[-300:]}"}
-    br = subprocess.run([str(bridge), "--site", str(site_of(scenario)), "--replay", str(log),
+    br = subprocess.run([str(bridge), "--site", str(site), "--replay", str(log),
                          "--estimates", str(est_p), "--stats", str(d / "stats.json"),
                          "--mavlink", "udpout:127.0.0.1:9", "--status-interval", "0"],
                         capture_output=True, text=True)
@@ -148,6 +167,8 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
+    ap.add_argument("--tuning", action="append", default=[], metavar="KEY=VALUE",
+                    help="a [tuning] key of the bridge's site file (repeatable)")
     args = ap.parse_args()
     bridge, out = Path(args.bridge), Path(args.out)
     if not bridge.exists():
@@ -155,9 +176,12 @@ def main() -> int:
         return 2
     out.mkdir(parents=True, exist_ok=True)
     lines, report = [], {}
+    if args.tuning:
+        print("tuning " + " ".join(args.tuning))
     for scenario in args.scenarios.split(","):
+        site = tuned_site(scenario, args.tuning, out)
         with ThreadPoolExecutor(max_workers=args.jobs) as pool:
-            runs = list(pool.map(lambda s: one_run(bridge, scenario, s, out),
+            runs = list(pool.map(lambda s: one_run(bridge, scenario, s, out, site),
                                  range(1, args.seeds + 1)))
         for r in runs:
             if not r["ok"]:
