@@ -42,6 +42,7 @@
     X(reset_reject_count, reset_reject_count, K_INT, 0, 1000, false)           \
     X(initial_theta_rad, initial_theta_rad, K_REAL, -100, 100, false)          \
     X(reset_sigma_theta_rad, reset_sigma_theta_rad, K_REAL, 0, 100, true)      \
+    X(ring_heading, ring_heading, K_INT, 0, 1, false)                          \
     X(initial_sigma_v_mps, initial_sigma_v_mps, K_REAL, 0, 100, true)          \
     X(initial_sigma_omega_radps, initial_sigma_omega_radps, K_REAL, 0, 100,    \
       true)

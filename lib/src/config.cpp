@@ -63,6 +63,7 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->reset_reject_count = 8;
     cfg->initial_theta_rad = real(0.0);
     cfg->reset_sigma_theta_rad = real(1.0);
+    cfg->ring_heading = 1;
     cfg->initial_sigma_v_mps = real(0.5);
     cfg->initial_sigma_omega_radps = real(0.5);
     cfg->max_predict_gap_s = real(2.0);
@@ -179,6 +180,7 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
              "initial_theta_rad");
     BL_CHECK(is_finite(c->reset_sigma_theta_rad) && c->reset_sigma_theta_rad > real(0),
              "reset_sigma_theta_rad");
+    BL_CHECK(c->ring_heading <= 1, "ring_heading");
     BL_CHECK(is_finite(c->initial_sigma_v_mps) && c->initial_sigma_v_mps > real(0),
              "initial_sigma_v_mps");
     BL_CHECK(is_finite(c->initial_sigma_omega_radps) && c->initial_sigma_omega_radps > real(0),

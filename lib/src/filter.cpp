@@ -437,15 +437,119 @@ __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_soluti
 // The last-pulse table the snapshot (re)start reads: every pulse fuse_pulse
 // was given and did not refuse as an error (fused, gated out, buffered before
 // the start or while stale), one entry per beacon, the newest wins.
+//
+// Beside it, per beacon, the receivers that heard its latest firing, for the
+// heading from the ring: the arrivals within ring_window_us of the firing's
+// earliest one (the direct pulse reaches the whole ring within its diameter's
+// flight time, plus timing noise); an arrival more than half a period later
+// starts the next firing's set; an arrival later than the window (an echo on
+// a receiver the direct pulse missed) or from an older firing is left out.
+int64_t ring_window_us(const bl_config *cfg)
+{
+    // 2 r / s: flight time across the ring (s nominal); 4 σ: the timing noise
+    // of two arrivals (√2 · 2.8 σ).
+    const real w_s = real(2) * cfg->ring_radius_m / cfg->speed_of_sound_mps + real(4) * cfg->sigma_arrival_s;
+    return int64_t(std::llround(double(w_s) * 1e6));
+}
+
+void remember_ring(bl_filter *f, uint32_t b, int64_t arrival_us, uint32_t receiver_index)
+{
+    const bl_config *cfg = &f->cfg_;
+    const uint32_t bit = 1u << receiver_index;
+    const int64_t half_T_us = int64_t(std::llround(double(cfg->beacon_period_s) * 0.5e6));
+    const int64_t w_us = ring_window_us(cfg);
+    int64_t d_us = 0;  // this arrival - the firing's earliest, us
+    const bool same_timeline = f->ring_mask_[b] != 0 && bl::sub_us(arrival_us, f->ring_t_us_[b], &d_us);
+    if (same_timeline && d_us < -half_T_us) return;  // an older firing's straggler
+    if (!same_timeline || d_us > half_T_us || d_us < -w_us) {
+        // a new firing (or the earlier set was late arrivals of this one)
+        f->ring_t_us_[b] = arrival_us;
+        f->ring_mask_[b] = bit;
+    } else if (d_us < 0) {
+        f->ring_t_us_[b] = arrival_us;
+        f->ring_mask_[b] |= bit;
+    } else if (d_us <= w_us) {
+        f->ring_mask_[b] |= bit;
+    }
+}
+
 void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index)
 {
     f->last_arrival_us_[beacon_index] = arrival_us;
     f->last_receiver_[beacon_index] = receiver_index;
     f->last_valid_mask_ |= 1u << beacon_index;
+    remember_ring(f, beacon_index, arrival_us, receiver_index);
 }
 
-// Start (or restart) *f from the snapshot of its last pulses. On failure
-// *f is untouched.
+// Heading from the receiver ring at the fix (x, y) (filter.h, "Heading from
+// the ring"). The receivers are directional (Kleeman 1992 §2: eight at 45°,
+// each facing its own sector; cfg.beamwidth_deg), so the receivers that heard
+// beacon b's latest firing face it: its body-frame bearing phi_b is the
+// circular mean of their angles. Its site-frame bearing from the fix is
+// beta_b = atan2(y_b - y, x_b - x), and the bearing model of Vander et al.
+// 2011 eq. 3 (phi = beta - theta) gives theta_b = beta_b - phi_b. The heading
+// is the circular mean of theta_b over the beacons of the last cycle, with
+// sigma = max(circular standard deviation sqrt(-2 ln Rbar) of the theta_b
+// (Mardia 1972, Statistics of Directional Data; Rbar = mean resultant
+// length), the receiver spacing / sqrt(12) (the quantisation of one
+// receiver's angle)). False (no heading) with fewer than min(3, N) beacons
+// whose receivers give a bearing, a spread above 0.6 rad (the sets do not
+// agree: echoes, or a robot turning through the cycle), or receivers too
+// wide (beamwidth_deg > 180) to point.
+bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, real *theta_rad, real *sigma_rad)
+{
+    const bl_config *cfg = &f->cfg_;
+    if (cfg->beamwidth_deg > real(180) || cfg->receiver_count < 2) return false;
+    const uint32_t n = cfg->beacon_count;
+    const int64_t cycle_us =
+        int64_t(std::llround(double(cfg->beacon_period_s) * double(n) * 1e6)) + ring_window_us(cfg);
+    real sum_c = 0, sum_s = 0;
+    uint32_t used = 0;
+    for (uint32_t b = 0; b < n; ++b) {
+        const uint32_t mask = f->ring_mask_[b];
+        int64_t age_us;
+        if (mask == 0 || !bl::sub_us(latest_us, f->ring_t_us_[b], &age_us) || age_us > cycle_us ||
+            age_us < -cycle_us)
+            continue;  // no firing of this beacon in the last cycle
+        real rc = 0, rs = 0;
+        uint32_t heard = 0;
+        for (uint32_t k = 0; k < cfg->receiver_count; ++k) {
+            if (!((mask >> k) & 1u)) continue;
+            bl_real a;
+            if (bl_config_receiver_angle(cfg, k, &a) != BL_OK) continue;
+            rc += std::cos(a);
+            rs += std::sin(a);
+            ++heard;
+        }
+        // receivers on opposite sides point nowhere
+        if (heard == 0 || std::sqrt(rc * rc + rs * rs) < real(0.3) * real(heard)) continue;
+        const real phi = std::atan2(rs, rc);
+        const bl_beacon &bc = cfg->beacons[b];
+        const real beta = std::atan2(bc.y_m - y_m, bc.x_m - x_m);
+        // Vander et al. 2011 eq. 3: phi = beta - theta
+        const real th_b = beta - phi;
+        sum_c += std::cos(th_b);
+        sum_s += std::sin(th_b);
+        ++used;
+    }
+    const uint32_t need = n < 3 ? n : 3;
+    if (used < need || used == 0) return false;
+    const real rbar = std::sqrt(sum_c * sum_c + sum_s * sum_s) / real(used);
+    if (!(rbar > real(0))) return false;
+    // Mardia 1972: circular standard deviation sqrt(-2 ln Rbar), rad
+    const real spread = std::sqrt(real(-2) * std::log(rbar < real(1) ? rbar : real(1)));
+    if (!(spread <= real(0.6))) return false;
+    const real step_deg = cfg->angle_step_deg != real(0) ? std::fabs(cfg->angle_step_deg)
+                                                         : real(360) / real(cfg->receiver_count);
+    const real quant = step_deg * bl::kDegToRad / std::sqrt(real(12));
+    *theta_rad = std::atan2(sum_s, sum_c);
+    *sigma_rad = spread > quant ? spread : quant;
+    return true;
+}
+
+// Start (or restart) *f from the snapshot of its last pulses, heading from
+// the ring when cfg.ring_heading and the ring gives one, else theta with σ
+// sigma_theta. On failure *f is untouched.
 int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real s_mps, real var_s, real T_s,
                         real var_T, uint32_t min_beacons)
 {
@@ -454,6 +558,13 @@ int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real s_mps, 
     uint32_t ref_beacon = 0;
     const int rc = solve_snapshot(f, s_mps, T_s, min_beacons, &sol, &ref_arrival_us, &ref_beacon);
     if (rc != BL_OK) return rc;
+    if (f->cfg_.ring_heading) {
+        real th, sg;
+        if (ring_heading(f, sol.x_m, sol.y_m, ref_arrival_us, &th, &sg)) {
+            theta = th;
+            sigma_theta = sg;
+        }
+    }
     apply_snapshot(f, sol, ref_arrival_us, ref_beacon, theta, sigma_theta, s_mps, var_s, T_s, var_T);
     return BL_OK;
 }

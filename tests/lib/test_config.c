@@ -185,6 +185,7 @@ MUT(m_reset_theta, c->reset_sigma_theta_rad = 0)
 MUT(m_sig_v, c->initial_sigma_v_mps = 0)
 MUT(m_sig_w, c->initial_sigma_omega_radps = -1)
 MUT(m_gap, c->max_predict_gap_s = 0)
+MUT(m_ring_heading, c->ring_heading = 2)
 MUT(m_wscale_neg, c->sigma_wheel_scale = -0.01f)
 MUT(m_wscale_high, c->sigma_wheel_scale = 0.6f)
 MUT(m_wscale_drift, c->wheel_scale_drift_per_sqrt_s = (bl_real)NAN)
@@ -213,6 +214,7 @@ static void test_every_check(void **state)
         {m_jitter, "firing_jitter_s"}, {m_iter0, "iekf_max_iterations"}, {m_iter_high, "iekf_max_iterations"},
         {m_tol, "iekf_step_tolerance"}, {m_theta0, "initial_theta_rad"}, {m_reset_theta, "reset_sigma_theta_rad"},
         {m_sig_v, "initial_sigma_v_mps"}, {m_sig_w, "initial_sigma_omega_radps"}, {m_gap, "max_predict_gap_s"},
+        {m_ring_heading, "ring_heading"},
         {m_wscale_neg, "sigma_wheel_scale"}, {m_wscale_high, "sigma_wheel_scale"},
         {m_wscale_drift, "wheel_scale_drift_per_sqrt_s"},
     };

@@ -689,13 +689,15 @@ static void test_speed_of_sound_convergence(void **state)
                 fabs(final[0] - final[2]) < 1.0); /* from 30 m/s apart */
 }
 
-/* The automatic start does not know the heading (one snapshot cannot see
- * it): starting 1 rad off, with σ 1 rad, the filter learns it from motion. */
+/* Without the ring's heading (cfg.ring_heading 0) the automatic start does
+ * not know the heading (the timing of one snapshot hardly sees it): starting
+ * 1 rad off, with σ 1 rad, the filter learns it from motion. */
 static void test_heading_learned_from_motion(void **state)
 {
     (void)state;
     bl_config cfg;
     assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.ring_heading = 0; /* without the heading from the ring (test_heading_from_ring) */
     const double offsets[4] = {1.0, -1.0, 1.5, -1.5};
     for (int k = 0; k < 4; ++k) {
         cfg.initial_theta_rad = (bl_real)offsets[k]; /* truth starts at 0 */
@@ -1003,6 +1005,89 @@ static int64_t still_arrival_us(const bl_config *cfg, double px, double py, long
     const double dz = (double)cfg->receiver_height_m - b->z_m;
     const double ta = t0_s + (double)k * 0.15 + sqrt(dx * dx + dy * dy + dz * dz) / 343.0 + noise_s * rng_gauss();
     return (int64_t)llround(ta * 1e6);
+}
+
+/* One firing cycle heard by a robot standing at (px, py) with heading th:
+ * each beacon is heard by the receivers facing it (body bearing within
+ * ±half_fov_rad of the receiver's axis), each at its own position on the
+ * ring; arrival noise noise_s. With all_on_rx0, receiver 0 alone hears every
+ * beacon (a ring that points nowhere). Returns the last status. */
+static bl_pulse_status ring_cycle(bl_filter *f, const bl_config *cfg, double px, double py, double th,
+                                  long cycle, double half_fov_rad, double noise_s, int all_on_rx0)
+{
+    for (uint32_t b = 0; b < cfg->beacon_count; ++b) {
+        const long k = cycle * (long)cfg->beacon_count + (long)b;
+        const bl_beacon *bc = &cfg->beacons[b];
+        const double bearing = atan2(bc->y_m - py, bc->x_m - px) - th; /* body frame */
+        for (uint32_t r = 0; r < cfg->receiver_count; ++r) {
+            bl_real a;
+            assert_int_equal(bl_config_receiver_angle(cfg, r, &a), BL_OK);
+            if (all_on_rx0 ? r != 0 : fabs(wrap(bearing - (double)a)) > half_fov_rad) continue;
+            const double rx = px + (double)cfg->ring_radius_m * cos(th + (double)a);
+            const double ry = py + (double)cfg->ring_radius_m * sin(th + (double)a);
+            const double dx = rx - bc->x_m, dy = ry - bc->y_m, dz = (double)cfg->receiver_height_m - bc->z_m;
+            const double ta = 1.0 + (double)k * 0.15 + sqrt(dx * dx + dy * dy + dz * dz) / 343.0 + noise_s * rng_gauss();
+            bl_pulse_result res;
+            assert_int_equal(bl_filter_fuse_pulse(f, b, (int64_t)llround(ta * 1e6), r, &res), BL_OK);
+            if (res.status == BL_PULSE_STARTED) return 1;
+        }
+    }
+    return 0;
+}
+
+/* Heading from the ring: the receivers are directional, so the ones that
+ * heard each beacon point at it; from the snapshot's position the first
+ * start knows the heading, whatever cfg.initial_theta_rad says, with a σ that
+ * covers its error. A ring that points nowhere (receiver 0 hears all), or
+ * cfg.ring_heading 0, falls back to initial_theta_rad with σ
+ * reset_sigma_theta_rad. */
+static void test_heading_from_ring(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.speed_of_sound_mps = 343;
+    cfg.initial_theta_rad = (bl_real)0.5;
+    static bl_filter f;
+    const double headings[5] = {0.0, 2.0, -2.5, 3.1, -1.2};
+    rng_seed(777);
+    for (int i = 0; i < 5; ++i) {
+        for (int fov = 0; fov < 2; ++fov) { /* 2 or 3 receivers per beacon */
+            assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+            assert_true(ring_cycle(&f, &cfg, 5.0, 7.0, headings[i], 0, fov ? 1.0 : 0.6, 2e-4, 0));
+            bl_estimate e;
+            assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+            const double err = fabs(wrap((double)e.theta_rad - headings[i]));
+            const double sigma = sqrt((double)e.cov[12]);
+            print_message("ring heading: truth %+.2f rad, estimate %+.3f rad, sigma %.3f rad\n", headings[i],
+                          (double)e.theta_rad, sigma);
+            assert_true(err < 0.2);
+            assert_true(err < 3 * sigma);
+            assert_true(sigma < 0.5);
+        }
+    }
+    /* receiver 0 hears every beacon: the ring gives no heading */
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    assert_true(ring_cycle(&f, &cfg, 5.0, 7.0, 2.0, 0, 0, 2e-4, 1));
+    bl_estimate e;
+    assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+    assert_true(fabs((double)e.theta_rad - 0.5) < 1e-6);
+    assert_true(fabs(sqrt((double)e.cov[12]) - (double)cfg.reset_sigma_theta_rad) < 1e-6);
+    /* switched off: the configured heading, though the ring would point */
+    cfg.ring_heading = 0;
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    assert_true(ring_cycle(&f, &cfg, 5.0, 7.0, 2.0, 0, 1.0, 2e-4, 0));
+    assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+    assert_true(fabs((double)e.theta_rad - 0.5) < 1e-6);
+    /* an explicit restart of a running filter takes the ring's heading too */
+    cfg.ring_heading = 1;
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    assert_true(ring_cycle(&f, &cfg, 5.0, 7.0, -2.5, 0, 1.0, 2e-4, 0));
+    assert_false(ring_cycle(&f, &cfg, 5.0, 7.0, -2.5, 1, 1.0, 2e-4, 0)); /* running */
+    assert_int_equal(bl_filter_start_snapshot(&f, (bl_real)0.3, (bl_real)0.2), BL_OK);
+    assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+    assert_int_equal(e.reset_counter, 1);
+    assert_true(fabs(wrap((double)e.theta_rad + 2.5)) < 0.2);
 }
 
 /* A caller that only fuses pulses (never predicts): the state time stays at
@@ -1427,6 +1512,7 @@ int main(void)
         cmocka_unit_test(test_moving_robot_consistent),
         cmocka_unit_test(test_speed_of_sound_convergence),
         cmocka_unit_test(test_heading_learned_from_motion),
+        cmocka_unit_test(test_heading_from_ring),
         cmocka_unit_test(test_wheel_scale_calibration),
         cmocka_unit_test(test_echoes_rejected),
         cmocka_unit_test(test_missing_pulses),

@@ -99,8 +99,15 @@ typedef struct bl_config {
     bl_real iekf_step_tolerance;      /* stop iterating when |Δposition| < this (m) */
     uint32_t reset_reject_count;      /* K: re-initialise from the snapshot solver after K
                                          consecutive rejections across >= 2 beacons; 0 = never */
-    bl_real initial_theta_rad;        /* heading assumed by the automatic snapshot start */
-    bl_real reset_sigma_theta_rad;    /* heading σ after a snapshot (re-)start, > 0 */
+    bl_real initial_theta_rad;        /* heading assumed by the automatic snapshot start
+                                         when the ring gives none (ring_heading) */
+    bl_real reset_sigma_theta_rad;    /* heading σ after a snapshot (re-)start without a
+                                         ring heading, > 0 */
+    uint32_t ring_heading;            /* 1 (default): a snapshot (re-)start takes its heading
+                                         from the receiver ring — which receivers heard
+                                         each beacon of the last cycle (filter.h,
+                                         "Heading from the ring") — when the ring gives
+                                         one; 0: always the given/kept heading */
     bl_real initial_sigma_v_mps;      /* σ of v after a snapshot (re-)start (v = 0), > 0 */
     bl_real initial_sigma_omega_radps; /* σ of ω after a snapshot (re-)start (ω = 0), > 0 */
     bl_real max_predict_gap_s;        /* longest extrapolation of the state (s), (0, 3600]:

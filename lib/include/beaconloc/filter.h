@@ -25,9 +25,24 @@
  * The filter starts itself from the snapshot solver (bl_solve_tdoa_2d) once
  * the buffered pulses of the latest firing cycle cover 4 beacons (all of
  * them if the site has 3) and the fix explains them (residual < 3 σ of
- * cfg.startup_sigma_arrival_s), heading cfg.initial_theta_rad with σ
- * cfg.reset_sigma_theta_rad; or explicitly with bl_filter_start() (known
- * pose and firing time) or bl_filter_start_snapshot().
+ * cfg.startup_sigma_arrival_s), heading from the ring (below), else
+ * cfg.initial_theta_rad with σ cfg.reset_sigma_theta_rad; or explicitly with
+ * bl_filter_start() (known pose and firing time) or
+ * bl_filter_start_snapshot().
+ *
+ * Heading from the ring (cfg.ring_heading, on by default): the receivers are
+ * directional (cfg.beamwidth_deg <= 180), so the ones that heard a beacon's
+ * latest firing (arrivals within the ring's flight time plus 4 σ of the
+ * firing's earliest) face it. Their mean angle is the beacon's body-frame
+ * bearing; with the snapshot's position and the beacon's site position that
+ * gives the heading (Vander et al. 2011 eq. 3). Every snapshot (re)start —
+ * the automatic one, persistent rejection, a time gap, and
+ * bl_filter_start_snapshot() — takes the circular mean over the last
+ * cycle's beacons, with σ = max(their circular spread, receiver spacing/√12),
+ * when at least min(3, N) beacons give a bearing and they agree within
+ * 0.6 rad; otherwise the given or kept heading with its σ. So a robot
+ * switched on, or kidnapped and turned, while standing still starts with
+ * its heading known to about 0.1-0.2 rad instead of learning it from motion.
  *
  * Start-up (Kleeman §3.9): until the position σ first falls below
  * cfg.converged_sigma_xy_m, arrivals get σ cfg.startup_sigma_arrival_s and
@@ -38,7 +53,8 @@
  * Persistent rejection: after cfg.reset_reject_count consecutive gate
  * rejections spanning >= 2 beacons, the filter re-initialises from the
  * snapshot of the last cycle's pulses (kept per beacon, accepted or not),
- * keeping s and T, heading with σ cfg.reset_sigma_theta_rad, and bumps
+ * keeping s and T, heading from the ring or kept with σ
+ * cfg.reset_sigma_theta_rad, and bumps
  * the reset counter (fuse_pulse returns status BL_PULSE_RESET).
  * Time gaps: the state is never extrapolated further than
  * cfg.max_predict_gap_s. A pulse arriving later than that after the state
@@ -47,8 +63,8 @@
  * fuse_pulse keeps the pulse in the snapshot table (status BUFFERED, BL_OK)
  * and, as soon as the table's latest cycle covers min(4, N) beacons and the
  * fix explains them, re-initialises from that snapshot (status RESET,
- * reset counter bumped, state time = the latest arrival; heading kept with
- * σ cfg.reset_sigma_theta_rad, s and T kept with their variance grown by
+ * reset counter bumped, state time = the latest arrival; heading from the
+ * ring or kept with σ cfg.reset_sigma_theta_rad, s and T kept with their variance grown by
  * their random walk over the gap, wheel scales kept). Pulses from before
  * the gap are more than a cycle older and take no part. Until then the
  * stale state stays as it was: predict and estimate_at to the present
@@ -118,6 +134,8 @@ typedef struct bl_filter {
     uint32_t rejected_[BL_MAX_BEACONS];
     int64_t last_arrival_us_[BL_MAX_BEACONS];
     uint32_t last_receiver_[BL_MAX_BEACONS];
+    int64_t ring_t_us_[BL_MAX_BEACONS];   /* earliest arrival of the latest firing */
+    uint32_t ring_mask_[BL_MAX_BEACONS];  /* receivers that heard it (bit per receiver) */
 } bl_filter;
 
 /* Explicit start: a known pose and firing time. */
@@ -212,8 +230,10 @@ int bl_filter_update_config(bl_filter *f, const bl_config *cfg);
 int bl_filter_start(bl_filter *f, const bl_filter_prior *prior);
 
 /* Start (or restart) from the snapshot solver on the buffered last pulse
- * of each beacon (those of the latest firing cycle); heading is not
- * observable from one snapshot, so it is given (σ sigma_theta_rad > 0).
+ * of each beacon (those of the latest firing cycle); the heading from the
+ * ring when cfg.ring_heading and the ring gives one (see "Heading from the
+ * ring"), else theta_rad with σ sigma_theta_rad > 0 (the timing of one
+ * snapshot hardly sees the heading).
  * The buffer holds the last pulse per beacon of every fuse_pulse call that
  * returned BL_OK (fused, gated out, buffered before the start or while
  * stale). The state time becomes the latest buffered arrival. A started
