@@ -409,3 +409,33 @@ def test_tuning_section_reaches_the_filter(bridge_bin, kleeman_log, tmp_path):
                           timeout=60)
     assert proc.returncode == 78
     assert f"{bad}:{line}: [tuning] iekf_max_iterations: 40 out of range 1..20" in proc.stderr
+
+
+def test_heading_from_the_ring_at_start(bridge_bin, kleeman_log, tmp_path):
+    """The robot is switched on facing +x but the site says initial_theta_rad
+    = 3.0 (as if its heading were unknown). The snapshot start takes the
+    heading from which receivers heard each beacon: right, and consistent
+    with its sigma, from the first estimate; no reset. With ring_heading = 0
+    the start believes the 3 rad and is far off while standing."""
+    log, truth_path = kleeman_log
+    truth = read_truth(truth_path)
+    first = {}
+    for ring in (1, 0):
+        site = tmp_path / f"ring{ring}.ini"
+        site.write_text(SITE.read_text() + f"\n[tuning]\ninitial_theta_rad = 3.0\nring_heading = {ring}\n")
+        est_path = tmp_path / f"ring{ring}.csv"
+        proc = subprocess.run([str(bridge_bin), "--site", str(site), "--replay", str(log),
+                               "--mavlink", "udpout:127.0.0.1:9", "--estimates", str(est_path)],
+                              capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 0, proc.stderr
+        est = np.genfromtxt(est_path, delimiter=",", names=True)
+        standing = (est["t_us"] - truth["t_us"][0]) < 5e6      # the run stands for its first 5 s
+        assert standing.sum() > 20
+        th_true = np.interp(est["t_us"][standing], truth["t_us"], np.unwrap(truth["theta_rad"]))
+        err = np.angle(np.exp(1j * (est["theta_rad"][standing] - th_true)))
+        first[ring] = (float(np.sqrt(np.mean(err ** 2))),
+                       float(np.mean(err ** 2 / est["var_theta_rad2"][standing])),
+                       int(est["reset_counter"][-1]))
+    rms, nees, resets = first[1]
+    assert rms < 0.3 and nees < 4 and resets == 0, first
+    assert first[0][0] > 1.0, first
