@@ -444,6 +444,8 @@ __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_soluti
 // flight time, plus timing noise); an arrival more than half a period later
 // starts the next firing's set; an arrival later than the window (an echo on
 // a receiver the direct pulse missed) or from an older firing is left out.
+static_assert(BL_MAX_RECEIVERS <= 32, "ring_mask_ holds one bit per receiver");
+
 int64_t ring_window_us(const bl_config *cfg)
 {
     // 2 r / s: flight time across the ring (s nominal); 4 σ: the timing noise
