@@ -48,6 +48,7 @@ static const struct key_desc keys[] = {
     NUM("receivers", "angle_step_deg", K_REAL, angle_step_deg, -360, 360, false),
     NUM("receivers", "height_m", K_REAL, receiver_height_m, -1e4, 1e4, false),
     NUM("receivers", "beamwidth_deg", K_REAL, beamwidth_deg, 0, 360, true),
+    NUM("receivers", "double_pulse_tolerance_s", K_REAL, double_pulse_tolerance_s, 0, 1, true),
     NUM("robot", "wheel_base_m", K_REAL, wheel_base_m, 0, 100, true),
     NUM("robot", "wheel_radius_m", K_REAL, wheel_radius_m, 0, 100, true),
     NUM("robot", "ticks_per_rev", K_INT, ticks_per_rev, 1, 1000000, false),
@@ -87,6 +88,7 @@ void config_defaults(struct bridge_config *cfg)
     cfg->first_angle_deg = 0.0;
     cfg->receiver_height_m = 1.0;
     cfg->beamwidth_deg = 90.0;
+    cfg->double_pulse_tolerance_s = 0.001; /* DBC PULSE_DETECTION comment */
     cfg->wheel_base_m = 0.50;
     cfg->wheel_radius_m = 0.10;
     cfg->ticks_per_rev = 4096;
@@ -413,6 +415,14 @@ static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
                  "beacon beyond [beacons] count = %d", cfg->beacon_count);
             return -1;
         }
+    }
+    /* The node's window for the second burst must end before the next firing. */
+    if (cfg->double_pulse_spacing_s + cfg->double_pulse_tolerance_s >= cfg->period_s) {
+        find_key("receivers", "double_pulse_tolerance_s", &ki);
+        fail(ctx, ctx ? ctx->key_line[ki] : 0, "receivers", "double_pulse_tolerance_s",
+             "%g s: double_pulse_spacing_s + this not below period_s %g s",
+             cfg->double_pulse_tolerance_s, cfg->period_s);
+        return -1;
     }
     /* Beacon 1 must be distinguishable in time from its double pulse. */
     if (cfg->double_pulse_spacing_s >= cfg->period_s) {

@@ -47,6 +47,9 @@ struct bridge_config {
     double angle_step_deg;      /* 0 = evenly spaced (360/count) */
     double receiver_height_m;
     double beamwidth_deg;
+    double double_pulse_tolerance_s; /* the receiver node's ± window for beacon 1's
+                                        second burst; it holds each detection for
+                                        double_pulse_spacing_s + this before sending */
     /* [robot] */
     double wheel_base_m;
     double wheel_radius_m;

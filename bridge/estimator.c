@@ -34,9 +34,6 @@
 /* Echo-storm evaluation window (us). */
 #define STORM_WINDOW_US 5000000
 #define STORM_MIN_PULSES 10
-/* The receiver node's double-pulse tolerance: it holds each detection for
- * double_pulse_spacing_s + this before sending it (docs/protocol.md). */
-#define DOUBLE_PULSE_TOLERANCE_US 1000
 
 /* ---- events ----------------------------------------------------------- */
 
@@ -181,7 +178,9 @@ static int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
 
 int64_t estimator_pulse_hold_us(const struct bridge_config *cfg)
 {
-    return (int64_t)llround(cfg->double_pulse_spacing_s * 1e6) + DOUBLE_PULSE_TOLERANCE_US;
+    /* The receiver node holds each detection for double_pulse_spacing_s plus
+     * its double-pulse tolerance before sending it (docs/protocol.md). */
+    return (int64_t)llround((cfg->double_pulse_spacing_s + cfg->double_pulse_tolerance_s) * 1e6);
 }
 
 /* Field by field (no padding, no accidental fields). */
@@ -283,6 +282,7 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg,
         bl_filter_update_config(&e->filter, &c) == BL_OK) {
         e->blcfg = c;
         e->cfg = *cfg;
+        e->pulse_hold_us = estimator_pulse_hold_us(cfg); /* the node's tolerance may change */
         if (!seq_config_equal(&sc, &e->seqcfg)) {
             /* The windows follow the speed-of-sound tuning (max flight,
              * merge window): new windows, the filter's hint at once so the

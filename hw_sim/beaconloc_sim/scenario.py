@@ -238,8 +238,10 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
                                             minimum=0, maximum=1),
         late_arrival_delay_s=rng_pair("acoustics", "late_arrival_delay_s", (0.004, 0.030)),
         late_arrival_gain=rng_pair("acoustics", "late_arrival_gain", (0.5, 1.0)),
-        double_pulse_tolerance_s=ini.number("acoustics", "double_pulse_tolerance_s", 0.001,
-                                            positive=True),
+        # the receiver node's window: the site's ([receivers]); a scenario may give the
+        # node another one than the site file says (a mismatched node firmware)
+        double_pulse_tolerance_s=ini.number("acoustics", "double_pulse_tolerance_s",
+                                            site.double_pulse_tolerance_s, positive=True),
         detector_holdoff_s=ini.number("acoustics", "detector_holdoff_s", 0.020, minimum=0.0,
                                       maximum=1.0),
         beacon_period_ppm=ini.number("clocks", "beacon_period_ppm", 50.0, minimum=-1000, maximum=1000),

@@ -23,7 +23,8 @@ _KNOWN = {
     "site": {"name", "room_size_x_m", "room_size_y_m", "room_height_m"},
     "beacons": {"count", "period_s", "double_pulse_spacing_s", "burst_length_s"},
     "beacon": {"x_m", "y_m", "z_m"},
-    "receivers": {"count", "ring_radius_m", "first_angle_deg", "height_m", "beamwidth_deg"},
+    "receivers": {"count", "ring_radius_m", "first_angle_deg", "height_m", "beamwidth_deg",
+                  "double_pulse_tolerance_s"},
     "robot": {"wheel_base_m", "wheel_radius_m", "ticks_per_rev", "encoder_rate_hz",
               "sigma_wheel_scale"},   # the last is the estimator's (bridge), not physics
     "noise": {"sigma_arrival_s", "sigma_wheel_per_m", "speed_of_sound_mps",
@@ -49,6 +50,7 @@ class Site:
     first_angle_rad: float
     rx_height_m: float
     beamwidth_rad: float             # full beam width at half amplitude
+    double_pulse_tolerance_s: float  # the receiver node's +/- window for beacon 1's second burst, s
     wheel_base_m: float
     wheel_radius_m: float
     ticks_per_rev: int
@@ -106,6 +108,8 @@ def load_site(path: str | Path) -> Site:
         rx_height_m=ini.number("receivers", "height_m", minimum=0.0),
         beamwidth_rad=math.radians(ini.number("receivers", "beamwidth_deg", 90.0,
                                               positive=True, maximum=360.0)),
+        double_pulse_tolerance_s=ini.number("receivers", "double_pulse_tolerance_s", 0.001,
+                                            positive=True),
         wheel_base_m=ini.number("robot", "wheel_base_m", positive=True),
         wheel_radius_m=ini.number("robot", "wheel_radius_m", positive=True),
         ticks_per_rev=ini.integer("robot", "ticks_per_rev", minimum=1),
@@ -121,4 +125,7 @@ def load_site(path: str | Path) -> Site:
                         "must exceed burst_length_s (the two bursts would merge)")
     if site.period_s <= site.double_pulse_spacing_s + site.burst_length_s:
         raise ini.error("beacons", "period_s", "shorter than beacon 1's double pulse")
+    if site.double_pulse_tolerance_s >= site.double_pulse_spacing_s:
+        raise ini.error("receivers", "double_pulse_tolerance_s",
+                        "must be below double_pulse_spacing_s (a burst would be its own second)")
     return site

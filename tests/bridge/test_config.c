@@ -172,6 +172,32 @@ static void test_out_of_range_and_bad_values(void **state)
     expect_error(body, ":23: [robot] sigma_wheel_scale: 0.8 out of range [0..0.5]");
 }
 
+/* The receiver node's double-pulse tolerance: 1 ms unless the site says
+ * otherwise; it sets how long the node holds a detection (spacing + it). */
+static void test_double_pulse_tolerance_key(void **state)
+{
+    (void)state;
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    assert_true(cfg.double_pulse_tolerance_s == 0.001);
+    assert_int_equal(estimator_pulse_hold_us(&cfg), 4000); /* 3 ms + 1 ms */
+    char body[2048];
+    snprintf(body, sizeof body, "%s[receivers]\ndouble_pulse_tolerance_s = 0.0015\n", good_body);
+    assert_int_equal(make_file(body), 0);
+    char err[CONFIG_ERR_LEN] = "";
+    if (config_load_file(&cfg, path, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    unlink(path);
+    path[0] = '\0';
+    assert_true(cfg.double_pulse_tolerance_s == 0.0015);
+    assert_int_equal(estimator_pulse_hold_us(&cfg), 4500);
+    snprintf(body, sizeof body, "%s[receivers]\ndouble_pulse_tolerance_s = 0\n", good_body);
+    expect_error(body, ":23: [receivers] double_pulse_tolerance_s: 0 out of range (0..1]");
+    snprintf(body, sizeof body, "%s[receivers]\ndouble_pulse_tolerance_s = 0.199\n", good_body);
+    expect_error(body, ":23: [receivers] double_pulse_tolerance_s: 0.199 s: double_pulse_spacing_s "
+                       "+ this not below period_s 0.2 s");
+}
+
 /* The optional wheel-scale calibration key reaches the estimator's config. */
 static void test_wheel_scale_calibration_key(void **state)
 {
@@ -365,6 +391,7 @@ int main(void)
         cmocka_unit_test(test_not_a_number),
         cmocka_unit_test(test_out_of_range_and_bad_values),
         cmocka_unit_test_teardown(test_wheel_scale_calibration_key, teardown),
+        cmocka_unit_test_teardown(test_double_pulse_tolerance_key, teardown),
         cmocka_unit_test_teardown(test_tuning_section, teardown),
         cmocka_unit_test(test_duplicate_key),
         cmocka_unit_test(test_beacons_incomplete_or_extra),

@@ -120,3 +120,16 @@ def test_missing_site_file_and_unknown_scenario(tmp_path):
     bad.write_text("site = a.ini\n")
     with pytest.raises(ConfigError, match=r"^bad.scenario.ini:1: key before any \[section\]"):
         load_scenario(str(bad))
+
+
+def test_double_pulse_tolerance_from_the_site(make_scenario):
+    """The receiver node's double-pulse window is the site's ([receivers], 1 ms by
+    default, as the bridge assumes); a scenario may give the node another one."""
+    assert load_scenario(str(make_scenario(GOOD_BODY))).double_pulse_tolerance_s == 0.001
+    text = site_with(receivers__double_pulse_tolerance_s="0.0015")
+    assert load_scenario(str(make_scenario(GOOD_BODY, text))).double_pulse_tolerance_s == 0.0015
+    body = GOOD_BODY + "[acoustics]\ndouble_pulse_tolerance_s = 0.0005\n"
+    assert load_scenario(str(make_scenario(body, text))).double_pulse_tolerance_s == 0.0005
+    text = site_with(receivers__double_pulse_tolerance_s="0.004")
+    with pytest.raises(ConfigError, match=r"\[receivers\] double_pulse_tolerance_s: must be below"):
+        load_scenario(str(make_scenario(GOOD_BODY, text)))
