@@ -23,13 +23,16 @@ class Segment:
 class Trajectory:
     """Closed-form pose, speed and wheel travel along a segment program.
 
-    ``kidnap`` = (time_s, dx_m, dy_m): from time_s on, the robot sits dx, dy
-    away from where the program puts it (carried; its wheels did not turn).
+    ``kidnap`` = (time_s, dx_m, dy_m[, dtheta_rad]): at time_s the robot is carried
+    dx, dy away and turned by dtheta (its wheels do not turn); from then on the
+    program goes on from the new pose, so the rest of the path is the planned one
+    turned by dtheta about the pickup point p_k and moved by (dx, dy):
+    p(t) = p_k + (dx, dy) + R(dtheta) (p_planned(t) - p_k), theta(t) = theta_planned(t) + dtheta.
     """
 
     def __init__(self, start_x_m: float, start_y_m: float, start_theta_rad: float,
                  segments: list[Segment], wheel_base_m: float,
-                 kidnap: tuple[float, float, float] | None = None):
+                 kidnap: tuple[float, ...] | None = None):
         self.segments = segments
         self.wheel_base_m = wheel_base_m
         self.kidnap = kidnap
@@ -84,9 +87,22 @@ class Trajectory:
         x, y, th = self._advance(self.x0_m[i], self.y0_m[i], self.th0_rad[i],
                                  self.v_mps[i], self.w_radps[i], tau)
         if self.kidnap is not None:
-            moved = t >= self.kidnap[0]
-            x = x + np.where(moved, self.kidnap[1], 0.0)
-            y = y + np.where(moved, self.kidnap[2], 0.0)
+            t_k, dx, dy = self.kidnap[:3]
+            dth = self.kidnap[3] if len(self.kidnap) > 3 else 0.0
+            moved = t >= t_k
+            if dth != 0.0:
+                # the planned path after the pickup, turned by dth about the pickup point
+                ik = self._index(np.asarray(t_k))
+                xk, yk, _ = self._advance(self.x0_m[ik], self.y0_m[ik], self.th0_rad[ik],
+                                          self.v_mps[ik], self.w_radps[ik],
+                                          max(t_k - self.t0_s[ik], 0.0))
+                c, s = math.cos(dth), math.sin(dth)
+                rx = xk + c * (x - xk) - s * (y - yk)
+                ry = yk + s * (x - xk) + c * (y - yk)
+                x, y = np.where(moved, rx, x), np.where(moved, ry, y)
+                th = th + np.where(moved, dth, 0.0)
+            x = x + np.where(moved, dx, 0.0)
+            y = y + np.where(moved, dy, 0.0)
         return {"x_m": x, "y_m": y, "theta_rad": th, "v_mps": self.v_mps[i],
                 "omega_radps": self.w_radps[i]}
 

@@ -74,7 +74,7 @@ class Scenario:
     initial_ticks: tuple[int, int]
     # faults
     encoder_silence: tuple[float, float] | None
-    kidnap: tuple[float, float, float] | None
+    kidnap: tuple[float, float, float, float] | None   # time_s, dx_m, dy_m, dtheta_rad
     beacon_outage: tuple[float, float, tuple[int, ...]] | None
     obstacles_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     # output
@@ -153,10 +153,13 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
             raise ini.error("path", key, "unknown key")
     kidnap = None
     if ini.has("faults", "kidnap"):
-        k = ini.numbers("faults", "kidnap", 3)
+        k = ini.numbers("faults", "kidnap")
+        if len(k) not in (3, 4):
+            raise ini.error("faults", "kidnap", "expected time_s, dx_m, dy_m[, dtheta_deg], got "
+                            f"{len(k)} numbers")
         if k[0] < 0:
             raise ini.error("faults", "kidnap", "time_s must be >= 0")
-        kidnap = (k[0], k[1], k[2])
+        kidnap = (k[0], k[1], k[2], math.radians(k[3]) if len(k) == 4 else 0.0)
     trajectory = Trajectory(start[0], start[1], math.radians(start[2]), segments,
                             site.wheel_base_m, kidnap)
 
