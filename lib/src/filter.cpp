@@ -333,26 +333,30 @@ struct Snapshot {
 
 // Pulses of the latest firing cycle from the last-pulse table, as a TDOA
 // problem: each pulse's firing slot relative to the latest pulse is found
-// from the arrival spacing (flight-time differences < T/2).
-bool build_snapshot(const bl_filter *f, real s_mps, real T_s, real sigma_s, Snapshot &out)
+// from the arrival spacing (flight-time differences < T/2). Each beacon's
+// arrival is the earliest of its latest firing (ring_t_us_: the direct path;
+// a later echo of the same firing does not replace it). Only the beacons in
+// use_mask take part.
+bool build_snapshot(const bl_filter *f, real s_mps, real T_s, real sigma_s, uint32_t use_mask, Snapshot &out)
 {
     const bl_config *cfg = &f->cfg_;
     const uint32_t n = cfg->beacon_count;
+    const uint32_t valid = f->last_valid_mask_ & use_mask;
     int64_t latest = 0;
     uint32_t L = n;
     for (uint32_t j = 0; j < n; ++j)
-        if ((f->last_valid_mask_ >> j) & 1u)
-            if (L == n || f->last_arrival_us_[j] > latest) {
-                latest = f->last_arrival_us_[j];
+        if ((valid >> j) & 1u)
+            if (L == n || f->ring_t_us_[j] > latest) {
+                latest = f->ring_t_us_[j];
                 L = j;
             }
     if (L == n) return false;
     std::memset(&out, 0, sizeof out);
     uint32_t m = 0;
     for (uint32_t j = 0; j < n; ++j) {
-        if (!((f->last_valid_mask_ >> j) & 1u)) continue;
+        if (!((valid >> j) & 1u)) continue;
         int64_t d_us;
-        if (!bl::sub_us(f->last_arrival_us_[j], latest, &d_us)) continue;
+        if (!bl::sub_us(f->ring_t_us_[j], latest, &d_us)) continue;
         const real dt = bl::us_to_s(d_us);  // <= 0
         const real slot_r = std::round(dt / T_s);
         if (!(slot_r > -real(n)) || slot_r > real(0)) continue;
@@ -376,12 +380,12 @@ bool build_snapshot(const bl_filter *f, real s_mps, real T_s, real sigma_s, Snap
 // The snapshot fix of the last cycle (the problem lives only in this frame;
 // noinline keeps it off the callers' stacks).
 __attribute__((noinline)) int solve_snapshot(const bl_filter *f, real s_mps, real T_s, uint32_t min_beacons,
-                                             bl_tdoa_solution *sol, int64_t *ref_arrival_us,
+                                             uint32_t use_mask, bl_tdoa_solution *sol, int64_t *ref_arrival_us,
                                              uint32_t *ref_beacon)
 {
     const bl_config *cfg = &f->cfg_;
     Snapshot snap;
-    if (!build_snapshot(f, s_mps, T_s, cfg->startup_sigma_arrival_s, snap)) return BL_EDEGENERATE;
+    if (!build_snapshot(f, s_mps, T_s, cfg->startup_sigma_arrival_s, use_mask, snap)) return BL_EDEGENERATE;
     if (snap.prob.count < min_beacons) return BL_EDEGENERATE;
     const int rc = bl_solve_tdoa_2d(&snap.prob, sol);
     if (rc != BL_OK) return rc;
@@ -454,7 +458,7 @@ int64_t ring_window_us(const bl_config *cfg)
     return int64_t(std::llround(double(w_s) * 1e6));
 }
 
-void remember_ring(bl_filter *f, uint32_t b, int64_t arrival_us, uint32_t receiver_index)
+void remember_ring(bl_filter *f, uint32_t b, int64_t arrival_us, uint32_t receiver_index, bool explained)
 {
     const bl_config *cfg = &f->cfg_;
     const uint32_t bit = 1u << receiver_index;
@@ -467,20 +471,41 @@ void remember_ring(bl_filter *f, uint32_t b, int64_t arrival_us, uint32_t receiv
         // a new firing (or the earlier set was late arrivals of this one)
         f->ring_t_us_[b] = arrival_us;
         f->ring_mask_[b] = bit;
-    } else if (d_us < 0) {
+        f->ring_explained_mask_ = (f->ring_explained_mask_ & ~(1u << b)) | (explained ? 1u << b : 0u);
+        return;
+    }
+    if (d_us < 0) {
         f->ring_t_us_[b] = arrival_us;
         f->ring_mask_[b] |= bit;
     } else if (d_us <= w_us) {
         f->ring_mask_[b] |= bit;
+    } else {
+        return;  // later than the window: not the direct pulse
     }
+    if (explained) f->ring_explained_mask_ |= 1u << b;
 }
 
-void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index)
+// explained: the pulse was fused (accepted by the gate of a started filter).
+void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index,
+                    bool explained = false)
 {
     f->last_arrival_us_[beacon_index] = arrival_us;
     f->last_receiver_[beacon_index] = receiver_index;
     f->last_valid_mask_ |= 1u << beacon_index;
-    remember_ring(f, beacon_index, arrival_us, receiver_index);
+    remember_ring(f, beacon_index, arrival_us, receiver_index, explained);
+}
+
+// The beacons whose latest firing the running state could not explain
+// (every direct arrival of it gated out): after a kidnap those are the
+// firings heard at the new place. A restart from a started filter uses them
+// alone when they cover min_beacons, so that the fix does not mix the
+// places before and after; else every beacon of the table.
+uint32_t restart_mask(const bl_filter *f, uint32_t min_beacons)
+{
+    const uint32_t unexplained = f->last_valid_mask_ & ~f->ring_explained_mask_;
+    uint32_t count = 0;
+    for (uint32_t m = unexplained; m; m &= m - 1) ++count;
+    return count >= min_beacons ? unexplained : ~0u;
 }
 
 // Heading from the receiver ring at the fix (x, y) (filter.h, "Heading from
@@ -494,11 +519,16 @@ void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uin
 // sigma = max(circular standard deviation sqrt(-2 ln Rbar) of the theta_b
 // (Mardia 1972, Statistics of Directional Data; Rbar = mean resultant
 // length), the receiver spacing / sqrt(12) (the quantisation of one
-// receiver's angle)). False (no heading) with fewer than min(3, N) beacons
+// receiver's angle)). Each theta_b is the heading at that firing; it is
+// carried to the snapshot time with the turn rate omega (constant-velocity
+// model, Kleeman 1992 eq. 15: theta(t) = theta(t_b) + omega (t - t_b)), as
+// a robot on a 0.5 m arc turns 0.8 rad in one cycle.
+// False (no heading) with fewer than min(3, N) beacons
 // whose receivers give a bearing, a spread above 0.6 rad (the sets do not
 // agree: echoes, or a robot turning through the cycle), or receivers too
 // wide (beamwidth_deg > 180) to point.
-bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, real *theta_rad, real *sigma_rad)
+bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, real omega_radps, uint32_t use_mask,
+                  real *theta_rad, real *sigma_rad)
 {
     const bl_config *cfg = &f->cfg_;
     if (cfg->beamwidth_deg > real(180) || cfg->receiver_count < 2) return false;
@@ -508,7 +538,7 @@ bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, rea
     real sum_c = 0, sum_s = 0;
     uint32_t used = 0;
     for (uint32_t b = 0; b < n; ++b) {
-        const uint32_t mask = f->ring_mask_[b];
+        const uint32_t mask = ((use_mask >> b) & 1u) ? f->ring_mask_[b] : 0u;
         int64_t age_us;
         if (mask == 0 || !bl::sub_us(latest_us, f->ring_t_us_[b], &age_us) || age_us > cycle_us ||
             age_us < -cycle_us)
@@ -528,8 +558,9 @@ bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, rea
         const real phi = std::atan2(rs, rc);
         const bl_beacon &bc = cfg->beacons[b];
         const real beta = std::atan2(bc.y_m - y_m, bc.x_m - x_m);
-        // Vander et al. 2011 eq. 3: phi = beta - theta
-        const real th_b = beta - phi;
+        // Vander et al. 2011 eq. 3: phi = beta - theta; carried to latest_us
+        // (Kleeman 1992 eq. 15, constant turn rate)
+        const real th_b = beta - phi + omega_radps * bl::us_to_s(age_us);
         sum_c += std::cos(th_b);
         sum_s += std::sin(th_b);
         ++used;
@@ -552,17 +583,17 @@ bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, rea
 // Start (or restart) *f from the snapshot of its last pulses, heading from
 // the ring when cfg.ring_heading and the ring gives one, else theta with σ
 // sigma_theta. On failure *f is untouched.
-int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real s_mps, real var_s, real T_s,
-                        real var_T, uint32_t min_beacons)
+int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_radps, real s_mps, real var_s,
+                        real T_s, real var_T, uint32_t min_beacons, uint32_t use_mask = ~0u)
 {
     bl_tdoa_solution sol;
     int64_t ref_arrival_us = 0;
     uint32_t ref_beacon = 0;
-    const int rc = solve_snapshot(f, s_mps, T_s, min_beacons, &sol, &ref_arrival_us, &ref_beacon);
+    const int rc = solve_snapshot(f, s_mps, T_s, min_beacons, use_mask, &sol, &ref_arrival_us, &ref_beacon);
     if (rc != BL_OK) return rc;
     if (f->cfg_.ring_heading) {
         real th, sg;
-        if (ring_heading(f, sol.x_m, sol.y_m, ref_arrival_us, &th, &sg)) {
+        if (ring_heading(f, sol.x_m, sol.y_m, ref_arrival_us, omega_radps, use_mask, &th, &sg)) {
             theta = th;
             sigma_theta = sg;
         }
@@ -749,7 +780,12 @@ extern "C" int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real
         vs = cov(f)(S, S);
         vT = cov(f)(T, T);
     }
-    return start_from_snapshot(f, theta_rad, sigma_theta_rad, s, vs, Tp, vT, 3);
+    // a running filter's turn rate carries the ring's bearings to the snapshot time
+    // a restart uses the firings the running state could not explain when
+    // they cover min(4, N) beacons (restart_mask), else every beacon
+    const uint32_t n = cfg->beacon_count;
+    return start_from_snapshot(f, theta_rad, sigma_theta_rad, started(f) ? f->x_[W] : real(0), s, vs, Tp, vT, 3,
+                               started(f) ? restart_mask(f, n < 4 ? n : 4) : ~0u);
 }
 
 extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real d_right_m)
@@ -1018,7 +1054,7 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     uint32_t ref = f->ref_beacon_;
     // The reference follows the newest firing (Kleeman eq. 15: t0 += T per beacon).
     shift_reference(cfg, xi, Pn, epoch, ref, g.slot > 0 ? g.slot : 0);
-    remember();
+    remember_pulse(f, beacon_index, arrival_us, receiver_index, true);
     commit(f, xi, Pn);
     f->epoch_us_ = epoch;
     f->ref_beacon_ = ref;
@@ -1087,7 +1123,8 @@ inline bl_pulse_status fuse_stale(bl_filter *f, uint32_t beacon_index, int64_t a
         grown_variance(f->P_[S * NX + S], qs, gap_s, cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps);
     const real var_T = grown_variance(f->P_[T * NX + T], qT, gap_s, cfg->sigma_period_s * cfg->sigma_period_s);
     const uint32_t n = cfg->beacon_count;
-    if (start_from_snapshot(f, f->x_[TH], cfg->reset_sigma_theta_rad, f->x_[S], var_s, f->x_[T], var_T,
+    // after the gap the old turn rate means nothing: 0
+    if (start_from_snapshot(f, f->x_[TH], cfg->reset_sigma_theta_rad, real(0), f->x_[S], var_s, f->x_[T], var_T,
                             n < 4 ? n : 4) == BL_OK)
         return BL_PULSE_RESET;
     return BL_PULSE_BUFFERED;
@@ -1123,7 +1160,7 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
         remember_pulse(f, beacon_index, arrival_us, receiver_index);
         res.status = BL_PULSE_BUFFERED;
         const uint32_t need = cfg->beacon_count < 4 ? cfg->beacon_count : 4;
-        if (start_from_snapshot(f, cfg->initial_theta_rad, cfg->reset_sigma_theta_rad,
+        if (start_from_snapshot(f, cfg->initial_theta_rad, cfg->reset_sigma_theta_rad, real(0),
                                 cfg->speed_of_sound_mps,
                                 cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps,
                                 cfg->beacon_period_s, cfg->sigma_period_s * cfg->sigma_period_s,
@@ -1152,8 +1189,13 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
             // snapshot solver on the last cycle (keeps s and T, heading with a
             // wide σ); if the snapshot fails, keep counting.
             const uint32_t n = cfg->beacon_count;
-            if (start_from_snapshot(f, f->x_[TH], cfg->reset_sigma_theta_rad, f->x_[S], f->P_[S * NX + S],
-                                    f->x_[T], f->P_[T * NX + T], n < 4 ? n : 4) == BL_OK)
+            // From the firings the state could not explain only: until they
+            // cover min(4, N) beacons (within a cycle of rejections) it waits.
+            const uint32_t need = n < 4 ? n : 4;
+            const uint32_t use = restart_mask(f, need);
+            if (use != ~0u &&
+                start_from_snapshot(f, f->x_[TH], cfg->reset_sigma_theta_rad, f->x_[W], f->x_[S],
+                                    f->P_[S * NX + S], f->x_[T], f->P_[T * NX + T], need, use) == BL_OK)
                 res.status = BL_PULSE_RESET;
         }
     }

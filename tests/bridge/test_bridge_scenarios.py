@@ -49,9 +49,12 @@ def test_kidnap_resets_and_recovers(bridge_bin, tmp_path):
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_kidnap_with_a_turn_recovers_position_and_heading(bridge_bin, tmp_path, seed):
     """Carried 7.5 m and turned 180 degrees at 60 s (kidnap with dtheta): the
-    filter re-starts (its heading from the ring) and is back under 0.1 m and
-    0.2 rad within 10 beacon cycles. (Over seeds 1-8 the position was back
-    within 2.3 to 4.7 s, the heading within 1.9 to 4.0 s.)"""
+    filter re-starts once, from the firings the old state could not explain,
+    with its heading from the ring, and is back under 0.1 m and 0.2 rad
+    within 10 beacon cycles. (Over seeds 1-8: one reset on 7 of them, two on
+    one; position back within 1.0 to 4.3 s. When the restart's snapshot
+    still mixed the pulses heard before and after the carry it took 2 or 3
+    resets on 7 of the 8, and 2.3 to 4.7 s.)"""
     scenario = tmp_path / "kidnap-turn.scenario.ini"
     text = (SITE.parent / "kidnap.scenario.ini").read_text()
     assert "kidnap = 60, 0.0, 2.0" in text
@@ -66,7 +69,7 @@ def test_kidnap_with_a_turn_recovers_position_and_heading(bridge_bin, tmp_path, 
     before = (t_sim > 40) & (t_sim < 59.5)
     assert np.all(est["reset_counter"][before] == 0)
     assert np.percentile(err[before], 95) < 0.1
-    assert est["reset_counter"][-1] >= 1
+    assert est["reset_counter"][-1] == 1
     just_after = (t_sim >= 60) & (t_sim < 62)
     assert np.max(err_th[just_after]) > 2.5          # it really was turned round
     settled = t_sim >= 60 + 10 * BEACON_CYCLE_S

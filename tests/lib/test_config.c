@@ -86,6 +86,8 @@ static int site_handler(void *user, const char *section, const char *key, const 
     R("noise", "speed_of_sound_mps", speed_of_sound_mps);
     R("noise", "sigma_speed_of_sound_mps", sigma_speed_of_sound_mps);
     R("noise", "gate_sigma", gate_sigma);
+    /* the receiver node's own setting (its hold of a detection), the bridge's */
+    else if (!strcmp(section, "receivers") && !strcmp(key, "double_pulse_tolerance_s")) return 1;
     else if (!strncmp(section, "beacon", 6) && section[6] >= '1' && section[6] <= '9') {
         const int n = atoi(section + 6);
         if (n < 1 || n > BL_MAX_BEACONS) ok = 0;

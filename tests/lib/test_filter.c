@@ -772,24 +772,29 @@ static void test_echoes_rejected(void **state)
 }
 
 /* Robot kidnapped (lifted 3 m away): persistent rejection re-initialises
- * from the snapshot solver, the reset counter bumps, the error recovers. */
+ * from the snapshot solver, the reset counter bumps, the error recovers.
+ * One reset does it, on each of four seeds. (The restart takes only the
+ * firings the old state could not explain; the bridge's replay test of a
+ * kidnap with a turn is where a mixed snapshot used to cost extra resets.) */
 static void test_kidnap_recovers(void **state)
 {
     (void)state;
     bl_config cfg;
     assert_int_equal(bl_config_default(&cfg), BL_OK);
-    sim_params sp = default_sim();
-    sp.duration_s = 80;
-    sp.kidnap_at_s = 40;
-    sp.kidnap_dx_m = 2.0;
-    sp.kidnap_dy_m = 2.5;
-    sp.seed = 5;
-    sim_stats st = {0};
-    sim_run(&sp, &cfg, 70.0, &st);
-    print_stats("kidnap", &st);
-    assert_true(st.resets >= 1 && st.resets <= 3);
-    assert_true(st.final_e < 0.10);
-    assert_true(st.max_e < 0.25); /* over the last 10 s */
+    for (uint64_t seed = 5; seed < 9; ++seed) {
+        sim_params sp = default_sim();
+        sp.duration_s = 80;
+        sp.kidnap_at_s = 40;
+        sp.kidnap_dx_m = 2.0;
+        sp.kidnap_dy_m = 2.5;
+        sp.seed = seed;
+        sim_stats st = {0};
+        sim_run(&sp, &cfg, 70.0, &st);
+        print_stats("kidnap", &st);
+        assert_int_equal(st.resets, 1);
+        assert_true(st.final_e < 0.10);
+        assert_true(st.max_e < 0.25); /* over the last 10 s */
+    }
 }
 
 /* float32 at a 24 h clock offset: same accuracy as at 0, the t0 offset in

@@ -52,8 +52,11 @@
  * brings back the start-up σ and gate until it re-converges.
  * Persistent rejection: after cfg.reset_reject_count consecutive gate
  * rejections spanning >= 2 beacons, the filter re-initialises from the
- * snapshot of the last cycle's pulses (kept per beacon, accepted or not),
- * keeping s and T, heading from the ring or kept with σ
+ * snapshot of the last cycle's firings that it could not explain (every
+ * direct arrival of the firing gated out: after a kidnap, the ones heard at
+ * the new place), as soon as those cover min(4, N) beacons, so that the fix
+ * does not mix the places before and after; keeping s and T, heading from
+ * the ring or kept with σ
  * cfg.reset_sigma_theta_rad, and bumps
  * the reset counter (fuse_pulse returns status BL_PULSE_RESET).
  * Time gaps: the state is never extrapolated further than
@@ -136,6 +139,7 @@ typedef struct bl_filter {
     uint32_t last_receiver_[BL_MAX_BEACONS];
     int64_t ring_t_us_[BL_MAX_BEACONS];   /* earliest arrival of the latest firing */
     uint32_t ring_mask_[BL_MAX_BEACONS];  /* receivers that heard it (bit per receiver) */
+    uint32_t ring_explained_mask_;        /* beacons whose latest firing had a fused arrival */
 } bl_filter;
 
 /* Explicit start: a known pose and firing time. */
@@ -234,9 +238,12 @@ int bl_filter_start(bl_filter *f, const bl_filter_prior *prior);
  * ring when cfg.ring_heading and the ring gives one (see "Heading from the
  * ring"), else theta_rad with σ sigma_theta_rad > 0 (the timing of one
  * snapshot hardly sees the heading).
- * The buffer holds the last pulse per beacon of every fuse_pulse call that
+ * The buffer holds the last firing per beacon of every fuse_pulse call that
  * returned BL_OK (fused, gated out, buffered before the start or while
- * stale). The state time becomes the latest buffered arrival. A started
+ * stale), timed by its earliest arrival (within the ring's flight time plus
+ * 4 σ: a later echo of the firing does not replace it). On a started filter
+ * only the firings it could not explain take part when they cover min(4, N)
+ * beacons (as for persistent rejection), else all. The state time becomes the latest buffered arrival. A started
  * filter keeps its s, T (with their variances) and wheel scales.
  * Errors: BL_EINVAL, BL_ENOTINIT, BL_EDEGENERATE (fewer than 3 beacons in
  * the last cycle or singular geometry), BL_ENOCONVERGE (no convergence, or
