@@ -38,7 +38,8 @@
  * gives the heading (Vander et al. 2011 eq. 3). Every snapshot (re)start —
  * the automatic one, persistent rejection, a time gap, and
  * bl_filter_start_snapshot() — takes the circular mean over the last
- * cycle's beacons, with σ = max(their circular spread, receiver spacing/√12),
+ * cycle's beacons (each carried to the snapshot time with a running
+ * filter's turn rate), with σ = max(their circular spread, receiver spacing/√12),
  * when at least min(3, N) beacons give a bearing and they agree within
  * 0.6 rad; otherwise the given or kept heading with its σ. So a robot
  * switched on, or kidnapped and turned, while standing still starts with
