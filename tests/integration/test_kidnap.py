@@ -15,7 +15,7 @@ RECOVERED_M = 0.10
 def test_kidnap_reinitialises_and_recovers(rig):
     sc = h.scenario_events("kidnap")
     assert sc.kidnap is not None, "kidnap scenario has no [faults] kidnap"
-    t_kidnap, dx, dy = sc.kidnap
+    t_kidnap, dx, dy, _dtheta_rad = sc.kidnap
     assert np.hypot(dx, dy) >= 1.0, "the kidnap should move the robot far (2 m)"
     t_down = t_kidnap
     if sc.encoder_silence is not None:
