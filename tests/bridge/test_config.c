@@ -77,6 +77,17 @@ static void expect_error(const char *body, const char *expect)
     path[0] = '\0';
 }
 
+/* Load `body` over *cfg and expect success (the temp file is removed). */
+static void load_ok(const char *body, struct bridge_config *cfg)
+{
+    assert_int_equal(make_file(body), 0);
+    char err[CONFIG_ERR_LEN] = "";
+    if (config_load_file(cfg, path, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    unlink(path);
+    path[0] = '\0';
+}
+
 static void test_repo_site_file(void **state)
 {
     (void)state;
@@ -99,12 +110,9 @@ static void test_repo_site_file(void **state)
 static void test_values_and_defaults(void **state)
 {
     (void)state;
-    assert_int_equal(make_file(good_body), 0);
     struct bridge_config cfg;
     config_defaults(&cfg);
-    char err[CONFIG_ERR_LEN] = "";
-    if (config_load_file(&cfg, path, err, sizeof err) != 0)
-        fail_msg("%s", err);
+    load_ok(good_body, &cfg);
     assert_int_equal(cfg.beacon_count, 3);
     assert_true(cfg.period_s == 0.2);
     assert_true(cfg.beacon[2].z_m == 1.5);
@@ -183,12 +191,7 @@ static void test_double_pulse_tolerance_key(void **state)
     assert_int_equal(estimator_pulse_hold_us(&cfg), 4000); /* 3 ms + 1 ms */
     char body[2048];
     snprintf(body, sizeof body, "%s[receivers]\ndouble_pulse_tolerance_s = 0.0015\n", good_body);
-    assert_int_equal(make_file(body), 0);
-    char err[CONFIG_ERR_LEN] = "";
-    if (config_load_file(&cfg, path, err, sizeof err) != 0)
-        fail_msg("%s", err);
-    unlink(path);
-    path[0] = '\0';
+    load_ok(body, &cfg);
     assert_true(cfg.double_pulse_tolerance_s == 0.0015);
     assert_int_equal(estimator_pulse_hold_us(&cfg), 4500);
     snprintf(body, sizeof body, "%s[receivers]\ndouble_pulse_tolerance_s = 0\n", good_body);
@@ -204,13 +207,10 @@ static void test_wheel_scale_calibration_key(void **state)
     (void)state;
     char body[2048];
     snprintf(body, sizeof body, "%s[robot]\nsigma_wheel_scale = 0.03\n", good_body);
-    assert_int_equal(make_file(body), 0);
     struct bridge_config cfg;
     config_defaults(&cfg);
     assert_true(cfg.sigma_wheel_scale == 0.0); /* off by default */
-    char err[CONFIG_ERR_LEN] = "";
-    if (config_load_file(&cfg, path, err, sizeof err) != 0)
-        fail_msg("%s", err);
+    load_ok(body, &cfg);
     assert_true(cfg.sigma_wheel_scale == 0.03);
 }
 
@@ -233,16 +233,12 @@ static void test_tuning_section(void **state)
     char body[2048];
     snprintf(body, sizeof body, "%s[tuning]\nspeed_of_sound_drift_mps_per_sqrt_s = 0.02\n"
              "iekf_max_iterations = 6\nheading_noise_fraction = 0\n", good_body);
-    assert_int_equal(make_file(body), 0);
-    char err[CONFIG_ERR_LEN] = "";
-    if (config_load_file(&cfg, path, err, sizeof err) != 0)
-        fail_msg("%s", err);
-    unlink(path);
-    path[0] = '\0';
+    load_ok(body, &cfg);
     assert_true(cfg.tuning.speed_of_sound_drift_mps_per_sqrt_s == 0.02);
     assert_int_equal(cfg.tuning.iekf_max_iterations, 6);
     assert_true(cfg.tuning.heading_noise_fraction == 0.0);
     bl_config c;
+    char err[CONFIG_ERR_LEN] = "";
     assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), 0);
     assert_true(c.speed_of_sound_drift_mps_per_sqrt_s == (bl_real)0.02);
     assert_int_equal(c.iekf_max_iterations, 6);
@@ -260,14 +256,13 @@ static void test_tuning_section(void **state)
 
     /* parses, but the library refuses it against [noise] sigma_arrival_s */
     snprintf(body, sizeof body, "%s[tuning]\n\nstartup_sigma_arrival_s = 0.0001\n", good_body);
-    assert_int_equal(make_file(body), 0);
     config_defaults(&cfg);
-    if (config_load_file(&cfg, path, err, sizeof err) != 0)
-        fail_msg("%s", err);
+    load_ok(body, &cfg);
     assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), -1);
+    /* the message names the loaded file: cfg.path */
     char want[CONFIG_ERR_LEN + 64];
     snprintf(want, sizeof want, "%s:24: [tuning] startup_sigma_arrival_s: rejected by the "
-             "estimator", path);
+             "estimator", cfg.path);
     if (strncmp(err, want, strlen(want)) != 0)
         fail_msg("got '%s', want prefix '%s'", err, want);
 }
