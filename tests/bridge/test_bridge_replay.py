@@ -369,6 +369,22 @@ def test_paced_latency_counts_held_pulses(bridge_bin, kleeman_log, tmp_path):
     assert s["latency_p99_us"] < 150000, s
 
 
+def replay_with_tuning(bridge_bin, log, tmp_path, name, tuning=None):
+    """Replay log through the bridge with the repo's site file plus a [tuning]
+    section of `tuning` (lines "key = value"; None: the site as it is);
+    returns the estimates CSV as a structured array."""
+    site = SITE
+    if tuning is not None:
+        site = tmp_path / f"{name}.ini"
+        site.write_text(SITE.read_text() + "\n[tuning]\n" + tuning + "\n")
+    est_path = tmp_path / f"{name}.csv"
+    proc = subprocess.run([str(bridge_bin), "--site", str(site), "--replay", str(log),
+                           "--mavlink", "udpout:127.0.0.1:9", "--estimates", str(est_path)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    return np.genfromtxt(est_path, delimiter=",", names=True)
+
+
 def test_tuning_section_reaches_the_filter(bridge_bin, kleeman_log, tmp_path):
     """A [tuning] key in the site file changes the estimator: with the speed
     of sound's random walk at 0.01 instead of 0.2 m/s/sqrt(s), its estimate
@@ -383,16 +399,9 @@ def test_tuning_section_reaches_the_filter(bridge_bin, kleeman_log, tmp_path):
     on every run."""
     log, truth_path = kleeman_log
     truth = read_truth(truth_path)
-    tuned_site = tmp_path / "tuned.ini"
-    tuned_site.write_text(SITE.read_text() + "\n[tuning]\nspeed_of_sound_drift_mps_per_sqrt_s = 0.01\n")
     wander = {}
-    for name, site in (("default", SITE), ("tuned", tuned_site)):
-        est_path = tmp_path / f"{name}.csv"
-        proc = subprocess.run([str(bridge_bin), "--site", str(site), "--replay", str(log),
-                               "--mavlink", "udpout:127.0.0.1:9", "--estimates", str(est_path)],
-                              capture_output=True, text=True, timeout=60)
-        assert proc.returncode == 0, proc.stderr
-        est = np.genfromtxt(est_path, delimiter=",", names=True)
+    for name, tuning in (("default", None), ("tuned", "speed_of_sound_drift_mps_per_sqrt_s = 0.01")):
+        est = replay_with_tuning(bridge_bin, log, tmp_path, name, tuning)
         late = (est["t_us"] - truth["t_us"][0]) > 40e6
         wander[name] = float(np.std(np.diff(est["sos_mps"][late])))   # m/s per estimate
         xt = np.interp(est["t_us"][late], truth["t_us"], truth["x_m"])
@@ -421,14 +430,8 @@ def test_heading_from_the_ring_at_start(bridge_bin, kleeman_log, tmp_path):
     truth = read_truth(truth_path)
     first = {}
     for ring in (1, 0):
-        site = tmp_path / f"ring{ring}.ini"
-        site.write_text(SITE.read_text() + f"\n[tuning]\ninitial_theta_rad = 3.0\nring_heading = {ring}\n")
-        est_path = tmp_path / f"ring{ring}.csv"
-        proc = subprocess.run([str(bridge_bin), "--site", str(site), "--replay", str(log),
-                               "--mavlink", "udpout:127.0.0.1:9", "--estimates", str(est_path)],
-                              capture_output=True, text=True, timeout=60)
-        assert proc.returncode == 0, proc.stderr
-        est = np.genfromtxt(est_path, delimiter=",", names=True)
+        est = replay_with_tuning(bridge_bin, log, tmp_path, f"ring{ring}",
+                                 f"initial_theta_rad = 3.0\nring_heading = {ring}")
         standing = (est["t_us"] - truth["t_us"][0]) < 5e6      # the run stands for its first 5 s
         assert standing.sum() > 20
         th_true = np.interp(est["t_us"][standing], truth["t_us"], np.unwrap(truth["theta_rad"]))
