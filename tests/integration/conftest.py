@@ -11,6 +11,7 @@ No case skips for lack of a bus: without vcan the suite fails, loudly
 from __future__ import annotations
 
 import itertools
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -20,7 +21,35 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import harness  # noqa: E402
 
-_iface_numbers = itertools.count(1)
+
+def _worker_index() -> int:
+    """0 without pytest-xdist, else N of its worker gwN: live cases run side by
+    side, one per worker, and each needs interface names of its own."""
+    w = os.environ.get("PYTEST_XDIST_WORKER", "")
+    return int(w[2:]) + 1 if w.startswith("gw") and w[2:].isdigit() else 0
+
+
+# Files whose checks share one module-scoped live run (module_rig): each goes
+# whole to one worker. Every other case is a live run of its own.
+SHARED_RUN_FILES = ("test_nominal.py",)
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """pytest-xdist's scheduling with one unit per live run: a shared-run
+    file whole, any other case alone (xdist's own loadgroup marks are lost
+    on pytest 9, which no longer lets a plugin rename a test's nodeid)."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class LiveRunScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0]
+            return module if module.endswith(SHARED_RUN_FILES) else nodeid
+
+    return LiveRunScheduling(config, log)
+
+
+# vcan1, vcan2, ... alone; vcan101, vcan102, ... on worker gw0, vcan201 on gw1.
+_iface_numbers = itertools.count(100 * _worker_index() + 1)
 
 
 def _ip(*args: str) -> subprocess.CompletedProcess:

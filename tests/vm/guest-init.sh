@@ -1,7 +1,8 @@
 #!/bin/sh
-# beaconloc: runs inside the virtme-ng guest (or directly on a host that has
-# vcan). Brings up the kernel CAN bus, proves it with a python-can round trip,
-# then runs the given command with the results folder in $BL_RESULTS.
+# beaconloc: runs inside the User-Mode Linux guest (tests/vm/uml-init.sh
+# starts it) or directly on a host that has vcan. Brings up the kernel CAN
+# bus, proves it with a python-can round trip, then runs the given command
+# with the results folder in $BL_RESULTS.
 #
 #   guest-init.sh RESULTS_DIR COMMAND [ARGS...]
 #
@@ -9,7 +10,7 @@
 # failure from a test failure), bus.log (modprobe/ip/round-trip output),
 # script.log (the command's stdout+stderr), exit-code (the command's status,
 # or 90 when the bus could not be brought up).
-# The repository is read-only inside the guest: nothing here writes into it.
+# Nothing here writes into the repository: only RESULTS_DIR.
 set -u
 RESULTS=$1
 shift
@@ -28,9 +29,18 @@ export PATH="$REPO/.venv/bin:$PATH"
 bus_ok=1
 {
   echo "# bus set-up on $(uname -r)"
-  # Modules: a no-op where they are built in or already loaded.
-  modprobe vcan 2>&1 || echo "modprobe vcan failed (built in?)"
-  modprobe can-raw 2>&1 || echo "modprobe can-raw failed (built in?)"
+  # Modules, in dependency order (vcan needs can-dev; can-gw joins two buses
+  # in the interface-down case). Already loaded or built in: nothing to do.
+  # modprobe where the kernel's tree is in /lib/modules; the UML kernel keeps
+  # its modules in /usr/lib/uml/modules/VER (Debian's user-mode-linux).
+  uml_mods=/usr/lib/uml/modules/$(uname -r)/kernel
+  for m in can can_raw can_dev vcan can_gw; do
+    [ -d "/sys/module/$m" ] && continue
+    modprobe "$m" 2>/dev/null && continue
+    ko=$(find "$uml_mods" -name "$(echo "$m" | tr _ -).ko" 2>/dev/null | head -n 1)
+    if [ -n "$ko" ] && insmod "$ko"; then echo "loaded $ko"; continue; fi
+    echo "cannot load module $m"
+  done
   for ifc in ${BL_VCAN_IFACES:-vcan0}; do
     if ! ip link show "$ifc" >/dev/null 2>&1; then
       ip link add dev "$ifc" type vcan || { echo "cannot create $ifc"; bus_ok=0; }

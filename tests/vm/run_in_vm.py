@@ -1,14 +1,17 @@
 """Run a command on a real kernel CAN bus: directly where the host has vcan,
-otherwise inside one virtme-ng VM (qemu, --disable-kvm).
+otherwise inside one User-Mode Linux guest (Debian's user-mode-linux: the
+guest kernel runs as host processes at native speed and boots in seconds).
 
     run_in_vm.py [options] COMMAND [ARGS...]
 
 COMMAND runs with the repository as working directory, vcan0 up, and the
-results folder in $BL_RESULTS (the only place it may write: the guest sees
-the host's files read-only). tests/vm/guest-init.sh does the guest side.
+results folder in $BL_RESULTS. The guest shares the host's file system
+(hostfs), so the results come back as they are written;
+tests/vm/uml-init.sh is the guest's init, tests/vm/guest-init.sh brings up
+the bus and runs the command in both modes.
 
 Exit status: the command's own, or non-zero when it did not run at all
-(the VM did not boot in time, no vcan, timeout, no exit code written) and,
+(the guest did not boot in time, no vcan, timeout, no exit code written) and,
 with --junit, when the pytest report is missing or counts zero tests.
 """
 from __future__ import annotations
@@ -48,20 +51,34 @@ def host_has_vcan() -> bool:
     return ok
 
 
-def pick_kernel() -> tuple[Path, str]:
-    """The newest /boot/vmlinuz-VER whose /lib/modules/VER has the vcan module:
-    the guest loads modules from the host's tree, so the two must match."""
-    found = []
-    for vmlinuz in sorted(Path("/boot").glob("vmlinuz-*")):
-        ver = vmlinuz.name[len("vmlinuz-"):]
-        can_dir = Path("/lib/modules") / ver / "kernel" / "drivers" / "net" / "can"
-        if any(can_dir.glob("vcan.ko*")) and os.access(vmlinuz, os.R_OK):
-            found.append((vmlinuz, ver))
+UML_KERNEL = "linux.uml"  # Debian's user-mode-linux: /usr/bin/linux.uml
+UML_MODULES = Path("/usr/lib/uml/modules")
+UML_INIT = REPO / "tests" / "vm" / "uml-init.sh"
+
+
+def uml_kernel() -> tuple[str, str]:
+    """(path of linux.uml, its version) where its CAN modules are installed:
+    the guest loads can, can-raw, can-dev, vcan and can-gw from
+    /usr/lib/uml/modules/VERSION."""
+    kernel = shutil.which(UML_KERNEL)
+    if kernel is None:
+        raise SystemExit("run-in-vm: linux.uml missing: install the Debian package "
+                         "user-mode-linux (make setup)")
+    found = sorted(d.name for d in UML_MODULES.glob("*")
+                   if any((d / "kernel" / "drivers" / "net" / "can").glob("vcan.ko*")))
     if not found:
-        raise SystemExit("run-in-vm: no /boot/vmlinuz-* with a matching /lib/modules/*/"
-                         "kernel/drivers/net/can/vcan.ko (install linux-image-amd64: "
-                         "make setup)")
-    return found[-1]
+        raise SystemExit(f"run-in-vm: no vcan.ko under {UML_MODULES}/*/kernel/drivers/net/can "
+                         "(package user-mode-linux)")
+    return kernel, found[-1]
+
+
+def uml_argv(kernel: str, job: Path, memory: str) -> list[str]:
+    """The UML command line: the host's own root file system over hostfs
+    (read-write: results come back through it), uml-init.sh as PID 1, the
+    job's path handed to init as the environment variable bl_job, the
+    console on stdout."""
+    return [kernel, f"mem={memory}", "root=/dev/root", "rootfstype=hostfs", "rootflags=/",
+            "rw", f"init={UML_INIT}", f"bl_job={job}", "con=null", "con0=fd:0,fd:1"]
 
 
 def clean_results(results: Path) -> None:
@@ -100,7 +117,7 @@ def kill_group(proc: subprocess.Popen) -> None:
 
 
 def run(args: argparse.Namespace, results: Path) -> tuple[str, int | None]:
-    """Start the command (VM or direct); wait, tailing --tail; return
+    """Start the command (UML or direct); wait, tailing --tail; return
     (how it ended, exit code read from the results folder or None)."""
     guest_cmd = [str(GUEST_INIT), str(results), *args.command]
     env = dict(os.environ)
@@ -112,21 +129,19 @@ def run(args: argparse.Namespace, results: Path) -> tuple[str, int | None]:
         argv = guest_cmd
         boot_timeout = None
     else:
-        vmlinuz, ver = pick_kernel()
-        vng = REPO / ".venv" / "bin" / "vng"
-        if not vng.exists():
-            raise SystemExit("run-in-vm: .venv/bin/vng missing (virtme-ng): run make setup")
-        if not shutil.which("qemu-system-x86_64"):
-            raise SystemExit("run-in-vm: qemu-system-x86_64 missing (qemu-system-x86): run make setup")
-        # The guest's shell needs the command as one string; quote each part.
-        exec_str = " ".join(_shquote(a) for a in guest_cmd)
-        if args.ifaces:
-            exec_str = f"BL_VCAN_IFACES={_shquote(args.ifaces)} {exec_str}"
-        argv = [str(vng), "--run", str(vmlinuz), "--disable-kvm", "--user", "root",
-                "--cpus", str(args.cpus), "--memory", args.memory,
-                "--rwdir", str(results), "--exec", exec_str]
-        log(f"booting {vmlinuz.name} in virtme-ng (--disable-kvm, {args.cpus} cpus, "
-            f"{args.memory}); boot timeout {args.boot_timeout:.0f} s")
+        kernel, ver = uml_kernel()
+        # The job: guest-init.sh and the command, with the host's environment
+        # that matters (the guest's init starts with an empty one).
+        keep = {k: v for k, v in env.items()
+                if k in ("PATH", "BL_VCAN_IFACES", "BL_BUILD", "LANG", "LC_ALL", "TZ")
+                or k.startswith("BL_IT_")}
+        job = results / "job.sh"
+        job.write_text("".join(f"export {k}={_shquote(v)}\n" for k, v in sorted(keep.items()))
+                       + f"cd {_shquote(str(REPO))}\n"
+                       + "exec " + " ".join(_shquote(a) for a in guest_cmd) + "\n")
+        argv = uml_argv(kernel, job, args.memory)
+        log(f"booting User-Mode Linux {ver} ({args.memory}); boot timeout "
+            f"{args.boot_timeout:.0f} s")
         boot_timeout = args.boot_timeout
     console = (results / "console.log").open("wb")
     t_start = time.monotonic()
@@ -143,12 +158,12 @@ def run(args: argparse.Namespace, results: Path) -> tuple[str, int | None]:
             now = time.monotonic() - t_start
             if booted_at is None and (results / "booted").exists():
                 booted_at = now
-                if args.mode == "vm":
+                if args.mode == "uml":
                     log(f"guest booted after {now:.0f} s")
             if tail_path is not None:
                 tail_pos = tail_new(tail_path, tail_pos)
             if boot_timeout is not None and booted_at is None and now > boot_timeout:
-                how = f"VM did not boot within {boot_timeout:.0f} s"
+                how = f"guest did not boot within {boot_timeout:.0f} s"
                 kill_group(proc)
                 break
             if now > args.timeout:
@@ -162,11 +177,11 @@ def run(args: argparse.Namespace, results: Path) -> tuple[str, int | None]:
         console.close()
     if tail_path is not None:
         tail_new(tail_path, tail_pos)
-    log(f"{'guest' if args.mode == 'vm' else 'command'} ran {time.monotonic() - t_start:.0f} s")
+    log(f"{'guest' if args.mode == 'uml' else 'command'} ran {time.monotonic() - t_start:.0f} s")
     code_file = results / "exit-code"
     if not code_file.exists():
         if how == "finished":
-            how = "the command never reported an exit code (VM crashed or never booted)"
+            how = "the command never reported an exit code (guest crashed or never booted)"
         return how, None
     try:
         return how, int(code_file.read_text().strip())
@@ -222,14 +237,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--results", default=str(REPO / "build" / "vm"),
-                    help="results folder (the VM's --rwdir); emptied first")
-    ap.add_argument("--mode", choices=("auto", "vm", "direct"), default="auto",
-                    help="auto: direct where the host has vcan, else a VM")
-    ap.add_argument("--boot-timeout", type=float, default=420.0, help="seconds")
-    ap.add_argument("--timeout", type=float, default=2700.0,
+                    help="results folder; emptied first")
+    ap.add_argument("--mode", choices=("auto", "uml", "direct"), default="auto",
+                    help="auto: direct where the host has vcan, else a UML guest")
+    ap.add_argument("--boot-timeout", type=float, default=60.0, help="seconds")
+    ap.add_argument("--timeout", type=float, default=1800.0,
                     help="seconds for boot plus command")
-    ap.add_argument("--cpus", type=int, default=2)
-    ap.add_argument("--memory", default="2G")
+    ap.add_argument("--memory", default="3G", help="the guest's memory (UML mem=)")
     ap.add_argument("--ifaces", default="", help="vcan interfaces to create (default vcan0)")
     ap.add_argument("--junit", default="", help="pytest junit xml (relative to results): "
                     "print its failures and summary, fail on zero tests")
@@ -243,7 +257,7 @@ def main() -> int:
     results = Path(args.results).resolve()
     clean_results(results)
     if args.mode == "auto":
-        args.mode = "direct" if host_has_vcan() else "vm"
+        args.mode = "direct" if host_has_vcan() else "uml"
     how, code = run(args, results)
 
     failed = False
@@ -275,7 +289,7 @@ def main() -> int:
             if script_log.exists():
                 print(script_log.read_text(errors="replace")[-args.max_chars:])
             failed = True
-        log(f"integration ({'VM' if args.mode == 'vm' else 'host vcan'}): {summary}")
+        log(f"integration ({'UML' if args.mode == 'uml' else 'host vcan'}): {summary}")
         print(summary)
         if bad:
             failed = True
