@@ -60,7 +60,35 @@ def test_direct_mode_without_a_bus_fails(tmp_path):
     assert (tmp_path / "r" / "exit-code").read_text().strip() == "90"
 
 
-def test_pick_kernel_has_matching_modules():
-    vmlinuz, ver = run_in_vm.pick_kernel()
-    assert vmlinuz.name == f"vmlinuz-{ver}"
-    assert any((Path("/lib/modules") / ver / "kernel/drivers/net/can").glob("vcan.ko*"))
+def test_uml_kernel_has_its_can_modules():
+    kernel, ver = run_in_vm.uml_kernel()
+    mods = run_in_vm.UML_MODULES / ver / "kernel"
+    for ko in ("net/can/can.ko", "net/can/can-raw.ko", "net/can/can-gw.ko",
+               "drivers/net/can/dev/can-dev.ko", "drivers/net/can/vcan.ko"):
+        assert (mods / ko).exists(), f"{mods / ko} missing: the guest could not load it"
+
+
+def _run_uml(tmp_path, *command) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(RUNNER), "--results", str(tmp_path / "r"),
+                           "--mode", "uml", "--memory", "512M", *command],
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_uml_guest_runs_the_command_on_a_bus(tmp_path):
+    """A real boot: the command runs in the guest on vcan0 with the results
+    folder shared, and its exit status comes back."""
+    out = tmp_path / "r" / "seen.txt"
+    p = _run_uml(tmp_path, "sh", "-c",
+                 f"uname -r > {out}; ip -o link show vcan0 >> {out}; exit 3")
+    assert p.returncode == 1, p.stdout + p.stderr
+    assert "command exited 3" in p.stdout
+    seen = out.read_text()
+    assert "vcan0" in seen and "UP" in seen
+    assert "vcan round trip on vcan0: ok" in p.stdout
+
+
+def test_uml_run_with_zero_tests_fails(tmp_path):
+    """A suite that ran nothing is a failure, not a pass."""
+    p = _run_uml(tmp_path, "--junit", "junit.xml", "true")
+    assert p.returncode == 1, p.stdout + p.stderr
+    assert "zero tests ran" in p.stdout

@@ -14,8 +14,8 @@
 export PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
 mount -t proc proc /proc
 mount -t sysfs sysfs /sys
-# The guest's own /tmp and /run: nothing it writes there reaches the host's.
-mount -t tmpfs -o mode=1777 tmpfs /tmp
+# The guest's own /run and /dev/shm. /tmp stays the host's: a results
+# folder may be there (the guest's HOME is a folder of its own in it).
 mount -t tmpfs -o mode=755 tmpfs /run
 mount -t tmpfs -o mode=1777 tmpfs /dev/shm 2>/dev/null
 ip link set lo up
