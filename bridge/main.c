@@ -28,6 +28,7 @@
 #include "frames.h"
 #include "health.h"
 #include "log.h"
+#include "mav_links.h"
 #include "mavlink_out.h"
 #include "record.h"
 #include "replay.h"
@@ -64,7 +65,9 @@ struct frame_ref {
 struct options {
     const char *site;
     const char *can;
-    const char *mavlink;
+    const char *mavlink;  /* the first --mavlink (overrides [bridge] mavlink) */
+    const char *mavlink_more[MAV_LINKS_MAX - 1]; /* further --mavlink endpoints */
+    int n_mavlink_more;
     const char *replay;
     const char *record;
     const char *estimates;
@@ -82,7 +85,9 @@ struct daemon {
     enum mode mode;
     int epfd, sigfd;
     struct timer timers[T_COUNT];
-    int mav_fd_registered;
+    int mav_fds[MAV_LINKS_FDS_MAX]; /* the endpoints' descriptors in epoll */
+    int n_mav_fds;
+    unsigned mav_fd_gen;      /* links.fd_gen they were registered at */
     struct can_in can;
     int can_fd_registered;    /* fd in epoll, -1 none */
     bool can_down_logged;
@@ -98,7 +103,7 @@ struct daemon {
     bool recording;
     struct estimates_csv csv;
     bool csv_open;
-    struct mav_out mav;
+    struct mav_links links;   /* every --mavlink endpoint */
     struct frame_counters fc;
     struct estimator est;
     struct latency_hist lat;
@@ -150,6 +155,7 @@ static void usage(FILE *f)
         "  --site FILE        site file (beacons, receivers, robot, noise, [bridge])\n"
         "  --can IFACE        SocketCAN interface (default vcan0)\n"
         "  --mavlink EP       udpout:HOST:PORT | udpin:HOST:PORT | serial:DEV:BAUD\n"
+        "                     (repeat for up to 4 endpoints; each gets every message)\n"
         "  --rate HZ          ODOMETRY rate (default 30)\n"
         "  --sysid N --compid N   MAVLink ids (default 1, 197)\n"
         "  --log-level L      error, warning, info, debug\n"
@@ -226,7 +232,18 @@ static int parse_args(int argc, char **argv, struct options *o, int *status)
         switch (c) {
         case O_SITE: o->site = optarg; break;
         case O_CAN: o->can = optarg; break;
-        case O_MAV: o->mavlink = optarg; break;
+        case O_MAV:
+            if (!o->mavlink)
+                o->mavlink = optarg;
+            else if (o->n_mavlink_more < MAV_LINKS_MAX - 1)
+                o->mavlink_more[o->n_mavlink_more++] = optarg;
+            else {
+                fprintf(stderr, "error: command line: --mavlink: at most %d endpoints\n",
+                        MAV_LINKS_MAX);
+                *status = EX_USAGE_STATUS;
+                return -1;
+            }
+            break;
         case O_RATE: rc = parse_double_opt("rate", optarg, 0, 1000, &o->rate_hz); break;
         case O_SYSID: rc = parse_id_opt("sysid", optarg, &o->sysid); break;
         case O_COMPID: rc = parse_id_opt("compid", optarg, &o->compid); break;
@@ -328,6 +345,14 @@ static int build_config(const struct options *o, struct bridge_config *cfg)
             fprintf(stderr, "error: %s\n", err);
         return -1;
     }
+    for (int i = 0; i < o->n_mavlink_more; i++)
+        if (strlen(o->mavlink_more[i]) >= MAV_LINK_SPEC_MAX ||
+            mav_endpoint_parse(o->mavlink_more[i], &ep) != 0) {
+            fprintf(stderr, "error: command line: --mavlink: '%s' is not "
+                    "udpout:HOST:PORT, udpin:HOST:PORT or serial:DEVICE:BAUD\n",
+                    o->mavlink_more[i]);
+            return -1;
+        }
     if (config_check(cfg, err, sizeof err) != 0) {
         if (!o->site)
             fprintf(stderr, "error: no beacons configured: give the site file with --site FILE\n");
@@ -368,16 +393,45 @@ static int ep_del(struct daemon *d, int fd)
     return 0;
 }
 
-static void sync_mav_fd(struct daemon *d)
+/* Bring the epoll set in line with the MAVLink endpoints' descriptors
+ * after any mav_links call (mav_links.h): out with those that are gone
+ * (before their numbers can be reused), in with every current one (EEXIST:
+ * already there). Cheap when nothing changed. */
+static void sync_mav_fds(struct daemon *d)
 {
-    int fd = mav_out_fd(&d->mav);
-    if (fd == d->mav_fd_registered)
+    if (d->links.fd_gen == d->mav_fd_gen)
         return;
-    if (d->mav_fd_registered >= 0)
-        (void)ep_del(d, d->mav_fd_registered); /* logged; the fd is replaced */
-    d->mav_fd_registered = -1;
-    if (fd >= 0 && ep_add(d, fd) == 0)
-        d->mav_fd_registered = fd;
+    int now[MAV_LINKS_FDS_MAX];
+    int n = mav_links_fds(&d->links, now, MAV_LINKS_FDS_MAX);
+    for (int i = 0; i < d->n_mav_fds; i++) {
+        bool kept = false;
+        for (int j = 0; j < n; j++)
+            kept |= now[j] == d->mav_fds[i];
+        if (!kept)
+            (void)ep_del(d, d->mav_fds[i]); /* logged */
+    }
+    d->n_mav_fds = 0;
+    for (int j = 0; j < n; j++) {
+        struct epoll_event ev = { .events = EPOLLIN, .data.fd = now[j] };
+        if (epoll_ctl(d->epfd, EPOLL_CTL_ADD, now[j], &ev) == 0 || errno == EEXIST)
+            d->mav_fds[d->n_mav_fds++] = now[j];
+        else
+            log_error("epoll_ctl add MAVLink fd %d: %s", now[j], strerror(errno));
+    }
+    d->mav_fd_gen = d->links.fd_gen;
+}
+
+/* Open every endpoint: [bridge] mavlink (or the first --mavlink), then the
+ * further --mavlink ones. Returns 0 or -EINVAL. */
+static int open_links(struct daemon *d)
+{
+    const char *specs[MAV_LINKS_MAX] = { d->cfg.mavlink };
+    for (int i = 0; i < d->opt.n_mavlink_more; i++)
+        specs[i + 1] = d->opt.mavlink_more[i];
+    int rc = mav_links_open(&d->links, specs, 1 + d->opt.n_mavlink_more,
+                            (unsigned)d->cfg.system_id, (unsigned)d->cfg.component_id);
+    sync_mav_fds(d);
+    return rc;
 }
 
 /* ---- timers ----------------------------------------------------------- */
@@ -517,8 +571,9 @@ static void send_odometry(struct daemon *d, const struct est_output *o,
         }
     m.reset_counter = (uint8_t)o->reset_counter;
     m.quality = (int8_t)quality_of(o);
-    int rc = mav_out_send_odometry(&d->mav, &m);
-    if (rc == 0) {
+    int rc = mav_links_send_odometry(&d->links, &m);
+    sync_mav_fds(d);
+    if (rc > 0) {
         d->odom_sent++;
         measure_latency(d, o);
     } else if (rc == -EINVAL)
@@ -541,7 +596,8 @@ static void statustext(struct daemon *d, enum mav_out_severity sev,
 {
     char buf[MAV_OUT_STATUSTEXT_MAX + 1];
     snprintf(buf, sizeof buf, "beaconloc: %.39s", text);
-    mav_out_send_statustext(&d->mav, sev, buf);
+    mav_links_send_statustext(&d->links, sev, buf);
+    sync_mav_fds(d);
 }
 
 static void drain_events(struct daemon *d)
@@ -796,16 +852,17 @@ static void on_heartbeat(struct daemon *d, int64_t now)
     struct est_health h;
     estimator_health(&d->est, now, &h);
     bool can_down = d->mode == MODE_LIVE && (d->can.fd < 0 || d->can.link_down);
-    if (mav_out_send_heartbeat(&d->mav, health_state(&h, can_down)) == 0)
+    if (mav_links_send_heartbeat(&d->links, health_state(&h, can_down)) > 0)
         d->hb_sent++;
     if (have) {
         /* time_boot_ms: since the daemon started (live) or since the log's
          * first frame (replay); wraps after 49.7 days */
         int64_t since = now - (d->mode == MODE_LIVE ? d->run_start_mono_us : d->log_first_us);
         uint32_t ms = (uint32_t)((uint64_t)(since > 0 ? since : 0) / 1000u);
-        mav_out_send_named_float(&d->mav, "sos_mps", (float)o.sos_mps, ms);
-        mav_out_send_named_float(&d->mav, "period_s", (float)o.period_s, ms);
+        mav_links_send_named_float(&d->links, "sos_mps", (float)o.sos_mps, ms);
+        mav_links_send_named_float(&d->links, "period_s", (float)o.period_s, ms);
     }
+    sync_mav_fds(d);
 }
 
 static void on_second(struct daemon *d, int64_t now)
@@ -813,11 +870,8 @@ static void on_second(struct daemon *d, int64_t now)
     (void)now;
     d->seconds++;
     can_try_open(d);
-    if (!mav_out_is_up(&d->mav)) {
-        if (mav_out_retry(&d->mav) == 0)
-            log_info("MAVLink endpoint %s open", d->cfg.mavlink);
-        sync_mav_fd(d);
-    }
+    mav_links_retry(&d->links); /* never blocks: names are looked up off the loop */
+    sync_mav_fds(d);
     flush_outputs(d);
     uint64_t every = (uint64_t)llround(d->cfg.status_interval_s);
     if (every > 0 && d->seconds % every == 0)
@@ -890,17 +944,11 @@ static void reload(struct daemon *d)
     if (log_level_parse(nc.log_level, &lv) == 0)
         log_set_level(lv);
     if (new_ep) {
-        /* out of the set before the close: the new socket may get the same
-         * number, and sync_mav_fd() must then add it */
-        (void)ep_del(d, d->mav_fd_registered);
-        d->mav_fd_registered = -1;
-        mav_out_close(&d->mav);
-        int r = mav_out_open(&d->mav, d->cfg.mavlink, (unsigned)d->cfg.system_id,
-                             (unsigned)d->cfg.component_id);
-        if (r != 0)
-            log_warn("MAVLink endpoint %s: %s; retrying every second",
-                     d->cfg.mavlink, strerror(-r));
-        sync_mav_fd(d);
+        /* out of the set before anything can reuse the numbers */
+        mav_links_close(&d->links);
+        sync_mav_fds(d);
+        if (open_links(d) != 0) /* checked by build_config() */
+            log_error("SIGHUP: MAVLink endpoint %s rejected", d->cfg.mavlink);
     }
     if (new_can && d->mode == MODE_LIVE) {
         if (d->can.fd >= 0)
@@ -963,13 +1011,8 @@ static void poll_once(struct daemon *d, int timeout_ms)
             signal_readable(d);
         } else if (d->can_fd_registered >= 0 && fd == d->can_fd_registered) {
             can_readable(d);
-        } else if (fd == d->mav_fd_registered) {
-            int rc = mav_out_handle_input(&d->mav, now_local(d));
-            if (rc < 0 && !mav_out_is_up(&d->mav)) {
-                log_warn("MAVLink endpoint %s: %s; retrying every second",
-                         d->cfg.mavlink, strerror(-rc));
-                sync_mav_fd(d);
-            }
+        } else if (mav_links_handle(&d->links, fd, now_local(d))) {
+            sync_mav_fds(d); /* input answered, or a name lookup's answer */
         } else if (fd == d->replay_tfd) {
             uint64_t exp; /* expirations: the paced loop decides what is due */
             if (read(fd, &exp, sizeof exp) < 0 && errno != EAGAIN)
@@ -1008,13 +1051,32 @@ static int arm_all_timers(struct daemon *d)
     return rc;
 }
 
+/* Frames handled between two turns of the loop in replay (signals, MAVLink
+ * input, the pacing timer). */
+#define REPLAY_FRAMES_PER_TURN 256
+
+/* The next frame of the log, the loop's other work done whenever the reader
+ * returns without one (a run of bad lines, an idle pipe: it is bounded, see
+ * replay.h). 1 with *msg, 0 at the end or once stopped by a signal, -errno. */
+static int next_frame(struct daemon *d, struct can_msg *msg)
+{
+    for (;;) {
+        int rc = replay_next(&d->rp, msg);
+        if (rc != -EAGAIN)
+            return rc;
+        poll_once(d, d->rp.starved ? 20 : 0); /* an idle pipe: wait 20 ms */
+        if (!d->running)
+            return 0;
+    }
+}
+
 static void run_replay_fast(struct daemon *d)
 {
     struct can_msg msg;
     bool first = true;
     uint64_t n = 0;
     int rc;
-    while (d->running && (rc = replay_next(&d->rp, &msg)) > 0) {
+    while (d->running && (rc = next_frame(d, &msg)) > 0) {
         if (first) {
             d->log_now_us = msg.rx_us;
             d->log_first_us = msg.rx_us;
@@ -1027,7 +1089,7 @@ static void run_replay_fast(struct daemon *d)
         soft_timers_advance(d, msg.rx_us);
         d->log_now_us = msg.rx_us;
         handle_frame(d, &msg);
-        if ((++n & 255) == 0) {
+        if (++n % REPLAY_FRAMES_PER_TURN == 0) {
             drain_events(d);
             poll_once(d, 0); /* signals, MAVLink input */
         }
@@ -1040,9 +1102,12 @@ static void run_replay_fast(struct daemon *d)
 static void run_replay_paced(struct daemon *d)
 {
     struct can_msg msg;
-    int rc = replay_next(&d->rp, &msg);
-    if (rc <= 0)
+    int rc = next_frame(d, &msg);
+    if (rc <= 0) {
+        if (rc < 0)
+            log_error("%s: read error: %s", d->opt.replay, strerror(-rc));
         return;
+    }
     d->log_first_us = msg.rx_us;
     d->log_now_us = msg.rx_us;
     d->mono_start_us = mono_us();
@@ -1061,16 +1126,22 @@ static void run_replay_paced(struct daemon *d)
     while (d->running) {
         int64_t paced = d->log_first_us +
             (int64_t)((double)(mono_us() - d->mono_start_us) * d->opt.speed);
-        while (rc > 0 && msg.rx_us <= paced) {
+        int budget = REPLAY_FRAMES_PER_TURN;
+        while (rc > 0 && msg.rx_us <= paced && budget-- > 0) {
             if (msg.rx_us < d->log_now_us)
                 msg.rx_us = d->log_now_us;
             soft_timers_advance(d, msg.rx_us);
             d->log_now_us = msg.rx_us;
             handle_frame(d, &msg);
-            rc = replay_next(&d->rp, &msg);
+            rc = next_frame(d, &msg);
         }
-        if (rc <= 0)
+        if (rc <= 0 || !d->running)
             break;
+        if (budget < 0) { /* more is due (a high --speed): a turn of the loop first */
+            drain_events(d);
+            poll_once(d, 0);
+            continue;
+        }
         soft_timers_advance(d, paced < msg.rx_us ? paced : msg.rx_us);
         drain_events(d);
         int64_t next = msg.rx_us;
@@ -1142,8 +1213,10 @@ static void fill_report(struct daemon *d, struct stats_report *r)
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;
     r->heartbeat_sent = d->hb_sent;
-    r->mavlink_tx_errors = d->mav.stats.tx_errors;
-    r->timesync_answered = d->mav.stats.timesync_answered;
+    struct mav_out_stats ms;
+    mav_links_stats(&d->links, &ms);
+    r->mavlink_tx_errors = ms.tx_errors;
+    r->timesync_answered = ms.timesync_answered;
     r->latency_samples = d->lat.count;
     r->latency_p50_us = latency_quantile(&d->lat, 0.5);
     r->latency_p99_us = latency_quantile(&d->lat, 0.99);
@@ -1177,7 +1250,6 @@ int main(int argc, char **argv)
     d->epfd = -1;
     d->sigfd = -1;
     d->replay_tfd = -1;
-    d->mav_fd_registered = -1;
     d->can_fd_registered = -1;
     for (int i = 0; i < T_COUNT; i++)
         d->timers[i].fd = -1;
@@ -1225,23 +1297,20 @@ int main(int argc, char **argv)
         return EX_SOFTWARE_STATUS;
     }
 
-    int rc = mav_out_open(&d->mav, d->cfg.mavlink, (unsigned)d->cfg.system_id,
-                          (unsigned)d->cfg.component_id);
+    /* an endpoint that cannot open now is logged and retried, not fatal */
+    int rc = open_links(d);
     if (rc == -EINVAL) {
         fprintf(stderr, "error: mavlink endpoint '%s' rejected\n", d->cfg.mavlink);
         return EX_CONFIG_STATUS;
     }
-    if (rc != 0)
-        log_warn("MAVLink endpoint %s: %s; retrying every second",
-                 d->cfg.mavlink, strerror(-rc));
-    sync_mav_fd(d);
 
-    log_info("beaconloc-bridge %s: site %s, %d beacons, %s %s, MAVLink %s, "
+    log_info("beaconloc-bridge %s: site %s, %d beacons, %s %s, MAVLink %s%s, "
              "ODOMETRY %.0f Hz", BRIDGE_VERSION,
              d->opt.site ? d->opt.site : "(defaults)", d->cfg.beacon_count,
              d->opt.replay ? "replay" : "CAN",
              d->opt.replay ? d->opt.replay : d->cfg.can_interface,
-             d->cfg.mavlink, d->cfg.odometry_rate_hz);
+             d->cfg.mavlink, d->opt.n_mavlink_more ? " and more" : "",
+             d->cfg.odometry_rate_hz);
 
     switch (d->mode) {
     case MODE_LIVE:
@@ -1278,7 +1347,7 @@ int main(int argc, char **argv)
     if (d->opt.replay)
         replay_close(&d->rp);
     can_in_close(&d->can);
-    mav_out_close(&d->mav);
+    mav_links_close(&d->links); /* never waits for a name lookup in flight */
     log_flush();
     return d->exit_code;
 }

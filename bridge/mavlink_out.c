@@ -6,7 +6,7 @@
  * the wire, field by field: docs/mavlink.md.
  */
 #ifndef _GNU_SOURCE
-#define _GNU_SOURCE /* getaddrinfo, cfmakeraw, SOCK_NONBLOCK */
+#define _GNU_SOURCE /* cfmakeraw, SOCK_NONBLOCK */
 #endif
 
 #include "mavlink_out.h"
@@ -162,24 +162,31 @@ int mav_endpoint_parse(const char *text, struct mav_endpoint *ep)
 
 /* ---- opening / closing ------------------------------------------------- */
 
-static int resolve(const struct mav_endpoint *ep, bool passive, struct sockaddr_storage *ss, socklen_t *len,
-                   int *family)
+/* A numeric host only (IPv4 / IPv6 literal; "" or 0.0.0.0 = any for udpin):
+ * getaddrinfo() with AI_NUMERICHOST never touches the network, so this
+ * never blocks. A host name gives -EDESTADDRREQ: its address must come from
+ * a lookup off the event loop (mav_out_set_address()). */
+static int resolve_numeric(const struct mav_endpoint *ep, bool passive, struct sockaddr_storage *ss,
+                           socklen_t *len, int *family)
 {
     struct addrinfo hints, *res = NULL;
     memset(&hints, 0, sizeof hints);
     hints.ai_family = AF_UNSPEC;
     hints.ai_socktype = SOCK_DGRAM;
-    hints.ai_flags = AI_NUMERICSERV | (passive ? AI_PASSIVE : 0);
+    hints.ai_flags = AI_NUMERICHOST | AI_NUMERICSERV | (passive ? AI_PASSIVE : 0);
     char port[8];
     snprintf(port, sizeof port, "%u", (unsigned)ep->port);
     const char *host = ep->host[0] ? ep->host : NULL;
     if (host && passive && strcmp(host, "0.0.0.0") == 0)
         host = NULL;
+    errno = 0;
     int rc = getaddrinfo(host, port, &hints, &res);
     if (rc != 0) {
+        if (rc == EAI_NONAME)
+            return -EDESTADDRREQ;
         if (rc == EAI_SYSTEM)
             return errno ? -errno : -EIO;
-        return rc == EAI_MEMORY ? -ENOMEM : rc == EAI_AGAIN ? -EAGAIN : -EHOSTUNREACH;
+        return rc == EAI_MEMORY ? -ENOMEM : -EHOSTUNREACH;
     }
     /* Prefer IPv4 for "any" (mavutil binds 0.0.0.0), else the first answer. */
     const struct addrinfo *pick = res;
@@ -200,34 +207,40 @@ static int resolve(const struct mav_endpoint *ep, bool passive, struct sockaddr_
     return 0;
 }
 
-static int open_udp(struct mav_out *m)
+/* Open the UDP socket for the address ss (udpin: bind it; udpout: send to it). */
+static int open_udp_at(struct mav_out *m, const struct sockaddr_storage *ss, socklen_t len, int family)
 {
-    struct sockaddr_storage ss;
-    socklen_t len = 0;
-    int family = AF_UNSPEC;
     bool passive = m->ep.kind == MAV_ENDPOINT_UDPIN;
-    int rc = resolve(&m->ep, passive, &ss, &len, &family);
-    if (rc < 0)
-        return rc;
     int fd = socket(family, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
     if (fd < 0)
         return -errno;
     if (passive) {
         /* No SO_REUSEADDR: UDP has no TIME_WAIT, and a port another program
          * holds must be an error (EADDRINUSE, retried), not shared silently. */
-        if (bind(fd, (const struct sockaddr *)&ss, len) < 0) {
-            rc = -errno;
+        if (bind(fd, (const struct sockaddr *)ss, len) < 0) {
+            int rc = -errno;
             close(fd);
             return rc;
         }
         m->have_peer = false;
     } else {
-        m->peer = ss;
+        m->peer = *ss;
         m->peer_len = len;
         m->have_peer = true;
     }
     m->fd = fd;
     return 0;
+}
+
+static int open_udp(struct mav_out *m)
+{
+    struct sockaddr_storage ss;
+    socklen_t len = 0;
+    int family = AF_UNSPEC;
+    int rc = resolve_numeric(&m->ep, m->ep.kind == MAV_ENDPOINT_UDPIN, &ss, &len, &family);
+    if (rc < 0)
+        return rc;
+    return open_udp_at(m, &ss, len, family);
 }
 
 static int open_serial(struct mav_out *m)
@@ -307,6 +320,33 @@ int mav_out_retry(struct mav_out *m)
     int rc = open_endpoint(m);
     if (rc == 0)
         m->stats.reopens++;
+    return rc;
+}
+
+bool mav_out_needs_lookup(const struct mav_out *m)
+{
+    if (!m || !m->ep.kind || m->ep.kind == MAV_ENDPOINT_SERIAL)
+        return false;
+    struct sockaddr_storage ss;
+    socklen_t len;
+    int family;
+    return resolve_numeric(&m->ep, m->ep.kind == MAV_ENDPOINT_UDPIN, &ss, &len, &family) == -EDESTADDRREQ;
+}
+
+int mav_out_set_address(struct mav_out *m, const struct sockaddr *addr, socklen_t len)
+{
+    if (!m || !m->ep.kind || m->ep.kind == MAV_ENDPOINT_SERIAL || !addr || len == 0 ||
+        len > sizeof(struct sockaddr_storage) || (addr->sa_family != AF_INET && addr->sa_family != AF_INET6))
+        return -EINVAL;
+    if (m->fd >= 0)
+        return 0;
+    struct sockaddr_storage ss;
+    memset(&ss, 0, sizeof ss);
+    memcpy(&ss, addr, len);
+    int rc = open_udp_at(m, &ss, len, addr->sa_family);
+    m->last_errno = rc < 0 ? -rc : 0;
+    if (rc == 0)
+        m->stats.reopens++; /* as mav_out_retry(): the open found it down */
     return rc;
 }
 

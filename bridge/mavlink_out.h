@@ -16,6 +16,10 @@
  *     the error in `last_errno`); every
  *     send while down fails with -ENOTCONN and is counted in `tx_errors`;
  *     mav_out_retry() (call it once a second) reopens.
+ *   - No call looks a name up: a UDP endpoint given by host name (not an IP
+ *     literal) stays down with -EDESTADDRREQ until the caller, having
+ *     resolved the name off its event loop (bridge/resolver.h), hands the
+ *     address to mav_out_set_address(). mav_out_needs_lookup() tells.
  *   - No call blocks: sockets and the serial port are non-blocking; a send
  *     that would block is dropped whole and counted (-EAGAIN, tx_busy). On a
  *     serial line a partly written frame is completed before the next one
@@ -116,18 +120,33 @@ struct mav_out {
  * Returns 0 when the endpoint is open, -EINVAL for a bad endpoint string or
  * id (m left untouched), or another -errno when the endpoint could not be
  * opened now (m is initialised in the down state and mav_out_retry() will
- * try again; this is not fatal).
+ * try again; this is not fatal). -EDESTADDRREQ: the host is a name, see
+ * mav_out_set_address().
  */
 int mav_out_open(struct mav_out *m, const char *endpoint, unsigned sysid, unsigned compid);
 
-/* Reopen if down. Returns 0 if open (already or now), else -errno. Cheap when open. */
+/* Reopen if down. Returns 0 if open (already or now), else -errno
+ * (-EDESTADDRREQ: a host name, see mav_out_set_address()). Cheap when open. */
 int mav_out_retry(struct mav_out *m);
+
+/* True for a UDP endpoint whose host is a name: it opens only through
+ * mav_out_set_address(). Does no I/O. */
+bool mav_out_needs_lookup(const struct mav_out *m);
+
+/*
+ * Open a down UDP endpoint with `addr` (AF_INET or AF_INET6, `len` bytes),
+ * the address its host name resolved to: udpout sends there, udpin binds
+ * it. Returns 0 (open, or already open: nothing changed), -EINVAL for a
+ * serial endpoint, a never opened struct or a bad address, or -errno of
+ * socket()/bind() (the endpoint stays down).
+ */
+int mav_out_set_address(struct mav_out *m, const struct sockaddr *addr, socklen_t len);
 
 /* Close the endpoint (idempotent). Counters stay readable. */
 void mav_out_close(struct mav_out *m);
 
 /* File descriptor to wait on for EPOLLIN; -1 while down. It changes after
- * mav_out_retry() and mav_out_open(), and a serial hang-up detected by any
+ * mav_out_retry(), mav_out_set_address() and mav_out_open(), and a serial hang-up detected by any
  * send or by mav_out_handle_input() closes it (-1): re-read it after those
  * calls and before opening other descriptors (a closed number may be reused,
  * so an epoll deregistration by the old number must happen first). */

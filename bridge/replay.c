@@ -4,9 +4,11 @@
 #include "replay.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "log.h"
 
@@ -165,54 +167,130 @@ int replay_parse_line(const char *line, struct can_msg *msg, char *ifname,
 int replay_open(struct replay *r, const char *path)
 {
     memset(r, 0, sizeof *r);
-    r->f = fopen(path, "r");
-    if (!r->f)
+    r->fd = -1;
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0)
         return -errno;
+    /* Non-blocking: an idle pipe must not hold the event loop (-EAGAIN). */
+    int fl = fcntl(fd, F_GETFL);
+    if (fl < 0 || fcntl(fd, F_SETFL, fl | O_NONBLOCK) < 0) {
+        int e = errno;
+        close(fd);
+        return -e;
+    }
     r->path = strdup(path);
-    if (!r->path) {
-        fclose(r->f);
-        r->f = NULL;
+    r->buf = malloc(REPLAY_READ_CHUNK);
+    if (!r->path || !r->buf) {
+        close(fd);
+        free(r->path);
+        free(r->buf);
+        r->path = r->buf = NULL;
         return -ENOMEM;
     }
-    /* Large stdio buffer: replay reads the log sequentially at full speed. */
-    setvbuf(r->f, NULL, _IOFBF, 1 << 20);
+    r->fd = fd;
     return 0;
 }
 
 void replay_close(struct replay *r)
 {
-    if (r->f)
-        fclose(r->f);
-    free(r->line);
+    if (r->fd >= 0)
+        close(r->fd); /* read-only: nothing to lose */
+    free(r->buf);
     free(r->path);
-    r->f = NULL;
-    r->line = NULL;
+    r->fd = -1;
+    r->buf = NULL;
     r->path = NULL;
+}
+
+/*
+ * Assemble the next line in r->line: 1 when one is complete (its newline,
+ * or the end of the file, reached; `overlong` tells whether it was kept),
+ * 0 at the end of the file, -EAGAIN when *reads_left is spent or no data is
+ * there yet, other -errno on a read error.
+ */
+static int next_line(struct replay *r, int *reads_left)
+{
+    for (;;) {
+        if (r->pos == r->end) {
+            if (r->eof)
+                return r->len > 0 || r->overlong ? 1 : 0; /* a last line without newline */
+            if (*reads_left <= 0)
+                return -EAGAIN;
+            (*reads_left)--;
+            ssize_t n = read(r->fd, r->buf, REPLAY_READ_CHUNK);
+            if (n < 0) {
+                if (errno == EINTR)
+                    continue;
+                if (errno == EAGAIN || errno == EWOULDBLOCK) {
+                    r->starved = true;
+                    return -EAGAIN;
+                }
+                return -errno;
+            }
+            r->starved = false;
+            r->pos = 0;
+            r->end = (size_t)n;
+            if (n == 0)
+                r->eof = true;
+            continue;
+        }
+        const char *s = r->buf + r->pos;
+        size_t avail = r->end - r->pos;
+        const char *nl = memchr(s, '\n', avail);
+        size_t take = nl ? (size_t)(nl - s) + 1 : avail;
+        if (!r->overlong && r->len + take > REPLAY_LINE_MAX)
+            r->overlong = true; /* from here on: skipped, not buffered */
+        if (!r->overlong) {
+            memcpy(r->line + r->len, s, take);
+            r->len += take;
+        }
+        r->pos += take;
+        if (nl)
+            return 1;
+    }
+}
+
+static void bad_line(struct replay *r, bool overlong)
+{
+    r->bad_lines++;
+    if (r->bad_lines <= 5 && overlong)
+        log_warn("%s:%llu: longer than %d bytes, not a candump line, skipped: '%.60s...'",
+                 r->path, (unsigned long long)r->lines, REPLAY_LINE_MAX, r->line);
+    else if (r->bad_lines <= 5)
+        log_warn("%s:%llu: not a candump line, skipped: '%.60s'", r->path,
+                 (unsigned long long)r->lines, r->line);
+    else if (r->bad_lines == 6)
+        log_warn("%s: more lines not in candump format: counting them "
+                 "only (see the stats)", r->path);
 }
 
 int replay_next(struct replay *r, struct can_msg *msg)
 {
-    for (;;) {
-        ssize_t n = getline(&r->line, &r->cap, r->f);
-        if (n < 0) {
-            if (ferror(r->f))
-                return -EIO;
-            return 0;
-        }
+    if (r->fd < 0)
+        return -EBADF;
+    int reads_left = 1;
+    for (int seen = 0; seen < REPLAY_LINES_PER_CALL; seen++) {
+        int rc = next_line(r, &reads_left);
+        if (rc <= 0)
+            return rc;
         r->lines++;
-        if (n <= 1 && (r->line[0] == '\n' || n == 0))
+        bool overlong = r->overlong;
+        r->line[r->len] = '\0';
+        r->len = 0;
+        r->overlong = false;
+        if (overlong) {
+            r->long_lines++;
+            bad_line(r, true);
+            continue;
+        }
+        if (r->line[strspn(r->line, "\r\n")] == '\0')
             continue; /* empty line */
         if (replay_parse_line(r->line, msg, NULL, 0) == 0) {
             r->frames++;
             return 1;
         }
-        r->bad_lines++;
         r->line[strcspn(r->line, "\r\n")] = '\0';
-        if (r->bad_lines <= 5)
-            log_warn("%s:%llu: not a candump line, skipped: '%.60s'", r->path,
-                     (unsigned long long)r->lines, r->line);
-        else if (r->bad_lines == 6)
-            log_warn("%s: more lines not in candump format: counting them "
-                     "only (see the stats)", r->path);
+        bad_line(r, false);
     }
+    return -EAGAIN;
 }

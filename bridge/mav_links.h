@@ -1,0 +1,84 @@
+/*
+ * beaconloc-bridge — the set of MAVLink endpoints (--mavlink, repeatable):
+ * every message goes to each endpoint that is up; each one is reopened on
+ * its own when it is down, so an endpoint that fails (a serial adapter
+ * unplugged, a host name that does not resolve, a name server that answers
+ * late) never holds up the others or the event loop.
+ *
+ * Host names are looked up off the loop (bridge/resolver.h, one detached
+ * thread per lookup, at most one in flight per endpoint); the answer wakes
+ * the loop through an eventfd, and the endpoint opens at once.
+ *
+ * Conventions: the caller owns `struct mav_links`; mav_links_open() fills
+ * it, mav_links_close() releases it (never waits for a lookup). Logging
+ * (bridge/log.h): an endpoint going down is logged once per outage, its
+ * coming back once. The descriptors to wait on for EPOLLIN change with most
+ * calls: compare fd_gen after each call and re-read them (mav_links_fds())
+ * before anything else can open a descriptor (a closed number may be
+ * reused).
+ */
+#ifndef BRIDGE_MAV_LINKS_H
+#define BRIDGE_MAV_LINKS_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "mavlink_out.h"
+#include "resolver.h"
+
+#define MAV_LINKS_MAX 4          /* endpoints */
+#define MAV_LINK_SPEC_MAX 160    /* bytes of an endpoint string incl. NUL */
+#define MAV_LINKS_FDS_MAX (2 * MAV_LINKS_MAX) /* each: its socket/tty, its lookup eventfd */
+
+struct mav_link {
+    struct mav_out out;
+    struct resolver res;        /* host-name lookups; efd -1 until the first */
+    char spec[MAV_LINK_SPEC_MAX]; /* as given, for messages */
+    bool down_logged;           /* the current outage has been logged */
+};
+
+struct mav_links {
+    struct mav_link link[MAV_LINKS_MAX];
+    int n;
+    unsigned fd_gen; /* changes whenever a descriptor was opened or closed */
+};
+
+/*
+ * Open n (1..MAV_LINKS_MAX) endpoints (mavutil-style strings, see
+ * mav_endpoint_parse()) with our system and component ids. Returns 0, or
+ * -EINVAL for a bad count, id or endpoint string (nothing opened, `l` left
+ * as it was). An endpoint that cannot open now is not an error: it is
+ * logged and retried by mav_links_retry(); a host name starts its lookup.
+ */
+int mav_links_open(struct mav_links *l, const char *const specs[], int n, unsigned sysid, unsigned compid);
+
+/* Close every endpoint and abandon lookups in flight (idempotent). */
+void mav_links_close(struct mav_links *l);
+
+/* Once a second: reopen what is down; for a host name, start a lookup
+ * unless one is in flight (a late answer is taken here too). Never blocks. */
+void mav_links_retry(struct mav_links *l);
+
+/* The descriptors to wait on for EPOLLIN (at most max); returns how many. */
+int mav_links_fds(const struct mav_links *l, int fds[], int max);
+
+/* fd is readable: if it is one of ours, handle it (input: parsed and
+ * answered; a lookup's eventfd: its answer taken, the endpoint opened) and
+ * return true; else false. */
+bool mav_links_handle(struct mav_links *l, int fd, int64_t now_us);
+
+/* Send to every endpoint. Each returns the number of endpoints that took
+ * the message (0 when none is up), or -EINVAL (bad message, nothing sent),
+ * as the mav_out_send_* call of the same name. */
+int mav_links_send_odometry(struct mav_links *l, const struct mav_odometry *o);
+int mav_links_send_heartbeat(struct mav_links *l, enum mav_out_state system_status);
+int mav_links_send_statustext(struct mav_links *l, enum mav_out_severity severity, const char *text);
+int mav_links_send_named_float(struct mav_links *l, const char *name, float value, uint32_t time_boot_ms);
+
+/* The counters of every endpoint, summed. */
+void mav_links_stats(const struct mav_links *l, struct mav_out_stats *sum);
+
+/* Number of endpoints up now. */
+int mav_links_up(const struct mav_links *l);
+
+#endif /* BRIDGE_MAV_LINKS_H */
