@@ -56,11 +56,16 @@ def messages(frames, epoch_s: float, channel: str):
 
 def write_log(frames, path: str, epoch_s: float, channel: str) -> int:
     """candump -L format, as fast as possible. Returns the number of frames written."""
-    n = 0
     with can.io.CanutilsLogWriter(path, channel=channel) as writer:
-        for msg in messages(frames, epoch_s, channel):
-            writer.on_message_received(msg)
-            n += 1
+        return append_log(writer, frames, epoch_s, channel)
+
+
+def append_log(writer: can.io.CanutilsLogWriter, frames, epoch_s: float, channel: str) -> int:
+    """write_log onto an open writer (a run written window by window). Returns the count."""
+    n = 0
+    for msg in messages(frames, epoch_s, channel):
+        writer.on_message_received(msg)
+        n += 1
     return n
 
 

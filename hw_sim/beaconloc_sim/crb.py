@@ -149,27 +149,46 @@ def odometry_variances(d_left_m: float, d_right_m: float, dt_s: float, m: BoundM
                      (var_l + var_r) / (m.wheel_base_m ** 2 * dt_s ** 2)])
 
 
+def prior_start(model: BoundModel) -> tuple:
+    """A `start` for pcrb_along_path that begins at the prior (the first window of a run)."""
+    return (np.diag(1.0 / np.asarray(model.prior_sigma, dtype=float) ** 2), None, None, None)
+
+
 def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.ndarray,
                     heard_rx_angles: list[np.ndarray], wheel_left_m: np.ndarray,
-                    wheel_right_m: np.ndarray, model: BoundModel) -> np.ndarray:
+                    wheel_right_m: np.ndarray, model: BoundModel, *,
+                    start: tuple | None = None) -> np.ndarray | tuple[np.ndarray, tuple]:
     """Bound covariance J_k^-1 after each beacon firing k, shape (K, 8, 8).
 
     states: (K, 8) true state at each firing (STATE order, t0 = firing time);
     beacon_index: (K,) 0-based beacon fired; heard_rx_angles[k]: body angles of the
     receivers that detected firing k's direct pulse; wheel_*_m: (K,) true cumulative
     wheel travel at each firing (odometry input between firings).
+    start: to go on from an earlier call, its returned end (J, state, wheel_left_m,
+    wheel_right_m after its last firing); then returns (covariances, end). Without it
+    the recursion starts from the prior.
     """
     K = len(states)
-    J = np.diag(1.0 / np.asarray(model.prior_sigma, dtype=float) ** 2)
     out = np.empty((K, 8, 8))
+    if start is None:
+        J = np.diag(1.0 / np.asarray(model.prior_sigma, dtype=float) ** 2)
+        prev = None
+    else:
+        J, *prev = start
+        if prev[0] is None:               # prior_start(): the first window
+            prev = None
+        if K == 0:
+            return out, start
     # arrival noise plus the node clock's 1 us quantisation (uniform: variance 1 us^2 / 12)
     R_one = model.sigma_arrival_s ** 2 + (1e-6) ** 2 / 12
     for k in range(K):
         if k > 0:
-            F, Q = process_model(states[k - 1], states[k], wheel_left_m[k] - wheel_left_m[k - 1],
-                                 wheel_right_m[k] - wheel_right_m[k - 1],
-                                 states[k, IT0] - states[k - 1, IT0],
-                                 states[k, IS] - states[k - 1, IS], model)
+            prev = (states[k - 1], wheel_left_m[k - 1], wheel_right_m[k - 1])
+        if prev is not None:
+            F, Q = process_model(prev[0], states[k], wheel_left_m[k] - prev[1],
+                                 wheel_right_m[k] - prev[2],
+                                 states[k, IT0] - prev[0][IT0],
+                                 states[k, IS] - prev[0][IS], model)
         else:
             F, Q = np.eye(8), np.diag(np.full(8, 1e-20))
         angles = heard_rx_angles[k]
@@ -178,13 +197,15 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
             rows.append(arrival_jacobian(states[k], beacons_m[beacon_index[k]], np.asarray(angles),
                                          model.ring_radius_m, model.rx_height_m))
             variances.append(np.full(len(angles), R_one))
-        if k > 0:
+        if prev is not None:
             rows.append(odometry_rows())
-            variances.append(odometry_variances(wheel_left_m[k] - wheel_left_m[k - 1],
-                                                wheel_right_m[k] - wheel_right_m[k - 1],
-                                                states[k, IT0] - states[k - 1, IT0], model))
+            variances.append(odometry_variances(wheel_left_m[k] - prev[1],
+                                                wheel_right_m[k] - prev[2],
+                                                states[k, IT0] - prev[0][IT0], model))
         H = np.vstack(rows) if rows else None
         R = np.diag(np.concatenate(variances)) if rows else None
         J = info_step(J, F, Q, H, R)
         out[k] = np.linalg.inv(J)
-    return out
+    if start is None:
+        return out
+    return out, (J, states[K - 1], wheel_left_m[K - 1], wheel_right_m[K - 1])

@@ -15,17 +15,21 @@ TICK_WRAP = 1 << 14     # DBC: LeftTicks/RightTicks are cumulative modulo 2^14
 
 
 def wheel_rotation_rad(travel_m: np.ndarray, true_radius_m: float, slip_fraction: float,
-                       sigma_wheel_per_m: float, rng: np.random.Generator) -> np.ndarray:
-    """Cumulative rotation of one wheel at each sample, rad.
+                       sigma_wheel_per_m: float, rng: np.random.Generator, *,
+                       start_travel_m: float = 0.0, start_rad: float = 0.0) -> np.ndarray:
+    """Cumulative rotation of one wheel at each sample, rad (from start_rad at
+    ground travel start_travel_m: a run simulated in windows goes on from its last sample).
 
     A wheel of true radius r rolling a ground distance d turns d / r rad (no slip).
     Slip adds a systematic fraction and a random walk: each sample-to-sample
     increment dd gets noise N(0, sigma^2 * |dd| * 1 m) in ground distance, so the
     travel error std after 1 m is sigma_wheel_per_m (site [noise]).
     """
-    dd = np.diff(travel_m, prepend=0.0)          # travel is counted from t = 0
+    dd = np.diff(travel_m, prepend=start_travel_m)   # travel is counted from t = 0
     noise_m = rng.standard_normal(dd.shape) * sigma_wheel_per_m * np.sqrt(np.abs(dd))
     rolled = np.cumsum(dd * (1.0 + slip_fraction) + noise_m)
+    if start_rad != 0.0:
+        return start_rad + rolled / true_radius_m
     return rolled / true_radius_m
 
 

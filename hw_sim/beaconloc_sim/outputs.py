@@ -15,13 +15,18 @@ _INT_COLUMNS = {"t_us"}
 
 def write_csv(path: str | Path, columns: tuple[str, ...], data: dict[str, np.ndarray]) -> int:
     """Write columns in order; t_us as integers, the rest with full float precision."""
-    n = len(data[columns[0]])
-    cols = [np.asarray(data[c]) for c in columns]
     with open(path, "w", newline="", encoding="utf-8") as fh:
         fh.write(",".join(columns) + "\n")
-        for i in range(n):
-            fh.write(",".join(str(int(c[i])) if name in _INT_COLUMNS else repr(float(c[i]))
-                              for name, c in zip(columns, cols)) + "\n")
+        return append_csv_rows(fh, columns, data)
+
+
+def append_csv_rows(fh, columns: tuple[str, ...], data: dict[str, np.ndarray]) -> int:
+    """Rows of write_csv (no header) onto an open file: a run written window by window."""
+    n = len(data[columns[0]])
+    cols = [np.asarray(data[c]) for c in columns]
+    for i in range(n):
+        fh.write(",".join(str(int(c[i])) if name in _INT_COLUMNS else repr(float(c[i]))
+                          for name, c in zip(columns, cols)) + "\n")
     return n
 
 
@@ -111,6 +116,19 @@ def run_stats(result: SimResult, *, wall_time_s: float, lateness_s: np.ndarray |
             "frames_late_over_1ms": int(np.sum(late_us > 1000.0)),
         }
     return stats
+
+
+def add_stats(total: dict | None, part: dict) -> dict:
+    """run_stats of consecutive windows of one run, added up (counts summed; wall_time_s,
+    duration_s and sim_time_s of the whole run are set by the caller)."""
+    if total is None:
+        return json.loads(json.dumps(part))
+    for key, value in part.items():
+        if isinstance(value, dict):
+            add_stats(total.setdefault(key, {}), value)
+        elif isinstance(value, int) and not isinstance(value, bool) and key != "seed":
+            total[key] = total.get(key, 0) + value
+    return total
 
 
 def write_json(path, obj) -> None:

@@ -23,19 +23,25 @@ class Segment:
 class Trajectory:
     """Closed-form pose, speed and wheel travel along a segment program.
 
-    ``kidnap`` = (time_s, dx_m, dy_m[, dtheta_rad]): at time_s the robot is carried
-    dx, dy away and turned by dtheta (its wheels do not turn); from then on the
-    program goes on from the new pose, so the rest of the path is the planned one
-    turned by dtheta about the pickup point p_k and moved by (dx, dy):
-    p(t) = p_k + (dx, dy) + R(dtheta) (p_planned(t) - p_k), theta(t) = theta_planned(t) + dtheta.
+    ``kidnaps``: one (time_s, dx_m, dy_m[, dtheta_rad]) or a sequence of them. At
+    time_s the robot is carried dx, dy away and turned by dtheta (its wheels do not
+    turn); from then on the program goes on from the new pose, so the rest of the
+    path is the path before turned by dtheta about the pickup point p_k and moved
+    by (dx, dy): p(t) = p_k + (dx, dy) + R(dtheta) (p_before(t) - p_k),
+    theta(t) = theta_before(t) + dtheta. Several kidnaps apply in time order, each
+    to the path as the earlier ones left it.
     """
 
     def __init__(self, start_x_m: float, start_y_m: float, start_theta_rad: float,
                  segments: list[Segment], wheel_base_m: float,
-                 kidnap: tuple[float, ...] | None = None):
+                 kidnaps=None):
         self.segments = segments
         self.wheel_base_m = wheel_base_m
-        self.kidnap = kidnap
+        if kidnaps is None:
+            kidnaps = ()
+        elif len(kidnaps) and not isinstance(kidnaps[0], (tuple, list)):
+            kidnaps = (tuple(kidnaps),)        # the one-kidnap form
+        self.kidnaps = tuple(sorted((tuple(k) for k in kidnaps), key=lambda k: k[0]))
         n = len(segments)
         self.t0_s = np.zeros(n + 1)
         self.x0_m = np.zeros(n + 1)
@@ -86,25 +92,37 @@ class Trajectory:
         tau = np.maximum(t - self.t0_s[i], 0.0)
         x, y, th = self._advance(self.x0_m[i], self.y0_m[i], self.th0_rad[i],
                                  self.v_mps[i], self.w_radps[i], tau)
-        if self.kidnap is not None:
-            t_k, dx, dy = self.kidnap[:3]
-            dth = self.kidnap[3] if len(self.kidnap) > 3 else 0.0
-            moved = t >= t_k
-            if dth != 0.0:
-                # the planned path after the pickup, turned by dth about the pickup point
-                ik = self._index(np.asarray(t_k))
-                xk, yk, _ = self._advance(self.x0_m[ik], self.y0_m[ik], self.th0_rad[ik],
-                                          self.v_mps[ik], self.w_radps[ik],
-                                          max(t_k - self.t0_s[ik], 0.0))
-                c, s = math.cos(dth), math.sin(dth)
-                rx = xk + c * (x - xk) - s * (y - yk)
-                ry = yk + s * (x - xk) + c * (y - yk)
-                x, y = np.where(moved, rx, x), np.where(moved, ry, y)
-                th = th + np.where(moved, dth, 0.0)
-            x = x + np.where(moved, dx, 0.0)
-            y = y + np.where(moved, dy, 0.0)
+        for j in range(len(self.kidnaps)):
+            x, y, th = self._carried(j, t, x, y, th)
         return {"x_m": x, "y_m": y, "theta_rad": th, "v_mps": self.v_mps[i],
                 "omega_radps": self.w_radps[i]}
+
+    @property
+    def kidnap(self) -> tuple[float, ...] | None:
+        """The first kidnap (None without one)."""
+        return self.kidnaps[0] if self.kidnaps else None
+
+    def _carried(self, j: int, t, x, y, th):
+        """Kidnap j applied to poses (x, y, th) at times t of the path as kidnaps 0..j-1 left it."""
+        t_k, dx, dy = self.kidnaps[j][:3]
+        dth = self.kidnaps[j][3] if len(self.kidnaps[j]) > 3 else 0.0
+        moved = t >= t_k
+        if dth != 0.0:
+            # the path after the pickup, turned by dth about the pickup point
+            ik = self._index(np.asarray(t_k))
+            xk, yk, thk = self._advance(self.x0_m[ik], self.y0_m[ik], self.th0_rad[ik],
+                                        self.v_mps[ik], self.w_radps[ik],
+                                        max(t_k - self.t0_s[ik], 0.0))
+            for e in range(j):                  # where the earlier kidnaps had put it
+                xk, yk, thk = self._carried(e, np.asarray(t_k), xk, yk, thk)
+            c, s = math.cos(dth), math.sin(dth)
+            rx = xk + c * (x - xk) - s * (y - yk)
+            ry = yk + s * (x - xk) + c * (y - yk)
+            x, y = np.where(moved, rx, x), np.where(moved, ry, y)
+            th = th + np.where(moved, dth, 0.0)
+        x = x + np.where(moved, dx, 0.0)
+        y = y + np.where(moved, dy, 0.0)
+        return x, y, th
 
     def wheel_travel(self, t_s) -> tuple[np.ndarray, np.ndarray]:
         """Cumulative ground travel of the left and right wheel at t_s, m."""

@@ -17,7 +17,7 @@ SUFFIX = ".scenario.ini"
 
 _KNOWN = {
     "scenario": {"site", "description", "duration_s", "seed"},
-    "path": {"start", "speed_mps", "turn_rate_degps"},      # + segmentN
+    "path": {"start", "speed_mps", "turn_rate_degps", "repeat"},      # + segmentN
     "environment": {"temperature_c", "temperature_profile", "air_absorption_db_per_m"},
     "acoustics": {"source_level_mv", "threshold_mv", "amplitude_noise_rel", "rise_time_s",
                   "wall_reflection", "floor_ceiling_reflection", "echo_probability",
@@ -26,7 +26,8 @@ _KNOWN = {
     "clocks": {"beacon_period_ppm", "first_firing_s", "rx_offset_us", "rx_drift_ppm",
                "encoder_offset_us", "encoder_drift_ppm", "node_latency_s", "bus_bitrate_bps"},
     "encoders": {"wheel_radius_bias", "slip_fraction", "sigma_wheel_per_m", "initial_ticks"},
-    "faults": {"encoder_silence", "kidnap", "beacon_outage"},
+    # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
+    "faults": {"encoder_silence", "kidnap", "beacon_outage", "echo_storm"},
     "output": {"truth_rate_hz", "log_epoch_s", "channel"},
     # [obstacles]: segmentN = x1_m, y1_m, x2_m, y2_m
 }
@@ -72,10 +73,13 @@ class Scenario:
     slip_fraction: tuple[float, float]       # systematic extra wheel rotation, left/right
     sigma_wheel_per_m: float
     initial_ticks: tuple[int, int]
-    # faults
-    encoder_silence: tuple[float, float] | None
-    kidnap: tuple[float, float, float, float] | None   # time_s, dx_m, dy_m, dtheta_rad
-    beacon_outage: tuple[float, float, tuple[int, ...]] | None
+    # faults: every window of each kind, in time order (docs/simulator.md, [faults])
+    encoder_silences: tuple[tuple[float, float], ...]              # start_s, duration_s
+    kidnaps: tuple[tuple[float, float, float, float], ...]         # time_s, dx_m, dy_m, dtheta_rad
+    beacon_outages: tuple[tuple[float, float, tuple[int, ...]], ...]  # start_s, duration_s, ids
+    # start_s, duration_s, echo_probability, late_arrival_probability: the firings in the
+    # window use these two instead of the scenario's
+    echo_storms: tuple[tuple[float, float, float, float], ...]
     obstacles_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     # output
     truth_rate_hz: float = 50.0
@@ -89,6 +93,37 @@ class Scenario:
     def temperature_c(self, t_s) -> np.ndarray:
         prof = self.temperature_profile
         return np.interp(np.asarray(t_s, dtype=float), prof[:, 0], prof[:, 1])
+
+    # The first window of each kind (None without one): the form of a scenario with one fault.
+    @property
+    def encoder_silence(self) -> tuple[float, float] | None:
+        return self.encoder_silences[0] if self.encoder_silences else None
+
+    @property
+    def kidnap(self) -> tuple[float, float, float, float] | None:
+        return self.kidnaps[0] if self.kidnaps else None
+
+    @property
+    def beacon_outage(self) -> tuple[float, float, tuple[int, ...]] | None:
+        return self.beacon_outages[0] if self.beacon_outages else None
+
+    def echo_probabilities(self, t_s) -> tuple[np.ndarray, np.ndarray]:
+        """Echo and late-arrival probability of a firing at t_s (echo storms included)."""
+        t = np.asarray(t_s, dtype=float)
+        echo = np.full(t.shape, self.echo_probability)
+        late = np.full(t.shape, self.late_arrival_probability)
+        for start, dur, p_echo, p_late in self.echo_storms:
+            inside = (t >= start) & (t < start + dur)
+            echo[inside], late[inside] = p_echo, p_late
+        return echo, late
+
+    def encoder_silent(self, t_s) -> np.ndarray:
+        """True where the encoder node is silent (any encoder_silence window)."""
+        t = np.asarray(t_s, dtype=float)
+        silent = np.zeros(t.shape, dtype=bool)
+        for start, dur in self.encoder_silences:
+            silent |= (t >= start) & (t < start + dur)
+        return silent
 
     @property
     def true_period_s(self) -> float:
@@ -122,7 +157,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
     path = resolve(name_or_path)
     ini = IniFile(path)
     for sec, known in _KNOWN.items():
-        if sec != "path":
+        if sec not in ("path", "faults"):
             ini.check_known(sec, known)
     for sec in ini.parser.sections():
         if sec not in _KNOWN and sec != "obstacles":
@@ -151,17 +186,19 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
     for key in ini.parser.options("path"):
         if key not in _KNOWN["path"] and not key.startswith("segment"):
             raise ini.error("path", key, "unknown key")
-    kidnap = None
-    if ini.has("faults", "kidnap"):
-        k = ini.numbers("faults", "kidnap")
+    fault_keys = _fault_keys(ini)
+    kidnaps = []
+    for key in fault_keys["kidnap"]:
+        k = ini.numbers("faults", key)
         if len(k) not in (3, 4):
-            raise ini.error("faults", "kidnap", "expected time_s, dx_m, dy_m[, dtheta_deg], got "
+            raise ini.error("faults", key, "expected time_s, dx_m, dy_m[, dtheta_deg], got "
                             f"{len(k)} numbers")
         if k[0] < 0:
-            raise ini.error("faults", "kidnap", "time_s must be >= 0")
-        kidnap = (k[0], k[1], k[2], math.radians(k[3]) if len(k) == 4 else 0.0)
-    trajectory = Trajectory(start[0], start[1], math.radians(start[2]), segments,
-                            site.wheel_base_m, kidnap)
+            raise ini.error("faults", key, "time_s must be >= 0")
+        kidnaps.append((k[0], k[1], k[2], math.radians(k[3]) if len(k) == 4 else 0.0))
+    kidnaps.sort(key=lambda k: k[0])
+    if len({k[0] for k in kidnaps}) != len(kidnaps):
+        raise ini.error("faults", fault_keys["kidnap"][-1], "two kidnaps at the same time")
 
     # -- environment -----------------------------------------------------------------
     if ini.has("environment", "temperature_profile"):
@@ -186,6 +223,16 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         else float(duration_s)
     if not duration > 0:
         raise ConfigError("--duration must be > 0")
+    realization_s = max(duration, ini.number("scenario", "duration_s", positive=True))
+    repeat = ini.raw("path", "repeat", "no").lower()
+    if repeat not in ("yes", "no", "true", "false", "1", "0"):
+        raise ini.error("path", "repeat", f"expected yes or no, got {repeat!r}")
+    if repeat in ("yes", "true", "1") and segments:
+        # the program starts again where it ended, as often as the run needs
+        program_s = sum(seg.duration_s for seg in segments)
+        segments = segments * max(1, math.ceil(realization_s / program_s))
+    trajectory = Trajectory(start[0], start[1], math.radians(start[2]), segments,
+                            site.wheel_base_m, kidnaps)
     sc_seed = ini.integer("scenario", "seed", 1, minimum=0) if seed is None else int(seed)
 
     obstacles = []
@@ -194,20 +241,27 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
             if not (key.startswith("segment") and key[7:].isdigit()):
                 raise ini.error("obstacles", key, "obstacle keys are segment1, segment2, ...")
             obstacles.append(ini.numbers("obstacles", key, 4))
-    outage = None
-    if ini.has("faults", "beacon_outage"):
-        vals = ini.numbers("faults", "beacon_outage")
+    outages = []
+    for key in fault_keys["beacon_outage"]:
+        vals = ini.numbers("faults", key)
         if len(vals) < 3 or vals[1] <= 0 or any(v != int(v) or not 1 <= v <= site.beacon_count
                                                  for v in vals[2:]):
-            raise ini.error("faults", "beacon_outage",
+            raise ini.error("faults", key,
                             f"expected 'start_s, duration_s, id[, id...]' with ids 1..{site.beacon_count}")
-        outage = (vals[0], vals[1], tuple(int(v) for v in vals[2:]))
-    silence = None
-    if ini.has("faults", "encoder_silence"):
-        s = ini.numbers("faults", "encoder_silence", 2)
+        outages.append((vals[0], vals[1], tuple(int(v) for v in vals[2:])))
+    silences = []
+    for key in fault_keys["encoder_silence"]:
+        s = ini.numbers("faults", key, 2)
         if s[1] <= 0:
-            raise ini.error("faults", "encoder_silence", "duration_s must be > 0")
-        silence = (s[0], s[1])
+            raise ini.error("faults", key, "duration_s must be > 0")
+        silences.append((s[0], s[1]))
+    storms = []
+    for key in fault_keys["echo_storm"]:
+        s = ini.numbers("faults", key, 4)
+        if s[1] <= 0 or not (0 <= s[2] <= 1 and 0 <= s[3] <= 1):
+            raise ini.error("faults", key, "expected 'start_s, duration_s, echo_probability, "
+                            "late_arrival_probability' with duration_s > 0, probabilities 0..1")
+        storms.append(tuple(s))
     initial_ticks = ini.numbers("encoders", "initial_ticks", 2, default=[16000, 300])
     if any(v != int(v) or not 0 <= v < 16384 for v in initial_ticks):
         raise ini.error("encoders", "initial_ticks", "ticks must be integers 0..16383")
@@ -262,12 +316,27 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         sigma_wheel_per_m=ini.number("encoders", "sigma_wheel_per_m", site.sigma_wheel_per_m,
                                      minimum=0),
         initial_ticks=(int(initial_ticks[0]), int(initial_ticks[1])),
-        encoder_silence=silence,
-        kidnap=kidnap,
-        beacon_outage=outage,
+        encoder_silences=tuple(sorted(silences)),
+        kidnaps=tuple(kidnaps),
+        beacon_outages=tuple(sorted(outages)),
+        echo_storms=tuple(sorted(storms)),
         obstacles_m=np.array(obstacles, dtype=float).reshape(-1, 4),
         truth_rate_hz=ini.number("output", "truth_rate_hz", 50.0, positive=True, maximum=1000),
         log_epoch_s=ini.number("output", "log_epoch_s", 1_700_000_000.0, minimum=0),
         channel=ini.raw("output", "channel", "vcan0"),
-        realization_s=max(duration, ini.number("scenario", "duration_s", positive=True)),
+        realization_s=realization_s,
     )
+
+
+def _fault_keys(ini: IniFile) -> dict[str, list[str]]:
+    """[faults] keys per kind: KIND or KINDN (N digits), in file order; others are errors."""
+    kinds = {k: [] for k in sorted(_KNOWN["faults"])}
+    if not ini.has("faults"):
+        return kinds
+    for key in ini.parser.options("faults"):
+        kind = key.rstrip("0123456789")
+        if kind not in kinds:
+            raise ini.error("faults", key, "unknown key (known: " + ", ".join(kinds) +
+                            ", each optionally numbered: kidnap2, ...)")
+        kinds[kind].append(key)
+    return kinds

@@ -40,22 +40,33 @@ class Detections:
     saturated: np.ndarray
 
 
-def make_firings(scn, rng: np.random.Generator) -> Firings:
+def firings_until(scn, t_s: float) -> int:
+    """Number of firings at or before t_s (firing k is at first_firing_s + k T_true)."""
+    if not t_s > scn.first_firing_s:
+        return 0
+    return max(int(np.floor((t_s - scn.first_firing_s) / scn.true_period_s)) + 1, 0)
+
+
+def make_firings(scn, rng: np.random.Generator,
+                 window_s: tuple[float, float] | None = None) -> Firings:
+    """The firings of the run (up to duration_s), or of window_s = (t_a, t_b]: those
+    with t_a < t <= t_b, numbered from the start of the run (beacon k mod N + 1)."""
     site = scn.site
     period = scn.true_period_s
-    n = int(np.floor((scn.duration_s - scn.first_firing_s) / period)) + 1 \
-        if scn.duration_s > scn.first_firing_s else 0
-    k = np.arange(max(n, 0))
+    if window_s is None:
+        k = np.arange(firings_until(scn, scn.duration_s))
+    else:
+        k = np.arange(firings_until(scn, window_s[0]), firings_until(scn, window_s[1]))
     # beacon controller: beacon (k mod N) + 1 fires at t_first + k T_true (Kleeman 1992 s. 2, eq. 15)
     t = scn.first_firing_s + k * period
     beacon = k % site.beacon_count
     alive = np.ones(len(k), dtype=bool)
-    if scn.beacon_outage is not None:
-        start, dur, ids = scn.beacon_outage
+    for start, dur, ids in scn.beacon_outages:
         dead = np.isin(beacon + 1, ids) & (t >= start) & (t < start + dur)
         alive &= ~dead
-    strong = rng.random(len(k)) < scn.echo_probability
-    late = rng.random(len(k)) < scn.late_arrival_probability
+    p_echo, p_late = scn.echo_probabilities(t)
+    strong = rng.random(len(k)) < p_echo
+    late = rng.random(len(k)) < p_late
     late_delay = rng.uniform(*scn.late_arrival_delay_s, size=len(k))
     late_gain = rng.uniform(*scn.late_arrival_gain, size=len(k))
     sos = ac.speed_of_sound_mps(scn.temperature_c(t))

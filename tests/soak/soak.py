@@ -1,0 +1,287 @@
+"""Soak: hours of simulated time of the kleeman-lab site through the real bridge
+binary in --replay, one fault an hour (tests/soak/kleeman-lab-24h.scenario.ini:
+kidnap, encoder silence, beacon outage, echo storm, 10 degC temperature swing,
+in turn). docs/soak.md says what is measured and how.
+
+  1. the simulator writes the log and the truth window by window
+     (beaconloc-sim run --window 600: bounded memory for 24 h);
+  2. the bridge replays the log as fast as it can with --estimates, --stats and
+     a status line every 3600 s of log time; this driver reads its stderr as it
+     comes (each status line closes a simulated hour: wall time, cumulative
+     frames and latency) and samples its VmRSS every 50 ms, each sample tagged
+     with the hour the replay is in;
+  3. the estimates are judged against the truth hour by hour, read in blocks
+     (never the whole day in memory), with tests/integration/harness.py's
+     estimate_errors() (Mahalanobis distance of the position error under the
+     reported covariance), as the accuracy benchmark does.
+
+Targets (exit 1 if one is missed): RSS growth <= 1024 KiB after the first hour,
+nan = 0, lost_frames = 0, within_3sigma_pct >= 97, latency p99 within 20 % of the
+first hour's (see docs/soak.md for what the bridge lets this check measure).
+Last line:
+  soak sim_h=24 frames=<n> rss_growth_kib=<n> nan=<n> resets=<n> within_3sigma_pct=<x> latency_p99_us=<n> lost_frames=<n>
+"""
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "tests" / "integration"))
+import harness as h  # noqa: E402
+
+from beaconloc_sim.scenario import load_scenario  # noqa: E402
+
+SCENARIO = Path(__file__).resolve().parent / "kleeman-lab-24h.scenario.ini"
+HOUR_S = 3600.0
+WINDOW_S = 600.0               # simulator window (a divisor of an hour: SOAK_H=2 is a prefix)
+RSS_POLL_S = 0.05
+SETTLE_S = 20.0                # not judged: the start-up and this long after each kidnap
+EST_BLOCK_ROWS = 200_000
+
+RSS_GROWTH_MAX_KIB = 1024
+WITHIN_3SIGMA_MIN_PCT = 97.0
+LATENCY_GROWTH_MAX = 0.20
+
+STATUS_RE = re.compile(r"status: frames (\d+) .*? lost (\d+) .*? resets=(\d+) .*?"
+                       r"latency p50 (-?\d+) p99 (-?\d+) us")
+
+
+@dataclass
+class Hour:
+    """Figures of one simulated hour."""
+    frames: int = 0              # frames the bridge read in this hour (status lines)
+    wall_s: float = math.nan     # wall time the replay took for it
+    lat_p99_cum_us: int = -1     # the bridge's p99 since the start, at the end of this hour
+    rss_kib: list = field(default_factory=list)
+    estimates: int = 0
+    nan: int = 0
+    judged: int = 0
+    inside: int = 0
+    reset_max: int = -1
+
+    @property
+    def inside_pct(self) -> float:
+        return 100.0 * self.inside / self.judged if self.judged else math.nan
+
+
+def simulate(hours: int, out: Path) -> tuple[dict, float]:
+    t0 = time.monotonic()
+    argv = [str(h.SIM), "run", str(SCENARIO), "--duration", f"{hours * HOUR_S:g}",
+            "--window", f"{WINDOW_S:g}", "--log", str(out / "bus.log"),
+            "--truth", str(out / "truth.csv"), "--stats", str(out / "sim-stats.json")]
+    sim = subprocess.run(argv, capture_output=True, text=True)
+    if sim.returncode != 0:
+        raise SystemExit(f"soak: simulator exit {sim.returncode}: {sim.stderr.strip()[-2000:]}")
+    return json.loads((out / "sim-stats.json").read_text()), time.monotonic() - t0
+
+
+def vm_rss_kib(pid: int) -> int | None:
+    try:
+        with open(f"/proc/{pid}/status") as fh:
+            for line in fh:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1])
+    except (FileNotFoundError, ProcessLookupError):
+        return None
+    return None
+
+
+def replay(bridge: Path, site: Path, out: Path, hours: list[Hour]) -> tuple[dict, float]:
+    """Run the bridge on the log; fill frames, wall time, latency and RSS per hour."""
+    argv = [str(bridge), "--site", str(site), "--replay", str(out / "bus.log"),
+            "--estimates", str(out / "est.csv"), "--stats", str(out / "bridge-stats.json"),
+            "--mavlink", "udpout:127.0.0.1:9", "--status-interval", f"{HOUR_S:g}"]
+    t0 = time.monotonic()
+    proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, errors="replace")
+    done = {"hours": 0, "t": t0, "frames": 0}
+
+    def read_stderr() -> None:
+        with (out / "bridge.err").open("w") as log:
+            for line in proc.stderr:
+                log.write(line)
+                m = STATUS_RE.search(line)
+                if m and line.lstrip().startswith("info: status:") and done["hours"] < len(hours):
+                    now = time.monotonic()
+                    hr = hours[done["hours"]]
+                    frames = int(m.group(1))
+                    hr.frames, hr.wall_s = frames - done["frames"], now - done["t"]
+                    hr.lat_p99_cum_us = int(m.group(5))
+                    done.update(hours=done["hours"] + 1, t=now, frames=frames)
+
+    reader = threading.Thread(target=read_stderr, daemon=True)
+    reader.start()
+    while proc.poll() is None:
+        rss = vm_rss_kib(proc.pid)
+        if rss is not None:
+            hours[min(done["hours"], len(hours) - 1)].rss_kib.append(rss)
+        time.sleep(RSS_POLL_S)
+    reader.join(timeout=10)
+    wall = time.monotonic() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"soak: bridge exit {proc.returncode}:\n{h.tail(out / 'bridge.err')}")
+    stats = json.loads((out / "bridge-stats.json").read_text())
+    # the last hour closes at the end of the log (its status line may fall just after it)
+    if done["hours"] < len(hours):
+        last = hours[done["hours"]]
+        last.frames = stats["frames_total"] - done["frames"]
+        last.wall_s = t0 + wall - done["t"]
+        last.lat_p99_cum_us = stats["latency_p99_us"]
+    return stats, wall
+
+
+def read_truth(path: Path) -> dict[str, np.ndarray]:
+    with path.open() as fh:
+        header = fh.readline().strip().split(",")
+        arr = np.loadtxt(fh, delimiter=",", ndmin=2)
+    truth = {c: arr[:, i] for i, c in enumerate(header)}
+    truth["t_us"] = truth["t_us"].astype(np.int64)
+    return truth
+
+
+def judge_estimates(path: Path, truth: dict, kidnaps_s: list[float], hours: list[Hour]) -> None:
+    """Per hour: estimates, non-finite ones, and the share inside their 3 sigma
+    (Mahalanobis <= 3), not judged in the start-up and SETTLE_S after each kidnap."""
+    with path.open() as fh:
+        header = fh.readline().strip().split(",")
+        missing = [c for c in h.EST_COLUMNS if c not in header]
+        if missing:
+            raise SystemExit(f"soak: {path}: columns {missing} missing")
+        while True:
+            lines = list(itertools.islice(fh, EST_BLOCK_ROWS))
+            if not lines:
+                break
+            arr = np.loadtxt(lines, delimiter=",", ndmin=2)
+            est = {c: arr[:, i] for i, c in enumerate(header)}
+            est["t_us"] = est["t_us"].astype(np.int64)
+            e = h.estimate_errors(est, truth)
+            t_sim = h.truth_at(truth, est["t_us"], "t_sim_s")
+            # an estimate past the truth's end belongs to the last hour
+            hour = np.clip(np.floor(np.nan_to_num(t_sim, nan=len(hours) * HOUR_S - 1) / HOUR_S),
+                           0, len(hours) - 1).astype(int)
+            values = np.column_stack([est[c] for c in h.EST_COLUMNS if c != "t_us"])
+            bad = ~np.isfinite(values).all(axis=1)
+            settling = t_sim < h.CONVERGED_AFTER_S
+            for t_k in kidnaps_s:
+                settling |= (t_sim >= t_k) & (t_sim < t_k + SETTLE_S)
+            judged = np.isfinite(t_sim) & ~settling
+            inside = judged & ~bad & (e.mahal <= 3.0)
+            for k in np.unique(hour):
+                sel = hour == k
+                hr = hours[k]
+                hr.estimates += int(sel.sum())
+                hr.nan += int(bad[sel].sum())
+                hr.judged += int(judged[sel].sum())
+                hr.inside += int(inside[sel].sum())
+                hr.reset_max = max(hr.reset_max, int(np.nanmax(est["reset_counter"][sel])))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--bridge", default=str(h.BRIDGE))
+    ap.add_argument("--out", default=str(REPO / "build" / "soak"))
+    ap.add_argument("--hours", type=int, default=int(os.environ.get("SOAK_H", "24")),
+                    help="simulated hours, >= 2 (default: $SOAK_H or 24)")
+    args = ap.parse_args()
+    bridge, out = Path(args.bridge), Path(args.out)
+    if not bridge.exists():
+        print(f"soak: {bridge} not built", file=sys.stderr)
+        return 2
+    if not 2 <= args.hours <= 24:
+        print("soak: --hours / SOAK_H must be 2..24 (the scenario is 24 h; the first hour is "
+              "the reference of the RSS and latency targets)", file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    t_start = time.monotonic()
+    scn = load_scenario(str(SCENARIO), duration_s=args.hours * HOUR_S)
+    site = SCENARIO.parent / "../../hw_sim/scenarios/kleeman-lab.ini"
+
+    sim_stats, sim_wall = simulate(args.hours, out)
+    print(f"simulated {args.hours} h in {sim_wall:.0f} s: {sim_stats['frames']['total']} frames",
+          flush=True)
+    hours = [Hour() for _ in range(args.hours)]
+    stats, replay_wall = replay(bridge, site.resolve(), out, hours)
+    print(f"replayed in {replay_wall:.0f} s ({stats['replay_frames_per_s']:.0f} frames/s)",
+          flush=True)
+    truth = read_truth(out / "truth.csv")
+    judge_estimates(out / "est.csv", truth, [k[0] for k in scn.kidnaps], hours)
+
+    # -- figures ----------------------------------------------------------------------
+    frames_log = int(sim_stats["frames"]["total"])
+    decoded = sum(stats["frames_received_by_id"].values())
+    lost = frames_log - decoded
+    nan = sum(hr.nan for hr in hours)
+    judged, inside = sum(hr.judged for hr in hours), sum(hr.inside for hr in hours)
+    within = 100.0 * inside / judged if judged else 0.0
+    rss_base = hours[0].rss_kib[-1] if hours[0].rss_kib else None
+    later = [r for hr in hours[1:] for r in hr.rss_kib]
+    rss_growth = max(later) - rss_base if later and rss_base is not None else None
+    lat_first = hours[0].lat_p99_cum_us
+    lat_all = int(stats["latency_p99_us"])
+
+    kinds = {0: "kidnap", 1: "enc-silence", 2: "beacon-out", 3: "echo-storm", 4: "temp-swing"}
+    print()
+    print(f"{'hour':>4} {'fault':<11} {'frames':>8} {'estimates':>9} {'nan':>4} {'resets':>6} "
+          f"{'in_3sig_%':>9} {'rss_max_kib':>11} {'lat_p99_cum_us':>14} {'wall_s':>6} "
+          f"{'us/frame':>8}")
+    prev_resets = 0
+    for k, hr in enumerate(hours):
+        resets = hr.reset_max if hr.reset_max >= 0 else prev_resets
+        us_per_frame = hr.wall_s / hr.frames * 1e6 if hr.frames else math.nan
+        print(f"{k:>4} {kinds[k % 5]:<11} {hr.frames:>8} {hr.estimates:>9} {hr.nan:>4} "
+              f"{resets - prev_resets:>6} {hr.inside_pct:>9.2f} "
+              f"{max(hr.rss_kib) if hr.rss_kib else -1:>11} {hr.lat_p99_cum_us:>14} "
+              f"{hr.wall_s:>6.1f} {us_per_frame:>8.2f}")
+        prev_resets = resets
+    print(f"not judged: the first {h.CONVERGED_AFTER_S:g} s and {SETTLE_S:g} s after each of "
+          f"{sum(1 for k in scn.kidnaps if k[0] < args.hours * HOUR_S)} kidnaps; "
+          f"estimates {sum(hr.estimates for hr in hours)}, judged {judged}")
+    print(f"frames: log {frames_log}, read {stats['frames_total']}, decoded {decoded}; "
+          f"lost by counter {stats['lost_by_counter']}, malformed {stats['malformed']}, "
+          f"replay bad lines {stats['replay_bad_lines']}")
+    print(f"latency (the bridge's, fast replay = processing time): first hour p99 {lat_first} us, "
+          f"whole run p99 {lat_all} us, max {stats['latency_max_us']} us over "
+          f"{stats['latency_samples']} samples")
+
+    checks = [
+        (f"RSS growth after the first hour <= {RSS_GROWTH_MAX_KIB} KiB",
+         rss_growth is not None and rss_growth <= RSS_GROWTH_MAX_KIB,
+         f"{rss_growth} KiB (base {rss_base} KiB at the end of hour 0, "
+         f"{sum(len(hr.rss_kib) for hr in hours)} samples)"),
+        ("no non-finite estimate", nan == 0, f"nan={nan}"),
+        ("no frame lost (log - decoded)", lost == 0, f"lost_frames={lost}"),
+        (f"within 3 sigma >= {WITHIN_3SIGMA_MIN_PCT:g} %", within >= WITHIN_3SIGMA_MIN_PCT,
+         f"{within:.2f} %"),
+        (f"latency p99 within {LATENCY_GROWTH_MAX:.0%} of the first hour's "
+         "(cumulative: the bridge has no per-hour figure)",
+         lat_first > 0 and lat_all <= (1 + LATENCY_GROWTH_MAX) * lat_first,
+         f"whole run {lat_all} us vs first hour {lat_first} us"),
+    ]
+    print()
+    for name, ok, value in checks:
+        print(f"target {'met   ' if ok else 'MISSED'} {name}: {value}")
+    print(f"wall time {time.monotonic() - t_start:.0f} s (simulate {sim_wall:.0f} s, "
+          f"replay {replay_wall:.0f} s)")
+    print(f"soak sim_h={args.hours} frames={frames_log} rss_growth_kib="
+          f"{rss_growth if rss_growth is not None else -1} nan={nan} "
+          f"resets={stats['estimator_resets']} within_3sigma_pct={within:.2f} "
+          f"latency_p99_us={lat_all} lost_frames={lost}")
+    return 0 if all(ok for _, ok, _ in checks) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
