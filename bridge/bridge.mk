@@ -81,6 +81,8 @@ $(BRIDGE_ASAN_BIN): $(BRIDGE_SANOBJS) $(BRIDGE_SANDIR)/main.o $(BRIDGE_LIB)
 # ASan/UBSan against sanitized bridge objects (all but main.o). A test that
 # stands in for syscalls lists its wraps in BRIDGE_WRAP_<name>.
 BRIDGE_WRAP_test_can_in := -Wl,--wrap=socket,--wrap=bind,--wrap=ioctl,--wrap=setsockopt,--wrap=getsockopt,--wrap=recvmsg,--wrap=close
+# test_resolver stands a few names in for a name server (slow, failing).
+BRIDGE_WRAP_test_resolver := -Wl,--wrap=getaddrinfo
 
 $(BRIDGE_TESTDIR)/obj/%.o: tests/bridge/%.c $(BRIDGE_CAN_H) $(BRIDGE_MAVDEP)
 	@mkdir -p $(@D)

@@ -1,7 +1,9 @@
 /*
  * cmocka: candump log parsing (bridge/replay.c) and writing
  * (bridge/record.c): every line form, bad lines counted and skipped with
- * good frames still delivered, and record -> replay round trip.
+ * good frames still delivered, and record -> replay round trip; bounded
+ * reading (over-long lines, runs of bad lines, a line with no end, an idle
+ * pipe: each call returns within its budget).
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -11,6 +13,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <fcntl.h>
 #include <unistd.h>
 #include <cmocka.h>
 
@@ -127,6 +131,180 @@ static void test_file_bad_lines_counted_good_kept(void **state)
     assert_int_equal(replay_open(&r, "/nonexistent.log"), -ENOENT);
 }
 
+/* A temporary log holding `len` bytes of `text`; returns its path in `path`. */
+static void write_log(char *path, const char *text, size_t len)
+{
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    assert_int_equal(write(fd, text, len), (ssize_t)len);
+    assert_int_equal(close(fd), 0);
+}
+
+/* Lines of at most REPLAY_LINE_MAX bytes (newline included) are read; a
+ * longer one is one bad line, skipped to its newline, and the next good
+ * line still comes. */
+static void test_line_length_cap(void **state)
+{
+    (void)state;
+    const char *good = "(1.000000) vcan0 100#0011223344556677";
+    size_t glen = strlen(good);
+    static char text[3 * 1024 + 20000];
+    size_t n = 0;
+    /* exactly REPLAY_LINE_MAX bytes: the good line padded with spaces */
+    memcpy(text + n, good, glen);
+    n += glen;
+    memset(text + n, ' ', REPLAY_LINE_MAX - 1 - glen);
+    n += REPLAY_LINE_MAX - 1 - glen;
+    text[n++] = '\n';
+    /* one byte more: bad */
+    memcpy(text + n, good, glen);
+    n += glen;
+    memset(text + n, ' ', REPLAY_LINE_MAX - glen);
+    n += REPLAY_LINE_MAX - glen;
+    text[n++] = '\n';
+    /* 20000 bytes: bad, skipped without being buffered */
+    memset(text + n, 'x', 20000);
+    n += 20000;
+    text[n++] = '\n';
+    memcpy(text + n, "(2.000000) vcan0 110#01\n", 24);
+    n += 24;
+    assert_true(n <= sizeof text);
+    char path[] = "/tmp/test_replay_XXXXXX";
+    write_log(path, text, n);
+    FILE *devnull = fopen("/dev/null", "w");
+    log_set_stream(devnull);
+    struct replay r;
+    assert_int_equal(replay_open(&r, path), 0);
+    struct can_msg m;
+    int rc;
+    while ((rc = replay_next(&r, &m)) == -EAGAIN)
+        ;
+    assert_int_equal(rc, 1);
+    assert_int_equal(m.id, 0x100);
+    while ((rc = replay_next(&r, &m)) == -EAGAIN)
+        ;
+    assert_int_equal(rc, 1);
+    assert_int_equal(m.id, 0x110);
+    assert_true(m.rx_us == 2000000);
+    while ((rc = replay_next(&r, &m)) == -EAGAIN)
+        ;
+    assert_int_equal(rc, 0);
+    assert_int_equal(r.lines, 4);
+    assert_int_equal(r.bad_lines, 2);
+    assert_int_equal(r.long_lines, 2);
+    assert_int_equal(r.frames, 2);
+    replay_close(&r);
+    log_set_stream(NULL);
+    fclose(devnull);
+    unlink(path);
+}
+
+/* A run of bad lines: each call looks at REPLAY_LINES_PER_CALL lines at
+ * most and returns -EAGAIN, so the caller's loop gets its turn; the good
+ * line after them still comes. */
+static void test_bad_run_returns_to_caller(void **state)
+{
+    (void)state;
+    enum { BAD = 1000 };
+    static char text[BAD * 8 + 64];
+    size_t n = 0;
+    for (int i = 0; i < BAD; i++) {
+        memcpy(text + n, "garbage\n", 8);
+        n += 8;
+    }
+    memcpy(text + n, "(3.000000) vcan0 120#AA\n", 24);
+    n += 24;
+    char path[] = "/tmp/test_replay_XXXXXX";
+    write_log(path, text, n);
+    FILE *devnull = fopen("/dev/null", "w");
+    log_set_stream(devnull);
+    struct replay r;
+    assert_int_equal(replay_open(&r, path), 0);
+    struct can_msg m;
+    int rc, again = 0;
+    while ((rc = replay_next(&r, &m)) == -EAGAIN) {
+        again++;
+        /* the budget: never more lines per call than promised */
+        assert_true(r.lines <= (uint64_t)again * REPLAY_LINES_PER_CALL);
+    }
+    assert_int_equal(rc, 1);
+    assert_int_equal(m.id, 0x120);
+    assert_true(again >= BAD / REPLAY_LINES_PER_CALL);
+    assert_int_equal(r.bad_lines, BAD);
+    replay_close(&r);
+    log_set_stream(NULL);
+    fclose(devnull);
+    unlink(path);
+}
+
+/* 1 MiB with no newline at all: read one chunk per call, never buffered
+ * whole; one bad line at the end of the file. */
+static void test_endless_line_bounded(void **state)
+{
+    (void)state;
+    size_t len = 1u << 20;
+    char *text = malloc(len);
+    assert_non_null(text);
+    memset(text, 'z', len);
+    char path[] = "/tmp/test_replay_XXXXXX";
+    write_log(path, text, len);
+    free(text);
+    FILE *devnull = fopen("/dev/null", "w");
+    log_set_stream(devnull);
+    struct replay r;
+    assert_int_equal(replay_open(&r, path), 0);
+    struct can_msg m;
+    int rc, again = 0;
+    while ((rc = replay_next(&r, &m)) == -EAGAIN)
+        again++;
+    assert_int_equal(rc, 0);
+    assert_true(again >= (int)(len / REPLAY_READ_CHUNK) - 1); /* one read per call */
+    assert_int_equal(r.bad_lines, 1);
+    assert_int_equal(r.long_lines, 1);
+    assert_int_equal(r.frames, 0);
+    replay_close(&r);
+    log_set_stream(NULL);
+    fclose(devnull);
+    unlink(path);
+}
+
+/* A pipe: no data yet is -EAGAIN with `starved` (the call does not wait),
+ * a line written is a frame, the writer gone is the end. */
+static void test_idle_pipe_does_not_block(void **state)
+{
+    (void)state;
+    char dir[] = "/tmp/test_replay_fifoXXXXXX";
+    assert_non_null(mkdtemp(dir));
+    char fifo[64];
+    snprintf(fifo, sizeof fifo, "%s/log", dir);
+    assert_int_equal(mkfifo(fifo, 0600), 0);
+    /* open the write end first (non-blocking open of a FIFO's read end
+     * would not wait for it; ours is blocking, so hold a reader meanwhile) */
+    int rd = open(fifo, O_RDONLY | O_NONBLOCK);
+    assert_true(rd >= 0);
+    int wr = open(fifo, O_WRONLY);
+    assert_true(wr >= 0);
+    struct replay r;
+    assert_int_equal(replay_open(&r, fifo), 0);
+    assert_int_equal(close(rd), 0);
+    struct can_msg m;
+    assert_int_equal(replay_next(&r, &m), -EAGAIN);
+    assert_true(r.starved);
+    const char *line = "(4.000000) vcan0 130#0102\n";
+    assert_int_equal(write(wr, line, strlen(line)), (ssize_t)strlen(line));
+    assert_int_equal(replay_next(&r, &m), 1);
+    assert_int_equal(m.id, 0x130);
+    assert_false(r.starved);
+    assert_int_equal(close(wr), 0);
+    int rc;
+    while ((rc = replay_next(&r, &m)) == -EAGAIN)
+        ;
+    assert_int_equal(rc, 0);
+    replay_close(&r);
+    unlink(fifo);
+    rmdir(dir);
+}
+
 static void test_record_round_trip(void **state)
 {
     (void)state;
@@ -195,6 +373,10 @@ int main(void)
         cmocka_unit_test(test_other_frame_forms),
         cmocka_unit_test(test_bad_lines),
         cmocka_unit_test(test_file_bad_lines_counted_good_kept),
+        cmocka_unit_test(test_line_length_cap),
+        cmocka_unit_test(test_bad_run_returns_to_caller),
+        cmocka_unit_test(test_endless_line_bounded),
+        cmocka_unit_test(test_idle_pipe_does_not_block),
         cmocka_unit_test(test_record_round_trip),
         cmocka_unit_test(test_record_file),
     };
