@@ -393,7 +393,9 @@ class Rig:
     def start_sim(self, scenario: str, duration_s: float | None = None,
                   seed: int | None = None, extra: list[str] | None = None) -> Proc:
         assert SIM.exists(), f"{SIM} missing (make setup)"
-        argv = [str(SIM), "run", scenario, "--channel", self.iface,
+        # --spin-ms 0: the live cases run side by side on one guest CPU, where
+        # simulators busy-waiting at SCHED_FIFO would starve the bridges.
+        argv = [str(SIM), "run", scenario, "--channel", self.iface, "--spin-ms", "0",
                 "--truth", str(self.truth), "--stats", str(self.sim_stats)]
         if duration_s is not None:
             argv += ["--duration", f"{duration_s:g}"]

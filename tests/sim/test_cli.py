@@ -94,8 +94,10 @@ def test_plot_writes_png(tmp_path):
                      "--out", str(tmp_path / "p2.png")]) == 65
 
 
-def test_live_on_virtual_bus_sends_every_frame(tmp_path):
-    """Live mode over python-can's virtual interface; a second bus on the channel receives all."""
+@pytest.mark.parametrize("spin_ms", ["1.5", "0"])
+def test_live_on_virtual_bus_sends_every_frame(tmp_path, spin_ms):
+    """Live mode over python-can's virtual interface; a second bus on the channel receives all,
+    with the last 1.5 ms of each wait spun (the default) or slept (--spin-ms 0)."""
     channel = f"beaconloc-test-{id(tmp_path)}"
     rx = can.Bus(interface="virtual", channel=channel)
     got = []
@@ -111,7 +113,8 @@ def test_live_on_virtual_bus_sends_every_frame(tmp_path):
     stats_p = tmp_path / "stats.json"
     try:
         assert cli.main(["run", "kleeman-lab", "--duration", "1.5", "--channel", channel,
-                         "--interface", "virtual", "--stats", str(stats_p)]) == 0
+                         "--interface", "virtual", "--spin-ms", spin_ms,
+                         "--stats", str(stats_p)]) == 0
     finally:
         done.set()
         th.join()
@@ -121,3 +124,10 @@ def test_live_on_virtual_bus_sends_every_frame(tmp_path):
     assert {m.arbitration_id for m in got} == {0x100, 0x110, 0x120}
     lat = stats["live"]["lateness_us"]
     assert 0 <= lat["p50"] <= lat["p99"] <= lat["max"]
+
+
+@pytest.mark.parametrize("spin_ms", ["-1", "nan", "1000"])
+def test_live_spin_out_of_range_is_a_usage_error(spin_ms, capsys):
+    assert cli.main(["run", "kleeman-lab", "--duration", "1", "--channel", "vcan0",
+                     "--spin-ms", spin_ms]) == 64
+    assert "--spin-ms" in capsys.readouterr().err
