@@ -1,0 +1,201 @@
+"""Long runs: several faults of a kind ([faults] kidnap, kidnap2, ...), echo-storm
+windows, a repeated path program, and a run simulated window by window
+(simulate.run_windows, run --window) that carries bus, counters, wheels and the
+bound across the windows."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from beaconloc_sim import simulate
+from beaconloc_sim.cli import main as cli_main
+from beaconloc_sim.encoders import unwrap_ticks
+from beaconloc_sim.inifile import ConfigError
+from beaconloc_sim.scenario import load_scenario
+from beaconloc_sim.site import SCENARIO_DIR
+
+LAP = "\n".join(f"segment{i + 2} = {s}" for i, s in enumerate(
+    ["straight 6.0", "arc 90 0.5", "straight 5.0", "arc 90 0.5"] * 2))
+PATH = f"[path]\nstart = 2.5, 2.5, 0\nspeed_mps = 0.45\nsegment1 = wait 5\n{LAP}\n"
+
+
+def body(duration_s: float, faults: str = "", path: str = PATH, extra: str = "") -> str:
+    return f"duration_s = {duration_s}\n{path}{extra}[faults]\n{faults}"
+
+
+def test_numbered_fault_keys_give_every_window_in_time_order(make_scenario):
+    faults = ("kidnap2 = 50, 0, -1\nkidnap = 20, 0, 1\nencoder_silence = 10, 1\n"
+              "encoder_silence7 = 30, 2\nbeacon_outage = 5, 3, 2\nbeacon_outage2 = 40, 4, 1, 3\n"
+              "echo_storm = 60, 10, 0.5, 0.25\n")
+    scn = load_scenario(str(make_scenario(body(80, faults))))
+    assert [k[0] for k in scn.kidnaps] == [20, 50]
+    assert scn.kidnap == (20, 0, 1, 0.0)                 # the first one, as before
+    assert scn.encoder_silences == ((10, 1), (30, 2))
+    assert scn.beacon_outages == ((5, 3, (2,)), (40, 4, (1, 3)))
+    assert scn.echo_storms == ((60, 10, 0.5, 0.25),)
+    silent = scn.encoder_silent(np.array([9.9, 10.5, 11.0, 31.9, 32.0]))
+    assert silent.tolist() == [False, True, False, True, False]
+    echo, late = scn.echo_probabilities(np.array([59.0, 60.0, 69.9, 70.0]))
+    assert echo.tolist() == [0.0, 0.5, 0.5, 0.0] and late.tolist() == [0.0, 0.25, 0.25, 0.0]
+
+
+@pytest.mark.parametrize("faults, key, why", [
+    ("kidnapx = 10, 0, 1\n", "kidnapx", "unknown key"),
+    ("echo_storm = 10, 5, 1.5, 0\n", "echo_storm", "probabilities 0..1"),
+    ("echo_storm3 = 10, 5, 0.3\n", "echo_storm3", "expected 4 comma-separated numbers"),
+    ("kidnap = 10, 0, 1\nkidnap2 = 10, 1, 0\n", "kidnap2", "two kidnaps at the same time"),
+    ("encoder_silence4 = 10, 0\n", "encoder_silence4", "duration_s must be > 0"),
+])
+def test_bad_fault_windows_name_their_key(make_scenario, faults, key, why):
+    with pytest.raises(ConfigError) as err:
+        load_scenario(str(make_scenario(body(60, faults))))
+    assert f"[faults] {key}" in str(err.value) and why in str(err.value)
+
+
+def test_two_kidnaps_apply_in_turn_each_to_the_path_the_first_left():
+    """Straight east at 0.5 m/s from (3, 3); at 10 s carried 4 m north; at 20 s turned
+    90 degrees left about where it then is and carried 1 m east."""
+    from beaconloc_sim.path import Trajectory, parse_segment
+    seg = [parse_segment("straight 20", 0.5, 1.0)]
+    tr = Trajectory(3.0, 3.0, 0.0, seg, 0.5, [(20.0, 1.0, 0.0, math.pi / 2), (10.0, 0.0, 4.0, 0.0)])
+    st = tr.state(np.array([9.999, 10.0, 19.999, 20.0, 24.0]))
+    assert (st["x_m"][1], st["y_m"][1]) == pytest.approx((8.0, 7.0), abs=1e-3)
+    # picked up at (13, 7) heading east, put down at (14, 7) heading north; 4 s on: 2 m north
+    assert (st["x_m"][2], st["y_m"][2]) == pytest.approx((13.0, 7.0), abs=1e-3)
+    assert (st["x_m"][3], st["y_m"][3], st["theta_rad"][3]) == pytest.approx((14.0, 7.0, math.pi / 2))
+    assert (st["x_m"][4], st["y_m"][4]) == pytest.approx((14.0, 9.0), abs=1e-9)
+    assert tr.kidnap == (10.0, 0.0, 4.0, 0.0)
+
+
+def test_repeated_program_drives_on_from_where_it_ended(make_scenario):
+    once = load_scenario(str(make_scenario(body(300, ""))))
+    again = load_scenario(str(make_scenario(body(300, "", extra="", path=PATH + "repeat = yes\n"))))
+    program_s = once.trajectory.end_s
+    assert again.trajectory.end_s >= 300
+    t = np.array([12.0, 40.0])
+    a, b = again.trajectory.state(t + program_s), once.trajectory.state(t)
+    # the lap closes, so the second pass is the first one again (after its 5 s wait)
+    assert a["x_m"] == pytest.approx(b["x_m"], abs=1e-6)
+    assert a["y_m"] == pytest.approx(b["y_m"], abs=1e-6)
+    assert once.trajectory.state(np.array([program_s + 50]))["v_mps"][0] == 0.0
+    assert again.trajectory.state(np.array([program_s + 50]))["v_mps"][0] == pytest.approx(0.45)
+
+
+def test_echo_storm_window_makes_echoes_only_inside_it(make_scenario):
+    scn = load_scenario(str(make_scenario(body(90, "echo_storm = 30, 30, 0.5, 0.5\n"))))
+    res = simulate.run(scn)
+    f = res.firings
+    inside = (f.t_s >= 30) & (f.t_s < 60)
+    assert not f.strong_echo[~inside].any() and not f.late[~inside].any()
+    assert 0.35 < f.strong_echo[inside].mean() < 0.65 and 0.35 < f.late[inside].mean() < 0.65
+
+
+def test_every_outage_and_silence_window_is_applied(make_scenario):
+    faults = ("beacon_outage = 10, 5, 2\nbeacon_outage2 = 30, 5, 4\n"
+              "encoder_silence = 20, 2\nencoder_silence2 = 40, 3\n")
+    res = simulate.run(load_scenario(str(make_scenario(body(60, faults)))))
+    f = res.firings
+    dead = ~f.alive
+    assert set((f.beacon[dead & (f.t_s < 20)] + 1).tolist()) == {2}
+    assert set((f.beacon[dead & (f.t_s >= 20)] + 1).tolist()) == {4}
+    assert dead.sum() == pytest.approx(2 * 5 / (6 * 0.15), abs=1)
+    enc_t = res.odometry["t_us"]          # encoder frames sent, on the receiver clock
+    t = (enc_t - res.rx_clock.offset_us) / 1e6 / (1 + res.rx_clock.drift_ppm * 1e-6)
+    gaps = np.diff(t)
+    big = t[:-1][gaps > 0.5]
+    assert big.tolist() == pytest.approx([20.0, 40.0], abs=0.02)
+    assert gaps[gaps > 0.5].tolist() == pytest.approx([2.0, 3.0], abs=0.02)
+
+
+def windows(scn, window_s):
+    return list(simulate.run_windows(scn, window_s))
+
+
+def test_run_in_windows_is_one_continuous_bus():
+    scn = load_scenario("kidnap", duration_s=120)
+    parts = windows(scn, 25.0)
+    assert len(parts) == 5
+    t = np.concatenate([p.frames.t_s for p in parts])
+    ids = np.concatenate([p.frames.arb_id for p in parts])
+    sigs = [s for p in parts for s in p.frames.signals]
+    assert np.all(np.diff(t) >= 0.9 * simulate.FRAME_BITS / scn.bus_bitrate_bps)
+    assert t[-1] <= 120.0
+    # rolling counters run on across the boundaries (per id and node)
+    for fid, node, modulo in ((simulate.ID_PULSE, None, 8), (simulate.ID_ENCODERS, None, 16),
+                              (simulate.ID_STATUS, 1, 16), (simulate.ID_STATUS, 2, 16)):
+        c = np.array([s["Counter"] for s, i in zip(sigs, ids)
+                      if i == fid and (node is None or s["NodeId"] == node)])
+        assert np.all((np.diff(c) - 1) % modulo == 0), fid
+    # node time of the encoder frames: 10 ms apart, or the kidnap's 1 s silence
+    enc_us = np.array([s["NodeTime"] for s, i in zip(sigs, ids) if i == simulate.ID_ENCODERS])
+    step = np.diff(enc_us) % 2**32
+    assert set(step.tolist()) <= {10_000, 1_010_000}
+    # wheel ticks run on: at most a 10 ms drive per 10 ms of node time (outer wheel on a
+    # corner: 0.675 m/s, 44 ticks)
+    left = np.array([s["LeftTicks"] for s, i in zip(sigs, ids) if i == simulate.ID_ENCODERS])
+    assert (np.abs(np.diff(unwrap_ticks(left))) / (step / 10_000)).max() < 60
+    # truth rows every 20 ms across the windows, and the bound goes on (no fall back to the prior)
+    tr = np.concatenate([p.truth["t_sim_s"] for p in parts])
+    assert np.allclose(np.diff(tr), 1 / scn.truth_rate_hz) and tr[0] == 0 and tr[-1] == 120
+    pcrb = np.concatenate([p.truth["pcrb_pos_m"] for p in parts])
+    assert pcrb[tr > 10].max() < 0.1
+    # the odometry goes on from the previous window's pose (no jump at a boundary)
+    ox = np.concatenate([p.odometry["x_m"] for p in parts])
+    oy = np.concatenate([p.odometry["y_m"] for p in parts])
+    assert np.hypot(np.diff(ox), np.diff(oy))[step == 10_000].max() < 0.01
+    # about as many frames as the single run (different noise draws)
+    assert len(t) == pytest.approx(len(simulate.run(scn).frames), rel=0.01)
+
+
+def test_windowed_run_is_the_prefix_of_a_longer_one():
+    short = windows(load_scenario("echo-storm", duration_s=40), 20.0)
+    long = windows(load_scenario("echo-storm", duration_s=60), 20.0)
+    for a, b in zip(short, long):
+        assert a.frames.data == b.frames.data
+        assert np.array_equal(a.frames.t_s, b.frames.t_s)
+        assert np.array_equal(a.truth["pcrb_pos_m"], b.truth["pcrb_pos_m"])
+
+
+def test_cli_window_writes_log_truth_and_stats(tmp_path):
+    import json
+    log, truth, stats = tmp_path / "w.log", tmp_path / "w.csv", tmp_path / "w.json"
+    rc = cli_main(["run", "kleeman-lab", "--duration", "50", "--window", "20", "--log", str(log),
+                   "--truth", str(truth), "--stats", str(stats)])
+    assert rc == 0
+    st = json.loads(stats.read_text())
+    lines = log.read_text().splitlines()
+    assert len(lines) == st["frames"]["total"] > 5000
+    assert st["frames"]["total"] == sum(v for k, v in st["frames"].items() if k != "total")
+    assert st["duration_s"] == 50 and st["window_s"] == 20
+    stamps = np.array([float(ln.split()[0].strip("()")) for ln in lines])
+    assert np.all(np.diff(stamps) > 0) and stamps[-1] - 1_700_000_000 <= 50
+    rows = truth.read_text().splitlines()
+    assert rows[0].startswith("t_us,t_sim_s") and len(rows) == 1 + 50 * 50 + 1
+    assert cli_main(["run", "kleeman-lab", "--window", "20", "--channel", "vcan0"]) == 64
+
+
+def test_soak_scenario_has_one_fault_an_hour_in_turn():
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "soak" / "kleeman-lab-24h.scenario.ini"
+    scn = load_scenario(str(path))
+    assert scn.duration_s == 86400 and scn.trajectory.end_s >= 86400
+    assert scn.site.name == load_scenario("kleeman-lab").site.name
+    starts = {"kidnap": [k[0] for k in scn.kidnaps],
+              "beacon_outage": [o[0] for o in scn.beacon_outages],
+              "echo_storm": [s[0] for s in scn.echo_storms],
+              # the swing: where the profile leaves 20 C
+              "temperature": [t for t, c in scn.temperature_profile[1:] if c == 20][::2]}
+    silences = [s[0] for s in scn.encoder_silences if s[1] > 1.0]
+    for hour in range(24):
+        t = 3600 * hour + 1800
+        kind = ["kidnap", "silence", "beacon_outage", "echo_storm", "temperature"][hour % 5]
+        found = silences if kind == "silence" else starts[kind]
+        assert t in found, (hour, kind)
+    assert sum(len(v) for v in starts.values()) + len(silences) == 24
+    # the robot stays in the room all day (kidnaps alternate north and back)
+    st = scn.trajectory.state(np.arange(0, 86400, 7.0))
+    assert st["x_m"].min() > 0.5 and st["x_m"].max() < 11.5
+    assert st["y_m"].min() > 0.5 and st["y_m"].max() < 11.5
+    assert SCENARIO_DIR.joinpath("kleeman-lab.ini").is_file()
