@@ -106,7 +106,14 @@ $(BRIDGE_FAKECAN): tests/bridge/fake_can_preload.c
 	@mkdir -p $(@D)
 	$(CC) -std=c11 -O2 -Wall -Wextra -Werror -shared -fPIC -o $@ $< -ldl
 
-test-bridge-py: $(BRIDGE_BIN) $(BRIDGE_ASAN_BIN) $(BRIDGE_FAKECAN) | $(SETUP_STAMP)
+# Test-only LD_PRELOAD shim: a name server that answers late (or fails), for
+# the host-fault tests (tests/bridge/test_bridge_hostfaults.py).
+BRIDGE_SLOWDNS := $(BRIDGE_TESTDIR)/slow_dns_preload.so
+$(BRIDGE_SLOWDNS): tests/bridge/slow_dns_preload.c
+	@mkdir -p $(@D)
+	$(CC) -std=c11 -O2 -Wall -Wextra -Werror -shared -fPIC -o $@ $< -ldl
+
+test-bridge-py: $(BRIDGE_BIN) $(BRIDGE_ASAN_BIN) $(BRIDGE_FAKECAN) $(BRIDGE_SLOWDNS) | $(SETUP_STAMP)
 	BL_BUILD=$(abspath $(BUILD)) $(PYTEST) -q tests/bridge
 
 bench-bridge: $(BRIDGE_BIN) | $(SETUP_STAMP)

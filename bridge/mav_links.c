@@ -4,6 +4,7 @@
 #include "mav_links.h"
 
 #include <errno.h>
+#include <netdb.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -70,10 +71,16 @@ static void take_answer(struct mav_link *k)
         return;
     }
     rc = mav_out_set_address(&k->out, (const struct sockaddr *)&a.ss, a.len);
-    if (rc == 0)
-        came_up(k);
-    else
+    if (rc != 0) {
         went_down(k, "", -rc);
+        return;
+    }
+    /* numeric conversion only: never a name server */
+    char addr[64];
+    if (getnameinfo((const struct sockaddr *)&a.ss, a.len, addr, sizeof addr, NULL, 0, NI_NUMERICHOST) != 0)
+        snprintf(addr, sizeof addr, "?");
+    log_info("MAVLink endpoint %s open (%s is %s)", k->spec, k->out.ep.host, addr);
+    k->down_logged = false;
 }
 
 int mav_links_open(struct mav_links *l, const char *const specs[], int n, unsigned sysid, unsigned compid)
