@@ -208,7 +208,7 @@ def main() -> int:
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.monotonic()
     scn = load_scenario(str(SCENARIO), duration_s=args.hours * HOUR_S)
-    site = SCENARIO.parent / "../../hw_sim/scenarios/kleeman-lab.ini"
+    site = scn.site.path            # the site file the scenario names (kleeman-lab.ini)
 
     sim_stats, sim_wall = simulate(args.hours, out)
     print(f"simulated {args.hours} h in {sim_wall:.0f} s: {sim_stats['frames']['total']} frames",
