@@ -34,18 +34,42 @@ def _worker_index() -> int:
 SHARED_RUN_FILES = ("test_nominal.py",)
 
 
+def live_run_of(nodeid: str) -> str:
+    """The live run a test belongs to: its file where the file shares one
+    run, else the test itself."""
+    module = nodeid.split("::", 1)[0]
+    return module if module.endswith(SHARED_RUN_FILES) else nodeid
+
+
 def pytest_xdist_make_scheduler(config, log):
-    """pytest-xdist's scheduling with one unit per live run: a shared-run
-    file whole, any other case alone (xdist's own loadgroup marks are lost
-    on pytest 9, which no longer lets a plugin rename a test's nodeid)."""
+    """pytest-xdist's scheduling with one unit per live run (xdist's own
+    loadgroup marks are lost on pytest 9, which no longer lets a plugin
+    rename a test's nodeid)."""
     from xdist.scheduler import LoadScopeScheduling
 
     class LiveRunScheduling(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            module = nodeid.split("::", 1)[0]
-            return module if module.endswith(SHARED_RUN_FILES) else nodeid
+            return live_run_of(nodeid)
 
     return LiveRunScheduling(config, log)
+
+
+def pytest_collection_modifyitems(config, items):
+    """BL_IT_SHARD=I/N (set by tests/vm/run_in_vm.py --guests N): keep the
+    live runs I, I+N, I+2N, ... in collection order, so N guests side by
+    side share the suite; every test of one live run stays together."""
+    shard = os.environ.get("BL_IT_SHARD", "")
+    if not shard:
+        return
+    i, n = (int(v) for v in shard.split("/"))
+    assert 0 <= i < n, f"BL_IT_SHARD={shard}: want I/N with 0 <= I < N"
+    runs = list(dict.fromkeys(live_run_of(it.nodeid) for it in items))
+    mine = set(runs[i::n])
+    keep = [it for it in items if live_run_of(it.nodeid) in mine]
+    drop = [it for it in items if live_run_of(it.nodeid) not in mine]
+    if drop:
+        config.hook.pytest_deselected(items=drop)
+        items[:] = keep
 
 
 # vcan1, vcan2, ... alone; vcan101, vcan102, ... on worker gw0, vcan201 on gw1.

@@ -180,6 +180,10 @@ class NodeClockProbe:
                 continue
             if self.first_rx_mono_s is None:
                 self.first_rx_mono_s = msg.timestamp - self.real_minus_mono_s
+                # From now on only the frames the clock map needs: the kernel
+                # drops the rest before they wake this thread (every wake-up
+                # costs about a millisecond of the UML guest's one CPU).
+                self.bus.set_filters([{"can_id": self._pulse.frame_id, "can_mask": 0x7FF}])
             if msg.arbitration_id != self._pulse.frame_id or msg.dlc != 8:
                 continue
             try:

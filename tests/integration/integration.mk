@@ -1,6 +1,7 @@
 # End to end on a kernel CAN bus (tests/integration, tests/vm, tests/bench,
-# tests/demo). The bus lives in a virtme-ng VM where the host has no vcan.
-#   make test-integration [IT_ARGS='-k nominal']   the pytest suite, one VM boot
+# tests/demo). The bus lives in User-Mode Linux where the host has no vcan.
+#   make test-integration [IT_ARGS='-k nominal'] [IT_GUESTS=N]
+#                                                  the pytest suite in N UML guests
 #   make bench-accuracy                            20 seeds x 2 scenarios, --replay
 #   make demo [DEMO_S=120]                         kleeman-lab live, plot in build/demo/
 #   make vm-check                                  boot, python-can round trip on vcan0
@@ -11,6 +12,8 @@ DEMO_OUT     := $(BUILD)/demo
 IT_BRIDGE    := $(BUILD)/bridge/beaconloc-bridge
 VM_RUN       := tests/vm/run-in-vm.sh
 IT_ARGS      ?=
+# UML guests side by side (a guest has one CPU): one per host core, at most 4.
+IT_GUESTS    ?= $(shell n=$$(nproc); [ $$n -gt 4 ] && n=4; echo $$n)
 DEMO_S       ?= 120
 
 .PHONY: test-integration bench-accuracy demo vm-check test-vm-runner
@@ -21,7 +24,7 @@ test-vm-runner: $(SETUP_STAMP)
 	PYTHONDONTWRITEBYTECODE=1 $(PYTEST) -p no:cacheprovider -q tests/vm/test_run_in_vm.py
 
 test-integration: $(SETUP_STAMP) $(IT_BRIDGE)
-	$(VM_RUN) --results $(IT_RESULTS) --junit junit.xml \
+	$(VM_RUN) --results $(IT_RESULTS) --junit junit.xml --guests $(IT_GUESTS) \
 	    tests/integration/run-suite.sh $(IT_ARGS)
 
 vm-check: $(SETUP_STAMP)

@@ -17,6 +17,7 @@ with --junit, when the pytest report is missing or counts zero tests.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import os
 import shutil
 import signal
@@ -116,14 +117,19 @@ def kill_group(proc: subprocess.Popen) -> None:
         proc.wait()
 
 
-def run(args: argparse.Namespace, results: Path) -> tuple[str, int | None]:
+def run(args: argparse.Namespace, results: Path, shard: str | None) -> tuple[str, int | None]:
     """Start the command (UML or direct); wait, tailing --tail; return
-    (how it ended, exit code read from the results folder or None)."""
+    (how it ended, exit code read from the results folder or None).
+    shard: "I/N" for guest I of N side by side (BL_IT_SHARD), else None."""
+    results.mkdir(parents=True, exist_ok=True)
+    label = f"guest{shard.split('/')[0]}: " if shard else ""
     guest_cmd = [str(GUEST_INIT), str(results), *args.command]
     env = dict(os.environ)
     env["PATH"] = f"{REPO / '.venv' / 'bin'}:{env.get('PATH', '')}"
     if args.ifaces:
         env["BL_VCAN_IFACES"] = args.ifaces
+    if shard is not None:
+        env["BL_IT_SHARD"] = shard
     if args.mode == "direct":
         log("host has vcan: running directly")
         argv = guest_cmd
@@ -140,7 +146,7 @@ def run(args: argparse.Namespace, results: Path) -> tuple[str, int | None]:
                        + f"cd {_shquote(str(REPO))}\n"
                        + "exec " + " ".join(_shquote(a) for a in guest_cmd) + "\n")
         argv = uml_argv(kernel, job, args.memory)
-        log(f"booting User-Mode Linux {ver} ({args.memory}); boot timeout "
+        log(f"{label}booting User-Mode Linux {ver} ({args.memory}); boot timeout "
             f"{args.boot_timeout:.0f} s")
         boot_timeout = args.boot_timeout
     console = (results / "console.log").open("wb")
@@ -148,7 +154,7 @@ def run(args: argparse.Namespace, results: Path) -> tuple[str, int | None]:
     proc = subprocess.Popen(argv, cwd=REPO, env=env, stdin=subprocess.DEVNULL,
                             stdout=console, stderr=subprocess.STDOUT,
                             start_new_session=True)
-    tail_path = results / args.tail if args.tail else None
+    tail_path = results / args.tail if args.tail and not label else None
     tail_pos = 0
     booted_at = None
     how = "finished"
@@ -159,7 +165,7 @@ def run(args: argparse.Namespace, results: Path) -> tuple[str, int | None]:
             if booted_at is None and (results / "booted").exists():
                 booted_at = now
                 if args.mode == "uml":
-                    log(f"guest booted after {now:.0f} s")
+                    log(f"{label}guest booted after {now:.0f} s")
             if tail_path is not None:
                 tail_pos = tail_new(tail_path, tail_pos)
             if boot_timeout is not None and booted_at is None and now > boot_timeout:
@@ -177,7 +183,7 @@ def run(args: argparse.Namespace, results: Path) -> tuple[str, int | None]:
         console.close()
     if tail_path is not None:
         tail_new(tail_path, tail_pos)
-    log(f"{'guest' if args.mode == 'uml' else 'command'} ran {time.monotonic() - t_start:.0f} s")
+    log(f"{label}{'guest' if args.mode == 'uml' else 'command'} ran {time.monotonic() - t_start:.0f} s")
     code_file = results / "exit-code"
     if not code_file.exists():
         if how == "finished":
@@ -233,6 +239,56 @@ def report_junit(path: Path, max_chars: int) -> tuple[int, int, str]:
     return tests, failures + errors, summary
 
 
+def judge(args: argparse.Namespace, results: Path, how: str, code: int | None,
+          label: str) -> tuple[int, list[int]]:
+    """Print what one run left in its results folder; return (status: 0 ok,
+    1 failed, 2 did not run; [passed, failed, skipped] of its junit report,
+    zeros without one)."""
+    counts = [0, 0, 0]
+    bus_log = results / "bus.log"
+    if code is None:
+        log(f"{label}FAILED: {how}")
+        for name in ("bus.log", "script.log", "console.log"):
+            p = results / name
+            if p.exists():
+                print(f"--------------- {label}{name} (tail) ---------------")
+                print(p.read_text(errors="replace")[-args.max_chars:])
+        return 2, counts
+    if code == 90:
+        log(f"{label}FAILED: the CAN bus could not be brought up")
+        print(bus_log.read_text(errors="replace") if bus_log.exists() else "(no bus.log)")
+        return 2, counts
+    failed = False
+    if bus_log.exists():
+        for line in bus_log.read_text(errors="replace").splitlines():
+            if line.startswith("vcan round trip"):
+                log(f"{label}{line}")
+    if how != "finished":
+        log(f"{label}FAILED: {how}")
+        failed = True
+    if args.junit:
+        tests, bad, summary = report_junit(results / args.junit, args.max_chars)
+        n_skipped = int(summary.split(", ")[2].split()[0]) if tests else 0
+        counts = [tests - bad - n_skipped, bad, n_skipped]
+        script_log = results / "script.log"
+        if tests == 0:
+            log(f"{label}FAILED: {summary}: zero tests ran")
+            if script_log.exists():
+                print(script_log.read_text(errors="replace")[-args.max_chars:])
+            failed = True
+        log(f"{label}integration ({'UML' if args.mode == 'uml' else 'host vcan'}): {summary}")
+        if bad:
+            failed = True
+    if code != 0:
+        log(f"{label}FAILED: command exited {code} (log: {results / 'script.log'})")
+        if not args.junit:
+            p = results / "script.log"
+            if p.exists():
+                print(p.read_text(errors="replace")[-args.max_chars:])
+        failed = True
+    return int(failed), counts
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -240,10 +296,14 @@ def main() -> int:
                     help="results folder; emptied first")
     ap.add_argument("--mode", choices=("auto", "uml", "direct"), default="auto",
                     help="auto: direct where the host has vcan, else a UML guest")
+    ap.add_argument("--guests", type=int, default=1,
+                    help="UML guests side by side, each running the command with "
+                         "BL_IT_SHARD=I/N and results in RESULTS/guestI (a UML guest has "
+                         "one CPU: one guest per host core). Direct mode runs one command.")
     ap.add_argument("--boot-timeout", type=float, default=60.0, help="seconds")
     ap.add_argument("--timeout", type=float, default=1800.0,
                     help="seconds for boot plus command")
-    ap.add_argument("--memory", default="3G", help="the guest's memory (UML mem=)")
+    ap.add_argument("--memory", default="2G", help="each guest's memory (UML mem=)")
     ap.add_argument("--ifaces", default="", help="vcan interfaces to create (default vcan0)")
     ap.add_argument("--junit", default="", help="pytest junit xml (relative to results): "
                     "print its failures and summary, fail on zero tests")
@@ -254,53 +314,28 @@ def main() -> int:
     args = ap.parse_args()
     if not args.command:
         ap.error("no command")
+    if args.guests < 1:
+        ap.error("--guests must be >= 1")
     results = Path(args.results).resolve()
     clean_results(results)
     if args.mode == "auto":
         args.mode = "direct" if host_has_vcan() else "uml"
-    how, code = run(args, results)
-
-    failed = False
-    bus_log = results / "bus.log"
-    if code is None:
-        log(f"FAILED: {how}")
-        for name in ("bus.log", "script.log", "console.log"):
-            p = results / name
-            if p.exists():
-                print(f"--------------- {name} (tail) ---------------")
-                print(p.read_text(errors="replace")[-args.max_chars:])
-        return 2
-    if code == 90:
-        log("FAILED: the CAN bus could not be brought up")
-        print(bus_log.read_text(errors="replace") if bus_log.exists() else "(no bus.log)")
-        return 2
-    if bus_log.exists():
-        for line in bus_log.read_text(errors="replace").splitlines():
-            if line.startswith("vcan round trip"):
-                log(line)
-    if how != "finished":
-        log(f"FAILED: {how}")
-        failed = True
+    if args.mode == "direct" or args.guests == 1:
+        how, code = run(args, results, None)
+        status, counts = judge(args, results, how, code, "")
+    else:
+        n = args.guests
+        folders = [results / f"guest{i}" for i in range(n)]
+        with concurrent.futures.ThreadPoolExecutor(n) as pool:
+            ends = list(pool.map(lambda i: run(args, folders[i], f"{i}/{n}"), range(n)))
+        status, counts = 0, [0, 0, 0]
+        for i, (how, code) in enumerate(ends):
+            st, c = judge(args, folders[i], how, code, f"guest{i}: ")
+            status = max(status, st)
+            counts = [a + b for a, b in zip(counts, c)]
     if args.junit:
-        tests, bad, summary = report_junit(results / args.junit, args.max_chars)
-        script_log = results / "script.log"
-        if tests == 0:
-            log(f"FAILED: {summary}: zero tests ran")
-            if script_log.exists():
-                print(script_log.read_text(errors="replace")[-args.max_chars:])
-            failed = True
-        log(f"integration ({'UML' if args.mode == 'uml' else 'host vcan'}): {summary}")
-        print(summary)
-        if bad:
-            failed = True
-    if code != 0:
-        log(f"FAILED: command exited {code} (log: {results / 'script.log'})")
-        if not args.junit:
-            p = results / "script.log"
-            if p.exists():
-                print(p.read_text(errors="replace")[-args.max_chars:])
-        failed = True
-    return 1 if failed else 0
+        print(f"{counts[0]} passed, {counts[1]} failed, {counts[2]} skipped")
+    return status
 
 
 if __name__ == "__main__":

@@ -92,3 +92,16 @@ def test_uml_run_with_zero_tests_fails(tmp_path):
     p = _run_uml(tmp_path, "--junit", "junit.xml", "true")
     assert p.returncode == 1, p.stdout + p.stderr
     assert "zero tests ran" in p.stdout
+
+
+def test_uml_guests_side_by_side_each_run_their_shard(tmp_path):
+    """--guests 2: two guests at once, each with its own results folder and
+    BL_IT_SHARD; one failing guest fails the whole run."""
+    p = _run_uml(tmp_path, "--guests", "2", "sh", "-c",
+                 'echo "$BL_IT_SHARD" > "$BL_RESULTS/shard.txt"; [ "$BL_IT_SHARD" = 0/2 ]')
+    r = tmp_path / "r"
+    assert (r / "guest0" / "shard.txt").read_text().strip() == "0/2"
+    assert (r / "guest1" / "shard.txt").read_text().strip() == "1/2"
+    assert p.returncode == 1, p.stdout + p.stderr
+    assert "guest1: FAILED: command exited 1" in p.stdout
+    assert "guest0: FAILED" not in p.stdout
