@@ -8,7 +8,6 @@
  * the output rates are those of a live run. See docs/bridge.md.
  */
 #include <errno.h>
-#include <getopt.h>
 #include <inttypes.h>
 #include <math.h>
 #include <signal.h>
@@ -30,17 +29,10 @@
 #include "log.h"
 #include "mav_links.h"
 #include "mavlink_out.h"
+#include "options.h"
 #include "record.h"
 #include "replay.h"
 #include "stats.h"
-
-#define EX_OK_STATUS 0
-#define EX_USAGE_STATUS 64
-#define EX_NOINPUT_STATUS 66
-#define EX_SOFTWARE_STATUS 70
-#define EX_CANTCREAT_STATUS 73
-
-#define BRIDGE_VERSION "0.1.0"
 
 enum timer_id { T_ODOM, T_HEARTBEAT, T_SECOND, T_COUNT };
 
@@ -60,23 +52,6 @@ enum mode { MODE_LIVE, MODE_REPLAY_FAST, MODE_REPLAY_PACED };
 struct frame_ref {
     int64_t rx_us;    /* on the bridge clock (the log's in replay) */
     int64_t mono_us;  /* CLOCK_MONOTONIC when it was read */
-};
-
-struct options {
-    const char *site;
-    const char *can;
-    const char *mavlink;  /* the first --mavlink (overrides [bridge] mavlink) */
-    const char *mavlink_more[MAV_LINKS_MAX - 1]; /* further --mavlink endpoints */
-    int n_mavlink_more;
-    const char *replay;
-    const char *record;
-    const char *estimates;
-    const char *stats;
-    const char *log_level;
-    double rate_hz;       /* 0 = not given */
-    int sysid, compid;    /* 0 = not given */
-    double speed;         /* paced replay speed factor, 0 = fast */
-    double status_interval_s; /* <0 = not given */
 };
 
 struct daemon {
@@ -140,227 +115,6 @@ static int64_t now_local(const struct daemon *d)
     /* Replay (fast or paced): the log time of the frame or timer being
      * handled; pacing only decides when that happens. */
     return d->mode == MODE_LIVE ? mono_us() : d->log_now_us;
-}
-
-/* ---- usage / options -------------------------------------------------- */
-
-static void usage(FILE *f)
-{
-    fprintf(f,
-        "usage: beaconloc-bridge [--site FILE] [--can IFACE] [--mavlink ENDPOINT]\n"
-        "                        [--rate HZ] [--sysid N] [--compid N] [--log-level LEVEL]\n"
-        "                        [--replay LOG [--realtime | --speed X]] [--record LOG]\n"
-        "                        [--estimates CSV] [--stats JSON] [--status-interval S]\n"
-        "                        [--help] [--version]\n"
-        "  --site FILE        site file (beacons, receivers, robot, noise, [bridge])\n"
-        "  --can IFACE        SocketCAN interface (default vcan0)\n"
-        "  --mavlink EP       udpout:HOST:PORT | udpin:HOST:PORT | serial:DEV:BAUD\n"
-        "                     (repeat for up to 4 endpoints; each gets every message)\n"
-        "  --rate HZ          ODOMETRY rate (default 30)\n"
-        "  --sysid N --compid N   MAVLink ids (default 1, 197)\n"
-        "  --log-level L      error, warning, info, debug\n"
-        "  --replay LOG       read a candump log instead of the bus (as fast as possible)\n"
-        "  --realtime         pace the replay at the log's own speed\n"
-        "  --speed X          pace the replay at X times the log's speed\n"
-        "  --record LOG       write every frame read to a candump log\n"
-        "  --estimates CSV    write every estimate (receiver-node clock)\n"
-        "  --stats JSON       write counters and latency at exit\n"
-        "  --status-interval S  status line period in seconds (0 = off)\n"
-        "See docs/bridge.md.\n");
-}
-
-static int parse_double_opt(const char *name, const char *s, double lo,
-                            double hi, double *out)
-{
-    char *end;
-    errno = 0;
-    double v = strtod(s, &end);
-    if (end == s || *end || errno || !isfinite(v) || v <= lo || v > hi) {
-        fprintf(stderr, "error: command line: --%s: '%s' is not a number in "
-                "(%g, %g]\n", name, s, lo, hi);
-        return -1;
-    }
-    *out = v;
-    return 0;
-}
-
-static int parse_id_opt(const char *name, const char *s, int *out)
-{
-    char *end;
-    errno = 0;
-    long v = strtol(s, &end, 10);
-    if (end == s || *end || errno || v < 1 || v > 255) {
-        fprintf(stderr, "error: command line: --%s: '%s' is not an id 1..255\n",
-                name, s);
-        return -1;
-    }
-    *out = (int)v;
-    return 0;
-}
-
-/* Returns -1 to exit with *status. */
-static int parse_args(int argc, char **argv, struct options *o, int *status)
-{
-    enum { O_SITE = 256, O_CAN, O_MAV, O_RATE, O_SYSID, O_COMPID, O_LOGLEVEL,
-           O_REPLAY, O_REALTIME, O_SPEED, O_RECORD, O_ESTIMATES, O_STATS,
-           O_STATUS, O_VERSION };
-    static const struct option longopts[] = {
-        { "site", required_argument, 0, O_SITE },
-        { "can", required_argument, 0, O_CAN },
-        { "mavlink", required_argument, 0, O_MAV },
-        { "rate", required_argument, 0, O_RATE },
-        { "sysid", required_argument, 0, O_SYSID },
-        { "compid", required_argument, 0, O_COMPID },
-        { "log-level", required_argument, 0, O_LOGLEVEL },
-        { "replay", required_argument, 0, O_REPLAY },
-        { "realtime", no_argument, 0, O_REALTIME },
-        { "speed", required_argument, 0, O_SPEED },
-        { "record", required_argument, 0, O_RECORD },
-        { "estimates", required_argument, 0, O_ESTIMATES },
-        { "stats", required_argument, 0, O_STATS },
-        { "status-interval", required_argument, 0, O_STATUS },
-        { "help", no_argument, 0, 'h' },
-        { "version", no_argument, 0, O_VERSION },
-        { 0, 0, 0, 0 }
-    };
-    memset(o, 0, sizeof *o);
-    o->status_interval_s = -1;
-    int c;
-    opterr = 0;
-    while ((c = getopt_long(argc, argv, "h", longopts, NULL)) != -1) {
-        int rc = 0;
-        switch (c) {
-        case O_SITE: o->site = optarg; break;
-        case O_CAN: o->can = optarg; break;
-        case O_MAV:
-            if (!o->mavlink)
-                o->mavlink = optarg;
-            else if (o->n_mavlink_more < MAV_LINKS_MAX - 1)
-                o->mavlink_more[o->n_mavlink_more++] = optarg;
-            else {
-                fprintf(stderr, "error: command line: --mavlink: at most %d endpoints\n",
-                        MAV_LINKS_MAX);
-                *status = EX_USAGE_STATUS;
-                return -1;
-            }
-            break;
-        case O_RATE: rc = parse_double_opt("rate", optarg, 0, 1000, &o->rate_hz); break;
-        case O_SYSID: rc = parse_id_opt("sysid", optarg, &o->sysid); break;
-        case O_COMPID: rc = parse_id_opt("compid", optarg, &o->compid); break;
-        case O_LOGLEVEL: o->log_level = optarg; break;
-        case O_REPLAY: o->replay = optarg; break;
-        case O_REALTIME: o->speed = 1.0; break;
-        case O_SPEED: rc = parse_double_opt("speed", optarg, 0, 1e6, &o->speed); break;
-        case O_RECORD: o->record = optarg; break;
-        case O_ESTIMATES: o->estimates = optarg; break;
-        case O_STATS: o->stats = optarg; break;
-        case O_STATUS: {
-            double v;
-            if (!strcmp(optarg, "0"))
-                o->status_interval_s = 0;
-            else if (!(rc = parse_double_opt("status-interval", optarg, 0, 86400, &v)))
-                o->status_interval_s = v;
-            break;
-        }
-        case 'h': usage(stdout); *status = EX_OK_STATUS; return -1;
-        case O_VERSION:
-            printf("beaconloc-bridge %s\n", BRIDGE_VERSION);
-            *status = EX_OK_STATUS;
-            return -1;
-        default:
-            fprintf(stderr, "error: command line: unknown or incomplete option '%s'\n",
-                    argv[optind - 1]);
-            usage(stderr);
-            *status = EX_USAGE_STATUS;
-            return -1;
-        }
-        if (rc) {
-            *status = EX_CONFIG_STATUS;
-            return -1;
-        }
-    }
-    if (optind < argc) {
-        fprintf(stderr, "error: command line: unexpected argument '%s'\n", argv[optind]);
-        usage(stderr);
-        *status = EX_USAGE_STATUS;
-        return -1;
-    }
-    if (o->speed > 0 && !o->replay) {
-        fprintf(stderr, "error: command line: --realtime/--speed need --replay\n");
-        *status = EX_USAGE_STATUS;
-        return -1;
-    }
-    return 0;
-}
-
-/* Layers: defaults < site file < command line. Returns 0 or -1 (message
- * printed). */
-static int build_config(const struct options *o, struct bridge_config *cfg)
-{
-    char err[CONFIG_ERR_LEN];
-    config_defaults(cfg);
-    if (o->site && config_load_file(cfg, o->site, err, sizeof err) != 0) {
-        fprintf(stderr, "error: %s\n", err);
-        return -1;
-    }
-    if (o->can) {
-        if (!o->can[0] || strlen(o->can) >= 16) {
-            fprintf(stderr, "error: command line: --can: '%s' is not an interface name\n", o->can);
-            return -1;
-        }
-        snprintf(cfg->can_interface, sizeof cfg->can_interface, "%s", o->can);
-    }
-    if (o->mavlink) {
-        if (strlen(o->mavlink) >= sizeof cfg->mavlink) {
-            fprintf(stderr, "error: command line: --mavlink: too long\n");
-            return -1;
-        }
-        snprintf(cfg->mavlink, sizeof cfg->mavlink, "%s", o->mavlink);
-    }
-    if (o->rate_hz > 0)
-        cfg->odometry_rate_hz = o->rate_hz;
-    if (o->sysid)
-        cfg->system_id = o->sysid;
-    if (o->compid)
-        cfg->component_id = o->compid;
-    if (o->log_level)
-        snprintf(cfg->log_level, sizeof cfg->log_level, "%s", o->log_level);
-    if (o->status_interval_s >= 0)
-        cfg->status_interval_s = o->status_interval_s;
-    enum log_level lv;
-    if (log_level_parse(cfg->log_level, &lv) != 0) {
-        fprintf(stderr, "error: command line: --log-level: unknown level '%s'\n",
-                cfg->log_level);
-        return -1;
-    }
-    struct mav_endpoint ep;
-    if (mav_endpoint_parse(cfg->mavlink, &ep) != 0) {
-        if (o->mavlink)
-            fprintf(stderr, "error: command line: --mavlink: '%s' is not "
-                    "udpout:HOST:PORT, udpin:HOST:PORT or serial:DEVICE:BAUD\n",
-                    cfg->mavlink);
-        else
-            config_format_error(cfg, "bridge", "mavlink", "not a valid endpoint",
-                                err, sizeof err),
-            fprintf(stderr, "error: %s\n", err);
-        return -1;
-    }
-    for (int i = 0; i < o->n_mavlink_more; i++)
-        if (strlen(o->mavlink_more[i]) >= MAV_LINK_SPEC_MAX ||
-            mav_endpoint_parse(o->mavlink_more[i], &ep) != 0) {
-            fprintf(stderr, "error: command line: --mavlink: '%s' is not "
-                    "udpout:HOST:PORT, udpin:HOST:PORT or serial:DEVICE:BAUD\n",
-                    o->mavlink_more[i]);
-            return -1;
-        }
-    if (config_check(cfg, err, sizeof err) != 0) {
-        if (!o->site)
-            fprintf(stderr, "error: no beacons configured: give the site file with --site FILE\n");
-        else
-            fprintf(stderr, "error: %s\n", err);
-        return -1;
-    }
-    return 0;
 }
 
 /* ---- epoll helpers ---------------------------------------------------- */

@@ -6,7 +6,7 @@ disappears (a pty whose master is closed mid-run) and a full disk under
 its rate, in wall-clock time, with no stall (paced replay: --realtime), and
 every frame of the log is decoded. Plus: SIGTERM and SIGINT stop every mode
 within 1 s (live, fast and paced replay, /dev/urandom, an idle pipe, a name
-lookup in flight).
+lookup in flight), and --mavlink given several times.
 
 Bounds are for behaviour, not speed on an idle machine: a stalled loop
 shows as a gap of seconds between ODOMETRY messages, or a replay of tens of
@@ -338,3 +338,17 @@ def test_signal_stops_every_mode(kleeman_log, shim, tmp_path, mode, sig):
     if mode == "replay-paced-log":
         assert stats["frames_total"] > 0
     print(f"{mode} {signal.Signals(sig).name}: stopped in {exit_s * 1000:.0f} ms")
+
+
+# ---- several endpoints on the command line -------------------------------
+
+def test_several_endpoints_command_line():
+    def run(*args):
+        return subprocess.run([str(BRIDGE), "--site", str(SITE), "--replay", "/dev/null", *args],
+                              capture_output=True, text=True, timeout=20)
+    four = [a for i in range(4) for a in ("--mavlink", f"udpout:127.0.0.1:{14550 + i}")]
+    assert run(*four).returncode == 0
+    p = run(*four, "--mavlink", "udpout:127.0.0.1:14560")
+    assert p.returncode == 64 and "at most 4 endpoints" in p.stderr
+    p = run("--mavlink", "udpout:127.0.0.1:14550", "--mavlink", "tcp:x:1")
+    assert p.returncode == 78 and "--mavlink: 'tcp:x:1'" in p.stderr
