@@ -146,6 +146,9 @@ bool pulse_model(const bl_config *cfg, const VX &x, const bl_pulse_geometry &g, 
     const real dh_dtfire = real(1) + dg_ddelta.dot(e_dir * x(V));
     J(T0) = dh_dtfire;
     J(T) = dh_dtfire * real(g.slot);
+    // Finite inputs far out of range (found by fuzzing: times of 1e300 s)
+    // can still overflow: the model is undefined there.
+    if (!is_finite(*h) || !J.allFinite()) return false;
     *H = J;
     return true;
 }
@@ -711,6 +714,14 @@ extern "C" int bl_filter_update_config(bl_filter *f, const bl_config *cfg)
     return BL_OK;
 }
 
+// Ranges of an explicit prior (bl_filter_start, filter.h): far beyond any
+// robot, small enough that no product of them overflows.
+constexpr real kPriorMaxPos_m = real(1e6);        // |x|, |y| and σ_xy (m)
+constexpr real kPriorMaxTheta_rad = real(1e3);    // |θ| before wrapping and σ_θ (rad)
+constexpr real kPriorMaxV_mps = real(1e3);        // |v| and σ_v (m/s)
+constexpr real kPriorMaxOmega_radps = real(1e3);  // |ω| and σ_ω (rad/s)
+constexpr real kPriorMaxSigmaT0_s = real(1e3);    // σ_t0 (s)
+
 extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
 {
     if (f == nullptr || p == nullptr) return BL_EINVAL;
@@ -721,6 +732,14 @@ extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
     if (!all_finite(vals, int(sizeof vals / sizeof vals[0]))) return BL_EINVAL;
     if (!(p->sigma_xy_m > 0) || !(p->sigma_theta_rad > 0) || !(p->sigma_v_mps > 0) ||
         !(p->sigma_omega_radps > 0) || !(p->sigma_t0_s > 0))
+        return BL_EINVAL;
+    // Physical ranges (found by fuzzing: a finite theta or v of 1e308 was
+    // taken, and every later extrapolation overflowed).
+    if (!(std::fabs(p->x_m) <= kPriorMaxPos_m) || !(std::fabs(p->y_m) <= kPriorMaxPos_m) ||
+        !(std::fabs(p->theta_rad) <= kPriorMaxTheta_rad) || !(std::fabs(p->v_mps) <= kPriorMaxV_mps) ||
+        !(std::fabs(p->omega_radps) <= kPriorMaxOmega_radps) || !(p->sigma_xy_m <= kPriorMaxPos_m) ||
+        !(p->sigma_theta_rad <= kPriorMaxTheta_rad) || !(p->sigma_v_mps <= kPriorMaxV_mps) ||
+        !(p->sigma_omega_radps <= kPriorMaxOmega_radps) || !(p->sigma_t0_s <= kPriorMaxSigmaT0_s))
         return BL_EINVAL;
     if (p->t0_beacon_index >= cfg->beacon_count) return BL_EINVAL;
     // The firing time must be near the pose time (within the predict gap).
@@ -751,6 +770,9 @@ extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
     int64_t epoch = p->t0_us;
     uint32_t ref = p->t0_beacon_index;
     advance_reference(cfg, x, P, epoch, ref, p->t_us);
+    // A finite σ can still square to inf (e.g. sigma_t0_s = 1e300): refuse
+    // a prior that would leave the state or P non-finite (found by fuzzing).
+    if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
 
     state(f) = x;
     cov(f) = P;
@@ -1230,6 +1252,9 @@ extern "C" int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estima
     VX x = state(f);
     MX P = cov(f);
     cv_predict(&f->cfg_, x, P, bl::us_to_s(t_us - f->t_us_));
+    // As bl_filter_predict: a non-finite extrapolation (a huge but finite
+    // state or P) is refused, never returned (found by fuzzing).
+    if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
     fill_estimate(f, x, P, t_us, est);
     return BL_OK;
 }
@@ -1258,6 +1283,9 @@ extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_in
     const real after_rel = bl::us_to_s(d_us);
     // Smallest slot of this beacon with firing + flight >= after.
     const real cycles = std::ceil((after_rel - flight - t0_rel - real(base) * x(T)) / (real(n) * x(T)));
+    // The slot must be a number the model can take (found by fuzzing: a
+    // huge but finite state gave an infinite flight and a slot out of range).
+    if (!is_finite(flight) || !(std::fabs(cycles) < real(1e6))) return BL_EINVAL;
     bl_pulse_geometry g;
     g.beacon_index = beacon_index;
     g.receiver_index = 0;
@@ -1276,6 +1304,9 @@ extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_in
     e.arrival_us = f->t_us_ + int64_t(std::llround(double(h) * 1e6));
     e.flight_s = h - fire_rel;
     e.sigma_s = std::sqrt(H.dot(P.lazyProduct(H.transpose())) + sa * sa + cfg->firing_jitter_s * cfg->firing_jitter_s);
+    if (!is_finite(e.flight_s) || !is_finite(e.sigma_s) || !(std::fabs(h) < real(1e6)) ||
+        !(std::fabs(fire_rel) < real(1e6)))
+        return BL_EINVAL;
     *out = e;
     return BL_OK;
 }
@@ -1311,25 +1342,28 @@ extern "C" int bl_model_odometry(const bl_config *cfg, const bl_real x[BL_FILTER
     VX xo;
     OdoJac J;
     odometry_model(cfg->wheel_base_m, Eigen::Map<const VX>(x), d_left_m, d_right_m, xo, &J);
+    MX Fl = MX::Identity();
+    Fl(X, TH) = J.fx_th;
+    Fl(Y, TH) = J.fy_th;
+    bl::Mat<NX, 2> Gl = bl::Mat<NX, 2>::Zero();
+    for (int r = 0; r < 3; ++r) {
+        Fl(r, KL) = J.g[r][0] * d_left_m;
+        Fl(r, KR) = J.g[r][1] * d_right_m;
+        Gl(r, 0) = J.g[r][0] * x[KL];
+        Gl(r, 1) = J.g[r][1] * x[KR];
+    }
+    // Finite but far out-of-range inputs can overflow (found by fuzzing):
+    // outputs are written only when finite.
+    if (!xo.allFinite() || !Fl.allFinite() || !Gl.allFinite()) return BL_EINVAL;
     Eigen::Map<VX> xm(x_out);
     xm = xo;
     if (F) {
         Eigen::Map<MX> Fmap(F);
-        Fmap.setIdentity();
-        Fmap(X, TH) = J.fx_th;
-        Fmap(Y, TH) = J.fy_th;
-        for (int r = 0; r < 3; ++r) {
-            Fmap(r, KL) = J.g[r][0] * d_left_m;
-            Fmap(r, KR) = J.g[r][1] * d_right_m;
-        }
+        Fmap = Fl;
     }
     if (G) {
         Eigen::Map<bl::Mat<NX, 2>> Gmap(G);
-        Gmap.setZero();
-        for (int r = 0; r < 3; ++r) {
-            Gmap(r, 0) = J.g[r][0] * x[KL];
-            Gmap(r, 1) = J.g[r][1] * x[KR];
-        }
+        Gmap = Gl;
     }
     return BL_OK;
 }
@@ -1342,12 +1376,14 @@ extern "C" int bl_model_constant_velocity(const bl_real x[BL_FILTER_NX], bl_real
     VX xo;
     SparseEntry d[kCvEntries];
     cv_model(Eigen::Map<const VX>(x), dt_s, xo, d);
+    MX Fl = MX::Identity();
+    for (int k = 0; k < kCvEntries; ++k) Fl(d[k].r, d[k].c) += d[k].v;
+    if (!xo.allFinite() || !Fl.allFinite()) return BL_EINVAL;  // as bl_model_odometry
     Eigen::Map<VX> xm(x_out);
     xm = xo;
     if (F) {
         Eigen::Map<MX> Fmap(F);
-        Fmap.setIdentity();
-        for (int k = 0; k < kCvEntries; ++k) Fmap(d[k].r, d[k].c) += d[k].v;
+        Fmap = Fl;
     }
     return BL_OK;
 }

@@ -1277,6 +1277,60 @@ static void test_process_noise_by_motion(void **state)
     assert_true(fabs(still) <= 1e-6 * straight);
 }
 
+/* Found by fuzzing (tests/fuzz/fuzz_lib_api.c, inputs in
+ * tests/fuzz/corpus/lib_api/regress-*): finite but far out-of-range
+ * arguments were taken and gave a non-finite state, P or result. */
+static void test_fuzz_out_of_range_refused(void **state)
+{
+#define SAME() assert_memory_equal(&f, &ref, sizeof f)
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    static bl_filter f, ref;
+    int64_t t;
+    converged_filter(&f, &cfg, &t, 6, 6);
+    ref = f;
+    bl_filter_prior pr;
+    memset(&pr, 0, sizeof pr);
+    pr.t_us = t;
+    pr.t0_us = t;
+    pr.x_m = 6;
+    pr.y_m = 6;
+    pr.sigma_xy_m = pr.sigma_theta_rad = pr.sigma_v_mps = pr.sigma_omega_radps = 1;
+    pr.sigma_t0_s = (bl_real)1e300; /* squared: inf in P */
+    assert_int_equal(bl_filter_start(&f, &pr), BL_EINVAL); SAME();
+    pr.sigma_t0_s = (bl_real)1e-3;
+    pr.theta_rad = (bl_real)1.7976931348623157e308;
+    assert_int_equal(bl_filter_start(&f, &pr), BL_EINVAL); SAME();
+    pr.theta_rad = 0;
+    pr.v_mps = (bl_real)1e308; /* every extrapolation overflowed */
+    assert_int_equal(bl_filter_start(&f, &pr), BL_EINVAL); SAME();
+    pr.v_mps = 0;
+    pr.x_m = (bl_real)2e6;
+    assert_int_equal(bl_filter_start(&f, &pr), BL_EINVAL); SAME();
+    pr.x_m = 6;
+    assert_int_equal(bl_filter_start(&f, &pr), BL_OK); /* in range: taken */
+    bl_real P[BL_FILTER_NX * BL_FILTER_NX];
+    assert_int_equal(bl_filter_get_state(&f, NULL, P), BL_OK);
+    for (int i = 0; i < BL_FILTER_NX * BL_FILTER_NX; i++)
+        assert_true(isfinite(P[i]));
+
+    /* the models: outputs written only when finite */
+    bl_real x[BL_FILTER_NX], xo[BL_FILTER_NX], F[BL_FILTER_NX * BL_FILTER_NX], h = 42;
+    assert_int_equal(bl_filter_get_state(&f, x, NULL), BL_OK);
+    for (int i = 0; i < BL_FILTER_NX; i++)
+        xo[i] = -1;
+    assert_int_equal(bl_model_odometry(&cfg, x, (bl_real)1e308, (bl_real)-1e308, xo, F, NULL), BL_EINVAL);
+    for (int i = 0; i < BL_FILTER_NX; i++)
+        assert_true(xo[i] == -1);
+    x[BL_IX_V] = 1;
+    assert_int_equal(bl_model_constant_velocity(x, (bl_real)1e308, xo, F), BL_EINVAL);
+    bl_pulse_geometry g = { 0, 0, 0, (bl_real)1e308, (bl_real)-1e308 };
+    assert_int_equal(bl_model_pulse(&cfg, x, &g, &h, NULL), BL_EINVAL);
+    assert_true(h == 42);
+#undef SAME
+}
+
 static void test_api_misuse_leaves_state(void **state)
 {
     (void)state;
@@ -1525,6 +1579,7 @@ int main(void)
         cmocka_unit_test(test_kidnap_recovers),
         cmocka_unit_test(test_24h_epoch),
         cmocka_unit_test(test_24h_real),
+        cmocka_unit_test(test_fuzz_out_of_range_refused),
     };
     return cmocka_run_group_tests_name(IS_FLOAT ? "filter (float)" : "filter (double)", tests, NULL, NULL);
 }

@@ -230,7 +230,8 @@ int bl_filter_update_config(bl_filter *f, const bl_config *cfg);
  * was already started. The wheel scales (robot properties) are kept by any
  * restart of a started filter; a first start sets them to 1 with σ
  * cfg.sigma_wheel_scale. Errors: BL_EINVAL (NULL, non-finite, σ <= 0,
- * beacon index >= count), BL_ENOTINIT, BL_ETIME (t0_us further from t_us
+ * out of range: |x|, |y|, σ_xy > 1e6 m, |θ|, σ_θ > 1e3 rad, |v|, σ_v >
+ * 1e3 m/s, |ω|, σ_ω > 1e3 rad/s, σ_t0 > 1e3 s; beacon index >= count), BL_ENOTINIT, BL_ETIME (t0_us further from t_us
  * than cfg.max_predict_gap_s plus one firing cycle). */
 int bl_filter_start(bl_filter *f, const bl_filter_prior *prior);
 
@@ -321,14 +322,15 @@ int bl_filter_estimate(const bl_filter *f, bl_estimate *est);
 
 /* Estimate extrapolated to t_us (>= state time, within max_predict_gap_s)
  * with the constant-velocity model, without changing the filter.
- * Errors: BL_EINVAL (NULL), BL_ENOTINIT (not started), BL_ETIME (t_us
+ * Errors: BL_EINVAL (NULL, or a non-finite extrapolation), BL_ENOTINIT (not started), BL_ETIME (t_us
  * before the state time or more than max_predict_gap_s after it). */
 int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estimate *est);
 
 /* Predicted next pulse of beacon beacon_index: the firing whose predicted
  * arrival at the ring centre is the first at or after after_us.
  * For the sequencer's windows. Errors: BL_EINVAL (NULL, or the model is
- * undefined there: ring centre on the beacon), BL_ENOTINIT (not started),
+ * undefined there: ring centre on the beacon, or a non-finite or
+ * out-of-range result), BL_ENOTINIT (not started),
  * BL_EBEACON, BL_ETIME (|after_us - state time| > cfg.max_predict_gap_s). */
 int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_index, int64_t after_us,
                                bl_expected_pulse *out);

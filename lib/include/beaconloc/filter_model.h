@@ -30,7 +30,8 @@ typedef struct bl_pulse_geometry {
  * H (BL_FILTER_NX, optional) = ∂h/∂x (s per unit of each state).
  * Errors: BL_EINVAL (NULL cfg/x/g/h_rel_s, receiver_index >= receiver_count,
  * non-finite x or times, receiver within 1 µm of the beacon, or
- * s - v·u <= 1e-3 m/s: the pulse cannot catch the receiver),
+ * s - v·u <= 1e-3 m/s: the pulse cannot catch the receiver, or a
+ * non-finite result from finite but far out-of-range inputs),
  * BL_EBEACON (beacon_index >= cfg->beacon_count). */
 int bl_model_pulse(const bl_config *cfg, const bl_real x[BL_FILTER_NX], const bl_pulse_geometry *g,
                    bl_real *h_rel_s, bl_real H[BL_FILTER_NX]);
@@ -44,14 +45,15 @@ int bl_model_pulse(const bl_config *cfg, const bl_real x[BL_FILTER_NX], const bl
  * v and ω pass through unchanged (the filter then fuses the wheel speeds as
  * a measurement, Kleeman eq. 25).
  * Errors: BL_EINVAL (NULL cfg/x/x_out, non-finite x or increments,
- * cfg->wheel_base_m <= 0). */
+ * cfg->wheel_base_m <= 0, or a non-finite result). */
 int bl_model_odometry(const bl_config *cfg, const bl_real x[BL_FILTER_NX], bl_real d_left_m, bl_real d_right_m,
                       bl_real x_out[BL_FILTER_NX], bl_real F[BL_FILTER_NX * BL_FILTER_NX],
                       bl_real G[BL_FILTER_NX * 2]);
 
 /* Constant-velocity transition over dt_s >= 0 (Kleeman 1992 eq. 15 with
  * the turn rate as a state): x_out, F (optional).
- * Errors: BL_EINVAL (NULL x/x_out, non-finite x or dt_s, dt_s < 0). */
+ * Errors: BL_EINVAL (NULL x/x_out, non-finite x or dt_s, dt_s < 0, or a
+ * non-finite result). */
 int bl_model_constant_velocity(const bl_real x[BL_FILTER_NX], bl_real dt_s, bl_real x_out[BL_FILTER_NX],
                                bl_real F[BL_FILTER_NX * BL_FILTER_NX]);
 

@@ -1,0 +1,101 @@
+# tests/fuzz — coverage-guided fuzzing with libFuzzer (clang, ASan + UBSan).
+# One harness per input surface (docs/fuzzing.md):
+#   fuzz_replay    candump-log lines of --replay (bridge/replay.c)
+#   fuzz_frames    SocketCAN reads and decoded CAN frames into the estimator
+#                  (bridge/can_in.c, frames.c, estimator.c, node_clock.c)
+#   fuzz_site      the site file (bridge/config.c, [tuning] included) up to
+#                  the estimator's init and a SIGHUP reconfigure
+#   fuzz_mavlink   what udpin: and serial endpoints receive (bridge/mavlink_out.c)
+#   fuzz_lib_api   the library API as a state machine (lib/include/beaconloc/*.h)
+#
+#   make fuzz [FUZZ_SECONDS=60]   build and run each harness FUZZ_SECONDS; one
+#                                 summary line per harness; fails on any crash
+#   make fuzz-smoke               each harness FUZZ_SMOKE_SECONDS (in UNIT_TESTS)
+#   make fuzz-build               the harnesses only ($(BUILD)/fuzz/fuzz_*)
+#   make fuzz-seeds               regenerate the committed seed corpus from the
+#                                 simulator (tests/fuzz/make_seeds.py)
+#
+# The committed corpus tests/fuzz/corpus/<name>/ is a read-only seed
+# directory; what the fuzzer finds goes to $(BUILD)/fuzz/corpus/<name>/,
+# crashes to $(BUILD)/fuzz/artifacts/<name>/. Reproduce one with
+#   $(BUILD)/fuzz/fuzz_<name> $(BUILD)/fuzz/artifacts/<name>/crash-...
+# Everything here is built with clang into $(BUILD)/fuzz (the gcc builds are
+# untouched); the generated CAN codec and MAVLink headers are the ones of
+# bridge/bridge.mk and bridge/mavlink.mk.
+
+FUZZ_DIR      := $(BUILD)/fuzz
+FUZZ_CC       ?= clang
+FUZZ_CXX      ?= clang++
+FUZZ_SECONDS  ?= 60
+FUZZ_SMOKE_SECONDS ?= 8
+FUZZ_NAMES    := replay frames site mavlink lib_api
+FUZZ_BINS     := $(addprefix $(FUZZ_DIR)/fuzz_,$(FUZZ_NAMES))
+
+# Instrumentation for coverage (fuzzer-no-link) and the sanitizers on every
+# object; -fsanitize=fuzzer adds libFuzzer's main at the link.
+FUZZ_SAN      := -fsanitize=fuzzer-no-link,address,undefined \
+                 -fno-sanitize-recover=undefined -fno-omit-frame-pointer -g -O1
+FUZZ_LDSAN    := -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined
+# Library and bridge sources as their own fragments compile them, minus
+# -Werror (clang's warnings differ from gcc's; the gcc builds enforce them).
+FUZZ_LIB_CXXFLAGS := $(filter-out -Werror,$(LIB_CXXFLAGS)) # Eigen asserts on
+FUZZ_BR_CFLAGS    := -std=c11 -Wall -Wextra -MMD -MP
+FUZZ_HARN_CFLAGS  := -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -MMD -MP -Itests/fuzz \
+                     -DFUZZ_SITE='"$(CURDIR)/hw_sim/scenarios/kleeman-lab.ini"'
+
+FUZZ_LIB_OBJS := $(patsubst lib/src/%.cpp,$(FUZZ_DIR)/obj/lib/%.o,$(LIB_SRCS))
+FUZZ_BR_OBJS  := $(patsubst bridge/%.c,$(FUZZ_DIR)/obj/bridge/%.o,$(filter-out bridge/main.c,$(BRIDGE_SRCS))) \
+                 $(FUZZ_DIR)/obj/bridge/beaconloc_can.o
+
+.PHONY: fuzz fuzz-smoke fuzz-build fuzz-seeds
+UNIT_TESTS += fuzz-smoke
+
+$(FUZZ_DIR)/obj/lib/%.o: lib/src/%.cpp $(LIB_HDRS) tests/fuzz/fuzz.mk
+	@mkdir -p $(@D)
+	$(FUZZ_CXX) $(FUZZ_LIB_CXXFLAGS) $(FUZZ_SAN) -c $< -o $@
+
+$(FUZZ_DIR)/obj/bridge/%.o: bridge/%.c $(BRIDGE_CAN_H) $(BRIDGE_MAVSTAMP) tests/fuzz/fuzz.mk
+	@mkdir -p $(@D)
+	$(FUZZ_CC) $(BRIDGE_CPPFLAGS) $(FUZZ_BR_CFLAGS) $(FUZZ_SAN) -c -o $@ $<
+
+$(FUZZ_DIR)/obj/bridge/beaconloc_can.o: $(BRIDGE_CAN_C) $(BRIDGE_CAN_H) tests/fuzz/fuzz.mk
+	@mkdir -p $(@D)
+	$(FUZZ_CC) $(BRIDGE_CPPFLAGS) $(FUZZ_BR_CFLAGS) $(FUZZ_SAN) -c -o $@ $<
+
+$(FUZZ_DIR)/obj/fuzz_%.o: tests/fuzz/fuzz_%.c tests/fuzz/fuzz_common.h $(BRIDGE_CAN_H) $(BRIDGE_MAVSTAMP) tests/fuzz/fuzz.mk
+	@mkdir -p $(@D)
+	$(FUZZ_CC) $(BRIDGE_CPPFLAGS) $(FUZZ_HARN_CFLAGS) $(FUZZ_SAN) -c -o $@ $<
+
+# Every harness links the whole bridge (all but main.o) and the library; the
+# linker keeps what it calls. fuzz_frames stands in for recvmsg (the CAN
+# socket's read) with its own function, as tests/bridge/test_can_in.c does.
+FUZZ_LDFLAGS_frames := -Wl,--wrap=recvmsg
+
+$(FUZZ_DIR)/fuzz_%: $(FUZZ_DIR)/obj/fuzz_%.o $(FUZZ_BR_OBJS) $(FUZZ_LIB_OBJS)
+	$(FUZZ_CXX) $(FUZZ_LDSAN) -o $@ $< $(FUZZ_BR_OBJS) $(FUZZ_LIB_OBJS) \
+	    $(FUZZ_LDFLAGS_$*) -linih -lm
+
+# Dictionary of the site-file harness: every section and key of the key
+# table (bridge/config.c, bridge/tuning.h), derived, not copied.
+$(FUZZ_DIR)/site.dict: bridge/config.c bridge/tuning.h tests/fuzz/site_dict.sh
+	@mkdir -p $(@D)
+	sh tests/fuzz/site_dict.sh bridge/config.c bridge/tuning.h > $@
+
+fuzz-build: $(FUZZ_BINS) $(FUZZ_DIR)/site.dict
+
+# $(1) seconds per harness
+FUZZ_RUN = sh tests/fuzz/run_fuzz.sh --seconds $(1) --build $(FUZZ_DIR) $(FUZZ_NAMES)
+
+fuzz: fuzz-build
+	$(call FUZZ_RUN,$(FUZZ_SECONDS))
+
+fuzz-smoke: fuzz-build
+	$(call FUZZ_RUN,$(FUZZ_SMOKE_SECONDS))
+
+# Seeds: simulator logs (kleeman-lab and the fault scenarios, short), the
+# site files, MAVLink packets packed with pymavlink. Written into
+# tests/fuzz/corpus/ (committed); run by hand when a format changes.
+fuzz-seeds: | $(SETUP_STAMP)
+	$(PY) tests/fuzz/make_seeds.py --out tests/fuzz/corpus --work $(FUZZ_DIR)/seed-work
+
+-include $(FUZZ_LIB_OBJS:.o=.d) $(FUZZ_BR_OBJS:.o=.d) $(patsubst %,$(FUZZ_DIR)/obj/fuzz_%.d,$(FUZZ_NAMES))

@@ -1,0 +1,286 @@
+/*
+ * beaconloc fuzzing — CAN input of the bridge: SocketCAN reads
+ * (bridge/can_in.c, recvmsg replaced), frame decoding (bridge/frames.c and
+ * the cantools codec) and the decoded frames driving the estimator
+ * (bridge/estimator.c, node_clock.c, the library) as bridge/main.c's
+ * handle_frame() does, on the kleeman-lab site.
+ *
+ * Input: a sequence of records, each one opcode byte then its fields:
+ *   op 0, 1  socket read: size selector (CAN_MTU, CANFD_MTU, any size, a
+ *            read error), 72 bytes of struct canfd_frame (any id with the
+ *            EFF/RTR/ERR flag bits, any len), control messages
+ *            (SO_TIMESTAMP, SO_RXQ_OVFL with fuzzed values), time step
+ *   op 2     a frame as a replayed log gives it (struct can_msg: flags,
+ *            id, len 0..64, data), time step
+ *   op 3     periodic work: estimator_tick, output now, health, events
+ * The time step is a byte: 0..249 -> that many 100 us forward; 250 backwards
+ * up to 655 ms; 251 forward up to 71 min; 252 a jump of up to ±2^62 us.
+ *
+ * Invariants checked after every frame:
+ *   - can_in_read: a length within the classic/FD maximum, counters add up
+ *     (frames + error frames + bad sizes = reads of data);
+ *   - frame_decode: FRAME_OK only for our three ids, classic, 8 bytes; the
+ *     result counters add up to the frames decoded;
+ *   - the estimator's output, when valid, is finite with a covariance whose
+ *     diagonal is >= 0; its health says finite.
+ */
+#include <errno.h>
+#include <limits.h>
+#include <linux/can.h>
+#include <linux/can/error.h>
+#include <math.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <fcntl.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "can_in.h"
+#include "config.h"
+#include "estimator.h"
+#include "frames.h"
+#include "fuzz_common.h"
+#include "log.h"
+
+int LLVMFuzzerInitialize(int *argc, char ***argv);
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+/* ---- recvmsg stand-in: returns what the harness prepared ------------- */
+
+static struct {
+    bool armed;
+    ssize_t n;                  /* bytes of the read, or -1 with err */
+    int err;
+    uint8_t frame[CANFD_MTU + 8];
+    bool have_ts;
+    struct timeval ts;
+    bool have_ovfl;
+    uint32_t ovfl;
+} fake;
+
+ssize_t __real_recvmsg(int fd, struct msghdr *mh, int flags);
+ssize_t __wrap_recvmsg(int fd, struct msghdr *mh, int flags);
+ssize_t __wrap_recvmsg(int fd, struct msghdr *mh, int flags)
+{
+    (void)fd;
+    (void)flags;
+    if (!fake.armed) {
+        errno = EAGAIN;
+        return -1;
+    }
+    fake.armed = false;
+    if (fake.n < 0) {
+        errno = fake.err;
+        return -1;
+    }
+    size_t n = (size_t)fake.n;
+    size_t cap = mh->msg_iov[0].iov_len;
+    memcpy(mh->msg_iov[0].iov_base, fake.frame, n < cap ? n : cap);
+    /* control messages, as the kernel lays them out */
+    size_t used = 0;
+    uint8_t *ctrl = mh->msg_control;
+    if (fake.have_ts && used + CMSG_SPACE(sizeof fake.ts) <= mh->msg_controllen) {
+        struct cmsghdr *cm = (struct cmsghdr *)(void *)(ctrl + used);
+        cm->cmsg_level = SOL_SOCKET;
+        cm->cmsg_type = SO_TIMESTAMP;
+        cm->cmsg_len = CMSG_LEN(sizeof fake.ts);
+        memcpy(CMSG_DATA(cm), &fake.ts, sizeof fake.ts);
+        used += CMSG_SPACE(sizeof fake.ts);
+    }
+    if (fake.have_ovfl && used + CMSG_SPACE(sizeof fake.ovfl) <= mh->msg_controllen) {
+        struct cmsghdr *cm = (struct cmsghdr *)(void *)(ctrl + used);
+        cm->cmsg_level = SOL_SOCKET;
+        cm->cmsg_type = SO_RXQ_OVFL;
+        cm->cmsg_len = CMSG_LEN(sizeof fake.ovfl);
+        memcpy(CMSG_DATA(cm), &fake.ovfl, sizeof fake.ovfl);
+        used += CMSG_SPACE(sizeof fake.ovfl);
+    }
+    mh->msg_controllen = used;
+    mh->msg_flags = 0;
+    return (ssize_t)(n < cap ? n : cap);
+}
+
+/* ---- state -------------------------------------------------------------- */
+
+static struct bridge_config site;
+static struct estimator est_template; /* estimator_init'ed once, copied per input */
+static struct estimator est;
+static int dummy_fd = -1;             /* a real descriptor for can_in to own */
+
+int LLVMFuzzerInitialize(int *argc, char ***argv)
+{
+    (void)argc;
+    (void)argv;
+    log_set_level(LOG_ERROR);
+    char err[CONFIG_ERR_LEN];
+    config_defaults(&site);
+    if (config_load_file(&site, FUZZ_SITE, err, sizeof err) != 0 ||
+        estimator_init(&est_template, &site, err, sizeof err) != 0) {
+        fprintf(stderr, "fuzz_frames: %s\n", err);
+        abort();
+    }
+    return 0;
+}
+
+/* Receive times the bridge can see: CLOCK_MONOTONIC live, the log's
+ * timestamps in replay (at most 12 digits of seconds: < 1e18 us). */
+#define LOCAL_MAX_US 1000000000000000000LL
+
+static int64_t time_step(struct fz *z, int64_t t)
+{
+    uint8_t code = fz_u8(z);
+    if (code < 250) {
+        t += (int64_t)code * 100;
+    } else if (code == 250) {
+        t -= (int64_t)fz_u16(z) * 10;
+    } else if (code == 251) {
+        t += (int64_t)fz_u32(z);
+    } else {
+        int64_t j = (int64_t)(fz_u64(z) % (uint64_t)LOCAL_MAX_US);
+        t = (code & 1) ? t - j : t + j;
+    }
+    return t < 0 ? 0 : t > LOCAL_MAX_US ? LOCAL_MAX_US : t;
+}
+
+static void check_output(const struct estimator *e, int64_t now)
+{
+    struct est_output o;
+    for (int pass = 0; pass < 2; pass++) {
+        if (estimator_output(e, pass ? now : 0, &o) != 0)
+            continue;
+        bool finite = isfinite(o.x_m) && isfinite(o.y_m) && isfinite(o.theta_rad) &&
+                      isfinite(o.v_mps) && isfinite(o.omega_radps) &&
+                      isfinite(o.sos_mps) && isfinite(o.period_s);
+        for (int i = 0; i < 25; i++)
+            finite = finite && isfinite(o.cov[i]);
+        FUZZ_CHECK(finite, "estimator output not finite (pass %d): x %g y %g th %g",
+                   pass, o.x_m, o.y_m, o.theta_rad);
+        for (int i = 0; i < 5; i++)
+            FUZZ_CHECK(o.cov[i * 6] >= 0.0, "negative variance %d: %g", i, o.cov[i * 6]);
+    }
+    struct est_health h;
+    estimator_health(e, now, &h);
+    FUZZ_CHECK(!h.started || h.finite, "health: started but not finite");
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    struct fz z = { data, size };
+    memcpy(&est, &est_template, sizeof est);
+    struct frame_counters fc;
+    frame_counters_init(&fc);
+    struct can_in ci;
+    can_in_init(&ci, "vcan0");
+    if (dummy_fd < 0)
+        dummy_fd = open("/dev/null", O_RDONLY | O_CLOEXEC);
+    ci.fd = dummy_fd;
+    uint64_t decoded = 0, data_reads = 0;
+    int64_t now = 1000000; /* local time, us */
+
+    while (fz_left(&z)) {
+        uint8_t op = fz_u8(&z) % 4;
+        struct can_msg msg;
+        memset(&msg, 0, sizeof msg);
+        bool have = false;
+        if (op <= 1) {
+            uint8_t sel = fz_u8(&z);
+            memset(&fake, 0, sizeof fake);
+            fake.armed = true;
+            switch (sel & 3) {
+            case 0: fake.n = CAN_MTU; break;
+            case 1: fake.n = CANFD_MTU; break;
+            case 2: fake.n = fz_u8(&z) % (CANFD_MTU + 8); break;
+            default: {
+                static const int errs[] = { EAGAIN, EINTR, ENETDOWN, ENODEV, ENXIO, EIO };
+                fake.n = -1;
+                fake.err = errs[fz_u8(&z) % (sizeof errs / sizeof errs[0])];
+                break;
+            }
+            }
+            fz_bytes(&z, fake.frame, CANFD_MTU);
+            fake.have_ts = sel & 4;
+            fake.have_ovfl = sel & 8;
+            if (fake.have_ts) {
+                fake.ts.tv_sec = (time_t)fz_u32(&z);
+                fake.ts.tv_usec = (suseconds_t)(fz_u32(&z) % 1000000u);
+            }
+            if (fake.have_ovfl)
+                fake.ovfl = fz_u32(&z);
+            struct can_in_counters before = ci.c;
+            int rc;
+            /* EINTR is retried inside; the stand-in then says EAGAIN. */
+            rc = can_in_read(&ci, &msg);
+            if (fake.n > 0 && rc >= 0) {
+                data_reads++;
+                FUZZ_CHECK(ci.c.frames + ci.c.error_frames + ci.c.bad_size ==
+                               before.frames + before.error_frames + before.bad_size + 1,
+                           "can_in counters: read of %zd bytes rc %d", fake.n, rc);
+            }
+            if (rc == 1 || rc == 2) {
+                FUZZ_CHECK(msg.len <= ((msg.flags & CAN_MSG_FD) ? CANFD_MAX_DLEN : CAN_MAX_DLEN),
+                           "can_in_read: len %u flags 0x%x", msg.len, msg.flags);
+                FUZZ_CHECK((rc == 2) == ((msg.flags & CAN_MSG_ERROR) != 0),
+                           "can_in_read: rc %d flags 0x%x", rc, msg.flags);
+                have = rc == 1; /* error frames: counted by can_in already */
+            }
+            if (ci.fd < 0) { /* interface "gone": the daemon reopens */
+                dummy_fd = open("/dev/null", O_RDONLY | O_CLOEXEC);
+                ci.fd = dummy_fd;
+                ci.link_down = false;
+            }
+        } else if (op == 2) {
+            msg.flags = fz_u8(&z) & 0x0f;
+            msg.id = fz_u32(&z);
+            if (!(msg.flags & (CAN_MSG_EXTENDED | CAN_MSG_ERROR)))
+                msg.id &= 0x7ffu;
+            else
+                msg.id &= 0x1fffffffu;
+            msg.len = (uint8_t)(fz_u8(&z) % (CAN_MSG_MAX_DATA + 1));
+            fz_bytes(&z, msg.data, msg.len);
+            if (msg.flags & CAN_MSG_ERROR)
+                can_in_count_error_frame(&ci, msg.id);
+            else
+                have = true;
+        } else {
+            estimator_tick(&est, now);
+            check_output(&est, now);
+            struct est_event ev;
+            while (estimator_next_event(&est, &ev))
+                FUZZ_CHECK(memchr(ev.text, '\0', sizeof ev.text), "event text");
+        }
+        now = time_step(&z, now);
+        if (!have)
+            continue;
+        msg.rx_us = now;
+        struct frame f;
+        enum frame_result r = frame_decode(&fc, &msg, &f);
+        decoded++;
+        if (r == FRAME_OK) {
+            FUZZ_CHECK(msg.len == 8 && !(msg.flags & (CAN_MSG_EXTENDED | CAN_MSG_RTR |
+                                                      CAN_MSG_FD | CAN_MSG_ERROR)) &&
+                           (msg.id == FRAME_ID_PULSE || msg.id == FRAME_ID_ENCODERS ||
+                            msg.id == FRAME_ID_STATUS),
+                       "FRAME_OK for id 0x%x len %u flags 0x%x", (unsigned)msg.id,
+                       msg.len, msg.flags);
+            switch (f.kind) {
+            case FRAME_PULSE: estimator_pulse(&est, &f.u.pulse, msg.rx_us); break;
+            case FRAME_ENCODERS: estimator_encoders(&est, &f.u.enc, msg.rx_us); break;
+            case FRAME_STATUS: estimator_status(&est, &f.u.status, msg.rx_us); break;
+            default: FUZZ_CHECK(0, "kind %d", (int)f.kind);
+            }
+            int64_t rx;
+            if (estimator_take_update(&est, &rx))
+                check_output(&est, now);
+        }
+        uint64_t sum = fc.unknown_id + fc.malformed + fc.out_of_range;
+        for (int k = 0; k < FRAME_KIND_COUNT; k++)
+            sum += fc.received[k] + fc.duplicates[k] + fc.out_of_order[k];
+        FUZZ_CHECK(sum == decoded, "frame counters %llu != %llu decoded",
+                   (unsigned long long)sum, (unsigned long long)decoded);
+    }
+    check_output(&est, now);
+    return 0;
+}

@@ -1,0 +1,219 @@
+#!/usr/bin/env python3
+"""Seed corpus of the libFuzzer harnesses (tests/fuzz/fuzz_*.c), written into
+tests/fuzz/corpus/<name>/ (committed; `make fuzz-seeds` rewrites it).
+
+  replay   the first lines of simulator candump logs (kleeman-lab and fault
+           scenarios), plus every line syntax replay.c accepts
+  frames   the same logs as fuzz_frames records: replayed frames (op 2) and
+           SocketCAN reads (op 0)
+  site     the site file, and one with a [tuning] section
+  mavlink  TIMESYNC and HEARTBEAT packed by pymavlink (MAVLink 2 and 1),
+           truncated, glued to garbage, oversized datagrams, a serial stream
+  lib_api  a log as library calls: pulse frames -> sequencer push, encoder
+           frames -> predict_odometry, pops fused into the filter
+The record formats are the harnesses' (see the comment at the top of each).
+"""
+import argparse
+import os
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+import cantools
+
+ROOT = Path(__file__).resolve().parents[2]
+DBC = ROOT / "hw_sim/can/beaconloc.dbc"
+SITE = ROOT / "hw_sim/scenarios/kleeman-lab.ini"
+SCENARIOS = [("kleeman-lab", 4.0), ("echo-storm", 3.0), ("encoder-silence", 3.0), ("kidnap", 3.0)]
+
+
+def sim_log(work: Path, scenario: str, seconds: float) -> list:
+    """Simulated candump log lines of `scenario` (seed 1)."""
+    log = work / f"{scenario}.log"
+    sim = Path(sys.executable).with_name("beaconloc-sim")
+    subprocess.run([str(sim), "run", scenario, "--log", str(log), "--no-realtime",
+                    "--duration", str(seconds), "--seed", "1"], check=True,
+                   stdout=subprocess.DEVNULL)
+    return log.read_text().splitlines()
+
+
+def parse(line: str):
+    """(t_us, id, data) of a simulator log line (standard ids, data frames)."""
+    stamp, _ifname, frame = line.split()[:3]
+    sec, frac = stamp.strip("()").split(".")
+    t_us = int(sec) * 1000000 + int(frac.ljust(6, "0")[:6])
+    ident, payload = frame.split("#")
+    return t_us, int(ident, 16), bytes.fromhex(payload)
+
+
+def write(out: Path, name: str, blob: bytes) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / name).write_bytes(blob)
+
+
+def seeds_replay(out: Path, logs: dict) -> None:
+    for scn, lines in logs.items():
+        write(out, f"{scn}.log", ("\n".join(lines[:60]) + "\n").encode())
+    syntax = [
+        "(1700000000.000000) vcan0 100#0011223344556677",
+        "(1700000000.000100) vcan0 123#R",
+        "(1700000000.000150) vcan0 123#R8 T",
+        "(1700000000.000200) vcan0 12345678#00",
+        "(1700000000.000300) vcan0 20000040#0000000000000000",
+        "(1700000000.000400) can1 123##1001122",
+        "(1700000000.000500) vcan0 110#10.0B.96.49.80.3E.4B.00 R",
+        "(1700000000.000600) vcan0 100#0011223344556677_C",
+        "(1700000000.000700) vcan0 120#",
+        "not a candump line",
+        "",
+        "(1700000000.000800) vcan0 7FF#00112233445566778899",
+    ]
+    write(out, "syntax.log", ("\r\n".join(syntax) + "\n").encode())
+
+
+def dt_code(dt_us: int) -> bytes:
+    """fuzz_frames time step: 0..249 x 100 us, else 251 + u32 (forward)."""
+    if 0 <= dt_us < 250 * 100:
+        return bytes([dt_us // 100])
+    if dt_us < 0:
+        return bytes([250]) + struct.pack("<H", min(-dt_us // 10, 65535))
+    return bytes([251]) + struct.pack("<I", min(dt_us, 2**32 - 1))
+
+
+def seeds_frames(out: Path, logs: dict) -> None:
+    for scn, lines in logs.items():
+        frames = [parse(l) for l in lines]
+        blob = bytearray()
+        for i, (t, ident, data) in enumerate(frames):
+            nxt = frames[i + 1][0] if i + 1 < len(frames) else t
+            blob += bytes([2, 0]) + struct.pack("<I", ident) + bytes([len(data)]) + data
+            blob += dt_code(nxt - t)
+            if i % 50 == 49:
+                blob += bytes([3, 0])  # periodic work
+        write(out, f"{scn}.replay", bytes(blob))
+        # the first frames as SocketCAN reads (struct can_frame, CAN_MTU)
+        blob = bytearray()
+        for i, (t, ident, data) in enumerate(frames[:120]):
+            nxt = frames[i + 1][0]
+            frame = struct.pack("<IBBBB", ident, len(data), 0, 0, 0) + data.ljust(64, b"\0")
+            blob += bytes([0, 0]) + frame + dt_code(nxt - t)
+        write(out, f"{scn}.socket", bytes(blob))
+    # error frame, FD, RTR, extended and short frames through the socket path
+    blob = bytearray()
+    for can_id, size_sel, ln in [(0x20000040 | 0x40, 0, 8), (0x100, 1, 12), (0x40000110, 0, 0),
+                                 (0x80000120, 0, 8), (0x110, 2, 3)]:
+        blob += bytes([0, size_sel]) + (bytes([13]) if size_sel == 2 else b"")
+        blob += struct.pack("<IBBBB", can_id, ln, 0, 0, 0) + bytes(range(64)) + bytes([10])
+    write(out, "special.socket", bytes(blob))
+
+
+def seeds_site(out: Path) -> None:
+    text = SITE.read_text()
+    write(out, "kleeman-lab.ini", text.encode())
+    tuning = text + "\n[tuning]\nsigma_period_s = 0.0001\niekf_max_iterations = 3\n" \
+        "reset_reject_count = 6\nring_heading = 0\ninitial_theta_rad = 1.5\n"
+    write(out, "kleeman-lab-tuning.ini", tuning.encode())
+    write(out, "other-ring.ini", text.replace("ring_radius_m = 0.10", "ring_radius_m = 0.12")
+          .replace("count = 8", "count = 6").encode())
+
+
+def seeds_mavlink(out: Path) -> None:
+    os.environ["MAVLINK20"] = "1"
+    from pymavlink.dialects.v20 import common as m2
+    from pymavlink.dialects.v10 import common as m1
+    mav = m2.MAVLink(None, srcSystem=255, srcComponent=190)
+    ts = mav.timesync_encode(0, 123456789).pack(mav)
+    ts_answer = mav.timesync_encode(5, 7).pack(mav)
+    hb = mav.heartbeat_encode(m2.MAV_TYPE_QUADROTOR, m2.MAV_AUTOPILOT_PX4, 0, 0, 4).pack(mav)
+    hb_none = mav.heartbeat_encode(m2.MAV_TYPE_GCS, m2.MAV_AUTOPILOT_INVALID, 0, 0, 4).pack(mav)
+    mav1 = m1.MAVLink(None, srcSystem=1, srcComponent=1)
+    ts1 = mav1.timesync_encode(0, 42).pack(mav1)
+    now = struct.pack("<Q", 5_000_000 << 2)
+
+    def udp(*dgrams):
+        return bytes([0]) + now + b"".join(struct.pack("<H", len(d)) + d for d in dgrams)
+
+    write(out, "udp-timesync", udp(ts))
+    write(out, "udp-heartbeat-timesync", udp(hb, ts, hb_none, ts_answer))
+    write(out, "udp-mavlink1", udp(ts1, ts))
+    write(out, "udp-truncated", udp(ts[:7], ts[7:], hb[:-1]))
+    write(out, "udp-garbage", udp(b"\xfd\xff" + bytes(range(40)), b"\x00" * 10 + ts))
+    write(out, "udp-oversized", udp((ts + hb) * 60))
+    write(out, "serial-stream", bytes([1]) + now + b"\x55\xfd" + ts + hb + ts[:5] + b"junk" + ts + ts1)
+
+
+# fuzz_lib_api opcodes (op % 20): 4 predict_odometry (ticks), 12 seq push, 14 pop+fuse
+def clock_to(cur: int, target: int):
+    """Trailing clock byte(s) moving the harness clock from cur towards
+    target (forward, 500 us steps or i32); returns (bytes, new clock)."""
+    d = target - cur
+    if d <= 0:
+        return bytes([0]), cur
+    if d < 200 * 500:
+        return bytes([240, d // 500]), cur + d // 500 * 500
+    return bytes([240, 230]) + struct.pack("<i", min(d, 2**31 - 1)), cur + min(d, 2**31 - 1)
+
+
+def seeds_lib_api(out: Path, logs: dict) -> None:
+    db = cantools.database.load_file(str(DBC))
+    for scn in ("kleeman-lab", "echo-storm"):
+        frames = [parse(l) for l in logs[scn]]
+        pulses = [(t, db.decode_message(i, d)) for t, i, d in frames if i == 0x100]
+        encs = [(t, db.decode_message(i, d)) for t, i, d in frames if i == 0x110]
+        if not pulses or not encs:
+            continue
+        # each node's clock onto the log's, then the harness's (starts at 1 s)
+        off_p = min(t - m["NodeTime"] for t, m in pulses)
+        off_e = min(t - m["NodeTime"] for t, m in encs)
+        base = frames[0][0] - 1_000_000
+        events = [(m["NodeTime"] + off_p - base, "p", m) for _, m in pulses]
+        events += [(m["NodeTime"] + off_e - base, "e", m) for _, m in encs]
+        events.sort(key=lambda e: e[0])
+        now = 1_000_000
+        blob = bytearray()
+        last = None
+        for t, kind, m in events:
+            mv, now = clock_to(now, t - 10_000)
+            blob += mv
+            if kind == "p":
+                off = (t - now + 20_000) // 4
+                if not 0 <= off < 65536:
+                    continue
+                blob += bytes([12]) + struct.pack("<H", off) + bytes([m["Receiver"], m["DoublePulse"],
+                                                                      min(int(m["Width"]) // 40, 255)])
+            else:
+                if last is None:
+                    last = m
+                    blob += bytes([11, 0, 0, 0, 0])  # a const call while the clock moves
+                    continue
+                dl = (m["LeftTicks"] - last["LeftTicks"] + 8192) % 16384 - 8192
+                dr = (m["RightTicks"] - last["RightTicks"] + 8192) % 16384 - 8192
+                last = m
+                b = max(0, min(255, (t - now) // 100))
+                blob += bytes([4, b]) + struct.pack("<hh", dl, dr)
+                now += b * 100
+                blob += bytes([0, 14, 0, 200]) + struct.pack("<H", 5000)  # pop at now - 5 ms
+            blob += bytes([0])
+        write(out, f"{scn}.calls", bytes(blob))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--work", type=Path, required=True)
+    a = ap.parse_args()
+    a.work.mkdir(parents=True, exist_ok=True)
+    logs = {scn: sim_log(a.work, scn, s) for scn, s in SCENARIOS}
+    seeds_replay(a.out / "replay", logs)
+    seeds_frames(a.out / "frames", logs)
+    seeds_site(a.out / "site")
+    seeds_mavlink(a.out / "mavlink")
+    seeds_lib_api(a.out / "lib_api", logs)
+    for d in sorted(a.out.iterdir()):
+        print(f"make_seeds: {d}: {len(list(d.iterdir()))} files")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
