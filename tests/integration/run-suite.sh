@@ -9,8 +9,14 @@
 set -u
 : "${BL_RESULTS:?run me through tests/vm/run-in-vm.sh}"
 cd "$(dirname "$0")/../.."
-exec env PYTHONDONTWRITEBYTECODE=1 .venv/bin/python -m pytest tests/integration \
+# Each case writes its files (logs, CSVs, stats) under $BL_SCRATCH, in the
+# guest's memory; they are copied to $BL_RESULTS/cases at the end.
+cases=${BL_SCRATCH:-$BL_RESULTS}/cases
+trap 'if [ "$cases" != "$BL_RESULTS/cases" ] && [ -d "$cases" ]; then cp -a "$cases" "$BL_RESULTS/"; fi' EXIT
+env PYTHONDONTWRITEBYTECODE=1 .venv/bin/python -m pytest tests/integration \
     -c tests/integration/pytest.ini -p no:cacheprovider \
-    --junitxml="$BL_RESULTS/junit.xml" --basetemp="$BL_RESULTS/cases" \
+    --junitxml="$BL_RESULTS/junit.xml" --basetemp="$cases" \
     -n "${BL_IT_WORKERS:-3}" \
     -v -ra --durations=0 "$@"
+rc=$?
+exit $rc

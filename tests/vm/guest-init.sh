@@ -18,7 +18,11 @@ mkdir -p "$RESULTS"
 echo "kernel $(uname -r) $(date -u +%FT%TZ)" > "$RESULTS/booted"
 
 export PYTHONDONTWRITEBYTECODE=1
-export HOME=${BL_GUEST_HOME:-/tmp/bl-home}
+# BL_SCRATCH: a folder for files written during the run (uml-init.sh gives a
+# tmpfs in the guest's memory; elsewhere a fresh temporary folder).
+if [ -z "${BL_SCRATCH:-}" ]; then BL_SCRATCH=$(mktemp -d); fi
+export BL_SCRATCH
+export HOME=${BL_GUEST_HOME:-$BL_SCRATCH/home}
 export MPLCONFIGDIR=$HOME/mpl
 export MPLBACKEND=Agg
 export BL_RESULTS=$RESULTS

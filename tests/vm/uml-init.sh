@@ -19,6 +19,11 @@ mount -t sysfs sysfs /sys
 mount -t tmpfs -o mode=755 tmpfs /run
 mount -t tmpfs -o mode=1777 tmpfs /dev/shm 2>/dev/null
 ip link set lo up
+# Scratch space in the guest's own memory for files written while a live
+# case runs: hostfs writes are done by the guest kernel's one thread, so a
+# slow host disk would stall the whole guest, bus and bridge included.
+mkdir -p /run/bl-scratch
+export BL_SCRATCH=/run/bl-scratch
 echo "uml-init: $(uname -r), job ${bl_job:-none}"
 if [ -n "${bl_job:-}" ] && [ -r "$bl_job" ]; then
   sh "$bl_job"
