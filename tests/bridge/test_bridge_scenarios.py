@@ -133,3 +133,31 @@ def test_beacon1_outage_numbering_holds(bridge_bin, tmp_path):
     keep = t_sim > 20
     assert np.max(err[keep]) < 0.15, float(np.max(err[keep]))
     assert stats["estimator_resets"] == 0
+
+
+def test_temperature_ramp_speed_of_sound_followed(bridge_bin, tmp_path):
+    """15 -> 25 degC over 120 s, the first 90 s run (+7.5 degC), the checks
+    of the live suite's ramp case, moved here: nothing in them needs a live
+    bus. The truth's speed of sound moves by > 2 m/s; after 20 s the
+    estimate follows it within 1 m/s rms,
+    >= 95 % of positions lie inside their reported 3 sigma, and the position
+    rms over the last 10 s is under 0.1 m, with no re-initialisation."""
+    log, truth_path = run_sim(tmp_path, "temperature-ramp", 90)
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    assert truth["sos_mps"].max() - truth["sos_mps"].min() > 2.0, "the ramp did not move s"
+    t_sim, err = errors(est, truth)
+    late = t_sim > 20
+    sos_err = est["sos_mps"] - np.interp(est["t_us"], truth["t_us"], truth["sos_mps"])
+    sos_rms = float(np.sqrt(np.mean(sos_err[late] ** 2)))
+    assert sos_rms < 1.0, f"speed of sound rms error {sos_rms:.2f} m/s during the ramp"
+    ex = est["x_m"] - np.interp(est["t_us"], truth["t_us"], truth["x_m"])
+    ey = est["y_m"] - np.interp(est["t_us"], truth["t_us"], truth["y_m"])
+    vxx, vxy, vyy = est["var_x_m2"], est["cov_xy_m2"], est["var_y_m2"]
+    # d^2 = e^T P^-1 e for the 2x2 position block.
+    d2 = (vyy * ex * ex - 2 * vxy * ex * ey + vxx * ey * ey) / (vxx * vyy - vxy * vxy)
+    inside = float(np.mean(np.sqrt(d2[late]) <= 3.0))
+    assert inside >= 0.95, f"only {inside:.1%} of estimates inside their 3 sigma"
+    last = t_sim >= t_sim[-1] - 10.0
+    assert np.sqrt(np.mean(err[last] ** 2)) < 0.1
+    assert stats["estimator_resets"] == 0

@@ -3,9 +3,10 @@ what happened (STATUSTEXT), and the accuracy comes back afterwards.
 
     echo-storm        30 % of the firings also give a strong wall echo
     beacon-outage     2 of 6 beacons dead for 20 s
-    temperature-ramp  15 -> 25 degC over 120 s (the first 90 s live: +7.5 degC,
-                      the speed of sound moves ~4.5 m/s)
     encoder-silence   the encoder node sends nothing for a while (scenario file)
+
+The temperature ramp's checks (the estimate follows the speed of sound)
+need no live bus: tests/bridge/test_bridge_scenarios.py replays it.
 """
 from __future__ import annotations
 
@@ -23,7 +24,6 @@ SETTLE_S = 10.0          # after an event ends, before the 3-sigma check resumes
 CASES = {
     "echo-storm": (re.compile(r"echo", re.I), 50.0),
     "beacon-outage": (re.compile(r"beacon\s*\d.*(lost|silent|missing|dead|out)", re.I), 80.0),
-    "temperature-ramp": (None, 90.0),
     "encoder-silence": (re.compile(r"encoder", re.I), 55.0),
 }
 
@@ -77,11 +77,3 @@ def test_scenario_output_never_stops_and_recovers(rig, scenario):
     last = e.t_s >= e.t_s[-1] - 10.0
     rms = float(np.sqrt(np.nanmean(e.pos_m[last] ** 2)))
     assert rms < RECOVERED_RMS_M, f"rms position error over the last 10 s: {rms * 1e3:.0f} mm"
-
-    if scenario == "temperature-ramp":
-        # The speed of sound really moved, and the estimate followed it.
-        sos_truth = run.truth["sos_mps"]
-        assert sos_truth.max() - sos_truth.min() > 2.0, "the ramp did not change the speed of sound"
-        late = (e.t_s >= h.CONVERGED_AFTER_S) & np.isfinite(e.sos_err_mps)
-        sos_rms = float(np.sqrt(np.mean(e.sos_err_mps[late] ** 2)))
-        assert sos_rms < 1.0, f"speed of sound rms error {sos_rms:.2f} m/s during the ramp"
