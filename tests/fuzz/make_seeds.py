@@ -129,7 +129,7 @@ def seeds_mavlink(out: Path) -> None:
     hb_none = mav.heartbeat_encode(m2.MAV_TYPE_GCS, m2.MAV_AUTOPILOT_INVALID, 0, 0, 4).pack(mav)
     mav1 = m1.MAVLink(None, srcSystem=1, srcComponent=1)
     ts1 = mav1.timesync_encode(0, 42).pack(mav1)
-    now = struct.pack("<Q", 5_000_000 << 2)
+    now = struct.pack("<Q", 5_000_000)
 
     def udp(*dgrams):
         return bytes([0]) + now + b"".join(struct.pack("<H", len(d)) + d for d in dgrams)
