@@ -614,9 +614,12 @@ static void dispatch(struct mav_out *m, const mavlink_message_t *msg, int64_t no
         if (ts.tc1 != 0)
             break; /* a response (to someone else): nothing to do */
         /* MAVLink timesync protocol (common.xml TIMESYNC): answer with
-         * tc1 = our time in ns, ts1 mirrored. */
+         * tc1 = our time in ns, ts1 mirrored. now_us is a log's time in
+         * replay (any 12-digit second count): saturate rather than overflow
+         * int64 ns, and never answer tc1 = 0, which would read as a request. */
+        int64_t tc1_ns = now_us >= INT64_MAX / 1000 ? INT64_MAX : now_us > 0 ? now_us * 1000 : 1;
         mavlink_msg_timesync_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg,
-                                         now_us * 1000, ts.ts1);
+                                         tc1_ns, ts.ts1);
         if (send_msg(m) == 0)
             m->stats.timesync_answered++;
         break;

@@ -611,6 +611,43 @@ static void test_udpin_answers_timesync(void **state)
     mav_out_close(&m2);
 }
 
+/* TIMESYNC answered at a replayed log's time past int64 ns (found by
+ * fuzz_mavlink: now_us * 1000 overflowed): tc1 saturates; at time 0 it is
+ * 1 ns, never 0, which would make the answer a request. */
+static void test_timesync_answer_saturates(void **state)
+{
+    (void)state;
+    uint16_t port = free_port();
+    char ep[64];
+    snprintf(ep, sizeof ep, "udpin:127.0.0.1:%u", (unsigned)port);
+    struct mav_out m;
+    assert_int_equal(mav_out_open(&m, ep, 1, 197), 0);
+    uint16_t peer_port;
+    int peer = udp_listener(&peer_port);
+    struct sockaddr_in dst = {.sin_family = AF_INET, .sin_port = htons(port)};
+    dst.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    uint8_t buf[MAVLINK_MAX_PACKET_LEN + 16];
+    const int64_t now_us[] = {INT64_C(4611683816183249192), INT64_MAX / 1000, 0};
+    const int64_t want_ns[] = {INT64_MAX, INT64_MAX, 1};
+    for (int i = 0; i < 3; i++) {
+        mavlink_message_t req, msg;
+        mavlink_msg_timesync_pack(17, 1, &req, 0, 42 + i);
+        uint16_t n = wire(&req, buf);
+        assert_int_equal(sendto(peer, buf, n, 0, (struct sockaddr *)&dst, sizeof dst), n);
+        assert_true(wait_readable(mav_out_fd(&m), 1000));
+        assert_int_equal(mav_out_handle_input(&m, now_us[i]), 1);
+        mavlink_reset_channel_status(MAVLINK_COMM_1);
+        assert_true(read_msg(peer, false, &msg));
+        mavlink_timesync_t ts;
+        mavlink_msg_timesync_decode(&msg, &ts);
+        assert_true(ts.tc1 == want_ns[i]);
+        assert_true(ts.ts1 == 42 + i);
+    }
+    assert_int_equal(m.stats.timesync_answered, 3);
+    close(peer);
+    mav_out_close(&m);
+}
+
 /* IPv6: udpout to [::1] and udpin on [::1] answering a TIMESYNC. Skipped
  * (reported as such) where the host has no IPv6 loopback. */
 static void test_ipv6_loopback(void **state)
@@ -1018,6 +1055,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_odometry_rejects_bad_input, udp_setup, udp_teardown),
         cmocka_unit_test_setup_teardown(test_heartbeat_statustext_named_float, udp_setup, udp_teardown),
         cmocka_unit_test(test_udpin_answers_timesync),
+        cmocka_unit_test(test_timesync_answer_saturates),
         cmocka_unit_test(test_ipv6_loopback),
         cmocka_unit_test(test_udpin_any_address),
         cmocka_unit_test(test_serial_pty),
