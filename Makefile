@@ -20,6 +20,10 @@ CXX     ?= g++
 
 UNIT_TESTS :=
 PY_TESTS   :=
+# What the suites run, built first by `make test` with one job per core
+# (fragments add their test executables, preload libraries, fuzzers).
+TEST_BUILDS =
+NPROC   := $(shell nproc 2>/dev/null || echo 1)
 
 # Installs Debian packages and the .venv (idempotent; quick when done).
 setup: $(SETUP_STAMP)
@@ -36,7 +40,7 @@ test-unit: $(UNIT_TESTS)
 test-py: $(PY_TESTS)
 
 test: setup
-	$(MAKE) all
+	$(MAKE) -j$(NPROC) all $(TEST_BUILDS)
 	$(MAKE) test-unit
 	$(MAKE) test-py
 	$(MAKE) test-integration

@@ -43,6 +43,7 @@ BRIDGE_LDLIBS   := -linih -lm
 ALL_TARGETS += $(BRIDGE_BIN)
 UNIT_TESTS  += test-bridge
 PY_TESTS    += test-bridge-py
+TEST_BUILDS += $(BRIDGE_TESTS) $(BRIDGE_ASAN_BIN) $(BRIDGE_FAKECAN) $(BRIDGE_SLOWDNS)
 
 .PHONY: test-bridge test-bridge-py bench-bridge
 
@@ -114,7 +115,7 @@ $(BRIDGE_SLOWDNS): tests/bridge/slow_dns_preload.c
 	$(CC) -std=c11 -O2 -Wall -Wextra -Werror -shared -fPIC -o $@ $< -ldl
 
 test-bridge-py: $(BRIDGE_BIN) $(BRIDGE_ASAN_BIN) $(BRIDGE_FAKECAN) $(BRIDGE_SLOWDNS) | $(SETUP_STAMP)
-	BL_BUILD=$(abspath $(BUILD)) $(PYTEST) -q tests/bridge
+	BL_BUILD=$(abspath $(BUILD)) $(PYTEST) -q -n 3 tests/bridge
 
 bench-bridge: $(BRIDGE_BIN) | $(SETUP_STAMP)
 	$(PY) tests/bridge/bench_replay.py --bridge $(BRIDGE_BIN) --out $(BUILD)/bench/bridge

@@ -115,6 +115,7 @@ size-m4: $(M4_ELF) | $(SETUP_STAMP)
 	    --lib-objs $(M4_DIR)/lib --example-objs $(M4_DIR)/example --prefix $(M4_PREFIX)
 
 UNIT_TESTS += check-m4-build
+TEST_BUILDS += $(M4_ELF) $(M4_SIM_ELF)
 # The emulator run joins the unit tests wherever qemu-system-arm is installed
 # (Debian package qemu-system-arm; .ci/setup should install it).
 ifneq ($(shell command -v $(QEMU_ARM) 2>/dev/null),)

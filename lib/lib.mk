@@ -57,6 +57,7 @@ LIB_TEST_BINS := $(foreach v,/ /float/ /san/,$(addprefix $(BUILD)/lib$(v)tests/,
 
 ALL_TARGETS += $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
 UNIT_TESTS  += test-lib
+TEST_BUILDS += $(LIB_TEST_BINS)
 
 .PHONY: lib test-lib check-lib-clink
 lib: $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a

@@ -49,6 +49,7 @@ FUZZ_BR_OBJS  := $(patsubst bridge/%.c,$(FUZZ_DIR)/obj/bridge/%.o,$(filter-out b
 
 .PHONY: fuzz fuzz-smoke fuzz-build fuzz-seeds
 UNIT_TESTS += fuzz-smoke
+TEST_BUILDS += fuzz-build
 
 $(FUZZ_DIR)/obj/lib/%.o: lib/src/%.cpp $(LIB_HDRS) tests/fuzz/fuzz.mk
 	@mkdir -p $(@D)

@@ -21,7 +21,7 @@ DEMO_S       ?= 120
 # The runner's own logic (host side, no VM): part of `make test-py`.
 PY_TESTS += test-vm-runner
 test-vm-runner: $(SETUP_STAMP)
-	PYTHONDONTWRITEBYTECODE=1 $(PYTEST) -p no:cacheprovider -q tests/vm/test_run_in_vm.py
+	PYTHONDONTWRITEBYTECODE=1 $(PYTEST) -p no:cacheprovider -q -n 3 tests/vm/test_run_in_vm.py
 
 test-integration: $(SETUP_STAMP) $(IT_BRIDGE)
 	$(VM_RUN) --results $(IT_RESULTS) --junit junit.xml --guests $(IT_GUESTS) \
