@@ -81,7 +81,9 @@ struct daemon {
     struct mav_links links;   /* every --mavlink endpoint */
     struct frame_counters fc;
     struct estimator est;
-    struct latency_hist lat;
+    struct latency_hist lat;          /* the whole run */
+    struct latency_hist lat_interval; /* since the previous status line */
+    struct latency_summary lat_interval_last; /* what the latest status line closed */
     struct frame_ref fref[FRAME_REF_RING]; /* replay: read times of recent frames */
     unsigned fref_next;
     uint64_t last_sent_measurement; /* measurement_seq of the last ODOMETRY sent */
@@ -294,8 +296,11 @@ static void measure_latency(struct daemon *d, const struct est_output *o)
         return; /* nothing new in it: an extrapolation of what was sent */
     d->last_sent_measurement = o->measurement_seq;
     int64_t ref = frame_ref_mono(d, o->source_rx_us);
-    if (ref != 0)
-        latency_add(&d->lat, mono_us() - ref);
+    if (ref != 0) {
+        int64_t us = mono_us() - ref;
+        latency_add(&d->lat, us);
+        latency_add(&d->lat_interval, us);
+    }
 }
 
 static void send_odometry(struct daemon *d, const struct est_output *o,
@@ -486,13 +491,16 @@ static void status_line(struct daemon *d, const char *prefix)
                  o.x_m, o.y_m, o.theta_rad, sxy, o.sos_mps, quality_of(&o),
                  o.reset_counter);
     }
+    /* each status line closes a latency interval and starts the next */
+    latency_interval_close(&d->lat_interval, &d->lat_interval_last);
     const struct frame_counters *fc = &d->fc;
     log_info("%s: frames %" PRIu64 " (pulse %" PRIu64 " enc %" PRIu64
              " status %" PRIu64 ") bad %" PRIu64 " unknown %" PRIu64
              " range %" PRIu64 " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64
              " kdrop %" PRIu64 " errfr %" PRIu64 " | pulses ok %" PRIu64
              " rej %" PRIu64 " | %s | odom %" PRIu64 " werr %" PRIu64
-             " | latency p50 %" PRId64 " p99 %" PRId64 " us",
+             " | latency p50 %" PRId64 " p99 %" PRId64 " us"
+             " (interval p50 %" PRId64 " p99 %" PRId64 " us)",
              prefix, d->frames_total, fc->received[FRAME_PULSE],
              fc->received[FRAME_ENCODERS], fc->received[FRAME_STATUS],
              fc->malformed, fc->unknown_id, fc->out_of_range,
@@ -501,7 +509,8 @@ static void status_line(struct daemon *d, const char *prefix)
              d->can.c.error_frames, d->est.c.pulses_accepted,
              d->est.c.pulses_rejected, est, d->odom_sent,
              d->rec.write_errors + d->csv.write_errors,
-             latency_quantile(&d->lat, 0.5), latency_quantile(&d->lat, 0.99));
+             latency_quantile(&d->lat, 0.5), latency_quantile(&d->lat, 0.99),
+             d->lat_interval_last.p50_us, d->lat_interval_last.p99_us);
 }
 
 /* ---- CAN -------------------------------------------------------------- */
@@ -733,7 +742,7 @@ static void signal_readable(struct daemon *d)
         case SIGHUP:
             reload(d);
             break;
-        case SIGUSR1: /* report now: status line and the --stats file */
+        case SIGUSR1: /* report now: status line and the --stats file (its interval) */
             status_line(d, "status");
             if (d->opt.stats) {
                 struct stats_report rep;
@@ -975,6 +984,10 @@ static void fill_report(struct daemon *d, struct stats_report *r)
     r->latency_p50_us = latency_quantile(&d->lat, 0.5);
     r->latency_p99_us = latency_quantile(&d->lat, 0.99);
     r->latency_max_us = d->lat.max_us;
+    r->latency_interval_samples = d->lat_interval_last.samples;
+    r->latency_interval_p50_us = d->lat_interval_last.p50_us;
+    r->latency_interval_p99_us = d->lat_interval_last.p99_us;
+    r->latency_interval_max_us = d->lat_interval_last.max_us;
     r->run_time_s = (double)(mono_us() - d->run_start_mono_us) / 1e6;
     if (d->mode != MODE_LIVE && r->run_time_s > 0)
         r->replay_frames_per_s = (double)d->frames_total / r->run_time_s;
@@ -1009,6 +1022,7 @@ int main(int argc, char **argv)
         d->timers[i].fd = -1;
     frame_counters_init(&d->fc);
     latency_reset(&d->lat);
+    latency_interval_close(&d->lat_interval, &d->lat_interval_last); /* none yet */
     can_in_init(&d->can, d->cfg.can_interface);
     d->running = true;
 
@@ -1080,11 +1094,12 @@ int main(int argc, char **argv)
         break;
     }
 
-    /* Flush first, so that a write error is in the final figures. */
+    /* Flush first, so that a write error is in the final figures; the
+     * final status line before the report, which holds its interval. */
     flush_outputs(d);
+    status_line(d, "final");
     struct stats_report rep;
     fill_report(d, &rep);
-    status_line(d, "final");
     if (d->mode != MODE_LIVE)
         log_info("replay: %" PRIu64 " frames in %.3f s (%.0f frames/s), "
                  "%" PRIu64 " bad lines", d->frames_total, rep.run_time_s,

@@ -63,6 +63,20 @@ int64_t latency_quantile(const struct latency_hist *h, double q)
     return h->max_us;
 }
 
+void latency_summarise(const struct latency_hist *h, struct latency_summary *s)
+{
+    s->samples = h->count;
+    s->p50_us = latency_quantile(h, 0.5);
+    s->p99_us = latency_quantile(h, 0.99);
+    s->max_us = h->max_us;
+}
+
+void latency_interval_close(struct latency_hist *h, struct latency_summary *s)
+{
+    latency_summarise(h, s);
+    latency_reset(h);
+}
+
 /* "NAME": total, "NAME_per_frame": {one count per frame kind} (stats JSON). */
 static void write_per_frame(FILE *f, const char *name, uint64_t total, const uint64_t *by_kind)
 {
@@ -146,6 +160,11 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"latency_p50_us\": %lld,\n", (long long)r->latency_p50_us);
     fprintf(f, "  \"latency_p99_us\": %lld,\n", (long long)r->latency_p99_us);
     fprintf(f, "  \"latency_max_us\": %lld,\n", (long long)r->latency_max_us);
+    fprintf(f, "  \"latency_interval_samples\": %llu,\n",
+            (unsigned long long)r->latency_interval_samples);
+    fprintf(f, "  \"latency_interval_p50_us\": %lld,\n", (long long)r->latency_interval_p50_us);
+    fprintf(f, "  \"latency_interval_p99_us\": %lld,\n", (long long)r->latency_interval_p99_us);
+    fprintf(f, "  \"latency_interval_max_us\": %lld,\n", (long long)r->latency_interval_max_us);
     fprintf(f, "  \"replay_frames_per_s\": %.1f,\n", r->replay_frames_per_s);
     fprintf(f, "  \"run_time_s\": %.3f\n", r->run_time_s);
     fprintf(f, "}\n");

@@ -1,6 +1,11 @@
 /*
  * beaconloc-bridge — latency histogram and the statistics report
  * (status line, --stats FILE JSON at exit).
+ *
+ * The daemon keeps two histograms fed the same samples: one for the whole
+ * run, one for the interval since the previous status line (closed and
+ * emptied by latency_interval_close() at each status line). Fixed size,
+ * caller-owned, no allocation.
  */
 #ifndef BRIDGE_STATS_H
 #define BRIDGE_STATS_H
@@ -25,8 +30,22 @@ struct latency_hist {
 
 void latency_reset(struct latency_hist *h);
 void latency_add(struct latency_hist *h, int64_t us);
-/* Quantile q in [0,1] (us, lower edge of its bin); -1 when empty. */
+/* Quantile q in [0,1] (us, lower edge of its bin); -1 when empty.
+ * Cost: one pass over the bins (O(LAT_BINS)). */
 int64_t latency_quantile(const struct latency_hist *h, double q);
+
+/* The figures reported of one histogram (status line, JSON). */
+struct latency_summary {
+    uint64_t samples;
+    int64_t p50_us, p99_us; /* -1 when no sample */
+    int64_t max_us;         /* 0 when no sample */
+};
+
+void latency_summarise(const struct latency_hist *h, struct latency_summary *s);
+/* Interval histogram: summarise h into *s, then empty h, so that the next
+ * interval starts with no sample. Cost: two passes over the bins and one
+ * memset of the histogram (~45 KiB), once per status line. */
+void latency_interval_close(struct latency_hist *h, struct latency_summary *s);
 
 /* Everything the JSON report holds (plain numbers, filled by main.c). */
 struct stats_report {
@@ -48,6 +67,9 @@ struct stats_report {
         node_restarts, numbering_errors, seq_resyncs;
     int64_t latency_p50_us, latency_p99_us, latency_max_us;
     uint64_t latency_samples;
+    /* the interval the latest status line closed (latency_interval_close) */
+    int64_t latency_interval_p50_us, latency_interval_p99_us, latency_interval_max_us;
+    uint64_t latency_interval_samples;
     double replay_frames_per_s; /* 0 when not replaying */
     double run_time_s;          /* wall time of the run */
     uint64_t frames_total;      /* frames read (bus or log) */

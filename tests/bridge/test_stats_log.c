@@ -48,6 +48,63 @@ static void test_quantiles_log_bins(void **state)
     assert_int_equal(h.count, 101);
 }
 
+/* The interval histogram: closing it reports what it held since the last
+ * close and empties it, so the next interval's quantiles owe nothing to the
+ * earlier samples; the whole-run histogram fed the same samples keeps all. */
+static struct latency_hist run, interval;
+
+static void test_interval_close_resets(void **state)
+{
+    (void)state;
+    latency_reset(&run);
+    latency_reset(&interval);
+    struct latency_summary s;
+    latency_interval_close(&interval, &s);
+    assert_int_equal(s.samples, 0);
+    assert_int_equal(s.p50_us, -1);
+    assert_int_equal(s.p99_us, -1);
+    assert_int_equal(s.max_us, 0);
+
+    /* interval 1: 1..1000 us, a slow one */
+    for (int i = 1; i <= 1000; i++) {
+        latency_add(&run, i);
+        latency_add(&interval, i);
+    }
+    latency_add(&run, 20000);
+    latency_add(&interval, 20000);
+    latency_interval_close(&interval, &s);
+    assert_int_equal(s.samples, 1001);
+    assert_int_equal(s.p50_us, 501);
+    assert_int_equal(s.p99_us, 991);
+    assert_int_equal(s.max_us, 20000);
+    assert_int_equal(interval.count, 0);
+    assert_int_equal(interval.max_us, 0);
+    assert_int_equal(latency_quantile(&interval, 0.5), -1);
+    for (int b = 0; b < LAT_BINS; b++)
+        assert_int_equal(interval.bins[b], 0);
+
+    /* interval 2: 100 samples of 7 us only; the run still holds interval 1 */
+    for (int i = 0; i < 100; i++) {
+        latency_add(&run, 7);
+        latency_add(&interval, 7);
+    }
+    latency_interval_close(&interval, &s);
+    assert_int_equal(s.samples, 100);
+    assert_int_equal(s.p50_us, 7);
+    assert_int_equal(s.p99_us, 7);
+    assert_int_equal(s.max_us, 7);
+    latency_summarise(&run, &s);
+    assert_int_equal(s.samples, 1101);
+    assert_int_equal(s.p50_us, 451); /* rank 551: 100 x 7 us, then 1..451 */
+    assert_int_equal(s.max_us, 20000);
+
+    /* interval 3: nothing came */
+    latency_interval_close(&interval, &s);
+    assert_int_equal(s.samples, 0);
+    assert_int_equal(s.p99_us, -1);
+    assert_int_equal(run.count, 1101);
+}
+
 static void test_json_report(void **state)
 {
     (void)state;
@@ -62,6 +119,9 @@ static void test_json_report(void **state)
     fc.out_of_order[FRAME_ENCODERS] = 8;
     struct stats_report r = { .frames = &fc, .kernel_drops = 5,
                               .latency_p50_us = 42, .latency_p99_us = 99,
+                              .latency_interval_samples = 1234,
+                              .latency_interval_p50_us = 17, .latency_interval_p99_us = 61,
+                              .latency_interval_max_us = 512,
                               .replay_frames_per_s = 12345.6,
                               .record_write_errors = 9, .estimates_write_errors = 2 };
     char path[] = "/tmp/test_stats_XXXXXX";
@@ -80,6 +140,10 @@ static void test_json_report(void **state)
     assert_non_null(strstr(buf, "\"lost_by_counter\": 4,"));
     assert_non_null(strstr(buf, "\"dropped_by_kernel\": 5,"));
     assert_non_null(strstr(buf, "\"latency_p99_us\": 99,"));
+    assert_non_null(strstr(buf, "\"latency_interval_samples\": 1234,"));
+    assert_non_null(strstr(buf, "\"latency_interval_p50_us\": 17,"));
+    assert_non_null(strstr(buf, "\"latency_interval_p99_us\": 61,"));
+    assert_non_null(strstr(buf, "\"latency_interval_max_us\": 512,"));
     assert_non_null(strstr(buf, "\"replay_frames_per_s\": 12345.6,"));
     assert_non_null(strstr(buf, "\"duplicates\": 7,"));
     assert_non_null(strstr(buf, "\"duplicates_per_frame\": {\"pulse_detection\": 6, "
@@ -132,6 +196,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_quantiles_exact_below_4ms),
         cmocka_unit_test(test_quantiles_log_bins),
+        cmocka_unit_test(test_interval_close_resets),
         cmocka_unit_test(test_json_report),
         cmocka_unit_test(test_log_repeats_summarised),
     };
