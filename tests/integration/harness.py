@@ -364,19 +364,22 @@ class Rig:
             self.probe = NodeClockProbe(self.iface)
         return self.probe
 
-    def _spawn(self, name: str, argv: list[str]) -> Proc:
+    def _spawn(self, name: str, argv: list[str], env: dict | None = None) -> Proc:
         out = self.workdir / f"{name}.out"
         err = self.workdir / f"{name}.err"
         p = subprocess.Popen(argv, cwd=self.workdir, stdin=subprocess.DEVNULL,
-                             stdout=out.open("wb"), stderr=err.open("wb"))
+                             stdout=out.open("wb"), stderr=err.open("wb"),
+                             env={**os.environ, **env} if env else None)
         proc = Proc(name, p, err, out)
         self.procs.append(proc)
         return proc
 
     def start_bridge(self, site: Path = SITE, extra: list[str] | None = None,
-                     name: str = "bridge", wait_heartbeat_s: float = 60.0) -> Proc:
-        """Start the real daemon on this rig's bus; wait for its first
-        HEARTBEAT so nothing the simulator sends afterwards is missed."""
+                     name: str = "bridge", wait_heartbeat_s: float = 60.0,
+                     env: dict | None = None) -> Proc:
+        """Start the real daemon on this rig's bus (env: variables added to
+        its environment); wait for its first HEARTBEAT so nothing the
+        simulator sends afterwards is missed."""
         assert BRIDGE.exists(), f"{BRIDGE} not built (make all)"
         lst = self.listen()
         since = time.monotonic()
@@ -386,7 +389,7 @@ class Rig:
                                "--estimates", str(self.workdir / f"{name}-est.csv"
                                                   if name != "bridge" else self.estimates),
                                "--stats", str(self.workdir / f"{name}-stats.json"),
-                               *(extra or [])])
+                               *(extra or [])], env=env)
         if wait_heartbeat_s:
             hb = lst.wait_for("HEARTBEAT", wait_heartbeat_s, since=since)
             assert p.alive(), f"bridge exited {p.popen.returncode}:\n{tail(p.stderr_path)}"
@@ -498,13 +501,14 @@ class LiveRun:
 
 def run_live(rig: Rig, scenario: str, duration_s: float, *, seed: int | None = None,
              site: Path = SITE, bridge_extra: list[str] | None = None,
+             bridge_env: dict | None = None,
              actions: list | None = None, timesync_every_s: float = 0.0,
              stop_bridge: bool = True) -> LiveRun:
     """Bridge first (waits for its HEARTBEAT), then the simulator live on the
     rig's bus for duration_s; `actions` = [(seconds after the simulator
     started, callable(rig))] run in order; finally SIGTERM to the bridge."""
     lst = rig.listen()
-    rig.start_bridge(site=site, extra=bridge_extra)
+    rig.start_bridge(site=site, extra=bridge_extra, env=bridge_env)
     probe = rig.watch_node_clock()
     sim = rig.start_sim(scenario, duration_s=duration_s, seed=seed)
     # Times count from the simulator's first frame on the bus (its start-up,

@@ -5,6 +5,7 @@
 #   make bench-accuracy                            20 seeds x 2 scenarios, --replay
 #   make demo [DEMO_S=120]                         kleeman-lab live, plot in build/demo/
 #   make vm-check                                  boot, python-can round trip on vcan0
+#   make bench-bus                                 simulator pacing + bridge latency on the bus
 #   make test-vm-runner                            the runner's own tests (in make test-py)
 
 IT_RESULTS   := $(BUILD)/vm
@@ -16,7 +17,7 @@ IT_ARGS      ?=
 IT_GUESTS    ?= $(shell n=$$(nproc); [ $$n -gt 4 ] && n=4; echo $$n)
 DEMO_S       ?= 120
 
-.PHONY: test-integration bench-accuracy demo vm-check test-vm-runner
+.PHONY: test-integration bench-accuracy demo vm-check test-vm-runner bench-bus
 
 # The runner's own logic (host side, no VM): part of `make test-py`.
 PY_TESTS += test-vm-runner
@@ -29,6 +30,10 @@ test-integration: $(SETUP_STAMP) $(IT_BRIDGE)
 
 vm-check: $(SETUP_STAMP)
 	$(VM_RUN) --results $(BUILD)/vm-check true
+
+bench-bus: $(SETUP_STAMP) $(IT_BRIDGE)
+	$(VM_RUN) --results $(BUILD)/bench-bus --tail script.log \
+	    $(PY) tests/vm/bench_bus.py
 
 bench-accuracy: $(SETUP_STAMP) $(IT_BRIDGE)
 	$(PY) tests/bench/accuracy.py --bridge $(IT_BRIDGE) --out $(BUILD)/bench/accuracy

@@ -18,6 +18,7 @@ mount -t sysfs sysfs /sys
 # folder may be there (the guest's HOME is a folder of its own in it).
 mount -t tmpfs -o mode=755 tmpfs /run
 mount -t tmpfs -o mode=1777 tmpfs /dev/shm 2>/dev/null
+mkdir -p /dev/pts && mount -t devpts -o gid=5,mode=620,ptmxmode=666 devpts /dev/pts
 ip link set lo up
 # Scratch space in the guest's own memory for files written while a live
 # case runs: hostfs writes are done by the guest kernel's one thread, so a
