@@ -8,7 +8,8 @@ in turn). docs/soak.md says what is measured and how.
   2. the bridge replays the log as fast as it can with --estimates, --stats and
      a status line every 3600 s of log time; this driver reads its stderr as it
      comes (each status line closes a simulated hour: wall time, cumulative
-     frames and latency) and samples its VmRSS every 50 ms, each sample tagged
+     frames, the latency quantiles of that hour alone, the bridge's CPU time and
+     the whole machine's) and samples its VmRSS every 50 ms, each sample tagged
      with the hour the replay is in;
   3. the estimates are judged against the truth hour by hour, read in blocks
      (never the whole day in memory), with tests/integration/harness.py's
@@ -16,8 +17,9 @@ in turn). docs/soak.md says what is measured and how.
      reported covariance), as the accuracy benchmark does.
 
 Targets (exit 1 if one is missed): RSS growth <= 1024 KiB after the first hour,
-nan = 0, lost_frames = 0, within_3sigma_pct >= 97, latency p99 within 20 % of the
-first hour's (see docs/soak.md for what the bridge lets this check measure).
+nan = 0, lost_frames = 0, within_3sigma_pct >= 97, the last hour's latency p99
+within 20 % of the first hour's (docs/soak.md: what fast-replay latency measures,
+and how much of it is the machine's load).
 Last line:
   soak sim_h=24 frames=<n> rss_growth_kib=<n> nan=<n> resets=<n> within_3sigma_pct=<x> latency_p99_us=<n> lost_frames=<n>
 """
@@ -29,6 +31,7 @@ import json
 import math
 import os
 import re
+import resource
 import subprocess
 import sys
 import threading
@@ -56,7 +59,9 @@ WITHIN_3SIGMA_MIN_PCT = 97.0
 LATENCY_GROWTH_MAX = 0.20
 
 STATUS_RE = re.compile(r"status: frames (\d+) .*? lost (\d+) .*? resets=(\d+) .*?"
-                       r"latency p50 (-?\d+) p99 (-?\d+) us")
+                       r"latency p50 (-?\d+) p99 (-?\d+) us "
+                       r"\(interval p50 (-?\d+) p99 (-?\d+) us\)")
+CLK_TCK = os.sysconf("SC_CLK_TCK")
 
 
 @dataclass
@@ -64,7 +69,10 @@ class Hour:
     """Figures of one simulated hour."""
     frames: int = 0              # frames the bridge read in this hour (status lines)
     wall_s: float = math.nan     # wall time the replay took for it
-    lat_p99_cum_us: int = -1     # the bridge's p99 since the start, at the end of this hour
+    lat_p50_us: int = -1         # the bridge's p50 / p99 over this hour alone (its interval)
+    lat_p99_us: int = -1
+    cpu_s: float = math.nan      # the bridge's CPU time (user + system) in this hour
+    busy_s: float = math.nan     # the machine's busy CPU time (all cores) in this hour
     rss_kib: list = field(default_factory=list)
     estimates: int = 0
     nan: int = 0
@@ -75,6 +83,16 @@ class Hour:
     @property
     def inside_pct(self) -> float:
         return 100.0 * self.inside / self.judged if self.judged else math.nan
+
+    @property
+    def cpu_pct(self) -> float:
+        """Share of the hour's wall time the bridge was on a CPU (< 100: it waited)."""
+        return 100.0 * self.cpu_s / self.wall_s if self.wall_s > 0 else math.nan
+
+    @property
+    def others_cores(self) -> float:
+        """Cores busy with everything but the bridge, on average over the hour."""
+        return (self.busy_s - self.cpu_s) / self.wall_s if self.wall_s > 0 else math.nan
 
 
 def simulate(hours: int, out: Path) -> tuple[dict, float]:
@@ -99,15 +117,65 @@ def vm_rss_kib(pid: int) -> int | None:
     return None
 
 
-def replay(bridge: Path, site: Path, out: Path, hours: list[Hour]) -> tuple[dict, float]:
-    """Run the bridge on the log; fill frames, wall time, latency and RSS per hour."""
+def cpu_ticks(pid: int) -> int | None:
+    """utime + stime of a process (clock ticks)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            fields = fh.read().rsplit(")", 1)[1].split()
+    except (FileNotFoundError, ProcessLookupError):
+        return None
+    return int(fields[11]) + int(fields[12])
+
+
+def machine_busy_ticks() -> int:
+    """Busy time of all CPUs (user, nice, system, irq, softirq, steal; clock ticks)."""
+    with open("/proc/stat") as fh:
+        v = [int(x) for x in fh.readline().split()[1:]]
+    return v[0] + v[1] + v[2] + v[5] + v[6] + v[7]
+
+
+def raise_priority(pid: int) -> str:
+    """Put the replay (started in a session of its own, so in an autogroup of its
+    own) at nice -10, group and process, when the driver may (root, CAP_SYS_NICE): on
+    a shared machine the other sessions' work otherwise preempts it between reading a
+    frame and sending ODOMETRY, and the latency tail is theirs (docs/soak.md).
+    Returns what was done, for the report."""
+    done = []
+    try:
+        with open(f"/proc/{pid}/autogroup", "w") as fh:
+            fh.write("-10")
+        done.append("own autogroup at nice -10")
+    except FileNotFoundError:
+        pass  # kernel without autogroups: the process nice is what counts
+    except OSError as e:
+        return f"normal priority (autogroup nice: {e.strerror})"
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, -10)
+        done.append("nice -10")
+    except OSError as e:
+        return f"normal priority (nice: {e.strerror})"
+    return ", ".join(done)
+
+
+def children_cpu_s() -> float:
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
+def replay(bridge: Path, site: Path, out: Path, hours: list[Hour],
+           priority: bool) -> tuple[dict, float, str]:
+    """Run the bridge on the log; fill frames, wall time, latency, CPU and RSS per hour."""
     argv = [str(bridge), "--site", str(site), "--replay", str(out / "bus.log"),
             "--estimates", str(out / "est.csv"), "--stats", str(out / "bridge-stats.json"),
             "--mavlink", "udpout:127.0.0.1:9", "--status-interval", f"{HOUR_S:g}"]
+    cpu_before = children_cpu_s()
+    busy0 = machine_busy_ticks()
     t0 = time.monotonic()
     proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, errors="replace")
-    done = {"hours": 0, "t": t0, "frames": 0}
+                            stderr=subprocess.PIPE, text=True, errors="replace",
+                            start_new_session=priority)
+    prio = raise_priority(proc.pid) if priority else "normal priority (--normal-priority)"
+    done = {"hours": 0, "t": t0, "frames": 0, "cpu": 0, "busy": busy0}
 
     def read_stderr() -> None:
         with (out / "bridge.err").open("w") as log:
@@ -116,31 +184,46 @@ def replay(bridge: Path, site: Path, out: Path, hours: list[Hour]) -> tuple[dict
                 m = STATUS_RE.search(line)
                 if m and line.lstrip().startswith("info: status:") and done["hours"] < len(hours):
                     now = time.monotonic()
+                    cpu, busy = cpu_ticks(proc.pid), machine_busy_ticks()
                     hr = hours[done["hours"]]
                     frames = int(m.group(1))
                     hr.frames, hr.wall_s = frames - done["frames"], now - done["t"]
-                    hr.lat_p99_cum_us = int(m.group(5))
-                    done.update(hours=done["hours"] + 1, t=now, frames=frames)
+                    hr.lat_p50_us, hr.lat_p99_us = int(m.group(6)), int(m.group(7))
+                    if cpu is not None:
+                        hr.cpu_s = (cpu - done["cpu"]) / CLK_TCK
+                        done["cpu"] = cpu
+                    hr.busy_s = (busy - done["busy"]) / CLK_TCK
+                    done.update(hours=done["hours"] + 1, t=now, frames=frames, busy=busy)
 
     reader = threading.Thread(target=read_stderr, daemon=True)
     reader.start()
-    while proc.poll() is None:
-        rss = vm_rss_kib(proc.pid)
-        if rss is not None:
-            hours[min(done["hours"], len(hours) - 1)].rss_kib.append(rss)
-        time.sleep(RSS_POLL_S)
+    try:
+        while proc.poll() is None:
+            rss = vm_rss_kib(proc.pid)
+            if rss is not None:
+                hours[min(done["hours"], len(hours) - 1)].rss_kib.append(rss)
+            time.sleep(RSS_POLL_S)
+    except BaseException:
+        proc.kill()  # its own session: an interrupt of the driver does not reach it
+        raise
+    busy_end = machine_busy_ticks()
     reader.join(timeout=10)
     wall = time.monotonic() - t0
+    cpu_total = children_cpu_s() - cpu_before   # the bridge's, exact (waited for)
     if proc.returncode != 0:
         raise SystemExit(f"soak: bridge exit {proc.returncode}:\n{h.tail(out / 'bridge.err')}")
     stats = json.loads((out / "bridge-stats.json").read_text())
-    # the last hour closes at the end of the log (its status line may fall just after it)
+    # the last hour closes at the end of the log (its status line may fall just after it):
+    # the final status line closes its latency interval, which the stats JSON holds
     if done["hours"] < len(hours):
         last = hours[done["hours"]]
         last.frames = stats["frames_total"] - done["frames"]
         last.wall_s = t0 + wall - done["t"]
-        last.lat_p99_cum_us = stats["latency_p99_us"]
-    return stats, wall
+        last.lat_p50_us = stats["latency_interval_p50_us"]
+        last.lat_p99_us = stats["latency_interval_p99_us"]
+        last.cpu_s = cpu_total - done["cpu"] / CLK_TCK
+        last.busy_s = (busy_end - done["busy"]) / CLK_TCK
+    return stats, wall, prio
 
 
 def read_truth(path: Path) -> dict[str, np.ndarray]:
@@ -196,6 +279,9 @@ def main() -> int:
     ap.add_argument("--out", default=str(REPO / "build" / "soak"))
     ap.add_argument("--hours", type=int, default=int(os.environ.get("SOAK_H", "24")),
                     help="simulated hours, >= 2 (default: $SOAK_H or 24)")
+    ap.add_argument("--normal-priority", action="store_true",
+                    help="replay at the driver's priority, not at nice -10 in an autogroup "
+                         "of its own (to see the machine's load in the latency)")
     args = ap.parse_args()
     bridge, out = Path(args.bridge), Path(args.out)
     if not bridge.exists():
@@ -214,9 +300,10 @@ def main() -> int:
     print(f"simulated {args.hours} h in {sim_wall:.0f} s: {sim_stats['frames']['total']} frames",
           flush=True)
     hours = [Hour() for _ in range(args.hours)]
-    stats, replay_wall = replay(bridge, site.resolve(), out, hours)
-    print(f"replayed in {replay_wall:.0f} s ({stats['replay_frames_per_s']:.0f} frames/s)",
-          flush=True)
+    stats, replay_wall, prio = replay(bridge, site.resolve(), out, hours,
+                                      not args.normal_priority)
+    print(f"replayed in {replay_wall:.0f} s ({stats['replay_frames_per_s']:.0f} frames/s), "
+          f"{prio}", flush=True)
     truth = read_truth(out / "truth.csv")
     judge_estimates(out / "est.csv", truth, [k[0] for k in scn.kidnaps], hours)
 
@@ -230,22 +317,26 @@ def main() -> int:
     rss_base = hours[0].rss_kib[-1] if hours[0].rss_kib else None
     later = [r for hr in hours[1:] for r in hr.rss_kib]
     rss_growth = max(later) - rss_base if later and rss_base is not None else None
-    lat_first = hours[0].lat_p99_cum_us
+    lat_first, lat_last = hours[0].lat_p99_us, hours[-1].lat_p99_us
     lat_all = int(stats["latency_p99_us"])
+    # the last hour's fault comes back every 5 hours: its earlier hours, like for like
+    same_fault = [hr.lat_p99_us for hr in hours[len(hours) - 1::-5]][::-1]
 
     kinds = {0: "kidnap", 1: "enc-silence", 2: "beacon-out", 3: "echo-storm", 4: "temp-swing"}
     print()
     print(f"{'hour':>4} {'fault':<11} {'frames':>8} {'estimates':>9} {'nan':>4} {'resets':>6} "
-          f"{'in_3sig_%':>9} {'rss_max_kib':>11} {'lat_p99_cum_us':>14} {'wall_s':>6} "
-          f"{'us/frame':>8}")
+          f"{'in_3sig_%':>9} {'rss_max_kib':>11} {'lat_p50_us':>10} {'lat_p99_us':>10} "
+          f"{'wall_s':>6} {'us/frame':>8} {'cpu_us/frame':>12} {'cpu_%':>5} {'others':>6}")
     prev_resets = 0
     for k, hr in enumerate(hours):
         resets = hr.reset_max if hr.reset_max >= 0 else prev_resets
         us_per_frame = hr.wall_s / hr.frames * 1e6 if hr.frames else math.nan
+        cpu_us_per_frame = hr.cpu_s / hr.frames * 1e6 if hr.frames else math.nan
         print(f"{k:>4} {kinds[k % 5]:<11} {hr.frames:>8} {hr.estimates:>9} {hr.nan:>4} "
               f"{resets - prev_resets:>6} {hr.inside_pct:>9.2f} "
-              f"{max(hr.rss_kib) if hr.rss_kib else -1:>11} {hr.lat_p99_cum_us:>14} "
-              f"{hr.wall_s:>6.1f} {us_per_frame:>8.2f}")
+              f"{max(hr.rss_kib) if hr.rss_kib else -1:>11} {hr.lat_p50_us:>10} "
+              f"{hr.lat_p99_us:>10} {hr.wall_s:>6.1f} {us_per_frame:>8.2f} "
+              f"{cpu_us_per_frame:>12.2f} {hr.cpu_pct:>5.1f} {hr.others_cores:>6.2f}")
         prev_resets = resets
     print(f"not judged: the first {h.CONVERGED_AFTER_S:g} s and {SETTLE_S:g} s after each of "
           f"{sum(1 for k in scn.kidnaps if k[0] < args.hours * HOUR_S)} kidnaps; "
@@ -253,9 +344,13 @@ def main() -> int:
     print(f"frames: log {frames_log}, read {stats['frames_total']}, decoded {decoded}; "
           f"lost by counter {stats['lost_by_counter']}, malformed {stats['malformed']}, "
           f"replay bad lines {stats['replay_bad_lines']}")
-    print(f"latency (the bridge's, fast replay = processing time): first hour p99 {lat_first} us, "
-          f"whole run p99 {lat_all} us, max {stats['latency_max_us']} us over "
-          f"{stats['latency_samples']} samples")
+    print(f"latency (the bridge's, fast replay = processing time): p99 first hour {lat_first} us, "
+          f"last hour {lat_last} us, whole run {lat_all} us, max {stats['latency_max_us']} us over "
+          f"{stats['latency_samples']} samples; p99 of the hours with the last hour's fault "
+          f"({kinds[(len(hours) - 1) % 5]}): {' '.join(str(v) for v in same_fault)} us")
+    print("lat_*: the bridge's latency over the hour alone; cpu_us/frame: its CPU time per "
+          "frame; cpu_%: its CPU time / wall time; others: cores busy with everything else "
+          "(machine load, docs/soak.md)")
 
     checks = [
         (f"RSS growth after the first hour <= {RSS_GROWTH_MAX_KIB} KiB",
@@ -266,10 +361,11 @@ def main() -> int:
         ("no frame lost (log - decoded)", lost == 0, f"lost_frames={lost}"),
         (f"within 3 sigma >= {WITHIN_3SIGMA_MIN_PCT:g} %", within >= WITHIN_3SIGMA_MIN_PCT,
          f"{within:.2f} %"),
-        (f"latency p99 within {LATENCY_GROWTH_MAX:.0%} of the first hour's "
-         "(cumulative: the bridge has no per-hour figure)",
-         lat_first > 0 and lat_all <= (1 + LATENCY_GROWTH_MAX) * lat_first,
-         f"whole run {lat_all} us vs first hour {lat_first} us"),
+        (f"latency p99 of the last hour within {LATENCY_GROWTH_MAX:.0%} of the first hour's",
+         lat_first > 0 and 0 <= lat_last <= (1 + LATENCY_GROWTH_MAX) * lat_first,
+         f"last hour {lat_last} us vs first hour {lat_first} us "
+         f"({lat_last / lat_first - 1 if lat_first > 0 else math.nan:+.0%}; the bridge on a CPU "
+         f"{hours[0].cpu_pct:.0f} % and {hours[-1].cpu_pct:.0f} % of these hours)"),
     ]
     print()
     for name, ok, value in checks:
@@ -279,7 +375,7 @@ def main() -> int:
     print(f"soak sim_h={args.hours} frames={frames_log} rss_growth_kib="
           f"{rss_growth if rss_growth is not None else -1} nan={nan} "
           f"resets={stats['estimator_resets']} within_3sigma_pct={within:.2f} "
-          f"latency_p99_us={lat_all} lost_frames={lost}")
+          f"latency_p99_us={lat_last} lost_frames={lost}")
     return 0 if all(ok for _, ok, _ in checks) else 1
 
 
