@@ -611,21 +611,31 @@ static void test_udpin_answers_timesync(void **state)
     mav_out_close(&m2);
 }
 
+/* A udpin endpoint on a free port of HOST ("" binds every address) and a
+ * UDP socket of a peer (the ground station); *dst addresses the endpoint
+ * on the loopback. Returns the peer's socket. */
+static int open_udpin_with_peer(struct mav_out *m, const char *host, struct sockaddr_in *dst)
+{
+    uint16_t port = free_port();
+    char ep[64];
+    snprintf(ep, sizeof ep, "udpin:%s:%u", host, (unsigned)port);
+    assert_int_equal(mav_out_open(m, ep, 1, 197), 0);
+    uint16_t peer_port;
+    int peer = udp_listener(&peer_port);
+    *dst = (struct sockaddr_in){.sin_family = AF_INET, .sin_port = htons(port)};
+    dst->sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    return peer;
+}
+
 /* TIMESYNC answered at a replayed log's time past int64 ns (found by
  * fuzz_mavlink: now_us * 1000 overflowed): tc1 saturates; at time 0 it is
  * 1 ns, never 0, which would make the answer a request. */
 static void test_timesync_answer_saturates(void **state)
 {
     (void)state;
-    uint16_t port = free_port();
-    char ep[64];
-    snprintf(ep, sizeof ep, "udpin:127.0.0.1:%u", (unsigned)port);
     struct mav_out m;
-    assert_int_equal(mav_out_open(&m, ep, 1, 197), 0);
-    uint16_t peer_port;
-    int peer = udp_listener(&peer_port);
-    struct sockaddr_in dst = {.sin_family = AF_INET, .sin_port = htons(port)};
-    dst.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    struct sockaddr_in dst;
+    int peer = open_udpin_with_peer(&m, "127.0.0.1", &dst);
     uint8_t buf[MAVLINK_MAX_PACKET_LEN + 16];
     const int64_t now_us[] = {INT64_C(4611683816183249192), INT64_MAX / 1000, 0};
     const int64_t want_ns[] = {INT64_MAX, INT64_MAX, 1};
@@ -701,15 +711,9 @@ static void test_ipv6_loopback(void **state)
 static void test_udpin_any_address(void **state)
 {
     (void)state;
-    uint16_t port = free_port();
-    char ep[64];
-    snprintf(ep, sizeof ep, "udpin::%u", (unsigned)port);
     struct mav_out m;
-    assert_int_equal(mav_out_open(&m, ep, 1, 197), 0);
-    uint16_t peer_port;
-    int peer = udp_listener(&peer_port);
-    struct sockaddr_in dst = {.sin_family = AF_INET, .sin_port = htons(port)};
-    dst.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    struct sockaddr_in dst;
+    int peer = open_udpin_with_peer(&m, "", &dst);
     uint8_t buf[MAVLINK_MAX_PACKET_LEN];
     mavlink_message_t req;
     mavlink_msg_timesync_pack(9, 1, &req, 0, 5);
