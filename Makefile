@@ -15,7 +15,7 @@ CC      ?= gcc
 CXX     ?= g++
 
 .DEFAULT_GOAL := all
-.PHONY: all setup test test-host test-unit test-py test-integration demo clean \
+.PHONY: all setup test test-unit test-py test-integration demo clean \
         bench-speed bench-accuracy
 
 UNIT_TESTS :=
@@ -39,16 +39,13 @@ all: $(ALL_TARGETS)
 test-unit: $(UNIT_TESTS)
 test-py: $(PY_TESTS)
 
-# The integration suite runs in real time on the bus, mostly waiting: the
-# unit and Python suites run beside it (its guests have the priority), each
-# suite's output printed whole when it ends (--output-sync).
+# One suite after the other: the live suite's real-time checks get the
+# machine to themselves.
 test: setup
 	$(MAKE) -j$(NPROC) all $(TEST_BUILDS)
-	$(MAKE) -j2 --output-sync=recurse test-integration test-host
-
-test-host:
 	$(MAKE) test-unit
 	$(MAKE) test-py
+	$(MAKE) test-integration
 
 clean:
 	rm -rf $(BUILD)
