@@ -27,7 +27,7 @@ FUZZ_DIR      := $(BUILD)/fuzz
 FUZZ_CC       ?= clang
 FUZZ_CXX      ?= clang++
 FUZZ_SECONDS  ?= 60
-FUZZ_SMOKE_SECONDS ?= 8
+FUZZ_SMOKE_SECONDS ?= 5
 FUZZ_NAMES    := replay frames site mavlink lib_api
 FUZZ_BINS     := $(addprefix $(FUZZ_DIR)/fuzz_,$(FUZZ_NAMES))
 
