@@ -82,6 +82,10 @@ $(FUZZ_DIR)/site.dict: bridge/config.c bridge/tuning.h tests/fuzz/site_dict.sh
 	@mkdir -p $(@D)
 	sh tests/fuzz/site_dict.sh bridge/config.c bridge/tuning.h > $@
 
+# The objects stay once built: make would delete them as intermediates of
+# the pattern rules, and a later `make fuzz-smoke` would build them again.
+.SECONDARY: $(FUZZ_LIB_OBJS) $(FUZZ_BR_OBJS) $(FUZZ_NAMES:%=$(FUZZ_DIR)/obj/fuzz_%.o)
+
 fuzz-build: $(FUZZ_BINS) $(FUZZ_DIR)/site.dict
 
 # $(1) seconds per harness

@@ -197,16 +197,26 @@ def run(args: argparse.Namespace, results: Path, shard: str | None) -> tuple[str
 
 
 def _raise_priority(nice: int) -> None:
-    """In the child before exec: the test bus runs in real time, so it must
-    not queue behind whatever else the host is busy with (a build, a fuzzer,
-    another user's job). A guest is one host thread of execution; a nice value
-    below the default lets it take its core when it needs it. Without the
-    right to (not root, no CAP_SYS_NICE) the run goes on at the default."""
-    if nice:
-        try:
-            os.setpriority(os.PRIO_PROCESS, 0, nice)
-        except OSError:
-            pass
+    """In the child before exec (after setsid): the test bus runs in real
+    time, so it must not queue behind whatever else the host is busy with (a
+    build, a fuzzer, another user's job). A guest is one host thread of
+    execution; a nice value below the default lets it take its core when it
+    needs it. With autogroup scheduling (/proc/sys/kernel/sched_autogroup_enabled)
+    a process's nice only ranks it inside its own session, and sessions share
+    the CPU as equals: the guest's session gets the same nice as its autogroup.
+    Without the right to (not root, no CAP_SYS_NICE) the run goes on at the
+    default."""
+    if not nice:
+        return
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+    except OSError:
+        pass
+    try:
+        with open("/proc/self/autogroup", "w") as fh:
+            fh.write(str(nice))
+    except OSError:
+        pass  # no autogroups in this kernel: the process nice is what counts
 
 
 def _shquote(s: str) -> str:
