@@ -4,7 +4,7 @@
 #   run-suite.sh [PYTEST ARGS...]     e.g. -k nominal
 # The live cases run side by side (pytest-xdist, one live run per worker,
 # every case on its own vcan interfaces and UDP port): BL_IT_WORKERS workers
-# (default 3: a live case costs a UML guest's one CPU about a quarter; 0 runs
+# (default 2: a live case costs a UML guest's one CPU about a quarter; 0 runs
 # them one after another). BL_IT_SHARD=I/N runs the share of guest I of N.
 set -u
 : "${BL_RESULTS:?run me through tests/vm/run-in-vm.sh}"
@@ -16,7 +16,7 @@ trap 'if [ "$cases" != "$BL_RESULTS/cases" ] && [ -d "$cases" ]; then cp -a "$ca
 env PYTHONDONTWRITEBYTECODE=1 .venv/bin/python -m pytest tests/integration \
     -c tests/integration/pytest.ini -p no:cacheprovider \
     --junitxml="$BL_RESULTS/junit.xml" --basetemp="$cases" \
-    -n "${BL_IT_WORKERS:-3}" \
+    -n "${BL_IT_WORKERS:-2}" \
     -v -ra --durations=0 "$@"
 rc=$?
 exit $rc
