@@ -2,10 +2,10 @@
 # The integration suite on the bus that tests/vm/guest-init.sh brought up.
 # Everything it writes goes to $BL_RESULTS (the repository may be read-only).
 #   run-suite.sh [PYTEST ARGS...]     e.g. -k nominal
-# The live cases run side by side (pytest-xdist, one live run per worker,
-# every case on its own vcan interfaces and UDP port): BL_IT_WORKERS workers
-# (default 2: a live case costs a UML guest's one CPU about a quarter; 0 runs
-# them one after another). BL_IT_SHARD=I/N runs the share of guest I of N.
+# Live runs one after the other in a guest by default (BL_IT_WORKERS=0):
+# side by side (pytest-xdist, BL_IT_WORKERS=N, one live run per worker, each
+# on its own vcan interfaces and UDP port) they starved each other on the
+# guest's one CPU. BL_IT_SHARD=I/N runs the share of guest I of N.
 set -u
 : "${BL_RESULTS:?run me through tests/vm/run-in-vm.sh}"
 cd "$(dirname "$0")/../.."
@@ -16,7 +16,7 @@ trap 'if [ "$cases" != "$BL_RESULTS/cases" ] && [ -d "$cases" ]; then cp -a "$ca
 env PYTHONDONTWRITEBYTECODE=1 .venv/bin/python -m pytest tests/integration \
     -c tests/integration/pytest.ini -p no:cacheprovider \
     --junitxml="$BL_RESULTS/junit.xml" --basetemp="$cases" \
-    -n "${BL_IT_WORKERS:-2}" \
+    -n "${BL_IT_WORKERS:-0}" \
     -v -ra --durations=0 "$@"
 rc=$?
 exit $rc
