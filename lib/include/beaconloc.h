@@ -12,5 +12,6 @@
 #include "beaconloc/filter.h"
 #include "beaconloc/filter_model.h"
 #include "beaconloc/sequencer.h"
+#include "beaconloc/localizer.h"
 
 #endif /* BEACONLOC_H */

@@ -1,0 +1,291 @@
+/*
+ * beaconloc — the localizer: beacon sequencer + filter + the estimation
+ * policy that makes them robust on real data. One object, fed with receiver
+ * detections and wheel increments, giving the pose, counters and events.
+ * The bridge daemon and the firmware example both run on it.
+ *
+ * Policy (what the localizer does between the sequencer and the filter):
+ *   - Repeats are not fused. A later arrival of a firing that already gave a
+ *     pulse (bl_seq_pulse.repeat) is an echo or a straggler in all but freak
+ *     cases; before convergence the start-up gate would accept a wall echo
+ *     (Kleeman 1992 §3.9), after it a stream of gated-out echoes would feed
+ *     the persistent-rejection watch. Counted in repeats_skipped.
+ *   - Every member of a firing is fused (each receiver that heard it, with
+ *     its own ring position, Kleeman 1992 eq. 21): what the Cramér–Rao
+ *     bound counts, and no early bias of the earliest of several detections.
+ *     A member that shows a numbering error (below) ends the firing.
+ *   - Persistent rejection (robot kidnapped, filter drifted): of the last
+ *     W = K + K/2 arrivals fused or gated out (members of numbered firings;
+ *     repeats and misnumbered arrivals excluded), K rejected
+ *     by the gate across at least min(3, N) beacons restarts the filter from
+ *     the snapshot solver (bl_filter_start_snapshot, heading kept with σ
+ *     cfg.reset_sigma_theta_rad unless the ring gives one). K is
+ *     cfg.reset_reject_count (default 8: 8 of 12); 0 switches the watch off.
+ *     The filter's own consecutive-rejection reset is not used (this is the
+ *     one mechanism). Event RESET, cause PERSISTENT_REJECTION.
+ *   - Numbering errors: a rejected arrival whose innovation is longer than
+ *     the longest flight (seq cfg max_flight_us) while converged cannot come
+ *     from a pose error: the sequencer gave the wrong beacon number. Two in
+ *     a row re-synchronise the sequencer from the filter's firing times
+ *     (event RESYNC); they do not enter the rejection watch.
+ *   - Sequencer hint: while the filter is converged, its firing time of
+ *     beacon 1 and period (with σ) are handed to the sequencer after every
+ *     update (tighter windows; numbering survives a silent beacon 1); the
+ *     hint is dropped when not converged and on every re-initialisation.
+ *   - Wheel silences: pulses are fused after a constant-velocity predict
+ *     when no wheel sample came for BL_LOC_WHEEL_SILENCE_US before the pulse
+ *     (or none ever), or the state is older than that; a wheel increment
+ *     that spans such a silence (or whose interval was covered by a
+ *     constant-velocity predict, or ends before the state time) only sets
+ *     the reference: one increment over seconds hides the path's shape.
+ *   - Time gaps: a predict beyond cfg.max_predict_gap_s (BL_ETIME), or a
+ *     pulse too old for the state, re-initialises the filter (fresh, starts
+ *     again from the next complete cycle); event RESET, causes TIME_GAP /
+ *     STALE_PULSE. The filter's own restart of a stale state gives a RESET
+ *     with cause SNAPSHOT.
+ *   - Sequencer full (BL_EFULL): the pulses ready at the detection's time
+ *     are processed, then, if still full, the oldest are closed, all through
+ *     the same path (repeats skipped, counters kept).
+ *   The published reset counter is the filter's plus every re-initialisation
+ *   done here, so it never goes back.
+ *
+ * Time: every time is int64 microseconds on one monotonic timebase chosen
+ * by the caller (the receiver clock). The localizer never reads a clock:
+ * bl_localizer_advance(now) closes the sequencer's merge windows. Pass as
+ * now the current time minus the largest delivery latency of detections.
+ *
+ * Tags: each input carries a caller tag (uint64_t, never read by the
+ * library); the tag of the newest measurement fused into the state is
+ * reported (bl_loc_status.newest_tag), e.g. the receive time of the frame
+ * that carried it, so the caller finds its own context without searching.
+ *
+ * Events: a queue of BL_LOC_EVENT_QUEUE structured events (started, reset
+ * with its cause, converged / not converged, numbering re-synchronised);
+ * when full the oldest is dropped (counted in events_dropped). Text is the
+ * caller's business.
+ *
+ * Memory: caller-owned struct (filter + sequencer + policy state; sizeof
+ * reported by make size-m4), no heap, no globals. Cost per call: a
+ * detection O(BL_SEQ_MAX_PENDING + BL_MAX_RECEIVERS) plus what it closes;
+ * every pulse closed costs one bl_filter_fuse_pulse per member (O(NX²) per
+ * IEKF iteration, see filter.h) plus an estimate and a hint; a snapshot
+ * restart adds one bl_solve_tdoa_2d; a wheel increment one predict.
+ * Errors: every function returns BL_OK or a negative bl_error; on error
+ * *loc is left byte-identical. Errors are bad arguments only (NULL, not
+ * initialised, NaN/inf, out of range, time going backwards where stated).
+ * Bad data (echoes, outliers, late detections, misnumbered pulses) is
+ * counted, never an error. Not thread-safe per instance.
+ */
+#ifndef BEACONLOC_LOCALIZER_H
+#define BEACONLOC_LOCALIZER_H
+
+#include "beaconloc/common.h"
+#include "beaconloc/config.h"
+#include "beaconloc/filter.h"
+#include "beaconloc/sequencer.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* No wheel sample for this long before a pulse: constant-velocity predict
+ * first (us). */
+#define BL_LOC_WHEEL_SILENCE_US 200000
+/* Largest persistent-rejection window (first arrivals): W = K + K/2 is
+ * clamped to it (and K to W). */
+#define BL_LOC_REJECT_WINDOW_MAX 32
+/* Events kept until the caller takes them. */
+#ifndef BL_LOC_EVENT_QUEUE
+#define BL_LOC_EVENT_QUEUE 8
+#endif
+
+/* Wheel travel since the previous sample (differential drive). */
+typedef struct bl_wheel_increment {
+    int64_t t_us;          /* time of this sample (end of the increment), us */
+    bl_real d_left_m;      /* left wheel travel since the previous sample, m, as measured
+                              with the nominal wheel radius (ticks · 2πr / ticks_per_rev) */
+    bl_real d_right_m;     /* right wheel travel, m */
+    bool reference_only;   /* no increment known (first sample, encoder restart, count
+                              glitch): the sample only sets the time reference */
+    uint64_t tag;          /* caller's tag, never read by the library */
+} bl_wheel_increment;
+
+typedef enum bl_loc_event_kind {
+    BL_LOC_EV_STARTED = 1,        /* filter started (first start, or first after a fresh
+                                     re-initialisation): x_m, y_m */
+    BL_LOC_EV_RESET = 2,          /* re-initialised; see cause */
+    BL_LOC_EV_CONVERGED = 3,
+    BL_LOC_EV_NOT_CONVERGED = 4,
+    BL_LOC_EV_RESYNC = 5          /* beacon numbering re-synchronised from the filter */
+} bl_loc_event_kind;
+
+typedef enum bl_loc_reset_cause {
+    BL_LOC_CAUSE_NONE = 0,
+    BL_LOC_CAUSE_PERSISTENT_REJECTION = 1, /* restarted from the snapshot; count = rejected
+                                              arrivals of window_len */
+    BL_LOC_CAUSE_SNAPSHOT = 2,    /* the filter restarted itself from the snapshot (a stale
+                                     state after a time gap) */
+    BL_LOC_CAUSE_TIME_GAP = 3,    /* a predict beyond max_predict_gap_s: fresh filter */
+    BL_LOC_CAUSE_STALE_PULSE = 4, /* a pulse too old for the state: fresh filter */
+    BL_LOC_CAUSE_CONFIG = 5       /* bl_localizer_reinit (new geometry): fresh filter */
+} bl_loc_reset_cause;
+
+typedef struct bl_loc_event {
+    uint8_t kind;           /* bl_loc_event_kind */
+    uint8_t cause;          /* bl_loc_reset_cause (RESET), else 0 */
+    uint16_t count;         /* PERSISTENT_REJECTION: rejected arrivals in the window */
+    uint16_t window_len;    /* PERSISTENT_REJECTION: arrivals in the window (W) */
+    uint32_t reset_counter; /* published reset counter after the event */
+    int64_t t_us;           /* state time after the event (0 when not started) */
+    bl_real x_m, y_m;       /* position after the event (STARTED, RESET from a snapshot) */
+} bl_loc_event;
+
+/* Counters: uint32, wrapping; zero at init (bl_localizer_reinit keeps them). */
+typedef struct bl_loc_counters {
+    uint32_t pulses_in;          /* pulses popped from the sequencer (any status) */
+    uint32_t pulses_accepted;    /* arrivals fused (accepted, started, reset) */
+    uint32_t pulses_rejected;    /* arrivals rejected by the gate */
+    uint32_t pulses_buffered;    /* arrivals kept for the snapshot (not started / stale) */
+    uint32_t pulses_unassigned;  /* sequencer could not number them (unlocked) */
+    uint32_t pulses_spurious;    /* outside every window */
+    uint32_t repeats_skipped;    /* later arrivals of a firing: not fused */
+    uint32_t firings_accepted;   /* firings with at least one member fused */
+    uint32_t firings_rejected;   /* firings with a member rejected and none fused */
+    uint32_t snapshot_restarts;  /* restarts by the persistent-rejection watch */
+    uint32_t restart_failures;   /* watch triggered but the snapshot failed (watch cleared) */
+    uint32_t fuse_errors;        /* filter refused a pulse (library error) */
+    uint32_t predicts;           /* odometry predicts */
+    uint32_t cv_predicts;        /* constant-velocity predicts (wheels silent) */
+    uint32_t predict_errors;
+    uint32_t reinits;            /* fresh filters: time gaps, stale pulses, reinit */
+    uint32_t seq_errors;         /* detections the sequencer refused (late: older than a
+                                    pulse already closed) */
+    uint32_t seq_full;           /* sequencer full: pulses closed early */
+    uint32_t hint_errors;        /* hints the sequencer refused */
+    uint32_t numbering_errors;   /* rejected arrivals with innovations longer than any flight */
+    uint32_t seq_resyncs;        /* sequencer re-synchronised from the filter */
+    uint32_t events_dropped;     /* events lost because the queue was full */
+} bl_loc_counters;
+
+/* Summary for health reports. */
+typedef struct bl_loc_status {
+    bool started;            /* the filter has a state */
+    bool ever_started;       /* it had one at some time since bl_localizer_init */
+    bool converged;
+    uint32_t reset_counter;  /* published: filter's + re-initialisations done here */
+    uint32_t measurements;   /* measurements fused so far (arrivals and wheel increments);
+                                wraps. A change means a new update. */
+    bool have_tag;           /* newest_tag is valid (a measurement was fused) */
+    uint64_t newest_tag;     /* tag of the newest measurement fused into the state */
+    uint32_t window_len;     /* first arrivals in the persistent-rejection watch */
+    uint32_t window_rejected;/* of those, rejected by the gate */
+    uint32_t window_size;    /* W */
+} bl_loc_status;
+
+/* Caller-owned localizer. Members are PRIVATE except `filter` and `seq`,
+ * which may be read (not written) through their own const functions
+ * (bl_filter_estimate, bl_sequencer_state, seq.counters). */
+typedef struct bl_localizer {
+    bl_filter filter;
+    bl_sequencer seq;
+    /* ---- private ---- */
+    uint32_t magic_;
+    uint32_t reject_k_;          /* K */
+    uint32_t reject_w_;          /* W */
+    uint32_t win_rejected_;      /* bit i: slot i rejected */
+    uint32_t win_len_, win_next_;
+    uint8_t win_beacon_[BL_LOC_REJECT_WINDOW_MAX];
+    uint32_t reset_base_;
+    uint32_t last_reset_seen_;
+    uint32_t misnumbered_in_row_;
+    uint32_t measurements_;
+    uint64_t newest_tag_;
+    bool have_tag_;
+    bool was_started_;
+    bool ever_started_;
+    bool was_converged_;
+    bool hint_set_;
+    bool wheel_seen_;            /* a wheel sample came */
+    bool wheel_ref_;             /* the last sample is a valid increment start */
+    int64_t wheel_last_us_;      /* last wheel sample */
+    bl_loc_counters counters_;
+    bl_loc_event events_[BL_LOC_EVENT_QUEUE];
+    uint32_t ev_head_, ev_len_;
+} bl_localizer;
+
+/* The sequencer config for a site (bl_sequencer_config_from_site with the
+ * robot inside the beacons' hull), and on failure the cause in words
+ * (static text, e.g. "period too short for the beacons' spread: the beacon
+ * time windows overlap"; NULL on success) and the bl_config field at fault
+ * (static text, NULL when none). *out written only on success.
+ * Errors: as bl_sequencer_config_from_site. */
+int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out,
+                            const char **why, const char **field);
+
+/* Initialise *loc for the site cfg and the sequencer config seq_cfg (e.g.
+ * from bl_localizer_seq_config). Not started: pulses buffer until the
+ * filter starts from a snapshot. Errors: BL_EINVAL (NULL), BL_ECONFIG
+ * (bl_config_check or bl_sequencer_config_check fails, or the two disagree
+ * on beacon or receiver count). */
+int bl_localizer_init(bl_localizer *loc, const bl_config *cfg, const bl_seq_config *seq_cfg);
+
+/* New tuning, same geometry: the filter keeps its state
+ * (bl_filter_update_config); a different sequencer config re-initialises the
+ * sequencer and hands it the filter's hint at once. Errors: BL_EINVAL,
+ * BL_ENOTINIT, BL_ECONFIG (bad config, geometry changed, or wheel-scale
+ * calibration switched on/off: use bl_localizer_reinit). */
+int bl_localizer_update_config(bl_localizer *loc, const bl_config *cfg, const bl_seq_config *seq_cfg);
+
+/* New configuration with a fresh filter and sequencer; the published reset
+ * counter and the counters go on (event RESET, cause CONFIG, if the filter
+ * had started). Errors: BL_EINVAL, BL_ENOTINIT, BL_ECONFIG. */
+int bl_localizer_reinit(bl_localizer *loc, const bl_config *cfg, const bl_seq_config *seq_cfg);
+
+/* The receiver node restarted (its clock and stream start over): the
+ * sequencer forgets its lock, hint and pending pulses; the filter goes on.
+ * Errors: BL_EINVAL, BL_ENOTINIT. */
+int bl_localizer_sequencer_reset(bl_localizer *loc);
+
+/* One receiver detection (det->tag is carried to the pulse's members).
+ * Pushed into the sequencer; when it is full the pulses ready at
+ * det->time_us are processed first, then the oldest closed.
+ * A detection older than a pulse already closed is counted (seq_errors).
+ * Errors: BL_EINVAL (NULL, receiver >= receiver_count, |time_us| >
+ * BL_SEQ_TIME_LIMIT_US), BL_ENOTINIT. */
+int bl_localizer_detection(bl_localizer *loc, const bl_seq_detection *det);
+
+/* Processes every pulse whose merge window has closed at now_us (the
+ * current time minus the largest delivery latency of detections; INT64_MAX
+ * flushes): numbered first arrivals are fused member by member, repeats
+ * skipped, the policy above applied. Errors: BL_EINVAL (NULL), BL_ENOTINIT. */
+int bl_localizer_advance(bl_localizer *loc, int64_t now_us);
+
+/* One wheel sample. Call bl_localizer_advance(t_us - latency) first so the
+ * pulses that arrived before it go first. Not started: only the reference.
+ * Errors: BL_EINVAL (NULL, NaN/inf, |d| > 10 m), BL_ENOTINIT, BL_ETIME
+ * (t_us not after the previous wheel sample). */
+int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *inc);
+
+/* Estimate at the state time, reset_counter = the published one.
+ * Errors: BL_EINVAL (NULL), BL_ENOTINIT (not initialised, or not started). */
+int bl_localizer_estimate(const bl_localizer *loc, bl_estimate *est);
+
+/* Estimate extrapolated to t_us (constant velocity); at the state time when
+ * t_us is not after it. Errors: BL_EINVAL, BL_ENOTINIT (not started),
+ * BL_ETIME (t_us more than cfg.max_predict_gap_s after the state time: no
+ * stale pose with a stale covariance). */
+int bl_localizer_estimate_at(const bl_localizer *loc, int64_t t_us, bl_estimate *est);
+
+/* Counters and status. Errors: BL_EINVAL, BL_ENOTINIT. */
+int bl_localizer_counters(const bl_localizer *loc, bl_loc_counters *out);
+int bl_localizer_status(const bl_localizer *loc, bl_loc_status *out);
+
+/* Takes the oldest event: returns 1 and fills *ev, or 0 (BL_OK) when none.
+ * Errors: BL_EINVAL, BL_ENOTINIT. */
+int bl_localizer_next_event(bl_localizer *loc, bl_loc_event *ev);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* BEACONLOC_LOCALIZER_H */

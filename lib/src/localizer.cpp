@@ -1,0 +1,607 @@
+// beaconloc — the localizer: sequencer + filter + estimation policy
+// (localizer.h). No heap, no clock reads; every public function validates its
+// arguments before touching *loc.
+extern "C" {
+#include "beaconloc/localizer.h"
+}
+
+#include <cstring>
+
+#include "internal.hpp"
+
+namespace {
+
+constexpr uint32_t kMagic = 0x6C6F6331u;  // "loc1"
+
+// Tag of member m of a pulse (the detection's tag, carried by the sequencer).
+inline uint64_t member_tag(const bl_seq_pulse &pl, uint32_t m)
+{
+    (void)pl;
+    (void)m;
+    return 0;  // TODO(h1 API): pl.members[m].tag
+}
+
+bool valid(const bl_localizer *loc) { return loc != nullptr && loc->magic_ == kMagic; }
+
+void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset_cause cause, uint16_t count)
+{
+    bl_loc_event ev;
+    std::memset(&ev, 0, sizeof ev);
+    ev.kind = static_cast<uint8_t>(kind);
+    ev.cause = static_cast<uint8_t>(cause);
+    ev.count = count;
+    ev.window_len = static_cast<uint16_t>(loc->reject_w_);
+    bl_estimate est;
+    if (bl_filter_estimate(&loc->filter, &est) == BL_OK && est.started) {
+        ev.t_us = est.t_us;
+        ev.x_m = est.x_m;
+        ev.y_m = est.y_m;
+        ev.reset_counter = loc->reset_base_ + est.reset_counter;
+    } else {
+        ev.reset_counter = loc->reset_base_;
+    }
+    if (loc->ev_len_ == BL_LOC_EVENT_QUEUE) {  // drop the oldest
+        loc->ev_head_ = (loc->ev_head_ + 1) % BL_LOC_EVENT_QUEUE;
+        loc->ev_len_--;
+        loc->counters_.events_dropped++;
+    }
+    loc->events_[(loc->ev_head_ + loc->ev_len_) % BL_LOC_EVENT_QUEUE] = ev;
+    loc->ev_len_++;
+}
+
+// The filter gets the site config without its own persistent-rejection
+// reset: the localizer's window is the one mechanism (cfg.reset_reject_count
+// is K of the window here).
+bl_config filter_config(const bl_config *cfg)
+{
+    bl_config c = *cfg;
+    c.reset_reject_count = 0;
+    return c;
+}
+
+void set_window(bl_localizer *loc, uint32_t k)
+{
+    uint32_t w = k + k / 2;
+    if (w > BL_LOC_REJECT_WINDOW_MAX) w = BL_LOC_REJECT_WINDOW_MAX;
+    if (k > w) k = w;
+    loc->reject_k_ = k;
+    loc->reject_w_ = w;
+    loc->win_len_ = loc->win_next_ = 0;
+    loc->win_rejected_ = 0;
+}
+
+bool configs_agree(const bl_config *cfg, const bl_seq_config *sc)
+{
+    return bl_config_check(cfg, nullptr) == BL_OK && bl_sequencer_config_check(sc) == BL_OK &&
+           sc->beacon_count == cfg->beacon_count && sc->receiver_count == cfg->receiver_count;
+}
+
+// ---- sequencer hint ------------------------------------------------------
+
+// While converged, the filter's firing-time prediction goes to the
+// sequencer; dropped when not converged.
+void update_hint(bl_localizer *loc, const bl_estimate &est)
+{
+    if (!est.started || !est.converged) {
+        if (loc->hint_set_) {
+            (void)bl_sequencer_clear_hint(&loc->seq);
+            loc->hint_set_ = false;
+        }
+        return;
+    }
+    bl_seq_hint h;
+    int rc = bl_sequencer_hint_from_estimate(&est, &h);
+    if (rc == BL_OK) rc = bl_sequencer_set_hint(&loc->seq, &h);
+    if (rc == BL_OK)
+        loc->hint_set_ = true;
+    else
+        loc->counters_.hint_errors++;
+}
+
+// ---- re-initialisation ---------------------------------------------------
+
+// A fresh filter (pulses buffer until the next snapshot start); the
+// published reset counter keeps counting.
+void reinit_filter(bl_localizer *loc, bl_loc_reset_cause cause)
+{
+    bl_estimate est;
+    const bool was = bl_filter_estimate(&loc->filter, &est) == BL_OK && est.started;
+    if (was) loc->reset_base_ += est.reset_counter + 1;
+    bl_config c = loc->filter.cfg_;  // already without the filter's own reset
+    (void)bl_filter_init(&loc->filter, &c);
+    (void)bl_sequencer_clear_hint(&loc->seq);
+    loc->hint_set_ = false;
+    loc->counters_.reinits++;
+    loc->last_reset_seen_ = 0;
+    loc->was_started_ = false;
+    loc->was_converged_ = false;
+    loc->wheel_ref_ = false;
+    loc->win_len_ = 0;
+    loc->win_rejected_ = 0;
+    loc->misnumbered_in_row_ = 0;
+    if (was) push_event(loc, BL_LOC_EV_RESET, cause, 0);
+}
+
+void measurement_fused(bl_localizer *loc, uint64_t tag)
+{
+    loc->measurements_++;
+    loc->newest_tag_ = tag;
+    loc->have_tag_ = true;
+}
+
+// ---- persistent-rejection watch -----------------------------------------
+
+void watch(bl_localizer *loc, uint32_t beacon, bool rejected)
+{
+    if (loc->reject_w_ == 0) return;
+    const uint32_t bit = 1u << loc->win_next_;
+    loc->win_beacon_[loc->win_next_] = static_cast<uint8_t>(beacon);
+    loc->win_rejected_ = rejected ? (loc->win_rejected_ | bit) : (loc->win_rejected_ & ~bit);
+    loc->win_next_ = (loc->win_next_ + 1) % loc->reject_w_;
+    if (loc->win_len_ < loc->reject_w_) loc->win_len_++;
+}
+
+uint32_t window_rejected(const bl_localizer *loc, uint32_t *beacon_mask)
+{
+    uint32_t n = 0, mask = 0;
+    for (uint32_t i = 0; i < loc->win_len_; i++)
+        if (loc->win_rejected_ & (1u << i)) {
+            n++;
+            mask |= 1u << loc->win_beacon_[i];
+        }
+    if (beacon_mask) *beacon_mask = mask;
+    return n;
+}
+
+// Restarts from the snapshot when the watch says so; true if restarted.
+bool restart_if_persistent(bl_localizer *loc)
+{
+    if (loc->reject_k_ == 0 || loc->win_len_ < loc->reject_w_) return false;
+    uint32_t mask = 0;
+    const uint32_t n = window_rejected(loc, &mask);
+    const uint32_t n_beacons = loc->filter.cfg_.beacon_count;
+    const int need = static_cast<int>(n_beacons < 3 ? n_beacons : 3);
+    if (n < loc->reject_k_ || __builtin_popcount(mask) < need) return false;
+    bl_estimate est;
+    (void)bl_filter_estimate(&loc->filter, &est);
+    const int rc = bl_filter_start_snapshot(&loc->filter, est.theta_rad, loc->filter.cfg_.reset_sigma_theta_rad);
+    loc->win_len_ = 0;
+    loc->win_rejected_ = 0;
+    if (rc != BL_OK) {
+        loc->counters_.restart_failures++;
+        return false;
+    }
+    loc->counters_.snapshot_restarts++;
+    loc->wheel_ref_ = false;  // the state time moved to the latest arrival
+    bl_estimate now;
+    (void)bl_filter_estimate(&loc->filter, &now);
+    loc->last_reset_seen_ = now.reset_counter;  // this reset is reported here, once
+    push_event(loc, BL_LOC_EV_RESET, BL_LOC_CAUSE_PERSISTENT_REJECTION, static_cast<uint16_t>(n));
+    return true;
+}
+
+// ---- pulses --------------------------------------------------------------
+
+enum class Fused { kNo, kAccepted, kRejected, kMisnumbered };
+
+// One arrival (beacon, time, receiver) of a firing.
+Fused fuse_one(bl_localizer *loc, uint32_t beacon, int64_t arrival_us, uint32_t receiver)
+{
+    bl_estimate est;
+    (void)bl_filter_estimate(&loc->filter, &est);
+    // Wheels silent before this pulse (or never heard), or no update for
+    // that long: constant-velocity predict to the pulse, so the process
+    // noise of the interval is in P before the fusion.
+    const bool wheels_stale = !loc->wheel_seen_ || arrival_us - loc->wheel_last_us_ > BL_LOC_WHEEL_SILENCE_US;
+    if (est.started &&
+        ((wheels_stale && arrival_us > est.t_us) || arrival_us - est.t_us > BL_LOC_WHEEL_SILENCE_US)) {
+        const int prc = bl_filter_predict(&loc->filter, arrival_us);
+        if (prc == BL_OK) {
+            loc->counters_.cv_predicts++;
+            loc->wheel_ref_ = false;  // the silence is covered by this predict
+        } else if (prc == BL_ETIME) {
+            reinit_filter(loc, BL_LOC_CAUSE_TIME_GAP);
+        } else {
+            loc->counters_.predict_errors++;
+        }
+    }
+    bl_pulse_result res;
+    int rc = bl_filter_fuse_pulse(&loc->filter, beacon, arrival_us, receiver, &res);
+    if (rc == BL_ETIME) {
+        reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
+        rc = bl_filter_fuse_pulse(&loc->filter, beacon, arrival_us, receiver, &res);
+    }
+    if (rc != BL_OK) {
+        loc->counters_.fuse_errors++;
+        return Fused::kNo;
+    }
+    // An innovation longer than the longest flight: a numbering error, not a
+    // pose error (see localizer.h). Two in a row while converged re-sync.
+    const bool misnumbered = res.status == BL_PULSE_REJECTED && loc->was_converged_ &&
+                             (res.innovation_s < 0 ? -res.innovation_s : res.innovation_s) * bl_real(1e6) >
+                                 bl_real(loc->seq.cfg.max_flight_us);
+    if (misnumbered) {
+        loc->counters_.numbering_errors++;
+        loc->counters_.pulses_rejected++;
+        if (++loc->misnumbered_in_row_ >= 2) {
+            bl_estimate now;
+            (void)bl_filter_estimate(&loc->filter, &now);
+            (void)bl_sequencer_reset(&loc->seq);
+            loc->hint_set_ = false;
+            update_hint(loc, now);
+            loc->misnumbered_in_row_ = 0;
+            loc->counters_.seq_resyncs++;
+            push_event(loc, BL_LOC_EV_RESYNC, BL_LOC_CAUSE_NONE, 0);
+        }
+        return Fused::kMisnumbered;
+    }
+    if (res.status == BL_PULSE_ACCEPTED) loc->misnumbered_in_row_ = 0;
+    switch (res.status) {
+    case BL_PULSE_ACCEPTED:
+    case BL_PULSE_STARTED:
+    case BL_PULSE_RESET:
+        loc->counters_.pulses_accepted++;
+        return Fused::kAccepted;
+    case BL_PULSE_REJECTED:
+        loc->counters_.pulses_rejected++;
+        return Fused::kRejected;
+    case BL_PULSE_BUFFERED:
+    default:
+        loc->counters_.pulses_buffered++;
+        return Fused::kNo;
+    }
+}
+
+// Bookkeeping after a state change: events, hint.
+void after_update(bl_localizer *loc)
+{
+    bl_estimate est;
+    (void)bl_filter_estimate(&loc->filter, &est);
+    if (est.started) loc->ever_started_ = true;
+    if (est.started && !loc->was_started_) {
+        loc->was_started_ = true;
+        loc->last_reset_seen_ = est.reset_counter;
+        push_event(loc, BL_LOC_EV_STARTED, BL_LOC_CAUSE_NONE, 0);
+    }
+    if (est.started && est.reset_counter != loc->last_reset_seen_) {
+        loc->last_reset_seen_ = est.reset_counter;
+        push_event(loc, BL_LOC_EV_RESET, BL_LOC_CAUSE_SNAPSHOT, 0);
+    }
+    update_hint(loc, est);
+    if (est.started && est.converged != loc->was_converged_) {
+        loc->was_converged_ = est.converged;
+        push_event(loc, est.converged ? BL_LOC_EV_CONVERGED : BL_LOC_EV_NOT_CONVERGED, BL_LOC_CAUSE_NONE, 0);
+    }
+}
+
+// One numbered firing: every member fused and watched.
+void fuse_firing(bl_localizer *loc, const bl_seq_pulse &pl)
+{
+    const uint32_t beacon = static_cast<uint32_t>(pl.beacon);
+    const uint32_t n = (pl.member_count == 0 || pl.member_count > BL_MAX_RECEIVERS) ? 0 : pl.member_count;
+    bool any_accepted = false, any_rejected = false;
+    for (uint32_t m = 0; m < (n ? n : 1u); m++) {
+        const int64_t t = n ? pl.members[m].arrival_us : pl.arrival_us;
+        const uint32_t rx = n ? pl.members[m].receiver : pl.receiver;
+        const uint64_t tag = n ? member_tag(pl, m) : 0;
+        const Fused r = fuse_one(loc, beacon, t, rx);
+        if (r == Fused::kMisnumbered) break;  // one numbering error, not one per receiver
+        bool fused = r == Fused::kAccepted;
+        if (r == Fused::kAccepted || r == Fused::kRejected) {
+            watch(loc, beacon, r == Fused::kRejected);
+            if (r == Fused::kRejected && restart_if_persistent(loc)) fused = true;
+        }
+        if (r == Fused::kRejected) any_rejected = true;
+        if (fused) {
+            any_accepted = true;
+            measurement_fused(loc, tag);
+            after_update(loc);
+        }
+    }
+    if (any_accepted)
+        loc->counters_.firings_accepted++;
+    else if (any_rejected)
+        loc->counters_.firings_rejected++;
+}
+
+void process_pulse(bl_localizer *loc, const bl_seq_pulse &pl)
+{
+    loc->counters_.pulses_in++;
+    if (pl.status == BL_SEQ_UNLOCKED) {
+        loc->counters_.pulses_unassigned++;
+        return;
+    }
+    if (pl.status != BL_SEQ_ASSIGNED || pl.beacon < 0 ||
+        static_cast<uint32_t>(pl.beacon) >= loc->filter.cfg_.beacon_count) {
+        loc->counters_.pulses_spurious++;
+        return;
+    }
+    if (pl.repeat) {  // a later arrival of a firing: an echo (localizer.h)
+        loc->counters_.repeats_skipped++;
+        return;
+    }
+    fuse_firing(loc, pl);
+}
+
+void pop_until(bl_localizer *loc, int64_t now_us)
+{
+    bl_seq_pulse pl;
+    int rc;
+    while ((rc = bl_sequencer_pop(&loc->seq, now_us, &pl)) == 1) process_pulse(loc, pl);
+    if (rc < 0) loc->counters_.seq_errors++;
+}
+
+bool finite_real(bl_real v) { return bl::is_finite(v); }
+
+}  // namespace
+
+// ---- public API -----------------------------------------------------------
+
+extern "C" int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out, const char **why,
+                                       const char **field)
+{
+    if (why) *why = nullptr;
+    if (field) *field = nullptr;
+    const int rc = bl_sequencer_config_from_site(site, 0, out);
+    if (rc == BL_OK || site == nullptr || out == nullptr) return rc;
+    // The cause, in the order bl_sequencer_config_from_site checks.
+    const char *w = "the beacon sequencer refuses the site";
+    const char *f = nullptr;
+    const bl_real s_min = site->speed_of_sound_mps - 3 * site->sigma_speed_of_sound_mps;
+    if (site->beacon_count < 1 || site->beacon_count > BL_MAX_BEACONS) {
+        w = "beacon count out of range", f = "beacon_count";
+    } else if (site->receiver_count < 1 || site->receiver_count > BL_MAX_RECEIVERS) {
+        w = "receiver count out of range", f = "receiver_count";
+    } else if (rc == BL_EINVAL) {
+        w = "a value is not finite", f = nullptr;
+    } else if (!(s_min > 100) || !(s_min < 1000)) {
+        w = "speed of sound minus 3 sigma outside (100, 1000) m/s", f = "sigma_speed_of_sound_mps";
+    } else if (!(site->beacon_period_s > 0) || !(site->beacon_period_s <= 10)) {
+        w = "period outside (0, 10] s", f = "beacon_period_s";
+    } else if (!(site->double_pulse_spacing_s >= 0) || !(site->double_pulse_spacing_s < site->beacon_period_s)) {
+        w = "double-pulse spacing not in [0, period)", f = "double_pulse_spacing_s";
+    } else if (!(site->burst_length_s >= 0) || !(site->burst_length_s < site->beacon_period_s)) {
+        w = "burst length not in [0, period)", f = "burst_length_s";
+    } else if (!(site->ring_radius_m >= 0) || !(site->ring_radius_m < 100)) {
+        w = "ring radius not in [0, 100) m", f = "ring_radius_m";
+    } else {
+        // Same site with the longest period the sequencer takes: if that
+        // passes, the period is too short for the beacons' spread.
+        bl_config longer = *site;
+        longer.beacon_period_s = 10;
+        bl_seq_config probe;
+        if (bl_sequencer_config_from_site(&longer, 0, &probe) == BL_OK) {
+            w = "period too short for the beacons' spread: the beacon time windows overlap";
+            f = "beacon_period_s";
+        } else {
+            // Windows of one firing: merge window (ring diameter) against
+            // the double-pulse spacing, or distances beyond 1000 km.
+            w = "merge window (ring diameter / speed of sound) not shorter than the double-pulse "
+                "spacing minus its tolerance, or beacons farther than 1000 km";
+            f = "double_pulse_spacing_s";
+        }
+    }
+    if (why) *why = w;
+    if (field) *field = f;
+    return rc;
+}
+
+extern "C" int bl_localizer_init(bl_localizer *loc, const bl_config *cfg, const bl_seq_config *seq_cfg)
+{
+    if (loc == nullptr || cfg == nullptr || seq_cfg == nullptr) return BL_EINVAL;
+    if (!configs_agree(cfg, seq_cfg)) return BL_ECONFIG;
+    std::memset(loc, 0, sizeof *loc);
+    const bl_config fc = filter_config(cfg);
+    if (bl_filter_init(&loc->filter, &fc) != BL_OK || bl_sequencer_init(&loc->seq, seq_cfg) != BL_OK) {
+        std::memset(loc, 0, sizeof *loc);
+        return BL_ECONFIG;
+    }
+    set_window(loc, cfg->reset_reject_count);
+    loc->magic_ = kMagic;
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_update_config(bl_localizer *loc, const bl_config *cfg, const bl_seq_config *seq_cfg)
+{
+    if (loc == nullptr || cfg == nullptr || seq_cfg == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    if (!configs_agree(cfg, seq_cfg)) return BL_ECONFIG;
+    const bl_config fc = filter_config(cfg);
+    if (bl_filter_update_config(&loc->filter, &fc) != BL_OK) return BL_ECONFIG;  // filter untouched
+    if (cfg->reset_reject_count != loc->reject_k_) set_window(loc, cfg->reset_reject_count);
+    if (std::memcmp(seq_cfg, &loc->seq.cfg, sizeof *seq_cfg) != 0) {
+        // New windows (they follow the speed-of-sound tuning): the filter's
+        // hint at once so the numbering goes on without waiting for beacon 1.
+        const bl_seq_counters kept = loc->seq.counters;
+        (void)bl_sequencer_init(&loc->seq, seq_cfg);
+        loc->seq.counters = kept;
+        loc->hint_set_ = false;
+        bl_estimate est;
+        if (bl_filter_estimate(&loc->filter, &est) == BL_OK) update_hint(loc, est);
+    }
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_reinit(bl_localizer *loc, const bl_config *cfg, const bl_seq_config *seq_cfg)
+{
+    if (loc == nullptr || cfg == nullptr || seq_cfg == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    if (!configs_agree(cfg, seq_cfg)) return BL_ECONFIG;
+    const bl_seq_counters kept = loc->seq.counters;
+    (void)bl_sequencer_init(&loc->seq, seq_cfg);
+    loc->seq.counters = kept;
+    const bl_config fc = filter_config(cfg);
+    loc->filter.cfg_ = fc;  // reinit_filter re-initialises with the filter's config
+    reinit_filter(loc, BL_LOC_CAUSE_CONFIG);
+    set_window(loc, cfg->reset_reject_count);
+    loc->wheel_seen_ = false;
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_sequencer_reset(bl_localizer *loc)
+{
+    if (loc == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    (void)bl_sequencer_reset(&loc->seq);
+    loc->hint_set_ = false;
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_detection(bl_localizer *loc, const bl_seq_detection *det)
+{
+    if (loc == nullptr || det == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    if (det->receiver >= loc->seq.cfg.receiver_count || det->time_us > BL_SEQ_TIME_LIMIT_US ||
+        det->time_us < -BL_SEQ_TIME_LIMIT_US)
+        return BL_EINVAL;
+    int rc = bl_sequencer_push(&loc->seq, det);
+    if (rc == BL_EFULL) {
+        loc->counters_.seq_full++;
+        pop_until(loc, det->time_us);
+        rc = bl_sequencer_push(&loc->seq, det);
+        if (rc == BL_EFULL) {  // still full: close the oldest pulses, same path as any pulse
+            bl_seq_pulse pl;
+            while (loc->seq.n_pending >= BL_SEQ_MAX_PENDING && bl_sequencer_pop(&loc->seq, INT64_MAX / 4, &pl) == 1)
+                process_pulse(loc, pl);
+            rc = bl_sequencer_push(&loc->seq, det);
+        }
+    }
+    if (rc != BL_OK) loc->counters_.seq_errors++;  // late detection: bad data, counted
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_advance(bl_localizer *loc, int64_t now_us)
+{
+    if (loc == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    pop_until(loc, now_us);
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *inc)
+{
+    if (loc == nullptr || inc == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    if (!finite_real(inc->d_left_m) || !finite_real(inc->d_right_m) || inc->d_left_m > 10 || inc->d_left_m < -10 ||
+        inc->d_right_m > 10 || inc->d_right_m < -10 || inc->t_us > BL_SEQ_TIME_LIMIT_US ||
+        inc->t_us < -BL_SEQ_TIME_LIMIT_US)
+        return BL_EINVAL;
+    if (loc->wheel_seen_ && inc->t_us <= loc->wheel_last_us_) return BL_ETIME;
+    const int64_t last = loc->wheel_last_us_;
+    const int64_t gap = inc->t_us - last;
+    const bool had_ref = loc->wheel_ref_ && loc->wheel_seen_ && !inc->reference_only;
+    loc->wheel_last_us_ = inc->t_us;
+    loc->wheel_seen_ = true;
+    loc->wheel_ref_ = true;
+    if (!had_ref) return BL_OK;
+    bl_estimate est;
+    (void)bl_filter_estimate(&loc->filter, &est);
+    if (!est.started) return BL_OK;
+    // Sample older than the state (the filter just started at a pulse), the
+    // interval already covered by a constant-velocity predict, or an
+    // increment that spans a silence: the reference only (localizer.h).
+    if (inc->t_us <= est.t_us || last < est.t_us - BL_LOC_WHEEL_SILENCE_US || gap > BL_LOC_WHEEL_SILENCE_US)
+        return BL_OK;
+    if (last > est.t_us) {
+        // The state is older than the increment's start: constant velocity
+        // up to it first, so the increment is divided by its own interval.
+        const int prc = bl_filter_predict(&loc->filter, last);
+        if (prc == BL_OK) {
+            loc->counters_.cv_predicts++;
+        } else if (prc == BL_ETIME) {
+            reinit_filter(loc, BL_LOC_CAUSE_TIME_GAP);
+            return BL_OK;
+        } else {
+            loc->counters_.predict_errors++;
+            return BL_OK;
+        }
+    }
+    // Wheel increments are the dead-reckoning input of Kleeman 1992 §3.8
+    // (eq. 24; the filter forms Δθ = (d_r − d_l) / wheel_base).
+    const int rc = bl_filter_predict_odometry(&loc->filter, inc->t_us, inc->d_left_m, inc->d_right_m);
+    if (rc == BL_OK) {
+        loc->counters_.predicts++;
+        measurement_fused(loc, inc->tag);
+        after_update(loc);
+    } else if (rc == BL_ETIME) {
+        reinit_filter(loc, BL_LOC_CAUSE_TIME_GAP);
+    } else {
+        loc->counters_.predict_errors++;
+    }
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_estimate(const bl_localizer *loc, bl_estimate *est)
+{
+    if (loc == nullptr || est == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    bl_estimate e;
+    const int rc = bl_filter_estimate(&loc->filter, &e);
+    if (rc != BL_OK) return rc;
+    if (!e.started) return BL_ENOTINIT;
+    e.reset_counter += loc->reset_base_;
+    *est = e;
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_estimate_at(const bl_localizer *loc, int64_t t_us, bl_estimate *est)
+{
+    if (loc == nullptr || est == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    bl_estimate now;
+    int rc = bl_filter_estimate(&loc->filter, &now);
+    if (rc != BL_OK) return rc;
+    if (!now.started) return BL_ENOTINIT;
+    bl_estimate e = now;
+    if (t_us > now.t_us) {
+        rc = bl_filter_estimate_at(&loc->filter, t_us, &e);
+        if (rc != BL_OK) return rc;
+    }
+    e.reset_counter += loc->reset_base_;
+    *est = e;
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_counters(const bl_localizer *loc, bl_loc_counters *out)
+{
+    if (loc == nullptr || out == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    *out = loc->counters_;
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_status(const bl_localizer *loc, bl_loc_status *out)
+{
+    if (loc == nullptr || out == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    bl_loc_status s;
+    std::memset(&s, 0, sizeof s);
+    bl_estimate est;
+    if (bl_filter_estimate(&loc->filter, &est) == BL_OK && est.started) {
+        s.started = true;
+        s.converged = est.converged;
+        s.reset_counter = loc->reset_base_ + est.reset_counter;
+    } else {
+        s.reset_counter = loc->reset_base_;
+    }
+    s.ever_started = loc->ever_started_ || s.started;
+    s.measurements = loc->measurements_;
+    s.have_tag = loc->have_tag_;
+    s.newest_tag = loc->newest_tag_;
+    s.window_len = loc->win_len_;
+    s.window_rejected = window_rejected(loc, nullptr);
+    s.window_size = loc->reject_w_;
+    *out = s;
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_next_event(bl_localizer *loc, bl_loc_event *ev)
+{
+    if (loc == nullptr || ev == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    if (loc->ev_len_ == 0) return 0;
+    *ev = loc->events_[loc->ev_head_];
+    loc->ev_head_ = (loc->ev_head_ + 1) % BL_LOC_EVENT_QUEUE;
+    loc->ev_len_--;
+    return 1;
+}
