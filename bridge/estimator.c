@@ -1,5 +1,7 @@
 /*
- * beaconloc-bridge — estimator glue (sequencer, filter, node clocks, health).
+ * beaconloc-bridge — estimator glue: node clocks, encoder ticks -> metres,
+ * health events; the estimation itself (sequencer, filter and the policy
+ * between them) is the library's localizer (beaconloc/localizer.h).
  */
 #include "estimator.h"
 
@@ -11,26 +13,17 @@
 
 #include "log.h"
 
-/* Encoders silent this long: pulses are fused after a constant-velocity
- * predict, and the silence is reported. */
-#define ENC_SILENCE_US 200000
 /* Fastest plausible wheel (m/s): a larger count difference is a glitch. */
 #define MAX_WHEEL_MPS 10.0
 /* Encoders silent this long are reported (STATUSTEXT). */
 #define ENC_REPORT_US 500000
-/* Slack subtracted from "now" before popping pulses, covering node-clock
+/* Encoder silences longer than this are counted (encoder_gaps); the
+ * localizer coasts through them at constant velocity. */
+#define ENC_SILENCE_US BL_LOC_WHEEL_SILENCE_US
+/* Slack subtracted from "now" before closing pulses, covering node-clock
  * mapping error and transmission order (us). */
 #define POP_SLACK_ENC_US 5000
 #define POP_SLACK_TICK_US 20000
-/* Persistent rejection (robot kidnapped, filter drifted): of the last
- * REJECT_WINDOW first arrivals (two firing cycles of six beacons),
- * REJECT_MIN rejected across at least REJECT_BEACONS beacons restarts the
- * filter from the snapshot solver. Unlike a count of consecutive
- * rejections, one beacon whose innovation happens to be absorbed by the
- * firing time cannot hold the restart off. */
-#define REJECT_WINDOW 12
-#define REJECT_MIN 8
-#define REJECT_BEACONS 3
 /* Echo-storm evaluation window (us). */
 #define STORM_WINDOW_US 5000000
 #define STORM_MIN_PULSES 10
@@ -176,6 +169,41 @@ static int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
     return 0;
 }
 
+
+/* The sequencer config with the real cause of a refusal (the localizer
+ * names it), reported against the site-file key at fault. */
+static int seq_config_checked(const struct bridge_config *cfg, const bl_config *c,
+                              char *err, size_t errlen)
+{
+    bl_seq_config sc;
+    const char *why = NULL, *field = NULL;
+    int rc = bl_localizer_seq_config(c, &sc, &why, &field);
+    if (rc == BL_OK)
+        return 0;
+    const char *section = "beacons", *key = "period_s";
+    for (size_t i = 0; field && i < sizeof field_keys / sizeof field_keys[0]; i++)
+        if (!strcmp(field_keys[i].field, field)) {
+            section = field_keys[i].section;
+            key = field_keys[i].key;
+        }
+    char text[200];
+    snprintf(text, sizeof text, "%s (%s)", why ? why : "refused by the beacon sequencer",
+             bl_strerror(rc));
+    config_format_error(cfg, section, key, text, err, errlen);
+    return -1;
+}
+
+/* Both library configs, or -1 with the cause in err. */
+static int make_configs(const struct bridge_config *cfg, bl_config *c,
+                        bl_seq_config *sc, char *err, size_t errlen)
+{
+    if (estimator_make_config(cfg, c, err, errlen) ||
+        seq_config_checked(cfg, c, err, errlen) ||
+        make_seq_config(cfg, c, sc, err, errlen))
+        return -1;
+    return 0;
+}
+
 int64_t estimator_pulse_hold_us(const struct bridge_config *cfg)
 {
     /* The receiver node holds each detection for double_pulse_spacing_s plus
@@ -183,38 +211,120 @@ int64_t estimator_pulse_hold_us(const struct bridge_config *cfg)
     return (int64_t)llround((cfg->double_pulse_spacing_s + cfg->double_pulse_tolerance_s) * 1e6);
 }
 
-/* Field by field (no padding, no accidental fields). */
-static bool seq_config_equal(const bl_seq_config *a, const bl_seq_config *b)
-{
-    return a->beacon_count == b->beacon_count &&
-           a->receiver_count == b->receiver_count &&
-           a->period_us == b->period_us &&
-           a->period_tolerance_ppm == b->period_tolerance_ppm &&
-           a->max_flight_us == b->max_flight_us &&
-           a->merge_window_us == b->merge_window_us &&
-           a->window_margin_us == b->window_margin_us &&
-           a->double_spacing_us == b->double_spacing_us &&
-           a->double_tolerance_us == b->double_tolerance_us &&
-           a->double_width_min_us == b->double_width_min_us &&
-           a->min_width_us == b->min_width_us &&
-           a->lock_timeout_cycles == b->lock_timeout_cycles &&
-           a->max_consecutive_spurious == b->max_consecutive_spurious &&
-           a->period_gain_div == b->period_gain_div;
-}
-
 static void reset_runtime(struct estimator *e)
 {
     e->enc_have_ref = false;
-    e->was_started = false;
-    e->was_converged = false;
-    e->last_reset_seen = 0;
     memset(e->beacon_lost, 0, sizeof e->beacon_lost);
     memset(e->beacon_ever, 0, sizeof e->beacon_ever);
-    e->storm_acc = e->storm_rej = e->storm_echo = 0;
+    memset(e->beacon_accepted, 0, sizeof e->beacon_accepted);
     e->storm = false;
     e->enc_seen = false;
     e->enc_silent = false;
-    e->win_len = 0;
+    e->was_started = false;
+}
+
+/* Counters and health bookkeeping after every call into the localizer:
+ * the localizer's counters into est_counters, its events into text, a new
+ * update noted with the receive time of the frame behind it (the tag). */
+static void sync(struct estimator *e)
+{
+    bl_loc_counters lc;
+    bl_loc_status st;
+    if (bl_localizer_counters(&e->loc, &lc) != BL_OK ||
+        bl_localizer_status(&e->loc, &st) != BL_OK)
+        return;
+    struct est_counters *c = &e->c;
+    c->pulses_in = lc.pulses_in;
+    c->pulses_accepted = lc.pulses_accepted;
+    c->pulses_rejected = lc.pulses_rejected;
+    c->pulses_buffered = lc.pulses_buffered;
+    c->pulses_unassigned = lc.pulses_unassigned;
+    c->pulses_spurious = lc.pulses_spurious;
+    c->repeats_skipped = lc.repeats_skipped;
+    c->snapshot_restarts = lc.snapshot_restarts;
+    c->fuse_errors = lc.fuse_errors;
+    c->predicts = lc.predicts;
+    c->cv_predicts = lc.cv_predicts;
+    c->predict_errors = lc.predict_errors;
+    c->reinits = lc.reinits;
+    c->seq_errors = lc.seq_errors;
+    c->hint_errors = lc.hint_errors;
+    c->numbering_errors = lc.numbering_errors;
+    c->seq_resyncs = lc.seq_resyncs;
+    e->seq.counters = e->loc.seq.counters;
+    e->reset_base = st.reset_counter;
+    if (st.measurements != e->measurements_seen) {
+        e->measurements_seen = st.measurements;
+        e->updated = true;
+        e->last_update_rx_us = st.have_tag ? (int64_t)st.newest_tag : 0;
+        if (e->last_update_rx_us > e->last_data_rx_us)
+            e->last_data_rx_us = e->last_update_rx_us;
+    }
+    bl_loc_event ev;
+    while (bl_localizer_next_event(&e->loc, &ev) == 1) {
+        switch (ev.kind) {
+        case BL_LOC_EV_STARTED:
+            event(e, EST_EV_INFO, "filter started at x=%.2f y=%.2f",
+                  (double)ev.x_m, (double)ev.y_m);
+            e->was_started = true;
+            for (uint32_t b = 0; b < e->blcfg.beacon_count; b++)
+                e->beacon_last_ok_us[b] = e->latest_node_us;
+            break;
+        case BL_LOC_EV_RESET:
+            switch (ev.cause) {
+            case BL_LOC_CAUSE_PERSISTENT_REJECTION:
+                event(e, EST_EV_WARNING,
+                      "persistent rejection (%u of %u): restarted (reset %u)",
+                      ev.count, ev.window_len, ev.reset_counter);
+                break;
+            case BL_LOC_CAUSE_SNAPSHOT:
+                event(e, EST_EV_WARNING, "re-initialised from snapshot (reset %u)",
+                      ev.reset_counter);
+                break;
+            case BL_LOC_CAUSE_TIME_GAP:
+                event(e, EST_EV_WARNING, "re-initialised: no data for too long");
+                break;
+            case BL_LOC_CAUSE_STALE_PULSE:
+                event(e, EST_EV_WARNING, "re-initialised: stale filter");
+                break;
+            default:
+                event(e, EST_EV_WARNING, "re-initialised: site geometry changed");
+                break;
+            }
+            if (ev.cause != BL_LOC_CAUSE_PERSISTENT_REJECTION &&
+                ev.cause != BL_LOC_CAUSE_SNAPSHOT)
+                e->was_started = false; /* fresh filter: beacons wait for it */
+            break;
+        case BL_LOC_EV_CONVERGED:
+            event(e, EST_EV_INFO, "converged");
+            break;
+        case BL_LOC_EV_NOT_CONVERGED:
+            event(e, EST_EV_WARNING, "not converged");
+            break;
+        case BL_LOC_EV_RESYNC:
+            event(e, EST_EV_WARNING, "beacon numbering re-synchronised");
+            break;
+        default:
+            break;
+        }
+    }
+    /* beacons heard again (accepted count of the filter went up) */
+    bl_estimate est;
+    if (bl_filter_estimate(&e->loc.filter, &est) == BL_OK) {
+        for (uint32_t b = 0; b < e->blcfg.beacon_count && b < BL_MAX_BEACONS; b++) {
+            if (est.accepted[b] == e->beacon_accepted[b])
+                continue;
+            e->beacon_accepted[b] = est.accepted[b];
+            if (!est.started || est.accepted[b] == 0)
+                continue;
+            e->beacon_last_ok_us[b] = e->latest_node_us;
+            e->beacon_ever[b] = true;
+            if (e->beacon_lost[b]) {
+                e->beacon_lost[b] = false;
+                event(e, EST_EV_NOTICE, "beacon %u back", b + 1);
+            }
+        }
+    }
 }
 
 int estimator_init(struct estimator *e, const struct bridge_config *cfg,
@@ -223,13 +333,9 @@ int estimator_init(struct estimator *e, const struct bridge_config *cfg,
     memset(e, 0, sizeof *e);
     e->cfg = *cfg;
     e->pulse_hold_us = estimator_pulse_hold_us(cfg);
-    if (estimator_make_config(cfg, &e->blcfg, err, errlen))
+    if (make_configs(cfg, &e->blcfg, &e->seqcfg, err, errlen))
         return -1;
-    if (make_seq_config(cfg, &e->blcfg, &e->seqcfg, err, errlen))
-        return -1;
-    int rc = bl_filter_init(&e->filter, &e->blcfg);
-    if (rc == BL_OK)
-        rc = bl_sequencer_init(&e->seq, &e->seqcfg);
+    int rc = bl_localizer_init(&e->loc, &e->blcfg, &e->seqcfg);
     if (rc != BL_OK) {
         snprintf(err, errlen, "%s: estimator initialisation failed: %s",
                  cfg->path[0] ? cfg->path : "defaults", bl_strerror(rc));
@@ -246,365 +352,44 @@ int estimator_init(struct estimator *e, const struct bridge_config *cfg,
     return 0;
 }
 
-/* Start over with a fresh filter (pulses buffer until the next snapshot
- * start); the published reset counter keeps counting. */
-static void reinit_filter(struct estimator *e, const char *why)
-{
-    bl_estimate est;
-    if (bl_filter_estimate(&e->filter, &est) == BL_OK && est.started)
-        e->reset_base += est.reset_counter + 1;
-    bl_filter_init(&e->filter, &e->blcfg);
-    bl_sequencer_clear_hint(&e->seq);
-    e->hint_set = false;
-    e->c.reinits++;
-    e->last_reset_seen = 0;
-    e->was_started = false;
-    e->was_converged = false;
-    event(e, EST_EV_WARNING, "re-initialised: %s", why);
-}
-
-static void update_hint(struct estimator *e, const bl_estimate *est);
-
 int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg,
                           char *err, size_t errlen)
 {
     bl_config c;
     bl_seq_config sc;
-    if (estimator_make_config(cfg, &c, err, errlen) ||
-        make_seq_config(cfg, &c, &sc, err, errlen))
+    if (make_configs(cfg, &c, &sc, err, errlen))
         return -1;
     e->beacon_lost_s = cfg->beacon_lost_s;
     e->echo_storm_ratio = cfg->echo_storm_ratio;
     /* Same geometry (beacons, period, receiver ring, wheels; config.c) and
      * the library agrees (it also refuses switching the wheel-scale
-     * calibration on or off): tuning only, the filter keeps its state. */
+     * calibration on or off): tuning only, the filter keeps its state; new
+     * sequencer windows get the filter's hint at once. */
     if (config_same_geometry(&e->cfg, cfg) &&
-        bl_filter_update_config(&e->filter, &c) == BL_OK) {
+        bl_localizer_update_config(&e->loc, &c, &sc) == BL_OK) {
         e->blcfg = c;
+        e->seqcfg = sc;
         e->cfg = *cfg;
         e->pulse_hold_us = estimator_pulse_hold_us(cfg); /* the node's tolerance may change */
-        if (!seq_config_equal(&sc, &e->seqcfg)) {
-            /* The windows follow the speed-of-sound tuning (max flight,
-             * merge window): new windows, the filter's hint at once so the
-             * numbering goes on without waiting for beacon 1. */
-            e->seqcfg = sc;
-            bl_sequencer_init(&e->seq, &e->seqcfg);
-            e->hint_set = false;
-            bl_estimate est;
-            if (bl_filter_estimate(&e->filter, &est) == BL_OK)
-                update_hint(e, &est);
-        }
+        sync(e);
         return 0;
+    }
+    if (bl_localizer_reinit(&e->loc, &c, &sc) != BL_OK) {
+        snprintf(err, errlen, "%s: estimator re-initialisation refused",
+                 cfg->path[0] ? cfg->path : "defaults");
+        return -1;
     }
     e->cfg = *cfg;
     e->blcfg = c;
     e->seqcfg = sc;
     e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
     e->pulse_hold_us = estimator_pulse_hold_us(cfg);
-    bl_sequencer_init(&e->seq, &e->seqcfg);
-    reinit_filter(e, "site geometry changed");
+    sync(e);
     reset_runtime(e);
     return 1;
 }
 
 /* ---- pulses ----------------------------------------------------------- */
-
-static void beacon_ok(struct estimator *e, uint32_t b, int64_t t_us)
-{
-    if (b >= BL_MAX_BEACONS)
-        return;
-    e->beacon_last_ok_us[b] = t_us;
-    e->beacon_ever[b] = true;
-    if (e->beacon_lost[b]) {
-        e->beacon_lost[b] = false;
-        event(e, EST_EV_NOTICE, "beacon %u back", b + 1);
-    }
-}
-
-static void watch_rejections(struct estimator *e, uint32_t beacon,
-                             bool rejected)
-{
-    e->win_beacon[e->win_next] = (uint8_t)beacon;
-    e->win_rejected[e->win_next] = rejected;
-    e->win_next = (e->win_next + 1) % REJECT_WINDOW;
-    if (e->win_len < REJECT_WINDOW)
-        e->win_len++;
-}
-
-/* A measurement carried by the frame received at rx_us (local; 0 = not
- * known) went into the state. */
-static void measurement_fused(struct estimator *e, int64_t rx_us)
-{
-    e->updated = true;
-    e->last_update_rx_us = rx_us;
-    e->measurement_seq++;
-    if (rx_us > e->last_data_rx_us)
-        e->last_data_rx_us = rx_us;
-}
-
-/* Restart from the snapshot when the watch says so; true if restarted
- * (the caller counts the pulse as the measurement fused). */
-static bool restart_if_persistent(struct estimator *e)
-{
-    if (e->win_len < REJECT_WINDOW)
-        return false;
-    unsigned n = 0;
-    uint32_t mask = 0;
-    for (unsigned i = 0; i < REJECT_WINDOW; i++)
-        if (e->win_rejected[i]) {
-            n++;
-            mask |= 1u << e->win_beacon[i];
-        }
-    if (n < REJECT_MIN || __builtin_popcount(mask) < REJECT_BEACONS)
-        return false;
-    bl_estimate est;
-    bl_filter_estimate(&e->filter, &est);
-    int rc = bl_filter_start_snapshot(&e->filter, est.theta_rad,
-                                      e->blcfg.reset_sigma_theta_rad);
-    e->win_len = 0;
-    if (rc != BL_OK) {
-        log_debug("snapshot restart failed: %s", bl_strerror(rc));
-        return false;
-    }
-    e->c.snapshot_restarts++;
-    e->enc_have_ref = false; /* state time moved to the latest arrival */
-    event(e, EST_EV_WARNING, "persistent rejection (%u of %d): restarted", n,
-          REJECT_WINDOW);
-    return true;
-}
-
-/* While the filter has converged, its firing-time prediction (t0 of
- * beacon 1 and the period, with their σ) is handed to the sequencer: the
- * windows tighten and the numbering survives a silent beacon 1, whose
- * double pulse otherwise anchors the sequencer's own model. The hint is
- * dropped when the filter is not converged (and on every re-init). */
-static void update_hint(struct estimator *e, const bl_estimate *est)
-{
-    if (!est->started || !est->converged) {
-        if (e->hint_set) {
-            bl_sequencer_clear_hint(&e->seq);
-            e->hint_set = false;
-        }
-        return;
-    }
-    bl_seq_hint h = {
-        .fire_us = est->t0_us,
-        .beacon = 0,
-        .period_us = est->period_s * (bl_real)1e6,
-        .fire_sigma_us = est->sigma_t0_s * (bl_real)1e6,
-        .period_sigma_us = est->sigma_period_s * (bl_real)1e6,
-    };
-    int rc = bl_sequencer_set_hint(&e->seq, &h);
-    if (rc == BL_OK) {
-        e->hint_set = true;
-    } else {
-        e->c.hint_errors++;
-        log_debug("sequencer hint refused: %s", bl_strerror(rc));
-    }
-}
-
-/* rx_us: local receive time of the frame that carried this detection. */
-static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
-{
-    bl_estimate est;
-    bl_filter_estimate(&e->filter, &est);
-    /* Encoders silent (none for ENC_SILENCE_US before this pulse), or no
-     * state update for that long: constant-velocity predict to the pulse,
-     * so the process noise of the whole interval is in P before the fusion
-     * (the pulse model alone extrapolates with v and omega, no noise). */
-    bool enc_stale = !e->enc_seen || pl->arrival_us - e->enc_last_node_us > ENC_SILENCE_US;
-    if (est.started && ((enc_stale && pl->arrival_us > est.t_us) ||
-                        pl->arrival_us - est.t_us > ENC_SILENCE_US)) {
-        int rc = bl_filter_predict(&e->filter, pl->arrival_us);
-        if (rc == BL_OK) {
-            e->c.cv_predicts++;
-            e->enc_have_ref = false; /* the silence is covered by this predict */
-        } else if (rc == BL_ETIME) {
-            reinit_filter(e, "no data for too long");
-        } else {
-            e->c.predict_errors++;
-        }
-    }
-    bl_pulse_result res;
-    int rc = bl_filter_fuse_pulse(&e->filter, (uint32_t)pl->beacon,
-                                  pl->arrival_us, pl->receiver, &res);
-    if (rc == BL_ETIME) {
-        reinit_filter(e, "stale filter");
-        rc = bl_filter_fuse_pulse(&e->filter, (uint32_t)pl->beacon,
-                                  pl->arrival_us, pl->receiver, &res);
-    }
-    if (rc != BL_OK) {
-        e->c.fuse_errors++;
-        log_debug("fuse_pulse beacon %d: %s", pl->beacon + 1, bl_strerror(rc));
-        return;
-    }
-    log_debug("pulse beacon %d rx %u at %lld%s: status %d innov %.1f us "
-              "sigma %.1f us ratio %.2f",
-              pl->beacon + 1, pl->receiver, (long long)pl->arrival_us,
-              pl->repeat ? " (repeat)" : "", (int)res.status,
-              (double)res.innovation_s * 1e6,
-              (double)res.innovation_sigma_s * 1e6, (double)res.test_ratio);
-    /* An innovation longer than the longest flight cannot come from a
-     * position error inside the site: the pulse was given the wrong beacon
-     * number (the sequencer slipped a slot, e.g. anchored on an echo that
-     * looked like beacon 1's double pulse while beacon 1 was silent). Two
-     * in a row while the filter is converged: re-synchronise the sequencer
-     * from the filter's firing times instead of blaming the pose. */
-    bool misnumbered = res.status == BL_PULSE_REJECTED && e->was_converged &&
-        fabs((double)res.innovation_s) * 1e6 > (double)e->seqcfg.max_flight_us;
-    if (misnumbered) {
-        e->c.numbering_errors++;
-        if (++e->misnumbered_in_row >= 2) {
-            bl_estimate now_est;
-            bl_filter_estimate(&e->filter, &now_est);
-            bl_sequencer_reset(&e->seq);
-            e->hint_set = false;
-            update_hint(e, &now_est);
-            e->misnumbered_in_row = 0;
-            e->c.seq_resyncs++;
-            event(e, EST_EV_WARNING, "beacon numbering re-synchronised");
-        }
-    } else if (res.status == BL_PULSE_ACCEPTED) {
-        e->misnumbered_in_row = 0;
-    }
-    if (!pl->repeat && !misnumbered && (res.status == BL_PULSE_ACCEPTED ||
-                                        res.status == BL_PULSE_REJECTED))
-        watch_rejections(e, (uint32_t)pl->beacon,
-                         res.status == BL_PULSE_REJECTED);
-    switch (res.status) {
-    case BL_PULSE_ACCEPTED:
-        e->c.pulses_accepted++;
-        e->storm_acc++;
-        beacon_ok(e, (uint32_t)pl->beacon, pl->arrival_us);
-        break;
-    case BL_PULSE_REJECTED:
-        e->c.pulses_rejected++;
-        e->storm_rej++;
-        if (!restart_if_persistent(e))
-            return;
-        break;
-    case BL_PULSE_BUFFERED:
-        e->c.pulses_buffered++;
-        return;
-    case BL_PULSE_STARTED:
-        e->c.pulses_accepted++;
-        beacon_ok(e, (uint32_t)pl->beacon, pl->arrival_us);
-        break;
-    case BL_PULSE_RESET:
-        e->c.pulses_accepted++;
-        break;
-    }
-    measurement_fused(e, rx_us);
-    /* Health bookkeeping on every update. */
-    bl_filter_estimate(&e->filter, &est);
-    if (est.started)
-        e->ever_started = true;
-    if (est.started && !e->was_started) {
-        event(e, EST_EV_INFO, "filter started at x=%.2f y=%.2f",
-              (double)est.x_m, (double)est.y_m);
-        e->was_started = true;
-        e->last_reset_seen = est.reset_counter;
-        for (uint32_t b = 0; b < e->blcfg.beacon_count; b++)
-            e->beacon_last_ok_us[b] = pl->arrival_us;
-    }
-    if (est.reset_counter != e->last_reset_seen) {
-        e->last_reset_seen = est.reset_counter;
-        event(e, EST_EV_WARNING, "re-initialised from snapshot (reset %u)",
-              e->reset_base + est.reset_counter);
-    }
-    update_hint(e, &est);
-    if (est.converged != e->was_converged) {
-        e->was_converged = est.converged;
-        event(e, est.converged ? EST_EV_INFO : EST_EV_WARNING, "%s",
-              est.converged ? "converged" : "not converged");
-    }
-}
-
-/* Local receive time of the pulse frame that carried the detection at
- * node time node_us on `receiver` (the sequencer gives back the detection
- * times it was given); 0 when it is no longer remembered. */
-static int64_t pulse_rx_of(const struct estimator *e, int64_t node_us,
-                           uint32_t receiver)
-{
-    for (unsigned i = 0; i < EST_PULSE_RX_RING; i++) {
-        unsigned k = (e->pulse_rx_next + EST_PULSE_RX_RING - 1 - i) % EST_PULSE_RX_RING;
-        if (e->pulse_rx[k].rx_us != 0 && e->pulse_rx[k].node_us == node_us &&
-            e->pulse_rx[k].receiver == receiver)
-            return e->pulse_rx[k].rx_us;
-    }
-    return 0;
-}
-
-/* Fuses every receiver that heard the firing as its own measurement
- * (bl_seq_pulse.members: each receiver's earliest detection, sorted by
- * time), each with its own position on the ring (Kleeman 1992 eq. 21).
- * The receivers' arrival noises are independent, so this is what the
- * Cramér–Rao bound counts; fusing only the earliest detection throws
- * the others away and is biased early (the minimum of several noisy
- * times), by an amount that shrinks with distance as fewer receivers
- * hear a far beacon: a speed-of-sound bias. A firing given a wrong
- * beacon number is one numbering error, not one per receiver: its
- * other members are not fused. */
-static void fuse_members(struct estimator *e, const bl_seq_pulse *pl)
-{
-    if (pl->member_count == 0 || pl->member_count > BL_MAX_RECEIVERS) {
-        fuse(e, pl, pulse_rx_of(e, pl->arrival_us, pl->receiver));
-        return;
-    }
-    const uint32_t acc_before = e->storm_acc, rej_before = e->storm_rej;
-    bl_seq_pulse one = *pl;
-    for (uint32_t m = 0; m < pl->member_count; m++) {
-        one.arrival_us = pl->members[m].arrival_us;
-        one.receiver = pl->members[m].receiver;
-        one.amplitude_mv = pl->members[m].amplitude_mv;
-        uint64_t misnumbered_before = e->c.numbering_errors;
-        fuse(e, &one, pulse_rx_of(e, one.arrival_us, one.receiver));
-        if (e->c.numbering_errors != misnumbered_before)
-            break;
-    }
-    /* The echo-storm watch compares firings (echoes are counted once per
-     * firing): the firing counts as accepted when any member was, else as
-     * rejected when any member was. */
-    if (e->storm_acc != acc_before) {
-        e->storm_acc = acc_before + 1;
-        e->storm_rej = rej_before;
-    } else if (e->storm_rej != rej_before) {
-        e->storm_rej = rej_before + 1;
-    }
-}
-
-static void pop_ready(struct estimator *e, int64_t now_node_us)
-{
-    bl_seq_pulse pl;
-    int rc;
-    while ((rc = bl_sequencer_pop(&e->seq, now_node_us, &pl)) == 1) {
-        e->c.pulses_in++;
-        if (pl.status == BL_SEQ_UNLOCKED) {
-            e->c.pulses_unassigned++;
-            continue;
-        }
-        if (pl.status != BL_SEQ_ASSIGNED || pl.beacon < 0) {
-            e->c.pulses_spurious++;
-            continue;
-        }
-        if (pl.repeat) {
-            /* A later arrival of a firing that already gave a pulse. The
-             * direct path is the shortest, so this is an echo (or a
-             * multi-receiver straggler) in all but freak cases. It is not
-             * fused: before convergence the start-up gate is wide enough to
-             * accept a 3.4 m longer wall echo (Kleeman 1992 §3.9), and after
-             * it a stream of gated-out echoes would still feed the
-             * library's persistent-rejection reset and replace the last
-             * direct pulse it keeps per beacon for the snapshot restart. */
-            e->c.repeats_skipped++;
-            e->storm_echo++;
-            continue;
-        }
-        fuse_members(e, &pl);
-    }
-    if (rc < 0)
-        e->c.seq_errors++;
-}
 
 void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
                      int64_t rx_us)
@@ -614,13 +399,9 @@ void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
     int64_t t = node_clock_observe(&e->rx_clock, p->node_time_us,
                                    rx_us - e->pulse_hold_us);
     e->rx_seen = true;
-    e->pulse_rx[e->pulse_rx_next].node_us = t;
-    e->pulse_rx[e->pulse_rx_next].rx_us = rx_us;
-    e->pulse_rx[e->pulse_rx_next].receiver = p->receiver;
-    e->pulse_rx_next = (e->pulse_rx_next + 1) % EST_PULSE_RX_RING;
     if (e->rx_clock.last_event == NODE_CLOCK_RESTART) {
         e->c.node_restarts++;
-        bl_sequencer_reset(&e->seq);
+        (void)bl_localizer_sequencer_reset(&e->loc);
         event(e, EST_EV_WARNING, "receiver node clock restarted");
     }
     if (t > e->latest_node_us)
@@ -632,25 +413,14 @@ void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
         .amplitude_mv = p->amplitude_mv,
         .width_us = (uint16_t)(p->width_us > 65535 ? 65535 : p->width_us),
     };
-    int rc = bl_sequencer_push(&e->seq, &d);
-    if (rc == BL_EFULL) {
-        pop_ready(e, t);
-        rc = bl_sequencer_push(&e->seq, &d);
-        if (rc == BL_EFULL) { /* still full: close the oldest windows */
-            bl_seq_pulse pl;
-            while (bl_sequencer_pop(&e->seq, INT64_MAX / 4, &pl) == 1) {
-                e->c.pulses_in++;
-                if (pl.status == BL_SEQ_ASSIGNED && pl.beacon >= 0)
-                    fuse_members(e, &pl);
-            }
-            rc = bl_sequencer_push(&e->seq, &d);
-        }
-    }
+    BRIDGE_SET_DETECTION_TAG(d, rx_us);
+    int rc = bl_localizer_detection(&e->loc, &d);
     if (rc != BL_OK) {
         e->c.seq_errors++;
-        log_debug("sequencer push: %s", bl_strerror(rc));
+        log_debug("localizer detection: %s", bl_strerror(rc));
     }
-    pop_ready(e, t);
+    (void)bl_localizer_advance(&e->loc, t);
+    sync(e);
 }
 
 /* ---- encoders --------------------------------------------------------- */
@@ -685,10 +455,16 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
     }
     int64_t local = node_clock_to_local(&e->enc_clock, te);
     int64_t t = node_clock_to_node(&e->rx_clock, local);
+    if (e->enc_seen && t <= e->enc_last_node_us) {
+        /* mapped onto the receiver clock not after the last sample (a
+         * re-fit of either clock): the localizer needs increasing times */
+        e->c.stale_encoders++;
+        return;
+    }
     if (t > e->latest_node_us)
         e->latest_node_us = t;
     /* Pulses that arrived before this sample go first. */
-    pop_ready(e, t - POP_SLACK_ENC_US);
+    (void)bl_localizer_advance(&e->loc, t - POP_SLACK_ENC_US);
 
     bool had_ref = e->enc_have_ref;
     if (e->enc_clock.last_event == NODE_CLOCK_RESTART) {
@@ -713,7 +489,6 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
     e->enc_left = f->left_ticks;
     e->enc_right = f->right_ticks;
     e->enc_have_ref = true;
-    int64_t last = e->enc_last_node_us;
     e->enc_last_node_us = t;
     if (e->enc_seen && gap > ENC_SILENCE_US)
         e->c.encoder_gaps++;
@@ -723,55 +498,21 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
               (double)gap / 1e6);
     }
     e->enc_seen = true;
-    if (!had_ref)
-        return;
-    bl_estimate est;
-    bl_filter_estimate(&e->filter, &est);
-    if (!est.started)
-        return;
-    if (t <= est.t_us || last < est.t_us - ENC_SILENCE_US || gap > ENC_SILENCE_US) {
-        /* Sample older than the state (the filter just started at a pulse),
-         * the interval was already covered by a constant-velocity predict,
-         * or the increment spans a silence (frames lost, the interface was
-         * down): one increment over seconds hides the path's shape (an arc
-         * then a straight is not one chord), so it is not used as
-         * odometry; the silence is covered by constant velocity with its
-         * growing covariance. Take the sample as the new reference only. */
-        return;
-    }
-    if (last > est.t_us) {
-        /* The state is older than this increment's start (the reference
-         * was taken after the last update, e.g. the first sample after a
-         * silence): constant velocity up to the reference first, so the
-         * increment is divided by its own interval, not a longer one. */
-        int prc = bl_filter_predict(&e->filter, last);
-        if (prc == BL_OK) {
-            e->c.cv_predicts++;
-        } else if (prc == BL_ETIME) {
-            reinit_filter(e, "no data for too long");
-            return;
-        } else {
-            e->c.predict_errors++;
-            return;
-        }
-    }
-    /* Wheel increments are the dead-reckoning input of Kleeman 1992 §3.8
-     * (eq. 24 takes the heading increment as an input; the library forms
-     * Δθ = (d_r − d_l) / wheel_base and the speed from them). Each wheel's
-     * distance from its ticks: d = n_ticks · 2πr / ticks_per_rev (m). */
-    double dl_m = dl * e->m_per_tick;
-    double dr_m = dr * e->m_per_tick;
-    int rc = bl_filter_predict_odometry(&e->filter, t, (bl_real)dl_m,
-                                        (bl_real)dr_m);
-    if (rc == BL_OK) {
-        e->c.predicts++;
-        measurement_fused(e, rx_us);
-    } else if (rc == BL_ETIME) {
-        reinit_filter(e, "no data for too long");
-    } else {
+    /* Each wheel's distance from its ticks: d = n_ticks · 2πr /
+     * ticks_per_rev (m), the dead-reckoning input of Kleeman 1992 §3.8. */
+    bl_wheel_increment inc = {
+        .t_us = t,
+        .d_left_m = (bl_real)(dl * e->m_per_tick),
+        .d_right_m = (bl_real)(dr * e->m_per_tick),
+        .reference_only = !had_ref,
+        .tag = (uint64_t)rx_us,
+    };
+    int rc = bl_localizer_wheels(&e->loc, &inc);
+    if (rc != BL_OK) {
         e->c.predict_errors++;
-        log_debug("predict_odometry: %s", bl_strerror(rc));
+        log_debug("localizer wheels: %s", bl_strerror(rc));
     }
+    sync(e);
 }
 
 void estimator_status(struct estimator *e, const struct frame_status *s,
@@ -798,7 +539,8 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
     if (!e->rx_seen)
         return;
     int64_t now = estimator_local_to_node(e, local_now_us);
-    pop_ready(e, now - POP_SLACK_TICK_US);
+    (void)bl_localizer_advance(&e->loc, now - POP_SLACK_TICK_US);
+    sync(e);
     if (!e->was_started)
         return;
     /* beacon lost: no accepted pulse for beacon_lost_s */
@@ -815,14 +557,22 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
         e->enc_silent = true;
         event(e, EST_EV_WARNING, "encoders silent");
     }
-    /* echo storm: share of gated-out pulses over the window */
-    if (e->storm_window_start_us == 0)
+    /* echo storm: share of firings gated out, and of echoes (later
+     * arrivals of a firing), over the window (localizer counters) */
+    bl_loc_counters lc;
+    if (bl_localizer_counters(&e->loc, &lc) != BL_OK)
+        return;
+    if (e->storm_window_start_us == 0) {
         e->storm_window_start_us = now;
+        e->storm_base_acc = lc.firings_accepted;
+        e->storm_base_rej = lc.firings_rejected;
+        e->storm_base_echo = lc.repeats_skipped;
+    }
     if (now - e->storm_window_start_us >= STORM_WINDOW_US) {
-        /* share of arrivals that were echoes (later arrivals of a firing)
-         * or rejected by the gate */
-        uint32_t bad = e->storm_rej + e->storm_echo;
-        uint32_t n = e->storm_acc + bad;
+        uint32_t acc = lc.firings_accepted - e->storm_base_acc;
+        uint32_t bad = (lc.firings_rejected - e->storm_base_rej) +
+                       (lc.repeats_skipped - e->storm_base_echo);
+        uint32_t n = acc + bad;
         double ratio = n ? (double)bad / n : 0.0;
         if (!e->storm && n >= STORM_MIN_PULSES && ratio > e->echo_storm_ratio) {
             e->storm = true;
@@ -832,7 +582,9 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
             e->storm = false;
             event(e, EST_EV_NOTICE, "echo storm over");
         }
-        e->storm_acc = e->storm_rej = e->storm_echo = 0;
+        e->storm_base_acc = lc.firings_accepted;
+        e->storm_base_rej = lc.firings_rejected;
+        e->storm_base_echo = lc.repeats_skipped;
         e->storm_window_start_us = now;
     }
 }
@@ -852,18 +604,18 @@ int estimator_output(const struct estimator *e, int64_t at_local_us,
 {
     memset(out, 0, sizeof *out);
     bl_estimate est;
-    int rc = BL_ENOTINIT;
-    if (at_local_us) {
-        int64_t t = estimator_local_to_node(e, at_local_us);
-        rc = bl_filter_estimate_at(&e->filter, t, &est);
-        if (rc == BL_ETIME && bl_filter_estimate(&e->filter, &est) == BL_OK &&
-            est.started && t > est.t_us)
-            return -1; /* beyond max_coast_s: no stale pose with a stale covariance */
-    }
-    if (rc != BL_OK)
-        rc = bl_filter_estimate(&e->filter, &est);
-    if (rc != BL_OK || !est.started)
+    int rc;
+    if (at_local_us)
+        rc = bl_localizer_estimate_at(&e->loc, estimator_local_to_node(e, at_local_us), &est);
+    else
+        rc = bl_localizer_estimate(&e->loc, &est);
+    if (rc != BL_OK) {
+        /* not started, or beyond max_coast_s (no stale pose with a stale
+         * covariance), or a refused extrapolation */
+        if (rc != BL_ENOTINIT && rc != BL_ETIME)
+            log_debug("estimate: %s", bl_strerror(rc));
         return -1;
+    }
     out->valid = true;
     out->t_node_us = est.t_us;
     out->t_local_us = e->rx_seen ? node_clock_to_local(&e->rx_clock, est.t_us)
@@ -877,10 +629,10 @@ int estimator_output(const struct estimator *e, int64_t at_local_us,
     out->period_s = est.period_s;
     for (int i = 0; i < 25; i++)
         out->cov[i] = est.cov[i];
-    out->reset_counter = e->reset_base + est.reset_counter;
+    out->reset_counter = est.reset_counter;
     out->converged = est.converged;
     out->source_rx_us = e->last_update_rx_us;
-    out->measurement_seq = e->measurement_seq;
+    out->measurement_seq = e->measurements_seen;
     return 0;
 }
 
@@ -890,7 +642,7 @@ void estimator_health(const struct estimator *e, int64_t local_now_us,
     memset(h, 0, sizeof *h);
     bl_estimate est;
     h->finite = true;
-    if (bl_filter_estimate(&e->filter, &est) == BL_OK && est.started) {
+    if (bl_localizer_estimate(&e->loc, &est) == BL_OK) {
         h->started = true;
         h->converged = est.converged;
         double v[] = { est.x_m, est.y_m, est.theta_rad, est.v_mps, est.omega_radps };
@@ -899,11 +651,12 @@ void estimator_health(const struct estimator *e, int64_t local_now_us,
         for (int i = 0; i < 25; i++)
             h->finite = h->finite && isfinite((double)est.cov[i]);
     }
-    h->ever_started = e->ever_started || h->started;
+    bl_loc_status st;
+    if (bl_localizer_status(&e->loc, &st) == BL_OK) {
+        h->ever_started = st.ever_started || h->started;
+        h->window_len = st.window_len;
+        h->window_rejected = st.window_rejected;
+    }
     h->since_update_us = e->last_data_rx_us > 0 ? local_now_us - e->last_data_rx_us
                                                 : INT64_MAX;
-    h->window_len = e->win_len;
-    for (unsigned i = 0; i < e->win_len && i < REJECT_WINDOW; i++)
-        if (e->win_rejected[(e->win_next + REJECT_WINDOW - 1 - i) % REJECT_WINDOW])
-            h->window_rejected++;
 }

@@ -28,13 +28,14 @@
  * need not increase (the receivers' frames of one firing leave in the order
  * of their own latency), so pulses are not dropped on the clock's flags.
  *
- * Encoders drive bl_filter_predict_odometry; pulses go through the
- * sequencer, then bl_filter_fuse_pulse (which starts the filter from the
- * snapshot solver once a cycle is complete, and re-initialises it after
- * persistent rejection). When the encoders fall silent, pulses are fused
- * after a constant-velocity predict. The reset counter published is the
- * filter's plus every re-initialisation done here (geometry change on
- * SIGHUP, receiver-node restart).
+ * Detections and wheel increments go to the library's localizer
+ * (beaconloc/localizer.h: sequencer, filter, and the policy between them:
+ * repeats skipped, every member of a firing fused, the persistent-rejection
+ * restart, misnumbering re-sync, coasting through encoder silences). The
+ * bridge keeps what is bus business: node clocks, ticks -> metres, stale
+ * and glitched encoder frames, health events with text. The reset counter
+ * published is the localizer's (the filter's plus every re-initialisation,
+ * including a geometry change on SIGHUP).
  */
 #ifndef BRIDGE_ESTIMATOR_H
 #define BRIDGE_ESTIMATOR_H
@@ -113,14 +114,20 @@ struct est_health {
     unsigned window_rejected; /* of those, rejected by the gate */
 };
 
-#define EST_PULSE_RX_RING 64 /* recent pulse frames remembered for their receive time */
+/* The detection's tag is the local receive time of its frame (the
+ * localizer reports the newest fused measurement's tag). */
+#define BRIDGE_SET_DETECTION_TAG(d, rx_us) ((void)(d), (void)(rx_us)) /* TODO(h1 API): (d).tag = (uint64_t)(rx_us) */
 
 struct estimator {
     struct bridge_config cfg;     /* the site as configured (geometry for SIGHUP) */
     bl_config blcfg;
-    bl_filter filter;
-    bl_sequencer seq;
     bl_seq_config seqcfg;
+    bl_localizer loc;             /* sequencer + filter + estimation policy */
+    /* Read-only mirrors for the daemon's stats, refreshed after every call
+     * into the localizer: the sequencer's counters, and the published reset
+     * counter while no filter runs. */
+    struct { bl_seq_counters counters; } seq;
+    uint32_t reset_base;
     struct node_clock rx_clock;   /* receiver array (node 1) */
     struct node_clock enc_clock;  /* wheel encoders (node 2) */
     bool rx_seen;                 /* rx_clock has an observation */
@@ -131,35 +138,22 @@ struct estimator {
     uint16_t enc_left, enc_right; /* last tick counts */
     int64_t enc_last_node_us;     /* last encoder sample, receiver-node time */
     double m_per_tick;
-    /* reset counter bookkeeping */
-    uint32_t reset_base;
-    uint32_t last_reset_seen;
-    bool was_started;
-    bool was_converged;
-    bool hint_set;                /* the sequencer has the filter's hint */
-    unsigned misnumbered_in_row;  /* rejected pulses with impossible innovations */
     /* health */
+    bool was_started;             /* "filter started" seen (beacon-lost watch on) */
     double beacon_lost_s, echo_storm_ratio;
     int64_t beacon_last_ok_us[BL_MAX_BEACONS];
     bool beacon_lost[BL_MAX_BEACONS];
     bool beacon_ever[BL_MAX_BEACONS];
+    uint32_t beacon_accepted[BL_MAX_BEACONS]; /* filter's accepted count, last seen */
     int64_t storm_window_start_us;
-    uint32_t storm_acc, storm_rej, storm_echo;
+    uint32_t storm_base_acc, storm_base_rej, storm_base_echo; /* localizer counters at
+                                                                 the window's start */
     bool storm;
-    /* persistent-rejection watch over the last EST_REJECT_WINDOW first
-     * arrivals (repeats excluded): bit set = rejected, with its beacon */
-    uint8_t win_beacon[16];
-    bool win_rejected[16];
-    unsigned win_len, win_next;
     int64_t latest_node_us;       /* newest receiver-node time seen */
     int64_t pulse_hold_us;        /* the receiver node's hold of a detection (us) */
-    /* receive time of the recent pulse frames, by (node time, receiver) */
-    struct { int64_t node_us, rx_us; uint32_t receiver; } pulse_rx[EST_PULSE_RX_RING];
-    unsigned pulse_rx_next;
+    uint32_t measurements_seen;   /* localizer's measurement count, last seen */
     int64_t last_update_rx_us;    /* local rx time of the newest fused measurement's frame */
-    uint64_t measurement_seq;     /* measurements fused (pulses and encoder increments) */
     int64_t last_data_rx_us;      /* newest receive time of a fused measurement's frame */
-    bool ever_started;
     bool updated;                 /* an update since estimator_take_update */
     struct est_counters c;
     struct est_event events[EST_EVENT_QUEUE];
