@@ -121,3 +121,48 @@ TEST_BUILDS += $(M4_ELF) $(M4_SIM_ELF)
 ifneq ($(shell command -v $(QEMU_ARM) 2>/dev/null),)
 UNIT_TESTS += run-m4-qemu
 endif
+
+# ---- the firmware main loop on the host, on simulator logs ----------------
+# The same main.c (renamed firmware_main) with sim/board_log.c: a candump log
+# written by the simulator in, the bridge's estimates CSV out; the float
+# library as on the M4. Frames decoded by the cantools-generated codec
+# (bridge/bridge.mk generates it), encoder samples mapped onto the receiver
+# clock by bridge/node_clock.c (host only: one clock on a real board).
+#   make bench-firmware   echo-storm and kleeman-lab, 20 seeds each: the
+#                         firmware's position RMSE against the bridge's on the
+#                         same logs, judged by tests/bench/accuracy.py's code.
+#                         Last line (kleeman-lab):
+#   firmware scenario=kleeman-lab seeds=20 rmse_mm=<x> bridge_rmse_mm=<x> ratio=<firmware/bridge>
+FW_HOST_DIR   := $(BUILD)/fw_host
+FW_HOST_BIN   := $(FW_HOST_DIR)/firmware_host
+FW_HOST_CAN   := $(BUILD)/gen/can
+FW_HOST_FLAGS := -std=c11 -O2 -g -Wall -Wextra -Werror -Wdouble-promotion -DBL_USE_FLOAT=1 \
+                 -Ilib/include -Ibridge -I$(FW_HOST_CAN)
+
+$(FW_HOST_DIR)/main.o: lib/examples/firmware_m4/main.c $(M4_HDRS) lib/firmware.mk
+	@mkdir -p $(@D)
+	$(CC) $(FW_HOST_FLAGS) -Dmain=firmware_main -c $< -o $@
+
+$(FW_HOST_DIR)/board_log.o: lib/examples/firmware_m4/sim/board_log.c $(M4_HDRS) bridge/node_clock.h \
+                            $(FW_HOST_CAN)/beaconloc_can.h lib/firmware.mk
+	@mkdir -p $(@D)
+	$(CC) $(FW_HOST_FLAGS) -c $< -o $@
+
+$(FW_HOST_DIR)/node_clock.o: bridge/node_clock.c bridge/node_clock.h
+	@mkdir -p $(@D)
+	$(CC) $(FW_HOST_FLAGS) -c $< -o $@
+
+$(FW_HOST_DIR)/beaconloc_can.o: $(FW_HOST_CAN)/beaconloc_can.c $(FW_HOST_CAN)/beaconloc_can.h
+	@mkdir -p $(@D)
+	$(CC) $(FW_HOST_FLAGS) -c $< -o $@
+
+$(FW_HOST_BIN): $(FW_HOST_DIR)/main.o $(FW_HOST_DIR)/board_log.o $(FW_HOST_DIR)/node_clock.o \
+                $(FW_HOST_DIR)/beaconloc_can.o $(BUILD)/lib/float/libbeaconloc.a
+	$(CC) -o $@ $^ -lm
+
+.PHONY: bench-firmware
+bench-firmware: $(FW_HOST_BIN) $(BUILD)/bridge/beaconloc-bridge | $(SETUP_STAMP)
+	$(PY) tests/bench/firmware.py --firmware $(FW_HOST_BIN) --bridge $(BUILD)/bridge/beaconloc-bridge \
+	    --out $(BUILD)/bench/firmware
+
+TEST_BUILDS += $(FW_HOST_BIN)

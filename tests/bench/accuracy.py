@@ -90,23 +90,9 @@ def tuned_site(scenario: str, tuning: list[str], out: Path) -> Path:
     return path
 
 
-def one_run(bridge: Path, scenario: str, seed: int, out: Path, site: Path) -> dict:
-    d = out / f"{scenario}-s{seed:02d}"
-    d.mkdir(parents=True, exist_ok=True)
-    log, truth_p, est_p = d / "bus.log", d / "truth.csv", d / "est.csv"
-    sim = subprocess.run([str(h.SIM), "run", scenario, "--log", str(log), "--truth", str(truth_p),
-                          "--seed", str(seed)], capture_output=True, text=True)
-    if sim.returncode != 0:
-        return {"seed": seed, "ok": False, "why": f"simulator exit {sim.returncode}: "
-                f"{sim.stderr.strip()[-300:]}"}
-    br = subprocess.run([str(bridge), "--site", str(site), "--replay", str(log),
-                         "--estimates", str(est_p), "--stats", str(d / "stats.json"),
-                         "--mavlink", "udpout:127.0.0.1:9", "--status-interval", "0"],
-                        capture_output=True, text=True)
-    (d / "bridge.err").write_text(br.stderr)
-    if br.returncode != 0 or not est_p.exists():
-        return {"seed": seed, "ok": False, "why": f"bridge exit {br.returncode}: "
-                f"{br.stderr.strip()[-300:]}"}
+def judge(seed: int, truth_p: Path, est_p: Path) -> dict:
+    """One run's figures from its truth and estimates CSVs (also used by
+    tests/bench/firmware.py on the firmware's estimates)."""
     truth = h.read_csv(truth_p, h.TRUTH_COLUMNS)
     est = h.read_csv(est_p, h.EST_COLUMNS)
     e = h.estimate_errors(est, truth)
@@ -129,6 +115,26 @@ def one_run(bridge: Path, scenario: str, seed: int, out: Path, site: Path) -> di
         "final_rms_m": final_rms,
         "resets": int(e.reset_counter[-1]),
     }
+
+
+def one_run(bridge: Path, scenario: str, seed: int, out: Path, site: Path) -> dict:
+    d = out / f"{scenario}-s{seed:02d}"
+    d.mkdir(parents=True, exist_ok=True)
+    log, truth_p, est_p = d / "bus.log", d / "truth.csv", d / "est.csv"
+    sim = subprocess.run([str(h.SIM), "run", scenario, "--log", str(log), "--truth", str(truth_p),
+                          "--seed", str(seed)], capture_output=True, text=True)
+    if sim.returncode != 0:
+        return {"seed": seed, "ok": False, "why": f"simulator exit {sim.returncode}: "
+                f"{sim.stderr.strip()[-300:]}"}
+    br = subprocess.run([str(bridge), "--site", str(site), "--replay", str(log),
+                         "--estimates", str(est_p), "--stats", str(d / "stats.json"),
+                         "--mavlink", "udpout:127.0.0.1:9", "--status-interval", "0"],
+                        capture_output=True, text=True)
+    (d / "bridge.err").write_text(br.stderr)
+    if br.returncode != 0 or not est_p.exists():
+        return {"seed": seed, "ok": False, "why": f"bridge exit {br.returncode}: "
+                f"{br.stderr.strip()[-300:]}"}
+    return judge(seed, truth_p, est_p)
 
 
 def summarise(scenario: str, runs: list[dict]) -> tuple[str, dict]:

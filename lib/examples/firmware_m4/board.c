@@ -112,8 +112,24 @@ int64_t board_extend_us(uint32_t stamp_us, int64_t now_us) {
     return now_us - (int64_t)age_us;
 }
 
-uint16_t board_encoder_left(void) { return (uint16_t)TIM_CNT(TIM3_BASE); }
-uint16_t board_encoder_right(void) { return (uint16_t)TIM_CNT(TIM4_BASE); }
+/* Polled latch: both counters and TIM2 together, every
+ * BOARD_ODOMETRY_PERIOD_US (the main loop runs much faster). */
+static uint32_t next_odo_us;
+static bool odo_started;
+
+bool board_odometry_pop(board_odometry *out) {
+    const uint32_t now = TIM_CNT(TIM2_BASE);
+    if (!odo_started) {
+        odo_started = true;
+        next_odo_us = now;
+    }
+    if ((int32_t)(now - next_odo_us) < 0) return false;
+    next_odo_us += BOARD_ODOMETRY_PERIOD_US;
+    out->stamp_us = now;
+    out->left = (uint16_t)TIM_CNT(TIM3_BASE);
+    out->right = (uint16_t)TIM_CNT(TIM4_BASE);
+    return true;
+}
 
 bool board_burst_pop(board_burst *out) {
     const uint32_t tail = queue_tail;
@@ -121,6 +137,8 @@ bool board_burst_pop(board_burst *out) {
     out->start_us = queue[tail].start_us;
     out->width_us = queue[tail].width_us;
     out->receiver = queue[tail].receiver;
+    out->amplitude_mv = 0;      /* no ADC */
+    out->double_pulse = false;  /* the sequencer pairs the bursts */
     __asm__ volatile("dmb" ::: "memory");
     queue_tail = (tail + 1u) & (QUEUE_LEN - 1u);
     return true;

@@ -113,7 +113,9 @@ static void add_burst(int64_t start_us, uint32_t rx) {
     if (n_pending >= sizeof pending / sizeof pending[0]) return;
     pending[n_pending].start_us = (uint32_t)start_us;   /* the node's 32-bit clock */
     pending[n_pending].width_us = 2500;
+    pending[n_pending].amplitude_mv = 0;
     pending[n_pending].receiver = (uint8_t)rx;
+    pending[n_pending].double_pulse = false;
     pending_end_us[n_pending] = start_us + 2500;
     n_pending++;
 }
@@ -177,8 +179,15 @@ static uint16_t encoder(double sign) {
     const double ticks = floor(dist_m / (2.0 * PI_RAD * WHEEL_RADIUS_M) * TICKS_PER_REV);
     return (uint16_t)(uint32_t)(int64_t)ticks;
 }
-uint16_t board_encoder_left(void) { return encoder(-1.0); }
-uint16_t board_encoder_right(void) { return encoder(+1.0); }
+static int64_t next_odo_us;
+bool board_odometry_pop(board_odometry *out) {
+    if (sim_now_us < next_odo_us) return false;
+    next_odo_us = sim_now_us + BOARD_ODOMETRY_PERIOD_US;
+    out->stamp_us = (uint32_t)sim_now_us;
+    out->left = encoder(-1.0);
+    out->right = encoder(+1.0);
+    return true;
+}
 
 /* Delivers bursts in the order their falling edge (end of burst) happened. */
 bool board_burst_pop(board_burst *out) {
