@@ -1449,6 +1449,65 @@ static void test_api_misuse_leaves_state(void **state)
     assert_memory_equal(&z, &zref, sizeof z);
 }
 
+/* bl_config_same_geometry (config.h) is the one geometry check:
+ * bl_filter_update_config refuses exactly what it calls a geometry change
+ * (each field it lists, the beacon period included) and accepts tuning
+ * (and what it leaves to the caller: wheel radius, ticks, encoder rate). */
+static void test_same_geometry(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    static bl_filter f;
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    assert_true(bl_config_same_geometry(&cfg, &cfg));
+    assert_false(bl_config_same_geometry(NULL, &cfg));
+    assert_false(bl_config_same_geometry(&cfg, NULL));
+    /* beacons beyond beacon_count are not part of the site */
+    bl_config c = cfg;
+    c.beacons[BL_MAX_BEACONS - 1].x_m += 1;
+    assert_true(bl_config_same_geometry(&cfg, &c));
+    assert_int_equal(bl_filter_update_config(&f, &c), BL_OK);
+    assert_int_equal(bl_filter_update_config(&f, &cfg), BL_OK);
+    /* each geometry field: different geometry, refused by update_config */
+    for (int k = 0; k < 12; ++k) {
+        c = cfg;
+        switch (k) {
+        case 0: c.beacon_period_s *= (bl_real)1.01; break;
+        case 1: c.beacons[2].y_m += (bl_real)0.01; break;
+        case 2: c.beacons[5].z_m += (bl_real)0.01; break;
+        case 3: c.receiver_count -= 1; break;
+        case 4: c.ring_radius_m += (bl_real)0.01; break;
+        case 5: c.first_angle_deg += 1; break;
+        case 6: c.angle_step_deg = 40; break;
+        case 7: c.receiver_height_m += (bl_real)0.01; break;
+        case 8: c.wheel_base_m += (bl_real)0.01; break;
+        case 9: c.sigma_wheel_scale = (bl_real)0.03; break; /* state layout: calibration on */
+        case 10: c.beacon_count = 5; break;
+        case 11: c.beacons[0].x_m += (bl_real)0.01; break;
+        }
+        assert_int_equal(bl_config_check(&c, NULL), BL_OK);
+        assert_false(bl_config_same_geometry(&cfg, &c));
+        assert_false(bl_config_same_geometry(&c, &cfg));
+        assert_int_equal(bl_filter_update_config(&f, &c), BL_ECONFIG);
+    }
+    /* tuning and the caller's own conversions: same geometry, accepted */
+    c = cfg;
+    c.gate_sigma = 4;
+    c.sigma_arrival_s *= 2;
+    c.wheel_radius_m *= (bl_real)1.1;
+    c.ticks_per_rev += 1;
+    c.encoder_rate_hz = 50;
+    c.reset_reject_count = 3;
+    assert_true(bl_config_same_geometry(&cfg, &c));
+    assert_int_equal(bl_filter_update_config(&f, &c), BL_OK);
+    /* a calibration σ changed but still on is the same state layout */
+    bl_config on = cfg, on2 = cfg;
+    on.sigma_wheel_scale = (bl_real)0.03;
+    on2.sigma_wheel_scale = (bl_real)0.05;
+    assert_true(bl_config_same_geometry(&on, &on2));
+}
+
 /* Iterated EKF (Kleeman §3.4): from a prior 1 m off, one precise pulse.
  * The iteration stops as soon as the step is below the tolerance (not at
  * the cap) and the posterior explains the measurement. */
@@ -1595,6 +1654,7 @@ int main(void)
         cmocka_unit_test(test_gate),
         cmocka_unit_test(test_api_misuse_leaves_state),
         cmocka_unit_test(test_start_snapshot_restart),
+        cmocka_unit_test(test_same_geometry),
         cmocka_unit_test(test_gap_pulses_only_recovers),
         cmocka_unit_test(test_gap_recovers),
         cmocka_unit_test(test_process_noise_by_motion),

@@ -218,8 +218,9 @@ typedef struct bl_seq_pending {
 } bl_seq_pending;
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
- * `counters` are private. Size: 1,328 bytes on x86-64 with BL_MAX_RECEIVERS 16
- * (BL_SEQ_MAX_PENDING · (24 + 6·BL_MAX_RECEIVERS) + 336). */
+ * `counters` are private. Size: 2,352 bytes on x86-64 and on Cortex-M4 with
+ * BL_MAX_RECEIVERS 16 (BL_SEQ_MAX_PENDING · (24 + 14·BL_MAX_RECEIVERS) + 368;
+ * 8 of the 14 bytes per receiver are the callers' tags). */
 typedef struct bl_sequencer {
     bl_seq_config cfg;
     bl_seq_counters counters;
