@@ -412,8 +412,8 @@ void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
         .double_pulse = p->double_pulse,
         .amplitude_mv = p->amplitude_mv,
         .width_us = (uint16_t)(p->width_us > 65535 ? 65535 : p->width_us),
+        .tag = (uint64_t)rx_us, /* comes back as the newest fused measurement's */
     };
-    BRIDGE_SET_DETECTION_TAG(d, rx_us);
     int rc = bl_localizer_detection(&e->loc, &d);
     if (rc != BL_OK) {
         e->c.seq_errors++;

@@ -114,9 +114,6 @@ struct est_health {
     unsigned window_rejected; /* of those, rejected by the gate */
 };
 
-/* The detection's tag is the local receive time of its frame (the
- * localizer reports the newest fused measurement's tag). */
-#define BRIDGE_SET_DETECTION_TAG(d, rx_us) ((void)(d), (void)(rx_us)) /* TODO(h1 API): (d).tag = (uint64_t)(rx_us) */
 
 struct estimator {
     struct bridge_config cfg;     /* the site as configured (geometry for SIGHUP) */

@@ -16,14 +16,22 @@ constexpr uint32_t kMagic = 0x6C6F6331u;  // "loc1"
 // Tag of member m of a pulse (the detection's tag, carried by the sequencer).
 inline uint64_t member_tag(const bl_seq_pulse &pl, uint32_t m)
 {
-    (void)pl;
-    (void)m;
-    return 0;  // TODO(h1 API): pl.members[m].tag
+    return pl.members[m].tag;
 }
 
 bool valid(const bl_localizer *loc) { return loc != nullptr && loc->magic_ == kMagic; }
 
-void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset_cause cause, uint16_t count)
+// Started, and the state time, without a bl_estimate on the stack (these
+// sit on the deepest call chain: pulse -> fusion -> snapshot solver).
+bool started(const bl_filter *f) { return bl_filter_get_state(f, nullptr, nullptr) == BL_OK; }
+int64_t state_time_us(const bl_filter *f) { return f->t_us_; }
+
+#define NOINLINE __attribute__((noinline))
+// The pulse path is inlined into its two entry points: every frame on it
+// adds to the deepest chain (pulse -> fusion -> snapshot solver).
+#define INLINE inline __attribute__((always_inline))
+
+NOINLINE void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset_cause cause, uint16_t count)
 {
     bl_loc_event ev;
     std::memset(&ev, 0, sizeof ev);
@@ -49,15 +57,9 @@ void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset_cause ca
     loc->ev_len_++;
 }
 
-// The filter gets the site config without its own persistent-rejection
-// reset: the localizer's window is the one mechanism (cfg.reset_reject_count
-// is K of the window here).
-bl_config filter_config(const bl_config *cfg)
-{
-    bl_config c = *cfg;
-    c.reset_reject_count = 0;
-    return c;
-}
+// The filter's config (it has no persistent-rejection reset of its own:
+// cfg.reset_reject_count is K of the localizer's window).
+bl_config filter_config(const bl_config *cfg) { return *cfg; }
 
 void set_window(bl_localizer *loc, uint32_t k)
 {
@@ -80,7 +82,7 @@ bool configs_agree(const bl_config *cfg, const bl_seq_config *sc)
 
 // While converged, the filter's firing-time prediction goes to the
 // sequencer; dropped when not converged.
-void update_hint(bl_localizer *loc, const bl_estimate &est)
+NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
 {
     if (!est.started || !est.converged) {
         if (loc->hint_set_) {
@@ -102,12 +104,11 @@ void update_hint(bl_localizer *loc, const bl_estimate &est)
 
 // A fresh filter (pulses buffer until the next snapshot start); the
 // published reset counter keeps counting.
-void reinit_filter(bl_localizer *loc, bl_loc_reset_cause cause)
+NOINLINE void reinit_filter(bl_localizer *loc, bl_loc_reset_cause cause)
 {
-    bl_estimate est;
-    const bool was = bl_filter_estimate(&loc->filter, &est) == BL_OK && est.started;
-    if (was) loc->reset_base_ += est.reset_counter + 1;
-    bl_config c = loc->filter.cfg_;  // already without the filter's own reset
+    const bool was = started(&loc->filter);
+    if (was) loc->reset_base_ += loc->filter.reset_count_ + 1;
+    const bl_config c = loc->filter.cfg_;
     (void)bl_filter_init(&loc->filter, &c);
     (void)bl_sequencer_clear_hint(&loc->seq);
     loc->hint_set_ = false;
@@ -154,7 +155,7 @@ uint32_t window_rejected(const bl_localizer *loc, uint32_t *beacon_mask)
 }
 
 // Restarts from the snapshot when the watch says so; true if restarted.
-bool restart_if_persistent(bl_localizer *loc)
+NOINLINE bool restart_if_persistent(bl_localizer *loc)
 {
     if (loc->reject_k_ == 0 || loc->win_len_ < loc->reject_w_) return false;
     uint32_t mask = 0;
@@ -162,9 +163,10 @@ bool restart_if_persistent(bl_localizer *loc)
     const uint32_t n_beacons = loc->filter.cfg_.beacon_count;
     const int need = static_cast<int>(n_beacons < 3 ? n_beacons : 3);
     if (n < loc->reject_k_ || __builtin_popcount(mask) < need) return false;
-    bl_estimate est;
-    (void)bl_filter_estimate(&loc->filter, &est);
-    const int rc = bl_filter_start_snapshot(&loc->filter, est.theta_rad, loc->filter.cfg_.reset_sigma_theta_rad);
+    bl_real x[BL_FILTER_NX];
+    if (bl_filter_get_state(&loc->filter, x, nullptr) != BL_OK) return false;
+    const int rc = bl_filter_start_snapshot(&loc->filter, bl::wrap_angle(x[BL_IX_THETA]),
+                                            loc->filter.cfg_.reset_sigma_theta_rad);
     loc->win_len_ = 0;
     loc->win_rejected_ = 0;
     if (rc != BL_OK) {
@@ -173,9 +175,7 @@ bool restart_if_persistent(bl_localizer *loc)
     }
     loc->counters_.snapshot_restarts++;
     loc->wheel_ref_ = false;  // the state time moved to the latest arrival
-    bl_estimate now;
-    (void)bl_filter_estimate(&loc->filter, &now);
-    loc->last_reset_seen_ = now.reset_counter;  // this reset is reported here, once
+    loc->last_reset_seen_ = loc->filter.reset_count_;  // this reset is reported here, once
     push_event(loc, BL_LOC_EV_RESET, BL_LOC_CAUSE_PERSISTENT_REJECTION, static_cast<uint16_t>(n));
     return true;
 }
@@ -184,76 +184,91 @@ bool restart_if_persistent(bl_localizer *loc)
 
 enum class Fused { kNo, kAccepted, kRejected, kMisnumbered };
 
-// One arrival (beacon, time, receiver) of a firing.
-Fused fuse_one(bl_localizer *loc, uint32_t beacon, int64_t arrival_us, uint32_t receiver)
+// Numbering re-synchronised: the sequencer starts over from the filter's
+// firing times (its hint).
+NOINLINE void resync(bl_localizer *loc)
 {
-    bl_estimate est;
-    (void)bl_filter_estimate(&loc->filter, &est);
-    // Wheels silent before this pulse (or never heard), or no update for
-    // that long: constant-velocity predict to the pulse, so the process
-    // noise of the interval is in P before the fusion.
+    bl_estimate now;
+    (void)bl_filter_estimate(&loc->filter, &now);
+    (void)bl_sequencer_reset(&loc->seq);
+    loc->hint_set_ = false;
+    update_hint(loc, now);
+    loc->misnumbered_in_row_ = 0;
+    loc->counters_.seq_resyncs++;
+    push_event(loc, BL_LOC_EV_RESYNC, BL_LOC_CAUSE_NONE, 0);
+}
+
+// Wheels silent before this pulse (or never heard), or no update for that
+// long: constant-velocity predict to the pulse, so the process noise of the
+// interval is in P before the fusion.
+NOINLINE void coast_to(bl_localizer *loc, int64_t arrival_us)
+{
     const bool wheels_stale = !loc->wheel_seen_ || arrival_us - loc->wheel_last_us_ > BL_LOC_WHEEL_SILENCE_US;
-    if (est.started &&
-        ((wheels_stale && arrival_us > est.t_us) || arrival_us - est.t_us > BL_LOC_WHEEL_SILENCE_US)) {
-        const int prc = bl_filter_predict(&loc->filter, arrival_us);
-        if (prc == BL_OK) {
-            loc->counters_.cv_predicts++;
-            loc->wheel_ref_ = false;  // the silence is covered by this predict
-        } else if (prc == BL_ETIME) {
-            reinit_filter(loc, BL_LOC_CAUSE_TIME_GAP);
-        } else {
-            loc->counters_.predict_errors++;
-        }
+    const int64_t t_state_us = state_time_us(&loc->filter);
+    if (!started(&loc->filter) ||
+        !((wheels_stale && arrival_us > t_state_us) || arrival_us - t_state_us > BL_LOC_WHEEL_SILENCE_US))
+        return;
+    const int prc = bl_filter_predict(&loc->filter, arrival_us);
+    if (prc == BL_OK) {
+        loc->counters_.cv_predicts++;
+        loc->wheel_ref_ = false;  // the silence is covered by this predict
+    } else if (prc == BL_ETIME) {
+        reinit_filter(loc, BL_LOC_CAUSE_TIME_GAP);
+    } else {
+        loc->counters_.predict_errors++;
     }
-    bl_pulse_result res;
-    int rc = bl_filter_fuse_pulse(&loc->filter, beacon, arrival_us, receiver, &res);
-    if (rc == BL_ETIME) {
-        reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
-        rc = bl_filter_fuse_pulse(&loc->filter, beacon, arrival_us, receiver, &res);
-    }
-    if (rc != BL_OK) {
-        loc->counters_.fuse_errors++;
-        return Fused::kNo;
-    }
+}
+
+// The fusion's result (loc->result_) counted and classified.
+NOINLINE Fused classify(bl_localizer *loc)
+{
+    const bl_fusion_result &res = loc->result_;
     // An innovation longer than the longest flight: a numbering error, not a
     // pose error (see localizer.h). Two in a row while converged re-sync.
-    const bool misnumbered = res.status == BL_PULSE_REJECTED && loc->was_converged_ &&
-                             (res.innovation_s < 0 ? -res.innovation_s : res.innovation_s) * bl_real(1e6) >
+    const bool misnumbered = res.status == BL_FUSION_REJECTED && loc->was_converged_ &&
+                             (res.innovation < 0 ? -res.innovation : res.innovation) * bl_real(1e6) >
                                  bl_real(loc->seq.cfg.max_flight_us);
     if (misnumbered) {
         loc->counters_.numbering_errors++;
         loc->counters_.pulses_rejected++;
-        if (++loc->misnumbered_in_row_ >= 2) {
-            bl_estimate now;
-            (void)bl_filter_estimate(&loc->filter, &now);
-            (void)bl_sequencer_reset(&loc->seq);
-            loc->hint_set_ = false;
-            update_hint(loc, now);
-            loc->misnumbered_in_row_ = 0;
-            loc->counters_.seq_resyncs++;
-            push_event(loc, BL_LOC_EV_RESYNC, BL_LOC_CAUSE_NONE, 0);
-        }
+        if (++loc->misnumbered_in_row_ >= 2) resync(loc);
         return Fused::kMisnumbered;
     }
-    if (res.status == BL_PULSE_ACCEPTED) loc->misnumbered_in_row_ = 0;
+    if (res.status == BL_FUSION_ACCEPTED) loc->misnumbered_in_row_ = 0;
     switch (res.status) {
-    case BL_PULSE_ACCEPTED:
-    case BL_PULSE_STARTED:
-    case BL_PULSE_RESET:
+    case BL_FUSION_ACCEPTED:
+    case BL_FUSION_STARTED:
+    case BL_FUSION_RESET:
         loc->counters_.pulses_accepted++;
         return Fused::kAccepted;
-    case BL_PULSE_REJECTED:
+    case BL_FUSION_REJECTED:
         loc->counters_.pulses_rejected++;
         return Fused::kRejected;
-    case BL_PULSE_BUFFERED:
+    case BL_FUSION_BUFFERED:
     default:
         loc->counters_.pulses_buffered++;
         return Fused::kNo;
     }
 }
 
+// One arrival (beacon, time, receiver) of a firing.
+INLINE Fused fuse_one(bl_localizer *loc, uint32_t beacon, int64_t arrival_us, uint32_t receiver)
+{
+    coast_to(loc, arrival_us);
+    int rc = bl_filter_fuse_pulse(&loc->filter, beacon, arrival_us, receiver, &loc->result_);
+    if (rc == BL_ETIME) {
+        reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
+        rc = bl_filter_fuse_pulse(&loc->filter, beacon, arrival_us, receiver, &loc->result_);
+    }
+    if (rc != BL_OK) {
+        loc->counters_.fuse_errors++;
+        return Fused::kNo;
+    }
+    return classify(loc);
+}
+
 // Bookkeeping after a state change: events, hint.
-void after_update(bl_localizer *loc)
+NOINLINE void after_update(bl_localizer *loc)
 {
     bl_estimate est;
     (void)bl_filter_estimate(&loc->filter, &est);
@@ -275,7 +290,7 @@ void after_update(bl_localizer *loc)
 }
 
 // One numbered firing: every member fused and watched.
-void fuse_firing(bl_localizer *loc, const bl_seq_pulse &pl)
+INLINE void fuse_firing(bl_localizer *loc, const bl_seq_pulse &pl)
 {
     const uint32_t beacon = static_cast<uint32_t>(pl.beacon);
     const uint32_t n = (pl.member_count == 0 || pl.member_count > BL_MAX_RECEIVERS) ? 0 : pl.member_count;
@@ -304,7 +319,7 @@ void fuse_firing(bl_localizer *loc, const bl_seq_pulse &pl)
         loc->counters_.firings_rejected++;
 }
 
-void process_pulse(bl_localizer *loc, const bl_seq_pulse &pl)
+INLINE void process_pulse(bl_localizer *loc, const bl_seq_pulse &pl)
 {
     loc->counters_.pulses_in++;
     if (pl.status == BL_SEQ_UNLOCKED) {
@@ -323,11 +338,10 @@ void process_pulse(bl_localizer *loc, const bl_seq_pulse &pl)
     fuse_firing(loc, pl);
 }
 
-void pop_until(bl_localizer *loc, int64_t now_us)
+INLINE void pop_until(bl_localizer *loc, int64_t now_us)
 {
-    bl_seq_pulse pl;
     int rc;
-    while ((rc = bl_sequencer_pop(&loc->seq, now_us, &pl)) == 1) process_pulse(loc, pl);
+    while ((rc = bl_sequencer_pop(&loc->seq, now_us, &loc->pulse_)) == 1) process_pulse(loc, loc->pulse_);
     if (rc < 0) loc->counters_.seq_errors++;
 }
 
@@ -460,9 +474,9 @@ extern "C" int bl_localizer_detection(bl_localizer *loc, const bl_seq_detection 
         pop_until(loc, det->time_us);
         rc = bl_sequencer_push(&loc->seq, det);
         if (rc == BL_EFULL) {  // still full: close the oldest pulses, same path as any pulse
-            bl_seq_pulse pl;
-            while (loc->seq.n_pending >= BL_SEQ_MAX_PENDING && bl_sequencer_pop(&loc->seq, INT64_MAX / 4, &pl) == 1)
-                process_pulse(loc, pl);
+            while (loc->seq.n_pending >= BL_SEQ_MAX_PENDING &&
+                   bl_sequencer_pop(&loc->seq, INT64_MAX / 4, &loc->pulse_) == 1)
+                process_pulse(loc, loc->pulse_);
             rc = bl_sequencer_push(&loc->seq, det);
         }
     }
@@ -494,15 +508,14 @@ extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *
     loc->wheel_seen_ = true;
     loc->wheel_ref_ = true;
     if (!had_ref) return BL_OK;
-    bl_estimate est;
-    (void)bl_filter_estimate(&loc->filter, &est);
-    if (!est.started) return BL_OK;
+    if (!started(&loc->filter)) return BL_OK;
+    const int64_t t_state_us = state_time_us(&loc->filter);
     // Sample older than the state (the filter just started at a pulse), the
     // interval already covered by a constant-velocity predict, or an
     // increment that spans a silence: the reference only (localizer.h).
-    if (inc->t_us <= est.t_us || last < est.t_us - BL_LOC_WHEEL_SILENCE_US || gap > BL_LOC_WHEEL_SILENCE_US)
+    if (inc->t_us <= t_state_us || last < t_state_us - BL_LOC_WHEEL_SILENCE_US || gap > BL_LOC_WHEEL_SILENCE_US)
         return BL_OK;
-    if (last > est.t_us) {
+    if (last > t_state_us) {
         // The state is older than the increment's start: constant velocity
         // up to it first, so the increment is divided by its own interval.
         const int prc = bl_filter_predict(&loc->filter, last);
@@ -548,15 +561,11 @@ extern "C" int bl_localizer_estimate_at(const bl_localizer *loc, int64_t t_us, b
 {
     if (loc == nullptr || est == nullptr) return BL_EINVAL;
     if (!valid(loc)) return BL_ENOTINIT;
-    bl_estimate now;
-    int rc = bl_filter_estimate(&loc->filter, &now);
+    if (!started(&loc->filter)) return BL_ENOTINIT;
+    bl_estimate e;
+    const int rc = t_us > state_time_us(&loc->filter) ? bl_filter_estimate_at(&loc->filter, t_us, &e)
+                                                       : bl_filter_estimate(&loc->filter, &e);
     if (rc != BL_OK) return rc;
-    if (!now.started) return BL_ENOTINIT;
-    bl_estimate e = now;
-    if (t_us > now.t_us) {
-        rc = bl_filter_estimate_at(&loc->filter, t_us, &e);
-        if (rc != BL_OK) return rc;
-    }
     e.reset_counter += loc->reset_base_;
     *est = e;
     return BL_OK;

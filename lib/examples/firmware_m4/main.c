@@ -101,6 +101,7 @@ int main(void) {
             d.width_us = b.width_us;
             d.amplitude_mv = b.amplitude_mv;
             d.double_pulse = b.double_pulse;
+            d.tag = (uint64_t)now_us;   /* when the loop took it (latency figure) */
             if (bl_localizer_detection(&fw_loc, &d) != BL_OK) fw_out.errors++;
         }
 

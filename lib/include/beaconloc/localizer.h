@@ -21,8 +21,8 @@
  *     the snapshot solver (bl_filter_start_snapshot, heading kept with σ
  *     cfg.reset_sigma_theta_rad unless the ring gives one). K is
  *     cfg.reset_reject_count (default 8: 8 of 12); 0 switches the watch off.
- *     The filter's own consecutive-rejection reset is not used (this is the
- *     one mechanism). Event RESET, cause PERSISTENT_REJECTION.
+ *     This is the one persistent-rejection mechanism (the filter has none of
+ *     its own). Event RESET, cause PERSISTENT_REJECTION.
  *   - Numbering errors: a rejected arrival whose innovation is longer than
  *     the longest flight (seq cfg max_flight_us) while converged cannot come
  *     from a pose error: the sequencer gave the wrong beacon number. Two in
@@ -82,6 +82,7 @@
 #include "beaconloc/common.h"
 #include "beaconloc/config.h"
 #include "beaconloc/filter.h"
+#include "beaconloc/fusion.h"
 #include "beaconloc/sequencer.h"
 
 #ifdef __cplusplus
@@ -211,6 +212,9 @@ typedef struct bl_localizer {
     bl_loc_counters counters_;
     bl_loc_event events_[BL_LOC_EVENT_QUEUE];
     uint32_t ev_head_, ev_len_;
+    bl_seq_pulse pulse_;         /* the pulse being processed, and its fusion result (kept */
+    bl_fusion_result result_;     /* off the stack: the fusion's snapshot start is the
+                                    deepest call chain) */
 } bl_localizer;
 
 /* The sequencer config for a site (bl_sequencer_config_from_site with the
