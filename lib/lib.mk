@@ -62,8 +62,19 @@ TEST_BUILDS += $(LIB_TEST_BINS)
 .PHONY: lib test-lib check-lib-clink
 lib: $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
 
-test-lib: $(LIB_TEST_BINS) check-lib-clink
-	@set -e; for t in $(LIB_TEST_BINS); do echo "== $$t"; $$t; done
+# test_localizer's input: hardware-simulator runs turned into the
+# localizer's inputs (tests/lib/localizer_input.py), made here, never
+# committed. Scenario and seconds simulated:
+LOC_DATA_DIR := $(BUILD)/tests/lib/data
+LOC_RUNS     := kleeman-lab:40 echo-storm:40 kidnap:75 encoder-silence:40
+LOC_DATA     := $(foreach r,$(LOC_RUNS),$(LOC_DATA_DIR)/$(word 1,$(subst :, ,$(r))).txt)
+$(LOC_DATA_DIR)/%.txt: tests/lib/localizer_input.py hw_sim/can/beaconloc.dbc hw_sim/scenarios/%.scenario.ini \
+                       hw_sim/scenarios/kleeman-lab.ini | $(SETUP_STAMP)
+	$(PY) tests/lib/localizer_input.py $* \
+	    $(word 2,$(subst :, ,$(filter $*:%,$(LOC_RUNS)))) 1 $(LOC_DATA_DIR)/$*
+
+test-lib: $(LIB_TEST_BINS) check-lib-clink $(LOC_DATA)
+	@set -e; for t in $(LIB_TEST_BINS); do echo "== $$t"; BL_LOCALIZER_DATA=$(LOC_DATA_DIR) $$t; done
 
 # Pure C program, plain gcc, no libstdc++: the link itself proves no C++
 # runtime is needed; nm -u proves no heap and no C++ runtime references.

@@ -1,0 +1,449 @@
+/*
+ * cmocka tests of the localizer (lib/include/beaconloc/localizer.h) on
+ * hardware-simulator runs: lib/lib.mk runs the simulator at build time
+ * (tests/lib/localizer_input.py: kleeman-lab, echo-storm, kidnap,
+ * encoder-silence) and turns each candump log into the localizer's inputs on
+ * the receiver node's clock, beside the simulator's truth. Every input is
+ * fed as the bridge feeds it (a detection, then the pulses closed at its
+ * time; a wheel sample after the pulses closed 5 ms before it), and the
+ * estimates are checked against the truth. Data directory:
+ * $BL_LOCALIZER_DATA, default build/tests/lib/data.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <setjmp.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <math.h>
+#include <cmocka.h>
+
+#include "beaconloc/localizer.h"
+
+#define WHEEL_LATENCY_US 5000
+#define SKIP_S 20.0
+
+typedef struct {
+    char kind;           /* 'D' detection, 'W' wheel sample */
+    bl_seq_detection d;
+    bl_wheel_increment w;
+} input_t;
+
+typedef struct {
+    input_t *in;
+    size_t n;
+    int64_t *tt;         /* truth t_us */
+    double *tx, *ty;
+    size_t nt;
+} run_t;
+
+static const char *data_dir(void) {
+    const char *d = getenv("BL_LOCALIZER_DATA");
+    return d ? d : "build/tests/lib/data";
+}
+
+static void load(run_t *r, const char *name) {
+    char path[512];
+    snprintf(path, sizeof path, "%s/%s.txt", data_dir(), name);
+    FILE *f = fopen(path, "r");
+    if (!f) fail_msg("%s: not found (made by lib/lib.mk)", path);
+    size_t cap = 1 << 16;
+    r->in = calloc(cap, sizeof *r->in);
+    r->n = 0;
+    char line[256];
+    while (fgets(line, sizeof line, f)) {
+        if (r->n == cap) {
+            cap *= 2;
+            r->in = realloc(r->in, cap * sizeof *r->in);
+        }
+        input_t *e = &r->in[r->n];
+        memset(e, 0, sizeof *e);
+        long long t;
+        unsigned long long tag;
+        if (line[0] == 'D') {
+            unsigned rx, dbl, amp, width;
+            assert_int_equal(sscanf(line + 1, "%lld %u %u %u %u %llu", &t, &rx, &dbl, &amp, &width, &tag), 6);
+            e->kind = 'D';
+            e->d.time_us = t;
+            e->d.receiver = rx;
+            e->d.double_pulse = dbl != 0;
+            e->d.amplitude_mv = (uint16_t)amp;
+            e->d.width_us = (uint16_t)width;
+            e->d.tag = tag;
+        } else {
+            double dl, dr;
+            unsigned ref;
+            assert_int_equal(sscanf(line + 1, "%lld %lf %lf %u %llu", &t, &dl, &dr, &ref, &tag), 5);
+            e->kind = 'W';
+            e->w.t_us = t;
+            e->w.d_left_m = (bl_real)dl;
+            e->w.d_right_m = (bl_real)dr;
+            e->w.reference_only = ref != 0;
+            e->w.tag = tag;
+        }
+        r->n++;
+    }
+    fclose(f);
+    snprintf(path, sizeof path, "%s/%s.truth.csv", data_dir(), name);
+    f = fopen(path, "r");
+    if (!f) fail_msg("%s: not found", path);
+    cap = 1 << 16;
+    r->tt = calloc(cap, sizeof *r->tt);
+    r->tx = calloc(cap, sizeof *r->tx);
+    r->ty = calloc(cap, sizeof *r->ty);
+    r->nt = 0;
+    char big[1024];
+    if (!fgets(big, sizeof big, f)) fail_msg("empty truth");
+    while (fgets(big, sizeof big, f)) {
+        if (r->nt == cap) {
+            cap *= 2;
+            r->tt = realloc(r->tt, cap * sizeof *r->tt);
+            r->tx = realloc(r->tx, cap * sizeof *r->tx);
+            r->ty = realloc(r->ty, cap * sizeof *r->ty);
+        }
+        long long t;
+        double ts, x, y;
+        if (sscanf(big, "%lld,%lf,%lf,%lf", &t, &ts, &x, &y) == 4) {
+            r->tt[r->nt] = t;
+            r->tx[r->nt] = x;
+            r->ty[r->nt] = y;
+            r->nt++;
+        }
+    }
+    fclose(f);
+    assert_true(r->n > 1000 && r->nt > 100);
+}
+
+static void unload(run_t *r) {
+    free(r->in);
+    free(r->tt);
+    free(r->tx);
+    free(r->ty);
+}
+
+/* Truth position at t_us (linear interpolation); false outside the run. */
+static bool truth_at(const run_t *r, int64_t t_us, double *x, double *y) {
+    if (t_us < r->tt[0] || t_us > r->tt[r->nt - 1]) return false;
+    size_t lo = 0, hi = r->nt - 1;
+    while (hi - lo > 1) {
+        size_t mid = (lo + hi) / 2;
+        if (r->tt[mid] <= t_us) lo = mid; else hi = mid;
+    }
+    double a = r->tt[hi] > r->tt[lo] ? (double)(t_us - r->tt[lo]) / (double)(r->tt[hi] - r->tt[lo]) : 0;
+    *x = r->tx[lo] + a * (r->tx[hi] - r->tx[lo]);
+    *y = r->ty[lo] + a * (r->ty[hi] - r->ty[lo]);
+    return true;
+}
+
+static double seconds(const run_t *r, int64_t t_us) { return (double)(t_us - r->tt[0]) * 1e-6; }
+
+/* What a run saw. */
+typedef struct {
+    double err2_sum;      /* after SKIP_S */
+    unsigned err_n;
+    double err_max_after_s, err_max_after; /* max error after err_max_after_s */
+    unsigned events[8];   /* by kind */
+    unsigned resets_by_cause[8];
+    double first_reset_s; /* time of the first RESET event (s), -1 none */
+    unsigned bad_tags;    /* newest tag not an input already fed */
+} stats_t;
+
+typedef void (*hook_fn)(bl_localizer *loc, const run_t *r, size_t i, void *ctx);
+
+static void feed(bl_localizer *loc, const run_t *r, stats_t *s, hook_fn hook, void *ctx) {
+    bl_config cfg;
+    bl_seq_config sc;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.max_predict_gap_s = 10; /* the bridge's default max_coast_s */
+    assert_int_equal(bl_localizer_seq_config(&cfg, &sc, NULL, NULL), BL_OK);
+    assert_int_equal(bl_localizer_init(loc, &cfg, &sc), BL_OK);
+    memset(s, 0, sizeof *s);
+    s->first_reset_s = -1;
+    uint32_t seen = 0;
+    uint64_t max_tag = 0;
+    for (size_t i = 0; i < r->n; i++) {
+        const input_t *e = &r->in[i];
+        int64_t t;
+        if (e->kind == 'D') {
+            assert_int_equal(bl_localizer_detection(loc, &e->d), BL_OK);
+            assert_int_equal(bl_localizer_advance(loc, e->d.time_us), BL_OK);
+            t = e->d.time_us;
+            if (e->d.tag > max_tag) max_tag = e->d.tag;
+        } else {
+            assert_int_equal(bl_localizer_advance(loc, e->w.t_us - WHEEL_LATENCY_US), BL_OK);
+            assert_int_equal(bl_localizer_wheels(loc, &e->w), BL_OK);
+            t = e->w.t_us;
+            if (e->w.tag > max_tag) max_tag = e->w.tag;
+        }
+        if (hook) hook(loc, r, i, ctx);
+        bl_loc_event ev;
+        while (bl_localizer_next_event(loc, &ev) == 1) {
+            assert_true(ev.kind >= 1 && ev.kind < 8);
+            s->events[ev.kind]++;
+            if (ev.kind == BL_LOC_EV_RESET) {
+                s->resets_by_cause[ev.cause]++;
+                if (s->first_reset_s < 0) s->first_reset_s = seconds(r, t);
+            }
+        }
+        bl_loc_status st;
+        assert_int_equal(bl_localizer_status(loc, &st), BL_OK);
+        if (st.measurements == seen) continue;
+        seen = st.measurements;
+        /* the newest fused measurement is one already fed */
+        if (!st.have_tag || st.newest_tag == 0 || st.newest_tag > max_tag) s->bad_tags++;
+        bl_estimate est;
+        assert_int_equal(bl_localizer_estimate(loc, &est), BL_OK);
+        double x, y;
+        if (!truth_at(r, est.t_us, &x, &y)) continue;
+        const double e2 = (est.x_m - x) * (est.x_m - x) + (est.y_m - y) * (est.y_m - y);
+        const double ts = seconds(r, est.t_us);
+        if (ts >= SKIP_S) {
+            s->err2_sum += e2;
+            s->err_n++;
+        }
+        if (s->err_max_after_s > 0 && ts >= s->err_max_after_s && sqrt(e2) > s->err_max_after)
+            s->err_max_after = sqrt(e2);
+    }
+}
+
+static double rmse(const stats_t *s) { return s->err_n ? sqrt(s->err2_sum / s->err_n) : 1e9; }
+
+static bl_localizer LOC;   /* big: static */
+
+/* ---- tests -------------------------------------------------------------- */
+
+/* Nominal site: starts once, converges, tracks within a few cm; every
+ * update names a measurement already fed; nothing refused. */
+static void test_nominal_tracks(void **state) {
+    (void)state;
+    run_t r;
+    load(&r, "kleeman-lab");
+    stats_t s;
+    feed(&LOC, &r, &s, NULL, NULL);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    if (rmse(&s) > 0.05) fail_msg("rmse %.3f m", rmse(&s));
+    assert_int_equal(s.events[BL_LOC_EV_STARTED], 1);
+    assert_true(s.events[BL_LOC_EV_CONVERGED] >= 1);
+    assert_int_equal(s.events[BL_LOC_EV_RESET], 0);
+    assert_int_equal(c.snapshot_restarts, 0);
+    assert_int_equal(c.fuse_errors + c.predict_errors + c.seq_errors, 0);
+    assert_true(c.predicts > 1000);
+    assert_true(c.pulses_accepted > 300);
+    assert_int_equal(s.bad_tags, 0);
+    bl_loc_status st;
+    assert_int_equal(bl_localizer_status(&LOC, &st), BL_OK);
+    assert_true(st.started && st.converged && st.ever_started);
+    assert_int_equal(st.window_size, 12); /* K = 8 (default): 8 of 12 */
+    unload(&r);
+}
+
+/* Echoes: every later arrival of a firing the sequencer flagged as a repeat
+ * is skipped (none reaches the filter), and the accuracy holds. */
+static void test_echo_repeats_not_fused(void **state) {
+    (void)state;
+    run_t r;
+    load(&r, "echo-storm");
+    stats_t s;
+    feed(&LOC, &r, &s, NULL, NULL);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    assert_true(c.repeats_skipped > 20);
+    assert_int_equal(c.repeats_skipped, LOC.seq.counters.repeats);
+    /* what the filter counted is what the localizer fused: no repeat went in */
+    bl_estimate est;
+    assert_int_equal(bl_localizer_estimate(&LOC, &est), BL_OK);
+    uint64_t filt = 0;
+    for (int b = 0; b < BL_MAX_BEACONS; b++) filt += est.accepted[b] + est.rejected[b];
+    assert_true(filt <= (uint64_t)c.pulses_accepted + c.pulses_rejected);
+    assert_int_equal(c.snapshot_restarts, 0);
+    if (rmse(&s) > 0.05) fail_msg("rmse %.3f m", rmse(&s));
+    unload(&r);
+}
+
+/* Kidnap (2 m at 60 s): the persistent-rejection watch restarts the filter
+ * from the snapshot once, and the pose is right again afterwards. */
+static void test_kidnap_restarts_once(void **state) {
+    (void)state;
+    run_t r;
+    load(&r, "kidnap");
+    stats_t s;
+    s.err_max_after_s = 0;
+    feed(&LOC, &r, &s, NULL, NULL);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    assert_int_equal(c.snapshot_restarts, 1);
+    assert_int_equal(s.resets_by_cause[BL_LOC_CAUSE_PERSISTENT_REJECTION], 1);
+    assert_int_equal(s.events[BL_LOC_EV_RESET], 1);
+    if (s.first_reset_s < 60.0 || s.first_reset_s > 65.0) fail_msg("restart at %.2f s", s.first_reset_s);
+    bl_estimate est;
+    assert_int_equal(bl_localizer_estimate(&LOC, &est), BL_OK);
+    assert_int_equal(est.reset_counter, 1);
+    double x, y;
+    assert_true(truth_at(&r, est.t_us, &x, &y));
+    if (hypot(est.x_m - x, est.y_m - y) > 0.1) fail_msg("final error %.3f m", hypot(est.x_m - x, est.y_m - y));
+    unload(&r);
+}
+
+/* Encoder silence (20.5 s for 5 s): pulses are fused after constant-velocity
+ * predicts, no wheel increment spans the silence, nothing re-initialises,
+ * and the pose stays close. */
+typedef struct {
+    double at_s[2];
+    uint32_t cv[2], predicts[2];
+} silence_ctx;
+
+static void silence_hook(bl_localizer *loc, const run_t *r, size_t i, void *ctx) {
+    silence_ctx *k = ctx;
+    const input_t *e = &r->in[i];
+    const double ts = seconds(r, e->kind == 'D' ? e->d.time_us : e->w.t_us);
+    bl_loc_counters c;
+    (void)bl_localizer_counters(loc, &c);
+    for (int j = 0; j < 2; j++)
+        if (ts < k->at_s[j]) {
+            k->cv[j] = c.cv_predicts;
+            k->predicts[j] = c.predicts;
+        }
+}
+
+static void test_silence_coasts(void **state) {
+    (void)state;
+    run_t r;
+    load(&r, "encoder-silence");
+    stats_t s;
+    silence_ctx k = {{21.0, 25.0}, {0, 0}, {0, 0}};
+    feed(&LOC, &r, &s, silence_hook, &k);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    assert_int_equal(k.predicts[1], k.predicts[0]);     /* no odometry in the silence */
+    assert_true(k.cv[1] - k.cv[0] >= 20);                /* coasted at constant velocity */
+    assert_true(c.predicts > k.predicts[1] + 500);       /* odometry back afterwards */
+    assert_int_equal(c.reinits, 0);
+    assert_int_equal(s.events[BL_LOC_EV_RESET], 0);
+    if (rmse(&s) > 0.08) fail_msg("rmse %.3f m", rmse(&s));
+    unload(&r);
+}
+
+/* A slipped sequencer (its firing model one period off, as after anchoring
+ * on an echo that looked like beacon 1's double pulse): the filter sees
+ * innovations longer than any flight, counts numbering errors, and
+ * re-synchronises the sequencer from its own firing times instead of
+ * restarting the pose. Injected during the encoder silence, where nothing
+ * but pulses updates the hint. */
+typedef struct {
+    double at_s;
+    bool done;
+} slip_ctx;
+
+static void slip_hook(bl_localizer *loc, const run_t *r, size_t i, void *ctx) {
+    slip_ctx *k = ctx;
+    const input_t *e = &r->in[i];
+    if (k->done || e->kind != 'D' || seconds(r, e->d.time_us) < k->at_s) return;
+    k->done = true;
+    bl_estimate est;
+    assert_int_equal(bl_localizer_estimate(loc, &est), BL_OK);
+    assert_true(est.converged);
+    bl_seq_hint h;
+    assert_int_equal(bl_sequencer_hint_from_estimate(&est, &h), BL_OK);
+    h.fire_us += (int64_t)llround((double)h.period_us); /* one slot late */
+    assert_int_equal(bl_sequencer_set_hint(&loc->seq, &h), BL_OK);
+}
+
+static void test_misnumbering_resyncs(void **state) {
+    (void)state;
+    run_t r;
+    load(&r, "encoder-silence");
+    stats_t s;
+    slip_ctx k = {21.5, false};
+    feed(&LOC, &r, &s, slip_hook, &k);
+    assert_true(k.done);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    assert_true(c.numbering_errors >= 2);
+    assert_true(c.seq_resyncs >= 1);
+    assert_int_equal(s.events[BL_LOC_EV_RESYNC], c.seq_resyncs);
+    assert_int_equal(c.snapshot_restarts, 0);  /* numbering errors are not pose errors */
+    assert_int_equal(s.events[BL_LOC_EV_RESET], 0);
+    if (rmse(&s) > 0.08) fail_msg("rmse %.3f m", rmse(&s));
+    unload(&r);
+}
+
+/* Errors are bad arguments only, and leave the object byte-identical. */
+static void test_errors_leave_it_untouched(void **state) {
+    (void)state;
+    static bl_localizer before, loc;
+    bl_config cfg;
+    bl_seq_config sc;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    assert_int_equal(bl_localizer_seq_config(&cfg, &sc, NULL, NULL), BL_OK);
+    memset(&loc, 0, sizeof loc);
+    bl_seq_detection d;
+    memset(&d, 0, sizeof d);
+    assert_int_equal(bl_localizer_detection(&loc, &d), BL_ENOTINIT);
+    assert_int_equal(bl_localizer_init(&loc, &cfg, &sc), BL_OK);
+    bl_wheel_increment w = {.t_us = 1000, .d_left_m = 0, .d_right_m = 0, .reference_only = true, .tag = 1};
+    assert_int_equal(bl_localizer_wheels(&loc, &w), BL_OK);
+    before = loc;
+    d.receiver = 8;   /* kleeman-lab has 8 receivers: 0..7 */
+    assert_int_equal(bl_localizer_detection(&loc, &d), BL_EINVAL);
+    d.receiver = 0;
+    d.time_us = BL_SEQ_TIME_LIMIT_US + 1;
+    assert_int_equal(bl_localizer_detection(&loc, &d), BL_EINVAL);
+    assert_int_equal(bl_localizer_detection(&loc, NULL), BL_EINVAL);
+    w.t_us = 1000; /* not after the previous sample */
+    assert_int_equal(bl_localizer_wheels(&loc, &w), BL_ETIME);
+    w.t_us = 2000;
+    w.d_left_m = (bl_real)NAN;
+    assert_int_equal(bl_localizer_wheels(&loc, &w), BL_EINVAL);
+    w.d_left_m = 11;
+    assert_int_equal(bl_localizer_wheels(&loc, &w), BL_EINVAL);
+    bl_estimate est;
+    assert_int_equal(bl_localizer_estimate(&loc, &est), BL_ENOTINIT); /* not started */
+    assert_int_equal(bl_localizer_estimate_at(&loc, 5000, &est), BL_ENOTINIT);
+    bl_config bad = cfg;
+    bad.beacon_count = 2;
+    assert_int_equal(bl_localizer_update_config(&loc, &bad, &sc), BL_ECONFIG);
+    assert_int_equal(bl_localizer_reinit(&loc, &bad, &sc), BL_ECONFIG);
+    assert_memory_equal(&loc, &before, sizeof loc);
+    bl_loc_event ev;
+    assert_int_equal(bl_localizer_next_event(&loc, &ev), 0); /* none: not started */
+}
+
+/* A refused sequencer config names its real cause. */
+static void test_seq_config_cause(void **state) {
+    (void)state;
+    bl_config cfg;
+    bl_seq_config sc;
+    const char *why, *field;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    assert_int_equal(bl_localizer_seq_config(&cfg, &sc, &why, &field), BL_OK);
+    assert_null(why);
+    bl_config c = cfg;
+    c.beacon_period_s = (bl_real)0.03; /* shorter than a flight across the room */
+    assert_int_equal(bl_localizer_seq_config(&c, &sc, &why, &field), BL_ECONFIG);
+    assert_non_null(strstr(why, "period too short"));
+    assert_string_equal(field, "beacon_period_s");
+    c = cfg;
+    c.sigma_speed_of_sound_mps = 100; /* s - 3 sigma below 100 m/s */
+    assert_int_equal(bl_localizer_seq_config(&c, &sc, &why, &field), BL_ECONFIG);
+    assert_non_null(strstr(why, "speed of sound"));
+    assert_null(strstr(why, "period"));
+    c = cfg;
+    c.ring_radius_m = 200;
+    assert_int_equal(bl_localizer_seq_config(&c, &sc, &why, &field), BL_ECONFIG);
+    assert_string_equal(field, "ring_radius_m");
+}
+
+int main(void) {
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_errors_leave_it_untouched),
+        cmocka_unit_test(test_seq_config_cause),
+        cmocka_unit_test(test_nominal_tracks),
+        cmocka_unit_test(test_echo_repeats_not_fused),
+        cmocka_unit_test(test_kidnap_restarts_once),
+        cmocka_unit_test(test_silence_coasts),
+        cmocka_unit_test(test_misnumbering_resyncs),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
