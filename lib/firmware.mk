@@ -19,14 +19,14 @@
 #                       library archive references any (nm -u), as
 #                       check-lib-clink does for the host builds.
 #
-# Targets (issue 2): library <= 32 KiB flash, one filter <= 2 KiB RAM,
-# stack <= 2 KiB. Reported, not enforced.
+# Targets (issue 2): library <= 32 KiB flash, one localizer (filter +
+# sequencer + policy) <= 2 KiB RAM, stack <= 2 KiB. Reported, not enforced.
 
 M4_PREFIX   ?= arm-none-eabi-
 M4_DIR      := $(BUILD)/m4
 M4_ARCH     := -mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard
 M4_COMMON   := $(M4_ARCH) -Os -g -ffunction-sections -fdata-sections -fstack-usage \
-               -fcallgraph-info=su -DBL_USE_FLOAT=1 -Ilib/include
+               -fcallgraph-info=su -DBL_USE_FLOAT=1 -DBL_MAX_BEACONS=8 -DBL_MAX_RECEIVERS=8 -Ilib/include
 M4_CXXFLAGS := $(M4_COMMON) -std=c++17 -fno-exceptions -fno-rtti -fno-threadsafe-statics \
                -DEIGEN_NO_MALLOC -DEIGEN_GEMM_TO_COEFFBASED_THRESHOLD=1000 -DEIGEN_NO_DEBUG \
                -isystem /usr/include/eigen3 -Wall -Wextra -Werror -Wconversion -Wdouble-promotion
@@ -110,9 +110,10 @@ check-m4-build: $(M4_ELF)
 	  exit 1; fi; \
 	echo "check-m4-build: OK: $(M4_ELF) links (arm-none-eabi-gcc, newlib nano, no C++ runtime, no heap in the image or the library)"
 
-size-m4: $(M4_ELF) | $(SETUP_STAMP)
+size-m4: $(M4_ELF) $(M4_DIR)/example/sim/size_probe.o | $(SETUP_STAMP)
 	$(PY) lib/examples/firmware_m4/size_report.py --elf $(M4_ELF) --map $(M4_DIR)/firmware_m4.map \
-	    --lib-objs $(M4_DIR)/lib --example-objs $(M4_DIR)/example --prefix $(M4_PREFIX)
+	    --lib-objs $(M4_DIR)/lib --example-objs $(M4_DIR)/example --prefix $(M4_PREFIX) \
+	    --probe $(M4_DIR)/example/sim/size_probe.o
 
 UNIT_TESTS += check-m4-build
 TEST_BUILDS += $(M4_ELF) $(M4_SIM_ELF)

@@ -338,11 +338,16 @@ INLINE void process_pulse(bl_localizer *loc, const bl_seq_pulse &pl)
     fuse_firing(loc, pl);
 }
 
-INLINE void pop_until(bl_localizer *loc, int64_t now_us)
+// Every pulse closed at now_us through the same path; with while_full only
+// until the sequencer has room again (BL_EFULL). One copy of the pulse path
+// (flash), its frame on the deepest chain (localizer.h, cost).
+NOINLINE void pop_until(bl_localizer *loc, int64_t now_us, bool while_full)
 {
-    int rc;
-    while ((rc = bl_sequencer_pop(&loc->seq, now_us, &loc->pulse_)) == 1) process_pulse(loc, loc->pulse_);
-    if (rc < 0) loc->counters_.seq_errors++;
+    int rc = 0;
+    while ((!while_full || loc->seq.n_pending >= BL_SEQ_MAX_PENDING) &&
+           (rc = bl_sequencer_pop(&loc->seq, now_us, &loc->pulse_)) == 1)
+        process_pulse(loc, loc->pulse_);
+    if (!while_full && rc < 0) loc->counters_.seq_errors++;
 }
 
 bool finite_real(bl_real v) { return bl::is_finite(v); }
@@ -471,12 +476,10 @@ extern "C" int bl_localizer_detection(bl_localizer *loc, const bl_seq_detection 
     int rc = bl_sequencer_push(&loc->seq, det);
     if (rc == BL_EFULL) {
         loc->counters_.seq_full++;
-        pop_until(loc, det->time_us);
+        pop_until(loc, det->time_us, false);
         rc = bl_sequencer_push(&loc->seq, det);
         if (rc == BL_EFULL) {  // still full: close the oldest pulses, same path as any pulse
-            while (loc->seq.n_pending >= BL_SEQ_MAX_PENDING &&
-                   bl_sequencer_pop(&loc->seq, INT64_MAX / 4, &loc->pulse_) == 1)
-                process_pulse(loc, loc->pulse_);
+            pop_until(loc, INT64_MAX / 4, true);
             rc = bl_sequencer_push(&loc->seq, det);
         }
     }
@@ -488,7 +491,7 @@ extern "C" int bl_localizer_advance(bl_localizer *loc, int64_t now_us)
 {
     if (loc == nullptr) return BL_EINVAL;
     if (!valid(loc)) return BL_ENOTINIT;
-    pop_until(loc, now_us);
+    pop_until(loc, now_us, false);
     return BL_OK;
 }
 

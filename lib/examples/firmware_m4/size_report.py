@@ -2,14 +2,16 @@
 """Flash / RAM / stack report of libbeaconloc in the Cortex-M4F example.
 
 Reads the linker map (library share of every output section), the ELF
-(whole image, sizeof(bl_filter) from the static instance fw_filter), the
+(whole image), the sizes of bl_filter, bl_sequencer and bl_localizer (nm -S of
+the probe object sim/size_probe.o; the example's one localizer is fw_loc), the
 -fstack-usage .su files (worst function) and the -fcallgraph-info=su .ci
 files (worst call chain). Prints a table and, last, one machine-readable
 line:
 
   size-m4 lib_flash_bytes=<n> lib_ram_bytes=<n> newlib_flash_bytes=<n>
           image_flash_bytes=<n> image_ram_bytes=<n> filter_bytes=<n>
-          sequencer_bytes=<n> stack_fn_max_bytes=<n> stack_chain_max_bytes=<n>
+          sequencer_bytes=<n> localizer_bytes=<n> stack_fn_max_bytes=<n>
+          stack_chain_max_bytes=<n>
           heap_refs=<number of heap functions linked>
 """
 import argparse
@@ -206,6 +208,7 @@ def main():
     ap.add_argument("--lib-objs", required=True)
     ap.add_argument("--example-objs", required=True)
     ap.add_argument("--prefix", default="arm-none-eabi-")
+    ap.add_argument("--probe", required=True, help="object defining size_probe_{filter,sequencer,localizer}")
     a = ap.parse_args()
     global DEMANGLE_PREFIX
     DEMANGLE_PREFIX = a.prefix
@@ -215,8 +218,9 @@ def main():
     nl_flash, nl_ram = flash_ram(shares, "newlib")
     ex_flash, ex_ram = flash_ram(shares, "example")
     img_flash, img_ram = elf_totals(a.prefix, a.elf)
-    filt = symbol_size(a.prefix, a.elf, "fw_filter")
-    seq = symbol_size(a.prefix, a.elf, "fw_seq")
+    filt = symbol_size(a.prefix, a.probe, "size_probe_filter")
+    seq = symbol_size(a.prefix, a.probe, "size_probe_sequencer")
+    loc = symbol_size(a.prefix, a.probe, "size_probe_localizer")
 
     su = read_su([a.lib_objs])
     su.sort(reverse=True)
@@ -239,8 +243,10 @@ def main():
     print(f"  newlib/libgcc pulled in by all     {nl_flash:7d} B flash, {nl_ram} B RAM")
     print(f"  example code (board, main, start) {ex_flash:7d} B flash, {ex_ram} B RAM")
     print(f"  whole image                        {img_flash:7d} B flash, {img_ram} B RAM (data+bss)")
-    print(f"  sizeof(bl_filter)                  {filt:7d} B   target <= {TARGET_FILTER_RAM} B  {verdict(filt, TARGET_FILTER_RAM)}")
-    print(f"  sizeof(bl_sequencer)               {seq:7d} B")
+    print(f"  sizeof(bl_localizer)               {loc:7d} B   target <= {TARGET_FILTER_RAM} B  {verdict(loc, TARGET_FILTER_RAM)}")
+    print(f"    of which bl_filter               {filt:7d} B")
+    print(f"    of which bl_sequencer            {seq:7d} B")
+    print(f"    policy, events, pulse scratch    {loc - filt - seq:7d} B")
     print(f"  worst library function stack       {fn_max[0]:7d} B   {short(fn_max[2].split(':', 3)[-1])} ({fn_max[1]})")
     print(f"  worst library call chain           {lib_chain[0]:7d} B   target <= {TARGET_STACK} B  {verdict(lib_chain[0], TARGET_STACK)}")
     print("      " + " -> ".join(short(n) for n in lib_chain[1]))
@@ -257,7 +263,7 @@ def main():
     heap = heap_symbols(a.prefix, a.elf)
     print("  heap functions linked: " + (", ".join(heap) if heap else "none"))
     print(f"size-m4 lib_flash_bytes={lib_flash} lib_ram_bytes={lib_ram} newlib_flash_bytes={nl_flash} "
-          f"image_flash_bytes={img_flash} image_ram_bytes={img_ram} filter_bytes={filt} sequencer_bytes={seq} "
+          f"image_flash_bytes={img_flash} image_ram_bytes={img_ram} filter_bytes={filt} sequencer_bytes={seq} localizer_bytes={loc} "
           f"stack_fn_max_bytes={fn_max[0]} stack_chain_max_bytes={lib_chain[0]} heap_refs={len(heap)}")
 
 
