@@ -15,7 +15,7 @@ BRIDGE_CANGEN   := $(BUILD)/gen/can
 BRIDGE_MAVGEN   := $(BUILD)/gen/mavlink
 BRIDGE_MAVSTAMP := $(BRIDGE_MAVGEN)/.stamp
 BRIDGE_LIB      := $(BUILD)/lib/libbeaconloc.a
-BRIDGE_DBC      := hw_sim/can/beaconloc.dbc
+BRIDGE_DBC      := hw_sim/beaconloc_sim/data/beaconloc.dbc
 
 # The generated codec is named beaconloc_can (not beaconloc) so that its
 # header cannot be confused with the library's umbrella header beaconloc.h.

@@ -4,7 +4,7 @@
  *   < site file given with --site (config_load_file, libinih)
  *   < command line (applied by main.c after the file).
  *
- * The site file is the one the simulator reads (hw_sim/scenarios/NAME.ini).
+ * The site file is the one the simulator reads (hw_sim/beaconloc_sim/data/scenarios/NAME.ini).
  * Our sections are [beacons], [beaconN], [receivers], [robot], [noise],
  * [tuning] (the estimator's tuning, bridge/tuning.h) and [bridge]; an unknown key in one of them is an error (a typo must not be
  * silently ignored). [site] is the simulator's (room size) and skipped; any

@@ -2,7 +2,7 @@
  * beaconloc-bridge — CAN frame decoding and bad-frame accounting.
  *
  * Every payload is decoded by the C that cantools generates at build time
- * from hw_sim/can/beaconloc.dbc (build/gen/can/beaconloc_can.{c,h}); this
+ * from hw_sim/beaconloc_sim/data/beaconloc.dbc (build/gen/can/beaconloc_can.{c,h}); this
  * file only checks frame shape, ranges and rolling counters.
  *
  * Bad data is never an error: a frame that is not one of ours, has the

@@ -18,7 +18,7 @@
 #include "config.h"
 #include "estimator.h"
 
-#define SITE "hw_sim/scenarios/kleeman-lab.ini"
+#define SITE "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"
 
 static const char *good_body =
     "[site]\n"                       /* 1  simulator's: ignored */

@@ -114,7 +114,7 @@ static void test_site_file_matches_defaults(void **state)
 {
     (void)state;
     const char *path = getenv("BL_SITE_FILE");
-    if (!path) path = "hw_sim/scenarios/kleeman-lab.ini";
+    if (!path) path = "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini";
     site_ctx c;
     memset(&c, 0, sizeof c);
     assert_int_equal(bl_config_default(&c.cfg), BL_OK);

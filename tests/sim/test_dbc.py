@@ -9,7 +9,7 @@ import pytest
 
 from beaconloc_sim import can_out, simulate
 from beaconloc_sim.scenario import load_scenario
-from beaconloc_sim.site import DBC_PATH
+from beaconloc_sim.resources import dbc_path
 
 
 @pytest.fixture(scope="module")
@@ -18,7 +18,7 @@ def echo_storm_run():
 
 
 def test_every_simulated_frame_decodes_to_its_signals(echo_storm_run):
-    db = cantools.database.load_file(str(DBC_PATH))
+    db = cantools.database.load_file(str(dbc_path()))
     res = echo_storm_run
     assert {0x100, 0x110, 0x120} <= set(res.frames.arb_id.tolist())
     for fid, data, sig in zip(res.frames.arb_id.tolist(), res.frames.data, res.frames.signals):
@@ -28,7 +28,7 @@ def test_every_simulated_frame_decodes_to_its_signals(echo_storm_run):
 
 
 def test_every_dbc_message_round_trips_random_values():
-    db = cantools.database.load_file(str(DBC_PATH))
+    db = cantools.database.load_file(str(dbc_path()))
     rnd = random.Random(7)
     for msg in db.messages:
         for _ in range(200):
