@@ -129,7 +129,7 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
     iv = nodes.Interval(scn, t_a, t_b, firings, det, rng_latency=rng_lat, rng_wheels=rng_enc)
     # a window sends what is ready before its end; the rest waits in its node for the next one
     until_s = t_b if win is not None else math.inf
-    frames = carry.bus.transmit([node.release(iv, until_s) for node in carry.nodes])
+    frames = carry.bus.transmit([node.release(iv, until_s) for node in carry.nodes], until_s)
     if encode:
         frames.data = can_out.encode_all(frames)
 

@@ -68,3 +68,30 @@ def test_log_reads_back_with_python_can(tmp_path, echo_storm_run):
         assert msg.timestamp == pytest.approx(1_700_000_000.0 + t, abs=2e-6)
     stamps = [m.timestamp for m in msgs]
     assert stamps == sorted(stamps)
+
+
+def test_frame_table_comes_from_the_dbc():
+    """Every node kind's frame id and counter modulo are the DBC's, and no frame id or
+    modulus is written as a literal in the simulator's code."""
+    import re
+    from pathlib import Path
+
+    from beaconloc_sim import dbc, nodes
+    db = cantools.database.load_file(str(dbc_path()))
+    kinds = {nodes.ReceiverRing, nodes.WheelEncoders, nodes.NodeStatus}
+    for kind in kinds:
+        msg = db.get_message_by_name(kind.message)
+        counter = msg.get_signal_by_name("Counter")
+        assert kind.frame_spec() == dbc.FrameSpec(msg.name, msg.frame_id, 1 << counter.length)
+    assert {k.frame_spec().counter_modulo for k in kinds} == {8, 16}
+    assert dbc.message_names() == {0x100: "PULSE_DETECTION", 0x110: "WHEEL_ENCODERS",
+                                   0x120: "NODE_STATUS"}
+    from beaconloc_sim.clocks import WRAP_US
+    from beaconloc_sim.encoders import TICK_WRAP
+    assert TICK_WRAP == dbc.signal_modulo("WHEEL_ENCODERS", "RightTicks") == 1 << 14
+    assert all(dbc.signal_modulo(m.name, "NodeTime") == WRAP_US
+               for m in db.messages if "NodeTime" in [s.name for s in m.signals])
+    package = Path(dbc.__file__).parent
+    for path in sorted(package.rglob("*.py")):
+        code = re.sub(r'""".*?"""|#[^\n]*', "", path.read_text(), flags=re.DOTALL)
+        assert not re.search(r"\b(0x1[0-5][0-9a-fA-F]|256|272|288|1 << 14|\(1 << 3\))\b", code), path
