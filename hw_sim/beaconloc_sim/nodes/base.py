@@ -74,7 +74,7 @@ class Node:
         now, later = order[:n].tolist(), order[n:]
         self._waiting = (ready[later], [signals[i] for i in later.tolist()])
         out = Released(ready[now].tolist(), [self.frame_id] * n, [signals[i] for i in now])
-        for sig in out.signals:
+        for sig in out.signals if self.counter_modulo else []:
             sig[COUNTER] = self.counter
             self.counter = (self.counter + 1) % self.counter_modulo
         return out
