@@ -7,7 +7,8 @@
 # bridge/bridge.mk also builds and runs both tests under test-bridge.
 #
 # Include generated headers only with -isystem $(BUILD)/gen/mavlink, and only
-# from bridge/mavlink_out.c (the one translation unit that sees MAVLink).
+# from bridge/mavlink_out.c (the one translation unit that sees MAVLink; the
+# covariance it sends is reshaped in bridge/covariance.c, no MAVLink type).
 
 MAVLINK_GEN    := $(BUILD)/gen/mavlink
 MAVLINK_STAMP  := $(MAVLINK_GEN)/.stamp
@@ -42,6 +43,10 @@ $(MAVOUT_DIR)/mavlink_out.o: bridge/mavlink_out.c bridge/mavlink_out.h $(MAVLINK
 	@mkdir -p $(@D)
 	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
 
+$(MAVOUT_DIR)/covariance.o: bridge/covariance.c bridge/covariance.h bridge/mavlink_out.h
+	@mkdir -p $(@D)
+	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
+
 $(MAVOUT_DIR)/node_clock.o: bridge/node_clock.c bridge/node_clock.h
 	@mkdir -p $(@D)
 	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
@@ -56,7 +61,8 @@ $(MAVOUT_DIR)/test_node_clock.o: tests/bridge/test_node_clock.c bridge/node_cloc
 	@mkdir -p $(@D)
 	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
 
-$(MAVOUT_DIR)/test_mavlink_out: $(MAVOUT_DIR)/test_mavlink_out.o $(MAVOUT_DIR)/mavlink_out.o
+$(MAVOUT_DIR)/test_mavlink_out: $(MAVOUT_DIR)/test_mavlink_out.o $(MAVOUT_DIR)/mavlink_out.o \
+                                 $(MAVOUT_DIR)/covariance.o
 	$(CC) -fsanitize=address,undefined -o $@ $^ -lcmocka -lm
 
 $(MAVOUT_DIR)/test_node_clock: $(MAVOUT_DIR)/test_node_clock.o $(MAVOUT_DIR)/node_clock.o
