@@ -34,6 +34,7 @@
 #include <termios.h>
 #include <unistd.h>
 
+#include "covariance.h"
 #include "mavlink_out.h"
 
 /* ---- helpers ----------------------------------------------------------- */
@@ -405,6 +406,41 @@ static void test_odometry_partial_covariance(void **state)
     for (int i = 0; i < 4; i++)
         norm += (double)od.q[i] * (double)od.q[i];
     assert_true(fabs(norm - 1.0) < 1e-6);
+}
+
+/* The estimator's 5x5 state covariance (x, y, theta, v, omega) on the wire:
+ * reshaped in one place (covariance.c) into the FRD upper triangles. */
+static void test_odometry_state_covariance(void **state)
+{
+    struct udp_fixture *f = *state;
+    double cov[ST_N * ST_N];
+    for (int i = 0; i < ST_N; i++)
+        for (int j = 0; j < ST_N; j++)
+            cov[i * ST_N + j] = i == j ? 0.01 * (i + 1) : 0.001 * (i + j);
+    struct mav_odometry o;
+    mav_odometry_init(&o);
+    mav_odometry_set_state_cov(&o, cov);
+    o.quality = (int8_t)mav_quality_from_state_cov(cov);
+    assert_int_equal(o.quality, mav_quality_from_cov(0.01, 0.001, 0.02));
+    assert_true(fabs(state_cov_sigma_xy_m(cov) - sqrt(0.02)) < 1e-12);
+    assert_true(state_cov_at(cov, ST_THETA, ST_V) == 0.005);
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), 0);
+    mavlink_message_t msg;
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    mavlink_odometry_t od;
+    mavlink_msg_odometry_decode(&msg, &od);
+    const float *p = od.pose_covariance, *v = od.velocity_covariance;
+    assert_true(p[ut_index(0, 0)] == 0.02f);    /* north = state y */
+    assert_true(p[ut_index(1, 1)] == 0.01f);    /* east = state x */
+    assert_true(p[ut_index(0, 1)] == 0.001f);   /* x-y */
+    assert_true(p[ut_index(5, 5)] == 0.03f);    /* yaw = theta */
+    assert_true(p[ut_index(0, 5)] == -0.003f);  /* north x (-yaw): -cov(y, theta) */
+    assert_true(p[ut_index(1, 5)] == -0.002f);  /* east x (-yaw): -cov(x, theta) */
+    assert_true(isnan(p[ut_index(2, 2)]));      /* z not estimated */
+    assert_true(v[ut_index(0, 0)] == 0.04f);    /* forward = v */
+    assert_true(v[ut_index(5, 5)] == 0.05f);    /* yaw rate = omega */
+    assert_true(v[ut_index(0, 5)] == -0.007f);  /* v x (-omega) */
+    assert_true(isnan(v[ut_index(1, 1)]));      /* no lateral velocity */
 }
 
 static void test_odometry_rejects_bad_input(void **state)
@@ -1056,6 +1092,7 @@ int main(void)
         cmocka_unit_test(test_open_rejects_bad_arguments),
         cmocka_unit_test_setup_teardown(test_odometry_roundtrip, udp_setup, udp_teardown),
         cmocka_unit_test_setup_teardown(test_odometry_partial_covariance, udp_setup, udp_teardown),
+        cmocka_unit_test_setup_teardown(test_odometry_state_covariance, udp_setup, udp_teardown),
         cmocka_unit_test_setup_teardown(test_odometry_rejects_bad_input, udp_setup, udp_teardown),
         cmocka_unit_test_setup_teardown(test_heartbeat_statustext_named_float, udp_setup, udp_teardown),
         cmocka_unit_test(test_udpin_answers_timesync),
