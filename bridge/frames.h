@@ -2,14 +2,17 @@
  * beaconloc-bridge — CAN frame decoding and bad-frame accounting.
  *
  * Every payload is decoded by the C that cantools generates at build time
- * from hw_sim/can/beaconloc.dbc (build/gen/can/beaconloc_can.{c,h}); this
- * file only checks frame shape, ranges and rolling counters.
+ * from hw_sim/can/beaconloc.dbc (build/gen/can/beaconloc_can.{c,h}),
+ * called by its kind's decoder in the sensor table (sensors.h: ids, counter
+ * moduli, decoders, handlers); frames.c only checks frame shape and
+ * rolling counters, for every kind alike.
  *
  * Bad data is never an error: a frame that is not one of ours, has the
  * wrong length, or carries a signal outside its DBC range is counted in
  * struct frame_counters and dropped; the caller goes on with the next frame.
  *
- * Rolling counters (per frame id; per node for NODE_STATUS):
+ * Rolling counters (per kind; per node for a kind with a track per node,
+ * NODE_STATUS), modulo the range of the kind's Counter signal in the DBC:
  *   - a step of 1 is normal; a step of s > 1 counts s - 1 frames lost
  *     (a step of 0 with a different payload: a whole lap, modulo - 1 lost);
  *   - a duplicate is a frame whose 8 bytes equal one of the last
