@@ -22,8 +22,9 @@
 static void mav_readable(struct pollable *p)
 {
     struct daemon *d = p->owner;
-    if (mav_links_handle(&d->links, p->fd, now_local(d)))
-        sync_mav_fds(d); /* input answered, or a name lookup's answer */
+    const struct mav_pollable *mp = (const struct mav_pollable *)(void *)p;
+    mav_links_readable(&d->links, &mp->which, now_local(d));
+    sync_mav_fds(d); /* input answered, or a name lookup's answer */
 }
 
 void sync_mav_fds(struct daemon *d)
@@ -34,12 +35,13 @@ void sync_mav_fds(struct daemon *d)
      * one closed already left the set with its close), in with every
      * current one, each with its own handler object. */
     for (int i = 0; i < MAV_LINKS_FDS_MAX; i++)
-        (void)loop_del(&d->loop, &d->mav[i]); /* logged */
-    int now[MAV_LINKS_FDS_MAX];
-    int n = mav_links_fds(&d->links, now, MAV_LINKS_FDS_MAX);
+        (void)loop_del(&d->loop, &d->mav[i].p); /* logged */
+    struct mav_links_fd now[MAV_LINKS_FDS_MAX];
+    int n = mav_links_fd_list(&d->links, now, MAV_LINKS_FDS_MAX);
     for (int j = 0; j < n; j++) {
-        d->mav[j] = (struct pollable){ .fd = -1, .on_read = mav_readable, .owner = d };
-        (void)loop_add(&d->loop, &d->mav[j], now[j], "MAVLink"); /* logged */
+        d->mav[j].p = (struct pollable){ .fd = -1, .on_read = mav_readable, .owner = d };
+        d->mav[j].which = now[j];
+        (void)loop_add(&d->loop, &d->mav[j].p, now[j].fd, "MAVLink"); /* logged */
     }
     d->mav_fd_gen = d->links.fd_gen;
 }

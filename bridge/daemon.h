@@ -62,7 +62,10 @@ struct daemon {
     struct loop loop;
     struct pollable sig;      /* signalfd */
     struct timer timers[T_COUNT];
-    struct pollable mav[MAV_LINKS_FDS_MAX]; /* the endpoints' descriptors */
+    struct mav_pollable {
+        struct pollable p;     /* first member */
+        struct mav_links_fd which;
+    } mav[MAV_LINKS_FDS_MAX]; /* the endpoints' descriptors */
     unsigned mav_fd_gen;      /* links.fd_gen they were registered at */
     /* CAN (can_link.c) */
     struct can_in can;

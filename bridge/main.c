@@ -92,7 +92,7 @@ int main(int argc, char **argv)
     d->loop.epfd = -1;
     d->can_p.fd = d->pace.fd = d->sig.fd = -1;
     for (int i = 0; i < MAV_LINKS_FDS_MAX; i++)
-        d->mav[i].fd = -1;
+        d->mav[i].p.fd = -1;
     timers_init(d);
     frame_counters_init(&d->fc);
     latency_reset(&d->lat);
