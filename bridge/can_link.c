@@ -84,12 +84,16 @@ static void can_readable(struct pollable *p)
     drain_events(d);
 }
 
+void can_link_init(struct daemon *d)
+{
+    can_in_init(&d->can, d->cfg.can_interface);
+    d->can_p = (struct pollable){ .fd = -1, .on_read = can_readable, .owner = d };
+}
+
 void can_try_open(struct daemon *d)
 {
     if (d->mode != MODE_LIVE)
         return;
-    d->can_p.on_read = can_readable;
-    d->can_p.owner = d;
     if (d->can.fd >= 0 && !d->can.link_down && d->can_p.fd == d->can.fd)
         return;
     uint64_t reopens = d->can.c.reopens;

@@ -116,6 +116,8 @@ int64_t now_local(const struct daemon *d);
 void handle_frame(struct daemon *d, const struct can_msg *msg);
 
 /* ---- can_link.c ---- */
+/* Prepare the CAN input and its handler object (no I/O). */
+void can_link_init(struct daemon *d);
 /* Open the socket, or check a down link (1 s timer and start). */
 void can_try_open(struct daemon *d);
 /* SIGHUP with another interface: close, reopen by the new name. */

@@ -90,14 +90,14 @@ int main(int argc, char **argv)
     d->mode = !d->opt.replay ? MODE_LIVE
             : d->opt.speed > 0 ? MODE_REPLAY_PACED : MODE_REPLAY_FAST;
     d->loop.epfd = -1;
-    d->can_p.fd = d->pace.fd = d->sig.fd = -1;
+    d->pace.fd = d->sig.fd = -1;
     for (int i = 0; i < MAV_LINKS_FDS_MAX; i++)
         d->mav[i].p.fd = -1;
     timers_init(d);
     frame_counters_init(&d->fc);
     latency_reset(&d->lat);
     latency_interval_close(&d->lat_interval, &d->lat_interval_last); /* none yet */
-    can_in_init(&d->can, d->cfg.can_interface);
+    can_link_init(d);
     d->running = true;
 
     if ((status = open_files(d)) != 0)
