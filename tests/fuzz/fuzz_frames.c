@@ -2,7 +2,7 @@
  * beaconloc fuzzing — CAN input of the bridge: SocketCAN reads
  * (bridge/can_in.c, recvmsg replaced), frame decoding (bridge/frames.c and
  * the cantools codec) and the decoded frames driving the estimator
- * (bridge/estimator.c, node_clock.c, the library) as bridge/main.c's
+ * (bridge/estimator.c, node_clock.c, the library) as bridge/frame_in.c's
  * handle_frame() does, on the kleeman-lab site.
  *
  * Input: a sequence of records, each one opcode byte then its fields:
