@@ -1,5 +1,6 @@
 /*
- * Helpers of the MAVLink-output tests (test_mavlink_out.c, test_covariance.c):
+ * Helpers of the MAVLink-output tests (test_mavlink_out.c, test_covariance.c,
+ * test_resolver.c):
  * a UDP listener, reading one message back with the generated parser, the
  * udpout fixture. Test code only: it sees MAVLink to decode what
  * bridge/mavlink_out.c packed.
