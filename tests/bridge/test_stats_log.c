@@ -158,29 +158,42 @@ static void test_json_report(void **state)
     assert_int_equal(stats_write_json(&r, "/nonexistent/dir/s.json") < 0, 1);
 }
 
+/* The log written to a temporary file while the test runs (log_set_stream),
+ * read back by captured_log(). */
+static FILE *capture_log(void)
+{
+    char path[] = "/tmp/test_log_XXXXXX";
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    FILE *f = fdopen(fd, "w+");
+    unlink(path);
+    log_set_stream(f);
+    log_set_level(LOG_INFO);
+    return f;
+}
+
+static void captured_log(FILE *f, char *text, size_t size)
+{
+    log_flush();
+    log_set_stream(NULL);
+    rewind(f);
+    size_t n = fread(text, 1, size - 1, f);
+    text[n] = '\0';
+    fclose(f);
+}
+
 static void test_log_repeats_summarised(void **state)
 {
     (void)state;
-    char path[] = "/tmp/test_log_XXXXXX";
-    int fd = mkstemp(path);
-    close(fd);
-    FILE *f = fopen(path, "w+");
-    log_set_stream(f);
-    log_set_level(LOG_INFO);
+    FILE *f = capture_log();
     unsigned long before = log_suppressed_total();
     for (int i = 0; i < 533; i++)
         log_warn("can0: %s", "Network is down");
     log_info("other");
     log_debug("hidden at info level");
     log_info("other");
-    log_flush();
-    log_set_stream(NULL);
-    rewind(f);
     char text[1024];
-    size_t n = fread(text, 1, sizeof text - 1, f);
-    text[n] = '\0';
-    fclose(f);
-    unlink(path);
+    captured_log(f, text, sizeof text);
     assert_string_equal(text,
                         "warning: can0: Network is down\n"
                         "warning: last message repeated 532 times\n"
@@ -215,21 +228,10 @@ static void test_status_line_text(void **state)
                               .estimates_write_errors = 1, .latency_p50_us = 8,
                               .latency_p99_us = 21, .latency_interval_p50_us = 7,
                               .latency_interval_p99_us = -1 };
-    char path[] = "/tmp/test_status_XXXXXX";
-    int fd = mkstemp(path);
-    close(fd);
-    FILE *f = fopen(path, "w+");
-    log_set_stream(f);
-    log_set_level(LOG_INFO);
+    FILE *f = capture_log();
     stats_status_line(&r, "final", "x=5.369 y=2.848");
-    log_flush();
-    log_set_stream(NULL);
-    rewind(f);
     char text[1024];
-    size_t n = fread(text, 1, sizeof text - 1, f);
-    text[n] = '\0';
-    fclose(f);
-    unlink(path);
+    captured_log(f, text, sizeof text);
     assert_string_equal(text,
                         "info: final: frames 1201 (pulse 181 enc 1000 status 20) bad 1 unknown 2 "
                         "range 3 lost 4 dup 5 late 6 kdrop 7 errfr 8 | pulses ok 69 rej 9 | "
