@@ -5,7 +5,6 @@
  * and the --stats report, the output files' flushes.
  */
 #include <errno.h>
-#include <math.h>
 #include <signal.h>
 #include <stdio.h>
 #include <string.h>
