@@ -58,7 +58,9 @@ class Range:
 
     def __str__(self) -> str:
         def num(v: float) -> str:
-            return "∞" if v == math.inf else "−∞" if v == -math.inf else f"{v:g}"
+            if math.isinf(v):
+                return "∞" if v > 0 else "-∞"
+            return str(int(v)) if v.is_integer() and abs(v) < 1e9 else f"{v:g}"
         return f"{'(' if self.lo_open else '['}{num(self.lo)}, {num(self.hi)}" \
                f"{')' if self.hi_open else ']'}"
 
@@ -270,19 +272,24 @@ def _docs_default(key: Key) -> str:
     return str(key.default)
 
 
+def _docs_range(key: Key) -> str:
+    shown = key.range or key.sim_range
+    return str(shown) if shown else ""
+
+
 def _docs_readers(key: Key, section: Section) -> str:
     readers = []
     if "bridge" in section.read_by:
         readers.append("bridge")
     if key.sim == "unsupported":
-        readers.append("sim: refused")
+        readers.append(f"sim: only {_docs_default(key)}")
     elif key.sim == "ignored":
         readers.append("sim: skips")
     elif key.sim:
-        extra = [] if key.sim_range == key.range or key.sim_range is None else [f"{key.sim_range}"]
+        extra = [] if key.sim_range == (key.range or key.sim_range) else [f"{key.sim_range}"]
         if key.sim == "required" and key.default is not None:
             extra.append("required")
-        readers.append("sim" + (f" ({', '.join(extra)})" if extra else ""))
+        readers.append("sim" + (f": {', '.join(extra)}" if extra else ""))
     return ", ".join(readers)
 
 
@@ -294,8 +301,7 @@ def docs_table(schema: Schema) -> str:
     for s in schema.sections:
         header = f"`[{s.name}]`"
         for i, k in enumerate(s.keys):
-            rng = str(k.range) if k.range else ""
-            rows.append(f"| {header if i == 0 else ''} | `{k.name}` | {k.unit} | {rng} | "
+            rows.append(f"| {header if i == 0 else ''} | `{k.name}` | {k.unit} | {_docs_range(k)} | "
                         f"{_docs_default(k)} | {_docs_readers(k, s)} | {k.doc} |")
     return "\n".join(rows + ["", DOCS_END])
 
