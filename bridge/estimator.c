@@ -321,7 +321,7 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
             e->c.predict_errors++;
         }
     }
-    bl_pulse_result res;
+    bl_fusion_result res;
     int rc = bl_filter_fuse_pulse(&e->filter, (uint32_t)pl->beacon,
                                   pl->arrival_us, pl->receiver, &res);
     if (rc == BL_ETIME) {
@@ -338,16 +338,16 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
               "sigma %.1f us ratio %.2f",
               pl->beacon + 1, pl->receiver, (long long)pl->arrival_us,
               pl->repeat ? " (repeat)" : "", (int)res.status,
-              (double)res.innovation_s * 1e6,
-              (double)res.innovation_sigma_s * 1e6, (double)res.test_ratio);
+              (double)res.innovation * 1e6,
+              sqrt((double)res.innovation_var) * 1e6, (double)res.test_ratio);
     /* An innovation longer than the longest flight cannot come from a
      * position error inside the site: the pulse was given the wrong beacon
      * number (the sequencer slipped a slot, e.g. anchored on an echo that
      * looked like beacon 1's double pulse while beacon 1 was silent). Two
      * in a row while the filter is converged: re-synchronise the sequencer
      * from the filter's firing times instead of blaming the pose. */
-    bool misnumbered = res.status == BL_PULSE_REJECTED && e->was_converged &&
-        fabs((double)res.innovation_s) * 1e6 > (double)e->seqcfg.max_flight_us;
+    bool misnumbered = res.status == BL_FUSION_REJECTED && e->was_converged &&
+        fabs((double)res.innovation) * 1e6 > (double)e->seqcfg.max_flight_us;
     if (misnumbered) {
         e->c.numbering_errors++;
         if (++e->misnumbered_in_row >= 2) {
@@ -360,33 +360,33 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
             e->c.seq_resyncs++;
             event(e, EST_EV_WARNING, "beacon numbering re-synchronised");
         }
-    } else if (res.status == BL_PULSE_ACCEPTED) {
+    } else if (res.status == BL_FUSION_ACCEPTED) {
         e->misnumbered_in_row = 0;
     }
-    if (!pl->repeat && !misnumbered && (res.status == BL_PULSE_ACCEPTED ||
-                                        res.status == BL_PULSE_REJECTED))
+    if (!pl->repeat && !misnumbered && (res.status == BL_FUSION_ACCEPTED ||
+                                        res.status == BL_FUSION_REJECTED))
         watch_rejections(e, (uint32_t)pl->beacon,
-                         res.status == BL_PULSE_REJECTED);
+                         res.status == BL_FUSION_REJECTED);
     switch (res.status) {
-    case BL_PULSE_ACCEPTED:
+    case BL_FUSION_ACCEPTED:
         e->c.pulses_accepted++;
         e->storm_acc++;
         beacon_ok(e, (uint32_t)pl->beacon, pl->arrival_us);
         break;
-    case BL_PULSE_REJECTED:
+    case BL_FUSION_REJECTED:
         e->c.pulses_rejected++;
         e->storm_rej++;
         if (!restart_if_persistent(e))
             return;
         break;
-    case BL_PULSE_BUFFERED:
+    case BL_FUSION_BUFFERED:
         e->c.pulses_buffered++;
         return;
-    case BL_PULSE_STARTED:
+    case BL_FUSION_STARTED:
         e->c.pulses_accepted++;
         beacon_ok(e, (uint32_t)pl->beacon, pl->arrival_us);
         break;
-    case BL_PULSE_RESET:
+    case BL_FUSION_RESET:
         e->c.pulses_accepted++;
         break;
     }
