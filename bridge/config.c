@@ -14,6 +14,7 @@
 #include <ini.h>
 
 #include "log.h"
+#include "site_to_lib.h"
 
 enum key_type { K_INT, K_REAL, K_STR, K_LOGLEVEL, K_ENDPOINT, K_IFNAME };
 
@@ -438,17 +439,15 @@ int config_load_file(struct bridge_config *cfg, const char *path, char *err,
 bool config_same_geometry(const struct bridge_config *a,
                           const struct bridge_config *b)
 {
-    /* the keys the site schema marks geometry = "change" / "on_off" */
+    /* the bridge's own state: the keys the site schema marks geometry = "bridge" */
 #define SAME(member) && a->member == b->member
-#define SAME_ON_OFF(member) && (a->member > 0) == (b->member > 0)
-#define SAME_BEACON(member) && a->beacon[i].member == b->beacon[i].member
-    if (!(true SITE_GEOMETRY_CHANGE(SAME) SITE_GEOMETRY_ON_OFF(SAME_ON_OFF)))
+    if (!(true SITE_GEOMETRY_BRIDGE(SAME)))
         return false;
-    for (int i = 0; i < a->beacon_count; i++)
-        if (!(true SITE_GEOMETRY_BEACON(SAME_BEACON)))
-            return false;
-#undef SAME_BEACON
 #undef SAME
-#undef SAME_ON_OFF
-    return true;
+    /* the filter's: the library decides (geometry = "library" in the schema,
+     * checked against it by tests/bridge/test_config.c) */
+    bl_config la, lb;
+    site_to_lib(a, &la);
+    site_to_lib(b, &lb);
+    return bl_config_same_geometry(&la, &lb);
 }

@@ -114,16 +114,16 @@ int config_load_file(struct bridge_config *cfg, const char *path, char *err,
  * Returns 0 or -1 with a message (naming the key) in err. */
 int config_check(const struct bridge_config *cfg, char *err, size_t errlen);
 
-/* True when the two configs have the same estimator geometry, the keys the
- * site schema marks `geometry`: beacons (count, positions, period,
- * double-pulse spacing, burst length), receiver ring (count, radius, angles,
- * height), robot (wheel base, wheel radius, ticks per turn) and whether the
- * wheel-scale calibration is on (sigma_wheel_scale 0 or > 0; its value is
- * tuning). Tuning ([noise], [tuning], beamwidth, encoder rate, [bridge]) is
- * not geometry. This is the bridge's one reconfigure decision: SIGHUP keeps
- * the filter exactly when it is true (estimator_reconfigure).
- * TODO(h1): also require bl_config_same_geometry() of the two bl_configs
- * once the library has it, so that the two checks cannot disagree. */
+/* True when the two configs have the same estimator geometry: the library's
+ * bl_config_same_geometry of the two as bl_configs (beacons: count,
+ * positions, period; receiver ring: count, radius, angles, height; wheel
+ * base; wheel-scale calibration on or off) and the same geometry of the
+ * bridge's own state (wheel radius and ticks per turn: odometry scale;
+ * double-pulse spacing and burst length: the sequencer's windows), the keys
+ * the site schema marks `geometry`. Tuning ([noise], [tuning], the
+ * calibration's σ, beamwidth, encoder rate, [bridge]) is not geometry.
+ * The bridge's one reconfigure decision: SIGHUP keeps the filter exactly
+ * when it is true (estimator_reconfigure). */
 bool config_same_geometry(const struct bridge_config *a,
                           const struct bridge_config *b);
 

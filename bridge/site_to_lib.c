@@ -15,7 +15,7 @@ struct field_key {
 };
 
 static const struct field_key field_keys[] = {
-#define FIELD_KEY(sec, k, type, member, field) { #field, #sec, #k },
+#define FIELD_KEY(sec, k, type, member, field, geometry) { #field, #sec, #k },
     SITE_LIB_FIELDS(FIELD_KEY)
 #undef FIELD_KEY
     { "beacons", "beacon1", "x_m" },
@@ -25,24 +25,30 @@ static const struct field_key field_keys[] = {
 #define LIB_CTYPE_K_REAL bl_real
 #define LIB_CTYPE_K_INT uint32_t
 
-int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
-                          char *err, size_t errlen)
+void site_to_lib(const struct bridge_config *cfg, bl_config *out)
 {
-    bl_config c;
-    bl_config_default(&c);
+    bl_config_default(out);
     /* Every key with a bl_config field (the parse ranges keep the integers
      * >= 0). [bridge] max_coast_s is max_predict_gap_s: a CAN outage (interface
      * down, a node rebooting) shorter than this is coasted through on
      * constant velocity, P grows, the pulses pull the state back afterwards;
      * longer, the filter re-starts from the snapshot solver. */
-#define APPLY(sec, k, type, member, field) c.field = (LIB_CTYPE_##type)cfg->member;
+#define APPLY(sec, k, type, member, field, geometry)                           \
+    out->field = (LIB_CTYPE_##type)cfg->member;
     SITE_LIB_FIELDS(APPLY)
 #undef APPLY
     for (int i = 0; i < cfg->beacon_count && i < BL_MAX_BEACONS; i++) {
-#define APPLY_BEACON(member, field) c.beacons[i].field = (bl_real)cfg->beacon[i].member;
+#define APPLY_BEACON(member, field) out->beacons[i].field = (bl_real)cfg->beacon[i].member;
         SITE_LIB_BEACON_FIELDS(APPLY_BEACON)
 #undef APPLY_BEACON
     }
+}
+
+int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
+                          char *err, size_t errlen)
+{
+    bl_config c;
+    site_to_lib(cfg, &c);
     const char *bad = NULL;
     int rc = bl_config_check(&c, &bad);
     if (rc != BL_OK) {

@@ -16,6 +16,10 @@
 #include "beaconloc.h"
 #include "config.h"
 
+/* The library's defaults, then every key of cfg that maps onto a bl_config
+ * field; no check (estimator_make_config checks). */
+void site_to_lib(const struct bridge_config *cfg, bl_config *out);
+
 /* Translate a bridge config to the library's (for tests and reload): the
  * library's defaults, then every key that maps onto a field; then
  * bl_config_check. Returns 0, or -1 with "file:line: [section] key:

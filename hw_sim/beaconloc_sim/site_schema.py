@@ -78,7 +78,7 @@ class Key:
     sim: str | None            # required / optional / ignored / unsupported; None: not read
     bridge: str | None         # struct bridge_config member; None: not read by the bridge
     lib: str | None            # bl_config field
-    geometry: str | None       # "change", "on_off" or None
+    geometry: str | None       # "library", "bridge" or None
 
     @property
     def numeric(self) -> bool:
@@ -155,8 +155,10 @@ def _key(section: str, read_by: tuple[str, ...], raw: dict) -> Key:
                          "the simulator reads")
     if sim == "optional" and default is None and raw["type"] != "string":
         raise ValueError(f"{where}: optional for the simulator but no default")
-    if raw.get("geometry") not in (None, "change", "on_off"):
-        raise ValueError(f"{where}: geometry must be 'change' or 'on_off'")
+    if raw.get("geometry") not in (None, "library", "bridge"):
+        raise ValueError(f"{where}: geometry must be 'library' or 'bridge'")
+    if raw.get("geometry") == "library" and "lib" not in raw:
+        raise ValueError(f"{where}: library geometry without a lib field")
     member = None
     if in_bridge:
         member = raw.get("bridge", f"tuning.{raw['name']}" if section == "tuning" else raw["name"])
@@ -238,20 +240,18 @@ def c_header(schema: Schema) -> str:
                     [f"SITE_KEYS_{s.name}(X)" for s in bridge_sections])
     lib_keys = [k for s in bridge_sections if s.name != BEACON_SECTION for k in s.keys if k.lib]
     out += _c_macro("SITE_LIB_FIELDS", "X(section, key, type, bridge_config member, bl_config "
-                    "field): the keys that set a bl_config field",
-                    [f"X({k.section}, {k.name}, {_C_TYPE[k.type]}, {k.bridge}, {k.lib})"
-                     for k in lib_keys])
+                    "field, geometry): the keys that set a bl_config field; geometry is "
+                    "SITE_GEOMETRY_library, _bridge or _none",
+                    [f"X({k.section}, {k.name}, {_C_TYPE[k.type]}, {k.bridge}, {k.lib}, "
+                     f"SITE_GEOMETRY_{k.geometry or 'none'})" for k in lib_keys])
     beacon = schema.section(BEACON_SECTION)
     out += _c_macro("SITE_LIB_BEACON_FIELDS", "X(config_beacon member, bl_beacon field) of "
                     "[beaconN] -> bl_config.beacons[N-1]",
                     [f"X({k.bridge}, {k.lib})" for k in beacon.keys if k.lib])
-    for mode in ("change", "on_off"):
-        rows = [f"X({k.bridge})" for s in bridge_sections if s.name != BEACON_SECTION
-                for k in s.keys if k.geometry == mode]
-        out += _c_macro(f"SITE_GEOMETRY_{mode.upper()}",
-                        f"X(bridge_config member): geometry, {mode!r} re-initialises", rows)
-    out += _c_macro("SITE_GEOMETRY_BEACON", "X(config_beacon member): beacon geometry",
-                    [f"X({k.bridge})" for k in beacon.keys if k.geometry == "change"])
+    out += _c_macro("SITE_GEOMETRY_BRIDGE", "X(bridge_config member): geometry of the bridge's "
+                    "own state (the library's is bl_config_same_geometry's)",
+                    [f"X({k.bridge})" for s in bridge_sections for k in s.keys
+                     if k.geometry == "bridge"])
     out += _c_macro("SITE_SIM_SECTIONS", "X(section): the simulator's alone (the bridge skips them)",
                     [f"X({s.name})" for s in schema.sections if "bridge" not in s.read_by])
     out += [f"#define SITE_MAX_BEACONS {schema.max_beacons}",

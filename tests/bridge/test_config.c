@@ -445,7 +445,7 @@ static void test_tuning_defaults_are_the_librarys(void **state)
     bl_config lib;
     bl_config_default(&lib);
     int n = 0;
-#define SAME_DEFAULT(sec, k, type, member, field)                              \
+#define SAME_DEFAULT(sec, k, type, member, field, geometry)                    \
     if (!strcmp(#sec, "tuning")) {                                             \
         n++;                                                                   \
         if ((bl_real)cfg.member != lib.field)                                  \
@@ -478,7 +478,7 @@ static void test_every_key_reaches_its_field(void **state)
     assert_int_equal(config_load_file(&site, SITE, err, sizeof err), 0);
     bl_config c;
     int n = 0;
-#define REACHES(sec, k, type, member, field)                                   \
+#define REACHES(sec, k, type, member, field, geometry)                         \
     cfg = site;                                                                \
     cfg.member = NUDGE_##type(cfg.member);                                     \
     if (estimator_make_config(&cfg, &c, err, sizeof err) != 0)                 \
@@ -502,6 +502,52 @@ static void test_every_key_reaches_its_field(void **state)
     assert_true(c.beacons[2].z_m == (bl_real)cfg.beacon[2].z_m);
 }
 
+/* The library's geometry check (bl_config_same_geometry) is the schema's
+ * geometry = "library" list: each field changed alone from the site file's
+ * value is geometry exactly when the schema says so. */
+#define IS_LIBRARY_GEOMETRY_SITE_GEOMETRY_library true
+#define IS_LIBRARY_GEOMETRY_SITE_GEOMETRY_bridge false
+#define IS_LIBRARY_GEOMETRY_SITE_GEOMETRY_none false
+#define IS_LIBRARY_GEOMETRY(g) IS_LIBRARY_GEOMETRY_##g
+static void test_library_geometry_is_the_schemas(void **state)
+{
+    (void)state;
+    struct bridge_config site;
+    config_defaults(&site);
+    char err[CONFIG_ERR_LEN] = "";
+    assert_int_equal(config_load_file(&site, SITE, err, sizeof err), 0);
+    bl_config base, c;
+    assert_int_equal(estimator_make_config(&site, &base, err, sizeof err), 0);
+    int geometry = 0;
+#define LIB_GEOMETRY(sec, k, type, member, field, g)                           \
+    c = base;                                                                  \
+    c.field = (LIB_CTYPE_##type)NUDGE_##type(c.field);                         \
+    if (bl_config_same_geometry(&base, &c) == IS_LIBRARY_GEOMETRY(g))          \
+        fail_msg("[%s] %s: the library %s it geometry, the schema %s", #sec,  \
+                 #k, IS_LIBRARY_GEOMETRY(g) ? "does not call" : "calls",      \
+                 IS_LIBRARY_GEOMETRY(g) ? "does" : "does not");               \
+    geometry += IS_LIBRARY_GEOMETRY(g);
+    SITE_LIB_FIELDS(LIB_GEOMETRY)
+#undef LIB_GEOMETRY
+    assert_true(geometry >= 8);
+    /* [beaconN] x_m, y_m, z_m: geometry = "library" */
+#define BEACON_GEOMETRY(member, field)                                         \
+    c = base;                                                                  \
+    c.beacons[2].field += 1;                                                   \
+    assert_false(bl_config_same_geometry(&base, &c));
+    SITE_LIB_BEACON_FIELDS(BEACON_GEOMETRY)
+#undef BEACON_GEOMETRY
+    /* and the bridge's decision holds the library's */
+    struct bridge_config b = site;
+    b.wheel_base_m += 0.01;
+    assert_false(config_same_geometry(&site, &b));
+    b = site;
+    b.wheel_radius_m += 0.01; /* bridge geometry: the library calls it tuning */
+    assert_false(config_same_geometry(&site, &b));
+    site_to_lib(&b, &c);
+    assert_true(bl_config_same_geometry(&base, &c));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -523,6 +569,7 @@ int main(void)
         cmocka_unit_test(test_every_schema_key_has_its_range),
         cmocka_unit_test(test_tuning_defaults_are_the_librarys),
         cmocka_unit_test(test_every_key_reaches_its_field),
+        cmocka_unit_test(test_library_geometry_is_the_schemas),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -67,7 +67,7 @@ static int set_u32(uint32_t *f, const char *v)
 /* An estimator section of the schema: one with a key that sets a field. */
 static int estimator_section(const char *section)
 {
-#define SECTION_OF(sec, k, type, member, field) if (!strcmp(section, #sec)) return 1;
+#define SECTION_OF(sec, k, type, member, field, geometry) if (!strcmp(section, #sec)) return 1;
     SITE_LIB_FIELDS(SECTION_OF)
 #undef SECTION_OF
     return 0;
@@ -88,7 +88,7 @@ static int site_handler(void *user, const char *section, const char *key, const 
 #undef BEACON_FIELD
     } else if (estimator_section(section) && strcmp(section, "tuning") && strcmp(section, "bridge")) {
         ok = 0;
-#define FIELD(sec, k, type, member, field) \
+#define FIELD(sec, k, type, member, field, geometry) \
         if (!strcmp(section, #sec) && !strcmp(key, #k)) ok = SET_##type(&g->field, value);
         SITE_LIB_FIELDS(FIELD)
 #undef FIELD

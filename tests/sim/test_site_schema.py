@@ -101,6 +101,7 @@ _KEY = '[[section.key]]\nname = "period_s"\ntype = "real"\nunit = "s"\ndoc = "T"
     ('range = "(0, 10]"\ndefault = "x"\n', "not a real"),
     ('range = "(0, inf)"\n', "closed above"),
     ('range = "(0, 10]"\ngeometry = "maybe"\n', "geometry"),
+    ('range = "(0, 10]"\ngeometry = "library"\n', "without a lib field"),
     ('range = "(0, 10]"\nunits = "s"\n', "unknown schema fields"),
 ])
 def test_bad_schema_is_refused(extra, why):
@@ -130,7 +131,7 @@ def test_c_header_rows_are_the_schemas():
                 assert float(lo) == k.range.lo and float(hi) == k.range.hi
                 assert lo_open == ("true" if k.range.lo_open else "false")
             if k.lib:
-                assert re.search(rf"X\({s.name}, {k.name}, K_[A-Z]+, [a-z0-9_.]+, {k.lib}\)",
+                assert re.search(rf"X\({s.name}, {k.name}, K_[A-Z]+, [a-z0-9_.]+, {k.lib}, ",
                                  header) or s.name == BEACON_SECTION, (s.name, k.name)
 
 
