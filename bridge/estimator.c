@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "log.h"
+#include "site_to_lib.h"
 
 /* Encoders silent this long: pulses are fused after a constant-velocity
  * predict, and the silence is reported. */
@@ -69,112 +70,7 @@ bool estimator_next_event(struct estimator *e, struct est_event *ev)
 
 /* ---- configuration ---------------------------------------------------- */
 
-/* bl_config field -> site-file key, for the library's config check. */
-static const struct { const char *field, *section, *key; } field_keys[] = {
-    { "beacon_count", "beacons", "count" },
-    { "beacon_period_s", "beacons", "period_s" },
-    { "double_pulse_spacing_s", "beacons", "double_pulse_spacing_s" },
-    { "burst_length_s", "beacons", "burst_length_s" },
-    { "beacons", "beacon1", "x_m" },
-    { "receiver_count", "receivers", "count" },
-    { "ring_radius_m", "receivers", "ring_radius_m" },
-    { "first_angle_deg", "receivers", "first_angle_deg" },
-    { "angle_step_deg", "receivers", "angle_step_deg" },
-    { "receiver_height_m", "receivers", "height_m" },
-    { "beamwidth_deg", "receivers", "beamwidth_deg" },
-    { "wheel_base_m", "robot", "wheel_base_m" },
-    { "wheel_radius_m", "robot", "wheel_radius_m" },
-    { "ticks_per_rev", "robot", "ticks_per_rev" },
-    { "encoder_rate_hz", "robot", "encoder_rate_hz" },
-    { "sigma_wheel_scale", "robot", "sigma_wheel_scale" },
-    { "sigma_arrival_s", "noise", "sigma_arrival_s" },
-    { "sigma_wheel_per_m", "noise", "sigma_wheel_per_m" },
-    { "speed_of_sound_mps", "noise", "speed_of_sound_mps" },
-    { "sigma_speed_of_sound_mps", "noise", "sigma_speed_of_sound_mps" },
-    { "gate_sigma", "noise", "gate_sigma" },
-    { "max_predict_gap_s", "bridge", "max_coast_s" },
-#define TUNING_FIELD_KEY(key, field, type, lo, hi, open) { #field, "tuning", #key },
-    BRIDGE_TUNING_KEYS(TUNING_FIELD_KEY)
-#undef TUNING_FIELD_KEY
-};
-
-/* C type of a tuning field in bl_config, by its key type (bridge/tuning.h). */
-#define LIB_CTYPE_K_REAL bl_real
-#define LIB_CTYPE_K_INT uint32_t
-
-int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
-                          char *err, size_t errlen)
-{
-    bl_config c;
-    bl_config_default(&c);
-    c.beacon_count = (uint32_t)cfg->beacon_count;
-    c.beacon_period_s = (bl_real)cfg->period_s;
-    c.double_pulse_spacing_s = (bl_real)cfg->double_pulse_spacing_s;
-    c.burst_length_s = (bl_real)cfg->burst_length_s;
-    for (int i = 0; i < cfg->beacon_count && i < BL_MAX_BEACONS; i++) {
-        c.beacons[i].x_m = (bl_real)cfg->beacon[i].x_m;
-        c.beacons[i].y_m = (bl_real)cfg->beacon[i].y_m;
-        c.beacons[i].z_m = (bl_real)cfg->beacon[i].z_m;
-    }
-    c.receiver_count = (uint32_t)cfg->receiver_count;
-    c.ring_radius_m = (bl_real)cfg->ring_radius_m;
-    c.first_angle_deg = (bl_real)cfg->first_angle_deg;
-    c.angle_step_deg = (bl_real)cfg->angle_step_deg; /* 0: evenly spaced */
-    c.receiver_height_m = (bl_real)cfg->receiver_height_m;
-    c.beamwidth_deg = (bl_real)cfg->beamwidth_deg;
-    c.wheel_base_m = (bl_real)cfg->wheel_base_m;
-    c.wheel_radius_m = (bl_real)cfg->wheel_radius_m;
-    c.ticks_per_rev = (uint32_t)cfg->ticks_per_rev;
-    c.encoder_rate_hz = (bl_real)cfg->encoder_rate_hz;
-    c.sigma_wheel_scale = (bl_real)cfg->sigma_wheel_scale;
-    c.sigma_arrival_s = (bl_real)cfg->sigma_arrival_s;
-    c.sigma_wheel_per_m = (bl_real)cfg->sigma_wheel_per_m;
-    c.speed_of_sound_mps = (bl_real)cfg->speed_of_sound_mps;
-    c.sigma_speed_of_sound_mps = (bl_real)cfg->sigma_speed_of_sound_mps;
-    c.gate_sigma = (bl_real)cfg->gate_sigma;
-    /* [tuning] (the parse ranges keep the integers >= 0) */
-#define TUNING_APPLY(key, field, type, lo, hi, open)                           \
-    c.field = (LIB_CTYPE_##type)cfg->tuning.key;
-    BRIDGE_TUNING_KEYS(TUNING_APPLY)
-#undef TUNING_APPLY
-    /* A CAN outage (interface down, a node rebooting) shorter than this is
-     * coasted through: constant-velocity predict, P grows, the pulses pull
-     * the state back afterwards; longer, the filter re-starts from the
-     * snapshot solver. */
-    c.max_predict_gap_s = (bl_real)cfg->max_coast_s;
-    const char *bad = NULL;
-    int rc = bl_config_check(&c, &bad);
-    if (rc != BL_OK) {
-        const char *section = "beacons", *key = bad ? bad : "?";
-        for (size_t i = 0; bad && i < sizeof field_keys / sizeof field_keys[0]; i++)
-            if (!strcmp(field_keys[i].field, bad)) {
-                section = field_keys[i].section;
-                key = field_keys[i].key;
-            }
-        char why[160];
-        snprintf(why, sizeof why, "rejected by the estimator (%s: %s)",
-                 bad ? bad : "?", bl_strerror(rc));
-        config_format_error(cfg, section, key, why, err, errlen);
-        return -1;
-    }
-    *out = c;
-    return 0;
-}
-
-static int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
-                           bl_seq_config *out, char *err, size_t errlen)
-{
-    int rc = bl_sequencer_config_from_site(c, 0, out);
-    if (rc != BL_OK) {
-        char why[160];
-        snprintf(why, sizeof why,
-                 "beacon time windows overlap: period too short for the "
-                 "beacons' spread (%s)", bl_strerror(rc));
-        config_format_error(cfg, "beacons", "period_s", why, err, errlen);
-        return -1;
-    }
-    return 0;
-}
+/* estimator_make_config and make_seq_config: bridge/site_to_lib.c */
 
 int64_t estimator_pulse_hold_us(const struct bridge_config *cfg)
 {
@@ -425,7 +321,7 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
             e->c.predict_errors++;
         }
     }
-    bl_pulse_result res;
+    bl_fusion_result res;
     int rc = bl_filter_fuse_pulse(&e->filter, (uint32_t)pl->beacon,
                                   pl->arrival_us, pl->receiver, &res);
     if (rc == BL_ETIME) {
@@ -442,16 +338,16 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
               "sigma %.1f us ratio %.2f",
               pl->beacon + 1, pl->receiver, (long long)pl->arrival_us,
               pl->repeat ? " (repeat)" : "", (int)res.status,
-              (double)res.innovation_s * 1e6,
-              (double)res.innovation_sigma_s * 1e6, (double)res.test_ratio);
+              (double)res.innovation * 1e6,
+              sqrt((double)res.innovation_var) * 1e6, (double)res.test_ratio);
     /* An innovation longer than the longest flight cannot come from a
      * position error inside the site: the pulse was given the wrong beacon
      * number (the sequencer slipped a slot, e.g. anchored on an echo that
      * looked like beacon 1's double pulse while beacon 1 was silent). Two
      * in a row while the filter is converged: re-synchronise the sequencer
      * from the filter's firing times instead of blaming the pose. */
-    bool misnumbered = res.status == BL_PULSE_REJECTED && e->was_converged &&
-        fabs((double)res.innovation_s) * 1e6 > (double)e->seqcfg.max_flight_us;
+    bool misnumbered = res.status == BL_FUSION_REJECTED && e->was_converged &&
+        fabs((double)res.innovation) * 1e6 > (double)e->seqcfg.max_flight_us;
     if (misnumbered) {
         e->c.numbering_errors++;
         if (++e->misnumbered_in_row >= 2) {
@@ -464,33 +360,33 @@ static void fuse(struct estimator *e, const bl_seq_pulse *pl, int64_t rx_us)
             e->c.seq_resyncs++;
             event(e, EST_EV_WARNING, "beacon numbering re-synchronised");
         }
-    } else if (res.status == BL_PULSE_ACCEPTED) {
+    } else if (res.status == BL_FUSION_ACCEPTED) {
         e->misnumbered_in_row = 0;
     }
-    if (!pl->repeat && !misnumbered && (res.status == BL_PULSE_ACCEPTED ||
-                                        res.status == BL_PULSE_REJECTED))
+    if (!pl->repeat && !misnumbered && (res.status == BL_FUSION_ACCEPTED ||
+                                        res.status == BL_FUSION_REJECTED))
         watch_rejections(e, (uint32_t)pl->beacon,
-                         res.status == BL_PULSE_REJECTED);
+                         res.status == BL_FUSION_REJECTED);
     switch (res.status) {
-    case BL_PULSE_ACCEPTED:
+    case BL_FUSION_ACCEPTED:
         e->c.pulses_accepted++;
         e->storm_acc++;
         beacon_ok(e, (uint32_t)pl->beacon, pl->arrival_us);
         break;
-    case BL_PULSE_REJECTED:
+    case BL_FUSION_REJECTED:
         e->c.pulses_rejected++;
         e->storm_rej++;
         if (!restart_if_persistent(e))
             return;
         break;
-    case BL_PULSE_BUFFERED:
+    case BL_FUSION_BUFFERED:
         e->c.pulses_buffered++;
         return;
-    case BL_PULSE_STARTED:
+    case BL_FUSION_STARTED:
         e->c.pulses_accepted++;
         beacon_ok(e, (uint32_t)pl->beacon, pl->arrival_us);
         break;
-    case BL_PULSE_RESET:
+    case BL_FUSION_RESET:
         e->c.pulses_accepted++;
         break;
     }

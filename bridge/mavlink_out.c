@@ -462,7 +462,7 @@ static int send_msg(struct mav_out *m)
     return 0;
 }
 
-static bool finite6(const float *v, size_t n)
+static bool all_finite(const float *v, size_t n)
 {
     for (size_t i = 0; i < n; i++)
         if (!isfinite(v[i]))
@@ -475,7 +475,7 @@ int mav_out_send_odometry(struct mav_out *m, const struct mav_odometry *o)
     if (!m || !o || o->quality < -1 || o->quality > 100)
         return -EINVAL;
     const float vals[] = {o->x_m, o->y_m, o->z_m, o->yaw_rad, o->vx_mps, o->vy_mps, o->vz_mps, o->yawrate_radps};
-    if (!finite6(vals, sizeof vals / sizeof vals[0]))
+    if (!all_finite(vals, sizeof vals / sizeof vals[0]))
         return -EINVAL;
     float pose_ut[MAV_COV_UT_LEN], vel_ut[MAV_COV_UT_LEN];
     if (mav_cov_to_frd(o, pose_ut, vel_ut) < 0)

@@ -241,24 +241,31 @@ int main(int argc, char **argv) {
                 if (timed) pred_ns[np++] = now_ns() - a - timer_ns;
                 if (rc != BL_OK) die("bl_filter_predict_odometry", rc);
             } else {
-                bl_pulse_result res;
+                bl_fusion_result res;
                 bl_filter prior;
                 if (r < 0) prior = f;
                 const int64_t a = timed ? now_ns() : 0;
                 rc = bl_filter_fuse_pulse(&f, e->beacon, e->t_us, e->receiver, &res);
                 if (timed) fuse_ns[nf++] = now_ns() - a - timer_ns;
                 if (rc != BL_OK) die("bl_filter_fuse_pulse", rc);
-                if (r >= 0 && res.status == BL_PULSE_ACCEPTED) accepted++;
-                if (r >= 0 && res.status == BL_PULSE_REJECTED) rejected++;
+                if (r >= 0 && res.status == BL_FUSION_ACCEPTED) accepted++;
+                if (r >= 0 && res.status == BL_FUSION_REJECTED) rejected++;
                 if (r < 0) {
+                    /* The firing the filter attributed the pulse to: the nearest
+                     * one, i.e. the first whose predicted arrival is at or after
+                     * half a cycle of this beacon before the pulse. */
+                    bl_expected_pulse xp;
+                    const int64_t half_cycle_us = (int64_t)cfg.beacon_count * PERIOD_US / 2;
+                    rc = bl_filter_expected_arrival(&prior, e->beacon, e->t_us - half_cycle_us, &xp);
+                    if (rc != BL_OK) die("bl_filter_expected_arrival", rc);
                     for (int i = 0; i < BL_FILTER_NX; ++i) {
                         /* t0 as firing time of this pulse relative to the state time */
-                        const double v = i == BL_IX_T0 ? (double)(res.fire_us - prior.t_us_) * 1e-6 : (double)prior.x_[i];
+                        const double v = i == BL_IX_T0 ? (double)(xp.fire_us - prior.t_us_) * 1e-6 : (double)prior.x_[i];
                         fprintf(dump, "%.17g ", v);
                     }
                     for (int i = 0; i < BL_FILTER_NX * BL_FILTER_NX; ++i) fprintf(dump, "%.17g ", (double)prior.P_[i]);
                     fprintf(dump, "%.17g %.17g %u %u %.17g\n", (double)(e->t_us - prior.t_us_) * 1e-6,
-                            (double)(res.fire_us - prior.t_us_) * 1e-6, e->beacon, e->receiver,
+                            (double)(xp.fire_us - prior.t_us_) * 1e-6, e->beacon, e->receiver,
                             (double)cfg.sigma_arrival_s);
                 }
                 if (r == 0 && e->t_us > (int64_t)(seconds * 0.5e6)) {

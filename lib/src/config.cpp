@@ -202,3 +202,22 @@ extern "C" int bl_config_receiver_angle(const bl_config *cfg, uint32_t receiver_
     *angle_rad = (cfg->first_angle_deg + step_deg * real(receiver_index)) * bl::kDegToRad;
     return BL_OK;
 }
+
+// The one geometry check (config.h): what a running filter's state depends
+// on. Beacon entries beyond beacon_count are not part of the site.
+extern "C" bool bl_config_same_geometry(const bl_config *a, const bl_config *b)
+{
+    if (a == nullptr || b == nullptr) return false;
+    if (a->beacon_count != b->beacon_count || a->beacon_period_s != b->beacon_period_s ||
+        a->receiver_count != b->receiver_count || a->ring_radius_m != b->ring_radius_m ||
+        a->first_angle_deg != b->first_angle_deg || a->angle_step_deg != b->angle_step_deg ||
+        a->receiver_height_m != b->receiver_height_m || a->wheel_base_m != b->wheel_base_m ||
+        (a->sigma_wheel_scale > real(0)) != (b->sigma_wheel_scale > real(0)))
+        return false;
+    const uint32_t n = a->beacon_count < BL_MAX_BEACONS ? a->beacon_count : BL_MAX_BEACONS;
+    for (uint32_t i = 0; i < n; ++i)
+        if (a->beacons[i].x_m != b->beacons[i].x_m || a->beacons[i].y_m != b->beacons[i].y_m ||
+            a->beacons[i].z_m != b->beacons[i].z_m)
+            return false;
+    return true;
+}

@@ -437,8 +437,6 @@ __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_soluti
     f->t_us_ = ref_arrival_us;
     if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
     f->flags_ = kFlagStarted | kFlagEverStarted;
-    f->consecutive_rejections_ = 0;
-    f->rejection_beacon_mask_ = 0;
 }
 
 // The last-pulse table the snapshot (re)start reads: every pulse fuse_pulse
@@ -493,7 +491,6 @@ void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uin
                     bool explained = false)
 {
     f->last_arrival_us_[beacon_index] = arrival_us;
-    f->last_receiver_[beacon_index] = receiver_index;
     f->last_valid_mask_ |= 1u << beacon_index;
     remember_ring(f, beacon_index, arrival_us, receiver_index, explained);
 }
@@ -618,7 +615,8 @@ void fill_estimate(const bl_filter *f, const VX &x, const MX &P, int64_t t_us, b
     est->t_us = t_us;
     est->started = started(f);
     est->reset_counter = f->reset_count_;
-    est->consecutive_rejections = f->consecutive_rejections_;
+    est->wheel_speed_fused = f->wheel_fused_;
+    est->wheel_speed_refused = f->wheel_refused_;
     for (uint32_t i = 0; i < BL_MAX_BEACONS; ++i) {
         est->accepted[i] = f->accepted_[i];
         est->rejected[i] = f->rejected_[i];
@@ -699,17 +697,7 @@ extern "C" int bl_filter_update_config(bl_filter *f, const bl_config *cfg)
     if (f == nullptr || cfg == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
     if (bl_config_check(cfg, nullptr) != BL_OK) return BL_ECONFIG;
-    const bl_config *o = &f->cfg_;
-    if (cfg->beacon_count != o->beacon_count || cfg->receiver_count != o->receiver_count ||
-        cfg->ring_radius_m != o->ring_radius_m || cfg->first_angle_deg != o->first_angle_deg ||
-        cfg->angle_step_deg != o->angle_step_deg || cfg->receiver_height_m != o->receiver_height_m ||
-        cfg->wheel_base_m != o->wheel_base_m ||
-        (cfg->sigma_wheel_scale > real(0)) != (o->sigma_wheel_scale > real(0)))
-        return BL_ECONFIG;
-    for (uint32_t i = 0; i < cfg->beacon_count; ++i)
-        if (cfg->beacons[i].x_m != o->beacons[i].x_m || cfg->beacons[i].y_m != o->beacons[i].y_m ||
-            cfg->beacons[i].z_m != o->beacons[i].z_m)
-            return BL_ECONFIG;
+    if (!bl_config_same_geometry(&f->cfg_, cfg)) return BL_ECONFIG;
     f->cfg_ = *cfg;
     return BL_OK;
 }
@@ -782,8 +770,6 @@ extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
     if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
     f->flags_ = kFlagStarted | kFlagEverStarted;
     if (converged_now(cfg, P)) f->flags_ |= kFlagConverged;
-    f->consecutive_rejections_ = 0;
-    f->rejection_beacon_mask_ = 0;
     return BL_OK;
 }
 
@@ -945,6 +931,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     f->epoch_us_ = epoch;
     f->ref_beacon_ = ref;
     f->t_us_ = t_us;
+    if (dt > real(0)) f->wheel_fused_ += 2;
     return BL_OK;
 }
 
@@ -975,10 +962,10 @@ namespace {
 // Own frame (noinline): the NxN work matrices are gone before the caller
 // may re-initialise from the snapshot solver.
 __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
-                                           uint32_t receiver_index, bl_pulse_result *result)
+                                           uint32_t receiver_index, bl_fusion_result *result)
 {
     const bl_config *cfg = &f->cfg_;
-    bl_pulse_result res;
+    bl_fusion_result res;
     std::memset(&res, 0, sizeof res);
     // The caller (classify_arrival) checked |arrival - state time| <= max_predict_gap_s.
     const int64_t dts_us = arrival_us - f->t_us_;
@@ -1019,11 +1006,9 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     // Kleeman eq. 7: innovation; its variance H P Hᵀ + R (eq. 9's bracket).
     const real nu0 = g.arrival_rel_s - h0;
     const real S0 = H.dot(P.lazyProduct(H.transpose())) + R;
-    res.innovation_s = nu0;
-    res.innovation_sigma_s = std::sqrt(S0);
-    res.test_ratio = std::fabs(nu0) / (gate * res.innovation_sigma_s);
-    const double fire_s = double(g.epoch_rel_s) + double(x(T0)) + double(g.slot) * double(x(T));
-    res.fire_us = f->t_us_ + int64_t(std::llround(fire_s * 1e6));
+    res.innovation = nu0;
+    res.innovation_var = S0;
+    res.test_ratio = std::fabs(nu0) / (gate * std::sqrt(S0));
 
     // Every pulse is kept (accepted or not) for a snapshot re-initialisation.
     auto remember = [&]() { remember_pulse(f, beacon_index, arrival_us, receiver_index); };
@@ -1032,9 +1017,7 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
         // Chi-square gate (1 dof): an echoed or outlying arrival (Kleeman §3.9).
         remember();
         f->rejected_[beacon_index] += 1;
-        f->consecutive_rejections_ += 1;
-        f->rejection_beacon_mask_ |= 1u << beacon_index;
-        res.status = BL_PULSE_REJECTED;
+        res.status = BL_FUSION_REJECTED;
         *result = res;
         return BL_OK;
     }
@@ -1081,10 +1064,7 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     f->epoch_us_ = epoch;
     f->ref_beacon_ = ref;
     f->accepted_[beacon_index] += 1;
-    f->fused_count_ += 1;
-    f->consecutive_rejections_ = 0;
-    f->rejection_beacon_mask_ = 0;
-    res.status = BL_PULSE_ACCEPTED;
+    res.status = BL_FUSION_ACCEPTED;
     res.iterations = it;
     *result = res;
     return BL_OK;
@@ -1132,7 +1112,7 @@ real grown_variance(real var, real q, real gap_s, real var0)
 // random walk over the gap (grown_variance), the wheel scales. Until the
 // restart the stale state itself is untouched. Inline in fuse_pulse: the
 // snapshot solver's stack chain starts there, as for persistent rejection.
-inline bl_pulse_status fuse_stale(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index)
+inline bl_fusion_status fuse_stale(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index)
 {
     const bl_config *cfg = &f->cfg_;
     remember_pulse(f, beacon_index, arrival_us, receiver_index);
@@ -1148,21 +1128,21 @@ inline bl_pulse_status fuse_stale(bl_filter *f, uint32_t beacon_index, int64_t a
     // after the gap the old turn rate means nothing: 0
     if (start_from_snapshot(f, f->x_[TH], cfg->reset_sigma_theta_rad, real(0), f->x_[S], var_s, f->x_[T], var_T,
                             n < 4 ? n : 4) == BL_OK)
-        return BL_PULSE_RESET;
-    return BL_PULSE_BUFFERED;
+        return BL_FUSION_RESET;
+    return BL_FUSION_BUFFERED;
 }
 
 }  // namespace
 
 extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
-                                    uint32_t receiver_index, bl_pulse_result *result)
+                                    uint32_t receiver_index, bl_fusion_result *result)
 {
     if (f == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
     const bl_config *cfg = &f->cfg_;
     if (beacon_index >= cfg->beacon_count) return BL_EBEACON;
     if (receiver_index >= cfg->receiver_count) return BL_EINVAL;
-    bl_pulse_result res;
+    bl_fusion_result res;
     std::memset(&res, 0, sizeof res);
 
     if (!started(f)) {
@@ -1180,14 +1160,14 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
                 }
         }
         remember_pulse(f, beacon_index, arrival_us, receiver_index);
-        res.status = BL_PULSE_BUFFERED;
+        res.status = BL_FUSION_BUFFERED;
         const uint32_t need = cfg->beacon_count < 4 ? cfg->beacon_count : 4;
         if (start_from_snapshot(f, cfg->initial_theta_rad, cfg->reset_sigma_theta_rad, real(0),
                                 cfg->speed_of_sound_mps,
                                 cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps,
                                 cfg->beacon_period_s, cfg->sigma_period_s * cfg->sigma_period_s,
                                 need) == BL_OK) {
-            res.status = BL_PULSE_STARTED;
+            res.status = BL_FUSION_STARTED;
         }
         if (result) *result = res;
         return BL_OK;
@@ -1203,24 +1183,6 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
     }
     const int rc = fuse_started(f, beacon_index, arrival_us, receiver_index, &res);
     if (rc != BL_OK) return rc;
-    if (res.status == BL_PULSE_REJECTED) {
-        uint32_t nb = 0;
-        for (uint32_t m = f->rejection_beacon_mask_; m; m &= m - 1) ++nb;
-        if (cfg->reset_reject_count > 0 && f->consecutive_rejections_ >= cfg->reset_reject_count && nb >= 2) {
-            // Persistent rejection: kidnapped or drifted. Re-initialise from the
-            // snapshot solver on the last cycle (keeps s and T, heading with a
-            // wide σ); if the snapshot fails, keep counting.
-            const uint32_t n = cfg->beacon_count;
-            // From the firings the state could not explain only: until they
-            // cover min(4, N) beacons (within a cycle of rejections) it waits.
-            const uint32_t need = n < 4 ? n : 4;
-            const uint32_t use = restart_mask(f, need);
-            if (use != ~0u &&
-                start_from_snapshot(f, f->x_[TH], cfg->reset_sigma_theta_rad, f->x_[W], f->x_[S],
-                                    f->P_[S * NX + S], f->x_[T], f->P_[T * NX + T], need, use) == BL_OK)
-                res.status = BL_PULSE_RESET;
-        }
-    }
     if (result) *result = res;
     return BL_OK;
 }

@@ -467,6 +467,7 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det) {
         if ((g.rx_mask & bit) == 0 || off < g.rx_offset_us[det->receiver]) {
             g.rx_offset_us[det->receiver] = off;
             g.rx_amplitude_mv[det->receiver] = det->amplitude_mv;
+            g.rx_tag[det->receiver] = det->tag;
         }
         g.rx_mask |= bit;
         if (det->double_pulse || wide) g.double_mask |= bit;
@@ -521,6 +522,7 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det) {
     g.double_mask = (det->double_pulse || wide) ? bit : 0u;
     g.rx_offset_us[det->receiver] = 0;
     g.rx_amplitude_mv[det->receiver] = det->amplitude_mv;
+    g.rx_tag[det->receiver] = det->tag;
     seq->n_pending++;
     seq->counters.detections++;
     return BL_OK;
@@ -558,6 +560,7 @@ int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out) {
         mem.arrival_us = g.start_us + g.rx_offset_us[r];
         mem.receiver = r;
         mem.amplitude_mv = g.rx_amplitude_mv[r];
+        mem.tag = g.rx_tag[r];
         uint32_t k = p.member_count;
         while (k > 0 && (p.members[k - 1].arrival_us > mem.arrival_us ||
                          (p.members[k - 1].arrival_us == mem.arrival_us && r == g.receiver))) {
@@ -569,6 +572,7 @@ int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out) {
     }
     p.amplitude_mv = g.amplitude_mv;
     p.width_us = g.width_us;
+    p.tag = g.rx_tag[g.receiver];  // the earliest detection's (caller's own)
     // Beacon 1 when at least half the receivers that heard the pulse show
     // its signature.
     p.double_pulse = signed_rx > 0 && 2 * signed_rx >= either;

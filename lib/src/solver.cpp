@@ -246,12 +246,17 @@ int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
     real trace_p = 0;
     for (int k = 0; k < D; ++k) trace_p += cov_m(k, k);
     sol.pdop = std::sqrt(trace_p) / (sigma_rms_s * s);
-    real r2 = 0;
+    // Weighted rms of the arrival residuals e_j (s), weights w_j = 1/σ_j²
+    // (the normal equations' weights): sqrt(Σ w_j e_j² / Σ w_j) (s); equal
+    // σ_j give the plain rms.
+    real r2 = 0, w_res = 0;
     for (uint32_t j = 0; j < N; ++j) {
         const real e = (rho_of(j) - tau - (q - beacon(j)).norm()) / s;
-        r2 += e * e;
+        const real wj = real(1) / (prob->sigma_s[j] * prob->sigma_s[j]);
+        r2 += wj * e * e;
+        w_res += wj;
     }
-    sol.residual_rms_s = std::sqrt(r2 / real(N));
+    sol.residual_rms_s = std::sqrt(r2 / w_res);
     sol.iterations = it;
     sol.converged = converged;
 

@@ -231,17 +231,17 @@ static void perturb_config(struct fz *z, bl_config *c)
 
 static void fuse_one(uint32_t beacon, int64_t t, uint32_t rx)
 {
-    bl_pulse_result res;
+    bl_fusion_result res;
     f_before = f;
     int rc = bl_filter_fuse_pulse(&f, beacon, t, rx, &res);
     after_filter_call(rc, "fuse_pulse", false);
     if (rc == BL_OK) {
-        FUZZ_CHECK(res.status <= BL_PULSE_RESET, "status %d", (int)res.status);
-        if (res.status == BL_PULSE_ACCEPTED || res.status == BL_PULSE_REJECTED) {
-            FUZZ_CHECK(isfinite(res.innovation_s) && isfinite(res.innovation_sigma_s) &&
-                           res.innovation_sigma_s > 0 && !(res.test_ratio < 0),
-                       "pulse result: innov %g sigma %g ratio %g", res.innovation_s,
-                       res.innovation_sigma_s, res.test_ratio);
+        FUZZ_CHECK(res.status <= BL_FUSION_RESET, "status %d", (int)res.status);
+        if (res.status == BL_FUSION_ACCEPTED || res.status == BL_FUSION_REJECTED) {
+            FUZZ_CHECK(isfinite(res.innovation) && isfinite(res.innovation_var) &&
+                           res.innovation_var > 0 && !(res.test_ratio < 0),
+                       "pulse result: innov %g var %g ratio %g", (double)res.innovation,
+                       (double)res.innovation_var, (double)res.test_ratio);
         }
     }
 }

@@ -344,6 +344,7 @@ typedef struct sim_stats {
     int nan_seen;
     int started;
     uint32_t resets;
+    uint32_t snapshot_restarts; /* bl_filter_start_snapshot() calls of the rejection window that succeeded */
     uint32_t accepted, rejected;
     int echoes, echoes_rejected, direct_rejected;
     double max_abs_t0_offset_s;
@@ -454,6 +455,11 @@ static void sim_run(const sim_params *sp, const bl_config *cfg_in, double settle
     sim_pulse next = sim_pulse_of(sp, &cfg, next_fire);
     const double half = 0.5 * (double)cfg.wheel_base_m;
     const long steps = lround(sp->duration_s / SIM_DT);
+    /* The caller's persistent-rejection window (the localizer's, not the
+     * filter's): cfg.reset_reject_count gate rejections in a row spanning
+     * >= 2 beacons restart the filter through bl_filter_start_snapshot(),
+     * which takes the firings the state could not explain. */
+    uint32_t rejections_in_row = 0, rejection_beacons = 0;
     for (long i = 1; i <= steps; ++i) {
         const double t = (double)i * SIM_DT;
         /* true wheel motion over the step (midpoint speeds), plus slip noise */
@@ -478,14 +484,31 @@ static void sim_run(const sim_params *sp, const bl_config *cfg_in, double settle
                 next = sim_pulse_of(sp, &cfg, ++next_fire);
                 continue;
             }
-            bl_pulse_result res;
+            bl_fusion_result res;
             const int rc = bl_filter_fuse_pulse(&f, next.beacon, to_us(sp, next.arrival_s), next.receiver, &res);
             assert_int_equal(rc, BL_OK);
-            if (res.status == BL_PULSE_STARTED) st->started = 1;
+            if (res.status == BL_FUSION_STARTED) st->started = 1;
+            if (res.status == BL_FUSION_REJECTED) {
+                rejections_in_row++;
+                rejection_beacons |= 1u << next.beacon;
+            } else if (res.status != BL_FUSION_BUFFERED) {
+                rejections_in_row = 0;
+                rejection_beacons = 0;
+            }
+            if (cfg.reset_reject_count > 0 && rejections_in_row >= cfg.reset_reject_count &&
+                (rejection_beacons & (rejection_beacons - 1)) != 0) {
+                bl_estimate now;
+                assert_int_equal(bl_filter_estimate(&f, &now), BL_OK);
+                if (bl_filter_start_snapshot(&f, now.theta_rad, cfg.reset_sigma_theta_rad) == BL_OK) {
+                    st->snapshot_restarts++;
+                    rejections_in_row = 0;
+                    rejection_beacons = 0;
+                }
+            }
             if (next.echo) {
                 st->echoes++;
-                if (res.status == BL_PULSE_REJECTED) st->echoes_rejected++;
-            } else if (res.status == BL_PULSE_REJECTED && t > settle_s) {
+                if (res.status == BL_FUSION_REJECTED) st->echoes_rejected++;
+            } else if (res.status == BL_FUSION_REJECTED && t > settle_s) {
                 st->direct_rejected++;
             }
             next = sim_pulse_of(sp, &cfg, ++next_fire);
@@ -771,11 +794,14 @@ static void test_echoes_rejected(void **state)
     assert_true(st.within_3sigma >= 0.95 * st.samples);
 }
 
-/* Robot kidnapped (lifted 3 m away): persistent rejection re-initialises
- * from the snapshot solver, the reset counter bumps, the error recovers.
- * One reset does it, on each of four seeds. (The restart takes only the
- * firings the old state could not explain; the bridge's replay test of a
- * kidnap with a turn is where a mixed snapshot used to cost extra resets.) */
+/* Robot kidnapped (lifted 3 m away): the filter itself never restarts on
+ * rejections; the caller's window (sim_run, as the localizer) calls
+ * bl_filter_start_snapshot() after cfg.reset_reject_count rejections
+ * across >= 2 beacons, which re-initialises from the snapshot of the
+ * firings the old state could not explain; the reset counter bumps, the
+ * error recovers. One restart does it, on each of four seeds. (The bridge's
+ * replay test of a kidnap with a turn is where a snapshot mixing the places
+ * before and after used to cost extra resets.) */
 static void test_kidnap_recovers(void **state)
 {
     (void)state;
@@ -792,6 +818,7 @@ static void test_kidnap_recovers(void **state)
         sim_run(&sp, &cfg, 70.0, &st);
         print_stats("kidnap", &st);
         assert_int_equal(st.resets, 1);
+        assert_int_equal(st.snapshot_restarts, 1); /* that reset is the window's restart */
         assert_true(st.final_e < 0.10);
         assert_true(st.max_e < 0.25); /* over the last 10 s */
     }
@@ -896,7 +923,7 @@ static void converged_filter(bl_filter *f, const bl_config *cfg, int64_t *t_us, 
             t += 10000;
             assert_int_equal(bl_filter_predict_odometry(f, t, 0, 0), BL_OK);
         }
-        bl_pulse_result r;
+        bl_fusion_result r;
         assert_int_equal(bl_filter_fuse_pulse(f, b, ta_us, 0, &r), BL_OK);
     }
     *t_us = t;
@@ -936,27 +963,33 @@ static void test_gate(void **state)
     assert_int_equal(bl_filter_get_state(&f, x0, P0), BL_OK);
     /* an echo: 5 ms late (1.7 m longer path) */
     const int64_t ta_us = (int64_t)llround(arr_true * 1e6);
-    bl_pulse_result r;
+    bl_fusion_result r;
     assert_int_equal(bl_filter_fuse_pulse(&f, 0, ta_us + 5000, 0, &r), BL_OK);
-    assert_int_equal(r.status, BL_PULSE_REJECTED);
+    assert_int_equal(r.status, BL_FUSION_REJECTED);
     assert_true(r.test_ratio > 1);
-    assert_true(fabs((double)r.innovation_s - 5e-3) < 3 * (double)r.innovation_sigma_s);
+    assert_true(fabs((double)r.innovation - 5e-3) < 3 * sqrt((double)r.innovation_var));
     assert_int_equal(bl_filter_get_state(&f, x1, P1), BL_OK);
     assert_memory_equal(x0, x1, sizeof x0);
     assert_memory_equal(P0, P1, sizeof P0);
     bl_estimate e2;
     assert_int_equal(bl_filter_estimate(&f, &e2), BL_OK);
     assert_int_equal(e2.rejected[0], e.rejected[0] + 1);
-    assert_int_equal(e2.consecutive_rejections, 1);
+    /* a rejection leaves the filter running: no restart, whatever the count */
+    assert_true(e2.started);
+    assert_int_equal(e2.reset_counter, e.reset_counter);
     /* the direct pulse of the same firing passes and is fused */
     assert_int_equal(bl_filter_fuse_pulse(&f, 0, ta_us, 0, &r), BL_OK);
-    assert_int_equal(r.status, BL_PULSE_ACCEPTED);
+    assert_int_equal(r.status, BL_FUSION_ACCEPTED);
     assert_true(r.test_ratio < 1);
     assert_true(r.iterations >= 1);
-    assert_true(fabs((double)r.fire_us * 1e-6 - fire_true) < 3 * (double)e.sigma_t0_s + 2e-6);
+    /* attributed to the expected firing: the innovation is the direct
+     * arrival's, within 3σ of its own variance (another firing of beacon 0
+     * would be 0.9 s off) */
+    assert_true(fabs((double)r.innovation) < 3 * sqrt((double)r.innovation_var));
+    assert_true(r.innovation_var > 0 && r.test_ratio >= 0);
     assert_int_equal(bl_filter_estimate(&f, &e2), BL_OK);
     assert_int_equal(e2.accepted[0], e.accepted[0] + 1);
-    assert_int_equal(e2.consecutive_rejections, 0);
+    assert_int_equal(e2.rejected[0], e.rejected[0] + 1); /* the accepted pulse is not counted as rejected */
     /* the gate scales with gate_sigma: a pulse 2.5σ late passes at 5σ, not at 2σ */
     const int64_t t2 = ta_us + (int64_t)llround(6 * 0.15e6);
     assert_int_equal(bl_filter_expected_arrival(&f, 0, t2 - 100000, &xp), BL_OK);
@@ -966,13 +999,13 @@ static void test_gate(void **state)
     assert_int_equal(bl_filter_update_config(&g, &c2), BL_OK);
     const double late = 2.5 * (double)xp.sigma_s;
     assert_int_equal(bl_filter_fuse_pulse(&g, 0, xp.arrival_us + (int64_t)llround(late * 1e6), 0, &r), BL_OK);
-    assert_int_equal(r.status, BL_PULSE_REJECTED);
+    assert_int_equal(r.status, BL_FUSION_REJECTED);
     g = f;
     c2.gate_sigma = 5;
     c2.startup_gate_sigma = 5;
     assert_int_equal(bl_filter_update_config(&g, &c2), BL_OK);
     assert_int_equal(bl_filter_fuse_pulse(&g, 0, xp.arrival_us + (int64_t)llround(late * 1e6), 0, &r), BL_OK);
-    assert_int_equal(r.status, BL_PULSE_ACCEPTED);
+    assert_int_equal(r.status, BL_FUSION_ACCEPTED);
 }
 
 /* Explicit restart from the snapshot of the last cycle on a running filter:
@@ -1017,7 +1050,7 @@ static int64_t still_arrival_us(const bl_config *cfg, double px, double py, long
  * ±half_fov_rad of the receiver's axis), each at its own position on the
  * ring; arrival noise noise_s. With all_on_rx0, receiver 0 alone hears every
  * beacon (a ring that points nowhere). Returns the last status. */
-static bl_pulse_status ring_cycle(bl_filter *f, const bl_config *cfg, double px, double py, double th,
+static bl_fusion_status ring_cycle(bl_filter *f, const bl_config *cfg, double px, double py, double th,
                                   long cycle, double half_fov_rad, double noise_s, int all_on_rx0)
 {
     for (uint32_t b = 0; b < cfg->beacon_count; ++b) {
@@ -1032,9 +1065,9 @@ static bl_pulse_status ring_cycle(bl_filter *f, const bl_config *cfg, double px,
             const double ry = py + (double)cfg->ring_radius_m * sin(th + (double)a);
             const double dx = rx - bc->x_m, dy = ry - bc->y_m, dz = (double)cfg->receiver_height_m - bc->z_m;
             const double ta = 1.0 + (double)k * 0.15 + sqrt(dx * dx + dy * dy + dz * dz) / 343.0 + noise_s * rng_gauss();
-            bl_pulse_result res;
+            bl_fusion_result res;
             assert_int_equal(bl_filter_fuse_pulse(f, b, (int64_t)llround(ta * 1e6), r, &res), BL_OK);
-            if (res.status == BL_PULSE_STARTED) return 1;
+            if (res.status == BL_FUSION_STARTED) return 1;
         }
     }
     return 0;
@@ -1118,16 +1151,16 @@ static void test_gap_pulses_only_recovers(void **state)
         const int64_t ta = still_arrival_us(&cfg, px, py, k, 1.0, 2e-4);
         bl_estimate before;
         assert_int_equal(bl_filter_estimate(&f, &before), BL_OK);
-        bl_pulse_result r;
+        bl_fusion_result r;
         assert_int_equal(bl_filter_fuse_pulse(&f, (uint32_t)(k % 6), ta, 0, &r), BL_OK);
         if (before.started) {
             const double ahead_s = (double)(ta - before.t_us) * 1e-6;
-            if (r.status == BL_PULSE_RESET) {
+            if (r.status == BL_FUSION_RESET) {
                 assert_true(ahead_s > gap_s); /* reset because of the gap, not otherwise */
                 ++resets;
             } else {
                 assert_true(ahead_s <= gap_s);
-                assert_true(r.status == BL_PULSE_ACCEPTED || r.status == BL_PULSE_REJECTED);
+                assert_true(r.status == BL_FUSION_ACCEPTED || r.status == BL_FUSION_REJECTED);
                 ++fused;
             }
         }
@@ -1186,13 +1219,13 @@ static void test_gap_recovers(void **state)
                 ++predicts_after;
             }
         }
-        bl_pulse_result r;
+        bl_fusion_result r;
         assert_int_equal(bl_filter_fuse_pulse(&f, (uint32_t)(k % 6), ta, 0, &r), BL_OK);
         if (resets == 0) {
-            if (r.status == BL_PULSE_BUFFERED) {
+            if (r.status == BL_FUSION_BUFFERED) {
                 ++buffered;
             } else {
-                assert_int_equal(r.status, BL_PULSE_RESET);
+                assert_int_equal(r.status, BL_FUSION_RESET);
                 ++resets;
                 assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
                 assert_true(e.t_us == ta); /* restarted at this (fresh) arrival */
@@ -1200,7 +1233,7 @@ static void test_gap_recovers(void **state)
                 assert_true(hypot(e.x_m - qx, e.y_m - qy) < 0.5);
             }
         } else {
-            assert_true(r.status == BL_PULSE_ACCEPTED || r.status == BL_PULSE_REJECTED);
+            assert_true(r.status == BL_FUSION_ACCEPTED || r.status == BL_FUSION_REJECTED);
         }
     }
     assert_int_equal(buffered, 3); /* the 4th fresh beacon completes the snapshot */
@@ -1218,7 +1251,7 @@ static void test_gap_recovers(void **state)
     assert_true(hypot(e.x_m - qx, e.y_m - qy) < (double)cfg.ring_radius_m);
     /* a pulse from before the gap is still a caller error (time went back) */
     ref = f;
-    bl_pulse_result r;
+    bl_fusion_result r;
     assert_int_equal(bl_filter_fuse_pulse(&f, 0, t, 0, &r), BL_ETIME);
     assert_memory_equal(&f, &ref, sizeof f);
 }
@@ -1340,7 +1373,7 @@ static void test_api_misuse_leaves_state(void **state)
     int64_t t;
     converged_filter(&f, &cfg, &t, 6, 6);
     ref = f;
-    bl_pulse_result r;
+    bl_fusion_result r;
     bl_estimate e;
     bl_expected_pulse xp;
 #define SAME() assert_memory_equal(&f, &ref, sizeof f)
@@ -1406,7 +1439,7 @@ static void test_api_misuse_leaves_state(void **state)
     assert_false(e.started);
     /* buffering before the start: bad arguments leave it untouched too */
     assert_int_equal(bl_filter_fuse_pulse(&z, 0, 5000000, 0, &r), BL_OK);
-    assert_int_equal(r.status, BL_PULSE_BUFFERED);
+    assert_int_equal(r.status, BL_FUSION_BUFFERED);
     static bl_filter zref;
     zref = z;
     assert_int_equal(bl_filter_fuse_pulse(&z, 6, 5100000, 0, &r), BL_EBEACON);
@@ -1414,6 +1447,65 @@ static void test_api_misuse_leaves_state(void **state)
     assert_int_equal(bl_filter_fuse_pulse(&z, 1, 5000000 - 3000000, 0, &r), BL_ETIME); /* 3 s older */
     assert_int_equal(bl_filter_fuse_pulse(&z, 1, INT64_MIN, 0, &r), BL_ETIME);
     assert_memory_equal(&z, &zref, sizeof z);
+}
+
+/* bl_config_same_geometry (config.h) is the one geometry check:
+ * bl_filter_update_config refuses exactly what it calls a geometry change
+ * (each field it lists, the beacon period included) and accepts tuning
+ * (and what it leaves to the caller: wheel radius, ticks, encoder rate). */
+static void test_same_geometry(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    static bl_filter f;
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    assert_true(bl_config_same_geometry(&cfg, &cfg));
+    assert_false(bl_config_same_geometry(NULL, &cfg));
+    assert_false(bl_config_same_geometry(&cfg, NULL));
+    /* beacons beyond beacon_count are not part of the site */
+    bl_config c = cfg;
+    c.beacons[BL_MAX_BEACONS - 1].x_m += 1;
+    assert_true(bl_config_same_geometry(&cfg, &c));
+    assert_int_equal(bl_filter_update_config(&f, &c), BL_OK);
+    assert_int_equal(bl_filter_update_config(&f, &cfg), BL_OK);
+    /* each geometry field: different geometry, refused by update_config */
+    for (int k = 0; k < 12; ++k) {
+        c = cfg;
+        switch (k) {
+        case 0: c.beacon_period_s *= (bl_real)1.01; break;
+        case 1: c.beacons[2].y_m += (bl_real)0.01; break;
+        case 2: c.beacons[5].z_m += (bl_real)0.01; break;
+        case 3: c.receiver_count -= 1; break;
+        case 4: c.ring_radius_m += (bl_real)0.01; break;
+        case 5: c.first_angle_deg += 1; break;
+        case 6: c.angle_step_deg = 40; break;
+        case 7: c.receiver_height_m += (bl_real)0.01; break;
+        case 8: c.wheel_base_m += (bl_real)0.01; break;
+        case 9: c.sigma_wheel_scale = (bl_real)0.03; break; /* state layout: calibration on */
+        case 10: c.beacon_count = 5; break;
+        case 11: c.beacons[0].x_m += (bl_real)0.01; break;
+        }
+        assert_int_equal(bl_config_check(&c, NULL), BL_OK);
+        assert_false(bl_config_same_geometry(&cfg, &c));
+        assert_false(bl_config_same_geometry(&c, &cfg));
+        assert_int_equal(bl_filter_update_config(&f, &c), BL_ECONFIG);
+    }
+    /* tuning and the caller's own conversions: same geometry, accepted */
+    c = cfg;
+    c.gate_sigma = 4;
+    c.sigma_arrival_s *= 2;
+    c.wheel_radius_m *= (bl_real)1.1;
+    c.ticks_per_rev += 1;
+    c.encoder_rate_hz = 50;
+    c.reset_reject_count = 3;
+    assert_true(bl_config_same_geometry(&cfg, &c));
+    assert_int_equal(bl_filter_update_config(&f, &c), BL_OK);
+    /* a calibration σ changed but still on is the same state layout */
+    bl_config on = cfg, on2 = cfg;
+    on.sigma_wheel_scale = (bl_real)0.03;
+    on2.sigma_wheel_scale = (bl_real)0.05;
+    assert_true(bl_config_same_geometry(&on, &on2));
 }
 
 /* Iterated EKF (Kleeman §3.4): from a prior 1 m off, one precise pulse.
@@ -1447,9 +1539,9 @@ static double posterior_residual_us(uint32_t iterations, uint32_t *used)
     /* beacon 3 (index 2) fires at 2.3 s */
     const double dx = 6 - cfg.beacons[2].x_m, dy = 6 - cfg.beacons[2].y_m;
     const int64_t arrival_us = 2300000 + (int64_t)llround(sqrt(dx * dx + dy * dy) / 343.0 * 1e6);
-    bl_pulse_result r;
+    bl_fusion_result r;
     assert_int_equal(bl_filter_fuse_pulse(&f, 2, arrival_us, 0, &r), BL_OK);
-    assert_int_equal(r.status, BL_PULSE_ACCEPTED);
+    assert_int_equal(r.status, BL_FUSION_ACCEPTED);
     *used = r.iterations;
     bl_expected_pulse xp;
     assert_int_equal(bl_filter_expected_arrival(&f, 2, arrival_us - 20000, &xp), BL_OK);
@@ -1562,6 +1654,7 @@ int main(void)
         cmocka_unit_test(test_gate),
         cmocka_unit_test(test_api_misuse_leaves_state),
         cmocka_unit_test(test_start_snapshot_restart),
+        cmocka_unit_test(test_same_geometry),
         cmocka_unit_test(test_gap_pulses_only_recovers),
         cmocka_unit_test(test_gap_recovers),
         cmocka_unit_test(test_process_noise_by_motion),

@@ -64,6 +64,9 @@ static void add_det(train_t *tr, int64_t t_us, uint32_t rx, bool dbl, uint16_t w
     e->d.double_pulse = dbl;
     e->d.amplitude_mv = 1000;
     e->d.width_us = width_us;
+    /* the caller's tag: unique per detection (its time and receiver), never
+     * read by the sequencer; it must come back with the detection */
+    e->d.tag = ((uint64_t)t_us << 8) | 0x80u | rx;
     e->firing = firing;
 }
 
@@ -379,6 +382,7 @@ static void check_members_of_train(int double_mode) {
         assert_true(p->member_count >= 1 && p->member_count <= N_RX);
         assert_int_equal(p->members[0].arrival_us, p->arrival_us);
         assert_int_equal(p->members[0].receiver, p->receiver);
+        assert_true(p->tag == p->members[0].tag); /* the earliest detection's tag */
         uint32_t seen = 0;
         for (uint32_t m = 0; m < p->member_count; ++m) {
             const bl_seq_member *mb = &p->members[m];
@@ -388,12 +392,16 @@ static void check_members_of_train(int double_mode) {
             seen |= 1u << mb->receiver;
             /* the member is this receiver's first detection of firing f */
             int64_t first = INT64_MAX;
+            uint64_t first_tag = 0;
             for (size_t d = 0; d < g_tr.n; ++d)
                 if (g_tr.det[d].firing == f && g_tr.det[d].d.receiver == mb->receiver &&
-                    g_tr.det[d].d.time_us < first)
+                    g_tr.det[d].d.time_us < first) {
                     first = g_tr.det[d].d.time_us;
+                    first_tag = g_tr.det[d].d.tag;
+                }
             assert_int_equal(mb->arrival_us, first);
             assert_int_equal(mb->amplitude_mv, 1000);
+            assert_true(mb->tag == first_tag); /* the tag of the detection behind the member */
         }
         /* and every receiver that heard firing f is a member */
         for (size_t d = 0; d < g_tr.n; ++d)
@@ -413,32 +421,39 @@ static void test_members(void **state) {
 
 /* Members from detections pushed out of order, and a receiver heard twice
  * within the merge window (its earlier detection counts, whichever comes
- * first in the stream). */
+ * first in the stream); each member carries back its own detection's tag. */
 static void test_members_out_of_order(void **state) {
     (void)state;
     bl_sequencer seq;
     init_seq(&seq);
-    bl_seq_detection d = {.time_us = 5000400, .receiver = 3, .amplitude_mv = 500, .width_us = 2500};
+    /* tags: the caller's own (e.g. a CAN frame's receive time), never read */
+    bl_seq_detection d = {.time_us = 5000400, .receiver = 3, .amplitude_mv = 500, .width_us = 2500,
+                          .tag = 0xA1};
     assert_int_equal(bl_sequencer_push(&seq, &d), BL_OK);
     d.time_us = 5000000;   /* new earliest: offsets rebase */
     d.receiver = 2;
     d.amplitude_mv = 900;
+    d.tag = 0xA2;
     assert_int_equal(bl_sequencer_push(&seq, &d), BL_OK);
     d.time_us = 5000700;
     d.receiver = 1;
     d.amplitude_mv = 300;
+    d.tag = 0xA3;
     assert_int_equal(bl_sequencer_push(&seq, &d), BL_OK);
     d.time_us = 5000200;   /* receiver 3 again, earlier than its first report */
     d.receiver = 3;
     d.amplitude_mv = 650;
+    d.tag = 0xA4;
     assert_int_equal(bl_sequencer_push(&seq, &d), BL_OK);
     d.time_us = 5000900;   /* receiver 2 again, later: an echo, not its arrival */
     d.receiver = 2;
     d.amplitude_mv = 100;
+    d.tag = 0xA5;
     assert_int_equal(bl_sequencer_push(&seq, &d), BL_OK);
     d.time_us = 4999900;   /* a new earliest receiver after all */
     d.receiver = 5;
     d.amplitude_mv = 700;
+    d.tag = UINT64_MAX;    /* every bit passes through */
     assert_int_equal(bl_sequencer_push(&seq, &d), BL_OK);
     bl_seq_pulse p;
     assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), 1);
@@ -449,11 +464,14 @@ static void test_members_out_of_order(void **state) {
     const int64_t t_exp[4] = {4999900, 5000000, 5000200, 5000700};
     const uint32_t r_exp[4] = {5, 2, 3, 1};
     const uint16_t a_exp[4] = {700, 900, 650, 300};
+    const uint64_t tag_exp[4] = {UINT64_MAX, 0xA2, 0xA4, 0xA3};
     for (int m = 0; m < 4; ++m) {
         assert_int_equal(p.members[m].arrival_us, t_exp[m]);
         assert_int_equal(p.members[m].receiver, r_exp[m]);
         assert_int_equal(p.members[m].amplitude_mv, a_exp[m]);
+        assert_true(p.members[m].tag == tag_exp[m]);
     }
+    assert_true(p.tag == UINT64_MAX); /* the earliest detection's */
     assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), BL_OK);
 }
 
@@ -1039,10 +1057,10 @@ static void test_sequencer_feeds_filter(void **state) {
         int rc;
         while ((rc = bl_sequencer_pop(&seq, now, &p)) == 1) {
             if (p.status != BL_SEQ_ASSIGNED) continue;
-            bl_pulse_result res;
+            bl_fusion_result res;
             assert_int_equal(bl_filter_fuse_pulse(&f, (uint32_t)p.beacon, p.arrival_us, p.receiver, &res), BL_OK);
-            if (res.status == BL_PULSE_ACCEPTED) fused++;
-            if (res.status == BL_PULSE_REJECTED) rejected++;
+            if (res.status == BL_FUSION_ACCEPTED) fused++;
+            if (res.status == BL_FUSION_REJECTED) rejected++;
             bl_estimate est;
             assert_int_equal(bl_filter_estimate(&f, &est), BL_OK);
             bl_seq_hint h;

@@ -307,6 +307,46 @@ static void test_site_2d_exact(void **state)
     }
 }
 
+/* residual_rms_s is the weighted rms the header promises,
+ * sqrt(Σ e_j²/σ_j² / Σ 1/σ_j²), with the residuals e_j recomputed here at
+ * the returned solution; with unequal σ_j it is not the plain rms (which
+ * the solver used to report). */
+static void test_residual_rms_weighted(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    static const double sig[6] = {1e-4, 1e-4, 4e-4, 4e-4, 1.5e-3, 1.5e-3};
+    rng_seed(77);
+    int differs = 0;
+    const int trials = 50;
+    for (int r = 0; r < trials; ++r) {
+        const double pos[2] = {2 + 8 * rng_uniform(), 2 + 8 * rng_uniform()};
+        bl_tdoa_problem p;
+        bl_tdoa_solution sol;
+        site_problem(&p, &cfg, pos, 343.0, 0.01, 0.0);
+        for (uint32_t j = 0; j < p.count; ++j) {
+            p.sigma_s[j] = (bl_real)sig[j];
+            p.arrival_s[j] = (bl_real)((double)p.arrival_s[j] + sig[j] * rng_gauss());
+        }
+        assert_int_equal(bl_solve_tdoa_2d(&p, &sol), BL_OK);
+        const double q[3] = {(double)sol.x_m, (double)sol.y_m, (double)cfg.receiver_height_m};
+        double wr2 = 0, wsum = 0, r2 = 0;
+        for (uint32_t j = 0; j < p.count; ++j) {
+            const double e = ((double)p.arrival_s[j] - (double)p.fire_offset_s[j]) - (double)sol.t0_s -
+                             dist3(q, &p.beacons[j]) / 343.0;
+            wr2 += e * e / (sig[j] * sig[j]);
+            wsum += 1 / (sig[j] * sig[j]);
+            r2 += e * e;
+        }
+        const double weighted = sqrt(wr2 / wsum), plain = sqrt(r2 / p.count);
+        const double tol = IS_FLOAT ? 2e-6 : 1e-12;
+        assert_true(fabs((double)sol.residual_rms_s - weighted) < tol);
+        if (fabs(plain - weighted) > 10 * tol) differs++;
+    }
+    assert_true(differs >= trials * 9 / 10); /* the weights matter in (almost) every trial */
+}
+
 /* 3D overdetermined: eight beacons on the corners of a room-sized box. */
 static void test_3d_overdetermined(void **state)
 {
@@ -557,6 +597,7 @@ int main(void)
         cmocka_unit_test(test_step_equals_eq8),
         cmocka_unit_test(test_convergence_1e5_in_4_iterations),
         cmocka_unit_test(test_site_2d_exact),
+        cmocka_unit_test(test_residual_rms_weighted),
         cmocka_unit_test(test_3d_overdetermined),
         cmocka_unit_test(test_site_2d_covariance_consistent),
         cmocka_unit_test(test_2d_three_beacons),

@@ -60,12 +60,12 @@ static void fuse(const bl_seq_pulse *p) {
     if (p->status != BL_SEQ_ASSIGNED) return;   /* unlocked / spurious: counted */
     uint32_t fused = 0;
     for (uint32_t m = 0; m < p->member_count; ++m) {
-        bl_pulse_result res;
+        bl_fusion_result res;
         const int rc = bl_filter_fuse_pulse(&fw_filter, (uint32_t)p->beacon, p->members[m].arrival_us,
                                             p->members[m].receiver, &res);
         if (rc != BL_OK) {
             fw_out.errors++;
-        } else if (res.status == BL_PULSE_REJECTED) {
+        } else if (res.status == BL_FUSION_REJECTED) {
             fw_out.pulses_rejected++;
         } else {
             fw_out.pulses_fused++;

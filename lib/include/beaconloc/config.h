@@ -97,8 +97,11 @@ typedef struct bl_config {
     bl_real firing_jitter_s;          /* σ of firing-time jitter per beacon slot, >= 0 */
     uint32_t iekf_max_iterations;     /* IEKF relinearisations per pulse, 1..20 */
     bl_real iekf_step_tolerance;      /* stop iterating when |Δposition| < this (m) */
-    uint32_t reset_reject_count;      /* K: re-initialise from the snapshot solver after K
-                                         consecutive rejections across >= 2 beacons; 0 = never */
+    uint32_t reset_reject_count;      /* K: the localizer's persistent-rejection threshold:
+                                         it restarts the filter from the snapshot solver
+                                         (bl_filter_start_snapshot) after K rejected first
+                                         arrivals in its window; 0 = never. Not read by
+                                         the filter itself */
     bl_real initial_theta_rad;        /* heading assumed by the automatic snapshot start
                                          when the ring gives none (ring_heading) */
     bl_real reset_sigma_theta_rad;    /* heading σ after a snapshot (re-)start without a
@@ -133,6 +136,22 @@ int bl_config_check(const bl_config *cfg, const char **bad_field);
  * Errors: BL_EINVAL (NULL, k >= receiver_count). */
 int bl_config_receiver_angle(const bl_config *cfg, uint32_t receiver_index,
                              bl_real *angle_rad);
+
+/* True when a and b describe the same geometry, so that a running filter's
+ * state means the same under either (bl_filter_update_config accepts b
+ * for a filter made with a only then). Compares exactly, field by field
+ * (==, no tolerance):
+ *   beacons:   beacon_count, beacon_period_s, and x_m, y_m, z_m of
+ *              beacons[0 .. beacon_count-1] (entries beyond are ignored);
+ *   receivers: receiver_count, ring_radius_m, first_angle_deg,
+ *              angle_step_deg, receiver_height_m;
+ *   robot:     wheel_base_m;
+ *   state layout: whether the wheel-scale states are on
+ *              (sigma_wheel_scale > 0 in both or in neither).
+ * Everything else (wheel_radius_m, ticks_per_rev, encoder_rate_hz, noise,
+ * gates, tuning) is tuning and may differ. False if either is NULL. Not a
+ * validity check: see bl_config_check. */
+bool bl_config_same_geometry(const bl_config *a, const bl_config *b);
 
 #ifdef __cplusplus
 }

@@ -36,7 +36,7 @@
  * firing's earliest) face it. Their mean angle is the beacon's body-frame
  * bearing; with the snapshot's position and the beacon's site position that
  * gives the heading (Vander et al. 2011 eq. 3). Every snapshot (re)start —
- * the automatic one, persistent rejection, a time gap, and
+ * the automatic one, a time gap, and
  * bl_filter_start_snapshot() — takes the circular mean over the last
  * cycle's beacons (each carried to the snapshot time with a running
  * filter's turn rate), with σ = max(their circular spread, receiver spacing/√12),
@@ -51,22 +51,20 @@
  * cfg.gate_sigma. The flag is cleared again when the position σ grows
  * above 2·cfg.converged_sigma_xy_m (a long coast without pulses), which
  * brings back the start-up σ and gate until it re-converges.
- * Persistent rejection: after cfg.reset_reject_count consecutive gate
- * rejections spanning >= 2 beacons, the filter re-initialises from the
- * snapshot of the last cycle's firings that it could not explain (every
- * direct arrival of the firing gated out: after a kidnap, the ones heard at
- * the new place), as soon as those cover min(4, N) beacons, so that the fix
- * does not mix the places before and after; keeping s and T, heading from
- * the ring or kept with σ
- * cfg.reset_sigma_theta_rad, and bumps
- * the reset counter (fuse_pulse returns status BL_PULSE_RESET).
+ * Persistent rejection is not the filter's: a gated-out pulse is counted
+ * (bl_estimate.rejected) and leaves the state untouched, however many come
+ * in a row. The caller (the library's localizer) keeps the one window of
+ * rejections (cfg.reset_reject_count) and restarts the filter with
+ * bl_filter_start_snapshot(), which on a started filter takes only the
+ * firings the state could not explain (after a kidnap: the ones heard at
+ * the new place) when they cover min(4, N) beacons.
  * Time gaps: the state is never extrapolated further than
  * cfg.max_predict_gap_s. A pulse arriving later than that after the state
  * time (no predict for that long: encoders silent, the caller paused, or a
  * caller that fuses pulses without predicting) makes the filter *stale*:
- * fuse_pulse keeps the pulse in the snapshot table (status BUFFERED, BL_OK)
+ * fuse_pulse keeps the pulse in the snapshot table (status BL_FUSION_BUFFERED, BL_OK)
  * and, as soon as the table's latest cycle covers min(4, N) beacons and the
- * fix explains them, re-initialises from that snapshot (status RESET,
+ * fix explains them, re-initialises from that snapshot (status BL_FUSION_RESET,
  * reset counter bumped, state time = the latest arrival; heading from the
  * ring or kept with σ cfg.reset_sigma_theta_rad, s and T kept with their variance grown by
  * their random walk over the gap, wheel scales kept). Pulses from before
@@ -98,6 +96,7 @@
 
 #include "beaconloc/common.h"
 #include "beaconloc/config.h"
+#include "beaconloc/fusion.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -130,14 +129,12 @@ typedef struct bl_filter {
     uint32_t flags_;
     uint32_t magic_;
     uint32_t reset_count_;
-    uint32_t consecutive_rejections_;
-    uint32_t rejection_beacon_mask_;
-    uint32_t fused_count_;
+    uint32_t wheel_fused_;  /* scalar wheel-speed updates fused (v and ω each count) */
+    uint32_t wheel_refused_; /* scalar wheel-speed updates refused (non-finite result) */
     uint32_t last_valid_mask_;
     uint32_t accepted_[BL_MAX_BEACONS];
     uint32_t rejected_[BL_MAX_BEACONS];
     int64_t last_arrival_us_[BL_MAX_BEACONS];
-    uint32_t last_receiver_[BL_MAX_BEACONS];
     int64_t ring_t_us_[BL_MAX_BEACONS];   /* earliest arrival of the latest firing */
     uint32_t ring_mask_[BL_MAX_BEACONS];  /* receivers that heard it (bit per receiver) */
     uint32_t ring_explained_mask_;        /* beacons whose latest firing had a fused arrival */
@@ -159,29 +156,6 @@ typedef struct bl_filter_prior {
      * beacon_period_s) with σ sigma_speed_of_sound_mps, sigma_period_s. */
 } bl_filter_prior;
 
-typedef enum bl_pulse_status {
-    BL_PULSE_ACCEPTED = 0, /* fused */
-    BL_PULSE_REJECTED = 1, /* outside the innovation gate (echo / outlier); counted */
-    BL_PULSE_BUFFERED = 2, /* filter not started yet, or stale after a time gap
-                              (see "Time gaps" above): kept for the snapshot
-                              (re)start */
-    BL_PULSE_STARTED = 3,  /* this pulse completed a cycle: filter started from the
-                              snapshot solver */
-    BL_PULSE_RESET = 4     /* persistent rejection, or a stale filter's first
-                              complete cycle after a time gap: re-initialised
-                              from the snapshot solver on the last cycle's
-                              pulses; reset counter bumped */
-} bl_pulse_status;
-
-typedef struct bl_pulse_result {
-    bl_pulse_status status;
-    bl_real innovation_s;       /* measured - predicted arrival (s), at the prior */
-    bl_real innovation_sigma_s; /* σ of the innovation (s): sqrt(H P Hᵀ + R) */
-    bl_real test_ratio;         /* |innovation| / (gate · σ); > 1 means rejected */
-    int64_t fire_us;            /* the firing time the pulse was attributed to */
-    uint32_t iterations;        /* IEKF iterations used (0 if not fused) */
-} bl_pulse_result;
-
 typedef struct bl_estimate {
     int64_t t_us;               /* time the estimate refers to */
     bl_real x_m, y_m, theta_rad; /* theta wrapped to (-pi, pi] */
@@ -202,9 +176,12 @@ typedef struct bl_estimate {
     bool converged;             /* position σ fell below cfg.converged_sigma_xy_m
                                    and has not grown above twice that since */
     uint32_t reset_counter;     /* +1 on every (re-)initialisation after the first start */
-    uint32_t consecutive_rejections;
     uint32_t accepted[BL_MAX_BEACONS]; /* per beacon index: pulses fused */
     uint32_t rejected[BL_MAX_BEACONS]; /* per beacon index: pulses rejected by the gate */
+    uint32_t wheel_speed_fused;   /* wheel-speed measurements (v and ω, each one) fused
+                                     by bl_filter_predict_odometry (ungated) */
+    uint32_t wheel_speed_refused; /* wheel-speed measurements refused: the update would
+                                     have left the state non-finite (state kept) */
 } bl_estimate;
 
 typedef struct bl_expected_pulse {
@@ -220,9 +197,10 @@ typedef struct bl_expected_pulse {
 int bl_filter_init(bl_filter *f, const bl_config *cfg);
 
 /* Replace the tuning of an initialised filter, keeping its state, when the
- * geometry (beacon count/positions, receiver ring) is unchanged.
- * Errors: BL_EINVAL, BL_ENOTINIT, BL_ECONFIG (bad cfg, or geometry changed,
- * or wheel-scale calibration switched on/off (sigma_wheel_scale 0 <-> > 0):
+ * geometry is unchanged: bl_config_same_geometry(old, cfg) (config.h: beacon
+ * count, period and positions, the receiver ring, the wheel base, and the
+ * wheel-scale calibration switch sigma_wheel_scale 0 <-> > 0).
+ * Errors: BL_EINVAL, BL_ENOTINIT, BL_ECONFIG (bad cfg, or geometry changed:
  * re-init instead). */
 int bl_filter_update_config(bl_filter *f, const bl_config *cfg);
 
@@ -244,8 +222,11 @@ int bl_filter_start(bl_filter *f, const bl_filter_prior *prior);
  * returned BL_OK (fused, gated out, buffered before the start or while
  * stale), timed by its earliest arrival (within the ring's flight time plus
  * 4 σ: a later echo of the firing does not replace it). On a started filter
- * only the firings it could not explain take part when they cover min(4, N)
- * beacons (as for persistent rejection), else all. The state time becomes the latest buffered arrival. A started
+ * only the firings it could not explain (every direct arrival of the
+ * firing gated out) take part when they cover min(4, N) beacons, else all:
+ * the restart after persistent rejection (the localizer's window of
+ * cfg.reset_reject_count rejections). The state time becomes the latest
+ * buffered arrival. A started
  * filter keeps its s, T (with their variances) and wheel scales.
  * Errors: BL_EINVAL, BL_ENOTINIT, BL_EDEGENERATE (fewer than 3 beacons in
  * the last cycle or singular geometry), BL_ENOCONVERGE (no convergence, or
@@ -293,12 +274,17 @@ int bl_filter_predict(bl_filter *f, int64_t t_us);
  * the robot from the state time to the firing time with v, omega (call
  * predict up to about arrival_us first for best accuracy). The firing cycle
  * is found from the predicted t0 and T (nearest firing of that beacon).
- * Not started: the pulse is buffered (status BUFFERED) and the filter starts
- * itself from the snapshot when a cycle is complete (status STARTED).
+ * Not started: the pulse is buffered (status BL_FUSION_BUFFERED) and the filter starts
+ * itself from the snapshot when a cycle is complete (BL_FUSION_STARTED).
  * Stale (arrival more than cfg.max_predict_gap_s after the state time): the
- * pulse is buffered (BUFFERED) and the filter restarts itself from the
- * snapshot when the fresh pulses complete a cycle (RESET); see "Time gaps".
- * result may be NULL.
+ * pulse is buffered (BL_FUSION_BUFFERED) and the filter restarts itself from the
+ * snapshot when the fresh pulses complete a cycle (BL_FUSION_RESET); see "Time gaps".
+ * Started and fresh: BL_FUSION_ACCEPTED (fused) or BL_FUSION_REJECTED (gated
+ * out: counted in bl_estimate.rejected, state untouched); never a restart
+ * (persistent rejection is the caller's: bl_filter_start_snapshot()).
+ * *result (may be NULL): status; innovation (s) and its variance (s²) and
+ * test ratio against the gate for ACCEPTED and REJECTED (0 otherwise);
+ * IEKF iterations when fused.
  * Errors: BL_EINVAL (NULL f), BL_ENOTINIT (not init), BL_EBEACON
  * (beacon_index >= count), BL_EINVAL (receiver_index >= receiver_count),
  * BL_ETIME (arrival more than cfg.max_predict_gap_s *before* the state
@@ -306,7 +292,7 @@ int bl_filter_predict(bl_filter *f, int64_t t_us);
  * BL_EINVAL (the receiver is on the beacon, or the update would leave the
  * state non-finite: refused). */
 int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
-                         uint32_t receiver_index, bl_pulse_result *result);
+                         uint32_t receiver_index, bl_fusion_result *result);
 
 /* Raw state and covariance (layout BL_IX_*; t0 relative to the internal
  * epoch; P row-major NXxNX in the units of the states, e.g. P[T0][T0] s²),

@@ -62,7 +62,10 @@ typedef struct bl_tdoa_solution {
      * 2D N = 3; else all 0, error_vector_valid false). */
     bl_real error_vector[3];
     bool error_vector_valid;
-    bl_real residual_rms_s;              /* weighted rms of the arrival residuals (s) */
+    bl_real residual_rms_s;              /* weighted rms of the arrival residuals e_j (s) at
+                                            the solution: sqrt(Σ e_j²/σ_j² / Σ 1/σ_j²),
+                                            σ_j = sigma_s[j]; the plain rms when all σ_j
+                                            are equal */
     uint32_t iterations;                 /* Gauss-Newton steps taken */
     bool converged;                      /* last step below tolerance */
 } bl_tdoa_solution;

@@ -158,7 +158,7 @@ int main(void) {
             if (rc != BL_OK) quit(0);
             if (np < MAX_SAMPLES) pred_instr[np++] = n;
         }
-        bl_pulse_result res;
+        bl_fusion_result res;
         const uint32_t t0 = ticks_now();
         const int rc = bl_filter_fuse_pulse(&filt, b, arrival, best, &res);
         const uint32_t n = instr_since(t0);
