@@ -1,6 +1,6 @@
 # beaconloc-bridge: the daemon (bridge/*.c), its cmocka tests
 # (tests/bridge/test_*.c), its pytest suite and its replay benchmark.
-#   make build/bridge/beaconloc-bridge   the daemon
+#   make bridge                          the daemon (build/bridge/beaconloc-bridge)
 #   make test-bridge                     every tests/bridge/test_*.c (cmocka)
 #   make test-bridge-py                  pytest tests/bridge/ (also builds the
 #                                        ASan/UBSan daemon beaconloc-bridge-asan)
@@ -15,7 +15,7 @@ BRIDGE_CANGEN   := $(BUILD)/gen/can
 BRIDGE_MAVGEN   := $(BUILD)/gen/mavlink
 BRIDGE_MAVSTAMP := $(BRIDGE_MAVGEN)/.stamp
 BRIDGE_LIB      := $(BUILD)/lib/libbeaconloc.a
-BRIDGE_DBC      := hw_sim/can/beaconloc.dbc
+BRIDGE_DBC      := hw_sim/beaconloc_sim/data/beaconloc.dbc
 
 # The generated codec is named beaconloc_can (not beaconloc) so that its
 # header cannot be confused with the library's umbrella header beaconloc.h.
@@ -45,7 +45,9 @@ UNIT_TESTS  += test-bridge
 PY_TESTS    += test-bridge-py
 TEST_BUILDS += $(BRIDGE_TESTS) $(BRIDGE_ASAN_BIN) $(BRIDGE_FAKECAN) $(BRIDGE_SLOWDNS)
 
-.PHONY: test-bridge test-bridge-py bench-bridge
+.PHONY: bridge test-bridge test-bridge-py bench-bridge
+
+bridge: $(BRIDGE_BIN)
 
 $(BRIDGE_CAN_C) $(BRIDGE_CAN_H) &: $(BRIDGE_DBC) .ci/requirements.txt | $(SETUP_STAMP)
 	@mkdir -p $(BRIDGE_CANGEN)

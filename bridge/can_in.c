@@ -17,6 +17,7 @@
 #include <linux/can/raw.h>
 
 #include "log.h"
+#include "sensors.h"
 
 #ifndef SO_RXQ_OVFL
 #define SO_RXQ_OVFL 40
@@ -92,13 +93,16 @@ int can_in_open(struct can_in *ci)
         return -ci->last_errno;
     }
     int rc;
-    /* Kernel filters: only our three ids (standard frames, data or RTR:
-     * an RTR with our id is still counted as malformed). */
-    struct can_filter filters[] = {
-        { FRAME_ID_PULSE, CAN_SFF_MASK | CAN_EFF_FLAG },
-        { FRAME_ID_ENCODERS, CAN_SFF_MASK | CAN_EFF_FLAG },
-        { FRAME_ID_STATUS, CAN_SFF_MASK | CAN_EFF_FLAG },
-    };
+    /* Kernel filters: one per kind of the sensor table, its id range
+     * (standard frames, data or RTR: an RTR with our id is still counted
+     * as malformed). */
+    struct can_filter filters[FRAME_KIND_COUNT];
+    for (int k = 0; k < FRAME_KIND_COUNT; k++) {
+        uint32_t id, mask;
+        sensor_filter(&sensor_kinds[k], &id, &mask);
+        filters[k].can_id = id;
+        filters[k].can_mask = (mask & CAN_SFF_MASK) | CAN_EFF_FLAG;
+    }
     if ((rc = sockopt(fd, SOL_CAN_RAW, CAN_RAW_FILTER, filters,
                       sizeof filters, "CAN_RAW_FILTER", ci->ifname)))
         goto fail;

@@ -13,9 +13,8 @@
 
 #include <ini.h>
 
-#include "beaconloc.h"
-
 #include "log.h"
+#include "site_to_lib.h"
 
 enum key_type { K_INT, K_REAL, K_STR, K_LOGLEVEL, K_ENDPOINT, K_IFNAME };
 
@@ -29,92 +28,34 @@ struct key_desc {
     bool min_open;       /* min excluded */
 };
 
-#define OFF(f) offsetof(struct bridge_config, f)
-#define BOFF(f) offsetof(struct config_beacon, f)
-#define NUM(sec, k, t, f, lo, hi, open) { sec, k, t, OFF(f), 0, lo, hi, open }
-#define STR(sec, k, t, f) { sec, k, t, OFF(f), sizeof(((struct bridge_config *)0)->f), 0, 0, false }
-
-static const struct key_desc keys[] = {
-    NUM("beacons", "count", K_INT, beacon_count, 1, CONFIG_MAX_BEACONS, false),
-    NUM("beacons", "period_s", K_REAL, period_s, 0, 10, true),
-    NUM("beacons", "double_pulse_spacing_s", K_REAL, double_pulse_spacing_s, 0, 1, true),
-    NUM("beacons", "burst_length_s", K_REAL, burst_length_s, 0, 1, true),
-    { "beaconN", "x_m", K_REAL, BOFF(x_m), 0, -1e4, 1e4, false },
-    { "beaconN", "y_m", K_REAL, BOFF(y_m), 0, -1e4, 1e4, false },
-    { "beaconN", "z_m", K_REAL, BOFF(z_m), 0, -1e4, 1e4, false },
-    NUM("receivers", "count", K_INT, receiver_count, 1, CONFIG_MAX_RECEIVERS, false),
-    NUM("receivers", "ring_radius_m", K_REAL, ring_radius_m, 0, 10, false),
-    NUM("receivers", "first_angle_deg", K_REAL, first_angle_deg, -360, 360, false),
-    NUM("receivers", "angle_step_deg", K_REAL, angle_step_deg, -360, 360, false),
-    NUM("receivers", "height_m", K_REAL, receiver_height_m, -1e4, 1e4, false),
-    NUM("receivers", "beamwidth_deg", K_REAL, beamwidth_deg, 0, 360, true),
-    NUM("receivers", "double_pulse_tolerance_s", K_REAL, double_pulse_tolerance_s, 0, 1, true),
-    NUM("robot", "wheel_base_m", K_REAL, wheel_base_m, 0, 100, true),
-    NUM("robot", "wheel_radius_m", K_REAL, wheel_radius_m, 0, 100, true),
-    NUM("robot", "ticks_per_rev", K_INT, ticks_per_rev, 1, 1000000, false),
-    NUM("robot", "encoder_rate_hz", K_REAL, encoder_rate_hz, 0, 100000, true),
-    NUM("robot", "sigma_wheel_scale", K_REAL, sigma_wheel_scale, 0, 0.5, false),
-    NUM("noise", "sigma_arrival_s", K_REAL, sigma_arrival_s, 0, 1, true),
-    NUM("noise", "sigma_wheel_per_m", K_REAL, sigma_wheel_per_m, 0, 10, false),
-    NUM("noise", "speed_of_sound_mps", K_REAL, speed_of_sound_mps, 200, 500, false),
-    NUM("noise", "sigma_speed_of_sound_mps", K_REAL, sigma_speed_of_sound_mps, 0, 100, false),
-    NUM("noise", "gate_sigma", K_REAL, gate_sigma, 0, 1000, true),
-#define TUNING_KEY(key, field, type, lo, hi, open)                             \
-    NUM("tuning", #key, type, tuning.key, lo, hi, open),
-    BRIDGE_TUNING_KEYS(TUNING_KEY)
-#undef TUNING_KEY
-    STR("bridge", "can_interface", K_IFNAME, can_interface),
-    STR("bridge", "mavlink", K_ENDPOINT, mavlink),
-    NUM("bridge", "odometry_rate_hz", K_REAL, odometry_rate_hz, 0, 1000, true),
-    NUM("bridge", "system_id", K_INT, system_id, 1, 255, false),
-    NUM("bridge", "component_id", K_INT, component_id, 1, 255, false),
-    STR("bridge", "log_level", K_LOGLEVEL, log_level),
-    NUM("bridge", "status_interval_s", K_REAL, status_interval_s, 0, 86400, false),
-    NUM("bridge", "beacon_lost_s", K_REAL, beacon_lost_s, 0, 3600, true),
-    NUM("bridge", "echo_storm_ratio", K_REAL, echo_storm_ratio, 0, 1, true),
-    NUM("bridge", "max_coast_s", K_REAL, max_coast_s, 0, 3600, true),
-};
+/* The key table, one row per key of the site schema (site_keys.h, generated
+ * from hw_sim/beaconloc_sim/data/site_schema.toml), in file order. */
+#define KEY_ROW(sec, k, type, strct, member, lo, hi, open, def)                \
+    { #sec, #k, type, offsetof(struct strct, member),                          \
+      sizeof(((struct strct *)0)->member), lo, hi, open },
+static const struct key_desc keys[] = { SITE_KEYS(KEY_ROW) };
+#undef KEY_ROW
 #define NKEYS (sizeof keys / sizeof keys[0])
+
+/* A key's built-in default, by its struct and type ([beaconN] has none). */
+#define DEFAULT_config_beacon(type, member, def)
+#define DEFAULT_bridge_config(type, member, def) DEFAULT_##type(member, def)
+#define DEFAULT_K_REAL(member, def) cfg->member = def;
+#define DEFAULT_K_INT(member, def) cfg->member = def;
+#define DEFAULT_STRING(member, def)                                            \
+    snprintf(cfg->member, sizeof cfg->member, "%s", def);
+#define DEFAULT_K_STR DEFAULT_STRING
+#define DEFAULT_K_LOGLEVEL DEFAULT_STRING
+#define DEFAULT_K_ENDPOINT DEFAULT_STRING
+#define DEFAULT_K_IFNAME DEFAULT_STRING
 
 void config_defaults(struct bridge_config *cfg)
 {
     memset(cfg, 0, sizeof *cfg);
-    cfg->beacon_count = 0;
-    cfg->period_s = 0.150;
-    cfg->double_pulse_spacing_s = 0.003;
-    cfg->burst_length_s = 0.0025;
-    cfg->receiver_count = 8;
-    cfg->ring_radius_m = 0.10;
-    cfg->first_angle_deg = 0.0;
-    cfg->receiver_height_m = 1.0;
-    cfg->beamwidth_deg = 90.0;
-    cfg->double_pulse_tolerance_s = 0.001; /* DBC PULSE_DETECTION comment */
-    cfg->wheel_base_m = 0.50;
-    cfg->wheel_radius_m = 0.10;
-    cfg->ticks_per_rev = 4096;
-    cfg->encoder_rate_hz = 100;
-    cfg->sigma_arrival_s = 0.0002;
-    cfg->sigma_wheel_per_m = 0.01;
-    cfg->speed_of_sound_mps = 343.0;
-    cfg->sigma_speed_of_sound_mps = 5.0;
-    cfg->gate_sigma = 3.0;
-    /* [tuning]: the library's defaults */
-    bl_config lib;
-    bl_config_default(&lib);
-#define TUNING_DEFAULT(key, field, type, lo, hi, open)                         \
-    cfg->tuning.key = (BRIDGE_TUNING_CTYPE_##type)lib.field;
-    BRIDGE_TUNING_KEYS(TUNING_DEFAULT)
-#undef TUNING_DEFAULT
-    snprintf(cfg->can_interface, sizeof cfg->can_interface, "vcan0");
-    snprintf(cfg->mavlink, sizeof cfg->mavlink, "udpout:127.0.0.1:14550");
-    cfg->odometry_rate_hz = 30;
-    cfg->system_id = 1;
-    cfg->component_id = 197;
-    snprintf(cfg->log_level, sizeof cfg->log_level, "info");
-    cfg->status_interval_s = 10;
-    cfg->beacon_lost_s = 2.0;
-    cfg->echo_storm_ratio = 0.3;
-    cfg->max_coast_s = 10.0;
+#define KEY_DEFAULT(sec, k, type, strct, member, lo, hi, open, def)            \
+    DEFAULT_##strct(type, member, def)
+    SITE_KEYS(KEY_DEFAULT)
+#undef KEY_DEFAULT
 }
 
 /* ---- parsing ---------------------------------------------------------- */
@@ -176,20 +117,21 @@ static int beacon_section_number(const char *section)
  * hw_sim/beaconloc_sim/site.py reads [site], [beacons], [beaconN],
  * [receivers], [robot], [noise] and leaves [bridge] to us; scenario
  * settings live in their own *.scenario.ini files). */
-static const char *const our_sections[] = { "beacons", "receivers", "robot",
-                                            "noise", "tuning", "bridge" };
-
 static bool our_section(const char *section)
 {
-    for (size_t i = 0; i < sizeof our_sections / sizeof our_sections[0]; i++)
-        if (!strcasecmp(section, our_sections[i]))
+    for (size_t i = 0; i < NKEYS; i++)
+        if (strcmp(keys[i].section, "beaconN") && !strcasecmp(section, keys[i].section))
             return true;
     return beacon_section_number(section) > 0;
 }
 
+/* The sections the schema leaves to the simulator ([site]). */
 static bool simulator_section(const char *section)
 {
-    return !strcasecmp(section, "site");
+#define SIM_SECTION(name) if (!strcasecmp(section, #name)) return true;
+    SITE_SIM_SECTIONS(SIM_SECTION)
+#undef SIM_SECTION
+    return false;
 }
 
 static int parse_real(const char *s, double *out)
@@ -305,10 +247,9 @@ static int handler(void *user, const char *section, const char *name,
                      ctx->path, ctx->line, name);
         else
             snprintf(ctx->err, ctx->errlen, "%s:%d: [%s] unknown section (a site "
-                     "file holds [site], [beacons], [beacon1]..[beacon%d], "
-                     "[receivers], [robot], [noise], [tuning], [bridge])", ctx->path,
+                     "file holds " SITE_SECTIONS_PHRASE ")", ctx->path,
                      ctx->section_line > 0 ? ctx->section_line : ctx->line,
-                     section, CONFIG_MAX_BEACONS);
+                     section);
         ctx->failed = true;
         return 0;
     }
@@ -498,22 +439,15 @@ int config_load_file(struct bridge_config *cfg, const char *path, char *err,
 bool config_same_geometry(const struct bridge_config *a,
                           const struct bridge_config *b)
 {
-    if (a->beacon_count != b->beacon_count || a->period_s != b->period_s ||
-        a->double_pulse_spacing_s != b->double_pulse_spacing_s ||
-        a->burst_length_s != b->burst_length_s ||
-        a->receiver_count != b->receiver_count ||
-        a->ring_radius_m != b->ring_radius_m ||
-        a->first_angle_deg != b->first_angle_deg ||
-        a->angle_step_deg != b->angle_step_deg ||
-        a->receiver_height_m != b->receiver_height_m ||
-        a->wheel_base_m != b->wheel_base_m ||
-        a->wheel_radius_m != b->wheel_radius_m ||
-        a->ticks_per_rev != b->ticks_per_rev)
+    /* the bridge's own state: the keys the site schema marks geometry = "bridge" */
+#define SAME(member) && a->member == b->member
+    if (!(true SITE_GEOMETRY_BRIDGE(SAME)))
         return false;
-    for (int i = 0; i < a->beacon_count; i++)
-        if (a->beacon[i].x_m != b->beacon[i].x_m ||
-            a->beacon[i].y_m != b->beacon[i].y_m ||
-            a->beacon[i].z_m != b->beacon[i].z_m)
-            return false;
-    return true;
+#undef SAME
+    /* the filter's: the library decides (geometry = "library" in the schema,
+     * checked against it by tests/bridge/test_config.c) */
+    bl_config la, lb;
+    site_to_lib(a, &la);
+    site_to_lib(b, &lb);
+    return bl_config_same_geometry(&la, &lb);
 }

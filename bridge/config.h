@@ -4,7 +4,12 @@
  *   < site file given with --site (config_load_file, libinih)
  *   < command line (applied by main.c after the file).
  *
- * The site file is the one the simulator reads (hw_sim/scenarios/NAME.ini).
+ * The site file is the one the simulator reads (hw_sim/beaconloc_sim/data/scenarios/NAME.ini).
+ * Its keys (type, range, default, bridge_config member) are declared once,
+ * in the site schema hw_sim/beaconloc_sim/data/site_schema.toml; the tables
+ * of config.c are generated from it at build time (site_keys.h,
+ * bridge/site_schema.mk), so a key here is a member below with the schema's
+ * name (a schema key without its member does not compile).
  * Our sections are [beacons], [beaconN], [receivers], [robot], [noise],
  * [tuning] (the estimator's tuning, bridge/tuning.h) and [bridge]; an unknown key in one of them is an error (a typo must not be
  * silently ignored). [site] is the simulator's (room size) and skipped; any
@@ -20,8 +25,9 @@
 
 #include "tuning.h"
 
-#define CONFIG_MAX_BEACONS 16
-#define CONFIG_MAX_RECEIVERS 16
+/* The largest beacon and receiver counts of the site schema (site_keys.h). */
+#define CONFIG_MAX_BEACONS SITE_MAX_BEACONS
+#define CONFIG_MAX_RECEIVERS SITE_MAX_RECEIVERS
 #define CONFIG_ERR_LEN 512
 #define CONFIG_STR_LEN 128
 #define CONFIG_MAX_KEYS 64
@@ -108,11 +114,16 @@ int config_load_file(struct bridge_config *cfg, const char *path, char *err,
  * Returns 0 or -1 with a message (naming the key) in err. */
 int config_check(const struct bridge_config *cfg, char *err, size_t errlen);
 
-/* True when the two configs have the same estimator geometry: beacons
- * (count, positions, period, double-pulse spacing, burst length), receiver
- * ring (count, radius, angles, height) and robot (wheel base, wheel
- * radius, ticks per turn). Tuning ([noise], [tuning], sigma_wheel_scale,
- * beamwidth, encoder rate, [bridge]) is not geometry. SIGHUP then keeps the filter. */
+/* True when the two configs have the same estimator geometry: the library's
+ * bl_config_same_geometry of the two as bl_configs (beacons: count,
+ * positions, period; receiver ring: count, radius, angles, height; wheel
+ * base; wheel-scale calibration on or off) and the same geometry of the
+ * bridge's own state (wheel radius and ticks per turn: odometry scale;
+ * double-pulse spacing and burst length: the sequencer's windows), the keys
+ * the site schema marks `geometry`. Tuning ([noise], [tuning], the
+ * calibration's σ, beamwidth, encoder rate, [bridge]) is not geometry.
+ * The bridge's one reconfigure decision: SIGHUP keeps the filter exactly
+ * when it is true (estimator_reconfigure). */
 bool config_same_geometry(const struct bridge_config *a,
                           const struct bridge_config *b);
 

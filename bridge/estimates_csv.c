@@ -3,6 +3,8 @@
  */
 #include "estimates_csv.h"
 
+#include "covariance.h"
+
 #include <errno.h>
 #include <string.h>
 
@@ -24,14 +26,14 @@ int estimates_csv_write(struct estimates_csv *c, const struct est_output *o,
 {
     if (!c->f)
         return -EBADF;
-    /* cov: row-major 5x5 of (x, y, theta, v, omega) */
     errno = 0;
     int n = fprintf(c->f,
                     "%lld,%.6f,%.6f,%.7f,%.6f,%.7f,%.4f,%.9f,%.6e,%.6e,%.6e,"
                     "%.6e,%u,%d\n",
                     (long long)o->t_node_us, o->x_m, o->y_m, o->theta_rad,
                     o->v_mps, o->omega_radps, o->sos_mps, o->period_s,
-                    o->cov[0], o->cov[1], o->cov[6], o->cov[12],
+                    state_cov_at(o->cov, ST_X, ST_X), state_cov_at(o->cov, ST_X, ST_Y),
+                    state_cov_at(o->cov, ST_Y, ST_Y), state_cov_at(o->cov, ST_THETA, ST_THETA),
                     o->reset_counter, quality);
     if (n < 0) {
         c->write_errors++;

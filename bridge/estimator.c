@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "log.h"
+#include "site_to_lib.h"
 
 /* Fastest plausible wheel (m/s): a larger count difference is a glitch. */
 #define MAX_WHEEL_MPS 10.0
@@ -62,112 +63,7 @@ bool estimator_next_event(struct estimator *e, struct est_event *ev)
 
 /* ---- configuration ---------------------------------------------------- */
 
-/* bl_config field -> site-file key, for the library's config check. */
-static const struct { const char *field, *section, *key; } field_keys[] = {
-    { "beacon_count", "beacons", "count" },
-    { "beacon_period_s", "beacons", "period_s" },
-    { "double_pulse_spacing_s", "beacons", "double_pulse_spacing_s" },
-    { "burst_length_s", "beacons", "burst_length_s" },
-    { "beacons", "beacon1", "x_m" },
-    { "receiver_count", "receivers", "count" },
-    { "ring_radius_m", "receivers", "ring_radius_m" },
-    { "first_angle_deg", "receivers", "first_angle_deg" },
-    { "angle_step_deg", "receivers", "angle_step_deg" },
-    { "receiver_height_m", "receivers", "height_m" },
-    { "beamwidth_deg", "receivers", "beamwidth_deg" },
-    { "wheel_base_m", "robot", "wheel_base_m" },
-    { "wheel_radius_m", "robot", "wheel_radius_m" },
-    { "ticks_per_rev", "robot", "ticks_per_rev" },
-    { "encoder_rate_hz", "robot", "encoder_rate_hz" },
-    { "sigma_wheel_scale", "robot", "sigma_wheel_scale" },
-    { "sigma_arrival_s", "noise", "sigma_arrival_s" },
-    { "sigma_wheel_per_m", "noise", "sigma_wheel_per_m" },
-    { "speed_of_sound_mps", "noise", "speed_of_sound_mps" },
-    { "sigma_speed_of_sound_mps", "noise", "sigma_speed_of_sound_mps" },
-    { "gate_sigma", "noise", "gate_sigma" },
-    { "max_predict_gap_s", "bridge", "max_coast_s" },
-#define TUNING_FIELD_KEY(key, field, type, lo, hi, open) { #field, "tuning", #key },
-    BRIDGE_TUNING_KEYS(TUNING_FIELD_KEY)
-#undef TUNING_FIELD_KEY
-};
-
-/* C type of a tuning field in bl_config, by its key type (bridge/tuning.h). */
-#define LIB_CTYPE_K_REAL bl_real
-#define LIB_CTYPE_K_INT uint32_t
-
-int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
-                          char *err, size_t errlen)
-{
-    bl_config c;
-    bl_config_default(&c);
-    c.beacon_count = (uint32_t)cfg->beacon_count;
-    c.beacon_period_s = (bl_real)cfg->period_s;
-    c.double_pulse_spacing_s = (bl_real)cfg->double_pulse_spacing_s;
-    c.burst_length_s = (bl_real)cfg->burst_length_s;
-    for (int i = 0; i < cfg->beacon_count && i < BL_MAX_BEACONS; i++) {
-        c.beacons[i].x_m = (bl_real)cfg->beacon[i].x_m;
-        c.beacons[i].y_m = (bl_real)cfg->beacon[i].y_m;
-        c.beacons[i].z_m = (bl_real)cfg->beacon[i].z_m;
-    }
-    c.receiver_count = (uint32_t)cfg->receiver_count;
-    c.ring_radius_m = (bl_real)cfg->ring_radius_m;
-    c.first_angle_deg = (bl_real)cfg->first_angle_deg;
-    c.angle_step_deg = (bl_real)cfg->angle_step_deg; /* 0: evenly spaced */
-    c.receiver_height_m = (bl_real)cfg->receiver_height_m;
-    c.beamwidth_deg = (bl_real)cfg->beamwidth_deg;
-    c.wheel_base_m = (bl_real)cfg->wheel_base_m;
-    c.wheel_radius_m = (bl_real)cfg->wheel_radius_m;
-    c.ticks_per_rev = (uint32_t)cfg->ticks_per_rev;
-    c.encoder_rate_hz = (bl_real)cfg->encoder_rate_hz;
-    c.sigma_wheel_scale = (bl_real)cfg->sigma_wheel_scale;
-    c.sigma_arrival_s = (bl_real)cfg->sigma_arrival_s;
-    c.sigma_wheel_per_m = (bl_real)cfg->sigma_wheel_per_m;
-    c.speed_of_sound_mps = (bl_real)cfg->speed_of_sound_mps;
-    c.sigma_speed_of_sound_mps = (bl_real)cfg->sigma_speed_of_sound_mps;
-    c.gate_sigma = (bl_real)cfg->gate_sigma;
-    /* [tuning] (the parse ranges keep the integers >= 0) */
-#define TUNING_APPLY(key, field, type, lo, hi, open)                           \
-    c.field = (LIB_CTYPE_##type)cfg->tuning.key;
-    BRIDGE_TUNING_KEYS(TUNING_APPLY)
-#undef TUNING_APPLY
-    /* A CAN outage (interface down, a node rebooting) shorter than this is
-     * coasted through: constant-velocity predict, P grows, the pulses pull
-     * the state back afterwards; longer, the filter re-starts from the
-     * snapshot solver. */
-    c.max_predict_gap_s = (bl_real)cfg->max_coast_s;
-    const char *bad = NULL;
-    int rc = bl_config_check(&c, &bad);
-    if (rc != BL_OK) {
-        const char *section = "beacons", *key = bad ? bad : "?";
-        for (size_t i = 0; bad && i < sizeof field_keys / sizeof field_keys[0]; i++)
-            if (!strcmp(field_keys[i].field, bad)) {
-                section = field_keys[i].section;
-                key = field_keys[i].key;
-            }
-        char why[160];
-        snprintf(why, sizeof why, "rejected by the estimator (%s: %s)",
-                 bad ? bad : "?", bl_strerror(rc));
-        config_format_error(cfg, section, key, why, err, errlen);
-        return -1;
-    }
-    *out = c;
-    return 0;
-}
-
-static int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
-                           bl_seq_config *out, char *err, size_t errlen)
-{
-    int rc = bl_sequencer_config_from_site(c, 0, out);
-    if (rc != BL_OK) {
-        char why[160];
-        snprintf(why, sizeof why,
-                 "beacon time windows overlap: period too short for the "
-                 "beacons' spread (%s)", bl_strerror(rc));
-        config_format_error(cfg, "beacons", "period_s", why, err, errlen);
-        return -1;
-    }
-    return 0;
-}
+/* estimator_make_config and make_seq_config: bridge/site_to_lib.c */
 
 
 /* The sequencer config with the real cause of a refusal (the localizer

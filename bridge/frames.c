@@ -1,24 +1,22 @@
 /*
- * beaconloc-bridge — CAN frame decoding through the cantools-generated codec.
+ * beaconloc-bridge — CAN frame shape, rolling counters and bad-frame
+ * accounting; the payloads are decoded by each kind's decoder of the
+ * sensor table (sensors.h), through the cantools-generated codec.
  */
 #include "frames.h"
 
 #include <string.h>
 
-#include "beaconloc_can.h" /* generated at build time from the DBC */
+#include "sensors.h"
 
 void frame_counters_init(struct frame_counters *c)
 {
     memset(c, 0, sizeof *c);
-}
-
-const char *frame_kind_name(enum frame_kind kind)
-{
-    switch (kind) {
-    case FRAME_PULSE: return "pulse_detection";
-    case FRAME_ENCODERS: return "wheel_encoders";
-    case FRAME_STATUS: return "node_status";
-    default: return "?";
+    for (int k = 0; k < FRAME_KIND_COUNT; k++) {
+        unsigned m = sensor_counter_modulo(&sensor_kinds[k]);
+        /* the track's bit window holds FRAME_MODULO_MAX steps (a test
+         * checks every kind of the table against it) */
+        c->modulo[k] = m < 2u ? 2u : m > FRAME_MODULO_MAX ? FRAME_MODULO_MAX : m;
     }
 }
 
@@ -42,11 +40,11 @@ static void remember(struct frame_track *t, const uint8_t *data)
         t->recent_len++;
 }
 
-/* Pulse frames of one firing leave the receiver node out of NodeTime order
- * by up to the firing's spread over the ring (0.2 m / 343 m/s = 0.6 ms)
- * plus the node's latency jitter (0.3 ms): a late pulse frame may be newer
- * than the newest by this much (us). */
-#define PULSE_STAMP_SLACK_US 2000
+/* All-ones over bits 0..n-1 (n <= 32). */
+static uint32_t low_bits(unsigned n)
+{
+    return n >= 32u ? UINT32_MAX : (1u << n) - 1u;
+}
 
 /* Rolling counter of one track (contract at the top of frames.h): counter
  * modulo `modulo`, stamp = the frame's node time (wrapping 32-bit) or
@@ -86,106 +84,41 @@ static enum frame_result track(struct frame_counters *c, enum frame_kind k,
         step = modulo; /* a different frame with the same counter: a lap */
     c->lost[k] += step - 1u;
     /* the frames skipped are 1..step-1 behind the new newest */
-    uint32_t window = ((1u << modulo) - 1u) & ~1u;
-    t->missing = ((t->missing << step) | ((1u << step) - 2u)) & window;
+    uint32_t window = low_bits(modulo) & ~1u;
+    uint32_t shifted = step >= 32u ? 0u : t->missing << step;
+    t->missing = (shifted | (low_bits(step) & ~1u)) & window;
     t->last = counter;
     t->newest_stamp = stamp;
     return FRAME_OK;
 }
 
-static enum frame_result decode_pulse(struct frame_counters *c,
-                                      const uint8_t *data, size_t len,
-                                      struct frame *out)
+/* Shape and kind of a frame, then its kind's decoder and rolling counter. */
+static enum frame_result decode(struct frame_counters *c, const struct can_msg *msg,
+                                struct frame *out)
 {
-    struct beaconloc_can_pulse_detection_t m;
-    if (beaconloc_can_pulse_detection_unpack(&m, data, len) != 0)
+    const struct sensor_kind *sk = (msg->flags & CAN_MSG_EXTENDED)
+                                       ? NULL : sensor_kind_of_id(msg->id);
+    if (!sk)
+        return FRAME_UNKNOWN_ID;
+    /* The DBC's frames are classic CAN with exactly 8 bytes; the generated
+     * unpack only rejects short payloads, a long one is as wrong. */
+    if ((msg->flags & (CAN_MSG_RTR | CAN_MSG_FD | CAN_MSG_ERROR)) || msg->len != 8u)
         return FRAME_MALFORMED;
-    if (!beaconloc_can_pulse_detection_receiver_is_in_range(m.receiver) ||
-        !beaconloc_can_pulse_detection_double_pulse_is_in_range(m.double_pulse) ||
-        !beaconloc_can_pulse_detection_counter_is_in_range(m.counter) ||
-        !beaconloc_can_pulse_detection_amplitude_is_in_range(m.amplitude) ||
-        !beaconloc_can_pulse_detection_width_is_in_range(m.width))
+    struct frame_seq seq;
+    enum frame_result r = sk->decode(msg->id, msg->data, out, &seq);
+    if (r != FRAME_OK)
+        return r;
+    enum frame_kind k = (enum frame_kind)(sk - sensor_kinds);
+    if (seq.track >= sk->tracks)
         return FRAME_OUT_OF_RANGE;
-    out->kind = FRAME_PULSE;
-    out->u.pulse.node_time_us = m.node_time;
-    out->u.pulse.receiver = m.receiver;
-    out->u.pulse.double_pulse = m.double_pulse != 0;
-    out->u.pulse.counter = m.counter;
-    out->u.pulse.amplitude_mv =
-        (uint16_t)beaconloc_can_pulse_detection_amplitude_decode(m.amplitude);
-    out->u.pulse.width_us = beaconloc_can_pulse_detection_width_decode(m.width);
-    return track(c, FRAME_PULSE, &c->track[FRAME_PULSE], m.counter, 8u,
-                 m.node_time, PULSE_STAMP_SLACK_US, data);
-}
-
-static enum frame_result decode_encoders(struct frame_counters *c,
-                                         const uint8_t *data, size_t len,
-                                         struct frame *out)
-{
-    struct beaconloc_can_wheel_encoders_t m;
-    if (beaconloc_can_wheel_encoders_unpack(&m, data, len) != 0)
-        return FRAME_MALFORMED;
-    if (!beaconloc_can_wheel_encoders_left_ticks_is_in_range(m.left_ticks) ||
-        !beaconloc_can_wheel_encoders_right_ticks_is_in_range(m.right_ticks) ||
-        !beaconloc_can_wheel_encoders_counter_is_in_range(m.counter))
-        return FRAME_OUT_OF_RANGE;
-    out->kind = FRAME_ENCODERS;
-    out->u.enc.node_time_us = m.node_time;
-    out->u.enc.left_ticks = m.left_ticks;
-    out->u.enc.right_ticks = m.right_ticks;
-    out->u.enc.counter = m.counter;
-    return track(c, FRAME_ENCODERS, &c->track[FRAME_ENCODERS], m.counter, 16u,
-                 m.node_time, 0, data);
-}
-
-static enum frame_result decode_status(struct frame_counters *c,
-                                       const uint8_t *data, size_t len,
-                                       struct frame *out)
-{
-    struct beaconloc_can_node_status_t m;
-    if (beaconloc_can_node_status_unpack(&m, data, len) != 0)
-        return FRAME_MALFORMED;
-    if (!beaconloc_can_node_status_node_id_is_in_range(m.node_id) ||
-        !beaconloc_can_node_status_counter_is_in_range(m.counter) ||
-        !beaconloc_can_node_status_flags_is_in_range(m.flags) ||
-        !beaconloc_can_node_status_uptime_is_in_range(m.uptime) ||
-        m.node_id >= FRAME_MAX_NODES)
-        return FRAME_OUT_OF_RANGE;
-    out->kind = FRAME_STATUS;
-    out->u.status.node_id = m.node_id;
-    out->u.status.counter = m.counter;
-    out->u.status.flags = m.flags;
-    out->u.status.uptime_s = m.uptime;
-    out->u.status.tx_errors = m.tx_error_count;
-    out->u.status.rx_errors = m.rx_error_count;
-    out->u.status.overruns = m.overruns;
-    return track(c, FRAME_STATUS, &c->status[m.node_id], m.counter, 16u,
-                 m.uptime, 0, data);
+    return track(c, k, &c->track[k][seq.track], seq.counter, c->modulo[k],
+                 seq.stamp, sk->stamp_slack_us, msg->data);
 }
 
 enum frame_result frame_decode(struct frame_counters *c,
                                const struct can_msg *msg, struct frame *out)
 {
-    enum frame_result r;
-    if (msg->flags & CAN_MSG_EXTENDED) {
-        r = FRAME_UNKNOWN_ID;
-    } else if (msg->id != BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID &&
-               msg->id != BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID &&
-               msg->id != BEACONLOC_CAN_NODE_STATUS_FRAME_ID) {
-        r = FRAME_UNKNOWN_ID;
-    } else if ((msg->flags & (CAN_MSG_RTR | CAN_MSG_FD | CAN_MSG_ERROR)) ||
-               msg->len != 8u) {
-        /* The DBC's frames are classic CAN with exactly 8 bytes; the
-         * generated unpack only rejects short payloads, a long one is as
-         * wrong. */
-        r = FRAME_MALFORMED;
-    } else if (msg->id == BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID) {
-        r = decode_pulse(c, msg->data, msg->len, out);
-    } else if (msg->id == BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID) {
-        r = decode_encoders(c, msg->data, msg->len, out);
-    } else {
-        r = decode_status(c, msg->data, msg->len, out);
-    }
+    enum frame_result r = decode(c, msg, out);
     switch (r) {
     case FRAME_OK: c->received[out->kind]++; break;
     case FRAME_UNKNOWN_ID: c->unknown_id++; break;

@@ -2,14 +2,17 @@
  * beaconloc-bridge — CAN frame decoding and bad-frame accounting.
  *
  * Every payload is decoded by the C that cantools generates at build time
- * from hw_sim/can/beaconloc.dbc (build/gen/can/beaconloc_can.{c,h}); this
- * file only checks frame shape, ranges and rolling counters.
+ * from hw_sim/beaconloc_sim/data/beaconloc.dbc (build/gen/can/beaconloc_can.{c,h}),
+ * called by its kind's decoder in the sensor table (sensors.h: ids, counter
+ * moduli, decoders, handlers); frames.c only checks frame shape and
+ * rolling counters, for every kind alike.
  *
  * Bad data is never an error: a frame that is not one of ours, has the
  * wrong length, or carries a signal outside its DBC range is counted in
  * struct frame_counters and dropped; the caller goes on with the next frame.
  *
- * Rolling counters (per frame id; per node for NODE_STATUS):
+ * Rolling counters (per kind; per node for a kind with a track per node,
+ * NODE_STATUS), modulo the range of the kind's Counter signal in the DBC:
  *   - a step of 1 is normal; a step of s > 1 counts s - 1 frames lost
  *     (a step of 0 with a different payload: a whole lap, modulo - 1 lost);
  *   - a duplicate is a frame whose 8 bytes equal one of the last
@@ -35,11 +38,6 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* Frame ids of the DBC (also in the generated header). */
-#define FRAME_ID_PULSE 0x100u
-#define FRAME_ID_ENCODERS 0x110u
-#define FRAME_ID_STATUS 0x120u
-
 #define CAN_MSG_MAX_DATA 64u
 
 /* Flags of struct can_msg. */
@@ -57,6 +55,8 @@ struct can_msg {
     int64_t rx_us;     /* receive time on the bridge clock, us */
 };
 
+/* The sensor kinds, in the order of the sensor table (bridge/sensors.c:
+ * frame ids, names, counter moduli, decoders, handlers). */
 enum frame_kind {
     FRAME_PULSE = 0,
     FRAME_ENCODERS = 1,
@@ -111,8 +111,17 @@ struct frame {
 
 #define FRAME_MAX_NODES 16
 #define FRAME_RECENT 4 /* payloads remembered per track for duplicates */
+#define FRAME_MODULO_MAX 32 /* largest counter modulo a track follows (bit window) */
 
-/* Rolling-counter state of one frame id (of one node for NODE_STATUS). */
+/* What a kind's decoder tells the rolling-counter check about one frame. */
+struct frame_seq {
+    uint8_t counter;   /* the frame's Counter signal */
+    uint32_t stamp;    /* its node time, us (NODE_STATUS: uptime, s) */
+    unsigned track;    /* which track of its kind: 0, or the node id for a
+                          kind with a track per node (< FRAME_MAX_NODES) */
+};
+
+/* Rolling-counter state of one track (a kind, or a kind's node). */
 struct frame_track {
     bool seen;
     uint8_t last;          /* counter of the newest frame */
@@ -132,11 +141,12 @@ struct frame_counters {
     uint64_t lost[FRAME_KIND_COUNT];      /* gaps in rolling counters (frames never seen) */
     uint64_t duplicates[FRAME_KIND_COUNT];/* the same frame again: dropped */
     uint64_t out_of_order[FRAME_KIND_COUNT]; /* delivered after a newer one: dropped */
-    /* rolling-counter state */
-    struct frame_track track[FRAME_KIND_COUNT];  /* pulse, encoders (status unused) */
-    struct frame_track status[FRAME_MAX_NODES];  /* NODE_STATUS per node id */
+    /* rolling-counter state, per kind and track (node) */
+    unsigned modulo[FRAME_KIND_COUNT];    /* counter modulo, from the DBC's range */
+    struct frame_track track[FRAME_KIND_COUNT][FRAME_MAX_NODES];
 };
 
+/* Zero the counters; each kind's counter modulo from the sensor table. */
 void frame_counters_init(struct frame_counters *c);
 
 /*
@@ -152,7 +162,5 @@ enum frame_result frame_decode(struct frame_counters *c,
 uint64_t frame_lost_total(const struct frame_counters *c);
 uint64_t frame_duplicates_total(const struct frame_counters *c);
 uint64_t frame_out_of_order_total(const struct frame_counters *c);
-
-const char *frame_kind_name(enum frame_kind kind);
 
 #endif /* BRIDGE_FRAMES_H */

@@ -144,36 +144,53 @@ void mav_links_retry(struct mav_links *l)
     }
 }
 
-int mav_links_fds(const struct mav_links *l, int fds[], int max)
+int mav_links_fd_list(const struct mav_links *l, struct mav_links_fd out[], int max)
 {
     int n = 0;
     for (int i = 0; l && i < l->n; i++) {
         struct link_fds f = fds_of(&l->link[i]);
         if (f.out >= 0 && n < max)
-            fds[n++] = f.out;
+            out[n++] = (struct mav_links_fd){ .fd = f.out, .link = i, .lookup = false };
         if (f.res >= 0 && n < max)
-            fds[n++] = f.res;
+            out[n++] = (struct mav_links_fd){ .fd = f.res, .link = i, .lookup = true };
     }
     return n;
 }
 
+int mav_links_fds(const struct mav_links *l, int fds[], int max)
+{
+    struct mav_links_fd all[MAV_LINKS_FDS_MAX];
+    int n = mav_links_fd_list(l, all, max < MAV_LINKS_FDS_MAX ? max : MAV_LINKS_FDS_MAX);
+    for (int i = 0; i < n; i++)
+        fds[i] = all[i].fd;
+    return n;
+}
+
+void mav_links_readable(struct mav_links *l, const struct mav_links_fd *which, int64_t now_us)
+{
+    if (!l || which->link < 0 || which->link >= l->n)
+        return;
+    struct mav_link *k = &l->link[which->link];
+    struct link_fds before = fds_of(k);
+    if (!which->lookup) {
+        int rc = mav_out_handle_input(&k->out, now_us);
+        if (rc < 0 && !mav_out_is_up(&k->out))
+            went_down(k, "", -rc);
+    } else {
+        take_answer(k);
+    }
+    note_fds(l, k, before);
+}
+
 bool mav_links_handle(struct mav_links *l, int fd, int64_t now_us)
 {
-    for (int i = 0; l && fd >= 0 && i < l->n; i++) {
-        struct mav_link *k = &l->link[i];
-        struct link_fds before = fds_of(k);
-        if (fd == before.out) {
-            int rc = mav_out_handle_input(&k->out, now_us);
-            if (rc < 0 && !mav_out_is_up(&k->out))
-                went_down(k, "", -rc);
-        } else if (fd == before.res) {
-            take_answer(k);
-        } else {
-            continue;
+    struct mav_links_fd all[MAV_LINKS_FDS_MAX];
+    int n = mav_links_fd_list(l, all, MAV_LINKS_FDS_MAX);
+    for (int i = 0; fd >= 0 && i < n; i++)
+        if (all[i].fd == fd) {
+            mav_links_readable(l, &all[i], now_us);
+            return true;
         }
-        note_fds(l, k, before);
-        return true;
-    }
     return false;
 }
 

@@ -59,8 +59,26 @@ void mav_links_close(struct mav_links *l);
  * unless one is in flight (a late answer is taken here too). Never blocks. */
 void mav_links_retry(struct mav_links *l);
 
-/* The descriptors to wait on for EPOLLIN (at most max); returns how many. */
+/* One descriptor to wait on for EPOLLIN: an endpoint's socket/tty, or its
+ * name lookup's eventfd (lookup). */
+struct mav_links_fd {
+    int fd;
+    int link;    /* index of its endpoint */
+    bool lookup; /* the lookup's eventfd, not the endpoint */
+};
+
+/* The descriptors to wait on (at most max), each with what it is; returns
+ * how many. An event loop keeps one handler object per entry and calls
+ * mav_links_readable() with it. */
+int mav_links_fd_list(const struct mav_links *l, struct mav_links_fd out[], int max);
+
+/* The descriptors alone (at most max); returns how many. */
 int mav_links_fds(const struct mav_links *l, int fds[], int max);
+
+/* The descriptor `which` (an entry of mav_links_fd_list() since the last
+ * fd_gen change) is readable: the endpoint's input parsed and answered, or
+ * the lookup's answer taken and the endpoint opened. */
+void mav_links_readable(struct mav_links *l, const struct mav_links_fd *which, int64_t now_us);
 
 /* fd is readable: if it is one of ours, handle it (input: parsed and
  * answered; a lookup's eventfd: its answer taken, the endpoint opened) and

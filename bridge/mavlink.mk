@@ -2,12 +2,14 @@
 # pinned pymavlink wheel's common.xml (never committed), and stand-alone rules
 # for the MAVLink-output and node-clock unit tests.
 #   make build/gen/mavlink/.stamp   generate the headers (the contract other rules depend on)
-#   make test-mavlink               cmocka: tests/bridge/test_mavlink_out.c  (ASan/UBSan)
+#   make test-mavlink               cmocka: tests/bridge/test_mavlink_out.c and
+#                                   test_covariance.c (ASan/UBSan)
 #   make test-node-clock            cmocka: tests/bridge/test_node_clock.c   (ASan/UBSan)
 # bridge/bridge.mk also builds and runs both tests under test-bridge.
 #
 # Include generated headers only with -isystem $(BUILD)/gen/mavlink, and only
-# from bridge/mavlink_out.c (the one translation unit that sees MAVLink).
+# from bridge/mavlink_out.c (the one translation unit that sees MAVLink; the
+# covariance it sends is reshaped in bridge/covariance.c, no MAVLink type).
 
 MAVLINK_GEN    := $(BUILD)/gen/mavlink
 MAVLINK_STAMP  := $(MAVLINK_GEN)/.stamp
@@ -42,6 +44,10 @@ $(MAVOUT_DIR)/mavlink_out.o: bridge/mavlink_out.c bridge/mavlink_out.h $(MAVLINK
 	@mkdir -p $(@D)
 	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
 
+$(MAVOUT_DIR)/covariance.o: bridge/covariance.c bridge/covariance.h bridge/mavlink_out.h
+	@mkdir -p $(@D)
+	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
+
 $(MAVOUT_DIR)/node_clock.o: bridge/node_clock.c bridge/node_clock.h
 	@mkdir -p $(@D)
 	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
@@ -52,18 +58,28 @@ $(MAVOUT_DIR)/test_mavlink_out.o: tests/bridge/test_mavlink_out.c bridge/mavlink
 	@mkdir -p $(@D)
 	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
 
+$(MAVOUT_DIR)/test_covariance.o: tests/bridge/test_covariance.c bridge/covariance.h bridge/mavlink_out.h $(MAVLINK_STAMP)
+	@mkdir -p $(@D)
+	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
+
 $(MAVOUT_DIR)/test_node_clock.o: tests/bridge/test_node_clock.c bridge/node_clock.h
 	@mkdir -p $(@D)
 	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
 
-$(MAVOUT_DIR)/test_mavlink_out: $(MAVOUT_DIR)/test_mavlink_out.o $(MAVOUT_DIR)/mavlink_out.o
+$(MAVOUT_DIR)/test_mavlink_out: $(MAVOUT_DIR)/test_mavlink_out.o $(MAVOUT_DIR)/mavlink_out.o \
+                                 $(MAVOUT_DIR)/covariance.o
+	$(CC) -fsanitize=address,undefined -o $@ $^ -lcmocka -lm
+
+$(MAVOUT_DIR)/test_covariance: $(MAVOUT_DIR)/test_covariance.o $(MAVOUT_DIR)/mavlink_out.o \
+                                $(MAVOUT_DIR)/covariance.o
 	$(CC) -fsanitize=address,undefined -o $@ $^ -lcmocka -lm
 
 $(MAVOUT_DIR)/test_node_clock: $(MAVOUT_DIR)/test_node_clock.o $(MAVOUT_DIR)/node_clock.o
 	$(CC) -fsanitize=address,undefined -o $@ $^ -lcmocka -lm
 
-test-mavlink: $(MAVOUT_DIR)/test_mavlink_out
-	$(MAVOUT_RUNENV) $<
+test-mavlink: $(MAVOUT_DIR)/test_mavlink_out $(MAVOUT_DIR)/test_covariance
+	$(MAVOUT_RUNENV) $(MAVOUT_DIR)/test_mavlink_out
+	$(MAVOUT_RUNENV) $(MAVOUT_DIR)/test_covariance
 
 test-node-clock: $(MAVOUT_DIR)/test_node_clock
 	$(MAVOUT_RUNENV) $<

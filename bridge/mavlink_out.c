@@ -10,6 +10,7 @@
 #endif
 
 #include "mavlink_out.h"
+#include "covariance.h"
 
 #include <common/mavlink.h>
 
@@ -469,72 +470,6 @@ static bool all_finite(const float *v, size_t n)
     return true;
 }
 
-/*
- * Frame change SITE (x east, y north, z up) -> LOCAL_FRD as used here
- * (x north, y east, z down), and body FLU -> FRD. Both are signed
- * permutations P (proper rotations by pi), so a covariance maps as
- * C' = P C P^T (covariance of a linear map), i.e. C'[i][j] = s_i s_j C[p_i][p_j].
- * Pose rows: x, y, z, roll, pitch, yaw (attitude as small rotations about
- * the frame axes, which map like the position axes).
- */
-static const int pose_perm[6] = {1, 0, 2, 4, 3, 5};
-static const float pose_sign[6] = {1.0f, 1.0f, -1.0f, 1.0f, 1.0f, -1.0f};
-static const int vel_perm[6] = {0, 1, 2, 3, 4, 5};
-static const float vel_sign[6] = {1.0f, -1.0f, -1.0f, 1.0f, -1.0f, -1.0f};
-
-/*
- * Check the matrix, map it with (perm, sign) and pack the row-major upper
- * triangle. Symmetry is checked relative to the entry's natural scale
- * sqrt(C_ii C_jj) (a correlation error of 1e-4 is allowed for rounding in the
- * caller's filter and the double -> float cast); the two triangles are
- * averaged, so what is sent is exactly symmetric.
- */
-static int map_cov(const float c[6][6], const int perm[6], const float sign[6], float ut[MAV_COV_UT_LEN])
-{
-    bool any_known = false;
-    for (int i = 0; i < 6; i++) {
-        for (int j = i; j < 6; j++) {
-            float a = c[i][j], b = c[j][i];
-            if (isnan(a) != isnan(b) || isinf(a) || isinf(b))
-                return -EINVAL;
-            if (isnan(a))
-                continue;
-            any_known = true;
-            if (i == j) {
-                if (a < 0.0f)
-                    return -EINVAL;
-                continue;
-            }
-            double scale = isnan(c[i][i]) || isnan(c[j][j]) ? fmax(fabs((double)a), fabs((double)b))
-                                                            : sqrt(fabs((double)c[i][i] * (double)c[j][j]));
-            if (fabs((double)a - (double)b) > 1e-4 * scale + 1e-30)
-                return -EINVAL;
-        }
-    }
-    int k = 0;
-    for (int i = 0; i < 6; i++)
-        for (int j = i; j < 6; j++) {
-            float v = 0.5f * (c[perm[i]][perm[j]] + c[perm[j]][perm[i]]);
-            ut[k++] = any_known ? sign[i] * sign[j] * v : NAN;
-        }
-    /* MAVLink: a NaN first element means "whole matrix unknown"; a partly
-     * known matrix must therefore know its first entry. */
-    if (any_known && isnan(ut[0]))
-        return -EINVAL;
-    return 0;
-}
-
-void mav_odometry_init(struct mav_odometry *o)
-{
-    if (!o)
-        return;
-    memset(o, 0, sizeof *o);
-    for (int i = 0; i < 6; i++)
-        for (int j = 0; j < 6; j++)
-            o->pose_cov[i][j] = o->vel_cov[i][j] = NAN;
-    o->quality = -1;
-}
-
 int mav_out_send_odometry(struct mav_out *m, const struct mav_odometry *o)
 {
     if (!m || !o || o->quality < -1 || o->quality > 100)
@@ -543,8 +478,7 @@ int mav_out_send_odometry(struct mav_out *m, const struct mav_odometry *o)
     if (!all_finite(vals, sizeof vals / sizeof vals[0]))
         return -EINVAL;
     float pose_ut[MAV_COV_UT_LEN], vel_ut[MAV_COV_UT_LEN];
-    if (map_cov(o->pose_cov, pose_perm, pose_sign, pose_ut) < 0 ||
-        map_cov(o->vel_cov, vel_perm, vel_sign, vel_ut) < 0)
+    if (mav_cov_to_frd(o, pose_ut, vel_ut) < 0)
         return -EINVAL;
 
     /* Heading: site yaw is CCW from east; FRD/NED yaw is CW from north:
@@ -697,31 +631,4 @@ int mav_out_handle_input(struct mav_out *m, int64_t now_us)
         parsed += parse_bytes(m, buf, (size_t)n, now_us);
     }
     return parsed;
-}
-
-/* ---- quality ----------------------------------------------------------- */
-
-int mav_quality_from_cov(double var_x_m2, double cov_xy_m2, double var_y_m2)
-{
-    if (!isfinite(var_x_m2) || !isfinite(cov_xy_m2) || !isfinite(var_y_m2))
-        return -1;
-    /* PSD test of the 2x2 (Sylvester: diagonal >= 0 and det >= 0, with a
-     * relative tolerance for rounding). */
-    double det = var_x_m2 * var_y_m2 - cov_xy_m2 * cov_xy_m2;
-    if (var_x_m2 < 0.0 || var_y_m2 < 0.0 || det < -1e-9 * (var_x_m2 * var_y_m2 + 1e-300))
-        return -1;
-    /* Largest eigenvalue of a symmetric 2x2 [[a, b], [b, c]], the root of
-     * the characteristic polynomial l^2 - (a + c) l + (ac - b^2) = 0:
-     * l_max = (a + c)/2 + sqrt(((a - c)/2)^2 + b^2). */
-    double half_diff = 0.5 * (var_x_m2 - var_y_m2);
-    double lmax_m2 = 0.5 * (var_x_m2 + var_y_m2) + sqrt(half_diff * half_diff + cov_xy_m2 * cov_xy_m2);
-    double sigma_m = sqrt(lmax_m2);
-    /* Quality map (ours, docs/mavlink.md): logarithmic in sigma from
-     * 100 at 1 cm to 1 at 1 m: q = 100 - 99/2 * log10(sigma / 0.01 m). */
-    if (sigma_m <= 0.01)
-        return 100;
-    if (sigma_m >= 1.0)
-        return 1;
-    double q = 100.0 - 49.5 * log10(sigma_m / 0.01);
-    return (int)lround(q);
 }

@@ -192,7 +192,9 @@ struct mav_odometry {
     int8_t quality;        /* 0..100, or -1 while not converged (see mav_quality_from_cov) */
 };
 
-/* Zero every value, every covariance entry NaN, quality -1. */
+/* Zero every value, every covariance entry NaN, quality -1. (This, the
+ * covariance mapping and mav_quality_from_cov() live in covariance.c, the
+ * one place the covariance is reshaped.) */
 void mav_odometry_init(struct mav_odometry *o);
 
 /*

@@ -4,7 +4,11 @@
 #include "stats.h"
 
 #include <errno.h>
+#include <inttypes.h>
 #include <string.h>
+
+#include "log.h"
+#include "sensors.h"
 
 void latency_reset(struct latency_hist *h)
 {
@@ -77,15 +81,22 @@ void latency_interval_close(struct latency_hist *h, struct latency_summary *s)
     latency_reset(h);
 }
 
+/* {"pulse_detection": n, ...}: one count per kind of the sensor table. */
+static void write_by_kind(FILE *f, const uint64_t *by_kind)
+{
+    fputc('{', f);
+    for (int k = 0; k < FRAME_KIND_COUNT; k++)
+        fprintf(f, "%s\"%s\": %llu", k ? ", " : "", sensor_kinds[k].name,
+                (unsigned long long)by_kind[k]);
+    fputs("},\n", f);
+}
+
 /* "NAME": total, "NAME_per_frame": {one count per frame kind} (stats JSON). */
 static void write_per_frame(FILE *f, const char *name, uint64_t total, const uint64_t *by_kind)
 {
     fprintf(f, "  \"%s\": %llu,\n", name, (unsigned long long)total);
-    fprintf(f, "  \"%s_per_frame\": {\"pulse_detection\": %llu, "
-               "\"wheel_encoders\": %llu, \"node_status\": %llu},\n",
-            name, (unsigned long long)by_kind[FRAME_PULSE],
-            (unsigned long long)by_kind[FRAME_ENCODERS],
-            (unsigned long long)by_kind[FRAME_STATUS]);
+    fprintf(f, "  \"%s_per_frame\": ", name);
+    write_by_kind(f, by_kind);
 }
 
 int stats_write_json(const struct stats_report *r, const char *path)
@@ -98,16 +109,14 @@ int stats_write_json(const struct stats_report *r, const char *path)
     const struct frame_counters *fc = r->frames;
     fprintf(f, "{\n");
     fprintf(f, "  \"frames_total\": %llu,\n", (unsigned long long)r->frames_total);
-    fprintf(f, "  \"frames_received\": {\"pulse_detection\": %llu, "
-               "\"wheel_encoders\": %llu, \"node_status\": %llu},\n",
-            (unsigned long long)fc->received[FRAME_PULSE],
-            (unsigned long long)fc->received[FRAME_ENCODERS],
-            (unsigned long long)fc->received[FRAME_STATUS]);
-    fprintf(f, "  \"frames_received_by_id\": {\"0x100\": %llu, \"0x110\": %llu, "
-               "\"0x120\": %llu},\n",
-            (unsigned long long)fc->received[FRAME_PULSE],
-            (unsigned long long)fc->received[FRAME_ENCODERS],
-            (unsigned long long)fc->received[FRAME_STATUS]);
+    fprintf(f, "  \"frames_received\": ");
+    write_by_kind(f, fc->received);
+    /* by id: a kind's first frame id (each kind has one frame today) */
+    fprintf(f, "  \"frames_received_by_id\": {");
+    for (int k = 0; k < FRAME_KIND_COUNT; k++)
+        fprintf(f, "%s\"0x%03x\": %llu", k ? ", " : "", (unsigned)sensor_kinds[k].id_first,
+                (unsigned long long)fc->received[k]);
+    fputs("},\n", f);
     fprintf(f, "  \"dropped_by_kernel\": %llu,\n", (unsigned long long)r->kernel_drops);
     fprintf(f, "  \"malformed\": %llu,\n", (unsigned long long)fc->malformed);
     fprintf(f, "  \"unknown_id\": %llu,\n", (unsigned long long)fc->unknown_id);
@@ -176,4 +185,28 @@ int stats_write_json(const struct stats_report *r, const char *path)
     if (rename(tmp, path) != 0)
         return -errno;
     return 0;
+}
+
+void stats_status_line(const struct stats_report *r, const char *prefix,
+                       const char *estimate)
+{
+    const struct frame_counters *fc = r->frames;
+    char kinds[32 * FRAME_KIND_COUNT] = "";
+    size_t n = 0;
+    for (int k = 0; k < FRAME_KIND_COUNT && n < sizeof kinds; k++)
+        n += (size_t)snprintf(kinds + n, sizeof kinds - n, "%s%s %" PRIu64, k ? " " : "",
+                              sensor_kinds[k].short_name, fc->received[k]);
+    log_info("%s: frames %" PRIu64 " (%s) bad %" PRIu64 " unknown %" PRIu64
+             " range %" PRIu64 " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64
+             " kdrop %" PRIu64 " errfr %" PRIu64 " | pulses ok %" PRIu64
+             " rej %" PRIu64 " | %s | odom %" PRIu64 " werr %" PRIu64
+             " | latency p50 %" PRId64 " p99 %" PRId64 " us"
+             " (interval p50 %" PRId64 " p99 %" PRId64 " us)",
+             prefix, r->frames_total, kinds, fc->malformed, fc->unknown_id,
+             fc->out_of_range, frame_lost_total(fc), frame_duplicates_total(fc),
+             frame_out_of_order_total(fc), r->kernel_drops, r->error_frames,
+             r->pulses_accepted, r->pulses_rejected, estimate, r->odometry_sent,
+             r->record_write_errors + r->estimates_write_errors,
+             r->latency_p50_us, r->latency_p99_us,
+             r->latency_interval_p50_us, r->latency_interval_p99_us);
 }

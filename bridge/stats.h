@@ -75,7 +75,14 @@ struct stats_report {
     uint64_t frames_total;      /* frames read (bus or log) */
 };
 
-/* Write the report as one JSON object. Returns 0 or -errno. */
+/* Write the report as one JSON object (per-kind counts keyed by the sensor
+ * table's names). Returns 0 or -errno. */
 int stats_write_json(const struct stats_report *r, const char *path);
+
+/* Log the status line (docs/bridge.md, STATUS LINE) of report r at level
+ * info: "PREFIX: frames N (pulse N enc N status N) ... | ESTIMATE | ...",
+ * the per-kind counts by the sensor table's short names. */
+void stats_status_line(const struct stats_report *r, const char *prefix,
+                       const char *estimate);
 
 #endif /* BRIDGE_STATS_H */

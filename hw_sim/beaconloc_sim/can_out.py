@@ -2,21 +2,14 @@
 candump log (python-can CanutilsLogWriter) or sent live on a python-can bus."""
 from __future__ import annotations
 
-import functools
 import gc
 import os
 import time
 
 import can
-import cantools
 import numpy as np
 
-from .site import DBC_PATH
-
-
-@functools.lru_cache(maxsize=1)
-def database() -> cantools.database.can.Database:
-    return cantools.database.load_file(str(DBC_PATH))
+from .dbc import database
 
 
 def encode_all(frames) -> list[bytes]:

@@ -11,7 +11,10 @@ import math
 
 import numpy as np
 
-TICK_WRAP = 1 << 14     # DBC: LeftTicks/RightTicks are cumulative modulo 2^14
+from .dbc import signal_modulo
+
+# DBC: LeftTicks/RightTicks are cumulative, wrapping (modulo 2^14)
+TICK_WRAP = signal_modulo("WHEEL_ENCODERS", "LeftTicks")
 
 
 def wheel_rotation_rad(travel_m: np.ndarray, true_radius_m: float, slip_fraction: float,

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from .physics.pulses import KIND_DIRECT, KIND_FLOOR_CEILING, KIND_LATE, KIND_WALL
-from .simulate import ID_ENCODERS, ID_PULSE, ID_STATUS, ODOMETRY_COLUMNS, TRUTH_COLUMNS, SimResult
+from .dbc import message_names
+from .simulate import ODOMETRY_COLUMNS, TRUTH_COLUMNS, SimResult
 
 _INT_COLUMNS = {"t_us"}
 
@@ -82,7 +83,7 @@ def run_stats(result: SimResult, *, wall_time_s: float, lateness_s: np.ndarray |
     fr = result.frames
     ids = fr.arb_id
     det = result.detections
-    names = {ID_PULSE: "PULSE_DETECTION", ID_ENCODERS: "WHEEL_ENCODERS", ID_STATUS: "NODE_STATUS"}
+    names = message_names()
     n_total = len(fr) if sent is None else sent
     by_id = {f"0x{fid:03X}": int(np.sum(ids[:n_total] == fid)) for fid in names}
     stats = {

@@ -174,3 +174,8 @@ def parse_segment(text: str, default_speed_mps: float, turn_rate_radps: float) -
     if angle == 0 or rate <= 0:
         raise ValueError("turn needs a non-zero angle and a rate > 0")
     return Segment("turn", abs(angle) / rate, 0.0, math.copysign(rate, angle))
+
+
+def wrap_angle(a):
+    """Angle wrapped to [-pi, pi), rad."""
+    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi

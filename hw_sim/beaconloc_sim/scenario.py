@@ -1,5 +1,6 @@
-"""Scenario files ``hw_sim/scenarios/<name>.scenario.ini``: the site they use,
-the path, temperature, echoes, clocks, encoder imperfections, faults, duration, seed.
+"""Scenario files ``<name>.scenario.ini`` (the built-in ones are package data,
+beaconloc_sim/data/scenarios/, found through resources): the site they use, the path,
+temperature, echoes, clocks, encoder imperfections, faults, duration, seed.
 See docs/simulator.md for every key."""
 from __future__ import annotations
 
@@ -11,9 +12,9 @@ import numpy as np
 
 from .inifile import ConfigError, IniFile
 from .path import Trajectory, parse_segment
-from .site import SCENARIO_DIR, Site, load_site
-
-SUFFIX = ".scenario.ini"
+from .resources import SCENARIO_SUFFIX as SUFFIX
+from .resources import builtin_scenario_names, builtin_scenario_path
+from .site import Site, load_site
 
 _KNOWN = {
     "scenario": {"site", "description", "duration_s", "seed"},
@@ -132,7 +133,7 @@ class Scenario:
 
 
 def builtin_names() -> list[str]:
-    return sorted(p.name[: -len(SUFFIX)] for p in SCENARIO_DIR.glob("*" + SUFFIX))
+    return builtin_scenario_names()
 
 
 def resolve(name_or_path: str) -> Path:
@@ -142,8 +143,8 @@ def resolve(name_or_path: str) -> Path:
         if not candidate.is_file():
             raise ConfigError(f"{name_or_path}: no such scenario file")
         return candidate
-    builtin = SCENARIO_DIR / (name_or_path + SUFFIX)
-    if builtin.is_file():
+    builtin = builtin_scenario_path(name_or_path)
+    if builtin is not None:
         return builtin
     raise ConfigError(f"unknown scenario {name_or_path!r}; built-in: {', '.join(builtin_names())}")
 

@@ -4,38 +4,29 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from . import can_out, crb
+from . import can_out, crb, nodes
+from .bus import FRAME_BITS, Bus, Frames
 from .clocks import NodeClock
-from .encoders import TICK_WRAP, dead_reckoning, ticks, wheel_rotation_rad
+from .nodes import ODOMETRY_COLUMNS, Node, NodeStatus, ReceiverRing, WheelEncoders
+from .path import wrap_angle
 from .physics import acoustics as ac
 from .physics.pulses import KIND_DIRECT, Detections, Firings, make_firings, simulate_detections
 from .scenario import Scenario
 
-NODE_RX, NODE_ENCODER = 1, 2          # DBC NODE_STATUS NodeId
-ID_PULSE, ID_ENCODERS, ID_STATUS = 0x100, 0x110, 0x120
-# classic CAN frame with 8 data bytes: 111 bits + typical stuffing, ~125 bit times
-FRAME_BITS = 125
+# frame ids of the nodes' frames (from the DBC)
+ID_PULSE = ReceiverRing.frame_spec().frame_id
+ID_ENCODERS = WheelEncoders.frame_spec().frame_id
+ID_STATUS = NodeStatus.frame_spec().frame_id
+__all__ = ["FRAME_BITS", "Frames", "ODOMETRY_COLUMNS", "TRUTH_COLUMNS", "SimResult", "run",
+           "run_windows", "wrap_angle", "ID_PULSE", "ID_ENCODERS", "ID_STATUS"]
 
 TRUTH_COLUMNS = ("t_us", "t_sim_s", "x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "sos_mps",
                  "period_s", "temperature_c", "pcrb_x_m", "pcrb_y_m", "pcrb_pos_m", "pcrb_lateral_m",
                  "pcrb_sos_mps")
-ODOMETRY_COLUMNS = ("t_us", "x_m", "y_m", "theta_rad")
-
-
-@dataclass
-class Frames:
-    """Frames in bus order. t_s: end of transmission = the bridge's receive time, sim seconds."""
-    t_s: np.ndarray
-    arb_id: np.ndarray
-    signals: list[dict]
-    data: list[bytes] = field(default_factory=list)
-
-    def __len__(self) -> int:
-        return len(self.t_s)
 
 
 @dataclass
@@ -49,10 +40,6 @@ class SimResult:
     rx_clock: NodeClock
     encoder_clock: NodeClock
     pcrb_cov: np.ndarray              # (K, 8, 8) bound after each firing, crb.STATE order
-
-
-def wrap_angle(a):
-    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
 
 
 def run(scn: Scenario, *, encode: bool = True) -> SimResult:
@@ -93,15 +80,12 @@ def _run(scn: Scenario, *, encode: bool = True) -> SimResult:
 
 @dataclass
 class Carry:
-    """What one window of a windowed run hands to the next (run_windows)."""
-    pending: tuple[list, list, list, list]   # frames ready after the window: ready_s, ids, nodes, signals
-    bus_start_s: float                       # start of the last frame's transmission
-    counters: dict                           # rolling counter per (frame id, node)
-    travel_m: tuple[float, float]            # true wheel travel at the last encoder sample
-    rotation_rad: tuple[float, float]        # wheel rotation at the last encoder sample
-    last_sent: tuple | None                  # ticks (l, r) and odometry pose (x, y, th) of it
-    recent_edges_s: np.ndarray               # detections of the window's last second
-    recent_saturated: np.ndarray
+    """What one window of a windowed run hands to the next (run_windows): the nodes (their
+    clocks, counters, waiting frames and wheel state), the bus schedule and the bound."""
+    ring: ReceiverRing
+    wheels: WheelEncoders
+    nodes: list[Node]
+    bus: Bus
     pcrb: tuple | None                       # crb.pcrb_along_path end
     last_cov: np.ndarray | None              # bound after the last firing
 
@@ -129,150 +113,37 @@ def run_windows(scn: Scenario, window_s: float, *, encode: bool = True):
         yield result
 
 
-def _after(clock: NodeClock, t_s: float) -> int:
-    """First node-clock count of a window starting at t_s: its value at t = 0, else the
-    first count after the previous window's last (windows are (t_a, t_b])."""
-    return int(clock.unwrapped_us(t_s)) + (1 if t_s > 0 else 0)
-
-
 def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry | None, *,
             encode: bool) -> tuple[SimResult, Carry | None]:
     """The run (win None) or its window win = (t_a, t_b] after carry (None: the first)."""
-    site = scn.site
     rng_pulse, rng_enc, rng_lat, rng_fire = (np.random.default_rng(s) for s in seeds)
-    rx_clock = NodeClock(scn.rx_offset_us, scn.rx_drift_ppm)
-    enc_clock = NodeClock(scn.encoder_offset_us, scn.encoder_drift_ppm)
     t_a, t_b = win if win is not None else (0.0, scn.duration_s)
+    if carry is None:
+        ring, wheels, on_bus = nodes.on_bus(scn)
+        carry = Carry(ring, wheels, on_bus, Bus(scn.bus_bitrate_bps),
+                      None if win is None else crb.prior_start(bound_model(scn)), None)
+    rx_clock, enc_clock = carry.ring.clock, carry.wheels.clock
 
     firings = make_firings(scn, rng_fire, win)
     det = simulate_detections(scn, firings, rng_pulse)
-
-    ready, ids, nodes, sigs = ([], [], [], []) if carry is None else \
-        tuple(list(x) for x in carry.pending)
-    # -- PULSE_DETECTION: the node decides on DoublePulse after the double-pulse window ------
-    window_s = site.double_pulse_spacing_s + scn.double_pulse_tolerance_s
-    lat = rng_lat.uniform(*scn.node_latency_s, size=len(det.edge_s))
-    node_us = rx_clock.wrapped_us(det.edge_s)
-    for i in range(len(det.edge_s)):
-        ready.append(det.edge_s[i] + window_s + lat[i])
-        ids.append(ID_PULSE)
-        nodes.append(NODE_RX)
-        sigs.append({"NodeTime": int(node_us[i]), "Receiver": int(det.receiver[i]),
-                     "DoublePulse": int(det.double[i]),
-                     "Amplitude": int(round(det.amplitude_mv[i])),
-                     "Width": 2 * int(round(min(max(det.width_s[i], 0.0), 8190e-6) * 1e6 / 2))})
-
-    # -- WHEEL_ENCODERS at encoder_rate_hz of the encoder node's own clock -------------------
-    period_us = int(round(1e6 / site.encoder_rate_hz))
-    first = -(-_after(enc_clock, t_a) // period_us) * period_us
-    last_us = enc_clock.unwrapped_us(t_b)
-    enc_us = np.arange(first, last_us + 1, period_us, dtype=np.int64)
-    t_enc = enc_clock.true_time_s(enc_us)
-    travel_l, travel_r = scn.trajectory.wheel_travel(t_enc)
-    r_true_l = site.wheel_radius_m * (1.0 + scn.wheel_radius_bias[0])
-    r_true_r = site.wheel_radius_m * (1.0 + scn.wheel_radius_bias[1])
-    c_travel, c_rot = (carry.travel_m, carry.rotation_rad) if carry else ((0.0, 0.0), (0.0, 0.0))
-    rot_l = wheel_rotation_rad(travel_l, r_true_l, scn.slip_fraction[0], scn.sigma_wheel_per_m,
-                               rng_enc, start_travel_m=c_travel[0], start_rad=c_rot[0])
-    rot_r = wheel_rotation_rad(travel_r, r_true_r, scn.slip_fraction[1], scn.sigma_wheel_per_m,
-                               rng_enc, start_travel_m=c_travel[1], start_rad=c_rot[1])
-    ticks_l = ticks(rot_l, site.ticks_per_rev, scn.initial_ticks[0])
-    ticks_r = ticks(rot_r, site.ticks_per_rev, scn.initial_ticks[1])
-    enc_sent = ~scn.encoder_silent(t_enc)
-    lat = rng_lat.uniform(*scn.node_latency_s, size=len(t_enc))
-    for i in np.flatnonzero(enc_sent).tolist():
-        ready.append(t_enc[i] + lat[i])
-        ids.append(ID_ENCODERS)
-        nodes.append(NODE_ENCODER)
-        sigs.append({"NodeTime": int(enc_us[i] % (1 << 32)),
-                     "LeftTicks": int(ticks_l[i] % TICK_WRAP),
-                     "RightTicks": int(ticks_r[i] % TICK_WRAP)})
-
-    # -- NODE_STATUS at 1 Hz from both nodes ---------------------------------------------------
-    edges, saturated = det.edge_s, det.saturated
-    if carry is not None:
-        edges = np.concatenate([carry.recent_edges_s, edges])
-        saturated = np.concatenate([carry.recent_saturated, saturated])
-    for node, clock, phase_us in ((NODE_RX, rx_clock, 250_000), (NODE_ENCODER, enc_clock, 750_000)):
-        first = -(-(_after(clock, t_a) - phase_us) // 1_000_000) * 1_000_000 + phase_us
-        st_us = np.arange(first, clock.unwrapped_us(t_b) + 1, 1_000_000, dtype=np.int64)
-        t_st = clock.true_time_s(st_us)
-        lat = rng_lat.uniform(*scn.node_latency_s, size=len(t_st))
-        silent = scn.encoder_silent(t_st) if node == NODE_ENCODER else np.zeros(len(t_st), bool)
-        for i in range(len(t_st)):
-            if silent[i]:
-                continue
-            flags = 0
-            if node == NODE_RX:
-                recent = (edges > t_st[i] - 1.0) & (edges <= t_st[i])
-                flags |= 1 if np.any(saturated[recent]) else 0
-            ready.append(t_st[i] + lat[i])
-            ids.append(ID_STATUS)
-            nodes.append(node)
-            sigs.append({"NodeId": node, "Flags": flags,
-                         "Uptime": int(st_us[i] // 1_000_000) % (1 << 24),
-                         "TxErrorCount": 0, "RxErrorCount": 0, "Overruns": 0})
-
-    # -- bus: frames leave in order of readiness, one at a time ---------------------------------
-    ready_a = np.asarray(ready, dtype=float)
-    order = np.argsort(ready_a, kind="stable")
-    ready_a = ready_a[order]
-    ids_a = np.asarray(ids, dtype=np.int64)[order]
-    nodes_a = np.asarray(nodes, dtype=np.int64)[order]
-    sigs = [sigs[i] for i in order.tolist()]
-    pending = ([], [], [], [])
-    if win is not None:
-        # a window sends what is ready before its end; the rest waits for the next one
-        n_now = int(np.searchsorted(ready_a, t_b, side="left"))
-        pending = (ready_a[n_now:].tolist(), ids_a[n_now:].tolist(), nodes_a[n_now:].tolist(),
-                   sigs[n_now:])
-        ready_a, ids_a, nodes_a, sigs = ready_a[:n_now], ids_a[:n_now], nodes_a[:n_now], sigs[:n_now]
-    frame_s = FRAME_BITS / scn.bus_bitrate_bps
-    # start_i = max(ready_i, start_{i-1} + frame): a running maximum of ready_i - i * frame
-    idx = np.arange(len(ready_a))
-    start = np.maximum.accumulate(ready_a - idx * frame_s) + idx * frame_s if len(idx) else ready_a
-    if carry is not None and len(idx):
-        start = np.maximum(start, carry.bus_start_s + (idx + 1) * frame_s)
-    t_rx = start + frame_s
-    # rolling counters per frame id and node, in transmit order (DBC: mod 8 / 16 / 16)
-    modulo = {ID_PULSE: 8, ID_ENCODERS: 16, ID_STATUS: 16}
-    counters: dict[tuple[int, int], int] = {} if carry is None else dict(carry.counters)
-    for i, sig in enumerate(sigs):
-        key = (int(ids_a[i]), int(nodes_a[i]))
-        c = counters.get(key, 0)
-        sig["Counter"] = c
-        counters[key] = (c + 1) % modulo[key[0]]
-    frames = Frames(t_rx, ids_a, sigs)
+    iv = nodes.Interval(scn, t_a, t_b, firings, det, rng_latency=rng_lat, rng_wheels=rng_enc)
+    # a window sends what is ready before its end; the rest waits in its node for the next one
+    until_s = t_b if win is not None else math.inf
+    frames = carry.bus.transmit([node.release(iv, until_s) for node in carry.nodes], until_s)
     if encode:
         frames.data = can_out.encode_all(frames)
 
     truth = _truth(scn, rx_clock, win)
-    pcrb_start = None if win is None else \
-        carry.pcrb if carry else crb.prior_start(bound_model(scn))
-    pcrb_cov, pcrb_end = _pcrb(scn, firings, det, rx_clock, pcrb_start)
-    _attach_bound(truth, firings, pcrb_cov, scn, carry.last_cov if carry else None)
-    sent_l, sent_r, sent_t = ticks_l[enc_sent], ticks_r[enc_sent], t_enc[enc_sent]
-    odometry = _odometry(scn, site, sent_l, sent_r, sent_t, rx_clock,
-                         carry.last_sent if carry else None)
+    pcrb_cov, pcrb_end = _pcrb(scn, firings, det, rx_clock, carry.pcrb)
+    _attach_bound(truth, firings, pcrb_cov, scn, carry.last_cov)
+    odometry = carry.wheels.odometry(rx_clock)
     result = SimResult(scn, frames, truth, odometry, firings, det, rx_clock, enc_clock, pcrb_cov)
     if win is None:
         return result, None
-    last_sent = carry.last_sent if carry else None
-    if len(sent_t):
-        last_sent = (int(sent_l[-1] % TICK_WRAP), int(sent_r[-1] % TICK_WRAP),
-                     float(odometry["x_m"][-1]), float(odometry["y_m"][-1]),
-                     float(odometry["theta_rad"][-1]))
-    keep = det.edge_s > t_b - 1.0
-    return result, Carry(
-        pending=pending,
-        bus_start_s=float(start[-1]) if len(idx) else (carry.bus_start_s if carry else -math.inf),
-        counters=counters,
-        travel_m=(float(travel_l[-1]), float(travel_r[-1])) if len(t_enc) else c_travel,
-        rotation_rad=(float(rot_l[-1]), float(rot_r[-1])) if len(t_enc) else c_rot,
-        last_sent=last_sent,
-        recent_edges_s=det.edge_s[keep], recent_saturated=det.saturated[keep],
-        pcrb=pcrb_end,
-        last_cov=pcrb_cov[-1] if len(pcrb_cov) else (carry.last_cov if carry else None))
+    carry.pcrb = pcrb_end
+    if len(pcrb_cov):
+        carry.last_cov = pcrb_cov[-1]
+    return result, carry
 
 
 def _truth(scn: Scenario, rx_clock: NodeClock,
@@ -357,22 +228,3 @@ def _attach_bound(truth, firings: Firings, cov: np.ndarray, scn: Scenario,
     truth["pcrb_lateral_m"] = np.sqrt(np.maximum(nx * nx * var_x + 2 * nx * ny * cov_xy
                                                  + ny * ny * var_y, 0.0))
     truth["pcrb_sos_mps"] = np.sqrt(bound(isos, isos, prior[isos] ** 2))
-
-
-def _odometry(scn, site, ticks_l, ticks_r, t_enc, rx_clock,
-              last: tuple | None = None) -> dict[str, np.ndarray]:
-    """Dead reckoning from the encoder frames actually sent, nominal geometry, true start
-    pose; or on from `last` = (ticks l, r, x, y, theta) of the previous window's last frame."""
-    if len(t_enc) == 0:
-        return {c: np.zeros(0) for c in ODOMETRY_COLUMNS}
-    if last is None:
-        st0 = scn.trajectory.state(np.array([t_enc[0]]))
-        x, y, th = dead_reckoning(ticks_l % TICK_WRAP, ticks_r % TICK_WRAP, float(st0["x_m"][0]),
-                                  float(st0["y_m"][0]), float(st0["theta_rad"][0]),
-                                  site.wheel_radius_m, site.wheel_base_m, site.ticks_per_rev)
-    else:
-        x, y, th = dead_reckoning(np.concatenate([[last[0]], ticks_l % TICK_WRAP]),
-                                  np.concatenate([[last[1]], ticks_r % TICK_WRAP]), last[2], last[3],
-                                  last[4], site.wheel_radius_m, site.wheel_base_m, site.ticks_per_rev)
-        x, y, th = x[1:], y[1:], th[1:]
-    return {"t_us": rx_clock.unwrapped_us(t_enc), "x_m": x, "y_m": y, "theta_rad": wrap_angle(th)}

@@ -1,9 +1,13 @@
 """The site file: beacons, receiver ring, robot, noise (shared with the bridge).
 
-Format: ``hw_sim/scenarios/kleeman-lab.ini``. The simulator reads every section
-except ``[bridge]`` and ``[tuning]`` (the daemon's settings and the estimator's
-tuning, checked by the bridge); any other section is an error, as in the bridge
-(bridge/config.c), so a misspelt one cannot drop its keys silently.
+Format: ``hw_sim/scenarios/kleeman-lab.ini``; its keys, types, ranges and
+defaults are the site schema's (``data/site_schema.toml``, read through
+:mod:`.site_schema`), the one the bridge's parser is generated from. The
+simulator reads the sections the schema gives it (``read_by`` sim) with its own
+checks (``sim``, ``sim_range``) and skips the others (``[bridge]``,
+``[tuning]``: the daemon's settings and the estimator's tuning, checked by the
+bridge); any other section is an error, as in the bridge (bridge/config.c), so
+a misspelt one cannot drop its keys silently.
 """
 from __future__ import annotations
 
@@ -14,24 +18,43 @@ from pathlib import Path
 import numpy as np
 
 from .inifile import ConfigError, IniFile
+from .site_schema import BEACON_SECTION, Key, load_schema
 
 PACKAGE_ROOT = Path(__file__).resolve().parent.parent      # hw_sim/
 SCENARIO_DIR = PACKAGE_ROOT / "scenarios"
 DBC_PATH = PACKAGE_ROOT / "can" / "beaconloc.dbc"
 
-_KNOWN = {
-    "site": {"name", "room_size_x_m", "room_size_y_m", "room_height_m"},
-    "beacons": {"count", "period_s", "double_pulse_spacing_s", "burst_length_s"},
-    "beacon": {"x_m", "y_m", "z_m"},
-    "receivers": {"count", "ring_radius_m", "first_angle_deg", "height_m", "beamwidth_deg",
-                  "double_pulse_tolerance_s"},
-    "robot": {"wheel_base_m", "wheel_radius_m", "ticks_per_rev", "encoder_rate_hz",
-              "sigma_wheel_scale"},   # the last is the estimator's (bridge), not physics
-    "noise": {"sigma_arrival_s", "sigma_wheel_per_m", "speed_of_sound_mps",
-              "sigma_speed_of_sound_mps", "gate_sigma"},
-}
-# Sections of a site file that are not the simulator's (their keys are the bridge's to check).
-_NOT_OURS = ("bridge", "tuning")
+
+def _read_key(ini: IniFile, section: str, key: Key):
+    """One key as the simulator reads it (schema: sim, sim_range, default)."""
+    if key.sim == "ignored":
+        return None
+    if key.sim == "unsupported":
+        # accepted only at its default: what the simulator simulates
+        if ini.has(section, key.name) and ini.number(section, key.name) != key.default:
+            raise ini.error(section, key.name, f"not simulated (only {key.default:g}: {key.doc})")
+        return key.default
+    default = None if key.sim == "required" else key.default
+    if not key.numeric:
+        return ini.raw(section, key.name, default) if ini.has(section, key.name) or default \
+            else None
+    rng = key.sim_range
+    minimum = maximum = None
+    positive = False
+    if rng is not None:
+        if rng.lo_open and rng.lo == 0:
+            positive = True
+        elif rng.lo_open and math.isfinite(rng.lo) or rng.hi_open and math.isfinite(rng.hi):
+            raise ValueError(f"[{section}] {key.name}: sim_range {rng} cannot be checked")
+        elif math.isfinite(rng.lo):
+            minimum = rng.lo
+        maximum = rng.hi if math.isfinite(rng.hi) else None
+    if key.type == "int":
+        return ini.integer(section, key.name, default,
+                           minimum=None if minimum is None else int(minimum),
+                           maximum=None if maximum is None else int(maximum))
+    return ini.number(section, key.name, default, minimum=minimum, maximum=maximum,
+                      positive=positive)
 
 
 @dataclass(frozen=True)
@@ -72,53 +95,60 @@ class Site:
 
 def load_site(path: str | Path) -> Site:
     ini = IniFile(path)
-    for section, known in _KNOWN.items():
-        if section != "beacon":
-            ini.check_known(section, known)
-    count = ini.integer("beacons", "count", minimum=1, maximum=15)
+    schema = load_schema()
+    ours = [s for s in schema.sections if "sim" in s.read_by]
+    for section in ours:
+        if section.name != BEACON_SECTION:
+            ini.check_known(section.name, {k.name for k in section.keys})
+    value: dict[tuple[str, str], object] = {}
+    beacons_section = schema.section("beacons")
+    count = _read_key(ini, "beacons", beacons_section.key("count"))
+    beacon_keys = schema.section(BEACON_SECTION).keys
     beacons = []
     for i in range(1, count + 1):
         sec = f"beacon{i}"
         if not ini.has(sec):
             raise ConfigError(f"{ini.where('beacons', 'count')}: count = {count} but [{sec}] is missing")
-        ini.check_known(sec, _KNOWN["beacon"])
-        beacons.append([ini.number(sec, "x_m"), ini.number(sec, "y_m"), ini.number(sec, "z_m")])
+        ini.check_known(sec, {k.name for k in beacon_keys})
+        beacons.append([_read_key(ini, sec, k) for k in beacon_keys])
+    not_ours = {s.name for s in schema.sections if "sim" not in s.read_by}
     for sec in ini.parser.sections():
         if sec.startswith("beacon") and sec[6:].isdigit() and sec[6] != "0":
             if not 1 <= int(sec[6:]) <= count:
                 raise ini.error(sec, None, f"beacon beyond [beacons] count = {count}")
-        elif sec not in _KNOWN or sec == "beacon":
-            if sec not in _NOT_OURS:
-                raise ini.error(sec, None, "unknown section (a site file holds [site], [beacons], "
-                                "[beacon1]..[beaconN], [receivers], [robot], [noise], [tuning], "
-                                "[bridge])")
+        elif sec not in {s.name for s in ours} - {BEACON_SECTION} and sec not in not_ours:
+            raise ini.error(sec, None, "unknown section (a site file holds "
+                            f"{schema.sections_phrase('N')})")
+    for section in ours:
+        if section.name != BEACON_SECTION:
+            for key in section.keys:
+                value[section.name, key.name] = _read_key(ini, section.name, key)
+    v = value.__getitem__
     site = Site(
         path=Path(path),
-        name=ini.raw("site", "name", Path(path).stem),
-        room_x_m=ini.number("site", "room_size_x_m", positive=True),
-        room_y_m=ini.number("site", "room_size_y_m", positive=True),
-        room_z_m=ini.number("site", "room_height_m", 3.0, positive=True),
+        name=v(("site", "name")) or Path(path).stem,
+        room_x_m=v(("site", "room_size_x_m")),
+        room_y_m=v(("site", "room_size_y_m")),
+        room_z_m=v(("site", "room_height_m")),
         beacons_m=np.array(beacons, dtype=float),
-        period_s=ini.number("beacons", "period_s", positive=True),
-        double_pulse_spacing_s=ini.number("beacons", "double_pulse_spacing_s", positive=True),
-        burst_length_s=ini.number("beacons", "burst_length_s", positive=True),
-        rx_count=ini.integer("receivers", "count", minimum=1, maximum=8),
-        ring_radius_m=ini.number("receivers", "ring_radius_m", minimum=0.0),
-        first_angle_rad=math.radians(ini.number("receivers", "first_angle_deg", 0.0)),
-        rx_height_m=ini.number("receivers", "height_m", minimum=0.0),
-        beamwidth_rad=math.radians(ini.number("receivers", "beamwidth_deg", 90.0,
-                                              positive=True, maximum=360.0)),
-        double_pulse_tolerance_s=ini.number("receivers", "double_pulse_tolerance_s", 0.001,
-                                            positive=True),
-        wheel_base_m=ini.number("robot", "wheel_base_m", positive=True),
-        wheel_radius_m=ini.number("robot", "wheel_radius_m", positive=True),
-        ticks_per_rev=ini.integer("robot", "ticks_per_rev", minimum=1),
-        encoder_rate_hz=ini.number("robot", "encoder_rate_hz", positive=True, maximum=1000.0),
-        sigma_arrival_s=ini.number("noise", "sigma_arrival_s", minimum=0.0),
-        sigma_wheel_per_m=ini.number("noise", "sigma_wheel_per_m", minimum=0.0),
-        speed_of_sound_mps=ini.number("noise", "speed_of_sound_mps", positive=True),
-        sigma_speed_of_sound_mps=ini.number("noise", "sigma_speed_of_sound_mps", positive=True),
-        gate_sigma=ini.number("noise", "gate_sigma", 3.0, positive=True),
+        period_s=v(("beacons", "period_s")),
+        double_pulse_spacing_s=v(("beacons", "double_pulse_spacing_s")),
+        burst_length_s=v(("beacons", "burst_length_s")),
+        rx_count=v(("receivers", "count")),
+        ring_radius_m=v(("receivers", "ring_radius_m")),
+        first_angle_rad=math.radians(v(("receivers", "first_angle_deg"))),
+        rx_height_m=v(("receivers", "height_m")),
+        beamwidth_rad=math.radians(v(("receivers", "beamwidth_deg"))),
+        double_pulse_tolerance_s=v(("receivers", "double_pulse_tolerance_s")),
+        wheel_base_m=v(("robot", "wheel_base_m")),
+        wheel_radius_m=v(("robot", "wheel_radius_m")),
+        ticks_per_rev=v(("robot", "ticks_per_rev")),
+        encoder_rate_hz=v(("robot", "encoder_rate_hz")),
+        sigma_arrival_s=v(("noise", "sigma_arrival_s")),
+        sigma_wheel_per_m=v(("noise", "sigma_wheel_per_m")),
+        speed_of_sound_mps=v(("noise", "speed_of_sound_mps")),
+        sigma_speed_of_sound_mps=v(("noise", "sigma_speed_of_sound_mps")),
+        gate_sigma=v(("noise", "gate_sigma")),
     )
     if site.double_pulse_spacing_s <= site.burst_length_s:
         raise ini.error("beacons", "double_pulse_spacing_s",

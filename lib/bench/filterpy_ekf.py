@@ -27,7 +27,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 X, Y, TH, V, W, S, T, T0, KL, KR = range(10)
 NX = 10  # BL_FILTER_NX (lib/include/beaconloc/filter.h): + wheel scales k_l, k_r
 
-# kleeman-lab receiver ring and beacons (bl_config_default, hw_sim/scenarios/kleeman-lab.ini)
+# kleeman-lab receiver ring and beacons (bl_config_default, hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini)
 RING_RADIUS_M = 0.10
 RECEIVERS = 8
 RECEIVER_HEIGHT_M = 1.0

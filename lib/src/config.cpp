@@ -10,7 +10,7 @@ extern "C" int bl_config_default(bl_config *cfg)
 {
     if (cfg == nullptr) return BL_EINVAL;
     std::memset(cfg, 0, sizeof *cfg);
-    // Site: hw_sim/scenarios/kleeman-lab.ini (Kleeman 1992 §2: 12 m square
+    // Site: hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini (Kleeman 1992 §2: 12 m square
     // laboratory, six beacons fired 150 ms apart, eight receivers at 45°).
     cfg->beacon_count = 6;
     cfg->beacon_period_s = real(0.150);

@@ -23,7 +23,7 @@ REPO = Path(__file__).resolve().parents[2]
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bridge", default=str(REPO / "build/bridge/beaconloc-bridge"))
-    ap.add_argument("--site", default=str(REPO / "hw_sim/scenarios/kleeman-lab.ini"))
+    ap.add_argument("--site", default=str(REPO / "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"))
     ap.add_argument("--out", default=str(REPO / "build/bench/bridge"))
     ap.add_argument("--duration", type=float, default=1200.0, help="log length, s")
     ap.add_argument("--runs", type=int, default=5)

@@ -11,7 +11,7 @@ REPO = Path(__file__).resolve().parents[2]
 # The build folder: $BL_BUILD (make test-bridge-py passes its BUILD), else build/.
 BUILD = Path(os.environ.get("BL_BUILD", REPO / "build"))
 BRIDGE = BUILD / "bridge" / "beaconloc-bridge"
-SITE = REPO / "hw_sim" / "scenarios" / "kleeman-lab.ini"
+SITE = REPO / "hw_sim" / "beaconloc_sim" / "data" / "scenarios" / "kleeman-lab.ini"
 # Log timestamps are this epoch + simulated time (hw_sim scenario default
 # [output] log_epoch_s, not overridden by the scenarios used here).
 LOG_EPOCH_S = 1_700_000_000.0

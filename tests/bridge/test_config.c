@@ -2,7 +2,10 @@
  * cmocka: site-file parsing (bridge/config.c). Errors must name the file,
  * the line, the section and the key; the simulator's [site] is skipped,
  * any other unknown section is an error; a good file gives the values
- * written in it.
+ * written in it. The key table is the site schema's (site_keys.h, generated
+ * from hw_sim/beaconloc_sim/data/site_schema.toml): every key of it is read
+ * with its range, maps onto its bl_config field, and the [tuning] defaults
+ * are the library's.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -10,6 +13,7 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <math.h>
 #include <string.h>
 #include <unistd.h>
 #include <cmocka.h>
@@ -17,8 +21,10 @@
 #include "beaconloc.h"
 #include "config.h"
 #include "estimator.h"
+#include "site_keys.h"
+#include "site_to_lib.h"
 
-#define SITE "hw_sim/scenarios/kleeman-lab.ini"
+#define SITE "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"
 
 static const char *good_body =
     "[site]\n"                       /* 1  simulator's: ignored */
@@ -350,6 +356,11 @@ static void test_same_geometry(void **state)
     b = a; b.beacon[5].z_m = 1.1;            assert_false(config_same_geometry(&a, &b));
     /* beyond count: not part of the site */
     b = a; b.beacon[9].x_m = 3.0;            assert_true(config_same_geometry(&a, &b));
+    /* the wheel-scale calibration: switching it on or off is geometry (the
+     * library refuses it as tuning), its σ is tuning */
+    b = a; b.sigma_wheel_scale = 0.03;       assert_false(config_same_geometry(&a, &b));
+    a.sigma_wheel_scale = 0.02;              assert_true(config_same_geometry(&a, &b));
+    b.sigma_wheel_scale = 0;                 assert_false(config_same_geometry(&a, &b));
 }
 
 static void test_format_error_uses_lines(void **state)
@@ -376,6 +387,167 @@ static void test_format_error_uses_lines(void **state)
     assert_string_equal(err, want);
 }
 
+/* The schema's keys as the parser must see them (site_keys.h). */
+struct schema_key {
+    const char *section, *key, *type;
+    double min, max;
+    bool min_open;
+};
+static const struct schema_key schema_keys[] = {
+#define SCHEMA_KEY(sec, k, type, strct, member, lo, hi, open, def)             \
+    { #sec, #k, #type, lo, hi, open },
+    SITE_KEYS(SCHEMA_KEY)
+#undef SCHEMA_KEY
+};
+
+/* Every numeric key of the schema is known to the parser and refuses a value
+ * above its maximum (and at its minimum when that is excluded), naming the
+ * file, the line, the section and the key. */
+static void test_every_schema_key_has_its_range(void **state)
+{
+    (void)state;
+    size_t numeric = 0;
+    for (size_t i = 0; i < sizeof schema_keys / sizeof schema_keys[0]; i++) {
+        const struct schema_key *k = &schema_keys[i];
+        bool is_int = !strcmp(k->type, "K_INT");
+        if (!is_int && strcmp(k->type, "K_REAL"))
+            continue;
+        numeric++;
+        /* first in the file (good_body gives some keys); [beacon4] beyond
+         * count = 3: the range is checked while parsing, before the beacons
+         * are counted */
+        const char *sec = !strcmp(k->section, "beaconN") ? "beacon4" : k->section;
+        char body[2048], want[256];
+        double above = k->max + 1 + fabs(k->max);
+        if (is_int)
+            snprintf(body, sizeof body, "[%s]\n%s = %.0f\n%s", sec, k->key, above, good_body);
+        else
+            snprintf(body, sizeof body, "[%s]\n%s = %.17g\n%s", sec, k->key, above, good_body);
+        snprintf(want, sizeof want, is_int ? ":2: [%s] %s: %.0f out of range"
+                                           : ":2: [%s] %s: %g out of range", sec, k->key, above);
+        expect_error(body, want);
+        if (k->min_open) {
+            snprintf(body, sizeof body, "[%s]\n%s = %.17g\n%s", sec, k->key, k->min, good_body);
+            snprintf(want, sizeof want, ":2: [%s] %s: %g out of range (", sec, k->key, k->min);
+            expect_error(body, want);
+        }
+    }
+    assert_true(numeric >= 50); /* the schema's numbers (53 today) */
+}
+
+/* The [tuning] keys default to the library's own values (bl_config_default):
+ * the schema's defaults and the library's cannot drift apart. */
+static void test_tuning_defaults_are_the_librarys(void **state)
+{
+    (void)state;
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    bl_config lib;
+    bl_config_default(&lib);
+    int n = 0;
+#define SAME_DEFAULT(sec, k, type, member, field, geometry)                    \
+    if (!strcmp(#sec, "tuning")) {                                             \
+        n++;                                                                   \
+        if ((bl_real)cfg.member != lib.field)                                  \
+            fail_msg("[tuning] %s: schema default %g, library %g", #k,       \
+                     (double)cfg.member, (double)lib.field);                   \
+    }
+    SITE_LIB_FIELDS(SAME_DEFAULT)
+#undef SAME_DEFAULT
+    /* every [tuning] key is a library field */
+    int keys = 0;
+#define COUNT(sec, k, type, strct, member, lo, hi, open, def) keys++;
+    SITE_KEYS_tuning(COUNT)
+#undef COUNT
+    assert_int_equal(n, keys);
+    assert_true(n >= 21);
+}
+
+/* Every key with a bl_config field reaches it: changed alone from the site
+ * file's value, estimator_make_config gives the field that value. */
+#define NUDGE_INT(x) ((x) > 0 ? (x) - 1 : (x) + 1)
+#define NUDGE_REAL(x) ((x) != 0 ? (x) * 1.01 : 0.01)
+#define NUDGE_K_INT NUDGE_INT
+#define NUDGE_K_REAL NUDGE_REAL
+static void test_every_key_reaches_its_field(void **state)
+{
+    (void)state;
+    struct bridge_config site, cfg;
+    config_defaults(&site);
+    char err[CONFIG_ERR_LEN] = "";
+    assert_int_equal(config_load_file(&site, SITE, err, sizeof err), 0);
+    bl_config c;
+    int n = 0;
+#define REACHES(sec, k, type, member, field, geometry)                         \
+    cfg = site;                                                                \
+    cfg.member = NUDGE_##type(cfg.member);                                     \
+    if (estimator_make_config(&cfg, &c, err, sizeof err) != 0)                 \
+        fail_msg("[%s] %s: %s", #sec, #k, err);                                \
+    if (c.field != (LIB_CTYPE_##type)cfg.member || c.field == (LIB_CTYPE_##type)site.member) \
+        fail_msg("[%s] %s does not reach bl_config.%s", #sec, #k, #field);     \
+    n++;
+#define LIB_CTYPE_K_REAL bl_real
+#define LIB_CTYPE_K_INT uint32_t
+    SITE_LIB_FIELDS(REACHES)
+#undef REACHES
+    assert_true(n >= 40);
+    /* the beacons: [beaconN] x_m, y_m, z_m -> beacons[N-1] */
+    cfg = site;
+    cfg.beacon[2].x_m += 0.5;
+    cfg.beacon[2].y_m -= 0.5;
+    cfg.beacon[2].z_m += 0.25;
+    assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), 0);
+    assert_true(c.beacons[2].x_m == (bl_real)cfg.beacon[2].x_m);
+    assert_true(c.beacons[2].y_m == (bl_real)cfg.beacon[2].y_m);
+    assert_true(c.beacons[2].z_m == (bl_real)cfg.beacon[2].z_m);
+}
+
+/* The library's geometry check (bl_config_same_geometry) is the schema's
+ * geometry = "library" list: each field changed alone from the site file's
+ * value is geometry exactly when the schema says so. */
+#define IS_LIBRARY_GEOMETRY_SITE_GEOMETRY_library true
+#define IS_LIBRARY_GEOMETRY_SITE_GEOMETRY_bridge false
+#define IS_LIBRARY_GEOMETRY_SITE_GEOMETRY_none false
+#define IS_LIBRARY_GEOMETRY(g) IS_LIBRARY_GEOMETRY_##g
+static void test_library_geometry_is_the_schemas(void **state)
+{
+    (void)state;
+    struct bridge_config site;
+    config_defaults(&site);
+    char err[CONFIG_ERR_LEN] = "";
+    assert_int_equal(config_load_file(&site, SITE, err, sizeof err), 0);
+    bl_config base, c;
+    assert_int_equal(estimator_make_config(&site, &base, err, sizeof err), 0);
+    int geometry = 0;
+#define LIB_GEOMETRY(sec, k, type, member, field, g)                           \
+    c = base;                                                                  \
+    c.field = (LIB_CTYPE_##type)NUDGE_##type(c.field);                         \
+    if (bl_config_same_geometry(&base, &c) == IS_LIBRARY_GEOMETRY(g))          \
+        fail_msg("[%s] %s: the library %s it geometry, the schema %s", #sec,  \
+                 #k, IS_LIBRARY_GEOMETRY(g) ? "does not call" : "calls",      \
+                 IS_LIBRARY_GEOMETRY(g) ? "does" : "does not");               \
+    geometry += IS_LIBRARY_GEOMETRY(g);
+    SITE_LIB_FIELDS(LIB_GEOMETRY)
+#undef LIB_GEOMETRY
+    assert_true(geometry >= 8);
+    /* [beaconN] x_m, y_m, z_m: geometry = "library" */
+#define BEACON_GEOMETRY(member, field)                                         \
+    c = base;                                                                  \
+    c.beacons[2].field += 1;                                                   \
+    assert_false(bl_config_same_geometry(&base, &c));
+    SITE_LIB_BEACON_FIELDS(BEACON_GEOMETRY)
+#undef BEACON_GEOMETRY
+    /* and the bridge's decision holds the library's */
+    struct bridge_config b = site;
+    b.wheel_base_m += 0.01;
+    assert_false(config_same_geometry(&site, &b));
+    b = site;
+    b.wheel_radius_m += 0.01; /* bridge geometry: the library calls it tuning */
+    assert_false(config_same_geometry(&site, &b));
+    site_to_lib(&b, &c);
+    assert_true(bl_config_same_geometry(&base, &c));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -394,6 +566,10 @@ int main(void)
         cmocka_unit_test(test_no_beacons_is_an_error),
         cmocka_unit_test(test_same_geometry),
         cmocka_unit_test(test_format_error_uses_lines),
+        cmocka_unit_test(test_every_schema_key_has_its_range),
+        cmocka_unit_test(test_tuning_defaults_are_the_librarys),
+        cmocka_unit_test(test_every_key_reaches_its_field),
+        cmocka_unit_test(test_library_geometry_is_the_schemas),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -22,7 +22,7 @@
 #include "estimator.h"
 #include "log.h"
 
-#define SITE "hw_sim/scenarios/kleeman-lab.ini"
+#define SITE "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"
 #define SOS_MPS 343.0
 #define RX_NODE_OFFSET_US 4289967296LL /* receiver node clock = bridge + this: wraps at 5 s */
 #define ENC_NODE_OFFSET_US 123456789LL

@@ -27,6 +27,7 @@
 #include <cmocka.h>
 
 #include "log.h"
+#include "mav_test_util.h" /* udp_listener, wait_readable */
 #include "mav_links.h"
 #include "resolver.h"
 
@@ -71,12 +72,6 @@ static int64_t now_ms(void)
     return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
 }
 
-static bool wait_readable(int fd, int timeout_ms)
-{
-    struct pollfd p = {.fd = fd, .events = POLLIN};
-    return poll(&p, 1, timeout_ms) == 1 && (p.revents & POLLIN);
-}
-
 /* Wait until every lookup thread started has finished (its job freed). */
 static void wait_lookups_finished(void)
 {
@@ -84,19 +79,6 @@ static void wait_lookups_finished(void)
         usleep(10000);
     assert_int_equal(atomic_load(&lookups_done), atomic_load(&lookups_started));
     usleep(20000); /* the thread's last steps after getaddrinfo: unlock, free */
-}
-
-static int udp_listener(uint16_t *port)
-{
-    int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-    assert_true(fd >= 0);
-    struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = 0};
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    assert_int_equal(bind(fd, (struct sockaddr *)&a, sizeof a), 0);
-    socklen_t len = sizeof a;
-    assert_int_equal(getsockname(fd, (struct sockaddr *)&a, &len), 0);
-    *port = ntohs(a.sin_port);
-    return fd;
 }
 
 /* Datagrams waiting on fd (each one MAVLink message here), read and counted. */

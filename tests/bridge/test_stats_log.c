@@ -148,6 +148,8 @@ static void test_json_report(void **state)
     assert_non_null(strstr(buf, "\"duplicates\": 7,"));
     assert_non_null(strstr(buf, "\"duplicates_per_frame\": {\"pulse_detection\": 6, "
                                 "\"wheel_encoders\": 0, \"node_status\": 1}"));
+    assert_non_null(strstr(buf, "\"frames_received_by_id\": {\"0x100\": 11, \"0x110\": 22, "
+                                "\"0x120\": 0}"));
     assert_non_null(strstr(buf, "\"out_of_order\": 8,"));
     assert_non_null(strstr(buf, "\"out_of_order_per_frame\": {\"pulse_detection\": 0, "
                                 "\"wheel_encoders\": 8, \"node_status\": 0}"));
@@ -156,29 +158,42 @@ static void test_json_report(void **state)
     assert_int_equal(stats_write_json(&r, "/nonexistent/dir/s.json") < 0, 1);
 }
 
+/* The log written to a temporary file while the test runs (log_set_stream),
+ * read back by captured_log(). */
+static FILE *capture_log(void)
+{
+    char path[] = "/tmp/test_log_XXXXXX";
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    FILE *f = fdopen(fd, "w+");
+    unlink(path);
+    log_set_stream(f);
+    log_set_level(LOG_INFO);
+    return f;
+}
+
+static void captured_log(FILE *f, char *text, size_t size)
+{
+    log_flush();
+    log_set_stream(NULL);
+    rewind(f);
+    size_t n = fread(text, 1, size - 1, f);
+    text[n] = '\0';
+    fclose(f);
+}
+
 static void test_log_repeats_summarised(void **state)
 {
     (void)state;
-    char path[] = "/tmp/test_log_XXXXXX";
-    int fd = mkstemp(path);
-    close(fd);
-    FILE *f = fopen(path, "w+");
-    log_set_stream(f);
-    log_set_level(LOG_INFO);
+    FILE *f = capture_log();
     unsigned long before = log_suppressed_total();
     for (int i = 0; i < 533; i++)
         log_warn("can0: %s", "Network is down");
     log_info("other");
     log_debug("hidden at info level");
     log_info("other");
-    log_flush();
-    log_set_stream(NULL);
-    rewind(f);
     char text[1024];
-    size_t n = fread(text, 1, sizeof text - 1, f);
-    text[n] = '\0';
-    fclose(f);
-    unlink(path);
+    captured_log(f, text, sizeof text);
     assert_string_equal(text,
                         "warning: can0: Network is down\n"
                         "warning: last message repeated 532 times\n"
@@ -191,6 +206,39 @@ static void test_log_repeats_summarised(void **state)
     assert_int_equal(log_level_parse("verbose", &lv), -1);
 }
 
+/* The status line, word for word as docs/bridge.md (STATUS LINE) shows it;
+ * the per-kind counts by the sensor table's short names. */
+static void test_status_line_text(void **state)
+{
+    (void)state;
+    struct frame_counters fc;
+    frame_counters_init(&fc);
+    fc.received[FRAME_PULSE] = 181;
+    fc.received[FRAME_ENCODERS] = 1000;
+    fc.received[FRAME_STATUS] = 20;
+    fc.malformed = 1;
+    fc.unknown_id = 2;
+    fc.out_of_range = 3;
+    fc.lost[FRAME_PULSE] = 4;
+    fc.duplicates[FRAME_ENCODERS] = 5;
+    fc.out_of_order[FRAME_STATUS] = 6;
+    struct stats_report r = { .frames = &fc, .frames_total = 1201, .kernel_drops = 7,
+                              .error_frames = 8, .pulses_accepted = 69, .pulses_rejected = 9,
+                              .odometry_sent = 284, .record_write_errors = 10,
+                              .estimates_write_errors = 1, .latency_p50_us = 8,
+                              .latency_p99_us = 21, .latency_interval_p50_us = 7,
+                              .latency_interval_p99_us = -1 };
+    FILE *f = capture_log();
+    stats_status_line(&r, "final", "x=5.369 y=2.848");
+    char text[1024];
+    captured_log(f, text, sizeof text);
+    assert_string_equal(text,
+                        "info: final: frames 1201 (pulse 181 enc 1000 status 20) bad 1 unknown 2 "
+                        "range 3 lost 4 dup 5 late 6 kdrop 7 errfr 8 | pulses ok 69 rej 9 | "
+                        "x=5.369 y=2.848 | odom 284 werr 11 | latency p50 8 p99 21 us "
+                        "(interval p50 7 p99 -1 us)\n");
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -199,6 +247,7 @@ int main(void)
         cmocka_unit_test(test_interval_close_resets),
         cmocka_unit_test(test_json_report),
         cmocka_unit_test(test_log_repeats_summarised),
+        cmocka_unit_test(test_status_line_text),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

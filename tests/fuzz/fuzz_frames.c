@@ -2,7 +2,7 @@
  * beaconloc fuzzing — CAN input of the bridge: SocketCAN reads
  * (bridge/can_in.c, recvmsg replaced), frame decoding (bridge/frames.c and
  * the cantools codec) and the decoded frames driving the estimator
- * (bridge/estimator.c, node_clock.c, the library) as bridge/main.c's
+ * (bridge/estimator.c, node_clock.c, the library) as bridge/frame_in.c's
  * handle_frame() does, on the kleeman-lab site.
  *
  * Input: a sequence of records, each one opcode byte then its fields:
@@ -38,6 +38,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include "beaconloc_can.h"
 #include "can_in.h"
 #include "config.h"
 #include "estimator.h"
@@ -261,8 +262,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         if (r == FRAME_OK) {
             FUZZ_CHECK(msg.len == 8 && !(msg.flags & (CAN_MSG_EXTENDED | CAN_MSG_RTR |
                                                       CAN_MSG_FD | CAN_MSG_ERROR)) &&
-                           (msg.id == FRAME_ID_PULSE || msg.id == FRAME_ID_ENCODERS ||
-                            msg.id == FRAME_ID_STATUS),
+                           (msg.id == BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID ||
+                            msg.id == BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID ||
+                            msg.id == BEACONLOC_CAN_NODE_STATUS_FRAME_ID),
                        "FRAME_OK for id 0x%x len %u flags 0x%x", (unsigned)msg.id,
                        msg.len, msg.flags);
             switch (f.kind) {

@@ -23,8 +23,8 @@ from pathlib import Path
 import cantools
 
 ROOT = Path(__file__).resolve().parents[2]
-DBC = ROOT / "hw_sim/can/beaconloc.dbc"
-SITE = ROOT / "hw_sim/scenarios/kleeman-lab.ini"
+DBC = ROOT / "hw_sim/beaconloc_sim/data/beaconloc.dbc"
+SITE = ROOT / "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"
 SCENARIOS = [("kleeman-lab", 4.0), ("echo-storm", 3.0), ("encoder-silence", 3.0), ("kidnap", 3.0)]
 
 

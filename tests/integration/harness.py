@@ -27,9 +27,9 @@ REPO = Path(__file__).resolve().parents[2]
 BUILD = Path(os.environ.get("BL_BUILD", REPO / "build"))
 BRIDGE = BUILD / "bridge" / "beaconloc-bridge"
 SIM = REPO / ".venv" / "bin" / "beaconloc-sim"
-SCENARIOS = REPO / "hw_sim" / "scenarios"
+SCENARIOS = REPO / "hw_sim" / "beaconloc_sim" / "data" / "scenarios"
 SITE = SCENARIOS / "kleeman-lab.ini"
-DBC = REPO / "hw_sim" / "can" / "beaconloc.dbc"
+DBC = REPO / "hw_sim" / "beaconloc_sim" / "data" / "beaconloc.dbc"
 
 # MAVLink enum values the bridge must send (common.xml, from pymavlink).
 MAV_FRAME_LOCAL_FRD = mavutil.mavlink.MAV_FRAME_LOCAL_FRD

@@ -57,50 +57,44 @@ static int set_u32(uint32_t *f, const char *v)
     return 1;
 }
 
+/* The site schema's mapping of keys onto bl_config fields (site_keys.h,
+ * generated from hw_sim/beaconloc_sim/data/site_schema.toml): the test reads
+ * the file with the mapping the bridge uses, not a copy of it. */
+#include "site_keys.h"
+#define SET_K_REAL set_real
+#define SET_K_INT set_u32
+
+/* An estimator section of the schema: one with a key that sets a field. */
+static int estimator_section(const char *section)
+{
+#define SECTION_OF(sec, k, type, member, field, geometry) if (!strcmp(section, #sec)) return 1;
+    SITE_LIB_FIELDS(SECTION_OF)
+#undef SECTION_OF
+    return 0;
+}
+
 static int site_handler(void *user, const char *section, const char *key, const char *value)
 {
     site_ctx *c = user;
     bl_config *g = &c->cfg;
     int ok = -1; /* -1: not an estimator section */
-#define R(sec, k, field) else if (!strcmp(section, sec) && !strcmp(key, k)) ok = set_real(&g->field, value)
-#define U(sec, k, field) else if (!strcmp(section, sec) && !strcmp(key, k)) ok = set_u32(&g->field, value)
-    if (0) {
-    }
-    U("beacons", "count", beacon_count);
-    R("beacons", "period_s", beacon_period_s);
-    R("beacons", "double_pulse_spacing_s", double_pulse_spacing_s);
-    R("beacons", "burst_length_s", burst_length_s);
-    U("receivers", "count", receiver_count);
-    R("receivers", "ring_radius_m", ring_radius_m);
-    R("receivers", "first_angle_deg", first_angle_deg);
-    R("receivers", "angle_step_deg", angle_step_deg);
-    R("receivers", "height_m", receiver_height_m);
-    R("receivers", "beamwidth_deg", beamwidth_deg);
-    R("robot", "wheel_base_m", wheel_base_m);
-    R("robot", "wheel_radius_m", wheel_radius_m);
-    U("robot", "ticks_per_rev", ticks_per_rev);
-    R("robot", "encoder_rate_hz", encoder_rate_hz);
-    R("robot", "sigma_wheel_scale", sigma_wheel_scale); /* optional key */
-    R("noise", "sigma_arrival_s", sigma_arrival_s);
-    R("noise", "sigma_wheel_per_m", sigma_wheel_per_m);
-    R("noise", "speed_of_sound_mps", speed_of_sound_mps);
-    R("noise", "sigma_speed_of_sound_mps", sigma_speed_of_sound_mps);
-    R("noise", "gate_sigma", gate_sigma);
-    /* the receiver node's own setting (its hold of a detection), the bridge's */
-    else if (!strcmp(section, "receivers") && !strcmp(key, "double_pulse_tolerance_s")) return 1;
-    else if (!strncmp(section, "beacon", 6) && section[6] >= '1' && section[6] <= '9') {
+    if (!strncmp(section, "beacon", 6) && section[6] >= '1' && section[6] <= '9') {
         const int n = atoi(section + 6);
-        if (n < 1 || n > BL_MAX_BEACONS) ok = 0;
-        else if (!strcmp(key, "x_m")) ok = set_real(&g->beacons[n - 1].x_m, value);
-        else if (!strcmp(key, "y_m")) ok = set_real(&g->beacons[n - 1].y_m, value);
-        else if (!strcmp(key, "z_m")) ok = set_real(&g->beacons[n - 1].z_m, value);
-        else ok = 0;
-    } else if (!strcmp(section, "beacons") || !strcmp(section, "receivers") || !strcmp(section, "robot") ||
-               !strcmp(section, "noise")) {
         ok = 0;
+#define BEACON_FIELD(member, field) \
+        else if (!strcmp(key, #member)) ok = set_real(&g->beacons[n - 1].field, value);
+        if (n < 1 || n > BL_MAX_BEACONS) ok = 0;
+        SITE_LIB_BEACON_FIELDS(BEACON_FIELD)
+#undef BEACON_FIELD
+    } else if (estimator_section(section) && strcmp(section, "tuning") && strcmp(section, "bridge")) {
+        ok = 0;
+#define FIELD(sec, k, type, member, field, geometry) \
+        if (!strcmp(section, #sec) && !strcmp(key, #k)) ok = SET_##type(&g->field, value);
+        SITE_LIB_FIELDS(FIELD)
+#undef FIELD
+        /* the receiver node's own setting (its hold of a detection), the bridge's */
+        if (!strcmp(section, "receivers") && !strcmp(key, "double_pulse_tolerance_s")) return 1;
     }
-#undef R
-#undef U
     if (ok == -1) return 1; /* [site], [bridge]: not the estimator's */
     c->keys++;
     if (!ok) {
@@ -114,7 +108,7 @@ static void test_site_file_matches_defaults(void **state)
 {
     (void)state;
     const char *path = getenv("BL_SITE_FILE");
-    if (!path) path = "hw_sim/scenarios/kleeman-lab.ini";
+    if (!path) path = "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini";
     site_ctx c;
     memset(&c, 0, sizeof c);
     assert_int_equal(bl_config_default(&c.cfg), BL_OK);

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from beaconloc_sim.site import SCENARIO_DIR
+from beaconloc_sim.resources import builtin_site_path
 
-SITE_TEXT = (SCENARIO_DIR / "kleeman-lab.ini").read_text()
+SITE_TEXT = builtin_site_path().read_text()
 
 
 def site_with(**overrides) -> str:

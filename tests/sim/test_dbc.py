@@ -9,7 +9,7 @@ import pytest
 
 from beaconloc_sim import can_out, simulate
 from beaconloc_sim.scenario import load_scenario
-from beaconloc_sim.site import DBC_PATH
+from beaconloc_sim.resources import dbc_path
 
 
 @pytest.fixture(scope="module")
@@ -18,7 +18,7 @@ def echo_storm_run():
 
 
 def test_every_simulated_frame_decodes_to_its_signals(echo_storm_run):
-    db = cantools.database.load_file(str(DBC_PATH))
+    db = cantools.database.load_file(str(dbc_path()))
     res = echo_storm_run
     assert {0x100, 0x110, 0x120} <= set(res.frames.arb_id.tolist())
     for fid, data, sig in zip(res.frames.arb_id.tolist(), res.frames.data, res.frames.signals):
@@ -28,7 +28,7 @@ def test_every_simulated_frame_decodes_to_its_signals(echo_storm_run):
 
 
 def test_every_dbc_message_round_trips_random_values():
-    db = cantools.database.load_file(str(DBC_PATH))
+    db = cantools.database.load_file(str(dbc_path()))
     rnd = random.Random(7)
     for msg in db.messages:
         for _ in range(200):
@@ -68,3 +68,30 @@ def test_log_reads_back_with_python_can(tmp_path, echo_storm_run):
         assert msg.timestamp == pytest.approx(1_700_000_000.0 + t, abs=2e-6)
     stamps = [m.timestamp for m in msgs]
     assert stamps == sorted(stamps)
+
+
+def test_frame_table_comes_from_the_dbc():
+    """Every node kind's frame id and counter modulo are the DBC's, and no frame id or
+    modulus is written as a literal in the simulator's code."""
+    import re
+    from pathlib import Path
+
+    from beaconloc_sim import dbc, nodes
+    db = cantools.database.load_file(str(dbc_path()))
+    kinds = {nodes.ReceiverRing, nodes.WheelEncoders, nodes.NodeStatus}
+    for kind in kinds:
+        msg = db.get_message_by_name(kind.message)
+        counter = msg.get_signal_by_name("Counter")
+        assert kind.frame_spec() == dbc.FrameSpec(msg.name, msg.frame_id, 1 << counter.length)
+    assert {k.frame_spec().counter_modulo for k in kinds} == {8, 16}
+    assert dbc.message_names() == {0x100: "PULSE_DETECTION", 0x110: "WHEEL_ENCODERS",
+                                   0x120: "NODE_STATUS"}
+    from beaconloc_sim.clocks import WRAP_US
+    from beaconloc_sim.encoders import TICK_WRAP
+    assert TICK_WRAP == dbc.signal_modulo("WHEEL_ENCODERS", "RightTicks") == 1 << 14
+    assert all(dbc.signal_modulo(m.name, "NodeTime") == WRAP_US
+               for m in db.messages if "NodeTime" in [s.name for s in m.signals])
+    package = Path(dbc.__file__).parent
+    for path in sorted(package.rglob("*.py")):
+        code = re.sub(r'""".*?"""|#[^\n]*', "", path.read_text(), flags=re.DOTALL)
+        assert not re.search(r"\b(0x1[0-5][0-9a-fA-F]|256|272|288|1 << 14|\(1 << 3\))\b", code), path

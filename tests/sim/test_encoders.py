@@ -10,7 +10,7 @@ import pytest
 from beaconloc_sim import simulate
 from beaconloc_sim.encoders import TICK_WRAP, dead_reckoning, unwrap_ticks
 from beaconloc_sim.scenario import load_scenario
-from beaconloc_sim.site import DBC_PATH
+from beaconloc_sim.resources import dbc_path
 
 from conftest import site_with
 
@@ -19,7 +19,7 @@ STRAIGHT = ("duration_s = 12\n[path]\nstart = 2.0, 6.0, 0\nspeed_mps = 0.5\n"
 
 
 def _encoder_frames(res):
-    db = cantools.database.load_file(str(DBC_PATH))
+    db = cantools.database.load_file(str(dbc_path()))
     out = []
     for data, fid in zip(res.frames.data, res.frames.arb_id.tolist()):
         if fid == simulate.ID_ENCODERS:

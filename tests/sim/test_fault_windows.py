@@ -14,7 +14,7 @@ from beaconloc_sim.cli import main as cli_main
 from beaconloc_sim.encoders import unwrap_ticks
 from beaconloc_sim.inifile import ConfigError
 from beaconloc_sim.scenario import load_scenario
-from beaconloc_sim.site import SCENARIO_DIR
+from beaconloc_sim.resources import builtin_site_path
 
 LAP = "\n".join(f"segment{i + 2} = {s}" for i, s in enumerate(
     ["straight 6.0", "arc 90 0.5", "straight 5.0", "arc 90 0.5"] * 2))
@@ -198,4 +198,4 @@ def test_soak_scenario_has_one_fault_an_hour_in_turn():
     st = scn.trajectory.state(np.arange(0, 86400, 7.0))
     assert st["x_m"].min() > 0.5 and st["x_m"].max() < 11.5
     assert st["y_m"].min() > 0.5 and st["y_m"].max() < 11.5
-    assert SCENARIO_DIR.joinpath("kleeman-lab.ini").is_file()
+    assert scn.site.path.resolve() == builtin_site_path().resolve()

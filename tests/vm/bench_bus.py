@@ -30,7 +30,7 @@ REPO = Path(__file__).resolve().parents[2]
 BUILD = Path(os.environ.get("BL_BUILD", REPO / "build"))
 BRIDGE = BUILD / "bridge" / "beaconloc-bridge"
 SIM = REPO / ".venv" / "bin" / "beaconloc-sim"
-SITE = REPO / "hw_sim" / "scenarios" / "kleeman-lab.ini"
+SITE = REPO / "hw_sim" / "beaconloc_sim" / "data" / "scenarios" / "kleeman-lab.ini"
 
 
 def live_run(iface: str, out: Path, live_s: float, spin_ms: float) -> tuple[dict, dict]:

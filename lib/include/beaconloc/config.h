@@ -2,7 +2,7 @@
  * beaconloc — site geometry and estimator tuning in one params struct.
  *
  * The fields of the site sections map 1:1 onto the keys of the INI site file
- * (hw_sim/scenarios/kleeman-lab.ini): section [beacons] -> beacon_*,
+ * (hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini): section [beacons] -> beacon_*,
  * [beaconN] x_m/y_m/z_m -> beacons[N-1], [receivers] -> receiver_*,
  * [robot] -> robot fields, [noise] -> noise fields. The comment after each
  * field names its INI key. Fields under "tuning" default to
@@ -120,7 +120,7 @@ typedef struct bl_config {
                                          the fresh pulses (filter.h, "Time gaps") */
 } bl_config;
 
-/* Fills *cfg with the kleeman-lab site (hw_sim/scenarios/kleeman-lab.ini)
+/* Fills *cfg with the kleeman-lab site (hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini)
  * and the default tuning. Always succeeds for a non-NULL cfg.
  * Errors: BL_EINVAL (cfg NULL). */
 int bl_config_default(bl_config *cfg);

@@ -1,0 +1,61 @@
+/*
+ * beaconloc-bridge — the sensor table (contract: sensors.h).
+ */
+#include "sensors.h"
+
+#include "beaconloc_can.h" /* generated at build time from the DBC */
+
+/* Pulse frames of one firing leave the receiver node out of NodeTime order
+ * by up to the firing's spread over the ring (0.2 m / 343 m/s = 0.6 ms)
+ * plus the node's latency jitter (0.3 ms): a late pulse frame may be newer
+ * than the newest by this much (us). */
+#define PULSE_STAMP_SLACK_US 2000
+
+const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
+    [FRAME_PULSE] = {
+        .name = "pulse_detection", .short_name = "pulse",
+        .id_first = BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID,
+        .id_last = BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID,
+        .counter_in_range = beaconloc_can_pulse_detection_counter_is_in_range,
+        .stamp_slack_us = PULSE_STAMP_SLACK_US, .tracks = 1,
+        .decode = sensor_pulse_decode, .handle = sensor_pulse_handle,
+    },
+    [FRAME_ENCODERS] = {
+        .name = "wheel_encoders", .short_name = "enc",
+        .id_first = BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID,
+        .id_last = BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID,
+        .counter_in_range = beaconloc_can_wheel_encoders_counter_is_in_range,
+        .stamp_slack_us = 0, .tracks = 1,
+        .decode = sensor_encoders_decode, .handle = sensor_encoders_handle,
+    },
+    [FRAME_STATUS] = {
+        .name = "node_status", .short_name = "status",
+        .id_first = BEACONLOC_CAN_NODE_STATUS_FRAME_ID,
+        .id_last = BEACONLOC_CAN_NODE_STATUS_FRAME_ID,
+        .counter_in_range = beaconloc_can_node_status_counter_is_in_range,
+        .stamp_slack_us = 0, .tracks = FRAME_MAX_NODES, /* one per node id */
+        .decode = sensor_status_decode, .handle = sensor_status_handle,
+    },
+};
+
+const struct sensor_kind *sensor_kind_of_id(uint32_t id)
+{
+    for (int k = 0; k < FRAME_KIND_COUNT; k++)
+        if (id >= sensor_kinds[k].id_first && id <= sensor_kinds[k].id_last)
+            return &sensor_kinds[k];
+    return NULL;
+}
+
+unsigned sensor_counter_modulo(const struct sensor_kind *k)
+{
+    unsigned n = 0;
+    while (n < 256u && k->counter_in_range((uint8_t)n))
+        n++;
+    return n;
+}
+
+void sensor_filter(const struct sensor_kind *k, uint32_t *id, uint32_t *mask)
+{
+    *id = k->id_first;
+    *mask = 0x7ffu & ~(k->id_last - k->id_first); /* CAN_SFF_MASK less the block */
+}

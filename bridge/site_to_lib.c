@@ -1,0 +1,84 @@
+/*
+ * beaconloc-bridge — site file -> estimator library configuration.
+ */
+#include "site_to_lib.h"
+
+#include <stdio.h>
+#include <string.h>
+
+#include "estimator.h"
+
+/* bl_config field -> site-file key, for the library's config check: the
+ * keys of the schema that set a field, and [beacon1] x_m for "beacons". */
+struct field_key {
+    const char *field, *section, *key;
+};
+
+static const struct field_key field_keys[] = {
+#define FIELD_KEY(sec, k, type, member, field, geometry) { #field, #sec, #k },
+    SITE_LIB_FIELDS(FIELD_KEY)
+#undef FIELD_KEY
+    { "beacons", "beacon1", "x_m" },
+};
+
+/* C type of a field in bl_config, by its key type. */
+#define LIB_CTYPE_K_REAL bl_real
+#define LIB_CTYPE_K_INT uint32_t
+
+void site_to_lib(const struct bridge_config *cfg, bl_config *out)
+{
+    bl_config_default(out);
+    /* Every key with a bl_config field (the parse ranges keep the integers
+     * >= 0). [bridge] max_coast_s is max_predict_gap_s: a CAN outage (interface
+     * down, a node rebooting) shorter than this is coasted through on
+     * constant velocity, P grows, the pulses pull the state back afterwards;
+     * longer, the filter re-starts from the snapshot solver. */
+#define APPLY(sec, k, type, member, field, geometry)                           \
+    out->field = (LIB_CTYPE_##type)cfg->member;
+    SITE_LIB_FIELDS(APPLY)
+#undef APPLY
+    for (int i = 0; i < cfg->beacon_count && i < BL_MAX_BEACONS; i++) {
+#define APPLY_BEACON(member, field) out->beacons[i].field = (bl_real)cfg->beacon[i].member;
+        SITE_LIB_BEACON_FIELDS(APPLY_BEACON)
+#undef APPLY_BEACON
+    }
+}
+
+int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
+                          char *err, size_t errlen)
+{
+    bl_config c;
+    site_to_lib(cfg, &c);
+    const char *bad = NULL;
+    int rc = bl_config_check(&c, &bad);
+    if (rc != BL_OK) {
+        const char *section = "beacons", *key = bad ? bad : "?";
+        for (size_t i = 0; bad && i < sizeof field_keys / sizeof field_keys[0]; i++)
+            if (!strcmp(field_keys[i].field, bad)) {
+                section = field_keys[i].section;
+                key = field_keys[i].key;
+            }
+        char why[160];
+        snprintf(why, sizeof why, "rejected by the estimator (%s: %s)",
+                 bad ? bad : "?", bl_strerror(rc));
+        config_format_error(cfg, section, key, why, err, errlen);
+        return -1;
+    }
+    *out = c;
+    return 0;
+}
+
+int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
+                    bl_seq_config *out, char *err, size_t errlen)
+{
+    int rc = bl_sequencer_config_from_site(c, 0, out);
+    if (rc != BL_OK) {
+        char why[160];
+        snprintf(why, sizeof why,
+                 "beacon time windows overlap: period too short for the "
+                 "beacons' spread (%s)", bl_strerror(rc));
+        config_format_error(cfg, "beacons", "period_s", why, err, errlen);
+        return -1;
+    }
+    return 0;
+}

@@ -1,0 +1,32 @@
+"""NODE_STATUS: the health frame every sensor node sends at 1 Hz of its own clock, at
+its own phase, with its own rolling counter (one NodeStatus per node on the bus)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..dbc import signal_modulo
+from .base import Interval, Node
+
+PERIOD_US = 1_000_000
+
+
+class NodeStatus(Node):
+    message = "NODE_STATUS"
+
+    def __init__(self, host: Node):
+        super().__init__(host.clock)
+        self.host = host
+        self.node_id = host.node_id
+        self.uptime_modulo = signal_modulo(self.message, "Uptime")
+
+    def sample(self, iv: Interval) -> tuple[np.ndarray, list[dict]]:
+        st_us = self.periodic_us(iv, PERIOD_US, self.host.status_phase_us)
+        t_st = self.clock.true_time_s(st_us)
+        lat = iv.latency_s(len(t_st))
+        sent = np.flatnonzero(~self.host.silent(t_st))
+        flags = self.host.status_flags(t_st[sent])
+        signals = [{"NodeId": self.node_id, "Flags": int(f),
+                    "Uptime": int(st_us[i] // PERIOD_US) % self.uptime_modulo,
+                    "TxErrorCount": 0, "RxErrorCount": 0, "Overruns": 0}
+                   for i, f in zip(sent.tolist(), flags.tolist())]
+        return t_st[sent] + lat[sent], signals

@@ -1,0 +1,220 @@
+"""The site schema (hw_sim/beaconloc_sim/data/site_schema.toml) against what derives from it.
+
+The bridge's C tables are generated from the schema at build time (and checked
+by tests/bridge/test_config.c); here: the schema is well formed, the docs' key
+table is the schema's, the repo's site files hold only schema keys within
+their ranges, and the simulator reads every key the schema gives it.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from beaconloc_sim.inifile import ConfigError
+from beaconloc_sim.site import SCENARIO_DIR, load_site
+from beaconloc_sim.site_schema import (BEACON_SECTION, DOCS_BEGIN, DOCS_END, Range, c_header,
+                                       docs_table, load_schema, parse_schema)
+
+from conftest import SITE_TEXT
+
+REPO = Path(__file__).resolve().parents[2]
+SCHEMA = load_schema()
+
+
+def test_docs_key_table_is_the_schemas():
+    """docs/bridge.md carries the generated table: `make docs-site-keys` after a schema change."""
+    text = (REPO / "docs" / "bridge.md").read_text(encoding="utf-8")
+    begin, end = text.find(DOCS_BEGIN), text.find(DOCS_END)
+    assert 0 <= begin < end, "the site-keys markers are missing from docs/bridge.md"
+    documented = text[begin:end + len(DOCS_END)]
+    assert documented == docs_table(SCHEMA), \
+        "docs/bridge.md's site-key table differs from the schema: run `make docs-site-keys`"
+
+
+def test_docs_table_has_one_row_per_key():
+    rows = [r for r in docs_table(SCHEMA).splitlines() if r.startswith("| ") and "`" in r]
+    keys = [re.search(r"\| `([a-z_0-9]+)` \|", r).group(1) for r in rows]
+    assert keys == [k.name for k in SCHEMA.keys()]
+
+
+def test_schema_sections_in_file_order():
+    assert [s.name for s in SCHEMA.sections] == [
+        "site", "beacons", BEACON_SECTION, "receivers", "robot", "noise", "tuning", "bridge"]
+    assert SCHEMA.sections_phrase("N") == ("[site], [beacons], [beacon1]..[beaconN], [receivers], "
+                                           "[robot], [noise], [tuning], [bridge]")
+
+
+def _ini_keys(path: Path) -> list[tuple[str, str, str]]:
+    section, out = None, []
+    for line in path.read_text().splitlines():
+        line = line.split(";")[0].strip()
+        if line.startswith("["):
+            section = line.strip("[]")
+        elif "=" in line:
+            key, value = (p.strip() for p in line.split("=", 1))
+            out.append((section, key, value))
+    return out
+
+
+@pytest.mark.parametrize("site", sorted(p.name for p in SCENARIO_DIR.glob("*.ini")
+                                        if not p.name.endswith(".scenario.ini")))
+def test_repo_site_files_hold_schema_keys_in_range(site):
+    for section, key, value in _ini_keys(SCENARIO_DIR / site):
+        name = BEACON_SECTION if re.fullmatch(r"beacon[1-9][0-9]*", section) else section
+        k = SCHEMA.section(name).key(key)   # KeyError: a key the schema does not know
+        if k.numeric:
+            for rng in (k.range, k.sim_range):
+                assert rng is None or rng.contains(float(value)), (section, key, value, rng)
+
+
+@pytest.mark.parametrize("text, why", [
+    ("(0, 1]", None), ("[1, 16]", None), ("[0, inf)", None), ("(-inf, inf)", None),
+    ("0..1", "not an interval"), ("[2, 1]", "empty interval"),
+])
+def test_range_notation(text, why):
+    if why:
+        with pytest.raises(ValueError, match=why):
+            Range.parse(text)
+    else:
+        r = Range.parse(text)
+        assert str(Range.parse(str(r).replace("∞", "inf"))) == str(r)
+
+
+def test_range_bounds():
+    r = Range.parse("(0, 1]")
+    assert not r.contains(0) and r.contains(1e-9) and r.contains(1) and not r.contains(1.0001)
+    assert Range.parse("[0, inf)").contains(0) and Range.parse("[0, inf)").contains(1e300)
+
+
+_SECTION = '[[section]]\nname = "beacons"\nread_by = ["bridge", "sim"]\n'
+_KEY = '[[section.key]]\nname = "period_s"\ntype = "real"\nunit = "s"\ndoc = "T"\nsim = "required"\n'
+
+
+@pytest.mark.parametrize("extra, why", [
+    ('range = "(0, 10]"\ndefault = 11.0\n', "outside"),
+    ('default = 1.0\n', "needs a range"),
+    ('range = "(0, 10]"\ndefault = "x"\n', "not a real"),
+    ('range = "(0, inf)"\n', "closed above"),
+    ('range = "(0, 10]"\ngeometry = "maybe"\n', "geometry"),
+    ('range = "(0, 10]"\ngeometry = "library"\n', "without a lib field"),
+    ('range = "(0, 10]"\nunits = "s"\n', "unknown schema fields"),
+])
+def test_bad_schema_is_refused(extra, why):
+    with pytest.raises(ValueError, match=why):
+        parse_schema(_SECTION + _KEY + extra)
+
+
+def test_key_declared_twice_is_refused():
+    key = _KEY + 'range = "(0, 10]"\n'
+    with pytest.raises(ValueError, match="declared twice"):
+        parse_schema(_SECTION + key + key)
+
+
+def test_c_header_rows_are_the_schemas():
+    """Every key the bridge reads has one X row, with the schema's range and default."""
+    header = c_header(SCHEMA)
+    for s in SCHEMA.sections:
+        for k in s.keys:
+            rows = re.findall(rf"X\({s.name}, {k.name}, [^\n]*\)", header)
+            if "bridge" not in s.read_by:
+                assert not rows, (s.name, k.name)
+                continue
+            assert len(rows) >= 1, (s.name, k.name)
+            row = rows[0]
+            if k.numeric:
+                lo, hi, lo_open = (p.strip() for p in row.split(",")[5:8])
+                assert float(lo) == k.range.lo and float(hi) == k.range.hi
+                assert lo_open == ("true" if k.range.lo_open else "false")
+            if k.lib:
+                assert re.search(rf"X\({s.name}, {k.name}, K_[A-Z]+, [a-z0-9_.]+, {k.lib}, ",
+                                 header) or s.name == BEACON_SECTION, (s.name, k.name)
+
+
+def _set_key(text: str, section: str, key: str, value) -> str:
+    """text with [section] key = value (replaced, or added under the header)."""
+    lines, current, header = text.splitlines(), None, None
+    for i, line in enumerate(lines):
+        if line.startswith("["):
+            current = line.strip().strip("[]")
+            if current == section:
+                header = i
+        elif current == section and re.match(rf"{re.escape(key)}\s*=", line):
+            lines[i] = f"{key} = {value}"
+            return "\n".join(lines) + "\n"
+    assert header is not None, section
+    lines.insert(header + 1, f"{key} = {value}")
+    return "\n".join(lines) + "\n"
+
+
+def _file_value(section: str, key: str) -> float:
+    for sec, k, v in _ini_keys(SCENARIO_DIR / "kleeman-lab.ini"):
+        if (sec, k) == (section, key):
+            return float(v)
+    raise KeyError((section, key))
+
+
+def _nudged(k) -> str:
+    v = k.default
+    if k.type == "int":
+        return str(v - 1 if v is not None and v > 1 else 4097)
+    if v is None or v == 0:
+        return "0.01"
+    return repr(float(v) * 1.01)
+
+
+SIM_READ = [(s.name, k) for s in SCHEMA.sections if "sim" in s.read_by for k in s.keys
+            if k.sim in ("required", "optional") and k.numeric and k.name != "count"]
+
+
+@pytest.mark.parametrize("section, key", SIM_READ, ids=[f"{s}.{k.name}" for s, k in SIM_READ])
+def test_simulator_reads_every_schema_key(tmp_path, section, key):
+    """A key the schema gives the simulator changes the simulated site (no key dropped)."""
+    sec = "beacon2" if section == BEACON_SECTION else section
+    base = tmp_path / "base.ini"
+    base.write_text(SITE_TEXT)
+    before = load_site(base)
+    changed = tmp_path / "changed.ini"
+    if key.default is None:   # required, no default: nudge the file's own value
+        value = repr(_file_value(sec, key.name) * 1.01 + 0.01)
+    else:
+        value = _nudged(key)
+    changed.write_text(_set_key(SITE_TEXT, sec, key.name, value))
+    after = load_site(changed)
+    differ = [f.name for f in dataclasses.fields(before) if f.name != "path"
+              and not _equal(getattr(before, f.name), getattr(after, f.name))]
+    assert differ, f"[{sec}] {key.name} = {value} changed nothing the simulator reads"
+
+
+def _equal(a, b) -> bool:
+    return bool(np.array_equal(a, b)) if isinstance(a, np.ndarray) else a == b
+
+
+def test_simulator_applies_the_sim_range(tmp_path):
+    """Out of the simulator's range: refused with the key named; inside it: accepted."""
+    for section in SCHEMA.sections:
+        if "sim" not in section.read_by or section.name == BEACON_SECTION:
+            continue
+        for k in section.keys:
+            if k.sim not in ("required", "optional") or not k.numeric or k.sim_range is None:
+                continue
+            r = k.sim_range
+            if math.isfinite(r.hi) and k.name != "count":
+                text = _set_key(SITE_TEXT, section.name, k.name, repr(r.hi * 2 + 1))
+                path = tmp_path / f"{section.name}_{k.name}.ini"
+                path.write_text(text)
+                with pytest.raises(ConfigError, match=rf"\[{section.name}\] {k.name}: must be <="):
+                    load_site(path)
+
+
+def test_unsupported_key_only_at_its_default(tmp_path):
+    """[receivers] angle_step_deg: the bridge's; the simulated ring is evenly spaced (0)."""
+    (tmp_path / "even.ini").write_text(_set_key(SITE_TEXT, "receivers", "angle_step_deg", "0"))
+    assert load_site(tmp_path / "even.ini").rx_count == 8
+    (tmp_path / "odd.ini").write_text(_set_key(SITE_TEXT, "receivers", "angle_step_deg", "40"))
+    with pytest.raises(ConfigError, match=r"\[receivers\] angle_step_deg: not simulated"):
+        load_site(tmp_path / "odd.ini")
