@@ -65,36 +65,11 @@ bool estimator_next_event(struct estimator *e, struct est_event *ev)
 
 /* estimator_make_config and make_seq_config: bridge/site_to_lib.c */
 
-
-/* The sequencer config with the real cause of a refusal (the localizer
- * names it), reported against the site-file key at fault. */
-static int seq_config_checked(const struct bridge_config *cfg, const bl_config *c,
-                              char *err, size_t errlen)
-{
-    bl_seq_config sc;
-    const char *why = NULL, *field = NULL;
-    int rc = bl_localizer_seq_config(c, &sc, &why, &field);
-    if (rc == BL_OK)
-        return 0;
-    const char *section = "beacons", *key = "period_s";
-    for (size_t i = 0; field && i < sizeof field_keys / sizeof field_keys[0]; i++)
-        if (!strcmp(field_keys[i].field, field)) {
-            section = field_keys[i].section;
-            key = field_keys[i].key;
-        }
-    char text[200];
-    snprintf(text, sizeof text, "%s (%s)", why ? why : "refused by the beacon sequencer",
-             bl_strerror(rc));
-    config_format_error(cfg, section, key, text, err, errlen);
-    return -1;
-}
-
 /* Both library configs, or -1 with the cause in err. */
 static int make_configs(const struct bridge_config *cfg, bl_config *c,
                         bl_seq_config *sc, char *err, size_t errlen)
 {
     if (estimator_make_config(cfg, c, err, errlen) ||
-        seq_config_checked(cfg, c, err, errlen) ||
         make_seq_config(cfg, c, sc, err, errlen))
         return -1;
     return 0;

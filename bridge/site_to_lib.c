@@ -71,13 +71,21 @@ int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
 int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
                     bl_seq_config *out, char *err, size_t errlen)
 {
-    int rc = bl_sequencer_config_from_site(c, 0, out);
+    /* The localizer names the real cause and the field at fault (not
+     * always the period: the speed of sound, the ring, the spacing...). */
+    const char *cause = NULL, *field = NULL;
+    int rc = bl_localizer_seq_config(c, out, &cause, &field);
     if (rc != BL_OK) {
-        char why[160];
-        snprintf(why, sizeof why,
-                 "beacon time windows overlap: period too short for the "
-                 "beacons' spread (%s)", bl_strerror(rc));
-        config_format_error(cfg, "beacons", "period_s", why, err, errlen);
+        const char *section = "beacons", *key = "period_s";
+        for (size_t i = 0; field && i < sizeof field_keys / sizeof field_keys[0]; i++)
+            if (!strcmp(field_keys[i].field, field)) {
+                section = field_keys[i].section;
+                key = field_keys[i].key;
+            }
+        char why[200];
+        snprintf(why, sizeof why, "refused by the beacon sequencer: %s (%s)",
+                 cause ? cause : "?", bl_strerror(rc));
+        config_format_error(cfg, section, key, why, err, errlen);
         return -1;
     }
     return 0;

@@ -28,9 +28,10 @@ void site_to_lib(const struct bridge_config *cfg, bl_config *out);
 int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
                           char *err, size_t errlen);
 
-/* The beacon sequencer's config for the site (bl_sequencer_config_from_site
- * of c, the bl_config made from cfg). Returns 0, or -1 with a message naming
- * [beacons] period_s in err. */
+/* The beacon sequencer's config for the site (bl_localizer_seq_config of c,
+ * the bl_config made from cfg). Returns 0, or -1 with the real cause in err,
+ * against the site-file key of the field at fault ([beacons] period_s when
+ * the period is too short for the beacons' spread). */
 int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
                     bl_seq_config *out, char *err, size_t errlen);
 

@@ -68,8 +68,9 @@ lib: $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
 LOC_DATA_DIR := $(BUILD)/tests/lib/data
 LOC_RUNS     := kleeman-lab:40 echo-storm:40 kidnap:75 encoder-silence:40
 LOC_DATA     := $(foreach r,$(LOC_RUNS),$(LOC_DATA_DIR)/$(word 1,$(subst :, ,$(r))).txt)
-$(LOC_DATA_DIR)/%.txt: tests/lib/localizer_input.py hw_sim/can/beaconloc.dbc hw_sim/scenarios/%.scenario.ini \
-                       hw_sim/scenarios/kleeman-lab.ini | $(SETUP_STAMP)
+$(LOC_DATA_DIR)/%.txt: tests/lib/localizer_input.py hw_sim/beaconloc_sim/data/beaconloc.dbc \
+                       hw_sim/beaconloc_sim/data/scenarios/%.scenario.ini \
+                       hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini | $(SETUP_STAMP)
 	$(PY) tests/lib/localizer_input.py $* \
 	    $(word 2,$(subst :, ,$(filter $*:%,$(LOC_RUNS)))) 1 $(LOC_DATA_DIR)/$*
 

@@ -29,7 +29,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
 SIM = REPO / ".venv" / "bin" / "beaconloc-sim"
-DBC = REPO / "hw_sim" / "can" / "beaconloc.dbc"
+DBC = REPO / "hw_sim" / "beaconloc_sim" / "data" / "beaconloc.dbc"
 PULSE_HOLD_US = 4000          # kleeman-lab: double-pulse spacing 3 ms + tolerance 1 ms
 WHEEL_RADIUS_M, TICKS_PER_REV = 0.10, 4096
 
