@@ -105,20 +105,15 @@ real firing_cycles(const bl_filter *f, const VX &x, uint32_t b, real t_rel_s, in
     return (t_rel_s - *flight_s - t0_rel - real(*base) * x(T)) / (real(n) * x(T));
 }
 
-struct PulseContext {
+// The pulse's measurement model for fuse_scalar: its arrival time (s after
+// the state time), Kleeman eq. 21; the update must keep the model's
+// parameters physical (s > 0 with a variance, T > 0).
+struct ArrivalModel {
     const bl_config *cfg;
     bl_pulse_geometry g;
+    bool measure(const VX &x, real *h, RX *H) const { return pulse_model(cfg, x, g, h, H); }
+    bool admissible(const VX &x, const MX &P) const { return P(S, S) > 0 && x(S) > 0 && x(T) > 0; }
 };
-
-// The arrival time (s after the state time) for fuse_scalar.
-bool measure_arrival(const void *ctx, const VX &x, real *h, RX *H)
-{
-    const PulseContext *c = static_cast<const PulseContext *>(ctx);
-    return pulse_model(c->cfg, x, c->g, h, H);
-}
-
-// The update keeps the model's parameters physical.
-bool arrival_admissible(const VX &x, const MX &P) { return P(S, S) > 0 && x(S) > 0 && x(T) > 0; }
 
 // fuse_pulse on a started filter: slot attribution, then the shared update
 // with the start-up or converged σ and gate. Own frame (noinline): the NxN
@@ -134,9 +129,9 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     MX P = cov(f);
 
     // Which firing of this beacon: nearest to (arrival - predicted flight).
-    PulseContext pc;
-    pc.cfg = cfg;
-    bl_pulse_geometry &g = pc.g;
+    ArrivalModel model;
+    model.cfg = cfg;
+    bl_pulse_geometry &g = model.g;
     g.beacon_index = beacon_index;
     g.receiver_index = receiver_index;
     g.arrival_rel_s = bl::us_to_s(dts_us);
@@ -157,7 +152,6 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     m.gate_sigma = conv ? cfg->gate_sigma : cfg->startup_gate_sigma;
     m.max_iterations = cfg->iekf_max_iterations;
     m.step_tolerance_m = cfg->iekf_step_tolerance;
-    const ScalarModel model = {measure_arrival, arrival_admissible, &pc};
     const int rc = fuse_scalar(model, m, x, P, result);
     if (rc != BL_OK) return rc;  // undefined or numerically impossible: state untouched
 

@@ -7,16 +7,19 @@ namespace bl {
 
 namespace {
 
-// Measurement model of one wheel speed: h(x) = x(index) (v in m/s or ω in
-// rad/s), H = e_index (linear: one iteration).
-bool measure_state(const void *ctx, const VX &x, real *h, RX *H)
-{
-    const int i = *static_cast<const int *>(ctx);
-    *h = x(i);
-    *H = RX::Zero();
-    (*H)(i) = real(1);
-    return true;
-}
+// Measurement model of one wheel speed for fuse_scalar: h(x) = x(i) (v in
+// m/s or ω in rad/s), H = e_i (linear: one iteration); any finite update.
+struct StateModel {
+    int i;
+    bool measure(const VX &x, real *h, RX *H) const
+    {
+        *h = x(i);
+        *H = RX::Zero();
+        (*H)(i) = real(1);
+        return true;
+    }
+    bool admissible(const VX &, const MX &) const { return true; }
+};
 
 }  // namespace
 
@@ -65,9 +68,9 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
     const real rw = (k2 * (dl_pred_m + dr_pred_m) / (cfg->wheel_base_m * cfg->wheel_base_m)) / (dt_s * dt_s) +
                     floor_v * floor_v;
     const real rs[2] = {rv, rw};
-    static const int idx[2] = {V, W};
+    const int idx[2] = {V, W};
     for (int k = 0; k < 2; ++k) {
-        const ScalarModel model = {measure_state, nullptr, &idx[k]};
+        const StateModel model = {idx[k]};
         const ScalarMeasurement m = {zs[k], rs[k], real(0), 1u, real(0)};
         bl_fusion_result res;
         if (fuse_scalar(model, m, x, P, &res) == BL_OK)
