@@ -1,0 +1,118 @@
+// beaconloc — the one scalar measurement update every aiding source goes
+// through (PX4 ekf2's aid-source pattern: one shared update, one status
+// struct, a file per source with its model beside it: aid_pulse.cpp,
+// aid_wheels.cpp). Private to the library; the result type is public
+// (beaconloc/fusion.h).
+#ifndef BEACONLOC_FUSION_HPP
+#define BEACONLOC_FUSION_HPP
+
+#include "internal.hpp"
+
+extern "C" {
+#include "beaconloc/filter.h"
+#include "beaconloc/fusion.h"
+}
+
+namespace bl {
+
+constexpr int NX = BL_FILTER_NX;
+using VX = Mat<NX, 1>;                      // state vector (units: BL_IX_* in filter.h)
+using MX = Mat<NX, NX>;                     // covariance, row-major as bl_filter.P_
+using RX = Eigen::Matrix<real, 1, NX>;      // Jacobian row of a scalar measurement
+
+struct ScalarMeasurement {
+    real z;                   // measured value, in the measurement's unit
+    real R;                   // its noise variance (unit²), > 0
+    real gate_sigma;          // innovation gate (σ); <= 0: ungated (test ratio 0)
+    uint32_t max_iterations;  // IEKF iterations, >= 1 (1: the plain EKF update)
+    real step_tolerance_m;    // stop iterating once an iterate moves the position
+                              // (x, y) less than this (m)
+};
+
+// P = (P + Pᵀ)/2, entry by entry.
+void symmetrise(MX &P);
+
+// Parts of fuse_scalar that do not depend on the model (fusion.cpp).
+// Innovation z - h, its variance S = H P Hᵀ + R, the test ratio into *res
+// (zeroed first); true when outside the gate (a NaN ratio is outside).
+bool outside_gate(const ScalarMeasurement &m, real h, real S, bl_fusion_result *res);
+// Pn = P after the Joseph-form update with gain K, u = P Hᵀ, s = H u + R,
+// symmetric; the heading of xi wrapped. False if xi or Pn is not finite.
+bool joseph_update(const MX &P, const VX &K, const VX &u, real s, VX &xi, MX &Pn);
+
+// One scalar measurement update of (x, P) through the source's model, a
+// functor with
+//   bool measure(const VX &x, real *h, RX *H) const:  h(x), the predicted
+//       measurement (its unit), and H = ∂h/∂x (unit per unit of each state)
+//       at x; false where the model is undefined;
+//   bool admissible(const VX &x, const MX &P) const:  the updated state is
+//       physical for this source (e.g. s > 0).
+// In this order:
+//   innovation ν = z - h(x̄) and its variance S = H P Hᵀ + R (Kleeman 1992
+//   eq. 7 and eq. 9's bracket); the test ratio |ν| / (gate·√S) against the
+//   gate (Kleeman §3.9: a chi-square test with 1 dof); outside it: REJECTED,
+//   x and P untouched; else the iterated EKF (Kleeman §3.4 eqs. 8-9,
+//   relinearised through model.measure at each iterate), the Joseph-form
+//   covariance (Kleeman eq. 11) with the last iterate's H and K, P made
+//   symmetric, the heading wrapped to (-π, π]: ACCEPTED.
+// Returns BL_OK with *result filled (status ACCEPTED or REJECTED), or
+// BL_EINVAL (the model is undefined at x̄, or the update would leave x or P
+// non-finite or not admissible: refused, x, P and *result untouched).
+// Cost O(NX²) per iteration; its frame holds one NXxNX matrix. A template
+// (one instance per source) rather than a callback, so that the call graph
+// (make size-m4's stack chains) sees the model.
+template <class Model>
+int fuse_scalar(const Model &model, const ScalarMeasurement &m, VX &x, MX &P, bl_fusion_result *result)
+{
+    real h;
+    RX H;
+    if (!model.measure(x, &h, &H)) return BL_EINVAL;
+    // Kleeman eq. 7: innovation; its variance H P Hᵀ + R (eq. 9's bracket).
+    VX PHt = P.lazyProduct(H.transpose());
+    real S = H.dot(PHt) + m.R;
+    bl_fusion_result res;
+    if (outside_gate(m, h, S, &res)) {
+        res.status = BL_FUSION_REJECTED;
+        *result = res;
+        return BL_OK;
+    }
+    // Iterated EKF (Kleeman §3.4; Jazwinski): relinearise at x_i,
+    //   K_i = P Hᵢᵀ (Hᵢ P Hᵢᵀ + R)⁻¹                           (eq. 9)
+    //   x_{i+1} = x̄ + K_i (z - h(x_i) - H_i (x̄ - x_i))          (eq. 8)
+    // PHt and S hold P Hᵢᵀ and Hᵢ P Hᵢᵀ + R of the current iterate.
+    const VX &xbar = x;
+    VX xi = xbar;
+    VX K;
+    uint32_t it = 0;
+    for (;;) {
+        K = PHt / S;
+        const VX xn = xbar + K * (m.z - h - H.dot(xbar - xi));
+        ++it;
+        const real step = (xn.template head<2>() - xi.template head<2>()).norm();
+        xi = xn;
+        if (it >= m.max_iterations || step < m.step_tolerance_m) break;
+        real hn;
+        RX Hn;
+        // Relinearisation left the model's domain: keep the last valid step.
+        if (!model.measure(xi, &hn, &Hn)) break;
+        h = hn;
+        H = Hn;
+        PHt = P.lazyProduct(H.transpose());
+        S = H.dot(PHt) + m.R;
+    }
+    // Joseph form (Kleeman eq. 11) with H and K of the last iterate
+    // (u = P Hᵀ = PHt, H u + R = S).
+    MX Pn;
+    if (!joseph_update(P, K, PHt, S, xi, Pn) || !model.admissible(xi, Pn))
+        return BL_EINVAL;  // numerically impossible update: refused, x and P untouched
+    x = xi;
+    P = Pn;
+    res.status = BL_FUSION_ACCEPTED;
+    res.iterations = it;
+    *result = res;
+    return BL_OK;
+}
+
+}  // namespace bl
+
+#endif
