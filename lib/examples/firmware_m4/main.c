@@ -77,7 +77,9 @@ int main(void) {
         }
     }
     fw_cfg.max_predict_gap_s = MAX_COAST_S;
-    if (bl_localizer_seq_config(&fw_cfg, &seq_cfg, NULL, NULL) != BL_OK ||
+    /* (bl_localizer_seq_config would also name a refusal's cause: text the
+     * firmware has no use for, 400 B of flash) */
+    if (bl_sequencer_config_from_site(&fw_cfg, 0, &seq_cfg) != BL_OK ||
         bl_localizer_init(&fw_loc, &fw_cfg, &seq_cfg) != BL_OK) {
         for (;;) {
         }
