@@ -6,6 +6,8 @@ RMSE after the first 20 s, pooled over the seeds).
 For each scenario and seed: the simulator writes a candump log and the truth,
 the bridge replays the log (accuracy.one_run), the firmware host binary reads
 the same log; both estimates CSVs go through accuracy.judge.
+--check EST --truth TRUTH --max-rmse-mm X judges one estimates CSV (make
+run-m4-qemu: the firmware on the emulated M4) and exits 1 above X.
 Last two lines (machine-readable):
   firmware scenario=echo-storm seeds=20 rmse_mm=.. bridge_rmse_mm=.. ratio=<firmware/bridge>
   firmware scenario=kleeman-lab seeds=20 rmse_mm=.. bridge_rmse_mm=.. ratio=..
@@ -41,13 +43,29 @@ def one_seed(bridge: Path, firmware: Path, scenario: str, seed: int, out: Path) 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--firmware", required=True)
-    ap.add_argument("--bridge", required=True)
+    ap.add_argument("--firmware")
+    ap.add_argument("--bridge")
+    ap.add_argument("--check", metavar="EST_CSV")
+    ap.add_argument("--truth")
+    ap.add_argument("--max-rmse-mm", type=float, default=100.0)
     ap.add_argument("--out", default=str(acc.REPO / "build" / "bench" / "firmware"))
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenarios", default=",".join(acc.SCENARIOS))
     args = ap.parse_args()
+    if args.check:
+        r = acc.judge(0, Path(args.truth), Path(args.check))
+        if not r["ok"]:
+            print(f"firmware check: {args.check}: {r['why']}")
+            return 1
+        rmse = math.sqrt(float(acc.np.nanmean(r["err2"]))) * 1e3
+        ok = rmse <= args.max_rmse_mm and not r["diverged"]
+        print(f"firmware check: {args.check}: rmse_mm={rmse:.1f} (after {acc.SKIP_S:.0f} s) "
+              f"final_10s_mm={r['final_rms_m'] * 1e3:.1f} limit_mm={args.max_rmse_mm:.0f} "
+              f"{'ok' if ok else 'FAIL'}")
+        return 0 if ok else 1
+    if not args.firmware or not args.bridge:
+        ap.error("--firmware and --bridge (or --check)")
     bridge, firmware, out = Path(args.bridge), Path(args.firmware), Path(args.out)
     for p in (bridge, firmware):
         if not p.exists():

@@ -6,7 +6,13 @@
  * is judged by the same accuracy code as the bridge (make bench-firmware,
  * tests/bench/firmware.py).
  *
- *   firmware_host --log bus.log --estimates est.csv
+ *   firmware_host --log bus.log --estimates est.csv [--board-dump board.txt]
+ *
+ * --board-dump writes what this board hands main.c, in order, as text for
+ * the QEMU board (sim/board_sim.c reads it through semihosting):
+ *   B <start_us> <width_us> <amplitude_mv> <receiver> <double_pulse>   a burst (32-bit stamp)
+ *   O <stamp_us> <left> <right>                                        an encoder latch
+ *   N <now_us>                                                         board_time_us() returns now
  *
  * The board it stands in for has one clock (TIM2) for bursts and encoder
  * latches; the log has two node clocks and the receive time of each frame.
@@ -38,7 +44,7 @@
 
 int firmware_main(void);
 
-static FILE *log_f, *csv_f;
+static FILE *log_f, *csv_f, *dump_f;
 static const char *log_path;
 static unsigned long line_no;
 static struct node_clock rx_clock, enc_clock;
@@ -54,6 +60,10 @@ static unsigned odo_head, odo_len;
 static uint64_t rows, frames, bad_lines, dropped;
 
 static void finish(void) {
+    if (dump_f && fclose(dump_f) != 0) {
+        fprintf(stderr, "firmware_host: closing the board dump: %s\n", strerror(errno));
+        exit(1);
+    }
     if (csv_f && fclose(csv_f) != 0) {
         fprintf(stderr, "firmware_host: closing the estimates: %s\n", strerror(errno));
         exit(1);
@@ -107,6 +117,9 @@ static void on_pulse(const uint8_t *data, uint8_t len, int64_t rx_us) {
     b->amplitude_mv = (uint16_t)beaconloc_can_pulse_detection_amplitude_decode(m.amplitude);
     b->receiver = m.receiver;
     b->double_pulse = m.double_pulse != 0;
+    if (dump_f)
+        fprintf(dump_f, "B %" PRIu32 " %u %u %u %d\n", b->start_us, b->width_us, b->amplitude_mv, b->receiver,
+                b->double_pulse ? 1 : 0);
 }
 
 /* Signed difference of two 14-bit wrapping tick counts. */
@@ -144,6 +157,7 @@ static void on_encoders(const uint8_t *data, uint8_t len, int64_t rx_us) {
     o->stamp_us = (uint32_t)t;
     o->left = count_left;
     o->right = count_right;
+    if (dump_f) fprintf(dump_f, "O %" PRIu32 " %u %u\n", o->stamp_us, o->left, o->right);
 }
 
 void board_init(void) {
@@ -170,6 +184,7 @@ int64_t board_time_us(void) {
             on_encoders(data, len, rx_us);
         else
             continue;
+        if (dump_f) fprintf(dump_f, "N %lld\n", (long long)now_us);
         return now_us;
     }
 }
@@ -209,15 +224,17 @@ void board_publish(const board_pose *p) {
 }
 
 int main(int argc, char **argv) {
-    const char *est_path = NULL;
+    const char *est_path = NULL, *dump_path = NULL;
     for (int i = 1; i + 1 < argc; i += 2) {
         if (!strcmp(argv[i], "--log"))
             log_path = argv[i + 1];
         else if (!strcmp(argv[i], "--estimates"))
             est_path = argv[i + 1];
+        else if (!strcmp(argv[i], "--board-dump"))
+            dump_path = argv[i + 1];
     }
     if (!log_path || !est_path) {
-        fprintf(stderr, "usage: %s --log CANDUMP_LOG --estimates CSV\n", argv[0]);
+        fprintf(stderr, "usage: %s --log CANDUMP_LOG --estimates CSV [--board-dump FILE]\n", argv[0]);
         return 1;
     }
     log_f = fopen(log_path, "r");
@@ -228,6 +245,10 @@ int main(int argc, char **argv) {
     csv_f = fopen(est_path, "w");
     if (!csv_f) {
         fprintf(stderr, "firmware_host: %s: %s\n", est_path, strerror(errno));
+        return 1;
+    }
+    if (dump_path && !(dump_f = fopen(dump_path, "w"))) {
+        fprintf(stderr, "firmware_host: %s: %s\n", dump_path, strerror(errno));
         return 1;
     }
     fputs("t_us,x_m,y_m,theta_rad,v_mps,omega_radps,sos_mps,period_s,"
