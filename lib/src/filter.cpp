@@ -299,6 +299,27 @@ void commit(bl_filter *f, const VX &x, const MX &P)
     }
 }
 
+namespace {
+
+// The end of every predict to t_us: heading wrapped, a non-finite result
+// refused (BL_EINVAL, *f untouched), the reference moved to the latest
+// firing at or before t_us; then x, P at t_us are the filter's state.
+int commit_predict(bl_filter *f, VX &x, MX &P, int64_t t_us)
+{
+    x(TH) = wrap_angle(x(TH));
+    if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
+    int64_t epoch = f->epoch_us_;
+    uint32_t ref = f->ref_beacon_;
+    advance_reference(&f->cfg_, x, P, epoch, ref, t_us);
+    commit(f, x, P);
+    f->epoch_us_ = epoch;
+    f->ref_beacon_ = ref;
+    f->t_us_ = t_us;
+    return BL_OK;
+}
+
+}  // namespace
+
 }  // namespace bl
 
 using namespace bl;
@@ -499,15 +520,8 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     // Kleeman eq. 25: the wheel speeds measure v and ω (aid_wheels.cpp).
     if (dt > real(0)) fuse_wheel_speeds(cfg, cl, cr, dt, x, P, &wheel);
     symmetrise(P);
-    x(TH) = bl::wrap_angle(x(TH));
-    if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
-    int64_t epoch = f->epoch_us_;
-    uint32_t ref = f->ref_beacon_;
-    advance_reference(cfg, x, P, epoch, ref, t_us);
-    commit(f, x, P);
-    f->epoch_us_ = epoch;
-    f->ref_beacon_ = ref;
-    f->t_us_ = t_us;
+    const int rc = commit_predict(f, x, P, t_us);
+    if (rc != BL_OK) return rc;
     f->wheel_fused_ += wheel.fused;
     f->wheel_refused_ += wheel.refused;
     return BL_OK;
@@ -523,16 +537,7 @@ extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
     VX x = state(f);
     MX P = cov(f);
     cv_predict(cfg, x, P, bl::us_to_s(t_us - f->t_us_));
-    x(TH) = bl::wrap_angle(x(TH));
-    if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
-    int64_t epoch = f->epoch_us_;
-    uint32_t ref = f->ref_beacon_;
-    advance_reference(cfg, x, P, epoch, ref, t_us);
-    commit(f, x, P);
-    f->epoch_us_ = epoch;
-    f->ref_beacon_ = ref;
-    f->t_us_ = t_us;
-    return BL_OK;
+    return commit_predict(f, x, P, t_us);
 }
 
 extern "C" int bl_filter_get_state(const bl_filter *f, bl_real x[BL_FILTER_NX],
