@@ -27,8 +27,8 @@ bool started(const bl_filter *f) { return bl_filter_get_state(f, nullptr, nullpt
 int64_t state_time_us(const bl_filter *f) { return f->t_us_; }
 
 #define NOINLINE __attribute__((noinline))
-// The pulse path is inlined into its two entry points: every frame on it
-// adds to the deepest chain (pulse -> fusion -> snapshot solver).
+// The pulse path is inlined into pop_until: every frame on it adds to the
+// deepest chain (pulse -> fusion -> snapshot solver).
 #define INLINE inline __attribute__((always_inline))
 
 NOINLINE void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset_cause cause, uint16_t count)
@@ -61,6 +61,13 @@ NOINLINE void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset
 // cfg.reset_reject_count is K of the localizer's window).
 bl_config filter_config(const bl_config *cfg) { return *cfg; }
 
+// The window restarts empty at slot 0 (slots 0..len-1 valid until full).
+void clear_window(bl_localizer *loc)
+{
+    loc->win_len_ = loc->win_next_ = 0;
+    loc->win_rejected_ = 0;
+}
+
 void set_window(bl_localizer *loc, uint32_t k)
 {
     uint32_t w = k + k / 2;
@@ -68,8 +75,7 @@ void set_window(bl_localizer *loc, uint32_t k)
     if (k > w) k = w;
     loc->reject_k_ = k;
     loc->reject_w_ = w;
-    loc->win_len_ = loc->win_next_ = 0;
-    loc->win_rejected_ = 0;
+    clear_window(loc);
 }
 
 bool configs_agree(const bl_config *cfg, const bl_seq_config *sc)
@@ -117,8 +123,7 @@ NOINLINE void reinit_filter(bl_localizer *loc, bl_loc_reset_cause cause)
     loc->was_started_ = false;
     loc->was_converged_ = false;
     loc->wheel_ref_ = false;
-    loc->win_len_ = 0;
-    loc->win_rejected_ = 0;
+    clear_window(loc);
     loc->misnumbered_in_row_ = 0;
     if (was) push_event(loc, BL_LOC_EV_RESET, cause, 0);
 }
@@ -167,8 +172,7 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     if (bl_filter_get_state(&loc->filter, x, nullptr) != BL_OK) return false;
     const int rc = bl_filter_start_snapshot(&loc->filter, bl::wrap_angle(x[BL_IX_THETA]),
                                             loc->filter.cfg_.reset_sigma_theta_rad);
-    loc->win_len_ = 0;
-    loc->win_rejected_ = 0;
+    clear_window(loc);
     if (rc != BL_OK) {
         loc->counters_.restart_failures++;
         return false;
