@@ -113,6 +113,7 @@ struct ArrivalModel {
     bl_pulse_geometry g;
     bool measure(const VX &x, real *h, RX *H) const { return pulse_model(cfg, x, g, h, H); }
     bool admissible(const VX &x, const VX &var) const { return var(S) > 0 && x(S) > 0 && x(T) > 0; }
+    int unit_state() const { return -1; }
 };
 
 // fuse_pulse on a started filter: slot attribution, then the shared update

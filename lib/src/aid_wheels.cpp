@@ -19,6 +19,7 @@ struct StateModel {
         return true;
     }
     bool admissible(const VX &, const VX &) const { return true; }
+    int unit_state() const { return i; }
 };
 
 }  // namespace

@@ -54,7 +54,9 @@ void store_symmetric(const real up[kUpper], MX &P);
 //       at x; false where the model is undefined;
 //   bool admissible(const VX &x, const VX &var) const:  the updated state
 //       x with variances var (P's diagonal) is physical for this source
-//       (e.g. s > 0).
+//       (e.g. s > 0);
+//   int unit_state() const:  i when the measurement is state i itself
+//       (H = e_i always: P Hᵀ is P's column i), else -1.
 // In this order:
 //   innovation ν = z - h(x̄) and its variance S = H P Hᵀ + R (Kleeman 1992
 //   eq. 7 and eq. 9's bracket); the test ratio |ν| / (gate·√S) against the
@@ -75,9 +77,16 @@ int fuse_scalar(const Model &model, const ScalarMeasurement &m, VX &x, MX &P, bl
     real h;
     RX H;
     if (!model.measure(x, &h, &H)) return BL_EINVAL;
+    // P Hᵀ and H P Hᵀ + R at the current H.
+    const int unit = model.unit_state();
+    VX PHt;
+    real S;
+    auto project = [&]() {
+        PHt = unit >= 0 ? VX(P.col(unit)) : VX(P.lazyProduct(H.transpose()));
+        S = (unit >= 0 ? P(unit, unit) : H.dot(PHt)) + m.R;
+    };
     // Kleeman eq. 7: innovation; its variance H P Hᵀ + R (eq. 9's bracket).
-    VX PHt = P.lazyProduct(H.transpose());
-    real S = H.dot(PHt) + m.R;
+    project();
     bl_fusion_result res;
     if (outside_gate(m, h, S, &res)) {
         res.status = BL_FUSION_REJECTED;
@@ -105,8 +114,7 @@ int fuse_scalar(const Model &model, const ScalarMeasurement &m, VX &x, MX &P, bl
         if (!model.measure(xi, &hn, &Hn)) break;
         h = hn;
         H = Hn;
-        PHt = P.lazyProduct(H.transpose());
-        S = H.dot(PHt) + m.R;
+        project();
     }
     // Joseph form (Kleeman eq. 11) with H and K of the last iterate
     // (u = P Hᵀ = PHt, H u + R = S); P symmetric.
