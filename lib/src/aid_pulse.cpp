@@ -112,7 +112,8 @@ struct ArrivalModel {
     const bl_config *cfg;
     bl_pulse_geometry g;
     bool measure(const VX &x, real *h, RX *H) const { return pulse_model(cfg, x, g, h, H); }
-    bool admissible(const VX &x, const MX &P) const { return P(S, S) > 0 && x(S) > 0 && x(T) > 0; }
+    bool admissible(const VX &x, const VX &var) const { return var(S) > 0 && x(S) > 0 && x(T) > 0; }
+    int unit_state() const { return -1; }
 };
 
 // fuse_pulse on a started filter: slot attribution, then the shared update

@@ -18,7 +18,8 @@ struct StateModel {
         (*H)(i) = real(1);
         return true;
     }
-    bool admissible(const VX &, const MX &) const { return true; }
+    bool admissible(const VX &, const VX &) const { return true; }
+    int unit_state() const { return i; }
 };
 
 }  // namespace

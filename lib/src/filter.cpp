@@ -518,8 +518,8 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     x = xo;
     WheelSpeedCounts wheel = {0, 0};
     // Kleeman eq. 25: the wheel speeds measure v and ω (aid_wheels.cpp).
+    symmetrise(P);  // the in-place propagation is symmetric only to rounding
     if (dt > real(0)) fuse_wheel_speeds(cfg, cl, cr, dt, x, P, &wheel);
-    symmetrise(P);
     const int rc = commit_predict(f, x, P, t_us);
     if (rc != BL_OK) return rc;
     f->wheel_fused_ += wheel.fused;

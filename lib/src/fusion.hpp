@@ -36,17 +36,27 @@ void symmetrise(MX &P);
 // Innovation z - h, its variance S = H P Hᵀ + R, the test ratio into *res
 // (zeroed first); true when outside the gate (a NaN ratio is outside).
 bool outside_gate(const ScalarMeasurement &m, real h, real S, bl_fusion_result *res);
-// Pn = P after the Joseph-form update with gain K, u = P Hᵀ, s = H u + R,
-// symmetric; the heading of xi wrapped. False if xi or Pn is not finite.
-bool joseph_update(const MX &P, const VX &K, const VX &u, real s, VX &xi, MX &Pn);
+// The Joseph-form update of a symmetric P (its upper triangle is read) with
+// gain K, u = P Hᵀ and s = H u + R, computed once per entry of the upper
+// triangle (the result is symmetric by construction) into up[] (row by row,
+// columns r..NX-1), its diagonal (the new variances) into *diag. False if
+// an entry is not finite.
+constexpr int kUpper = NX * (NX + 1) / 2;
+bool joseph_upper(const MX &P, const VX &K, const VX &u, real s, real up[kUpper], VX *diag);
+// P = the symmetric matrix whose upper triangle is up[].
+void store_symmetric(const real up[kUpper], MX &P);
 
-// One scalar measurement update of (x, P) through the source's model, a
+// One scalar measurement update of (x, P), P symmetric (every update and
+// predict leaves it so), through the source's model, a
 // functor with
 //   bool measure(const VX &x, real *h, RX *H) const:  h(x), the predicted
 //       measurement (its unit), and H = ∂h/∂x (unit per unit of each state)
 //       at x; false where the model is undefined;
-//   bool admissible(const VX &x, const MX &P) const:  the updated state is
-//       physical for this source (e.g. s > 0).
+//   bool admissible(const VX &x, const VX &var) const:  the updated state
+//       x with variances var (P's diagonal) is physical for this source
+//       (e.g. s > 0);
+//   int unit_state() const:  i when the measurement is state i itself
+//       (H = e_i always: P Hᵀ is P's column i), else -1.
 // In this order:
 //   innovation ν = z - h(x̄) and its variance S = H P Hᵀ + R (Kleeman 1992
 //   eq. 7 and eq. 9's bracket); the test ratio |ν| / (gate·√S) against the
@@ -58,7 +68,7 @@ bool joseph_update(const MX &P, const VX &K, const VX &u, real s, VX &xi, MX &Pn
 // Returns BL_OK with *result filled (status ACCEPTED or REJECTED), or
 // BL_EINVAL (the model is undefined at x̄, or the update would leave x or P
 // non-finite or not admissible: refused, x, P and *result untouched).
-// Cost O(NX²) per iteration; its frame holds one NXxNX matrix. A template
+// Cost O(NX²) per iteration; its frame holds the upper triangle of P. A template
 // (one instance per source) rather than a callback, so that the call graph
 // (make size-m4's stack chains) sees the model.
 template <class Model>
@@ -67,9 +77,16 @@ int fuse_scalar(const Model &model, const ScalarMeasurement &m, VX &x, MX &P, bl
     real h;
     RX H;
     if (!model.measure(x, &h, &H)) return BL_EINVAL;
+    // P Hᵀ and H P Hᵀ + R at the current H.
+    const int unit = model.unit_state();
+    VX PHt;
+    real S;
+    auto project = [&]() {
+        PHt = unit >= 0 ? VX(P.col(unit)) : VX(P.lazyProduct(H.transpose()));
+        S = (unit >= 0 ? P(unit, unit) : H.dot(PHt)) + m.R;
+    };
     // Kleeman eq. 7: innovation; its variance H P Hᵀ + R (eq. 9's bracket).
-    VX PHt = P.lazyProduct(H.transpose());
-    real S = H.dot(PHt) + m.R;
+    project();
     bl_fusion_result res;
     if (outside_gate(m, h, S, &res)) {
         res.status = BL_FUSION_REJECTED;
@@ -97,16 +114,17 @@ int fuse_scalar(const Model &model, const ScalarMeasurement &m, VX &x, MX &P, bl
         if (!model.measure(xi, &hn, &Hn)) break;
         h = hn;
         H = Hn;
-        PHt = P.lazyProduct(H.transpose());
-        S = H.dot(PHt) + m.R;
+        project();
     }
     // Joseph form (Kleeman eq. 11) with H and K of the last iterate
-    // (u = P Hᵀ = PHt, H u + R = S).
-    MX Pn;
-    if (!joseph_update(P, K, PHt, S, xi, Pn) || !model.admissible(xi, Pn))
+    // (u = P Hᵀ = PHt, H u + R = S); P symmetric.
+    xi(BL_IX_THETA) = wrap_angle(xi(BL_IX_THETA));
+    real up[kUpper];
+    VX var;
+    if (!xi.allFinite() || !joseph_upper(P, K, PHt, S, up, &var) || !model.admissible(xi, var))
         return BL_EINVAL;  // numerically impossible update: refused, x and P untouched
     x = xi;
-    P = Pn;
+    store_symmetric(up, P);
     res.status = BL_FUSION_ACCEPTED;
     res.iterations = it;
     *result = res;

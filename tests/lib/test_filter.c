@@ -893,23 +893,30 @@ static void test_24h_real(void **state)
 
 /* ===================================================== gate and API use */
 
+/* An explicit prior at (x, y), heading 0, firing time t0_us of beacon 1
+ * (index 0); σ of x and y, θ, v and ω (sigma_vw for both), t0. */
+static bl_filter_prior prior_at(int64_t t_us, double x, double y, double sigma_xy, double sigma_theta,
+                                double sigma_vw, int64_t t0_us, double sigma_t0)
+{
+    bl_filter_prior pr;
+    memset(&pr, 0, sizeof pr);
+    pr.t_us = t_us;
+    pr.x_m = (bl_real)x;
+    pr.y_m = (bl_real)y;
+    pr.sigma_xy_m = (bl_real)sigma_xy;
+    pr.sigma_theta_rad = (bl_real)sigma_theta;
+    pr.sigma_v_mps = (bl_real)sigma_vw;
+    pr.sigma_omega_radps = (bl_real)sigma_vw;
+    pr.t0_us = t0_us;
+    pr.sigma_t0_s = (bl_real)sigma_t0;
+    return pr;
+}
+
 /* A converged stationary filter at a known pose (explicit start). */
 static void converged_filter(bl_filter *f, const bl_config *cfg, int64_t *t_us, double px, double py)
 {
     assert_int_equal(bl_filter_init(f, cfg), BL_OK);
-    bl_filter_prior pr;
-    memset(&pr, 0, sizeof pr);
-    pr.t_us = 1000000;
-    pr.x_m = (bl_real)(px + 0.05);
-    pr.y_m = (bl_real)(py - 0.05);
-    pr.theta_rad = 0;
-    pr.sigma_xy_m = (bl_real)0.2;
-    pr.sigma_theta_rad = (bl_real)0.1;
-    pr.sigma_v_mps = (bl_real)0.1;
-    pr.sigma_omega_radps = (bl_real)0.1;
-    pr.t0_us = 1000000;
-    pr.t0_beacon_index = 0;
-    pr.sigma_t0_s = (bl_real)1e-3;
+    const bl_filter_prior pr = prior_at(1000000, px + 0.05, py - 0.05, 0.2, 0.1, 0.1, 1000000, 1e-3);
     assert_int_equal(bl_filter_start(f, &pr), BL_OK);
     int64_t t = 1000000;
     rng_seed(99);
@@ -1323,17 +1330,7 @@ static double heading_var_growth(const bl_config *cfg, bl_real dl, bl_real dr)
 {
     static bl_filter f;
     assert_int_equal(bl_filter_init(&f, cfg), BL_OK);
-    bl_filter_prior pr;
-    memset(&pr, 0, sizeof pr);
-    pr.t_us = 1000000;
-    pr.x_m = 6;
-    pr.y_m = 6;
-    pr.sigma_xy_m = (bl_real)0.05;
-    pr.sigma_theta_rad = (bl_real)0.01;
-    pr.sigma_v_mps = (bl_real)0.1;
-    pr.sigma_omega_radps = (bl_real)0.1;
-    pr.t0_us = 950000;
-    pr.sigma_t0_s = (bl_real)1e-4;
+    const bl_filter_prior pr = prior_at(1000000, 6, 6, 0.05, 0.01, 0.1, 950000, 1e-4);
     assert_int_equal(bl_filter_start(&f, &pr), BL_OK);
     bl_real P0[NX * NX], P1[NX * NX];
     assert_int_equal(bl_filter_get_state(&f, NULL, P0), BL_OK);
@@ -1634,17 +1631,7 @@ static void test_wheel_speed_counters(void **state)
     assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
     assert_int_equal(e.wheel_speed_fused, 0);
     assert_int_equal(e.wheel_speed_refused, 0);
-    bl_filter_prior pr;
-    memset(&pr, 0, sizeof pr);
-    pr.t_us = 1000000;
-    pr.x_m = 4;
-    pr.y_m = 5;
-    pr.sigma_xy_m = (bl_real)0.1;
-    pr.sigma_theta_rad = (bl_real)0.1;
-    pr.sigma_v_mps = (bl_real)0.5;
-    pr.sigma_omega_radps = (bl_real)0.5;
-    pr.t0_us = 1000000;
-    pr.sigma_t0_s = (bl_real)1e-3;
+    const bl_filter_prior pr = prior_at(1000000, 4, 5, 0.1, 0.1, 0.5, 1000000, 1e-3);
     assert_int_equal(bl_filter_start(&f, &pr), BL_OK);
     int64_t t = pr.t_us;
     for (int k = 0; k < 50; ++k) {
