@@ -27,9 +27,12 @@ M4_DIR      := $(BUILD)/m4
 M4_ARCH     := -mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard
 M4_COMMON   := $(M4_ARCH) -Os -g -ffunction-sections -fdata-sections -fstack-usage \
                -fcallgraph-info=su -DBL_USE_FLOAT=1 -Ilib/include
-M4_CXXFLAGS := $(M4_COMMON) -std=c++17 -fno-exceptions -fno-rtti -fno-threadsafe-statics \
+# EIGEN_CFLAGS: pkg-config's eigen3 as -isystem (lib/lib.mk, parsed after
+# this file: hence = here). Eigen is headers only, the host's serve the
+# cross build.
+M4_CXXFLAGS  = $(M4_COMMON) -std=c++17 -fno-exceptions -fno-rtti -fno-threadsafe-statics \
                -DEIGEN_NO_MALLOC -DEIGEN_GEMM_TO_COEFFBASED_THRESHOLD=1000 -DEIGEN_NO_DEBUG \
-               -isystem /usr/include/eigen3 -Wall -Wextra -Werror -Wconversion -Wdouble-promotion
+               $(EIGEN_CFLAGS) -Wall -Wextra -Werror -Wconversion -Wdouble-promotion
 M4_CFLAGS   := $(M4_COMMON) -std=c11 -Wall -Wextra -Werror -Wdouble-promotion
 M4_LDFLAGS  := $(M4_ARCH) --specs=nano.specs --specs=nosys.specs -nostartfiles \
                -Tlib/examples/firmware_m4/stm32f4.ld -Wl,--gc-sections

@@ -12,9 +12,20 @@
 # Every lib/src/*.cpp is compiled into the library (wildcard); every
 # tests/lib/test_*.c except test_clink.c is a cmocka test (test_clink.c is the
 # plain C program of check-lib-clink: no cmocka, no C++ runtime).
+# Header dependencies: each object and test records the headers it includes
+# (-MMD -MP, .d files beside it, included below). Compilers: $(CC), $(CXX),
+# $(AR). Eigen: EIGEN_CFLAGS from `pkg-config --cflags eigen3` as -isystem
+# (Debian's path when pkg-config has no eigen3); lib/firmware.mk uses it too.
 
 LIB_SRCS      := $(sort $(wildcard lib/src/*.cpp))
+# Every library header (for fragments that depend on all of them, e.g.
+# tests/fuzz/fuzz.mk; the rules here use the .d files instead).
 LIB_HDRS      := $(wildcard lib/include/*.h lib/include/beaconloc/*.h lib/src/*.hpp)
+EIGEN_CFLAGS  := $(patsubst -I%,-isystem %,$(shell pkg-config --cflags eigen3 2>/dev/null))
+ifeq ($(strip $(EIGEN_CFLAGS)),)
+EIGEN_CFLAGS  := -isystem /usr/include/eigen3
+endif
+LIB_DEPFLAGS  := -MMD -MP
 LIB_TEST_SRCS := $(filter-out tests/lib/test_clink.c,$(sort $(wildcard tests/lib/test_*.c)))
 LIB_TEST_NAMES := $(basename $(notdir $(LIB_TEST_SRCS)))
 
@@ -27,7 +38,7 @@ LIB_WARN      := -Wall -Wextra -Werror -Wconversion -Wdouble-promotion -Wshadow
 # keep fixed-size products off Eigen's GEMM kernel (which references malloc).
 LIB_CXXFLAGS  := -std=c++17 -O2 -fno-exceptions -fno-rtti -fno-threadsafe-statics \
                  -DEIGEN_NO_MALLOC -DEIGEN_GEMM_TO_COEFFBASED_THRESHOLD=1000 \
-                 -isystem /usr/include/eigen3 -Ilib/include $(LIB_WARN)
+                 $(EIGEN_CFLAGS) -Ilib/include $(LIB_WARN)
 LIB_TEST_CFLAGS := -std=c11 -O1 -g -Ilib/include -Itests/lib -Wall -Wextra -Werror \
                    -Wno-unused-parameter
 LIB_SAN       := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all
@@ -35,18 +46,21 @@ LIB_SAN       := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanit
 # $(1) variant dir under build/lib ('' = default), $(2) extra compile flags,
 # $(3) extra test link flags
 define LIB_VARIANT
-$(BUILD)/lib/$(1)obj/%.o: lib/src/%.cpp $(LIB_HDRS) lib/lib.mk
+$(BUILD)/lib/$(1)obj/%.o: lib/src/%.cpp lib/lib.mk
 	@mkdir -p $$(@D)
-	$(CXX) $(LIB_CXXFLAGS) $(2) -c $$< -o $$@
+	$(CXX) $(LIB_CXXFLAGS) $(LIB_DEPFLAGS) $(2) -c $$< -o $$@
 
 $(BUILD)/lib/$(1)libbeaconloc.a: $(patsubst lib/src/%.cpp,$(BUILD)/lib/$(1)obj/%.o,$(LIB_SRCS))
 	@mkdir -p $$(@D)
 	rm -f $$@
-	ar rcs $$@ $$^
+	$(AR) rcs $$@ $$^
 
-$(BUILD)/lib/$(1)tests/%: tests/lib/%.c $(BUILD)/lib/$(1)libbeaconloc.a $(LIB_HDRS)
+$(BUILD)/lib/$(1)tests/%: tests/lib/%.c $(BUILD)/lib/$(1)libbeaconloc.a lib/lib.mk
 	@mkdir -p $$(@D)
-	$(CC) $(LIB_TEST_CFLAGS) $(2) $$< $(BUILD)/lib/$(1)libbeaconloc.a $(3) $$(LIB_TEST_LDLIBS_$$*) -lcmocka -lm -o $$@
+	$(CC) $(LIB_TEST_CFLAGS) $(LIB_DEPFLAGS) $(2) $$< $(BUILD)/lib/$(1)libbeaconloc.a $(3) $$(LIB_TEST_LDLIBS_$$*) -lcmocka -lm -o $$@
+
+-include $(patsubst lib/src/%.cpp,$(BUILD)/lib/$(1)obj/%.d,$(LIB_SRCS)) \
+         $(addprefix $(BUILD)/lib/$(1)tests/,$(addsuffix .d,$(LIB_TEST_NAMES)))
 endef
 
 $(eval $(call LIB_VARIANT,,-DEIGEN_NO_DEBUG,))
@@ -65,14 +79,14 @@ lib: $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
 test-lib: $(LIB_TEST_BINS) check-lib-clink
 	@set -e; for t in $(LIB_TEST_BINS); do echo "== $$t"; $$t; done
 
-# Pure C program, plain gcc, no libstdc++: the link itself proves no C++
+# Pure C program, plain C compiler ($(CC)), no libstdc++: the link itself proves no C++
 # runtime is needed; nm -u proves no heap and no C++ runtime references.
 LIB_FORBIDDEN := '(__cxa_|__gxx_|_Znw|_Zna|_Zdl|_Zda|_ZSt|_Unwind_|^malloc$$|^free$$|^calloc$$|^realloc$$|operator)'
 check-lib-clink: tests/lib/test_clink.c $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
 	@mkdir -p $(BUILD)/lib/clink
-	gcc -std=c99 -pedantic -Wall -Wextra -Werror -Ilib/include tests/lib/test_clink.c \
+	$(CC) -std=c99 -pedantic -Wall -Wextra -Werror -Ilib/include tests/lib/test_clink.c \
 	    $(BUILD)/lib/libbeaconloc.a -lm -o $(BUILD)/lib/clink/clink_double
-	gcc -std=c99 -pedantic -Wall -Wextra -Werror -DBL_USE_FLOAT=1 -Ilib/include tests/lib/test_clink.c \
+	$(CC) -std=c99 -pedantic -Wall -Wextra -Werror -DBL_USE_FLOAT=1 -Ilib/include tests/lib/test_clink.c \
 	    $(BUILD)/lib/float/libbeaconloc.a -lm -o $(BUILD)/lib/clink/clink_float
 	$(BUILD)/lib/clink/clink_double
 	$(BUILD)/lib/clink/clink_float

@@ -532,14 +532,12 @@ int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out) {
     if (seq == nullptr || out == nullptr) return BL_EINVAL;
     if (!seq_ok(seq)) return BL_ENOTINIT;
     if (seq->n_pending == 0) return BL_OK;
-    const bl_seq_pending g = seq->pending[0];
-    const int64_t close_us = g.start_us + close_delay_us(seq->cfg);
+    const int64_t close_us = seq->pending[0].start_us + close_delay_us(seq->cfg);
     if (now_us < close_us) return BL_OK;
-    for (uint32_t k = 1; k < seq->n_pending; ++k) seq->pending[k - 1] = seq->pending[k];
-    seq->n_pending--;
-    if (close_us > seq->horizon_us) seq->horizon_us = close_us;
-
-    bl_seq_pulse p;
+    // Written straight into *out (no error can follow): no pulse-sized copy
+    // on the stack; the pending entry leaves the queue once read.
+    const bl_seq_pending &g = seq->pending[0];
+    bl_seq_pulse &p = *out;
     memset(&p, 0, sizeof p);
     p.arrival_us = g.start_us;
     p.beacon = BL_SEQ_UNASSIGNED;
@@ -576,9 +574,11 @@ int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out) {
     // Beacon 1 when at least half the receivers that heard the pulse show
     // its signature.
     p.double_pulse = signed_rx > 0 && 2 * signed_rx >= either;
+    for (uint32_t k = 1; k < seq->n_pending; ++k) seq->pending[k - 1] = seq->pending[k];
+    seq->n_pending--;
+    if (close_us > seq->horizon_us) seq->horizon_us = close_us;
     number_pulse(seq, &p);
     seq->counters.pulses_out++;
-    *out = p;
     return 1;
 }
 

@@ -1,6 +1,7 @@
 /* Plain C program (no cmocka, no C++ runtime) linked by `make check-lib-clink`
  * with `gcc prog.c libbeaconloc.a -lm`: proves the archive is usable from C
- * and exercises config, solver and filter through the public header. */
+ * and exercises config, solver, filter and the fusion result through the
+ * public header. */
 #include <stdio.h>
 #include <math.h>
 #include "beaconloc.h"
@@ -36,6 +37,11 @@ int main(void)
     CHECK(bl_filter_init(&f, &cfg) == BL_OK);
     CHECK(bl_filter_estimate(&f, &est) == BL_OK && !est.started);
     CHECK(bl_filter_predict(&f, 1000) == BL_ENOTINIT);
+    CHECK(bl_config_same_geometry(&cfg, &cfg));
+    /* a pulse before the start is buffered for the snapshot start */
+    bl_fusion_result res;
+    CHECK(bl_filter_fuse_pulse(&f, 0, 1000000, 0, &res) == BL_OK && res.status == BL_FUSION_BUFFERED);
+    CHECK(res.iterations == 0 && res.test_ratio == 0);
     printf("clink (%s): sizeof(bl_filter)=%zu ok\n", sizeof(bl_real) == 4 ? "float" : "double",
            sizeof(bl_filter));
     return 0;

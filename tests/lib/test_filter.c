@@ -893,23 +893,30 @@ static void test_24h_real(void **state)
 
 /* ===================================================== gate and API use */
 
+/* An explicit prior at (x, y), heading 0, firing time t0_us of beacon 1
+ * (index 0); σ of x and y, θ, v and ω (sigma_vw for both), t0. */
+static bl_filter_prior prior_at(int64_t t_us, double x, double y, double sigma_xy, double sigma_theta,
+                                double sigma_vw, int64_t t0_us, double sigma_t0)
+{
+    bl_filter_prior pr;
+    memset(&pr, 0, sizeof pr);
+    pr.t_us = t_us;
+    pr.x_m = (bl_real)x;
+    pr.y_m = (bl_real)y;
+    pr.sigma_xy_m = (bl_real)sigma_xy;
+    pr.sigma_theta_rad = (bl_real)sigma_theta;
+    pr.sigma_v_mps = (bl_real)sigma_vw;
+    pr.sigma_omega_radps = (bl_real)sigma_vw;
+    pr.t0_us = t0_us;
+    pr.sigma_t0_s = (bl_real)sigma_t0;
+    return pr;
+}
+
 /* A converged stationary filter at a known pose (explicit start). */
 static void converged_filter(bl_filter *f, const bl_config *cfg, int64_t *t_us, double px, double py)
 {
     assert_int_equal(bl_filter_init(f, cfg), BL_OK);
-    bl_filter_prior pr;
-    memset(&pr, 0, sizeof pr);
-    pr.t_us = 1000000;
-    pr.x_m = (bl_real)(px + 0.05);
-    pr.y_m = (bl_real)(py - 0.05);
-    pr.theta_rad = 0;
-    pr.sigma_xy_m = (bl_real)0.2;
-    pr.sigma_theta_rad = (bl_real)0.1;
-    pr.sigma_v_mps = (bl_real)0.1;
-    pr.sigma_omega_radps = (bl_real)0.1;
-    pr.t0_us = 1000000;
-    pr.t0_beacon_index = 0;
-    pr.sigma_t0_s = (bl_real)1e-3;
+    const bl_filter_prior pr = prior_at(1000000, px + 0.05, py - 0.05, 0.2, 0.1, 0.1, 1000000, 1e-3);
     assert_int_equal(bl_filter_start(f, &pr), BL_OK);
     int64_t t = 1000000;
     rng_seed(99);
@@ -1043,6 +1050,63 @@ static int64_t still_arrival_us(const bl_config *cfg, double px, double py, long
     const double dz = (double)cfg->receiver_height_m - b->z_m;
     const double ta = t0_s + (double)k * 0.15 + sqrt(dx * dx + dy * dy + dz * dz) / 343.0 + noise_s * rng_gauss();
     return (int64_t)llround(ta * 1e6);
+}
+
+/* Persistent rejection is the caller's: a converged filter carried 4.2 m
+ * away rejects every pulse of the new place and stays where it was (no
+ * reset, state untouched), however many: two cycles of beacons 0-3 give 8
+ * >= cfg.reset_reject_count rejections across 4 beacons. Then
+ * bl_filter_start_snapshot() restarts it from the firings it could not
+ * explain only (beacons 0-3, heard at the new place in the last cycle), not
+ * mixed with the explained firings of beacons 4-5 heard at the old place in
+ * the same cycle: the fix is the new place. */
+static void kidnap_pulses(bl_filter *f, const bl_config *cfg, int64_t *t, int cycles)
+{
+    for (int cycle = 0; cycle < cycles; ++cycle)
+        for (long b = 0; b < 4; ++b) {
+            const long k = 6 * 30 + 6 * cycle + b;
+            const int64_t ta = still_arrival_us(cfg, 7, 8, k, 1.0, 2e-4);
+            while (*t + 10000 <= ta) {
+                *t += 10000;
+                assert_int_equal(bl_filter_predict_odometry(f, *t, 0, 0), BL_OK);
+            }
+            bl_real x0[NX], x1[NX];
+            assert_int_equal(bl_filter_get_state(f, x0, NULL), BL_OK);
+            bl_fusion_result r;
+            assert_int_equal(bl_filter_fuse_pulse(f, (uint32_t)b, ta, 0, &r), BL_OK);
+            assert_int_equal(r.status, BL_FUSION_REJECTED);
+            assert_true(r.test_ratio > 1);
+            assert_int_equal(r.iterations, 0);
+            assert_int_equal(bl_filter_get_state(f, x1, NULL), BL_OK);
+            assert_memory_equal(x0, x1, sizeof x0);
+        }
+}
+
+static void test_restart_from_unexplained_firings(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    assert_true(cfg.reset_reject_count <= 8);
+    static bl_filter f, g;
+    int64_t t;
+    converged_filter(&f, &cfg, &t, 4, 5);
+    g = f;
+    int64_t tg = t;
+    kidnap_pulses(&g, &cfg, &tg, 2);
+    bl_estimate e;
+    assert_int_equal(bl_filter_estimate(&g, &e), BL_OK);
+    assert_true(e.started);
+    assert_int_equal(e.reset_counter, 0); /* the filter never restarts itself on rejections */
+    assert_true(fabs(e.x_m - 4) < 0.1 && fabs(e.y_m - 5) < 0.1);
+    /* the caller's restart, after one cycle: from the unexplained firings */
+    kidnap_pulses(&f, &cfg, &t, 1);
+    assert_int_equal(bl_filter_start_snapshot(&f, 0, (bl_real)0.2), BL_OK);
+    assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+    assert_int_equal(e.reset_counter, 1);
+    print_message("restart from unexplained firings: (%.3f, %.3f), true (7, 8)\n", (double)e.x_m, (double)e.y_m);
+    assert_true(fabs(e.x_m - 7) < 0.3 && fabs(e.y_m - 8) < 0.3);
+    assert_true(fabs(e.x_m - 7) < 3 * sqrt(e.cov[0]) && fabs(e.y_m - 8) < 3 * sqrt(e.cov[6]));
 }
 
 /* One firing cycle heard by a robot standing at (px, py) with heading th:
@@ -1266,17 +1330,7 @@ static double heading_var_growth(const bl_config *cfg, bl_real dl, bl_real dr)
 {
     static bl_filter f;
     assert_int_equal(bl_filter_init(&f, cfg), BL_OK);
-    bl_filter_prior pr;
-    memset(&pr, 0, sizeof pr);
-    pr.t_us = 1000000;
-    pr.x_m = 6;
-    pr.y_m = 6;
-    pr.sigma_xy_m = (bl_real)0.05;
-    pr.sigma_theta_rad = (bl_real)0.01;
-    pr.sigma_v_mps = (bl_real)0.1;
-    pr.sigma_omega_radps = (bl_real)0.1;
-    pr.t0_us = 950000;
-    pr.sigma_t0_s = (bl_real)1e-4;
+    const bl_filter_prior pr = prior_at(1000000, 6, 6, 0.05, 0.01, 0.1, 950000, 1e-4);
     assert_int_equal(bl_filter_start(&f, &pr), BL_OK);
     bl_real P0[NX * NX], P1[NX * NX];
     assert_int_equal(bl_filter_get_state(&f, NULL, P0), BL_OK);
@@ -1562,6 +1616,42 @@ static void test_iekf_relinearisation(void **state)
     assert_true(iekf <= 2);
 }
 
+/* The wheel speeds are two scalar measurements (v, ω) per predict_odometry
+ * over a positive interval, counted per source in the estimate; a predict
+ * to the state time itself measures no speed; none is refused on ordinary
+ * data. They pull v to the measured wheel speed. */
+static void test_wheel_speed_counters(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    static bl_filter f;
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    bl_estimate e;
+    assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+    assert_int_equal(e.wheel_speed_fused, 0);
+    assert_int_equal(e.wheel_speed_refused, 0);
+    const bl_filter_prior pr = prior_at(1000000, 4, 5, 0.1, 0.1, 0.5, 1000000, 1e-3);
+    assert_int_equal(bl_filter_start(&f, &pr), BL_OK);
+    int64_t t = pr.t_us;
+    for (int k = 0; k < 50; ++k) {
+        t += 10000;
+        /* 3 mm per wheel per 10 ms: 0.3 m/s straight ahead */
+        assert_int_equal(bl_filter_predict_odometry(&f, t, (bl_real)0.003, (bl_real)0.003), BL_OK);
+    }
+    assert_int_equal(bl_filter_predict_odometry(&f, t, 0, 0), BL_OK); /* dt = 0: no speed */
+    assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+    assert_int_equal(e.wheel_speed_fused, 2 * 50);
+    assert_int_equal(e.wheel_speed_refused, 0);
+    assert_true(fabs((double)e.v_mps - 0.3) < 0.01);
+    assert_true(fabs((double)e.omega_radps) < 0.01);
+    /* an error leaves the counters as they were */
+    assert_int_equal(bl_filter_predict_odometry(&f, t - 1, (bl_real)0.003, (bl_real)0.003), BL_ETIME);
+    bl_estimate e2;
+    assert_int_equal(bl_filter_estimate(&f, &e2), BL_OK);
+    assert_int_equal(e2.wheel_speed_fused, e.wheel_speed_fused);
+}
+
 /* estimate_at extrapolates with constant velocity without changing the filter. */
 /* Speed from noisy wheel increments (Kleeman 1992 eq. 25 as a measurement
  * of v): wheel noise with variance sigma_wheel_per_m² per metre rolled, as
@@ -1655,11 +1745,13 @@ int main(void)
         cmocka_unit_test(test_api_misuse_leaves_state),
         cmocka_unit_test(test_start_snapshot_restart),
         cmocka_unit_test(test_same_geometry),
+        cmocka_unit_test(test_restart_from_unexplained_firings),
         cmocka_unit_test(test_gap_pulses_only_recovers),
         cmocka_unit_test(test_gap_recovers),
         cmocka_unit_test(test_process_noise_by_motion),
         cmocka_unit_test(test_estimate_at),
         cmocka_unit_test(test_odometry_speed_unbiased),
+        cmocka_unit_test(test_wheel_speed_counters),
         cmocka_unit_test(test_iekf_relinearisation),
         cmocka_unit_test(test_moving_robot_consistent),
         cmocka_unit_test(test_speed_of_sound_convergence),

@@ -1,0 +1,64 @@
+// beaconloc — private parts of the filter shared by its translation units:
+// filter.cpp (init, start, predict, estimate), snapshot.cpp (the snapshot
+// (re)start and its last-pulse table), aid_pulse.cpp (pulse arrival times),
+// aid_wheels.cpp (wheel speeds). Every measurement goes through fuse_scalar
+// (fusion.hpp).
+#ifndef BEACONLOC_FILTER_INTERNAL_HPP
+#define BEACONLOC_FILTER_INTERNAL_HPP
+
+#include "fusion.hpp"
+
+namespace bl {
+
+constexpr uint32_t kFilterMagic = 0x424c4631u;  // "BLF1"
+constexpr uint32_t kFlagStarted = 1u;
+constexpr uint32_t kFlagConverged = 2u;
+constexpr uint32_t kFlagEverStarted = 4u;
+
+// State indices (filter.h BL_IX_*), short.
+enum : int { X = BL_IX_X, Y = BL_IX_Y, TH = BL_IX_THETA, V = BL_IX_V, W = BL_IX_OMEGA,
+             S = BL_IX_S, T = BL_IX_T, T0 = BL_IX_T0, KL = BL_IX_KL, KR = BL_IX_KR };
+
+inline Eigen::Map<VX> state(bl_filter *f) { return Eigen::Map<VX>(f->x_); }
+inline Eigen::Map<const VX> state(const bl_filter *f) { return Eigen::Map<const VX>(f->x_); }
+inline Eigen::Map<MX> cov(bl_filter *f) { return Eigen::Map<MX>(f->P_); }
+inline Eigen::Map<const MX> cov(const bl_filter *f) { return Eigen::Map<const MX>(f->P_); }
+
+inline bool initialised(const bl_filter *f) { return f != nullptr && f->magic_ == kFilterMagic; }
+inline bool started(const bl_filter *f) { return initialised(f) && (f->flags_ & kFlagStarted); }
+
+bool all_finite(const bl_real *v, int n);
+
+// ---- filter.cpp
+// t0 += k·T (the reference moves k firing slots), then whole microseconds
+// move from the t0 offset into the epoch.
+void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k);
+// Wheel scales at a (re)start: kept by a started filter, else 1 ± σ.
+void start_wheel_scales(const bl_filter *f, VX &x, MX &P);
+// Store x, P as the filter's state and update the converged flag.
+void commit(bl_filter *f, const VX &x, const MX &P);
+
+// ---- snapshot.cpp
+// Keep a pulse in the last-pulse table (explained: it was fused).
+void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index,
+                    bool explained = false);
+// The beacons whose latest firing the state could not explain, when they
+// cover min_beacons; else ~0u (every beacon).
+uint32_t restart_mask(const bl_filter *f, uint32_t min_beacons);
+// (Re)start from the snapshot of the table's last cycle; *f untouched on failure.
+int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_radps, real s_mps, real var_s,
+                        real T_s, real var_T, uint32_t min_beacons, uint32_t use_mask = ~0u);
+
+// ---- aid_wheels.cpp
+struct WheelSpeedCounts {
+    uint32_t fused;    // scalar wheel-speed updates fused
+    uint32_t refused;  // refused by fuse_scalar (non-finite result)
+};
+// Kleeman eq. 25: the wheel speeds over dt_s > 0 from the calibrated wheel
+// distances left_m, right_m as measurements of v and ω.
+void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_s, VX &x, MX &P,
+                       WheelSpeedCounts *counts);
+
+}  // namespace bl
+
+#endif

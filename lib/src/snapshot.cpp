@@ -1,0 +1,295 @@
+// beaconloc — the filter's snapshot (re)start (filter.h: the automatic
+// start, a time gap's restart, bl_filter_start_snapshot): the last-pulse
+// table of every pulse fuse_pulse kept, the TDOA fix of its latest cycle
+// (bl_solve_tdoa_2d, Kleeman 1990) and the heading from the receiver ring.
+#include "filter_internal.hpp"
+
+#include <cstring>
+
+#include "beaconloc/solver.h"
+
+namespace bl {
+
+namespace {
+
+struct Snapshot {
+    bl_tdoa_problem prob;
+    int64_t ref_arrival_us;
+    uint32_t ref_beacon;
+};
+
+// Pulses of the latest firing cycle from the last-pulse table, as a TDOA
+// problem: each pulse's firing slot relative to the latest pulse is found
+// from the arrival spacing (flight-time differences < T/2). Each beacon's
+// arrival is the earliest of its latest firing (ring_t_us_: the direct path;
+// a later echo of the same firing does not replace it). Only the beacons in
+// use_mask take part.
+bool build_snapshot(const bl_filter *f, real s_mps, real T_s, real sigma_s, uint32_t use_mask, Snapshot &out)
+{
+    const bl_config *cfg = &f->cfg_;
+    const uint32_t n = cfg->beacon_count;
+    const uint32_t valid = f->last_valid_mask_ & use_mask;
+    int64_t latest = 0;
+    uint32_t L = n;
+    for (uint32_t j = 0; j < n; ++j)
+        if ((valid >> j) & 1u)
+            if (L == n || f->ring_t_us_[j] > latest) {
+                latest = f->ring_t_us_[j];
+                L = j;
+            }
+    if (L == n) return false;
+    std::memset(&out, 0, sizeof out);
+    uint32_t m = 0;
+    for (uint32_t j = 0; j < n; ++j) {
+        if (!((valid >> j) & 1u)) continue;
+        int64_t d_us;
+        if (!bl::sub_us(f->ring_t_us_[j], latest, &d_us)) continue;
+        const real dt = bl::us_to_s(d_us);  // <= 0
+        const real slot_r = std::round(dt / T_s);
+        if (!(slot_r > -real(n)) || slot_r > real(0)) continue;
+        const int64_t slot = int64_t(slot_r);
+        const int64_t expect = int64_t(j) - int64_t(L);
+        if (((slot - expect) % int64_t(n)) != 0) continue;  // not this beacon's slot
+        out.prob.beacons[m] = cfg->beacons[j];
+        out.prob.arrival_s[m] = dt;
+        out.prob.fire_offset_s[m] = real(slot) * T_s;
+        out.prob.sigma_s[m] = sigma_s;
+        ++m;
+    }
+    out.prob.count = m;
+    out.prob.speed_of_sound_mps = s_mps;
+    out.prob.receiver_z_m = cfg->receiver_height_m;
+    out.ref_arrival_us = latest;
+    out.ref_beacon = L;
+    return true;
+}
+
+// The snapshot fix of the last cycle (the problem lives only in this frame;
+// noinline keeps it off the callers' stacks).
+__attribute__((noinline)) int solve_snapshot(const bl_filter *f, real s_mps, real T_s, uint32_t min_beacons,
+                                             uint32_t use_mask, bl_tdoa_solution *sol, int64_t *ref_arrival_us,
+                                             uint32_t *ref_beacon)
+{
+    const bl_config *cfg = &f->cfg_;
+    Snapshot snap;
+    if (!build_snapshot(f, s_mps, T_s, cfg->startup_sigma_arrival_s, use_mask, snap)) return BL_EDEGENERATE;
+    if (snap.prob.count < min_beacons) return BL_EDEGENERATE;
+    const int rc = bl_solve_tdoa_2d(&snap.prob, sol);
+    if (rc != BL_OK) return rc;
+    // An overdetermined fix must explain its pulses (an echo-polluted or
+    // moving-robot snapshot does not).
+    if (snap.prob.count > 3 && sol->residual_rms_s > real(3) * cfg->startup_sigma_arrival_s)
+        return BL_ENOCONVERGE;
+    *ref_arrival_us = snap.ref_arrival_us;
+    *ref_beacon = snap.ref_beacon;
+    return BL_OK;
+}
+
+// State and covariance from a snapshot fix: position and t0 (with their
+// covariance) from the solver, heading given, v = ω = 0, s and T given.
+__attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_solution &sol, int64_t ref_arrival_us,
+                                              uint32_t ref_beacon, real theta, real sigma_theta, real s_mps,
+                                              real var_s, real T_s, real var_T)
+{
+    const bl_config *cfg = &f->cfg_;
+    VX x = VX::Zero();
+    MX P = MX::Zero();
+    x(X) = sol.x_m;
+    x(Y) = sol.y_m;
+    x(TH) = bl::wrap_angle(theta);
+    x(S) = s_mps;
+    x(T) = T_s;
+    x(T0) = sol.t0_s;  // firing of ref_beacon relative to its arrival
+    const int idx[3] = {X, Y, T0};
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) P(idx[r], idx[c]) = sol.cov[r * 4 + c];
+    P(TH, TH) = sigma_theta * sigma_theta;
+    P(V, V) = cfg->initial_sigma_v_mps * cfg->initial_sigma_v_mps;
+    P(W, W) = cfg->initial_sigma_omega_radps * cfg->initial_sigma_omega_radps;
+    P(S, S) = var_s;
+    P(T, T) = var_T;
+    start_wheel_scales(f, x, P);
+    symmetrise(P);  // the solver's covariance is symmetric only to rounding
+    int64_t epoch = ref_arrival_us;
+    uint32_t ref = ref_beacon;
+    shift_reference(cfg, x, P, epoch, ref, 0);
+
+    state(f) = x;
+    cov(f) = P;
+    f->epoch_us_ = epoch;
+    f->ref_beacon_ = ref;
+    f->t_us_ = ref_arrival_us;
+    if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
+    f->flags_ = kFlagStarted | kFlagEverStarted;
+}
+
+// The last-pulse table the snapshot (re)start reads: every pulse fuse_pulse
+// was given and did not refuse as an error (fused, gated out, buffered before
+// the start or while stale), one entry per beacon, the newest wins.
+//
+// Beside it, per beacon, the receivers that heard its latest firing, for the
+// heading from the ring: the arrivals within ring_window_us of the firing's
+// earliest one (the direct pulse reaches the whole ring within its diameter's
+// flight time, plus timing noise); an arrival more than half a period later
+// starts the next firing's set; an arrival later than the window (an echo on
+// a receiver the direct pulse missed) or from an older firing is left out.
+static_assert(BL_MAX_RECEIVERS <= 32, "ring_mask_ holds one bit per receiver");
+
+int64_t ring_window_us(const bl_config *cfg)
+{
+    // 2 r / s: flight time across the ring (s nominal); 4 σ: the timing noise
+    // of two arrivals (√2 · 2.8 σ).
+    const real w_s = real(2) * cfg->ring_radius_m / cfg->speed_of_sound_mps + real(4) * cfg->sigma_arrival_s;
+    return int64_t(std::llround(double(w_s) * 1e6));
+}
+
+void remember_ring(bl_filter *f, uint32_t b, int64_t arrival_us, uint32_t receiver_index, bool explained)
+{
+    const bl_config *cfg = &f->cfg_;
+    const uint32_t bit = 1u << receiver_index;
+    const int64_t half_T_us = int64_t(std::llround(double(cfg->beacon_period_s) * 0.5e6));
+    const int64_t w_us = ring_window_us(cfg);
+    int64_t d_us = 0;  // this arrival - the firing's earliest, us
+    const bool same_timeline = f->ring_mask_[b] != 0 && bl::sub_us(arrival_us, f->ring_t_us_[b], &d_us);
+    if (same_timeline && d_us < -half_T_us) return;  // an older firing's straggler
+    if (!same_timeline || d_us > half_T_us || d_us < -w_us) {
+        // a new firing (or the earlier set was late arrivals of this one)
+        f->ring_t_us_[b] = arrival_us;
+        f->ring_mask_[b] = bit;
+        f->ring_explained_mask_ = (f->ring_explained_mask_ & ~(1u << b)) | (explained ? 1u << b : 0u);
+        return;
+    }
+    if (d_us < 0) {
+        f->ring_t_us_[b] = arrival_us;
+        f->ring_mask_[b] |= bit;
+    } else if (d_us <= w_us) {
+        f->ring_mask_[b] |= bit;
+    } else {
+        return;  // later than the window: not the direct pulse
+    }
+    if (explained) f->ring_explained_mask_ |= 1u << b;
+}
+
+}  // namespace
+
+// explained: the pulse was fused (accepted by the gate of a started filter).
+void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index,
+                    bool explained)
+{
+    f->last_arrival_us_[beacon_index] = arrival_us;
+    f->last_valid_mask_ |= 1u << beacon_index;
+    remember_ring(f, beacon_index, arrival_us, receiver_index, explained);
+}
+
+// The beacons whose latest firing the running state could not explain
+// (every direct arrival of it gated out): after a kidnap those are the
+// firings heard at the new place. A restart from a started filter uses them
+// alone when they cover min_beacons, so that the fix does not mix the
+// places before and after; else every beacon of the table.
+uint32_t restart_mask(const bl_filter *f, uint32_t min_beacons)
+{
+    const uint32_t unexplained = f->last_valid_mask_ & ~f->ring_explained_mask_;
+    uint32_t count = 0;
+    for (uint32_t m = unexplained; m; m &= m - 1) ++count;
+    return count >= min_beacons ? unexplained : ~0u;
+}
+
+namespace {
+
+// Heading from the receiver ring at the fix (x, y) (filter.h, "Heading from
+// the ring"). The receivers are directional (Kleeman 1992 §2: eight at 45°,
+// each facing its own sector; cfg.beamwidth_deg), so the receivers that heard
+// beacon b's latest firing face it: its body-frame bearing phi_b is the
+// circular mean of their angles. Its site-frame bearing from the fix is
+// beta_b = atan2(y_b - y, x_b - x), and the bearing model of Vander et al.
+// 2011 eq. 3 (phi = beta - theta) gives theta_b = beta_b - phi_b. The heading
+// is the circular mean of theta_b over the beacons of the last cycle, with
+// sigma = max(circular standard deviation sqrt(-2 ln Rbar) of the theta_b
+// (Mardia 1972, Statistics of Directional Data; Rbar = mean resultant
+// length), the receiver spacing / sqrt(12) (the quantisation of one
+// receiver's angle)). Each theta_b is the heading at that firing; it is
+// carried to the snapshot time with the turn rate omega (constant-velocity
+// model, Kleeman 1992 eq. 15: theta(t) = theta(t_b) + omega (t - t_b)), as
+// a robot on a 0.5 m arc turns 0.8 rad in one cycle.
+// False (no heading) with fewer than min(3, N) beacons
+// whose receivers give a bearing, a spread above 0.6 rad (the sets do not
+// agree: echoes, or a robot turning through the cycle), or receivers too
+// wide (beamwidth_deg > 180) to point.
+bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, real omega_radps, uint32_t use_mask,
+                  real *theta_rad, real *sigma_rad)
+{
+    const bl_config *cfg = &f->cfg_;
+    if (cfg->beamwidth_deg > real(180) || cfg->receiver_count < 2) return false;
+    const uint32_t n = cfg->beacon_count;
+    const int64_t cycle_us =
+        int64_t(std::llround(double(cfg->beacon_period_s) * double(n) * 1e6)) + ring_window_us(cfg);
+    real sum_c = 0, sum_s = 0;
+    uint32_t used = 0;
+    for (uint32_t b = 0; b < n; ++b) {
+        const uint32_t mask = ((use_mask >> b) & 1u) ? f->ring_mask_[b] : 0u;
+        int64_t age_us;
+        if (mask == 0 || !bl::sub_us(latest_us, f->ring_t_us_[b], &age_us) || age_us > cycle_us ||
+            age_us < -cycle_us)
+            continue;  // no firing of this beacon in the last cycle
+        real rc = 0, rs = 0;
+        uint32_t heard = 0;
+        for (uint32_t k = 0; k < cfg->receiver_count; ++k) {
+            if (!((mask >> k) & 1u)) continue;
+            bl_real a;
+            if (bl_config_receiver_angle(cfg, k, &a) != BL_OK) continue;
+            rc += std::cos(a);
+            rs += std::sin(a);
+            ++heard;
+        }
+        // receivers on opposite sides point nowhere
+        if (heard == 0 || std::sqrt(rc * rc + rs * rs) < real(0.3) * real(heard)) continue;
+        const real phi = std::atan2(rs, rc);
+        const bl_beacon &bc = cfg->beacons[b];
+        const real beta = std::atan2(bc.y_m - y_m, bc.x_m - x_m);
+        // Vander et al. 2011 eq. 3: phi = beta - theta; carried to latest_us
+        // (Kleeman 1992 eq. 15, constant turn rate)
+        const real th_b = beta - phi + omega_radps * bl::us_to_s(age_us);
+        sum_c += std::cos(th_b);
+        sum_s += std::sin(th_b);
+        ++used;
+    }
+    const uint32_t need = n < 3 ? n : 3;
+    if (used < need || used == 0) return false;
+    const real rbar = std::sqrt(sum_c * sum_c + sum_s * sum_s) / real(used);
+    if (!(rbar > real(0))) return false;
+    // Mardia 1972: circular standard deviation sqrt(-2 ln Rbar), rad
+    const real spread = std::sqrt(real(-2) * std::log(rbar < real(1) ? rbar : real(1)));
+    if (!(spread <= real(0.6))) return false;
+    const real step_deg = cfg->angle_step_deg != real(0) ? std::fabs(cfg->angle_step_deg)
+                                                         : real(360) / real(cfg->receiver_count);
+    const real quant = step_deg * bl::kDegToRad / std::sqrt(real(12));
+    *theta_rad = std::atan2(sum_s, sum_c);
+    *sigma_rad = spread > quant ? spread : quant;
+    return true;
+}
+
+}  // namespace
+
+// Start (or restart) *f from the snapshot of its last pulses, heading from
+// the ring when cfg.ring_heading and the ring gives one, else theta with σ
+// sigma_theta. On failure *f is untouched.
+int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_radps, real s_mps, real var_s,
+                        real T_s, real var_T, uint32_t min_beacons, uint32_t use_mask)
+{
+    bl_tdoa_solution sol;
+    int64_t ref_arrival_us = 0;
+    uint32_t ref_beacon = 0;
+    const int rc = solve_snapshot(f, s_mps, T_s, min_beacons, use_mask, &sol, &ref_arrival_us, &ref_beacon);
+    if (rc != BL_OK) return rc;
+    if (f->cfg_.ring_heading) {
+        real th, sg;
+        if (ring_heading(f, sol.x_m, sol.y_m, ref_arrival_us, omega_radps, use_mask, &th, &sg)) {
+            theta = th;
+            sigma_theta = sg;
+        }
+    }
+    apply_snapshot(f, sol, ref_arrival_us, ref_beacon, theta, sigma_theta, s_mps, var_s, T_s, var_T);
+    return BL_OK;
+}
+
+}  // namespace bl
