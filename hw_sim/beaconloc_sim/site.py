@@ -1,6 +1,6 @@
 """The site file: beacons, receiver ring, robot, noise (shared with the bridge).
 
-Format: ``hw_sim/scenarios/kleeman-lab.ini``; its keys, types, ranges and
+Format: ``data/scenarios/kleeman-lab.ini`` (package data); its keys, types, ranges and
 defaults are the site schema's (``data/site_schema.toml``, read through
 :mod:`.site_schema`), the one the bridge's parser is generated from. The
 simulator reads the sections the schema gives it (``read_by`` sim) with its own
@@ -19,10 +19,6 @@ import numpy as np
 
 from .inifile import ConfigError, IniFile
 from .site_schema import BEACON_SECTION, Key, load_schema
-
-PACKAGE_ROOT = Path(__file__).resolve().parent.parent      # hw_sim/
-SCENARIO_DIR = PACKAGE_ROOT / "scenarios"
-DBC_PATH = PACKAGE_ROOT / "can" / "beaconloc.dbc"
 
 
 def _read_key(ini: IniFile, section: str, key: Key):

@@ -76,11 +76,13 @@ $(FUZZ_DIR)/fuzz_%: $(FUZZ_DIR)/obj/fuzz_%.o $(FUZZ_BR_OBJS) $(FUZZ_LIB_OBJS)
 	$(FUZZ_CXX) $(FUZZ_LDSAN) -o $@ $< $(FUZZ_BR_OBJS) $(FUZZ_LIB_OBJS) \
 	    $(FUZZ_LDFLAGS_$*) -linih -lm
 
-# Dictionary of the site-file harness: every section and key of the key
-# table (bridge/config.c, bridge/tuning.h), derived, not copied.
-$(FUZZ_DIR)/site.dict: bridge/config.c bridge/tuning.h tests/fuzz/site_dict.sh
+# Dictionary of the site-file harness: every section and key of the site
+# schema (derived, not copied), plus INI syntax and values.
+$(FUZZ_DIR)/site.dict: $(SITE_SCHEMA) $(SITE_SCHEMA_PY) tests/fuzz/site_syntax.dict | $(SETUP_STAMP)
 	@mkdir -p $(@D)
-	sh tests/fuzz/site_dict.sh bridge/config.c bridge/tuning.h > $@
+	$(PY) -m beaconloc_sim.site_schema fuzz-dict > $@.tmp
+	cat tests/fuzz/site_syntax.dict >> $@.tmp
+	mv $@.tmp $@
 
 # The objects stay once built: make would delete them as intermediates of
 # the pattern rules, and a later `make fuzz-smoke` would build them again.

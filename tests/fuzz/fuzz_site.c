@@ -1,6 +1,6 @@
 /*
  * beaconloc fuzzing — the site file, the whole path the daemon takes with
- * it (bridge/main.c at start and on SIGHUP):
+ * it (bridge/main.c at start, bridge/control.c on SIGHUP):
  *   config_defaults -> config_load_file (libinih, every section and key,
  *   [tuning] included, the consistency check) -> estimator_init (the
  *   library's config, bl_config_check, the sequencer's config) and

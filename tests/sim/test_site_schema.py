@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from beaconloc_sim.inifile import ConfigError
-from beaconloc_sim.site import SCENARIO_DIR, load_site
+from beaconloc_sim.resources import builtin_site_path
+from beaconloc_sim.site import load_site
 from beaconloc_sim.site_schema import (BEACON_SECTION, DOCS_BEGIN, DOCS_END, Range, c_header,
                                        docs_table, load_schema, parse_schema)
 
@@ -59,6 +60,9 @@ def _ini_keys(path: Path) -> list[tuple[str, str, str]]:
             key, value = (p.strip() for p in line.split("=", 1))
             out.append((section, key, value))
     return out
+
+
+SCENARIO_DIR = builtin_site_path().parent   # the packaged scenarios and their site file
 
 
 @pytest.mark.parametrize("site", sorted(p.name for p in SCENARIO_DIR.glob("*.ini")
