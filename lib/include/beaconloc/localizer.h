@@ -64,8 +64,10 @@
  * when full the oldest is dropped (counted in events_dropped). Text is the
  * caller's business.
  *
- * Memory: caller-owned struct (filter + sequencer + policy state; sizeof
- * reported by make size-m4), no heap, no globals. Cost per call: a
+ * Memory: caller-owned struct (filter + sequencer + policy state), no heap,
+ * no globals. sizeof on Cortex-M4F, float (make size-m4): 3,088 B with
+ * BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 984, sequencer 1,392,
+ * policy + events + the pulse being processed 712), 4,560 B with 16/16. Cost per call: a
  * detection O(BL_SEQ_MAX_PENDING + BL_MAX_RECEIVERS) plus what it closes;
  * every pulse closed costs one bl_filter_fuse_pulse per member (O(NX²) per
  * IEKF iteration, see filter.h) plus an estimate and a hint; a snapshot
