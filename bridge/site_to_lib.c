@@ -21,6 +21,17 @@ static const struct field_key field_keys[] = {
     { "beacons", "beacon1", "x_m" },
 };
 
+/* The site-file key that sets bl_config field `field` (NULL: not known, the
+ * defaults stay). */
+static void key_of_field(const char *field, const char **section, const char **key)
+{
+    for (size_t i = 0; field && i < sizeof field_keys / sizeof field_keys[0]; i++)
+        if (!strcmp(field_keys[i].field, field)) {
+            *section = field_keys[i].section;
+            *key = field_keys[i].key;
+        }
+}
+
 /* C type of a field in bl_config, by its key type. */
 #define LIB_CTYPE_K_REAL bl_real
 #define LIB_CTYPE_K_INT uint32_t
@@ -53,11 +64,7 @@ int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
     int rc = bl_config_check(&c, &bad);
     if (rc != BL_OK) {
         const char *section = "beacons", *key = bad ? bad : "?";
-        for (size_t i = 0; bad && i < sizeof field_keys / sizeof field_keys[0]; i++)
-            if (!strcmp(field_keys[i].field, bad)) {
-                section = field_keys[i].section;
-                key = field_keys[i].key;
-            }
+        key_of_field(bad, &section, &key);
         char why[160];
         snprintf(why, sizeof why, "rejected by the estimator (%s: %s)",
                  bad ? bad : "?", bl_strerror(rc));
@@ -77,11 +84,7 @@ int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
     int rc = bl_localizer_seq_config(c, out, &cause, &field);
     if (rc != BL_OK) {
         const char *section = "beacons", *key = "period_s";
-        for (size_t i = 0; field && i < sizeof field_keys / sizeof field_keys[0]; i++)
-            if (!strcmp(field_keys[i].field, field)) {
-                section = field_keys[i].section;
-                key = field_keys[i].key;
-            }
+        key_of_field(field, &section, &key);
         char why[200];
         snprintf(why, sizeof why, "refused by the beacon sequencer: %s (%s)",
                  cause ? cause : "?", bl_strerror(rc));
