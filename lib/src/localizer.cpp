@@ -14,7 +14,7 @@ namespace {
 constexpr uint32_t kMagic = 0x6C6F6331u;  // "loc1"
 
 // Tag of member m of a pulse (the detection's tag, carried by the sequencer).
-inline uint64_t member_tag(const bl_seq_pulse &pl, uint32_t m)
+inline uint32_t member_tag(const bl_seq_pulse &pl, uint32_t m)
 {
     return pl.members[m].tag;
 }
@@ -128,7 +128,7 @@ NOINLINE void reinit_filter(bl_localizer *loc, bl_loc_reset_cause cause)
     if (was) push_event(loc, BL_LOC_EV_RESET, cause, 0);
 }
 
-void measurement_fused(bl_localizer *loc, uint64_t tag)
+void measurement_fused(bl_localizer *loc, uint32_t tag)
 {
     loc->measurements_++;
     loc->newest_tag_ = tag;
@@ -302,7 +302,7 @@ INLINE void fuse_firing(bl_localizer *loc, const bl_seq_pulse &pl)
     for (uint32_t m = 0; m < (n ? n : 1u); m++) {
         const int64_t t = n ? pl.members[m].arrival_us : pl.arrival_us;
         const uint32_t rx = n ? pl.members[m].receiver : pl.receiver;
-        const uint64_t tag = n ? member_tag(pl, m) : 0;
+        const uint32_t tag = n ? member_tag(pl, m) : 0;
         const Fused r = fuse_one(loc, beacon, t, rx);
         if (r == Fused::kMisnumbered) break;  // one numbering error, not one per receiver
         bool fused = r == Fused::kAccepted;

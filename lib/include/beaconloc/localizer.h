@@ -54,10 +54,12 @@
  * bl_localizer_advance(now) closes the sequencer's merge windows. Pass as
  * now the current time minus the largest delivery latency of detections.
  *
- * Tags: each input carries a caller tag (uint64_t, never read by the
+ * Tags: each input carries a caller tag (uint32_t, never read by the
  * library); the tag of the newest measurement fused into the state is
- * reported (bl_loc_status.newest_tag), e.g. the receive time of the frame
- * that carried it, so the caller finds its own context without searching.
+ * reported (bl_loc_status.newest_tag), e.g. the low 32 bits of the receive
+ * time (us) of the frame that carried it, which the caller unwraps against
+ * its own clock (unambiguous for 2^31 us = 35 min either side; the bridge:
+ * node_clock_unwrap_near), so it finds its own context without searching.
  *
  * Events: a queue of BL_LOC_EVENT_QUEUE structured events (started, reset
  * with its cause, converged / not converged, numbering re-synchronised);
@@ -110,7 +112,7 @@ typedef struct bl_wheel_increment {
     bl_real d_right_m;     /* right wheel travel, m */
     bool reference_only;   /* no increment known (first sample, encoder restart, count
                               glitch): the sample only sets the time reference */
-    uint64_t tag;          /* caller's tag, never read by the library */
+    uint32_t tag;          /* caller's tag, never read by the library */
 } bl_wheel_increment;
 
 typedef enum bl_loc_event_kind {
@@ -179,7 +181,7 @@ typedef struct bl_loc_status {
     uint32_t measurements;   /* measurements fused so far (arrivals and wheel increments);
                                 wraps. A change means a new update. */
     bool have_tag;           /* newest_tag is valid (a measurement was fused) */
-    uint64_t newest_tag;     /* tag of the newest measurement fused into the state */
+    uint32_t newest_tag;     /* tag of the newest measurement fused into the state */
     uint32_t window_len;     /* first arrivals in the persistent-rejection watch */
     uint32_t window_rejected;/* of those, rejected by the gate */
     uint32_t window_size;    /* W */
@@ -202,7 +204,7 @@ typedef struct bl_localizer {
     uint32_t last_reset_seen_;
     uint32_t misnumbered_in_row_;
     uint32_t measurements_;
-    uint64_t newest_tag_;
+    uint32_t newest_tag_;
     bool have_tag_;
     bool was_started_;
     bool ever_started_;

@@ -131,10 +131,11 @@ typedef struct bl_seq_detection {
     bool double_pulse;     /* node saw beacon 1's second burst (DoublePulse flag) */
     uint16_t amplitude_mv; /* peak envelope amplitude (mV) */
     uint16_t width_us;     /* envelope width above threshold (us) */
-    uint64_t tag;          /* caller's own, never read by the library (e.g. a CAN frame's
-                              receive time, us): comes back with this detection in
-                              bl_seq_member.tag (and bl_seq_pulse.tag when it is the
-                              pulse's earliest) */
+    uint32_t tag;          /* caller's own, never read by the library (e.g. the low 32
+                              bits of a CAN frame's receive time, us, which the caller
+                              unwraps against its clock): comes back with this
+                              detection in bl_seq_member.tag (and bl_seq_pulse.tag
+                              when it is the pulse's earliest) */
 } bl_seq_detection;
 
 typedef enum bl_seq_status {
@@ -148,7 +149,7 @@ typedef struct bl_seq_member {
     int64_t arrival_us;       /* this receiver's earliest detection in the merge window (us) */
     uint32_t receiver;        /* receiver index on the ring */
     uint16_t amplitude_mv;    /* its peak envelope amplitude (mV) */
-    uint64_t tag;             /* bl_seq_detection.tag of that detection (caller's own) */
+    uint32_t tag;             /* bl_seq_detection.tag of that detection (caller's own) */
 } bl_seq_member;
 
 /* One merged pulse, output of bl_sequencer_pop. */
@@ -163,7 +164,7 @@ typedef struct bl_seq_pulse {
     uint32_t receivers_heard; /* distinct receivers merged into this pulse, >= 1 */
     uint16_t amplitude_mv;    /* earliest detection's amplitude (mV) */
     uint16_t width_us;        /* earliest detection's width (us) */
-    uint64_t tag;             /* earliest detection's bl_seq_detection.tag (= members[0].tag) */
+    uint32_t tag;             /* earliest detection's bl_seq_detection.tag (= members[0].tag) */
     bool double_pulse;        /* recognised as beacon 1's double pulse */
     bool repeat;              /* this firing already produced a pulse: a late arrival,
                                  probably an echo (left for the filter's gate) */
@@ -214,7 +215,7 @@ typedef struct bl_seq_pending {
     int32_t rx_offset_us[BL_MAX_RECEIVERS];   /* per receiver in rx_mask: its earliest
                                                  detection - start_us (us, >= 0) */
     uint16_t rx_amplitude_mv[BL_MAX_RECEIVERS];
-    uint64_t rx_tag[BL_MAX_RECEIVERS];        /* per receiver: its earliest detection's tag */
+    uint32_t rx_tag[BL_MAX_RECEIVERS];        /* per receiver: its earliest detection's tag */
 } bl_seq_pending;
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
