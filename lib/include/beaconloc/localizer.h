@@ -216,9 +216,10 @@ typedef struct bl_localizer {
     bl_loc_counters counters_;
     bl_loc_event events_[BL_LOC_EVENT_QUEUE];
     uint32_t ev_head_, ev_len_;
-    bl_seq_pulse pulse_;         /* the pulse being processed, and its fusion result (kept */
-    bl_fusion_result result_;     /* off the stack: the fusion's snapshot start is the
-                                    deepest call chain) */
+    bl_fusion_result result_;    /* the fusion result of the arrival being processed (kept
+                                    off the stack: the fusion's snapshot start is the
+                                    deepest call chain). The pulse itself is read where
+                                    the sequencer keeps it (its freed pending slot). */
 } bl_localizer;
 
 /* The sequencer config for a site (bl_sequencer_config_from_site with the
