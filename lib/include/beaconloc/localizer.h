@@ -101,7 +101,7 @@ extern "C" {
 #define BL_LOC_REJECT_WINDOW_MAX 32
 /* Events kept until the caller takes them. */
 #ifndef BL_LOC_EVENT_QUEUE
-#define BL_LOC_EVENT_QUEUE 8
+#define BL_LOC_EVENT_QUEUE 4
 #endif
 
 /* Wheel travel since the previous sample (differential drive). */
@@ -194,17 +194,19 @@ typedef struct bl_localizer {
     bl_filter filter;
     bl_sequencer seq;
     /* ---- private ---- */
+    int64_t wheel_last_us_;      /* last wheel sample */
     uint32_t magic_;
     uint32_t reject_k_;          /* K */
     uint32_t reject_w_;          /* W */
     uint32_t win_rejected_;      /* bit i: slot i rejected */
     uint32_t win_len_, win_next_;
-    uint8_t win_beacon_[BL_LOC_REJECT_WINDOW_MAX];
     uint32_t reset_base_;
     uint32_t last_reset_seen_;
     uint32_t misnumbered_in_row_;
     uint32_t measurements_;
     uint32_t newest_tag_;
+    uint32_t ev_head_, ev_len_;
+    uint8_t win_beacon_[BL_LOC_REJECT_WINDOW_MAX];
     bool have_tag_;
     bool was_started_;
     bool ever_started_;
@@ -212,10 +214,8 @@ typedef struct bl_localizer {
     bool hint_set_;
     bool wheel_seen_;            /* a wheel sample came */
     bool wheel_ref_;             /* the last sample is a valid increment start */
-    int64_t wheel_last_us_;      /* last wheel sample */
     bl_loc_counters counters_;
     bl_loc_event events_[BL_LOC_EVENT_QUEUE];
-    uint32_t ev_head_, ev_len_;
     bl_fusion_result result_;    /* the fusion result of the arrival being processed (kept
                                     off the stack: the fusion's snapshot start is the
                                     deepest call chain). The pulse itself is read where

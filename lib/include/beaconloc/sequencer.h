@@ -93,7 +93,7 @@ extern "C" {
 
 /* Pulses held open (merge window not closed yet) at one time. */
 #ifndef BL_SEQ_MAX_PENDING
-#define BL_SEQ_MAX_PENDING 8
+#define BL_SEQ_MAX_PENDING 4
 #endif
 
 /* Valid range of every time argument: |t_us| <= 2^61 us (73,000 years), so
@@ -227,26 +227,27 @@ typedef struct bl_sequencer {
     bl_seq_counters counters;
     /* ---- private ---- */
     bl_seq_pending pending[BL_SEQ_MAX_PENDING];
+    /* (4-byte fields first, then the int64 ones: no padding) */
     uint32_t n_pending;
     uint32_t magic;
-    int64_t horizon_us;             /* earliest time a new detection may have (us) */
+    uint32_t consecutive_spurious;
+    int32_t last_beacon;            /* beacon of the last assigned pulse */
+    uint32_t conflicts_in_row;
+    uint32_t hint_beacon;
+    uint32_t beacon_seen_mask;      /* beacons with a valid beacon_last_us */
     bool locked;
     bool hint_valid;
     bool have_last;                 /* last_* valid */
-    uint32_t consecutive_spurious;
+    int64_t horizon_us;             /* earliest time a new detection may have (us) */
     int64_t anchor_us;              /* beacon-1 arrival of the model (us) */
     int64_t period_ns;              /* tracked T (ns) */
-    int32_t last_beacon;            /* beacon of the last assigned pulse */
-    int64_t last_fire_us;           /* its firing-time estimate (us) */
+    int64_t last_fire_us;           /* firing-time estimate of the last assigned pulse (us) */
     int64_t conflict_us;            /* last conflicting double pulse (us) */
-    uint32_t conflicts_in_row;
     int64_t hint_fire_us;           /* hint: firing time of beacon hint_beacon (us) */
-    uint32_t hint_beacon;
     int64_t hint_period_ns;
     int64_t hint_fire_sigma_ns;
     int64_t hint_period_sigma_ns;
     int64_t beacon_last_us[BL_MAX_BEACONS];   /* first arrival of each beacon's last firing */
-    uint32_t beacon_seen_mask;      /* beacons with a valid beacon_last_us */
 } bl_sequencer;
 
 /* Model summary for logs and health reports. */
