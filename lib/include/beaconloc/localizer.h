@@ -67,9 +67,11 @@
  * caller's business.
  *
  * Memory: caller-owned struct (filter + sequencer + policy state), no heap,
- * no globals. sizeof on Cortex-M4F, float (make size-m4): 3,088 B with
- * BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 984, sequencer 1,392,
- * policy + events + the pulse being processed 712), 4,560 B with 16/16. Cost per call: a
+ * no globals, no pulse buffer (a closed pulse's members are fused from the
+ * sequencer's slot they were merged in). sizeof on Cortex-M4F, float (make
+ * size-m4): 2,032 B with BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 984,
+ * sequencer 704, policy + counters + events 344), 2,736 B with 16/16.
+ * Cost per call: a
  * detection O(BL_SEQ_MAX_PENDING + BL_MAX_RECEIVERS) plus what it closes;
  * every pulse closed costs one bl_filter_fuse_pulse per member (O(NX²) per
  * IEKF iteration, see filter.h) plus an estimate and a hint; a snapshot
@@ -99,7 +101,8 @@ extern "C" {
 /* Largest persistent-rejection window (first arrivals): W = K + K/2 is
  * clamped to it (and K to W). */
 #define BL_LOC_REJECT_WINDOW_MAX 32
-/* Events kept until the caller takes them. */
+/* Events kept until the caller takes them (take them after every call; when
+ * full the oldest is dropped, counted in events_dropped). */
 #ifndef BL_LOC_EVENT_QUEUE
 #define BL_LOC_EVENT_QUEUE 4
 #endif

@@ -91,7 +91,20 @@
 extern "C" {
 #endif
 
-/* Pulses held open (merge window not closed yet) at one time. */
+/* Pulses held open (merge window not closed yet) at one time. When pops keep
+ * up (pop at each detection's time before pushing it, as the localizer does
+ * on BL_EFULL and the bridge after every detection), the open pulses' starts
+ * lie in (t - D, t] (D = merge window, or double spacing + tolerance + merge
+ * window if longer: the close delay), pairwise more than merge_window_us
+ * apart (closer ones merge) and never double spacing ± tolerance after
+ * another open start (a second burst, swallowed). So at most
+ * floor((D - 1) / (merge_window_us + 1)) + 1 are open, fewer with the
+ * second-burst gap: 4 for kleeman-lab (D = 4,607 us, merge 1,107 us; the
+ * proof and a check in tests/lib/test_sequencer_errors.c; make
+ * bench-sequencer, whose replay fails on a push that stays full, on every
+ * scenario). A fifth open pulse (pops lagging, a site with a much smaller
+ * merge window than its double spacing) gives BL_EFULL: the localizer then
+ * closes the oldest early (counted in seq_full). */
 #ifndef BL_SEQ_MAX_PENDING
 #define BL_SEQ_MAX_PENDING 4
 #endif
@@ -219,9 +232,10 @@ typedef struct bl_seq_pending {
 } bl_seq_pending;
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
- * `counters` are private. Size: 2,352 bytes on x86-64 and on Cortex-M4 with
- * BL_MAX_RECEIVERS 16 (BL_SEQ_MAX_PENDING · (24 + 14·BL_MAX_RECEIVERS) + 368;
- * 8 of the 14 bytes per receiver are the callers' tags). */
+ * `counters` are private. Size: BL_SEQ_MAX_PENDING · (24 + 10·BL_MAX_RECEIVERS)
+ * + 224 + 8·BL_MAX_BEACONS bytes on x86-64 and on Cortex-M4 (4 of the 10
+ * bytes per receiver are the caller's tags): 704 B with 8 beacons and 8
+ * receivers (the M4 example), 1,088 B with 16/16. */
 typedef struct bl_sequencer {
     bl_seq_config cfg;
     bl_seq_counters counters;
