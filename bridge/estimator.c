@@ -127,7 +127,9 @@ static void sync(struct estimator *e)
     if (st.measurements != e->measurements_seen) {
         e->measurements_seen = st.measurements;
         e->updated = true;
-        e->last_update_rx_us = st.have_tag ? (int64_t)st.newest_tag : 0;
+        /* the tag is the frame's receive time, low 32 bits (milliseconds
+         * old against the newest frame's) */
+        e->last_update_rx_us = st.have_tag ? node_clock_unwrap_near(st.newest_tag, e->latest_rx_us) : 0;
         if (e->last_update_rx_us > e->last_data_rx_us)
             e->last_data_rx_us = e->last_update_rx_us;
     }
@@ -283,8 +285,10 @@ void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
         .double_pulse = p->double_pulse,
         .amplitude_mv = p->amplitude_mv,
         .width_us = (uint16_t)(p->width_us > 65535 ? 65535 : p->width_us),
-        .tag = (uint64_t)rx_us, /* comes back as the newest fused measurement's */
+        .tag = (uint32_t)rx_us, /* low 32 bits; comes back as the newest fused measurement's */
     };
+    if (rx_us > e->latest_rx_us)
+        e->latest_rx_us = rx_us;
     int rc = bl_localizer_detection(&e->loc, &d);
     if (rc != BL_OK) {
         e->c.seq_errors++;
@@ -376,8 +380,10 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
         .d_left_m = (bl_real)(dl * e->m_per_tick),
         .d_right_m = (bl_real)(dr * e->m_per_tick),
         .reference_only = !had_ref,
-        .tag = (uint64_t)rx_us,
+        .tag = (uint32_t)rx_us,
     };
+    if (rx_us > e->latest_rx_us)
+        e->latest_rx_us = rx_us;
     int rc = bl_localizer_wheels(&e->loc, &inc);
     if (rc != BL_OK) {
         e->c.predict_errors++;

@@ -150,6 +150,8 @@ struct estimator {
     int64_t pulse_hold_us;        /* the receiver node's hold of a detection (us) */
     uint32_t measurements_seen;   /* localizer's measurement count, last seen */
     int64_t last_update_rx_us;    /* local rx time of the newest fused measurement's frame */
+    int64_t latest_rx_us;         /* newest frame receive time handed to the localizer: the
+                                     clock its 32-bit tags are unwrapped against */
     int64_t last_data_rx_us;      /* newest receive time of a fused measurement's frame */
     bool updated;                 /* an update since estimator_take_update */
     struct est_counters c;

@@ -330,3 +330,11 @@ double node_clock_drift(const struct node_clock *nc)
 {
     return nc && nc->have_fit ? nc->drift : 0.0;
 }
+
+int64_t node_clock_unwrap_near(uint32_t low32_us, int64_t ref_us)
+{
+    /* (low32 - ref) mod 2^32, taken as a signed offset in [-2^31, 2^31) */
+    const uint32_t d = low32_us - (uint32_t)((uint64_t)ref_us & 0xFFFFFFFFu);
+    const int64_t off = d >= 0x80000000u ? (int64_t)d - ((int64_t)1 << 32) : (int64_t)d;
+    return ref_us + off;
+}

@@ -133,6 +133,13 @@ bool node_clock_synced(const struct node_clock *nc);
 /* Current drift estimate (1e-6 = node clock 1 ppm slow), 0 before a fit. */
 double node_clock_drift(const struct node_clock *nc);
 
+/* The time (us) whose low 32 bits are low32_us, nearest to ref_us: a time
+ * kept in 32 bits (the library's uint32 tags carry a frame's receive time
+ * that way) recovered against the caller's clock. Exact when the time lies
+ * within [ref_us - 2^31, ref_us + 2^31) us (+-35.8 min): the frames behind
+ * the tags are milliseconds old. */
+int64_t node_clock_unwrap_near(uint32_t low32_us, int64_t ref_us);
+
 #ifdef __cplusplus
 }
 #endif

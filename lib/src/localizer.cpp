@@ -8,16 +8,11 @@ extern "C" {
 #include <cstring>
 
 #include "internal.hpp"
+#include "sequencer_internal.hpp"
 
 namespace {
 
 constexpr uint32_t kMagic = 0x6C6F6331u;  // "loc1"
-
-// Tag of member m of a pulse (the detection's tag, carried by the sequencer).
-inline uint64_t member_tag(const bl_seq_pulse &pl, uint32_t m)
-{
-    return pl.members[m].tag;
-}
 
 bool valid(const bl_localizer *loc) { return loc != nullptr && loc->magic_ == kMagic; }
 
@@ -128,7 +123,7 @@ NOINLINE void reinit_filter(bl_localizer *loc, bl_loc_reset_cause cause)
     if (was) push_event(loc, BL_LOC_EV_RESET, cause, 0);
 }
 
-void measurement_fused(bl_localizer *loc, uint64_t tag)
+void measurement_fused(bl_localizer *loc, uint32_t tag)
 {
     loc->measurements_++;
     loc->newest_tag_ = tag;
@@ -293,17 +288,17 @@ NOINLINE void after_update(bl_localizer *loc)
     }
 }
 
-// One numbered firing: every member fused and watched.
-INLINE void fuse_firing(bl_localizer *loc, const bl_seq_pulse &pl)
+// One numbered firing: every member fused and watched, in member order
+// (bl_seq_pulse.members), read from the sequencer's slot *g.
+INLINE void fuse_firing(bl_localizer *loc, const bl::SeqNumbered &pl, const bl_seq_pending &g)
 {
     const uint32_t beacon = static_cast<uint32_t>(pl.beacon);
-    const uint32_t n = (pl.member_count == 0 || pl.member_count > BL_MAX_RECEIVERS) ? 0 : pl.member_count;
+    uint8_t order[BL_MAX_RECEIVERS];
+    const uint32_t n = bl::sequencer_member_order(g, order);
     bool any_accepted = false, any_rejected = false;
-    for (uint32_t m = 0; m < (n ? n : 1u); m++) {
-        const int64_t t = n ? pl.members[m].arrival_us : pl.arrival_us;
-        const uint32_t rx = n ? pl.members[m].receiver : pl.receiver;
-        const uint64_t tag = n ? member_tag(pl, m) : 0;
-        const Fused r = fuse_one(loc, beacon, t, rx);
+    for (uint32_t m = 0; m < n; m++) {
+        const uint32_t rx = order[m];
+        const Fused r = fuse_one(loc, beacon, g.start_us + g.rx_offset_us[rx], rx);
         if (r == Fused::kMisnumbered) break;  // one numbering error, not one per receiver
         bool fused = r == Fused::kAccepted;
         if (r == Fused::kAccepted || r == Fused::kRejected) {
@@ -313,7 +308,7 @@ INLINE void fuse_firing(bl_localizer *loc, const bl_seq_pulse &pl)
         if (r == Fused::kRejected) any_rejected = true;
         if (fused) {
             any_accepted = true;
-            measurement_fused(loc, tag);
+            measurement_fused(loc, g.rx_tag[rx]);
             after_update(loc);
         }
     }
@@ -323,7 +318,7 @@ INLINE void fuse_firing(bl_localizer *loc, const bl_seq_pulse &pl)
         loc->counters_.firings_rejected++;
 }
 
-INLINE void process_pulse(bl_localizer *loc, const bl_seq_pulse &pl)
+INLINE void process_pulse(bl_localizer *loc, const bl::SeqNumbered &pl, const bl_seq_pending &g)
 {
     loc->counters_.pulses_in++;
     if (pl.status == BL_SEQ_UNLOCKED) {
@@ -339,18 +334,22 @@ INLINE void process_pulse(bl_localizer *loc, const bl_seq_pulse &pl)
         loc->counters_.repeats_skipped++;
         return;
     }
-    fuse_firing(loc, pl);
+    fuse_firing(loc, pl, g);
 }
 
 // Every pulse closed at now_us through the same path; with while_full only
 // until the sequencer has room again (BL_EFULL). One copy of the pulse path
-// (flash), its frame on the deepest chain (localizer.h, cost).
+// (flash), its frame on the deepest chain (localizer.h, cost). The pulse's
+// members are read where the sequencer keeps them (sequencer_close): no
+// pulse buffer here; nothing pushes before they are fused.
 NOINLINE void pop_until(bl_localizer *loc, int64_t now_us, bool while_full)
 {
     int rc = 0;
+    bl::SeqNumbered pl;
+    const bl_seq_pending *g = nullptr;
     while ((!while_full || loc->seq.n_pending >= BL_SEQ_MAX_PENDING) &&
-           (rc = bl_sequencer_pop(&loc->seq, now_us, &loc->pulse_)) == 1)
-        process_pulse(loc, loc->pulse_);
+           (rc = bl::sequencer_close(&loc->seq, now_us, &pl, &g)) == 1)
+        process_pulse(loc, pl, *g);
     if (!while_full && rc < 0) loc->counters_.seq_errors++;
 }
 

@@ -8,6 +8,8 @@
 
 #include "beaconloc/sequencer.h"
 
+#include "sequencer_internal.hpp"
+
 #include <stdint.h>
 #include <string.h>
 
@@ -197,7 +199,7 @@ void track_period(bl_sequencer *s, int32_t beacon, int64_t t_us) {
 }
 
 // Numbers one closed pulse and updates the model.
-void number_pulse(bl_sequencer *s, bl_seq_pulse *p) {
+void number_pulse(bl_sequencer *s, bl::SeqNumbered *p) {
     const bl_seq_config &c = s->cfg;
     const int64_t t = p->arrival_us;
     const bool was_locked = is_locked(s);
@@ -530,55 +532,33 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det) {
 
 int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out) {
     if (seq == nullptr || out == nullptr) return BL_EINVAL;
-    if (!seq_ok(seq)) return BL_ENOTINIT;
-    if (seq->n_pending == 0) return BL_OK;
-    const int64_t close_us = seq->pending[0].start_us + close_delay_us(seq->cfg);
-    if (now_us < close_us) return BL_OK;
-    // Written straight into *out (no error can follow): no pulse-sized copy
-    // on the stack; the pending entry leaves the queue once read.
-    const bl_seq_pending &g = seq->pending[0];
+    bl::SeqNumbered n;
+    const bl_seq_pending *g = nullptr;
+    const int rc = bl::sequencer_close(seq, now_us, &n, &g);
+    if (rc != 1) return rc;
     bl_seq_pulse &p = *out;
     memset(&p, 0, sizeof p);
-    p.arrival_us = g.start_us;
-    p.beacon = BL_SEQ_UNASSIGNED;
-    p.receiver = g.receiver;
-    uint32_t heard = 0, signed_rx = 0;
-    for (uint32_t m = g.rx_mask; m != 0; m &= m - 1) ++heard;
-    for (uint32_t m = g.double_mask; m != 0; m &= m - 1) ++signed_rx;
-    uint32_t either = 0;
-    for (uint32_t m = g.rx_mask | g.double_mask; m != 0; m &= m - 1) ++either;
-    p.receivers_heard = heard;
-    // Members: every receiver's own earliest detection, sorted by time
-    // (insertion sort, at most BL_MAX_RECEIVERS entries; on equal times the
-    // pulse's own earliest receiver first, then by receiver index since the
-    // mask is walked in increasing receiver order).
-    for (uint32_t m = g.rx_mask; m != 0; m &= m - 1) {
-        const uint32_t r = static_cast<uint32_t>(__builtin_ctz(m));
-        bl_seq_member mem;
-        mem.arrival_us = g.start_us + g.rx_offset_us[r];
+    p.arrival_us = n.arrival_us;
+    p.fire_us = n.fire_us;
+    p.beacon = n.beacon;
+    p.status = n.status;
+    p.double_pulse = n.double_pulse;
+    p.repeat = n.repeat;
+    p.receiver = g->receiver;
+    p.amplitude_mv = g->amplitude_mv;
+    p.width_us = g->width_us;
+    p.tag = g->rx_tag[g->receiver];  // the earliest detection's (caller's own)
+    uint8_t order[BL_MAX_RECEIVERS];
+    p.member_count = bl::sequencer_member_order(*g, order);
+    p.receivers_heard = p.member_count;
+    for (uint32_t k = 0; k < p.member_count; ++k) {
+        const uint32_t r = order[k];
+        bl_seq_member &mem = p.members[k];
+        mem.arrival_us = g->start_us + g->rx_offset_us[r];
         mem.receiver = r;
-        mem.amplitude_mv = g.rx_amplitude_mv[r];
-        mem.tag = g.rx_tag[r];
-        uint32_t k = p.member_count;
-        while (k > 0 && (p.members[k - 1].arrival_us > mem.arrival_us ||
-                         (p.members[k - 1].arrival_us == mem.arrival_us && r == g.receiver))) {
-            p.members[k] = p.members[k - 1];
-            --k;
-        }
-        p.members[k] = mem;
-        p.member_count++;
+        mem.amplitude_mv = g->rx_amplitude_mv[r];
+        mem.tag = g->rx_tag[r];
     }
-    p.amplitude_mv = g.amplitude_mv;
-    p.width_us = g.width_us;
-    p.tag = g.rx_tag[g.receiver];  // the earliest detection's (caller's own)
-    // Beacon 1 when at least half the receivers that heard the pulse show
-    // its signature.
-    p.double_pulse = signed_rx > 0 && 2 * signed_rx >= either;
-    for (uint32_t k = 1; k < seq->n_pending; ++k) seq->pending[k - 1] = seq->pending[k];
-    seq->n_pending--;
-    if (close_us > seq->horizon_us) seq->horizon_us = close_us;
-    number_pulse(seq, &p);
-    seq->counters.pulses_out++;
     return 1;
 }
 
@@ -656,3 +636,55 @@ int bl_sequencer_state(const bl_sequencer *seq, bl_seq_state *st) {
 }
 
 }  // extern "C"
+
+namespace bl {
+
+uint32_t sequencer_member_order(const bl_seq_pending &g, uint8_t order[BL_MAX_RECEIVERS]) {
+    // Insertion sort, at most BL_MAX_RECEIVERS entries; the mask is walked in
+    // increasing receiver order, so equal times stay by receiver index
+    // except that the pulse's own earliest receiver goes first.
+    uint32_t n = 0;
+    for (uint32_t m = g.rx_mask; m != 0; m &= m - 1) {
+        const uint32_t r = static_cast<uint32_t>(__builtin_ctz(m));
+        const int32_t off = g.rx_offset_us[r];
+        uint32_t k = n;
+        while (k > 0 && (g.rx_offset_us[order[k - 1]] > off ||
+                         (g.rx_offset_us[order[k - 1]] == off && r == g.receiver))) {
+            order[k] = order[k - 1];
+            --k;
+        }
+        order[k] = static_cast<uint8_t>(r);
+        ++n;
+    }
+    return n;
+}
+
+int sequencer_close(bl_sequencer *seq, int64_t now_us, SeqNumbered *out, const bl_seq_pending **held) {
+    if (seq == nullptr || out == nullptr || held == nullptr) return BL_EINVAL;
+    if (!seq_ok(seq)) return BL_ENOTINIT;
+    if (seq->n_pending == 0) return BL_OK;
+    const int64_t close_us = seq->pending[0].start_us + close_delay_us(seq->cfg);
+    if (now_us < close_us) return BL_OK;
+    const bl_seq_pending &g = seq->pending[0];
+    uint32_t signed_rx = 0, either = 0;
+    for (uint32_t m = g.double_mask; m != 0; m &= m - 1) ++signed_rx;
+    for (uint32_t m = g.rx_mask | g.double_mask; m != 0; m &= m - 1) ++either;
+    SeqNumbered n = {g.start_us, 0, BL_SEQ_UNASSIGNED, 0, false, false};
+    // Beacon 1 when at least half the receivers that heard the pulse show
+    // its signature.
+    n.double_pulse = signed_rx > 0 && 2 * signed_rx >= either;
+    // The entry leaves the queue to the first free slot (the others move up
+    // one): its members stay readable there until the next push.
+    const bl_seq_pending closed = g;
+    for (uint32_t k = 1; k < seq->n_pending; ++k) seq->pending[k - 1] = seq->pending[k];
+    seq->n_pending--;
+    seq->pending[seq->n_pending] = closed;
+    *held = &seq->pending[seq->n_pending];
+    if (close_us > seq->horizon_us) seq->horizon_us = close_us;
+    number_pulse(seq, &n);
+    seq->counters.pulses_out++;
+    *out = n;
+    return 1;
+}
+
+}  // namespace bl

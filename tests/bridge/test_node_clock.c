@@ -398,6 +398,28 @@ static void test_forward_jump_is_restart(void **state)
     assert_true(u > newest && u - newest < 20000);
 }
 
+/* A time kept in its low 32 bits comes back against a nearby clock: on
+ * either side of the reference, across a 2^32 boundary, at the limits of
+ * the +-2^31 us range, for negative times, and not beyond the range. */
+static void test_unwrap_near(void **state)
+{
+    (void)state;
+    const int64_t base = 5 * WRAP + 123456; /* hours into the run */
+    const int64_t offsets[] = {0, -1, 1, -2500, 4000000, -((int64_t)1 << 31), ((int64_t)1 << 31) - 1};
+    const int64_t refs[] = {base, 3 * WRAP - 10, 3 * WRAP + 10, 0, -WRAP - 7, 77};
+    for (size_t r = 0; r < sizeof refs / sizeof refs[0]; r++)
+        for (size_t k = 0; k < sizeof offsets / sizeof offsets[0]; k++) {
+            const int64_t t = refs[r] + offsets[k];
+            const uint32_t low = (uint32_t)((uint64_t)t & 0xFFFFFFFFu);
+            assert_int_equal(node_clock_unwrap_near(low, refs[r]), t);
+        }
+    /* a frame 3 ms old, the receive clock just past a 2^32 boundary */
+    assert_int_equal(node_clock_unwrap_near((uint32_t)(WRAP - 3000), 7 * WRAP + 500), 7 * WRAP - 3000);
+    /* 2^31 us ahead is read as 2^31 us behind: the range ends there */
+    assert_int_equal(node_clock_unwrap_near((uint32_t)((uint64_t)(base + ((int64_t)1 << 31)) & 0xFFFFFFFFu), base),
+                     base - ((int64_t)1 << 31));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -412,6 +434,7 @@ int main(void)
         cmocka_unit_test(test_fit_with_reordering_and_duplicates),
         cmocka_unit_test(test_restart),
         cmocka_unit_test(test_forward_jump_is_restart),
+        cmocka_unit_test(test_unwrap_near),
     };
     return cmocka_run_group_tests_name("node_clock", tests, NULL, NULL);
 }

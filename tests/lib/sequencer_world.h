@@ -73,7 +73,7 @@ static inline void add_det(train_t *tr, int64_t t_us, uint32_t rx, bool dbl, uin
     e->d.width_us = width_us;
     /* the caller's tag: unique per detection (its time and receiver), never
      * read by the sequencer; it must come back with the detection */
-    e->d.tag = ((uint64_t)t_us << 8) | 0x80u | rx;
+    e->d.tag = (uint32_t)(((uint64_t)t_us << 8) | 0x80u | rx); /* unique within a merge window */
     e->firing = firing;
 }
 

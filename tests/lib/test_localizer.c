@@ -70,7 +70,7 @@ static void load(run_t *r, const char *name) {
             e->d.double_pulse = dbl != 0;
             e->d.amplitude_mv = (uint16_t)amp;
             e->d.width_us = (uint16_t)width;
-            e->d.tag = tag;
+            e->d.tag = (uint32_t)tag;
         } else {
             double dl, dr;
             unsigned ref;
@@ -80,7 +80,7 @@ static void load(run_t *r, const char *name) {
             e->w.d_left_m = (bl_real)dl;
             e->w.d_right_m = (bl_real)dr;
             e->w.reference_only = ref != 0;
-            e->w.tag = tag;
+            e->w.tag = (uint32_t)tag;
         }
         r->n++;
     }

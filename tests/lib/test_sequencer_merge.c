@@ -66,7 +66,7 @@ static void check_members_of_train(int double_mode) {
             seen |= 1u << mb->receiver;
             /* the member is this receiver's first detection of firing f */
             int64_t first = INT64_MAX;
-            uint64_t first_tag = 0;
+            uint32_t first_tag = 0;
             for (size_t d = 0; d < g_tr.n; ++d)
                 if (g_tr.det[d].firing == f && g_tr.det[d].d.receiver == mb->receiver &&
                     g_tr.det[d].d.time_us < first) {
@@ -127,7 +127,7 @@ static void test_members_out_of_order(void **state) {
     d.time_us = 4999900;   /* a new earliest receiver after all */
     d.receiver = 5;
     d.amplitude_mv = 700;
-    d.tag = UINT64_MAX;    /* every bit passes through */
+    d.tag = UINT32_MAX;    /* every bit passes through */
     assert_int_equal(bl_sequencer_push(&seq, &d), BL_OK);
     bl_seq_pulse p;
     assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), 1);
@@ -138,14 +138,14 @@ static void test_members_out_of_order(void **state) {
     const int64_t t_exp[4] = {4999900, 5000000, 5000200, 5000700};
     const uint32_t r_exp[4] = {5, 2, 3, 1};
     const uint16_t a_exp[4] = {700, 900, 650, 300};
-    const uint64_t tag_exp[4] = {UINT64_MAX, 0xA2, 0xA4, 0xA3};
+    const uint32_t tag_exp[4] = {UINT32_MAX, 0xA2, 0xA4, 0xA3};
     for (int m = 0; m < 4; ++m) {
         assert_int_equal(p.members[m].arrival_us, t_exp[m]);
         assert_int_equal(p.members[m].receiver, r_exp[m]);
         assert_int_equal(p.members[m].amplitude_mv, a_exp[m]);
         assert_true(p.members[m].tag == tag_exp[m]);
     }
-    assert_true(p.tag == UINT64_MAX); /* the earliest detection's */
+    assert_true(p.tag == UINT32_MAX); /* the earliest detection's */
     assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), BL_OK);
 }
 

@@ -103,7 +103,7 @@ int main(void) {
             d.width_us = b.width_us;
             d.amplitude_mv = b.amplitude_mv;
             d.double_pulse = b.double_pulse;
-            d.tag = (uint64_t)now_us;   /* when the loop took it (latency figure) */
+            d.tag = (uint32_t)now_us;   /* when the loop took it, low 32 bits (latency figure) */
             if (bl_localizer_detection(&fw_loc, &d) != BL_OK) fw_out.errors++;
         }
 
@@ -121,7 +121,7 @@ int main(void) {
             inc.d_left_m = (float)dl * m_per_tick;
             inc.d_right_m = (float)dr * m_per_tick;
             inc.reference_only = !have_counts;
-            inc.tag = (uint64_t)now_us;
+            inc.tag = (uint32_t)now_us;
             if (bl_localizer_wheels(&fw_loc, &inc) != BL_OK) fw_out.errors++;
             have_counts = true;
             last_left = s.left;

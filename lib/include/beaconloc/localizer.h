@@ -54,10 +54,12 @@
  * bl_localizer_advance(now) closes the sequencer's merge windows. Pass as
  * now the current time minus the largest delivery latency of detections.
  *
- * Tags: each input carries a caller tag (uint64_t, never read by the
+ * Tags: each input carries a caller tag (uint32_t, never read by the
  * library); the tag of the newest measurement fused into the state is
- * reported (bl_loc_status.newest_tag), e.g. the receive time of the frame
- * that carried it, so the caller finds its own context without searching.
+ * reported (bl_loc_status.newest_tag), e.g. the low 32 bits of the receive
+ * time (us) of the frame that carried it, which the caller unwraps against
+ * its own clock (unambiguous for 2^31 us = 35 min either side; the bridge:
+ * node_clock_unwrap_near), so it finds its own context without searching.
  *
  * Events: a queue of BL_LOC_EVENT_QUEUE structured events (started, reset
  * with its cause, converged / not converged, numbering re-synchronised);
@@ -65,9 +67,11 @@
  * caller's business.
  *
  * Memory: caller-owned struct (filter + sequencer + policy state), no heap,
- * no globals. sizeof on Cortex-M4F, float (make size-m4): 3,088 B with
- * BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 984, sequencer 1,392,
- * policy + events + the pulse being processed 712), 4,560 B with 16/16. Cost per call: a
+ * no globals, no pulse buffer (a closed pulse's members are fused from the
+ * sequencer's slot they were merged in). sizeof on Cortex-M4F, float (make
+ * size-m4): 2,032 B with BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 984,
+ * sequencer 704, policy + counters + events 344), 2,736 B with 16/16.
+ * Cost per call: a
  * detection O(BL_SEQ_MAX_PENDING + BL_MAX_RECEIVERS) plus what it closes;
  * every pulse closed costs one bl_filter_fuse_pulse per member (O(NX²) per
  * IEKF iteration, see filter.h) plus an estimate and a hint; a snapshot
@@ -97,9 +101,10 @@ extern "C" {
 /* Largest persistent-rejection window (first arrivals): W = K + K/2 is
  * clamped to it (and K to W). */
 #define BL_LOC_REJECT_WINDOW_MAX 32
-/* Events kept until the caller takes them. */
+/* Events kept until the caller takes them (take them after every call; when
+ * full the oldest is dropped, counted in events_dropped). */
 #ifndef BL_LOC_EVENT_QUEUE
-#define BL_LOC_EVENT_QUEUE 8
+#define BL_LOC_EVENT_QUEUE 4
 #endif
 
 /* Wheel travel since the previous sample (differential drive). */
@@ -110,7 +115,7 @@ typedef struct bl_wheel_increment {
     bl_real d_right_m;     /* right wheel travel, m */
     bool reference_only;   /* no increment known (first sample, encoder restart, count
                               glitch): the sample only sets the time reference */
-    uint64_t tag;          /* caller's tag, never read by the library */
+    uint32_t tag;          /* caller's tag, never read by the library */
 } bl_wheel_increment;
 
 typedef enum bl_loc_event_kind {
@@ -179,7 +184,7 @@ typedef struct bl_loc_status {
     uint32_t measurements;   /* measurements fused so far (arrivals and wheel increments);
                                 wraps. A change means a new update. */
     bool have_tag;           /* newest_tag is valid (a measurement was fused) */
-    uint64_t newest_tag;     /* tag of the newest measurement fused into the state */
+    uint32_t newest_tag;     /* tag of the newest measurement fused into the state */
     uint32_t window_len;     /* first arrivals in the persistent-rejection watch */
     uint32_t window_rejected;/* of those, rejected by the gate */
     uint32_t window_size;    /* W */
@@ -192,17 +197,19 @@ typedef struct bl_localizer {
     bl_filter filter;
     bl_sequencer seq;
     /* ---- private ---- */
+    int64_t wheel_last_us_;      /* last wheel sample */
     uint32_t magic_;
     uint32_t reject_k_;          /* K */
     uint32_t reject_w_;          /* W */
     uint32_t win_rejected_;      /* bit i: slot i rejected */
     uint32_t win_len_, win_next_;
-    uint8_t win_beacon_[BL_LOC_REJECT_WINDOW_MAX];
     uint32_t reset_base_;
     uint32_t last_reset_seen_;
     uint32_t misnumbered_in_row_;
     uint32_t measurements_;
-    uint64_t newest_tag_;
+    uint32_t newest_tag_;
+    uint32_t ev_head_, ev_len_;
+    uint8_t win_beacon_[BL_LOC_REJECT_WINDOW_MAX];
     bool have_tag_;
     bool was_started_;
     bool ever_started_;
@@ -210,13 +217,12 @@ typedef struct bl_localizer {
     bool hint_set_;
     bool wheel_seen_;            /* a wheel sample came */
     bool wheel_ref_;             /* the last sample is a valid increment start */
-    int64_t wheel_last_us_;      /* last wheel sample */
     bl_loc_counters counters_;
     bl_loc_event events_[BL_LOC_EVENT_QUEUE];
-    uint32_t ev_head_, ev_len_;
-    bl_seq_pulse pulse_;         /* the pulse being processed, and its fusion result (kept */
-    bl_fusion_result result_;     /* off the stack: the fusion's snapshot start is the
-                                    deepest call chain) */
+    bl_fusion_result result_;    /* the fusion result of the arrival being processed (kept
+                                    off the stack: the fusion's snapshot start is the
+                                    deepest call chain). The pulse itself is read where
+                                    the sequencer keeps it (its freed pending slot). */
 } bl_localizer;
 
 /* The sequencer config for a site (bl_sequencer_config_from_site with the

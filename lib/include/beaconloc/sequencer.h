@@ -91,9 +91,22 @@
 extern "C" {
 #endif
 
-/* Pulses held open (merge window not closed yet) at one time. */
+/* Pulses held open (merge window not closed yet) at one time. When pops keep
+ * up (pop at each detection's time before pushing it, as the localizer does
+ * on BL_EFULL and the bridge after every detection), the open pulses' starts
+ * lie in (t - D, t] (D = merge window, or double spacing + tolerance + merge
+ * window if longer: the close delay), pairwise more than merge_window_us
+ * apart (closer ones merge) and never double spacing ± tolerance after
+ * another open start (a second burst, swallowed). So at most
+ * floor((D - 1) / (merge_window_us + 1)) + 1 are open, fewer with the
+ * second-burst gap: 4 for kleeman-lab (D = 4,607 us, merge 1,107 us; the
+ * proof and a check in tests/lib/test_sequencer_errors.c; make
+ * bench-sequencer, whose replay fails on a push that stays full, on every
+ * scenario). A fifth open pulse (pops lagging, a site with a much smaller
+ * merge window than its double spacing) gives BL_EFULL: the localizer then
+ * closes the oldest early (counted in seq_full). */
 #ifndef BL_SEQ_MAX_PENDING
-#define BL_SEQ_MAX_PENDING 8
+#define BL_SEQ_MAX_PENDING 4
 #endif
 
 /* Valid range of every time argument: |t_us| <= 2^61 us (73,000 years), so
@@ -131,10 +144,11 @@ typedef struct bl_seq_detection {
     bool double_pulse;     /* node saw beacon 1's second burst (DoublePulse flag) */
     uint16_t amplitude_mv; /* peak envelope amplitude (mV) */
     uint16_t width_us;     /* envelope width above threshold (us) */
-    uint64_t tag;          /* caller's own, never read by the library (e.g. a CAN frame's
-                              receive time, us): comes back with this detection in
-                              bl_seq_member.tag (and bl_seq_pulse.tag when it is the
-                              pulse's earliest) */
+    uint32_t tag;          /* caller's own, never read by the library (e.g. the low 32
+                              bits of a CAN frame's receive time, us, which the caller
+                              unwraps against its clock): comes back with this
+                              detection in bl_seq_member.tag (and bl_seq_pulse.tag
+                              when it is the pulse's earliest) */
 } bl_seq_detection;
 
 typedef enum bl_seq_status {
@@ -148,7 +162,7 @@ typedef struct bl_seq_member {
     int64_t arrival_us;       /* this receiver's earliest detection in the merge window (us) */
     uint32_t receiver;        /* receiver index on the ring */
     uint16_t amplitude_mv;    /* its peak envelope amplitude (mV) */
-    uint64_t tag;             /* bl_seq_detection.tag of that detection (caller's own) */
+    uint32_t tag;             /* bl_seq_detection.tag of that detection (caller's own) */
 } bl_seq_member;
 
 /* One merged pulse, output of bl_sequencer_pop. */
@@ -163,7 +177,7 @@ typedef struct bl_seq_pulse {
     uint32_t receivers_heard; /* distinct receivers merged into this pulse, >= 1 */
     uint16_t amplitude_mv;    /* earliest detection's amplitude (mV) */
     uint16_t width_us;        /* earliest detection's width (us) */
-    uint64_t tag;             /* earliest detection's bl_seq_detection.tag (= members[0].tag) */
+    uint32_t tag;             /* earliest detection's bl_seq_detection.tag (= members[0].tag) */
     bool double_pulse;        /* recognised as beacon 1's double pulse */
     bool repeat;              /* this firing already produced a pulse: a late arrival,
                                  probably an echo (left for the filter's gate) */
@@ -214,38 +228,40 @@ typedef struct bl_seq_pending {
     int32_t rx_offset_us[BL_MAX_RECEIVERS];   /* per receiver in rx_mask: its earliest
                                                  detection - start_us (us, >= 0) */
     uint16_t rx_amplitude_mv[BL_MAX_RECEIVERS];
-    uint64_t rx_tag[BL_MAX_RECEIVERS];        /* per receiver: its earliest detection's tag */
+    uint32_t rx_tag[BL_MAX_RECEIVERS];        /* per receiver: its earliest detection's tag */
 } bl_seq_pending;
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
- * `counters` are private. Size: 2,352 bytes on x86-64 and on Cortex-M4 with
- * BL_MAX_RECEIVERS 16 (BL_SEQ_MAX_PENDING · (24 + 14·BL_MAX_RECEIVERS) + 368;
- * 8 of the 14 bytes per receiver are the callers' tags). */
+ * `counters` are private. Size: BL_SEQ_MAX_PENDING · (24 + 10·BL_MAX_RECEIVERS)
+ * + 224 + 8·BL_MAX_BEACONS bytes on x86-64 and on Cortex-M4 (4 of the 10
+ * bytes per receiver are the caller's tags): 704 B with 8 beacons and 8
+ * receivers (the M4 example), 1,088 B with 16/16. */
 typedef struct bl_sequencer {
     bl_seq_config cfg;
     bl_seq_counters counters;
     /* ---- private ---- */
     bl_seq_pending pending[BL_SEQ_MAX_PENDING];
+    /* (4-byte fields first, then the int64 ones: no padding) */
     uint32_t n_pending;
     uint32_t magic;
-    int64_t horizon_us;             /* earliest time a new detection may have (us) */
+    uint32_t consecutive_spurious;
+    int32_t last_beacon;            /* beacon of the last assigned pulse */
+    uint32_t conflicts_in_row;
+    uint32_t hint_beacon;
+    uint32_t beacon_seen_mask;      /* beacons with a valid beacon_last_us */
     bool locked;
     bool hint_valid;
     bool have_last;                 /* last_* valid */
-    uint32_t consecutive_spurious;
+    int64_t horizon_us;             /* earliest time a new detection may have (us) */
     int64_t anchor_us;              /* beacon-1 arrival of the model (us) */
     int64_t period_ns;              /* tracked T (ns) */
-    int32_t last_beacon;            /* beacon of the last assigned pulse */
-    int64_t last_fire_us;           /* its firing-time estimate (us) */
+    int64_t last_fire_us;           /* firing-time estimate of the last assigned pulse (us) */
     int64_t conflict_us;            /* last conflicting double pulse (us) */
-    uint32_t conflicts_in_row;
     int64_t hint_fire_us;           /* hint: firing time of beacon hint_beacon (us) */
-    uint32_t hint_beacon;
     int64_t hint_period_ns;
     int64_t hint_fire_sigma_ns;
     int64_t hint_period_sigma_ns;
     int64_t beacon_last_us[BL_MAX_BEACONS];   /* first arrival of each beacon's last firing */
-    uint32_t beacon_seen_mask;      /* beacons with a valid beacon_last_us */
 } bl_sequencer;
 
 /* Model summary for logs and health reports. */
