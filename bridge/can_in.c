@@ -52,8 +52,8 @@ void can_in_close(struct can_in *ci)
 }
 
 /* setsockopt that logs its context on failure; returns -errno. */
-static int sockopt(int fd, int level, int name, const void *val, socklen_t len,
-                   const char *what, const char *ifname)
+static int sockopt(int fd, int level, int name, const void *val, socklen_t len, const char *what,
+                   const char *ifname)
 {
     if (setsockopt(fd, level, name, val, len) < 0) {
         int e = errno;
@@ -103,32 +103,29 @@ int can_in_open(struct can_in *ci)
         filters[k].can_id = id;
         filters[k].can_mask = (mask & CAN_SFF_MASK) | CAN_EFF_FLAG;
     }
-    if ((rc = sockopt(fd, SOL_CAN_RAW, CAN_RAW_FILTER, filters,
-                      sizeof filters, "CAN_RAW_FILTER", ci->ifname)))
+    if ((rc = sockopt(fd, SOL_CAN_RAW, CAN_RAW_FILTER, filters, sizeof filters, "CAN_RAW_FILTER",
+                      ci->ifname)))
         goto fail;
     can_err_mask_t err_mask = CAN_ERR_BUSOFF | CAN_ERR_CRTL | CAN_ERR_RESTARTED;
-    if ((rc = sockopt(fd, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &err_mask,
-                      sizeof err_mask, "CAN_RAW_ERR_FILTER", ci->ifname)))
+    if ((rc = sockopt(fd, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &err_mask, sizeof err_mask,
+                      "CAN_RAW_ERR_FILTER", ci->ifname)))
         goto fail;
     /* Accept CAN FD frames too (they are counted as malformed, not lost);
      * older kernels without FD support refuse this: not fatal, but said
      * (the kernel then drops FD frames before we see them). */
     int one = 1;
-    if (sockopt(fd, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &one, sizeof one,
-                "CAN_RAW_FD_FRAMES", ci->ifname) != 0)
+    if (sockopt(fd, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &one, sizeof one, "CAN_RAW_FD_FRAMES",
+                ci->ifname) != 0)
         log_warn("%s: CAN FD frames will not be seen (not counted)", ci->ifname);
-    if ((rc = sockopt(fd, SOL_SOCKET, SO_TIMESTAMP, &one, sizeof one,
-                      "SO_TIMESTAMP", ci->ifname)))
+    if ((rc = sockopt(fd, SOL_SOCKET, SO_TIMESTAMP, &one, sizeof one, "SO_TIMESTAMP", ci->ifname)))
         goto fail;
-    if ((rc = sockopt(fd, SOL_SOCKET, SO_RXQ_OVFL, &one, sizeof one,
-                      "SO_RXQ_OVFL", ci->ifname)))
+    if ((rc = sockopt(fd, SOL_SOCKET, SO_RXQ_OVFL, &one, sizeof one, "SO_RXQ_OVFL", ci->ifname)))
         goto fail;
     /* A large buffer for bursts: SO_RCVBUFFORCE needs CAP_NET_ADMIN, fall
      * back to SO_RCVBUF (capped by net.core.rmem_max). */
     int rcvbuf = CAN_IN_RCVBUF_BYTES;
     if (setsockopt(fd, SOL_SOCKET, SO_RCVBUFFORCE, &rcvbuf, sizeof rcvbuf) < 0)
-        (void)sockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf,
-                      "SO_RCVBUF", ci->ifname);
+        (void)sockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf, "SO_RCVBUF", ci->ifname);
     check_rcvbuf(fd, rcvbuf, ci->ifname);
 
     struct ifreq ifr;
@@ -215,10 +212,10 @@ int can_in_read(struct can_in *ci, struct can_msg *msg)
     if (ci->fd < 0)
         return -ENETDOWN;
     struct canfd_frame frame;
-    struct iovec iov = { .iov_base = &frame, .iov_len = sizeof frame };
+    struct iovec iov = {.iov_base = &frame, .iov_len = sizeof frame};
     char ctrl[CMSG_SPACE(sizeof(struct timeval)) + CMSG_SPACE(sizeof(uint32_t))];
-    struct msghdr mh = { .msg_iov = &iov, .msg_iovlen = 1,
-                         .msg_control = ctrl, .msg_controllen = sizeof ctrl };
+    struct msghdr mh = {
+        .msg_iov = &iov, .msg_iovlen = 1, .msg_control = ctrl, .msg_controllen = sizeof ctrl};
     for (;;) {
         mh.msg_controllen = sizeof ctrl;
         ssize_t n = recvmsg(ci->fd, &mh, 0);
@@ -245,7 +242,7 @@ int can_in_read(struct can_in *ci, struct can_msg *msg)
             return -e;
         }
         if (n == 0)
-            return 0; /* nothing (a CAN_RAW socket never reads 0 bytes) */
+            return 0;          /* nothing (a CAN_RAW socket never reads 0 bytes) */
         ci->link_down = false; /* something arrived: the link is up */
         ci->last_errno = 0;
         if (n != (ssize_t)CAN_MTU && n != (ssize_t)CANFD_MTU) {
@@ -254,8 +251,7 @@ int can_in_read(struct can_in *ci, struct can_msg *msg)
         }
         int64_t rx_real = 0;
         bool have_ts = false;
-        for (struct cmsghdr *cm = CMSG_FIRSTHDR(&mh); cm;
-             cm = CMSG_NXTHDR(&mh, cm)) {
+        for (struct cmsghdr *cm = CMSG_FIRSTHDR(&mh); cm; cm = CMSG_NXTHDR(&mh, cm)) {
             if (cm->cmsg_level != SOL_SOCKET)
                 continue;
             if (cm->cmsg_type == SO_TIMESTAMP) {

@@ -24,27 +24,27 @@
 #define CAN_IN_RCVBUF_BYTES (4 * 1024 * 1024)
 
 struct can_in_counters {
-    uint64_t frames;          /* data frames read */
-    uint64_t kernel_drops;    /* SO_RXQ_OVFL: frames the kernel dropped (socket full) */
-    uint64_t error_frames;    /* error frames read, any class */
-    uint64_t bus_off;         /* CAN_ERR_BUSOFF */
-    uint64_t controller;      /* CAN_ERR_CRTL (buffer overflow, error passive/warning) */
-    uint64_t restarted;       /* CAN_ERR_RESTARTED */
-    uint64_t bad_size;        /* reads of a size that is neither CAN_MTU nor CANFD_MTU */
-    uint64_t downs;           /* interface lost (ENETDOWN/ENODEV/...) */
-    uint64_t reopens;         /* opened again after a loss */
+    uint64_t frames;       /* data frames read */
+    uint64_t kernel_drops; /* SO_RXQ_OVFL: frames the kernel dropped (socket full) */
+    uint64_t error_frames; /* error frames read, any class */
+    uint64_t bus_off;      /* CAN_ERR_BUSOFF */
+    uint64_t controller;   /* CAN_ERR_CRTL (buffer overflow, error passive/warning) */
+    uint64_t restarted;    /* CAN_ERR_RESTARTED */
+    uint64_t bad_size;     /* reads of a size that is neither CAN_MTU nor CANFD_MTU */
+    uint64_t downs;        /* interface lost (ENETDOWN/ENODEV/...) */
+    uint64_t reopens;      /* opened again after a loss */
 };
 
 struct can_in {
-    int fd;                      /* -1 while down */
+    int fd; /* -1 while down */
     char ifname[16];
-    int last_errno;              /* why it is down (0 when up) */
-    bool link_down;              /* socket open, interface not up */
-    uint32_t last_ovfl;          /* last SO_RXQ_OVFL value seen (cumulative in kernel) */
+    int last_errno;     /* why it is down (0 when up) */
+    bool link_down;     /* socket open, interface not up */
+    uint32_t last_ovfl; /* last SO_RXQ_OVFL value seen (cumulative in kernel) */
     bool have_ovfl;
     bool ever_open;
     struct can_in_counters c;
-    uint16_t last_error_class;   /* CAN_ERR_* bits of the last error frame */
+    uint16_t last_error_class; /* CAN_ERR_* bits of the last error frame */
 };
 
 /* Prepare (no I/O): fd -1, counters zero. */

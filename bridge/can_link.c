@@ -40,8 +40,7 @@ static void can_went_down(struct daemon *d, int err)
     if (d->can.fd < 0)
         d->can_p.fd = -1; /* closed: epoll dropped it */
     if (!d->can_down_logged) {
-        log_warn("%s: %s; retrying every second", d->cfg.can_interface,
-                 strerror(err));
+        log_warn("%s: %s; retrying every second", d->cfg.can_interface, strerror(err));
         d->can_down_logged = true;
         d->can_down_since_us = mono_us();
         can_statustext(d, MAV_OUT_SEV_ERROR, "down");
@@ -87,7 +86,7 @@ static void can_readable(struct pollable *p)
 void can_link_init(struct daemon *d)
 {
     can_in_init(&d->can, d->cfg.can_interface);
-    d->can_p = (struct pollable){ .fd = -1, .on_read = can_readable, .owner = d };
+    d->can_p = (struct pollable){.fd = -1, .on_read = can_readable, .owner = d};
 }
 
 void can_try_open(struct daemon *d)

@@ -22,18 +22,18 @@ struct key_desc {
     const char *section; /* "beaconN" for the per-beacon sections */
     const char *key;
     enum key_type type;
-    size_t offset;       /* in struct bridge_config (or config_beacon) */
-    size_t size;         /* string capacity */
-    double min, max;     /* inclusive range for numbers */
-    bool min_open;       /* min excluded */
+    size_t offset;   /* in struct bridge_config (or config_beacon) */
+    size_t size;     /* string capacity */
+    double min, max; /* inclusive range for numbers */
+    bool min_open;   /* min excluded */
 };
 
 /* The key table, one row per key of the site schema (site_keys.h, generated
  * from hw_sim/beaconloc_sim/data/site_schema.toml), in file order. */
-#define KEY_ROW(sec, k, type, strct, member, lo, hi, open, def)                \
-    { #sec, #k, type, offsetof(struct strct, member),                          \
-      sizeof(((struct strct *)0)->member), lo, hi, open },
-static const struct key_desc keys[] = { SITE_KEYS(KEY_ROW) };
+#define KEY_ROW(sec, k, type, strct, member, lo, hi, open, def)                                    \
+    {#sec, #k, type, offsetof(struct strct, member), sizeof(((struct strct *)0)->member),          \
+     lo,   hi, open},
+static const struct key_desc keys[] = {SITE_KEYS(KEY_ROW)};
 #undef KEY_ROW
 #define NKEYS (sizeof keys / sizeof keys[0])
 
@@ -42,8 +42,7 @@ static const struct key_desc keys[] = { SITE_KEYS(KEY_ROW) };
 #define DEFAULT_bridge_config(type, member, def) DEFAULT_##type(member, def)
 #define DEFAULT_K_REAL(member, def) cfg->member = def;
 #define DEFAULT_K_INT(member, def) cfg->member = def;
-#define DEFAULT_STRING(member, def)                                            \
-    snprintf(cfg->member, sizeof cfg->member, "%s", def);
+#define DEFAULT_STRING(member, def) snprintf(cfg->member, sizeof cfg->member, "%s", def);
 #define DEFAULT_K_STR DEFAULT_STRING
 #define DEFAULT_K_LOGLEVEL DEFAULT_STRING
 #define DEFAULT_K_ENDPOINT DEFAULT_STRING
@@ -52,7 +51,7 @@ static const struct key_desc keys[] = { SITE_KEYS(KEY_ROW) };
 void config_defaults(struct bridge_config *cfg)
 {
     memset(cfg, 0, sizeof *cfg);
-#define KEY_DEFAULT(sec, k, type, strct, member, lo, hi, open, def)            \
+#define KEY_DEFAULT(sec, k, type, strct, member, lo, hi, open, def)                                \
     DEFAULT_##strct(type, member, def)
     SITE_KEYS(KEY_DEFAULT)
 #undef KEY_DEFAULT
@@ -64,9 +63,9 @@ struct parse_ctx {
     struct bridge_config *cfg;
     const char *path;
     FILE *file;
-    int line;                        /* current line (counted by reader) */
-    int section_line;                /* line of the last [section] header */
-    int key_line[NKEYS];             /* line where a key was set, 0 = not */
+    int line;                            /* current line (counted by reader) */
+    int section_line;                    /* line of the last [section] header */
+    int key_line[NKEYS];                 /* line where a key was set, 0 = not */
     int beacon_line[CONFIG_MAX_BEACONS]; /* first line of [beaconN] keys */
     bool beacon_seen[CONFIG_MAX_BEACONS];
     bool beacon_key_seen[CONFIG_MAX_BEACONS][3];
@@ -75,12 +74,11 @@ struct parse_ctx {
     bool failed;
 };
 
-static void fail(struct parse_ctx *ctx, int line, const char *section,
-                 const char *key, const char *fmt, ...)
-    __attribute__((format(printf, 5, 6)));
+static void fail(struct parse_ctx *ctx, int line, const char *section, const char *key,
+                 const char *fmt, ...) __attribute__((format(printf, 5, 6)));
 
-static void fail(struct parse_ctx *ctx, int line, const char *section,
-                 const char *key, const char *fmt, ...)
+static void fail(struct parse_ctx *ctx, int line, const char *section, const char *key,
+                 const char *fmt, ...)
 {
     if (ctx->failed)
         return; /* keep the first error */
@@ -91,11 +89,9 @@ static void fail(struct parse_ctx *ctx, int line, const char *section,
     vsnprintf(why, sizeof why, fmt, ap);
     va_end(ap);
     if (line > 0)
-        snprintf(ctx->err, ctx->errlen, "%s:%d: [%s] %s: %s", ctx->path, line,
-                 section, key, why);
+        snprintf(ctx->err, ctx->errlen, "%s:%d: [%s] %s: %s", ctx->path, line, section, key, why);
     else
-        snprintf(ctx->err, ctx->errlen, "%s: [%s] %s: %s", ctx->path, section,
-                 key, why);
+        snprintf(ctx->err, ctx->errlen, "%s: [%s] %s: %s", ctx->path, section, key, why);
 }
 
 /* "beacon<N>" with N a positive decimal: returns N, else 0. */
@@ -128,7 +124,9 @@ static bool our_section(const char *section)
 /* The sections the schema leaves to the simulator ([site]). */
 static bool simulator_section(const char *section)
 {
-#define SIM_SECTION(name) if (!strcasecmp(section, #name)) return true;
+#define SIM_SECTION(name)                                                                          \
+    if (!strcasecmp(section, #name))                                                               \
+        return true;
     SITE_SIM_SECTIONS(SIM_SECTION)
 #undef SIM_SECTION
     return false;
@@ -158,12 +156,11 @@ static int parse_long(const char *s, long *out)
 
 static bool endpoint_valid(const char *s)
 {
-    return !strncmp(s, "udpout:", 7) || !strncmp(s, "udpin:", 6) ||
-           !strncmp(s, "serial:", 7);
+    return !strncmp(s, "udpout:", 7) || !strncmp(s, "udpin:", 6) || !strncmp(s, "serial:", 7);
 }
 
-static int set_value(struct parse_ctx *ctx, const struct key_desc *d,
-                     void *base, const char *section, const char *value)
+static int set_value(struct parse_ctx *ctx, const struct key_desc *d, void *base,
+                     const char *section, const char *value)
 {
     char *field = (char *)base + d->offset;
     switch (d->type) {
@@ -174,8 +171,7 @@ static int set_value(struct parse_ctx *ctx, const struct key_desc *d,
             return -1;
         }
         if ((double)v < d->min || (double)v > d->max) {
-            fail(ctx, ctx->line, section, d->key, "%ld out of range %g..%g", v,
-                 d->min, d->max);
+            fail(ctx, ctx->line, section, d->key, "%ld out of range %g..%g", v, d->min, d->max);
             return -1;
         }
         *(int *)(void *)field = (int)v;
@@ -188,8 +184,8 @@ static int set_value(struct parse_ctx *ctx, const struct key_desc *d,
             return -1;
         }
         if ((d->min_open ? v <= d->min : v < d->min) || v > d->max) {
-            fail(ctx, ctx->line, section, d->key, "%g out of range %s%g..%g]",
-                 v, d->min_open ? "(" : "[", d->min, d->max);
+            fail(ctx, ctx->line, section, d->key, "%g out of range %s%g..%g]", v,
+                 d->min_open ? "(" : "[", d->min, d->max);
             return -1;
         }
         *(double *)(void *)field = v;
@@ -208,15 +204,14 @@ static int set_value(struct parse_ctx *ctx, const struct key_desc *d,
         if (!endpoint_valid(value)) {
             fail(ctx, ctx->line, section, d->key,
                  "'%s' is not udpout:HOST:PORT, udpin:HOST:PORT or "
-                 "serial:DEVICE:BAUD", value);
+                 "serial:DEVICE:BAUD",
+                 value);
             return -1;
         }
         break;
     case K_IFNAME:
-        if (value[0] == '\0' || strlen(value) >= 16 || strchr(value, '/') ||
-            strchr(value, ' ')) {
-            fail(ctx, ctx->line, section, d->key,
-                 "'%s' is not a network interface name", value);
+        if (value[0] == '\0' || strlen(value) >= 16 || strchr(value, '/') || strchr(value, ' ')) {
+            fail(ctx, ctx->line, section, d->key, "'%s' is not a network interface name", value);
             return -1;
         }
         break;
@@ -224,16 +219,14 @@ static int set_value(struct parse_ctx *ctx, const struct key_desc *d,
         break;
     }
     if (strlen(value) >= d->size) {
-        fail(ctx, ctx->line, section, d->key, "longer than %zu characters",
-             d->size - 1);
+        fail(ctx, ctx->line, section, d->key, "longer than %zu characters", d->size - 1);
         return -1;
     }
     memcpy(field, value, strlen(value) + 1);
     return 0;
 }
 
-static int handler(void *user, const char *section, const char *name,
-                   const char *value)
+static int handler(void *user, const char *section, const char *name, const char *value)
 {
     struct parse_ctx *ctx = user;
     if (ctx->failed)
@@ -243,27 +236,25 @@ static int handler(void *user, const char *section, const char *name,
     if (!our_section(section)) {
         /* A misspelt section would silently drop its keys. */
         if (section[0] == '\0')
-            snprintf(ctx->err, ctx->errlen, "%s:%d: %s: key before any [section]",
-                     ctx->path, ctx->line, name);
+            snprintf(ctx->err, ctx->errlen, "%s:%d: %s: key before any [section]", ctx->path,
+                     ctx->line, name);
         else
-            snprintf(ctx->err, ctx->errlen, "%s:%d: [%s] unknown section (a site "
-                     "file holds " SITE_SECTIONS_PHRASE ")", ctx->path,
-                     ctx->section_line > 0 ? ctx->section_line : ctx->line,
-                     section);
+            snprintf(ctx->err, ctx->errlen,
+                     "%s:%d: [%s] unknown section (a site "
+                     "file holds " SITE_SECTIONS_PHRASE ")",
+                     ctx->path, ctx->section_line > 0 ? ctx->section_line : ctx->line, section);
         ctx->failed = true;
         return 0;
     }
     int beacon = beacon_section_number(section);
     if (beacon > CONFIG_MAX_BEACONS) {
-        fail(ctx, ctx->line, section, name,
-             "beacon number %d above the maximum %d", beacon,
+        fail(ctx, ctx->line, section, name, "beacon number %d above the maximum %d", beacon,
              CONFIG_MAX_BEACONS);
         return 0;
     }
     for (size_t i = 0; i < NKEYS; i++) {
         const struct key_desc *d = &keys[i];
-        bool sec_match = beacon ? !strcmp(d->section, "beaconN")
-                                : !strcasecmp(d->section, section);
+        bool sec_match = beacon ? !strcmp(d->section, "beaconN") : !strcasecmp(d->section, section);
         if (!sec_match || strcasecmp(d->key, name))
             continue;
         if (beacon) {
@@ -279,15 +270,14 @@ static int handler(void *user, const char *section, const char *name,
             if (!ctx->beacon_seen[b])
                 ctx->beacon_line[b] = ctx->line;
             ctx->beacon_seen[b] = true;
-            bool *set = kidx == 0 ? &ctx->cfg->beacon[b].set_x
-                      : kidx == 1 ? &ctx->cfg->beacon[b].set_y
-                                  : &ctx->cfg->beacon[b].set_z;
+            bool *set = kidx == 0   ? &ctx->cfg->beacon[b].set_x
+                        : kidx == 1 ? &ctx->cfg->beacon[b].set_y
+                                    : &ctx->cfg->beacon[b].set_z;
             *set = true;
             return 1;
         }
         if (ctx->key_line[i]) {
-            fail(ctx, ctx->line, section, name, "given twice (first on line %d)",
-                 ctx->key_line[i]);
+            fail(ctx, ctx->line, section, name, "given twice (first on line %d)", ctx->key_line[i]);
             return 0;
         }
         if (set_value(ctx, d, ctx->cfg, section, value))
@@ -312,8 +302,7 @@ static char *line_reader(char *str, int num, void *stream)
     return r;
 }
 
-static const struct key_desc *find_key(const char *section, const char *key,
-                                       size_t *index)
+static const struct key_desc *find_key(const char *section, const char *key, size_t *index)
 {
     for (size_t i = 0; i < NKEYS; i++)
         if (!strcmp(keys[i].section, section) && !strcmp(keys[i].key, key)) {
@@ -331,8 +320,7 @@ static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
     if (find_key("beacons", "count", &ki) && ctx)
         count_line = ctx->key_line[ki];
     if (cfg->beacon_count < 1) {
-        fail(ctx, count_line, "beacons", "count",
-             "not set: the site file must give the beacons");
+        fail(ctx, count_line, "beacons", "count", "not set: the site file must give the beacons");
         return -1;
     }
     for (int b = 0; b < cfg->beacon_count; b++) {
@@ -342,7 +330,9 @@ static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
         if (!bc->set_x || !bc->set_y || !bc->set_z) {
             int line = ctx ? ctx->beacon_line[b] : 0;
             fail(ctx, line ? line : count_line, sec,
-                 !bc->set_x ? "x_m" : !bc->set_y ? "y_m" : "z_m",
+                 !bc->set_x   ? "x_m"
+                 : !bc->set_y ? "y_m"
+                              : "z_m",
                  "missing (count = %d beacons)", cfg->beacon_count);
             return -1;
         }
@@ -368,9 +358,8 @@ static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
     /* Beacon 1 must be distinguishable in time from its double pulse. */
     if (cfg->double_pulse_spacing_s >= cfg->period_s) {
         find_key("beacons", "double_pulse_spacing_s", &ki);
-        fail(ctx, ctx ? ctx->key_line[ki] : 0, "beacons",
-             "double_pulse_spacing_s", "%g s not below period_s %g s",
-             cfg->double_pulse_spacing_s, cfg->period_s);
+        fail(ctx, ctx ? ctx->key_line[ki] : 0, "beacons", "double_pulse_spacing_s",
+             "%g s not below period_s %g s", cfg->double_pulse_spacing_s, cfg->period_s);
         return -1;
     }
     return 0;
@@ -378,16 +367,15 @@ static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
 
 int config_check(const struct bridge_config *cfg, char *err, size_t errlen)
 {
-    struct parse_ctx ctx = { .path = "config", .err = err, .errlen = errlen };
+    struct parse_ctx ctx = {.path = "config", .err = err, .errlen = errlen};
     /* Without a file there are no line numbers; key_line stays zero. */
     return check(cfg, &ctx);
 }
 
 _Static_assert(NKEYS <= CONFIG_MAX_KEYS, "CONFIG_MAX_KEYS too small");
 
-void config_format_error(const struct bridge_config *cfg, const char *section,
-                         const char *key, const char *why, char *err,
-                         size_t errlen)
+void config_format_error(const struct bridge_config *cfg, const char *section, const char *key,
+                         const char *why, char *err, size_t errlen)
 {
     int line = 0;
     int b = beacon_section_number(section);
@@ -400,17 +388,14 @@ void config_format_error(const struct bridge_config *cfg, const char *section,
     }
     const char *path = cfg->path[0] ? cfg->path : "defaults";
     if (line > 0)
-        snprintf(err, errlen, "%s:%d: [%s] %s: %s", path, line, section, key,
-                 why);
+        snprintf(err, errlen, "%s:%d: [%s] %s: %s", path, line, section, key, why);
     else
         snprintf(err, errlen, "%s: [%s] %s: %s", path, section, key, why);
 }
 
-int config_load_file(struct bridge_config *cfg, const char *path, char *err,
-                     size_t errlen)
+int config_load_file(struct bridge_config *cfg, const char *path, char *err, size_t errlen)
 {
-    struct parse_ctx ctx = { .cfg = cfg, .path = path, .err = err,
-                             .errlen = errlen };
+    struct parse_ctx ctx = {.cfg = cfg, .path = path, .err = err, .errlen = errlen};
     snprintf(cfg->path, sizeof cfg->path, "%s", path);
     ctx.file = fopen(path, "r");
     if (!ctx.file) {
@@ -429,18 +414,19 @@ int config_load_file(struct bridge_config *cfg, const char *path, char *err,
             cfg->beacon_line[b] = ctx.beacon_line[b];
     if (rc != 0) {
         /* inih's own syntax errors (no '=', unterminated section). */
-        snprintf(err, errlen, "%s:%d: syntax error (expected [section] or "
-                 "key = value)", path, rc);
+        snprintf(err, errlen,
+                 "%s:%d: syntax error (expected [section] or "
+                 "key = value)",
+                 path, rc);
         return -1;
     }
     return check(cfg, &ctx) == 0 ? 0 : -1;
 }
 
-bool config_same_geometry(const struct bridge_config *a,
-                          const struct bridge_config *b)
+bool config_same_geometry(const struct bridge_config *a, const struct bridge_config *b)
 {
     /* the bridge's own state: the keys the site schema marks geometry = "bridge" */
-#define SAME(member) && a->member == b->member
+#define SAME(member) &&a->member == b->member
     if (!(true SITE_GEOMETRY_BRIDGE(SAME)))
         return false;
 #undef SAME

@@ -50,7 +50,7 @@ struct bridge_config {
     int receiver_count;
     double ring_radius_m;
     double first_angle_deg;
-    double angle_step_deg;      /* 0 = evenly spaced (360/count) */
+    double angle_step_deg; /* 0 = evenly spaced (360/count) */
     double receiver_height_m;
     double beamwidth_deg;
     double double_pulse_tolerance_s; /* the receiver node's ± window for beacon 1's
@@ -61,7 +61,7 @@ struct bridge_config {
     double wheel_radius_m;
     int ticks_per_rev;
     double encoder_rate_hz;
-    double sigma_wheel_scale;   /* online wheel-scale calibration: initial σ, 0 = off */
+    double sigma_wheel_scale; /* online wheel-scale calibration: initial σ, 0 = off */
     /* [noise] */
     double sigma_arrival_s;
     double sigma_wheel_per_m;
@@ -77,13 +77,13 @@ struct bridge_config {
     int system_id;
     int component_id;
     char log_level[16];
-    double status_interval_s;   /* status line period, 0 = off */
-    double beacon_lost_s;       /* beacon silent this long -> "lost" */
-    double echo_storm_ratio;    /* (echoes+rejected)/all arrivals over 5 s */
-    double max_coast_s;         /* no data this long: the filter re-starts; until then
+    double status_interval_s; /* status line period, 0 = off */
+    double beacon_lost_s;     /* beacon silent this long -> "lost" */
+    double echo_storm_ratio;  /* (echoes+rejected)/all arrivals over 5 s */
+    double max_coast_s;       /* no data this long: the filter re-starts; until then
                                    constant-velocity output with growing covariance */
     /* where each value came from, for error messages */
-    char path[256];             /* site file ("" = built-in defaults) */
+    char path[256]; /* site file ("" = built-in defaults) */
     int key_line[CONFIG_MAX_KEYS];
     int beacon_line[CONFIG_MAX_BEACONS];
 };
@@ -94,9 +94,8 @@ struct bridge_config {
  * "defaults: ..." when no file was read). Used for errors found after
  * loading, e.g. by the estimator library's own check.
  */
-void config_format_error(const struct bridge_config *cfg, const char *section,
-                         const char *key, const char *why, char *err,
-                         size_t errlen);
+void config_format_error(const struct bridge_config *cfg, const char *section, const char *key,
+                         const char *why, char *err, size_t errlen);
 
 /* Built-in defaults (the kleeman-lab daemon settings, no beacons). */
 void config_defaults(struct bridge_config *cfg);
@@ -107,8 +106,7 @@ void config_defaults(struct bridge_config *cfg);
  * key: why" in err (cfg may then be partly updated: load into a copy when
  * the old value must survive, as SIGHUP does).
  */
-int config_load_file(struct bridge_config *cfg, const char *path, char *err,
-                     size_t errlen);
+int config_load_file(struct bridge_config *cfg, const char *path, char *err, size_t errlen);
 
 /* Consistency check of a finished config (ranges, beacons complete).
  * Returns 0 or -1 with a message (naming the key) in err. */
@@ -124,7 +122,6 @@ int config_check(const struct bridge_config *cfg, char *err, size_t errlen);
  * calibration's σ, beamwidth, encoder rate, [bridge]) is not geometry.
  * The bridge's one reconfigure decision: SIGHUP keeps the filter exactly
  * when it is true (estimator_reconfigure). */
-bool config_same_geometry(const struct bridge_config *a,
-                          const struct bridge_config *b);
+bool config_same_geometry(const struct bridge_config *a, const struct bridge_config *b);
 
 #endif /* BRIDGE_CONFIG_H */

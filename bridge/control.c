@@ -33,12 +33,11 @@ void sync_mav_fds(struct daemon *d)
     /* Out with every old descriptor (before their numbers can be reused;
      * one closed already left the set with its close), in with every
      * current one, each with its own handler object. */
-    for (int i = 0; i < MAV_LINKS_FDS_MAX; i++)
-        (void)loop_del(&d->loop, &d->mav[i].p); /* logged */
+    for (int i = 0; i < MAV_LINKS_FDS_MAX; i++) (void)loop_del(&d->loop, &d->mav[i].p); /* logged */
     struct mav_links_fd now[MAV_LINKS_FDS_MAX];
     int n = mav_links_fd_list(&d->links, now, MAV_LINKS_FDS_MAX);
     for (int j = 0; j < n; j++) {
-        d->mav[j].p = (struct pollable){ .fd = -1, .on_read = mav_readable, .owner = d };
+        d->mav[j].p = (struct pollable){.fd = -1, .on_read = mav_readable, .owner = d};
         d->mav[j].which = now[j];
         (void)loop_add(&d->loop, &d->mav[j].p, now[j].fd, "MAVLink"); /* logged */
     }
@@ -47,11 +46,10 @@ void sync_mav_fds(struct daemon *d)
 
 int open_links(struct daemon *d)
 {
-    const char *specs[MAV_LINKS_MAX] = { d->cfg.mavlink };
-    for (int i = 0; i < d->opt.n_mavlink_more; i++)
-        specs[i + 1] = d->opt.mavlink_more[i];
-    int rc = mav_links_open(&d->links, specs, 1 + d->opt.n_mavlink_more,
-                            (unsigned)d->cfg.system_id, (unsigned)d->cfg.component_id);
+    const char *specs[MAV_LINKS_MAX] = {d->cfg.mavlink};
+    for (int i = 0; i < d->opt.n_mavlink_more; i++) specs[i + 1] = d->opt.mavlink_more[i];
+    int rc = mav_links_open(&d->links, specs, 1 + d->opt.n_mavlink_more, (unsigned)d->cfg.system_id,
+                            (unsigned)d->cfg.component_id);
     sync_mav_fds(d);
     return rc;
 }
@@ -67,9 +65,12 @@ void statustext(struct daemon *d, enum mav_out_severity sev, const char *text)
 static enum mav_out_severity severity_of(enum est_event_severity s)
 {
     switch (s) {
-    case EST_EV_WARNING: return MAV_OUT_SEV_WARNING;
-    case EST_EV_NOTICE: return MAV_OUT_SEV_NOTICE;
-    default: return MAV_OUT_SEV_INFO;
+    case EST_EV_WARNING:
+        return MAV_OUT_SEV_WARNING;
+    case EST_EV_NOTICE:
+        return MAV_OUT_SEV_NOTICE;
+    default:
+        return MAV_OUT_SEV_INFO;
     }
 }
 
@@ -92,8 +93,8 @@ void write_failed(const char *opt, const char *path, int rc, bool *logged)
     if (*logged)
         return;
     *logged = true;
-    log_error("%s %s: write failed: %s (counted in write_errors; logged once)",
-              opt, path, strerror(-rc));
+    log_error("%s %s: write failed: %s (counted in write_errors; logged once)", opt, path,
+              strerror(-rc));
 }
 
 void flush_outputs(struct daemon *d)
@@ -117,10 +118,9 @@ void status_line(struct daemon *d, const char *prefix)
     struct est_output o;
     char est[200] = "estimate: none yet";
     if (estimator_output(&d->est, 0, &o) == 0)
-        snprintf(est, sizeof est,
-                 "x=%.3f y=%.3f th=%.3f sigma=%.3fm sos=%.1f q=%d resets=%u",
-                 o.x_m, o.y_m, o.theta_rad, state_cov_sigma_xy_m(o.cov), o.sos_mps,
-                 quality_of(&o), o.reset_counter);
+        snprintf(est, sizeof est, "x=%.3f y=%.3f th=%.3f sigma=%.3fm sos=%.1f q=%d resets=%u",
+                 o.x_m, o.y_m, o.theta_rad, state_cov_sigma_xy_m(o.cov), o.sos_mps, quality_of(&o),
+                 o.reset_counter);
     /* each status line closes a latency interval and starts the next */
     latency_interval_close(&d->lat_interval, &d->lat_interval_last);
     struct stats_report rep;
@@ -145,8 +145,8 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->estimates_write_errors = d->csv.write_errors;
     r->stale_encoders = d->est.c.stale_encoders;
     struct est_output o;
-    r->estimator_resets = estimator_output(&d->est, 0, &o) == 0
-                              ? o.reset_counter : d->est.reset_base;
+    r->estimator_resets =
+        estimator_output(&d->est, 0, &o) == 0 ? o.reset_counter : d->est.reset_base;
     r->pulses_accepted = d->est.c.pulses_accepted;
     r->pulses_rejected = d->est.c.pulses_rejected;
     r->pulses_buffered = d->est.c.pulses_buffered;
@@ -207,8 +207,7 @@ static void reload(struct daemon *d)
     }
     struct bridge_config nc;
     if (build_config(&d->opt, &nc) != 0) {
-        log_error("SIGHUP: %s not reloaded (keeping the running configuration)",
-                  d->opt.site);
+        log_error("SIGHUP: %s not reloaded (keeping the running configuration)", d->opt.site);
         return;
     }
     char err[CONFIG_ERR_LEN];
@@ -220,8 +219,7 @@ static void reload(struct daemon *d)
     log_info("SIGHUP: %s reloaded; %s", d->opt.site,
              rc == 0 ? "geometry unchanged, filter kept"
                      : "geometry changed, estimator re-initialised");
-    bool new_ep = strcmp(nc.mavlink, d->cfg.mavlink) != 0 ||
-                  nc.system_id != d->cfg.system_id ||
+    bool new_ep = strcmp(nc.mavlink, d->cfg.mavlink) != 0 || nc.system_id != d->cfg.system_id ||
                   nc.component_id != d->cfg.component_id;
     bool new_can = strcmp(nc.can_interface, d->cfg.can_interface) != 0;
     bool new_rate = nc.odometry_rate_hz != d->cfg.odometry_rate_hz;
@@ -241,7 +239,8 @@ static void reload(struct daemon *d)
     if (new_rate && timer_arm(d, T_ODOM, odom_period_us(d)) != 0)
         log_error("SIGHUP: ODOMETRY rate %.1f Hz not applied to the timer",
                   d->cfg.odometry_rate_hz);
-    statustext(d, MAV_OUT_SEV_INFO, rc == 0 ? "config reloaded" : "config reloaded, re-initialised");
+    statustext(d, MAV_OUT_SEV_INFO,
+               rc == 0 ? "config reloaded" : "config reloaded, re-initialised");
 }
 
 static void signal_readable(struct pollable *p)
@@ -275,7 +274,7 @@ static void signal_readable(struct pollable *p)
 
 int signals_open(struct daemon *d)
 {
-    d->sig = (struct pollable){ .fd = -1, .on_read = signal_readable, .owner = d };
+    d->sig = (struct pollable){.fd = -1, .on_read = signal_readable, .owner = d};
     if (signal(SIGPIPE, SIG_IGN) == SIG_ERR) /* a send to a closed peer: -EPIPE, not death */
         log_warn("signal SIGPIPE: %s", strerror(errno));
     sigset_t mask;

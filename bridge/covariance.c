@@ -10,8 +10,8 @@
 /* State index of each row/col of the ODOMETRY pose 6x6 (x, y, z, roll,
  * pitch, yaw) and velocity 6x6 (vx, vy, vz, rollrate, pitchrate, yawrate);
  * -1: not estimated (planar robot, differential drive). */
-static const int pose_of_state[6] = { ST_X, ST_Y, -1, -1, -1, ST_THETA };
-static const int vel_of_state[6] = { ST_V, -1, -1, -1, -1, ST_OMEGA };
+static const int pose_of_state[6] = {ST_X, ST_Y, -1, -1, -1, ST_THETA};
+static const int vel_of_state[6] = {ST_V, -1, -1, -1, -1, ST_OMEGA};
 
 void mav_odometry_set_state_cov(struct mav_odometry *o, const double cov[ST_N * ST_N])
 {
@@ -55,7 +55,8 @@ static const float vel_sign[6] = {1.0f, -1.0f, -1.0f, 1.0f, -1.0f, -1.0f};
  * caller's filter and the double -> float cast); the two triangles are
  * averaged, so what is sent is exactly symmetric.
  */
-static int cov_map(const float c[6][6], const int perm[6], const float sign[6], float ut[MAV_COV_UT_LEN])
+static int cov_map(const float c[6][6], const int perm[6], const float sign[6],
+                   float ut[MAV_COV_UT_LEN])
 {
     bool any_known = false;
     for (int i = 0; i < 6; i++) {
@@ -71,8 +72,9 @@ static int cov_map(const float c[6][6], const int perm[6], const float sign[6], 
                     return -EINVAL;
                 continue;
             }
-            double scale = isnan(c[i][i]) || isnan(c[j][j]) ? fmax(fabs((double)a), fabs((double)b))
-                                                            : sqrt(fabs((double)c[i][i] * (double)c[j][j]));
+            double scale = isnan(c[i][i]) || isnan(c[j][j])
+                               ? fmax(fabs((double)a), fabs((double)b))
+                               : sqrt(fabs((double)c[i][i] * (double)c[j][j]));
             if (fabs((double)a - (double)b) > 1e-4 * scale + 1e-30)
                 return -EINVAL;
         }
@@ -105,8 +107,7 @@ void mav_odometry_init(struct mav_odometry *o)
         return;
     memset(o, 0, sizeof *o);
     for (int i = 0; i < 6; i++)
-        for (int j = 0; j < 6; j++)
-            o->pose_cov[i][j] = o->vel_cov[i][j] = NAN;
+        for (int j = 0; j < 6; j++) o->pose_cov[i][j] = o->vel_cov[i][j] = NAN;
     o->quality = -1;
 }
 
@@ -125,7 +126,8 @@ int mav_quality_from_cov(double var_x_m2, double cov_xy_m2, double var_y_m2)
      * the characteristic polynomial l^2 - (a + c) l + (ac - b^2) = 0:
      * l_max = (a + c)/2 + sqrt(((a - c)/2)^2 + b^2). */
     double half_diff = 0.5 * (var_x_m2 - var_y_m2);
-    double lmax_m2 = 0.5 * (var_x_m2 + var_y_m2) + sqrt(half_diff * half_diff + cov_xy_m2 * cov_xy_m2);
+    double lmax_m2 =
+        0.5 * (var_x_m2 + var_y_m2) + sqrt(half_diff * half_diff + cov_xy_m2 * cov_xy_m2);
     double sigma_m = sqrt(lmax_m2);
     /* Quality map (ours, docs/mavlink.md): logarithmic in sigma from
      * 100 at 1 cm to 1 at 1 m: q = 100 - 99/2 * log10(sigma / 0.01 m). */

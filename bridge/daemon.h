@@ -38,9 +38,9 @@ enum timer_id { T_ODOM, T_HEARTBEAT, T_SECOND, T_COUNT };
 struct daemon;
 
 struct timer {
-    struct pollable p;    /* timerfd (live), not in the loop in replay */
-    int64_t period_us;    /* on the bridge clock */
-    int64_t next_us;      /* replay: next deadline on the log clock */
+    struct pollable p; /* timerfd (live), not in the loop in replay */
+    int64_t period_us; /* on the bridge clock */
+    int64_t next_us;   /* replay: next deadline on the log clock */
 };
 
 enum mode { MODE_LIVE, MODE_REPLAY_FAST, MODE_REPLAY_PACED };
@@ -51,8 +51,8 @@ enum mode { MODE_LIVE, MODE_REPLAY_FAST, MODE_REPLAY_PACED };
  * the bus carries. */
 #define FRAME_REF_RING 1024
 struct frame_ref {
-    int64_t rx_us;    /* on the bridge clock (the log's in replay) */
-    int64_t mono_us;  /* CLOCK_MONOTONIC when it was read */
+    int64_t rx_us;   /* on the bridge clock (the log's in replay) */
+    int64_t mono_us; /* CLOCK_MONOTONIC when it was read */
 };
 
 struct daemon {
@@ -60,43 +60,43 @@ struct daemon {
     struct bridge_config cfg;
     enum mode mode;
     struct loop loop;
-    struct pollable sig;      /* signalfd */
+    struct pollable sig; /* signalfd */
     struct timer timers[T_COUNT];
     struct mav_pollable {
-        struct pollable p;     /* first member */
+        struct pollable p; /* first member */
         struct mav_links_fd which;
     } mav[MAV_LINKS_FDS_MAX]; /* the endpoints' descriptors */
     unsigned mav_fd_gen;      /* links.fd_gen they were registered at */
     /* CAN (can_link.c) */
     struct can_in can;
-    struct pollable can_p;    /* the socket while in the loop */
+    struct pollable can_p; /* the socket while in the loop */
     bool can_down_logged;
     bool can_ever_up;
     int64_t can_down_since_us;
     uint64_t last_bus_off;
     /* replay (replay_run.c) */
     struct replay rp;
-    struct pollable pace;     /* paced replay: the pacing timerfd */
+    struct pollable pace; /* paced replay: the pacing timerfd */
     int64_t log_first_us, mono_start_us;
-    int64_t log_now_us;       /* replay: log clock */
+    int64_t log_now_us; /* replay: log clock */
     /* files */
     struct record rec;
     bool recording;
     struct estimates_csv csv;
     bool csv_open;
     bool record_err_logged, csv_err_logged;
-    struct mav_links links;   /* every --mavlink endpoint */
+    struct mav_links links; /* every --mavlink endpoint */
     struct frame_counters fc;
     struct estimator est;
     /* ODOMETRY and latency (odometry.c) */
-    struct latency_hist lat;          /* the whole run */
-    struct latency_hist lat_interval; /* since the previous status line */
+    struct latency_hist lat;                  /* the whole run */
+    struct latency_hist lat_interval;         /* since the previous status line */
     struct latency_summary lat_interval_last; /* what the latest status line closed */
-    struct frame_ref fref[FRAME_REF_RING]; /* replay: read times of recent frames */
+    struct frame_ref fref[FRAME_REF_RING];    /* replay: read times of recent frames */
     unsigned fref_next;
     uint64_t last_sent_measurement; /* measurement_seq of the last ODOMETRY sent */
     int64_t last_odom_local_us;
-    int64_t next_odom_due_us;   /* next ODOMETRY slot on a fixed grid (local us) */
+    int64_t next_odom_due_us; /* next ODOMETRY slot on a fixed grid (local us) */
     bool odom_sent_once;
     uint64_t odom_sent, hb_sent;
     uint64_t frames_total;

@@ -21,8 +21,7 @@ int estimates_csv_open(struct estimates_csv *c, const char *path)
     return 0;
 }
 
-int estimates_csv_write(struct estimates_csv *c, const struct est_output *o,
-                        int quality)
+int estimates_csv_write(struct estimates_csv *c, const struct est_output *o, int quality)
 {
     if (!c->f)
         return -EBADF;
@@ -30,11 +29,10 @@ int estimates_csv_write(struct estimates_csv *c, const struct est_output *o,
     int n = fprintf(c->f,
                     "%lld,%.6f,%.6f,%.7f,%.6f,%.7f,%.4f,%.9f,%.6e,%.6e,%.6e,"
                     "%.6e,%u,%d\n",
-                    (long long)o->t_node_us, o->x_m, o->y_m, o->theta_rad,
-                    o->v_mps, o->omega_radps, o->sos_mps, o->period_s,
-                    state_cov_at(o->cov, ST_X, ST_X), state_cov_at(o->cov, ST_X, ST_Y),
-                    state_cov_at(o->cov, ST_Y, ST_Y), state_cov_at(o->cov, ST_THETA, ST_THETA),
-                    o->reset_counter, quality);
+                    (long long)o->t_node_us, o->x_m, o->y_m, o->theta_rad, o->v_mps, o->omega_radps,
+                    o->sos_mps, o->period_s, state_cov_at(o->cov, ST_X, ST_X),
+                    state_cov_at(o->cov, ST_X, ST_Y), state_cov_at(o->cov, ST_Y, ST_Y),
+                    state_cov_at(o->cov, ST_THETA, ST_THETA), o->reset_counter, quality);
     if (n < 0) {
         c->write_errors++;
         return errno ? -errno : -EIO;

@@ -23,8 +23,7 @@ struct estimates_csv {
 int estimates_csv_open(struct estimates_csv *c, const char *path);
 /* Append one row. Returns 0 or -errno (counted in write_errors; buffered:
  * an error may only show at a later write or at the flush). */
-int estimates_csv_write(struct estimates_csv *c, const struct est_output *o,
-                        int quality);
+int estimates_csv_write(struct estimates_csv *c, const struct est_output *o, int quality);
 /* Flush, close: 0 or -errno (counted). */
 int estimates_csv_flush(struct estimates_csv *c);
 int estimates_csv_close(struct estimates_csv *c);

@@ -31,11 +31,10 @@
 
 /* ---- events ----------------------------------------------------------- */
 
-static void event(struct estimator *e, enum est_event_severity sev,
-                  const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static void event(struct estimator *e, enum est_event_severity sev, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
 
-static void event(struct estimator *e, enum est_event_severity sev,
-                  const char *fmt, ...)
+static void event(struct estimator *e, enum est_event_severity sev, const char *fmt, ...)
 {
     struct est_event ev;
     ev.severity = sev;
@@ -66,11 +65,10 @@ bool estimator_next_event(struct estimator *e, struct est_event *ev)
 /* estimator_make_config and make_seq_config: bridge/site_to_lib.c */
 
 /* Both library configs, or -1 with the cause in err. */
-static int make_configs(const struct bridge_config *cfg, bl_config *c,
-                        bl_seq_config *sc, char *err, size_t errlen)
+static int make_configs(const struct bridge_config *cfg, bl_config *c, bl_seq_config *sc, char *err,
+                        size_t errlen)
 {
-    if (estimator_make_config(cfg, c, err, errlen) ||
-        make_seq_config(cfg, c, sc, err, errlen))
+    if (estimator_make_config(cfg, c, err, errlen) || make_seq_config(cfg, c, sc, err, errlen))
         return -1;
     return 0;
 }
@@ -101,8 +99,7 @@ static void sync(struct estimator *e)
 {
     bl_loc_counters lc;
     bl_loc_status st;
-    if (bl_localizer_counters(&e->loc, &lc) != BL_OK ||
-        bl_localizer_status(&e->loc, &st) != BL_OK)
+    if (bl_localizer_counters(&e->loc, &lc) != BL_OK || bl_localizer_status(&e->loc, &st) != BL_OK)
         return;
     struct est_counters *c = &e->c;
     c->pulses_in = lc.pulses_in;
@@ -129,7 +126,8 @@ static void sync(struct estimator *e)
         e->updated = true;
         /* the tag is the frame's receive time, low 32 bits (milliseconds
          * old against the newest frame's) */
-        e->last_update_rx_us = st.have_tag ? node_clock_unwrap_near(st.newest_tag, e->latest_rx_us) : 0;
+        e->last_update_rx_us =
+            st.have_tag ? node_clock_unwrap_near(st.newest_tag, e->latest_rx_us) : 0;
         if (e->last_update_rx_us > e->last_data_rx_us)
             e->last_data_rx_us = e->last_update_rx_us;
     }
@@ -137,8 +135,8 @@ static void sync(struct estimator *e)
     while (bl_localizer_next_event(&e->loc, &ev) == 1) {
         switch (ev.kind) {
         case BL_LOC_EV_STARTED:
-            event(e, EST_EV_INFO, "filter started at x=%.2f y=%.2f",
-                  (double)ev.x_m, (double)ev.y_m);
+            event(e, EST_EV_INFO, "filter started at x=%.2f y=%.2f", (double)ev.x_m,
+                  (double)ev.y_m);
             e->was_started = true;
             for (uint32_t b = 0; b < e->blcfg.beacon_count; b++)
                 e->beacon_last_ok_us[b] = e->latest_node_us;
@@ -146,8 +144,7 @@ static void sync(struct estimator *e)
         case BL_LOC_EV_RESET:
             switch (ev.cause) {
             case BL_LOC_CAUSE_PERSISTENT_REJECTION:
-                event(e, EST_EV_WARNING,
-                      "persistent rejection (%u of %u): restarted (reset %u)",
+                event(e, EST_EV_WARNING, "persistent rejection (%u of %u): restarted (reset %u)",
                       ev.count, ev.window_len, ev.reset_counter);
                 break;
             case BL_LOC_CAUSE_SNAPSHOT:
@@ -164,8 +161,7 @@ static void sync(struct estimator *e)
                 event(e, EST_EV_WARNING, "re-initialised: site geometry changed");
                 break;
             }
-            if (ev.cause != BL_LOC_CAUSE_PERSISTENT_REJECTION &&
-                ev.cause != BL_LOC_CAUSE_SNAPSHOT)
+            if (ev.cause != BL_LOC_CAUSE_PERSISTENT_REJECTION && ev.cause != BL_LOC_CAUSE_SNAPSHOT)
                 e->was_started = false; /* fresh filter: beacons wait for it */
             break;
         case BL_LOC_EV_CONVERGED:
@@ -200,8 +196,7 @@ static void sync(struct estimator *e)
     }
 }
 
-int estimator_init(struct estimator *e, const struct bridge_config *cfg,
-                   char *err, size_t errlen)
+int estimator_init(struct estimator *e, const struct bridge_config *cfg, char *err, size_t errlen)
 {
     memset(e, 0, sizeof *e);
     e->cfg = *cfg;
@@ -225,8 +220,8 @@ int estimator_init(struct estimator *e, const struct bridge_config *cfg,
     return 0;
 }
 
-int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg,
-                          char *err, size_t errlen)
+int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg, char *err,
+                          size_t errlen)
 {
     bl_config c;
     bl_seq_config sc;
@@ -264,13 +259,11 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg,
 
 /* ---- pulses ----------------------------------------------------------- */
 
-void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
-                     int64_t rx_us)
+void estimator_pulse(struct estimator *e, const struct frame_pulse *p, int64_t rx_us)
 {
     /* The clock fit sees the frame as if sent the moment the detection was
      * made: minus the node's hold (see estimator.h, "Timebases"). */
-    int64_t t = node_clock_observe(&e->rx_clock, p->node_time_us,
-                                   rx_us - e->pulse_hold_us);
+    int64_t t = node_clock_observe(&e->rx_clock, p->node_time_us, rx_us - e->pulse_hold_us);
     e->rx_seen = true;
     if (e->rx_clock.last_event == NODE_CLOCK_RESTART) {
         e->c.node_restarts++;
@@ -307,8 +300,7 @@ static int tick_delta(uint16_t now, uint16_t before)
     return d >= 0x2000 ? d - 0x4000 : d;
 }
 
-void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
-                        int64_t rx_us)
+void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int64_t rx_us)
 {
     int64_t te = node_clock_observe(&e->enc_clock, f->node_time_us, rx_us);
     if (e->enc_clock.last_event == NODE_CLOCK_OUT_OF_ORDER ||
@@ -354,8 +346,7 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
     int64_t gap = t - e->enc_last_node_us;
     /* More ticks than MAX_WHEEL_MPS allows since the last sample (at least
      * one sample period): not a wheel, a glitch or a missed restart. */
-    double max_ticks = MAX_WHEEL_MPS * ((double)(gap > 10000 ? gap : 10000) / 1e6) /
-                       e->m_per_tick;
+    double max_ticks = MAX_WHEEL_MPS * ((double)(gap > 10000 ? gap : 10000) / 1e6) / e->m_per_tick;
     if (had_ref && (abs(dl) > max_ticks || abs(dr) > max_ticks)) {
         e->c.encoder_jumps++;
         log_warn("encoder counts jumped (%d, %d ticks): new reference", dl, dr);
@@ -369,8 +360,7 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
         e->c.encoder_gaps++;
     if (e->enc_silent) {
         e->enc_silent = false;
-        event(e, EST_EV_NOTICE, "encoders back after %.1f s",
-              (double)gap / 1e6);
+        event(e, EST_EV_NOTICE, "encoders back after %.1f s", (double)gap / 1e6);
     }
     e->enc_seen = true;
     /* Each wheel's distance from its ticks: d = n_ticks · 2πr /
@@ -392,13 +382,11 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
     sync(e);
 }
 
-void estimator_status(struct estimator *e, const struct frame_status *s,
-                      int64_t rx_us)
+void estimator_status(struct estimator *e, const struct frame_status *s, int64_t rx_us)
 {
     (void)rx_us;
     if (s->flags & 0x4)
-        log_warn("node %u reports a sensor fault (flags 0x%x)", s->node_id,
-                 s->flags);
+        log_warn("node %u reports a sensor fault (flags 0x%x)", s->node_id, s->flags);
     (void)e;
 }
 
@@ -429,8 +417,7 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
         }
     }
     /* encoders silent (reported once; "back" when they resume) */
-    if (e->enc_seen && !e->enc_silent &&
-        now - e->enc_last_node_us > ENC_REPORT_US) {
+    if (e->enc_seen && !e->enc_silent && now - e->enc_last_node_us > ENC_REPORT_US) {
         e->enc_silent = true;
         event(e, EST_EV_WARNING, "encoders silent");
     }
@@ -447,14 +434,13 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
     }
     if (now - e->storm_window_start_us >= STORM_WINDOW_US) {
         uint32_t acc = lc.firings_accepted - e->storm_base_acc;
-        uint32_t bad = (lc.firings_rejected - e->storm_base_rej) +
-                       (lc.repeats_skipped - e->storm_base_echo);
+        uint32_t bad =
+            (lc.firings_rejected - e->storm_base_rej) + (lc.repeats_skipped - e->storm_base_echo);
         uint32_t n = acc + bad;
         double ratio = n ? (double)bad / n : 0.0;
         if (!e->storm && n >= STORM_MIN_PULSES && ratio > e->echo_storm_ratio) {
             e->storm = true;
-            event(e, EST_EV_WARNING, "echo storm: %.0f%% echoes or rejected",
-                  100.0 * ratio);
+            event(e, EST_EV_WARNING, "echo storm: %.0f%% echoes or rejected", 100.0 * ratio);
         } else if (e->storm && ratio < e->echo_storm_ratio / 2) {
             e->storm = false;
             event(e, EST_EV_NOTICE, "echo storm over");
@@ -476,8 +462,7 @@ bool estimator_take_update(struct estimator *e, int64_t *rx_us)
     return true;
 }
 
-int estimator_output(const struct estimator *e, int64_t at_local_us,
-                     struct est_output *out)
+int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_output *out)
 {
     memset(out, 0, sizeof *out);
     bl_estimate est;
@@ -495,8 +480,7 @@ int estimator_output(const struct estimator *e, int64_t at_local_us,
     }
     out->valid = true;
     out->t_node_us = est.t_us;
-    out->t_local_us = e->rx_seen ? node_clock_to_local(&e->rx_clock, est.t_us)
-                                 : est.t_us;
+    out->t_local_us = e->rx_seen ? node_clock_to_local(&e->rx_clock, est.t_us) : est.t_us;
     out->x_m = est.x_m;
     out->y_m = est.y_m;
     out->theta_rad = est.theta_rad;
@@ -504,8 +488,7 @@ int estimator_output(const struct estimator *e, int64_t at_local_us,
     out->omega_radps = est.omega_radps;
     out->sos_mps = est.speed_of_sound_mps;
     out->period_s = est.period_s;
-    for (int i = 0; i < 25; i++)
-        out->cov[i] = est.cov[i];
+    for (int i = 0; i < 25; i++) out->cov[i] = est.cov[i];
     out->reset_counter = est.reset_counter;
     out->converged = est.converged;
     out->source_rx_us = e->last_update_rx_us;
@@ -513,8 +496,7 @@ int estimator_output(const struct estimator *e, int64_t at_local_us,
     return 0;
 }
 
-void estimator_health(const struct estimator *e, int64_t local_now_us,
-                      struct est_health *h)
+void estimator_health(const struct estimator *e, int64_t local_now_us, struct est_health *h)
 {
     memset(h, 0, sizeof *h);
     bl_estimate est;
@@ -522,11 +504,9 @@ void estimator_health(const struct estimator *e, int64_t local_now_us,
     if (bl_localizer_estimate(&e->loc, &est) == BL_OK) {
         h->started = true;
         h->converged = est.converged;
-        double v[] = { est.x_m, est.y_m, est.theta_rad, est.v_mps, est.omega_radps };
-        for (size_t i = 0; i < sizeof v / sizeof v[0]; i++)
-            h->finite = h->finite && isfinite(v[i]);
-        for (int i = 0; i < 25; i++)
-            h->finite = h->finite && isfinite((double)est.cov[i]);
+        double v[] = {est.x_m, est.y_m, est.theta_rad, est.v_mps, est.omega_radps};
+        for (size_t i = 0; i < sizeof v / sizeof v[0]; i++) h->finite = h->finite && isfinite(v[i]);
+        for (int i = 0; i < 25; i++) h->finite = h->finite && isfinite((double)est.cov[i]);
     }
     bl_loc_status st;
     if (bl_localizer_status(&e->loc, &st) == BL_OK) {
@@ -534,6 +514,5 @@ void estimator_health(const struct estimator *e, int64_t local_now_us,
         h->window_len = st.window_len;
         h->window_rejected = st.window_rejected;
     }
-    h->since_update_us = e->last_data_rx_us > 0 ? local_now_us - e->last_data_rx_us
-                                                : INT64_MAX;
+    h->since_update_us = e->last_data_rx_us > 0 ? local_now_us - e->last_data_rx_us : INT64_MAX;
 }

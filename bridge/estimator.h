@@ -59,38 +59,38 @@ struct est_event {
 };
 
 struct est_counters {
-    uint64_t pulses_in;          /* sequencer output pulses */
+    uint64_t pulses_in; /* sequencer output pulses */
     uint64_t pulses_accepted;
     uint64_t pulses_rejected;
-    uint64_t pulses_buffered;    /* before the start */
-    uint64_t pulses_unassigned;  /* sequencer could not number them */
+    uint64_t pulses_buffered;   /* before the start */
+    uint64_t pulses_unassigned; /* sequencer could not number them */
     uint64_t pulses_spurious;
     uint64_t repeats_skipped;
-    uint64_t snapshot_restarts;  /* restarts by the persistent-rejection watch */
-    uint64_t fuse_errors;        /* library returned an error */
-    uint64_t predicts;           /* odometry predicts */
-    uint64_t cv_predicts;        /* constant-velocity predicts (encoders silent) */
+    uint64_t snapshot_restarts; /* restarts by the persistent-rejection watch */
+    uint64_t fuse_errors;       /* library returned an error */
+    uint64_t predicts;          /* odometry predicts */
+    uint64_t cv_predicts;       /* constant-velocity predicts (encoders silent) */
     uint64_t predict_errors;
-    uint64_t encoder_gaps;       /* encoder silences longer than the gap limit */
-    uint64_t encoder_jumps;      /* implausible count differences (new reference) */
-    uint64_t unmapped_encoders;  /* encoder frames before the receiver clock */
-    uint64_t reinits;            /* re-initialisations done by the bridge */
+    uint64_t encoder_gaps;      /* encoder silences longer than the gap limit */
+    uint64_t encoder_jumps;     /* implausible count differences (new reference) */
+    uint64_t unmapped_encoders; /* encoder frames before the receiver clock */
+    uint64_t reinits;           /* re-initialisations done by the bridge */
     uint64_t node_restarts;
     uint64_t seq_errors;
-    uint64_t hint_errors;        /* hints the sequencer refused */
-    uint64_t numbering_errors;   /* innovations longer than any flight */
-    uint64_t seq_resyncs;        /* sequencer re-synchronised from the filter */
-    uint64_t stale_encoders;     /* encoder samples not newer than the last: dropped */
+    uint64_t hint_errors;      /* hints the sequencer refused */
+    uint64_t numbering_errors; /* innovations longer than any flight */
+    uint64_t seq_resyncs;      /* sequencer re-synchronised from the filter */
+    uint64_t stale_encoders;   /* encoder samples not newer than the last: dropped */
 };
 
 /* One published estimate. */
 struct est_output {
-    bool valid;               /* filter started */
-    int64_t t_node_us;        /* receiver-node clock (unwrapped) */
-    int64_t t_local_us;       /* bridge clock */
+    bool valid;         /* filter started */
+    int64_t t_node_us;  /* receiver-node clock (unwrapped) */
+    int64_t t_local_us; /* bridge clock */
     double x_m, y_m, theta_rad, v_mps, omega_radps;
     double sos_mps, period_s;
-    double cov[25];           /* x, y, theta, v, omega (row-major) */
+    double cov[25]; /* x, y, theta, v, omega (row-major) */
     uint32_t reset_counter;
     bool converged;
     /* The newest measurement fused into this estimate (an extrapolation
@@ -104,8 +104,8 @@ struct est_output {
 
 /* What the HEARTBEAT's system_status is decided from (health.h). */
 struct est_health {
-    bool started;             /* the filter has a state now */
-    bool ever_started;        /* it had one at some time since estimator_init */
+    bool started;      /* the filter has a state now */
+    bool ever_started; /* it had one at some time since estimator_init */
     bool converged;
     bool finite;              /* the state and covariance are finite */
     int64_t since_update_us;  /* local time since the newest fused measurement's
@@ -114,20 +114,21 @@ struct est_health {
     unsigned window_rejected; /* of those, rejected by the gate */
 };
 
-
 struct estimator {
-    struct bridge_config cfg;     /* the site as configured (geometry for SIGHUP) */
+    struct bridge_config cfg; /* the site as configured (geometry for SIGHUP) */
     bl_config blcfg;
     bl_seq_config seqcfg;
-    bl_localizer loc;             /* sequencer + filter + estimation policy */
+    bl_localizer loc; /* sequencer + filter + estimation policy */
     /* Read-only mirrors for the daemon's stats, refreshed after every call
      * into the localizer: the sequencer's counters, and the published reset
      * counter while no filter runs. */
-    struct { bl_seq_counters counters; } seq;
+    struct {
+        bl_seq_counters counters;
+    } seq;
     uint32_t reset_base;
-    struct node_clock rx_clock;   /* receiver array (node 1) */
-    struct node_clock enc_clock;  /* wheel encoders (node 2) */
-    bool rx_seen;                 /* rx_clock has an observation */
+    struct node_clock rx_clock;  /* receiver array (node 1) */
+    struct node_clock enc_clock; /* wheel encoders (node 2) */
+    bool rx_seen;                /* rx_clock has an observation */
     /* encoders */
     bool enc_have_ref;            /* enc_left/right are the reference */
     bool enc_seen;                /* an encoder frame was mapped */
@@ -136,7 +137,7 @@ struct estimator {
     int64_t enc_last_node_us;     /* last encoder sample, receiver-node time */
     double m_per_tick;
     /* health */
-    bool was_started;             /* "filter started" seen (beacon-lost watch on) */
+    bool was_started; /* "filter started" seen (beacon-lost watch on) */
     double beacon_lost_s, echo_storm_ratio;
     int64_t beacon_last_ok_us[BL_MAX_BEACONS];
     bool beacon_lost[BL_MAX_BEACONS];
@@ -146,14 +147,14 @@ struct estimator {
     uint32_t storm_base_acc, storm_base_rej, storm_base_echo; /* localizer counters at
                                                                  the window's start */
     bool storm;
-    int64_t latest_node_us;       /* newest receiver-node time seen */
-    int64_t pulse_hold_us;        /* the receiver node's hold of a detection (us) */
-    uint32_t measurements_seen;   /* localizer's measurement count, last seen */
-    int64_t last_update_rx_us;    /* local rx time of the newest fused measurement's frame */
-    int64_t latest_rx_us;         /* newest frame receive time handed to the localizer: the
+    int64_t latest_node_us;     /* newest receiver-node time seen */
+    int64_t pulse_hold_us;      /* the receiver node's hold of a detection (us) */
+    uint32_t measurements_seen; /* localizer's measurement count, last seen */
+    int64_t last_update_rx_us;  /* local rx time of the newest fused measurement's frame */
+    int64_t latest_rx_us;       /* newest frame receive time handed to the localizer: the
                                      clock its 32-bit tags are unwrapped against */
-    int64_t last_data_rx_us;      /* newest receive time of a fused measurement's frame */
-    bool updated;                 /* an update since estimator_take_update */
+    int64_t last_data_rx_us;    /* newest receive time of a fused measurement's frame */
+    bool updated;               /* an update since estimator_take_update */
     struct est_counters c;
     struct est_event events[EST_EVENT_QUEUE];
     unsigned ev_head, ev_len;
@@ -163,29 +164,25 @@ struct estimator {
  * Build the library configs from cfg and initialise everything.
  * Returns 0, or -1 with a message naming the site-file key in err.
  */
-int estimator_init(struct estimator *e, const struct bridge_config *cfg,
-                   char *err, size_t errlen);
+int estimator_init(struct estimator *e, const struct bridge_config *cfg, char *err, size_t errlen);
 
 /* Translate a bridge config to the library's (for tests and reload).
  * Returns 0 or -1 with a message in err. */
-int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
-                          char *err, size_t errlen);
+int estimator_make_config(const struct bridge_config *cfg, bl_config *out, char *err,
+                          size_t errlen);
 
 /*
  * New configuration (SIGHUP). Same geometry: tuning replaced, filter state
  * kept (returns 0). Otherwise everything is re-initialised and the reset
  * counter bumped (returns 1). -1 with err on a bad config (e unchanged).
  */
-int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg,
-                          char *err, size_t errlen);
+int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg, char *err,
+                          size_t errlen);
 
 /* Feed decoded frames with their local receive time. */
-void estimator_pulse(struct estimator *e, const struct frame_pulse *p,
-                     int64_t rx_us);
-void estimator_encoders(struct estimator *e, const struct frame_encoders *f,
-                        int64_t rx_us);
-void estimator_status(struct estimator *e, const struct frame_status *s,
-                      int64_t rx_us);
+void estimator_pulse(struct estimator *e, const struct frame_pulse *p, int64_t rx_us);
+void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int64_t rx_us);
+void estimator_status(struct estimator *e, const struct frame_status *s, int64_t rx_us);
 
 /* Periodic work at local time now (pops pulses whose merge window closed
  * while no later frame came, health checks). */
@@ -197,8 +194,7 @@ void estimator_tick(struct estimator *e, int64_t local_now_us);
 bool estimator_take_update(struct estimator *e, int64_t *rx_us);
 
 /* Health figures at local time now (for the HEARTBEAT). */
-void estimator_health(const struct estimator *e, int64_t local_now_us,
-                      struct est_health *h);
+void estimator_health(const struct estimator *e, int64_t local_now_us, struct est_health *h);
 
 /* The receiver node's hold of a detection before it sends the frame, us:
  * the double-pulse decision window, spacing + 1 ms (docs/protocol.md). */
@@ -206,8 +202,7 @@ int64_t estimator_pulse_hold_us(const struct bridge_config *cfg);
 
 /* The current estimate at the filter's state time (at_local_us = 0) or
  * extrapolated to local time at_local_us (constant velocity). */
-int estimator_output(const struct estimator *e, int64_t at_local_us,
-                     struct est_output *out);
+int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_output *out);
 
 /* Next pending health event; false when none. */
 bool estimator_next_event(struct estimator *e, struct est_event *ev);

@@ -8,7 +8,10 @@
 #include "daemon.h"
 #include "sensors.h"
 
-int64_t mono_us(void) { return can_in_mono_us(); }
+int64_t mono_us(void)
+{
+    return can_in_mono_us();
+}
 
 static int64_t real_us(void)
 {
@@ -30,8 +33,7 @@ void handle_frame(struct daemon *d, const struct can_msg *msg)
     if (d->mode != MODE_LIVE)
         frame_ref_note(d, msg->rx_us);
     if (d->recording) {
-        int64_t t = d->mode == MODE_LIVE ? msg->rx_us + (real_us() - mono_us())
-                                         : msg->rx_us;
+        int64_t t = d->mode == MODE_LIVE ? msg->rx_us + (real_us() - mono_us()) : msg->rx_us;
         int rc = record_write(&d->rec, msg, t);
         if (rc != 0)
             write_failed("--record", d->opt.record, rc, &d->record_err_logged);

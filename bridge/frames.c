@@ -23,14 +23,22 @@ void frame_counters_init(struct frame_counters *c)
 static uint64_t sum_kinds(const uint64_t *v)
 {
     uint64_t n = 0;
-    for (int k = 0; k < FRAME_KIND_COUNT; k++)
-        n += v[k];
+    for (int k = 0; k < FRAME_KIND_COUNT; k++) n += v[k];
     return n;
 }
 
-uint64_t frame_lost_total(const struct frame_counters *c) { return sum_kinds(c->lost); }
-uint64_t frame_duplicates_total(const struct frame_counters *c) { return sum_kinds(c->duplicates); }
-uint64_t frame_out_of_order_total(const struct frame_counters *c) { return sum_kinds(c->out_of_order); }
+uint64_t frame_lost_total(const struct frame_counters *c)
+{
+    return sum_kinds(c->lost);
+}
+uint64_t frame_duplicates_total(const struct frame_counters *c)
+{
+    return sum_kinds(c->duplicates);
+}
+uint64_t frame_out_of_order_total(const struct frame_counters *c)
+{
+    return sum_kinds(c->out_of_order);
+}
 
 static void remember(struct frame_track *t, const uint8_t *data)
 {
@@ -51,9 +59,8 @@ static uint32_t low_bits(unsigned n)
  * uptime, a late frame's stamp below newest + slack, data = its 8 bytes.
  * Returns FRAME_OK, FRAME_DUPLICATE or FRAME_OUT_OF_ORDER, with the
  * counters of kind k updated. */
-static enum frame_result track(struct frame_counters *c, enum frame_kind k,
-                               struct frame_track *t, uint8_t counter,
-                               unsigned modulo, uint32_t stamp, int32_t slack,
+static enum frame_result track(struct frame_counters *c, enum frame_kind k, struct frame_track *t,
+                               uint8_t counter, unsigned modulo, uint32_t stamp, int32_t slack,
                                const uint8_t *data)
 {
     for (uint32_t i = 0; i < t->recent_len; i++)
@@ -96,8 +103,8 @@ static enum frame_result track(struct frame_counters *c, enum frame_kind k,
 static enum frame_result decode(struct frame_counters *c, const struct can_msg *msg,
                                 struct frame *out)
 {
-    const struct sensor_kind *sk = (msg->flags & CAN_MSG_EXTENDED)
-                                       ? NULL : sensor_kind_of_id(msg->id);
+    const struct sensor_kind *sk =
+        (msg->flags & CAN_MSG_EXTENDED) ? NULL : sensor_kind_of_id(msg->id);
     if (!sk)
         return FRAME_UNKNOWN_ID;
     /* The DBC's frames are classic CAN with exactly 8 bytes; the generated
@@ -111,21 +118,30 @@ static enum frame_result decode(struct frame_counters *c, const struct can_msg *
     enum frame_kind k = (enum frame_kind)(sk - sensor_kinds);
     if (seq.track >= sk->tracks)
         return FRAME_OUT_OF_RANGE;
-    return track(c, k, &c->track[k][seq.track], seq.counter, c->modulo[k],
-                 seq.stamp, sk->stamp_slack_us, msg->data);
+    return track(c, k, &c->track[k][seq.track], seq.counter, c->modulo[k], seq.stamp,
+                 sk->stamp_slack_us, msg->data);
 }
 
-enum frame_result frame_decode(struct frame_counters *c,
-                               const struct can_msg *msg, struct frame *out)
+enum frame_result frame_decode(struct frame_counters *c, const struct can_msg *msg,
+                               struct frame *out)
 {
     enum frame_result r = decode(c, msg, out);
     switch (r) {
-    case FRAME_OK: c->received[out->kind]++; break;
-    case FRAME_UNKNOWN_ID: c->unknown_id++; break;
-    case FRAME_MALFORMED: c->malformed++; break;
-    case FRAME_OUT_OF_RANGE: c->out_of_range++; break;
-    case FRAME_DUPLICATE:    /* counted by track() */
-    case FRAME_OUT_OF_ORDER: break;
+    case FRAME_OK:
+        c->received[out->kind]++;
+        break;
+    case FRAME_UNKNOWN_ID:
+        c->unknown_id++;
+        break;
+    case FRAME_MALFORMED:
+        c->malformed++;
+        break;
+    case FRAME_OUT_OF_RANGE:
+        c->out_of_range++;
+        break;
+    case FRAME_DUPLICATE: /* counted by track() */
+    case FRAME_OUT_OF_ORDER:
+        break;
     }
     return r;
 }

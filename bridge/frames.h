@@ -48,21 +48,16 @@
 
 /* One frame as read from a socket or a candump log. */
 struct can_msg {
-    uint32_t id;       /* identifier without flag bits */
-    uint8_t flags;     /* CAN_MSG_* */
-    uint8_t len;       /* payload bytes */
+    uint32_t id;   /* identifier without flag bits */
+    uint8_t flags; /* CAN_MSG_* */
+    uint8_t len;   /* payload bytes */
     uint8_t data[CAN_MSG_MAX_DATA];
-    int64_t rx_us;     /* receive time on the bridge clock, us */
+    int64_t rx_us; /* receive time on the bridge clock, us */
 };
 
 /* The sensor kinds, in the order of the sensor table (bridge/sensors.c:
  * frame ids, names, counter moduli, decoders, handlers). */
-enum frame_kind {
-    FRAME_PULSE = 0,
-    FRAME_ENCODERS = 1,
-    FRAME_STATUS = 2,
-    FRAME_KIND_COUNT = 3
-};
+enum frame_kind { FRAME_PULSE = 0, FRAME_ENCODERS = 1, FRAME_STATUS = 2, FRAME_KIND_COUNT = 3 };
 
 /* Result of frame_decode(). */
 enum frame_result {
@@ -85,8 +80,8 @@ struct frame_pulse {
 
 struct frame_encoders {
     uint32_t node_time_us;
-    uint16_t left_ticks;   /* cumulative, modulo 2^14 */
-    uint16_t right_ticks;  /* cumulative, modulo 2^14 */
+    uint16_t left_ticks;  /* cumulative, modulo 2^14 */
+    uint16_t right_ticks; /* cumulative, modulo 2^14 */
     uint8_t counter;
 };
 
@@ -110,23 +105,23 @@ struct frame {
 };
 
 #define FRAME_MAX_NODES 16
-#define FRAME_RECENT 4 /* payloads remembered per track for duplicates */
+#define FRAME_RECENT 4      /* payloads remembered per track for duplicates */
 #define FRAME_MODULO_MAX 32 /* largest counter modulo a track follows (bit window) */
 
 /* What a kind's decoder tells the rolling-counter check about one frame. */
 struct frame_seq {
-    uint8_t counter;   /* the frame's Counter signal */
-    uint32_t stamp;    /* its node time, us (NODE_STATUS: uptime, s) */
-    unsigned track;    /* which track of its kind: 0, or the node id for a
+    uint8_t counter; /* the frame's Counter signal */
+    uint32_t stamp;  /* its node time, us (NODE_STATUS: uptime, s) */
+    unsigned track;  /* which track of its kind: 0, or the node id for a
                           kind with a track per node (< FRAME_MAX_NODES) */
 };
 
 /* Rolling-counter state of one track (a kind, or a kind's node). */
 struct frame_track {
     bool seen;
-    uint8_t last;          /* counter of the newest frame */
-    uint32_t newest_stamp; /* its node time (NODE_STATUS: uptime, s) */
-    uint32_t missing;      /* bit b set: the frame b counter steps behind the
+    uint8_t last;                    /* counter of the newest frame */
+    uint32_t newest_stamp;           /* its node time (NODE_STATUS: uptime, s) */
+    uint32_t missing;                /* bit b set: the frame b counter steps behind the
                               newest was counted lost (b = 1..modulo-1) */
     uint8_t recent[FRAME_RECENT][8]; /* payloads of the last frames */
     uint32_t recent_len, recent_next;
@@ -138,11 +133,11 @@ struct frame_counters {
     uint64_t unknown_id;
     uint64_t malformed;
     uint64_t out_of_range;
-    uint64_t lost[FRAME_KIND_COUNT];      /* gaps in rolling counters (frames never seen) */
-    uint64_t duplicates[FRAME_KIND_COUNT];/* the same frame again: dropped */
+    uint64_t lost[FRAME_KIND_COUNT];         /* gaps in rolling counters (frames never seen) */
+    uint64_t duplicates[FRAME_KIND_COUNT];   /* the same frame again: dropped */
     uint64_t out_of_order[FRAME_KIND_COUNT]; /* delivered after a newer one: dropped */
     /* rolling-counter state, per kind and track (node) */
-    unsigned modulo[FRAME_KIND_COUNT];    /* counter modulo, from the DBC's range */
+    unsigned modulo[FRAME_KIND_COUNT]; /* counter modulo, from the DBC's range */
     struct frame_track track[FRAME_KIND_COUNT][FRAME_MAX_NODES];
 };
 
@@ -155,8 +150,8 @@ void frame_counters_init(struct frame_counters *c);
  * and the rolling counter is checked (lost counted). FRAME_DUPLICATE and
  * FRAME_OUT_OF_ORDER frames are decoded (*out filled) but must not be used.
  */
-enum frame_result frame_decode(struct frame_counters *c,
-                               const struct can_msg *msg, struct frame *out);
+enum frame_result frame_decode(struct frame_counters *c, const struct can_msg *msg,
+                               struct frame *out);
 
 /* Frames lost by counter, duplicates, out of order: all kinds. */
 uint64_t frame_lost_total(const struct frame_counters *c);

@@ -5,9 +5,8 @@
 
 enum mav_out_state health_state(const struct est_health *h, bool can_down)
 {
-    if (h->started &&
-        (!h->finite || (h->window_len >= HEALTH_REJECT_MIN_WINDOW &&
-                        2 * h->window_rejected > h->window_len)))
+    if (h->started && (!h->finite || (h->window_len >= HEALTH_REJECT_MIN_WINDOW &&
+                                      2 * h->window_rejected > h->window_len)))
         return MAV_OUT_STATE_EMERGENCY;
     if (can_down || (h->ever_started && !h->started) ||
         (h->started && h->since_update_us > HEALTH_STALE_US))

@@ -14,13 +14,25 @@ static enum log_level last_level = LOG_INFO;
 static unsigned long repeat_count;
 static unsigned long suppressed_total;
 
-static FILE *stream(void) { return out_stream ? out_stream : stderr; }
+static FILE *stream(void)
+{
+    return out_stream ? out_stream : stderr;
+}
 
-void log_set_level(enum log_level level) { threshold = level; }
-enum log_level log_get_level(void) { return threshold; }
-void log_set_stream(FILE *s) { out_stream = s; }
+void log_set_level(enum log_level level)
+{
+    threshold = level;
+}
+enum log_level log_get_level(void)
+{
+    return threshold;
+}
+void log_set_stream(FILE *s)
+{
+    out_stream = s;
+}
 
-static const char *const names[] = { "error", "warning", "info", "debug" };
+static const char *const names[] = {"error", "warning", "info", "debug"};
 
 const char *log_level_name(enum log_level level)
 {
@@ -49,14 +61,17 @@ int log_level_parse(const char *name, enum log_level *level)
 void log_flush(void)
 {
     if (repeat_count > 0) {
-        fprintf(stream(), "%s: last message repeated %lu times\n",
-                log_level_name(last_level), repeat_count);
+        fprintf(stream(), "%s: last message repeated %lu times\n", log_level_name(last_level),
+                repeat_count);
         repeat_count = 0;
     }
     fflush(stream());
 }
 
-unsigned long log_suppressed_total(void) { return suppressed_total; }
+unsigned long log_suppressed_total(void)
+{
+    return suppressed_total;
+}
 
 void log_msg(enum log_level level, const char *fmt, ...)
 {

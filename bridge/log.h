@@ -27,8 +27,7 @@ const char *log_level_name(enum log_level level);
 /* Redirect output (tests); NULL restores stderr. */
 void log_set_stream(FILE *stream);
 
-void log_msg(enum log_level level, const char *fmt, ...)
-    __attribute__((format(printf, 2, 3)));
+void log_msg(enum log_level level, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 /* Print the pending "repeated N times" summary, if any. */
 void log_flush(void);

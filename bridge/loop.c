@@ -33,8 +33,7 @@ void loop_close(struct loop *l)
 
 int loop_add(struct loop *l, struct pollable *p, int fd, const char *what)
 {
-    struct epoll_event ev = { .events = EPOLLIN | (p->on_write ? EPOLLOUT : 0u),
-                              .data.ptr = p };
+    struct epoll_event ev = {.events = EPOLLIN | (p->on_write ? EPOLLOUT : 0u), .data.ptr = p};
     if (epoll_ctl(l->epfd, EPOLL_CTL_ADD, fd, &ev) < 0) {
         int e = errno;
         log_error("epoll_ctl add %s fd %d: %s", what, fd, strerror(e));

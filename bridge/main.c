@@ -55,8 +55,8 @@ static void shut_down(struct daemon *d)
     fill_report(d, &rep);
     if (d->mode != MODE_LIVE)
         log_info("replay: %" PRIu64 " frames in %.3f s (%.0f frames/s), "
-                 "%" PRIu64 " bad lines", d->frames_total, rep.run_time_s,
-                 rep.replay_frames_per_s, d->rp.bad_lines);
+                 "%" PRIu64 " bad lines",
+                 d->frames_total, rep.run_time_s, rep.replay_frames_per_s, d->rp.bad_lines);
     write_stats(d, &rep);
     if (d->csv_open && (rc = estimates_csv_close(&d->csv)) != 0)
         log_error("--estimates %s: close: %s", d->opt.estimates, strerror(-rc));
@@ -87,12 +87,10 @@ int main(int argc, char **argv)
         return EX_CONFIG_STATUS;
     }
     d->run_start_mono_us = mono_us();
-    d->mode = !d->opt.replay ? MODE_LIVE
-            : d->opt.speed > 0 ? MODE_REPLAY_PACED : MODE_REPLAY_FAST;
+    d->mode = !d->opt.replay ? MODE_LIVE : d->opt.speed > 0 ? MODE_REPLAY_PACED : MODE_REPLAY_FAST;
     d->loop.epfd = -1;
     d->pace.fd = d->sig.fd = -1;
-    for (int i = 0; i < MAV_LINKS_FDS_MAX; i++)
-        d->mav[i].p.fd = -1;
+    for (int i = 0; i < MAV_LINKS_FDS_MAX; i++) d->mav[i].p.fd = -1;
     timers_init(d);
     frame_counters_init(&d->fc);
     latency_reset(&d->lat);
@@ -113,20 +111,17 @@ int main(int argc, char **argv)
     }
 
     log_info("beaconloc-bridge %s: site %s, %d beacons, %s %s, MAVLink %s%s, "
-             "ODOMETRY %.0f Hz", BRIDGE_VERSION,
-             d->opt.site ? d->opt.site : "(defaults)", d->cfg.beacon_count,
-             d->opt.replay ? "replay" : "CAN",
-             d->opt.replay ? d->opt.replay : d->cfg.can_interface,
-             d->cfg.mavlink, d->opt.n_mavlink_more ? " and more" : "",
-             d->cfg.odometry_rate_hz);
+             "ODOMETRY %.0f Hz",
+             BRIDGE_VERSION, d->opt.site ? d->opt.site : "(defaults)", d->cfg.beacon_count,
+             d->opt.replay ? "replay" : "CAN", d->opt.replay ? d->opt.replay : d->cfg.can_interface,
+             d->cfg.mavlink, d->opt.n_mavlink_more ? " and more" : "", d->cfg.odometry_rate_hz);
 
     switch (d->mode) {
     case MODE_LIVE:
         if (arm_all_timers(d) != 0)
             return EX_SOFTWARE_STATUS;
         can_try_open(d);
-        while (d->running)
-            loop_run_once(&d->loop, -1);
+        while (d->running) loop_run_once(&d->loop, -1);
         break;
     case MODE_REPLAY_FAST:
         run_replay_fast(d);

@@ -17,7 +17,7 @@ struct link_fds {
 
 static struct link_fds fds_of(const struct mav_link *k)
 {
-    return (struct link_fds){ mav_out_fd(&k->out), resolver_fd(&k->res) };
+    return (struct link_fds){mav_out_fd(&k->out), resolver_fd(&k->res)};
 }
 
 static void note_fds(struct mav_links *l, const struct mav_link *k, struct link_fds before)
@@ -77,19 +77,23 @@ static void take_answer(struct mav_link *k)
     }
     /* numeric conversion only: never a name server */
     char addr[64];
-    if (getnameinfo((const struct sockaddr *)&a.ss, a.len, addr, sizeof addr, NULL, 0, NI_NUMERICHOST) != 0)
+    if (getnameinfo((const struct sockaddr *)&a.ss, a.len, addr, sizeof addr, NULL, 0,
+                    NI_NUMERICHOST) != 0)
         snprintf(addr, sizeof addr, "?");
     log_info("MAVLink endpoint %s open (%s is %s)", k->spec, k->out.ep.host, addr);
     k->down_logged = false;
 }
 
-int mav_links_open(struct mav_links *l, const char *const specs[], int n, unsigned sysid, unsigned compid)
+int mav_links_open(struct mav_links *l, const char *const specs[], int n, unsigned sysid,
+                   unsigned compid)
 {
-    if (!l || !specs || n < 1 || n > MAV_LINKS_MAX || sysid < 1 || sysid > 255 || compid < 1 || compid > 255)
+    if (!l || !specs || n < 1 || n > MAV_LINKS_MAX || sysid < 1 || sysid > 255 || compid < 1 ||
+        compid > 255)
         return -EINVAL;
     for (int i = 0; i < n; i++) {
         struct mav_endpoint ep;
-        if (!specs[i] || strlen(specs[i]) >= MAV_LINK_SPEC_MAX || mav_endpoint_parse(specs[i], &ep) != 0)
+        if (!specs[i] || strlen(specs[i]) >= MAV_LINK_SPEC_MAX ||
+            mav_endpoint_parse(specs[i], &ep) != 0)
             return -EINVAL;
     }
     memset(l, 0, sizeof *l);
@@ -150,9 +154,9 @@ int mav_links_fd_list(const struct mav_links *l, struct mav_links_fd out[], int 
     for (int i = 0; l && i < l->n; i++) {
         struct link_fds f = fds_of(&l->link[i]);
         if (f.out >= 0 && n < max)
-            out[n++] = (struct mav_links_fd){ .fd = f.out, .link = i, .lookup = false };
+            out[n++] = (struct mav_links_fd){.fd = f.out, .link = i, .lookup = false};
         if (f.res >= 0 && n < max)
-            out[n++] = (struct mav_links_fd){ .fd = f.res, .link = i, .lookup = true };
+            out[n++] = (struct mav_links_fd){.fd = f.res, .link = i, .lookup = true};
     }
     return n;
 }
@@ -161,8 +165,7 @@ int mav_links_fds(const struct mav_links *l, int fds[], int max)
 {
     struct mav_links_fd all[MAV_LINKS_FDS_MAX];
     int n = mav_links_fd_list(l, all, max < MAV_LINKS_FDS_MAX ? max : MAV_LINKS_FDS_MAX);
-    for (int i = 0; i < n; i++)
-        fds[i] = all[i].fd;
+    for (int i = 0; i < n; i++) fds[i] = all[i].fd;
     return n;
 }
 
@@ -197,22 +200,22 @@ bool mav_links_handle(struct mav_links *l, int fd, int64_t now_us)
 /* The loop of every send: how many endpoints took it, or -EINVAL. A serial
  * endpoint found gone by the send is closed (logged once, reopened by
  * mav_links_retry()). */
-#define SEND_ALL(l, call)                                               \
-    do {                                                                \
-        int sent_ = 0;                                                  \
-        for (int i_ = 0; (l) && i_ < (l)->n; i_++) {                    \
-            struct mav_link *k = &(l)->link[i_];                        \
-            struct link_fds before_ = fds_of(k);                        \
-            int rc_ = (call);                                           \
-            if (rc_ == -EINVAL)                                         \
-                return -EINVAL;                                         \
-            if (rc_ == 0)                                               \
-                sent_++;                                                \
-            else if (before_.out >= 0 && !mav_out_is_up(&k->out))       \
-                went_down(k, "", -rc_);                                 \
-            note_fds((l), k, before_);                                  \
-        }                                                               \
-        return sent_;                                                   \
+#define SEND_ALL(l, call)                                                                          \
+    do {                                                                                           \
+        int sent_ = 0;                                                                             \
+        for (int i_ = 0; (l) && i_ < (l)->n; i_++) {                                               \
+            struct mav_link *k = &(l)->link[i_];                                                   \
+            struct link_fds before_ = fds_of(k);                                                   \
+            int rc_ = (call);                                                                      \
+            if (rc_ == -EINVAL)                                                                    \
+                return -EINVAL;                                                                    \
+            if (rc_ == 0)                                                                          \
+                sent_++;                                                                           \
+            else if (before_.out >= 0 && !mav_out_is_up(&k->out))                                  \
+                went_down(k, "", -rc_);                                                            \
+            note_fds((l), k, before_);                                                             \
+        }                                                                                          \
+        return sent_;                                                                              \
     } while (0)
 
 int mav_links_send_odometry(struct mav_links *l, const struct mav_odometry *o)
@@ -230,7 +233,8 @@ int mav_links_send_statustext(struct mav_links *l, enum mav_out_severity severit
     SEND_ALL(l, mav_out_send_statustext(&k->out, severity, text));
 }
 
-int mav_links_send_named_float(struct mav_links *l, const char *name, float value, uint32_t time_boot_ms)
+int mav_links_send_named_float(struct mav_links *l, const char *name, float value,
+                               uint32_t time_boot_ms)
 {
     SEND_ALL(l, mav_out_send_named_float(&k->out, name, value, time_boot_ms));
 }
@@ -256,7 +260,6 @@ void mav_links_stats(const struct mav_links *l, struct mav_out_stats *sum)
 int mav_links_up(const struct mav_links *l)
 {
     int n = 0;
-    for (int i = 0; l && i < l->n; i++)
-        n += mav_out_is_up(&l->link[i].out);
+    for (int i = 0; l && i < l->n; i++) n += mav_out_is_up(&l->link[i].out);
     return n;
 }

@@ -26,15 +26,15 @@
 #include "mavlink_out.h"
 #include "resolver.h"
 
-#define MAV_LINKS_MAX 4          /* endpoints */
-#define MAV_LINK_SPEC_MAX 160    /* bytes of an endpoint string incl. NUL */
+#define MAV_LINKS_MAX 4                       /* endpoints */
+#define MAV_LINK_SPEC_MAX 160                 /* bytes of an endpoint string incl. NUL */
 #define MAV_LINKS_FDS_MAX (2 * MAV_LINKS_MAX) /* each: its socket/tty, its lookup eventfd */
 
 struct mav_link {
     struct mav_out out;
-    struct resolver res;        /* host-name lookups; efd -1 until the first */
+    struct resolver res;          /* host-name lookups; efd -1 until the first */
     char spec[MAV_LINK_SPEC_MAX]; /* as given, for messages */
-    bool down_logged;           /* the current outage has been logged */
+    bool down_logged;             /* the current outage has been logged */
 };
 
 struct mav_links {
@@ -50,7 +50,8 @@ struct mav_links {
  * as it was). An endpoint that cannot open now is not an error: it is
  * logged and retried by mav_links_retry(); a host name starts its lookup.
  */
-int mav_links_open(struct mav_links *l, const char *const specs[], int n, unsigned sysid, unsigned compid);
+int mav_links_open(struct mav_links *l, const char *const specs[], int n, unsigned sysid,
+                   unsigned compid);
 
 /* Close every endpoint and abandon lookups in flight (idempotent). */
 void mav_links_close(struct mav_links *l);
@@ -90,8 +91,10 @@ bool mav_links_handle(struct mav_links *l, int fd, int64_t now_us);
  * as the mav_out_send_* call of the same name. */
 int mav_links_send_odometry(struct mav_links *l, const struct mav_odometry *o);
 int mav_links_send_heartbeat(struct mav_links *l, enum mav_out_state system_status);
-int mav_links_send_statustext(struct mav_links *l, enum mav_out_severity severity, const char *text);
-int mav_links_send_named_float(struct mav_links *l, const char *name, float value, uint32_t time_boot_ms);
+int mav_links_send_statustext(struct mav_links *l, enum mav_out_severity severity,
+                              const char *text);
+int mav_links_send_named_float(struct mav_links *l, const char *name, float value,
+                               uint32_t time_boot_ms);
 
 /* The counters of every endpoint, summed. */
 void mav_links_stats(const struct mav_links *l, struct mav_out_stats *sum);

@@ -28,10 +28,10 @@
 /* ---- compile-time checks of the wrapper against the generated code ----- */
 
 struct mav_priv {
-    mavlink_status_t tx_status; /* our outgoing sequence number */
-    mavlink_status_t rx_status; /* parser state */
-    mavlink_message_t rx_msg;   /* parser's message under construction */
-    mavlink_message_t msg;      /* scratch: last parsed / packed message */
+    mavlink_status_t tx_status;              /* our outgoing sequence number */
+    mavlink_status_t rx_status;              /* parser state */
+    mavlink_message_t rx_msg;                /* parser's message under construction */
+    mavlink_message_t msg;                   /* scratch: last parsed / packed message */
     uint8_t pending[MAVLINK_MAX_PACKET_LEN]; /* serial: unsent tail of the last frame */
     uint16_t pending_off, pending_len;
 };
@@ -39,20 +39,28 @@ struct mav_priv {
 _Static_assert(sizeof(struct mav_priv) <= MAV_OUT_PRIV_BYTES, "MAV_OUT_PRIV_BYTES too small");
 _Static_assert(_Alignof(struct mav_priv) <= 16, "mav_out.priv alignment too small");
 #define SAME(a, b) ((int)(a) == (int)(b))
-_Static_assert(SAME(MAV_OUT_STATE_UNINIT, MAV_STATE_UNINIT) && SAME(MAV_OUT_STATE_BOOT, MAV_STATE_BOOT) &&
+_Static_assert(SAME(MAV_OUT_STATE_UNINIT, MAV_STATE_UNINIT) &&
+                   SAME(MAV_OUT_STATE_BOOT, MAV_STATE_BOOT) &&
                    SAME(MAV_OUT_STATE_CALIBRATING, MAV_STATE_CALIBRATING) &&
-                   SAME(MAV_OUT_STATE_STANDBY, MAV_STATE_STANDBY) && SAME(MAV_OUT_STATE_ACTIVE, MAV_STATE_ACTIVE) &&
+                   SAME(MAV_OUT_STATE_STANDBY, MAV_STATE_STANDBY) &&
+                   SAME(MAV_OUT_STATE_ACTIVE, MAV_STATE_ACTIVE) &&
                    SAME(MAV_OUT_STATE_CRITICAL, MAV_STATE_CRITICAL) &&
                    SAME(MAV_OUT_STATE_EMERGENCY, MAV_STATE_EMERGENCY),
                "enum mav_out_state differs from MAV_STATE");
-_Static_assert(SAME(MAV_OUT_SEV_EMERGENCY, MAV_SEVERITY_EMERGENCY) && SAME(MAV_OUT_SEV_ALERT, MAV_SEVERITY_ALERT) &&
-                   SAME(MAV_OUT_SEV_CRITICAL, MAV_SEVERITY_CRITICAL) && SAME(MAV_OUT_SEV_ERROR, MAV_SEVERITY_ERROR) &&
-                   SAME(MAV_OUT_SEV_WARNING, MAV_SEVERITY_WARNING) && SAME(MAV_OUT_SEV_NOTICE, MAV_SEVERITY_NOTICE) &&
-                   SAME(MAV_OUT_SEV_INFO, MAV_SEVERITY_INFO) && SAME(MAV_OUT_SEV_DEBUG, MAV_SEVERITY_DEBUG),
+_Static_assert(SAME(MAV_OUT_SEV_EMERGENCY, MAV_SEVERITY_EMERGENCY) &&
+                   SAME(MAV_OUT_SEV_ALERT, MAV_SEVERITY_ALERT) &&
+                   SAME(MAV_OUT_SEV_CRITICAL, MAV_SEVERITY_CRITICAL) &&
+                   SAME(MAV_OUT_SEV_ERROR, MAV_SEVERITY_ERROR) &&
+                   SAME(MAV_OUT_SEV_WARNING, MAV_SEVERITY_WARNING) &&
+                   SAME(MAV_OUT_SEV_NOTICE, MAV_SEVERITY_NOTICE) &&
+                   SAME(MAV_OUT_SEV_INFO, MAV_SEVERITY_INFO) &&
+                   SAME(MAV_OUT_SEV_DEBUG, MAV_SEVERITY_DEBUG),
                "enum mav_out_severity differs from MAV_SEVERITY");
 #undef SAME
-_Static_assert(MAV_OUT_STATUSTEXT_MAX == MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN, "STATUSTEXT text length");
-_Static_assert(MAV_OUT_NAME_MAX == MAVLINK_MSG_NAMED_VALUE_FLOAT_FIELD_NAME_LEN, "NAMED_VALUE_FLOAT name length");
+_Static_assert(MAV_OUT_STATUSTEXT_MAX == MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN,
+               "STATUSTEXT text length");
+_Static_assert(MAV_OUT_NAME_MAX == MAVLINK_MSG_NAMED_VALUE_FLOAT_FIELD_NAME_LEN,
+               "NAMED_VALUE_FLOAT name length");
 _Static_assert(MAV_COV_UT_LEN == MAVLINK_MSG_ODOMETRY_FIELD_POSE_COVARIANCE_LEN &&
                    MAV_COV_UT_LEN == MAVLINK_MSG_ODOMETRY_FIELD_VELOCITY_COVARIANCE_LEN,
                "ODOMETRY covariance length");
@@ -143,7 +151,8 @@ int mav_endpoint_parse(const char *text, struct mav_endpoint *ep)
     unsigned long v;
     if (e.kind == MAV_ENDPOINT_SERIAL) {
         speed_t sp;
-        if (e.host[0] != '/' || parse_uint(colon + 1, 1, 4000000, &v) < 0 || baud_to_speed((uint32_t)v, &sp) < 0)
+        if (e.host[0] != '/' || parse_uint(colon + 1, 1, 4000000, &v) < 0 ||
+            baud_to_speed((uint32_t)v, &sp) < 0)
             return -EINVAL;
         e.baud = (uint32_t)v;
     } else {
@@ -209,7 +218,8 @@ static int resolve_numeric(const struct mav_endpoint *ep, bool passive, struct s
 }
 
 /* Open the UDP socket for the address ss (udpin: bind it; udpout: send to it). */
-static int open_udp_at(struct mav_out *m, const struct sockaddr_storage *ss, socklen_t len, int family)
+static int open_udp_at(struct mav_out *m, const struct sockaddr_storage *ss, socklen_t len,
+                       int family)
 {
     bool passive = m->ep.kind == MAV_ENDPOINT_UDPIN;
     int fd = socket(family, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
@@ -259,18 +269,20 @@ static int open_serial(struct mav_out *m)
     } else {
         cfmakeraw(&t); /* 8 data bits, no parity, no echo, no line editing */
         t.c_cflag |= CLOCAL | CREAD;
-        t.c_cflag &= (tcflag_t)~(CSTOPB | CRTSCTS);
+        t.c_cflag &= (tcflag_t) ~(CSTOPB | CRTSCTS);
         /* VMIN 1 with O_NONBLOCK: no data -> EAGAIN, read() == 0 only on hang-up. */
         t.c_cc[VMIN] = 1;
         t.c_cc[VTIME] = 0;
-        if (cfsetispeed(&t, speed) < 0 || cfsetospeed(&t, speed) < 0 || tcsetattr(fd, TCSANOW, &t) < 0)
+        if (cfsetispeed(&t, speed) < 0 || cfsetospeed(&t, speed) < 0 ||
+            tcsetattr(fd, TCSANOW, &t) < 0)
             rc = -errno;
     }
     if (rc < 0) {
         close(fd);
         return rc;
     }
-    (void)ioctl(fd, TIOCEXCL); /* keep other openers (modem managers, ...) off the port; best effort */
+    (void)ioctl(fd,
+                TIOCEXCL); /* keep other openers (modem managers, ...) off the port; best effort */
     tcflush(fd, TCIOFLUSH);
     m->fd = fd;
     m->have_peer = true;
@@ -331,13 +343,15 @@ bool mav_out_needs_lookup(const struct mav_out *m)
     struct sockaddr_storage ss;
     socklen_t len;
     int family;
-    return resolve_numeric(&m->ep, m->ep.kind == MAV_ENDPOINT_UDPIN, &ss, &len, &family) == -EDESTADDRREQ;
+    return resolve_numeric(&m->ep, m->ep.kind == MAV_ENDPOINT_UDPIN, &ss, &len, &family) ==
+           -EDESTADDRREQ;
 }
 
 int mav_out_set_address(struct mav_out *m, const struct sockaddr *addr, socklen_t len)
 {
     if (!m || !m->ep.kind || m->ep.kind == MAV_ENDPOINT_SERIAL || !addr || len == 0 ||
-        len > sizeof(struct sockaddr_storage) || (addr->sa_family != AF_INET && addr->sa_family != AF_INET6))
+        len > sizeof(struct sockaddr_storage) ||
+        (addr->sa_family != AF_INET && addr->sa_family != AF_INET6))
         return -EINVAL;
     if (m->fd >= 0)
         return 0;
@@ -426,10 +440,11 @@ static int send_msg(struct mav_out *m)
         return -ENOTCONN;
     }
     if (m->ep.kind != MAV_ENDPOINT_SERIAL) {
-        ssize_t n = sendto(m->fd, buf, len, MSG_DONTWAIT | MSG_NOSIGNAL, (const struct sockaddr *)&m->peer,
-                           m->peer_len);
+        ssize_t n = sendto(m->fd, buf, len, MSG_DONTWAIT | MSG_NOSIGNAL,
+                           (const struct sockaddr *)&m->peer, m->peer_len);
         if (n < 0)
-            return (errno == EAGAIN || errno == EWOULDBLOCK || errno == ENOBUFS) ? busy(m) : fail(m, errno);
+            return (errno == EAGAIN || errno == EWOULDBLOCK || errno == ENOBUFS) ? busy(m)
+                                                                                 : fail(m, errno);
         if ((size_t)n != len)
             return fail(m, EMSGSIZE); /* a datagram is sent whole or not at all */
     } else {
@@ -474,7 +489,8 @@ int mav_out_send_odometry(struct mav_out *m, const struct mav_odometry *o)
 {
     if (!m || !o || o->quality < -1 || o->quality > 100)
         return -EINVAL;
-    const float vals[] = {o->x_m, o->y_m, o->z_m, o->yaw_rad, o->vx_mps, o->vy_mps, o->vz_mps, o->yawrate_radps};
+    const float vals[] = {o->x_m,    o->y_m,    o->z_m,    o->yaw_rad,
+                          o->vx_mps, o->vy_mps, o->vz_mps, o->yawrate_radps};
     if (!all_finite(vals, sizeof vals / sizeof vals[0]))
         return -EINVAL;
     float pose_ut[MAV_COV_UT_LEN], vel_ut[MAV_COV_UT_LEN];
@@ -488,24 +504,23 @@ int mav_out_send_odometry(struct mav_out *m, const struct mav_odometry *o)
     float q[4];
     mavlink_euler_to_quaternion(0.0f, 0.0f, (float)psi, q);
 
-    mavlink_msg_odometry_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg, o->time_usec,
-                                     MAV_FRAME_LOCAL_FRD, MAV_FRAME_BODY_FRD,
-                                     o->y_m,  /* x: north */
-                                     o->x_m,  /* y: east */
-                                     -o->z_m, /* z: down */
-                                     q,
-                                     o->vx_mps,  /* forward */
-                                     -o->vy_mps, /* right = -left */
-                                     -o->vz_mps, /* down = -up */
-                                     0.0f, 0.0f,
-                                     -o->yawrate_radps, /* about down = -(about up) */
-                                     pose_ut, vel_ut, o->reset_counter, MAV_ESTIMATOR_TYPE_VISION, o->quality);
+    mavlink_msg_odometry_pack_status(
+        m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg, o->time_usec, MAV_FRAME_LOCAL_FRD,
+        MAV_FRAME_BODY_FRD, o->y_m,    /* x: north */
+        o->x_m,                        /* y: east */
+        -o->z_m,                       /* z: down */
+        q, o->vx_mps,                  /* forward */
+        -o->vy_mps,                    /* right = -left */
+        -o->vz_mps,                    /* down = -up */
+        0.0f, 0.0f, -o->yawrate_radps, /* about down = -(about up) */
+        pose_ut, vel_ut, o->reset_counter, MAV_ESTIMATOR_TYPE_VISION, o->quality);
     return send_msg(m);
 }
 
 int mav_out_send_heartbeat(struct mav_out *m, enum mav_out_state system_status)
 {
-    if (!m || (int)system_status < MAV_OUT_STATE_UNINIT || (int)system_status > MAV_OUT_STATE_EMERGENCY)
+    if (!m || (int)system_status < MAV_OUT_STATE_UNINIT ||
+        (int)system_status > MAV_OUT_STATE_EMERGENCY)
         return -EINVAL;
     mavlink_msg_heartbeat_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg,
                                       MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0,
@@ -520,20 +535,21 @@ int mav_out_send_statustext(struct mav_out *m, enum mav_out_severity severity, c
     char buf[MAV_OUT_STATUSTEXT_MAX + 1];
     memset(buf, 0, sizeof buf);
     strncpy(buf, text, MAV_OUT_STATUSTEXT_MAX); /* 50 chars without NUL is legal on the wire */
-    mavlink_msg_statustext_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg, (uint8_t)severity,
-                                       buf, 0, 0);
+    mavlink_msg_statustext_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg,
+                                       (uint8_t)severity, buf, 0, 0);
     return send_msg(m);
 }
 
-int mav_out_send_named_float(struct mav_out *m, const char *name, float value, uint32_t time_boot_ms)
+int mav_out_send_named_float(struct mav_out *m, const char *name, float value,
+                             uint32_t time_boot_ms)
 {
     if (!m || !name || name[0] == '\0' || strlen(name) > MAV_OUT_NAME_MAX || !isfinite(value))
         return -EINVAL;
     char buf[MAV_OUT_NAME_MAX + 1];
     memset(buf, 0, sizeof buf);
     memcpy(buf, name, strlen(name));
-    mavlink_msg_named_value_float_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg, time_boot_ms,
-                                              buf, value);
+    mavlink_msg_named_value_float_pack_status(m->sysid, m->compid, &priv(m)->tx_status,
+                                              &priv(m)->msg, time_boot_ms, buf, value);
     return send_msg(m);
 }
 
@@ -612,8 +628,8 @@ int mav_out_handle_input(struct mav_out *m, int64_t now_us)
             if (err == EAGAIN || err == EWOULDBLOCK || err == EINTR)
                 break;
             /* UDP: an ICMP error from an earlier send; not a read failure. */
-            if (m->ep.kind != MAV_ENDPOINT_SERIAL && (err == ECONNREFUSED || err == EHOSTUNREACH ||
-                                                      err == ENETUNREACH))
+            if (m->ep.kind != MAV_ENDPOINT_SERIAL &&
+                (err == ECONNREFUSED || err == EHOSTUNREACH || err == ENETUNREACH))
                 continue;
             m->last_errno = err;
             if (m->ep.kind == MAV_ENDPOINT_SERIAL && device_gone(err))

@@ -63,9 +63,10 @@ enum mav_endpoint_kind {
 /* A parsed endpoint string. */
 struct mav_endpoint {
     enum mav_endpoint_kind kind;
-    char host[MAV_OUT_HOST_MAX]; /* host name / IPv4 / IPv6 literal ([..] stripped), or device path */
-    uint16_t port;               /* UDP port (1..65535); 0 for serial */
-    uint32_t baud;               /* serial only: one of the standard termios rates, 0 for UDP */
+    char host
+        [MAV_OUT_HOST_MAX]; /* host name / IPv4 / IPv6 literal ([..] stripped), or device path */
+    uint16_t port;          /* UDP port (1..65535); 0 for serial */
+    uint32_t baud;          /* serial only: one of the standard termios rates, 0 for UDP */
 };
 
 /*
@@ -81,14 +82,14 @@ int mav_endpoint_parse(const char *text, struct mav_endpoint *ep);
 
 /* Counters (monotonic since open; the caller reports them). */
 struct mav_out_stats {
-    uint64_t tx_msgs;           /* messages handed to the kernel in full */
-    uint64_t tx_bytes;          /* bytes of those messages */
-    uint64_t tx_errors;         /* sends that failed, any reason (endpoint down, busy, network error) */
-    uint64_t tx_busy;           /* of those: dropped whole because the link was saturated (socket
+    uint64_t tx_msgs;    /* messages handed to the kernel in full */
+    uint64_t tx_bytes;   /* bytes of those messages */
+    uint64_t tx_errors;  /* sends that failed, any reason (endpoint down, busy, network error) */
+    uint64_t tx_busy;    /* of those: dropped whole because the link was saturated (socket
                                    buffer full; serial: > 100 ms of line time already queued) */
-    uint64_t tx_no_peer;        /* udpin: messages dropped because no peer has spoken yet */
-    uint64_t rx_bytes;          /* bytes read from the endpoint */
-    uint64_t rx_msgs;           /* MAVLink messages parsed (CRC good) */
+    uint64_t tx_no_peer; /* udpin: messages dropped because no peer has spoken yet */
+    uint64_t rx_bytes;   /* bytes read from the endpoint */
+    uint64_t rx_msgs;    /* MAVLink messages parsed (CRC good) */
     uint64_t rx_parse_errors;   /* bad CRC / framing, as counted by the generated parser */
     uint64_t timesync_answered; /* TIMESYNC requests (tc1 == 0) answered */
     uint64_t reopens;           /* successful (re)opens after the first */
@@ -101,14 +102,14 @@ struct mav_out_stats {
 
 struct mav_out {
     struct mav_endpoint ep;
-    int fd;              /* -1 while down */
-    uint8_t sysid;       /* our system id */
-    uint8_t compid;      /* our component id */
-    int last_errno;      /* errno of the last failure (open or send), 0 if none */
-    bool have_peer;      /* UDP: destination known (udpout: resolved; udpin: someone spoke) */
+    int fd;         /* -1 while down */
+    uint8_t sysid;  /* our system id */
+    uint8_t compid; /* our component id */
+    int last_errno; /* errno of the last failure (open or send), 0 if none */
+    bool have_peer; /* UDP: destination known (udpout: resolved; udpin: someone spoke) */
     struct sockaddr_storage peer; /* UDP destination */
     socklen_t peer_len;
-    int peer_sysid;      /* system id of the last HEARTBEAT received, -1 if none */
+    int peer_sysid; /* system id of the last HEARTBEAT received, -1 if none */
     struct mav_out_stats stats;
     _Alignas(16) unsigned char priv[MAV_OUT_PRIV_BYTES];
 };
@@ -181,11 +182,11 @@ int mav_out_handle_input(struct mav_out *m, int64_t now_us);
  * is not estimated; mav_odometry_init() starts with all NaN.
  */
 struct mav_odometry {
-    uint64_t time_usec;   /* us, caller's monotonic clock (same as TIMESYNC answers) */
-    float x_m, y_m, z_m;  /* site frame: east, north, up */
-    float yaw_rad;        /* heading, CCW from +x (east); roll = pitch = 0 */
+    uint64_t time_usec;           /* us, caller's monotonic clock (same as TIMESYNC answers) */
+    float x_m, y_m, z_m;          /* site frame: east, north, up */
+    float yaw_rad;                /* heading, CCW from +x (east); roll = pitch = 0 */
     float vx_mps, vy_mps, vz_mps; /* body frame: forward, left, up */
-    float yawrate_radps;  /* CCW positive */
+    float yawrate_radps;          /* CCW positive */
     float pose_cov[6][6];
     float vel_cov[6][6];
     uint8_t reset_counter; /* bump on every re-initialisation (wraps at 256) */
@@ -247,7 +248,8 @@ int mav_out_send_statustext(struct mav_out *m, enum mav_out_severity severity, c
 /* NAMED_VALUE_FLOAT, e.g. ("sos_mps", 343.2f, t) or ("period_s", 0.9f, t);
  * time_boot_ms = caller's monotonic ms. -EINVAL if name is NULL, empty or
  * longer than MAV_OUT_NAME_MAX, or value is NaN/inf. */
-int mav_out_send_named_float(struct mav_out *m, const char *name, float value, uint32_t time_boot_ms);
+int mav_out_send_named_float(struct mav_out *m, const char *name, float value,
+                             uint32_t time_boot_ms);
 
 /*
  * ODOMETRY quality (0..100) from the horizontal position covariance (m^2):

@@ -30,8 +30,9 @@ static bool params_ok(const struct node_clock_params *p)
 {
     return p->bucket_us >= 1000 && p->bucket_us <= 60000000 && p->window_buckets >= 2 &&
            p->window_buckets <= NODE_CLOCK_MAX_BUCKETS && p->min_buckets >= 2 &&
-           p->min_buckets <= p->window_buckets && p->max_jump_us >= 1000 && p->max_jump_us < WRAP_US / 4 &&
-           isfinite(p->max_drift) && p->max_drift >= 0.0 && p->max_drift <= 0.01;
+           p->min_buckets <= p->window_buckets && p->max_jump_us >= 1000 &&
+           p->max_jump_us < WRAP_US / 4 && isfinite(p->max_drift) && p->max_drift >= 0.0 &&
+           p->max_drift <= 0.01;
 }
 
 int node_clock_init(struct node_clock *nc, const struct node_clock_params *params)
@@ -125,7 +126,9 @@ static void refit(struct node_clock *nc)
         sum_x += x;
         /* Andrew's monotone chain, lower hull: drop the last vertex while it
          * does not make a strict left (counter-clockwise) turn. */
-        while (h >= 2 && (hx[h - 1] - hx[h - 2]) * (y - hy[h - 2]) - (hy[h - 1] - hy[h - 2]) * (x - hx[h - 2]) <= 0.0)
+        while (h >= 2 && (hx[h - 1] - hx[h - 2]) * (y - hy[h - 2]) -
+                                 (hy[h - 1] - hy[h - 2]) * (x - hx[h - 2]) <=
+                             0.0)
             h--;
         hx[h] = x;
         hy[h] = y;
@@ -135,8 +138,7 @@ static void refit(struct node_clock *nc)
     double b = nc->have_fit ? nc->drift : 0.0; /* one point: keep the last slope */
     if (h >= 2) {
         uint32_t k = 0;
-        while (k + 2 < h && hx[k + 1] < mean_x)
-            k++;
+        while (k + 2 < h && hx[k + 1] < mean_x) k++;
         b = (hy[k + 1] - hy[k]) / (hx[k + 1] - hx[k]);
     }
     if (b > nc->p.max_drift)
@@ -173,8 +175,7 @@ static void add_point(struct node_clock *nc, int64_t node_us, int64_t rx_us)
     /* Find the slot: buckets are ordered by index; new points are nearly
      * always in the newest bucket, so search from the end. */
     uint32_t pos = nc->b_len;
-    while (pos > 0 && bucket(nc, pos - 1)->index > idx)
-        pos--;
+    while (pos > 0 && bucket(nc, pos - 1)->index > idx) pos--;
     if (pos > 0 && bucket(nc, pos - 1)->index == idx) {
         struct node_clock_bucket *bk = bucket(nc, pos - 1);
         if (residual(nc, node_us, rx_us) < residual(nc, bk->node_us, bk->rx_us)) {
@@ -190,8 +191,7 @@ static void add_point(struct node_clock *nc, int64_t node_us, int64_t rx_us)
             nc->b_len--;
             pos--;
         }
-        for (uint32_t i = nc->b_len; i > pos; i--)
-            *bucket(nc, i) = *bucket(nc, i - 1);
+        for (uint32_t i = nc->b_len; i > pos; i--) *bucket(nc, i) = *bucket(nc, i - 1);
         struct node_clock_bucket *bk = bucket(nc, pos);
         bk->node_us = node_us;
         bk->rx_us = rx_us;

@@ -58,13 +58,13 @@ struct node_clock_params {
 
 /* What the last node_clock_observe() saw. */
 enum node_clock_event {
-    NODE_CLOCK_NONE = 0,      /* no observation yet */
-    NODE_CLOCK_FIRST,         /* first observation (or first after node_clock_reset) */
-    NODE_CLOCK_IN_ORDER,      /* newer than every earlier stamp */
-    NODE_CLOCK_WRAPPED,       /* newer, and the 32-bit counter wrapped since the newest */
-    NODE_CLOCK_OUT_OF_ORDER,  /* older than the newest stamp (still used in the fit) */
-    NODE_CLOCK_DUPLICATE,     /* equal to a recent stamp (same unwrapped time returned) */
-    NODE_CLOCK_RESTART        /* node restarted / clock jumped: fit reset */
+    NODE_CLOCK_NONE = 0,     /* no observation yet */
+    NODE_CLOCK_FIRST,        /* first observation (or first after node_clock_reset) */
+    NODE_CLOCK_IN_ORDER,     /* newer than every earlier stamp */
+    NODE_CLOCK_WRAPPED,      /* newer, and the 32-bit counter wrapped since the newest */
+    NODE_CLOCK_OUT_OF_ORDER, /* older than the newest stamp (still used in the fit) */
+    NODE_CLOCK_DUPLICATE,    /* equal to a recent stamp (same unwrapped time returned) */
+    NODE_CLOCK_RESTART       /* node restarted / clock jumped: fit reset */
 };
 
 struct node_clock_bucket {
@@ -78,9 +78,9 @@ struct node_clock {
 
     /* unwrapping */
     bool have_first;
-    int64_t newest_node_us;  /* largest unwrapped stamp so far */
-    int64_t newest_rx_us;    /* receive time of that frame */
-    int64_t base_us;         /* unwrapped = raw + 2^32 * wraps + base (base moves on restart) */
+    int64_t newest_node_us; /* largest unwrapped stamp so far */
+    int64_t newest_rx_us;   /* receive time of that frame */
+    int64_t base_us;        /* unwrapped = raw + 2^32 * wraps + base (base moves on restart) */
     int64_t recent[NODE_CLOCK_RECENT];
     uint32_t recent_len, recent_next;
 

@@ -78,8 +78,8 @@ static void measure_latency(struct daemon *d, const struct est_output *o)
 
 /* Compose and send one ODOMETRY of estimate o stamped time_local_us, then
  * move the rate grid on from now. */
-static void send_odometry(struct daemon *d, const struct est_output *o,
-                          int64_t time_local_us, int64_t now)
+static void send_odometry(struct daemon *d, const struct est_output *o, int64_t time_local_us,
+                          int64_t now)
 {
     struct mav_odometry m;
     mav_odometry_init(&m);

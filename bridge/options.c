@@ -16,38 +16,38 @@
 
 static void usage(FILE *f)
 {
-    fprintf(f,
-        "usage: beaconloc-bridge [--site FILE] [--can IFACE] [--mavlink ENDPOINT]\n"
-        "                        [--rate HZ] [--sysid N] [--compid N] [--log-level LEVEL]\n"
-        "                        [--replay LOG [--realtime | --speed X]] [--record LOG]\n"
-        "                        [--estimates CSV] [--stats JSON] [--status-interval S]\n"
-        "                        [--help] [--version]\n"
-        "  --site FILE        site file (beacons, receivers, robot, noise, [bridge])\n"
-        "  --can IFACE        SocketCAN interface (default vcan0)\n"
-        "  --mavlink EP       udpout:HOST:PORT | udpin:HOST:PORT | serial:DEV:BAUD\n"
-        "                     (repeat for up to 4 endpoints; each gets every message)\n"
-        "  --rate HZ          ODOMETRY rate (default 30)\n"
-        "  --sysid N --compid N   MAVLink ids (default 1, 197)\n"
-        "  --log-level L      error, warning, info, debug\n"
-        "  --replay LOG       read a candump log instead of the bus (as fast as possible)\n"
-        "  --realtime         pace the replay at the log's own speed\n"
-        "  --speed X          pace the replay at X times the log's speed\n"
-        "  --record LOG       write every frame read to a candump log\n"
-        "  --estimates CSV    write every estimate (receiver-node clock)\n"
-        "  --stats JSON       write counters and latency at exit\n"
-        "  --status-interval S  status line period in seconds (0 = off)\n"
-        "See docs/bridge.md.\n");
+    fprintf(f, "usage: beaconloc-bridge [--site FILE] [--can IFACE] [--mavlink ENDPOINT]\n"
+               "                        [--rate HZ] [--sysid N] [--compid N] [--log-level LEVEL]\n"
+               "                        [--replay LOG [--realtime | --speed X]] [--record LOG]\n"
+               "                        [--estimates CSV] [--stats JSON] [--status-interval S]\n"
+               "                        [--help] [--version]\n"
+               "  --site FILE        site file (beacons, receivers, robot, noise, [bridge])\n"
+               "  --can IFACE        SocketCAN interface (default vcan0)\n"
+               "  --mavlink EP       udpout:HOST:PORT | udpin:HOST:PORT | serial:DEV:BAUD\n"
+               "                     (repeat for up to 4 endpoints; each gets every message)\n"
+               "  --rate HZ          ODOMETRY rate (default 30)\n"
+               "  --sysid N --compid N   MAVLink ids (default 1, 197)\n"
+               "  --log-level L      error, warning, info, debug\n"
+               "  --replay LOG       read a candump log instead of the bus (as fast as possible)\n"
+               "  --realtime         pace the replay at the log's own speed\n"
+               "  --speed X          pace the replay at X times the log's speed\n"
+               "  --record LOG       write every frame read to a candump log\n"
+               "  --estimates CSV    write every estimate (receiver-node clock)\n"
+               "  --stats JSON       write counters and latency at exit\n"
+               "  --status-interval S  status line period in seconds (0 = off)\n"
+               "See docs/bridge.md.\n");
 }
 
-static int parse_double_opt(const char *name, const char *s, double lo,
-                            double hi, double *out)
+static int parse_double_opt(const char *name, const char *s, double lo, double hi, double *out)
 {
     char *end;
     errno = 0;
     double v = strtod(s, &end);
     if (end == s || *end || errno || !isfinite(v) || v <= lo || v > hi) {
-        fprintf(stderr, "error: command line: --%s: '%s' is not a number in "
-                "(%g, %g]\n", name, s, lo, hi);
+        fprintf(stderr,
+                "error: command line: --%s: '%s' is not a number in "
+                "(%g, %g]\n",
+                name, s, lo, hi);
         return -1;
     }
     *out = v;
@@ -60,8 +60,7 @@ static int parse_id_opt(const char *name, const char *s, int *out)
     errno = 0;
     long v = strtol(s, &end, 10);
     if (end == s || *end || errno || v < 1 || v > 255) {
-        fprintf(stderr, "error: command line: --%s: '%s' is not an id 1..255\n",
-                name, s);
+        fprintf(stderr, "error: command line: --%s: '%s' is not an id 1..255\n", name, s);
         return -1;
     }
     *out = (int)v;
@@ -70,28 +69,40 @@ static int parse_id_opt(const char *name, const char *s, int *out)
 
 int parse_args(int argc, char **argv, struct options *o, int *status)
 {
-    enum { O_SITE = 256, O_CAN, O_MAV, O_RATE, O_SYSID, O_COMPID, O_LOGLEVEL,
-           O_REPLAY, O_REALTIME, O_SPEED, O_RECORD, O_ESTIMATES, O_STATS,
-           O_STATUS, O_VERSION };
-    static const struct option longopts[] = {
-        { "site", required_argument, 0, O_SITE },
-        { "can", required_argument, 0, O_CAN },
-        { "mavlink", required_argument, 0, O_MAV },
-        { "rate", required_argument, 0, O_RATE },
-        { "sysid", required_argument, 0, O_SYSID },
-        { "compid", required_argument, 0, O_COMPID },
-        { "log-level", required_argument, 0, O_LOGLEVEL },
-        { "replay", required_argument, 0, O_REPLAY },
-        { "realtime", no_argument, 0, O_REALTIME },
-        { "speed", required_argument, 0, O_SPEED },
-        { "record", required_argument, 0, O_RECORD },
-        { "estimates", required_argument, 0, O_ESTIMATES },
-        { "stats", required_argument, 0, O_STATS },
-        { "status-interval", required_argument, 0, O_STATUS },
-        { "help", no_argument, 0, 'h' },
-        { "version", no_argument, 0, O_VERSION },
-        { 0, 0, 0, 0 }
+    enum {
+        O_SITE = 256,
+        O_CAN,
+        O_MAV,
+        O_RATE,
+        O_SYSID,
+        O_COMPID,
+        O_LOGLEVEL,
+        O_REPLAY,
+        O_REALTIME,
+        O_SPEED,
+        O_RECORD,
+        O_ESTIMATES,
+        O_STATS,
+        O_STATUS,
+        O_VERSION
     };
+    static const struct option longopts[] = {{"site", required_argument, 0, O_SITE},
+                                             {"can", required_argument, 0, O_CAN},
+                                             {"mavlink", required_argument, 0, O_MAV},
+                                             {"rate", required_argument, 0, O_RATE},
+                                             {"sysid", required_argument, 0, O_SYSID},
+                                             {"compid", required_argument, 0, O_COMPID},
+                                             {"log-level", required_argument, 0, O_LOGLEVEL},
+                                             {"replay", required_argument, 0, O_REPLAY},
+                                             {"realtime", no_argument, 0, O_REALTIME},
+                                             {"speed", required_argument, 0, O_SPEED},
+                                             {"record", required_argument, 0, O_RECORD},
+                                             {"estimates", required_argument, 0, O_ESTIMATES},
+                                             {"stats", required_argument, 0, O_STATS},
+                                             {"status-interval", required_argument, 0, O_STATUS},
+                                             {"help", no_argument, 0, 'h'},
+                                             {"version", no_argument, 0, O_VERSION},
+                                             {0, 0, 0, 0}};
     memset(o, 0, sizeof *o);
     o->status_interval_s = -1;
     int c;
@@ -99,8 +110,12 @@ int parse_args(int argc, char **argv, struct options *o, int *status)
     while ((c = getopt_long(argc, argv, "h", longopts, NULL)) != -1) {
         int rc = 0;
         switch (c) {
-        case O_SITE: o->site = optarg; break;
-        case O_CAN: o->can = optarg; break;
+        case O_SITE:
+            o->site = optarg;
+            break;
+        case O_CAN:
+            o->can = optarg;
+            break;
         case O_MAV:
             if (!o->mavlink)
                 o->mavlink = optarg;
@@ -113,16 +128,36 @@ int parse_args(int argc, char **argv, struct options *o, int *status)
                 return -1;
             }
             break;
-        case O_RATE: rc = parse_double_opt("rate", optarg, 0, 1000, &o->rate_hz); break;
-        case O_SYSID: rc = parse_id_opt("sysid", optarg, &o->sysid); break;
-        case O_COMPID: rc = parse_id_opt("compid", optarg, &o->compid); break;
-        case O_LOGLEVEL: o->log_level = optarg; break;
-        case O_REPLAY: o->replay = optarg; break;
-        case O_REALTIME: o->speed = 1.0; break;
-        case O_SPEED: rc = parse_double_opt("speed", optarg, 0, 1e6, &o->speed); break;
-        case O_RECORD: o->record = optarg; break;
-        case O_ESTIMATES: o->estimates = optarg; break;
-        case O_STATS: o->stats = optarg; break;
+        case O_RATE:
+            rc = parse_double_opt("rate", optarg, 0, 1000, &o->rate_hz);
+            break;
+        case O_SYSID:
+            rc = parse_id_opt("sysid", optarg, &o->sysid);
+            break;
+        case O_COMPID:
+            rc = parse_id_opt("compid", optarg, &o->compid);
+            break;
+        case O_LOGLEVEL:
+            o->log_level = optarg;
+            break;
+        case O_REPLAY:
+            o->replay = optarg;
+            break;
+        case O_REALTIME:
+            o->speed = 1.0;
+            break;
+        case O_SPEED:
+            rc = parse_double_opt("speed", optarg, 0, 1e6, &o->speed);
+            break;
+        case O_RECORD:
+            o->record = optarg;
+            break;
+        case O_ESTIMATES:
+            o->estimates = optarg;
+            break;
+        case O_STATS:
+            o->stats = optarg;
+            break;
         case O_STATUS: {
             double v;
             if (!strcmp(optarg, "0"))
@@ -131,7 +166,10 @@ int parse_args(int argc, char **argv, struct options *o, int *status)
                 o->status_interval_s = v;
             break;
         }
-        case 'h': usage(stdout); *status = EX_OK_STATUS; return -1;
+        case 'h':
+            usage(stdout);
+            *status = EX_OK_STATUS;
+            return -1;
         case O_VERSION:
             printf("beaconloc-bridge %s\n", BRIDGE_VERSION);
             *status = EX_OK_STATUS;
@@ -196,26 +234,26 @@ int build_config(const struct options *o, struct bridge_config *cfg)
         cfg->status_interval_s = o->status_interval_s;
     enum log_level lv;
     if (log_level_parse(cfg->log_level, &lv) != 0) {
-        fprintf(stderr, "error: command line: --log-level: unknown level '%s'\n",
-                cfg->log_level);
+        fprintf(stderr, "error: command line: --log-level: unknown level '%s'\n", cfg->log_level);
         return -1;
     }
     struct mav_endpoint ep;
     if (mav_endpoint_parse(cfg->mavlink, &ep) != 0) {
         if (o->mavlink)
-            fprintf(stderr, "error: command line: --mavlink: '%s' is not "
+            fprintf(stderr,
+                    "error: command line: --mavlink: '%s' is not "
                     "udpout:HOST:PORT, udpin:HOST:PORT or serial:DEVICE:BAUD\n",
                     cfg->mavlink);
         else
-            config_format_error(cfg, "bridge", "mavlink", "not a valid endpoint",
-                                err, sizeof err),
-            fprintf(stderr, "error: %s\n", err);
+            config_format_error(cfg, "bridge", "mavlink", "not a valid endpoint", err, sizeof err),
+                fprintf(stderr, "error: %s\n", err);
         return -1;
     }
     for (int i = 0; i < o->n_mavlink_more; i++)
         if (strlen(o->mavlink_more[i]) >= MAV_LINK_SPEC_MAX ||
             mav_endpoint_parse(o->mavlink_more[i], &ep) != 0) {
-            fprintf(stderr, "error: command line: --mavlink: '%s' is not "
+            fprintf(stderr,
+                    "error: command line: --mavlink: '%s' is not "
                     "udpout:HOST:PORT, udpin:HOST:PORT or serial:DEVICE:BAUD\n",
                     o->mavlink_more[i]);
             return -1;

@@ -20,7 +20,7 @@
 struct options {
     const char *site;
     const char *can;
-    const char *mavlink;  /* the first --mavlink (overrides [bridge] mavlink) */
+    const char *mavlink; /* the first --mavlink (overrides [bridge] mavlink) */
     const char *mavlink_more[MAV_LINKS_MAX - 1]; /* further --mavlink endpoints */
     int n_mavlink_more;
     const char *replay;
@@ -28,9 +28,9 @@ struct options {
     const char *estimates;
     const char *stats;
     const char *log_level;
-    double rate_hz;       /* 0 = not given */
-    int sysid, compid;    /* 0 = not given */
-    double speed;         /* paced replay speed factor, 0 = fast */
+    double rate_hz;           /* 0 = not given */
+    int sysid, compid;        /* 0 = not given */
+    double speed;             /* paced replay speed factor, 0 = fast */
     double status_interval_s; /* <0 = not given */
 };
 

@@ -17,8 +17,8 @@ int record_open(struct record *r, const char *path, const char *ifname)
     return 0;
 }
 
-int record_format(char *buf, size_t size, const struct can_msg *msg,
-                  int64_t t_us, const char *ifname)
+int record_format(char *buf, size_t size, const struct can_msg *msg, int64_t t_us,
+                  const char *ifname)
 {
     static const char hex[] = "0123456789ABCDEF";
     char data[2 * CAN_MSG_MAX_DATA + 4];
@@ -41,12 +41,10 @@ int record_format(char *buf, size_t size, const struct can_msg *msg,
     int n;
     if (msg->flags & (CAN_MSG_EXTENDED | CAN_MSG_ERROR))
         n = snprintf(buf, size, "(%lld.%06lld) %s %08X#%s\n", sec, usec, ifname,
-                     (unsigned)(msg->id | ((msg->flags & CAN_MSG_ERROR)
-                                               ? 0x20000000u : 0u)),
-                     data);
+                     (unsigned)(msg->id | ((msg->flags & CAN_MSG_ERROR) ? 0x20000000u : 0u)), data);
     else
-        n = snprintf(buf, size, "(%lld.%06lld) %s %03X#%s\n", sec, usec, ifname,
-                     (unsigned)msg->id, data);
+        n = snprintf(buf, size, "(%lld.%06lld) %s %03X#%s\n", sec, usec, ifname, (unsigned)msg->id,
+                     data);
     if (n < 0 || (size_t)n >= size)
         return -1;
     return n;

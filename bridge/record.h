@@ -29,8 +29,8 @@ int record_write(struct record *r, const struct can_msg *msg, int64_t t_us);
 
 /* Format one line (no I/O) into buf; returns its length, or -1 if buf is
  * too small. */
-int record_format(char *buf, size_t size, const struct can_msg *msg,
-                  int64_t t_us, const char *ifname);
+int record_format(char *buf, size_t size, const struct can_msg *msg, int64_t t_us,
+                  const char *ifname);
 
 /* Flush buffered lines (the daemon calls it every second). Returns 0 or
  * -errno (counted). */

@@ -62,28 +62,23 @@ static const char *parse_stamp(const char *p, int64_t *us)
 static const char *skip_direction(const char *p)
 {
     if (*p == ' ') {
-        while (*p == ' ')
-            p++;
+        while (*p == ' ') p++;
         if (*p == 'R' || *p == 'T')
             p++;
     }
-    while (*p == ' ' || *p == '\r' || *p == '\n')
-        p++;
+    while (*p == ' ' || *p == '\r' || *p == '\n') p++;
     return *p == '\0' ? p : NULL;
 }
 
-int replay_parse_line(const char *line, struct can_msg *msg, char *ifname,
-                      size_t ifname_len)
+int replay_parse_line(const char *line, struct can_msg *msg, char *ifname, size_t ifname_len)
 {
     int64_t t_us;
     const char *p = parse_stamp(line, &t_us);
     if (!p || *p != ' ')
         return -EINVAL;
-    while (*p == ' ')
-        p++;
+    while (*p == ' ') p++;
     const char *ifs = p;
-    while (*p && *p != ' ' && *p != '\n')
-        p++;
+    while (*p && *p != ' ' && *p != '\n') p++;
     size_t iflen = (size_t)(p - ifs);
     if (iflen == 0 || iflen >= 16 || *p != ' ')
         return -EINVAL;
@@ -92,8 +87,7 @@ int replay_parse_line(const char *line, struct can_msg *msg, char *ifname,
         memcpy(ifname, ifs, n);
         ifname[n] = '\0';
     }
-    while (*p == ' ')
-        p++;
+    while (*p == ' ') p++;
     /* identifier: 3 hex digits (standard) or 8 (extended / error) */
     uint32_t id = 0;
     int nd = 0;
@@ -254,14 +248,15 @@ static void bad_line(struct replay *r, bool overlong)
 {
     r->bad_lines++;
     if (r->bad_lines <= 5 && overlong)
-        log_warn("%s:%llu: longer than %d bytes, not a candump line, skipped: '%.60s...'",
-                 r->path, (unsigned long long)r->lines, REPLAY_LINE_MAX, r->line);
+        log_warn("%s:%llu: longer than %d bytes, not a candump line, skipped: '%.60s...'", r->path,
+                 (unsigned long long)r->lines, REPLAY_LINE_MAX, r->line);
     else if (r->bad_lines <= 5)
         log_warn("%s:%llu: not a candump line, skipped: '%.60s'", r->path,
                  (unsigned long long)r->lines, r->line);
     else if (r->bad_lines == 6)
         log_warn("%s: more lines not in candump format: counting them "
-                 "only (see the stats)", r->path);
+                 "only (see the stats)",
+                 r->path);
 }
 
 int replay_next(struct replay *r, struct can_msg *msg)

@@ -32,19 +32,19 @@
 
 #include "frames.h"
 
-#define REPLAY_LINE_MAX 256       /* bytes of a line incl. its newline */
-#define REPLAY_LINES_PER_CALL 64  /* lines one replay_next() call looks at, at most */
-#define REPLAY_READ_CHUNK 65536   /* bytes of one read() of the log */
+#define REPLAY_LINE_MAX 256      /* bytes of a line incl. its newline */
+#define REPLAY_LINES_PER_CALL 64 /* lines one replay_next() call looks at, at most */
+#define REPLAY_READ_CHUNK 65536  /* bytes of one read() of the log */
 
 struct replay {
-    int fd;              /* the log, O_NONBLOCK; -1 when closed */
+    int fd; /* the log, O_NONBLOCK; -1 when closed */
     char *path;
-    char *buf;           /* REPLAY_READ_CHUNK bytes read, not yet consumed: buf[pos, end) */
+    char *buf; /* REPLAY_READ_CHUNK bytes read, not yet consumed: buf[pos, end) */
     size_t pos, end;
     char line[REPLAY_LINE_MAX + 1]; /* the line being assembled, NUL-terminated */
-    size_t len;          /* its bytes so far */
-    bool overlong;       /* it passed REPLAY_LINE_MAX: skipping to its newline */
-    bool eof;            /* read() returned 0 */
+    size_t len;                     /* its bytes so far */
+    bool overlong;                  /* it passed REPLAY_LINE_MAX: skipping to its newline */
+    bool eof;                       /* read() returned 0 */
     bool starved;        /* the last read found no data (a pipe): wait before calling again */
     uint64_t lines;      /* lines read */
     uint64_t bad_lines;  /* lines not in candump format (over-long ones included) */
@@ -65,7 +65,6 @@ int replay_next(struct replay *r, struct can_msg *msg);
  * Parse one log line (trailing newline allowed). Returns 0 with *msg filled
  * (and the interface name copied to ifname when not NULL), or -EINVAL.
  */
-int replay_parse_line(const char *line, struct can_msg *msg, char *ifname,
-                      size_t ifname_len);
+int replay_parse_line(const char *line, struct can_msg *msg, char *ifname, size_t ifname_len);
 
 #endif /* BRIDGE_REPLAY_H */

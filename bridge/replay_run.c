@@ -84,16 +84,15 @@ static void pace_readable(struct pollable *p)
 /* Wake the loop at log time `next` (on the paced clock). 0 or -1 (logged). */
 static int pace_until(struct daemon *d, int64_t next)
 {
-    int64_t due_mono = d->mono_start_us +
-        (int64_t)((double)(next - d->log_first_us) / d->opt.speed);
+    int64_t due_mono =
+        d->mono_start_us + (int64_t)((double)(next - d->log_first_us) / d->opt.speed);
     if (due_mono < 1)
         due_mono = 1;
-    struct itimerspec its = { .it_value = { due_mono / 1000000,
-                                            (due_mono % 1000000) * 1000 } };
+    struct itimerspec its = {.it_value = {due_mono / 1000000, (due_mono % 1000000) * 1000}};
     if (timerfd_settime(d->pace.fd, TFD_TIMER_ABSTIME, &its, NULL) < 0) {
         /* without it the loop would wait forever */
-        log_error("replay pacing timer: timerfd_settime at %" PRId64 " us: %s",
-                  due_mono, strerror(errno));
+        log_error("replay pacing timer: timerfd_settime at %" PRId64 " us: %s", due_mono,
+                  strerror(errno));
         return -1;
     }
     return 0;
@@ -101,7 +100,7 @@ static int pace_until(struct daemon *d, int64_t next)
 
 static int pace_open(struct daemon *d)
 {
-    d->pace = (struct pollable){ .fd = -1, .on_read = pace_readable, .owner = d };
+    d->pace = (struct pollable){.fd = -1, .on_read = pace_readable, .owner = d};
     int fd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
     if (fd < 0) {
         log_error("replay pacing timer: timerfd_create: %s", strerror(errno));
@@ -132,8 +131,8 @@ void run_replay_paced(struct daemon *d)
     /* Frames and timers are handled in log-time order, each when the
      * paced clock (log_first + speed * elapsed wall time) reaches it. */
     while (d->running) {
-        int64_t paced = d->log_first_us +
-            (int64_t)((double)(mono_us() - d->mono_start_us) * d->opt.speed);
+        int64_t paced =
+            d->log_first_us + (int64_t)((double)(mono_us() - d->mono_start_us) * d->opt.speed);
         int budget = REPLAY_FRAMES_PER_TURN;
         while (rc > 0 && msg.rx_us <= paced && budget-- > 0) {
             replay_frame(d, &msg);

@@ -27,10 +27,10 @@
 
 struct resolver_job {
     pthread_mutex_t mu;
-    int refs;        /* 2 while owner and thread both hold it, under mu */
-    bool abandoned;  /* the owner let go: do not signal, under mu */
-    bool done;       /* the lookup has finished, under mu */
-    int efd;         /* the owner's eventfd, written once when done */
+    int refs;       /* 2 while owner and thread both hold it, under mu */
+    bool abandoned; /* the owner let go: do not signal, under mu */
+    bool done;      /* the lookup has finished, under mu */
+    int efd;        /* the owner's eventfd, written once when done */
     char host[RESOLVER_HOST_MAX];
     uint16_t port_num;
     bool passive;
@@ -42,10 +42,14 @@ struct resolver_job {
 static int gai_errno(int gai)
 {
     switch (gai) {
-    case EAI_AGAIN: return -EAGAIN;
-    case EAI_MEMORY: return -ENOMEM;
-    case EAI_SYSTEM: return errno ? -errno : -EIO;
-    default: return -EHOSTUNREACH; /* EAI_NONAME, EAI_NODATA, EAI_FAIL, ... */
+    case EAI_AGAIN:
+        return -EAGAIN;
+    case EAI_MEMORY:
+        return -ENOMEM;
+    case EAI_SYSTEM:
+        return errno ? -errno : -EIO;
+    default:
+        return -EHOSTUNREACH; /* EAI_NONAME, EAI_NODATA, EAI_FAIL, ... */
     }
 }
 

@@ -7,8 +7,8 @@
 #include "beaconloc_can.h"
 #include "estimator.h"
 
-enum frame_result sensor_encoders_decode(uint32_t id, const uint8_t data[8],
-                                         struct frame *out, struct frame_seq *seq)
+enum frame_result sensor_encoders_decode(uint32_t id, const uint8_t data[8], struct frame *out,
+                                         struct frame_seq *seq)
 {
     (void)id;
     struct beaconloc_can_wheel_encoders_t m;
@@ -23,7 +23,7 @@ enum frame_result sensor_encoders_decode(uint32_t id, const uint8_t data[8],
     out->u.enc.left_ticks = m.left_ticks;
     out->u.enc.right_ticks = m.right_ticks;
     out->u.enc.counter = m.counter;
-    *seq = (struct frame_seq){ .counter = m.counter, .stamp = m.node_time, .track = 0 };
+    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = 0};
     return FRAME_OK;
 }
 

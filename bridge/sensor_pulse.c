@@ -7,8 +7,8 @@
 #include "beaconloc_can.h"
 #include "estimator.h"
 
-enum frame_result sensor_pulse_decode(uint32_t id, const uint8_t data[8],
-                                      struct frame *out, struct frame_seq *seq)
+enum frame_result sensor_pulse_decode(uint32_t id, const uint8_t data[8], struct frame *out,
+                                      struct frame_seq *seq)
 {
     (void)id;
     struct beaconloc_can_pulse_detection_t m;
@@ -28,7 +28,7 @@ enum frame_result sensor_pulse_decode(uint32_t id, const uint8_t data[8],
     out->u.pulse.amplitude_mv =
         (uint16_t)beaconloc_can_pulse_detection_amplitude_decode(m.amplitude);
     out->u.pulse.width_us = beaconloc_can_pulse_detection_width_decode(m.width);
-    *seq = (struct frame_seq){ .counter = m.counter, .stamp = m.node_time, .track = 0 };
+    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = 0};
     return FRAME_OK;
 }
 

@@ -8,8 +8,8 @@
 #include "beaconloc_can.h"
 #include "estimator.h"
 
-enum frame_result sensor_status_decode(uint32_t id, const uint8_t data[8],
-                                       struct frame *out, struct frame_seq *seq)
+enum frame_result sensor_status_decode(uint32_t id, const uint8_t data[8], struct frame *out,
+                                       struct frame_seq *seq)
 {
     (void)id;
     struct beaconloc_can_node_status_t m;
@@ -18,8 +18,7 @@ enum frame_result sensor_status_decode(uint32_t id, const uint8_t data[8],
     if (!beaconloc_can_node_status_node_id_is_in_range(m.node_id) ||
         !beaconloc_can_node_status_counter_is_in_range(m.counter) ||
         !beaconloc_can_node_status_flags_is_in_range(m.flags) ||
-        !beaconloc_can_node_status_uptime_is_in_range(m.uptime) ||
-        m.node_id >= FRAME_MAX_NODES)
+        !beaconloc_can_node_status_uptime_is_in_range(m.uptime) || m.node_id >= FRAME_MAX_NODES)
         return FRAME_OUT_OF_RANGE;
     out->kind = FRAME_STATUS;
     out->u.status.node_id = m.node_id;
@@ -29,7 +28,7 @@ enum frame_result sensor_status_decode(uint32_t id, const uint8_t data[8],
     out->u.status.tx_errors = m.tx_error_count;
     out->u.status.rx_errors = m.rx_error_count;
     out->u.status.overruns = m.overruns;
-    *seq = (struct frame_seq){ .counter = m.counter, .stamp = m.uptime, .track = m.node_id };
+    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.uptime, .track = m.node_id};
     return FRAME_OK;
 }
 

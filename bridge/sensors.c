@@ -11,32 +11,46 @@
  * than the newest by this much (us). */
 #define PULSE_STAMP_SLACK_US 2000
 
+/* clang-format off: one kind per block, aligned as a table */
 const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
-    [FRAME_PULSE] = {
-        .name = "pulse_detection", .short_name = "pulse",
-        .id_first = BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID,
-        .id_last = BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID,
-        .counter_in_range = beaconloc_can_pulse_detection_counter_is_in_range,
-        .stamp_slack_us = PULSE_STAMP_SLACK_US, .tracks = 1,
-        .decode = sensor_pulse_decode, .handle = sensor_pulse_handle,
-    },
-    [FRAME_ENCODERS] = {
-        .name = "wheel_encoders", .short_name = "enc",
-        .id_first = BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID,
-        .id_last = BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID,
-        .counter_in_range = beaconloc_can_wheel_encoders_counter_is_in_range,
-        .stamp_slack_us = 0, .tracks = 1,
-        .decode = sensor_encoders_decode, .handle = sensor_encoders_handle,
-    },
-    [FRAME_STATUS] = {
-        .name = "node_status", .short_name = "status",
-        .id_first = BEACONLOC_CAN_NODE_STATUS_FRAME_ID,
-        .id_last = BEACONLOC_CAN_NODE_STATUS_FRAME_ID,
-        .counter_in_range = beaconloc_can_node_status_counter_is_in_range,
-        .stamp_slack_us = 0, .tracks = FRAME_MAX_NODES, /* one per node id */
-        .decode = sensor_status_decode, .handle = sensor_status_handle,
-    },
+    [FRAME_PULSE] =
+        {
+            .name = "pulse_detection",
+            .short_name = "pulse",
+            .id_first = BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID,
+            .id_last = BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID,
+            .counter_in_range = beaconloc_can_pulse_detection_counter_is_in_range,
+            .stamp_slack_us = PULSE_STAMP_SLACK_US,
+            .tracks = 1,
+            .decode = sensor_pulse_decode,
+            .handle = sensor_pulse_handle,
+        },
+    [FRAME_ENCODERS] =
+        {
+            .name = "wheel_encoders",
+            .short_name = "enc",
+            .id_first = BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID,
+            .id_last = BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID,
+            .counter_in_range = beaconloc_can_wheel_encoders_counter_is_in_range,
+            .stamp_slack_us = 0,
+            .tracks = 1,
+            .decode = sensor_encoders_decode,
+            .handle = sensor_encoders_handle,
+        },
+    [FRAME_STATUS] =
+        {
+            .name = "node_status",
+            .short_name = "status",
+            .id_first = BEACONLOC_CAN_NODE_STATUS_FRAME_ID,
+            .id_last = BEACONLOC_CAN_NODE_STATUS_FRAME_ID,
+            .counter_in_range = beaconloc_can_node_status_counter_is_in_range,
+            .stamp_slack_us = 0,
+            .tracks = FRAME_MAX_NODES, /* one per node id */
+            .decode = sensor_status_decode,
+            .handle = sensor_status_handle,
+        },
 };
+/* clang-format on */
 
 const struct sensor_kind *sensor_kind_of_id(uint32_t id)
 {
@@ -49,8 +63,7 @@ const struct sensor_kind *sensor_kind_of_id(uint32_t id)
 unsigned sensor_counter_modulo(const struct sensor_kind *k)
 {
     unsigned n = 0;
-    while (n < 256u && k->counter_in_range((uint8_t)n))
-        n++;
+    while (n < 256u && k->counter_in_range((uint8_t)n)) n++;
     return n;
 }
 

@@ -31,25 +31,24 @@ struct estimator;
  * FRAME_UNKNOWN_ID (an id of the range the kind has no frame for),
  * FRAME_MALFORMED or FRAME_OUT_OF_RANGE (a signal outside its DBC range).
  */
-typedef enum frame_result (*sensor_decode_fn)(uint32_t id, const uint8_t data[8],
-                                              struct frame *out, struct frame_seq *seq);
+typedef enum frame_result (*sensor_decode_fn)(uint32_t id, const uint8_t data[8], struct frame *out,
+                                              struct frame_seq *seq);
 
 /* Hand a frame decoded fine (rolling counter checked) to the estimator, with
  * its receive time on the bridge clock (us). */
-typedef void (*sensor_handle_fn)(struct estimator *e, const struct frame *f,
-                                 int64_t rx_us);
+typedef void (*sensor_handle_fn)(struct estimator *e, const struct frame *f, int64_t rx_us);
 
 struct sensor_kind {
-    const char *name;        /* stats JSON key: "pulse_detection" */
-    const char *short_name;  /* status line: "pulse" */
-    uint32_t id_first;       /* frame ids of the kind (standard 11-bit), */
-    uint32_t id_last;        /* id_first..id_last, an aligned power-of-two block */
+    const char *name;       /* stats JSON key: "pulse_detection" */
+    const char *short_name; /* status line: "pulse" */
+    uint32_t id_first;      /* frame ids of the kind (standard 11-bit), */
+    uint32_t id_last;       /* id_first..id_last, an aligned power-of-two block */
     /* the generated range check of the kind's Counter signal (from 0):
      * the counter modulo is one past its largest value in range */
     bool (*counter_in_range)(uint8_t value);
-    int32_t stamp_slack_us;  /* a late frame's stamp may be newer than the
+    int32_t stamp_slack_us; /* a late frame's stamp may be newer than the
                                 newest by this much (frames.h) */
-    unsigned tracks;         /* rolling-counter tracks: 1, or FRAME_MAX_NODES
+    unsigned tracks;        /* rolling-counter tracks: 1, or FRAME_MAX_NODES
                                 (one per node id, struct frame_seq) */
     sensor_decode_fn decode;
     sensor_handle_fn handle;
@@ -69,14 +68,14 @@ unsigned sensor_counter_modulo(const struct sensor_kind *k);
 void sensor_filter(const struct sensor_kind *k, uint32_t *id, uint32_t *mask);
 
 /* Decoders and handlers, one file per kind (bridge/sensor_<kind>.c). */
-enum frame_result sensor_pulse_decode(uint32_t id, const uint8_t data[8],
-                                      struct frame *out, struct frame_seq *seq);
+enum frame_result sensor_pulse_decode(uint32_t id, const uint8_t data[8], struct frame *out,
+                                      struct frame_seq *seq);
 void sensor_pulse_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
-enum frame_result sensor_encoders_decode(uint32_t id, const uint8_t data[8],
-                                         struct frame *out, struct frame_seq *seq);
+enum frame_result sensor_encoders_decode(uint32_t id, const uint8_t data[8], struct frame *out,
+                                         struct frame_seq *seq);
 void sensor_encoders_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
-enum frame_result sensor_status_decode(uint32_t id, const uint8_t data[8],
-                                       struct frame *out, struct frame_seq *seq);
+enum frame_result sensor_status_decode(uint32_t id, const uint8_t data[8], struct frame *out,
+                                       struct frame_seq *seq);
 void sensor_status_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
 
 #endif /* BRIDGE_SENSORS_H */

@@ -15,10 +15,10 @@ struct field_key {
 };
 
 static const struct field_key field_keys[] = {
-#define FIELD_KEY(sec, k, type, member, field, geometry) { #field, #sec, #k },
+#define FIELD_KEY(sec, k, type, member, field, geometry) {#field, #sec, #k},
     SITE_LIB_FIELDS(FIELD_KEY)
 #undef FIELD_KEY
-    { "beacons", "beacon1", "x_m" },
+        {"beacons", "beacon1", "x_m"},
 };
 
 /* The site-file key that sets bl_config field `field` (NULL: not known, the
@@ -44,8 +44,7 @@ void site_to_lib(const struct bridge_config *cfg, bl_config *out)
      * down, a node rebooting) shorter than this is coasted through on
      * constant velocity, P grows, the pulses pull the state back afterwards;
      * longer, the filter re-starts from the snapshot solver. */
-#define APPLY(sec, k, type, member, field, geometry)                           \
-    out->field = (LIB_CTYPE_##type)cfg->member;
+#define APPLY(sec, k, type, member, field, geometry) out->field = (LIB_CTYPE_##type)cfg->member;
     SITE_LIB_FIELDS(APPLY)
 #undef APPLY
     for (int i = 0; i < cfg->beacon_count && i < BL_MAX_BEACONS; i++) {
@@ -55,8 +54,7 @@ void site_to_lib(const struct bridge_config *cfg, bl_config *out)
     }
 }
 
-int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
-                          char *err, size_t errlen)
+int estimator_make_config(const struct bridge_config *cfg, bl_config *out, char *err, size_t errlen)
 {
     bl_config c;
     site_to_lib(cfg, &c);
@@ -66,8 +64,8 @@ int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
         const char *section = "beacons", *key = bad ? bad : "?";
         key_of_field(bad, &section, &key);
         char why[160];
-        snprintf(why, sizeof why, "rejected by the estimator (%s: %s)",
-                 bad ? bad : "?", bl_strerror(rc));
+        snprintf(why, sizeof why, "rejected by the estimator (%s: %s)", bad ? bad : "?",
+                 bl_strerror(rc));
         config_format_error(cfg, section, key, why, err, errlen);
         return -1;
     }
@@ -75,8 +73,8 @@ int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
     return 0;
 }
 
-int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
-                    bl_seq_config *out, char *err, size_t errlen)
+int make_seq_config(const struct bridge_config *cfg, const bl_config *c, bl_seq_config *out,
+                    char *err, size_t errlen)
 {
     /* The localizer names the real cause and the field at fault (not
      * always the period: the speed of sound, the ring, the spacing...). */
@@ -86,8 +84,8 @@ int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
         const char *section = "beacons", *key = "period_s";
         key_of_field(field, &section, &key);
         char why[200];
-        snprintf(why, sizeof why, "refused by the beacon sequencer: %s (%s)",
-                 cause ? cause : "?", bl_strerror(rc));
+        snprintf(why, sizeof why, "refused by the beacon sequencer: %s (%s)", cause ? cause : "?",
+                 bl_strerror(rc));
         config_format_error(cfg, section, key, why, err, errlen);
         return -1;
     }

@@ -25,14 +25,14 @@ void site_to_lib(const struct bridge_config *cfg, bl_config *out);
  * bl_config_check. Returns 0, or -1 with "file:line: [section] key:
  * rejected by the estimator (field: why)" in err (*out untouched).
  * (Also declared in estimator.h.) */
-int estimator_make_config(const struct bridge_config *cfg, bl_config *out,
-                          char *err, size_t errlen);
+int estimator_make_config(const struct bridge_config *cfg, bl_config *out, char *err,
+                          size_t errlen);
 
 /* The beacon sequencer's config for the site (bl_localizer_seq_config of c,
  * the bl_config made from cfg). Returns 0, or -1 with the real cause in err,
  * against the site-file key of the field at fault ([beacons] period_s when
  * the period is too short for the beacons' spread). */
-int make_seq_config(const struct bridge_config *cfg, const bl_config *c,
-                    bl_seq_config *out, char *err, size_t errlen);
+int make_seq_config(const struct bridge_config *cfg, const bl_config *c, bl_seq_config *out,
+                    char *err, size_t errlen);
 
 #endif /* BRIDGE_SITE_TO_LIB_H */

@@ -143,16 +143,15 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"pulses_buffered\": %llu,\n", (unsigned long long)r->pulses_buffered);
     fprintf(f, "  \"pulses_unassigned\": %llu,\n", (unsigned long long)r->pulses_unassigned);
     fprintf(f, "  \"sequencer_spurious\": %llu,\n", (unsigned long long)r->sequencer_spurious);
-    fprintf(f, "  \"sequencer\": {\"detections\": %llu, \"merged\": %llu, "
-               "\"double_pulses\": %llu, \"double_conflicts\": %llu, "
-               "\"locks_acquired\": %llu, \"locks_lost\": %llu, \"repeats\": %llu},\n",
+    fprintf(f,
+            "  \"sequencer\": {\"detections\": %llu, \"merged\": %llu, "
+            "\"double_pulses\": %llu, \"double_conflicts\": %llu, "
+            "\"locks_acquired\": %llu, \"locks_lost\": %llu, \"repeats\": %llu},\n",
             (unsigned long long)r->seq_detections, (unsigned long long)r->seq_merged,
-            (unsigned long long)r->seq_double_pulses,
-            (unsigned long long)r->seq_double_conflicts,
-            (unsigned long long)r->seq_locks_acquired,
-            (unsigned long long)r->seq_locks_lost, (unsigned long long)r->seq_repeats);
-    fprintf(f, "  \"repeats_skipped\": %llu,\n",
-            (unsigned long long)r->repeats_skipped);
+            (unsigned long long)r->seq_double_pulses, (unsigned long long)r->seq_double_conflicts,
+            (unsigned long long)r->seq_locks_acquired, (unsigned long long)r->seq_locks_lost,
+            (unsigned long long)r->seq_repeats);
+    fprintf(f, "  \"repeats_skipped\": %llu,\n", (unsigned long long)r->repeats_skipped);
     fprintf(f, "  \"snapshot_restarts\": %llu,\n", (unsigned long long)r->snapshot_restarts);
     fprintf(f, "  \"encoder_jumps\": %llu,\n", (unsigned long long)r->encoder_jumps);
     fprintf(f, "  \"node_restarts\": %llu,\n", (unsigned long long)r->node_restarts);
@@ -187,8 +186,7 @@ int stats_write_json(const struct stats_report *r, const char *path)
     return 0;
 }
 
-void stats_status_line(const struct stats_report *r, const char *prefix,
-                       const char *estimate)
+void stats_status_line(const struct stats_report *r, const char *prefix, const char *estimate)
 {
     const struct frame_counters *fc = r->frames;
     char kinds[32 * FRAME_KIND_COUNT] = "";
@@ -196,17 +194,15 @@ void stats_status_line(const struct stats_report *r, const char *prefix,
     for (int k = 0; k < FRAME_KIND_COUNT && n < sizeof kinds; k++)
         n += (size_t)snprintf(kinds + n, sizeof kinds - n, "%s%s %" PRIu64, k ? " " : "",
                               sensor_kinds[k].short_name, fc->received[k]);
-    log_info("%s: frames %" PRIu64 " (%s) bad %" PRIu64 " unknown %" PRIu64
-             " range %" PRIu64 " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64
-             " kdrop %" PRIu64 " errfr %" PRIu64 " | pulses ok %" PRIu64
-             " rej %" PRIu64 " | %s | odom %" PRIu64 " werr %" PRIu64
+    log_info("%s: frames %" PRIu64 " (%s) bad %" PRIu64 " unknown %" PRIu64 " range %" PRIu64
+             " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64 " kdrop %" PRIu64 " errfr %" PRIu64
+             " | pulses ok %" PRIu64 " rej %" PRIu64 " | %s | odom %" PRIu64 " werr %" PRIu64
              " | latency p50 %" PRId64 " p99 %" PRId64 " us"
              " (interval p50 %" PRId64 " p99 %" PRId64 " us)",
-             prefix, r->frames_total, kinds, fc->malformed, fc->unknown_id,
-             fc->out_of_range, frame_lost_total(fc), frame_duplicates_total(fc),
-             frame_out_of_order_total(fc), r->kernel_drops, r->error_frames,
-             r->pulses_accepted, r->pulses_rejected, estimate, r->odometry_sent,
-             r->record_write_errors + r->estimates_write_errors,
-             r->latency_p50_us, r->latency_p99_us,
-             r->latency_interval_p50_us, r->latency_interval_p99_us);
+             prefix, r->frames_total, kinds, fc->malformed, fc->unknown_id, fc->out_of_range,
+             frame_lost_total(fc), frame_duplicates_total(fc), frame_out_of_order_total(fc),
+             r->kernel_drops, r->error_frames, r->pulses_accepted, r->pulses_rejected, estimate,
+             r->odometry_sent, r->record_write_errors + r->estimates_write_errors,
+             r->latency_p50_us, r->latency_p99_us, r->latency_interval_p50_us,
+             r->latency_interval_p99_us);
 }

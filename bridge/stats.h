@@ -50,21 +50,18 @@ void latency_interval_close(struct latency_hist *h, struct latency_summary *s);
 /* Everything the JSON report holds (plain numbers, filled by main.c). */
 struct stats_report {
     const struct frame_counters *frames;
-    uint64_t kernel_drops, error_frames, bus_off, controller_errors,
-        restarts, bad_size_reads, can_downs;
+    uint64_t kernel_drops, error_frames, bus_off, controller_errors, restarts, bad_size_reads,
+        can_downs;
     uint64_t replay_bad_lines;
     uint64_t record_write_errors, estimates_write_errors; /* --record, --estimates */
     uint64_t stale_encoders;
-    uint64_t estimator_resets, pulses_accepted, pulses_rejected,
-        pulses_buffered, pulses_unassigned, sequencer_spurious,
-        encoder_gaps, predict_errors, estimates;
-    uint64_t odometry_sent, heartbeat_sent, mavlink_tx_errors,
-        timesync_answered;
+    uint64_t estimator_resets, pulses_accepted, pulses_rejected, pulses_buffered, pulses_unassigned,
+        sequencer_spurious, encoder_gaps, predict_errors, estimates;
+    uint64_t odometry_sent, heartbeat_sent, mavlink_tx_errors, timesync_answered;
     /* sequencer counters (bl_seq_counters) */
-    uint64_t seq_detections, seq_merged, seq_double_pulses,
-        seq_double_conflicts, seq_locks_acquired, seq_locks_lost,
-        seq_repeats, repeats_skipped, snapshot_restarts, encoder_jumps,
-        node_restarts, numbering_errors, seq_resyncs;
+    uint64_t seq_detections, seq_merged, seq_double_pulses, seq_double_conflicts,
+        seq_locks_acquired, seq_locks_lost, seq_repeats, repeats_skipped, snapshot_restarts,
+        encoder_jumps, node_restarts, numbering_errors, seq_resyncs;
     int64_t latency_p50_us, latency_p99_us, latency_max_us;
     uint64_t latency_samples;
     /* the interval the latest status line closed (latency_interval_close) */
@@ -82,7 +79,6 @@ int stats_write_json(const struct stats_report *r, const char *path);
 /* Log the status line (docs/bridge.md, STATUS LINE) of report r at level
  * info: "PREFIX: frames N (pulse N enc N status N) ... | ESTIMATE | ...",
  * the per-kind counts by the sensor table's short names. */
-void stats_status_line(const struct stats_report *r, const char *prefix,
-                       const char *estimate);
+void stats_status_line(const struct stats_report *r, const char *prefix, const char *estimate);
 
 #endif /* BRIDGE_STATS_H */

@@ -15,7 +15,9 @@
 #include "log.h"
 
 static const char *const timer_names[T_COUNT] = {
-    [T_ODOM] = "ODOMETRY", [T_HEARTBEAT] = "HEARTBEAT", [T_SECOND] = "1 s",
+    [T_ODOM] = "ODOMETRY",
+    [T_HEARTBEAT] = "HEARTBEAT",
+    [T_SECOND] = "1 s",
 };
 
 static void on_heartbeat(struct daemon *d, int64_t now)
@@ -54,10 +56,17 @@ static void on_second(struct daemon *d, int64_t now)
 static void fire_timer(struct daemon *d, enum timer_id id, int64_t now)
 {
     switch (id) {
-    case T_ODOM: on_odom_timer(d, now); break;
-    case T_HEARTBEAT: on_heartbeat(d, now); break;
-    case T_SECOND: on_second(d, now); break;
-    default: break;
+    case T_ODOM:
+        on_odom_timer(d, now);
+        break;
+    case T_HEARTBEAT:
+        on_heartbeat(d, now);
+        break;
+    case T_SECOND:
+        on_second(d, now);
+        break;
+    default:
+        break;
     }
 }
 
@@ -74,7 +83,7 @@ static void timer_readable(struct pollable *p)
 void timers_init(struct daemon *d)
 {
     for (int i = 0; i < T_COUNT; i++)
-        d->timers[i].p = (struct pollable){ .fd = -1, .on_read = timer_readable, .owner = d };
+        d->timers[i].p = (struct pollable){.fd = -1, .on_read = timer_readable, .owner = d};
 }
 
 int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us)
@@ -86,8 +95,8 @@ int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us)
         return 0;
     }
     struct itimerspec its = {
-        .it_interval = { period_us / 1000000, (period_us % 1000000) * 1000 },
-        .it_value = { period_us / 1000000, (period_us % 1000000) * 1000 },
+        .it_interval = {period_us / 1000000, (period_us % 1000000) * 1000},
+        .it_value = {period_us / 1000000, (period_us % 1000000) * 1000},
     };
     if (t->p.fd < 0) {
         int fd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
@@ -104,8 +113,8 @@ int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us)
     }
     if (timerfd_settime(t->p.fd, 0, &its, NULL) < 0) {
         int e = errno;
-        log_error("%s timer: timerfd_settime %" PRId64 " us: %s", timer_names[id],
-                  period_us, strerror(e));
+        log_error("%s timer: timerfd_settime %" PRId64 " us: %s", timer_names[id], period_us,
+                  strerror(e));
         return -e;
     }
     return 0;

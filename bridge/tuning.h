@@ -24,7 +24,7 @@
 #define BRIDGE_CTYPE_K_INT int
 
 struct bridge_tuning {
-#define BRIDGE_TUNING_MEMBER(sec, key, type, strct, member, lo, hi, open, def) \
+#define BRIDGE_TUNING_MEMBER(sec, key, type, strct, member, lo, hi, open, def)                     \
     BRIDGE_CTYPE_##type key;
     SITE_KEYS_tuning(BRIDGE_TUNING_MEMBER)
 #undef BRIDGE_TUNING_MEMBER

@@ -35,32 +35,37 @@
 #include "beaconloc/sequencer.h"
 
 #define PI_RAD 3.14159265358979323846
-#define SOUND_MPS 343.0          /* true speed of sound (m/s) */
-#define PERIOD_US 150000         /* true beacon period (us) */
-#define ENC_PERIOD_US 10000      /* 100 Hz encoders */
-#define SIGMA_ARRIVAL_S 0.0002   /* Kleeman 1992 §2 */
+#define SOUND_MPS 343.0        /* true speed of sound (m/s) */
+#define PERIOD_US 150000       /* true beacon period (us) */
+#define ENC_PERIOD_US 10000    /* 100 Hz encoders */
+#define SIGMA_ARRIVAL_S 0.0002 /* Kleeman 1992 §2 */
 #define CIRCLE_R_M 3.0
 #define SPEED_MPS 0.5
 
 typedef struct {
     int64_t t_us;
-    int kind;            /* 0 encoder, 1 pulse */
-    double dl_m, dr_m;   /* encoder increments */
+    int kind;          /* 0 encoder, 1 pulse */
+    double dl_m, dr_m; /* encoder increments */
     uint32_t beacon, receiver;
-    double x_m, y_m;     /* truth at t_us (pulses: at arrival) */
+    double x_m, y_m; /* truth at t_us (pulses: at arrival) */
 } event_t;
 
 static uint64_t rng_state = 0x9E3779B97F4A7C15ull;
-static double uniform01(void) {
+static double uniform01(void)
+{
     rng_state ^= rng_state << 13;
     rng_state ^= rng_state >> 7;
     rng_state ^= rng_state << 17;
     return ((double)(rng_state >> 11) + 0.5) / 9007199254740992.0;
 }
-static double gauss(void) { return sqrt(-2.0 * log(uniform01())) * cos(2.0 * PI_RAD * uniform01()); }
+static double gauss(void)
+{
+    return sqrt(-2.0 * log(uniform01())) * cos(2.0 * PI_RAD * uniform01());
+}
 
 /* Truth: circle around (6, 6), counter-clockwise, heading along the path. */
-static void truth(double t_s, double *x, double *y, double *th) {
+static void truth(double t_s, double *x, double *y, double *th)
+{
     const double w = SPEED_MPS / CIRCLE_R_M;
     const double a = w * t_s;
     *x = 6.0 + CIRCLE_R_M * cos(a);
@@ -68,13 +73,15 @@ static void truth(double t_s, double *x, double *y, double *th) {
     *th = a + PI_RAD / 2;
 }
 
-static int cmp_event(const void *a, const void *b) {
+static int cmp_event(const void *a, const void *b)
+{
     const event_t *x = a, *y = b;
     if (x->t_us != y->t_us) return x->t_us < y->t_us ? -1 : 1;
     return x->kind - y->kind;
 }
 
-static size_t make_stream(const bl_config *cfg, double seconds, event_t **out) {
+static size_t make_stream(const bl_config *cfg, double seconds, event_t **out)
+{
     const size_t n_enc = (size_t)(seconds * 1e6 / ENC_PERIOD_US);
     const size_t n_fire = (size_t)(seconds * 1e6 / PERIOD_US);
     event_t *ev = calloc(n_enc + n_fire, sizeof *ev);
@@ -134,38 +141,50 @@ static size_t make_stream(const bl_config *cfg, double seconds, event_t **out) {
     return n;
 }
 
-static inline int64_t now_ns(void) {
+static inline int64_t now_ns(void)
+{
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
 }
 
-static int cmp_i64(const void *a, const void *b) {
+static int cmp_i64(const void *a, const void *b)
+{
     const int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
     return x < y ? -1 : x > y;
 }
 
-static int64_t median(int64_t *v, size_t n) {
+static int64_t median(int64_t *v, size_t n)
+{
     qsort(v, n, sizeof *v, cmp_i64);
     return n ? v[n / 2] : 0;
 }
 
-static const char *real_name_of(void) { return sizeof(bl_real) == sizeof(double) ? "double" : "float"; }
+static const char *real_name_of(void)
+{
+    return sizeof(bl_real) == sizeof(double) ? "double" : "float";
+}
 
-static void die(const char *what, int rc) {
+static void die(const char *what, int rc)
+{
     fprintf(stderr, "bench_speed: %s: %s\n", what, bl_strerror(rc));
     exit(1);
 }
 
-int main(int argc, char **argv) {
+int main(int argc, char **argv)
+{
     int reps = 20, timing = 1;
     double seconds = 60.0;
     const char *dump_path = NULL;
     for (int i = 1; i < argc; ++i) {
-        if (!strcmp(argv[i], "--reps") && i + 1 < argc) reps = atoi(argv[++i]);
-        else if (!strcmp(argv[i], "--seconds") && i + 1 < argc) seconds = atof(argv[++i]);
-        else if (!strcmp(argv[i], "--dump") && i + 1 < argc) dump_path = argv[++i];
-        else if (!strcmp(argv[i], "--no-timing")) timing = 0, reps = 1;
+        if (!strcmp(argv[i], "--reps") && i + 1 < argc)
+            reps = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--seconds") && i + 1 < argc)
+            seconds = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--dump") && i + 1 < argc)
+            dump_path = argv[++i];
+        else if (!strcmp(argv[i], "--no-timing"))
+            timing = 0, reps = 1;
         else {
             fprintf(stderr, "usage: %s [--reps N] [--seconds S] [--dump FILE] [--no-timing]\n", argv[0]);
             return 2;
@@ -260,7 +279,8 @@ int main(int argc, char **argv) {
                     if (rc != BL_OK) die("bl_filter_expected_arrival", rc);
                     for (int i = 0; i < BL_FILTER_NX; ++i) {
                         /* t0 as firing time of this pulse relative to the state time */
-                        const double v = i == BL_IX_T0 ? (double)(xp.fire_us - prior.t_us_) * 1e-6 : (double)prior.x_[i];
+                        const double v =
+                            i == BL_IX_T0 ? (double)(xp.fire_us - prior.t_us_) * 1e-6 : (double)prior.x_[i];
                         fprintf(dump, "%.17g ", v);
                     }
                     for (int i = 0; i < BL_FILTER_NX * BL_FILTER_NX; ++i) fprintf(dump, "%.17g ", (double)prior.P_[i]);
@@ -273,7 +293,8 @@ int main(int argc, char **argv) {
                     if (bl_filter_estimate(&f, &est) == BL_OK) {
                         double xt, yt, tht;
                         truth(est.t_us * 1e-6, &xt, &yt, &tht);
-                        err2 += ((double)est.x_m - xt) * ((double)est.x_m - xt) + ((double)est.y_m - yt) * ((double)est.y_m - yt);
+                        err2 += ((double)est.x_m - xt) * ((double)est.x_m - xt) +
+                                ((double)est.y_m - yt) * ((double)est.y_m - yt);
                         n_err++;
                     }
                 }
@@ -333,14 +354,15 @@ int main(int argc, char **argv) {
     if (timing) {
         printf("%s: fuse_pulse median %lld ns, p10 %lld, p90 %lld over %zu calls\n", real_name, (long long)fuse_med,
                (long long)fuse_ns[nf / 10], (long long)fuse_ns[nf * 9 / 10], nf);
-        printf("%s: predict_odometry median %lld ns, p10 %lld, p90 %lld over %zu calls (timer cost %lld ns subtracted)\n",
-               real_name, (long long)pred_med, (long long)pred_ns[np / 10], (long long)pred_ns[np * 9 / 10], np,
-               (long long)timer_ns);
+        printf(
+            "%s: predict_odometry median %lld ns, p10 %lld, p90 %lld over %zu calls (timer cost %lld ns subtracted)\n",
+            real_name, (long long)pred_med, (long long)pred_ns[np / 10], (long long)pred_ns[np * 9 / 10], np,
+            (long long)timer_ns);
     }
     printf("bench_speed real=%s fuse_pulse_ns=%lld predict_ns=%lld fuse_calls=%zu predict_calls=%zu accepted=%u "
            "rejected=%u rms_xy_m=%.4f\n",
-           real_name, (long long)fuse_med, (long long)pred_med, n_pulses * (size_t)reps, n_enc * (size_t)reps,
-           accepted, rejected, n_err ? sqrt(err2 / (double)n_err) : -1.0);
+           real_name, (long long)fuse_med, (long long)pred_med, n_pulses * (size_t)reps, n_enc * (size_t)reps, accepted,
+           rejected, n_err ? sqrt(err2 / (double)n_err) : -1.0);
     free(ev);
     free(fuse_ns);
     free(pred_ns);

@@ -20,12 +20,14 @@
 #include "beaconloc/config.h"
 #include "beaconloc/sequencer.h"
 
-static void print_pulse(const bl_seq_pulse *p) {
+static void print_pulse(const bl_seq_pulse *p)
+{
     printf("%" PRId64 " %u %d %u %d %d %u\n", p->arrival_us, p->receiver, p->beacon, (unsigned)p->status,
            (int)p->repeat, (int)p->double_pulse, p->receivers_heard);
 }
 
-int main(void) {
+int main(void)
+{
     bl_config site;
     bl_seq_config sc;
     bl_sequencer seq;
@@ -52,7 +54,7 @@ int main(void) {
                               .amplitude_mv = (uint16_t)(amp > 65535 ? 65535 : amp),
                               .width_us = (uint16_t)(width > 65535 ? 65535 : width)};
         rc = bl_sequencer_push(&seq, &d);
-        if (rc == BL_EFULL) {   /* close what is ready at this time, retry */
+        if (rc == BL_EFULL) { /* close what is ready at this time, retry */
             while ((rc = bl_sequencer_pop(&seq, (int64_t)t, &p)) == 1) print_pulse(&p);
             rc = bl_sequencer_push(&seq, &d);
         }

@@ -21,7 +21,6 @@ real receiver_angle(const bl_config *cfg, uint32_t k)
     return a;
 }
 
-
 // Kleeman 1992 eq. 21 with the receiver on the ring and 3D distance.
 // Times relative to the state time t_s. Returns false where undefined.
 bool pulse_model(const bl_config *cfg, const VX &x, const bl_pulse_geometry &g, real *h, RX *H,
@@ -174,12 +173,11 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     return BL_OK;
 }
 
-
 // Where an arrival lies against the state time t_s.
 enum class Arrival {
-    kFresh,   // |arrival - t_s| <= max_predict_gap_s: fused (fuse_started)
-    kStale,   // arrival > t_s + max_predict_gap_s: no predict for that long (fuse_stale)
-    kTooOld   // arrival < t_s - max_predict_gap_s: time went backwards (BL_ETIME)
+    kFresh,  // |arrival - t_s| <= max_predict_gap_s: fused (fuse_started)
+    kStale,  // arrival > t_s + max_predict_gap_s: no predict for that long (fuse_stale)
+    kTooOld  // arrival < t_s - max_predict_gap_s: time went backwards (BL_ETIME)
 };
 Arrival classify_arrival(const bl_filter *f, int64_t arrival_us)
 {
@@ -239,8 +237,8 @@ inline bl_fusion_status fuse_stale(bl_filter *f, uint32_t beacon_index, int64_t 
 
 }  // namespace
 
-extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
-                                    uint32_t receiver_index, bl_fusion_result *result)
+extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index,
+                                    bl_fusion_result *result)
 {
     if (f == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
@@ -267,11 +265,9 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
         remember_pulse(f, beacon_index, arrival_us, receiver_index);
         res.status = BL_FUSION_BUFFERED;
         const uint32_t need = cfg->beacon_count < 4 ? cfg->beacon_count : 4;
-        if (start_from_snapshot(f, cfg->initial_theta_rad, cfg->reset_sigma_theta_rad, real(0),
-                                cfg->speed_of_sound_mps,
-                                cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps,
-                                cfg->beacon_period_s, cfg->sigma_period_s * cfg->sigma_period_s,
-                                need) == BL_OK) {
+        if (start_from_snapshot(f, cfg->initial_theta_rad, cfg->reset_sigma_theta_rad, real(0), cfg->speed_of_sound_mps,
+                                cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps, cfg->beacon_period_s,
+                                cfg->sigma_period_s * cfg->sigma_period_s, need) == BL_OK) {
             res.status = BL_FUSION_STARTED;
         }
         if (result) *result = res;
@@ -279,12 +275,14 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
     }
 
     switch (classify_arrival(f, arrival_us)) {
-    case Arrival::kTooOld: return BL_ETIME;  // a caller error: state untouched
+    case Arrival::kTooOld:
+        return BL_ETIME;  // a caller error: state untouched
     case Arrival::kStale:
         res.status = fuse_stale(f, beacon_index, arrival_us, receiver_index);
         if (result) *result = res;
         return BL_OK;
-    case Arrival::kFresh: break;
+    case Arrival::kFresh:
+        break;
     }
     const int rc = fuse_started(f, beacon_index, arrival_us, receiver_index, &res);
     if (rc != BL_OK) return rc;
@@ -301,8 +299,7 @@ extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_in
     if (beacon_index >= cfg->beacon_count) return BL_EBEACON;
     int64_t d_us;
     if (!bl::sub_us(after_us, f->t_us_, &d_us)) return BL_ETIME;
-    if (d_us > int64_t(1e12) || d_us < -int64_t(1e12) ||
-        !(std::fabs(bl::us_to_s(d_us)) <= cfg->max_predict_gap_s))
+    if (d_us > int64_t(1e12) || d_us < -int64_t(1e12) || !(std::fabs(bl::us_to_s(d_us)) <= cfg->max_predict_gap_s))
         return BL_ETIME;
     const VX x = state(f);
     const MX P = cov(f);

@@ -66,8 +66,8 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
     const real dl_pred_m = std::fabs(x(V) - x(W) * half_b) * dt_s;
     const real dr_pred_m = std::fabs(x(V) + x(W) * half_b) * dt_s;
     const real rv = (k2 * real(0.25) * (dl_pred_m + dr_pred_m)) / (dt_s * dt_s) + floor_v * floor_v;
-    const real rw = (k2 * (dl_pred_m + dr_pred_m) / (cfg->wheel_base_m * cfg->wheel_base_m)) / (dt_s * dt_s) +
-                    floor_v * floor_v;
+    const real rw =
+        (k2 * (dl_pred_m + dr_pred_m) / (cfg->wheel_base_m * cfg->wheel_base_m)) / (dt_s * dt_s) + floor_v * floor_v;
     const real rs[2] = {rv, rw};
     const int idx[2] = {V, W};
     for (int k = 0; k < 2; ++k) {

@@ -16,9 +16,8 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->beacon_period_s = real(0.150);
     cfg->double_pulse_spacing_s = real(0.003);
     cfg->burst_length_s = real(0.0025);
-    const real bxy[6][2] = {{real(0.05), real(3.0)},  {real(0.05), real(9.0)},
-                            {real(6.0), real(11.95)}, {real(11.95), real(9.0)},
-                            {real(11.95), real(3.0)}, {real(6.0), real(0.05)}};
+    const real bxy[6][2] = {{real(0.05), real(3.0)},  {real(0.05), real(9.0)},  {real(6.0), real(11.95)},
+                            {real(11.95), real(9.0)}, {real(11.95), real(3.0)}, {real(6.0), real(0.05)}};
     for (int i = 0; i < 6; ++i) {
         cfg->beacons[i].x_m = bxy[i][0];
         cfg->beacons[i].y_m = bxy[i][1];
@@ -45,8 +44,8 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->sigma_speed_of_sound_mps = real(5.0);
     cfg->gate_sigma = real(3.0);
     // Tuning.
-    cfg->sigma_period_s = real(20e-6);          // beacon controller clock: ~100 ppm of 150 ms
-    cfg->startup_sigma_arrival_s = real(0.002); // §3.9: high variance while converging
+    cfg->sigma_period_s = real(20e-6);           // beacon controller clock: ~100 ppm of 150 ms
+    cfg->startup_sigma_arrival_s = real(0.002);  // §3.9: high variance while converging
     cfg->startup_gate_sigma = real(5.0);
     cfg->converged_sigma_xy_m = real(0.25);
     cfg->accel_noise_mps2 = real(0.5);
@@ -87,12 +86,12 @@ bool beacons_span_plane(const bl_config *c)
     return false;
 }
 
-#define BL_CHECK(cond, name)           \
-    do {                               \
-        if (!(cond)) {                 \
-            if (bad_field) *bad_field = name; \
-            return BL_ECONFIG;         \
-        }                              \
+#define BL_CHECK(cond, name)                                                                                           \
+    do {                                                                                                               \
+        if (!(cond)) {                                                                                                 \
+            if (bad_field) *bad_field = name;                                                                          \
+            return BL_ECONFIG;                                                                                         \
+        }                                                                                                              \
     } while (0)
 
 }  // namespace
@@ -102,17 +101,18 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     if (bad_field) *bad_field = nullptr;
     if (c == nullptr) return BL_EINVAL;
     BL_CHECK(c->beacon_count >= 3 && c->beacon_count <= BL_MAX_BEACONS, "beacon_count");
-    BL_CHECK(is_finite(c->beacon_period_s) && c->beacon_period_s > real(0) &&
-             c->beacon_period_s < real(10), "beacon_period_s");
+    BL_CHECK(is_finite(c->beacon_period_s) && c->beacon_period_s > real(0) && c->beacon_period_s < real(10),
+             "beacon_period_s");
     BL_CHECK(is_finite(c->double_pulse_spacing_s) && c->double_pulse_spacing_s >= real(0) &&
-             c->double_pulse_spacing_s < c->beacon_period_s, "double_pulse_spacing_s");
-    BL_CHECK(is_finite(c->burst_length_s) && c->burst_length_s >= real(0) &&
-             c->burst_length_s < c->beacon_period_s, "burst_length_s");
+                 c->double_pulse_spacing_s < c->beacon_period_s,
+             "double_pulse_spacing_s");
+    BL_CHECK(is_finite(c->burst_length_s) && c->burst_length_s >= real(0) && c->burst_length_s < c->beacon_period_s,
+             "burst_length_s");
     for (uint32_t i = 0; i < c->beacon_count; ++i) {
         const bl_beacon *b = &c->beacons[i];
-        BL_CHECK(is_finite(b->x_m) && is_finite(b->y_m) && is_finite(b->z_m) &&
-                 std::fabs(b->x_m) < real(1e5) && std::fabs(b->y_m) < real(1e5) &&
-                 std::fabs(b->z_m) < real(1e5), "beacons");
+        BL_CHECK(is_finite(b->x_m) && is_finite(b->y_m) && is_finite(b->z_m) && std::fabs(b->x_m) < real(1e5) &&
+                     std::fabs(b->y_m) < real(1e5) && std::fabs(b->z_m) < real(1e5),
+                 "beacons");
         for (uint32_t j = 0; j < i; ++j) {
             const bl_beacon *o = &c->beacons[j];
             const real dx = b->x_m - o->x_m, dy = b->y_m - o->y_m, dz = b->z_m - o->z_m;
@@ -123,82 +123,74 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     BL_CHECK(c->receiver_count >= 1 && c->receiver_count <= BL_MAX_RECEIVERS, "receiver_count");
     BL_CHECK(is_finite(c->ring_radius_m) && c->ring_radius_m >= real(0) && c->ring_radius_m < real(10),
              "ring_radius_m");
-    BL_CHECK(is_finite(c->first_angle_deg) && std::fabs(c->first_angle_deg) <= real(360),
-             "first_angle_deg");
-    BL_CHECK(is_finite(c->angle_step_deg) && std::fabs(c->angle_step_deg) <= real(360),
-             "angle_step_deg");
-    BL_CHECK(is_finite(c->receiver_height_m) && std::fabs(c->receiver_height_m) < real(1e5),
-             "receiver_height_m");
+    BL_CHECK(is_finite(c->first_angle_deg) && std::fabs(c->first_angle_deg) <= real(360), "first_angle_deg");
+    BL_CHECK(is_finite(c->angle_step_deg) && std::fabs(c->angle_step_deg) <= real(360), "angle_step_deg");
+    BL_CHECK(is_finite(c->receiver_height_m) && std::fabs(c->receiver_height_m) < real(1e5), "receiver_height_m");
     BL_CHECK(is_finite(c->beamwidth_deg) && c->beamwidth_deg > real(0) && c->beamwidth_deg <= real(360),
              "beamwidth_deg");
-    BL_CHECK(is_finite(c->wheel_base_m) && c->wheel_base_m > real(0) && c->wheel_base_m < real(100),
-             "wheel_base_m");
+    BL_CHECK(is_finite(c->wheel_base_m) && c->wheel_base_m > real(0) && c->wheel_base_m < real(100), "wheel_base_m");
     BL_CHECK(is_finite(c->wheel_radius_m) && c->wheel_radius_m > real(0) && c->wheel_radius_m < real(100),
              "wheel_radius_m");
     BL_CHECK(c->ticks_per_rev > 0, "ticks_per_rev");
     BL_CHECK(is_finite(c->encoder_rate_hz) && c->encoder_rate_hz > real(0), "encoder_rate_hz");
-    BL_CHECK(is_finite(c->sigma_wheel_scale) && c->sigma_wheel_scale >= real(0) &&
-             c->sigma_wheel_scale <= real(0.5), "sigma_wheel_scale");
+    BL_CHECK(is_finite(c->sigma_wheel_scale) && c->sigma_wheel_scale >= real(0) && c->sigma_wheel_scale <= real(0.5),
+             "sigma_wheel_scale");
     BL_CHECK(is_finite(c->sigma_arrival_s) && c->sigma_arrival_s > real(0) && c->sigma_arrival_s < real(1),
              "sigma_arrival_s");
-    BL_CHECK(is_finite(c->sigma_wheel_per_m) && c->sigma_wheel_per_m >= real(0) &&
-             c->sigma_wheel_per_m < real(1), "sigma_wheel_per_m");
-    BL_CHECK(is_finite(c->speed_of_sound_mps) && c->speed_of_sound_mps > real(1) &&
-             c->speed_of_sound_mps < real(1e4), "speed_of_sound_mps");
+    BL_CHECK(is_finite(c->sigma_wheel_per_m) && c->sigma_wheel_per_m >= real(0) && c->sigma_wheel_per_m < real(1),
+             "sigma_wheel_per_m");
+    BL_CHECK(is_finite(c->speed_of_sound_mps) && c->speed_of_sound_mps > real(1) && c->speed_of_sound_mps < real(1e4),
+             "speed_of_sound_mps");
     BL_CHECK(is_finite(c->sigma_speed_of_sound_mps) && c->sigma_speed_of_sound_mps > real(0) &&
-             c->sigma_speed_of_sound_mps < c->speed_of_sound_mps, "sigma_speed_of_sound_mps");
+                 c->sigma_speed_of_sound_mps < c->speed_of_sound_mps,
+             "sigma_speed_of_sound_mps");
     BL_CHECK(is_finite(c->gate_sigma) && c->gate_sigma > real(0), "gate_sigma");
-    BL_CHECK(is_finite(c->sigma_period_s) && c->sigma_period_s > real(0) &&
-             c->sigma_period_s < c->beacon_period_s, "sigma_period_s");
+    BL_CHECK(is_finite(c->sigma_period_s) && c->sigma_period_s > real(0) && c->sigma_period_s < c->beacon_period_s,
+             "sigma_period_s");
     BL_CHECK(is_finite(c->startup_sigma_arrival_s) && c->startup_sigma_arrival_s >= c->sigma_arrival_s &&
-             c->startup_sigma_arrival_s < real(1), "startup_sigma_arrival_s");
-    BL_CHECK(is_finite(c->startup_gate_sigma) && c->startup_gate_sigma >= c->gate_sigma,
-             "startup_gate_sigma");
-    BL_CHECK(is_finite(c->converged_sigma_xy_m) && c->converged_sigma_xy_m > real(0),
-             "converged_sigma_xy_m");
+                 c->startup_sigma_arrival_s < real(1),
+             "startup_sigma_arrival_s");
+    BL_CHECK(is_finite(c->startup_gate_sigma) && c->startup_gate_sigma >= c->gate_sigma, "startup_gate_sigma");
+    BL_CHECK(is_finite(c->converged_sigma_xy_m) && c->converged_sigma_xy_m > real(0), "converged_sigma_xy_m");
     BL_CHECK(is_finite(c->accel_noise_mps2) && c->accel_noise_mps2 >= real(0), "accel_noise_mps2");
     BL_CHECK(is_finite(c->angular_accel_noise_radps2) && c->angular_accel_noise_radps2 >= real(0),
              "angular_accel_noise_radps2");
     BL_CHECK(is_finite(c->heading_noise_rad_per_sqrt_s) && c->heading_noise_rad_per_sqrt_s >= real(0),
              "heading_noise_rad_per_sqrt_s");
     BL_CHECK(is_finite(c->heading_noise_fraction) && c->heading_noise_fraction >= real(0) &&
-             c->heading_noise_fraction <= real(1), "heading_noise_fraction");
+                 c->heading_noise_fraction <= real(1),
+             "heading_noise_fraction");
     BL_CHECK(is_finite(c->stationary_noise_scale) && c->stationary_noise_scale > real(0) &&
-             c->stationary_noise_scale <= real(1), "stationary_noise_scale");
-    BL_CHECK(is_finite(c->speed_of_sound_drift_mps_per_sqrt_s) &&
-             c->speed_of_sound_drift_mps_per_sqrt_s >= real(0), "speed_of_sound_drift_mps_per_sqrt_s");
+                 c->stationary_noise_scale <= real(1),
+             "stationary_noise_scale");
+    BL_CHECK(is_finite(c->speed_of_sound_drift_mps_per_sqrt_s) && c->speed_of_sound_drift_mps_per_sqrt_s >= real(0),
+             "speed_of_sound_drift_mps_per_sqrt_s");
     BL_CHECK(is_finite(c->period_drift_s_per_sqrt_s) && c->period_drift_s_per_sqrt_s >= real(0),
              "period_drift_s_per_sqrt_s");
     BL_CHECK(is_finite(c->wheel_scale_drift_per_sqrt_s) && c->wheel_scale_drift_per_sqrt_s >= real(0) &&
-             c->wheel_scale_drift_per_sqrt_s < real(1), "wheel_scale_drift_per_sqrt_s");
-    BL_CHECK(is_finite(c->firing_jitter_s) && c->firing_jitter_s >= real(0) &&
-             c->firing_jitter_s < c->beacon_period_s, "firing_jitter_s");
+                 c->wheel_scale_drift_per_sqrt_s < real(1),
+             "wheel_scale_drift_per_sqrt_s");
+    BL_CHECK(is_finite(c->firing_jitter_s) && c->firing_jitter_s >= real(0) && c->firing_jitter_s < c->beacon_period_s,
+             "firing_jitter_s");
     BL_CHECK(c->iekf_max_iterations >= 1 && c->iekf_max_iterations <= 20, "iekf_max_iterations");
-    BL_CHECK(is_finite(c->iekf_step_tolerance) && c->iekf_step_tolerance >= real(0),
-             "iekf_step_tolerance");
-    BL_CHECK(is_finite(c->initial_theta_rad) && std::fabs(c->initial_theta_rad) <= real(100),
-             "initial_theta_rad");
-    BL_CHECK(is_finite(c->reset_sigma_theta_rad) && c->reset_sigma_theta_rad > real(0),
-             "reset_sigma_theta_rad");
+    BL_CHECK(is_finite(c->iekf_step_tolerance) && c->iekf_step_tolerance >= real(0), "iekf_step_tolerance");
+    BL_CHECK(is_finite(c->initial_theta_rad) && std::fabs(c->initial_theta_rad) <= real(100), "initial_theta_rad");
+    BL_CHECK(is_finite(c->reset_sigma_theta_rad) && c->reset_sigma_theta_rad > real(0), "reset_sigma_theta_rad");
     BL_CHECK(c->ring_heading <= 1, "ring_heading");
-    BL_CHECK(is_finite(c->initial_sigma_v_mps) && c->initial_sigma_v_mps > real(0),
-             "initial_sigma_v_mps");
+    BL_CHECK(is_finite(c->initial_sigma_v_mps) && c->initial_sigma_v_mps > real(0), "initial_sigma_v_mps");
     BL_CHECK(is_finite(c->initial_sigma_omega_radps) && c->initial_sigma_omega_radps > real(0),
              "initial_sigma_omega_radps");
-    BL_CHECK(is_finite(c->max_predict_gap_s) && c->max_predict_gap_s > real(0) &&
-             c->max_predict_gap_s <= real(3600), "max_predict_gap_s");
+    BL_CHECK(is_finite(c->max_predict_gap_s) && c->max_predict_gap_s > real(0) && c->max_predict_gap_s <= real(3600),
+             "max_predict_gap_s");
     return BL_OK;
 }
 
-extern "C" int bl_config_receiver_angle(const bl_config *cfg, uint32_t receiver_index,
-                                        bl_real *angle_rad)
+extern "C" int bl_config_receiver_angle(const bl_config *cfg, uint32_t receiver_index, bl_real *angle_rad)
 {
-    if (cfg == nullptr || angle_rad == nullptr || receiver_index >= cfg->receiver_count ||
-        cfg->receiver_count == 0 || cfg->receiver_count > BL_MAX_RECEIVERS)
+    if (cfg == nullptr || angle_rad == nullptr || receiver_index >= cfg->receiver_count || cfg->receiver_count == 0 ||
+        cfg->receiver_count > BL_MAX_RECEIVERS)
         return BL_EINVAL;
-    const real step_deg = cfg->angle_step_deg != real(0)
-                              ? cfg->angle_step_deg
-                              : real(360) / real(cfg->receiver_count);
+    const real step_deg = cfg->angle_step_deg != real(0) ? cfg->angle_step_deg : real(360) / real(cfg->receiver_count);
     *angle_rad = (cfg->first_angle_deg + step_deg * real(receiver_index)) * bl::kDegToRad;
     return BL_OK;
 }

@@ -359,11 +359,19 @@ extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
     if (f == nullptr || p == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
     const bl_config *cfg = &f->cfg_;
-    const bl_real vals[] = {p->x_m, p->y_m, p->theta_rad, p->v_mps, p->omega_radps, p->sigma_xy_m,
-                            p->sigma_theta_rad, p->sigma_v_mps, p->sigma_omega_radps, p->sigma_t0_s};
+    const bl_real vals[] = {p->x_m,
+                            p->y_m,
+                            p->theta_rad,
+                            p->v_mps,
+                            p->omega_radps,
+                            p->sigma_xy_m,
+                            p->sigma_theta_rad,
+                            p->sigma_v_mps,
+                            p->sigma_omega_radps,
+                            p->sigma_t0_s};
     if (!all_finite(vals, int(sizeof vals / sizeof vals[0]))) return BL_EINVAL;
-    if (!(p->sigma_xy_m > 0) || !(p->sigma_theta_rad > 0) || !(p->sigma_v_mps > 0) ||
-        !(p->sigma_omega_radps > 0) || !(p->sigma_t0_s > 0))
+    if (!(p->sigma_xy_m > 0) || !(p->sigma_theta_rad > 0) || !(p->sigma_v_mps > 0) || !(p->sigma_omega_radps > 0) ||
+        !(p->sigma_t0_s > 0))
         return BL_EINVAL;
     // Physical ranges (found by fuzzing: a finite theta or v of 1e308 was
     // taken, and every later extrapolation overflowed).
@@ -481,8 +489,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     const real k2 = cfg->sigma_wheel_per_m * cfg->sigma_wheel_per_m;
     const real qu[2] = {k2 * std::fabs(d_left_m) * x(KL) * x(KL), k2 * std::fabs(d_right_m) * x(KR) * x(KR)};
     for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c)
-            Pn(r, c) += J.g[r][0] * qu[0] * J.g[c][0] + J.g[r][1] * qu[1] * J.g[c][1];
+        for (int c = 0; c < 3; ++c) Pn(r, c) += J.g[r][0] * qu[0] * J.g[c][0] + J.g[r][1] * qu[1] * J.g[c][1];
     // Motion type (Kleeman 1992 §3.10): "stationary, no acceleration,
     // straight ramp and curve"; "the incorporation of the dead-reckoning
     // heading information as an input sets the heading variance to the
@@ -490,7 +497,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     // equation (24)". Stationary = no wheel travel (|d| <= 1 µm each).
     const bool moving = std::fabs(d_left_m) > real(1e-6) || std::fabs(d_right_m) > real(1e-6);
     const real cl = x(KL) * d_left_m, cr = x(KR) * d_right_m;  // calibrated distances (m)
-    const real dth = (cr - cl) / cfg->wheel_base_m;             // Δθ, Kleeman eq. 24 (rad)
+    const real dth = (cr - cl) / cfg->wheel_base_m;            // Δθ, Kleeman eq. 24 (rad)
     if (moving) {
         // §3.10 gives no formula; our reading, with the offset as a random
         // walk (so it does not depend on the encoder rate) and the fraction
@@ -540,8 +547,7 @@ extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
     return commit_predict(f, x, P, t_us);
 }
 
-extern "C" int bl_filter_get_state(const bl_filter *f, bl_real x[BL_FILTER_NX],
-                                   bl_real P[BL_FILTER_NX * BL_FILTER_NX])
+extern "C" int bl_filter_get_state(const bl_filter *f, bl_real x[BL_FILTER_NX], bl_real P[BL_FILTER_NX * BL_FILTER_NX])
 {
     if (f == nullptr) return BL_EINVAL;
     if (!started(f)) return BL_ENOTINIT;
@@ -631,4 +637,3 @@ extern "C" int bl_model_constant_velocity(const bl_real x[BL_FILTER_NX], bl_real
     }
     return BL_OK;
 }
-

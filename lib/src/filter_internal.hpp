@@ -16,16 +16,44 @@ constexpr uint32_t kFlagConverged = 2u;
 constexpr uint32_t kFlagEverStarted = 4u;
 
 // State indices (filter.h BL_IX_*), short.
-enum : int { X = BL_IX_X, Y = BL_IX_Y, TH = BL_IX_THETA, V = BL_IX_V, W = BL_IX_OMEGA,
-             S = BL_IX_S, T = BL_IX_T, T0 = BL_IX_T0, KL = BL_IX_KL, KR = BL_IX_KR };
+enum : int {
+    X = BL_IX_X,
+    Y = BL_IX_Y,
+    TH = BL_IX_THETA,
+    V = BL_IX_V,
+    W = BL_IX_OMEGA,
+    S = BL_IX_S,
+    T = BL_IX_T,
+    T0 = BL_IX_T0,
+    KL = BL_IX_KL,
+    KR = BL_IX_KR
+};
 
-inline Eigen::Map<VX> state(bl_filter *f) { return Eigen::Map<VX>(f->x_); }
-inline Eigen::Map<const VX> state(const bl_filter *f) { return Eigen::Map<const VX>(f->x_); }
-inline Eigen::Map<MX> cov(bl_filter *f) { return Eigen::Map<MX>(f->P_); }
-inline Eigen::Map<const MX> cov(const bl_filter *f) { return Eigen::Map<const MX>(f->P_); }
+inline Eigen::Map<VX> state(bl_filter *f)
+{
+    return Eigen::Map<VX>(f->x_);
+}
+inline Eigen::Map<const VX> state(const bl_filter *f)
+{
+    return Eigen::Map<const VX>(f->x_);
+}
+inline Eigen::Map<MX> cov(bl_filter *f)
+{
+    return Eigen::Map<MX>(f->P_);
+}
+inline Eigen::Map<const MX> cov(const bl_filter *f)
+{
+    return Eigen::Map<const MX>(f->P_);
+}
 
-inline bool initialised(const bl_filter *f) { return f != nullptr && f->magic_ == kFilterMagic; }
-inline bool started(const bl_filter *f) { return initialised(f) && (f->flags_ & kFlagStarted); }
+inline bool initialised(const bl_filter *f)
+{
+    return f != nullptr && f->magic_ == kFilterMagic;
+}
+inline bool started(const bl_filter *f)
+{
+    return initialised(f) && (f->flags_ & kFlagStarted);
+}
 
 bool all_finite(const bl_real *v, int n);
 
@@ -46,8 +74,8 @@ void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uin
 // cover min_beacons; else ~0u (every beacon).
 uint32_t restart_mask(const bl_filter *f, uint32_t min_beacons);
 // (Re)start from the snapshot of the table's last cycle; *f untouched on failure.
-int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_radps, real s_mps, real var_s,
-                        real T_s, real var_T, uint32_t min_beacons, uint32_t use_mask = ~0u);
+int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_radps, real s_mps, real var_s, real T_s,
+                        real var_T, uint32_t min_beacons, uint32_t use_mask = ~0u);
 
 // ---- aid_wheels.cpp
 struct WheelSpeedCounts {

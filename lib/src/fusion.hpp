@@ -16,9 +16,9 @@ extern "C" {
 namespace bl {
 
 constexpr int NX = BL_FILTER_NX;
-using VX = Mat<NX, 1>;                      // state vector (units: BL_IX_* in filter.h)
-using MX = Mat<NX, NX>;                     // covariance, row-major as bl_filter.P_
-using RX = Eigen::Matrix<real, 1, NX>;      // Jacobian row of a scalar measurement
+using VX = Mat<NX, 1>;                  // state vector (units: BL_IX_* in filter.h)
+using MX = Mat<NX, NX>;                 // covariance, row-major as bl_filter.P_
+using RX = Eigen::Matrix<real, 1, NX>;  // Jacobian row of a scalar measurement
 
 struct ScalarMeasurement {
     real z;                   // measured value, in the measurement's unit

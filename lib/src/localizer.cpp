@@ -14,12 +14,21 @@ namespace {
 
 constexpr uint32_t kMagic = 0x6C6F6331u;  // "loc1"
 
-bool valid(const bl_localizer *loc) { return loc != nullptr && loc->magic_ == kMagic; }
+bool valid(const bl_localizer *loc)
+{
+    return loc != nullptr && loc->magic_ == kMagic;
+}
 
 // Started, and the state time, without a bl_estimate on the stack (these
 // sit on the deepest call chain: pulse -> fusion -> snapshot solver).
-bool started(const bl_filter *f) { return bl_filter_get_state(f, nullptr, nullptr) == BL_OK; }
-int64_t state_time_us(const bl_filter *f) { return f->t_us_; }
+bool started(const bl_filter *f)
+{
+    return bl_filter_get_state(f, nullptr, nullptr) == BL_OK;
+}
+int64_t state_time_us(const bl_filter *f)
+{
+    return f->t_us_;
+}
 
 #define NOINLINE __attribute__((noinline))
 // The pulse path is inlined into pop_until: every frame on it adds to the
@@ -54,7 +63,10 @@ NOINLINE void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset
 
 // The filter's config (it has no persistent-rejection reset of its own:
 // cfg.reset_reject_count is K of the localizer's window).
-bl_config filter_config(const bl_config *cfg) { return *cfg; }
+bl_config filter_config(const bl_config *cfg)
+{
+    return *cfg;
+}
 
 // The window restarts empty at slot 0 (slots 0..len-1 valid until full).
 void clear_window(bl_localizer *loc)
@@ -165,15 +177,15 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     if (n < loc->reject_k_ || __builtin_popcount(mask) < need) return false;
     bl_real x[BL_FILTER_NX];
     if (bl_filter_get_state(&loc->filter, x, nullptr) != BL_OK) return false;
-    const int rc = bl_filter_start_snapshot(&loc->filter, bl::wrap_angle(x[BL_IX_THETA]),
-                                            loc->filter.cfg_.reset_sigma_theta_rad);
+    const int rc =
+        bl_filter_start_snapshot(&loc->filter, bl::wrap_angle(x[BL_IX_THETA]), loc->filter.cfg_.reset_sigma_theta_rad);
     clear_window(loc);
     if (rc != BL_OK) {
         loc->counters_.restart_failures++;
         return false;
     }
     loc->counters_.snapshot_restarts++;
-    loc->wheel_ref_ = false;  // the state time moved to the latest arrival
+    loc->wheel_ref_ = false;                           // the state time moved to the latest arrival
     loc->last_reset_seen_ = loc->filter.reset_count_;  // this reset is reported here, once
     push_event(loc, BL_LOC_EV_RESET, BL_LOC_CAUSE_PERSISTENT_REJECTION, static_cast<uint16_t>(n));
     return true;
@@ -224,9 +236,9 @@ NOINLINE Fused classify(bl_localizer *loc)
     const bl_fusion_result &res = loc->result_;
     // An innovation longer than the longest flight: a numbering error, not a
     // pose error (see localizer.h). Two in a row while converged re-sync.
-    const bool misnumbered = res.status == BL_FUSION_REJECTED && loc->was_converged_ &&
-                             (res.innovation < 0 ? -res.innovation : res.innovation) * bl_real(1e6) >
-                                 bl_real(loc->seq.cfg.max_flight_us);
+    const bool misnumbered =
+        res.status == BL_FUSION_REJECTED && loc->was_converged_ &&
+        (res.innovation < 0 ? -res.innovation : res.innovation) * bl_real(1e6) > bl_real(loc->seq.cfg.max_flight_us);
     if (misnumbered) {
         loc->counters_.numbering_errors++;
         loc->counters_.pulses_rejected++;
@@ -353,14 +365,16 @@ NOINLINE void pop_until(bl_localizer *loc, int64_t now_us, bool while_full)
     if (!while_full && rc < 0) loc->counters_.seq_errors++;
 }
 
-bool finite_real(bl_real v) { return bl::is_finite(v); }
+bool finite_real(bl_real v)
+{
+    return bl::is_finite(v);
+}
 
 }  // namespace
 
 // ---- public API -----------------------------------------------------------
 
-extern "C" int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out, const char **why,
-                                       const char **field)
+extern "C" int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out, const char **why, const char **field)
 {
     if (why) *why = nullptr;
     if (field) *field = nullptr;
@@ -570,7 +584,7 @@ extern "C" int bl_localizer_estimate_at(const bl_localizer *loc, int64_t t_us, b
     if (!started(&loc->filter)) return BL_ENOTINIT;
     bl_estimate e;
     const int rc = t_us > state_time_us(&loc->filter) ? bl_filter_estimate_at(&loc->filter, t_us, &e)
-                                                       : bl_filter_estimate(&loc->filter, &e);
+                                                      : bl_filter_estimate(&loc->filter, &e);
     if (rc != BL_OK) return rc;
     e.reset_counter += loc->reset_base_;
     *est = e;

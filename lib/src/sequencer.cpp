@@ -19,29 +19,43 @@ namespace {
 
 constexpr uint32_t kMagic = 0x5E9B1C01u;
 constexpr int64_t kNsPerUs = 1000;
-constexpr int64_t kMaxPeriodUs = 10000000;   // 10 s
-constexpr int64_t kMinPeriodUs = 1000;       // 1 ms
+constexpr int64_t kMaxPeriodUs = 10000000;  // 10 s
+constexpr int64_t kMinPeriodUs = 1000;      // 1 ms
 constexpr uint32_t kMaxTimeoutCycles = 1000;
 constexpr uint32_t kMaxGainDiv = 1000000;
 
-bool finite_real(bl_real v) { return std::isfinite(v); }
+bool finite_real(bl_real v)
+{
+    return std::isfinite(v);
+}
 
-bool time_ok(int64_t t_us) { return t_us <= BL_SEQ_TIME_LIMIT_US && t_us >= -BL_SEQ_TIME_LIMIT_US; }
+bool time_ok(int64_t t_us)
+{
+    return t_us <= BL_SEQ_TIME_LIMIT_US && t_us >= -BL_SEQ_TIME_LIMIT_US;
+}
 
-int64_t abs64(int64_t v) { return v < 0 ? -v : v; }
+int64_t abs64(int64_t v)
+{
+    return v < 0 ? -v : v;
+}
 
 // Floor division for b > 0.
-int64_t floor_div(int64_t a, int64_t b) {
+int64_t floor_div(int64_t a, int64_t b)
+{
     int64_t q = a / b;
     if ((a % b) != 0 && a < 0) q -= 1;
     return q;
 }
 
 // Nearest integer to a / b for b > 0 (halves round up); |a| < 2^62.
-int64_t round_div(int64_t a, int64_t b) { return floor_div(a + b / 2, b); }
+int64_t round_div(int64_t a, int64_t b)
+{
+    return floor_div(a + b / 2, b);
+}
 
 // Non-negative modulo for n > 0.
-int32_t mod_index(int64_t k, uint32_t n) {
+int32_t mod_index(int64_t k, uint32_t n)
+{
     int64_t m = k % static_cast<int64_t>(n);
     if (m < 0) m += static_cast<int64_t>(n);
     return static_cast<int32_t>(m);
@@ -49,7 +63,8 @@ int32_t mod_index(int64_t k, uint32_t n) {
 
 // Delay after a pulse's earliest detection until its merge window (and the
 // window of beacon 1's second burst) has closed, us.
-int64_t close_delay_us(const bl_seq_config &c) {
+int64_t close_delay_us(const bl_seq_config &c)
+{
     int64_t d = c.merge_window_us;
     if (c.double_spacing_us > 0) {
         const int64_t second = static_cast<int64_t>(c.double_spacing_us) + c.double_tolerance_us + c.merge_window_us;
@@ -59,17 +74,20 @@ int64_t close_delay_us(const bl_seq_config &c) {
 }
 
 // Own-model window tolerance for slot j (us): margin + j·T·ppm/1e6.
-int64_t own_tol_us(const bl_seq_config &c, int64_t period_ns, int64_t j) {
+int64_t own_tol_us(const bl_seq_config &c, int64_t period_ns, int64_t j)
+{
     const int64_t slots = abs64(j);
     return c.window_margin_us + (slots * (period_ns / kNsPerUs) * c.period_tolerance_ppm) / 1000000;
 }
 
 // Largest slot offset the own model may number before the lock times out.
-int64_t own_max_slot(const bl_seq_config &c) {
+int64_t own_max_slot(const bl_seq_config &c)
+{
     return static_cast<int64_t>(c.beacon_count) * c.lock_timeout_cycles - 1;
 }
 
-bool config_ok(const bl_seq_config *c) {
+bool config_ok(const bl_seq_config *c)
+{
     if (c->beacon_count < 1 || c->beacon_count > BL_MAX_BEACONS) return false;
     if (c->receiver_count < 1 || c->receiver_count > BL_MAX_RECEIVERS || c->receiver_count > 32) return false;
     if (c->period_us < kMinPeriodUs || c->period_us > kMaxPeriodUs) return false;
@@ -84,8 +102,7 @@ bool config_ok(const bl_seq_config *c) {
     if (c->period_gain_div < 1 || c->period_gain_div > kMaxGainDiv) return false;
     // The second burst must not fall inside the merge window.
     if (c->double_spacing_us > 0 &&
-        static_cast<int64_t>(c->merge_window_us) >=
-            static_cast<int64_t>(c->double_spacing_us) - c->double_tolerance_us)
+        static_cast<int64_t>(c->merge_window_us) >= static_cast<int64_t>(c->double_spacing_us) - c->double_tolerance_us)
         return false;
     // Windows of successive slots j, j+1 must stay disjoint up to the lock
     // timeout (plus the extra cycle a double pulse may use):
@@ -96,7 +113,10 @@ bool config_ok(const bl_seq_config *c) {
     return need < c->period_us;
 }
 
-bool seq_ok(const bl_sequencer *s) { return s->magic == kMagic; }
+bool seq_ok(const bl_sequencer *s)
+{
+    return s->magic == kMagic;
+}
 
 struct Assignment {
     bool assigned;
@@ -108,7 +128,8 @@ struct Assignment {
 // pulse arrives in [fire - tol_k, fire + max_flight + tol_k] (Kleeman 1992
 // eq. 19, flight in [0, max_flight]), tol_k = margin + 3σ(fire + |k|·T).
 // Returns false when the hint is stale (its windows would overlap).
-bool number_by_hint(const bl_sequencer *s, int64_t t_us, Assignment *a) {
+bool number_by_hint(const bl_sequencer *s, int64_t t_us, Assignment *a)
+{
     const bl_seq_config &c = s->cfg;
     const int64_t half_flight_ns = static_cast<int64_t>(c.max_flight_us) * kNsPerUs / 2;
     const int64_t d_us = t_us - s->hint_fire_us;
@@ -119,8 +140,8 @@ bool number_by_hint(const bl_sequencer *s, int64_t t_us, Assignment *a) {
                            3 * (s->hint_fire_sigma_ns + abs64(k) * s->hint_period_sigma_ns);
     // Stale when the windows of successive firings overlap: max_flight + 2·tol >= T.
     if (static_cast<int64_t>(c.max_flight_us) * kNsPerUs + 2 * tol_ns >= s->hint_period_ns) return false;
-    const int64_t fire_ns_rel = k * s->hint_period_ns;          // firing of slot k - hint_fire, ns
-    const int64_t off_ns = d_us * kNsPerUs - fire_ns_rel;         // arrival - firing, ns
+    const int64_t fire_ns_rel = k * s->hint_period_ns;     // firing of slot k - hint_fire, ns
+    const int64_t off_ns = d_us * kNsPerUs - fire_ns_rel;  // arrival - firing, ns
     a->assigned = off_ns >= -tol_ns && off_ns <= static_cast<int64_t>(c.max_flight_us) * kNsPerUs + tol_ns;
     a->beacon = mod_index(static_cast<int64_t>(s->hint_beacon) + k, c.beacon_count);
     a->fire_us = s->hint_fire_us + round_div(fire_ns_rel, kNsPerUs);
@@ -133,7 +154,8 @@ bool number_by_hint(const bl_sequencer *s, int64_t t_us, Assignment *a) {
 // Returns false when the lock has timed out at t_us.
 // jmax: largest slot offset allowed (own_max_slot, or one cycle more for a
 // double pulse, whose signature confirms the slot).
-bool number_by_model(const bl_sequencer *s, int64_t t_us, int64_t jmax, Assignment *a) {
+bool number_by_model(const bl_sequencer *s, int64_t t_us, int64_t jmax, Assignment *a)
+{
     const bl_seq_config &c = s->cfg;
     const int64_t d_us = t_us - s->anchor_us;
     if (abs64(d_us) > (jmax + 1) * c.period_us * 2) return false;
@@ -149,15 +171,20 @@ bool number_by_model(const bl_sequencer *s, int64_t t_us, int64_t jmax, Assignme
 
 // Lock transitions are counted by the public entry points from the state
 // before and after (count_lock_change); these helpers only change state.
-bool is_locked(const bl_sequencer *s) { return s->locked || s->hint_valid; }
+bool is_locked(const bl_sequencer *s)
+{
+    return s->locked || s->hint_valid;
+}
 
-void count_lock_change(bl_sequencer *s, bool before, bool relocked) {
+void count_lock_change(bl_sequencer *s, bool before, bool relocked)
+{
     const bool after = is_locked(s);
     if (before && (!after || relocked)) s->counters.locks_lost++;
     if (after && (!before || relocked)) s->counters.locks_acquired++;
 }
 
-void lose_lock(bl_sequencer *s) {
+void lose_lock(bl_sequencer *s)
+{
     s->locked = false;
     s->hint_valid = false;
     s->have_last = false;
@@ -166,7 +193,8 @@ void lose_lock(bl_sequencer *s) {
     s->consecutive_spurious = 0;
 }
 
-void anchor_at(bl_sequencer *s, int64_t t_us) {
+void anchor_at(bl_sequencer *s, int64_t t_us)
+{
     s->locked = true;
     s->anchor_us = t_us;
     s->conflicts_in_row = 0;
@@ -175,7 +203,8 @@ void anchor_at(bl_sequencer *s, int64_t t_us) {
 // Tracks T from successive first arrivals of the same beacon:
 // T_meas = Δt / (m·N) for m whole cycles, accepted within the period
 // tolerance (Kleeman 1992 §2: the firing period is only known approximately).
-void track_period(bl_sequencer *s, int32_t beacon, int64_t t_us) {
+void track_period(bl_sequencer *s, int32_t beacon, int64_t t_us)
+{
     const bl_seq_config &c = s->cfg;
     const uint32_t bit = 1u << static_cast<uint32_t>(beacon);
     if ((s->beacon_seen_mask & bit) != 0) {
@@ -199,13 +228,14 @@ void track_period(bl_sequencer *s, int32_t beacon, int64_t t_us) {
 }
 
 // Numbers one closed pulse and updates the model.
-void number_pulse(bl_sequencer *s, bl::SeqNumbered *p) {
+void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
+{
     const bl_seq_config &c = s->cfg;
     const int64_t t = p->arrival_us;
     const bool was_locked = is_locked(s);
     bool relocked = false;
     Assignment a = {false, BL_SEQ_UNASSIGNED, 0};
-    bool numbered = false;   // a numbering method was available
+    bool numbered = false;  // a numbering method was available
 
     if (p->double_pulse) {
         s->counters.double_pulses++;
@@ -220,18 +250,18 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p) {
                 have_expect = true;
                 from_hint = true;
             } else {
-                s->hint_valid = false;   // stale
+                s->hint_valid = false;  // stale
             }
         }
         if (!have_expect && s->locked) {
             if (number_by_model(s, t, own_max_slot(c) + c.beacon_count, &e)) {
                 have_expect = true;
             } else {
-                lose_lock(s);   // timed out: re-acquire on this double pulse
+                lose_lock(s);  // timed out: re-acquire on this double pulse
             }
         }
         if (have_expect && e.assigned && e.beacon == 0) {
-            a = e;   // beacon 1 where expected
+            a = e;  // beacon 1 where expected
             if (!from_hint) a.fire_us = t - c.max_flight_us / 2;
             anchor_at(s, t);
             numbered = true;
@@ -247,10 +277,10 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p) {
             if (s->conflicts_in_row > 0) {
                 const int64_t dt = t - s->conflict_us;
                 const int64_t m_cycles = round_div(dt, cycle_us);
-                confirmed = m_cycles >= 1 && m_cycles <= static_cast<int64_t>(c.lock_timeout_cycles) &&
-                            abs64(dt - m_cycles * cycle_us) <=
-                                static_cast<int64_t>(c.max_flight_us) +
-                                    own_tol_us(c, s->period_ns, m_cycles * c.beacon_count);
+                confirmed =
+                    m_cycles >= 1 && m_cycles <= static_cast<int64_t>(c.lock_timeout_cycles) &&
+                    abs64(dt - m_cycles * cycle_us) <=
+                        static_cast<int64_t>(c.max_flight_us) + own_tol_us(c, s->period_ns, m_cycles * c.beacon_count);
             }
             if (confirmed) {
                 if (s->hint_valid) s->counters.hint_rejections++;
@@ -280,14 +310,14 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p) {
             if (number_by_hint(s, t, &a)) {
                 numbered = true;
             } else {
-                s->hint_valid = false;   // stale
+                s->hint_valid = false;  // stale
             }
         }
         if (!numbered && s->locked) {
             if (number_by_model(s, t, own_max_slot(c), &a)) {
                 numbered = true;
             } else {
-                lose_lock(s);   // no beacon 1 for lock_timeout_cycles
+                lose_lock(s);  // no beacon 1 for lock_timeout_cycles
             }
         }
     }
@@ -325,31 +355,33 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p) {
 
 extern "C" {
 
-int bl_sequencer_config_default(bl_seq_config *cfg) {
+int bl_sequencer_config_default(bl_seq_config *cfg)
+{
     if (cfg == nullptr) return BL_EINVAL;
     bl_seq_config c;
     memset(&c, 0, sizeof c);
-    c.beacon_count = 6;                 // Kleeman 1992 §2: six beacons
-    c.receiver_count = 8;               // eight receivers at 45°
-    c.period_us = 150000;               // fired 150 ms apart
-    c.period_tolerance_ppm = 5000;      // T known to 0.5 % before tracking
+    c.beacon_count = 6;             // Kleeman 1992 §2: six beacons
+    c.receiver_count = 8;           // eight receivers at 45°
+    c.period_us = 150000;           // fired 150 ms apart
+    c.period_tolerance_ppm = 5000;  // T known to 0.5 % before tracking
     // max flight = room diagonal / slowest s = 12·√2 m / 330 m/s = 51.4 ms
     c.max_flight_us = 51425;
     // merge = ring diameter / s + margin = 0.20 m / 330 m/s + 500 us
     c.merge_window_us = 1107;
-    c.window_margin_us = 2000;          // 10 σ of the 0.2 ms arrival noise (§2)
-    c.double_spacing_us = 3000;         // bursts 3 ms apart (§2, Fig. 2)
+    c.window_margin_us = 2000;   // 10 σ of the 0.2 ms arrival noise (§2)
+    c.double_spacing_us = 3000;  // bursts 3 ms apart (§2, Fig. 2)
     c.double_tolerance_us = 500;
-    c.double_width_min_us = 4000;       // 2.5 ms burst + spacing/2: both bursts in one envelope
+    c.double_width_min_us = 4000;  // 2.5 ms burst + spacing/2: both bursts in one envelope
     c.min_width_us = 0;
     c.lock_timeout_cycles = 3;
-    c.max_consecutive_spurious = 12;    // two cycles of nothing but noise
+    c.max_consecutive_spurious = 12;  // two cycles of nothing but noise
     c.period_gain_div = 16;
     *cfg = c;
     return BL_OK;
 }
 
-int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m, bl_seq_config *out) {
+int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m, bl_seq_config *out)
+{
     if (site == nullptr || out == nullptr) return BL_EINVAL;
     if (!finite_real(max_distance_m) || max_distance_m > static_cast<bl_real>(1e6)) return BL_EINVAL;
     bl_seq_config c;
@@ -360,16 +392,19 @@ int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m,
     // first: every comparison with a NaN is false, so a range check written
     // as "x > max" lets a NaN through (the beacon loop below did).
     if (!finite_real(site->speed_of_sound_mps) || !finite_real(site->sigma_speed_of_sound_mps) ||
-        !finite_real(site->beacon_period_s) || !finite_real(site->double_pulse_spacing_s) || !finite_real(site->burst_length_s) ||
-        !finite_real(site->ring_radius_m) || !finite_real(site->receiver_height_m))
+        !finite_real(site->beacon_period_s) || !finite_real(site->double_pulse_spacing_s) ||
+        !finite_real(site->burst_length_s) || !finite_real(site->ring_radius_m) ||
+        !finite_real(site->receiver_height_m))
         return BL_EINVAL;
     for (uint32_t i = 0; i < site->beacon_count; ++i)
-        if (!finite_real(site->beacons[i].x_m) || !finite_real(site->beacons[i].y_m) || !finite_real(site->beacons[i].z_m))
+        if (!finite_real(site->beacons[i].x_m) || !finite_real(site->beacons[i].y_m) ||
+            !finite_real(site->beacons[i].z_m))
             return BL_EINVAL;
     const bl_real s_min = site->speed_of_sound_mps - 3 * site->sigma_speed_of_sound_mps;
     if (!(s_min > static_cast<bl_real>(100)) || !(s_min < static_cast<bl_real>(1000))) return BL_ECONFIG;
     if (!(site->beacon_period_s > 0) || !(site->beacon_period_s <= static_cast<bl_real>(10))) return BL_ECONFIG;
-    if (!(site->double_pulse_spacing_s >= 0) || !(site->double_pulse_spacing_s < site->beacon_period_s)) return BL_ECONFIG;
+    if (!(site->double_pulse_spacing_s >= 0) || !(site->double_pulse_spacing_s < site->beacon_period_s))
+        return BL_ECONFIG;
     if (!(site->burst_length_s >= 0) || !(site->burst_length_s < site->beacon_period_s)) return BL_ECONFIG;
     if (!(site->ring_radius_m >= 0) || !(site->ring_radius_m < static_cast<bl_real>(100))) return BL_ECONFIG;
     bl_real dist_m = max_distance_m;
@@ -408,20 +443,24 @@ int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m,
     c.period_us = static_cast<int64_t>(period_us + static_cast<bl_real>(0.5));
     c.max_flight_us = static_cast<int32_t>(flight_us) + 1;
     c.merge_window_us = static_cast<int32_t>(merge_us) + 1;
-    c.double_spacing_us = static_cast<int32_t>(site->double_pulse_spacing_s * static_cast<bl_real>(1e6) + static_cast<bl_real>(0.5));
-    const int32_t burst_us = static_cast<int32_t>(site->burst_length_s * static_cast<bl_real>(1e6) + static_cast<bl_real>(0.5));
+    c.double_spacing_us =
+        static_cast<int32_t>(site->double_pulse_spacing_s * static_cast<bl_real>(1e6) + static_cast<bl_real>(0.5));
+    const int32_t burst_us =
+        static_cast<int32_t>(site->burst_length_s * static_cast<bl_real>(1e6) + static_cast<bl_real>(0.5));
     c.double_width_min_us = (c.double_spacing_us > 0 && burst_us > 0) ? burst_us + c.double_spacing_us / 2 : 0;
     if (!config_ok(&c)) return BL_ECONFIG;
     *out = c;
     return BL_OK;
 }
 
-int bl_sequencer_config_check(const bl_seq_config *cfg) {
+int bl_sequencer_config_check(const bl_seq_config *cfg)
+{
     if (cfg == nullptr) return BL_EINVAL;
     return config_ok(cfg) ? BL_OK : BL_ECONFIG;
 }
 
-int bl_sequencer_init(bl_sequencer *seq, const bl_seq_config *cfg) {
+int bl_sequencer_init(bl_sequencer *seq, const bl_seq_config *cfg)
+{
     if (seq == nullptr || cfg == nullptr) return BL_EINVAL;
     if (!config_ok(cfg)) return BL_ECONFIG;
     memset(seq, 0, sizeof *seq);
@@ -433,7 +472,8 @@ int bl_sequencer_init(bl_sequencer *seq, const bl_seq_config *cfg) {
     return BL_OK;
 }
 
-int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det) {
+int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det)
+{
     if (seq == nullptr || det == nullptr) return BL_EINVAL;
     if (!seq_ok(seq)) return BL_ENOTINIT;
     const bl_seq_config &c = seq->cfg;
@@ -530,7 +570,8 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det) {
     return BL_OK;
 }
 
-int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out) {
+int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out)
+{
     if (seq == nullptr || out == nullptr) return BL_EINVAL;
     bl::SeqNumbered n;
     const bl_seq_pending *g = nullptr;
@@ -562,7 +603,8 @@ int bl_sequencer_pop(bl_sequencer *seq, int64_t now_us, bl_seq_pulse *out) {
     return 1;
 }
 
-int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint) {
+int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint)
+{
     if (seq == nullptr || hint == nullptr) return BL_EINVAL;
     if (!seq_ok(seq)) return BL_ENOTINIT;
     const bl_seq_config &c = seq->cfg;
@@ -585,7 +627,8 @@ int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint) {
     return BL_OK;
 }
 
-int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint) {
+int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint)
+{
     if (est == nullptr || hint == nullptr) return BL_EINVAL;
     if (!est->started) return BL_ENOTINIT;
     const bl_real us_per_s = static_cast<bl_real>(1e6);
@@ -600,7 +643,8 @@ int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint) {
     return BL_OK;
 }
 
-int bl_sequencer_clear_hint(bl_sequencer *seq) {
+int bl_sequencer_clear_hint(bl_sequencer *seq)
+{
     if (seq == nullptr) return BL_EINVAL;
     if (!seq_ok(seq)) return BL_ENOTINIT;
     const bool was_locked = is_locked(seq);
@@ -609,7 +653,8 @@ int bl_sequencer_clear_hint(bl_sequencer *seq) {
     return BL_OK;
 }
 
-int bl_sequencer_reset(bl_sequencer *seq) {
+int bl_sequencer_reset(bl_sequencer *seq)
+{
     if (seq == nullptr) return BL_EINVAL;
     if (!seq_ok(seq)) return BL_ENOTINIT;
     const bool was_locked = is_locked(seq);
@@ -621,7 +666,8 @@ int bl_sequencer_reset(bl_sequencer *seq) {
     return BL_OK;
 }
 
-int bl_sequencer_state(const bl_sequencer *seq, bl_seq_state *st) {
+int bl_sequencer_state(const bl_sequencer *seq, bl_seq_state *st)
+{
     if (seq == nullptr || st == nullptr) return BL_EINVAL;
     if (!seq_ok(seq)) return BL_ENOTINIT;
     bl_seq_state s;
@@ -639,7 +685,8 @@ int bl_sequencer_state(const bl_sequencer *seq, bl_seq_state *st) {
 
 namespace bl {
 
-uint32_t sequencer_member_order(const bl_seq_pending &g, uint8_t order[BL_MAX_RECEIVERS]) {
+uint32_t sequencer_member_order(const bl_seq_pending &g, uint8_t order[BL_MAX_RECEIVERS])
+{
     // Insertion sort, at most BL_MAX_RECEIVERS entries; the mask is walked in
     // increasing receiver order, so equal times stay by receiver index
     // except that the pulse's own earliest receiver goes first.
@@ -648,8 +695,8 @@ uint32_t sequencer_member_order(const bl_seq_pending &g, uint8_t order[BL_MAX_RE
         const uint32_t r = static_cast<uint32_t>(__builtin_ctz(m));
         const int32_t off = g.rx_offset_us[r];
         uint32_t k = n;
-        while (k > 0 && (g.rx_offset_us[order[k - 1]] > off ||
-                         (g.rx_offset_us[order[k - 1]] == off && r == g.receiver))) {
+        while (k > 0 &&
+               (g.rx_offset_us[order[k - 1]] > off || (g.rx_offset_us[order[k - 1]] == off && r == g.receiver))) {
             order[k] = order[k - 1];
             --k;
         }
@@ -659,7 +706,8 @@ uint32_t sequencer_member_order(const bl_seq_pending &g, uint8_t order[BL_MAX_RE
     return n;
 }
 
-int sequencer_close(bl_sequencer *seq, int64_t now_us, SeqNumbered *out, const bl_seq_pending **held) {
+int sequencer_close(bl_sequencer *seq, int64_t now_us, SeqNumbered *out, const bl_seq_pending **held)
+{
     if (seq == nullptr || out == nullptr || held == nullptr) return BL_EINVAL;
     if (!seq_ok(seq)) return BL_ENOTINIT;
     if (seq->n_pending == 0) return BL_OK;

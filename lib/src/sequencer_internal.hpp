@@ -17,12 +17,12 @@ namespace bl {
 // What numbering gives a closed pulse (the bl_seq_pulse fields of the same
 // names).
 struct SeqNumbered {
-    int64_t arrival_us;   // earliest detection (us)
-    int64_t fire_us;      // firing-time estimate (us), 0 when not assigned
-    int32_t beacon;       // 0-based, or BL_SEQ_UNASSIGNED
-    uint8_t status;       // bl_seq_status
-    bool double_pulse;    // recognised as beacon 1's double pulse
-    bool repeat;          // a later arrival of a firing already out
+    int64_t arrival_us;  // earliest detection (us)
+    int64_t fire_us;     // firing-time estimate (us), 0 when not assigned
+    int32_t beacon;      // 0-based, or BL_SEQ_UNASSIGNED
+    uint8_t status;      // bl_seq_status
+    bool double_pulse;   // recognised as beacon 1's double pulse
+    bool repeat;         // a later arrival of a firing already out
 };
 
 // bl_sequencer_pop without the copy: closes and numbers the oldest pulse

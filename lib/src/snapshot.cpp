@@ -78,8 +78,7 @@ __attribute__((noinline)) int solve_snapshot(const bl_filter *f, real s_mps, rea
     if (rc != BL_OK) return rc;
     // An overdetermined fix must explain its pulses (an echo-polluted or
     // moving-robot snapshot does not).
-    if (snap.prob.count > 3 && sol->residual_rms_s > real(3) * cfg->startup_sigma_arrival_s)
-        return BL_ENOCONVERGE;
+    if (snap.prob.count > 3 && sol->residual_rms_s > real(3) * cfg->startup_sigma_arrival_s) return BL_ENOCONVERGE;
     *ref_arrival_us = snap.ref_arrival_us;
     *ref_beacon = snap.ref_beacon;
     return BL_OK;
@@ -88,8 +87,8 @@ __attribute__((noinline)) int solve_snapshot(const bl_filter *f, real s_mps, rea
 // State and covariance from a snapshot fix: position and t0 (with their
 // covariance) from the solver, heading given, v = ω = 0, s and T given.
 __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_solution &sol, int64_t ref_arrival_us,
-                                              uint32_t ref_beacon, real theta, real sigma_theta, real s_mps,
-                                              real var_s, real T_s, real var_T)
+                                              uint32_t ref_beacon, real theta, real sigma_theta, real s_mps, real var_s,
+                                              real T_s, real var_T)
 {
     const bl_config *cfg = &f->cfg_;
     VX x = VX::Zero();
@@ -173,8 +172,7 @@ void remember_ring(bl_filter *f, uint32_t b, int64_t arrival_us, uint32_t receiv
 }  // namespace
 
 // explained: the pulse was fused (accepted by the gate of a started filter).
-void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index,
-                    bool explained)
+void remember_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index, bool explained)
 {
     f->last_arrival_us_[beacon_index] = arrival_us;
     f->last_valid_mask_ |= 1u << beacon_index;
@@ -228,8 +226,7 @@ bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, rea
     for (uint32_t b = 0; b < n; ++b) {
         const uint32_t mask = ((use_mask >> b) & 1u) ? f->ring_mask_[b] : 0u;
         int64_t age_us;
-        if (mask == 0 || !bl::sub_us(latest_us, f->ring_t_us_[b], &age_us) || age_us > cycle_us ||
-            age_us < -cycle_us)
+        if (mask == 0 || !bl::sub_us(latest_us, f->ring_t_us_[b], &age_us) || age_us > cycle_us || age_us < -cycle_us)
             continue;  // no firing of this beacon in the last cycle
         real rc = 0, rs = 0;
         uint32_t heard = 0;
@@ -260,8 +257,8 @@ bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, rea
     // Mardia 1972: circular standard deviation sqrt(-2 ln Rbar), rad
     const real spread = std::sqrt(real(-2) * std::log(rbar < real(1) ? rbar : real(1)));
     if (!(spread <= real(0.6))) return false;
-    const real step_deg = cfg->angle_step_deg != real(0) ? std::fabs(cfg->angle_step_deg)
-                                                         : real(360) / real(cfg->receiver_count);
+    const real step_deg =
+        cfg->angle_step_deg != real(0) ? std::fabs(cfg->angle_step_deg) : real(360) / real(cfg->receiver_count);
     const real quant = step_deg * bl::kDegToRad / std::sqrt(real(12));
     *theta_rad = std::atan2(sum_s, sum_c);
     *sigma_rad = spread > quant ? spread : quant;
@@ -273,8 +270,8 @@ bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, rea
 // Start (or restart) *f from the snapshot of its last pulses, heading from
 // the ring when cfg.ring_heading and the ring gives one, else theta with σ
 // sigma_theta. On failure *f is untouched.
-int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_radps, real s_mps, real var_s,
-                        real T_s, real var_T, uint32_t min_beacons, uint32_t use_mask)
+int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_radps, real s_mps, real var_s, real T_s,
+                        real var_T, uint32_t min_beacons, uint32_t use_mask)
 {
     bl_tdoa_solution sol;
     int64_t ref_arrival_us = 0;

@@ -63,8 +63,7 @@ __attribute__((noinline)) void write_diverged(const bl::Vec3 &q, real t0_s, uint
 
 // D = 2: unknowns (x, y, tau); D = 3: (x, y, z, tau), where tau = s·t0 (m)
 // so that every Jacobian column is dimensionless (good conditioning).
-template <int D>
-int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
+template <int D> int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
 {
     constexpr int n = D + 1;
     using VecN = bl::Mat<n, 1>;

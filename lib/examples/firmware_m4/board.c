@@ -45,37 +45,39 @@
 #define NVIC_ISER0 REG32(0xE000E100u)
 
 #define HSI_HZ 16000000u
-#define QUEUE_LEN 32u   /* power of two */
+#define QUEUE_LEN 32u /* power of two */
 
 /* Written by the EXTI handlers, read by main: SPSC ring. */
 static volatile board_burst queue[QUEUE_LEN];
-static volatile uint32_t queue_head;   /* written by the ISR */
-static volatile uint32_t queue_tail;   /* written by main */
+static volatile uint32_t queue_head; /* written by the ISR */
+static volatile uint32_t queue_tail; /* written by main */
 static volatile uint32_t overruns;
-static uint32_t rise_us[BOARD_RECEIVERS];  /* ISR only */
-static uint8_t high_mask;                  /* ISR only */
+static uint32_t rise_us[BOARD_RECEIVERS]; /* ISR only */
+static uint8_t high_mask;                 /* ISR only */
 
 /* main-loop clock extension */
 static uint32_t last_cnt;
 static int64_t high_us;
 
-static void encoder_init(uint32_t tim) {
+static void encoder_init(uint32_t tim)
+{
     TIM_ARR(tim) = 0xFFFFu;
-    TIM_CCMR1(tim) = (1u << 0) | (1u << 8);   /* CC1S = TI1, CC2S = TI2 */
-    TIM_CCER(tim) = 0;                        /* both rising, not inverted */
-    TIM_SMCR(tim) = 3u;                       /* SMS = 011: encoder mode 3 (x4) */
-    TIM_CR1(tim) = 1u;                        /* CEN */
+    TIM_CCMR1(tim) = (1u << 0) | (1u << 8); /* CC1S = TI1, CC2S = TI2 */
+    TIM_CCER(tim) = 0;                      /* both rising, not inverted */
+    TIM_SMCR(tim) = 3u;                     /* SMS = 011: encoder mode 3 (x4) */
+    TIM_CR1(tim) = 1u;                      /* CEN */
 }
 
-void board_init(void) {
-    RCC_AHB1ENR |= (1u << 0) | (1u << 1);              /* GPIOA, GPIOB */
-    RCC_APB1ENR |= (1u << 0) | (1u << 1) | (1u << 2);  /* TIM2, TIM3, TIM4 */
-    RCC_APB2ENR |= (1u << 14);                         /* SYSCFG */
+void board_init(void)
+{
+    RCC_AHB1ENR |= (1u << 0) | (1u << 1);             /* GPIOA, GPIOB */
+    RCC_APB1ENR |= (1u << 0) | (1u << 1) | (1u << 2); /* TIM2, TIM3, TIM4 */
+    RCC_APB2ENR |= (1u << 14);                        /* SYSCFG */
 
     /* TIM2: 1 MHz free-running 32-bit clock */
     TIM_PSC(TIM2_BASE) = HSI_HZ / 1000000u - 1u;
     TIM_ARR(TIM2_BASE) = 0xFFFFFFFFu;
-    TIM_EGR(TIM2_BASE) = 1u;   /* UG: load the prescaler */
+    TIM_EGR(TIM2_BASE) = 1u; /* UG: load the prescaler */
     TIM_CR1(TIM2_BASE) = 1u;
 
     /* PB4..PB7 alternate function 2 (TIM3 CH1/CH2, TIM4 CH1/CH2), pull-up */
@@ -100,15 +102,17 @@ void board_init(void) {
     high_us = 0;
 }
 
-int64_t board_time_us(void) {
+int64_t board_time_us(void)
+{
     const uint32_t cnt = TIM_CNT(TIM2_BASE);
     if (cnt < last_cnt) high_us += (int64_t)1 << 32;
     last_cnt = cnt;
     return high_us + (int64_t)cnt;
 }
 
-int64_t board_extend_us(uint32_t stamp_us, int64_t now_us) {
-    const uint32_t age_us = (uint32_t)now_us - stamp_us;   /* modulo 2^32 */
+int64_t board_extend_us(uint32_t stamp_us, int64_t now_us)
+{
+    const uint32_t age_us = (uint32_t)now_us - stamp_us; /* modulo 2^32 */
     return now_us - (int64_t)age_us;
 }
 
@@ -117,7 +121,8 @@ int64_t board_extend_us(uint32_t stamp_us, int64_t now_us) {
 static uint32_t next_odo_us;
 static bool odo_started;
 
-bool board_odometry_pop(board_odometry *out) {
+bool board_odometry_pop(board_odometry *out)
+{
     const uint32_t now = TIM_CNT(TIM2_BASE);
     if (!odo_started) {
         odo_started = true;
@@ -131,25 +136,30 @@ bool board_odometry_pop(board_odometry *out) {
     return true;
 }
 
-bool board_burst_pop(board_burst *out) {
+bool board_burst_pop(board_burst *out)
+{
     const uint32_t tail = queue_tail;
     if (tail == queue_head) return false;
     out->start_us = queue[tail].start_us;
     out->width_us = queue[tail].width_us;
     out->receiver = queue[tail].receiver;
-    out->amplitude_mv = 0;      /* no ADC */
-    out->double_pulse = false;  /* the sequencer pairs the bursts */
+    out->amplitude_mv = 0;     /* no ADC */
+    out->double_pulse = false; /* the sequencer pairs the bursts */
     __asm__ volatile("dmb" ::: "memory");
     queue_tail = (tail + 1u) & (QUEUE_LEN - 1u);
     return true;
 }
 
-uint32_t board_burst_overruns(void) { return overruns; }
+uint32_t board_burst_overruns(void)
+{
+    return overruns;
+}
 
 /* Debugger-visible copy of the latest pose. */
 volatile board_pose board_last_pose;
 
-void board_publish(const board_pose *pose) {
+void board_publish(const board_pose *pose)
+{
     board_last_pose.t_us = pose->t_us;
     board_last_pose.x_m = pose->x_m;
     board_last_pose.y_m = pose->y_m;
@@ -167,18 +177,19 @@ void board_publish(const board_pose *pose) {
 }
 
 /* Shared by every EXTI line 0..7: time each edge, queue complete bursts. */
-static void exti_receivers(void) {
+static void exti_receivers(void)
+{
     const uint32_t now = TIM_CNT(TIM2_BASE);
     const uint32_t pending = EXTI_PR & 0xFFu;
-    EXTI_PR = pending;   /* write 1 to clear */
+    EXTI_PR = pending; /* write 1 to clear */
     const uint32_t level = GPIO_IDR(GPIOA_BASE);
     for (uint32_t r = 0; r < BOARD_RECEIVERS; ++r) {
         const uint32_t bit = 1u << r;
         if ((pending & bit) == 0) continue;
-        if ((level & bit) != 0) {   /* rising: leading edge */
+        if ((level & bit) != 0) { /* rising: leading edge */
             rise_us[r] = now;
             high_mask = (uint8_t)(high_mask | bit);
-        } else if ((high_mask & bit) != 0) {   /* falling: burst complete */
+        } else if ((high_mask & bit) != 0) { /* falling: burst complete */
             high_mask = (uint8_t)(high_mask & ~bit);
             const uint32_t width = now - rise_us[r];
             const uint32_t head = queue_head;
@@ -196,9 +207,27 @@ static void exti_receivers(void) {
     }
 }
 
-void EXTI0_IRQHandler(void) { exti_receivers(); }
-void EXTI1_IRQHandler(void) { exti_receivers(); }
-void EXTI2_IRQHandler(void) { exti_receivers(); }
-void EXTI3_IRQHandler(void) { exti_receivers(); }
-void EXTI4_IRQHandler(void) { exti_receivers(); }
-void EXTI9_5_IRQHandler(void) { exti_receivers(); }
+void EXTI0_IRQHandler(void)
+{
+    exti_receivers();
+}
+void EXTI1_IRQHandler(void)
+{
+    exti_receivers();
+}
+void EXTI2_IRQHandler(void)
+{
+    exti_receivers();
+}
+void EXTI3_IRQHandler(void)
+{
+    exti_receivers();
+}
+void EXTI4_IRQHandler(void)
+{
+    exti_receivers();
+}
+void EXTI9_5_IRQHandler(void)
+{
+    exti_receivers();
+}

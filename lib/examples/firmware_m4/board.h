@@ -23,17 +23,17 @@
 
 /* One burst seen by one receiver, on the 32-bit TIM2 clock. */
 typedef struct board_burst {
-    uint32_t start_us;   /* leading edge, TIM2 count (wraps every 71.6 min) */
-    uint16_t width_us;   /* time above threshold (us), saturated at 65535 */
+    uint32_t start_us;     /* leading edge, TIM2 count (wraps every 71.6 min) */
+    uint16_t width_us;     /* time above threshold (us), saturated at 65535 */
     uint16_t amplitude_mv; /* peak envelope (mV); 0 without an ADC (this board) */
-    uint8_t receiver;    /* 0..7 */
-    bool double_pulse;   /* the front end paired beacon 1's two bursts; false on this
+    uint8_t receiver;      /* 0..7 */
+    bool double_pulse;     /* the front end paired beacon 1's two bursts; false on this
                             board (the sequencer pairs them from the bursts/width) */
 } board_burst;
 
 /* Both wheel counters latched together, with the TIM2 time of the latch. */
 typedef struct board_odometry {
-    uint32_t stamp_us;   /* TIM2 count at the latch */
+    uint32_t stamp_us;    /* TIM2 count at the latch */
     uint16_t left, right; /* cumulative counts (wrap modulo 2^16) */
 } board_odometry;
 
@@ -47,7 +47,7 @@ int64_t board_extend_us(uint32_t stamp_us, int64_t now_us);
 
 /* Takes the next encoder sample (the board latches both counters every
  * BOARD_ODOMETRY_PERIOD_US); false when none is due. */
-#define BOARD_ODOMETRY_PERIOD_US 10000u   /* 100 Hz, the site's encoder_rate_hz */
+#define BOARD_ODOMETRY_PERIOD_US 10000u /* 100 Hz, the site's encoder_rate_hz */
 bool board_odometry_pop(board_odometry *out);
 
 /* Takes the oldest queued burst; false when the queue is empty. */
@@ -60,12 +60,12 @@ uint32_t board_burst_overruns(void);
 typedef struct board_pose {
     int64_t t_us;
     float x_m, y_m, theta_rad, v_mps, omega_radps;
-    float sos_mps, period_s;      /* speed of sound (m/s), beacon period (s) */
-    float var_x_m2, cov_xy_m2, var_y_m2;  /* position covariance (m^2) */
+    float sos_mps, period_s;             /* speed of sound (m/s), beacon period (s) */
+    float var_x_m2, cov_xy_m2, var_y_m2; /* position covariance (m^2) */
     float var_theta_rad2;
     uint32_t reset_counter;
-    uint32_t pulses_fused, pulses_rejected, repeats_skipped, sequencer_spurious,
-        snapshot_restarts, burst_overruns, errors;
+    uint32_t pulses_fused, pulses_rejected, repeats_skipped, sequencer_spurious, snapshot_restarts, burst_overruns,
+        errors;
     bool converged;
 } board_pose;
 

@@ -42,7 +42,8 @@ static board_pose fw_out;
 static bl_config fw_cfg;
 static bl_localizer fw_loc;
 
-static void publish(void) {
+static void publish(void)
+{
     bl_estimate est;
     bl_loc_counters c;
     if (bl_localizer_estimate(&fw_loc, &est) != BL_OK || bl_localizer_counters(&fw_loc, &c) != BL_OK) return;
@@ -54,7 +55,7 @@ static void publish(void) {
     fw_out.omega_radps = est.omega_radps;
     fw_out.sos_mps = est.speed_of_sound_mps;
     fw_out.period_s = est.period_s;
-    fw_out.var_x_m2 = est.cov[0];   /* cov: row-major 5x5 of (x, y, theta, v, omega) */
+    fw_out.var_x_m2 = est.cov[0]; /* cov: row-major 5x5 of (x, y, theta, v, omega) */
     fw_out.cov_xy_m2 = est.cov[1];
     fw_out.var_y_m2 = est.cov[6];
     fw_out.var_theta_rad2 = est.cov[12];
@@ -69,20 +70,19 @@ static void publish(void) {
     board_publish(&fw_out);
 }
 
-int main(void) {
+int main(void)
+{
     board_init();
     bl_seq_config seq_cfg;
     if (bl_config_default(&fw_cfg) != BL_OK) {
-        for (;;) {
-        }
+        for (;;) {}
     }
     fw_cfg.max_predict_gap_s = MAX_COAST_S;
     /* (bl_localizer_seq_config would also name a refusal's cause: text the
      * firmware has no use for, 400 B of flash) */
     if (bl_sequencer_config_from_site(&fw_cfg, 0, &seq_cfg) != BL_OK ||
         bl_localizer_init(&fw_loc, &fw_cfg, &seq_cfg) != BL_OK) {
-        for (;;) {
-        }
+        for (;;) {}
     }
     /* wheel travel per encoder count (m) = 2·pi·r / counts per turn */
     const float m_per_tick = TWO_PI * fw_cfg.wheel_radius_m / (float)fw_cfg.ticks_per_rev;
@@ -103,7 +103,7 @@ int main(void) {
             d.width_us = b.width_us;
             d.amplitude_mv = b.amplitude_mv;
             d.double_pulse = b.double_pulse;
-            d.tag = (uint32_t)now_us;   /* when the loop took it, low 32 bits (latency figure) */
+            d.tag = (uint32_t)now_us; /* when the loop took it, low 32 bits (latency figure) */
             if (bl_localizer_detection(&fw_loc, &d) != BL_OK) fw_out.errors++;
         }
 
@@ -133,8 +133,7 @@ int main(void) {
 
         /* 4. events (a robot would log them or send them on) */
         bl_loc_event ev;
-        while (bl_localizer_next_event(&fw_loc, &ev) == 1) {
-        }
+        while (bl_localizer_next_event(&fw_loc, &ev) == 1) {}
 
         /* 5. every update is published */
         bl_loc_status st;

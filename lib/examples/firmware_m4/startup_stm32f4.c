@@ -33,26 +33,19 @@ typedef void (*vector_fn)(void);
 /* 16 system exceptions + 82 STM32F407 interrupts (RM0090 Table 61). */
 #define N_VECTORS (16 + 82)
 __attribute__((section(".isr_vector"), used)) const vector_fn vector_table[N_VECTORS] = {
-    [0] = (vector_fn)&_estack,   /* initial main stack pointer */
-    [1] = Reset_Handler,
-    [2] = NMI_Handler,
-    [3] = HardFault_Handler,
-    [4] = MemManage_Handler,
-    [5] = BusFault_Handler,
-    [6] = UsageFault_Handler,
-    [11] = SVC_Handler,
-    [12] = DebugMon_Handler,
-    [14] = PendSV_Handler,
-    [15] = SysTick_Handler,
-    [16 + 6] = EXTI0_IRQHandler,
-    [16 + 7] = EXTI1_IRQHandler,
-    [16 + 8] = EXTI2_IRQHandler,
-    [16 + 9] = EXTI3_IRQHandler,
-    [16 + 10] = EXTI4_IRQHandler,
-    [16 + 23] = EXTI9_5_IRQHandler,
+    [0] = (vector_fn)&_estack, /* initial main stack pointer */
+    [1] = Reset_Handler,          [2] = NMI_Handler,
+    [3] = HardFault_Handler,      [4] = MemManage_Handler,
+    [5] = BusFault_Handler,       [6] = UsageFault_Handler,
+    [11] = SVC_Handler,           [12] = DebugMon_Handler,
+    [14] = PendSV_Handler,        [15] = SysTick_Handler,
+    [16 + 6] = EXTI0_IRQHandler,  [16 + 7] = EXTI1_IRQHandler,
+    [16 + 8] = EXTI2_IRQHandler,  [16 + 9] = EXTI3_IRQHandler,
+    [16 + 10] = EXTI4_IRQHandler, [16 + 23] = EXTI9_5_IRQHandler,
 };
 
-void Reset_Handler(void) {
+void Reset_Handler(void)
+{
     /* enable CP10/CP11 (the FPU) before any float instruction: SCB->CPACR */
     *(volatile uint32_t *)0xE000ED88u |= (0xFu << 20);
     __asm__ volatile("dsb\n isb" ::: "memory");
@@ -60,11 +53,10 @@ void Reset_Handler(void) {
     for (uint32_t *dst = &_sdata; dst < &_edata;) *dst++ = *src++;
     for (uint32_t *dst = &_sbss; dst < &_ebss;) *dst++ = 0;
     (void)main();
-    for (;;) {
-    }
+    for (;;) {}
 }
 
-void Default_Handler(void) {
-    for (;;) {
-    }
+void Default_Handler(void)
+{
+    for (;;) {}
 }

@@ -42,14 +42,14 @@ typedef double bl_real;
 /* Error codes: every fallible call returns BL_OK or one of these. */
 typedef enum bl_error {
     BL_OK = 0,
-    BL_EINVAL = -1,       /* NULL pointer, NaN/inf, or out-of-range argument */
-    BL_ECONFIG = -2,      /* configuration inconsistent (see bl_config_check) */
-    BL_ETIME = -3,        /* time went backwards or jumped beyond the limit */
-    BL_EBEACON = -4,      /* unknown beacon id */
-    BL_ENOTINIT = -5,     /* object not initialised, or estimate not available yet */
-    BL_EDEGENERATE = -6,  /* geometry cannot determine the solution (collinear, too few) */
-    BL_ENOCONVERGE = -7,  /* iteration did not converge within its limit */
-    BL_EFULL = -8         /* a fixed-capacity buffer is full */
+    BL_EINVAL = -1,      /* NULL pointer, NaN/inf, or out-of-range argument */
+    BL_ECONFIG = -2,     /* configuration inconsistent (see bl_config_check) */
+    BL_ETIME = -3,       /* time went backwards or jumped beyond the limit */
+    BL_EBEACON = -4,     /* unknown beacon id */
+    BL_ENOTINIT = -5,    /* object not initialised, or estimate not available yet */
+    BL_EDEGENERATE = -6, /* geometry cannot determine the solution (collinear, too few) */
+    BL_ENOCONVERGE = -7, /* iteration did not converge within its limit */
+    BL_EFULL = -8        /* a fixed-capacity buffer is full */
 } bl_error;
 
 /* Short English text for an error code (static storage, never NULL). */

@@ -26,34 +26,34 @@ extern "C" {
 
 typedef struct bl_config {
     /* ---- [beacons] ---- */
-    uint32_t beacon_count;            /* count: N, 3..BL_MAX_BEACONS */
-    bl_real beacon_period_s;          /* period_s: nominal T between successive firings
+    uint32_t beacon_count;          /* count: N, 3..BL_MAX_BEACONS */
+    bl_real beacon_period_s;        /* period_s: nominal T between successive firings
                                          (beacon 1 first, cycle 1..N), > 0 */
-    bl_real double_pulse_spacing_s;   /* double_pulse_spacing_s: beacon 1's second burst
+    bl_real double_pulse_spacing_s; /* double_pulse_spacing_s: beacon 1's second burst
                                          after its first (used by the sequencer), >= 0 */
-    bl_real burst_length_s;           /* burst_length_s: length of one burst, >= 0 */
+    bl_real burst_length_s;         /* burst_length_s: length of one burst, >= 0 */
     /* ---- [beacon1] .. [beaconN] ---- */
     bl_beacon beacons[BL_MAX_BEACONS]; /* x_m, y_m, z_m of beacon i at beacons[i-1] */
 
     /* ---- [receivers] ---- */
-    uint32_t receiver_count;          /* count: 1..BL_MAX_RECEIVERS */
-    bl_real ring_radius_m;            /* ring_radius_m: ring centred on the wheel-base
+    uint32_t receiver_count;   /* count: 1..BL_MAX_RECEIVERS */
+    bl_real ring_radius_m;     /* ring_radius_m: ring centred on the wheel-base
                                          centre, >= 0 */
-    bl_real first_angle_deg;          /* first_angle_deg: body-frame angle of receiver 0
+    bl_real first_angle_deg;   /* first_angle_deg: body-frame angle of receiver 0
                                          (0 = forward, +x body), CCW */
-    bl_real angle_step_deg;           /* angle_step_deg (optional key): body angle between
+    bl_real angle_step_deg;    /* angle_step_deg (optional key): body angle between
                                          receiver k and k+1, CCW; 0 means evenly spaced,
                                          360/receiver_count (the default) */
-    bl_real receiver_height_m;        /* height_m: z of every receiver in the site frame */
-    bl_real beamwidth_deg;            /* beamwidth_deg: full beam width at half amplitude
+    bl_real receiver_height_m; /* height_m: z of every receiver in the site frame */
+    bl_real beamwidth_deg;     /* beamwidth_deg: full beam width at half amplitude
                                          (simulator / sequencer), (0, 360] */
 
     /* ---- [robot] ---- */
-    bl_real wheel_base_m;             /* wheel_base_m: distance between the wheels, > 0 */
-    bl_real wheel_radius_m;           /* wheel_radius_m: > 0 (ticks -> metres in the caller) */
-    uint32_t ticks_per_rev;           /* ticks_per_rev: encoder ticks per wheel turn, > 0 */
-    bl_real encoder_rate_hz;          /* encoder_rate_hz: nominal encoder frame rate, > 0 */
-    bl_real sigma_wheel_scale;        /* sigma_wheel_scale (optional key, default 0 = off):
+    bl_real wheel_base_m;      /* wheel_base_m: distance between the wheels, > 0 */
+    bl_real wheel_radius_m;    /* wheel_radius_m: > 0 (ticks -> metres in the caller) */
+    uint32_t ticks_per_rev;    /* ticks_per_rev: encoder ticks per wheel turn, > 0 */
+    bl_real encoder_rate_hz;   /* encoder_rate_hz: nominal encoder frame rate, > 0 */
+    bl_real sigma_wheel_scale; /* sigma_wheel_scale (optional key, default 0 = off):
                                          initial σ (dimensionless) of each of the two
                                          wheel-scale states (true wheel distance = scale ·
                                          measured increment; both start at 1), 0..0.5;
@@ -74,19 +74,19 @@ typedef struct bl_config {
                                          1 dof: reject if |innov| > gate_sigma·σ_innov), > 0 */
 
     /* ---- tuning ([tuning] in the bridge's site file; defaults from bl_config_default) ---- */
-    bl_real sigma_period_s;           /* initial σ of the beacon period T (s), > 0 */
-    bl_real startup_sigma_arrival_s;  /* σ arrival used until converged (Kleeman §3.9: high
+    bl_real sigma_period_s;                      /* initial σ of the beacon period T (s), > 0 */
+    bl_real startup_sigma_arrival_s;             /* σ arrival used until converged (Kleeman §3.9: high
                                          variance during start-up), >= sigma_arrival_s */
-    bl_real startup_gate_sigma;       /* gate (σ) used until converged, >= gate_sigma */
-    bl_real converged_sigma_xy_m;     /* converged once sqrt(max(Pxx,Pyy)) is below this */
-    bl_real accel_noise_mps2;         /* process noise: σ of linear acceleration
+    bl_real startup_gate_sigma;                  /* gate (σ) used until converged, >= gate_sigma */
+    bl_real converged_sigma_xy_m;                /* converged once sqrt(max(Pxx,Pyy)) is below this */
+    bl_real accel_noise_mps2;                    /* process noise: σ of linear acceleration
                                          (constant-velocity predict; odometry v/ω states), >= 0 */
-    bl_real angular_accel_noise_radps2; /* process noise: σ of angular acceleration, >= 0 */
-    bl_real heading_noise_rad_per_sqrt_s; /* odometry heading noise while moving: σ² grows by
+    bl_real angular_accel_noise_radps2;          /* process noise: σ of angular acceleration, >= 0 */
+    bl_real heading_noise_rad_per_sqrt_s;        /* odometry heading noise while moving: σ² grows by
                                          this² per second (the "offset", Kleeman §3.10) ... */
-    bl_real heading_noise_fraction;   /* ... plus (this · |Δθ|)² per step (the "fraction of
+    bl_real heading_noise_fraction;              /* ... plus (this · |Δθ|)² per step (the "fraction of
                                          the angle increment", §3.10), >= 0 */
-    bl_real stationary_noise_scale;   /* process-noise scale when stationary (0..1] (§3.10) */
+    bl_real stationary_noise_scale;              /* process-noise scale when stationary (0..1] (§3.10) */
     bl_real speed_of_sound_drift_mps_per_sqrt_s; /* random walk of s (m/s/√s), >= 0; default
                                          0.2: follows a 5 °C/min air-temperature ramp
                                          within ~1 m/s (temperature-ramp scenario);
@@ -94,26 +94,26 @@ typedef struct bl_config {
     bl_real period_drift_s_per_sqrt_s;           /* random walk of T, >= 0 */
     bl_real wheel_scale_drift_per_sqrt_s;        /* random walk of each wheel scale
                                                     (1/√s: σ² grows by this² per s), >= 0 */
-    bl_real firing_jitter_s;          /* σ of firing-time jitter per beacon slot, >= 0 */
-    uint32_t iekf_max_iterations;     /* IEKF relinearisations per pulse, 1..20 */
-    bl_real iekf_step_tolerance;      /* stop iterating when |Δposition| < this (m) */
-    uint32_t reset_reject_count;      /* K: the localizer's persistent-rejection threshold:
+    bl_real firing_jitter_s;                     /* σ of firing-time jitter per beacon slot, >= 0 */
+    uint32_t iekf_max_iterations;                /* IEKF relinearisations per pulse, 1..20 */
+    bl_real iekf_step_tolerance;                 /* stop iterating when |Δposition| < this (m) */
+    uint32_t reset_reject_count;                 /* K: the localizer's persistent-rejection threshold:
                                          it restarts the filter from the snapshot solver
                                          (bl_filter_start_snapshot) after K rejected first
                                          arrivals in its window; 0 = never. Not read by
                                          the filter itself */
-    bl_real initial_theta_rad;        /* heading assumed by the automatic snapshot start
+    bl_real initial_theta_rad;                   /* heading assumed by the automatic snapshot start
                                          when the ring gives none (ring_heading) */
-    bl_real reset_sigma_theta_rad;    /* heading σ after a snapshot (re-)start without a
+    bl_real reset_sigma_theta_rad;               /* heading σ after a snapshot (re-)start without a
                                          ring heading, > 0 */
-    uint32_t ring_heading;            /* 1 (default): a snapshot (re-)start takes its heading
+    uint32_t ring_heading;                       /* 1 (default): a snapshot (re-)start takes its heading
                                          from the receiver ring — which receivers heard
                                          each beacon of the last cycle (filter.h,
                                          "Heading from the ring") — when the ring gives
                                          one; 0: always the given/kept heading */
-    bl_real initial_sigma_v_mps;      /* σ of v after a snapshot (re-)start (v = 0), > 0 */
-    bl_real initial_sigma_omega_radps; /* σ of ω after a snapshot (re-)start (ω = 0), > 0 */
-    bl_real max_predict_gap_s;        /* longest extrapolation of the state (s), (0, 3600]:
+    bl_real initial_sigma_v_mps;                 /* σ of v after a snapshot (re-)start (v = 0), > 0 */
+    bl_real initial_sigma_omega_radps;           /* σ of ω after a snapshot (re-)start (ω = 0), > 0 */
+    bl_real max_predict_gap_s;                   /* longest extrapolation of the state (s), (0, 3600]:
                                          a predict further ahead returns BL_ETIME; a
                                          pulse further ahead finds the filter stale and
                                          it re-initialises itself from the snapshot of
@@ -134,8 +134,7 @@ int bl_config_check(const bl_config *cfg, const char **bad_field);
 
 /* Receiver k's body-frame angle (rad): first_angle_deg + k·step, in radians.
  * Errors: BL_EINVAL (NULL, k >= receiver_count). */
-int bl_config_receiver_angle(const bl_config *cfg, uint32_t receiver_index,
-                             bl_real *angle_rad);
+int bl_config_receiver_angle(const bl_config *cfg, uint32_t receiver_index, bl_real *angle_rad);
 
 /* True when a and b describe the same geometry, so that a running filter's
  * state means the same under either (bl_filter_update_config accepts b

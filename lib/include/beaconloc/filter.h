@@ -123,45 +123,45 @@ typedef struct bl_filter {
     bl_config cfg_;
     bl_real x_[BL_FILTER_NX];
     bl_real P_[BL_FILTER_NX * BL_FILTER_NX];
-    int64_t t_us_;          /* time of the state */
-    int64_t epoch_us_;      /* t0 = epoch_us_ + x_[BL_IX_T0] seconds */
-    uint32_t ref_beacon_;   /* beacon index (0-based) whose firing is t0 */
+    int64_t t_us_;        /* time of the state */
+    int64_t epoch_us_;    /* t0 = epoch_us_ + x_[BL_IX_T0] seconds */
+    uint32_t ref_beacon_; /* beacon index (0-based) whose firing is t0 */
     uint32_t flags_;
     uint32_t magic_;
     uint32_t reset_count_;
-    uint32_t wheel_fused_;  /* scalar wheel-speed updates fused (v and ω each count) */
+    uint32_t wheel_fused_;   /* scalar wheel-speed updates fused (v and ω each count) */
     uint32_t wheel_refused_; /* scalar wheel-speed updates refused (non-finite result) */
     uint32_t last_valid_mask_;
     uint32_t accepted_[BL_MAX_BEACONS];
     uint32_t rejected_[BL_MAX_BEACONS];
     int64_t last_arrival_us_[BL_MAX_BEACONS];
-    int64_t ring_t_us_[BL_MAX_BEACONS];   /* earliest arrival of the latest firing */
-    uint32_t ring_mask_[BL_MAX_BEACONS];  /* receivers that heard it (bit per receiver) */
-    uint32_t ring_explained_mask_;        /* beacons whose latest firing had a fused arrival */
+    int64_t ring_t_us_[BL_MAX_BEACONS];  /* earliest arrival of the latest firing */
+    uint32_t ring_mask_[BL_MAX_BEACONS]; /* receivers that heard it (bit per receiver) */
+    uint32_t ring_explained_mask_;       /* beacons whose latest firing had a fused arrival */
 } bl_filter;
 
 /* Explicit start: a known pose and firing time. */
 typedef struct bl_filter_prior {
-    int64_t t_us;            /* time of the pose */
+    int64_t t_us; /* time of the pose */
     bl_real x_m, y_m, theta_rad;
     bl_real v_mps, omega_radps;
-    bl_real sigma_xy_m;      /* σ of x and of y, > 0 */
-    bl_real sigma_theta_rad; /* > 0 */
-    bl_real sigma_v_mps;     /* > 0 */
+    bl_real sigma_xy_m;        /* σ of x and of y, > 0 */
+    bl_real sigma_theta_rad;   /* > 0 */
+    bl_real sigma_v_mps;       /* > 0 */
     bl_real sigma_omega_radps; /* > 0 */
-    int64_t t0_us;           /* firing time of beacon t0_beacon_index (any cycle) */
-    uint32_t t0_beacon_index; /* 0-based */
-    bl_real sigma_t0_s;      /* > 0; e.g. 1e-3 if only roughly known */
+    int64_t t0_us;             /* firing time of beacon t0_beacon_index (any cycle) */
+    uint32_t t0_beacon_index;  /* 0-based */
+    bl_real sigma_t0_s;        /* > 0; e.g. 1e-3 if only roughly known */
     /* speed of sound and period start from cfg (speed_of_sound_mps,
      * beacon_period_s) with σ sigma_speed_of_sound_mps, sigma_period_s. */
 } bl_filter_prior;
 
 typedef struct bl_estimate {
-    int64_t t_us;               /* time the estimate refers to */
+    int64_t t_us;                /* time the estimate refers to */
     bl_real x_m, y_m, theta_rad; /* theta wrapped to (-pi, pi] */
     bl_real v_mps, omega_radps;
     bl_real speed_of_sound_mps, period_s;
-    int64_t t0_us;              /* firing time of beacon 1 (index 0) of the cycle of the
+    int64_t t0_us; /* firing time of beacon 1 (index 0) of the cycle of the
                                    latest fused pulse; beacon i fires at
                                    t0_us + i·period_s (+ k·count·period_s) */
     bl_real sigma_speed_of_sound_mps, sigma_period_s, sigma_t0_s;
@@ -172,23 +172,23 @@ typedef struct bl_estimate {
      * (m/s)², (rad/s)² on the diagonal; e.g. (x, θ) m·rad, (x, v) m²/s,
      * (θ, ω) rad²/s, (v, ω) m·rad/s². */
     bl_real cov[25];
-    bool started;               /* a pose exists (else only counters are valid) */
-    bool converged;             /* position σ fell below cfg.converged_sigma_xy_m
+    bool started;                      /* a pose exists (else only counters are valid) */
+    bool converged;                    /* position σ fell below cfg.converged_sigma_xy_m
                                    and has not grown above twice that since */
-    uint32_t reset_counter;     /* +1 on every (re-)initialisation after the first start */
+    uint32_t reset_counter;            /* +1 on every (re-)initialisation after the first start */
     uint32_t accepted[BL_MAX_BEACONS]; /* per beacon index: pulses fused */
     uint32_t rejected[BL_MAX_BEACONS]; /* per beacon index: pulses rejected by the gate */
-    uint32_t wheel_speed_fused;   /* wheel-speed measurements (v and ω, each one) fused
+    uint32_t wheel_speed_fused;        /* wheel-speed measurements (v and ω, each one) fused
                                      by bl_filter_predict_odometry (ungated) */
-    uint32_t wheel_speed_refused; /* wheel-speed measurements refused: the update would
+    uint32_t wheel_speed_refused;      /* wheel-speed measurements refused: the update would
                                      have left the state non-finite (state kept) */
 } bl_estimate;
 
 typedef struct bl_expected_pulse {
-    int64_t fire_us;     /* predicted firing time */
-    int64_t arrival_us;  /* predicted arrival at the ring centre */
-    bl_real flight_s;    /* predicted time of flight (s) */
-    bl_real sigma_s;     /* σ of the predicted arrival incl. measurement noise (s) */
+    int64_t fire_us;    /* predicted firing time */
+    int64_t arrival_us; /* predicted arrival at the ring centre */
+    bl_real flight_s;   /* predicted time of flight (s) */
+    bl_real sigma_s;    /* σ of the predicted arrival incl. measurement noise (s) */
 } bl_expected_pulse;
 
 /* Initialise *f for cfg (copied). The filter is not started: pulses are
@@ -291,15 +291,14 @@ int bl_filter_predict(bl_filter *f, int64_t t_us);
  * time; before the start: older than a buffered pulse by more than that),
  * BL_EINVAL (the receiver is on the beacon, or the update would leave the
  * state non-finite: refused). */
-int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
-                         uint32_t receiver_index, bl_fusion_result *result);
+int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index,
+                         bl_fusion_result *result);
 
 /* Raw state and covariance (layout BL_IX_*; t0 relative to the internal
  * epoch; P row-major NXxNX in the units of the states, e.g. P[T0][T0] s²),
  * for diagnostics and tests. Either pointer may be NULL.
  * Errors: BL_EINVAL (NULL f), BL_ENOTINIT (not started). */
-int bl_filter_get_state(const bl_filter *f, bl_real x[BL_FILTER_NX],
-                        bl_real P[BL_FILTER_NX * BL_FILTER_NX]);
+int bl_filter_get_state(const bl_filter *f, bl_real x[BL_FILTER_NX], bl_real P[BL_FILTER_NX * BL_FILTER_NX]);
 
 /* Current estimate (at the state time). Counters are valid even before the
  * start (est->started false). Errors: BL_EINVAL (NULL), BL_ENOTINIT (not
@@ -318,8 +317,7 @@ int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estimate *est);
  * undefined there: ring centre on the beacon, or a non-finite or
  * out-of-range result), BL_ENOTINIT (not started),
  * BL_EBEACON, BL_ETIME (|after_us - state time| > cfg.max_predict_gap_s). */
-int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_index, int64_t after_us,
-                               bl_expected_pulse *out);
+int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_index, int64_t after_us, bl_expected_pulse *out);
 
 #ifdef __cplusplus
 }

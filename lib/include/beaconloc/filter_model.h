@@ -33,8 +33,8 @@ typedef struct bl_pulse_geometry {
  * s - v·u <= 1e-3 m/s: the pulse cannot catch the receiver, or a
  * non-finite result from finite but far out-of-range inputs),
  * BL_EBEACON (beacon_index >= cfg->beacon_count). */
-int bl_model_pulse(const bl_config *cfg, const bl_real x[BL_FILTER_NX], const bl_pulse_geometry *g,
-                   bl_real *h_rel_s, bl_real H[BL_FILTER_NX]);
+int bl_model_pulse(const bl_config *cfg, const bl_real x[BL_FILTER_NX], const bl_pulse_geometry *g, bl_real *h_rel_s,
+                   bl_real H[BL_FILTER_NX]);
 
 /* Odometry transition (Kleeman 1992 eq. 24 input form; differential drive)
  * over measured wheel increments d_left_m, d_right_m, scaled by the state's
@@ -47,8 +47,7 @@ int bl_model_pulse(const bl_config *cfg, const bl_real x[BL_FILTER_NX], const bl
  * Errors: BL_EINVAL (NULL cfg/x/x_out, non-finite x or increments,
  * cfg->wheel_base_m <= 0, or a non-finite result). */
 int bl_model_odometry(const bl_config *cfg, const bl_real x[BL_FILTER_NX], bl_real d_left_m, bl_real d_right_m,
-                      bl_real x_out[BL_FILTER_NX], bl_real F[BL_FILTER_NX * BL_FILTER_NX],
-                      bl_real G[BL_FILTER_NX * 2]);
+                      bl_real x_out[BL_FILTER_NX], bl_real F[BL_FILTER_NX * BL_FILTER_NX], bl_real G[BL_FILTER_NX * 2]);
 
 /* Constant-velocity transition over dt_s >= 0 (Kleeman 1992 eq. 15 with
  * the turn rate as a state): x_out, F (optional).

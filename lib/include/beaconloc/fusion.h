@@ -27,10 +27,10 @@ typedef enum bl_fusion_status {
 
 typedef struct bl_fusion_result {
     bl_fusion_status status;
-    bl_real innovation;      /* measured - predicted, in the measurement's unit (s for a pulse, m/s for v, rad/s for ω) */
-    bl_real innovation_var;  /* H P Hᵀ + R, in that unit squared */
-    bl_real test_ratio;      /* |innovation| / (gate · sqrt(innovation_var)); > 1 rejected; 0 when ungated */
-    uint32_t iterations;     /* IEKF iterations (0 when not fused) */
+    bl_real innovation; /* measured - predicted, in the measurement's unit (s for a pulse, m/s for v, rad/s for ω) */
+    bl_real innovation_var; /* H P Hᵀ + R, in that unit squared */
+    bl_real test_ratio;     /* |innovation| / (gate · sqrt(innovation_var)); > 1 rejected; 0 when ungated */
+    uint32_t iterations;    /* IEKF iterations (0 when not fused) */
 } bl_fusion_result;
 
 #ifdef __cplusplus

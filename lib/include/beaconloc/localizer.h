@@ -109,33 +109,33 @@ extern "C" {
 
 /* Wheel travel since the previous sample (differential drive). */
 typedef struct bl_wheel_increment {
-    int64_t t_us;          /* time of this sample (end of the increment), us */
-    bl_real d_left_m;      /* left wheel travel since the previous sample, m, as measured
+    int64_t t_us;        /* time of this sample (end of the increment), us */
+    bl_real d_left_m;    /* left wheel travel since the previous sample, m, as measured
                               with the nominal wheel radius (ticks · 2πr / ticks_per_rev) */
-    bl_real d_right_m;     /* right wheel travel, m */
-    bool reference_only;   /* no increment known (first sample, encoder restart, count
+    bl_real d_right_m;   /* right wheel travel, m */
+    bool reference_only; /* no increment known (first sample, encoder restart, count
                               glitch): the sample only sets the time reference */
-    uint32_t tag;          /* caller's tag, never read by the library */
+    uint32_t tag;        /* caller's tag, never read by the library */
 } bl_wheel_increment;
 
 typedef enum bl_loc_event_kind {
-    BL_LOC_EV_STARTED = 1,        /* filter started (first start, or first after a fresh
+    BL_LOC_EV_STARTED = 1, /* filter started (first start, or first after a fresh
                                      re-initialisation): x_m, y_m */
-    BL_LOC_EV_RESET = 2,          /* re-initialised; see cause */
+    BL_LOC_EV_RESET = 2,   /* re-initialised; see cause */
     BL_LOC_EV_CONVERGED = 3,
     BL_LOC_EV_NOT_CONVERGED = 4,
-    BL_LOC_EV_RESYNC = 5          /* beacon numbering re-synchronised from the filter */
+    BL_LOC_EV_RESYNC = 5 /* beacon numbering re-synchronised from the filter */
 } bl_loc_event_kind;
 
 typedef enum bl_loc_reset_cause {
     BL_LOC_CAUSE_NONE = 0,
     BL_LOC_CAUSE_PERSISTENT_REJECTION = 1, /* restarted from the snapshot; count = rejected
                                               arrivals of window_len */
-    BL_LOC_CAUSE_SNAPSHOT = 2,    /* the filter restarted itself from the snapshot (a stale
+    BL_LOC_CAUSE_SNAPSHOT = 2,             /* the filter restarted itself from the snapshot (a stale
                                      state after a time gap) */
-    BL_LOC_CAUSE_TIME_GAP = 3,    /* a predict beyond max_predict_gap_s: fresh filter */
-    BL_LOC_CAUSE_STALE_PULSE = 4, /* a pulse too old for the state: fresh filter */
-    BL_LOC_CAUSE_CONFIG = 5       /* bl_localizer_reinit (new geometry): fresh filter */
+    BL_LOC_CAUSE_TIME_GAP = 3,             /* a predict beyond max_predict_gap_s: fresh filter */
+    BL_LOC_CAUSE_STALE_PULSE = 4,          /* a pulse too old for the state: fresh filter */
+    BL_LOC_CAUSE_CONFIG = 5                /* bl_localizer_reinit (new geometry): fresh filter */
 } bl_loc_reset_cause;
 
 typedef struct bl_loc_event {
@@ -150,44 +150,44 @@ typedef struct bl_loc_event {
 
 /* Counters: uint32, wrapping; zero at init (bl_localizer_reinit keeps them). */
 typedef struct bl_loc_counters {
-    uint32_t pulses_in;          /* pulses popped from the sequencer (any status) */
-    uint32_t pulses_accepted;    /* arrivals fused (accepted, started, reset) */
-    uint32_t pulses_rejected;    /* arrivals rejected by the gate */
-    uint32_t pulses_buffered;    /* arrivals kept for the snapshot (not started / stale) */
-    uint32_t pulses_unassigned;  /* sequencer could not number them (unlocked) */
-    uint32_t pulses_spurious;    /* outside every window */
-    uint32_t repeats_skipped;    /* later arrivals of a firing: not fused */
-    uint32_t firings_accepted;   /* firings with at least one member fused */
-    uint32_t firings_rejected;   /* firings with a member rejected and none fused */
-    uint32_t snapshot_restarts;  /* restarts by the persistent-rejection watch */
-    uint32_t restart_failures;   /* watch triggered but the snapshot failed (watch cleared) */
-    uint32_t fuse_errors;        /* filter refused a pulse (library error) */
-    uint32_t predicts;           /* odometry predicts */
-    uint32_t cv_predicts;        /* constant-velocity predicts (wheels silent) */
+    uint32_t pulses_in;         /* pulses popped from the sequencer (any status) */
+    uint32_t pulses_accepted;   /* arrivals fused (accepted, started, reset) */
+    uint32_t pulses_rejected;   /* arrivals rejected by the gate */
+    uint32_t pulses_buffered;   /* arrivals kept for the snapshot (not started / stale) */
+    uint32_t pulses_unassigned; /* sequencer could not number them (unlocked) */
+    uint32_t pulses_spurious;   /* outside every window */
+    uint32_t repeats_skipped;   /* later arrivals of a firing: not fused */
+    uint32_t firings_accepted;  /* firings with at least one member fused */
+    uint32_t firings_rejected;  /* firings with a member rejected and none fused */
+    uint32_t snapshot_restarts; /* restarts by the persistent-rejection watch */
+    uint32_t restart_failures;  /* watch triggered but the snapshot failed (watch cleared) */
+    uint32_t fuse_errors;       /* filter refused a pulse (library error) */
+    uint32_t predicts;          /* odometry predicts */
+    uint32_t cv_predicts;       /* constant-velocity predicts (wheels silent) */
     uint32_t predict_errors;
-    uint32_t reinits;            /* fresh filters: time gaps, stale pulses, reinit */
-    uint32_t seq_errors;         /* detections the sequencer refused (late: older than a
+    uint32_t reinits;          /* fresh filters: time gaps, stale pulses, reinit */
+    uint32_t seq_errors;       /* detections the sequencer refused (late: older than a
                                     pulse already closed) */
-    uint32_t seq_full;           /* sequencer full: pulses closed early */
-    uint32_t hint_errors;        /* hints the sequencer refused */
-    uint32_t numbering_errors;   /* rejected arrivals with innovations longer than any flight */
-    uint32_t seq_resyncs;        /* sequencer re-synchronised from the filter */
-    uint32_t events_dropped;     /* events lost because the queue was full */
+    uint32_t seq_full;         /* sequencer full: pulses closed early */
+    uint32_t hint_errors;      /* hints the sequencer refused */
+    uint32_t numbering_errors; /* rejected arrivals with innovations longer than any flight */
+    uint32_t seq_resyncs;      /* sequencer re-synchronised from the filter */
+    uint32_t events_dropped;   /* events lost because the queue was full */
 } bl_loc_counters;
 
 /* Summary for health reports. */
 typedef struct bl_loc_status {
-    bool started;            /* the filter has a state */
-    bool ever_started;       /* it had one at some time since bl_localizer_init */
+    bool started;      /* the filter has a state */
+    bool ever_started; /* it had one at some time since bl_localizer_init */
     bool converged;
-    uint32_t reset_counter;  /* published: filter's + re-initialisations done here */
-    uint32_t measurements;   /* measurements fused so far (arrivals and wheel increments);
+    uint32_t reset_counter;   /* published: filter's + re-initialisations done here */
+    uint32_t measurements;    /* measurements fused so far (arrivals and wheel increments);
                                 wraps. A change means a new update. */
-    bool have_tag;           /* newest_tag is valid (a measurement was fused) */
-    uint32_t newest_tag;     /* tag of the newest measurement fused into the state */
-    uint32_t window_len;     /* first arrivals in the persistent-rejection watch */
-    uint32_t window_rejected;/* of those, rejected by the gate */
-    uint32_t window_size;    /* W */
+    bool have_tag;            /* newest_tag is valid (a measurement was fused) */
+    uint32_t newest_tag;      /* tag of the newest measurement fused into the state */
+    uint32_t window_len;      /* first arrivals in the persistent-rejection watch */
+    uint32_t window_rejected; /* of those, rejected by the gate */
+    uint32_t window_size;     /* W */
 } bl_loc_status;
 
 /* Caller-owned localizer. Members are PRIVATE except `filter` and `seq`,
@@ -197,11 +197,11 @@ typedef struct bl_localizer {
     bl_filter filter;
     bl_sequencer seq;
     /* ---- private ---- */
-    int64_t wheel_last_us_;      /* last wheel sample */
+    int64_t wheel_last_us_; /* last wheel sample */
     uint32_t magic_;
-    uint32_t reject_k_;          /* K */
-    uint32_t reject_w_;          /* W */
-    uint32_t win_rejected_;      /* bit i: slot i rejected */
+    uint32_t reject_k_;     /* K */
+    uint32_t reject_w_;     /* W */
+    uint32_t win_rejected_; /* bit i: slot i rejected */
     uint32_t win_len_, win_next_;
     uint32_t reset_base_;
     uint32_t last_reset_seen_;
@@ -215,11 +215,11 @@ typedef struct bl_localizer {
     bool ever_started_;
     bool was_converged_;
     bool hint_set_;
-    bool wheel_seen_;            /* a wheel sample came */
-    bool wheel_ref_;             /* the last sample is a valid increment start */
+    bool wheel_seen_; /* a wheel sample came */
+    bool wheel_ref_;  /* the last sample is a valid increment start */
     bl_loc_counters counters_;
     bl_loc_event events_[BL_LOC_EVENT_QUEUE];
-    bl_fusion_result result_;    /* the fusion result of the arrival being processed (kept
+    bl_fusion_result result_; /* the fusion result of the arrival being processed (kept
                                     off the stack: the fusion's snapshot start is the
                                     deepest call chain). The pulse itself is read where
                                     the sequencer keeps it (its freed pending slot). */
@@ -231,8 +231,7 @@ typedef struct bl_localizer {
  * time windows overlap"; NULL on success) and the bl_config field at fault
  * (static text, NULL when none). *out written only on success.
  * Errors: as bl_sequencer_config_from_site. */
-int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out,
-                            const char **why, const char **field);
+int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out, const char **why, const char **field);
 
 /* Initialise *loc for the site cfg and the sequencer config seq_cfg (e.g.
  * from bl_localizer_seq_config). Not started: pulses buffer until the

@@ -117,24 +117,24 @@ extern "C" {
 #define BL_SEQ_UNASSIGNED (-1)
 
 typedef struct bl_seq_config {
-    uint32_t beacon_count;          /* N beacons in the firing cycle, 1..BL_MAX_BEACONS */
-    uint32_t receiver_count;        /* receivers on the ring, 1..BL_MAX_RECEIVERS */
-    int64_t period_us;              /* nominal T between successive firings (us), > 0 */
-    int32_t period_tolerance_ppm;   /* |T_true - T| bound before T is tracked (ppm), 0..100000 */
-    int32_t max_flight_us;          /* longest direct flight: largest beacon-robot distance /
+    uint32_t beacon_count;             /* N beacons in the firing cycle, 1..BL_MAX_BEACONS */
+    uint32_t receiver_count;           /* receivers on the ring, 1..BL_MAX_RECEIVERS */
+    int64_t period_us;                 /* nominal T between successive firings (us), > 0 */
+    int32_t period_tolerance_ppm;      /* |T_true - T| bound before T is tracked (ppm), 0..100000 */
+    int32_t max_flight_us;             /* longest direct flight: largest beacon-robot distance /
                                        slowest speed of sound (us), > 0 */
-    int32_t merge_window_us;        /* ring diameter / speed of sound + noise margin (us), > 0 */
-    int32_t window_margin_us;       /* arrival noise margin on both sides of a window (us), >= 0 */
-    int32_t double_spacing_us;      /* beacon 1's second burst after its first (us); 0 = no
+    int32_t merge_window_us;           /* ring diameter / speed of sound + noise margin (us), > 0 */
+    int32_t window_margin_us;          /* arrival noise margin on both sides of a window (us), >= 0 */
+    int32_t double_spacing_us;         /* beacon 1's second burst after its first (us); 0 = no
                                        second-burst recognition (flag/width only) */
-    int32_t double_tolerance_us;    /* ± tolerance on double_spacing_us (us), >= 0 */
-    int32_t double_width_min_us;    /* one envelope at least this wide is a double pulse (us);
+    int32_t double_tolerance_us;       /* ± tolerance on double_spacing_us (us), >= 0 */
+    int32_t double_width_min_us;       /* one envelope at least this wide is a double pulse (us);
                                        0 = off */
-    int32_t min_width_us;           /* narrower detections are spurious (us); 0 = off */
-    uint32_t lock_timeout_cycles;   /* lock lost after this many cycles without beacon 1, >= 1 */
+    int32_t min_width_us;              /* narrower detections are spurious (us); 0 = off */
+    uint32_t lock_timeout_cycles;      /* lock lost after this many cycles without beacon 1, >= 1 */
     uint32_t max_consecutive_spurious; /* lock lost after this many pulses in a row outside every
                                        window; 0 = never */
-    uint32_t period_gain_div;       /* T smoothing: T += (T_meas - T) / period_gain_div, >= 1 */
+    uint32_t period_gain_div;          /* T smoothing: T += (T_meas - T) / period_gain_div, >= 1 */
 } bl_seq_config;
 
 /* One burst detected by one receiver (one PULSE_DETECTION CAN frame). */
@@ -152,37 +152,37 @@ typedef struct bl_seq_detection {
 } bl_seq_detection;
 
 typedef enum bl_seq_status {
-    BL_SEQ_ASSIGNED = 0,   /* numbered: beacon >= 0 */
-    BL_SEQ_UNLOCKED = 1,   /* no firing-time model yet (no double pulse, no hint) */
-    BL_SEQ_SPURIOUS = 2    /* model locked but the pulse lies outside every window */
+    BL_SEQ_ASSIGNED = 0, /* numbered: beacon >= 0 */
+    BL_SEQ_UNLOCKED = 1, /* no firing-time model yet (no double pulse, no hint) */
+    BL_SEQ_SPURIOUS = 2  /* model locked but the pulse lies outside every window */
 } bl_seq_status;
 
 /* One receiver's detection merged into a pulse. */
 typedef struct bl_seq_member {
-    int64_t arrival_us;       /* this receiver's earliest detection in the merge window (us) */
-    uint32_t receiver;        /* receiver index on the ring */
-    uint16_t amplitude_mv;    /* its peak envelope amplitude (mV) */
-    uint32_t tag;             /* bl_seq_detection.tag of that detection (caller's own) */
+    int64_t arrival_us;    /* this receiver's earliest detection in the merge window (us) */
+    uint32_t receiver;     /* receiver index on the ring */
+    uint16_t amplitude_mv; /* its peak envelope amplitude (mV) */
+    uint32_t tag;          /* bl_seq_detection.tag of that detection (caller's own) */
 } bl_seq_member;
 
 /* One merged pulse, output of bl_sequencer_pop. */
 typedef struct bl_seq_pulse {
-    int64_t arrival_us;       /* earliest detection's time (us): the direct-path arrival */
-    int64_t fire_us;          /* sequencer's estimate of this beacon's firing time (us):
+    int64_t arrival_us;                      /* earliest detection's time (us): the direct-path arrival */
+    int64_t fire_us;                         /* sequencer's estimate of this beacon's firing time (us):
                                  the hint's prediction, or without hint the middle of
                                  the possible interval [a1 - max_flight, a1] + j·T;
                                  0 when not assigned */
-    int32_t beacon;           /* 0-based beacon index (0 = beacon 1), or BL_SEQ_UNASSIGNED */
-    uint32_t receiver;        /* receiver of the earliest detection */
-    uint32_t receivers_heard; /* distinct receivers merged into this pulse, >= 1 */
-    uint16_t amplitude_mv;    /* earliest detection's amplitude (mV) */
-    uint16_t width_us;        /* earliest detection's width (us) */
-    uint32_t tag;             /* earliest detection's bl_seq_detection.tag (= members[0].tag) */
-    bool double_pulse;        /* recognised as beacon 1's double pulse */
-    bool repeat;              /* this firing already produced a pulse: a late arrival,
+    int32_t beacon;                          /* 0-based beacon index (0 = beacon 1), or BL_SEQ_UNASSIGNED */
+    uint32_t receiver;                       /* receiver of the earliest detection */
+    uint32_t receivers_heard;                /* distinct receivers merged into this pulse, >= 1 */
+    uint16_t amplitude_mv;                   /* earliest detection's amplitude (mV) */
+    uint16_t width_us;                       /* earliest detection's width (us) */
+    uint32_t tag;                            /* earliest detection's bl_seq_detection.tag (= members[0].tag) */
+    bool double_pulse;                       /* recognised as beacon 1's double pulse */
+    bool repeat;                             /* this firing already produced a pulse: a late arrival,
                                  probably an echo (left for the filter's gate) */
-    uint8_t status;           /* bl_seq_status */
-    uint32_t member_count;    /* = receivers_heard: valid entries of members[] */
+    uint8_t status;                          /* bl_seq_status */
+    uint32_t member_count;                   /* = receivers_heard: valid entries of members[] */
     bl_seq_member members[BL_MAX_RECEIVERS]; /* one per receiver that heard the pulse,
                                  sorted by arrival_us; members[0] is the
                                  earliest detection (= arrival_us, receiver
@@ -192,11 +192,11 @@ typedef struct bl_seq_pulse {
 
 /* Optional prediction from the filter that tightens the windows. */
 typedef struct bl_seq_hint {
-    int64_t fire_us;          /* predicted firing time of beacon `beacon` in any one cycle (us) */
-    uint32_t beacon;          /* 0-based index of the beacon fire_us refers to */
-    bl_real period_us;        /* predicted T (us), > 0 */
-    bl_real fire_sigma_us;    /* σ of fire_us (us), >= 0 */
-    bl_real period_sigma_us;  /* σ of period_us (us), >= 0 */
+    int64_t fire_us;         /* predicted firing time of beacon `beacon` in any one cycle (us) */
+    uint32_t beacon;         /* 0-based index of the beacon fire_us refers to */
+    bl_real period_us;       /* predicted T (us), > 0 */
+    bl_real fire_sigma_us;   /* σ of fire_us (us), >= 0 */
+    bl_real period_sigma_us; /* σ of period_us (us), >= 0 */
 } bl_seq_hint;
 
 /* Counters: read-only for the caller, uint32 wrapping. */
@@ -219,16 +219,16 @@ typedef struct bl_seq_counters {
 
 /* Private: one pulse whose merge window is open. */
 typedef struct bl_seq_pending {
-    int64_t start_us;          /* earliest detection (us); windows count from it */
+    int64_t start_us; /* earliest detection (us); windows count from it */
     uint32_t receiver;
-    uint32_t rx_mask;          /* receivers heard (bit per receiver) */
+    uint32_t rx_mask; /* receivers heard (bit per receiver) */
     uint16_t amplitude_mv;
     uint16_t width_us;
-    uint32_t double_mask;      /* receivers showing beacon 1's signature */
-    int32_t rx_offset_us[BL_MAX_RECEIVERS];   /* per receiver in rx_mask: its earliest
+    uint32_t double_mask;                   /* receivers showing beacon 1's signature */
+    int32_t rx_offset_us[BL_MAX_RECEIVERS]; /* per receiver in rx_mask: its earliest
                                                  detection - start_us (us, >= 0) */
     uint16_t rx_amplitude_mv[BL_MAX_RECEIVERS];
-    uint32_t rx_tag[BL_MAX_RECEIVERS];        /* per receiver: its earliest detection's tag */
+    uint32_t rx_tag[BL_MAX_RECEIVERS]; /* per receiver: its earliest detection's tag */
 } bl_seq_pending;
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
@@ -245,32 +245,32 @@ typedef struct bl_sequencer {
     uint32_t n_pending;
     uint32_t magic;
     uint32_t consecutive_spurious;
-    int32_t last_beacon;            /* beacon of the last assigned pulse */
+    int32_t last_beacon; /* beacon of the last assigned pulse */
     uint32_t conflicts_in_row;
     uint32_t hint_beacon;
-    uint32_t beacon_seen_mask;      /* beacons with a valid beacon_last_us */
+    uint32_t beacon_seen_mask; /* beacons with a valid beacon_last_us */
     bool locked;
     bool hint_valid;
-    bool have_last;                 /* last_* valid */
-    int64_t horizon_us;             /* earliest time a new detection may have (us) */
-    int64_t anchor_us;              /* beacon-1 arrival of the model (us) */
-    int64_t period_ns;              /* tracked T (ns) */
-    int64_t last_fire_us;           /* firing-time estimate of the last assigned pulse (us) */
-    int64_t conflict_us;            /* last conflicting double pulse (us) */
-    int64_t hint_fire_us;           /* hint: firing time of beacon hint_beacon (us) */
+    bool have_last;       /* last_* valid */
+    int64_t horizon_us;   /* earliest time a new detection may have (us) */
+    int64_t anchor_us;    /* beacon-1 arrival of the model (us) */
+    int64_t period_ns;    /* tracked T (ns) */
+    int64_t last_fire_us; /* firing-time estimate of the last assigned pulse (us) */
+    int64_t conflict_us;  /* last conflicting double pulse (us) */
+    int64_t hint_fire_us; /* hint: firing time of beacon hint_beacon (us) */
     int64_t hint_period_ns;
     int64_t hint_fire_sigma_ns;
     int64_t hint_period_sigma_ns;
-    int64_t beacon_last_us[BL_MAX_BEACONS];   /* first arrival of each beacon's last firing */
+    int64_t beacon_last_us[BL_MAX_BEACONS]; /* first arrival of each beacon's last firing */
 } bl_sequencer;
 
 /* Model summary for logs and health reports. */
 typedef struct bl_seq_state {
-    bool locked;              /* firing-time model locked (by double pulse or hint) */
-    bool hint_active;         /* a hint is in use */
-    int64_t anchor_us;        /* last beacon-1 arrival used as anchor (us) */
-    bl_real period_us;        /* tracked T (us) */
-    uint32_t pending;         /* pulses waiting for their merge window to close */
+    bool locked;       /* firing-time model locked (by double pulse or hint) */
+    bool hint_active;  /* a hint is in use */
+    int64_t anchor_us; /* last beacon-1 arrival used as anchor (us) */
+    bl_real period_us; /* tracked T (us) */
+    uint32_t pending;  /* pulses waiting for their merge window to close */
 } bl_seq_state;
 
 /* Fills *cfg for the kleeman-lab site (6 beacons, 150 ms, 8 receivers on a
@@ -293,8 +293,7 @@ int bl_sequencer_config_default(bl_seq_config *cfg);
  * (100, 1000) m/s, period outside (0, 10] s, spacing or burst not in
  * [0, period), ring radius not in [0, 100) m, distances beyond 1000 km, or
  * the resulting windows overlap, see bl_sequencer_config_check). */
-int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m,
-                                  bl_seq_config *out);
+int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m, bl_seq_config *out);
 
 /* Checks ranges and that the windows cannot overlap:
  *   2·max_flight + 2·tol_N < T (the windows of successive firings are disjoint

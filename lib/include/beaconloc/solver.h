@@ -29,32 +29,32 @@ extern "C" {
 #endif
 
 typedef struct bl_tdoa_problem {
-    uint32_t count;                      /* N beacons used, 3 (2D) / 4 (3D) .. BL_MAX_BEACONS */
-    bl_beacon beacons[BL_MAX_BEACONS];   /* beacon positions (m), site frame */
-    bl_real arrival_s[BL_MAX_BEACONS];   /* arrival times (s) relative to any common
+    uint32_t count;                          /* N beacons used, 3 (2D) / 4 (3D) .. BL_MAX_BEACONS */
+    bl_beacon beacons[BL_MAX_BEACONS];       /* beacon positions (m), site frame */
+    bl_real arrival_s[BL_MAX_BEACONS];       /* arrival times (s) relative to any common
                                             reference the caller picks (keep them small:
                                             subtract e.g. the first arrival) */
-    bl_real fire_offset_s[BL_MAX_BEACONS]; /* known firing time of beacon j relative to t0
+    bl_real fire_offset_s[BL_MAX_BEACONS];   /* known firing time of beacon j relative to t0
                                             (s), e.g. (i-1)·T */
-    bl_real sigma_s[BL_MAX_BEACONS];     /* σ of each arrival (s), > 0 (weights) */
-    bl_real speed_of_sound_mps;          /* s (m/s), > 0 */
-    bl_real receiver_z_m;                /* 2D only: known receiver height (m) */
+    bl_real sigma_s[BL_MAX_BEACONS];         /* σ of each arrival (s), > 0 (weights) */
+    bl_real speed_of_sound_mps;              /* s (m/s), > 0 */
+    bl_real receiver_z_m;                    /* 2D only: known receiver height (m) */
     bl_real guess_x_m, guess_y_m, guess_z_m; /* start point; use_guess = false starts at the
                                             beacons' centroid (2D: z ignored) */
     bool use_guess;
-    uint32_t max_iterations;             /* 1..100; 0 means the default 10 */
-    bl_real tolerance_m;                 /* stop when the step is below this (m);
+    uint32_t max_iterations; /* 1..100; 0 means the default 10 */
+    bl_real tolerance_m;     /* stop when the step is below this (m);
                                             0 means the default 1e-6 m (1e-4 m for float) */
 } bl_tdoa_problem;
 
 typedef struct bl_tdoa_solution {
-    bl_real x_m, y_m, z_m;               /* position (2D: z_m = receiver_z_m) */
-    bl_real t0_s;                        /* emission time t0, same reference as arrival_s */
+    bl_real x_m, y_m, z_m; /* position (2D: z_m = receiver_z_m) */
+    bl_real t0_s;          /* emission time t0, same reference as arrival_s */
     /* Covariance of (x, y, [z,] t0) from the weighted normal equations,
      * row-major 4x4; 2D uses the top-left 3x3 (x, y, t0), the rest is 0. Units
      * m², m·s, s². Valid when the model is right and sigma_s are true σ. */
     bl_real cov[16];
-    bl_real pdop;                        /* position dilution of precision (1):
+    bl_real pdop; /* position dilution of precision (1):
                                             sqrt(trace of the position covariance) (m) /
                                             (σ·s) (m), σ the rms of sigma_s (s) */
     /* Kleeman 1990 eq. 9: maximum-length error vector (m per m of
@@ -62,12 +62,12 @@ typedef struct bl_tdoa_solution {
      * 2D N = 3; else all 0, error_vector_valid false). */
     bl_real error_vector[3];
     bool error_vector_valid;
-    bl_real residual_rms_s;              /* weighted rms of the arrival residuals e_j (s) at
+    bl_real residual_rms_s; /* weighted rms of the arrival residuals e_j (s) at
                                             the solution: sqrt(Σ e_j²/σ_j² / Σ 1/σ_j²),
                                             σ_j = sigma_s[j]; the plain rms when all σ_j
                                             are equal */
-    uint32_t iterations;                 /* Gauss-Newton steps taken */
-    bool converged;                      /* last step below tolerance */
+    uint32_t iterations;    /* Gauss-Newton steps taken */
+    bool converged;         /* last step below tolerance */
 } bl_tdoa_solution;
 
 /* Solve in 2D (x, y, t0) / 3D (x, y, z, t0).

@@ -27,7 +27,7 @@
 #define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
 #define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
 #define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
-#define TICKS_PER_KINSTR 168u      /* 168 MHz SysTick at 1 instruction per ns */
+#define TICKS_PER_KINSTR 168u /* 168 MHz SysTick at 1 instruction per ns */
 #define PI_RAD 3.14159265358979323846
 #define SOUND_MPS 343.0
 #define PERIOD_US 150000
@@ -35,14 +35,19 @@
 #define RUN_US 30000000
 #define MAX_SAMPLES 3200
 
-static int semihost(int op, const void *arg) {
+static int semihost(int op, const void *arg)
+{
     register int r0 __asm__("r0") = op;
     register const void *r1 __asm__("r1") = arg;
     __asm__ volatile("bkpt 0xAB" : "+r"(r0) : "r"(r1) : "memory");
     return r0;
 }
-static void put(const char *s) { (void)semihost(0x04, s); }
-static void put_u(const char *key, uint32_t v) {
+static void put(const char *s)
+{
+    (void)semihost(0x04, s);
+}
+static void put_u(const char *key, uint32_t v)
+{
     char b[16];
     char *p = b + sizeof b - 1;
     *p = 0;
@@ -53,19 +58,26 @@ static void put_u(const char *key, uint32_t v) {
     put(key);
     put(p);
 }
-__attribute__((noreturn)) static void quit(int ok) {
+__attribute__((noreturn)) static void quit(int ok)
+{
     (void)semihost(0x18, (const void *)(uintptr_t)(ok ? 0x20026u : 0x20024u));
-    for (;;) {
-    }
+    for (;;) {}
 }
 
-static uint32_t ticks_now(void) { return SYST_CVR; }
+static uint32_t ticks_now(void)
+{
+    return SYST_CVR;
+}
 /* SysTick counts down, 24 bits */
-static uint32_t instr_since(uint32_t start) { return ((start - SYST_CVR) & 0xFFFFFFu) * 1000u / TICKS_PER_KINSTR; }
+static uint32_t instr_since(uint32_t start)
+{
+    return ((start - SYST_CVR) & 0xFFFFFFu) * 1000u / TICKS_PER_KINSTR;
+}
 
 static uint32_t fuse_instr[MAX_SAMPLES], pred_instr[MAX_SAMPLES];
 
-static void sort_u32(uint32_t *v, uint32_t n) {   /* insertion sort: n is small */
+static void sort_u32(uint32_t *v, uint32_t n)
+{ /* insertion sort: n is small */
     for (uint32_t i = 1; i < n; ++i) {
         const uint32_t x = v[i];
         uint32_t j = i;
@@ -78,7 +90,8 @@ static void sort_u32(uint32_t *v, uint32_t n) {   /* insertion sort: n is small 
 }
 
 static uint64_t rng = 0x9E3779B97F4A7C15ull;
-static double gauss(void) {
+static double gauss(void)
+{
     double u[2];
     for (int k = 0; k < 2; ++k) {
         rng ^= rng << 13;
@@ -89,7 +102,8 @@ static double gauss(void) {
     return sqrt(-2.0 * log(u[0])) * cos(2.0 * PI_RAD * u[1]);
 }
 
-static void truth(double t_s, double *x, double *y, double *th) {
+static void truth(double t_s, double *x, double *y, double *th)
+{
     const double a = 0.5 / 3.0 * t_s;
     *x = 6.0 + 3.0 * cos(a);
     *y = 6.0 + 3.0 * sin(a);
@@ -100,10 +114,11 @@ static bl_config cfg;
 static bl_filter filt;
 static bl_sequencer seq;
 
-int main(void) {
+int main(void)
+{
     SYST_RVR = 0xFFFFFFu;
     SYST_CVR = 0;
-    SYST_CSR = 5u;   /* processor clock, enabled, no interrupt */
+    SYST_CSR = 5u; /* processor clock, enabled, no interrupt */
     if (bl_config_default(&cfg) != BL_OK || bl_filter_init(&filt, &cfg) != BL_OK) quit(0);
     double x0, y0, th0;
     truth(0.0, &x0, &y0, &th0);
@@ -138,10 +153,11 @@ int main(void) {
         double best_c = -2;
         for (uint32_t r = 0; r < cfg.receiver_count; ++r) {
             const double ang = th + r * 2 * PI_RAD / cfg.receiver_count;
-            const double c = ((bx - x) * cos(ang) + (by - y) * sin(ang)) / sqrt((bx - x) * (bx - x) + (by - y) * (by - y));
+            const double c =
+                ((bx - x) * cos(ang) + (by - y) * sin(ang)) / sqrt((bx - x) * (bx - x) + (by - y) * (by - y));
             if (c > best_c) best_c = c, best = r;
         }
-        for (int it = 0; it < 5; ++it) {   /* Kleeman 1992 eq. 20 */
+        for (int it = 0; it < 5; ++it) { /* Kleeman 1992 eq. 20 */
             truth((double)fire_us * 1e-6 + flight, &x, &y, &th);
             const double ang = th + best * 2 * PI_RAD / cfg.receiver_count;
             const double rx = x + 0.1 * cos(ang) - bx, ry = y + 0.1 * sin(ang) - by;

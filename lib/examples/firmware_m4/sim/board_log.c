@@ -37,7 +37,7 @@
 #include "beaconloc_can.h"
 #include "node_clock.h"
 
-#define PULSE_HOLD_US 4000   /* kleeman-lab: double_pulse_spacing_s 3 ms + tolerance 1 ms */
+#define PULSE_HOLD_US 4000 /* kleeman-lab: double_pulse_spacing_s 3 ms + tolerance 1 ms */
 #define QUEUE_LEN 64u
 #define FRAME_ID_PULSE 0x100u
 #define FRAME_ID_ENCODERS 0x110u
@@ -49,7 +49,7 @@ static const char *log_path;
 static unsigned long line_no;
 static struct node_clock rx_clock, enc_clock;
 static bool rx_seen, enc_seen;
-static int64_t now_us;              /* receiver-node clock (unwrapped) */
+static int64_t now_us;                   /* receiver-node clock (unwrapped) */
 static uint16_t count_left, count_right; /* 16-bit board counters from 14-bit frames */
 static uint16_t last14_left, last14_right;
 static int64_t last_odo_us;
@@ -59,7 +59,8 @@ static board_odometry odos[QUEUE_LEN];
 static unsigned odo_head, odo_len;
 static uint64_t rows, frames, bad_lines, dropped;
 
-static void finish(void) {
+static void finish(void)
+{
     if (dump_f && fclose(dump_f) != 0) {
         fprintf(stderr, "firmware_host: closing the board dump: %s\n", strerror(errno));
         exit(1);
@@ -68,15 +69,16 @@ static void finish(void) {
         fprintf(stderr, "firmware_host: closing the estimates: %s\n", strerror(errno));
         exit(1);
     }
-    fprintf(stderr, "firmware_host: %s: frames=%" PRIu64 " rows=%" PRIu64 " bad_lines=%" PRIu64
-                    " dropped=%" PRIu64 "\n",
+    fprintf(stderr,
+            "firmware_host: %s: frames=%" PRIu64 " rows=%" PRIu64 " bad_lines=%" PRIu64 " dropped=%" PRIu64 "\n",
             log_path, frames, rows, bad_lines, dropped);
     exit(0);
 }
 
 /* One candump -L line: "(sec.usec) iface ID#HEX [R|T]". False if not a
  * classic data frame. */
-static bool parse_line(const char *line, int64_t *rx_us, uint32_t *id, uint8_t data[8], uint8_t *len) {
+static bool parse_line(const char *line, int64_t *rx_us, uint32_t *id, uint8_t data[8], uint8_t *len)
+{
     long long sec;
     unsigned long usec;
     char iface[32], frame[64];
@@ -96,11 +98,13 @@ static bool parse_line(const char *line, int64_t *rx_us, uint32_t *id, uint8_t d
     return true;
 }
 
-static void set_now(int64_t t_us) {
+static void set_now(int64_t t_us)
+{
     if (t_us > now_us) now_us = t_us;
 }
 
-static void on_pulse(const uint8_t *data, uint8_t len, int64_t rx_us) {
+static void on_pulse(const uint8_t *data, uint8_t len, int64_t rx_us)
+{
     struct beaconloc_can_pulse_detection_t m;
     if (beaconloc_can_pulse_detection_unpack(&m, data, len) != 0) return;
     const int64_t t = node_clock_observe(&rx_clock, m.node_time, rx_us - PULSE_HOLD_US);
@@ -123,12 +127,14 @@ static void on_pulse(const uint8_t *data, uint8_t len, int64_t rx_us) {
 }
 
 /* Signed difference of two 14-bit wrapping tick counts. */
-static int tick_delta(uint16_t now, uint16_t before) {
+static int tick_delta(uint16_t now, uint16_t before)
+{
     const int d = (int)((now - before) & 0x3fff);
     return d >= 0x2000 ? d - 0x4000 : d;
 }
 
-static void on_encoders(const uint8_t *data, uint8_t len, int64_t rx_us) {
+static void on_encoders(const uint8_t *data, uint8_t len, int64_t rx_us)
+{
     struct beaconloc_can_wheel_encoders_t m;
     if (beaconloc_can_wheel_encoders_unpack(&m, data, len) != 0) return;
     const int64_t te = node_clock_observe(&enc_clock, m.node_time, rx_us);
@@ -160,12 +166,14 @@ static void on_encoders(const uint8_t *data, uint8_t len, int64_t rx_us) {
     if (dump_f) fprintf(dump_f, "O %" PRIu32 " %u %u\n", o->stamp_us, o->left, o->right);
 }
 
-void board_init(void) {
+void board_init(void)
+{
     node_clock_init(&rx_clock, NULL);
     node_clock_init(&enc_clock, NULL);
 }
 
-int64_t board_time_us(void) {
+int64_t board_time_us(void)
+{
     char line[256];
     for (;;) {
         if (!fgets(line, sizeof line, log_f)) finish();
@@ -190,12 +198,14 @@ int64_t board_time_us(void) {
 }
 
 /* A 32-bit TIM2 stamp near now (either side) to 64 bits. */
-int64_t board_extend_us(uint32_t stamp_us, int64_t t_now_us) {
+int64_t board_extend_us(uint32_t stamp_us, int64_t t_now_us)
+{
     const int32_t age_us = (int32_t)((uint32_t)t_now_us - stamp_us);
     return t_now_us - (int64_t)age_us;
 }
 
-bool board_burst_pop(board_burst *out) {
+bool board_burst_pop(board_burst *out)
+{
     if (burst_len == 0) return false;
     *out = bursts[burst_head];
     burst_head = (burst_head + 1) % QUEUE_LEN;
@@ -203,7 +213,8 @@ bool board_burst_pop(board_burst *out) {
     return true;
 }
 
-bool board_odometry_pop(board_odometry *out) {
+bool board_odometry_pop(board_odometry *out)
+{
     if (odo_len == 0) return false;
     *out = odos[odo_head];
     odo_head = (odo_head + 1) % QUEUE_LEN;
@@ -211,19 +222,24 @@ bool board_odometry_pop(board_odometry *out) {
     return true;
 }
 
-uint32_t board_burst_overruns(void) { return (uint32_t)dropped; }
+uint32_t board_burst_overruns(void)
+{
+    return (uint32_t)dropped;
+}
 
 /* One row per update, as bridge/estimates_csv.c writes it; quality -1 while
  * not converged, else 0 (the firmware computes no MAVLink quality). */
-void board_publish(const board_pose *p) {
+void board_publish(const board_pose *p)
+{
     fprintf(csv_f, "%lld,%.6f,%.6f,%.7f,%.6f,%.7f,%.4f,%.9f,%.6e,%.6e,%.6e,%.6e,%u,%d\n", (long long)p->t_us,
             (double)p->x_m, (double)p->y_m, (double)p->theta_rad, (double)p->v_mps, (double)p->omega_radps,
-            (double)p->sos_mps, (double)p->period_s, (double)p->var_x_m2, (double)p->cov_xy_m2,
-            (double)p->var_y_m2, (double)p->var_theta_rad2, p->reset_counter, p->converged ? 0 : -1);
+            (double)p->sos_mps, (double)p->period_s, (double)p->var_x_m2, (double)p->cov_xy_m2, (double)p->var_y_m2,
+            (double)p->var_theta_rad2, p->reset_counter, p->converged ? 0 : -1);
     rows++;
 }
 
-int main(int argc, char **argv) {
+int main(int argc, char **argv)
+{
     const char *est_path = NULL, *dump_path = NULL;
     for (int i = 1; i + 1 < argc; i += 2) {
         if (!strcmp(argv[i], "--log"))

@@ -35,21 +35,27 @@ static board_pose last;
 #ifdef BOARD_SIM_HOST
 #include <stdio.h>
 #include <stdlib.h>
-static int semihost(int op, const void *arg) {
+static int semihost(int op, const void *arg)
+{
     if (op == 0x04) fputs((const char *)arg, stdout);
     if (op == 0x18) exit((uintptr_t)arg == 0x20026u ? 0 : 1);
     return -1;
 }
 #else
-static int semihost(int op, const void *arg) {
+static int semihost(int op, const void *arg)
+{
     register int r0 __asm__("r0") = op;
     register const void *r1 __asm__("r1") = arg;
     __asm__ volatile("bkpt 0xAB" : "+r"(r0) : "r"(r1) : "memory");
     return r0;
 }
 #endif
-static void put(const char *s) { (void)semihost(0x04, s); /* SYS_WRITE0 */ }
-static char *fmt_uint(char *end, uint64_t u) {
+static void put(const char *s)
+{
+    (void)semihost(0x04, s); /* SYS_WRITE0 */
+}
+static char *fmt_uint(char *end, uint64_t u)
+{
     *--end = 0;
     do {
         *--end = (char)('0' + u % 10);
@@ -57,26 +63,30 @@ static char *fmt_uint(char *end, uint64_t u) {
     } while (u);
     return end;
 }
-static void put_kv(const char *k, uint32_t v) {
+static void put_kv(const char *k, uint32_t v)
+{
     char buf[24];
     put(k);
     put(fmt_uint(buf + sizeof buf, v));
 }
-__attribute__((noreturn)) static void sim_exit(int ok) {
+__attribute__((noreturn)) static void sim_exit(int ok)
+{
     /* SYS_EXIT: ADP_Stopped_ApplicationExit -> QEMU exit 0, InternalError -> 1 */
     (void)semihost(0x18, (const void *)(uintptr_t)(ok ? 0x20026u : 0x20024u));
-    for (;;) {
-    }
+    for (;;) {}
 }
-static int sh_open(const char *name, uint32_t mode) {
+static int sh_open(const char *name, uint32_t mode)
+{
     const uint32_t a[3] = {(uint32_t)(uintptr_t)name, mode, (uint32_t)strlen(name)};
     return semihost(0x01, a); /* SYS_OPEN: mode 0 "r", 4 "w" */
 }
-static void sh_write(const char *s, uint32_t n) {
+static void sh_write(const char *s, uint32_t n)
+{
     const uint32_t a[3] = {(uint32_t)csv_fd, (uint32_t)(uintptr_t)s, n};
     (void)semihost(0x05, a); /* SYS_WRITE */
 }
-static void sh_close(int fd) {
+static void sh_close(int fd)
+{
     const uint32_t a[1] = {(uint32_t)fd};
     (void)semihost(0x02, a);
 }
@@ -84,7 +94,8 @@ static void sh_close(int fd) {
 /* ---- the dump ---- */
 
 /* Next line into line[] (no newline); false at the end. */
-static bool read_line(char *line, unsigned cap) {
+static bool read_line(char *line, unsigned cap)
+{
     unsigned n = 0;
     for (;;) {
         if (rd_pos == rd_len) {
@@ -106,7 +117,8 @@ static bool read_line(char *line, unsigned cap) {
     }
 }
 
-static const char *parse_int(const char *p, int64_t *v) {
+static const char *parse_int(const char *p, int64_t *v)
+{
     while (*p == ' ') p++;
     const int neg = *p == '-';
     if (neg) p++;
@@ -121,7 +133,8 @@ static const char *parse_int(const char *p, int64_t *v) {
     return p;
 }
 
-static void finish(void) {
+static void finish(void)
+{
     sh_close(dump_fd);
     sh_close(csv_fd);
     put("m4-sim netduinoplus2 (Cortex-M4F, float32 library, simulator log):");
@@ -139,7 +152,8 @@ static void finish(void) {
     sim_exit(rows > 0 && bad == 0 && last.errors == 0);
 }
 
-void board_init(void) {
+void board_init(void)
+{
     static char cmd[256];
     uint32_t a[2] = {(uint32_t)(uintptr_t)cmd, sizeof cmd};
     if (semihost(0x15, a) != 0) { /* SYS_GET_CMDLINE: "prog DUMP CSV" */
@@ -171,7 +185,8 @@ void board_init(void) {
     sh_write(header, sizeof header - 1);
 }
 
-int64_t board_time_us(void) {
+int64_t board_time_us(void)
+{
     static char line[96];
     for (;;) {
         if (!read_line(line, sizeof line)) finish();
@@ -205,12 +220,14 @@ int64_t board_time_us(void) {
 }
 
 /* A 32-bit stamp near now (either side) to 64 bits. */
-int64_t board_extend_us(uint32_t stamp_us, int64_t now_us) {
+int64_t board_extend_us(uint32_t stamp_us, int64_t now_us)
+{
     const int32_t age_us = (int32_t)((uint32_t)now_us - stamp_us);
     return now_us - (int64_t)age_us;
 }
 
-bool board_burst_pop(board_burst *out) {
+bool board_burst_pop(board_burst *out)
+{
     if (burst_len == 0) return false;
     *out = bursts[burst_head];
     burst_head = (burst_head + 1) % (sizeof bursts / sizeof bursts[0]);
@@ -218,7 +235,8 @@ bool board_burst_pop(board_burst *out) {
     return true;
 }
 
-bool board_odometry_pop(board_odometry *out) {
+bool board_odometry_pop(board_odometry *out)
+{
     if (odo_len == 0) return false;
     *out = odos[odo_head];
     odo_head = (odo_head + 1) % (sizeof odos / sizeof odos[0]);
@@ -226,10 +244,14 @@ bool board_odometry_pop(board_odometry *out) {
     return true;
 }
 
-uint32_t board_burst_overruns(void) { return 0; }
+uint32_t board_burst_overruns(void)
+{
+    return 0;
+}
 
 /* v with `decimals` digits after the point (fixed point; |v| < 9e12). */
-static char *put_fixed(char *out, double v, int decimals) {
+static char *put_fixed(char *out, double v, int decimals)
+{
     if (v < 0) {
         *out++ = '-';
         v = -v;
@@ -253,16 +275,17 @@ static char *put_fixed(char *out, double v, int decimals) {
 }
 
 /* One CSV row per update (quality -1 while not converged, else 0). */
-void board_publish(const board_pose *p) {
+void board_publish(const board_pose *p)
+{
     last = *p;
     static char row[256];
     char *o = row;
     char buf[24];
     const char *s = fmt_uint(buf + sizeof buf, (uint64_t)p->t_us);
     while (*s) *o++ = *s++;
-    const double f[] = {(double)p->x_m,       (double)p->y_m,      (double)p->theta_rad, (double)p->v_mps,
-                        (double)p->omega_radps, (double)p->sos_mps, (double)p->period_s, (double)p->var_x_m2,
-                        (double)p->cov_xy_m2, (double)p->var_y_m2,  (double)p->var_theta_rad2};
+    const double f[] = {(double)p->x_m,         (double)p->y_m,      (double)p->theta_rad,     (double)p->v_mps,
+                        (double)p->omega_radps, (double)p->sos_mps,  (double)p->period_s,      (double)p->var_x_m2,
+                        (double)p->cov_xy_m2,   (double)p->var_y_m2, (double)p->var_theta_rad2};
     static const int dec[] = {6, 6, 7, 6, 7, 4, 9, 10, 10, 10, 10};
     for (unsigned i = 0; i < sizeof f / sizeof f[0]; i++) {
         *o++ = ',';
