@@ -121,7 +121,8 @@ static void sync(struct estimator *e)
     c->seq_resyncs = lc.seq_resyncs;
     e->seq.counters = e->loc.seq.counters;
     e->reset_base = st.reset_counter;
-    if (st.measurements != e->measurements_seen) {
+    const bool fused = st.measurements != e->measurements_seen;
+    if (fused) {
         e->measurements_seen = st.measurements;
         e->updated = true;
         /* the tag is the frame's receive time, low 32 bits (milliseconds
@@ -177,9 +178,10 @@ static void sync(struct estimator *e)
             break;
         }
     }
-    /* beacons heard again (accepted count of the filter went up) */
+    /* beacons heard again (accepted count of the filter went up); only
+     * after a fusion (an estimate builds the whole covariance) */
     bl_estimate est;
-    if (bl_filter_estimate(&e->loc.filter, &est) == BL_OK) {
+    if (fused && bl_filter_estimate(&e->loc.filter, &est) == BL_OK) {
         for (uint32_t b = 0; b < e->blcfg.beacon_count && b < BL_MAX_BEACONS; b++) {
             if (est.accepted[b] == e->beacon_accepted[b])
                 continue;

@@ -58,10 +58,7 @@ static double uniform01(void)
     rng_state ^= rng_state << 17;
     return ((double)(rng_state >> 11) + 0.5) / 9007199254740992.0;
 }
-static double gauss(void)
-{
-    return sqrt(-2.0 * log(uniform01())) * cos(2.0 * PI_RAD * uniform01());
-}
+static double gauss(void) { return sqrt(-2.0 * log(uniform01())) * cos(2.0 * PI_RAD * uniform01()); }
 
 /* Truth: circle around (6, 6), counter-clockwise, heading along the path. */
 static void truth(double t_s, double *x, double *y, double *th)
@@ -160,10 +157,7 @@ static int64_t median(int64_t *v, size_t n)
     return n ? v[n / 2] : 0;
 }
 
-static const char *real_name_of(void)
-{
-    return sizeof(bl_real) == sizeof(double) ? "double" : "float";
-}
+static const char *real_name_of(void) { return sizeof(bl_real) == sizeof(double) ? "double" : "float"; }
 
 static void die(const char *what, int rc)
 {

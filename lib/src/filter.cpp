@@ -208,7 +208,9 @@ bool converged_now(const bl_config *cfg, const MX &P)
     return m < cfg->converged_sigma_xy_m * cfg->converged_sigma_xy_m;
 }
 
-void fill_estimate(const bl_filter *f, const VX &x, const MX &P, int64_t t_us, bl_estimate *est)
+// XV, PM: VX and MX, or Maps of the filter's own storage (no copy).
+template <class XV, class PM>
+void fill_estimate(const bl_filter *f, const XV &x, const PM &P, int64_t t_us, bl_estimate *est)
 {
     const bl_config *cfg = &f->cfg_;
     std::memset(est, 0, sizeof *est);

@@ -29,31 +29,13 @@ enum : int {
     KR = BL_IX_KR
 };
 
-inline Eigen::Map<VX> state(bl_filter *f)
-{
-    return Eigen::Map<VX>(f->x_);
-}
-inline Eigen::Map<const VX> state(const bl_filter *f)
-{
-    return Eigen::Map<const VX>(f->x_);
-}
-inline Eigen::Map<MX> cov(bl_filter *f)
-{
-    return Eigen::Map<MX>(f->P_);
-}
-inline Eigen::Map<const MX> cov(const bl_filter *f)
-{
-    return Eigen::Map<const MX>(f->P_);
-}
+inline Eigen::Map<VX> state(bl_filter *f) { return Eigen::Map<VX>(f->x_); }
+inline Eigen::Map<const VX> state(const bl_filter *f) { return Eigen::Map<const VX>(f->x_); }
+inline Eigen::Map<MX> cov(bl_filter *f) { return Eigen::Map<MX>(f->P_); }
+inline Eigen::Map<const MX> cov(const bl_filter *f) { return Eigen::Map<const MX>(f->P_); }
 
-inline bool initialised(const bl_filter *f)
-{
-    return f != nullptr && f->magic_ == kFilterMagic;
-}
-inline bool started(const bl_filter *f)
-{
-    return initialised(f) && (f->flags_ & kFlagStarted);
-}
+inline bool initialised(const bl_filter *f) { return f != nullptr && f->magic_ == kFilterMagic; }
+inline bool started(const bl_filter *f) { return initialised(f) && (f->flags_ & kFlagStarted); }
 
 bool all_finite(const bl_real *v, int n);
 

@@ -26,10 +26,7 @@ using Vec3 = Eigen::Matrix<real, 3, 1>;
 constexpr real kPi = real(3.14159265358979323846);
 constexpr real kDegToRad = kPi / real(180);
 
-inline bool is_finite(real v)
-{
-    return std::isfinite(v);
-}
+inline bool is_finite(real v) { return std::isfinite(v); }
 
 // Angle wrapped to (-pi, pi].
 inline real wrap_angle(real a_rad)
@@ -44,15 +41,9 @@ inline real wrap_angle(real a_rad)
 
 // *out = a - b; false when it overflows int64 (times from the caller are
 // untrusted).
-inline bool sub_us(int64_t a, int64_t b, int64_t *out)
-{
-    return !__builtin_sub_overflow(a, b, out);
-}
+inline bool sub_us(int64_t a, int64_t b, int64_t *out) { return !__builtin_sub_overflow(a, b, out); }
 
-inline real us_to_s(int64_t dt_us)
-{
-    return real(dt_us) * real(1e-6);
-}
+inline real us_to_s(int64_t dt_us) { return real(dt_us) * real(1e-6); }
 
 }  // namespace bl
 

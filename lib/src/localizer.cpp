@@ -7,6 +7,7 @@ extern "C" {
 
 #include <cstring>
 
+#include "filter_internal.hpp"
 #include "internal.hpp"
 #include "sequencer_internal.hpp"
 
@@ -14,21 +15,11 @@ namespace {
 
 constexpr uint32_t kMagic = 0x6C6F6331u;  // "loc1"
 
-bool valid(const bl_localizer *loc)
-{
-    return loc != nullptr && loc->magic_ == kMagic;
-}
+bool valid(const bl_localizer *loc) { return loc != nullptr && loc->magic_ == kMagic; }
 
-// Started, and the state time, without a bl_estimate on the stack (these
-// sit on the deepest call chain: pulse -> fusion -> snapshot solver).
-bool started(const bl_filter *f)
-{
-    return bl_filter_get_state(f, nullptr, nullptr) == BL_OK;
-}
-int64_t state_time_us(const bl_filter *f)
-{
-    return f->t_us_;
-}
+// The state time, without a bl_estimate on the stack (this sits on the
+// deepest call chain: pulse -> fusion -> snapshot solver).
+int64_t state_time_us(const bl_filter *f) { return f->t_us_; }
 
 #define NOINLINE __attribute__((noinline))
 // The pulse path is inlined into pop_until: every frame on it adds to the
@@ -63,10 +54,7 @@ NOINLINE void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset
 
 // The filter's config (it has no persistent-rejection reset of its own:
 // cfg.reset_reject_count is K of the localizer's window).
-bl_config filter_config(const bl_config *cfg)
-{
-    return *cfg;
-}
+bl_config filter_config(const bl_config *cfg) { return *cfg; }
 
 // The window restarts empty at slot 0 (slots 0..len-1 valid until full).
 void clear_window(bl_localizer *loc)
@@ -119,7 +107,7 @@ NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
 // published reset counter keeps counting.
 NOINLINE void reinit_filter(bl_localizer *loc, bl_loc_reset_cause cause)
 {
-    const bool was = started(&loc->filter);
+    const bool was = bl::started(&loc->filter);
     if (was) loc->reset_base_ += loc->filter.reset_count_ + 1;
     const bl_config c = loc->filter.cfg_;
     (void)bl_filter_init(&loc->filter, &c);
@@ -216,7 +204,7 @@ NOINLINE void coast_to(bl_localizer *loc, int64_t arrival_us)
 {
     const bool wheels_stale = !loc->wheel_seen_ || arrival_us - loc->wheel_last_us_ > BL_LOC_WHEEL_SILENCE_US;
     const int64_t t_state_us = state_time_us(&loc->filter);
-    if (!started(&loc->filter) ||
+    if (!bl::started(&loc->filter) ||
         !((wheels_stale && arrival_us > t_state_us) || arrival_us - t_state_us > BL_LOC_WHEEL_SILENCE_US))
         return;
     const int prc = bl_filter_predict(&loc->filter, arrival_us);
@@ -365,10 +353,7 @@ NOINLINE void pop_until(bl_localizer *loc, int64_t now_us, bool while_full)
     if (!while_full && rc < 0) loc->counters_.seq_errors++;
 }
 
-bool finite_real(bl_real v)
-{
-    return bl::is_finite(v);
-}
+bool finite_real(bl_real v) { return bl::is_finite(v); }
 
 }  // namespace
 
@@ -528,7 +513,7 @@ extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *
     loc->wheel_seen_ = true;
     loc->wheel_ref_ = true;
     if (!had_ref) return BL_OK;
-    if (!started(&loc->filter)) return BL_OK;
+    if (!bl::started(&loc->filter)) return BL_OK;
     const int64_t t_state_us = state_time_us(&loc->filter);
     // Sample older than the state (the filter just started at a pulse), the
     // interval already covered by a constant-velocity predict, or an
@@ -581,7 +566,7 @@ extern "C" int bl_localizer_estimate_at(const bl_localizer *loc, int64_t t_us, b
 {
     if (loc == nullptr || est == nullptr) return BL_EINVAL;
     if (!valid(loc)) return BL_ENOTINIT;
-    if (!started(&loc->filter)) return BL_ENOTINIT;
+    if (!bl::started(&loc->filter)) return BL_ENOTINIT;
     bl_estimate e;
     const int rc = t_us > state_time_us(&loc->filter) ? bl_filter_estimate_at(&loc->filter, t_us, &e)
                                                       : bl_filter_estimate(&loc->filter, &e);
@@ -605,11 +590,12 @@ extern "C" int bl_localizer_status(const bl_localizer *loc, bl_loc_status *out)
     if (!valid(loc)) return BL_ENOTINIT;
     bl_loc_status s;
     std::memset(&s, 0, sizeof s);
-    bl_estimate est;
-    if (bl_filter_estimate(&loc->filter, &est) == BL_OK && est.started) {
+    // From the filter's flags, not a bl_estimate: the caller may ask after
+    // every frame, and an estimate builds the whole covariance.
+    if (bl::started(&loc->filter)) {
         s.started = true;
-        s.converged = est.converged;
-        s.reset_counter = loc->reset_base_ + est.reset_counter;
+        s.converged = (loc->filter.flags_ & bl::kFlagConverged) != 0;
+        s.reset_counter = loc->reset_base_ + loc->filter.reset_count_;
     } else {
         s.reset_counter = loc->reset_base_;
     }

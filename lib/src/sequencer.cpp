@@ -24,20 +24,11 @@ constexpr int64_t kMinPeriodUs = 1000;      // 1 ms
 constexpr uint32_t kMaxTimeoutCycles = 1000;
 constexpr uint32_t kMaxGainDiv = 1000000;
 
-bool finite_real(bl_real v)
-{
-    return std::isfinite(v);
-}
+bool finite_real(bl_real v) { return std::isfinite(v); }
 
-bool time_ok(int64_t t_us)
-{
-    return t_us <= BL_SEQ_TIME_LIMIT_US && t_us >= -BL_SEQ_TIME_LIMIT_US;
-}
+bool time_ok(int64_t t_us) { return t_us <= BL_SEQ_TIME_LIMIT_US && t_us >= -BL_SEQ_TIME_LIMIT_US; }
 
-int64_t abs64(int64_t v)
-{
-    return v < 0 ? -v : v;
-}
+int64_t abs64(int64_t v) { return v < 0 ? -v : v; }
 
 // Floor division for b > 0.
 int64_t floor_div(int64_t a, int64_t b)
@@ -48,10 +39,7 @@ int64_t floor_div(int64_t a, int64_t b)
 }
 
 // Nearest integer to a / b for b > 0 (halves round up); |a| < 2^62.
-int64_t round_div(int64_t a, int64_t b)
-{
-    return floor_div(a + b / 2, b);
-}
+int64_t round_div(int64_t a, int64_t b) { return floor_div(a + b / 2, b); }
 
 // Non-negative modulo for n > 0.
 int32_t mod_index(int64_t k, uint32_t n)
@@ -113,10 +101,7 @@ bool config_ok(const bl_seq_config *c)
     return need < c->period_us;
 }
 
-bool seq_ok(const bl_sequencer *s)
-{
-    return s->magic == kMagic;
-}
+bool seq_ok(const bl_sequencer *s) { return s->magic == kMagic; }
 
 struct Assignment {
     bool assigned;
@@ -171,10 +156,7 @@ bool number_by_model(const bl_sequencer *s, int64_t t_us, int64_t jmax, Assignme
 
 // Lock transitions are counted by the public entry points from the state
 // before and after (count_lock_change); these helpers only change state.
-bool is_locked(const bl_sequencer *s)
-{
-    return s->locked || s->hint_valid;
-}
+bool is_locked(const bl_sequencer *s) { return s->locked || s->hint_valid; }
 
 void count_lock_change(bl_sequencer *s, bool before, bool relocked)
 {

@@ -294,12 +294,6 @@ template <int D> int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
 
 }  // namespace
 
-extern "C" int bl_solve_tdoa_2d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol)
-{
-    return solve<2>(prob, sol);
-}
+extern "C" int bl_solve_tdoa_2d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol) { return solve<2>(prob, sol); }
 
-extern "C" int bl_solve_tdoa_3d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol)
-{
-    return solve<3>(prob, sol);
-}
+extern "C" int bl_solve_tdoa_3d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol) { return solve<3>(prob, sol); }

@@ -150,10 +150,7 @@ bool board_burst_pop(board_burst *out)
     return true;
 }
 
-uint32_t board_burst_overruns(void)
-{
-    return overruns;
-}
+uint32_t board_burst_overruns(void) { return overruns; }
 
 /* Debugger-visible copy of the latest pose. */
 volatile board_pose board_last_pose;
@@ -207,27 +204,9 @@ static void exti_receivers(void)
     }
 }
 
-void EXTI0_IRQHandler(void)
-{
-    exti_receivers();
-}
-void EXTI1_IRQHandler(void)
-{
-    exti_receivers();
-}
-void EXTI2_IRQHandler(void)
-{
-    exti_receivers();
-}
-void EXTI3_IRQHandler(void)
-{
-    exti_receivers();
-}
-void EXTI4_IRQHandler(void)
-{
-    exti_receivers();
-}
-void EXTI9_5_IRQHandler(void)
-{
-    exti_receivers();
-}
+void EXTI0_IRQHandler(void) { exti_receivers(); }
+void EXTI1_IRQHandler(void) { exti_receivers(); }
+void EXTI2_IRQHandler(void) { exti_receivers(); }
+void EXTI3_IRQHandler(void) { exti_receivers(); }
+void EXTI4_IRQHandler(void) { exti_receivers(); }
+void EXTI9_5_IRQHandler(void) { exti_receivers(); }

@@ -42,10 +42,7 @@ static int semihost(int op, const void *arg)
     __asm__ volatile("bkpt 0xAB" : "+r"(r0) : "r"(r1) : "memory");
     return r0;
 }
-static void put(const char *s)
-{
-    (void)semihost(0x04, s);
-}
+static void put(const char *s) { (void)semihost(0x04, s); }
 static void put_u(const char *key, uint32_t v)
 {
     char b[16];
@@ -64,15 +61,9 @@ __attribute__((noreturn)) static void quit(int ok)
     for (;;) {}
 }
 
-static uint32_t ticks_now(void)
-{
-    return SYST_CVR;
-}
+static uint32_t ticks_now(void) { return SYST_CVR; }
 /* SysTick counts down, 24 bits */
-static uint32_t instr_since(uint32_t start)
-{
-    return ((start - SYST_CVR) & 0xFFFFFFu) * 1000u / TICKS_PER_KINSTR;
-}
+static uint32_t instr_since(uint32_t start) { return ((start - SYST_CVR) & 0xFFFFFFu) * 1000u / TICKS_PER_KINSTR; }
 
 static uint32_t fuse_instr[MAX_SAMPLES], pred_instr[MAX_SAMPLES];
 

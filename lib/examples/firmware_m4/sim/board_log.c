@@ -222,10 +222,7 @@ bool board_odometry_pop(board_odometry *out)
     return true;
 }
 
-uint32_t board_burst_overruns(void)
-{
-    return (uint32_t)dropped;
-}
+uint32_t board_burst_overruns(void) { return (uint32_t)dropped; }
 
 /* One row per update, as bridge/estimates_csv.c writes it; quality -1 while
  * not converged, else 0 (the firmware computes no MAVLink quality). */

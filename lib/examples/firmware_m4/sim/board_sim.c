@@ -50,10 +50,7 @@ static int semihost(int op, const void *arg)
     return r0;
 }
 #endif
-static void put(const char *s)
-{
-    (void)semihost(0x04, s); /* SYS_WRITE0 */
-}
+static void put(const char *s) { (void)semihost(0x04, s); /* SYS_WRITE0 */ }
 static char *fmt_uint(char *end, uint64_t u)
 {
     *--end = 0;
@@ -244,10 +241,7 @@ bool board_odometry_pop(board_odometry *out)
     return true;
 }
 
-uint32_t board_burst_overruns(void)
-{
-    return 0;
-}
+uint32_t board_burst_overruns(void) { return 0; }
 
 /* v with `decimals` digits after the point (fixed point; |v| < 9e12). */
 static char *put_fixed(char *out, double v, int decimals)
