@@ -3,11 +3,12 @@ a whole frame at the bus bitrate. The same Frames go to the candump log and to a
 (can_out).
 
 Which frame goes next when several wait for the bus (arbitration):
-- "ready" (the simulator's model, every shipped log): first ready, first sent, as if the
-  nodes shared one transmit queue;
-- "priority" (CAN arbitration): of the frames ready when the bus falls idle, the lowest
-  identifier; the same identifier in the order the frames became ready. On the shipped
-  scenarios it sends 26 to 53 frames of a 120 s run in another order than "ready".
+- "priority" (the default: CAN arbitration, ISO 11898-1): of the frames ready when the
+  bus falls idle, the lowest identifier wins; the same identifier in the order the
+  frames became ready;
+- "ready": first ready, first sent, as if the nodes shared one transmit queue (the
+  simulator's model before the bus had arbitration; on the shipped scenarios 26 to 53
+  frames of a 120 s run go in another order than with "priority").
 """
 from __future__ import annotations
 
@@ -45,7 +46,7 @@ class Released:
 class Bus:
     """Serialises the frames of all nodes; keeps the schedule from one interval to the next."""
 
-    def __init__(self, bitrate_bps: float, arbitration: str = "ready"):
+    def __init__(self, bitrate_bps: float, arbitration: str = "priority"):
         if arbitration not in ARBITRATIONS:
             raise ValueError(f"arbitration must be one of {ARBITRATIONS}")
         self.arbitration = arbitration

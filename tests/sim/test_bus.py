@@ -26,7 +26,7 @@ def _order(frames):
 
 
 def test_ready_order_serialises_at_the_bitrate():
-    bus = Bus(BITRATE)
+    bus = Bus(BITRATE, arbitration="ready")
     out = bus.transmit([_released((0.0, 0x120), (1e-4, 0x100)), _released((5e-5, 0x110))])
     assert _order(out) == [(0x120, 0), (0x110, 0), (0x100, 1)]       # first ready, first sent
     assert out.t_s == pytest.approx([FRAME_S, 2 * FRAME_S, 3 * FRAME_S])
