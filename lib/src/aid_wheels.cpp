@@ -61,7 +61,7 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
     // scalar updates are sequential and independent), and the correlation
     // with the same wheels' noise already added to (x, y, θ) by the
     // prediction.
-    const real k2 = cfg->sigma_wheel_per_m * cfg->sigma_wheel_per_m;
+    const real k2 = cfg->wheels.sigma_wheel_per_m * cfg->wheels.sigma_wheel_per_m;
     const real half_b = real(0.5) * cfg->wheel_base_m;
     const real dl_pred_m = std::fabs(x(V) - x(W) * half_b) * dt_s;
     const real dr_pred_m = std::fabs(x(V) + x(W) * half_b) * dt_s;

@@ -232,8 +232,8 @@ static void test_tuning_section(void **state)
     bl_config_default(&lib);
     assert_true(cfg.tuning.speed_of_sound_drift_mps_per_sqrt_s ==
                 lib.speed_of_sound_drift_mps_per_sqrt_s);
-    assert_int_equal(cfg.tuning.iekf_max_iterations, (int)lib.iekf_max_iterations);
-    assert_true(cfg.tuning.iekf_step_tolerance_m == lib.iekf_step_tolerance);
+    assert_int_equal(cfg.tuning.iekf_max_iterations, (int)lib.pulse.iekf_max_iterations);
+    assert_true(cfg.tuning.iekf_step_tolerance_m == lib.pulse.iekf_step_tolerance);
     assert_true(cfg.tuning.initial_sigma_omega_radps == lib.initial_sigma_omega_radps);
 
     char body[2048];
@@ -247,8 +247,8 @@ static void test_tuning_section(void **state)
     char err[CONFIG_ERR_LEN] = "";
     assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), 0);
     assert_true(c.speed_of_sound_drift_mps_per_sqrt_s == (bl_real)0.02);
-    assert_int_equal(c.iekf_max_iterations, 6);
-    assert_true(c.heading_noise_fraction == 0);
+    assert_int_equal(c.pulse.iekf_max_iterations, 6);
+    assert_true(c.wheels.heading_noise_fraction == 0);
     /* not given: the library's default */
     assert_true(c.accel_noise_mps2 == lib.accel_noise_mps2);
     assert_int_equal(c.reset_reject_count, lib.reset_reject_count);
