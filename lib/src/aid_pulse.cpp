@@ -4,6 +4,8 @@
 // belongs to), the fusion of a started filter through the shared update
 // (fusion.hpp), buffering before the start and after a time gap, and the
 // predicted next arrival for the sequencer (filter.h, filter_model.h).
+// Its tuning: cfg.pulse (bl_pulse_params, config.h); otherwise only the
+// site geometry and the shared state settings.
 #include "filter_internal.hpp"
 
 #include <cstring>

@@ -1,6 +1,8 @@
 // beaconloc — aiding source: the wheel speeds (Kleeman 1992 eq. 25), fused
 // by bl_filter_predict_odometry after its odometry transition, as two
 // scalar measurements (v, then ω) through the shared update (fusion.hpp).
+// Its tuning: cfg.wheels (bl_wheel_params, config.h), as for the odometry
+// predict; otherwise only the wheel base.
 #include "filter_internal.hpp"
 
 namespace bl {
