@@ -9,7 +9,9 @@
 #include "estimator.h"
 
 /* bl_config field -> site-file key, for the library's config check: the
- * keys of the schema that set a field, and [beacon1] x_m for "beacons". */
+ * keys of the schema that set a field, by the field's member path as
+ * bl_config_check names it ("pulse.gate_sigma"), and [beacon1] x_m for
+ * "beacons". */
 struct field_key {
     const char *field, *section, *key;
 };

@@ -5,8 +5,10 @@
  * Which key sets which bl_config field is declared once, in the site schema
  * (hw_sim/beaconloc_sim/data/site_schema.toml, `lib = ...`); the mapping
  * here is generated from it (site_keys.h: SITE_LIB_FIELDS,
- * SITE_LIB_BEACON_FIELDS). A complaint of the library's check names the
- * site-file key that set the field, with its file and line.
+ * SITE_LIB_BEACON_FIELDS). A field is named by its member path in bl_config
+ * ("pulse.gate_sigma": a measurement source's params block); a complaint of
+ * the library's check names that path, which maps back to the site-file key
+ * that set the field, with its file and line.
  */
 #ifndef BRIDGE_SITE_TO_LIB_H
 #define BRIDGE_SITE_TO_LIB_H

@@ -2,7 +2,9 @@
  * beaconloc-bridge — the site file's optional [tuning] section.
  *
  * One key per tuning field of the estimator library (the fields under
- * "tuning" in lib/include/beaconloc/config.h). The keys, their ranges,
+ * "tuning" in lib/include/beaconloc/config.h and the per-source blocks'
+ * start-up and iteration fields, e.g. startup_gate_sigma ->
+ * pulse.startup_gate_sigma). The keys, their ranges,
  * defaults (the library's, bl_config_default; tests/bridge/test_config.c
  * checks they agree) and bl_config fields are declared in the site schema
  * (hw_sim/beaconloc_sim/data/site_schema.toml); SITE_KEYS_tuning is its
@@ -11,7 +13,8 @@
  *
  * The ranges are the parse ranges (a value outside is an error naming the
  * key and its line). bl_config_check then checks the whole, e.g.
- * startup_sigma_arrival_s >= [noise] sigma_arrival_s; its complaint names
+ * pulse.startup_sigma_arrival_s >= pulse.sigma_arrival_s ([noise]
+ * sigma_arrival_s); its complaint names
  * the [tuning] key and its line as well.
  */
 #ifndef BRIDGE_TUNING_H

@@ -31,6 +31,9 @@ _C_TYPE = {"real": "K_REAL", "int": "K_INT", "string": "K_STR", "loglevel": "K_L
            "endpoint": "K_ENDPOINT", "ifname": "K_IFNAME"}
 _SIM_MODES = ("required", "optional", "ignored", "unsupported")
 _RANGE_RE = re.compile(r"^\s*([\[(])\s*([^,\s]+)\s*,\s*([^\]\s)]+)\s*([\])])\s*$")
+# A key's lib entry: a bl_config member path, a field or a source's params block
+# and its field ("pulse.gate_sigma"); the generated C writes out->PATH.
+_LIB_FIELD = re.compile(r"[a-z_][a-z0-9_]*(\.[a-z_][a-z0-9_]*)?")
 
 
 @dataclass(frozen=True)
@@ -77,7 +80,7 @@ class Key:
     default: float | int | str | None   # None: required
     sim: str | None            # required / optional / ignored / unsupported; None: not read
     bridge: str | None         # struct bridge_config member; None: not read by the bridge
-    lib: str | None            # bl_config field
+    lib: str | None            # bl_config field: member path ("pulse.gate_sigma")
     geometry: str | None       # "library", "bridge" or None
 
     @property
@@ -159,6 +162,8 @@ def _key(section: str, read_by: tuple[str, ...], raw: dict) -> Key:
         raise ValueError(f"{where}: geometry must be 'library' or 'bridge'")
     if raw.get("geometry") == "library" and "lib" not in raw:
         raise ValueError(f"{where}: library geometry without a lib field")
+    if "lib" in raw and not _LIB_FIELD.fullmatch(raw["lib"]):
+        raise ValueError(f"{where}: lib must be a bl_config member path (field or block.field)")
     member = None
     if in_bridge:
         member = raw.get("bridge", f"tuning.{raw['name']}" if section == "tuning" else raw["name"])

@@ -280,7 +280,7 @@ int main(int argc, char **argv)
                     for (int i = 0; i < BL_FILTER_NX * BL_FILTER_NX; ++i) fprintf(dump, "%.17g ", (double)prior.P_[i]);
                     fprintf(dump, "%.17g %.17g %u %u %.17g\n", (double)(e->t_us - prior.t_us_) * 1e-6,
                             (double)(xp.fire_us - prior.t_us_) * 1e-6, e->beacon, e->receiver,
-                            (double)cfg.sigma_arrival_s);
+                            (double)cfg.pulse.sigma_arrival_s);
                 }
                 if (r == 0 && e->t_us > (int64_t)(seconds * 0.5e6)) {
                     bl_estimate est;

@@ -4,6 +4,8 @@
 // belongs to), the fusion of a started filter through the shared update
 // (fusion.hpp), buffering before the start and after a time gap, and the
 // predicted next arrival for the sequencer (filter.h, filter_model.h).
+// Its tuning: cfg.pulse (bl_pulse_params, config.h); otherwise only the
+// site geometry and the shared state settings.
 #include "filter_internal.hpp"
 
 #include <cstring>
@@ -145,13 +147,13 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     // Measurement noise: Kleeman §3.11 constant σ; §3.9 high variance while
     // converging; plus the beacon controller's firing jitter.
     const bool conv = (f->flags_ & kFlagConverged) != 0;
-    const real sa = conv ? cfg->sigma_arrival_s : cfg->startup_sigma_arrival_s;
+    const real sa = conv ? cfg->pulse.sigma_arrival_s : cfg->pulse.startup_sigma_arrival_s;
     ScalarMeasurement m;
     m.z = g.arrival_rel_s;
-    m.R = sa * sa + cfg->firing_jitter_s * cfg->firing_jitter_s;
-    m.gate_sigma = conv ? cfg->gate_sigma : cfg->startup_gate_sigma;
-    m.max_iterations = cfg->iekf_max_iterations;
-    m.step_tolerance_m = cfg->iekf_step_tolerance;
+    m.R = sa * sa + cfg->pulse.firing_jitter_s * cfg->pulse.firing_jitter_s;
+    m.gate_sigma = conv ? cfg->pulse.gate_sigma : cfg->pulse.startup_gate_sigma;
+    m.max_iterations = cfg->pulse.iekf_max_iterations;
+    m.step_tolerance_m = cfg->pulse.iekf_step_tolerance;
     const int rc = fuse_scalar(model, m, x, P, result);
     if (rc != BL_OK) return rc;  // undefined or numerically impossible: state untouched
 
@@ -324,12 +326,13 @@ extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_in
     RX H;
     if (!pulse_model(cfg, x, g, &h, &H, true)) return BL_EINVAL;
     const bool conv = (f->flags_ & kFlagConverged) != 0;
-    const real sa = conv ? cfg->sigma_arrival_s : cfg->startup_sigma_arrival_s;
+    const real sa = conv ? cfg->pulse.sigma_arrival_s : cfg->pulse.startup_sigma_arrival_s;
     bl_expected_pulse e;
     e.fire_us = f->t_us_ + int64_t(std::llround(double(fire_rel) * 1e6));
     e.arrival_us = f->t_us_ + int64_t(std::llround(double(h) * 1e6));
     e.flight_s = h - fire_rel;
-    e.sigma_s = std::sqrt(H.dot(P.lazyProduct(H.transpose())) + sa * sa + cfg->firing_jitter_s * cfg->firing_jitter_s);
+    e.sigma_s = std::sqrt(H.dot(P.lazyProduct(H.transpose())) + sa * sa +
+                          cfg->pulse.firing_jitter_s * cfg->pulse.firing_jitter_s);
     if (!is_finite(e.flight_s) || !is_finite(e.sigma_s) || !(std::fabs(h) < real(1e6)) ||
         !(std::fabs(fire_rel) < real(1e6)))
         return BL_EINVAL;

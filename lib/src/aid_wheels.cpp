@@ -1,6 +1,8 @@
 // beaconloc — aiding source: the wheel speeds (Kleeman 1992 eq. 25), fused
 // by bl_filter_predict_odometry after its odometry transition, as two
 // scalar measurements (v, then ω) through the shared update (fusion.hpp).
+// Its tuning: cfg.wheels (bl_wheel_params, config.h), as for the odometry
+// predict; otherwise only the wheel base.
 #include "filter_internal.hpp"
 
 namespace bl {
@@ -61,7 +63,7 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
     // scalar updates are sequential and independent), and the correlation
     // with the same wheels' noise already added to (x, y, θ) by the
     // prediction.
-    const real k2 = cfg->sigma_wheel_per_m * cfg->sigma_wheel_per_m;
+    const real k2 = cfg->wheels.sigma_wheel_per_m * cfg->wheels.sigma_wheel_per_m;
     const real half_b = real(0.5) * cfg->wheel_base_m;
     const real dl_pred_m = std::fabs(x(V) - x(W) * half_b) * dt_s;
     const real dr_pred_m = std::fabs(x(V) + x(W) * half_b) * dt_s;

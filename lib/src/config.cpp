@@ -6,6 +6,67 @@
 using bl::is_finite;
 using bl::real;
 
+namespace {
+
+// Per measurement source (config.h): its params block's defaults and checks,
+// one pair of functions per source. A check returns the bad member's path
+// in bl_config ("pulse.gate_sigma") or nullptr.
+
+// Pulse arrival times (aid_pulse.cpp): Kleeman 1992 §3.11 σ, §3.9 start-up.
+void default_pulse_params(bl_pulse_params *p)
+{
+    p->sigma_arrival_s = real(0.0002);
+    p->startup_sigma_arrival_s = real(0.002);  // §3.9: high variance while converging
+    p->gate_sigma = real(3.0);
+    p->startup_gate_sigma = real(5.0);
+    p->firing_jitter_s = real(10e-6);
+    p->iekf_max_iterations = 4;
+    p->iekf_step_tolerance = real(1e-4);
+}
+
+const char *check_pulse_params(const bl_pulse_params *p, real beacon_period_s)
+{
+    if (!(is_finite(p->sigma_arrival_s) && p->sigma_arrival_s > real(0) && p->sigma_arrival_s < real(1)))
+        return "pulse.sigma_arrival_s";
+    if (!(is_finite(p->startup_sigma_arrival_s) && p->startup_sigma_arrival_s >= p->sigma_arrival_s &&
+          p->startup_sigma_arrival_s < real(1)))
+        return "pulse.startup_sigma_arrival_s";
+    if (!(is_finite(p->gate_sigma) && p->gate_sigma > real(0))) return "pulse.gate_sigma";
+    if (!(is_finite(p->startup_gate_sigma) && p->startup_gate_sigma >= p->gate_sigma))
+        return "pulse.startup_gate_sigma";
+    if (!(is_finite(p->firing_jitter_s) && p->firing_jitter_s >= real(0) && p->firing_jitter_s < beacon_period_s))
+        return "pulse.firing_jitter_s";
+    if (!(p->iekf_max_iterations >= 1 && p->iekf_max_iterations <= 20)) return "pulse.iekf_max_iterations";
+    if (!(is_finite(p->iekf_step_tolerance) && p->iekf_step_tolerance >= real(0))) return "pulse.iekf_step_tolerance";
+    return nullptr;
+}
+
+// Wheel encoders (odometry predict, aid_wheels.cpp): Kleeman 1992 §3.10.
+void default_wheel_params(bl_wheel_params *w)
+{
+    w->sigma_wheel_per_m = real(0.01);
+    w->heading_noise_rad_per_sqrt_s = real(0.005);
+    w->heading_noise_fraction = real(0.02);
+    w->stationary_noise_scale = real(0.01);
+}
+
+const char *check_wheel_params(const bl_wheel_params *w)
+{
+    if (!(is_finite(w->sigma_wheel_per_m) && w->sigma_wheel_per_m >= real(0) && w->sigma_wheel_per_m < real(1)))
+        return "wheels.sigma_wheel_per_m";
+    if (!(is_finite(w->heading_noise_rad_per_sqrt_s) && w->heading_noise_rad_per_sqrt_s >= real(0)))
+        return "wheels.heading_noise_rad_per_sqrt_s";
+    if (!(is_finite(w->heading_noise_fraction) && w->heading_noise_fraction >= real(0) &&
+          w->heading_noise_fraction <= real(1)))
+        return "wheels.heading_noise_fraction";
+    if (!(is_finite(w->stationary_noise_scale) && w->stationary_noise_scale > real(0) &&
+          w->stationary_noise_scale <= real(1)))
+        return "wheels.stationary_noise_scale";
+    return nullptr;
+}
+
+}  // namespace
+
 extern "C" int bl_config_default(bl_config *cfg)
 {
     if (cfg == nullptr) return BL_EINVAL;
@@ -38,27 +99,18 @@ extern "C" int bl_config_default(bl_config *cfg)
     // RMSE ratio 1.026 -> 1.063..1.088, σ 0.03 per wheel); sites with
     // uncalibrated wheels set it (wheel-bias ±3 %: 1.757 -> ~1.09). See lib/README.md.
     cfg->sigma_wheel_scale = real(0);
-    cfg->sigma_arrival_s = real(0.0002);
-    cfg->sigma_wheel_per_m = real(0.01);
     cfg->speed_of_sound_mps = real(343.0);
     cfg->sigma_speed_of_sound_mps = real(5.0);
-    cfg->gate_sigma = real(3.0);
+    default_pulse_params(&cfg->pulse);
+    default_wheel_params(&cfg->wheels);
     // Tuning.
-    cfg->sigma_period_s = real(20e-6);           // beacon controller clock: ~100 ppm of 150 ms
-    cfg->startup_sigma_arrival_s = real(0.002);  // §3.9: high variance while converging
-    cfg->startup_gate_sigma = real(5.0);
+    cfg->sigma_period_s = real(20e-6);  // beacon controller clock: ~100 ppm of 150 ms
     cfg->converged_sigma_xy_m = real(0.25);
     cfg->accel_noise_mps2 = real(0.5);
     cfg->angular_accel_noise_radps2 = real(1.0);
-    cfg->heading_noise_rad_per_sqrt_s = real(0.005);
-    cfg->heading_noise_fraction = real(0.02);
-    cfg->stationary_noise_scale = real(0.01);
     cfg->speed_of_sound_drift_mps_per_sqrt_s = real(0.2);
     cfg->period_drift_s_per_sqrt_s = real(1e-8);
     cfg->wheel_scale_drift_per_sqrt_s = real(1e-5);  // 6e-4 per hour: tyre wear / load change
-    cfg->firing_jitter_s = real(10e-6);
-    cfg->iekf_max_iterations = 4;
-    cfg->iekf_step_tolerance = real(1e-4);
     cfg->reset_reject_count = 8;
     cfg->initial_theta_rad = real(0.0);
     cfg->reset_sigma_theta_rad = real(1.0);
@@ -135,34 +187,20 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     BL_CHECK(is_finite(c->encoder_rate_hz) && c->encoder_rate_hz > real(0), "encoder_rate_hz");
     BL_CHECK(is_finite(c->sigma_wheel_scale) && c->sigma_wheel_scale >= real(0) && c->sigma_wheel_scale <= real(0.5),
              "sigma_wheel_scale");
-    BL_CHECK(is_finite(c->sigma_arrival_s) && c->sigma_arrival_s > real(0) && c->sigma_arrival_s < real(1),
-             "sigma_arrival_s");
-    BL_CHECK(is_finite(c->sigma_wheel_per_m) && c->sigma_wheel_per_m >= real(0) && c->sigma_wheel_per_m < real(1),
-             "sigma_wheel_per_m");
     BL_CHECK(is_finite(c->speed_of_sound_mps) && c->speed_of_sound_mps > real(1) && c->speed_of_sound_mps < real(1e4),
              "speed_of_sound_mps");
     BL_CHECK(is_finite(c->sigma_speed_of_sound_mps) && c->sigma_speed_of_sound_mps > real(0) &&
                  c->sigma_speed_of_sound_mps < c->speed_of_sound_mps,
              "sigma_speed_of_sound_mps");
-    BL_CHECK(is_finite(c->gate_sigma) && c->gate_sigma > real(0), "gate_sigma");
+    const char *bad = check_pulse_params(&c->pulse, c->beacon_period_s);
+    if (bad == nullptr) bad = check_wheel_params(&c->wheels);
+    BL_CHECK(bad == nullptr, bad);
     BL_CHECK(is_finite(c->sigma_period_s) && c->sigma_period_s > real(0) && c->sigma_period_s < c->beacon_period_s,
              "sigma_period_s");
-    BL_CHECK(is_finite(c->startup_sigma_arrival_s) && c->startup_sigma_arrival_s >= c->sigma_arrival_s &&
-                 c->startup_sigma_arrival_s < real(1),
-             "startup_sigma_arrival_s");
-    BL_CHECK(is_finite(c->startup_gate_sigma) && c->startup_gate_sigma >= c->gate_sigma, "startup_gate_sigma");
     BL_CHECK(is_finite(c->converged_sigma_xy_m) && c->converged_sigma_xy_m > real(0), "converged_sigma_xy_m");
     BL_CHECK(is_finite(c->accel_noise_mps2) && c->accel_noise_mps2 >= real(0), "accel_noise_mps2");
     BL_CHECK(is_finite(c->angular_accel_noise_radps2) && c->angular_accel_noise_radps2 >= real(0),
              "angular_accel_noise_radps2");
-    BL_CHECK(is_finite(c->heading_noise_rad_per_sqrt_s) && c->heading_noise_rad_per_sqrt_s >= real(0),
-             "heading_noise_rad_per_sqrt_s");
-    BL_CHECK(is_finite(c->heading_noise_fraction) && c->heading_noise_fraction >= real(0) &&
-                 c->heading_noise_fraction <= real(1),
-             "heading_noise_fraction");
-    BL_CHECK(is_finite(c->stationary_noise_scale) && c->stationary_noise_scale > real(0) &&
-                 c->stationary_noise_scale <= real(1),
-             "stationary_noise_scale");
     BL_CHECK(is_finite(c->speed_of_sound_drift_mps_per_sqrt_s) && c->speed_of_sound_drift_mps_per_sqrt_s >= real(0),
              "speed_of_sound_drift_mps_per_sqrt_s");
     BL_CHECK(is_finite(c->period_drift_s_per_sqrt_s) && c->period_drift_s_per_sqrt_s >= real(0),
@@ -170,10 +208,6 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     BL_CHECK(is_finite(c->wheel_scale_drift_per_sqrt_s) && c->wheel_scale_drift_per_sqrt_s >= real(0) &&
                  c->wheel_scale_drift_per_sqrt_s < real(1),
              "wheel_scale_drift_per_sqrt_s");
-    BL_CHECK(is_finite(c->firing_jitter_s) && c->firing_jitter_s >= real(0) && c->firing_jitter_s < c->beacon_period_s,
-             "firing_jitter_s");
-    BL_CHECK(c->iekf_max_iterations >= 1 && c->iekf_max_iterations <= 20, "iekf_max_iterations");
-    BL_CHECK(is_finite(c->iekf_step_tolerance) && c->iekf_step_tolerance >= real(0), "iekf_step_tolerance");
     BL_CHECK(is_finite(c->initial_theta_rad) && std::fabs(c->initial_theta_rad) <= real(100), "initial_theta_rad");
     BL_CHECK(is_finite(c->reset_sigma_theta_rad) && c->reset_sigma_theta_rad > real(0), "reset_sigma_theta_rad");
     BL_CHECK(c->ring_heading <= 1, "ring_heading");

@@ -488,7 +488,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     // rolled, independent per wheel, as hw_sim draws slip), Q_u =
     // diag(σ_w²|mL| k_l², σ_w²|mR| k_r²) on the calibrated distances
     // (∂f/∂m = g·k); G Q_u Gᵀ touches only the (x, y, θ) block.
-    const real k2 = cfg->sigma_wheel_per_m * cfg->sigma_wheel_per_m;
+    const real k2 = cfg->wheels.sigma_wheel_per_m * cfg->wheels.sigma_wheel_per_m;
     const real qu[2] = {k2 * std::fabs(d_left_m) * x(KL) * x(KL), k2 * std::fabs(d_right_m) * x(KR) * x(KR)};
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c) Pn(r, c) += J.g[r][0] * qu[0] * J.g[c][0] + J.g[r][1] * qu[1] * J.g[c][1];
@@ -509,8 +509,9 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
         //   σ_θ² += σ_off²·dt + (f·Δθ)²   (rad²)
         // σ_off = heading_noise_rad_per_sqrt_s (rad/√s), f =
         // heading_noise_fraction (1), dt in s.
-        const real fr = cfg->heading_noise_fraction * dth;
-        Pn(TH, TH) += cfg->heading_noise_rad_per_sqrt_s * cfg->heading_noise_rad_per_sqrt_s * dt + fr * fr;
+        const real fr = cfg->wheels.heading_noise_fraction * dth;
+        Pn(TH, TH) +=
+            cfg->wheels.heading_noise_rad_per_sqrt_s * cfg->wheels.heading_noise_rad_per_sqrt_s * dt + fr * fr;
     }
     // v and ω: random walk of the piecewise-constant acceleration model (as
     // in cv_predict, our model): σ_v² += (s·σ_a·dt)² ((m/s)²), σ_ω² +=
@@ -519,7 +520,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     // a standing robot does not accelerate unnoticed). §3.10's "no
     // acceleration" vs "straight ramp" is not distinguished: the wheel
     // speeds below measure v every step.
-    const real scale = moving ? real(1) : cfg->stationary_noise_scale;
+    const real scale = moving ? real(1) : cfg->wheels.stationary_noise_scale;
     const real sa = scale * cfg->accel_noise_mps2 * dt, sw = scale * cfg->angular_accel_noise_radps2 * dt;
     Pn(V, V) += sa * sa;
     Pn(W, W) += sw * sw;

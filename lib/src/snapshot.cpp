@@ -72,13 +72,14 @@ __attribute__((noinline)) int solve_snapshot(const bl_filter *f, real s_mps, rea
 {
     const bl_config *cfg = &f->cfg_;
     Snapshot snap;
-    if (!build_snapshot(f, s_mps, T_s, cfg->startup_sigma_arrival_s, use_mask, snap)) return BL_EDEGENERATE;
+    if (!build_snapshot(f, s_mps, T_s, cfg->pulse.startup_sigma_arrival_s, use_mask, snap)) return BL_EDEGENERATE;
     if (snap.prob.count < min_beacons) return BL_EDEGENERATE;
     const int rc = bl_solve_tdoa_2d(&snap.prob, sol);
     if (rc != BL_OK) return rc;
     // An overdetermined fix must explain its pulses (an echo-polluted or
     // moving-robot snapshot does not).
-    if (snap.prob.count > 3 && sol->residual_rms_s > real(3) * cfg->startup_sigma_arrival_s) return BL_ENOCONVERGE;
+    if (snap.prob.count > 3 && sol->residual_rms_s > real(3) * cfg->pulse.startup_sigma_arrival_s)
+        return BL_ENOCONVERGE;
     *ref_arrival_us = snap.ref_arrival_us;
     *ref_beacon = snap.ref_beacon;
     return BL_OK;
@@ -138,7 +139,7 @@ int64_t ring_window_us(const bl_config *cfg)
 {
     // 2 r / s: flight time across the ring (s nominal); 4 σ: the timing noise
     // of two arrivals (√2 · 2.8 σ).
-    const real w_s = real(2) * cfg->ring_radius_m / cfg->speed_of_sound_mps + real(4) * cfg->sigma_arrival_s;
+    const real w_s = real(2) * cfg->ring_radius_m / cfg->speed_of_sound_mps + real(4) * cfg->pulse.sigma_arrival_s;
     return int64_t(std::llround(double(w_s) * 1e6));
 }
 

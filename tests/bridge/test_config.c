@@ -232,8 +232,8 @@ static void test_tuning_section(void **state)
     bl_config_default(&lib);
     assert_true(cfg.tuning.speed_of_sound_drift_mps_per_sqrt_s ==
                 lib.speed_of_sound_drift_mps_per_sqrt_s);
-    assert_int_equal(cfg.tuning.iekf_max_iterations, (int)lib.iekf_max_iterations);
-    assert_true(cfg.tuning.iekf_step_tolerance_m == lib.iekf_step_tolerance);
+    assert_int_equal(cfg.tuning.iekf_max_iterations, (int)lib.pulse.iekf_max_iterations);
+    assert_true(cfg.tuning.iekf_step_tolerance_m == lib.pulse.iekf_step_tolerance);
     assert_true(cfg.tuning.initial_sigma_omega_radps == lib.initial_sigma_omega_radps);
 
     char body[2048];
@@ -247,8 +247,8 @@ static void test_tuning_section(void **state)
     char err[CONFIG_ERR_LEN] = "";
     assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), 0);
     assert_true(c.speed_of_sound_drift_mps_per_sqrt_s == (bl_real)0.02);
-    assert_int_equal(c.iekf_max_iterations, 6);
-    assert_true(c.heading_noise_fraction == 0);
+    assert_int_equal(c.pulse.iekf_max_iterations, 6);
+    assert_true(c.wheels.heading_noise_fraction == 0);
     /* not given: the library's default */
     assert_true(c.accel_noise_mps2 == lib.accel_noise_mps2);
     assert_int_equal(c.reset_reject_count, lib.reset_reject_count);
@@ -502,6 +502,61 @@ static void test_every_key_reaches_its_field(void **state)
     assert_true(c.beacons[2].z_m == (bl_real)cfg.beacon[2].z_m);
 }
 
+/* The library's complaint about a field names the key that set it: each
+ * real field made non-finite alone (every check refuses that) is refused by
+ * bl_config_check under the field's member path (a source's block, e.g.
+ * "pulse.gate_sigma"), and the message names the schema's section and key,
+ * with its line in the file where the file gives it. */
+#define ONLY_K_REAL(...) __VA_ARGS__
+#define ONLY_K_INT(...)
+static void test_every_field_complaint_names_its_key(void **state)
+{
+    (void)state;
+    struct bridge_config site, cfg;
+    config_defaults(&site);
+    char err[CONFIG_ERR_LEN] = "", want[CONFIG_ERR_LEN + 64];
+    assert_int_equal(config_load_file(&site, SITE, err, sizeof err), 0);
+    bl_config c;
+    int n = 0;
+#define COMPLAINT(sec, k, type, member, field, geometry)                       \
+    ONLY_##type(                                                               \
+        cfg = site;                                                            \
+        cfg.member = NAN;                                                      \
+        if (estimator_make_config(&cfg, &c, err, sizeof err) != -1)            \
+            fail_msg("[%s] %s = nan accepted", #sec, #k);                      \
+        config_format_error(&cfg, #sec, #k, "rejected by the estimator (" #field ": ", \
+                            want, sizeof want);                                \
+        if (strncmp(err, want, strlen(want)) != 0)                             \
+            fail_msg("got '%s', want prefix '%s'", err, want);                 \
+        n++;)
+    SITE_LIB_FIELDS(COMPLAINT)
+#undef COMPLAINT
+    assert_true(n >= 35);
+    /* an integer of a source's block: [tuning] iekf_max_iterations */
+    cfg = site;
+    cfg.tuning.iekf_max_iterations = 0;
+    assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), -1);
+    assert_non_null(strstr(err, "[tuning] iekf_max_iterations: rejected by the estimator "
+                                "(pulse.iekf_max_iterations: "));
+    /* a [noise] key of one: its line in the file */
+    cfg = site;
+    cfg.gate_sigma = NAN;
+    assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), -1);
+    int at = 0, i = 0;
+    char line[256];
+    FILE *f = fopen(SITE, "r");
+    assert_non_null(f);
+    while (fgets(line, sizeof line, f)) {
+        i++;
+        if (!strncmp(line, "gate_sigma", 10)) at = i;
+    }
+    fclose(f);
+    assert_true(at > 0);
+    snprintf(want, sizeof want, SITE ":%d: [noise] gate_sigma: rejected by the estimator (pulse.gate_sigma: ", at);
+    if (strncmp(err, want, strlen(want)) != 0)
+        fail_msg("got '%s', want prefix '%s'", err, want);
+}
+
 /* The library's geometry check (bl_config_same_geometry) is the schema's
  * geometry = "library" list: each field changed alone from the site file's
  * value is geometry exactly when the schema says so. */
@@ -569,6 +624,7 @@ int main(void)
         cmocka_unit_test(test_every_schema_key_has_its_range),
         cmocka_unit_test(test_tuning_defaults_are_the_librarys),
         cmocka_unit_test(test_every_key_reaches_its_field),
+        cmocka_unit_test(test_every_field_complaint_names_its_key),
         cmocka_unit_test(test_library_geometry_is_the_schemas),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -526,7 +526,7 @@ static void test_reconfigure_tuning_keeps_filter(void **state)
     assert_int_equal(estimator_output(&W.est, 0, &before), 0);
     assert_int_equal(estimator_reconfigure(&W.est, &c, err, sizeof err), 0);
     assert_true(W.est.blcfg.speed_of_sound_drift_mps_per_sqrt_s == (bl_real)0.01);
-    assert_int_equal(W.est.blcfg.iekf_max_iterations, 2);
+    assert_int_equal(W.est.blcfg.pulse.iekf_max_iterations, 2);
     assert_int_equal(estimator_output(&W.est, 0, &after), 0);
     assert_true(after.x_m == before.x_m && after.reset_counter == before.reset_counter);
     /* one the library refuses: nothing changes */
@@ -534,7 +534,7 @@ static void test_reconfigure_tuning_keeps_filter(void **state)
     bad.tuning.startup_gate_sigma = 1.0; /* below gate_sigma 3 */
     assert_int_equal(estimator_reconfigure(&W.est, &bad, err, sizeof err), -1);
     assert_non_null(strstr(err, "[tuning] startup_gate_sigma: rejected by the estimator"));
-    assert_int_equal(W.est.blcfg.iekf_max_iterations, 2);
+    assert_int_equal(W.est.blcfg.pulse.iekf_max_iterations, 2);
     /* geometry: the wheel radius */
     struct bridge_config g = c;
     g.wheel_radius_m *= 1.01;

@@ -199,19 +199,19 @@ static void perturb_config(struct fz *z, bl_config *c)
         &c->ring_radius_m, &c->first_angle_deg, &c->angle_step_deg,
         &c->receiver_height_m, &c->beamwidth_deg, &c->wheel_base_m,
         &c->wheel_radius_m, &c->encoder_rate_hz, &c->sigma_wheel_scale,
-        &c->sigma_arrival_s, &c->sigma_wheel_per_m, &c->speed_of_sound_mps,
-        &c->sigma_speed_of_sound_mps, &c->gate_sigma, &c->sigma_period_s,
-        &c->startup_sigma_arrival_s, &c->startup_gate_sigma,
+        &c->pulse.sigma_arrival_s, &c->wheels.sigma_wheel_per_m, &c->speed_of_sound_mps,
+        &c->sigma_speed_of_sound_mps, &c->pulse.gate_sigma, &c->sigma_period_s,
+        &c->pulse.startup_sigma_arrival_s, &c->pulse.startup_gate_sigma,
         &c->converged_sigma_xy_m, &c->accel_noise_mps2,
-        &c->angular_accel_noise_radps2, &c->heading_noise_rad_per_sqrt_s,
-        &c->heading_noise_fraction, &c->stationary_noise_scale,
+        &c->angular_accel_noise_radps2, &c->wheels.heading_noise_rad_per_sqrt_s,
+        &c->wheels.heading_noise_fraction, &c->wheels.stationary_noise_scale,
         &c->speed_of_sound_drift_mps_per_sqrt_s, &c->period_drift_s_per_sqrt_s,
-        &c->wheel_scale_drift_per_sqrt_s, &c->firing_jitter_s,
-        &c->iekf_step_tolerance, &c->initial_theta_rad, &c->reset_sigma_theta_rad,
+        &c->wheel_scale_drift_per_sqrt_s, &c->pulse.firing_jitter_s,
+        &c->pulse.iekf_step_tolerance, &c->initial_theta_rad, &c->reset_sigma_theta_rad,
         &c->initial_sigma_v_mps, &c->initial_sigma_omega_radps, &c->max_predict_gap_s,
     };
     uint32_t *ints[] = { &c->beacon_count, &c->receiver_count, &c->ticks_per_rev,
-                         &c->iekf_max_iterations, &c->reset_reject_count, &c->ring_heading };
+                         &c->pulse.iekf_max_iterations, &c->reset_reject_count, &c->ring_heading };
     const size_t nr = sizeof reals / sizeof reals[0], ni = sizeof ints / sizeof ints[0];
     uint8_t k = fz_u8(z);
     if (k == 255)

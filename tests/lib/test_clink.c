@@ -27,7 +27,7 @@ int main(void)
         prob.beacons[j] = cfg.beacons[j];
         prob.fire_offset_s[j] = (bl_real)(j * cfg.beacon_period_s);
         prob.arrival_s[j] = (bl_real)(t0 + j * cfg.beacon_period_s + sqrt(dx * dx + dy * dy + dz * dz) / s);
-        prob.sigma_s[j] = cfg.sigma_arrival_s;
+        prob.sigma_s[j] = cfg.pulse.sigma_arrival_s;
     }
     CHECK(bl_solve_tdoa_2d(&prob, &sol) == BL_OK);
     CHECK(fabs(sol.x_m - px) < 1e-3 && fabs(sol.y_m - py) < 1e-3);

@@ -156,26 +156,26 @@ MUT(m_wheel_base, c->wheel_base_m = 0)
 MUT(m_wheel_radius, c->wheel_radius_m = -1)
 MUT(m_ticks, c->ticks_per_rev = 0)
 MUT(m_enc_rate, c->encoder_rate_hz = 0)
-MUT(m_sigma_arr, c->sigma_arrival_s = 0)
-MUT(m_sigma_wheel, c->sigma_wheel_per_m = -0.01f)
+MUT(m_sigma_arr, c->pulse.sigma_arrival_s = 0)
+MUT(m_sigma_wheel, c->wheels.sigma_wheel_per_m = -0.01f)
 MUT(m_sos, c->speed_of_sound_mps = 0)
 MUT(m_sigma_sos, c->sigma_speed_of_sound_mps = 0)
-MUT(m_gate, c->gate_sigma = (bl_real)NAN)
+MUT(m_gate, c->pulse.gate_sigma = (bl_real)NAN)
 MUT(m_sigma_T, c->sigma_period_s = 0)
-MUT(m_startup_sigma, c->startup_sigma_arrival_s = c->sigma_arrival_s / 2)
-MUT(m_startup_gate, c->startup_gate_sigma = c->gate_sigma / 2)
+MUT(m_startup_sigma, c->pulse.startup_sigma_arrival_s = c->pulse.sigma_arrival_s / 2)
+MUT(m_startup_gate, c->pulse.startup_gate_sigma = c->pulse.gate_sigma / 2)
 MUT(m_conv, c->converged_sigma_xy_m = 0)
 MUT(m_accel, c->accel_noise_mps2 = -1)
 MUT(m_alpha, c->angular_accel_noise_radps2 = (bl_real)NAN)
-MUT(m_heading, c->heading_noise_rad_per_sqrt_s = -1)
-MUT(m_frac, c->heading_noise_fraction = 2)
-MUT(m_stat, c->stationary_noise_scale = 0)
+MUT(m_heading, c->wheels.heading_noise_rad_per_sqrt_s = -1)
+MUT(m_frac, c->wheels.heading_noise_fraction = 2)
+MUT(m_stat, c->wheels.stationary_noise_scale = 0)
 MUT(m_sos_drift, c->speed_of_sound_drift_mps_per_sqrt_s = -1)
 MUT(m_T_drift, c->period_drift_s_per_sqrt_s = (bl_real)INFINITY)
-MUT(m_jitter, c->firing_jitter_s = 1)
-MUT(m_iter0, c->iekf_max_iterations = 0)
-MUT(m_iter_high, c->iekf_max_iterations = 21)
-MUT(m_tol, c->iekf_step_tolerance = -1)
+MUT(m_jitter, c->pulse.firing_jitter_s = 1)
+MUT(m_iter0, c->pulse.iekf_max_iterations = 0)
+MUT(m_iter_high, c->pulse.iekf_max_iterations = 21)
+MUT(m_tol, c->pulse.iekf_step_tolerance = -1)
 MUT(m_theta0, c->initial_theta_rad = (bl_real)NAN)
 MUT(m_reset_theta, c->reset_sigma_theta_rad = 0)
 MUT(m_sig_v, c->initial_sigma_v_mps = 0)
@@ -199,16 +199,16 @@ static void test_every_check(void **state)
         {m_rx_count, "receiver_count"}, {m_rx_count_high, "receiver_count"}, {m_ring, "ring_radius_m"},
         {m_first_angle, "first_angle_deg"}, {m_step, "angle_step_deg"}, {m_height, "receiver_height_m"},
         {m_beam, "beamwidth_deg"}, {m_wheel_base, "wheel_base_m"}, {m_wheel_radius, "wheel_radius_m"},
-        {m_ticks, "ticks_per_rev"}, {m_enc_rate, "encoder_rate_hz"}, {m_sigma_arr, "sigma_arrival_s"},
-        {m_sigma_wheel, "sigma_wheel_per_m"}, {m_sos, "speed_of_sound_mps"},
-        {m_sigma_sos, "sigma_speed_of_sound_mps"}, {m_gate, "gate_sigma"}, {m_sigma_T, "sigma_period_s"},
-        {m_startup_sigma, "startup_sigma_arrival_s"}, {m_startup_gate, "startup_gate_sigma"},
+        {m_ticks, "ticks_per_rev"}, {m_enc_rate, "encoder_rate_hz"}, {m_sigma_arr, "pulse.sigma_arrival_s"},
+        {m_sigma_wheel, "wheels.sigma_wheel_per_m"}, {m_sos, "speed_of_sound_mps"},
+        {m_sigma_sos, "sigma_speed_of_sound_mps"}, {m_gate, "pulse.gate_sigma"}, {m_sigma_T, "sigma_period_s"},
+        {m_startup_sigma, "pulse.startup_sigma_arrival_s"}, {m_startup_gate, "pulse.startup_gate_sigma"},
         {m_conv, "converged_sigma_xy_m"}, {m_accel, "accel_noise_mps2"},
-        {m_alpha, "angular_accel_noise_radps2"}, {m_heading, "heading_noise_rad_per_sqrt_s"},
-        {m_frac, "heading_noise_fraction"}, {m_stat, "stationary_noise_scale"},
+        {m_alpha, "angular_accel_noise_radps2"}, {m_heading, "wheels.heading_noise_rad_per_sqrt_s"},
+        {m_frac, "wheels.heading_noise_fraction"}, {m_stat, "wheels.stationary_noise_scale"},
         {m_sos_drift, "speed_of_sound_drift_mps_per_sqrt_s"}, {m_T_drift, "period_drift_s_per_sqrt_s"},
-        {m_jitter, "firing_jitter_s"}, {m_iter0, "iekf_max_iterations"}, {m_iter_high, "iekf_max_iterations"},
-        {m_tol, "iekf_step_tolerance"}, {m_theta0, "initial_theta_rad"}, {m_reset_theta, "reset_sigma_theta_rad"},
+        {m_jitter, "pulse.firing_jitter_s"}, {m_iter0, "pulse.iekf_max_iterations"}, {m_iter_high, "pulse.iekf_max_iterations"},
+        {m_tol, "pulse.iekf_step_tolerance"}, {m_theta0, "initial_theta_rad"}, {m_reset_theta, "reset_sigma_theta_rad"},
         {m_sig_v, "initial_sigma_v_mps"}, {m_sig_w, "initial_sigma_omega_radps"}, {m_gap, "max_predict_gap_s"},
         {m_ring_heading, "ring_heading"},
         {m_wscale_neg, "sigma_wheel_scale"}, {m_wscale_high, "sigma_wheel_scale"},

@@ -188,8 +188,8 @@ static void test_same_geometry(void **state)
     }
     /* tuning and the caller's own conversions: same geometry, accepted */
     c = cfg;
-    c.gate_sigma = 4;
-    c.sigma_arrival_s *= 2;
+    c.pulse.gate_sigma = 4;
+    c.pulse.sigma_arrival_s *= 2;
     c.wheel_radius_m *= (bl_real)1.1;
     c.ticks_per_rev += 1;
     c.encoder_rate_hz = 50;

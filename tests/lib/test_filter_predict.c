@@ -36,11 +36,11 @@ static void test_process_noise_by_motion(void **state)
                   turning);
     /* straight: wheel noise through Δθ = (dR - dL)/b, σ_w²(|dL| + |dR|)/b²,
      * plus the offset term σ_off²·dt */
-    const double k2 = (double)cfg.sigma_wheel_per_m * (double)cfg.sigma_wheel_per_m;
-    const double off2 = (double)cfg.heading_noise_rad_per_sqrt_s * (double)cfg.heading_noise_rad_per_sqrt_s;
+    const double k2 = (double)cfg.wheels.sigma_wheel_per_m * (double)cfg.wheels.sigma_wheel_per_m;
+    const double off2 = (double)cfg.wheels.heading_noise_rad_per_sqrt_s * (double)cfg.wheels.heading_noise_rad_per_sqrt_s;
     const double expect_straight = k2 * 0.02 / (b * b) + off2 * dt;
     /* turning: the same plus (f·Δθ)², Δθ = 0.01 m / b */
-    const double frac = (double)cfg.heading_noise_fraction * 0.01 / b;
+    const double frac = (double)cfg.wheels.heading_noise_fraction * 0.01 / b;
     const double rel = IS_FLOAT ? 2e-3 : 1e-9; /* float: P_θθ = 1e-4 rad² carries ~1e-11 of rounding */
     assert_true(fabs(straight - expect_straight) <= rel * expect_straight);
     assert_true(turning > straight);
@@ -110,7 +110,7 @@ static void test_odometry_speed_unbiased(void **state)
     pr.t0_us = 950000;
     pr.sigma_t0_s = (bl_real)1e-4;
     assert_int_equal(bl_filter_start(&f, &pr), BL_OK);
-    const double v_mps = 0.45, dt_s = 0.01, sw = (double)cfg.sigma_wheel_per_m;
+    const double v_mps = 0.45, dt_s = 0.01, sw = (double)cfg.wheels.sigma_wheel_per_m;
     const double d_m = v_mps * dt_s;
     double sum_v = 0, sum_z = 0;
     int n = 0;

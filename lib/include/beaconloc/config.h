@@ -4,11 +4,14 @@
  * The fields of the site sections map 1:1 onto the keys of the INI site file
  * (hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini): section [beacons] -> beacon_*,
  * [beaconN] x_m/y_m/z_m -> beacons[N-1], [receivers] -> receiver_*,
- * [robot] -> robot fields, [noise] -> noise fields. The comment after each
- * field names its INI key. Fields under "tuning" default to
- * bl_config_default(); the bridge reads them from the site file's optional
- * [tuning] section, one key per field named as the field (iekf_step_tolerance
- * as iekf_step_tolerance_m; bridge/tuning.h). [site] (room size, echoes) and
+ * [robot] -> robot fields, [noise] -> noise fields (a measurement source's
+ * σ and gate in its own block: pulse.sigma_arrival_s, pulse.gate_sigma,
+ * wheels.sigma_wheel_per_m). The comment after each field names its INI key.
+ * Fields under "tuning" and the per-source blocks (bl_pulse_params,
+ * bl_wheel_params) default to bl_config_default(); the bridge reads the
+ * tuning from the site file's optional [tuning] section, one key per field
+ * named as the field's last member (pulse.iekf_step_tolerance as
+ * iekf_step_tolerance_m; bridge/tuning.h). [site] (room size, echoes) and
  * [bridge] are not used by the estimator.
  *
  * Frame: site frame, x east, y north, z up, metres; angles counter-clockwise
@@ -23,6 +26,48 @@
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+/* Per measurement source: its tuning in its own params block (bl_config.pulse,
+ * bl_config.wheels), read only by that source's fusion (lib/src/aid_<source>.cpp)
+ * and by the prediction it drives; defaults in bl_config_default, checked in
+ * bl_config_check, which names a bad member by its path ("pulse.gate_sigma").
+ * A new source (bearing, range, sonar) adds its own block. The comment after
+ * each member names its site-file key ([noise] or [tuning]). */
+
+/* Ultrasonic pulse arrival times (aid_pulse.cpp; its snapshot start,
+ * snapshot.cpp; Kleeman 1992 eq. 21). */
+typedef struct bl_pulse_params {
+    bl_real sigma_arrival_s;         /* [noise] sigma_arrival_s: σ of a pulse arrival time
+                                        (Kleeman 1992 §3.11: 0.2 ms), > 0 */
+    bl_real startup_sigma_arrival_s; /* [tuning]: σ arrival used until converged (Kleeman
+                                        §3.9: high variance during start-up),
+                                        >= sigma_arrival_s */
+    bl_real gate_sigma;              /* [noise] gate_sigma: innovation gate in σ (chi-square
+                                        with 1 dof: reject if |innov| > gate_sigma·σ_innov), > 0 */
+    bl_real startup_gate_sigma;      /* [tuning]: gate (σ) used until converged, >= gate_sigma */
+    bl_real firing_jitter_s;         /* [tuning]: σ of firing-time jitter per beacon slot (s),
+                                        >= 0, < beacon_period_s */
+    uint32_t iekf_max_iterations;    /* [tuning]: IEKF relinearisations per pulse, 1..20 */
+    bl_real iekf_step_tolerance;     /* [tuning] iekf_step_tolerance_m: stop iterating when
+                                        |Δposition| < this (m), >= 0 */
+} bl_pulse_params;
+
+/* Wheel encoders: the odometry prediction (bl_filter_predict_odometry) and
+ * the wheel speeds it fuses (aid_wheels.cpp; Kleeman 1992 eqs. 24-25, §3.10).
+ * The wheel-scale states (sigma_wheel_scale, wheel_scale_drift_per_sqrt_s)
+ * are part of the state, shared: they stay in bl_config. */
+typedef struct bl_wheel_params {
+    bl_real sigma_wheel_per_m;            /* [noise] sigma_wheel_per_m: odometry noise: each
+                                             wheel's distance variance grows by this² · |d|
+                                             (m²) over a travel of |d| m (1 cm per metre), >= 0 */
+    bl_real heading_noise_rad_per_sqrt_s; /* [tuning]: heading noise while moving: σ² grows
+                                             by this² per second (the "offset", Kleeman
+                                             §3.10) ... */
+    bl_real heading_noise_fraction;       /* [tuning]: ... plus (this · |Δθ|)² per step (the
+                                             "fraction of the angle increment", §3.10), 0..1 */
+    bl_real stationary_noise_scale;       /* [tuning]: scale of the v/ω process noise while
+                                             stationary (no wheel travel), (0, 1] (§3.10) */
+} bl_wheel_params;
 
 typedef struct bl_config {
     /* ---- [beacons] ---- */
@@ -62,31 +107,21 @@ typedef struct bl_config {
                                          wheels known only to ±3 % */
 
     /* ---- [noise] ---- */
-    bl_real sigma_arrival_s;          /* sigma_arrival_s: σ of a pulse arrival time
-                                         (Kleeman 1992 §3.11: 0.2 ms), > 0 */
-    bl_real sigma_wheel_per_m;        /* sigma_wheel_per_m: odometry process noise: each
-                                         wheel's distance variance grows by this² · |d| (m²)
-                                         over a travel of |d| m (1 cm per metre), >= 0 */
     bl_real speed_of_sound_mps;       /* speed_of_sound_mps: initial speed of sound, > 0 */
     bl_real sigma_speed_of_sound_mps; /* sigma_speed_of_sound_mps: its initial σ (Kleeman
                                          Fig. 8: 5 m/s), > 0 */
-    bl_real gate_sigma;               /* gate_sigma: innovation gate in σ (chi-square with
-                                         1 dof: reject if |innov| > gate_sigma·σ_innov), > 0 */
 
-    /* ---- tuning ([tuning] in the bridge's site file; defaults from bl_config_default) ---- */
+    /* ---- per measurement source ([noise] and [tuning] keys; see above) ---- */
+    bl_pulse_params pulse;  /* pulse arrival times (aid_pulse.cpp) */
+    bl_wheel_params wheels; /* wheel encoders (odometry predict, aid_wheels.cpp) */
+
+    /* ---- tuning shared by all sources: state, process noise, start-up, policy
+     * ([tuning] in the bridge's site file; defaults from bl_config_default) ---- */
     bl_real sigma_period_s;                      /* initial σ of the beacon period T (s), > 0 */
-    bl_real startup_sigma_arrival_s;             /* σ arrival used until converged (Kleeman §3.9: high
-                                         variance during start-up), >= sigma_arrival_s */
-    bl_real startup_gate_sigma;                  /* gate (σ) used until converged, >= gate_sigma */
     bl_real converged_sigma_xy_m;                /* converged once sqrt(max(Pxx,Pyy)) is below this */
     bl_real accel_noise_mps2;                    /* process noise: σ of linear acceleration
                                          (constant-velocity predict; odometry v/ω states), >= 0 */
     bl_real angular_accel_noise_radps2;          /* process noise: σ of angular acceleration, >= 0 */
-    bl_real heading_noise_rad_per_sqrt_s;        /* odometry heading noise while moving: σ² grows by
-                                         this² per second (the "offset", Kleeman §3.10) ... */
-    bl_real heading_noise_fraction;              /* ... plus (this · |Δθ|)² per step (the "fraction of
-                                         the angle increment", §3.10), >= 0 */
-    bl_real stationary_noise_scale;              /* process-noise scale when stationary (0..1] (§3.10) */
     bl_real speed_of_sound_drift_mps_per_sqrt_s; /* random walk of s (m/s/√s), >= 0; default
                                          0.2: follows a 5 °C/min air-temperature ramp
                                          within ~1 m/s (temperature-ramp scenario);
@@ -94,9 +129,6 @@ typedef struct bl_config {
     bl_real period_drift_s_per_sqrt_s;           /* random walk of T, >= 0 */
     bl_real wheel_scale_drift_per_sqrt_s;        /* random walk of each wheel scale
                                                     (1/√s: σ² grows by this² per s), >= 0 */
-    bl_real firing_jitter_s;                     /* σ of firing-time jitter per beacon slot, >= 0 */
-    uint32_t iekf_max_iterations;                /* IEKF relinearisations per pulse, 1..20 */
-    bl_real iekf_step_tolerance;                 /* stop iterating when |Δposition| < this (m) */
     uint32_t reset_reject_count;                 /* K: the localizer's persistent-rejection threshold:
                                          it restarts the filter from the snapshot solver
                                          (bl_filter_start_snapshot) after K rejected first
@@ -129,7 +161,8 @@ int bl_config_default(bl_config *cfg);
  * at least 3 beacons not collinear in x-y). Returns BL_OK or BL_ECONFIG
  * (BL_EINVAL if cfg is NULL). Never modifies *cfg.
  * If bad_field is non-NULL it receives the name of the first bad field
- * (static storage, e.g. "beacon_period_s"), or NULL when BL_OK. */
+ * (static storage): its member path, e.g. "beacon_period_s", "pulse.gate_sigma"
+ * (a source's block, then the member), or NULL when BL_OK. */
 int bl_config_check(const bl_config *cfg, const char **bad_field);
 
 /* Receiver k's body-frame angle (rad): first_angle_deg + k·step, in radians.
@@ -148,7 +181,7 @@ int bl_config_receiver_angle(const bl_config *cfg, uint32_t receiver_index, bl_r
  *   state layout: whether the wheel-scale states are on
  *              (sigma_wheel_scale > 0 in both or in neither).
  * Everything else (wheel_radius_m, ticks_per_rev, encoder_rate_hz, noise,
- * gates, tuning) is tuning and may differ. False if either is NULL. Not a
+ * the per-source blocks, tuning) is tuning and may differ. False if either is NULL. Not a
  * validity check: see bl_config_check. */
 bool bl_config_same_geometry(const bl_config *a, const bl_config *b);
 

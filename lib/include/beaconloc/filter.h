@@ -25,7 +25,7 @@
  * The filter starts itself from the snapshot solver (bl_solve_tdoa_2d) once
  * the buffered pulses of the latest firing cycle cover 4 beacons (all of
  * them if the site has 3) and the fix explains them (residual < 3 σ of
- * cfg.startup_sigma_arrival_s), heading from the ring (below), else
+ * cfg.pulse.startup_sigma_arrival_s), heading from the ring (below), else
  * cfg.initial_theta_rad with σ cfg.reset_sigma_theta_rad; or explicitly with
  * bl_filter_start() (known pose and firing time) or
  * bl_filter_start_snapshot().
@@ -46,9 +46,9 @@
  * its heading known to about 0.1-0.2 rad instead of learning it from motion.
  *
  * Start-up (Kleeman §3.9): until the position σ first falls below
- * cfg.converged_sigma_xy_m, arrivals get σ cfg.startup_sigma_arrival_s and
- * the gate cfg.startup_gate_sigma; then cfg.sigma_arrival_s and
- * cfg.gate_sigma. The flag is cleared again when the position σ grows
+ * cfg.converged_sigma_xy_m, arrivals get σ cfg.pulse.startup_sigma_arrival_s and
+ * the gate cfg.pulse.startup_gate_sigma; then cfg.pulse.sigma_arrival_s and
+ * cfg.pulse.gate_sigma. The flag is cleared again when the position σ grows
  * above 2·cfg.converged_sigma_xy_m (a long coast without pulses), which
  * brings back the start-up σ and gate until it re-converges.
  * Persistent rejection is not the filter's: a gated-out pulse is counted
@@ -86,7 +86,7 @@
  * innovation gate and counted per beacon; a stale filter (above) is not an
  * error either.
  * Cost (BL_FILTER_NX = 10 states): fuse_pulse O(NX²) = O(10²) per IEKF
- * iteration (<= cfg.iekf_max_iterations), predict O(NX²) (sparse
+ * iteration (<= cfg.pulse.iekf_max_iterations), predict O(NX²) (sparse
  * Jacobians); a snapshot (re)start adds one bl_solve_tdoa_2d; no heap;
  * worst stack chain < 2 KiB on Cortex-M4F (make size-m4). Not thread-safe
  * per instance; instances are independent.
@@ -230,7 +230,7 @@ int bl_filter_start(bl_filter *f, const bl_filter_prior *prior);
  * filter keeps its s, T (with their variances) and wheel scales.
  * Errors: BL_EINVAL, BL_ENOTINIT, BL_EDEGENERATE (fewer than 3 beacons in
  * the last cycle or singular geometry), BL_ENOCONVERGE (no convergence, or
- * with > 3 beacons a residual above 3σ of cfg.startup_sigma_arrival_s). */
+ * with > 3 beacons a residual above 3σ of cfg.pulse.startup_sigma_arrival_s). */
 int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real sigma_theta_rad);
 
 /* Predict to t_us with wheel increments since the previous predict:
@@ -243,11 +243,12 @@ int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real sigma_thet
  * but gives no formula; this is our reading), from the increments:
  *   stationary (both |d| <= 1 µm): no pose noise (no wheel travel, no
  *     heading noise); the v, ω random walk scaled by
- *     cfg.stationary_noise_scale;
+ *     cfg.wheels.stationary_noise_scale;
  *   moving: each wheel's distance variance cfg.sigma_wheel_per_m²·|d| (m²)
  *     mapped onto x, y, θ, plus the heading variance "offset plus a fraction
  *     of the angle increment Δθ = (d_r − d_l)/wheel_base (eq. 24)":
- *     σ_θ² += heading_noise_rad_per_sqrt_s²·dt + (heading_noise_fraction·Δθ)²;
+ *     σ_θ² += wheels.heading_noise_rad_per_sqrt_s²·dt +
+ *             (wheels.heading_noise_fraction·Δθ)²;
  *   straight vs turning is that Δθ term only: a turning step adds
  *     (fraction·Δθ)² rad² more heading variance than a straight one with
  *     the same wheel travel. §3.10's "no acceleration" vs "straight ramp"
