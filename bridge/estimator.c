@@ -102,6 +102,7 @@ static void sync(struct estimator *e)
     if (bl_localizer_counters(&e->loc, &lc) != BL_OK || bl_localizer_status(&e->loc, &st) != BL_OK)
         return;
     struct est_counters *c = &e->c;
+    const bool pulses_fused = lc.pulses_accepted != c->pulses_accepted;
     c->pulses_in = lc.pulses_in;
     c->pulses_accepted = lc.pulses_accepted;
     c->pulses_rejected = lc.pulses_rejected;
@@ -179,9 +180,9 @@ static void sync(struct estimator *e)
         }
     }
     /* beacons heard again (accepted count of the filter went up); only
-     * after a fusion (an estimate builds the whole covariance) */
+     * after a pulse was fused (an estimate builds the whole covariance) */
     bl_estimate est;
-    if (fused && bl_filter_estimate(&e->loc.filter, &est) == BL_OK) {
+    if (pulses_fused && bl_filter_estimate(&e->loc.filter, &est) == BL_OK) {
         for (uint32_t b = 0; b < e->blcfg.beacon_count && b < BL_MAX_BEACONS; b++) {
             if (est.accepted[b] == e->beacon_accepted[b])
                 continue;

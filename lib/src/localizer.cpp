@@ -83,13 +83,18 @@ bool configs_agree(const bl_config *cfg, const bl_seq_config *sc)
 
 // While converged, the filter's firing-time prediction goes to the
 // sequencer; dropped when not converged.
+void clear_hint(bl_localizer *loc)
+{
+    if (loc->hint_set_) {
+        (void)bl_sequencer_clear_hint(&loc->seq);
+        loc->hint_set_ = false;
+    }
+}
+
 NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
 {
     if (!est.started || !est.converged) {
-        if (loc->hint_set_) {
-            (void)bl_sequencer_clear_hint(&loc->seq);
-            loc->hint_set_ = false;
-        }
+        clear_hint(loc);
         return;
     }
     bl_seq_hint h;
@@ -266,25 +271,34 @@ INLINE Fused fuse_one(bl_localizer *loc, uint32_t beacon, int64_t arrival_us, ui
     return classify(loc);
 }
 
-// Bookkeeping after a state change: events, hint.
-NOINLINE void after_update(bl_localizer *loc)
+// Bookkeeping after a state change: events from the filter's flags; the
+// sequencer hint refreshed after a pulse (the firing times move with the
+// pulses, a wheel update hardly moves them, and an estimate builds the whole
+// covariance) and dropped as soon as the filter is not converged.
+NOINLINE void after_update(bl_localizer *loc, bool pulse)
 {
-    bl_estimate est;
-    (void)bl_filter_estimate(&loc->filter, &est);
-    if (est.started) loc->ever_started_ = true;
-    if (est.started && !loc->was_started_) {
+    const bl_filter *f = &loc->filter;
+    const bool started = bl::started(f);
+    const bool converged = started && (f->flags_ & bl::kFlagConverged) != 0;
+    if (started) loc->ever_started_ = true;
+    if (started && !loc->was_started_) {
         loc->was_started_ = true;
-        loc->last_reset_seen_ = est.reset_counter;
+        loc->last_reset_seen_ = f->reset_count_;
         push_event(loc, BL_LOC_EV_STARTED, BL_LOC_CAUSE_NONE, 0);
     }
-    if (est.started && est.reset_counter != loc->last_reset_seen_) {
-        loc->last_reset_seen_ = est.reset_counter;
+    if (started && f->reset_count_ != loc->last_reset_seen_) {
+        loc->last_reset_seen_ = f->reset_count_;
         push_event(loc, BL_LOC_EV_RESET, BL_LOC_CAUSE_SNAPSHOT, 0);
     }
-    update_hint(loc, est);
-    if (est.started && est.converged != loc->was_converged_) {
-        loc->was_converged_ = est.converged;
-        push_event(loc, est.converged ? BL_LOC_EV_CONVERGED : BL_LOC_EV_NOT_CONVERGED, BL_LOC_CAUSE_NONE, 0);
+    if (!converged) {
+        clear_hint(loc);
+    } else if (pulse || !loc->hint_set_) {
+        bl_estimate est;
+        if (bl_filter_estimate(f, &est) == BL_OK) update_hint(loc, est);
+    }
+    if (started && converged != loc->was_converged_) {
+        loc->was_converged_ = converged;
+        push_event(loc, converged ? BL_LOC_EV_CONVERGED : BL_LOC_EV_NOT_CONVERGED, BL_LOC_CAUSE_NONE, 0);
     }
 }
 
@@ -309,7 +323,7 @@ INLINE void fuse_firing(bl_localizer *loc, const bl::SeqNumbered &pl, const bl_s
         if (fused) {
             any_accepted = true;
             measurement_fused(loc, g.rx_tag[rx]);
-            after_update(loc);
+            after_update(loc, true);
         }
     }
     if (any_accepted)
@@ -540,7 +554,7 @@ extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *
     if (rc == BL_OK) {
         loc->counters_.predicts++;
         measurement_fused(loc, inc->tag);
-        after_update(loc);
+        after_update(loc, false);
     } else if (rc == BL_ETIME) {
         reinit_filter(loc, BL_LOC_CAUSE_TIME_GAP);
     } else {
