@@ -4,6 +4,20 @@
  * detections and wheel increments, giving the pose, counters and events.
  * The bridge daemon and the firmware example both run on it.
  *
+ * Typical use (firmware main loop; lib/examples/firmware_m4/main.c):
+ *     bl_config cfg; bl_config_default(&cfg); ... site ...;
+ *     bl_seq_config sc; bl_localizer_seq_config(&cfg, &sc, &why, &field);
+ *     bl_localizer loc;  bl_localizer_init(&loc, &cfg, &sc);
+ *     on a receiver detection: bl_localizer_detection(&loc, &det);  (det.tag: yours)
+ *     every loop turn:         bl_localizer_advance(&loc, now_us - latency_us);
+ *     on an encoder sample:    bl_localizer_advance(&loc, t_us - latency_us);
+ *                              bl_localizer_wheels(&loc, &inc);
+ *     to publish:              bl_localizer_estimate_at(&loc, now_us, &est);
+ *     after each call:         while (bl_localizer_next_event(&loc, &ev) == 1) ...;
+ * (latency_us: the largest delay between a detection's time and its
+ * delivery to the caller; the sequencer closes a firing's merge window only
+ * after it.)
+ *
  * Policy (what the localizer does between the sequencer and the filter):
  *   - Repeats are not fused. A later arrival of a firing that already gave a
  *     pulse (bl_seq_pulse.repeat) is an echo or a straggler in all but freak
