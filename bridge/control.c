@@ -144,16 +144,15 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->record_write_errors = d->rec.write_errors;
     r->estimates_write_errors = d->csv.write_errors;
     r->stale_encoders = d->est.c.stale_encoders;
-    struct est_output o;
-    r->estimator_resets =
-        estimator_output(&d->est, 0, &o) == 0 ? o.reset_counter : d->est.reset_base;
+    bl_loc_status st; /* the published reset counter, with or without a filter running */
+    r->estimator_resets = bl_localizer_status(&d->est.loc, &st) == BL_OK ? st.reset_counter : 0;
     r->pulses_accepted = d->est.c.pulses_accepted;
     r->pulses_rejected = d->est.c.pulses_rejected;
     r->pulses_buffered = d->est.c.pulses_buffered;
     r->pulses_unassigned = d->est.c.pulses_unassigned;
     r->sequencer_spurious = d->est.c.pulses_spurious;
     r->encoder_gaps = d->est.c.encoder_gaps;
-    const bl_seq_counters *sc = &d->est.seq.counters;
+    const bl_seq_counters *sc = &d->est.loc.seq.counters;
     r->seq_detections = sc->detections;
     r->seq_merged = sc->merged;
     r->seq_double_pulses = sc->double_pulses;

@@ -120,8 +120,6 @@ static void sync(struct estimator *e)
     c->hint_errors = lc.hint_errors;
     c->numbering_errors = lc.numbering_errors;
     c->seq_resyncs = lc.seq_resyncs;
-    e->seq.counters = e->loc.seq.counters;
-    e->reset_base = st.reset_counter;
     const bool fused = st.measurements != e->measurements_seen;
     if (fused) {
         e->measurements_seen = st.measurements;

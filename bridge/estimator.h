@@ -118,14 +118,7 @@ struct estimator {
     struct bridge_config cfg; /* the site as configured (geometry for SIGHUP) */
     bl_config blcfg;
     bl_seq_config seqcfg;
-    bl_localizer loc; /* sequencer + filter + estimation policy */
-    /* Read-only mirrors for the daemon's stats, refreshed after every call
-     * into the localizer: the sequencer's counters, and the published reset
-     * counter while no filter runs. */
-    struct {
-        bl_seq_counters counters;
-    } seq;
-    uint32_t reset_base;
+    bl_localizer loc;            /* sequencer + filter + estimation policy */
     struct node_clock rx_clock;  /* receiver array (node 1) */
     struct node_clock enc_clock; /* wheel encoders (node 2) */
     bool rx_seen;                /* rx_clock has an observation */

@@ -52,10 +52,6 @@ NOINLINE void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset
     loc->ev_len_++;
 }
 
-// The filter's config (it has no persistent-rejection reset of its own:
-// cfg.reset_reject_count is K of the localizer's window).
-bl_config filter_config(const bl_config *cfg) { return *cfg; }
-
 // The window restarts empty at slot 0 (slots 0..len-1 valid until full).
 void clear_window(bl_localizer *loc)
 {
@@ -426,8 +422,7 @@ extern "C" int bl_localizer_init(bl_localizer *loc, const bl_config *cfg, const 
     if (loc == nullptr || cfg == nullptr || seq_cfg == nullptr) return BL_EINVAL;
     if (!configs_agree(cfg, seq_cfg)) return BL_ECONFIG;
     std::memset(loc, 0, sizeof *loc);
-    const bl_config fc = filter_config(cfg);
-    if (bl_filter_init(&loc->filter, &fc) != BL_OK || bl_sequencer_init(&loc->seq, seq_cfg) != BL_OK) {
+    if (bl_filter_init(&loc->filter, cfg) != BL_OK || bl_sequencer_init(&loc->seq, seq_cfg) != BL_OK) {
         std::memset(loc, 0, sizeof *loc);
         return BL_ECONFIG;
     }
@@ -441,8 +436,7 @@ extern "C" int bl_localizer_update_config(bl_localizer *loc, const bl_config *cf
     if (loc == nullptr || cfg == nullptr || seq_cfg == nullptr) return BL_EINVAL;
     if (!valid(loc)) return BL_ENOTINIT;
     if (!configs_agree(cfg, seq_cfg)) return BL_ECONFIG;
-    const bl_config fc = filter_config(cfg);
-    if (bl_filter_update_config(&loc->filter, &fc) != BL_OK) return BL_ECONFIG;  // filter untouched
+    if (bl_filter_update_config(&loc->filter, cfg) != BL_OK) return BL_ECONFIG;  // filter untouched
     if (cfg->reset_reject_count != loc->reject_k_) set_window(loc, cfg->reset_reject_count);
     if (std::memcmp(seq_cfg, &loc->seq.cfg, sizeof *seq_cfg) != 0) {
         // New windows (they follow the speed-of-sound tuning): the filter's
@@ -465,8 +459,7 @@ extern "C" int bl_localizer_reinit(bl_localizer *loc, const bl_config *cfg, cons
     const bl_seq_counters kept = loc->seq.counters;
     (void)bl_sequencer_init(&loc->seq, seq_cfg);
     loc->seq.counters = kept;
-    const bl_config fc = filter_config(cfg);
-    loc->filter.cfg_ = fc;  // reinit_filter re-initialises with the filter's config
+    loc->filter.cfg_ = *cfg;  // reinit_filter re-initialises with the filter's config
     reinit_filter(loc, BL_LOC_CAUSE_CONFIG);
     set_window(loc, cfg->reset_reject_count);
     loc->wheel_seen_ = false;

@@ -296,7 +296,7 @@ static void test_every_receiver_of_a_pulse_fused(void **state)
     double err = hypot(o.x_m - x, o.y_m - y);
     if (err > 0.02)
         fail_msg("position error %.3f m", err);
-    assert_int_equal(W.est.seq.counters.merged, 2 * (uint32_t)W.firings_sent);
+    assert_int_equal(W.est.loc.seq.counters.merged, 2 * (uint32_t)W.firings_sent);
     /* all three members of (nearly) every firing went to the filter */
     uint64_t fused = W.est.c.pulses_accepted + W.est.c.pulses_rejected + W.est.c.pulses_buffered;
     if (fused < 3 * (uint64_t)W.firings_sent - 12)
