@@ -93,6 +93,39 @@ typedef struct bl_tdoa_solution {
 int bl_solve_tdoa_2d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol);
 int bl_solve_tdoa_3d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol);
 
+/* ---- Bearings to beacons: triangulation with no prior ----
+ * Model (Vander et al. 2011 eq. 1): the bearing of beacon j measured at the
+ * sensor, body frame, CCW from the robot's +x axis,
+ *     phi_j = atan2(yb_j - ys, xb_j - xs) - theta,
+ * with the sensor at (xs, ys) = (x, y) + R(theta)·(sensor_x_m, sensor_y_m)
+ * (its mount offset from the wheel-base centre, body frame). Unknowns x, y,
+ * theta: three bearings fix them (each pair's difference puts the sensor on
+ * a circle through the two beacons, Vander §2 Fig. 2), except on the circle
+ * through the beacons (Fig. 4), where the solvers report failure.
+ * (Implementation and the definition of each output: solver_bearing.cpp.) */
+typedef struct bl_bearing_problem {
+    uint32_t count;                      /* N beacons, 3..BL_MAX_BEACONS */
+    bl_beacon beacons[BL_MAX_BEACONS];   /* site positions (m); z ignored */
+    bl_real bearing_rad[BL_MAX_BEACONS]; /* measured bearing of beacon j (rad), any 2π wrap */
+    bl_real sigma_rad[BL_MAX_BEACONS];   /* σ of each bearing (rad), > 0 */
+    bl_real sensor_x_m, sensor_y_m;      /* sensor mount, body frame (m) */
+    bl_real max_drms_m;                  /* refuse a fix whose drms exceeds this (m); 0 = 0.5 m */
+} bl_bearing_problem;
+
+typedef struct bl_bearing_solution {
+    bl_real x_m, y_m, theta_rad; /* robot (wheel-base centre), theta in (-π, π] */
+    bl_real cov[9];              /* covariance of (x, y, theta), row-major 3x3: m², m·rad, rad² */
+    bl_real drms_m;              /* sqrt(cov_xx + cov_yy) (m) */
+    bl_real condition;           /* conditioning in [0, 1]; 0 = degenerate */
+    bl_real residual_rms_rad;    /* weighted rms of the bearing residuals (rad) */
+    uint32_t iterations;         /* Gauss-Newton steps (0 for the closed form) */
+} bl_bearing_solution;
+
+/* Closed form for exactly three beacons (count must be 3). */
+int bl_solve_bearings_3(const bl_bearing_problem *prob, bl_bearing_solution *sol);
+/* Weighted least squares for N >= 3 beacons. */
+int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solution *sol);
+
 #ifdef __cplusplus
 }
 #endif
