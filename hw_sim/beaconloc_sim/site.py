@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .inifile import ConfigError, IniFile
-from .site_schema import BEACON_SECTION, Key, load_schema
+from .site_schema import Key, Schema, Section, load_schema
 
 
 def _read_key(ini: IniFile, section: str, key: Key):
@@ -79,14 +79,39 @@ class Site:
     speed_of_sound_mps: float
     sigma_speed_of_sound_mps: float
     gate_sigma: float
+    # the bearing sensor and its beacons (Vander et al. 2011); none when the count is 0
+    bearing_beacons_m: np.ndarray    # (M, 2) bearing beacon positions, site frame, m
+    bearing_offset_m: np.ndarray     # (2,) sensor mount, body frame (forward, left), m
+    sigma_bearing_rad: float         # σ of one bearing, rad
+    bearing_scan_rate_hz: float      # scans per second
+    bearing_rotating: bool           # each bearing timed at its own instant within the scan
 
     @property
     def beacon_count(self) -> int:
         return int(self.beacons_m.shape[0])
 
+    @property
+    def bearing_beacon_count(self) -> int:
+        return int(self.bearing_beacons_m.shape[0])
+
     def receiver_angles_rad(self) -> np.ndarray:
         """Body-frame angle of each receiver: first_angle + index * 2*pi/count (DBC comment)."""
         return self.first_angle_rad + np.arange(self.rx_count) * (2.0 * math.pi / self.rx_count)
+
+
+def _read_items(ini: IniFile, schema: Schema, section: Section) -> np.ndarray:
+    """The rows of a per-item section ([beacon1]..[beaconN]): (count, keys) array, N the
+    count key of the section it is indexed by."""
+    count = _read_key(ini, section.indexed_by, schema.section(section.indexed_by).key("count"))
+    rows = []
+    for i in range(1, count + 1):
+        sec = f"{section.prefix}{i}"
+        if not ini.has(sec):
+            raise ConfigError(f"{ini.where(section.indexed_by, 'count')}: count = {count} "
+                              f"but [{sec}] is missing")
+        ini.check_known(sec, {k.name for k in section.keys})
+        rows.append([_read_key(ini, sec, k) for k in section.keys])
+    return np.array(rows, dtype=float).reshape(count, len(section.keys))
 
 
 def load_site(path: str | Path) -> Site:
@@ -94,29 +119,24 @@ def load_site(path: str | Path) -> Site:
     schema = load_schema()
     ours = [s for s in schema.sections if "sim" in s.read_by]
     for section in ours:
-        if section.name != BEACON_SECTION:
+        if not section.indexed_by:
             ini.check_known(section.name, {k.name for k in section.keys})
     value: dict[tuple[str, str], object] = {}
-    beacons_section = schema.section("beacons")
-    count = _read_key(ini, "beacons", beacons_section.key("count"))
-    beacon_keys = schema.section(BEACON_SECTION).keys
-    beacons = []
-    for i in range(1, count + 1):
-        sec = f"beacon{i}"
-        if not ini.has(sec):
-            raise ConfigError(f"{ini.where('beacons', 'count')}: count = {count} but [{sec}] is missing")
-        ini.check_known(sec, {k.name for k in beacon_keys})
-        beacons.append([_read_key(ini, sec, k) for k in beacon_keys])
+    items = {s.name: _read_items(ini, schema, s) for s in ours if s.indexed_by}
     not_ours = {s.name for s in schema.sections if "sim" not in s.read_by}
+    plain = {s.name for s in ours if not s.indexed_by}
     for sec in ini.parser.sections():
-        if sec.startswith("beacon") and sec[6:].isdigit() and sec[6] != "0":
-            if not 1 <= int(sec[6:]) <= count:
-                raise ini.error(sec, None, f"beacon beyond [beacons] count = {count}")
-        elif sec not in {s.name for s in ours} - {BEACON_SECTION} and sec not in not_ours:
+        item = schema.item_of(sec)
+        if item is not None:
+            section, n = item
+            if n > items[section.name].shape[0]:
+                raise ini.error(sec, None, f"{section.prefix.replace('_', ' ')} beyond "
+                                f"[{section.indexed_by}] count = {items[section.name].shape[0]}")
+        elif sec not in plain and sec not in not_ours:
             raise ini.error(sec, None, "unknown section (a site file holds "
                             f"{schema.sections_phrase('N')})")
     for section in ours:
-        if section.name != BEACON_SECTION:
+        if not section.indexed_by:
             for key in section.keys:
                 value[section.name, key.name] = _read_key(ini, section.name, key)
     v = value.__getitem__
@@ -126,7 +146,7 @@ def load_site(path: str | Path) -> Site:
         room_x_m=v(("site", "room_size_x_m")),
         room_y_m=v(("site", "room_size_y_m")),
         room_z_m=v(("site", "room_height_m")),
-        beacons_m=np.array(beacons, dtype=float),
+        beacons_m=items["beaconN"],
         period_s=v(("beacons", "period_s")),
         double_pulse_spacing_s=v(("beacons", "double_pulse_spacing_s")),
         burst_length_s=v(("beacons", "burst_length_s")),
@@ -145,7 +165,16 @@ def load_site(path: str | Path) -> Site:
         speed_of_sound_mps=v(("noise", "speed_of_sound_mps")),
         sigma_speed_of_sound_mps=v(("noise", "sigma_speed_of_sound_mps")),
         gate_sigma=v(("noise", "gate_sigma")),
+        bearing_beacons_m=items["bearing_beaconN"],
+        bearing_offset_m=np.array([v(("bearing_sensor", "offset_x_m")),
+                                   v(("bearing_sensor", "offset_y_m"))]),
+        sigma_bearing_rad=math.radians(v(("bearing_sensor", "sigma_deg"))),
+        bearing_scan_rate_hz=v(("bearing_sensor", "scan_rate_hz")),
+        bearing_rotating=bool(v(("bearing_sensor", "rotating"))),
     )
+    if site.beacon_count == 0 and site.bearing_beacon_count == 0:
+        raise ini.error("beacons", "count", "a site needs beacons: ultrasonic ([beacons] count) "
+                        "or bearing ([bearing_beacons] count)")
     if site.double_pulse_spacing_s <= site.burst_length_s:
         raise ini.error("beacons", "double_pulse_spacing_s",
                         "must exceed burst_length_s (the two bursts would merge)")

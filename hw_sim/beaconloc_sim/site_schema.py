@@ -94,6 +94,14 @@ class Section:
     read_by: tuple[str, ...]
     doc: str
     keys: tuple[Key, ...]
+    indexed_by: str | None = None   # per-item "<prefix>N": the section whose count says how many
+
+    @property
+    def prefix(self) -> str:
+        """'beacon' for [beaconN]: the header of item i is prefix + str(i)."""
+        if not self.indexed_by:
+            raise ValueError(f"[{self.name}] is not a per-item section")
+        return self.name[:-1]
 
     def key(self, name: str) -> Key:
         for k in self.keys:
@@ -117,12 +125,32 @@ class Schema:
 
     @property
     def max_beacons(self) -> int:
-        return int(self.section("beacons").key("count").range.hi)
+        return self.max_items(self.section(BEACON_SECTION))
 
-    def sections_phrase(self, max_beacon: str) -> str:
-        """'[site], [beacons], [beacon1]..[beaconN], ...' for error messages."""
-        return ", ".join(f"[beacon1]..[beacon{max_beacon}]" if s.name == BEACON_SECTION
-                         else f"[{s.name}]" for s in self.sections)
+    def max_items(self, section: Section) -> int:
+        """The largest count of a per-item section's items (its count key's range)."""
+        return int(self.section(section.indexed_by).key("count").range.hi)
+
+    def indexed(self) -> list[Section]:
+        """The per-item sections ([beaconN], [bearing_beaconN])."""
+        return [s for s in self.sections if s.indexed_by]
+
+    def item_of(self, header: str) -> tuple[Section, int] | None:
+        """([beaconN] section, 3) for the header 'beacon3' (any positive decimal without a
+        leading 0, case-insensitive), None when header names no item."""
+        for sec in self.indexed():
+            p = sec.prefix
+            if header.lower().startswith(p) and header[len(p):].isdigit() \
+                    and header[len(p)] != "0":
+                return sec, int(header[len(p):])
+        return None
+
+    def sections_phrase(self, max_item: str | None = None) -> str:
+        """'[site], [beacons], [beacon1]..[beacon16], ...' for error messages; max_item
+        replaces every per-item section's largest number (e.g. 'N')."""
+        return ", ".join(
+            f"[{s.prefix}1]..[{s.prefix}{max_item or self.max_items(s)}]" if s.indexed_by
+            else f"[{s.name}]" for s in self.sections)
 
 
 def _key(section: str, read_by: tuple[str, ...], raw: dict) -> Key:
@@ -184,10 +212,21 @@ def parse_schema(text: str) -> Schema:
         names = [k.name for k in keys]
         if len(set(names)) != len(names):
             raise ValueError(f"[{raw['name']}]: a key declared twice")
-        sections.append(Section(raw["name"], read_by, raw.get("doc", ""), keys))
+        indexed_by = raw.get("indexed_by")
+        if indexed_by is not None and not raw["name"].endswith("N"):
+            raise ValueError(f"[{raw['name']}]: a per-item section's name ends in N")
+        sections.append(Section(raw["name"], read_by, raw.get("doc", ""), keys, indexed_by))
     if len({s.name for s in sections}) != len(sections):
         raise ValueError("a section declared twice")
-    return Schema(tuple(sections))
+    schema = Schema(tuple(sections))
+    for s in schema.indexed():
+        try:
+            count = schema.section(s.indexed_by).key("count")
+        except KeyError:
+            raise ValueError(f"[{s.name}]: indexed_by {s.indexed_by!r} has no count key") from None
+        if count.range is None and count.sim_range is None:
+            raise ValueError(f"[{s.indexed_by}] count: a range is needed (the largest N)")
+    return schema
 
 
 @lru_cache(maxsize=1)
@@ -211,6 +250,11 @@ def _c_string(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
+def _c_struct(section: str) -> str:
+    """The bridge's struct for a key's section: config_<prefix> for a per-item one."""
+    return f"config_{section[:-1]}" if section.endswith("N") else "bridge_config"
+
+
 def _c_row(key: Key) -> str:
     if key.numeric:
         lo, hi, lo_open = _c_number(key, key.range.lo), _c_number(key, key.range.hi), \
@@ -219,7 +263,7 @@ def _c_row(key: Key) -> str:
     else:
         lo, hi, lo_open = "0", "0", "false"
         default = _c_string(key.default or "")
-    owner = "config_beacon" if key.section == BEACON_SECTION else "bridge_config"
+    owner = _c_struct(key.section)
     return (f"X({key.section}, {key.name}, {_C_TYPE[key.type]}, {owner}, {key.bridge}, "
             f"{lo}, {hi}, {lo_open}, {default})")
 
@@ -237,32 +281,36 @@ def c_header(schema: Schema) -> str:
            " * `python -m beaconloc_sim.site_schema c-header`: never edit, never commit. */",
            "#ifndef BRIDGE_SITE_KEYS_H", "#define BRIDGE_SITE_KEYS_H", "",
            "/* Row of a key: X(section, key, type, struct, member, min, max, min excluded,",
-           " * default): struct bridge_config, or struct config_beacon for [beaconN]. */"]
+           " * default): struct bridge_config, or struct config_<prefix> for a per-item",
+           " * section [<prefix>N] (config_beacon for [beaconN]). */"]
     for s in bridge_sections:
         out += _c_macro(f"SITE_KEYS_{s.name}", f"[{s.name}]: {s.doc}",
                         [_c_row(k) for k in s.keys])
     out += _c_macro("SITE_KEYS", "every key the bridge reads, in file order",
                     [f"SITE_KEYS_{s.name}(X)" for s in bridge_sections])
-    lib_keys = [k for s in bridge_sections if s.name != BEACON_SECTION for k in s.keys if k.lib]
+    lib_keys = [k for s in bridge_sections if not s.indexed_by for k in s.keys if k.lib]
     out += _c_macro("SITE_LIB_FIELDS", "X(section, key, type, bridge_config member, bl_config "
                     "field, geometry): the keys that set a bl_config field; geometry is "
                     "SITE_GEOMETRY_library, _bridge or _none",
                     [f"X({k.section}, {k.name}, {_C_TYPE[k.type]}, {k.bridge}, {k.lib}, "
                      f"SITE_GEOMETRY_{k.geometry or 'none'})" for k in lib_keys])
-    beacon = schema.section(BEACON_SECTION)
-    out += _c_macro("SITE_LIB_BEACON_FIELDS", "X(config_beacon member, bl_beacon field) of "
-                    "[beaconN] -> bl_config.beacons[N-1]",
-                    [f"X({k.bridge}, {k.lib})" for k in beacon.keys if k.lib])
+    for item in (s for s in bridge_sections if s.indexed_by):
+        out += _c_macro(f"SITE_LIB_{item.prefix.upper()}_FIELDS",
+                        f"X({_c_struct(item.name)} member, bl_beacon field) of [{item.name}] -> "
+                        f"bl_config.{item.prefix}s[N-1]",
+                        [f"X({k.bridge}, {k.lib})" for k in item.keys if k.lib])
     out += _c_macro("SITE_GEOMETRY_BRIDGE", "X(bridge_config member): geometry of the bridge's "
                     "own state (the library's is bl_config_same_geometry's)",
                     [f"X({k.bridge})" for s in bridge_sections for k in s.keys
                      if k.geometry == "bridge"])
     out += _c_macro("SITE_SIM_SECTIONS", "X(section): the simulator's alone (the bridge skips them)",
                     [f"X({s.name})" for s in schema.sections if "bridge" not in s.read_by])
-    out += [f"#define SITE_MAX_BEACONS {schema.max_beacons}",
+    out += [f"#define SITE_MAX_{s.prefix.upper()}S {schema.max_items(s)}"
+            for s in bridge_sections if s.indexed_by]
+    out += [
             f"#define SITE_MAX_RECEIVERS {int(schema.section('receivers').key('count').range.hi)}",
             "/* \"[site], [beacons], [beacon1]..[beacon16], ...\" */",
-            f"#define SITE_SECTIONS_PHRASE {_c_string(schema.sections_phrase(str(schema.max_beacons)))}",
+            f"#define SITE_SECTIONS_PHRASE {_c_string(schema.sections_phrase())}",
             "", "#endif /* BRIDGE_SITE_KEYS_H */", ""]
     return "\n".join(out)
 
@@ -325,9 +373,9 @@ def fuzz_dict(schema: Schema) -> str:
     """libFuzzer dictionary entries: every section header and key of the bridge's."""
     words = []
     for s in schema.sections:
-        if s.name == BEACON_SECTION:
-            headers = ["beacon1", "beacon6", f"beacon{schema.max_beacons}",
-                       f"beacon{schema.max_beacons + 1}"]
+        if s.indexed_by:
+            n = schema.max_items(s)
+            headers = [f"{s.prefix}1", f"{s.prefix}3", f"{s.prefix}{n}", f"{s.prefix}{n + 1}"]
         else:
             headers = [s.name]
         words += [f'"[{h}]\\x0a"' for h in headers]

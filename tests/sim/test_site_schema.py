@@ -45,14 +45,32 @@ def test_docs_table_has_one_row_per_key():
 
 def test_schema_sections_in_file_order():
     assert [s.name for s in SCHEMA.sections] == [
-        "site", "beacons", BEACON_SECTION, "receivers", "robot", "noise", "tuning", "bridge"]
-    assert SCHEMA.sections_phrase("N") == ("[site], [beacons], [beacon1]..[beaconN], [receivers], "
-                                           "[robot], [noise], [tuning], [bridge]")
+        "site", "beacons", BEACON_SECTION, "receivers", "bearing_beacons", "bearing_beaconN",
+        "bearing_sensor", "robot", "noise", "tuning", "bridge"]
+    assert SCHEMA.sections_phrase("N") == (
+        "[site], [beacons], [beacon1]..[beaconN], [receivers], [bearing_beacons], "
+        "[bearing_beacon1]..[bearing_beaconN], [bearing_sensor], [robot], [noise], [tuning], "
+        "[bridge]")
+    assert "[beacon1]..[beacon16]" in SCHEMA.sections_phrase()
+    assert "[bearing_beacon1]..[bearing_beacon15]" in SCHEMA.sections_phrase()
+
+
+@pytest.mark.parametrize("header, item", [
+    ("beacon1", ("beaconN", 1)), ("Beacon16", ("beaconN", 16)), ("beacon17", ("beaconN", 17)),
+    ("bearing_beacon3", ("bearing_beaconN", 3)), ("beacon0", None), ("beacon01", None),
+    ("beacons", None), ("beacon", None), ("bearing_beacons", None), ("bearing_beacon", None)])
+def test_item_sections_by_header(header, item):
+    got = SCHEMA.item_of(header)
+    assert (None if got is None else (got[0].name, got[1])) == item
 
 
 def _ini_keys(path: Path) -> list[tuple[str, str, str]]:
+    return _ini_text_keys(path.read_text())
+
+
+def _ini_text_keys(text: str) -> list[tuple[str, str, str]]:
     section, out = None, []
-    for line in path.read_text().splitlines():
+    for line in text.splitlines():
         line = line.split(";")[0].strip()
         if line.startswith("["):
             section = line.strip("[]")
@@ -69,7 +87,8 @@ SCENARIO_DIR = builtin_site_path().parent   # the packaged scenarios and their s
                                         if not p.name.endswith(".scenario.ini")))
 def test_repo_site_files_hold_schema_keys_in_range(site):
     for section, key, value in _ini_keys(SCENARIO_DIR / site):
-        name = BEACON_SECTION if re.fullmatch(r"beacon[1-9][0-9]*", section) else section
+        item = SCHEMA.item_of(section)
+        name = item[0].name if item else section
         k = SCHEMA.section(name).key(key)   # KeyError: a key the schema does not know
         if k.numeric:
             for rng in (k.range, k.sim_range):
@@ -136,7 +155,7 @@ def test_c_header_rows_are_the_schemas():
                 assert lo_open == ("true" if k.range.lo_open else "false")
             if k.lib:
                 assert re.search(rf"X\({s.name}, {k.name}, K_[A-Z]+, [a-z0-9_.]+, {k.lib}, ",
-                                 header) or s.name == BEACON_SECTION, (s.name, k.name)
+                                 header) or s.indexed_by, (s.name, k.name)
 
 
 def _set_key(text: str, section: str, key: str, value) -> str:
@@ -150,13 +169,36 @@ def _set_key(text: str, section: str, key: str, value) -> str:
         elif current == section and re.match(rf"{re.escape(key)}\s*=", line):
             lines[i] = f"{key} = {value}"
             return "\n".join(lines) + "\n"
-    assert header is not None, section
+    if header is None:   # an optional section the file does not have
+        lines += ["", f"[{section}]"]
+        header = len(lines) - 1
     lines.insert(header + 1, f"{key} = {value}")
     return "\n".join(lines) + "\n"
 
 
-def _file_value(section: str, key: str) -> float:
-    for sec, k, v in _ini_keys(SCENARIO_DIR / "kleeman-lab.ini"):
+BEARING_TEXT = """
+[bearing_beacons]
+count = 3
+
+[bearing_beacon1]
+x_m = 3.0
+y_m = 2.1
+
+[bearing_beacon2]
+x_m = 0.0
+y_m = 1.05
+
+[bearing_beacon3]
+x_m = 3.0
+y_m = 0.0
+
+[bearing_sensor]
+sigma_deg = 1.0
+"""
+
+
+def _file_value(section: str, key: str, text: str) -> float:
+    for sec, k, v in _ini_text_keys(text):
         if (sec, k) == (section, key):
             return float(v)
     raise KeyError((section, key))
@@ -165,6 +207,8 @@ def _file_value(section: str, key: str) -> float:
 def _nudged(k) -> str:
     v = k.default
     if k.type == "int":
+        if v is not None and k.sim_range is not None and k.sim_range.hi == 1:
+            return str(1 - v)   # a switch: the other position
         return str(v - 1 if v is not None and v > 1 else 4097)
     if v is None or v == 0:
         return "0.01"
@@ -178,16 +222,17 @@ SIM_READ = [(s.name, k) for s in SCHEMA.sections if "sim" in s.read_by for k in 
 @pytest.mark.parametrize("section, key", SIM_READ, ids=[f"{s}.{k.name}" for s, k in SIM_READ])
 def test_simulator_reads_every_schema_key(tmp_path, section, key):
     """A key the schema gives the simulator changes the simulated site (no key dropped)."""
-    sec = "beacon2" if section == BEACON_SECTION else section
+    text = SITE_TEXT + BEARING_TEXT   # kleeman-lab with three bearing beacons too
+    sec = f"{SCHEMA.section(section).prefix}2" if SCHEMA.section(section).indexed_by else section
     base = tmp_path / "base.ini"
-    base.write_text(SITE_TEXT)
+    base.write_text(text)
     before = load_site(base)
     changed = tmp_path / "changed.ini"
     if key.default is None:   # required, no default: nudge the file's own value
-        value = repr(_file_value(sec, key.name) * 1.01 + 0.01)
+        value = repr(_file_value(sec, key.name, text) * 1.01 + 0.01)
     else:
         value = _nudged(key)
-    changed.write_text(_set_key(SITE_TEXT, sec, key.name, value))
+    changed.write_text(_set_key(text, sec, key.name, value))
     after = load_site(changed)
     differ = [f.name for f in dataclasses.fields(before) if f.name != "path"
               and not _equal(getattr(before, f.name), getattr(after, f.name))]
@@ -201,14 +246,15 @@ def _equal(a, b) -> bool:
 def test_simulator_applies_the_sim_range(tmp_path):
     """Out of the simulator's range: refused with the key named; inside it: accepted."""
     for section in SCHEMA.sections:
-        if "sim" not in section.read_by or section.name == BEACON_SECTION:
+        if "sim" not in section.read_by or section.indexed_by:
             continue
         for k in section.keys:
             if k.sim not in ("required", "optional") or not k.numeric or k.sim_range is None:
                 continue
             r = k.sim_range
             if math.isfinite(r.hi) and k.name != "count":
-                text = _set_key(SITE_TEXT, section.name, k.name, repr(r.hi * 2 + 1))
+                big = int(r.hi * 2 + 1) if k.type == "int" else r.hi * 2 + 1
+                text = _set_key(SITE_TEXT, section.name, k.name, repr(big))
                 path = tmp_path / f"{section.name}_{k.name}.ini"
                 path.write_text(text)
                 with pytest.raises(ConfigError, match=rf"\[{section.name}\] {k.name}: must be <="):
