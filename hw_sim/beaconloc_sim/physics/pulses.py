@@ -53,6 +53,10 @@ def make_firings(scn, rng: np.random.Generator,
     with t_a < t <= t_b, numbered from the start of the run (beacon k mod N + 1)."""
     site = scn.site
     period = scn.true_period_s
+    if site.beacon_count == 0:          # a site of bearing beacons only: nothing fires
+        e = np.zeros(0)
+        return Firings(e, np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0, bool),
+                       np.zeros(0, bool), e, e, e)
     if window_s is None:
         k = np.arange(firings_until(scn, scn.duration_s))
     else:
