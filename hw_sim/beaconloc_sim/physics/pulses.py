@@ -79,6 +79,9 @@ def make_firings(scn, rng: np.random.Generator,
 
 def simulate_detections(scn, firings: Firings, rng: np.random.Generator) -> Detections:
     site = scn.site
+    if site.beacon_count == 0:          # a site of bearing beacons only: nothing to hear
+        z, zi, zb = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, bool)
+        return Detections(z, z, zi, z, z, zb, zi, zi, zi, zb)
     room = (site.room_x_m, site.room_y_m, site.room_z_m)
     rx_ang = site.receiver_angles_rad()
     n_rx, n_src = site.rx_count, 7
