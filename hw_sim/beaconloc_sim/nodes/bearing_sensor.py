@@ -82,6 +82,14 @@ class Bearings:
                           for f in Bearings.__dataclass_fields__))
 
 
+def encode_bearing_deg(phi_rad, step_deg: float) -> np.ndarray:
+    """The BEARING frame's Bearing for bearings phi_rad: wrapped to [0, 360) deg and rounded
+    to the DBC step (a value that rounds up to 360 deg, raw 65536, wraps to 0)."""
+    modulo = int(round(360.0 / step_deg))
+    raw = np.round(np.mod(np.degrees(np.asarray(phi_rad, dtype=float)), 360.0) / step_deg)
+    return (raw.astype(np.int64) % modulo) * step_deg
+
+
 def occluded(sensor_xy: np.ndarray, beacon_xy: np.ndarray, obstacles_m: np.ndarray,
              disc_xy: np.ndarray | None = None, disc_radius_m: float = 0.0) -> np.ndarray:
     """True where the segment sensor -> beacon ((n, 2) each) crosses an obstacle segment
@@ -111,7 +119,6 @@ class BearingSensor(Node):
         site = scn.site
         bearing = database().get_message_by_name(self.message).get_signal_by_name("Bearing")
         self.step_deg = float(bearing.scale)                              # 360/65536 deg
-        self.bearing_modulo = int(round(360.0 / self.step_deg))           # raw 65536 wraps to 0
         self.period_us = int(round(1e6 / site.bearing_scan_rate_hz))
         self.out = None                       # outage state of each beacon (Markov chain)
         self.measured = Bearings.empty()      # bearings of the last interval (all, sent or not)
@@ -204,10 +211,8 @@ class BearingSensor(Node):
             o = scn.opponent.state(t)
             disc = np.column_stack([o["x_m"], o["y_m"]])
         hidden = occluded(sensor_xy, beacon_xy, scn.obstacles_m, disc, scn.opponent_radius_m)
-        # the frame's Bearing: wrapped to [0, 360) deg on the DBC step (raw 65536 -> 0)
-        raw = np.round(np.mod(np.degrees(true + noise[k, b, c]), 360.0) / self.step_deg)
-        raw = raw.astype(np.int64) % self.bearing_modulo
-        rec = Bearings(t, scan_us[k], b, true, np.radians(raw * self.step_deg), range_m,
+        sent_deg = encode_bearing_deg(true + noise[k, b, c], self.step_deg)
+        rec = Bearings(t, scan_us[k], b, true, np.radians(sent_deg), range_m,
                        outage[k, b], hidden, range_m > scn.bearing_max_range_m)
         self.measured = rec
         lat = iv.latency_s(len(t))
@@ -218,7 +223,7 @@ class BearingSensor(Node):
         quality = np.clip(np.round(255.0 * np.minimum(1.0, 1.0 / np.maximum(range_m, 1e-9) ** 2)),
                           1, 255).astype(np.int64)
         signals = [{"NodeTime": int(node_us[i] % WRAP_US), "Beacon": int(b[i]) + 1,
-                    "Bearing": float(raw[i]) * self.step_deg, "Quality": int(quality[i])}
+                    "Bearing": float(sent_deg[i]), "Quality": int(quality[i])}
                    for i in sent.tolist()]
         return t[sent] + lat[sent], signals
 
