@@ -45,9 +45,9 @@ class SimResult:
     rx_clock: NodeClock               # the truth's time base: the receiver array's clock, or
                                       # the bearing sensor's on a site without ultrasonic beacons
     encoder_clock: NodeClock
-    pcrb_cov: np.ndarray              # (K, 8, 8) bound after each measurement event, crb.STATE order
-    pcrb_t_s: np.ndarray = None       # (K,) true time of each event (firings and bearings), s
-    bearings: Bearings = None         # every bearing measured (sent or not, and why not)
+    pcrb_cov: np.ndarray              # (K, 8, 8) bound after each event, crb.STATE order
+    pcrb_t_s: np.ndarray | None = None   # (K,) true time of each event (firings, bearings), s
+    bearings: Bearings | None = None     # every bearing measured (sent or not, and why not)
 
 
 def run(scn: Scenario, *, encode: bool = True) -> SimResult:

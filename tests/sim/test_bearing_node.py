@@ -67,6 +67,7 @@ def test_frames_decode_to_the_true_bearing_within_sigma_and_wrap_at_0_360(make_s
     # NodeTime: the node clock at the scan instants (every 100 000 us of its own clock),
     # the three bearings of a scan at the same instant
     assert np.all(node_us % 100_000 == 0)
+    assert node_us.min() == 987_700_000            # [clocks] bearing_offset_us 987654321
     assert np.all(np.unique(node_us, return_counts=True)[1] == 3)
 
 
@@ -133,6 +134,16 @@ def test_a_beacon_behind_a_wall_is_never_sent(make_scenario):
     assert np.sum(beacon == 2) == 0
     assert np.sum(beacon == 1) == np.sum(beacon == 3) == 200
     assert np.all(res.bearings.occluded == (res.bearings.beacon == 1))
+
+
+def test_beacons_beyond_max_range_are_not_sent(make_scenario):
+    # from (1.5, 1.05): B2 at 1.5 m, B1 and B3 at 1.83 m
+    scn = load_scenario(make_scenario("duration_s = 5\n" + STANDING +
+                                      "[bearings]\nmax_range_m = 1.7\n", eurobot_site()))
+    res = simulate.run(scn)
+    _, beacon, *_ = decoded_bearings(res)
+    assert set(beacon.tolist()) == {2} and len(beacon) == 50
+    assert np.array_equal(res.bearings.out_of_range, res.bearings.beacon != 1)
 
 
 def test_the_opponent_hides_a_beacon_while_it_crosses_the_line_of_sight(make_scenario):
@@ -280,8 +291,8 @@ def test_pcrb_of_a_standing_robot_on_eurobot_approaches_the_static_bound(make_sc
 def test_a_mixed_site_fuses_firings_and_bearings():
     """kleeman-lab with three bearing beacons too: the bound has an event per firing and per
     scan, and is below the bound of the pulses alone."""
-    from pathlib import Path
     import tempfile
+    from pathlib import Path
     site_text = builtin_scenario_path("kleeman-lab").parent.joinpath("kleeman-lab.ini").read_text()
     site_text += ("\n[bearing_beacons]\ncount = 3\n[bearing_beacon1]\nx_m = 0.0\ny_m = 0.0\n"
                   "[bearing_beacon2]\nx_m = 12.0\ny_m = 0.0\n[bearing_beacon3]\nx_m = 6.0\n"
@@ -300,19 +311,14 @@ def test_a_mixed_site_fuses_firings_and_bearings():
     assert np.all(mixed.truth["pcrb_pos_m"][late] < pulses.truth["pcrb_pos_m"][late])
 
 
-def test_existing_sites_unchanged():
+def test_existing_sites_unchanged(tmp_path):
     """kleeman-lab's log and truth (with its bound) are those of the simulator before the
     bearing node existed: sha256 recorded on the schema branch (08b7878)."""
-    import io
     from beaconloc_sim import can_out, outputs
     res = simulate.run(load_scenario("kleeman-lab", duration_s=20))
-    import tempfile
-    from pathlib import Path
-    with tempfile.TemporaryDirectory() as d:
-        can_out.write_log(res.frames, Path(d, "l.log"), res.scenario.log_epoch_s, "vcan0")
-        outputs.write_truth(Path(d, "t.csv"), res)
-        log = hashlib.sha256(Path(d, "l.log").read_bytes()).hexdigest()
-        truth = hashlib.sha256(Path(d, "t.csv").read_bytes()).hexdigest()
-    del io
+    can_out.write_log(res.frames, tmp_path / "l.log", res.scenario.log_epoch_s, "vcan0")
+    outputs.write_truth(tmp_path / "t.csv", res)
+    log = hashlib.sha256((tmp_path / "l.log").read_bytes()).hexdigest()
+    truth = hashlib.sha256((tmp_path / "t.csv").read_bytes()).hexdigest()
     assert log == "8332fbc4b3052e363531605b9f6615354a97cde7f307fe46a1d44a51d4cafdf9"
     assert truth == "2b96a1c7621b3eccaad86d1d15494edb94829fe681126615c918c39f9ea0ba03"
