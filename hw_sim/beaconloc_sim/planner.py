@@ -119,16 +119,18 @@ def fisher(J: np.ndarray, sigma: float) -> np.ndarray:
 
 def bearing_fisher(x_m, y_m, theta_rad, beacons_m, offset_m, sigma_rad: float) -> np.ndarray:
     """Fisher information of one scan over (x_m, y_m, theta_rad), (*S, 3, 3); the Jacobian of
-    Vander 2011 eq. 1 (bearing_jacobian, sensor offset included)."""
-    return fisher(bearing_jacobian(x_m, y_m, theta_rad, beacons_m, offset_m), sigma_rad)
+    Vander 2011 eq. 1 (bearing_jacobian, sensor offset included); non-finite on a beacon."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return fisher(bearing_jacobian(x_m, y_m, theta_rad, beacons_m, offset_m), sigma_rad)
 
 
 def tdoa_fisher(x_m, y_m, beacons_m, rx_height_m: float, speed_of_sound_mps: float,
                 sigma_s: float) -> np.ndarray:
     """Fisher information of one firing cycle over (x_m, y_m, t0_s), (*S, 3, 3) (Kleeman 1992
-    eq. 21 at rest at the ring centre, every beacon heard)."""
-    return fisher(static_arrival_jacobian(x_m, y_m, beacons_m, rx_height_m, speed_of_sound_mps),
-                  sigma_s)
+    eq. 21 at rest at the ring centre, every beacon heard); non-finite on a beacon."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return fisher(static_arrival_jacobian(x_m, y_m, beacons_m, rx_height_m, speed_of_sound_mps),
+                      sigma_s)
 
 
 def position_bound(F: np.ndarray, cap_m: float = DRMS_CAP_M):

@@ -98,14 +98,14 @@ def plot_map(site, maps, out_path) -> None:
         fig.colorbar(cs, ax=ax, label="position drms (cm)", ticks=MAP_LEVELS_CM, shrink=0.8)
         beacons = []
         if m.kind in ("tdoa", "both"):
-            beacons.append((site.beacons_m, "s", "ultrasonic beacon"))
+            beacons.append((site.beacons_m, "s", "ultrasonic beacon", "U"))
         if m.kind in ("bearing", "both"):
-            beacons.append((site.bearing_beacons_m, "^", "bearing beacon"))
-        for pts, marker, label in beacons:
+            beacons.append((site.bearing_beacons_m, "^", "bearing beacon", "B"))
+        for pts, marker, label, prefix in beacons:
             ax.plot(pts[:, 0], pts[:, 1], marker, color="white", mec="black", ms=9,
                     clip_on=False, zorder=5, label=label)
             for i, p in enumerate(pts):
-                ax.annotate(f"B{i + 1}", (p[0], p[1]), textcoords="offset points",
+                ax.annotate(f"{prefix}{i + 1}", (p[0], p[1]), textcoords="offset points",
                             xytext=(6, 4), fontsize=8, annotation_clip=False)
         handles = ax.get_legend_handles_labels()[0]
         handles.append(Patch(facecolor="0.8", hatch="////", label="degenerate"))
