@@ -22,7 +22,8 @@ BIN = Path(sys.executable).with_name("beaconloc-sim")
 SIGMA_RAD = math.radians(1.0)
 LINE = re.compile(r"^map site=(\S+) kind=(tdoa|bearing|both) step_m=([0-9.e+-]+) "
                   r"drms_median_mm=([0-9.]+) drms_p90_mm=([0-9.]+) drms_worst_mm=([0-9.]+) "
-                  r"(heading_median_deg=[0-9.]+ heading_p90_deg=[0-9.]+ heading_worst_deg=[0-9.]+ )?"
+                  r"(heading_median_deg=[0-9.]+ heading_p90_deg=[0-9.]+ "
+                  r"heading_worst_deg=[0-9.]+ )?"
                   r"below5cm_pct=([0-9.]+) degenerate_pct=([0-9.]+)$")
 
 
