@@ -170,7 +170,8 @@ def _cmd_map(args) -> int:
           f"degenerate: cond > {planner.COND_MAX:g} or drms > {args.cap:g} m")
     if args.out:
         from .plot import plot_map
-        plot_map(site, maps, args.out)
+        plot_map(site, maps, args.out,
+                 split_x_m=site.room_x_m / 2 if args.halves else None)
     for m in maps:
         if len(m.headings_rad) > 1:
             print(f"# {m.kind}: sensor offset from the wheel-base centre: worst of "

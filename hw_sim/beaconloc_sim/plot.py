@@ -69,9 +69,10 @@ def plot(truth_path, estimates_path, odometry_path, out_path) -> None:
 MAP_LEVELS_CM = (0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100)
 
 
-def plot_map(site, maps, out_path) -> None:
+def plot_map(site, maps, out_path, split_x_m: float | None = None) -> None:
     """The planner's accuracy maps side by side: filled drms contours (cm, levels
-    MAP_LEVELS_CM), the 5 cm contour heavy, degenerate cells hatched grey, beacons drawn."""
+    MAP_LEVELS_CM), the 5 cm contour heavy, degenerate cells hatched grey, beacons drawn;
+    a dashed line at x = split_x_m (m) when given (the halves of Vander Fig. 5)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -107,6 +108,8 @@ def plot_map(site, maps, out_path) -> None:
             for i, p in enumerate(pts):
                 ax.annotate(f"{prefix}{i + 1}", (p[0], p[1]), textcoords="offset points",
                             xytext=(6, 4), fontsize=8, annotation_clip=False)
+        if split_x_m is not None:
+            ax.axvline(split_x_m, color="white", ls="--", lw=1)
         handles = ax.get_legend_handles_labels()[0]
         handles.append(Patch(facecolor="0.8", hatch="////", label="degenerate"))
         ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3,
@@ -119,5 +122,5 @@ def plot_map(site, maps, out_path) -> None:
                xlabel="x (m)", ylabel="y (m)")
         ax.set_title(title, pad=14)
     fig.tight_layout()
-    fig.savefig(out_path, dpi=100)
+    fig.savefig(out_path, dpi=100, bbox_inches="tight")
     plt.close(fig)
