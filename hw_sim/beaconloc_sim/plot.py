@@ -86,15 +86,19 @@ def plot_map(site, maps, out_path, split_x_m: float | None = None) -> None:
     cmap = plt.get_cmap("viridis", len(MAP_LEVELS_CM) + 1)
     norm = BoundaryNorm(MAP_LEVELS_CM, cmap.N, extend="both")
     for ax, m in zip(axes[0], maps):
-        drms_cm = m.drms_m * 100
+        # cell centres padded out to the walls with the edge cells' values
+        xs = np.concatenate([[0.0], m.x_m, [site.room_x_m]])
+        ys = np.concatenate([[0.0], m.y_m, [site.room_y_m]])
+        drms_cm = np.pad(m.drms_m * 100, 1, mode="edge")
+        degenerate = np.pad(m.degenerate, 1, mode="edge")
         ax.set_facecolor("0.8")      # degenerate cells: NaN, not filled
-        cs = ax.contourf(m.x_m, m.y_m, drms_cm, levels=MAP_LEVELS_CM, cmap=cmap, norm=norm,
+        cs = ax.contourf(xs, ys, drms_cm, levels=MAP_LEVELS_CM, cmap=cmap, norm=norm,
                          extend="both")
-        if m.degenerate.any():
-            ax.contourf(m.x_m, m.y_m, m.degenerate.astype(float), levels=[0.5, 1.5],
+        if degenerate.any():
+            ax.contourf(xs, ys, degenerate.astype(float), levels=[0.5, 1.5],
                         colors="none", hatches=["////"])
         if np.nanmin(drms_cm, initial=np.inf) < 5 < np.nanmax(drms_cm, initial=-np.inf):
-            c5 = ax.contour(m.x_m, m.y_m, drms_cm, levels=[5], colors="red", linewidths=2.2)
+            c5 = ax.contour(xs, ys, drms_cm, levels=[5], colors="red", linewidths=2.2)
             ax.clabel(c5, fmt="5 cm", fontsize=8)
         fig.colorbar(cs, ax=ax, label="position drms (cm)", ticks=MAP_LEVELS_CM, shrink=0.8)
         beacons = []
@@ -115,7 +119,8 @@ def plot_map(site, maps, out_path, split_x_m: float | None = None) -> None:
         ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3,
                   fontsize=8, frameon=False)
         s = m.stats()
-        title = f"{site.name}: {m.kind}, median {s['drms_median_mm']:.0f} mm"
+        title = f"{site.name}: {m.kind}, " + (f"median {s['drms_median_mm']:.0f} mm"
+                                              if s["degenerate_pct"] < 100 else "all degenerate")
         if len(m.headings_rad) > 1:
             title += f", worst of {len(m.headings_rad)} headings"
         ax.set(xlim=(0, site.room_x_m), ylim=(0, site.room_y_m), aspect="equal",

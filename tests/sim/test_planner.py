@@ -212,3 +212,24 @@ def test_cli_exit_2_without_the_requested_kind(tmp_path, capsys):
     assert "no ultrasonic beacons" in capsys.readouterr().err
     assert cli.main(["map", str(VANDER), "--kind", "both", "--out", str(out)]) == 2
     assert not (tmp_path / "x.png").exists()
+
+
+def test_bearing_bound_depends_on_heading_only_through_the_offset(tmp_path):
+    beacons = np.array([[3.0, 2.1], [0.0, 1.05], [3.0, 0.0]])
+    x, y = np.array([0.7, 2.2, 1.4]), np.array([0.3, 1.6, 1.0])
+    bound = [planner.position_bound(planner.bearing_fisher(x, y, np.full(3, th), beacons,
+                                                           offset, SIGMA_RAD))[0]
+             for offset in ((0, 0), (0.1, 0.05)) for th in (0.0, 1.3)]
+    np.testing.assert_allclose(bound[0], bound[1], rtol=1e-12)
+    assert np.all(np.abs(bound[2] / bound[3] - 1) > 1e-4)
+    # the site planner takes the worst of 8 headings when the sensor is offset, and says so
+    path = tmp_path / "offset.ini"
+    path.write_text(VANDER.read_text().replace("offset_x_m = 0.0", "offset_x_m = 0.1"))
+    site = load_site(path)
+    m = planner.kind_map(site, "bearing", 0.1)
+    assert len(m.headings_rad) == 8
+    per_heading = [planner.position_bound(planner.bearing_fisher(
+        *np.meshgrid(m.x_m, m.y_m), np.full((len(m.y_m), len(m.x_m)), th),
+        site.bearing_beacons_m, site.bearing_offset_m, SIGMA_RAD))[0] for th in m.headings_rad]
+    ok = ~m.degenerate
+    np.testing.assert_array_equal(m.drms_m[ok], np.max(per_heading, axis=0)[ok])
