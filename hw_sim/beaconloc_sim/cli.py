@@ -140,6 +140,48 @@ def _cmd_plot(args) -> int:
     return 0
 
 
+def _cmd_map(args) -> int:
+    """map SITE: the Cramér-Rao accuracy map of a site (planner.py); exit 2 when the site has
+    no beacons of the requested kind."""
+    from pathlib import Path
+
+    from . import planner
+    from .resources import builtin_site_path
+    from .site import load_site
+    path = Path(args.site)
+    if not path.exists() and builtin_site_path(args.site).is_file():
+        path = builtin_site_path(args.site)
+    if args.step is not None and not args.step > 0:
+        print("beaconloc-sim map: --step must be > 0", file=sys.stderr)
+        return EX_USAGE
+    try:
+        site = load_site(path)
+    except ConfigError as exc:
+        print(f"beaconloc-sim: {exc}", file=sys.stderr)
+        return EX_CONFIG
+    kinds = planner.kinds_of(site) if args.kind == "all" else [args.kind]
+    try:
+        maps = [planner.kind_map(site, k, args.step, args.cap) for k in kinds]
+    except planner.PlannerError as exc:
+        print(f"beaconloc-sim map: {exc}", file=sys.stderr)
+        return 2
+    step = planner.grid(site, args.step)[2]
+    print(f"# map {site.name}: {len(maps[0].x_m)} x {len(maps[0].y_m)} cells of {step:.4g} m; "
+          f"degenerate: cond > {planner.COND_MAX:g} or drms > {args.cap:g} m")
+    if args.out:
+        from .plot import plot_map
+        plot_map(site, maps, args.out,
+                 split_x_m=site.room_x_m / 2 if args.halves else None)
+    for m in maps:
+        if len(m.headings_rad) > 1:
+            print(f"# {m.kind}: sensor offset from the wheel-base centre: worst of "
+                  f"{len(m.headings_rad)} headings")
+        if args.halves:
+            print(planner.halves_line(site, m))
+        print(planner.summary_line(site, m, step))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="beaconloc-sim", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -175,6 +217,24 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--odometry", metavar="FILE")
     pl.add_argument("--out", required=True, metavar="PNG")
     pl.set_defaults(func=_cmd_plot)
+    mp = sub.add_parser("map", help="Cramer-Rao accuracy map of a site (where to put beacons)",
+                        description="The snapshot Cramer-Rao bound of one measurement cycle "
+                                    "over the site's room, per kind of measurement: position "
+                                    "drms (and heading sigma for bearings), degenerate cells, "
+                                    "median / 90th percentile / worst. Exit 2: the site has no "
+                                    "beacons of the requested kind.")
+    mp.add_argument("site", help="site file path, or a built-in site name (kleeman-lab)")
+    mp.add_argument("--out", metavar="PNG", help="draw the maps side by side into this PNG")
+    mp.add_argument("--step", type=float, metavar="M",
+                    help="grid step, m (default: the room's longer side / 300)")
+    mp.add_argument("--kind", choices=("tdoa", "bearing", "both", "all"), default="all",
+                    help="measurement kind (default all: every kind the site has, and both "
+                         "together on a mixed site)")
+    mp.add_argument("--cap", type=float, default=1.0, metavar="M",
+                    help="drms above this is marked degenerate, m (default 1)")
+    mp.add_argument("--halves", action="store_true",
+                    help="also print Vander Fig. 5's figures for x below / above half the room")
+    mp.set_defaults(func=_cmd_map)
     return p
 
 

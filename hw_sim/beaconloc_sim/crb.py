@@ -95,6 +95,20 @@ def arrival_jacobian(state, beacon_m, rx_angle_rad, ring_radius_m, rx_height_m) 
     return ((t[:8] - t[8:]) / (2 * _STEPS[:, None])).T
 
 
+def static_arrival_jacobian(x_m, y_m, beacons_m, rx_height_m: float,
+                            speed_of_sound_mps: float) -> np.ndarray:
+    """d(arrival)/d(x_m, y_m, t0_s) of arrival_time_s at rest (v = 0) at the ring centre
+    (ring_radius_m = 0), analytic, for positions of any shape S and beacons (N, 3): (*S, N, 3).
+    Kleeman 1992 eq. 21 with v = 0: t_i = t0 + d_i / s, so dt/d(x, y) = (p - b_i)_xy / (d_i s)
+    (s/m) and dt/dt0 = 1 (the columns IX, IY, IT0 of arrival_jacobian)."""
+    b = np.asarray(beacons_m, dtype=float)
+    dx = np.asarray(x_m, dtype=float)[..., None] - b[:, 0]
+    dy = np.asarray(y_m, dtype=float)[..., None] - b[:, 1]
+    d = np.sqrt(dx * dx + dy * dy + (rx_height_m - b[:, 2]) ** 2)
+    return np.stack([dx / (d * speed_of_sound_mps), dy / (d * speed_of_sound_mps),
+                     np.ones_like(d)], axis=-1)
+
+
 @dataclass
 class BoundModel:
     """Noise statistics the bound uses (the simulator's true ones)."""

@@ -63,3 +63,69 @@ def plot(truth_path, estimates_path, odometry_path, out_path) -> None:
     fig.tight_layout()
     fig.savefig(out_path, dpi=110)
     plt.close(fig)
+
+
+# contour levels of the accuracy map, cm (the 5 cm one drawn heavy: Vander Fig. 5's figure)
+MAP_LEVELS_CM = (0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100)
+
+
+def plot_map(site, maps, out_path, split_x_m: float | None = None) -> None:
+    """The planner's accuracy maps side by side: filled drms contours (cm, levels
+    MAP_LEVELS_CM), the 5 cm contour heavy, degenerate cells hatched grey, beacons drawn;
+    a dashed line at x = split_x_m (m) when given (the halves of Vander Fig. 5)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import BoundaryNorm
+    from matplotlib.patches import Patch
+
+    aspect = site.room_y_m / site.room_x_m
+    width = 5.6
+    fig, axes = plt.subplots(1, len(maps), figsize=(width * len(maps), width * aspect + 1.3),
+                             squeeze=False)
+    cmap = plt.get_cmap("viridis", len(MAP_LEVELS_CM) + 1)
+    norm = BoundaryNorm(MAP_LEVELS_CM, cmap.N, extend="both")
+    for ax, m in zip(axes[0], maps):
+        # cell centres padded out to the walls with the edge cells' values
+        xs = np.concatenate([[0.0], m.x_m, [site.room_x_m]])
+        ys = np.concatenate([[0.0], m.y_m, [site.room_y_m]])
+        drms_cm = np.pad(m.drms_m * 100, 1, mode="edge")
+        degenerate = np.pad(m.degenerate, 1, mode="edge")
+        ax.set_facecolor("0.8")      # degenerate cells: NaN, not filled
+        cs = ax.contourf(xs, ys, drms_cm, levels=MAP_LEVELS_CM, cmap=cmap, norm=norm,
+                         extend="both")
+        if degenerate.any():
+            ax.contourf(xs, ys, degenerate.astype(float), levels=[0.5, 1.5],
+                        colors="none", hatches=["////"])
+        if np.nanmin(drms_cm, initial=np.inf) < 5 < np.nanmax(drms_cm, initial=-np.inf):
+            c5 = ax.contour(xs, ys, drms_cm, levels=[5], colors="red", linewidths=2.2)
+            ax.clabel(c5, fmt="5 cm", fontsize=8)
+        fig.colorbar(cs, ax=ax, label="position drms (cm)", ticks=MAP_LEVELS_CM, shrink=0.8)
+        beacons = []
+        if m.kind in ("tdoa", "both"):
+            beacons.append((site.beacons_m, "s", "ultrasonic beacon", "U"))
+        if m.kind in ("bearing", "both"):
+            beacons.append((site.bearing_beacons_m, "^", "bearing beacon", "B"))
+        for pts, marker, label, prefix in beacons:
+            ax.plot(pts[:, 0], pts[:, 1], marker, color="white", mec="black", ms=9,
+                    clip_on=False, zorder=5, label=label)
+            for i, p in enumerate(pts):
+                ax.annotate(f"{prefix}{i + 1}", (p[0], p[1]), textcoords="offset points",
+                            xytext=(6, 4), fontsize=8, annotation_clip=False)
+        if split_x_m is not None:
+            ax.axvline(split_x_m, color="white", ls="--", lw=1)
+        handles = ax.get_legend_handles_labels()[0]
+        handles.append(Patch(facecolor="0.8", hatch="////", label="degenerate"))
+        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3,
+                  fontsize=8, frameon=False)
+        s = m.stats()
+        title = f"{site.name}: {m.kind}, " + (f"median {s['drms_median_mm']:.0f} mm"
+                                              if s["degenerate_pct"] < 100 else "all degenerate")
+        if len(m.headings_rad) > 1:
+            title += f", worst of {len(m.headings_rad)} headings"
+        ax.set(xlim=(0, site.room_x_m), ylim=(0, site.room_y_m), aspect="equal",
+               xlabel="x (m)", ylabel="y (m)")
+        ax.set_title(title, pad=14)
+    fig.tight_layout()
+    fig.savefig(out_path, dpi=100, bbox_inches="tight")
+    plt.close(fig)

@@ -1,0 +1,241 @@
+"""The site planner: the Cramér-Rao accuracy map of a site ("where do I put my beacons?").
+
+For every cell of a grid over the site's room (cell centres, step ``step_m``) and for each
+kind of measurement the site has, the snapshot Cramér-Rao bound of one measurement cycle
+with no prior, C = F^-1, F = J^T R^-1 J (Fisher information of independent Gaussian
+measurements, R = sigma^2 I):
+
+- ``bearing``: one scan of every bearing beacon (Vander et al. 2011 eq. 1; model and
+  Jacobian from physics/bearings.py), unknowns (x_m, y_m, theta_rad), sigma = the site's
+  [bearing_sensor] sigma_deg. With the sensor at the wheel-base centre (offset 0) the bound
+  does not depend on the heading (J's rows are (dy/r^2, -dx/r^2, -1)); with an offset it
+  does, and the map shows the worst over HEADINGS (8 headings, 45 degrees apart).
+- ``tdoa``: one firing cycle of every ultrasonic beacon heard at the ring centre at rest
+  with an unknown emission time and a known speed of sound (the snapshot solver's model;
+  Kleeman 1992 eq. 21 with v = 0: crb.static_arrival_jacobian), unknowns (x_m, y_m, t0_s),
+  sigma = [noise] sigma_arrival_s. Every beacon is heard (no directivity, no occlusion).
+- ``both``: a mixed site's two cycles together, unknowns (x_m, y_m, theta_rad, t0_s).
+
+Per cell: position drms = sqrt(C_xx + C_yy) (m) and the heading sigma sqrt(C_theta,theta)
+(rad; bearing and both only). The position block is the inverse of the Schur complement
+S = F_pp - F_pn F_nn^-1 F_np (the nuisance unknowns n: heading, emission time eliminated).
+A cell is *degenerate* when S is singular or ill-conditioned, cond(S) = lambda_max /
+lambda_min > COND_MAX (the error ellipse's axes more than 10^4 apart: the robot and the
+beacons concyclic or collinear, Vander Fig. 4), or when its drms exceeds the cap (1 m by
+default): it is marked on the map and left out of the statistics (counted as a share).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .crb import static_arrival_jacobian
+from .physics.bearings import bearing_jacobian
+from .site import Site
+
+KINDS = ("tdoa", "bearing")
+COND_MAX = 1e8                 # cond(S) above this: degenerate (S in 1/m^2, scale-free ratio)
+DRMS_CAP_M = 1.0               # drms above this: degenerate (useless for navigation), m
+HEADINGS_RAD = np.arange(8) * (math.pi / 4)   # worst over these when the sensor is offset
+CELLS_LONG_SIDE = 300          # default step: the room's longer side / this
+THRESHOLD_M = 0.05             # the "better than 5 cm" figure of Vander Fig. 5, m
+
+
+class PlannerError(ValueError):
+    """The site has no beacons of the requested kind (the CLI exits 2)."""
+
+
+@dataclass
+class KindMap:
+    kind: str                  # "tdoa", "bearing" or "both"
+    x_m: np.ndarray            # (nx,) cell centres, site frame, m
+    y_m: np.ndarray            # (ny,) cell centres, m
+    drms_m: np.ndarray         # (ny, nx) position drms, m; NaN where degenerate
+    heading_sigma_rad: np.ndarray | None   # (ny, nx) rad, NaN where degenerate; None for tdoa
+    degenerate: np.ndarray     # (ny, nx) bool
+    headings_rad: np.ndarray   # the headings evaluated (worst taken over them)
+
+    def stats(self) -> dict:
+        """Median, 90th percentile and worst over the non-degenerate cells (drms in mm,
+        heading in deg), the degenerate share and the share below 5 cm (of all cells), %."""
+        ok = ~self.degenerate
+        out = {"degenerate_pct": 100.0 * float(np.mean(self.degenerate)),
+               "below5cm_pct": 100.0 * float(np.mean(ok & (np.nan_to_num(self.drms_m, nan=np.inf)
+                                                             < THRESHOLD_M)))}
+        d = self.drms_m[ok] * 1e3
+        out.update(drms_median_mm=_pct(d, 50), drms_p90_mm=_pct(d, 90),
+                   drms_worst_mm=float(d.max()) if d.size else math.nan)
+        if self.heading_sigma_rad is not None:
+            h = np.degrees(self.heading_sigma_rad[ok])
+            out.update(heading_median_deg=_pct(h, 50), heading_p90_deg=_pct(h, 90),
+                       heading_worst_deg=float(h.max()) if h.size else math.nan)
+        return out
+
+    def halves(self, split_x_m: float) -> dict:
+        """Vander Fig. 5's figures for x < split and x >= split: share of the half's cells
+        below 5 cm (degenerate cells count as not below), median and worst drms (mm)."""
+        out = {}
+        for name, cols in (("left", self.x_m < split_x_m), ("right", self.x_m >= split_x_m)):
+            drms = self.drms_m[:, cols]
+            d = drms[~self.degenerate[:, cols]] * 1e3
+            out[f"{name}_below5cm_pct"] = 100.0 * float(
+                np.mean(np.nan_to_num(drms, nan=np.inf) < THRESHOLD_M))
+            out[f"{name}_median_mm"] = _pct(d, 50)
+            out[f"{name}_worst_mm"] = float(d.max()) if d.size else math.nan
+            out[f"{name}_degenerate_pct"] = 100.0 * float(np.mean(self.degenerate[:, cols]))
+        return out
+
+
+def _pct(a: np.ndarray, q: float) -> float:
+    return float(np.percentile(a, q)) if a.size else math.nan
+
+
+def kinds_of(site: Site) -> list[str]:
+    """The kinds of measurement a site has: tdoa (ultrasonic beacons), bearing, both."""
+    kinds = [k for k, n in (("tdoa", site.beacon_count), ("bearing", site.bearing_beacon_count))
+             if n > 0]
+    return kinds + ["both"] if len(kinds) == 2 else kinds
+
+
+def grid(site: Site, step_m: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """Cell centres over [0, room_x] x [0, room_y] (a beacon on a wall or corner is never a
+    cell centre) and the step, m (default: the longer side / CELLS_LONG_SIDE)."""
+    if step_m is None:
+        step_m = max(site.room_x_m, site.room_y_m) / CELLS_LONG_SIDE
+    if not (step_m > 0 and math.isfinite(step_m)):
+        raise ValueError(f"step must be > 0 m, not {step_m}")
+    nx = max(1, int(round(site.room_x_m / step_m)))
+    ny = max(1, int(round(site.room_y_m / step_m)))
+    return (np.arange(nx) + 0.5) * (site.room_x_m / nx), \
+        (np.arange(ny) + 0.5) * (site.room_y_m / ny), step_m
+
+
+def fisher(J: np.ndarray, sigma: float) -> np.ndarray:
+    """F = J^T R^-1 J with R = sigma^2 I, for stacked Jacobians (*S, M, k): (*S, k, k)."""
+    return np.einsum("...mi,...mj->...ij", J, J) / sigma ** 2
+
+
+def bearing_fisher(x_m, y_m, theta_rad, beacons_m, offset_m, sigma_rad: float) -> np.ndarray:
+    """Fisher information of one scan over (x_m, y_m, theta_rad), (*S, 3, 3); the Jacobian of
+    Vander 2011 eq. 1 (bearing_jacobian, sensor offset included); non-finite on a beacon."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return fisher(bearing_jacobian(x_m, y_m, theta_rad, beacons_m, offset_m), sigma_rad)
+
+
+def tdoa_fisher(x_m, y_m, beacons_m, rx_height_m: float, speed_of_sound_mps: float,
+                sigma_s: float) -> np.ndarray:
+    """Fisher information of one firing cycle over (x_m, y_m, t0_s), (*S, 3, 3) (Kleeman 1992
+    eq. 21 at rest at the ring centre, every beacon heard); non-finite on a beacon."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return fisher(static_arrival_jacobian(x_m, y_m, beacons_m, rx_height_m, speed_of_sound_mps),
+                      sigma_s)
+
+
+def position_bound(F: np.ndarray, cap_m: float = DRMS_CAP_M):
+    """From Fisher matrices (*S, k, k), position (x, y) first: (drms_m, third_sigma, degenerate).
+
+    drms_m = sqrt(trace of the position block of F^-1), the block being S^-1 with
+    S = F_pp - F_pn F_nn^-1 F_np (Schur complement); third_sigma = sqrt([F^-1]_22) (the
+    heading when it is the third unknown); both NaN where degenerate (see the module doc)."""
+    F = np.asarray(F, dtype=float)
+    shape = F.shape[:-2]
+    F = F.reshape(-1, *F.shape[-2:])
+    k = F.shape[-1]
+    with np.errstate(all="ignore"):
+        finite = np.all(np.isfinite(F), axis=(1, 2))
+        Fs = np.where(finite[:, None, None], F, np.eye(k))
+        Fnn = Fs[:, 2:, 2:]
+        nn_ok = np.linalg.cond(Fnn) < 1e12 if k > 2 else np.ones(len(F), bool)
+        Fnn = np.where(nn_ok[:, None, None], Fnn, np.eye(k - 2))
+        S = Fs[:, :2, :2] - Fs[:, :2, 2:] @ np.linalg.solve(Fnn, Fs[:, 2:, :2])
+        a, b, c = S[:, 0, 0], (S[:, 0, 1] + S[:, 1, 0]) / 2, S[:, 1, 1]
+        # eigenvalues of the symmetric 2x2 S
+        mid, rad = (a + c) / 2, np.hypot((a - c) / 2, b)
+        lo, hi = mid - rad, mid + rad
+        regular = finite & nn_ok & (lo > 0) & (hi < COND_MAX * lo)
+        # trace(S^-1) = (a + c) / det S
+        drms = np.sqrt(np.where(regular, (a + c) / np.where(regular, a * c - b * b, 1.0), np.nan))
+        degenerate = ~regular | ~(drms <= cap_m)
+        drms[degenerate] = np.nan
+        third = np.full(len(F), np.nan)
+        if k > 2 and np.any(~degenerate):
+            C = np.linalg.inv(Fs[~degenerate])
+            third[~degenerate] = np.sqrt(C[:, 2, 2])
+    return drms.reshape(shape), third.reshape(shape), degenerate.reshape(shape)
+
+
+def _kind_fisher(site: Site, kind: str, X: np.ndarray, Y: np.ndarray, theta_rad: float,
+                 sigma_scale: float) -> np.ndarray:
+    """Fisher matrices of one kind at the grid (X, Y) and one heading."""
+    if kind == "bearing":
+        return bearing_fisher(X, Y, np.full_like(X, theta_rad), site.bearing_beacons_m,
+                              site.bearing_offset_m, site.sigma_bearing_rad * sigma_scale)
+    if kind == "tdoa":
+        return tdoa_fisher(X, Y, site.beacons_m, site.rx_height_m, site.speed_of_sound_mps,
+                           site.sigma_arrival_s * sigma_scale)
+    # both: unknowns (x, y, theta, t0); the two cycles' measurements are independent
+    F = np.zeros(X.shape + (4, 4))
+    F[..., :3, :3] = _kind_fisher(site, "bearing", X, Y, theta_rad, sigma_scale)
+    Ft = _kind_fisher(site, "tdoa", X, Y, theta_rad, sigma_scale)
+    idx = np.array([0, 1, 3])
+    F[..., idx[:, None], idx] += Ft
+    return F
+
+
+def headings_of(site: Site, kind: str) -> np.ndarray:
+    """Headings evaluated: theta = 0 when the bound cannot depend on it (tdoa, or a bearing
+    sensor at the wheel-base centre), else HEADINGS_RAD (the map keeps the worst)."""
+    if kind == "tdoa" or not np.any(site.bearing_offset_m):
+        return np.zeros(1)
+    return HEADINGS_RAD
+
+
+def kind_map(site: Site, kind: str, step_m: float | None = None, cap_m: float = DRMS_CAP_M,
+             sigma_scale: float = 1.0) -> KindMap:
+    """The accuracy map of one kind over the site's room (sigma_scale multiplies the site's
+    sigma: a what-if for a better or worse sensor)."""
+    available = kinds_of(site)
+    if kind not in available:
+        have = ", ".join(available) or "none"
+        need = {"tdoa": "ultrasonic beacons ([beacons] count > 0)",
+                "bearing": "bearing beacons ([bearing_beacons] count > 0)",
+                "both": "both ultrasonic and bearing beacons"}.get(kind, f"kind {kind!r}")
+        raise PlannerError(f"{site.path}: site {site.name!r} has no {need} (its kinds: {have})")
+    x, y, step_m = grid(site, step_m)
+    X, Y = np.meshgrid(x, y)
+    headings = headings_of(site, kind)
+    drms = third = None
+    degenerate = np.zeros(X.shape, bool)
+    for th in headings:
+        d, h, deg = position_bound(_kind_fisher(site, kind, X, Y, float(th), sigma_scale), cap_m)
+        degenerate |= deg
+        drms = d if drms is None else np.fmax(drms, d)
+        third = h if third is None else np.fmax(third, h)
+    drms[degenerate] = np.nan
+    third[degenerate] = np.nan
+    return KindMap(kind=kind, x_m=x, y_m=y, drms_m=drms,
+                   heading_sigma_rad=None if kind == "tdoa" else third,
+                   degenerate=degenerate, headings_rad=headings)
+
+
+def summary_line(site: Site, m: KindMap, step_m: float) -> str:
+    """The machine-readable line of one kind (docs/simulator.md, `map`)."""
+    s = m.stats()
+    parts = [f"map site={site.name} kind={m.kind} step_m={step_m:.4g}",
+             f"drms_median_mm={s['drms_median_mm']:.1f} drms_p90_mm={s['drms_p90_mm']:.1f} "
+             f"drms_worst_mm={s['drms_worst_mm']:.1f}"]
+    if "heading_median_deg" in s:
+        parts.append(f"heading_median_deg={s['heading_median_deg']:.3f} "
+                     f"heading_p90_deg={s['heading_p90_deg']:.3f} "
+                     f"heading_worst_deg={s['heading_worst_deg']:.3f}")
+    parts.append(f"below5cm_pct={s['below5cm_pct']:.1f} degenerate_pct={s['degenerate_pct']:.1f}")
+    return " ".join(parts)
+
+
+def halves_line(site: Site, m: KindMap) -> str:
+    """Vander Fig. 5's figures, split at half the room's x."""
+    h = m.halves(site.room_x_m / 2)
+    return (f"halves site={site.name} kind={m.kind} split_x_m={site.room_x_m / 2:.3g} "
+            + " ".join(f"{k}={v:.1f}" for k, v in h.items()))
