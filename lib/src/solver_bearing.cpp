@@ -36,21 +36,28 @@ using Mat3 = bl::Mat<3, 3>;
 
 constexpr uint32_t kMaxIterations = 20;
 constexpr real kDefaultMaxDrms_m = real(0.5);
-// A fix whose sensor lies closer than kCircleGuard·drms (sensor position)
-// to the circle through the three beacons is refused (N = 3): there the
-// circle is inside the error ellipse, the first-order covariance no longer
-// describes the error and the fix may lie on the wrong side of the circle.
-constexpr real kCircleGuard = real(3);
+// A fix whose sensor-position drms exceeds kLinearity times the distance
+// to the nearest beacon is refused: the error then reaches across the
+// curvature of the bearings (atan2 is far from its tangent over the error
+// ellipse) and the first-order covariance no longer describes the error.
+// Near the degenerate circle this is what catches a fix that slid along
+// the circle (measured: tests/lib/test_solver_bearing.c, the grid across
+// the circle).
+constexpr real kLinearity = real(0.5);
+// An exactly determined fix (N = 3) must reproduce its bearings to within
+// kConsistency·sigma_j (rounding only); else it is refused.
 #if defined(BL_USE_FLOAT) && BL_USE_FLOAT
 constexpr real kMinCondition = real(1e-4);
 constexpr real kStepTol = real(1e-5);   // Gauss-Newton step (m and rad)
 constexpr real kCotMax = real(1e5);     // ToTal's clamp of an infinite cot
 constexpr real kCoincident = real(1e-5);  // relative beacon separation
+constexpr real kConsistency = real(1e-2);
 #else
 constexpr real kMinCondition = real(1e-6);
 constexpr real kStepTol = real(1e-9);
 constexpr real kCotMax = real(1e8);  // Pierlot & Van Droogenbroeck 2014 §IV: ±1e8
 constexpr real kCoincident = real(1e-9);
+constexpr real kConsistency = real(1e-4);
 #endif
 
 bool problem_valid(const bl_bearing_problem *p)
@@ -148,29 +155,41 @@ bool total(const bl_bearing_problem *p, const Bearings &b, uint32_t i, uint32_t 
     return is_finite(xs) && is_finite(ys);
 }
 
-// Heading from the sensor position: theta_j = angle(b_j - s) - phi_j for
-// each beacon, combined as the circular mean weighted by 1/sigma_j²
-// (exactly determined N = 3: all theta_j agree). Returns the mean's unit
-// vector (cos theta, sin theta); false if undefined (sensor on a beacon).
-bool heading(const bl_bearing_problem *p, const Bearings &b, const uint32_t *id, uint32_t n, real xs, real ys,
-             real &cth, real &sth)
+// Heading from the sensor position on beacons id[0..2]: theta_j =
+// angle(b_j - s) - phi_j for each beacon, combined as the circular mean
+// weighted by 1/sigma_j² (exactly determined: all theta_j agree). Returns
+// the mean's unit vector (cos theta, sin theta) and the largest
+// |sin(theta_j - theta)| / sigma_j: the bearing residuals of the fix in σ
+// (exactly determined, so rounding only for a true fix); false if undefined
+// (sensor on a beacon).
+bool heading(const bl_bearing_problem *p, const Bearings &b, const uint32_t id[3], real xs, real ys, real &cth,
+             real &sth, real &spread)
 {
+    real vc[3], vs[3];
     real sc = 0, ss = 0;
-    for (uint32_t a = 0; a < n; ++a) {
+    for (int a = 0; a < 3; ++a) {
         const uint32_t j = id[a];
         const real dx = p->beacons[j].x_m - xs, dy = p->beacons[j].y_m - ys;
         const real r = std::sqrt(dx * dx + dy * dy);
         if (!(r > real(0))) return false;
         const real w = real(1) / (p->sigma_rad[j] * p->sigma_rad[j]);
         // (cos, sin)(angle(u) - phi) = (ux c + uy s, uy c - ux s), u = (dx, dy)/r.
-        sc += w * (dx * b.c[j] + dy * b.s[j]) / r;
-        ss += w * (dy * b.c[j] - dx * b.s[j]) / r;
+        vc[a] = (dx * b.c[j] + dy * b.s[j]) / r;
+        vs[a] = (dy * b.c[j] - dx * b.s[j]) / r;
+        sc += w * vc[a];
+        ss += w * vs[a];
     }
     const real len = std::sqrt(sc * sc + ss * ss);
     if (!(len > real(0)) || !is_finite(len)) return false;
     cth = sc / len;
     sth = ss / len;
-    return true;
+    spread = 0;
+    for (int a = 0; a < 3; ++a) {
+        // sin(theta_j - theta) = vs_j cos(theta) - vc_j sin(theta)
+        const real e = std::fabs(vs[a] * cth - vc[a] * sth) / p->sigma_rad[id[a]];
+        if (!(e <= spread)) spread = e;
+    }
+    return is_finite(spread);
 }
 
 // Weighted normal matrix A = JᵀWJ at the sensor position (unknowns xs, ys,
@@ -238,37 +257,12 @@ real condition_of(const Mat3 &A, const Mat3 &inv)
     return real(1) / (n1 * n1i);
 }
 
-// First-order distance (m) of the sensor s to the circle through beacons i,
-// j, k (a line when they are collinear): |F(s)| / |∇F(s)| with F the
-// circle's implicit equation, B_j at the origin (u = B_i - B_j, v = B_k -
-// B_j, t = s - B_j):
-//   F(t) = K |t|² + L tx + M ty,  K = u × v,
-//   L = |v|² uy - |u|² vy,  M = |u|² vx - |v|² ux
-// (F vanishes at 0, u and v). Exact for a line; near a circle of radius R
-// it is the distance times (|t - c| + R) / (2 |t - c|) ≈ 1.
-real circle_distance(const bl_bearing_problem *p, uint32_t i, uint32_t j, uint32_t k, real xs, real ys)
-{
-    const real ox = p->beacons[j].x_m, oy = p->beacons[j].y_m;
-    const real ux = p->beacons[i].x_m - ox, uy = p->beacons[i].y_m - oy;
-    const real vx = p->beacons[k].x_m - ox, vy = p->beacons[k].y_m - oy;
-    const real tx = xs - ox, ty = ys - oy;
-    const real u2 = ux * ux + uy * uy, v2 = vx * vx + vy * vy;
-    const real K = ux * vy - uy * vx;
-    const real L = v2 * uy - u2 * vy;
-    const real M = u2 * vx - v2 * ux;
-    const real F = K * (tx * tx + ty * ty) + L * tx + M * ty;
-    const real gx = real(2) * K * tx + L, gy = real(2) * K * ty + M;
-    const real gn = std::sqrt(gx * gx + gy * gy);
-    return gn > real(0) ? std::fabs(F) / gn : real(0);
-}
-
 // The solution at the sensor fix q = (xs, ys, theta) (theta any wrap,
 // (cth, sth) its cosine and sine), A = JᵀWJ there, chi2 its weighted
-// squared residuals over n bearings; guard = the beacon triple of the
-// N = 3 circle guard (nullptr: none). Writes *out only if the fix passes
+// squared residuals over n bearings. Writes *out only if the fix passes
 // every check (solver.h); returns BL_OK or BL_EDEGENERATE.
 int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const Mat3 &A, real chi2, uint32_t n,
-           const uint32_t *guard, uint32_t iterations, bl_bearing_solution *out)
+           uint32_t iterations, bl_bearing_solution *out)
 {
     Mat3 cov_s;
     if (!scaled_inverse(A, cov_s)) return BL_EDEGENERATE;
@@ -291,14 +285,20 @@ int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const
         return BL_EDEGENERATE;
     const real condition = condition_of(Ar, cov);
     if (!(condition >= kMinCondition)) return BL_EDEGENERATE;
+    // Exactly determined (n = 3): the fix must reproduce the bearings,
+    // Σ e_j²/σ_j² <= 3 kConsistency² (see closed_form).
+    if (n == 3 && !(chi2 <= real(3) * kConsistency * kConsistency)) return BL_EDEGENERATE;
     const real drms_m = std::sqrt(cov(0, 0) + cov(1, 1));
     const real max_drms_m = p->max_drms_m > real(0) ? p->max_drms_m : kDefaultMaxDrms_m;
     if (!(drms_m <= max_drms_m)) return BL_EDEGENERATE;
-    if (guard != nullptr) {
-        const real drms_s = std::sqrt(cov_s(0, 0) + cov_s(1, 1));
-        if (!(circle_distance(p, guard[0], guard[1], guard[2], q(0), q(1)) >= kCircleGuard * drms_s))
-            return BL_EDEGENERATE;
+    real rmin2 = -1;  // squared distance sensor - nearest beacon (m²)
+    for (uint32_t j = 0; j < p->count; ++j) {
+        const real dx = p->beacons[j].x_m - q(0), dy = p->beacons[j].y_m - q(1);
+        const real r2 = dx * dx + dy * dy;
+        if (rmin2 < real(0) || r2 < rmin2) rmin2 = r2;
     }
+    const real drms_s = std::sqrt(cov_s(0, 0) + cov_s(1, 1));
+    if (!(drms_s <= kLinearity * std::sqrt(rmin2))) return BL_EDEGENERATE;
     // Weighted rms of the residuals with the 3 unknowns' degrees of freedom
     // removed (solver.h): sqrt(Σ w e² / Σ w · n / (n - 3)), 0 for n = 3.
     real residual_rad = 0;
@@ -334,7 +334,11 @@ bool closed_form(const bl_bearing_problem *p, const Bearings &b, const uint32_t 
     if (coincident(p, id[0], id[1], id[2])) return false;
     real xs, ys;
     if (!total(p, b, id[0], id[1], id[2], xs, ys)) return false;
-    if (!heading(p, b, id, 3, xs, ys, cth, sth)) return false;
+    // A fix that does not reproduce its three bearings is no solution:
+    // exactly on the degenerate circle D and k'31 both vanish and their
+    // rounding-level quotient is an arbitrary point.
+    real spread;
+    if (!heading(p, b, id, xs, ys, cth, sth, spread) || !(spread <= kConsistency)) return false;
     q << xs, ys, std::atan2(sth, cth);
     return true;
 }
@@ -354,7 +358,7 @@ extern "C" int bl_solve_bearings_3(const bl_bearing_problem *prob, bl_bearing_so
     Vec3 g;
     real chi2;
     if (!normal_equations(prob, id, 3, q, false, A, g, chi2)) return BL_EDEGENERATE;
-    return finish(prob, q, cth, sth, A, real(0), 3, id, 0, sol);
+    return finish(prob, q, cth, sth, A, real(0), 3, 0, sol);
 }
 
 extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solution *sol)
@@ -408,5 +412,5 @@ extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solu
     }
     if (!converged) return BL_ENOCONVERGE;
     if (!normal_equations(prob, all, N, q, true, A, g, chi2)) return BL_EDEGENERATE;
-    return finish(prob, q, std::cos(q(2)), std::sin(q(2)), A, chi2, N, N == 3 ? all : nullptr, it, sol);
+    return finish(prob, q, std::cos(q(2)), std::sin(q(2)), A, chi2, N, it, sol);
 }
