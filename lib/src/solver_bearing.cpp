@@ -48,13 +48,15 @@ constexpr real kLinearity = real(0.5);
 // kConsistency·sigma_j (rounding only); else it is refused.
 #if defined(BL_USE_FLOAT) && BL_USE_FLOAT
 constexpr real kMinCondition = real(1e-4);
-constexpr real kStepTol = real(1e-5);   // Gauss-Newton step (m and rad)
+constexpr real kStepTol = real(1e-5);   // Gauss-Newton step (m and rad), or
+constexpr real kStepRel = real(1e-3);   // this fraction of its σ (float rounding)
 constexpr real kCotMax = real(1e5);     // ToTal's clamp of an infinite cot
 constexpr real kCoincident = real(1e-5);  // relative beacon separation
 constexpr real kConsistency = real(1e-2);
 #else
 constexpr real kMinCondition = real(1e-6);
 constexpr real kStepTol = real(1e-9);
+constexpr real kStepRel = real(0);
 constexpr real kCotMax = real(1e8);  // Pierlot & Van Droogenbroeck 2014 §IV: ±1e8
 constexpr real kCoincident = real(1e-9);
 constexpr real kConsistency = real(1e-4);
@@ -405,7 +407,9 @@ extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solu
         q += step;
         ++it;
         if (!q.allFinite()) return BL_EDEGENERATE;
-        if (std::fabs(step(0)) < kStepTol && std::fabs(step(1)) < kStepTol && std::fabs(step(2)) < kStepTol) {
+        bool small = true;
+        for (int k = 0; k < 3; ++k) small = small && std::fabs(step(k)) < std::fmax(kStepTol, kStepRel * std::sqrt(inv(k, k)));
+        if (small) {
             converged = true;
             break;
         }

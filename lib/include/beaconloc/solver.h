@@ -156,7 +156,8 @@ int bl_solve_tdoa_3d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol);
  *                  - drms_m > max_drms_m (0.5 m when max_drms_m = 0);
  *                  - any non-finite intermediate or result;
  *   BL_ENOCONVERGE (bl_solve_bearings) Gauss-Newton did not reach a step
- *                  below 1e-9 m / 1e-9 rad (1e-5 for float) in 20 steps;
+ *                  below 1e-9 m / 1e-9 rad (float: 1e-5 or 1e-3 of its σ)
+ *                  in 20 steps;
  *                  *sol untouched.
  * Reentrant; no state, no heap, a few hundred bytes of stack. */
 typedef struct bl_bearing_problem {
