@@ -48,9 +48,9 @@ constexpr real kLinearity = real(0.5);
 // kConsistency·sigma_j (rounding only); else it is refused.
 #if defined(BL_USE_FLOAT) && BL_USE_FLOAT
 constexpr real kMinCondition = real(1e-4);
-constexpr real kStepTol = real(1e-5);   // Gauss-Newton step (m and rad), or
-constexpr real kStepRel = real(1e-3);   // this fraction of its σ (float rounding)
-constexpr real kCotMax = real(1e5);     // ToTal's clamp of an infinite cot
+constexpr real kStepTol = real(1e-5);     // Gauss-Newton step (m and rad), or
+constexpr real kStepRel = real(1e-3);     // this fraction of its σ (float rounding)
+constexpr real kCotMax = real(1e5);       // ToTal's clamp of an infinite cot
 constexpr real kCoincident = real(1e-5);  // relative beacon separation
 constexpr real kConsistency = real(1e-2);
 #else
@@ -120,8 +120,7 @@ bool coincident(const bl_bearing_problem *p, uint32_t i, uint32_t j, uint32_t k)
 // ToTal (Pierlot & Van Droogenbroeck 2014, Algorithm 1), beacons i, j, k in
 // the roles B1, B2, B3 (B2 the origin of the modified coordinates). Sensor
 // position (m); false when D = 0 or anything is not finite.
-bool total(const bl_bearing_problem *p, const Bearings &b, uint32_t i, uint32_t j, uint32_t k, real &xs,
-           real &ys)
+bool total(const bl_bearing_problem *p, const Bearings &b, uint32_t i, uint32_t j, uint32_t k, real &xs, real &ys)
 {
     const real x2 = p->beacons[j].x_m, y2 = p->beacons[j].y_m;
     // Step 1, modified beacon coordinates: x'1 = x1 - x2, y'1 = y1 - y2,
@@ -200,8 +199,8 @@ bool heading(const bl_bearing_problem *p, const Bearings &b, const uint32_t id[3
 // W = diag(1/sigma_j²). With res = true also g = JᵀW e and chi2 = Σ w e²,
 // e_j = wrap(phi_j - atan2(dy, dx) + theta) (rad). False if the sensor is
 // on a beacon.
-bool normal_equations(const bl_bearing_problem *p, const uint32_t *id, uint32_t n, const Vec3 &q, bool res,
-                      Mat3 &A, Vec3 &g, real &chi2)
+bool normal_equations(const bl_bearing_problem *p, const uint32_t *id, uint32_t n, const Vec3 &q, bool res, Mat3 &A,
+                      Vec3 &g, real &chi2)
 {
     A.setZero();
     g.setZero();
@@ -245,13 +244,14 @@ bool scaled_inverse(const Mat3 &A, Mat3 &inv)
 // 1 / (‖Â‖₁ ‖Â⁻¹‖₁), from A and its inverse (Â⁻¹ = S⁻¹ A⁻¹ S⁻¹); in (0, 1].
 real condition_of(const Mat3 &A, const Mat3 &inv)
 {
+    Vec3 d;  // sqrt of the diagonal: S = diag(1/d)
+    for (int k = 0; k < 3; ++k) d(k) = std::sqrt(A(k, k));
     real n1 = 0, n1i = 0;
     for (int c = 0; c < 3; ++c) {
         real col = 0, coli = 0;
         for (int r = 0; r < 3; ++r) {
-            const real srr = std::sqrt(A(r, r) * A(c, c));
-            col += std::fabs(A(r, c)) / srr;
-            coli += std::fabs(inv(r, c)) * srr;
+            col += std::fabs(A(r, c)) / (d(r) * d(c));
+            coli += std::fabs(inv(r, c)) * (d(r) * d(c));
         }
         if (col > n1) n1 = col;
         if (coli > n1i) n1i = coli;
@@ -260,7 +260,7 @@ real condition_of(const Mat3 &A, const Mat3 &inv)
 }
 
 // The solution at the sensor fix q = (xs, ys, theta) (theta any wrap,
-// (cth, sth) its cosine and sine), A = JᵀWJ there, chi2 its weighted
+// (cth, sth) its cosine and sine, already computed by the caller), A = JᵀWJ there, chi2 its weighted
 // squared residuals over n bearings. Writes *out only if the fix passes
 // every check (solver.h); returns BL_OK or BL_EDEGENERATE.
 int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const Mat3 &A, real chi2, uint32_t n,
@@ -311,9 +311,8 @@ int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const
     }
     const real x_m = q(0) - (cth * ox - sth * oy);
     const real y_m = q(1) - (sth * ox + cth * oy);
-    const real theta_rad = wrap_angle(std::atan2(sth, cth));
-    if (!is_finite(x_m) || !is_finite(y_m) || !is_finite(theta_rad) || !is_finite(residual_rad))
-        return BL_EDEGENERATE;
+    const real theta_rad = wrap_angle(q(2));
+    if (!is_finite(x_m) || !is_finite(y_m) || !is_finite(theta_rad) || !is_finite(residual_rad)) return BL_EDEGENERATE;
 
     bl_bearing_solution &sol = *out;
     std::memset(&sol, 0, sizeof sol);
@@ -408,7 +407,8 @@ extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solu
         ++it;
         if (!q.allFinite()) return BL_EDEGENERATE;
         bool small = true;
-        for (int k = 0; k < 3; ++k) small = small && std::fabs(step(k)) < std::fmax(kStepTol, kStepRel * std::sqrt(inv(k, k)));
+        for (int k = 0; k < 3; ++k)
+            small = small && std::fabs(step(k)) < std::fmax(kStepTol, kStepRel * std::sqrt(inv(k, k)));
         if (small) {
             converged = true;
             break;

@@ -45,8 +45,8 @@ static const double vander_beacons[3][2] = {{3.0, 2.1}, {0.0, 1.05}, {3.0, 0.0}}
 /* The problem of n beacons b seen from pose p: Vander eq. 1 with the sensor
  * at (x, y) + R(theta)·o, Gaussian noise noise_rad on each bearing, each
  * bearing shifted by wrap_k[j]·2π (wrap_k NULL: none). */
-static void make_problem(bl_bearing_problem *prob, uint32_t n, const double (*b)[2], const pose *p,
-                         double sigma_rad, double noise_rad, const int *wrap_k)
+static void make_problem(bl_bearing_problem *prob, uint32_t n, const double (*b)[2], const pose *p, double sigma_rad,
+                         double noise_rad, const int *wrap_k)
 {
     memset(prob, 0, sizeof *prob);
     prob->count = n;
@@ -255,8 +255,8 @@ static void test_vander_monte_carlo(void **state)
         const double drms_mc = sqrt((sxx + syy) / draws);
         const double sth_mc = sqrt(stt / draws);
         const double drms = (double)ref.drms_m, sth = sqrt((double)ref.cov[8]);
-        print_message("vander MC (%.1f, %.1f): drms reported %.4f m, sample %.4f m; theta σ %.5f / %.5f rad\n",
-                      p.x_m, p.y_m, drms, drms_mc, sth, sth_mc);
+        print_message("vander MC (%.1f, %.1f): drms reported %.4f m, sample %.4f m; theta σ %.5f / %.5f rad\n", p.x_m,
+                      p.y_m, drms, drms_mc, sth, sth_mc);
         assert_true(fabs(drms_mc / drms - 1.0) < 0.10);
         assert_true(fabs(sth_mc / sth - 1.0) < 0.10);
         /* bias: below 4 standard errors of the mean */
@@ -374,8 +374,7 @@ static void test_grid_across_circle(void **state)
                 const double th = PI * (2.0 * rng_uniform() - 1.0);
                 const double ox = 0.1 * (rng_uniform() - 0.5), oy = 0.1 * (rng_uniform() - 0.5);
                 const double xs = cx + rad * cos(ang), ys = cy + rad * sin(ang);
-                const pose p = {xs - (cos(th) * ox - sin(th) * oy), ys - (sin(th) * ox + cos(th) * oy), th, ox,
-                                oy};
+                const pose p = {xs - (cos(th) * ox - sin(th) * oy), ys - (sin(th) * ox + cos(th) * oy), th, ox, oy};
                 const double sig = (noise_deg[nk] > 0 ? noise_deg[nk] : 0.1) * DEG;
                 bl_bearing_problem prob;
                 make_problem(&prob, 3, vander_beacons, &p, sig, noise_deg[nk] * DEG, NULL);
@@ -525,10 +524,10 @@ static void test_wls_weights(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_closed_form_exact),  cmocka_unit_test(test_wls_exact),
-        cmocka_unit_test(test_vander_fig5_drms),   cmocka_unit_test(test_vander_monte_carlo),
-        cmocka_unit_test(test_degenerate),         cmocka_unit_test(test_grid_across_circle),
-        cmocka_unit_test(test_invalid_arguments),  cmocka_unit_test(test_wls_extra_beacon),
+        cmocka_unit_test(test_closed_form_exact), cmocka_unit_test(test_wls_exact),
+        cmocka_unit_test(test_vander_fig5_drms),  cmocka_unit_test(test_vander_monte_carlo),
+        cmocka_unit_test(test_degenerate),        cmocka_unit_test(test_grid_across_circle),
+        cmocka_unit_test(test_invalid_arguments), cmocka_unit_test(test_wls_extra_beacon),
         cmocka_unit_test(test_wls_weights),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
