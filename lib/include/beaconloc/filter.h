@@ -380,10 +380,11 @@ int bl_filter_fuse_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t 
  * if the filter was started before. This is the localizer's restart after
  * persistent rejection on a site with bearing beacons.
  * Errors: BL_EINVAL (NULL), BL_ENOTINIT, BL_EDEGENERATE (fewer than 3
- * bearing beacons in the window, or the solver finds the geometry
- * degenerate: the sensor near the circle through the beacons),
- * BL_ENOCONVERGE (the solver did not converge, or the fix's drms exceeds
- * cfg.bearing.max_fix_drms_m). On error *f is byte-identical. */
+ * bearing beacons in the window, or the solver refuses the geometry: the
+ * sensor near the circle through the beacons, collinear beacons, or a
+ * fix whose drms exceeds cfg.bearing.max_fix_drms_m), BL_ENOCONVERGE (the
+ * solver did not converge, or a non-finite fix). On error *f is
+ * byte-identical. */
 int bl_filter_start_bearings(bl_filter *f);
 
 /* Raw state and covariance (layout BL_IX_*; t0 relative to the internal
