@@ -186,8 +186,12 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     uint32_t mask = 0;
     const uint32_t n = window_rejected(loc, &mask);
     const bl_config &cfg = loc->filter.cfg_;
+    // At least min(3, N) beacons rejected (one faulty beacon restarts
+    // nothing); with bearing beacons min(3, N - 1): a kidnap along one
+    // beacon's line of sight leaves its bearing unchanged (3 bearing beacons: 2).
     const uint32_t n_beacons = cfg.beacon_count + cfg.bearing_beacon_count;
-    const int need = static_cast<int>(n_beacons < 3 ? n_beacons : 3);
+    const uint32_t cap = cfg.bearing_beacon_count > 0 ? n_beacons - 1 : n_beacons;
+    const int need = static_cast<int>(cap < 3 ? cap : 3);
     if (n < loc->reject_k_ || __builtin_popcount(mask) < need) return false;
     bl_real x[BL_FILTER_NX];
     if (bl_filter_get_state(&loc->filter, x, nullptr) != BL_OK) return false;

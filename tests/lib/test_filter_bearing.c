@@ -5,67 +5,7 @@
  * site with pulses, and the errors. */
 #include "filter_world.h"
 
-#define DEG (PI / 180.0)
-
-/* ---- the Eurobot world (Vander et al. 2011 Fig. 1 and §3) ----
- * A 3 m x 2.1 m table, bearing beacons B1 = (3, 2.1), B2 = (0, 1.05),
- * B3 = (3, 0) m, no ultrasonic beacons; σφ = 1°, 10 Hz per beacon, each
- * beacon's bearing taken at its own instant (a rotating sensor: 30 ms
- * apart); the sensor mounted 5 cm ahead of the wheel-base centre.
- * Differential drive, wheel base 0.25 m, each wheel's travel with noise
- * σ² = (0.01)²·|d| m² (the filter's own model: 1 cm over a metre). */
-static void eurobot_config(bl_config *cfg)
-{
-    assert_int_equal(bl_config_default(cfg), BL_OK);
-    cfg->beacon_count = 0;
-    cfg->bearing_beacon_count = 3;
-    const double b[3][2] = {{3.0, 2.1}, {0.0, 1.05}, {3.0, 0.0}};
-    for (int j = 0; j < 3; ++j) {
-        cfg->bearing_beacons[j].x_m = (bl_real)b[j][0];
-        cfg->bearing_beacons[j].y_m = (bl_real)b[j][1];
-        cfg->bearing_beacons[j].z_m = 0;
-    }
-    cfg->bearing.sigma_deg = 1;
-    cfg->bearing.offset_x_m = (bl_real)0.05;
-    cfg->wheel_base_m = (bl_real)0.25;
-    cfg->wheel_radius_m = (bl_real)0.03;
-    cfg->wheels.sigma_wheel_per_m = (bl_real)0.01;
-    assert_int_equal(bl_config_check(cfg, NULL), BL_OK);
-}
-
-typedef struct eb_pose {
-    double x, y, th;
-} eb_pose;
-
-/* Commanded motion: still for 0.5 s, then 0.25 m/s with a slalom
- * ω = 0.5 cos(2π τ / 4 s) rad/s (heading ±0.32 rad). */
-static void eb_vw(double t, double *v, double *w)
-{
-    const double tau = t - 0.5;
-    *v = tau < 0 ? 0 : 0.25;
-    *w = tau < 0 ? 0 : 0.5 * cos(2 * PI * tau / 4.0);
-}
-
-/* Exact arc for constant v, ω over dt. */
-static eb_pose eb_arc(eb_pose p, double v, double w, double dt)
-{
-    const double dth = w * dt, d = v * dt;
-    const double chord = fabs(dth) > 1e-9 ? 2 * sin(dth / 2) / dth * d : d;
-    p.x += chord * cos(p.th + dth / 2);
-    p.y += chord * sin(p.th + dth / 2);
-    p.th = wrap(p.th + dth);
-    return p;
-}
-
-static double eb_bearing(const bl_config *cfg, eb_pose p, int j)
-{
-    const double xs = p.x + cos(p.th) * cfg->bearing.offset_x_m - sin(p.th) * cfg->bearing.offset_y_m;
-    const double ys = p.y + sin(p.th) * cfg->bearing.offset_x_m + cos(p.th) * cfg->bearing.offset_y_m;
-    return wrap(atan2(cfg->bearing_beacons[j].y_m - ys, cfg->bearing_beacons[j].x_m - xs) - p.th);
-}
-
-#define EB_T0_US 5000000000ll
-static int64_t eb_us(double t) { return EB_T0_US + (int64_t)llround(t * 1e6); }
+#include "eurobot_world.h"
 
 typedef struct eb_run {
     double drop_prob;    /* probability a bearing is lost (outage) */
@@ -87,7 +27,7 @@ typedef struct eb_run {
 static void eb_simulate(eb_run *r)
 {
     bl_config cfg;
-    eurobot_config(&cfg);
+    assert_int_equal(eurobot_config(&cfg), BL_OK);
     rng_seed(r->seed);
     static bl_filter f;
     assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
@@ -268,7 +208,7 @@ static void test_start_refused_near_circle(void **state)
 {
     (void)state;
     bl_config cfg;
-    eurobot_config(&cfg);
+    assert_int_equal(eurobot_config(&cfg), BL_OK);
     cfg.bearing.offset_x_m = 0;
     static bl_filter f;
     assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
@@ -315,7 +255,7 @@ static void test_outlier_rejected(void **state)
 {
     (void)state;
     bl_config cfg;
-    eurobot_config(&cfg);
+    assert_int_equal(eurobot_config(&cfg), BL_OK);
     static bl_filter f;
     eb_pose p = {2.0, 1.0, 0.4};
     start_at(&f, &cfg, p, 0.01, 0.01);
@@ -343,7 +283,7 @@ static void test_wrap_near_pi(void **state)
 {
     (void)state;
     bl_config cfg;
-    eurobot_config(&cfg);
+    assert_int_equal(eurobot_config(&cfg), BL_OK);
     cfg.bearing.offset_x_m = 0;
     static bl_filter f;
     /* B2 = (0, 1.05) straight behind a robot heading +x at y just below 1.05 */
@@ -376,7 +316,7 @@ static void test_jacobian_finite_differences(void **state)
 {
     (void)state;
     bl_config cfg;
-    eurobot_config(&cfg);
+    assert_int_equal(eurobot_config(&cfg), BL_OK);
     cfg.bearing.offset_x_m = (bl_real)0.12;
     cfg.bearing.offset_y_m = (bl_real)-0.07;
     const bl_real x0[NX] = {(bl_real)1.2, (bl_real)0.7, (bl_real)2.5, (bl_real)0.4, (bl_real)0.9,
@@ -426,7 +366,7 @@ static void test_errors_leave_filter_untouched(void **state)
 {
     (void)state;
     bl_config cfg;
-    eurobot_config(&cfg);
+    assert_int_equal(eurobot_config(&cfg), BL_OK);
     static bl_filter f, before;
     eb_pose p = {2.0, 1.0, 0.4};
     start_at(&f, &cfg, p, 0.01, 0.01);
@@ -471,7 +411,7 @@ static void test_stale_restart(void **state)
 {
     (void)state;
     bl_config cfg;
-    eurobot_config(&cfg);
+    assert_int_equal(eurobot_config(&cfg), BL_OK);
     static bl_filter f;
     eb_pose p = {2.0, 1.0, 0.4};
     start_at(&f, &cfg, p, 0.01, 0.01);
