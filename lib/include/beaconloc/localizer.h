@@ -9,6 +9,7 @@
  *     bl_seq_config sc; bl_localizer_seq_config(&cfg, &sc, &why, &field);
  *     bl_localizer loc;  bl_localizer_init(&loc, &cfg, &sc);
  *     on a receiver detection: bl_localizer_detection(&loc, &det);  (det.tag: yours)
+ *     on a bearing:            bl_localizer_bearing(&loc, &bearing, NULL);
  *     every loop turn:         bl_localizer_advance(&loc, now_us - latency_us);
  *     on an encoder sample:    bl_localizer_advance(&loc, t_us - latency_us);
  *                              bl_localizer_wheels(&loc, &inc);
@@ -101,7 +102,8 @@
  * IEKF iteration, see filter.h) plus an estimate and a hint; a snapshot
  * restart adds one bl_solve_tdoa_2d; a wheel increment one predict.
  * Errors: every function returns BL_OK or a negative bl_error; on error
- * *loc is left byte-identical. Errors are bad arguments only (NULL, not
+ * *loc is left byte-identical, except the counter of refused inputs where a
+ * function names one (seq_errors, bearings_refused). Errors are bad arguments only (NULL, not
  * initialised, NaN/inf, out of range, time going backwards where stated).
  * Bad data (echoes, outliers, late detections, misnumbered pulses) is
  * counted, never an error. Not thread-safe per instance.
