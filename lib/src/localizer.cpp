@@ -319,7 +319,7 @@ NOINLINE void after_update(bl_localizer *loc, bool pulse)
     }
     if (!converged) {
         clear_hint(loc);
-    } else if (pulse || !loc->hint_set_) {
+    } else if (has_sequencer(loc) && (pulse || !loc->hint_set_)) {  // no estimate for a site without one
         bl_estimate est;
         if (bl_filter_estimate(f, &est) == BL_OK) update_hint(loc, est);
     }

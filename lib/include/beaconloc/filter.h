@@ -1,6 +1,7 @@
 /*
  * beaconloc — the estimator: Kleeman's (1992) iterated EKF for ultrasonic
- * beacon arrival times plus differential-drive dead reckoning.
+ * beacon arrival times plus differential-drive dead reckoning, and bearings
+ * to self-identifying beacons (Vander et al. 2011) in the same filter.
  *
  * State (10): x_m, y_m (wheel-base centre, site frame), theta_rad (heading,
  * CCW from +x), v_mps (forward speed), omega_radps (turn rate),
