@@ -193,11 +193,11 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     const uint32_t cap = cfg.bearing_beacon_count > 0 ? n_beacons - 1 : n_beacons;
     const int need = static_cast<int>(cap < 3 ? cap : 3);
     if (n < loc->reject_k_ || __builtin_popcount(mask) < need) return false;
-    bl_real x[BL_FILTER_NX];
-    if (bl_filter_get_state(&loc->filter, x, nullptr) != BL_OK) return false;
+    if (!bl::started(&loc->filter)) return false;
+    // The heading kept (read in place: no state copy on this, the deepest, chain).
+    const bl_real theta = bl::wrap_angle(loc->filter.x_[BL_IX_THETA]);
     int rc = BL_EDEGENERATE;
-    if (cfg.beacon_count > 0)
-        rc = bl_filter_start_snapshot(&loc->filter, bl::wrap_angle(x[BL_IX_THETA]), cfg.reset_sigma_theta_rad);
+    if (cfg.beacon_count > 0) rc = bl_filter_start_snapshot(&loc->filter, theta, cfg.reset_sigma_theta_rad);
     if (rc != BL_OK && cfg.bearing_beacon_count > 0) rc = bl_filter_start_bearings(&loc->filter);
     clear_window(loc);
     if (rc != BL_OK) {
