@@ -65,6 +65,29 @@ const char *check_wheel_params(const bl_wheel_params *w)
     return nullptr;
 }
 
+// Bearings (aid_bearing.cpp): Vander et al. 2011 §3, σφ = 1°.
+void default_bearing_params(bl_bearing_params *b)
+{
+    b->sigma_deg = real(1.0);
+    b->gate_sigma = real(3.0);
+    b->offset_x_m = real(0);
+    b->offset_y_m = real(0);
+    b->snapshot_window_s = real(0.25);  // 2.5 sensor turns at 10 Hz
+    b->max_fix_drms_m = real(0.25);     // = converged_sigma_xy_m's default
+}
+
+const char *check_bearing_params(const bl_bearing_params *b)
+{
+    if (!(is_finite(b->sigma_deg) && b->sigma_deg > real(0) && b->sigma_deg < real(90))) return "bearing.sigma_deg";
+    if (!(is_finite(b->gate_sigma) && b->gate_sigma > real(0))) return "bearing.gate_sigma";
+    if (!(is_finite(b->offset_x_m) && std::fabs(b->offset_x_m) < real(100))) return "bearing.offset_x_m";
+    if (!(is_finite(b->offset_y_m) && std::fabs(b->offset_y_m) < real(100))) return "bearing.offset_y_m";
+    if (!(is_finite(b->snapshot_window_s) && b->snapshot_window_s > real(0) && b->snapshot_window_s <= real(60)))
+        return "bearing.snapshot_window_s";
+    if (!(is_finite(b->max_fix_drms_m) && b->max_fix_drms_m > real(0))) return "bearing.max_fix_drms_m";
+    return nullptr;
+}
+
 }  // namespace
 
 extern "C" int bl_config_default(bl_config *cfg)
@@ -103,6 +126,8 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->sigma_speed_of_sound_mps = real(5.0);
     default_pulse_params(&cfg->pulse);
     default_wheel_params(&cfg->wheels);
+    cfg->bearing_beacon_count = 0;  // kleeman-lab has no bearing beacons
+    default_bearing_params(&cfg->bearing);
     // Tuning.
     cfg->sigma_period_s = real(20e-6);  // beacon controller clock: ~100 ppm of 150 ms
     cfg->converged_sigma_xy_m = real(0.25);
@@ -123,19 +148,35 @@ extern "C" int bl_config_default(bl_config *cfg)
 
 namespace {
 
-// True when at least three beacons span a triangle in x-y (area > 1e-3 m²).
-bool beacons_span_plane(const bl_config *c)
+// True when at least three of the n beacons b span a triangle in x-y (area > 1e-3 m²).
+bool beacons_span_plane(const bl_beacon *b, uint32_t n)
 {
-    for (uint32_t i = 0; i < c->beacon_count; ++i)
-        for (uint32_t j = i + 1; j < c->beacon_count; ++j)
-            for (uint32_t k = j + 1; k < c->beacon_count; ++k) {
-                const real ax = c->beacons[j].x_m - c->beacons[i].x_m;
-                const real ay = c->beacons[j].y_m - c->beacons[i].y_m;
-                const real bx = c->beacons[k].x_m - c->beacons[i].x_m;
-                const real by = c->beacons[k].y_m - c->beacons[i].y_m;
+    for (uint32_t i = 0; i < n; ++i)
+        for (uint32_t j = i + 1; j < n; ++j)
+            for (uint32_t k = j + 1; k < n; ++k) {
+                const real ax = b[j].x_m - b[i].x_m;
+                const real ay = b[j].y_m - b[i].y_m;
+                const real bx = b[k].x_m - b[i].x_m;
+                const real by = b[k].y_m - b[i].y_m;
                 if (std::fabs(ax * by - ay * bx) * real(0.5) > real(1e-3)) return true;
             }
     return false;
+}
+
+// Bearing beacons: finite, in range, pairwise distinct in x-y (a bearing
+// does not see z), and spanning the plane when they alone fix the pose.
+bool bearing_beacons_ok(const bl_config *c)
+{
+    for (uint32_t i = 0; i < c->bearing_beacon_count; ++i) {
+        const bl_beacon *b = &c->bearing_beacons[i];
+        if (!(is_finite(b->x_m) && is_finite(b->y_m) && std::fabs(b->x_m) < real(1e5) && std::fabs(b->y_m) < real(1e5)))
+            return false;
+        for (uint32_t j = 0; j < i; ++j) {
+            const real dx = b->x_m - c->bearing_beacons[j].x_m, dy = b->y_m - c->bearing_beacons[j].y_m;
+            if (!(dx * dx + dy * dy > real(1e-6))) return false;
+        }
+    }
+    return c->beacon_count > 0 || beacons_span_plane(c->bearing_beacons, c->bearing_beacon_count);
 }
 
 #define BL_CHECK(cond, name)                                                                                           \
@@ -152,7 +193,8 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
 {
     if (bad_field) *bad_field = nullptr;
     if (c == nullptr) return BL_EINVAL;
-    BL_CHECK(c->beacon_count >= 3 && c->beacon_count <= BL_MAX_BEACONS, "beacon_count");
+    // 0 ultrasonic beacons: a bearing-only site (checked below: >= 3 bearing beacons).
+    BL_CHECK(c->beacon_count == 0 || (c->beacon_count >= 3 && c->beacon_count <= BL_MAX_BEACONS), "beacon_count");
     BL_CHECK(is_finite(c->beacon_period_s) && c->beacon_period_s > real(0) && c->beacon_period_s < real(10),
              "beacon_period_s");
     BL_CHECK(is_finite(c->double_pulse_spacing_s) && c->double_pulse_spacing_s >= real(0) &&
@@ -171,7 +213,11 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
             BL_CHECK(dx * dx + dy * dy + dz * dz > real(1e-6), "beacons");
         }
     }
-    BL_CHECK(beacons_span_plane(c), "beacons");
+    BL_CHECK(c->beacon_count == 0 || beacons_span_plane(c->beacons, c->beacon_count), "beacons");
+    // At least one kind of beacon; without pulses the bearings start the filter (>= 3).
+    BL_CHECK(c->bearing_beacon_count <= BL_MAX_BEACONS && (c->beacon_count > 0 || c->bearing_beacon_count >= 3),
+             "bearing_beacon_count");
+    BL_CHECK(bearing_beacons_ok(c), "bearing_beacons");
     BL_CHECK(c->receiver_count >= 1 && c->receiver_count <= BL_MAX_RECEIVERS, "receiver_count");
     BL_CHECK(is_finite(c->ring_radius_m) && c->ring_radius_m >= real(0) && c->ring_radius_m < real(10),
              "ring_radius_m");
@@ -194,6 +240,7 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
              "sigma_speed_of_sound_mps");
     const char *bad = check_pulse_params(&c->pulse, c->beacon_period_s);
     if (bad == nullptr) bad = check_wheel_params(&c->wheels);
+    if (bad == nullptr) bad = check_bearing_params(&c->bearing);
     BL_CHECK(bad == nullptr, bad);
     BL_CHECK(is_finite(c->sigma_period_s) && c->sigma_period_s > real(0) && c->sigma_period_s < c->beacon_period_s,
              "sigma_period_s");
@@ -238,8 +285,15 @@ extern "C" bool bl_config_same_geometry(const bl_config *a, const bl_config *b)
         a->receiver_count != b->receiver_count || a->ring_radius_m != b->ring_radius_m ||
         a->first_angle_deg != b->first_angle_deg || a->angle_step_deg != b->angle_step_deg ||
         a->receiver_height_m != b->receiver_height_m || a->wheel_base_m != b->wheel_base_m ||
-        (a->sigma_wheel_scale > real(0)) != (b->sigma_wheel_scale > real(0)))
+        (a->sigma_wheel_scale > real(0)) != (b->sigma_wheel_scale > real(0)) ||
+        a->bearing_beacon_count != b->bearing_beacon_count || a->bearing.offset_x_m != b->bearing.offset_x_m ||
+        a->bearing.offset_y_m != b->bearing.offset_y_m)
         return false;
+    const uint32_t nb = a->bearing_beacon_count < BL_MAX_BEACONS ? a->bearing_beacon_count : BL_MAX_BEACONS;
+    for (uint32_t i = 0; i < nb; ++i)
+        if (a->bearing_beacons[i].x_m != b->bearing_beacons[i].x_m ||
+            a->bearing_beacons[i].y_m != b->bearing_beacons[i].y_m)
+            return false;
     const uint32_t n = a->beacon_count < BL_MAX_BEACONS ? a->beacon_count : BL_MAX_BEACONS;
     for (uint32_t i = 0; i < n; ++i)
         if (a->beacons[i].x_m != b->beacons[i].x_m || a->beacons[i].y_m != b->beacons[i].y_m ||

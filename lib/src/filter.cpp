@@ -2,8 +2,9 @@
 // times + differential-drive dead reckoning (filter.h, filter_model.h).
 // This file: init, start, the process models and predicts, the estimate.
 // Measurements: aid_pulse.cpp (arrival times), aid_wheels.cpp (wheel
-// speeds), both through the shared update fuse_scalar (fusion.cpp); the
-// snapshot (re)start: snapshot.cpp.
+// speeds), aid_bearing.cpp (bearings), all through the shared update
+// fuse_scalar (fusion.cpp); the snapshot (re)start: snapshot.cpp (pulses),
+// snapshot_bearing.cpp (bearings).
 //
 // State x = [x_m y_m theta_rad v_mps omega_radps s_mps T_s t0_s k_l k_r] where
 // t0 is the firing time of the reference slot (beacon ref_beacon_) as an
@@ -171,6 +172,9 @@ void cv_predict(const bl_config *cfg, VX &x, MX &P, real dt)
 // the int64 epoch so the offset stays below 1 µs in magnitude.
 void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k)
 {
+    // A bearing-only site (no ultrasonic beacons) has no firing slots: t0 is
+    // a state no measurement observes and the reference stays where it is.
+    if (cfg->beacon_count == 0) k = 0;
     if (k != 0) {
         const double t0 = double(x(T0)) + double(k) * double(x(T));
         x(T0) = real(t0);
@@ -222,6 +226,8 @@ void fill_estimate(const bl_filter *f, const XV &x, const PM &P, int64_t t_us, b
     for (uint32_t i = 0; i < BL_MAX_BEACONS; ++i) {
         est->accepted[i] = f->accepted_[i];
         est->rejected[i] = f->rejected_[i];
+        est->bearing_accepted[i] = f->bearing_accepted_[i];
+        est->bearing_rejected[i] = f->bearing_rejected_[i];
     }
     if (!est->started) return;
     est->x_m = x(X);
@@ -383,7 +389,8 @@ extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
         !(p->sigma_theta_rad <= kPriorMaxTheta_rad) || !(p->sigma_v_mps <= kPriorMaxV_mps) ||
         !(p->sigma_omega_radps <= kPriorMaxOmega_radps) || !(p->sigma_t0_s <= kPriorMaxSigmaT0_s))
         return BL_EINVAL;
-    if (p->t0_beacon_index >= cfg->beacon_count) return BL_EINVAL;
+    // (a bearing-only site has no ultrasonic beacon: index 0, t0 unobserved)
+    if (p->t0_beacon_index >= (cfg->beacon_count > 0 ? cfg->beacon_count : 1u)) return BL_EINVAL;
     // The firing time must be near the pose time (within the predict gap).
     int64_t d_us;
     if (!bl::sub_us(p->t0_us, p->t_us, &d_us)) return BL_ETIME;

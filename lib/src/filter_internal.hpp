@@ -1,7 +1,8 @@
 // beaconloc — private parts of the filter shared by its translation units:
 // filter.cpp (init, start, predict, estimate), snapshot.cpp (the snapshot
 // (re)start and its last-pulse table), aid_pulse.cpp (pulse arrival times),
-// aid_wheels.cpp (wheel speeds). Every measurement goes through fuse_scalar
+// aid_wheels.cpp (wheel speeds), aid_bearing.cpp (bearings),
+// snapshot_bearing.cpp (the triangulation (re)start). Every measurement goes through fuse_scalar
 // (fusion.hpp).
 #ifndef BEACONLOC_FILTER_INTERNAL_HPP
 #define BEACONLOC_FILTER_INTERNAL_HPP
@@ -58,6 +59,32 @@ uint32_t restart_mask(const bl_filter *f, uint32_t min_beacons);
 // (Re)start from the snapshot of the table's last cycle; *f untouched on failure.
 int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_radps, real s_mps, real var_s, real T_s,
                         real var_T, uint32_t min_beacons, uint32_t use_mask = ~0u);
+
+// Where a measurement time lies against the state time t_s (bearings;
+// aid_pulse.cpp classifies pulses the same way).
+enum class MeasTime {
+    kFresh,  // |t - t_s| <= max_predict_gap_s: fused
+    kStale,  // t > t_s + max_predict_gap_s: no predict for that long (kept, restart)
+    kTooOld  // t < t_s - max_predict_gap_s: time went backwards (BL_ETIME)
+};
+inline MeasTime classify_time(const bl_filter *f, int64_t t_us)
+{
+    int64_t d_us;
+    if (!sub_us(t_us, f->t_us_, &d_us)) return t_us < f->t_us_ ? MeasTime::kTooOld : MeasTime::kStale;
+    if (d_us > int64_t(1e12)) return MeasTime::kStale;
+    if (d_us < -int64_t(1e12)) return MeasTime::kTooOld;
+    const real d_s = us_to_s(d_us);
+    if (d_s > f->cfg_.max_predict_gap_s) return MeasTime::kStale;
+    if (-d_s > f->cfg_.max_predict_gap_s) return MeasTime::kTooOld;
+    return MeasTime::kFresh;
+}
+
+// ---- snapshot_bearing.cpp
+// Keep a bearing as its beacon's latest (the triangulation's input).
+void remember_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us, real bearing_rad);
+// (Re)start from the triangulation of the kept bearings (filter.h,
+// bl_filter_start_bearings); *f untouched on failure.
+int start_from_bearings(bl_filter *f);
 
 // ---- aid_wheels.cpp
 struct WheelSpeedCounts {

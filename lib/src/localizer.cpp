@@ -69,10 +69,30 @@ void set_window(bl_localizer *loc, uint32_t k)
     clear_window(loc);
 }
 
+// A site without ultrasonic beacons (bearings only) has no sequencer: its
+// config is the idle one (beacon_count 0, from bl_localizer_seq_config) and
+// loc->seq stays zeroed (never initialised, never called).
+bool has_sequencer(const bl_config *cfg) { return cfg->beacon_count > 0; }
+bool has_sequencer(const bl_localizer *loc) { return has_sequencer(&loc->filter.cfg_); }
+
 bool configs_agree(const bl_config *cfg, const bl_seq_config *sc)
 {
-    return bl_config_check(cfg, nullptr) == BL_OK && bl_sequencer_config_check(sc) == BL_OK &&
-           sc->beacon_count == cfg->beacon_count && sc->receiver_count == cfg->receiver_count;
+    if (bl_config_check(cfg, nullptr) != BL_OK) return false;
+    if (!has_sequencer(cfg)) return sc->beacon_count == 0;
+    return bl_sequencer_config_check(sc) == BL_OK && sc->beacon_count == cfg->beacon_count &&
+           sc->receiver_count == cfg->receiver_count;
+}
+
+// (Re)initialise the sequencer for seq_cfg, keeping its counters; zeroed
+// (idle) on a site without ultrasonic beacons.
+void init_sequencer(bl_localizer *loc, const bl_config *cfg, const bl_seq_config *seq_cfg)
+{
+    const bl_seq_counters kept = loc->seq.counters;
+    if (has_sequencer(cfg))
+        (void)bl_sequencer_init(&loc->seq, seq_cfg);
+    else
+        std::memset(&loc->seq, 0, sizeof loc->seq);
+    loc->seq.counters = kept;
 }
 
 // ---- sequencer hint ------------------------------------------------------
@@ -89,7 +109,9 @@ void clear_hint(bl_localizer *loc)
 
 NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
 {
-    if (!est.started || !est.converged) {
+    // Only a known firing time is a hint: after a start from bearings on a
+    // mixed site t0 has σ one cycle until the first pulse is fused.
+    if (!has_sequencer(loc) || !est.started || !est.converged || !(est.sigma_t0_s < est.period_s * bl_real(0.25))) {
         clear_hint(loc);
         return;
     }
@@ -112,7 +134,7 @@ NOINLINE void reinit_filter(bl_localizer *loc, bl_loc_reset_cause cause)
     if (was) loc->reset_base_ += loc->filter.reset_count_ + 1;
     const bl_config c = loc->filter.cfg_;
     (void)bl_filter_init(&loc->filter, &c);
-    (void)bl_sequencer_clear_hint(&loc->seq);
+    if (has_sequencer(loc)) (void)bl_sequencer_clear_hint(&loc->seq);
     loc->hint_set_ = false;
     loc->counters_.reinits++;
     loc->last_reset_seen_ = 0;
@@ -155,19 +177,24 @@ uint32_t window_rejected(const bl_localizer *loc, uint32_t *beacon_mask)
     return n;
 }
 
-// Restarts from the snapshot when the watch says so; true if restarted.
+// Restarts when the watch says so; true if restarted: from the pulse
+// snapshot, else (a bearing-only site, or the snapshot failed) from the
+// bearings' triangulation when the site has bearing beacons.
 NOINLINE bool restart_if_persistent(bl_localizer *loc)
 {
     if (loc->reject_k_ == 0 || loc->win_len_ < loc->reject_w_) return false;
     uint32_t mask = 0;
     const uint32_t n = window_rejected(loc, &mask);
-    const uint32_t n_beacons = loc->filter.cfg_.beacon_count;
+    const bl_config &cfg = loc->filter.cfg_;
+    const uint32_t n_beacons = cfg.beacon_count + cfg.bearing_beacon_count;
     const int need = static_cast<int>(n_beacons < 3 ? n_beacons : 3);
     if (n < loc->reject_k_ || __builtin_popcount(mask) < need) return false;
     bl_real x[BL_FILTER_NX];
     if (bl_filter_get_state(&loc->filter, x, nullptr) != BL_OK) return false;
-    const int rc =
-        bl_filter_start_snapshot(&loc->filter, bl::wrap_angle(x[BL_IX_THETA]), loc->filter.cfg_.reset_sigma_theta_rad);
+    int rc = BL_EDEGENERATE;
+    if (cfg.beacon_count > 0)
+        rc = bl_filter_start_snapshot(&loc->filter, bl::wrap_angle(x[BL_IX_THETA]), cfg.reset_sigma_theta_rad);
+    if (rc != BL_OK && cfg.bearing_beacon_count > 0) rc = bl_filter_start_bearings(&loc->filter);
     clear_window(loc);
     if (rc != BL_OK) {
         loc->counters_.restart_failures++;
@@ -354,6 +381,7 @@ INLINE void process_pulse(bl_localizer *loc, const bl::SeqNumbered &pl, const bl
 // pulse buffer here; nothing pushes before they are fused.
 NOINLINE void pop_until(bl_localizer *loc, int64_t now_us, bool while_full)
 {
+    if (!has_sequencer(loc)) return;  // idle: a bearing-only site
     int rc = 0;
     bl::SeqNumbered pl;
     const bl_seq_pending *g = nullptr;
@@ -373,6 +401,11 @@ extern "C" int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out
 {
     if (why) *why = nullptr;
     if (field) *field = nullptr;
+    if (site != nullptr && out != nullptr && site->beacon_count == 0) {
+        // No ultrasonic beacons (a bearing-only site): the idle sequencer.
+        std::memset(out, 0, sizeof *out);
+        return BL_OK;
+    }
     const int rc = bl_sequencer_config_from_site(site, 0, out);
     if (rc == BL_OK || site == nullptr || out == nullptr) return rc;
     // The cause, in the order bl_sequencer_config_from_site checks.
@@ -422,7 +455,8 @@ extern "C" int bl_localizer_init(bl_localizer *loc, const bl_config *cfg, const 
     if (loc == nullptr || cfg == nullptr || seq_cfg == nullptr) return BL_EINVAL;
     if (!configs_agree(cfg, seq_cfg)) return BL_ECONFIG;
     std::memset(loc, 0, sizeof *loc);
-    if (bl_filter_init(&loc->filter, cfg) != BL_OK || bl_sequencer_init(&loc->seq, seq_cfg) != BL_OK) {
+    if (bl_filter_init(&loc->filter, cfg) != BL_OK ||
+        (has_sequencer(cfg) && bl_sequencer_init(&loc->seq, seq_cfg) != BL_OK)) {
         std::memset(loc, 0, sizeof *loc);
         return BL_ECONFIG;
     }
@@ -438,12 +472,10 @@ extern "C" int bl_localizer_update_config(bl_localizer *loc, const bl_config *cf
     if (!configs_agree(cfg, seq_cfg)) return BL_ECONFIG;
     if (bl_filter_update_config(&loc->filter, cfg) != BL_OK) return BL_ECONFIG;  // filter untouched
     if (cfg->reset_reject_count != loc->reject_k_) set_window(loc, cfg->reset_reject_count);
-    if (std::memcmp(seq_cfg, &loc->seq.cfg, sizeof *seq_cfg) != 0) {
+    if (has_sequencer(cfg) && std::memcmp(seq_cfg, &loc->seq.cfg, sizeof *seq_cfg) != 0) {
         // New windows (they follow the speed-of-sound tuning): the filter's
         // hint at once so the numbering goes on without waiting for beacon 1.
-        const bl_seq_counters kept = loc->seq.counters;
-        (void)bl_sequencer_init(&loc->seq, seq_cfg);
-        loc->seq.counters = kept;
+        init_sequencer(loc, cfg, seq_cfg);
         loc->hint_set_ = false;
         bl_estimate est;
         if (bl_filter_estimate(&loc->filter, &est) == BL_OK) update_hint(loc, est);
@@ -456,9 +488,7 @@ extern "C" int bl_localizer_reinit(bl_localizer *loc, const bl_config *cfg, cons
     if (loc == nullptr || cfg == nullptr || seq_cfg == nullptr) return BL_EINVAL;
     if (!valid(loc)) return BL_ENOTINIT;
     if (!configs_agree(cfg, seq_cfg)) return BL_ECONFIG;
-    const bl_seq_counters kept = loc->seq.counters;
-    (void)bl_sequencer_init(&loc->seq, seq_cfg);
-    loc->seq.counters = kept;
+    init_sequencer(loc, cfg, seq_cfg);
     loc->filter.cfg_ = *cfg;  // reinit_filter re-initialises with the filter's config
     reinit_filter(loc, BL_LOC_CAUSE_CONFIG);
     set_window(loc, cfg->reset_reject_count);
@@ -470,7 +500,7 @@ extern "C" int bl_localizer_sequencer_reset(bl_localizer *loc)
 {
     if (loc == nullptr) return BL_EINVAL;
     if (!valid(loc)) return BL_ENOTINIT;
-    (void)bl_sequencer_reset(&loc->seq);
+    if (has_sequencer(loc)) (void)bl_sequencer_reset(&loc->seq);
     loc->hint_set_ = false;
     return BL_OK;
 }
@@ -479,6 +509,10 @@ extern "C" int bl_localizer_detection(bl_localizer *loc, const bl_seq_detection 
 {
     if (loc == nullptr || det == nullptr) return BL_EINVAL;
     if (!valid(loc)) return BL_ENOTINIT;
+    if (!has_sequencer(loc)) {
+        loc->counters_.seq_errors++;  // the site has no ultrasonic beacons: counted, refused
+        return BL_EBEACON;
+    }
     if (det->receiver >= loc->seq.cfg.receiver_count || det->time_us > BL_SEQ_TIME_LIMIT_US ||
         det->time_us < -BL_SEQ_TIME_LIMIT_US)
         return BL_EINVAL;
@@ -553,6 +587,63 @@ extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *
     } else {
         loc->counters_.predict_errors++;
     }
+    return BL_OK;
+}
+
+// The window's beacon id of bearing beacon j: after the pulse beacons' ids
+// (0..BL_MAX_BEACONS-1), so that the window's beacon mask counts both kinds.
+static_assert(2 * BL_MAX_BEACONS <= 32, "the window's beacon mask holds both kinds");
+
+extern "C" int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m, bl_fusion_result *res)
+{
+    if (loc == nullptr || m == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    if (m->beacon_index >= loc->filter.cfg_.bearing_beacon_count) {
+        loc->counters_.bearings_refused++;
+        return BL_EBEACON;
+    }
+    if (!finite_real(m->bearing_rad) || m->bearing_rad > 1000 || m->bearing_rad < -1000 ||
+        m->t_us > BL_SEQ_TIME_LIMIT_US || m->t_us < -BL_SEQ_TIME_LIMIT_US) {
+        loc->counters_.bearings_refused++;
+        return BL_EINVAL;
+    }
+    coast_to(loc, m->t_us);
+    bl_fusion_result &r = loc->result_;
+    int rc = bl_filter_fuse_bearing(&loc->filter, m->beacon_index, m->t_us, m->bearing_rad, &r);
+    if (rc == BL_ETIME) {  // older than the state by more than the gap: a new timeline
+        reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
+        rc = bl_filter_fuse_bearing(&loc->filter, m->beacon_index, m->t_us, m->bearing_rad, &r);
+    }
+    if (rc != BL_OK) {  // refused by the filter (a non-finite update): bad data, counted
+        loc->counters_.bearings_refused++;
+        return BL_OK;
+    }
+    const uint32_t window_id = BL_MAX_BEACONS + m->beacon_index;
+    bool fused = false;
+    switch (r.status) {
+    case BL_FUSION_ACCEPTED:
+    case BL_FUSION_STARTED:
+    case BL_FUSION_RESET:
+        loc->counters_.bearings_fused++;
+        watch(loc, window_id, false);
+        fused = true;
+        break;
+    case BL_FUSION_REJECTED:
+        loc->counters_.bearings_rejected++;
+        watch(loc, window_id, true);
+        fused = restart_if_persistent(loc);
+        break;
+    case BL_FUSION_BUFFERED:
+    default:
+        loc->counters_.bearings_buffered++;
+        break;
+    }
+    const bl_fusion_result out = r;
+    if (fused) {
+        measurement_fused(loc, m->tag);
+        after_update(loc, false);
+    }
+    if (res) *res = out;
     return BL_OK;
 }
 

@@ -69,9 +69,29 @@ typedef struct bl_wheel_params {
                                              stationary (no wheel travel), (0, 1] (§3.10) */
 } bl_wheel_params;
 
+/* Bearings to self-identifying beacons (aid_bearing.cpp; its triangulation
+ * start, snapshot_bearing.cpp; Vander et al. 2011 eqs. 1, 3). The sensor's
+ * mount offset is geometry (bl_config_same_geometry compares it); the rest
+ * is tuning. */
+typedef struct bl_bearing_params {
+    bl_real sigma_deg;         /* [bearing_sensor] sigma_deg: σ of one bearing (deg), > 0
+                                  (Vander et al. 2011 §3: 1°) */
+    bl_real gate_sigma;        /* [bearing_sensor] gate_sigma: innovation gate in σ (chi-square
+                                  with 1 dof), > 0; twice this until converged */
+    bl_real offset_x_m;        /* [bearing_sensor] offset_x_m: sensor mount, body frame, forward
+                                  of the wheel-base centre (m), |.| < 100; GEOMETRY */
+    bl_real offset_y_m;        /* [bearing_sensor] offset_y_m: sensor mount, body frame, to the
+                                  left (m), |.| < 100; GEOMETRY */
+    bl_real snapshot_window_s; /* [tuning] bearing_snapshot_window_s: buffered bearings within
+                                  this of the newest form one triangulation snapshot (s), > 0 */
+    bl_real max_fix_drms_m;    /* [tuning] max_fix_drms_m: a triangulation (re)start is refused
+                                  when the fix's drms sqrt(σx² + σy²) exceeds this (m), > 0 */
+} bl_bearing_params;
+
 typedef struct bl_config {
-    /* ---- [beacons] ---- */
-    uint32_t beacon_count;          /* count: N, 3..BL_MAX_BEACONS */
+    /* ---- [beacons] (ultrasonic pulse beacons) ---- */
+    uint32_t beacon_count;          /* count: N, 0 (a bearing-only site: no ultrasonic
+                                         beacons, the sequencer idles) or 3..BL_MAX_BEACONS */
     bl_real beacon_period_s;        /* period_s: nominal T between successive firings
                                          (beacon 1 first, cycle 1..N), > 0 */
     bl_real double_pulse_spacing_s; /* double_pulse_spacing_s: beacon 1's second burst
@@ -79,6 +99,12 @@ typedef struct bl_config {
     bl_real burst_length_s;         /* burst_length_s: length of one burst, >= 0 */
     /* ---- [beacon1] .. [beaconN] ---- */
     bl_beacon beacons[BL_MAX_BEACONS]; /* x_m, y_m, z_m of beacon i at beacons[i-1] */
+
+    /* ---- [bearing_beacons], [bearing_beacon1] .. [bearing_beaconN] ---- */
+    uint32_t bearing_beacon_count;             /* [bearing_beacons] count: 0..BL_MAX_BEACONS;
+                                                  >= 3 not collinear when beacon_count is 0 */
+    bl_beacon bearing_beacons[BL_MAX_BEACONS]; /* x_m, y_m of bearing beacon i at
+                                                  bearing_beacons[i-1] (z unused) */
 
     /* ---- [receivers] ---- */
     uint32_t receiver_count;   /* count: 1..BL_MAX_RECEIVERS */
@@ -114,6 +140,7 @@ typedef struct bl_config {
     /* ---- per measurement source ([noise] and [tuning] keys; see above) ---- */
     bl_pulse_params pulse;  /* pulse arrival times (aid_pulse.cpp) */
     bl_wheel_params wheels; /* wheel encoders (odometry predict, aid_wheels.cpp) */
+    bl_bearing_params bearing; /* bearings to the bearing beacons (aid_bearing.cpp) */
 
     /* ---- tuning shared by all sources: state, process noise, start-up, policy
      * ([tuning] in the bridge's site file; defaults from bl_config_default) ---- */
@@ -158,7 +185,11 @@ typedef struct bl_config {
 int bl_config_default(bl_config *cfg);
 
 /* Checks every field (finite, in range, beacons 0..count-1 pairwise distinct,
- * at least 3 beacons not collinear in x-y). Returns BL_OK or BL_ECONFIG
+ * at least 3 beacons not collinear in x-y when beacon_count > 0; bearing
+ * beacons 0..bearing_beacon_count-1 pairwise distinct in x-y, and when
+ * beacon_count is 0 at least 3 of them not collinear: the filter starts from
+ * their triangulation). A bad bearing field is named "bearing_beacon_count",
+ * "bearing_beacons" or "bearing.sigma_deg" (its block's member path). Returns BL_OK or BL_ECONFIG
  * (BL_EINVAL if cfg is NULL). Never modifies *cfg.
  * If bad_field is non-NULL it receives the name of the first bad field
  * (static storage): its member path, e.g. "beacon_period_s", "pulse.gate_sigma"
@@ -177,6 +208,9 @@ int bl_config_receiver_angle(const bl_config *cfg, uint32_t receiver_index, bl_r
  *              beacons[0 .. beacon_count-1] (entries beyond are ignored);
  *   receivers: receiver_count, ring_radius_m, first_angle_deg,
  *              angle_step_deg, receiver_height_m;
+ *   bearing beacons: bearing_beacon_count, x_m and y_m of
+ *              bearing_beacons[0 .. bearing_beacon_count-1], and the sensor
+ *              mount bearing.offset_x_m, bearing.offset_y_m;
  *   robot:     wheel_base_m;
  *   state layout: whether the wheel-scale states are on
  *              (sigma_wheel_scale > 0 in both or in neither).

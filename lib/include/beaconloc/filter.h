@@ -21,6 +21,7 @@
  *     bl_filter f;   bl_filter_init(&f, &cfg);
  *     on encoder frame:  bl_filter_predict_odometry(&f, t_us, d_left_m, d_right_m);
  *     on beacon pulse:   bl_filter_fuse_pulse(&f, beacon_index, arrival_us, rx, &res);
+ *     on a bearing:      bl_filter_fuse_bearing(&f, bearing_beacon_index, t_us, bearing_rad, &res);
  *     to publish:        bl_filter_estimate_at(&f, now_us, &est);
  * The filter starts itself from the snapshot solver (bl_solve_tdoa_2d) once
  * the buffered pulses of the latest firing cycle cover 4 beacons (all of
@@ -29,6 +30,11 @@
  * cfg.initial_theta_rad with σ cfg.reset_sigma_theta_rad; or explicitly with
  * bl_filter_start() (known pose and firing time) or
  * bl_filter_start_snapshot().
+ *
+ * A site with bearing beacons (cfg.bearing_beacon_count > 0) also starts
+ * from the triangulation of the bearings (bl_filter_fuse_bearing,
+ * bl_filter_start_bearings), whichever kind completes first; a site
+ * without ultrasonic beacons (cfg.beacon_count == 0) only from them.
  *
  * Heading from the ring (cfg.ring_heading, on by default): the receivers are
  * directional (cfg.beamwidth_deg <= 180), so the ones that heard a beacon's
@@ -138,6 +144,13 @@ typedef struct bl_filter {
     int64_t ring_t_us_[BL_MAX_BEACONS];  /* earliest arrival of the latest firing */
     uint32_t ring_mask_[BL_MAX_BEACONS]; /* receivers that heard it (bit per receiver) */
     uint32_t ring_explained_mask_;       /* beacons whose latest firing had a fused arrival */
+    /* bearings (aid_bearing.cpp): the latest of each bearing beacon, for the
+     * triangulation (re)start (snapshot_bearing.cpp), and the counters */
+    uint32_t bearing_valid_mask_;                  /* bit j: bearing_t_us_[j] is valid */
+    int64_t bearing_t_us_[BL_MAX_BEACONS];         /* time of bearing beacon j's latest */
+    bl_real bearing_rad_[BL_MAX_BEACONS];          /* its bearing (rad, body frame) */
+    uint32_t bearing_accepted_[BL_MAX_BEACONS];
+    uint32_t bearing_rejected_[BL_MAX_BEACONS];
 } bl_filter;
 
 /* Explicit start: a known pose and firing time. */
@@ -178,6 +191,9 @@ typedef struct bl_estimate {
     uint32_t reset_counter;            /* +1 on every (re-)initialisation after the first start */
     uint32_t accepted[BL_MAX_BEACONS]; /* per beacon index: pulses fused */
     uint32_t rejected[BL_MAX_BEACONS]; /* per beacon index: pulses rejected by the gate */
+    uint32_t bearing_accepted[BL_MAX_BEACONS]; /* per bearing beacon index: bearings fused */
+    uint32_t bearing_rejected[BL_MAX_BEACONS]; /* per bearing beacon index: bearings rejected
+                                                  by the gate */
     uint32_t wheel_speed_fused;        /* wheel-speed measurements (v and ω, each one) fused
                                      by bl_filter_predict_odometry (ungated) */
     uint32_t wheel_speed_refused;      /* wheel-speed measurements refused: the update would
@@ -259,6 +275,18 @@ int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real sigma_thet
  * stale, see "Time gaps" above; it restarts itself from the next cycle of
  * pulses, or call bl_filter_start()). */
 int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real d_right_m);
+/* The odometry model of Vander et al. 2011 eq. 2 is this predict's pose
+ * transition: the same midpoint form x' = x + d cos(θ + δ/2), y' = y +
+ * d sin(θ + δ/2), θ' = θ + δ (d = Δc, δ = Δθ of Kleeman eq. 24). Where
+ * the two differ: Vander takes u = (d, δ) as a control input with its own
+ * noise and the pose as the only state; here d and δ come from the
+ * calibrated wheel distances (wheel-scale states k_l, k_r when
+ * cfg.sigma_wheel_scale > 0), v and ω are states fused from the wheel
+ * speeds as a measurement (Kleeman eq. 25, aid_wheels.cpp), so that a
+ * bearing or pulse between two encoder samples is modelled at its own
+ * time; and the process noise is per wheel (σ² = sigma_wheel_per_m²·|d|)
+ * plus the heading terms above, where Vander states σ per metre of
+ * distance, per metre of drift and per 360° of turn. */
 
 /* Predict to t_us with the constant-velocity model (no encoders): Kleeman
  * 1992 eq. 15 with the turn rate as a state, white acceleration noise
@@ -294,6 +322,70 @@ int bl_filter_predict(bl_filter *f, int64_t t_us);
  * state non-finite: refused). */
 int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index,
                          bl_fusion_result *result);
+
+/* Fuse one bearing of bearing beacon bearing_beacon_index (0-based, into
+ * cfg.bearing_beacons) taken at t_us: bearing_rad (rad) is the beacon's
+ * direction seen from the sensor, body frame, CCW from the robot's +x axis,
+ * any 2π wrap. Model (Vander et al. 2011 eq. 3 with the sensor's mount
+ * offset (ox, oy) = cfg.bearing.offset_x_m/_y_m, body frame):
+ *     h = atan2(yb - ys, xb - xs) - θ,
+ *     (xs, ys) = (x, y) + R(θ)·(ox, oy),
+ * the robot (x, y, θ) extrapolated from the state time to t_us with v, ω
+ * (constant velocity and turn rate, midpoint heading as bl_filter_predict;
+ * the state time is not changed), so a rotating sensor that times each
+ * bearing itself is modelled at that instant. The innovation is wrapped to
+ * (-π, π] in every IEKF iteration; σ = cfg.bearing.sigma_deg; gate
+ * cfg.bearing.gate_sigma, twice that until converged (the start-up gate:
+ * a pulse start gives a heading σ of up to 1 rad, where the linearised
+ * bearing is poor); the shared update (fusion.h: IEKF, Joseph form).
+ * Every bearing that returns BL_OK is kept as its beacon's latest (time
+ * and value) for a triangulation (re)start.
+ * Not started: kept (BL_FUSION_BUFFERED); the filter starts itself
+ * (BL_FUSION_STARTED) from bl_solve_bearings (solver.h) once the kept
+ * bearings within cfg.bearing.snapshot_window_s of the newest cover >= 3
+ * bearing beacons and the fix's drms is <= cfg.bearing.max_fix_drms_m
+ * (see bl_filter_start_bearings). Stale (t_us more than
+ * cfg.max_predict_gap_s after the state time): kept, and the same
+ * triangulation restarts the filter (BL_FUSION_RESET) when possible.
+ * Started and fresh: BL_FUSION_ACCEPTED or BL_FUSION_REJECTED (counted in
+ * bl_estimate.bearing_rejected, state untouched).
+ * *result (may be NULL): status; innovation (rad, wrapped) and its variance
+ * (rad²), test ratio for ACCEPTED and REJECTED (0 otherwise); iterations.
+ * Errors: BL_EINVAL (NULL f, non-finite bearing_rad, or an update that
+ * would leave the state non-finite, or the sensor within 1 mm of the
+ * beacon: refused), BL_ENOTINIT (not init), BL_EBEACON
+ * (bearing_beacon_index >= cfg.bearing_beacon_count), BL_ETIME (t_us more
+ * than cfg.max_predict_gap_s *before* the state time; before the start:
+ * older than a kept bearing by more than that). On error *f is
+ * byte-identical. Cost: O(NX²) per IEKF iteration (3 at most); a
+ * (re)start adds one bl_solve_bearings. */
+int bl_filter_fuse_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us, bl_real bearing_rad,
+                           bl_fusion_result *result);
+
+/* Start (or restart) from the triangulation of the kept bearings: those
+ * within cfg.bearing.snapshot_window_s of the newest, one per bearing
+ * beacon (its latest), >= 3 beacons, solved by bl_solve_bearings (Vander
+ * et al. 2011 eq. 1, with the sensor offset) with σ cfg.bearing.sigma_deg.
+ * The fix gives x, y and θ with their covariance, the start's P block; when
+ * the filter runs, that block is inflated by the motion over the window
+ * (variance + (|v|·span)² in x and y, + (|ω|·span)² in θ, span = newest -
+ * oldest bearing used). v = ω = 0 with σ cfg.initial_sigma_v_mps,
+ * cfg.initial_sigma_omega_radps. The state time becomes the newest
+ * bearing's. s, T, t0 and the wheel scales: a started filter keeps them
+ * (with their covariance); a first start takes s and T from cfg with their
+ * σ, and t0 = the state time with σ one firing cycle (N·T; T on a
+ * bearing-only site, where no measurement observes s, T or t0: nothing
+ * divides by them, and convergence depends only on the position σ), so
+ * the first pulse of a mixed site sets the firing time. Counts as a reset
+ * if the filter was started before. This is the localizer's restart after
+ * persistent rejection on a site with bearing beacons.
+ * Errors: BL_EINVAL (NULL), BL_ENOTINIT, BL_EDEGENERATE (fewer than 3
+ * bearing beacons in the window, or the solver refuses the geometry: the
+ * sensor near the circle through the beacons, collinear beacons, or a
+ * fix whose drms exceeds cfg.bearing.max_fix_drms_m), BL_ENOCONVERGE (the
+ * solver did not converge, or a non-finite fix). On error *f is
+ * byte-identical. */
+int bl_filter_start_bearings(bl_filter *f);
 
 /* Raw state and covariance (layout BL_IX_*; t0 relative to the internal
  * epoch; P row-major NXxNX in the units of the states, e.g. P[T0][T0] s²),

@@ -60,6 +60,13 @@
  *   - Sequencer full (BL_EFULL): the pulses ready at the detection's time
  *     are processed, then, if still full, the oldest are closed, all through
  *     the same path (repeats skipped, counters kept).
+ *   - Bearings (bl_localizer_bearing): each fused through the filter
+ *     (bl_filter_fuse_bearing); its rejections count in the same
+ *     persistent-rejection window (a bearing beacon is a beacon of its
+ *     own for the min(3, N) rule, N counting both kinds); the restart is
+ *     the pulse snapshot when the site has ultrasonic beacons and it
+ *     succeeds, else the bearings' triangulation (bl_filter_start_bearings).
+ *     A site without ultrasonic beacons has an idle sequencer.
  *   The published reset counter is the filter's plus every re-initialisation
  *   done here, so it never goes back.
  *
@@ -120,6 +127,17 @@ extern "C" {
 #ifndef BL_LOC_EVENT_QUEUE
 #define BL_LOC_EVENT_QUEUE 4
 #endif
+
+/* One bearing from the omnidirectional bearing sensor (bl_filter_fuse_bearing). */
+typedef struct bl_bearing_meas {
+    int64_t t_us;          /* time the bearing was taken (a rotating sensor times each
+                              bearing itself), us, the caller's timebase */
+    uint32_t beacon_index; /* 0-based bearing beacon (cfg.bearing_beacons), not a pulse
+                              beacon's index */
+    bl_real bearing_rad;   /* body frame, CCW from the robot's +x axis, rad, any 2π wrap
+                              (|.| <= 1000) */
+    uint32_t tag;          /* caller's tag, never read by the library */
+} bl_bearing_meas;
 
 /* Wheel travel since the previous sample (differential drive). */
 typedef struct bl_wheel_increment {
@@ -187,6 +205,12 @@ typedef struct bl_loc_counters {
     uint32_t numbering_errors; /* rejected arrivals with innovations longer than any flight */
     uint32_t seq_resyncs;      /* sequencer re-synchronised from the filter */
     uint32_t events_dropped;   /* events lost because the queue was full */
+    uint32_t bearings_fused;    /* bearings fused (accepted, started, reset) */
+    uint32_t bearings_rejected; /* bearings rejected by the gate */
+    uint32_t bearings_buffered; /* bearings kept for the triangulation (not started / stale) */
+    uint32_t bearings_refused;  /* bearings refused: unknown bearing beacon, non-finite or
+                                   out of range (an error returned), or refused by the
+                                   filter (a non-finite update; BL_OK) */
 } bl_loc_counters;
 
 /* Summary for health reports. */
@@ -240,7 +264,8 @@ typedef struct bl_localizer {
 } bl_localizer;
 
 /* The sequencer config for a site (bl_sequencer_config_from_site with the
- * robot inside the beacons' hull), and on failure the cause in words
+ * robot inside the beacons' hull; for a site with no ultrasonic beacons,
+ * cfg.beacon_count 0, the idle config: all zero, BL_OK), and on failure the cause in words
  * (static text, e.g. "period too short for the beacons' spread: the beacon
  * time windows overlap"; NULL on success) and the bl_config field at fault
  * (static text, NULL when none). *out written only on success.
@@ -248,7 +273,8 @@ typedef struct bl_localizer {
 int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out, const char **why, const char **field);
 
 /* Initialise *loc for the site cfg and the sequencer config seq_cfg (e.g.
- * from bl_localizer_seq_config). Not started: pulses buffer until the
+ * from bl_localizer_seq_config; the idle one, beacon_count 0, for a site
+ * without ultrasonic beacons, which then starts from its bearings). Not started: pulses buffer until the
  * filter starts from a snapshot. Errors: BL_EINVAL (NULL), BL_ECONFIG
  * (bl_config_check or bl_sequencer_config_check fails, or the two disagree
  * on beacon or receiver count). */
@@ -272,6 +298,8 @@ int bl_localizer_reinit(bl_localizer *loc, const bl_config *cfg, const bl_seq_co
 int bl_localizer_sequencer_reset(bl_localizer *loc);
 
 /* One receiver detection (det->tag is carried to the pulse's members).
+ * A site without ultrasonic beacons (cfg.beacon_count 0) has no sequencer:
+ * BL_EBEACON, counted in seq_errors (the only change to *loc).
  * Pushed into the sequencer; when it is full the pulses ready at
  * det->time_us are processed first, then the oldest closed.
  * A detection older than a pulse already closed is counted (seq_errors).
@@ -284,6 +312,21 @@ int bl_localizer_detection(bl_localizer *loc, const bl_seq_detection *det);
  * flushes): numbered first arrivals are fused member by member, repeats
  * skipped, the policy above applied. Errors: BL_EINVAL (NULL), BL_ENOTINIT. */
 int bl_localizer_advance(bl_localizer *loc, int64_t now_us);
+
+/* One bearing (Vander et al. 2011 eq. 3; bl_filter_fuse_bearing): after a
+ * constant-velocity predict when the wheels are silent (as pulses), fused
+ * or gated; before the start (or when stale) kept until the bearings of one
+ * window cover 3 bearing beacons and the filter starts from their
+ * triangulation (event STARTED, or RESET cause SNAPSHOT). Rejections enter
+ * the persistent-rejection window with the pulses (policy above). A bearing
+ * older than the state by more than cfg.max_predict_gap_s re-initialises
+ * the filter (cause STALE_PULSE), as a pulse does. *res (may be NULL): the
+ * filter's fusion result.
+ * Errors: BL_EINVAL (NULL loc or m), BL_ENOTINIT; and, counted in
+ * bearings_refused (the only change to *loc then): BL_EBEACON
+ * (beacon_index >= cfg.bearing_beacon_count), BL_EINVAL (bearing not
+ * finite or |bearing| > 1000 rad, |t_us| > BL_SEQ_TIME_LIMIT_US). */
+int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m, bl_fusion_result *res);
 
 /* One wheel sample. Call bl_localizer_advance(t_us - latency) first so the
  * pulses that arrived before it go first. Not started: only the reference.

@@ -102,28 +102,82 @@ int bl_solve_tdoa_3d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol);
  * theta: three bearings fix them (each pair's difference puts the sensor on
  * a circle through the two beacons, Vander §2 Fig. 2), except on the circle
  * through the beacons (Fig. 4), where the solvers report failure.
- * (Implementation and the definition of each output: solver_bearing.cpp.) */
+ *
+ * bl_solve_bearings_3: closed form for exactly three beacons, the ToTal
+ *   algorithm (Pierlot & Van Droogenbroeck, IEEE T-RO 2014): the sensor
+ *   position from the three circles of Fig. 2, then theta from the bearings,
+ *   then the robot. iterations = 0, residual_rms_rad = 0 (exactly
+ *   determined: the fix reproduces the three bearings).
+ * bl_solve_bearings: N >= 3 beacons, weighted least squares (weights
+ *   1/sigma_j²) of the bearing residuals wrapped to (-π, π], Gauss-Newton on
+ *   (x, y, theta) started from the closed form on the best-conditioned
+ *   triple of beacons (all triples are tried: cost O(N³) closed forms, 560
+ *   for N = 16, plus O(N) per Gauss-Newton step, at most 20 steps). For N = 3
+ *   it returns the closed form's fix (one or two steps that confirm it).
+ *
+ * Outputs (both solvers):
+ *   cov       first-order covariance (JᵀWJ)⁻¹ of (x, y, theta), J = ∂phi/∂(x,
+ *             y, theta) (N x 3) at the fix, W = diag(1/sigma_j²); for N = 3
+ *             the exact first-order error propagation of eq. 1 behind
+ *             Vander Fig. 5. Row-major 3x3, units m², m·rad, rad².
+ *   drms_m    sqrt(cov_xx + cov_yy) (m), Vander Fig. 5's figure.
+ *   condition reciprocal 1-norm condition number of the Jacobi-scaled
+ *             normal matrix Â = S·JᵀWJ·S, S = diag(1/sqrt((JᵀWJ)_kk)):
+ *             1 / (‖Â‖₁·‖Â⁻¹‖₁), in (0, 1]; 1 = the three columns of the
+ *             weighted Jacobian orthogonal, -> 0 towards the degenerate
+ *             circle (Fig. 4) or collinear beacons. Independent of units
+ *             and of a common scale of the sigma_rad.
+ *   residual_rms_rad  0 for N = 3; for N > 3 the weighted rms of the
+ *             wrapped residuals e_j corrected for the 3 unknowns,
+ *             sqrt(Σ e_j²/σ_j² / Σ 1/σ_j² · N/(N - 3)) (rad): an estimate
+ *             of σ (of the harmonic rms of the sigma_j when they differ)
+ *             whose square has expectation σ² when the model is right.
+ *
+ * Returns BL_OK with *sol filled;
+ *   BL_EINVAL      prob or sol NULL; count < 3 or > BL_MAX_BEACONS (for
+ *                  bl_solve_bearings_3: count != 3); a beacon x/y, bearing,
+ *                  sigma, sensor offset or max_drms_m not finite; sigma_rad
+ *                  <= 0; max_drms_m < 0. *sol untouched;
+ *   BL_EDEGENERATE the geometry cannot fix the pose; *sol untouched — never
+ *                  a wrong answer:
+ *                  - coincident or collinear beacons (N = 3; for N > 3: no
+ *                    triple of non-collinear beacons);
+ *                  - the sensor on or near the circle through the three
+ *                    beacons (ToTal's denominator D = 0, Fig. 4), i.e.
+ *                    condition < 1e-6 (1e-4 for float), or, for N = 3, the
+ *                    circle closer to the fix than 3·drms (there the
+ *                    first-order covariance no longer bounds the error);
+ *                  - the sensor at a beacon (a bearing undefined);
+ *                  - drms_m > max_drms_m (0.5 m when max_drms_m = 0);
+ *                  - any non-finite intermediate or result;
+ *   BL_ENOCONVERGE (bl_solve_bearings) Gauss-Newton did not reach a step
+ *                  below 1e-9 m / 1e-9 rad (1e-5 for float) in 20 steps;
+ *                  *sol untouched.
+ * Reentrant; no state, no heap, a few hundred bytes of stack. */
 typedef struct bl_bearing_problem {
     uint32_t count;                      /* N beacons, 3..BL_MAX_BEACONS */
     bl_beacon beacons[BL_MAX_BEACONS];   /* site positions (m); z ignored */
-    bl_real bearing_rad[BL_MAX_BEACONS]; /* measured bearing of beacon j (rad), any 2π wrap */
+    bl_real bearing_rad[BL_MAX_BEACONS]; /* measured bearing of beacon j (rad), body frame, CCW
+                                            from the robot's +x axis, any 2π wrap */
     bl_real sigma_rad[BL_MAX_BEACONS];   /* σ of each bearing (rad), > 0 */
     bl_real sensor_x_m, sensor_y_m;      /* sensor mount, body frame (m) */
-    bl_real max_drms_m;                  /* refuse a fix whose drms exceeds this (m); 0 = 0.5 m */
+    bl_real max_drms_m;                  /* refuse a fix whose drms exceeds this (m), >= 0;
+                                            0 = the default 0.5 m */
 } bl_bearing_problem;
 
 typedef struct bl_bearing_solution {
-    bl_real x_m, y_m, theta_rad; /* robot (wheel-base centre), theta in (-π, π] */
+    bl_real x_m, y_m, theta_rad; /* robot (wheel-base centre) (m), heading (rad) in (-π, π] */
     bl_real cov[9];              /* covariance of (x, y, theta), row-major 3x3: m², m·rad, rad² */
     bl_real drms_m;              /* sqrt(cov_xx + cov_yy) (m) */
-    bl_real condition;           /* conditioning in [0, 1]; 0 = degenerate */
-    bl_real residual_rms_rad;    /* weighted rms of the bearing residuals (rad) */
+    bl_real condition;           /* conditioning in (0, 1]; -> 0 = degenerate (see above) */
+    bl_real residual_rms_rad;    /* dof-corrected weighted rms of the bearing residuals
+                                    (rad), 0 for N = 3 (see above) */
     uint32_t iterations;         /* Gauss-Newton steps (0 for the closed form) */
 } bl_bearing_solution;
 
-/* Closed form for exactly three beacons (count must be 3). */
+/* Closed form (ToTal) for exactly three beacons (count must be 3). */
 int bl_solve_bearings_3(const bl_bearing_problem *prob, bl_bearing_solution *sol);
-/* Weighted least squares for N >= 3 beacons. */
+/* Weighted least squares (Gauss-Newton) for N >= 3 beacons. */
 int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solution *sol);
 
 #ifdef __cplusplus
