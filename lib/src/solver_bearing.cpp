@@ -1,0 +1,412 @@
+// beaconloc — snapshot bearing triangulation (solver.h): the pose (x, y,
+// theta) from bearings to N >= 3 beacons, no prior.
+//
+// Measurement model, Vander et al. 2011 eq. 1 (eq. 3 in the filter):
+//   phi_j = atan2(yb_j - ys, xb_j - xs) - theta,
+// (xs, ys) = (x, y) + R(theta)·o the sensor, o its mount offset (body frame).
+// Internally the unknowns are the sensor position and theta (q = (xs, ys,
+// theta)): the model is then the paper's exactly, and the robot follows as
+// (x, y) = s - R(theta)·o. The reparametrisation is one-to-one, so the
+// least-squares fix and its first-order covariance are the same; both are
+// mapped back to the robot with T = ∂(x, y, theta)/∂(xs, ys, theta).
+//
+// Three beacons: closed form (ToTal, Pierlot & Van Droogenbroeck, "A New
+// Three Object Triangulation Algorithm for Mobile Robot Positioning", IEEE
+// T-RO 30(3), 2014, Algorithm 1). Each pair's bearing difference fixes a
+// circle through the two beacons and the sensor (inscribed angle theorem,
+// Vander §2 Fig. 2); the sensor is where the circles meet, which is unique
+// unless the sensor lies on the circle through the three beacons (Fig. 4,
+// ToTal's D = 0).
+// N beacons: weighted Gauss-Newton on the wrapped bearing residuals from
+// the closed form of the best-conditioned triple.
+#include "internal.hpp"
+
+#include <cstring>
+
+#include "beaconloc/solver.h"
+
+using bl::is_finite;
+using bl::real;
+using bl::Vec3;
+using bl::wrap_angle;
+
+namespace {
+
+using Mat3 = bl::Mat<3, 3>;
+
+constexpr uint32_t kMaxIterations = 20;
+constexpr real kDefaultMaxDrms_m = real(0.5);
+// A fix whose sensor lies closer than kCircleGuard·drms (sensor position)
+// to the circle through the three beacons is refused (N = 3): there the
+// circle is inside the error ellipse, the first-order covariance no longer
+// describes the error and the fix may lie on the wrong side of the circle.
+constexpr real kCircleGuard = real(3);
+#if defined(BL_USE_FLOAT) && BL_USE_FLOAT
+constexpr real kMinCondition = real(1e-4);
+constexpr real kStepTol = real(1e-5);   // Gauss-Newton step (m and rad)
+constexpr real kCotMax = real(1e5);     // ToTal's clamp of an infinite cot
+constexpr real kCoincident = real(1e-5);  // relative beacon separation
+#else
+constexpr real kMinCondition = real(1e-6);
+constexpr real kStepTol = real(1e-9);
+constexpr real kCotMax = real(1e8);  // Pierlot & Van Droogenbroeck 2014 §IV: ±1e8
+constexpr real kCoincident = real(1e-9);
+#endif
+
+bool problem_valid(const bl_bearing_problem *p)
+{
+    if (p->count < 3 || p->count > BL_MAX_BEACONS) return false;
+    if (!is_finite(p->sensor_x_m) || !is_finite(p->sensor_y_m)) return false;
+    if (!is_finite(p->max_drms_m) || p->max_drms_m < real(0)) return false;
+    for (uint32_t j = 0; j < p->count; ++j) {
+        if (!is_finite(p->beacons[j].x_m) || !is_finite(p->beacons[j].y_m)) return false;
+        if (!is_finite(p->bearing_rad[j])) return false;
+        if (!is_finite(p->sigma_rad[j]) || !(p->sigma_rad[j] > real(0))) return false;
+    }
+    return true;
+}
+
+// The bearings as unit vectors (cos phi_j, sin phi_j): every angle
+// difference below comes from products of these (no wrap needed, no trig).
+struct Bearings {
+    real c[BL_MAX_BEACONS];
+    real s[BL_MAX_BEACONS];
+};
+
+void bearing_vectors(const bl_bearing_problem *p, Bearings &b)
+{
+    for (uint32_t j = 0; j < p->count; ++j) {
+        b.c[j] = std::cos(p->bearing_rad[j]);
+        b.s[j] = std::sin(p->bearing_rad[j]);
+    }
+}
+
+// cot(a_j - a_i) from the unit vectors of a_i, a_j, its magnitude clamped
+// to kCotMax where the sine vanishes (sensor on the line through the two
+// beacons), as Pierlot & Van Droogenbroeck 2014 §IV do.
+inline real cot_diff(const Bearings &b, uint32_t i, uint32_t j)
+{
+    // sin(a_j - a_i) = s_j c_i - c_j s_i, cos(a_j - a_i) = c_j c_i + s_j s_i
+    const real s = b.s[j] * b.c[i] - b.c[j] * b.s[i];
+    const real c = b.c[j] * b.c[i] + b.s[j] * b.s[i];
+    const real floor = real(1) / kCotMax;
+    return c / (s < real(0) ? (s < -floor ? s : -floor) : (s > floor ? s : floor));
+}
+
+// Any two of beacons i, j, k closer than kCoincident times their extent.
+bool coincident(const bl_bearing_problem *p, uint32_t i, uint32_t j, uint32_t k)
+{
+    const uint32_t id[3] = {i, j, k};
+    real d2[3], dmax2 = 0;
+    for (int a = 0; a < 3; ++a) {
+        const bl_beacon &u = p->beacons[id[a]], &v = p->beacons[id[(a + 1) % 3]];
+        const real dx = u.x_m - v.x_m, dy = u.y_m - v.y_m;
+        d2[a] = dx * dx + dy * dy;
+        if (d2[a] > dmax2) dmax2 = d2[a];
+    }
+    const real tol2 = kCoincident * kCoincident * dmax2;
+    return !(dmax2 > real(0)) || d2[0] <= tol2 || d2[1] <= tol2 || d2[2] <= tol2;
+}
+
+// ToTal (Pierlot & Van Droogenbroeck 2014, Algorithm 1), beacons i, j, k in
+// the roles B1, B2, B3 (B2 the origin of the modified coordinates). Sensor
+// position (m); false when D = 0 or anything is not finite.
+bool total(const bl_bearing_problem *p, const Bearings &b, uint32_t i, uint32_t j, uint32_t k, real &xs,
+           real &ys)
+{
+    const real x2 = p->beacons[j].x_m, y2 = p->beacons[j].y_m;
+    // Step 1, modified beacon coordinates: x'1 = x1 - x2, y'1 = y1 - y2,
+    // x'3 = x3 - x2, y'3 = y3 - y2.
+    const real x1 = p->beacons[i].x_m - x2, y1 = p->beacons[i].y_m - y2;
+    const real x3 = p->beacons[k].x_m - x2, y3 = p->beacons[k].y_m - y2;
+    // Step 2, the three cot: T12 = cot(a2 - a1), T23 = cot(a3 - a2),
+    // T31 = cot(a1 - a3) (the paper's (1 - T12 T23)/(T12 + T23), the same
+    // value; here its sine and cosine cost four products, no division by
+    // T12 + T23 = 0 when the sensor is on the line through B1 and B3).
+    const real T12 = cot_diff(b, i, j);
+    const real T23 = cot_diff(b, j, k);
+    const real T31 = cot_diff(b, k, i);
+    // Step 3, modified circle centres (B2 at the origin; each circle passes
+    // through the sensor and its two beacons, Vander Fig. 2):
+    //   x'12 = x'1 + T12 y'1, y'12 = y'1 - T12 x'1,
+    //   x'23 = x'3 - T23 y'3, y'23 = y'3 + T23 x'3,
+    //   x'31 = (x'3 + x'1) + T31 (y'3 - y'1), y'31 = (y'3 + y'1) - T31 (x'3 - x'1).
+    const real x12 = x1 + T12 * y1, y12 = y1 - T12 * x1;
+    const real x23 = x3 - T23 * y3, y23 = y3 + T23 * x3;
+    const real x31 = (x3 + x1) + T31 * (y3 - y1), y31 = (y3 + y1) - T31 * (x3 - x1);
+    // Step 4: k'31 = x'1 x'3 + y'1 y'3 + T31 (x'1 y'3 - x'3 y'1).
+    const real k31 = x1 * x3 + y1 * y3 + T31 * (x1 * y3 - x3 * y1);
+    // Step 5: D = (x'12 - x'23)(y'23 - y'31) - (y'12 - y'23)(x'23 - x'31);
+    // D = 0 exactly when the sensor is on the circle through B1, B2, B3
+    // (Vander Fig. 4).
+    const real D = (x12 - x23) * (y23 - y31) - (y12 - y23) * (x23 - x31);
+    if (!(D != real(0)) || !is_finite(D)) return false;
+    // Step 6: xR = x2 + k'31 (y'12 - y'23) / D, yR = y2 + k'31 (x'23 - x'12) / D.
+    const real f = k31 / D;
+    xs = x2 + f * (y12 - y23);
+    ys = y2 + f * (x23 - x12);
+    return is_finite(xs) && is_finite(ys);
+}
+
+// Heading from the sensor position: theta_j = angle(b_j - s) - phi_j for
+// each beacon, combined as the circular mean weighted by 1/sigma_j²
+// (exactly determined N = 3: all theta_j agree). Returns the mean's unit
+// vector (cos theta, sin theta); false if undefined (sensor on a beacon).
+bool heading(const bl_bearing_problem *p, const Bearings &b, const uint32_t *id, uint32_t n, real xs, real ys,
+             real &cth, real &sth)
+{
+    real sc = 0, ss = 0;
+    for (uint32_t a = 0; a < n; ++a) {
+        const uint32_t j = id[a];
+        const real dx = p->beacons[j].x_m - xs, dy = p->beacons[j].y_m - ys;
+        const real r = std::sqrt(dx * dx + dy * dy);
+        if (!(r > real(0))) return false;
+        const real w = real(1) / (p->sigma_rad[j] * p->sigma_rad[j]);
+        // (cos, sin)(angle(u) - phi) = (ux c + uy s, uy c - ux s), u = (dx, dy)/r.
+        sc += w * (dx * b.c[j] + dy * b.s[j]) / r;
+        ss += w * (dy * b.c[j] - dx * b.s[j]) / r;
+    }
+    const real len = std::sqrt(sc * sc + ss * ss);
+    if (!(len > real(0)) || !is_finite(len)) return false;
+    cth = sc / len;
+    sth = ss / len;
+    return true;
+}
+
+// Weighted normal matrix A = JᵀWJ at the sensor position (unknowns xs, ys,
+// theta): the row of bearing j (Vander eq. 1 differentiated),
+//   ∂phi_j/∂(xs, ys, theta) = (dy/r², -dx/r², -1), (dx, dy) = b_j - s,
+// W = diag(1/sigma_j²). With res = true also g = JᵀW e and chi2 = Σ w e²,
+// e_j = wrap(phi_j - atan2(dy, dx) + theta) (rad). False if the sensor is
+// on a beacon.
+bool normal_equations(const bl_bearing_problem *p, const uint32_t *id, uint32_t n, const Vec3 &q, bool res,
+                      Mat3 &A, Vec3 &g, real &chi2)
+{
+    A.setZero();
+    g.setZero();
+    chi2 = 0;
+    for (uint32_t a = 0; a < n; ++a) {
+        const uint32_t j = id[a];
+        const real dx = p->beacons[j].x_m - q(0), dy = p->beacons[j].y_m - q(1);
+        const real r2 = dx * dx + dy * dy;
+        if (!(r2 > real(0))) return false;
+        const real w = real(1) / (p->sigma_rad[j] * p->sigma_rad[j]);
+        Vec3 row;
+        row << dy / r2, -dx / r2, real(-1);
+        A.noalias() += (w * row) * row.transpose();
+        if (res) {
+            const real e = wrap_angle(p->bearing_rad[j] - std::atan2(dy, dx) + q(2));
+            g.noalias() += (w * e) * row;
+            chi2 += w * e * e;
+        }
+    }
+    return true;
+}
+
+// Inverse of the symmetric positive definite A after Jacobi scaling
+// (Â = S A S, S = diag(1/sqrt(A_kk)): unit diagonal, so the closed-form
+// cofactor inverse loses no digits to the mixed units); false if singular.
+bool scaled_inverse(const Mat3 &A, Mat3 &inv)
+{
+    Vec3 sc;
+    for (int k = 0; k < 3; ++k) {
+        if (!(A(k, k) > real(0))) return false;
+        sc(k) = real(1) / std::sqrt(A(k, k));
+    }
+    const Mat3 As = sc.asDiagonal() * A * sc.asDiagonal();
+    const real det = As.determinant();
+    if (!(det > real(0)) || !is_finite(det)) return false;
+    inv = sc.asDiagonal() * As.inverse() * sc.asDiagonal();
+    return inv.allFinite();
+}
+
+// Reciprocal 1-norm condition number of the Jacobi-scaled Â = S A S,
+// 1 / (‖Â‖₁ ‖Â⁻¹‖₁), from A and its inverse (Â⁻¹ = S⁻¹ A⁻¹ S⁻¹); in (0, 1].
+real condition_of(const Mat3 &A, const Mat3 &inv)
+{
+    real n1 = 0, n1i = 0;
+    for (int c = 0; c < 3; ++c) {
+        real col = 0, coli = 0;
+        for (int r = 0; r < 3; ++r) {
+            const real srr = std::sqrt(A(r, r) * A(c, c));
+            col += std::fabs(A(r, c)) / srr;
+            coli += std::fabs(inv(r, c)) * srr;
+        }
+        if (col > n1) n1 = col;
+        if (coli > n1i) n1i = coli;
+    }
+    return real(1) / (n1 * n1i);
+}
+
+// First-order distance (m) of the sensor s to the circle through beacons i,
+// j, k (a line when they are collinear): |F(s)| / |∇F(s)| with F the
+// circle's implicit equation, B_j at the origin (u = B_i - B_j, v = B_k -
+// B_j, t = s - B_j):
+//   F(t) = K |t|² + L tx + M ty,  K = u × v,
+//   L = |v|² uy - |u|² vy,  M = |u|² vx - |v|² ux
+// (F vanishes at 0, u and v). Exact for a line; near a circle of radius R
+// it is the distance times (|t - c| + R) / (2 |t - c|) ≈ 1.
+real circle_distance(const bl_bearing_problem *p, uint32_t i, uint32_t j, uint32_t k, real xs, real ys)
+{
+    const real ox = p->beacons[j].x_m, oy = p->beacons[j].y_m;
+    const real ux = p->beacons[i].x_m - ox, uy = p->beacons[i].y_m - oy;
+    const real vx = p->beacons[k].x_m - ox, vy = p->beacons[k].y_m - oy;
+    const real tx = xs - ox, ty = ys - oy;
+    const real u2 = ux * ux + uy * uy, v2 = vx * vx + vy * vy;
+    const real K = ux * vy - uy * vx;
+    const real L = v2 * uy - u2 * vy;
+    const real M = u2 * vx - v2 * ux;
+    const real F = K * (tx * tx + ty * ty) + L * tx + M * ty;
+    const real gx = real(2) * K * tx + L, gy = real(2) * K * ty + M;
+    const real gn = std::sqrt(gx * gx + gy * gy);
+    return gn > real(0) ? std::fabs(F) / gn : real(0);
+}
+
+// The solution at the sensor fix q = (xs, ys, theta) (theta any wrap,
+// (cth, sth) its cosine and sine), A = JᵀWJ there, chi2 its weighted
+// squared residuals over n bearings; guard = the beacon triple of the
+// N = 3 circle guard (nullptr: none). Writes *out only if the fix passes
+// every check (solver.h); returns BL_OK or BL_EDEGENERATE.
+int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const Mat3 &A, real chi2, uint32_t n,
+           const uint32_t *guard, uint32_t iterations, bl_bearing_solution *out)
+{
+    Mat3 cov_s;
+    if (!scaled_inverse(A, cov_s)) return BL_EDEGENERATE;
+    // Robot from sensor: (x, y) = s - R(theta)·o, so with (a, b) = ∂(x, y)/∂theta
+    // = -R'(theta)·o = (sin·ox + cos·oy, -cos·ox + sin·oy):
+    //   T = [[1, 0, a], [0, 1, b], [0, 0, 1]], cov = T cov_s Tᵀ,
+    //   and the robot's normal matrix T⁻ᵀ A T⁻¹ (T⁻¹: a, b negated).
+    const real ox = p->sensor_x_m, oy = p->sensor_y_m;
+    const real a = sth * ox + cth * oy, b = -cth * ox + sth * oy;
+    Mat3 T = Mat3::Identity(), Ti = Mat3::Identity();
+    T(0, 2) = a;
+    T(1, 2) = b;
+    Ti(0, 2) = -a;
+    Ti(1, 2) = -b;
+    Mat3 cov = T.lazyProduct(cov_s).lazyProduct(T.transpose());
+    const Mat3 Ar = Ti.transpose().lazyProduct(A).lazyProduct(Ti);
+    for (int r = 0; r < 3; ++r)
+        for (int c = r + 1; c < 3; ++c) cov(r, c) = cov(c, r) = real(0.5) * (cov(r, c) + cov(c, r));
+    if (!cov.allFinite() || !Ar.allFinite() || !(Ar(0, 0) > 0) || !(Ar(1, 1) > 0) || !(Ar(2, 2) > 0))
+        return BL_EDEGENERATE;
+    const real condition = condition_of(Ar, cov);
+    if (!(condition >= kMinCondition)) return BL_EDEGENERATE;
+    const real drms_m = std::sqrt(cov(0, 0) + cov(1, 1));
+    const real max_drms_m = p->max_drms_m > real(0) ? p->max_drms_m : kDefaultMaxDrms_m;
+    if (!(drms_m <= max_drms_m)) return BL_EDEGENERATE;
+    if (guard != nullptr) {
+        const real drms_s = std::sqrt(cov_s(0, 0) + cov_s(1, 1));
+        if (!(circle_distance(p, guard[0], guard[1], guard[2], q(0), q(1)) >= kCircleGuard * drms_s))
+            return BL_EDEGENERATE;
+    }
+    // Weighted rms of the residuals with the 3 unknowns' degrees of freedom
+    // removed (solver.h): sqrt(Σ w e² / Σ w · n / (n - 3)), 0 for n = 3.
+    real residual_rad = 0;
+    if (n > 3) {
+        real wsum = 0;
+        for (uint32_t j = 0; j < p->count; ++j) wsum += real(1) / (p->sigma_rad[j] * p->sigma_rad[j]);
+        residual_rad = std::sqrt(chi2 / wsum * real(n) / real(n - 3));
+    }
+    const real x_m = q(0) - (cth * ox - sth * oy);
+    const real y_m = q(1) - (sth * ox + cth * oy);
+    const real theta_rad = wrap_angle(std::atan2(sth, cth));
+    if (!is_finite(x_m) || !is_finite(y_m) || !is_finite(theta_rad) || !is_finite(residual_rad))
+        return BL_EDEGENERATE;
+
+    bl_bearing_solution &sol = *out;
+    std::memset(&sol, 0, sizeof sol);
+    sol.x_m = x_m;
+    sol.y_m = y_m;
+    sol.theta_rad = theta_rad;
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) sol.cov[r * 3 + c] = cov(r, c);
+    sol.drms_m = drms_m;
+    sol.condition = condition;
+    sol.residual_rms_rad = residual_rad;
+    sol.iterations = iterations;
+    return BL_OK;
+}
+
+// Closed form on beacons i, j, k: sensor fix q (theta unwrapped from the
+// mean), its heading's unit vector; false when degenerate.
+bool closed_form(const bl_bearing_problem *p, const Bearings &b, const uint32_t id[3], Vec3 &q, real &cth, real &sth)
+{
+    if (coincident(p, id[0], id[1], id[2])) return false;
+    real xs, ys;
+    if (!total(p, b, id[0], id[1], id[2], xs, ys)) return false;
+    if (!heading(p, b, id, 3, xs, ys, cth, sth)) return false;
+    q << xs, ys, std::atan2(sth, cth);
+    return true;
+}
+
+}  // namespace
+
+extern "C" int bl_solve_bearings_3(const bl_bearing_problem *prob, bl_bearing_solution *sol)
+{
+    if (prob == nullptr || sol == nullptr || !problem_valid(prob) || prob->count != 3) return BL_EINVAL;
+    Bearings b;
+    bearing_vectors(prob, b);
+    static const uint32_t id[3] = {0, 1, 2};
+    Vec3 q;
+    real cth, sth;
+    if (!closed_form(prob, b, id, q, cth, sth)) return BL_EDEGENERATE;
+    Mat3 A;
+    Vec3 g;
+    real chi2;
+    if (!normal_equations(prob, id, 3, q, false, A, g, chi2)) return BL_EDEGENERATE;
+    return finish(prob, q, cth, sth, A, real(0), 3, id, 0, sol);
+}
+
+extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solution *sol)
+{
+    if (prob == nullptr || sol == nullptr || !problem_valid(prob)) return BL_EINVAL;
+    const uint32_t N = prob->count;
+    Bearings b;
+    bearing_vectors(prob, b);
+    uint32_t all[BL_MAX_BEACONS];
+    for (uint32_t j = 0; j < N; ++j) all[j] = j;
+
+    // Start: the closed form of every triple, keeping the one whose own
+    // normal matrix is best conditioned (condition_of in the sensor's
+    // unknowns).
+    Vec3 q = Vec3::Zero();
+    real best = -1;
+    Mat3 A, inv;
+    Vec3 g;
+    real chi2;
+    for (uint32_t i = 0; i < N; ++i)
+        for (uint32_t j = i + 1; j < N; ++j)
+            for (uint32_t k = j + 1; k < N; ++k) {
+                const uint32_t id[3] = {i, j, k};
+                Vec3 qt;
+                real c, s;
+                if (!closed_form(prob, b, id, qt, c, s)) continue;
+                if (!normal_equations(prob, id, 3, qt, false, A, g, chi2) || !scaled_inverse(A, inv)) continue;
+                const real cond = condition_of(A, inv);
+                if (cond > best) {
+                    best = cond;
+                    q = qt;
+                }
+            }
+    if (!(best > real(0))) return BL_EDEGENERATE;
+
+    // Gauss-Newton on all N bearings (weighted least squares of the wrapped
+    // residuals): q <- q + (JᵀWJ)⁻¹ JᵀW e.
+    uint32_t it = 0;
+    bool converged = false;
+    while (it < kMaxIterations) {
+        if (!normal_equations(prob, all, N, q, true, A, g, chi2) || !scaled_inverse(A, inv)) return BL_EDEGENERATE;
+        const Vec3 step = inv * g;
+        if (!step.allFinite()) return BL_EDEGENERATE;
+        q += step;
+        ++it;
+        if (!q.allFinite()) return BL_EDEGENERATE;
+        if (std::fabs(step(0)) < kStepTol && std::fabs(step(1)) < kStepTol && std::fabs(step(2)) < kStepTol) {
+            converged = true;
+            break;
+        }
+    }
+    if (!converged) return BL_ENOCONVERGE;
+    if (!normal_equations(prob, all, N, q, true, A, g, chi2)) return BL_EDEGENERATE;
+    return finish(prob, q, std::cos(q(2)), std::sin(q(2)), A, chi2, N, N == 3 ? all : nullptr, it, sol);
+}
