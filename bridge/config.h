@@ -42,8 +42,8 @@
 #define CONFIG_ERR_LEN 512
 #define CONFIG_STR_LEN 128
 #define CONFIG_MAX_KEYS 96
-#define CONFIG_MAX_ITEMS 32      /* bound on every per-item section's largest count */
-#define CONFIG_MAX_ITEM_KEYS 32  /* bound on the keys of one per-item section */
+#define CONFIG_MAX_ITEMS 32     /* bound on every per-item section's largest count */
+#define CONFIG_MAX_ITEM_KEYS 32 /* bound on the keys of one per-item section */
 
 #define EX_CONFIG_STATUS 78 /* sysexits.h EX_CONFIG */
 
@@ -89,7 +89,8 @@ struct bridge_config {
     double double_pulse_spacing_s; /* beacon 1's second burst delay */
     double burst_length_s;
     /* [beaconN], [bearing_beaconN]: item N at <prefix>[N-1] */
-#define CONFIG_ITEM_ARRAY(sec, prefix, strct, count_sec, count_member, max) struct strct prefix[max];
+#define CONFIG_ITEM_ARRAY(sec, prefix, strct, count_sec, count_member, max)                        \
+    struct strct prefix[max];
     SITE_ITEM_SECTIONS(CONFIG_ITEM_ARRAY)
 #undef CONFIG_ITEM_ARRAY
     /* [receivers] */

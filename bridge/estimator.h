@@ -93,20 +93,20 @@ struct est_counters {
     uint64_t reinits;           /* re-initialisations done by the bridge */
     uint64_t node_restarts;
     uint64_t seq_errors;
-    uint64_t hint_errors;      /* hints the sequencer refused */
-    uint64_t numbering_errors; /* innovations longer than any flight */
-    uint64_t seq_resyncs;      /* sequencer re-synchronised from the filter */
-    uint64_t stale_encoders;   /* encoder samples not newer than the last: dropped */
+    uint64_t hint_errors;       /* hints the sequencer refused */
+    uint64_t numbering_errors;  /* innovations longer than any flight */
+    uint64_t seq_resyncs;       /* sequencer re-synchronised from the filter */
+    uint64_t stale_encoders;    /* encoder samples not newer than the last: dropped */
     uint64_t pulses_unexpected; /* pulse frames on a site without ultrasonic beacons: dropped */
     /* bearings */
-    uint64_t bearings_fused;     /* localizer: fused (accepted, or the triangulation start) */
-    uint64_t bearings_rejected;  /* localizer: gated out */
-    uint64_t bearings_buffered;  /* localizer: kept for the triangulation start */
-    uint64_t bearings_refused;   /* localizer: refused (bad value; an error) */
+    uint64_t bearings_fused;          /* localizer: fused (accepted, or the triangulation start) */
+    uint64_t bearings_rejected;       /* localizer: gated out */
+    uint64_t bearings_buffered;       /* localizer: kept for the triangulation start */
+    uint64_t bearings_refused;        /* localizer: refused (bad value; an error) */
     uint64_t bearings_unknown_beacon; /* beacon id beyond [bearing_beacons] count: dropped */
     uint64_t bearings_unexpected;     /* bearing frames on a site without bearing beacons */
-    uint64_t stale_bearings;    /* bearings older than the newest on the sensor's clock */
-    uint64_t unmapped_bearings; /* bearings before the reference clock (mixed site) */
+    uint64_t stale_bearings;          /* bearings older than the newest on the sensor's clock */
+    uint64_t unmapped_bearings;       /* bearings before the reference clock (mixed site) */
 };
 
 /* One published estimate. */

@@ -22,7 +22,7 @@ static const struct field_key field_keys[] = {
     SITE_LIB_FIELDS(FIELD_KEY)
 #undef FIELD_KEY
         {"beacons", "beacon1", "x_m"},
-        {"bearing_beacons", "bearing_beacon1", "x_m"},
+    {"bearing_beacons", "bearing_beacon1", "x_m"},
 };
 
 /* The site-file key that sets bl_config field `field` (NULL: not known, the

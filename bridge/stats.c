@@ -207,8 +207,8 @@ void stats_status_line(const struct stats_report *r, const char *prefix, const c
     log_info("%s: frames %" PRIu64 " (%s) bad %" PRIu64 " unknown %" PRIu64 " range %" PRIu64
              " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64 " kdrop %" PRIu64 " errfr %" PRIu64
              " | pulses ok %" PRIu64 " rej %" PRIu64 " | bearings ok %" PRIu64 " rej %" PRIu64
-             " unk %" PRIu64 " | %s | odom %" PRIu64 " werr %" PRIu64
-             " | latency p50 %" PRId64 " p99 %" PRId64 " us"
+             " unk %" PRIu64 " | %s | odom %" PRIu64 " werr %" PRIu64 " | latency p50 %" PRId64
+             " p99 %" PRId64 " us"
              " (interval p50 %" PRId64 " p99 %" PRId64 " us)",
              prefix, r->frames_total, kinds, fc->malformed, fc->unknown_id, fc->out_of_range,
              frame_lost_total(fc), frame_duplicates_total(fc), frame_out_of_order_total(fc),
