@@ -15,11 +15,17 @@ also holds when Q is singular (states with no process noise: period, firing time
 
 The state is the estimator's (lib/, Kleeman 1992 eq. 14 extended with omega):
     [x_m, y_m, theta_rad, v_mps, omega_radps, s_mps, T_s, t0_s]
-propagated from one beacon firing to the next with the odometry as input
-(Kleeman 1992 eqs. 15 and 24; wheel noise as process noise) and measured by the
-arrival time of every direct pulse actually detected on every receiver
-(Kleeman 1992 eq. 21 with the receiver's 3D position on the ring) and by the
-odometry's speed and turn rate (Kleeman 1992 eq. 25), with the wheel noise.
+propagated from one measurement event to the next with the odometry as input
+(Kleeman 1992 eqs. 15 and 24; wheel noise as process noise) and measured, at each
+event, by the arrival time of every direct pulse of a beacon firing actually detected
+on every receiver (Kleeman 1992 eq. 21 with the receiver's 3D position on the ring),
+by every bearing actually delivered at that instant (Vander et al. 2011 eq. 1, the
+sensor offset included: physics.bearings.bearing_jacobian) and by the odometry's speed
+and turn rate (Kleeman 1992 eq. 25), with the wheel noise. The events are the beacon
+firings and the bearing instants in time order; a site without ultrasonic beacons has
+bearing events only (s, T and t0 are then unobserved: they keep their prior, which
+keeps J well conditioned), a site without bearing beacons firings only (the bound is
+then exactly the firing-to-firing recursion it was before bearings existed).
 """
 from __future__ import annotations
 
@@ -27,6 +33,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from .physics.bearings import bearing_jacobian
 
 STATE = ("x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "s_mps", "T_s", "t0_s")
 IX, IY, ITH, IV, IW, IS, IT, IT0 = range(8)
@@ -99,11 +107,28 @@ class BoundModel:
     sigma_accel_mps2: float = 0.5   # random-walk intensity of v between firings
     sigma_angacc_radps2: float = 1.0
     prior_sigma: tuple = (1.0, 1.0, 0.5, 0.5, 0.5, 5.0, 1e-4, 0.1)   # in STATE units
+    sigma_bearing_rad: float = 0.0  # σ of one bearing, rad (bearing sites)
+    bearing_offset_m: tuple = (0.0, 0.0)   # bearing sensor mount, body frame (fwd, left), m
+    sigma_common_per_m: float = 0.0  # common-mode slip of both wheels, m after 1 m of mean travel
+
+
+def wheel_covariance(d_left_m: float, d_right_m: float, m: BoundModel) -> np.ndarray:
+    """Covariance of the measured wheel increments (dL, dR), m^2: independent slip
+    sigma^2 |d| per wheel, the common-mode slip sigma_c^2 |(dL + dR)/2| on both (fully
+    correlated) and two tick quantisation errors of variance tick^2/12 per increment."""
+    var_w = m.sigma_wheel_per_m ** 2 * np.array([abs(d_left_m), abs(d_right_m)]) \
+        + m.m_per_tick ** 2 / 6
+    C = np.diag(var_w)
+    if m.sigma_common_per_m > 0:
+        C = C + m.sigma_common_per_m ** 2 * abs(d_left_m + d_right_m) / 2 * np.ones((2, 2))
+    return C
 
 
 def process_model(state: np.ndarray, next_state: np.ndarray, d_left_m: float, d_right_m: float,
-                  dt_s: float, s_change_mps: float, m: BoundModel) -> tuple[np.ndarray, np.ndarray]:
-    """F and Q of one firing-to-firing step with odometry input (Kleeman 1992 eqs. 15, 24)."""
+                  dt_s: float, s_change_mps: float, m: BoundModel,
+                  fires: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """F and Q of one event-to-event step with odometry input (Kleeman 1992 eqs. 15, 24);
+    fires: the step ends at a beacon firing (t0 moves on by T), else t0 stays."""
     b = m.wheel_base_m
     # differential-drive increments (Vander 2011 eq. 2): ds = (dL + dR)/2, dth = (dR - dL)/b
     ds = (d_left_m + d_right_m) / 2
@@ -114,16 +139,14 @@ def process_model(state: np.ndarray, next_state: np.ndarray, d_left_m: float, d_
     # x' = x + ds cos(th + dth/2), y' = y + ds sin(th + dth/2): d/dth
     F[IX, ITH] = -ds * s
     F[IY, ITH] = ds * c
-    # Kleeman 1992 eq. 15: t0(k+1) = t0(k) + T(k)
-    F[IT0, IT] = 1.0
+    # Kleeman 1992 eq. 15: t0(k+1) = t0(k) + T(k) at a firing; between firings t0 stays
+    F[IT0, IT] = 1.0 if fires else 0.0
     # wheel noise: var(dL) = sigma^2 |dL| * 1 m (and dR), mapped by G = d(x, y, th)/d(dL, dR)
     G = np.array([[c / 2 + ds * s / (2 * b), c / 2 - ds * s / (2 * b)],
                   [s / 2 - ds * c / (2 * b), s / 2 + ds * c / (2 * b)],
                   [-1 / b, 1 / b]])
-    var_w = m.sigma_wheel_per_m ** 2 * np.array([abs(d_left_m), abs(d_right_m)]) \
-        + m.m_per_tick ** 2 / 6   # two quantisation errors of variance tick^2/12 per increment
     Q = np.zeros((8, 8))
-    Q[:3, :3] = G @ np.diag(var_w) @ G.T
+    Q[:3, :3] = G @ wheel_covariance(d_left_m, d_right_m, m) @ G.T
     Q[IV, IV] = (m.sigma_accel_mps2 * dt_s) ** 2 + (next_state[IV] - state[IV]) ** 2
     Q[IW, IW] = (m.sigma_angacc_radps2 * dt_s) ** 2 + (next_state[IW] - state[IW]) ** 2
     Q[IS, IS] = s_change_mps ** 2 + (1e-4) ** 2
@@ -145,31 +168,43 @@ def odometry_variances(d_left_m: float, d_right_m: float, dt_s: float, m: BoundM
     over one step, from the wheel noise and the tick quantisation."""
     var_l = m.sigma_wheel_per_m ** 2 * abs(d_left_m) + m.m_per_tick ** 2 / 6
     var_r = m.sigma_wheel_per_m ** 2 * abs(d_right_m) + m.m_per_tick ** 2 / 6
-    return np.array([(var_l + var_r) / (4 * dt_s ** 2),
-                     (var_l + var_r) / (m.wheel_base_m ** 2 * dt_s ** 2)])
+    out = np.array([(var_l + var_r) / (4 * dt_s ** 2),
+                    (var_l + var_r) / (m.wheel_base_m ** 2 * dt_s ** 2)])
+    if m.sigma_common_per_m > 0:
+        # the common-mode slip moves both wheels alike: in the speed, not in the turn rate
+        out[0] += m.sigma_common_per_m ** 2 * abs(d_left_m + d_right_m) / 2 / dt_s ** 2
+    return out
 
 
 def prior_start(model: BoundModel) -> tuple:
     """A `start` for pcrb_along_path that begins at the prior (the first window of a run)."""
-    return (np.diag(1.0 / np.asarray(model.prior_sigma, dtype=float) ** 2), None, None, None)
+    return (np.diag(1.0 / np.asarray(model.prior_sigma, dtype=float) ** 2), None, None, None, None)
 
 
 def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.ndarray,
                     heard_rx_angles: list[np.ndarray], wheel_left_m: np.ndarray,
                     wheel_right_m: np.ndarray, model: BoundModel, *,
-                    start: tuple | None = None) -> np.ndarray | tuple[np.ndarray, tuple]:
-    """Bound covariance J_k^-1 after each beacon firing k, shape (K, 8, 8).
+                    start: tuple | None = None, event_time_s: np.ndarray | None = None,
+                    fires: np.ndarray | None = None,
+                    bearing_beacons_m: list[np.ndarray] | None = None
+                    ) -> np.ndarray | tuple[np.ndarray, tuple]:
+    """Bound covariance J_k^-1 after each measurement event k, shape (K, 8, 8).
 
-    states: (K, 8) true state at each firing (STATE order, t0 = firing time);
-    beacon_index: (K,) 0-based beacon fired; heard_rx_angles[k]: body angles of the
-    receivers that detected firing k's direct pulse; wheel_*_m: (K,) true cumulative
-    wheel travel at each firing (odometry input between firings).
+    states: (K, 8) true state at each event (STATE order, t0 = the latest firing's time);
+    beacon_index: (K,) 0-based beacon fired at a firing event; heard_rx_angles[k]: body
+    angles of the receivers that detected firing k's direct pulse (empty: none, or not a
+    firing); wheel_*_m: (K,) true cumulative wheel travel at each event (odometry input
+    between events). event_time_s: (K,) time of each event, s (default states[:, IT0]: every
+    event is a firing, the bound as it was before bearings); fires: (K,) the event is a
+    beacon firing (t0 moves on by T into it; default all); bearing_beacons_m[k]: (n, 2)
+    positions of the bearing beacons whose bearing was delivered at event k (default none).
     start: to go on from an earlier call, its returned end (J, state, wheel_left_m,
-    wheel_right_m after its last firing); then returns (covariances, end). Without it
+    wheel_right_m, time after its last event); then returns (covariances, end). Without it
     the recursion starts from the prior.
     """
     K = len(states)
     out = np.empty((K, 8, 8))
+    times = states[:, IT0] if event_time_s is None else np.asarray(event_time_s, dtype=float)
     if start is None:
         J = np.diag(1.0 / np.asarray(model.prior_sigma, dtype=float) ** 2)
         prev = None
@@ -183,12 +218,13 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
     R_one = model.sigma_arrival_s ** 2 + (1e-6) ** 2 / 12
     for k in range(K):
         if k > 0:
-            prev = (states[k - 1], wheel_left_m[k - 1], wheel_right_m[k - 1])
+            prev = (states[k - 1], wheel_left_m[k - 1], wheel_right_m[k - 1], times[k - 1])
+        dt_s = times[k] - prev[3] if prev is not None else 0.0
         if prev is not None:
             F, Q = process_model(prev[0], states[k], wheel_left_m[k] - prev[1],
-                                 wheel_right_m[k] - prev[2],
-                                 states[k, IT0] - prev[0][IT0],
-                                 states[k, IS] - prev[0][IS], model)
+                                 wheel_right_m[k] - prev[2], dt_s,
+                                 states[k, IS] - prev[0][IS], model,
+                                 fires=True if fires is None else bool(fires[k]))
         else:
             F, Q = np.eye(8), np.diag(np.full(8, 1e-20))
         angles = heard_rx_angles[k]
@@ -197,15 +233,22 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
             rows.append(arrival_jacobian(states[k], beacons_m[beacon_index[k]], np.asarray(angles),
                                          model.ring_radius_m, model.rx_height_m))
             variances.append(np.full(len(angles), R_one))
-        if prev is not None:
+        seen = bearing_beacons_m[k] if bearing_beacons_m is not None else None
+        if seen is not None and len(seen):
+            # Vander 2011 eq. 1: d(phi_j)/d(x, y, theta) at the true pose, sensor offset included
+            H_b = np.zeros((len(seen), 8))
+            H_b[:, :3] = bearing_jacobian(states[k, IX], states[k, IY], states[k, ITH], seen,
+                                          model.bearing_offset_m)
+            rows.append(H_b)
+            variances.append(np.full(len(seen), model.sigma_bearing_rad ** 2))
+        if prev is not None and dt_s > 0:
             rows.append(odometry_rows())
             variances.append(odometry_variances(wheel_left_m[k] - prev[1],
-                                                wheel_right_m[k] - prev[2],
-                                                states[k, IT0] - prev[0][IT0], model))
+                                                wheel_right_m[k] - prev[2], dt_s, model))
         H = np.vstack(rows) if rows else None
         R = np.diag(np.concatenate(variances)) if rows else None
         J = info_step(J, F, Q, H, R)
         out[k] = np.linalg.inv(J)
     if start is None:
         return out
-    return out, (J, states[K - 1], wheel_left_m[K - 1], wheel_right_m[K - 1])
+    return out, (J, states[K - 1], wheel_left_m[K - 1], wheel_right_m[K - 1], times[K - 1])

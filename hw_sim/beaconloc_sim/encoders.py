@@ -19,21 +19,36 @@ TICK_WRAP = signal_modulo("WHEEL_ENCODERS", "LeftTicks")
 
 def wheel_rotation_rad(travel_m: np.ndarray, true_radius_m: float, slip_fraction: float,
                        sigma_wheel_per_m: float, rng: np.random.Generator, *,
-                       start_travel_m: float = 0.0, start_rad: float = 0.0) -> np.ndarray:
+                       start_travel_m: float = 0.0, start_rad: float = 0.0,
+                       common_noise_m: np.ndarray | None = None) -> np.ndarray:
     """Cumulative rotation of one wheel at each sample, rad (from start_rad at
     ground travel start_travel_m: a run simulated in windows goes on from its last sample).
 
     A wheel of true radius r rolling a ground distance d turns d / r rad (no slip).
     Slip adds a systematic fraction and a random walk: each sample-to-sample
     increment dd gets noise N(0, sigma^2 * |dd| * 1 m) in ground distance, so the
-    travel error std after 1 m is sigma_wheel_per_m (site [noise]).
+    travel error std after 1 m is sigma_wheel_per_m (site [noise]). common_noise_m: a
+    ground-distance error per increment shared by both wheels (common_slip_m), or None.
     """
     dd = np.diff(travel_m, prepend=start_travel_m)   # travel is counted from t = 0
     noise_m = rng.standard_normal(dd.shape) * sigma_wheel_per_m * np.sqrt(np.abs(dd))
+    if common_noise_m is not None:
+        noise_m = noise_m + common_noise_m
     rolled = np.cumsum(dd * (1.0 + slip_fraction) + noise_m)
     if start_rad != 0.0:
         return start_rad + rolled / true_radius_m
     return rolled / true_radius_m
+
+
+def common_slip_m(travel_l_m: np.ndarray, travel_r_m: np.ndarray, sigma_distance_per_m: float,
+                  rng: np.random.Generator, *, start_l_m: float = 0.0,
+                  start_r_m: float = 0.0) -> np.ndarray:
+    """Common-mode random slip, m per sample increment, the same on both wheels: N(0,
+    sigma_c^2 |ds|) with ds the increment of the mean travel (dL + dR)/2, so the distance
+    error std after 1 m grows by sigma_c while the heading is unaffected (a model of
+    Vander 2011's "1 cm/m in distance" beside its smaller heading drift: docs/simulator.md)."""
+    ds = (np.diff(travel_l_m, prepend=start_l_m) + np.diff(travel_r_m, prepend=start_r_m)) / 2
+    return rng.standard_normal(ds.shape) * sigma_distance_per_m * np.sqrt(np.abs(ds))
 
 
 def ticks(rotation_rad: np.ndarray, ticks_per_rev: int, initial_ticks: int) -> np.ndarray:

@@ -105,6 +105,11 @@ def run_stats(result: SimResult, *, wall_time_s: float, lateness_s: np.ndarray |
         "sim_time_s": float(result.scenario.duration_s),
         "wall_time_s": wall_time_s,
     }
+    if result.scenario.site.bearing_beacon_count:
+        b = result.bearings
+        stats["bearings"] = {"measured": int(len(b.t_s)), "sent": int(np.sum(b.sent)),
+                             "outage": int(np.sum(b.outage)), "occluded": int(np.sum(b.occluded)),
+                             "out_of_range": int(np.sum(b.out_of_range))}
     if lateness_s is not None:
         late_us = np.asarray(lateness_s) * 1e6
         stats["live"] = {

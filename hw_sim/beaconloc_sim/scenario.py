@@ -25,8 +25,14 @@ _KNOWN = {
                   "strong_reflection", "late_arrival_probability", "late_arrival_delay_s",
                   "late_arrival_gain", "double_pulse_tolerance_s", "detector_holdoff_s"},
     "clocks": {"beacon_period_ppm", "first_firing_s", "rx_offset_us", "rx_drift_ppm",
-               "encoder_offset_us", "encoder_drift_ppm", "node_latency_s", "bus_bitrate_bps"},
-    "encoders": {"wheel_radius_bias", "slip_fraction", "sigma_wheel_per_m", "initial_ticks"},
+               "encoder_offset_us", "encoder_drift_ppm", "bearing_offset_us", "bearing_drift_ppm",
+               "node_latency_s", "bus_bitrate_bps"},
+    "encoders": {"wheel_radius_bias", "slip_fraction", "sigma_wheel_per_m", "sigma_distance_per_m",
+                 "initial_ticks"},
+    # the bearing sensor's imperfections (the site gives its sigma and scan rate)
+    "bearings": {"outage_probability", "outage_burst_s", "max_range_m"},
+    # a second robot (the Eurobot opponent): a disc on its own path, occluding bearings
+    "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
     "faults": {"encoder_silence", "kidnap", "beacon_outage", "echo_storm"},
     "output": {"truth_rate_hz", "log_epoch_s", "channel"},
@@ -82,6 +88,17 @@ class Scenario:
     # window use these two instead of the scenario's
     echo_storms: tuple[tuple[float, float, float, float], ...]
     obstacles_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    # the bearing sensor node (nodes/bearing_sensor.py, docs/simulator.md [bearings])
+    bearing_offset_us: int = 987_654_321
+    bearing_drift_ppm: float = 20.0
+    # common-mode random slip of both wheels: ground-distance error std after 1 m of mean
+    # travel, m (adds to the per-wheel sigma_wheel_per_m; 0 = none)
+    sigma_distance_per_m: float = 0.0
+    bearing_outage_probability: tuple[float, ...] = ()   # per bearing beacon, share of scans
+    bearing_outage_burst_s: float = 0.0      # mean outage burst, s (0: independent scans)
+    bearing_max_range_m: float = math.inf    # beacons farther than this are not seen
+    opponent: Trajectory | None = None       # the opponent robot's path (a disc), or None
+    opponent_radius_m: float = 0.0
     # output
     truth_rate_hz: float = 50.0
     log_epoch_s: float = 1_700_000_000.0
@@ -158,7 +175,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
     path = resolve(name_or_path)
     ini = IniFile(path)
     for sec, known in _KNOWN.items():
-        if sec not in ("path", "faults"):
+        if sec not in ("path", "faults", "opponent"):
             ini.check_known(sec, known)
     for sec in ini.parser.sections():
         if sec not in _KNOWN and sec != "obstacles":
@@ -172,21 +189,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
 
     # -- path ----------------------------------------------------------------------
     start = ini.numbers("path", "start", 3)
-    speed = ini.number("path", "speed_mps", 0.4, positive=True, maximum=5.0)
-    turn_rate = math.radians(ini.number("path", "turn_rate_degps", 30.0, positive=True))
-    seg_keys = sorted((k for k in ini.parser.options("path") if k.startswith("segment")),
-                      key=lambda k: int(k[7:]) if k[7:].isdigit() else -1)
-    segments = []
-    for key in seg_keys:
-        if not key[7:].isdigit():
-            raise ini.error("path", key, "segment keys are segment1, segment2, ...")
-        try:
-            segments.append(parse_segment(ini.raw("path", key), speed, turn_rate))
-        except ValueError as exc:
-            raise ini.error("path", key, str(exc)) from None
-    for key in ini.parser.options("path"):
-        if key not in _KNOWN["path"] and not key.startswith("segment"):
-            raise ini.error("path", key, "unknown key")
+    segments = _read_segments(ini, "path")
     fault_keys = _fault_keys(ini)
     kidnaps = []
     for key in fault_keys["kidnap"]:
@@ -225,16 +228,34 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
     if not duration > 0:
         raise ConfigError("--duration must be > 0")
     realization_s = max(duration, ini.number("scenario", "duration_s", positive=True))
-    repeat = ini.raw("path", "repeat", "no").lower()
-    if repeat not in ("yes", "no", "true", "false", "1", "0"):
-        raise ini.error("path", "repeat", f"expected yes or no, got {repeat!r}")
-    if repeat in ("yes", "true", "1") and segments:
-        # the program starts again where it ended, as often as the run needs
-        program_s = sum(seg.duration_s for seg in segments)
-        segments = segments * max(1, math.ceil(realization_s / program_s))
+    segments = _repeated(ini, "path", segments, realization_s)
     trajectory = Trajectory(start[0], start[1], math.radians(start[2]), segments,
                             site.wheel_base_m, kidnaps)
     sc_seed = ini.integer("scenario", "seed", 1, minimum=0) if seed is None else int(seed)
+    opponent, opponent_radius = None, 0.0
+    if ini.has("opponent"):
+        # the opponent: the same path program as [path] (one mechanism), no kidnaps
+        o_start = ini.numbers("opponent", "start", 3)
+        o_segments = _repeated(ini, "opponent", _read_segments(ini, "opponent"), realization_s)
+        opponent = Trajectory(o_start[0], o_start[1], math.radians(o_start[2]), o_segments,
+                              site.wheel_base_m)
+        opponent_radius = ini.number("opponent", "radius_m", 0.2, positive=True, maximum=10.0)
+    n_bb = site.bearing_beacon_count
+    outage_p = ini.numbers("bearings", "outage_probability", default=[0.0])
+    if len(outage_p) not in (1, n_bb) or any(not 0 <= p < 1 for p in outage_p):
+        raise ini.error("bearings", "outage_probability",
+                        f"expected one probability in [0, 1) or one per bearing beacon ({n_bb})")
+    outage_p = tuple(float(p) for p in outage_p) * (n_bb if len(outage_p) == 1 else 1)
+    burst_s = ini.number("bearings", "outage_burst_s", 0.0, minimum=0.0)
+    scan_s = 1.0 / site.bearing_scan_rate_hz if n_bb else 0.0
+    for p in outage_p:
+        # a two-state Markov chain with outage share p and mean burst L scans needs
+        # P(in -> out) = p / (L (1 - p)) <= 1 and L >= 1 (docs/simulator.md, [bearings])
+        if burst_s > 0 and (burst_s < scan_s or p / (1 - p) > burst_s / scan_s):
+            raise ini.error("bearings", "outage_burst_s",
+                            f"a mean burst of {burst_s:g} s cannot give an outage share {p:g} "
+                            f"at {site.bearing_scan_rate_hz:g} scans/s (need >= "
+                            f"{max(scan_s, scan_s * p / (1 - p)):g} s)")
 
     obstacles = []
     if ini.has("obstacles"):
@@ -322,11 +343,55 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         beacon_outages=tuple(sorted(outages)),
         echo_storms=tuple(sorted(storms)),
         obstacles_m=np.array(obstacles, dtype=float).reshape(-1, 4),
+        bearing_offset_us=ini.integer("clocks", "bearing_offset_us", 987_654_321, minimum=0,
+                                      maximum=2**40),
+        bearing_drift_ppm=ini.number("clocks", "bearing_drift_ppm", 20.0, minimum=-1000,
+                                     maximum=1000),
+        sigma_distance_per_m=ini.number("encoders", "sigma_distance_per_m", 0.0, minimum=0),
+        bearing_outage_probability=outage_p,
+        bearing_outage_burst_s=burst_s,
+        bearing_max_range_m=ini.number("bearings", "max_range_m", positive=True)
+        if ini.has("bearings", "max_range_m") else math.inf,
+        opponent=opponent,
+        opponent_radius_m=opponent_radius,
         truth_rate_hz=ini.number("output", "truth_rate_hz", 50.0, positive=True, maximum=1000),
         log_epoch_s=ini.number("output", "log_epoch_s", 1_700_000_000.0, minimum=0),
         channel=ini.raw("output", "channel", "vcan0"),
         realization_s=realization_s,
     )
+
+
+def _read_segments(ini: IniFile, sec: str) -> list:
+    """The path program of section sec ([path], [opponent]): speed_mps, turn_rate_degps and
+    segment1, segment2, ... (docs/simulator.md); any other key is an error."""
+    speed = ini.number(sec, "speed_mps", 0.4, positive=True, maximum=5.0)
+    turn_rate = math.radians(ini.number(sec, "turn_rate_degps", 30.0, positive=True))
+    seg_keys = sorted((k for k in ini.parser.options(sec) if k.startswith("segment")),
+                      key=lambda k: int(k[7:]) if k[7:].isdigit() else -1)
+    segments = []
+    for key in seg_keys:
+        if not key[7:].isdigit():
+            raise ini.error(sec, key, "segment keys are segment1, segment2, ...")
+        try:
+            segments.append(parse_segment(ini.raw(sec, key), speed, turn_rate))
+        except ValueError as exc:
+            raise ini.error(sec, key, str(exc)) from None
+    for key in ini.parser.options(sec):
+        if key not in _KNOWN[sec] and not key.startswith("segment"):
+            raise ini.error(sec, key, "unknown key")
+    return segments
+
+
+def _repeated(ini: IniFile, sec: str, segments: list, realization_s: float) -> list:
+    """The program of sec repeated as often as the run needs when its repeat = yes."""
+    repeat = ini.raw(sec, "repeat", "no").lower()
+    if repeat not in ("yes", "no", "true", "false", "1", "0"):
+        raise ini.error(sec, "repeat", f"expected yes or no, got {repeat!r}")
+    if repeat in ("yes", "true", "1") and segments:
+        # the program starts again where it ended, as often as the run needs
+        program_s = sum(seg.duration_s for seg in segments)
+        segments = segments * max(1, math.ceil(realization_s / program_s))
+    return segments
 
 
 def _fault_keys(ini: IniFile) -> dict[str, list[str]]:

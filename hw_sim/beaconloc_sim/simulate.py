@@ -11,7 +11,8 @@ import numpy as np
 from . import can_out, crb, nodes
 from .bus import FRAME_BITS, Bus, Frames
 from .clocks import NodeClock
-from .nodes import ODOMETRY_COLUMNS, Node, NodeStatus, ReceiverRing, WheelEncoders
+from .nodes import (ODOMETRY_COLUMNS, BearingSensor, Bearings, Node, NodeStatus, ReceiverRing,
+                    WheelEncoders)
 from .path import wrap_angle
 from .physics import acoustics as ac
 from .physics.pulses import KIND_DIRECT, Detections, Firings, make_firings, simulate_detections
@@ -21,8 +22,12 @@ from .scenario import Scenario
 ID_PULSE = ReceiverRing.frame_spec().frame_id
 ID_ENCODERS = WheelEncoders.frame_spec().frame_id
 ID_STATUS = NodeStatus.frame_spec().frame_id
+ID_BEARING = BearingSensor.frame_spec().frame_id
 __all__ = ["FRAME_BITS", "Frames", "ODOMETRY_COLUMNS", "TRUTH_COLUMNS", "SimResult", "run",
-           "run_windows", "wrap_angle", "ID_PULSE", "ID_ENCODERS", "ID_STATUS"]
+           "run_windows", "wrap_angle", "ID_PULSE", "ID_ENCODERS", "ID_STATUS", "ID_BEARING"]
+# child seeds of a run (or of a window): pulses, encoders, latency, firings, bearings. The
+# bearings' is the fifth child, so the first four draw what they drew before it existed.
+_N_SEEDS = 5
 
 TRUTH_COLUMNS = ("t_us", "t_sim_s", "x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "sos_mps",
                  "period_s", "temperature_c", "pcrb_x_m", "pcrb_y_m", "pcrb_pos_m", "pcrb_lateral_m",
@@ -37,9 +42,12 @@ class SimResult:
     odometry: dict[str, np.ndarray]
     firings: Firings
     detections: Detections
-    rx_clock: NodeClock
+    rx_clock: NodeClock               # the truth's time base: the receiver array's clock, or
+                                      # the bearing sensor's on a site without ultrasonic beacons
     encoder_clock: NodeClock
-    pcrb_cov: np.ndarray              # (K, 8, 8) bound after each firing, crb.STATE order
+    pcrb_cov: np.ndarray              # (K, 8, 8) bound after each event, crb.STATE order
+    pcrb_t_s: np.ndarray | None = None   # (K,) true time of each event (firings, bearings), s
+    bearings: Bearings | None = None     # every bearing measured (sent or not, and why not)
 
 
 def run(scn: Scenario, *, encode: bool = True) -> SimResult:
@@ -64,17 +72,19 @@ def _prefix(res: SimResult, scn: Scenario) -> SimResult:
     end_us = res.rx_clock.unwrapped_us(d)
     odometry = {k: v[res.odometry["t_us"] <= end_us] for k, v in res.odometry.items()}
     n_fire = int(np.searchsorted(res.firings.t_s, d, side="right"))
+    n_event = int(np.searchsorted(res.pcrb_t_s, d, side="right"))
     firings = Firings(*(getattr(res.firings, f.name)[:n_fire]
                         for f in dataclasses.fields(Firings)))
     dsel = (res.detections.edge_s <= d) & (res.detections.firing < n_fire)
     det = Detections(*(getattr(res.detections, f.name)[dsel]
                        for f in dataclasses.fields(Detections)))
     return SimResult(scn, frames, truth, odometry, firings, det, res.rx_clock, res.encoder_clock,
-                     res.pcrb_cov[:n_fire])
+                     res.pcrb_cov[:n_event], res.pcrb_t_s[:n_event],
+                     res.bearings.select(res.bearings.t_s <= d))
 
 
 def _run(scn: Scenario, *, encode: bool = True) -> SimResult:
-    seeds = np.random.SeedSequence(scn.seed).spawn(4)
+    seeds = np.random.SeedSequence(scn.seed).spawn(_N_SEEDS)
     return _window(scn, seeds, None, None, encode=encode)[0]
 
 
@@ -84,10 +94,11 @@ class Carry:
     clocks, counters, waiting frames and wheel state), the bus schedule and the bound."""
     ring: ReceiverRing
     wheels: WheelEncoders
+    bearing: BearingSensor | None
     nodes: list[Node]
     bus: Bus
     pcrb: tuple | None                       # crb.pcrb_along_path end
-    last_cov: np.ndarray | None              # bound after the last firing
+    last_cov: np.ndarray | None              # bound after the last event
 
 
 def run_windows(scn: Scenario, window_s: float, *, encode: bool = True):
@@ -108,7 +119,7 @@ def run_windows(scn: Scenario, window_s: float, *, encode: bool = True):
     n = max(1, math.ceil(scn.duration_s / window_s - 1e-9))
     for w in range(n):
         t_a, t_b = w * window_s, min((w + 1) * window_s, scn.duration_s)
-        seeds = np.random.SeedSequence(scn.seed, spawn_key=(w,)).spawn(4)
+        seeds = np.random.SeedSequence(scn.seed, spawn_key=(w,)).spawn(_N_SEEDS)
         result, carry = _window(scn, seeds, (t_a, t_b), carry, encode=encode)
         yield result
 
@@ -116,28 +127,37 @@ def run_windows(scn: Scenario, window_s: float, *, encode: bool = True):
 def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry | None, *,
             encode: bool) -> tuple[SimResult, Carry | None]:
     """The run (win None) or its window win = (t_a, t_b] after carry (None: the first)."""
-    rng_pulse, rng_enc, rng_lat, rng_fire = (np.random.default_rng(s) for s in seeds)
+    rng_pulse, rng_enc, rng_lat, rng_fire, rng_bear = (np.random.default_rng(s) for s in seeds)
     t_a, t_b = win if win is not None else (0.0, scn.duration_s)
     if carry is None:
-        ring, wheels, on_bus = nodes.on_bus(scn)
-        carry = Carry(ring, wheels, on_bus, Bus(scn.bus_bitrate_bps),
+        ring, wheels, bearing, on_bus = nodes.on_bus(scn)
+        carry = Carry(ring, wheels, bearing, on_bus, Bus(scn.bus_bitrate_bps),
                       None if win is None else crb.prior_start(bound_model(scn)), None)
-    rx_clock, enc_clock = carry.ring.clock, carry.wheels.clock
+    enc_clock = carry.wheels.clock
+    # the truth's time base: the receiver array's clock (the estimator's, Kleeman's t0), or
+    # the bearing sensor's on a site of bearing beacons only (no receiver array there)
+    rx_clock = carry.ring.clock if scn.site.beacon_count or carry.bearing is None \
+        else carry.bearing.clock
 
     firings = make_firings(scn, rng_fire, win)
     det = simulate_detections(scn, firings, rng_pulse)
-    iv = nodes.Interval(scn, t_a, t_b, firings, det, rng_latency=rng_lat, rng_wheels=rng_enc)
+    iv = nodes.Interval(scn, t_a, t_b, firings, det, rng_latency=rng_lat, rng_wheels=rng_enc,
+                        rng_bearings=rng_bear)
     # a window sends what is ready before its end; the rest waits in its node for the next one
     until_s = t_b if win is not None else math.inf
     frames = carry.bus.transmit([node.release(iv, until_s) for node in carry.nodes], until_s)
     if encode:
         frames.data = can_out.encode_all(frames)
 
+    measured = carry.bearing.measured if carry.bearing is not None else Bearings.empty()
+    seen = carry.bearing.bound_events(t_b if win is not None else math.inf) \
+        if carry.bearing is not None else Bearings.empty()
     truth = _truth(scn, rx_clock, win)
-    pcrb_cov, pcrb_end = _pcrb(scn, firings, det, rx_clock, carry.pcrb)
-    _attach_bound(truth, firings, pcrb_cov, scn, carry.last_cov)
+    pcrb_t, pcrb_cov, pcrb_end = _pcrb(scn, firings, det, seen, rx_clock, carry.pcrb)
+    _attach_bound(truth, pcrb_t, pcrb_cov, scn, carry.last_cov)
     odometry = carry.wheels.odometry(rx_clock)
-    result = SimResult(scn, frames, truth, odometry, firings, det, rx_clock, enc_clock, pcrb_cov)
+    result = SimResult(scn, frames, truth, odometry, firings, det, rx_clock, enc_clock, pcrb_cov,
+                       pcrb_t, measured)
     if win is None:
         return result, None
     carry.pcrb = pcrb_end
@@ -175,40 +195,68 @@ def bound_model(scn: Scenario) -> crb.BoundModel:
         wheel_base_m=site.wheel_base_m, ring_radius_m=site.ring_radius_m,
         rx_height_m=site.rx_height_m,
         m_per_tick=2 * math.pi * site.wheel_radius_m / site.ticks_per_rev,
-        prior_sigma=(1.0, 1.0, 0.5, 0.5, 0.5, site.sigma_speed_of_sound_mps, 1e-4, 0.1))
+        prior_sigma=(1.0, 1.0, 0.5, 0.5, 0.5, site.sigma_speed_of_sound_mps, 1e-4, 0.1),
+        sigma_bearing_rad=site.sigma_bearing_rad,
+        bearing_offset_m=tuple(float(v) for v in site.bearing_offset_m),
+        sigma_common_per_m=scn.sigma_distance_per_m)
 
 
-def _pcrb(scn: Scenario, firings: Firings, det: Detections, rx_clock: NodeClock,
-          start: tuple | None = None) -> tuple[np.ndarray, tuple | None]:
-    """Bound after each firing, with the receivers that really detected its direct pulse;
-    and the recursion's end (crb.pcrb_along_path) to go on from in the next window."""
-    k = len(firings.t_s)
-    if k == 0:
-        return np.zeros((0, 8, 8)), start
-    st = scn.trajectory.state(firings.t_s)
+def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
+          clock: NodeClock, start: tuple | None = None
+          ) -> tuple[np.ndarray, np.ndarray, tuple | None]:
+    """Bound after each measurement event: each firing with the receivers that really
+    detected its direct pulse, each instant with bearings delivered (seen), in time order;
+    the event times (true, s) and the recursion's end (crb.pcrb_along_path) to go on from in
+    the next window. clock: the time base (event times and t0 on it)."""
+    if len(firings.t_s) + len(seen.t_s) == 0:
+        return np.zeros(0), np.zeros((0, 8, 8)), start
+    # events: the distinct instants of firings and bearings (a non-rotating sensor's scan
+    # is one event); without bearings exactly the firings
+    t_ev = np.unique(np.concatenate([firings.t_s, seen.t_s])) if len(seen.t_s) else firings.t_s
+    k = len(t_ev)
+    fire_ev = np.searchsorted(t_ev, firings.t_s)           # event of each firing
+    is_fire = np.zeros(k, dtype=bool)
+    is_fire[fire_ev] = True
+    st = scn.trajectory.state(t_ev)
     period_rx = scn.true_period_s * (1.0 + scn.rx_drift_ppm * 1e-6)
+    t_time = clock.unwrapped_us(t_ev) * 1e-6
+    sos = np.empty(k)
+    sos[fire_ev] = firings.sos_mps
+    sos[~is_fire] = ac.speed_of_sound_mps(scn.temperature_c(t_ev[~is_fire]))
+    # t0: the latest firing's time on the clock (Kleeman's t0; the event's own before any)
+    last_fire = np.maximum.accumulate(np.where(is_fire, np.arange(k), -1))
+    t0 = np.where(last_fire >= 0, t_time[np.maximum(last_fire, 0)], t_time)
     states = np.column_stack([st["x_m"], st["y_m"], st["theta_rad"], st["v_mps"], st["omega_radps"],
-                              firings.sos_mps, np.full(k, period_rx),
-                              rx_clock.unwrapped_us(firings.t_s) * 1e-6])
+                              sos, np.full(k, period_rx), t0])
     direct = (det.kind == KIND_DIRECT) & (det.burst == 1)
     angles = scn.site.receiver_angles_rad()
     heard = [[] for _ in range(k)]
     for f, r in zip(det.firing[direct].tolist(), det.receiver[direct].tolist()):
-        heard[f].append(angles[r])
-    wl, wr = scn.trajectory.wheel_travel(firings.t_s)
-    args = (states, scn.site.beacons_m, firings.beacon, [np.array(h) for h in heard], wl, wr,
+        heard[fire_ev[f]].append(angles[r])
+    beacon = np.zeros(k, dtype=np.int64)
+    beacon[fire_ev] = firings.beacon
+    bearing_rows = None
+    if len(seen.t_s):
+        bearing_rows = [[] for _ in range(k)]
+        for e, j in zip(np.searchsorted(t_ev, seen.t_s).tolist(), seen.beacon.tolist()):
+            bearing_rows[e].append(scn.site.bearing_beacons_m[j])
+        bearing_rows = [np.array(r).reshape(-1, 2) for r in bearing_rows]
+    wl, wr = scn.trajectory.wheel_travel(t_ev)
+    args = (states, scn.site.beacons_m, beacon, [np.array(h) for h in heard], wl, wr,
             bound_model(scn))
+    kw = dict(event_time_s=t_time, fires=is_fire, bearing_beacons_m=bearing_rows)
     if start is None:
-        return crb.pcrb_along_path(*args), None
-    return crb.pcrb_along_path(*args, start=start)
+        return t_ev, crb.pcrb_along_path(*args, **kw), None
+    cov, end = crb.pcrb_along_path(*args, start=start, **kw)
+    return t_ev, cov, end
 
 
-def _attach_bound(truth, firings: Firings, cov: np.ndarray, scn: Scenario,
+def _attach_bound(truth, event_t_s: np.ndarray, cov: np.ndarray, scn: Scenario,
                   before: np.ndarray | None = None) -> None:
-    """Bound at each truth row: the posterior bound after the latest firing (before the
-    first: the bound `before` it, from an earlier window, or the prior)."""
+    """Bound at each truth row: the posterior bound after the latest measurement event
+    (before the first: the bound `before` it, from an earlier window, or the prior)."""
     t = truth["t_sim_s"]
-    i = np.searchsorted(firings.t_s, t, side="right") - 1
+    i = np.searchsorted(event_t_s, t, side="right") - 1
     prior = bound_model(scn).prior_sigma
     ix, iy, isos = crb.IX, crb.IY, crb.IS
 

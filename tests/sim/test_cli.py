@@ -131,3 +131,40 @@ def test_live_spin_out_of_range_is_a_usage_error(spin_ms, capsys):
     assert cli.main(["run", "kleeman-lab", "--duration", "1", "--channel", "vcan0",
                      "--spin-ms", spin_ms]) == 64
     assert "--spin-ms" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("window", [None, "4"])
+def test_run_eurobot_writes_a_candump_log_of_bearing_frames_and_the_bound(tmp_path, window):
+    """The bearing-only site through the command: every frame of the log decodes with cantools
+    from the DBC, the bearing counters roll modulo 16, the truth carries the bound."""
+    import cantools
+    from beaconloc_sim.resources import dbc_path
+    out = {k: tmp_path / f"{k}" for k in ("log", "truth", "odo", "stats")}
+    args = [str(BIN), "run", "eurobot", "--log", str(out["log"]), "--truth", str(out["truth"]),
+            "--odometry", str(out["odo"]), "--stats", str(out["stats"])]
+    proc = subprocess.run(args + (["--window", window] if window else []), capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    db = cantools.database.load_file(str(dbc_path()))
+    msgs = list(can.CanutilsLogReader(str(out["log"])))
+    decoded = [(m.arbitration_id, db.decode_message(m.arbitration_id, m.data)) for m in msgs]
+    bearing = [s for fid, s in decoded if fid == 0x140]
+    stats = json.loads(out["stats"].read_text())
+    # 121 scans (the node's clock is at a multiple of the 0.1 s scan period at t = 0), none lost
+    assert len(bearing) == stats["frames"]["0x140"]
+    assert stats["bearings"]["sent"] == stats["bearings"]["measured"] == 3 * 121
+    # the last scan's frames are ready just before 12 s: a windowed run does not send those
+    # that have not started by then
+    if window is None:
+        assert len(bearing) == 3 * 121
+    else:
+        assert 3 * 120 <= len(bearing) < 3 * 121
+    assert stats["frames"]["0x100"] == 0
+    assert np.all(np.diff([s["Counter"] for s in bearing]) % 16 == 1)
+    assert {s["Beacon"] for s in bearing} == {1, 2, 3}
+    with open(out["truth"]) as fh:
+        rows = list(csv.reader(fh))
+    truth = np.array(rows[1:], dtype=float)
+    assert rows[0] == TRUTH_HEADER and len(truth) == 12 * 50 + 1
+    assert np.all(np.diff(truth[:, 0]) > 0) and truth[:, 0].max() > 2**32   # bearing clock wraps
+    assert np.all(truth[:, 12] > 0) and truth[-1, 12] < 0.01

@@ -27,7 +27,12 @@ def test_builtin_scenarios_all_load():
         assert required in names
     for name in names:
         scn = load_scenario(name)
-        assert scn.duration_s == 120 and scn.site.beacon_count == 6
+        if scn.site.name == "eurobot":       # Vander 2011: the Eurobot table, bearings only
+            assert scn.duration_s == 12 and scn.site.beacon_count == 0
+            assert scn.site.bearing_beacon_count == 3
+        else:
+            assert scn.duration_s == 120 and scn.site.beacon_count == 6
+    assert {"eurobot", "eurobot-outage20", "eurobot-outage50", "eurobot-opponent"} <= set(names)
 
 
 def test_bad_site_number_names_file_line_key(make_scenario, tmp_path):

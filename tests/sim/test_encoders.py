@@ -104,3 +104,29 @@ def test_slip_noise_grows_with_distance(make_scenario):
     spread = np.std(ends)
     # each wheel's travel std after 5 m is 0.02 * sqrt(5) = 45 mm; the mean of two ~ 32 mm
     assert 0.01 < spread < 0.08
+
+
+def test_eurobot_wheel_noise_gives_vanders_odometry_figures():
+    """eurobot.ini's mapping of Vander 2011 (under Fig. 7): over a 1 m straight the distance
+    error std is 1 cm (per-wheel and common-mode slip together) and the heading drift 1 deg
+    (per-wheel slip only); the bound's wheel covariance (crb.wheel_covariance) is the
+    covariance of the simulated wheel increments."""
+    from beaconloc_sim import crb
+    from beaconloc_sim.encoders import common_slip_m, wheel_rotation_rad
+    sigma_w, sigma_c, b, r = 0.0033, 0.0097, 0.25, 0.035
+    rng = np.random.default_rng(11)
+    travel = np.linspace(0.0, 1.0, 101)
+    n = 4000
+    d_l, d_r = np.empty(n), np.empty(n)
+    for i in range(n):
+        common = common_slip_m(travel, travel, sigma_c, rng)
+        d_l[i] = wheel_rotation_rad(travel, r, 0.0, sigma_w, rng, common_noise_m=common)[-1] * r
+        d_r[i] = wheel_rotation_rad(travel, r, 0.0, sigma_w, rng, common_noise_m=common)[-1] * r
+    dist_err = (d_l + d_r) / 2 - 1.0
+    heading_err = (d_r - d_l) / b
+    assert np.std(dist_err) == pytest.approx(0.010, rel=0.05)                # 1 cm/m
+    assert np.degrees(np.std(heading_err)) == pytest.approx(1.07, rel=0.05)  # 1 deg/m
+    model = crb.BoundModel(sigma_arrival_s=2e-4, sigma_wheel_per_m=sigma_w, wheel_base_m=b,
+                           ring_radius_m=0.1, rx_height_m=0.3, m_per_tick=0.0,
+                           sigma_common_per_m=sigma_c)
+    assert np.cov(d_l, d_r) == pytest.approx(crb.wheel_covariance(1.0, 1.0, model), rel=0.08)

@@ -10,18 +10,28 @@ from __future__ import annotations
 from ..clocks import NodeClock
 from ..scenario import Scenario
 from .base import Interval, Node
+from .bearing_sensor import BearingSensor, Bearings
 from .node_status import NodeStatus
 from .receiver_ring import ReceiverRing
 from .wheel_encoders import ODOMETRY_COLUMNS, WheelEncoders
 
-__all__ = ["Interval", "Node", "NodeStatus", "ReceiverRing", "WheelEncoders", "ODOMETRY_COLUMNS",
-           "on_bus"]
+__all__ = ["Interval", "Node", "NodeStatus", "ReceiverRing", "WheelEncoders", "BearingSensor",
+           "Bearings", "ODOMETRY_COLUMNS", "on_bus"]
 
 
-def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, list[Node]]:
-    """The receiver ring, the wheel encoders and every node in bus order (each sensor
-    node, then their status frames), with their clocks."""
+def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | None, list[Node]]:
+    """The receiver ring, the wheel encoders, the bearing sensor (None on a site without
+    bearing beacons) and every node in bus order with their clocks: the receiver ring and
+    the wheel encoders, their status frames, then the bearing sensor and its status frame
+    (appended, so a site without bearing beacons has the frames it had before it existed).
+    A site without ultrasonic beacons has no receiver ring on the bus (its clock still
+    exists: nothing reads it there)."""
     ring = ReceiverRing(NodeClock(scn.rx_offset_us, scn.rx_drift_ppm))
     wheels = WheelEncoders(NodeClock(scn.encoder_offset_us, scn.encoder_drift_ppm), scn)
-    sensors: list[Node] = [ring, wheels]
-    return ring, wheels, sensors + [NodeStatus(n) for n in sensors]
+    sensors: list[Node] = [ring, wheels] if scn.site.beacon_count else [wheels]
+    nodes = sensors + [NodeStatus(n) for n in sensors]
+    bearing = None
+    if scn.site.bearing_beacon_count:
+        bearing = BearingSensor(NodeClock(scn.bearing_offset_us, scn.bearing_drift_ppm), scn)
+        nodes += [bearing, NodeStatus(bearing)]
+    return ring, wheels, bearing, nodes

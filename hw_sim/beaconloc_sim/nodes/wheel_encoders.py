@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..clocks import WRAP_US, NodeClock
-from ..encoders import TICK_WRAP, dead_reckoning, ticks, wheel_rotation_rad
+from ..encoders import TICK_WRAP, common_slip_m, dead_reckoning, ticks, wheel_rotation_rad
 from ..path import wrap_angle
 from .base import Interval, Node
 
@@ -35,12 +35,17 @@ class WheelEncoders(Node):
         enc_us = self.periodic_us(iv, int(round(1e6 / site.encoder_rate_hz)))
         t_enc = self.clock.true_time_s(enc_us)
         travel_l, travel_r = scn.trajectory.wheel_travel(t_enc)
+        common = None          # drawn only when the scenario has it (the others draw as before)
+        if scn.sigma_distance_per_m > 0:
+            common = common_slip_m(travel_l, travel_r, scn.sigma_distance_per_m, iv.rng_wheels,
+                                   start_l_m=self.travel_m[0], start_r_m=self.travel_m[1])
         rotation = []
         for side, travel in enumerate((travel_l, travel_r)):
             r_true = site.wheel_radius_m * (1.0 + scn.wheel_radius_bias[side])
             rotation.append(wheel_rotation_rad(
                 travel, r_true, scn.slip_fraction[side], scn.sigma_wheel_per_m, iv.rng_wheels,
-                start_travel_m=self.travel_m[side], start_rad=self.rotation_rad[side]))
+                start_travel_m=self.travel_m[side], start_rad=self.rotation_rad[side],
+                common_noise_m=common))
         ticks_l = ticks(rotation[0], site.ticks_per_rev, scn.initial_ticks[0])
         ticks_r = ticks(rotation[1], site.ticks_per_rev, scn.initial_ticks[1])
         if len(t_enc):

@@ -53,6 +53,10 @@ def make_firings(scn, rng: np.random.Generator,
     with t_a < t <= t_b, numbered from the start of the run (beacon k mod N + 1)."""
     site = scn.site
     period = scn.true_period_s
+    if site.beacon_count == 0:          # a site of bearing beacons only: nothing fires
+        e = np.zeros(0)
+        return Firings(e, np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0, bool),
+                       np.zeros(0, bool), e, e, e)
     if window_s is None:
         k = np.arange(firings_until(scn, scn.duration_s))
     else:
@@ -75,6 +79,9 @@ def make_firings(scn, rng: np.random.Generator,
 
 def simulate_detections(scn, firings: Firings, rng: np.random.Generator) -> Detections:
     site = scn.site
+    if site.beacon_count == 0:          # a site of bearing beacons only: nothing to hear
+        z, zi, zb = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, bool)
+        return Detections(z, z, zi, z, z, zb, zi, zi, zi, zb)
     room = (site.room_x_m, site.room_y_m, site.room_z_m)
     rx_ang = site.receiver_angles_rad()
     n_rx, n_src = site.rx_count, 7
