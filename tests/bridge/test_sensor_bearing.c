@@ -120,6 +120,29 @@ static void test_counter_gaps_and_late_frames(void **state)
     assert_int_equal(c.duplicates[FRAME_BEARING], 1);
 }
 
+/* The bearing sensor's NODE_STATUS (NodeId 3): decoded, its rolling counter
+ * followed on a track of its own (node 1's counter does not make it lost). */
+static void test_node_status_of_node_3(void **state)
+{
+    (void)state;
+    struct frame_counters c;
+    frame_counters_init(&c);
+    struct frame f;
+    for (uint8_t node = 1; node <= 3; node += 2)
+        for (uint8_t k = 0; k < 3; k++) {
+            struct beaconloc_can_node_status_t st = {
+                .node_id = node, .counter = (uint8_t)(k + 4 * node), .uptime = 10u + k,
+            };
+            struct can_msg m = { .id = BEACONLOC_CAN_NODE_STATUS_FRAME_ID, .len = 8 };
+            assert_int_equal(beaconloc_can_node_status_pack(m.data, &st, 8), 8);
+            assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
+            assert_int_equal(f.u.status.node_id, node);
+        }
+    assert_int_equal(c.received[FRAME_STATUS], 6);
+    assert_int_equal(c.lost[FRAME_STATUS], 0);
+    assert_true(c.track[FRAME_STATUS][3].seen && c.track[FRAME_STATUS][3].last == 14);
+}
+
 /* ---- the estimator path ----------------------------------------------- */
 
 /* Vander et al. 2011 Fig. 1: the Eurobot table, 3 m x 2.1 m. */
@@ -379,6 +402,7 @@ int main(void)
         cmocka_unit_test(test_good_frame_decodes),
         cmocka_unit_test(test_beacon_zero_out_of_range),
         cmocka_unit_test(test_counter_gaps_and_late_frames),
+        cmocka_unit_test(test_node_status_of_node_3),
         cmocka_unit_test_setup(test_bearing_only_run_near_truth, setup),
         cmocka_unit_test_setup(test_bad_bearings_counted_and_dropped, setup),
         cmocka_unit_test_setup(test_unexpected_kinds, setup),
