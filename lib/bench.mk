@@ -1,7 +1,8 @@
 # lib/bench.mk — make bench-speed: ns per pulse fusion / predict (double and
 # float), callgrind instructions per fusion, FilterPy's EKF update as the
-# reference, in one run (lib/bench/run_speed.py). Last line:
-#   speed fuse_pulse_ns=<n> predict_ns=<n> fuse_pulse_instr=<n> filterpy_ratio=<r>
+# reference, ns per bearing triangulation (3 beacons closed form, 4 beacons
+# least squares), in one run (lib/bench/run_speed.py). Last line:
+#   speed fuse_pulse_ns=<n> predict_ns=<n> fuse_pulse_instr=<n> filterpy_ratio=<r> triangulate3_ns=<n> triangulateN_ns=<n>
 
 BENCH_DIR    := $(BUILD)/bench
 BENCH_CFLAGS := -std=c11 -O2 -Wall -Wextra -Werror -Ilib/include

@@ -16,11 +16,18 @@
  *   --dump FILE   write, per fused pulse of an extra untimed pass, the filter's prior
  *                 (state, covariance, pulse geometry) for the FilterPy run
  *   --no-timing   one rep, no timing (for valgrind --tool=callgrind)
- * Also times the beacon sequencer (push + pop per detection, batch-timed).
+ * Also times the beacon sequencer (push + pop per detection, batch-timed)
+ * and the bearing triangulation (solver.h): bl_solve_bearings_3 on Vander
+ * et al. 2011's three beacons and bl_solve_bearings on those plus a fourth
+ * at (1.5, 2.1) m, 1000 random poses on the 3 m x 2.1 m table with σφ = 1°
+ * noise (the fixes each solver accepts in an untimed pass, checked against
+ * the truth), batch-timed: ns per call = one pass over the problems / their
+ * number, the median over --reps passes.
  * Output: human-readable lines, last line
  *   bench_speed real=<double|float> fuse_pulse_ns=<median> predict_ns=<median>
  *               fuse_calls=<n> predict_calls=<n> accepted=<n> rejected=<n>
  *               rms_xy_m=<rms position error over the second half>
+ *               triangulate3_ns=<median> triangulateN_ns=<median, N = 4>
  */
 #define _POSIX_C_SOURCE 200809L
 #include <math.h>
@@ -33,6 +40,7 @@
 #include "beaconloc/config.h"
 #include "beaconloc/filter.h"
 #include "beaconloc/sequencer.h"
+#include "beaconloc/solver.h"
 
 #define PI_RAD 3.14159265358979323846
 #define SOUND_MPS 343.0        /* true speed of sound (m/s) */
@@ -163,6 +171,61 @@ static void die(const char *what, int rc)
 {
     fprintf(stderr, "bench_speed: %s: %s\n", what, bl_strerror(rc));
     exit(1);
+}
+
+/* ---- bearing triangulation (solver.h) ---- */
+#define TRI_PROBLEMS 1000
+
+/* ns per call of solve (median over reps passes) on the problems it
+ * accepts; *accepted_out their number, *ratio_out the rms of
+ * error / drms over them (about 1 when the covariance is right). */
+static int64_t time_triangulation(int (*solve)(const bl_bearing_problem *, bl_bearing_solution *), uint32_t n_beacons,
+                                  int reps, size_t *accepted_out, double *ratio_out)
+{
+    static const double beacons[4][2] = {{3.0, 2.1}, {0.0, 1.05}, {3.0, 0.0}, {1.5, 2.1}};
+    static bl_bearing_problem probs[TRI_PROBLEMS];
+    size_t n = 0;
+    double r2 = 0;
+    for (int k = 0; k < TRI_PROBLEMS; ++k) {
+        const double x = 3.0 * uniform01(), y = 2.1 * uniform01(), th = PI_RAD * (2.0 * uniform01() - 1.0);
+        const double ox = 0.05, oy = 0.0;
+        const double xs = x + cos(th) * ox - sin(th) * oy, ys = y + sin(th) * ox + cos(th) * oy;
+        bl_bearing_problem *p = &probs[n];
+        memset(p, 0, sizeof *p);
+        p->count = n_beacons;
+        p->sensor_x_m = (bl_real)ox;
+        p->sensor_y_m = (bl_real)oy;
+        for (uint32_t j = 0; j < n_beacons; ++j) {
+            p->beacons[j].x_m = (bl_real)beacons[j][0];
+            p->beacons[j].y_m = (bl_real)beacons[j][1];
+            p->bearing_rad[j] =
+                (bl_real)(atan2(beacons[j][1] - ys, beacons[j][0] - xs) - th + PI_RAD / 180.0 * gauss());
+            p->sigma_rad[j] = (bl_real)(PI_RAD / 180.0);
+        }
+        bl_bearing_solution sol;
+        if (solve(p, &sol) != BL_OK) continue;
+        const double e2 = ((double)sol.x_m - x) * ((double)sol.x_m - x) + ((double)sol.y_m - y) * ((double)sol.y_m - y);
+        r2 += e2 / ((double)sol.drms_m * (double)sol.drms_m);
+        ++n;
+    }
+    int64_t *pass_ns = calloc((size_t)reps, sizeof(int64_t));
+    if (pass_ns == NULL || n == 0) die("triangulation", BL_EFULL);
+    volatile double sink = 0;
+    for (int r = 0; r < reps; ++r) {
+        double acc = 0;
+        const int64_t a = now_ns();
+        for (size_t k = 0; k < n; ++k) {
+            bl_bearing_solution sol;
+            if (solve(&probs[k], &sol) == BL_OK) acc += (double)sol.x_m;
+        }
+        pass_ns[r] = (now_ns() - a) / (int64_t)n;
+        sink = sink + acc;
+    }
+    const int64_t med = median(pass_ns, (size_t)reps);
+    free(pass_ns);
+    *accepted_out = n;
+    *ratio_out = sqrt(r2 / (double)n);
+    return med;
 }
 
 int main(int argc, char **argv)
@@ -342,6 +405,16 @@ int main(int argc, char **argv)
         printf("%s: sequencer push+pop %lld ns per detection (%zu detections, 3 receivers per pulse)\n", real_name_of(),
                (long long)seq_ns_per_det, seq_dets);
     }
+    int64_t tri3_ns = 0, triN_ns = 0;
+    if (timing) {
+        size_t n3 = 0, nN = 0;
+        double ratio3 = 0, ratioN = 0;
+        tri3_ns = time_triangulation(bl_solve_bearings_3, 3, reps, &n3, &ratio3);
+        triN_ns = time_triangulation(bl_solve_bearings, 4, reps, &nN, &ratioN);
+        printf("%s: bl_solve_bearings_3 %lld ns per call (%zu of %d table poses accepted, rms error/drms %.2f); "
+               "bl_solve_bearings N=4 %lld ns (%zu accepted, rms error/drms %.2f)\n",
+               real_name_of(), (long long)tri3_ns, n3, TRI_PROBLEMS, ratio3, (long long)triN_ns, nN, ratioN);
+    }
     const char *real_name = real_name_of();
     const int64_t fuse_med = timing ? median(fuse_ns, nf) : 0;
     const int64_t pred_med = timing ? median(pred_ns, np) : 0;
@@ -354,9 +427,9 @@ int main(int argc, char **argv)
             (long long)timer_ns);
     }
     printf("bench_speed real=%s fuse_pulse_ns=%lld predict_ns=%lld fuse_calls=%zu predict_calls=%zu accepted=%u "
-           "rejected=%u rms_xy_m=%.4f\n",
+           "rejected=%u rms_xy_m=%.4f triangulate3_ns=%lld triangulateN_ns=%lld\n",
            real_name, (long long)fuse_med, (long long)pred_med, n_pulses * (size_t)reps, n_enc * (size_t)reps, accepted,
-           rejected, n_err ? sqrt(err2 / (double)n_err) : -1.0);
+           rejected, n_err ? sqrt(err2 / (double)n_err) : -1.0, (long long)tri3_ns, (long long)triN_ns);
     free(ev);
     free(fuse_ns);
     free(pred_ns);

@@ -178,8 +178,7 @@ extern "C" int bl_model_bearing(const bl_config *cfg, const bl_real x[BL_FILTER_
                                 bl_real dt_s, bl_real *h_rad, bl_real H[BL_FILTER_NX])
 {
     if (cfg == nullptr || x == nullptr || h_rad == nullptr) return BL_EINVAL;
-    if (bearing_beacon_index >= cfg->bearing_beacon_count || bearing_beacon_index >= BL_MAX_BEACONS)
-        return BL_EBEACON;
+    if (bearing_beacon_index >= cfg->bearing_beacon_count || bearing_beacon_index >= BL_MAX_BEACONS) return BL_EBEACON;
     if (!all_finite(x, NX) || !is_finite(dt_s)) return BL_EINVAL;
     real h;
     RX J;

@@ -57,6 +57,10 @@ void store_symmetric(const real up[kUpper], MX &P);
 //       (e.g. s > 0);
 //   int unit_state() const:  i when the measurement is state i itself
 //       (H = e_i always: P Hᵀ is P's column i), else -1.
+// An angle measurement (a bearing, aid_bearing.cpp) returns from measure()
+// the branch of h nearest z, z - wrap(z - h): every innovation formed here
+// (the gate's and each IEKF iteration's) is then the wrapped one, in
+// (-π, π], with no change to this step or to the other sources.
 // In this order:
 //   innovation ν = z - h(x̄) and its variance S = H P Hᵀ + R (Kleeman 1992
 //   eq. 7 and eq. 9's bracket); the test ratio |ν| / (gate·√S) against the

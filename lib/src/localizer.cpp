@@ -186,14 +186,18 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     uint32_t mask = 0;
     const uint32_t n = window_rejected(loc, &mask);
     const bl_config &cfg = loc->filter.cfg_;
+    // At least min(3, N) beacons rejected (one faulty beacon restarts
+    // nothing); with bearing beacons min(3, N - 1): a kidnap along one
+    // beacon's line of sight leaves its bearing unchanged (3 bearing beacons: 2).
     const uint32_t n_beacons = cfg.beacon_count + cfg.bearing_beacon_count;
-    const int need = static_cast<int>(n_beacons < 3 ? n_beacons : 3);
+    const uint32_t cap = cfg.bearing_beacon_count > 0 ? n_beacons - 1 : n_beacons;
+    const int need = static_cast<int>(cap < 3 ? cap : 3);
     if (n < loc->reject_k_ || __builtin_popcount(mask) < need) return false;
-    bl_real x[BL_FILTER_NX];
-    if (bl_filter_get_state(&loc->filter, x, nullptr) != BL_OK) return false;
+    if (!bl::started(&loc->filter)) return false;
+    // The heading kept (read in place: no state copy on this, the deepest, chain).
+    const bl_real theta = bl::wrap_angle(loc->filter.x_[BL_IX_THETA]);
     int rc = BL_EDEGENERATE;
-    if (cfg.beacon_count > 0)
-        rc = bl_filter_start_snapshot(&loc->filter, bl::wrap_angle(x[BL_IX_THETA]), cfg.reset_sigma_theta_rad);
+    if (cfg.beacon_count > 0) rc = bl_filter_start_snapshot(&loc->filter, theta, cfg.reset_sigma_theta_rad);
     if (rc != BL_OK && cfg.bearing_beacon_count > 0) rc = bl_filter_start_bearings(&loc->filter);
     clear_window(loc);
     if (rc != BL_OK) {
@@ -315,7 +319,7 @@ NOINLINE void after_update(bl_localizer *loc, bool pulse)
     }
     if (!converged) {
         clear_hint(loc);
-    } else if (pulse || !loc->hint_set_) {
+    } else if (has_sequencer(loc) && (pulse || !loc->hint_set_)) {  // no estimate for a site without one
         bl_estimate est;
         if (bl_filter_estimate(f, &est) == BL_OK) update_hint(loc, est);
     }

@@ -36,21 +36,30 @@ using Mat3 = bl::Mat<3, 3>;
 
 constexpr uint32_t kMaxIterations = 20;
 constexpr real kDefaultMaxDrms_m = real(0.5);
-// A fix whose sensor lies closer than kCircleGuard·drms (sensor position)
-// to the circle through the three beacons is refused (N = 3): there the
-// circle is inside the error ellipse, the first-order covariance no longer
-// describes the error and the fix may lie on the wrong side of the circle.
-constexpr real kCircleGuard = real(3);
+// A fix whose sensor-position drms exceeds kLinearity times the distance
+// to the nearest beacon is refused: the error then reaches across the
+// curvature of the bearings (atan2 is far from its tangent over the error
+// ellipse) and the first-order covariance no longer describes the error.
+// Near the degenerate circle this is what catches a fix that slid along
+// the circle (measured: tests/lib/test_solver_bearing.c, the grid across
+// the circle).
+constexpr real kLinearity = real(0.5);
+// An exactly determined fix (N = 3) must reproduce its bearings to within
+// kConsistency·sigma_j (rounding only); else it is refused.
 #if defined(BL_USE_FLOAT) && BL_USE_FLOAT
 constexpr real kMinCondition = real(1e-4);
-constexpr real kStepTol = real(1e-5);   // Gauss-Newton step (m and rad)
-constexpr real kCotMax = real(1e5);     // ToTal's clamp of an infinite cot
+constexpr real kStepTol = real(1e-5);     // Gauss-Newton step (m and rad), or
+constexpr real kStepRel = real(1e-3);     // this fraction of its σ (float rounding)
+constexpr real kCotMax = real(1e5);       // ToTal's clamp of an infinite cot
 constexpr real kCoincident = real(1e-5);  // relative beacon separation
+constexpr real kConsistency = real(1e-2);
 #else
 constexpr real kMinCondition = real(1e-6);
 constexpr real kStepTol = real(1e-9);
+constexpr real kStepRel = real(0);
 constexpr real kCotMax = real(1e8);  // Pierlot & Van Droogenbroeck 2014 §IV: ±1e8
 constexpr real kCoincident = real(1e-9);
+constexpr real kConsistency = real(1e-4);
 #endif
 
 bool problem_valid(const bl_bearing_problem *p)
@@ -111,8 +120,7 @@ bool coincident(const bl_bearing_problem *p, uint32_t i, uint32_t j, uint32_t k)
 // ToTal (Pierlot & Van Droogenbroeck 2014, Algorithm 1), beacons i, j, k in
 // the roles B1, B2, B3 (B2 the origin of the modified coordinates). Sensor
 // position (m); false when D = 0 or anything is not finite.
-bool total(const bl_bearing_problem *p, const Bearings &b, uint32_t i, uint32_t j, uint32_t k, real &xs,
-           real &ys)
+bool total(const bl_bearing_problem *p, const Bearings &b, uint32_t i, uint32_t j, uint32_t k, real &xs, real &ys)
 {
     const real x2 = p->beacons[j].x_m, y2 = p->beacons[j].y_m;
     // Step 1, modified beacon coordinates: x'1 = x1 - x2, y'1 = y1 - y2,
@@ -148,29 +156,41 @@ bool total(const bl_bearing_problem *p, const Bearings &b, uint32_t i, uint32_t 
     return is_finite(xs) && is_finite(ys);
 }
 
-// Heading from the sensor position: theta_j = angle(b_j - s) - phi_j for
-// each beacon, combined as the circular mean weighted by 1/sigma_j²
-// (exactly determined N = 3: all theta_j agree). Returns the mean's unit
-// vector (cos theta, sin theta); false if undefined (sensor on a beacon).
-bool heading(const bl_bearing_problem *p, const Bearings &b, const uint32_t *id, uint32_t n, real xs, real ys,
-             real &cth, real &sth)
+// Heading from the sensor position on beacons id[0..2]: theta_j =
+// angle(b_j - s) - phi_j for each beacon, combined as the circular mean
+// weighted by 1/sigma_j² (exactly determined: all theta_j agree). Returns
+// the mean's unit vector (cos theta, sin theta) and the largest
+// |sin(theta_j - theta)| / sigma_j: the bearing residuals of the fix in σ
+// (exactly determined, so rounding only for a true fix); false if undefined
+// (sensor on a beacon).
+bool heading(const bl_bearing_problem *p, const Bearings &b, const uint32_t id[3], real xs, real ys, real &cth,
+             real &sth, real &spread)
 {
+    real vc[3], vs[3];
     real sc = 0, ss = 0;
-    for (uint32_t a = 0; a < n; ++a) {
+    for (int a = 0; a < 3; ++a) {
         const uint32_t j = id[a];
         const real dx = p->beacons[j].x_m - xs, dy = p->beacons[j].y_m - ys;
         const real r = std::sqrt(dx * dx + dy * dy);
         if (!(r > real(0))) return false;
         const real w = real(1) / (p->sigma_rad[j] * p->sigma_rad[j]);
         // (cos, sin)(angle(u) - phi) = (ux c + uy s, uy c - ux s), u = (dx, dy)/r.
-        sc += w * (dx * b.c[j] + dy * b.s[j]) / r;
-        ss += w * (dy * b.c[j] - dx * b.s[j]) / r;
+        vc[a] = (dx * b.c[j] + dy * b.s[j]) / r;
+        vs[a] = (dy * b.c[j] - dx * b.s[j]) / r;
+        sc += w * vc[a];
+        ss += w * vs[a];
     }
     const real len = std::sqrt(sc * sc + ss * ss);
     if (!(len > real(0)) || !is_finite(len)) return false;
     cth = sc / len;
     sth = ss / len;
-    return true;
+    spread = 0;
+    for (int a = 0; a < 3; ++a) {
+        // sin(theta_j - theta) = vs_j cos(theta) - vc_j sin(theta)
+        const real e = std::fabs(vs[a] * cth - vc[a] * sth) / p->sigma_rad[id[a]];
+        if (!(e <= spread)) spread = e;
+    }
+    return is_finite(spread);
 }
 
 // Weighted normal matrix A = JᵀWJ at the sensor position (unknowns xs, ys,
@@ -179,8 +199,8 @@ bool heading(const bl_bearing_problem *p, const Bearings &b, const uint32_t *id,
 // W = diag(1/sigma_j²). With res = true also g = JᵀW e and chi2 = Σ w e²,
 // e_j = wrap(phi_j - atan2(dy, dx) + theta) (rad). False if the sensor is
 // on a beacon.
-bool normal_equations(const bl_bearing_problem *p, const uint32_t *id, uint32_t n, const Vec3 &q, bool res,
-                      Mat3 &A, Vec3 &g, real &chi2)
+bool normal_equations(const bl_bearing_problem *p, const uint32_t *id, uint32_t n, const Vec3 &q, bool res, Mat3 &A,
+                      Vec3 &g, real &chi2)
 {
     A.setZero();
     g.setZero();
@@ -224,13 +244,14 @@ bool scaled_inverse(const Mat3 &A, Mat3 &inv)
 // 1 / (‖Â‖₁ ‖Â⁻¹‖₁), from A and its inverse (Â⁻¹ = S⁻¹ A⁻¹ S⁻¹); in (0, 1].
 real condition_of(const Mat3 &A, const Mat3 &inv)
 {
+    Vec3 d;  // sqrt of the diagonal: S = diag(1/d)
+    for (int k = 0; k < 3; ++k) d(k) = std::sqrt(A(k, k));
     real n1 = 0, n1i = 0;
     for (int c = 0; c < 3; ++c) {
         real col = 0, coli = 0;
         for (int r = 0; r < 3; ++r) {
-            const real srr = std::sqrt(A(r, r) * A(c, c));
-            col += std::fabs(A(r, c)) / srr;
-            coli += std::fabs(inv(r, c)) * srr;
+            col += std::fabs(A(r, c)) / (d(r) * d(c));
+            coli += std::fabs(inv(r, c)) * (d(r) * d(c));
         }
         if (col > n1) n1 = col;
         if (coli > n1i) n1i = coli;
@@ -238,37 +259,12 @@ real condition_of(const Mat3 &A, const Mat3 &inv)
     return real(1) / (n1 * n1i);
 }
 
-// First-order distance (m) of the sensor s to the circle through beacons i,
-// j, k (a line when they are collinear): |F(s)| / |∇F(s)| with F the
-// circle's implicit equation, B_j at the origin (u = B_i - B_j, v = B_k -
-// B_j, t = s - B_j):
-//   F(t) = K |t|² + L tx + M ty,  K = u × v,
-//   L = |v|² uy - |u|² vy,  M = |u|² vx - |v|² ux
-// (F vanishes at 0, u and v). Exact for a line; near a circle of radius R
-// it is the distance times (|t - c| + R) / (2 |t - c|) ≈ 1.
-real circle_distance(const bl_bearing_problem *p, uint32_t i, uint32_t j, uint32_t k, real xs, real ys)
-{
-    const real ox = p->beacons[j].x_m, oy = p->beacons[j].y_m;
-    const real ux = p->beacons[i].x_m - ox, uy = p->beacons[i].y_m - oy;
-    const real vx = p->beacons[k].x_m - ox, vy = p->beacons[k].y_m - oy;
-    const real tx = xs - ox, ty = ys - oy;
-    const real u2 = ux * ux + uy * uy, v2 = vx * vx + vy * vy;
-    const real K = ux * vy - uy * vx;
-    const real L = v2 * uy - u2 * vy;
-    const real M = u2 * vx - v2 * ux;
-    const real F = K * (tx * tx + ty * ty) + L * tx + M * ty;
-    const real gx = real(2) * K * tx + L, gy = real(2) * K * ty + M;
-    const real gn = std::sqrt(gx * gx + gy * gy);
-    return gn > real(0) ? std::fabs(F) / gn : real(0);
-}
-
 // The solution at the sensor fix q = (xs, ys, theta) (theta any wrap,
-// (cth, sth) its cosine and sine), A = JᵀWJ there, chi2 its weighted
-// squared residuals over n bearings; guard = the beacon triple of the
-// N = 3 circle guard (nullptr: none). Writes *out only if the fix passes
+// (cth, sth) its cosine and sine, already computed by the caller), A = JᵀWJ there, chi2 its weighted
+// squared residuals over n bearings. Writes *out only if the fix passes
 // every check (solver.h); returns BL_OK or BL_EDEGENERATE.
 int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const Mat3 &A, real chi2, uint32_t n,
-           const uint32_t *guard, uint32_t iterations, bl_bearing_solution *out)
+           uint32_t iterations, bl_bearing_solution *out)
 {
     Mat3 cov_s;
     if (!scaled_inverse(A, cov_s)) return BL_EDEGENERATE;
@@ -291,14 +287,20 @@ int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const
         return BL_EDEGENERATE;
     const real condition = condition_of(Ar, cov);
     if (!(condition >= kMinCondition)) return BL_EDEGENERATE;
+    // Exactly determined (n = 3): the fix must reproduce the bearings,
+    // Σ e_j²/σ_j² <= 3 kConsistency² (see closed_form).
+    if (n == 3 && !(chi2 <= real(3) * kConsistency * kConsistency)) return BL_EDEGENERATE;
     const real drms_m = std::sqrt(cov(0, 0) + cov(1, 1));
     const real max_drms_m = p->max_drms_m > real(0) ? p->max_drms_m : kDefaultMaxDrms_m;
     if (!(drms_m <= max_drms_m)) return BL_EDEGENERATE;
-    if (guard != nullptr) {
-        const real drms_s = std::sqrt(cov_s(0, 0) + cov_s(1, 1));
-        if (!(circle_distance(p, guard[0], guard[1], guard[2], q(0), q(1)) >= kCircleGuard * drms_s))
-            return BL_EDEGENERATE;
+    real rmin2 = -1;  // squared distance sensor - nearest beacon (m²)
+    for (uint32_t j = 0; j < p->count; ++j) {
+        const real dx = p->beacons[j].x_m - q(0), dy = p->beacons[j].y_m - q(1);
+        const real r2 = dx * dx + dy * dy;
+        if (rmin2 < real(0) || r2 < rmin2) rmin2 = r2;
     }
+    const real drms_s = std::sqrt(cov_s(0, 0) + cov_s(1, 1));
+    if (!(drms_s <= kLinearity * std::sqrt(rmin2))) return BL_EDEGENERATE;
     // Weighted rms of the residuals with the 3 unknowns' degrees of freedom
     // removed (solver.h): sqrt(Σ w e² / Σ w · n / (n - 3)), 0 for n = 3.
     real residual_rad = 0;
@@ -309,9 +311,8 @@ int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const
     }
     const real x_m = q(0) - (cth * ox - sth * oy);
     const real y_m = q(1) - (sth * ox + cth * oy);
-    const real theta_rad = wrap_angle(std::atan2(sth, cth));
-    if (!is_finite(x_m) || !is_finite(y_m) || !is_finite(theta_rad) || !is_finite(residual_rad))
-        return BL_EDEGENERATE;
+    const real theta_rad = wrap_angle(q(2));
+    if (!is_finite(x_m) || !is_finite(y_m) || !is_finite(theta_rad) || !is_finite(residual_rad)) return BL_EDEGENERATE;
 
     bl_bearing_solution &sol = *out;
     std::memset(&sol, 0, sizeof sol);
@@ -334,7 +335,11 @@ bool closed_form(const bl_bearing_problem *p, const Bearings &b, const uint32_t 
     if (coincident(p, id[0], id[1], id[2])) return false;
     real xs, ys;
     if (!total(p, b, id[0], id[1], id[2], xs, ys)) return false;
-    if (!heading(p, b, id, 3, xs, ys, cth, sth)) return false;
+    // A fix that does not reproduce its three bearings is no solution:
+    // exactly on the degenerate circle D and k'31 both vanish and their
+    // rounding-level quotient is an arbitrary point.
+    real spread;
+    if (!heading(p, b, id, xs, ys, cth, sth, spread) || !(spread <= kConsistency)) return false;
     q << xs, ys, std::atan2(sth, cth);
     return true;
 }
@@ -354,7 +359,7 @@ extern "C" int bl_solve_bearings_3(const bl_bearing_problem *prob, bl_bearing_so
     Vec3 g;
     real chi2;
     if (!normal_equations(prob, id, 3, q, false, A, g, chi2)) return BL_EDEGENERATE;
-    return finish(prob, q, cth, sth, A, real(0), 3, id, 0, sol);
+    return finish(prob, q, cth, sth, A, real(0), 3, 0, sol);
 }
 
 extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solution *sol)
@@ -401,12 +406,15 @@ extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solu
         q += step;
         ++it;
         if (!q.allFinite()) return BL_EDEGENERATE;
-        if (std::fabs(step(0)) < kStepTol && std::fabs(step(1)) < kStepTol && std::fabs(step(2)) < kStepTol) {
+        bool small = true;
+        for (int k = 0; k < 3; ++k)
+            small = small && std::fabs(step(k)) < std::fmax(kStepTol, kStepRel * std::sqrt(inv(k, k)));
+        if (small) {
             converged = true;
             break;
         }
     }
     if (!converged) return BL_ENOCONVERGE;
     if (!normal_equations(prob, all, N, q, true, A, g, chi2)) return BL_EDEGENERATE;
-    return finish(prob, q, std::cos(q(2)), std::sin(q(2)), A, chi2, N, N == 3 ? all : nullptr, it, sol);
+    return finish(prob, q, std::cos(q(2)), std::sin(q(2)), A, chi2, N, it, sol);
 }

@@ -185,6 +185,28 @@ MUT(m_ring_heading, c->ring_heading = 2)
 MUT(m_wscale_neg, c->sigma_wheel_scale = -0.01f)
 MUT(m_wscale_high, c->sigma_wheel_scale = 0.6f)
 MUT(m_wscale_drift, c->wheel_scale_drift_per_sqrt_s = (bl_real)NAN)
+/* bearings (config.h, bl_bearing_params) */
+static void three_bearing_beacons(bl_config *c)
+{
+    c->bearing_beacon_count = 3;
+    c->bearing_beacons[0] = (bl_beacon){3, (bl_real)2.1, 0};
+    c->bearing_beacons[1] = (bl_beacon){0, (bl_real)1.05, 0};
+    c->bearing_beacons[2] = (bl_beacon){3, 0, 0};
+}
+MUT(m_bsigma0, c->bearing.sigma_deg = 0)
+MUT(m_bsigma_nan, c->bearing.sigma_deg = (bl_real)NAN)
+MUT(m_bgate, c->bearing.gate_sigma = -1)
+MUT(m_boffx, c->bearing.offset_x_m = (bl_real)INFINITY)
+MUT(m_boffy, c->bearing.offset_y_m = (bl_real)NAN)
+MUT(m_bwindow, c->bearing.snapshot_window_s = 0)
+MUT(m_bdrms, c->bearing.max_fix_drms_m = (bl_real)NAN)
+MUT(m_bcount_high, c->bearing_beacon_count = BL_MAX_BEACONS + 1)
+MUT(m_bbeacon_nan, three_bearing_beacons(c); c->bearing_beacons[2].y_m = (bl_real)NAN)
+MUT(m_bbeacon_dup, three_bearing_beacons(c); c->bearing_beacons[2] = c->bearing_beacons[0]; c->bearing_beacons[2].z_m = 1)
+/* no ultrasonic beacons: >= 3 bearing beacons, not collinear */
+MUT(m_only_two_bearing, three_bearing_beacons(c); c->beacon_count = 0; c->bearing_beacon_count = 2)
+MUT(m_no_beacons_at_all, c->beacon_count = 0)
+MUT(m_bearing_collinear, three_bearing_beacons(c); c->beacon_count = 0; c->bearing_beacons[1].x_m = 3)
 
 static void test_every_check(void **state)
 {
@@ -213,6 +235,12 @@ static void test_every_check(void **state)
         {m_ring_heading, "ring_heading"},
         {m_wscale_neg, "sigma_wheel_scale"}, {m_wscale_high, "sigma_wheel_scale"},
         {m_wscale_drift, "wheel_scale_drift_per_sqrt_s"},
+        {m_bsigma0, "bearing.sigma_deg"}, {m_bsigma_nan, "bearing.sigma_deg"}, {m_bgate, "bearing.gate_sigma"},
+        {m_boffx, "bearing.offset_x_m"}, {m_boffy, "bearing.offset_y_m"},
+        {m_bwindow, "bearing.snapshot_window_s"}, {m_bdrms, "bearing.max_fix_drms_m"},
+        {m_bcount_high, "bearing_beacon_count"}, {m_bbeacon_nan, "bearing_beacons"},
+        {m_bbeacon_dup, "bearing_beacons"}, {m_only_two_bearing, "bearing_beacon_count"},
+        {m_no_beacons_at_all, "bearing_beacon_count"}, {m_bearing_collinear, "bearing_beacons"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
         bl_config cfg, copy;
@@ -246,6 +274,54 @@ static void test_beacon_count_uses_only_first_n(void **state)
     assert_int_equal(bl_config_check(&cfg, NULL), BL_OK);
     cfg.beacon_count = 11;
     assert_int_equal(bl_config_check(&cfg, NULL), BL_ECONFIG);
+}
+
+/* Bearing sites: defaults (kleeman-lab has none), a bearing-only Eurobot
+ * table passes, and the geometry check compares the bearing beacons and the
+ * sensor mount but not the bearing tuning. */
+static void test_bearing_sites(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    assert_int_equal(cfg.bearing_beacon_count, 0);
+    assert_true(cfg.bearing.sigma_deg == 1 && cfg.bearing.gate_sigma == 3);
+    assert_true(cfg.bearing.offset_x_m == 0 && cfg.bearing.offset_y_m == 0);
+    assert_true(cfg.bearing.snapshot_window_s == (bl_real)0.25 && cfg.bearing.max_fix_drms_m == (bl_real)0.25);
+    bl_config eb = cfg;
+    three_bearing_beacons(&eb);
+    eb.beacon_count = 0;
+    eb.beacons[0].x_m = (bl_real)NAN; /* no ultrasonic beacons: their entries are not read */
+    const char *bad = "x";
+    assert_int_equal(bl_config_check(&eb, &bad), BL_OK);
+    assert_null(bad);
+    bl_config mixed = cfg;
+    three_bearing_beacons(&mixed);
+    assert_int_equal(bl_config_check(&mixed, NULL), BL_OK);
+    /* collinear bearing beacons are fine beside pulse beacons (they never start the filter alone) */
+    mixed.bearing_beacons[1].x_m = 3;
+    assert_int_equal(bl_config_check(&mixed, NULL), BL_OK);
+    bl_config b = eb;
+    assert_true(bl_config_same_geometry(&eb, &b));
+    b.bearing.sigma_deg = 2;
+    b.bearing.gate_sigma = 4;
+    b.bearing.snapshot_window_s = 1;
+    b.bearing.max_fix_drms_m = 1;
+    b.bearing_beacons[5].x_m = 9; /* beyond the count */
+    assert_true(bl_config_same_geometry(&eb, &b));
+    b = eb;
+    b.bearing.offset_x_m = (bl_real)0.01;
+    assert_false(bl_config_same_geometry(&eb, &b));
+    b = eb;
+    b.bearing.offset_y_m = (bl_real)0.01;
+    assert_false(bl_config_same_geometry(&eb, &b));
+    b = eb;
+    b.bearing_beacons[1].y_m += (bl_real)0.01;
+    assert_false(bl_config_same_geometry(&eb, &b));
+    b = eb;
+    b.bearing_beacon_count = 4;
+    b.bearing_beacons[3] = (bl_beacon){1, 1, 0};
+    assert_false(bl_config_same_geometry(&eb, &b));
 }
 
 static void test_receiver_angles(void **state)
@@ -292,6 +368,7 @@ int main(void)
         cmocka_unit_test(test_site_file_matches_defaults),
         cmocka_unit_test(test_every_check),
         cmocka_unit_test(test_beacon_count_uses_only_first_n),
+        cmocka_unit_test(test_bearing_sites),
         cmocka_unit_test(test_receiver_angles),
         cmocka_unit_test(test_strerror),
     };

@@ -20,6 +20,7 @@
 #include <cmocka.h>
 
 #include "beaconloc/localizer.h"
+#include "eurobot_world.h"
 
 #define WHEEL_LATENCY_US 5000
 #define SKIP_S 20.0
@@ -34,7 +35,7 @@ typedef struct {
     input_t *in;
     size_t n;
     int64_t *tt;         /* truth t_us */
-    double *tx, *ty;
+    double *tx, *ty, *tth; /* truth position (m), heading (rad) */
     size_t nt;
 } run_t;
 
@@ -92,6 +93,7 @@ static void load(run_t *r, const char *name) {
     r->tt = calloc(cap, sizeof *r->tt);
     r->tx = calloc(cap, sizeof *r->tx);
     r->ty = calloc(cap, sizeof *r->ty);
+    r->tth = calloc(cap, sizeof *r->tth);
     r->nt = 0;
     char big[1024];
     if (!fgets(big, sizeof big, f)) fail_msg("empty truth");
@@ -101,13 +103,15 @@ static void load(run_t *r, const char *name) {
             r->tt = realloc(r->tt, cap * sizeof *r->tt);
             r->tx = realloc(r->tx, cap * sizeof *r->tx);
             r->ty = realloc(r->ty, cap * sizeof *r->ty);
+            r->tth = realloc(r->tth, cap * sizeof *r->tth);
         }
         long long t;
-        double ts, x, y;
-        if (sscanf(big, "%lld,%lf,%lf,%lf", &t, &ts, &x, &y) == 4) {
+        double ts, x, y, th;
+        if (sscanf(big, "%lld,%lf,%lf,%lf,%lf", &t, &ts, &x, &y, &th) == 5) {
             r->tt[r->nt] = t;
             r->tx[r->nt] = x;
             r->ty[r->nt] = y;
+            r->tth[r->nt] = th;
             r->nt++;
         }
     }
@@ -120,6 +124,7 @@ static void unload(run_t *r) {
     free(r->tt);
     free(r->tx);
     free(r->ty);
+    free(r->tth);
 }
 
 /* Truth position at t_us (linear interpolation); false outside the run. */
@@ -151,10 +156,14 @@ typedef struct {
 
 typedef void (*hook_fn)(bl_localizer *loc, const run_t *r, size_t i, void *ctx);
 
+/* The site feed() runs the localizer on: kleeman-lab when NULL. */
+static const bl_config *feed_site;
+
 static void feed(bl_localizer *loc, const run_t *r, stats_t *s, hook_fn hook, void *ctx) {
     bl_config cfg;
     bl_seq_config sc;
     assert_int_equal(bl_config_default(&cfg), BL_OK);
+    if (feed_site) cfg = *feed_site;
     cfg.max_predict_gap_s = 10; /* the bridge's default max_coast_s */
     assert_int_equal(bl_localizer_seq_config(&cfg, &sc, NULL, NULL), BL_OK);
     assert_int_equal(bl_localizer_init(loc, &cfg, &sc), BL_OK);
@@ -435,6 +444,260 @@ static void test_seq_config_cause(void **state) {
     assert_string_equal(field, "ring_radius_m");
 }
 
+/* ---- bearings ------------------------------------------------------------ */
+
+/* Gaussian noise for the bearing tests (xorshift64*, Box-Muller). */
+static uint64_t noise_state = 1;
+static double noise_gauss(void) {
+    double u[2];
+    for (int k = 0; k < 2; k++) {
+        noise_state ^= noise_state >> 12;
+        noise_state ^= noise_state << 25;
+        noise_state ^= noise_state >> 27;
+        u[k] = (double)((noise_state * 2685821657736338717ull) >> 11) * (1.0 / 9007199254740992.0);
+    }
+    if (u[0] < 1e-300) u[0] = 1e-300;
+    return sqrt(-2.0 * log(u[0])) * cos(2 * PI * u[1]);
+}
+
+/* Truth pose at t_us (heading interpolated on the circle); false outside. */
+static bool truth_pose_at(const run_t *r, int64_t t_us, double *x, double *y, double *th) {
+    if (!truth_at(r, t_us, x, y)) return false;
+    size_t lo = 0, hi = r->nt - 1;
+    while (hi - lo > 1) {
+        size_t mid = (lo + hi) / 2;
+        if (r->tt[mid] <= t_us) lo = mid; else hi = mid;
+    }
+    double a = r->tt[hi] > r->tt[lo] ? (double)(t_us - r->tt[lo]) / (double)(r->tt[hi] - r->tt[lo]) : 0;
+    *th = eb_wrap(r->tth[lo] + a * eb_wrap(r->tth[hi] - r->tth[lo]));
+    return true;
+}
+
+/* Mixed site: kleeman-lab's pulses (the simulator's run) plus three bearing
+ * beacons seen at 10 Hz (σ 0.5°) from the run's true pose, each beacon at
+ * its own instant. */
+static const double mixed_b[3][2] = {{0.5, 0.5}, {11.5, 0.5}, {6.0, 11.5}};
+typedef struct {
+    int64_t next_us[3];
+    unsigned given;
+} bearing_feed_t;
+
+static void bearing_hook(bl_localizer *loc, const run_t *r, size_t i, void *ctx) {
+    bearing_feed_t *b = ctx;
+    const input_t *e = &r->in[i];
+    if (e->kind != 'W') return;
+    for (uint32_t j = 0; j < 3; j++) {
+        if (b->next_us[j] == 0) b->next_us[j] = e->w.t_us + 30000 * (int64_t)j;
+        if (e->w.t_us < b->next_us[j]) continue;
+        b->next_us[j] += 100000;
+        double x, y, th;
+        if (!truth_pose_at(r, e->w.t_us, &x, &y, &th)) continue;
+        bl_bearing_meas m = {.t_us = e->w.t_us, .beacon_index = j, .tag = e->w.tag};
+        m.bearing_rad = (bl_real)(atan2(mixed_b[j][1] - y, mixed_b[j][0] - x) - th + 0.5 * DEG * noise_gauss());
+        bl_fusion_result res;
+        assert_int_equal(bl_localizer_bearing(loc, &m, &res), BL_OK);
+        b->given++;
+    }
+}
+
+static void test_mixed_site_counts_both(void **state) {
+    (void)state;
+    run_t r;
+    load(&r, "kleeman-lab");
+    bl_config site;
+    assert_int_equal(bl_config_default(&site), BL_OK);
+    site.bearing_beacon_count = 3;
+    for (int j = 0; j < 3; j++) {
+        site.bearing_beacons[j].x_m = (bl_real)mixed_b[j][0];
+        site.bearing_beacons[j].y_m = (bl_real)mixed_b[j][1];
+    }
+    site.bearing.sigma_deg = (bl_real)0.5;
+    feed_site = &site;
+    noise_state = 11;
+    bearing_feed_t b;
+    memset(&b, 0, sizeof b);
+    stats_t s;
+    feed(&LOC, &r, &s, bearing_hook, &b);
+    feed_site = NULL;
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    bl_estimate est;
+    assert_int_equal(bl_localizer_estimate(&LOC, &est), BL_OK);
+    print_message("mixed: rmse %.1f mm, pulses %u fused %u rejected, bearings %u given %u fused %u rejected %u buffered\n",
+                  1000 * rmse(&s), c.pulses_accepted, c.pulses_rejected, b.given, c.bearings_fused,
+                  c.bearings_rejected, c.bearings_buffered);
+    assert_true(c.pulses_accepted > 300);
+    assert_true(c.bearings_fused > b.given * 9 / 10);
+    assert_int_equal(c.bearings_fused + c.bearings_rejected + c.bearings_buffered, b.given);
+    assert_int_equal(c.bearings_refused, 0);
+    for (uint32_t j = 0; j < 3; j++) assert_true(est.bearing_accepted[j] > 100);
+    for (uint32_t k = 0; k < site.beacon_count; k++) assert_true(est.accepted[k] > 20);
+    assert_int_equal(s.events[BL_LOC_EV_STARTED], 1);
+    assert_int_equal(s.events[BL_LOC_EV_RESET], 0);
+    assert_int_equal(s.bad_tags, 0);
+    if (rmse(&s) > 0.03) fail_msg("rmse %.3f m", rmse(&s));
+    unload(&r);
+}
+
+/* A bearing-only (Eurobot) run through the localizer: wheels at 100 Hz,
+ * bearings at 10 Hz; kidnap_dx_m != 0 moves the robot at 5 s behind the
+ * odometry's back. */
+typedef struct {
+    unsigned events[8], resets_by_cause[8];
+    double final_err;
+    unsigned given;
+} eb_loc_result;
+
+static void eurobot_localizer_run(bl_localizer *loc, double kidnap_dx_m, double kidnap_dy_m, eb_loc_result *out) {
+    bl_config cfg;
+    assert_int_equal(eurobot_config(&cfg), BL_OK);
+    bl_seq_config sc;
+    memset(&sc, 0x5a, sizeof sc);
+    const char *why = "x", *field = "x";
+    assert_int_equal(bl_localizer_seq_config(&cfg, &sc, &why, &field), BL_OK);
+    assert_null(why);
+    assert_int_equal(sc.beacon_count, 0); /* idle */
+    assert_int_equal(bl_localizer_init(loc, &cfg, &sc), BL_OK);
+    memset(out, 0, sizeof *out);
+    noise_state = 5;
+    eb_pose truth = {0.8, 1.0, 0.0};
+    const double half = 0.5 * (double)cfg.wheel_base_m, dt = 0.01;
+    for (long i = 0; i <= 800; i++) {
+        const double t = (double)i * dt;
+        double v, w;
+        eb_vw(t - 0.5 * dt, &v, &w);
+        if (i > 0) truth = eb_arc(truth, v, w, dt);
+        if (i == 500 && (kidnap_dx_m != 0 || kidnap_dy_m != 0)) {
+            truth.x += kidnap_dx_m;
+            truth.y += kidnap_dy_m;
+        }
+        const double dl = (v - w * half) * dt, dr = (v + w * half) * dt;
+        bl_wheel_increment inc = {.t_us = eb_us(t), .tag = (uint32_t)(1 + 4 * i)};
+        inc.d_left_m = (bl_real)(dl + 0.01 * sqrt(fabs(dl)) * noise_gauss());
+        inc.d_right_m = (bl_real)(dr + 0.01 * sqrt(fabs(dr)) * noise_gauss());
+        inc.reference_only = i == 0;
+        assert_int_equal(bl_localizer_wheels(loc, &inc), BL_OK);
+        for (uint32_t j = 0; j < 3; j++) {
+            if ((i + 3 * j) % 10) continue;
+            bl_bearing_meas m = {.t_us = eb_us(t), .beacon_index = j, .tag = (uint32_t)(2 + 4 * i)};
+            m.bearing_rad = (bl_real)(eb_bearing(&cfg, truth, (int)j) + 1.0 * DEG * noise_gauss());
+            assert_int_equal(bl_localizer_bearing(loc, &m, NULL), BL_OK);
+            out->given++;
+        }
+        assert_int_equal(bl_localizer_advance(loc, eb_us(t)), BL_OK); /* idle sequencer: nothing */
+        bl_loc_event ev;
+        while (bl_localizer_next_event(loc, &ev) == 1) {
+            out->events[ev.kind]++;
+            if (ev.kind == BL_LOC_EV_RESET) out->resets_by_cause[ev.cause]++;
+        }
+    }
+    bl_estimate est;
+    assert_int_equal(bl_localizer_estimate(loc, &est), BL_OK);
+    out->final_err = hypot(est.x_m - truth.x, est.y_m - truth.y);
+}
+
+/* A site without ultrasonic beacons: the sequencer idles, detections are
+ * refused and counted, the filter starts from the bearings and tracks. */
+static void test_bearing_only_site(void **state) {
+    (void)state;
+    eb_loc_result res;
+    eurobot_localizer_run(&LOC, 0, 0, &res);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    print_message("eurobot localizer: final %.1f mm, fused %u rejected %u buffered %u of %u\n", 1000 * res.final_err,
+                  c.bearings_fused, c.bearings_rejected, c.bearings_buffered, res.given);
+    assert_int_equal(res.events[BL_LOC_EV_STARTED], 1);
+    assert_int_equal(res.events[BL_LOC_EV_RESET], 0);
+    assert_true(res.events[BL_LOC_EV_CONVERGED] >= 1);
+    assert_int_equal(c.bearings_buffered, 2); /* the third beacon's bearing starts it */
+    assert_int_equal(c.bearings_fused + c.bearings_rejected + c.bearings_buffered, res.given);
+    assert_true(c.bearings_rejected <= 3);
+    assert_true(c.predicts > 700);
+    assert_int_equal(c.pulses_in + c.seq_errors + c.hint_errors, 0);
+    assert_true(res.final_err < 0.03);
+    bl_loc_status st;
+    assert_int_equal(bl_localizer_status(&LOC, &st), BL_OK);
+    assert_true(st.started && st.converged && st.have_tag);
+    /* a detection: refused and counted, nothing else changes */
+    static bl_localizer before;
+    before = LOC;
+    bl_seq_detection d;
+    memset(&d, 0, sizeof d);
+    d.time_us = eb_us(8.0);
+    assert_int_equal(bl_localizer_detection(&LOC, &d), BL_EBEACON);
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    assert_int_equal(c.seq_errors, 1);
+    before.counters_.seq_errors++;
+    assert_memory_equal(&LOC, &before, sizeof LOC);
+    assert_int_equal(bl_localizer_sequencer_reset(&LOC), BL_OK);
+}
+
+/* Kidnapped on a bearing-only site: the bearings are rejected, the window
+ * (cfg.reset_reject_count) restarts the filter from their triangulation,
+ * once, and it tracks again. */
+static void test_bearing_only_kidnap_restarts(void **state) {
+    (void)state;
+    eb_loc_result res;
+    eurobot_localizer_run(&LOC, -0.3, 0.3, &res);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    print_message("eurobot kidnap: final %.1f mm, restarts %u (failed %u), rejected %u fused %u\n", 1000 * res.final_err,
+                  c.snapshot_restarts, c.restart_failures, c.bearings_rejected, c.bearings_fused);
+    assert_int_equal(res.events[BL_LOC_EV_STARTED], 1);
+    assert_int_equal(res.resets_by_cause[BL_LOC_CAUSE_PERSISTENT_REJECTION], 1);
+    assert_int_equal(res.events[BL_LOC_EV_RESET], 1);
+    assert_int_equal(c.snapshot_restarts, 1);
+    assert_int_equal(c.restart_failures, 0);
+    assert_true(c.bearings_rejected >= 8);
+    assert_true(res.final_err < 0.03);
+}
+
+/* Bad bearings: returned as errors and counted in bearings_refused; nothing
+ * else changes. */
+static void test_bearing_errors(void **state) {
+    (void)state;
+    static bl_localizer loc, before;
+    bl_config cfg;
+    assert_int_equal(eurobot_config(&cfg), BL_OK);
+    bl_seq_config sc;
+    assert_int_equal(bl_localizer_seq_config(&cfg, &sc, NULL, NULL), BL_OK);
+    assert_int_equal(bl_localizer_init(&loc, &cfg, &sc), BL_OK);
+    bl_bearing_meas m = {.t_us = eb_us(1), .beacon_index = 0, .bearing_rad = (bl_real)0.3, .tag = 1};
+    assert_int_equal(bl_localizer_bearing(&loc, &m, NULL), BL_OK);
+    before = loc;
+    assert_int_equal(bl_localizer_bearing(&loc, NULL, NULL), BL_EINVAL);
+    assert_int_equal(bl_localizer_bearing(NULL, &m, NULL), BL_EINVAL);
+    assert_memory_equal(&loc, &before, sizeof loc);
+    m.beacon_index = 3;
+    assert_int_equal(bl_localizer_bearing(&loc, &m, NULL), BL_EBEACON);
+    m.beacon_index = 1;
+    m.bearing_rad = (bl_real)NAN;
+    assert_int_equal(bl_localizer_bearing(&loc, &m, NULL), BL_EINVAL);
+    m.bearing_rad = 0;
+    m.t_us = BL_SEQ_TIME_LIMIT_US + 1;
+    assert_int_equal(bl_localizer_bearing(&loc, &m, NULL), BL_EINVAL);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&loc, &c), BL_OK);
+    assert_int_equal(c.bearings_refused, 3);
+    assert_int_equal(c.bearings_buffered, 1);
+    before.counters_.bearings_refused += 3;
+    assert_memory_equal(&loc, &before, sizeof loc);
+    /* a pulse site has no bearing beacons */
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    assert_int_equal(bl_localizer_seq_config(&cfg, &sc, NULL, NULL), BL_OK);
+    assert_int_equal(bl_localizer_init(&loc, &cfg, &sc), BL_OK);
+    m.beacon_index = 0;
+    m.t_us = eb_us(1);
+    assert_int_equal(bl_localizer_bearing(&loc, &m, NULL), BL_EBEACON);
+    /* an idle sequencer config does not fit a pulse site, nor a pulse one a bearing-only site */
+    bl_config eb;
+    assert_int_equal(eurobot_config(&eb), BL_OK);
+    bl_seq_config idle;
+    assert_int_equal(bl_localizer_seq_config(&eb, &idle, NULL, NULL), BL_OK);
+    assert_int_equal(bl_localizer_init(&loc, &cfg, &idle), BL_ECONFIG);
+    assert_int_equal(bl_localizer_init(&loc, &eb, &sc), BL_ECONFIG);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_errors_leave_it_untouched),
@@ -444,6 +707,10 @@ int main(void) {
         cmocka_unit_test(test_kidnap_restarts_once),
         cmocka_unit_test(test_silence_coasts),
         cmocka_unit_test(test_misnumbering_resyncs),
+        cmocka_unit_test(test_mixed_site_counts_both),
+        cmocka_unit_test(test_bearing_only_site),
+        cmocka_unit_test(test_bearing_only_kidnap_restarts),
+        cmocka_unit_test(test_bearing_errors),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -138,8 +138,8 @@ typedef struct bl_config {
                                          Fig. 8: 5 m/s), > 0 */
 
     /* ---- per measurement source ([noise] and [tuning] keys; see above) ---- */
-    bl_pulse_params pulse;  /* pulse arrival times (aid_pulse.cpp) */
-    bl_wheel_params wheels; /* wheel encoders (odometry predict, aid_wheels.cpp) */
+    bl_pulse_params pulse;     /* pulse arrival times (aid_pulse.cpp) */
+    bl_wheel_params wheels;    /* wheel encoders (odometry predict, aid_wheels.cpp) */
     bl_bearing_params bearing; /* bearings to the bearing beacons (aid_bearing.cpp) */
 
     /* ---- tuning shared by all sources: state, process noise, start-up, policy

@@ -1,6 +1,7 @@
 /*
  * beaconloc — the estimator: Kleeman's (1992) iterated EKF for ultrasonic
- * beacon arrival times plus differential-drive dead reckoning.
+ * beacon arrival times plus differential-drive dead reckoning, and bearings
+ * to self-identifying beacons (Vander et al. 2011) in the same filter.
  *
  * State (10): x_m, y_m (wheel-base centre, site frame), theta_rad (heading,
  * CCW from +x), v_mps (forward speed), omega_radps (turn rate),
@@ -146,9 +147,9 @@ typedef struct bl_filter {
     uint32_t ring_explained_mask_;       /* beacons whose latest firing had a fused arrival */
     /* bearings (aid_bearing.cpp): the latest of each bearing beacon, for the
      * triangulation (re)start (snapshot_bearing.cpp), and the counters */
-    uint32_t bearing_valid_mask_;                  /* bit j: bearing_t_us_[j] is valid */
-    int64_t bearing_t_us_[BL_MAX_BEACONS];         /* time of bearing beacon j's latest */
-    bl_real bearing_rad_[BL_MAX_BEACONS];          /* its bearing (rad, body frame) */
+    uint32_t bearing_valid_mask_;          /* bit j: bearing_t_us_[j] is valid */
+    int64_t bearing_t_us_[BL_MAX_BEACONS]; /* time of bearing beacon j's latest */
+    bl_real bearing_rad_[BL_MAX_BEACONS];  /* its bearing (rad, body frame) */
     uint32_t bearing_accepted_[BL_MAX_BEACONS];
     uint32_t bearing_rejected_[BL_MAX_BEACONS];
 } bl_filter;
@@ -185,18 +186,18 @@ typedef struct bl_estimate {
      * (m/s)², (rad/s)² on the diagonal; e.g. (x, θ) m·rad, (x, v) m²/s,
      * (θ, ω) rad²/s, (v, ω) m·rad/s². */
     bl_real cov[25];
-    bool started;                      /* a pose exists (else only counters are valid) */
-    bool converged;                    /* position σ fell below cfg.converged_sigma_xy_m
+    bool started;                              /* a pose exists (else only counters are valid) */
+    bool converged;                            /* position σ fell below cfg.converged_sigma_xy_m
                                    and has not grown above twice that since */
-    uint32_t reset_counter;            /* +1 on every (re-)initialisation after the first start */
-    uint32_t accepted[BL_MAX_BEACONS]; /* per beacon index: pulses fused */
-    uint32_t rejected[BL_MAX_BEACONS]; /* per beacon index: pulses rejected by the gate */
+    uint32_t reset_counter;                    /* +1 on every (re-)initialisation after the first start */
+    uint32_t accepted[BL_MAX_BEACONS];         /* per beacon index: pulses fused */
+    uint32_t rejected[BL_MAX_BEACONS];         /* per beacon index: pulses rejected by the gate */
     uint32_t bearing_accepted[BL_MAX_BEACONS]; /* per bearing beacon index: bearings fused */
     uint32_t bearing_rejected[BL_MAX_BEACONS]; /* per bearing beacon index: bearings rejected
                                                   by the gate */
-    uint32_t wheel_speed_fused;        /* wheel-speed measurements (v and ω, each one) fused
+    uint32_t wheel_speed_fused;                /* wheel-speed measurements (v and ω, each one) fused
                                      by bl_filter_predict_odometry (ungated) */
-    uint32_t wheel_speed_refused;      /* wheel-speed measurements refused: the update would
+    uint32_t wheel_speed_refused;              /* wheel-speed measurements refused: the update would
                                      have left the state non-finite (state kept) */
 } bl_estimate;
 

@@ -9,6 +9,7 @@
  *     bl_seq_config sc; bl_localizer_seq_config(&cfg, &sc, &why, &field);
  *     bl_localizer loc;  bl_localizer_init(&loc, &cfg, &sc);
  *     on a receiver detection: bl_localizer_detection(&loc, &det);  (det.tag: yours)
+ *     on a bearing:            bl_localizer_bearing(&loc, &bearing, NULL);
  *     every loop turn:         bl_localizer_advance(&loc, now_us - latency_us);
  *     on an encoder sample:    bl_localizer_advance(&loc, t_us - latency_us);
  *                              bl_localizer_wheels(&loc, &inc);
@@ -63,7 +64,10 @@
  *   - Bearings (bl_localizer_bearing): each fused through the filter
  *     (bl_filter_fuse_bearing); its rejections count in the same
  *     persistent-rejection window (a bearing beacon is a beacon of its
- *     own for the min(3, N) rule, N counting both kinds); the restart is
+ *     own for the min(3, N) rule, N counting both kinds, and on a site
+ *     with bearing beacons the rule is min(3, N - 1): a kidnap along one
+ *     beacon's line of sight leaves that bearing unchanged, so a
+ *     three-beacon Eurobot table restarts on two); the restart is
  *     the pulse snapshot when the site has ultrasonic beacons and it
  *     succeeds, else the bearings' triangulation (bl_filter_start_bearings).
  *     A site without ultrasonic beacons has an idle sequencer.
@@ -98,7 +102,8 @@
  * IEKF iteration, see filter.h) plus an estimate and a hint; a snapshot
  * restart adds one bl_solve_tdoa_2d; a wheel increment one predict.
  * Errors: every function returns BL_OK or a negative bl_error; on error
- * *loc is left byte-identical. Errors are bad arguments only (NULL, not
+ * *loc is left byte-identical, except the counter of refused inputs where a
+ * function names one (seq_errors, bearings_refused). Errors are bad arguments only (NULL, not
  * initialised, NaN/inf, out of range, time going backwards where stated).
  * Bad data (echoes, outliers, late detections, misnumbered pulses) is
  * counted, never an error. Not thread-safe per instance.
@@ -197,14 +202,14 @@ typedef struct bl_loc_counters {
     uint32_t predicts;          /* odometry predicts */
     uint32_t cv_predicts;       /* constant-velocity predicts (wheels silent) */
     uint32_t predict_errors;
-    uint32_t reinits;          /* fresh filters: time gaps, stale pulses, reinit */
-    uint32_t seq_errors;       /* detections the sequencer refused (late: older than a
+    uint32_t reinits;           /* fresh filters: time gaps, stale pulses, reinit */
+    uint32_t seq_errors;        /* detections the sequencer refused (late: older than a
                                     pulse already closed) */
-    uint32_t seq_full;         /* sequencer full: pulses closed early */
-    uint32_t hint_errors;      /* hints the sequencer refused */
-    uint32_t numbering_errors; /* rejected arrivals with innovations longer than any flight */
-    uint32_t seq_resyncs;      /* sequencer re-synchronised from the filter */
-    uint32_t events_dropped;   /* events lost because the queue was full */
+    uint32_t seq_full;          /* sequencer full: pulses closed early */
+    uint32_t hint_errors;       /* hints the sequencer refused */
+    uint32_t numbering_errors;  /* rejected arrivals with innovations longer than any flight */
+    uint32_t seq_resyncs;       /* sequencer re-synchronised from the filter */
+    uint32_t events_dropped;    /* events lost because the queue was full */
     uint32_t bearings_fused;    /* bearings fused (accepted, started, reset) */
     uint32_t bearings_rejected; /* bearings rejected by the gate */
     uint32_t bearings_buffered; /* bearings kept for the triangulation (not started / stale) */

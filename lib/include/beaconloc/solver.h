@@ -140,18 +140,24 @@ int bl_solve_tdoa_3d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol);
  *                  <= 0; max_drms_m < 0. *sol untouched;
  *   BL_EDEGENERATE the geometry cannot fix the pose; *sol untouched — never
  *                  a wrong answer:
- *                  - coincident or collinear beacons (N = 3; for N > 3: no
- *                    triple of non-collinear beacons);
+ *                  - two of the three beacons coincident (for N > 3: no
+ *                    triple of distinct beacons gives a fix);
  *                  - the sensor on or near the circle through the three
- *                    beacons (ToTal's denominator D = 0, Fig. 4), i.e.
- *                    condition < 1e-6 (1e-4 for float), or, for N = 3, the
- *                    circle closer to the fix than 3·drms (there the
- *                    first-order covariance no longer bounds the error);
+ *                    beacons (ToTal's denominator D = 0, Vander Fig. 4) or,
+ *                    for collinear beacons, on or near their line (the
+ *                    circle's limit; off the line collinear beacons fix the
+ *                    pose): caught by D = 0, condition < 1e-6 (1e-4 for
+ *                    float), drms_m > max_drms_m, or the linearity check:
+ *                    the sensor position's drms above half its distance to
+ *                    the nearest beacon (there the first-order covariance no
+ *                    longer describes the error: near the circle a noisy fix
+ *                    slides along it);
  *                  - the sensor at a beacon (a bearing undefined);
  *                  - drms_m > max_drms_m (0.5 m when max_drms_m = 0);
  *                  - any non-finite intermediate or result;
  *   BL_ENOCONVERGE (bl_solve_bearings) Gauss-Newton did not reach a step
- *                  below 1e-9 m / 1e-9 rad (1e-5 for float) in 20 steps;
+ *                  below 1e-9 m / 1e-9 rad (float: 1e-5 or 1e-3 of its σ)
+ *                  in 20 steps;
  *                  *sol untouched.
  * Reentrant; no state, no heap, a few hundred bytes of stack. */
 typedef struct bl_bearing_problem {
