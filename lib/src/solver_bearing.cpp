@@ -22,6 +22,7 @@
 #include "internal.hpp"
 
 #include <cstring>
+#include <limits>
 
 #include "beaconloc/solver.h"
 
@@ -50,14 +51,14 @@ constexpr real kLinearity = real(0.5);
 constexpr real kMinCondition = real(1e-4);
 constexpr real kStepTol = real(1e-5);     // Gauss-Newton step (m and rad), or
 constexpr real kStepRel = real(1e-3);     // this fraction of its σ (float rounding)
-constexpr real kCotMax = real(1e5);       // ToTal's clamp of an infinite cot
+constexpr real kCotMax = real(1e5);       // clamp of an infinite cot (cot_diff)
 constexpr real kCoincident = real(1e-5);  // relative beacon separation
 constexpr real kConsistency = real(1e-2);
 #else
 constexpr real kMinCondition = real(1e-6);
 constexpr real kStepTol = real(1e-9);
 constexpr real kStepRel = real(0);
-constexpr real kCotMax = real(1e8);  // Pierlot & Van Droogenbroeck 2014 §IV: ±1e8
+constexpr real kCotMax = real(1e8);
 constexpr real kCoincident = real(1e-9);
 constexpr real kConsistency = real(1e-4);
 #endif
@@ -92,7 +93,8 @@ void bearing_vectors(const bl_bearing_problem *p, Bearings &b)
 
 // cot(a_j - a_i) from the unit vectors of a_i, a_j, its magnitude clamped
 // to kCotMax where the sine vanishes (sensor on the line through the two
-// beacons), as Pierlot & Van Droogenbroeck 2014 §IV do.
+// beacons): ToTal replaces the infinite cot by a large finite value; the
+// fix then moves by O(1/kCotMax) of the beacon spacing.
 inline real cot_diff(const Bearings &b, uint32_t i, uint32_t j)
 {
     // sin(a_j - a_i) = s_j c_i - c_j s_i, cos(a_j - a_i) = c_j c_i + s_j s_i
@@ -186,7 +188,14 @@ bool heading(const bl_bearing_problem *p, const Bearings &b, const uint32_t id[3
     sth = ss / len;
     spread = 0;
     for (int a = 0; a < 3; ++a) {
-        // sin(theta_j - theta) = vs_j cos(theta) - vc_j sin(theta)
+        // sin(theta_j - theta) = vs_j cos(theta) - vc_j sin(theta); a theta_j
+        // opposite the mean (cos < 0) is inconsistent too: ToTal's cot fixes
+        // the bearing differences only modulo π, so a noisy triple can give
+        // the point that matches them with one beacon seen backwards.
+        if (!(vc[a] * cth + vs[a] * sth > real(0))) {
+            spread = std::numeric_limits<real>::infinity();
+            break;
+        }
         const real e = std::fabs(vs[a] * cth - vc[a] * sth) / p->sigma_rad[id[a]];
         if (!(e <= spread)) spread = e;
     }
@@ -259,9 +268,9 @@ real condition_of(const Mat3 &A, const Mat3 &inv)
     return real(1) / (n1 * n1i);
 }
 
-// The solution at the sensor fix q = (xs, ys, theta) (theta any wrap,
-// (cth, sth) its cosine and sine, already computed by the caller), A = JᵀWJ there, chi2 its weighted
-// squared residuals over n bearings. Writes *out only if the fix passes
+// The solution at the sensor fix q = (xs, ys, theta) (theta any wrap;
+// cth, sth its cosine and sine, from the caller), A = JᵀWJ there, chi2 its
+// weighted squared residuals over n bearings. Writes *out only if the fix passes
 // every check (solver.h); returns BL_OK or BL_EDEGENERATE.
 int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const Mat3 &A, real chi2, uint32_t n,
            uint32_t iterations, bl_bearing_solution *out)

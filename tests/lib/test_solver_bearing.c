@@ -354,6 +354,24 @@ static void test_degenerate(void **state)
     }
 }
 
+/* A bearing off by π (a beacon seen backwards): ToTal's cot fixes the
+ * bearing differences only modulo π, so it lands on the true sensor
+ * position, which reproduces only two of the three bearings: refused by
+ * both solvers, never returned as a fix. */
+static void test_bearing_off_by_pi(void **state)
+{
+    (void)state;
+    static const double pts[3][2] = {{2.5, 1.0}, {1.2, 0.4}, {2.0, 1.7}};
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+            const pose p = {pts[i][0], pts[i][1], 0.5 * i - 0.3, 0.0, 0.0};
+            bl_bearing_problem prob;
+            make_problem(&prob, 3, vander_beacons, &p, 1.0 * DEG, 0.0, NULL);
+            prob.bearing_rad[j] += (bl_real)PI;
+            expect_both(&prob, BL_EDEGENERATE);
+        }
+}
+
 /* Radial lines across the degenerate circle (every 5°, the sensor from
  * 0.4 m inside to 0.4 m outside, 1 cm steps), random headings and mounts:
  * every accepted fix lies within 5 drms of the truth, noise-free and with
@@ -524,11 +542,11 @@ static void test_wls_weights(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_closed_form_exact), cmocka_unit_test(test_wls_exact),
-        cmocka_unit_test(test_vander_fig5_drms),  cmocka_unit_test(test_vander_monte_carlo),
-        cmocka_unit_test(test_degenerate),        cmocka_unit_test(test_grid_across_circle),
-        cmocka_unit_test(test_invalid_arguments), cmocka_unit_test(test_wls_extra_beacon),
-        cmocka_unit_test(test_wls_weights),
+        cmocka_unit_test(test_closed_form_exact),  cmocka_unit_test(test_wls_exact),
+        cmocka_unit_test(test_vander_fig5_drms),   cmocka_unit_test(test_vander_monte_carlo),
+        cmocka_unit_test(test_degenerate),         cmocka_unit_test(test_bearing_off_by_pi),
+        cmocka_unit_test(test_grid_across_circle), cmocka_unit_test(test_invalid_arguments),
+        cmocka_unit_test(test_wls_extra_beacon),   cmocka_unit_test(test_wls_weights),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
