@@ -396,6 +396,34 @@ static void test_unexpected_kinds(void **state)
     assert_int_equal(e->c.bearings_fused + e->c.bearings_buffered + e->c.bearings_refused, 0);
 }
 
+/* SIGHUP on a bearing site: the bearing sensor's σ is tuning (the filter
+ * keeps its state), a bearing beacon moved is geometry (a fresh filter that
+ * starts again from the bearings). */
+static void test_reconfigure_bearing_site(void **state)
+{
+    (void)state;
+    run(&W, 1000000, 4000000, INT64_MAX, 0.0, 0.0);
+    struct est_output before, after;
+    assert_int_equal(estimator_output(&W.est, 0, &before), 0);
+    char err[CONFIG_ERR_LEN];
+    struct bridge_config c = W.cfg;
+    c.bearing_sensor.sigma_deg = 0.5;
+    assert_int_equal(estimator_reconfigure(&W.est, &c, err, sizeof err), 0);
+    assert_int_equal(estimator_output(&W.est, 0, &after), 0);
+    assert_true(after.x_m == before.x_m && after.reset_counter == before.reset_counter);
+    c.bearing_beacon[1].y_m += 0.2;
+    assert_int_equal(estimator_reconfigure(&W.est, &c, err, sizeof err), 1);
+    assert_int_equal(estimator_output(&W.est, 0, &after), -1);
+    c.bearing_beacon[1].y_m -= 0.2; /* the world's beacons again */
+    assert_int_equal(estimator_reconfigure(&W.est, &c, err, sizeof err), 1);
+    run(&W, 4000000, 6000000, INT64_MAX, 0.0, 0.0);
+    double pos, th;
+    pose_error(&W, &pos, &th);
+    assert_true(pos < 0.03);
+    assert_int_equal(estimator_output(&W.est, 0, &after), 0);
+    assert_true(after.reset_counter > before.reset_counter);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -406,6 +434,7 @@ int main(void)
         cmocka_unit_test_setup(test_bearing_only_run_near_truth, setup),
         cmocka_unit_test_setup(test_bad_bearings_counted_and_dropped, setup),
         cmocka_unit_test_setup(test_unexpected_kinds, setup),
+        cmocka_unit_test_setup(test_reconfigure_bearing_site, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
