@@ -106,6 +106,8 @@ def test_eurobot_bearings_end_to_end(rig):
 
     # 2. Against the truth and its own 3 sigma.
     t_s, err, mahal, _quality = run.odometry_vs_truth()
+    np.savetxt(rig.workdir / "odometry-vs-truth.csv", np.column_stack([t_s, err, mahal]),
+               delimiter=",", header="t_s,err_m,mahal", comments="")
     ok = (t_s >= EUROBOT_JUDGE_AFTER_S) & np.isfinite(err) & np.isfinite(mahal)
     assert ok.sum() > 100, ok.sum()
     inside = float(np.mean(mahal[ok] <= 3.0))
