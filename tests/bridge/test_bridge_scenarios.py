@@ -214,7 +214,9 @@ def test_eurobot_bearings_only(bridge_bin, tmp_path):
     assert received > 300  # 3 beacons at 10 Hz for 12 s
     assert stats["bearings_unknown_beacon"] == unknown
     assert (stats["bearings_fused"] + stats["bearings_rejected"] + stats["bearings_buffered"]
-            + stats["bearings_refused"] + stats["bearings_unknown_beacon"]) == received
+            + stats["bearings_refused"] + stats["bearings_unknown_beacon"]
+            + stats["stale_bearing_samples"] + stats["bearings_unexpected"]
+            + stats["unmapped_bearings"]) == received
     assert stats["bearings_refused"] == 0 and stats["bearings_unexpected"] == 0
     assert stats["frames_received"]["pulse_detection"] == 0
     assert stats["estimator_resets"] == 0

@@ -85,7 +85,7 @@ def test_scenario_output_never_stops_and_recovers(rig, scenario):
 # robot crosses the table in 9.7 s on one arc and stands; 12 s in all.
 EUROBOT_SITE = h.SCENARIOS / "eurobot.ini"
 EUROBOT_JUDGE_AFTER_S = 2.0  # the triangulation start and its first second
-EUROBOT_RMS_M = 0.04         # replayed: 27 mm from 1 s on, 2 mm standing at the end
+EUROBOT_RMS_M = 0.04         # replayed: 18 mm after 2 s, 2 mm standing at the end
 
 
 def test_eurobot_bearings_end_to_end(rig):
