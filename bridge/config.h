@@ -116,6 +116,7 @@ struct bridge_config {
     /* [noise] */
     double sigma_arrival_s;
     double sigma_wheel_per_m;
+    double sigma_distance_per_m; /* odometry noise common to both wheels, 1/sqrt(m) */
     double speed_of_sound_mps;
     double sigma_speed_of_sound_mps;
     double gate_sigma;

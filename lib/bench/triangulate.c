@@ -62,8 +62,7 @@ int main(int argc, char **argv)
             prob.bearing_rad[k] = (bl_real)bearing;
             prob.sigma_rad[k] = (bl_real)sigma_rad;
         }
-        if (count < 3)
-            continue;
+        if (count < 3) continue;
         prob.count = count;
         bl_bearing_solution sol;
         memset(&sol, 0, sizeof sol);

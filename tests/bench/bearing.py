@@ -113,7 +113,8 @@ def triangulate(tool: Path, site, scans, truth) -> dict:
             "tried": int(sel.sum()), "refused": int((sel & (rows[:, 1] != 0)).sum())}
 
 
-def one_run(bridge: Path, tool: Path, scenario: str, seed: int, out: Path) -> dict:
+def one_run(bridge: Path, tool: Path, scenario: str, seed: int, out: Path,
+            self_start: bool = False) -> dict:
     d = out / f"{scenario}-s{seed:02d}"
     d.mkdir(parents=True, exist_ok=True)
     log, truth_p, odo_p, est_p = d / "bus.log", d / "truth.csv", d / "odometry.csv", d / "est.csv"
@@ -130,11 +131,12 @@ def one_run(bridge: Path, tool: Path, scenario: str, seed: int, out: Path) -> di
     off = INITIAL_ERROR_M * np.array([math.cos(ang), math.sin(ang)])
     x0, y0 = truth["x_m"][0] + off[0], truth["y_m"][0] + off[1]
     heading0 = math.degrees(truth["theta_rad"][0])
+    start = [] if self_start else [
+        "--initial-pose", f"{x0!r},{y0!r},{heading0!r},{INITIAL_ERROR_M!r},"
+        f"{INITIAL_SIGMA_THETA_DEG!r}"]
     br = subprocess.run([str(bridge), "--site", str(site_of(scenario)), "--replay", str(log),
                          "--estimates", str(est_p), "--stats", str(d / "stats.json"),
-                         "--mavlink", "udpout:127.0.0.1:9", "--status-interval", "0",
-                         "--initial-pose", f"{x0!r},{y0!r},{heading0!r},{INITIAL_ERROR_M!r},"
-                         f"{INITIAL_SIGMA_THETA_DEG!r}"],
+                         "--mavlink", "udpout:127.0.0.1:9", "--status-interval", "0"] + start,
                         capture_output=True, text=True)
     (d / "bridge.err").write_text(br.stderr)
     if br.returncode != 0 or not est_p.exists():
@@ -195,6 +197,8 @@ def main() -> int:
     ap.add_argument("--out", default=str(REPO / "build" / "bench" / "bearing"))
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--self-start", action="store_true",
+                    help="no --initial-pose: the bridge starts itself from triangulation")
     args = ap.parse_args()
     bridge, tool, out = Path(args.bridge), Path(args.triangulate), Path(args.out)
     for p in (bridge, tool):
@@ -205,7 +209,7 @@ def main() -> int:
     figs = {}
     for scenario in SCENARIOS:
         with ThreadPoolExecutor(max_workers=args.jobs) as pool:
-            runs = list(pool.map(lambda s: one_run(bridge, tool, scenario, s, out),
+            runs = list(pool.map(lambda s: one_run(bridge, tool, scenario, s, out, args.self_start),
                                  range(1, args.seeds + 1)))
         for r in runs:
             if not r["ok"]:
