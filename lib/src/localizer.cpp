@@ -198,7 +198,9 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     const bl_real theta = bl::wrap_angle(loc->filter.x_[BL_IX_THETA]);
     int rc = BL_EDEGENERATE;
     if (cfg.beacon_count > 0) rc = bl_filter_start_snapshot(&loc->filter, theta, cfg.reset_sigma_theta_rad);
+#if BL_WITH_BEARINGS
     if (rc != BL_OK && cfg.bearing_beacon_count > 0) rc = bl_filter_start_bearings(&loc->filter);
+#endif
     clear_window(loc);
     if (rc != BL_OK) {
         loc->counters_.restart_failures++;
@@ -594,6 +596,7 @@ extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *
     return BL_OK;
 }
 
+#if BL_WITH_BEARINGS  // common.h: bl_localizer_bearing not built without bearings
 // The window's beacon id of bearing beacon j: after the pulse beacons' ids
 // (0..BL_MAX_BEACONS-1), so that the window's beacon mask counts both kinds.
 static_assert(2 * BL_MAX_BEACONS <= 32, "the window's beacon mask holds both kinds");
@@ -650,6 +653,7 @@ extern "C" int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m,
     if (res) *res = out;
     return BL_OK;
 }
+#endif  // BL_WITH_BEARINGS
 
 extern "C" int bl_localizer_estimate(const bl_localizer *loc, bl_estimate *est)
 {

@@ -133,6 +133,7 @@ extern "C" {
 #define BL_LOC_EVENT_QUEUE 4
 #endif
 
+#if BL_WITH_BEARINGS /* common.h */
 /* One bearing from the omnidirectional bearing sensor (bl_filter_fuse_bearing). */
 typedef struct bl_bearing_meas {
     int64_t t_us;          /* time the bearing was taken (a rotating sensor times each
@@ -143,6 +144,7 @@ typedef struct bl_bearing_meas {
                               (|.| <= 1000) */
     uint32_t tag;          /* caller's tag, never read by the library */
 } bl_bearing_meas;
+#endif
 
 /* Wheel travel since the previous sample (differential drive). */
 typedef struct bl_wheel_increment {
@@ -210,12 +212,14 @@ typedef struct bl_loc_counters {
     uint32_t numbering_errors;  /* rejected arrivals with innovations longer than any flight */
     uint32_t seq_resyncs;       /* sequencer re-synchronised from the filter */
     uint32_t events_dropped;    /* events lost because the queue was full */
+#if BL_WITH_BEARINGS
     uint32_t bearings_fused;    /* bearings fused (accepted, started, reset) */
     uint32_t bearings_rejected; /* bearings rejected by the gate */
     uint32_t bearings_buffered; /* bearings kept for the triangulation (not started / stale) */
     uint32_t bearings_refused;  /* bearings refused: unknown bearing beacon, non-finite or
                                    out of range (an error returned), or refused by the
                                    filter (a non-finite update; BL_OK) */
+#endif
 } bl_loc_counters;
 
 /* Summary for health reports. */
@@ -318,6 +322,7 @@ int bl_localizer_detection(bl_localizer *loc, const bl_seq_detection *det);
  * skipped, the policy above applied. Errors: BL_EINVAL (NULL), BL_ENOTINIT. */
 int bl_localizer_advance(bl_localizer *loc, int64_t now_us);
 
+#if BL_WITH_BEARINGS /* common.h: not declared in a build without bearings */
 /* One bearing (Vander et al. 2011 eq. 3; bl_filter_fuse_bearing): after a
  * constant-velocity predict when the wheels are silent (as pulses), fused
  * or gated; before the start (or when stale) kept until the bearings of one
@@ -332,6 +337,7 @@ int bl_localizer_advance(bl_localizer *loc, int64_t now_us);
  * (beacon_index >= cfg.bearing_beacon_count), BL_EINVAL (bearing not
  * finite or |bearing| > 1000 rad, |t_us| > BL_SEQ_TIME_LIMIT_US). */
 int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m, bl_fusion_result *res);
+#endif
 
 /* One wheel sample. Call bl_localizer_advance(t_us - latency) first so the
  * pulses that arrived before it go first. Not started: only the reference.
