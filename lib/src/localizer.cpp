@@ -655,6 +655,37 @@ extern "C" int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m,
 }
 #endif  // BL_WITH_BEARINGS
 
+// A known pose (localizer.h): the filter (re)started by bl_filter_start,
+// the persistent-rejection watch emptied, the event queued and counted.
+extern "C" int bl_localizer_start(bl_localizer *loc, const bl_filter_prior *prior)
+{
+    if (loc == nullptr || prior == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    bl_filter_prior p = *prior;
+    if (loc->filter.cfg_.beacon_count == 0) {
+        // No ultrasonic beacons: t0, s and T are states no measurement
+        // observes; the caller's t0 fields are ignored (any values).
+        p.t0_us = p.t_us;
+        p.t0_beacon_index = 0;
+        p.sigma_t0_s = loc->filter.cfg_.beacon_period_s;
+    }
+    const bool was = bl::started(&loc->filter);
+    const int rc = bl_filter_start(&loc->filter, &p);  // *filter untouched on error
+    if (rc != BL_OK) return rc;
+    clear_window(loc);
+    loc->misnumbered_in_row_ = 0;
+    loc->counters_.known_starts++;
+    loc->was_started_ = true;
+    loc->ever_started_ = true;
+    loc->last_reset_seen_ = loc->filter.reset_count_;  // reported here, once
+    if (was)
+        push_event(loc, BL_LOC_EV_RESET, BL_LOC_CAUSE_KNOWN_POSE, 0);
+    else
+        push_event(loc, BL_LOC_EV_STARTED, BL_LOC_CAUSE_NONE, 0);
+    after_update(loc, false);  // convergence event, the sequencer's hint
+    return BL_OK;
+}
+
 extern "C" int bl_localizer_estimate(const bl_localizer *loc, bl_estimate *est)
 {
     if (loc == nullptr || est == nullptr) return BL_EINVAL;

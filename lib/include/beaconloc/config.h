@@ -101,7 +101,7 @@ typedef struct bl_config {
     bl_beacon beacons[BL_MAX_BEACONS]; /* x_m, y_m, z_m of beacon i at beacons[i-1] */
 
     /* ---- [bearing_beacons], [bearing_beacon1] .. [bearing_beaconN] ---- */
-    uint32_t bearing_beacon_count;             /* [bearing_beacons] count: 0..BL_MAX_BEACONS;
+    uint32_t bearing_beacon_count; /* [bearing_beacons] count: 0..BL_MAX_BEACONS;
                                                   >= 3 not collinear when beacon_count is 0 */
     /* Without bearings (common.h BL_WITH_BEARINGS 0) only the count stays,
      * which bl_config_check then requires to be 0; the positions below and
@@ -144,8 +144,8 @@ typedef struct bl_config {
                                          Fig. 8: 5 m/s), > 0 */
 
     /* ---- per measurement source ([noise] and [tuning] keys; see above) ---- */
-    bl_pulse_params pulse;     /* pulse arrival times (aid_pulse.cpp) */
-    bl_wheel_params wheels;    /* wheel encoders (odometry predict, aid_wheels.cpp) */
+    bl_pulse_params pulse;  /* pulse arrival times (aid_pulse.cpp) */
+    bl_wheel_params wheels; /* wheel encoders (odometry predict, aid_wheels.cpp) */
 #if BL_WITH_BEARINGS
     bl_bearing_params bearing; /* bearings to the bearing beacons (aid_bearing.cpp) */
 #endif

@@ -188,20 +188,20 @@ typedef struct bl_estimate {
      * (m/s)², (rad/s)² on the diagonal; e.g. (x, θ) m·rad, (x, v) m²/s,
      * (θ, ω) rad²/s, (v, ω) m·rad/s². */
     bl_real cov[25];
-    bool started;                              /* a pose exists (else only counters are valid) */
-    bool converged;                            /* position σ fell below cfg.converged_sigma_xy_m
+    bool started;                      /* a pose exists (else only counters are valid) */
+    bool converged;                    /* position σ fell below cfg.converged_sigma_xy_m
                                    and has not grown above twice that since */
-    uint32_t reset_counter;                    /* +1 on every (re-)initialisation after the first start */
-    uint32_t accepted[BL_MAX_BEACONS];         /* per beacon index: pulses fused */
-    uint32_t rejected[BL_MAX_BEACONS];         /* per beacon index: pulses rejected by the gate */
+    uint32_t reset_counter;            /* +1 on every (re-)initialisation after the first start */
+    uint32_t accepted[BL_MAX_BEACONS]; /* per beacon index: pulses fused */
+    uint32_t rejected[BL_MAX_BEACONS]; /* per beacon index: pulses rejected by the gate */
 #if BL_WITH_BEARINGS
     uint32_t bearing_accepted[BL_MAX_BEACONS]; /* per bearing beacon index: bearings fused */
     uint32_t bearing_rejected[BL_MAX_BEACONS]; /* per bearing beacon index: bearings rejected
                                                   by the gate */
 #endif
-    uint32_t wheel_speed_fused;                /* wheel-speed measurements (v and ω, each one) fused
+    uint32_t wheel_speed_fused;   /* wheel-speed measurements (v and ω, each one) fused
                                      by bl_filter_predict_odometry (ungated) */
-    uint32_t wheel_speed_refused;              /* wheel-speed measurements refused: the update would
+    uint32_t wheel_speed_refused; /* wheel-speed measurements refused: the update would
                                      have left the state non-finite (state kept) */
 } bl_estimate;
 
