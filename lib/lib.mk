@@ -3,6 +3,8 @@
 #   build/lib/libbeaconloc.a         double (default; what the bridge links)
 #   build/lib/float/libbeaconloc.a   -DBL_USE_FLOAT=1
 #   build/lib/san/libbeaconloc.a     double with ASan/UBSan (tests only)
+#   build/lib/nobearing/libbeaconloc.a  double, -DBL_WITH_BEARINGS=0 (tests
+#                                    only: LIB_NOBEARING_TESTS below)
 #   make test-lib                    every tests/lib/test_*.c as its own cmocka
 #                                    executable against the double, float and
 #                                    sanitized builds, plus check-lib-clink
@@ -66,8 +68,14 @@ endef
 $(eval $(call LIB_VARIANT,,-DEIGEN_NO_DEBUG,))
 $(eval $(call LIB_VARIANT,float/,-DBL_USE_FLOAT=1 -DEIGEN_NO_DEBUG,))
 $(eval $(call LIB_VARIANT,san/,$(LIB_SAN) -g,$(LIB_SAN)))
+# Without bearings (common.h BL_WITH_BEARINGS 0, as the M4 example builds):
+# the library and the few tests that build that way, so the switch cannot
+# rot (every other test uses the bearing API and runs in the three above).
+$(eval $(call LIB_VARIANT,nobearing/,-DBL_WITH_BEARINGS=0 -DEIGEN_NO_DEBUG,))
+LIB_NOBEARING_TESTS := test_build_switch test_filter_pulse test_filter_errors test_solver_bearing
 
-LIB_TEST_BINS := $(foreach v,/ /float/ /san/,$(addprefix $(BUILD)/lib$(v)tests/,$(LIB_TEST_NAMES)))
+LIB_TEST_BINS := $(foreach v,/ /float/ /san/,$(addprefix $(BUILD)/lib$(v)tests/,$(LIB_TEST_NAMES))) \
+                 $(addprefix $(BUILD)/lib/nobearing/tests/,$(LIB_NOBEARING_TESTS))
 
 ALL_TARGETS += $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
 UNIT_TESTS  += test-lib

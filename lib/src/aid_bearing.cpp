@@ -7,6 +7,9 @@
 // config.h); otherwise only the bearing beacons' positions.
 #include "filter_internal.hpp"
 
+// The whole source compiles out without bearings (common.h BL_WITH_BEARINGS).
+#if BL_WITH_BEARINGS
+
 #include <cstring>
 
 #include "beaconloc/filter_model.h"
@@ -190,3 +193,5 @@ extern "C" int bl_model_bearing(const bl_config *cfg, const bl_real x[BL_FILTER_
     }
     return BL_OK;
 }
+
+#endif  // BL_WITH_BEARINGS

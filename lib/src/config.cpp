@@ -69,6 +69,7 @@ const char *check_wheel_params(const bl_wheel_params *w)
     return nullptr;
 }
 
+#if BL_WITH_BEARINGS
 // Bearings (aid_bearing.cpp): Vander et al. 2011 §3, σφ = 1°.
 void default_bearing_params(bl_bearing_params *b)
 {
@@ -91,6 +92,8 @@ const char *check_bearing_params(const bl_bearing_params *b)
     if (!(is_finite(b->max_fix_drms_m) && b->max_fix_drms_m > real(0))) return "bearing.max_fix_drms_m";
     return nullptr;
 }
+
+#endif
 
 }  // namespace
 
@@ -131,7 +134,9 @@ extern "C" int bl_config_default(bl_config *cfg)
     default_pulse_params(&cfg->pulse);
     default_wheel_params(&cfg->wheels);
     cfg->bearing_beacon_count = 0;  // kleeman-lab has no bearing beacons
+#if BL_WITH_BEARINGS
     default_bearing_params(&cfg->bearing);
+#endif
     // Tuning.
     cfg->sigma_period_s = real(20e-6);  // beacon controller clock: ~100 ppm of 150 ms
     cfg->converged_sigma_xy_m = real(0.25);
@@ -167,6 +172,7 @@ bool beacons_span_plane(const bl_beacon *b, uint32_t n)
     return false;
 }
 
+#if BL_WITH_BEARINGS
 // Bearing beacons: finite, in range, pairwise distinct in x-y (a bearing
 // does not see z), and spanning the plane when they alone fix the pose.
 bool bearing_beacons_ok(const bl_config *c)
@@ -182,6 +188,7 @@ bool bearing_beacons_ok(const bl_config *c)
     }
     return c->beacon_count > 0 || beacons_span_plane(c->bearing_beacons, c->bearing_beacon_count);
 }
+#endif
 
 #define BL_CHECK(cond, name)                                                                                           \
     do {                                                                                                               \
@@ -221,7 +228,16 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     // At least one kind of beacon; without pulses the bearings start the filter (>= 3).
     BL_CHECK(c->bearing_beacon_count <= BL_MAX_BEACONS && (c->beacon_count > 0 || c->bearing_beacon_count >= 3),
              "bearing_beacon_count");
+#if !BL_WITH_BEARINGS
+    // A library built without bearings (common.h BL_WITH_BEARINGS 0) has no
+    // bearing fusion and no triangulation start: a site with bearing beacons
+    // would silently lose them (and a bearing-only site never start), so it
+    // is refused. The count stays in bl_config for this check (and so a
+    // site loader that sets it compiles in both builds).
+    BL_CHECK(c->bearing_beacon_count == 0, "bearing_beacon_count");
+#else
     BL_CHECK(bearing_beacons_ok(c), "bearing_beacons");
+#endif
     BL_CHECK(c->receiver_count >= 1 && c->receiver_count <= BL_MAX_RECEIVERS, "receiver_count");
     BL_CHECK(is_finite(c->ring_radius_m) && c->ring_radius_m >= real(0) && c->ring_radius_m < real(10),
              "ring_radius_m");
@@ -244,7 +260,9 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
              "sigma_speed_of_sound_mps");
     const char *bad = check_pulse_params(&c->pulse, c->beacon_period_s);
     if (bad == nullptr) bad = check_wheel_params(&c->wheels);
+#if BL_WITH_BEARINGS
     if (bad == nullptr) bad = check_bearing_params(&c->bearing);
+#endif
     BL_CHECK(bad == nullptr, bad);
     BL_CHECK(is_finite(c->sigma_period_s) && c->sigma_period_s > real(0) && c->sigma_period_s < c->beacon_period_s,
              "sigma_period_s");
@@ -290,14 +308,16 @@ extern "C" bool bl_config_same_geometry(const bl_config *a, const bl_config *b)
         a->first_angle_deg != b->first_angle_deg || a->angle_step_deg != b->angle_step_deg ||
         a->receiver_height_m != b->receiver_height_m || a->wheel_base_m != b->wheel_base_m ||
         (a->sigma_wheel_scale > real(0)) != (b->sigma_wheel_scale > real(0)) ||
-        a->bearing_beacon_count != b->bearing_beacon_count || a->bearing.offset_x_m != b->bearing.offset_x_m ||
-        a->bearing.offset_y_m != b->bearing.offset_y_m)
+        a->bearing_beacon_count != b->bearing_beacon_count)
         return false;
+#if BL_WITH_BEARINGS
+    if (a->bearing.offset_x_m != b->bearing.offset_x_m || a->bearing.offset_y_m != b->bearing.offset_y_m) return false;
     const uint32_t nb = a->bearing_beacon_count < BL_MAX_BEACONS ? a->bearing_beacon_count : BL_MAX_BEACONS;
     for (uint32_t i = 0; i < nb; ++i)
         if (a->bearing_beacons[i].x_m != b->bearing_beacons[i].x_m ||
             a->bearing_beacons[i].y_m != b->bearing_beacons[i].y_m)
             return false;
+#endif
     const uint32_t n = a->beacon_count < BL_MAX_BEACONS ? a->beacon_count : BL_MAX_BEACONS;
     for (uint32_t i = 0; i < n; ++i)
         if (a->beacons[i].x_m != b->beacons[i].x_m || a->beacons[i].y_m != b->beacons[i].y_m ||

@@ -226,8 +226,10 @@ void fill_estimate(const bl_filter *f, const XV &x, const PM &P, int64_t t_us, b
     for (uint32_t i = 0; i < BL_MAX_BEACONS; ++i) {
         est->accepted[i] = f->accepted_[i];
         est->rejected[i] = f->rejected_[i];
+#if BL_WITH_BEARINGS
         est->bearing_accepted[i] = f->bearing_accepted_[i];
         est->bearing_rejected[i] = f->bearing_rejected_[i];
+#endif
     }
     if (!est->started) return;
     est->x_m = x(X);

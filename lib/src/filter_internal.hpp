@@ -79,12 +79,14 @@ inline MeasTime classify_time(const bl_filter *f, int64_t t_us)
     return MeasTime::kFresh;
 }
 
+#if BL_WITH_BEARINGS
 // ---- snapshot_bearing.cpp
 // Keep a bearing as its beacon's latest (the triangulation's input).
 void remember_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us, real bearing_rad);
 // (Re)start from the triangulation of the kept bearings (filter.h,
 // bl_filter_start_bearings); *f untouched on failure.
 int start_from_bearings(bl_filter *f);
+#endif
 
 // ---- aid_wheels.cpp
 struct WheelSpeedCounts {

@@ -198,7 +198,9 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     const bl_real theta = bl::wrap_angle(loc->filter.x_[BL_IX_THETA]);
     int rc = BL_EDEGENERATE;
     if (cfg.beacon_count > 0) rc = bl_filter_start_snapshot(&loc->filter, theta, cfg.reset_sigma_theta_rad);
+#if BL_WITH_BEARINGS
     if (rc != BL_OK && cfg.bearing_beacon_count > 0) rc = bl_filter_start_bearings(&loc->filter);
+#endif
     clear_window(loc);
     if (rc != BL_OK) {
         loc->counters_.restart_failures++;
@@ -594,6 +596,7 @@ extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *
     return BL_OK;
 }
 
+#if BL_WITH_BEARINGS  // common.h: bl_localizer_bearing not built without bearings
 // The window's beacon id of bearing beacon j: after the pulse beacons' ids
 // (0..BL_MAX_BEACONS-1), so that the window's beacon mask counts both kinds.
 static_assert(2 * BL_MAX_BEACONS <= 32, "the window's beacon mask holds both kinds");
@@ -648,6 +651,38 @@ extern "C" int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m,
         after_update(loc, false);
     }
     if (res) *res = out;
+    return BL_OK;
+}
+#endif  // BL_WITH_BEARINGS
+
+// A known pose (localizer.h): the filter (re)started by bl_filter_start,
+// the persistent-rejection watch emptied, the event queued and counted.
+extern "C" int bl_localizer_start(bl_localizer *loc, const bl_filter_prior *prior)
+{
+    if (loc == nullptr || prior == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    bl_filter_prior p = *prior;
+    if (loc->filter.cfg_.beacon_count == 0) {
+        // No ultrasonic beacons: t0, s and T are states no measurement
+        // observes; the caller's t0 fields are ignored (any values).
+        p.t0_us = p.t_us;
+        p.t0_beacon_index = 0;
+        p.sigma_t0_s = loc->filter.cfg_.beacon_period_s;
+    }
+    const bool was = bl::started(&loc->filter);
+    const int rc = bl_filter_start(&loc->filter, &p);  // *filter untouched on error
+    if (rc != BL_OK) return rc;
+    clear_window(loc);
+    loc->misnumbered_in_row_ = 0;
+    loc->counters_.known_starts++;
+    loc->was_started_ = true;
+    loc->ever_started_ = true;
+    loc->last_reset_seen_ = loc->filter.reset_count_;  // reported here, once
+    if (was)
+        push_event(loc, BL_LOC_EV_RESET, BL_LOC_CAUSE_KNOWN_POSE, 0);
+    else
+        push_event(loc, BL_LOC_EV_STARTED, BL_LOC_CAUSE_NONE, 0);
+    after_update(loc, false);  // convergence event, the sequencer's hint
     return BL_OK;
 }
 

@@ -5,6 +5,9 @@
 // (bl_solve_bearings, Vander et al. 2011 eq. 1), the state from the fix.
 #include "filter_internal.hpp"
 
+// The whole source compiles out without bearings (common.h BL_WITH_BEARINGS).
+#if BL_WITH_BEARINGS
+
 #include <cstring>
 
 #include "beaconloc/solver.h"
@@ -150,3 +153,5 @@ extern "C" int bl_filter_start_bearings(bl_filter *f)
     if (!bl::initialised(f)) return BL_ENOTINIT;
     return bl::start_from_bearings(f);
 }
+
+#endif  // BL_WITH_BEARINGS

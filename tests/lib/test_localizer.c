@@ -546,9 +546,14 @@ typedef struct {
     unsigned events[8], resets_by_cause[8];
     double final_err;
     unsigned given;
+    bl_estimate est; /* the final estimate */
+    eb_pose truth;   /* and the truth then */
 } eb_loc_result;
 
-static void eurobot_localizer_run(bl_localizer *loc, double kidnap_dx_m, double kidnap_dy_m, eb_loc_result *out) {
+/* start: NULL, or a known pose given to bl_localizer_start after the first
+ * (reference) wheel sample. */
+static void eurobot_localizer_run_from(bl_localizer *loc, double kidnap_dx_m, double kidnap_dy_m,
+                                       const bl_filter_prior *start, eb_loc_result *out) {
     bl_config cfg;
     assert_int_equal(eurobot_config(&cfg), BL_OK);
     bl_seq_config sc;
@@ -577,6 +582,7 @@ static void eurobot_localizer_run(bl_localizer *loc, double kidnap_dx_m, double 
         inc.d_right_m = (bl_real)(dr + 0.01 * sqrt(fabs(dr)) * noise_gauss());
         inc.reference_only = i == 0;
         assert_int_equal(bl_localizer_wheels(loc, &inc), BL_OK);
+        if (i == 0 && start) assert_int_equal(bl_localizer_start(loc, start), BL_OK);
         for (uint32_t j = 0; j < 3; j++) {
             if ((i + 3 * j) % 10) continue;
             bl_bearing_meas m = {.t_us = eb_us(t), .beacon_index = j, .tag = (uint32_t)(2 + 4 * i)};
@@ -594,6 +600,12 @@ static void eurobot_localizer_run(bl_localizer *loc, double kidnap_dx_m, double 
     bl_estimate est;
     assert_int_equal(bl_localizer_estimate(loc, &est), BL_OK);
     out->final_err = hypot(est.x_m - truth.x, est.y_m - truth.y);
+    out->est = est;
+    out->truth = truth;
+}
+
+static void eurobot_localizer_run(bl_localizer *loc, double kidnap_dx_m, double kidnap_dy_m, eb_loc_result *out) {
+    eurobot_localizer_run_from(loc, kidnap_dx_m, kidnap_dy_m, NULL, out);
 }
 
 /* A site without ultrasonic beacons: the sequencer idles, detections are
@@ -698,6 +710,121 @@ static void test_bearing_errors(void **state) {
     assert_int_equal(bl_localizer_init(&loc, &eb, &sc), BL_ECONFIG);
 }
 
+/* Eurobot start zone (Vander et al. 2011 §4: the filter starts with about
+ * 7 cm of error): the pose is known to 7 cm (σ 7 cm per axis), the robot
+ * stands at (0.8, 1.0), the prior says (0.85, 0.95) (7.1 cm off). The
+ * filter starts from it at once (no bearing is buffered, no triangulation
+ * start), converges, and ends on the truth within its covariance. The
+ * prior's t0 fields are ignored on this bearing-only site (garbage here). */
+static void test_known_start_converges(void **state) {
+    (void)state;
+    const bl_filter_prior prior = {.t_us = eb_us(0),
+                                   .x_m = (bl_real)0.85,
+                                   .y_m = (bl_real)0.95,
+                                   .theta_rad = (bl_real)(2 * DEG),
+                                   .sigma_xy_m = (bl_real)0.07,
+                                   .sigma_theta_rad = (bl_real)(3 * DEG),
+                                   .sigma_v_mps = (bl_real)0.05,
+                                   .sigma_omega_radps = (bl_real)0.1,
+                                   .t0_us = 0,
+                                   .t0_beacon_index = 99,
+                                   .sigma_t0_s = -1};
+    eb_loc_result res;
+    eurobot_localizer_run_from(&LOC, 0, 0, &prior, &res);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    const double ex = res.est.x_m - res.truth.x, ey = res.est.y_m - res.truth.y;
+    const double pxx = res.est.cov[0], pxy = res.est.cov[1], pyy = res.est.cov[6];
+    const double det = pxx * pyy - pxy * pxy;
+    const double d2 = (pyy * ex * ex - 2 * pxy * ex * ey + pxx * ey * ey) / det; /* e' P^-1 e */
+    print_message("eurobot known start: final %.1f mm, d2 %.2f, sigma %.1f mm, fused %u rejected %u\n",
+                  1000 * res.final_err, d2, 1000 * sqrt(pxx + pyy), c.bearings_fused, c.bearings_rejected);
+    assert_int_equal(c.known_starts, 1);
+    assert_int_equal(res.events[BL_LOC_EV_STARTED], 1);
+    assert_int_equal(res.events[BL_LOC_EV_RESET], 0);
+    assert_true(res.events[BL_LOC_EV_CONVERGED] >= 1);
+    assert_int_equal(c.bearings_buffered, 0); /* started before the first bearing */
+    assert_int_equal(c.bearings_fused + c.bearings_rejected, res.given);
+    assert_true(c.bearings_rejected <= 3);
+    assert_int_equal(c.snapshot_restarts, 0);
+    assert_true(res.final_err < 0.03);
+    assert_true(d2 < 13.8); /* chi-square, 2 dof, 99.9 % */
+    bl_estimate e;
+    assert_int_equal(bl_localizer_estimate(&LOC, &e), BL_OK);
+    assert_int_equal(e.reset_counter, 0);
+
+    /* Put back by hand at a known pose: RESET, cause KNOWN_POSE, the published
+     * reset counter +1, the watch empty, the pose the prior's. */
+    bl_filter_prior back = prior;
+    back.t_us = eb_us(8.5);
+    back.x_m = (bl_real)0.3;
+    back.y_m = (bl_real)0.4;
+    assert_int_equal(bl_localizer_start(&LOC, &back), BL_OK);
+    bl_loc_event ev;
+    unsigned resets = 0, cause = 0;
+    while (bl_localizer_next_event(&LOC, &ev) == 1)
+        if (ev.kind == BL_LOC_EV_RESET) resets++, cause = ev.cause;
+    assert_int_equal(resets, 1);
+    assert_int_equal(cause, BL_LOC_CAUSE_KNOWN_POSE);
+    assert_int_equal(bl_localizer_estimate(&LOC, &e), BL_OK);
+    assert_int_equal(e.reset_counter, 1);
+    assert_float_equal(e.x_m, 0.3, 1e-6);
+    assert_float_equal(e.y_m, 0.4, 1e-6);
+    assert_float_equal(sqrt(e.cov[0]), 0.07, 1e-5);
+    bl_loc_status st;
+    assert_int_equal(bl_localizer_status(&LOC, &st), BL_OK);
+    assert_int_equal(st.window_len, 0);
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    assert_int_equal(c.known_starts, 2);
+}
+
+/* Bad priors, a NULL or uninitialised localizer: the error of
+ * bl_filter_start, and the localizer byte-identical (started or not). */
+static void test_known_start_errors(void **state) {
+    (void)state;
+    static bl_localizer loc, before;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK); /* a pulse site */
+    bl_seq_config sc;
+    assert_int_equal(bl_localizer_seq_config(&cfg, &sc, NULL, NULL), BL_OK);
+    const bl_filter_prior good = {.t_us = 1000000,
+                                  .x_m = 1,
+                                  .y_m = 1,
+                                  .sigma_xy_m = (bl_real)0.07,
+                                  .sigma_theta_rad = (bl_real)0.05,
+                                  .sigma_v_mps = (bl_real)0.1,
+                                  .sigma_omega_radps = (bl_real)0.1,
+                                  .t0_us = 1000000,
+                                  .t0_beacon_index = 0,
+                                  .sigma_t0_s = (bl_real)1e-3};
+    memset(&loc, 0, sizeof loc);
+    assert_int_equal(bl_localizer_start(&loc, &good), BL_ENOTINIT);
+    assert_int_equal(bl_localizer_init(&loc, &cfg, &sc), BL_OK);
+    for (int started = 0; started < 2; started++) {
+        if (started) assert_int_equal(bl_localizer_start(&loc, &good), BL_OK);
+        before = loc;
+        bl_filter_prior p;
+        assert_int_equal(bl_localizer_start(&loc, NULL), BL_EINVAL);
+        assert_int_equal(bl_localizer_start(NULL, &good), BL_EINVAL);
+        p = good, p.x_m = (bl_real)NAN;
+        assert_int_equal(bl_localizer_start(&loc, &p), BL_EINVAL);
+        p = good, p.sigma_xy_m = 0;
+        assert_int_equal(bl_localizer_start(&loc, &p), BL_EINVAL);
+        p = good, p.sigma_theta_rad = -1;
+        assert_int_equal(bl_localizer_start(&loc, &p), BL_EINVAL);
+        p = good, p.theta_rad = (bl_real)1e30;
+        assert_int_equal(bl_localizer_start(&loc, &p), BL_EINVAL);
+        p = good, p.t0_beacon_index = cfg.beacon_count; /* t0 matters on a pulse site */
+        assert_int_equal(bl_localizer_start(&loc, &p), BL_EINVAL);
+        p = good, p.t0_us = good.t_us + 3600000000ll;
+        assert_int_equal(bl_localizer_start(&loc, &p), BL_ETIME);
+        assert_memory_equal(&loc, &before, sizeof loc);
+    }
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&loc, &c), BL_OK);
+    assert_int_equal(c.known_starts, 1);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_errors_leave_it_untouched),
@@ -711,6 +838,8 @@ int main(void) {
         cmocka_unit_test(test_bearing_only_site),
         cmocka_unit_test(test_bearing_only_kidnap_restarts),
         cmocka_unit_test(test_bearing_errors),
+        cmocka_unit_test(test_known_start_converges),
+        cmocka_unit_test(test_known_start_errors),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

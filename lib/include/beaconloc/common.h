@@ -39,6 +39,25 @@ typedef double bl_real;
 #define BL_MAX_RECEIVERS 16
 #endif
 
+/* Aiding sources compiled in, one switch per source (as PX4 ekf2's
+ * CONFIG_EKF2_RANGE_FINDER, CONFIG_EKF2_EXTERNAL_VISION...). Define with -D
+ * for the library and every file that includes its headers alike (the
+ * struct layouts depend on them).
+ *   BL_WITH_BEARINGS  1 (default): bearings to bearing beacons (filter.h
+ *                     bl_filter_fuse_bearing, bl_filter_start_bearings;
+ *                     localizer.h bl_localizer_bearing, bl_bearing_meas).
+ *                     0: those calls and types are not declared and their
+ *                     code is not built, the filter carries no bearing
+ *                     buffers, bl_estimate and bl_loc_counters no bearing
+ *                     counters; bl_config keeps its bearing fields (one
+ *                     config layout) but bl_config_check refuses
+ *                     bearing_beacon_count > 0. For pulse-only firmware. The
+ *                     solvers (solver.h, bl_solve_bearings*) stay: they are
+ *                     independent of the filter. */
+#ifndef BL_WITH_BEARINGS
+#define BL_WITH_BEARINGS 1
+#endif
+
 /* Error codes: every fallible call returns BL_OK or one of these. */
 typedef enum bl_error {
     BL_OK = 0,

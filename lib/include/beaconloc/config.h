@@ -106,10 +106,16 @@ typedef struct bl_config {
     bl_beacon beacons[BL_MAX_BEACONS]; /* x_m, y_m, z_m of beacon i at beacons[i-1] */
 
     /* ---- [bearing_beacons], [bearing_beacon1] .. [bearing_beaconN] ---- */
-    uint32_t bearing_beacon_count;             /* [bearing_beacons] count: 0..BL_MAX_BEACONS;
+    uint32_t bearing_beacon_count; /* [bearing_beacons] count: 0..BL_MAX_BEACONS;
                                                   >= 3 not collinear when beacon_count is 0 */
+    /* Without bearings (common.h BL_WITH_BEARINGS 0) only the count stays,
+     * which bl_config_check then requires to be 0; the positions below and
+     * the bearing block compile out (their 124 B, with float and 8 beacons,
+     * are what kept a pulse-only localizer over its 2 KiB RAM target). */
+#if BL_WITH_BEARINGS
     bl_beacon bearing_beacons[BL_MAX_BEACONS]; /* x_m, y_m of bearing beacon i at
                                                   bearing_beacons[i-1] (z unused) */
+#endif
 
     /* ---- [receivers] ---- */
     uint32_t receiver_count;   /* count: 1..BL_MAX_RECEIVERS */
@@ -143,9 +149,11 @@ typedef struct bl_config {
                                          Fig. 8: 5 m/s), > 0 */
 
     /* ---- per measurement source ([noise] and [tuning] keys; see above) ---- */
-    bl_pulse_params pulse;     /* pulse arrival times (aid_pulse.cpp) */
-    bl_wheel_params wheels;    /* wheel encoders (odometry predict, aid_wheels.cpp) */
+    bl_pulse_params pulse;  /* pulse arrival times (aid_pulse.cpp) */
+    bl_wheel_params wheels; /* wheel encoders (odometry predict, aid_wheels.cpp) */
+#if BL_WITH_BEARINGS
     bl_bearing_params bearing; /* bearings to the bearing beacons (aid_bearing.cpp) */
+#endif
 
     /* ---- tuning shared by all sources: state, process noise, start-up, policy
      * ([tuning] in the bridge's site file; defaults from bl_config_default) ---- */

@@ -145,6 +145,7 @@ typedef struct bl_filter {
     int64_t ring_t_us_[BL_MAX_BEACONS];  /* earliest arrival of the latest firing */
     uint32_t ring_mask_[BL_MAX_BEACONS]; /* receivers that heard it (bit per receiver) */
     uint32_t ring_explained_mask_;       /* beacons whose latest firing had a fused arrival */
+#if BL_WITH_BEARINGS
     /* bearings (aid_bearing.cpp): the latest of each bearing beacon, for the
      * triangulation (re)start (snapshot_bearing.cpp), and the counters */
     uint32_t bearing_valid_mask_;          /* bit j: bearing_t_us_[j] is valid */
@@ -152,6 +153,7 @@ typedef struct bl_filter {
     bl_real bearing_rad_[BL_MAX_BEACONS];  /* its bearing (rad, body frame) */
     uint32_t bearing_accepted_[BL_MAX_BEACONS];
     uint32_t bearing_rejected_[BL_MAX_BEACONS];
+#endif
 } bl_filter;
 
 /* Explicit start: a known pose and firing time. */
@@ -186,18 +188,20 @@ typedef struct bl_estimate {
      * (m/s)², (rad/s)² on the diagonal; e.g. (x, θ) m·rad, (x, v) m²/s,
      * (θ, ω) rad²/s, (v, ω) m·rad/s². */
     bl_real cov[25];
-    bool started;                              /* a pose exists (else only counters are valid) */
-    bool converged;                            /* position σ fell below cfg.converged_sigma_xy_m
+    bool started;                      /* a pose exists (else only counters are valid) */
+    bool converged;                    /* position σ fell below cfg.converged_sigma_xy_m
                                    and has not grown above twice that since */
-    uint32_t reset_counter;                    /* +1 on every (re-)initialisation after the first start */
-    uint32_t accepted[BL_MAX_BEACONS];         /* per beacon index: pulses fused */
-    uint32_t rejected[BL_MAX_BEACONS];         /* per beacon index: pulses rejected by the gate */
+    uint32_t reset_counter;            /* +1 on every (re-)initialisation after the first start */
+    uint32_t accepted[BL_MAX_BEACONS]; /* per beacon index: pulses fused */
+    uint32_t rejected[BL_MAX_BEACONS]; /* per beacon index: pulses rejected by the gate */
+#if BL_WITH_BEARINGS
     uint32_t bearing_accepted[BL_MAX_BEACONS]; /* per bearing beacon index: bearings fused */
     uint32_t bearing_rejected[BL_MAX_BEACONS]; /* per bearing beacon index: bearings rejected
                                                   by the gate */
-    uint32_t wheel_speed_fused;                /* wheel-speed measurements (v and ω, each one) fused
+#endif
+    uint32_t wheel_speed_fused;   /* wheel-speed measurements (v and ω, each one) fused
                                      by bl_filter_predict_odometry (ungated) */
-    uint32_t wheel_speed_refused;              /* wheel-speed measurements refused: the update would
+    uint32_t wheel_speed_refused; /* wheel-speed measurements refused: the update would
                                      have left the state non-finite (state kept) */
 } bl_estimate;
 
@@ -324,6 +328,7 @@ int bl_filter_predict(bl_filter *f, int64_t t_us);
 int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index,
                          bl_fusion_result *result);
 
+#if BL_WITH_BEARINGS /* common.h: not declared in a build without bearings */
 /* Fuse one bearing of bearing beacon bearing_beacon_index (0-based, into
  * cfg.bearing_beacons) taken at t_us: bearing_rad (rad) is the beacon's
  * direction seen from the sensor, body frame, CCW from the robot's +x axis,
@@ -387,6 +392,7 @@ int bl_filter_fuse_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t 
  * solver did not converge, or a non-finite fix). On error *f is
  * byte-identical. */
 int bl_filter_start_bearings(bl_filter *f);
+#endif /* BL_WITH_BEARINGS */
 
 /* Raw state and covariance (layout BL_IX_*; t0 relative to the internal
  * epoch; P row-major NXxNX in the units of the states, e.g. P[T0][T0] s²),

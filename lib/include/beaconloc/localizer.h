@@ -8,8 +8,9 @@
  *     bl_config cfg; bl_config_default(&cfg); ... site ...;
  *     bl_seq_config sc; bl_localizer_seq_config(&cfg, &sc, &why, &field);
  *     bl_localizer loc;  bl_localizer_init(&loc, &cfg, &sc);
+ *     known start pose (optional): bl_localizer_start(&loc, &prior);
  *     on a receiver detection: bl_localizer_detection(&loc, &det);  (det.tag: yours)
- *     on a bearing:            bl_localizer_bearing(&loc, &bearing, NULL);
+ *     on a bearing:            bl_localizer_bearing(&loc, &bearing, NULL);  (BL_WITH_BEARINGS)
  *     every loop turn:         bl_localizer_advance(&loc, now_us - latency_us);
  *     on an encoder sample:    bl_localizer_advance(&loc, t_us - latency_us);
  *                              bl_localizer_wheels(&loc, &inc);
@@ -133,6 +134,7 @@ extern "C" {
 #define BL_LOC_EVENT_QUEUE 4
 #endif
 
+#if BL_WITH_BEARINGS /* common.h */
 /* One bearing from the omnidirectional bearing sensor (bl_filter_fuse_bearing). */
 typedef struct bl_bearing_meas {
     int64_t t_us;          /* time the bearing was taken (a rotating sensor times each
@@ -143,6 +145,7 @@ typedef struct bl_bearing_meas {
                               (|.| <= 1000) */
     uint32_t tag;          /* caller's tag, never read by the library */
 } bl_bearing_meas;
+#endif
 
 /* Wheel travel since the previous sample (differential drive). */
 typedef struct bl_wheel_increment {
@@ -172,7 +175,8 @@ typedef enum bl_loc_reset_cause {
                                      state after a time gap) */
     BL_LOC_CAUSE_TIME_GAP = 3,             /* a predict beyond max_predict_gap_s: fresh filter */
     BL_LOC_CAUSE_STALE_PULSE = 4,          /* a pulse too old for the state: fresh filter */
-    BL_LOC_CAUSE_CONFIG = 5                /* bl_localizer_reinit (new geometry): fresh filter */
+    BL_LOC_CAUSE_CONFIG = 5,               /* bl_localizer_reinit (new geometry): fresh filter */
+    BL_LOC_CAUSE_KNOWN_POSE = 6            /* bl_localizer_start: restarted from a known pose */
 } bl_loc_reset_cause;
 
 typedef struct bl_loc_event {
@@ -202,20 +206,23 @@ typedef struct bl_loc_counters {
     uint32_t predicts;          /* odometry predicts */
     uint32_t cv_predicts;       /* constant-velocity predicts (wheels silent) */
     uint32_t predict_errors;
-    uint32_t reinits;           /* fresh filters: time gaps, stale pulses, reinit */
-    uint32_t seq_errors;        /* detections the sequencer refused (late: older than a
+    uint32_t reinits;          /* fresh filters: time gaps, stale pulses, reinit */
+    uint32_t seq_errors;       /* detections the sequencer refused (late: older than a
                                     pulse already closed) */
-    uint32_t seq_full;          /* sequencer full: pulses closed early */
-    uint32_t hint_errors;       /* hints the sequencer refused */
-    uint32_t numbering_errors;  /* rejected arrivals with innovations longer than any flight */
-    uint32_t seq_resyncs;       /* sequencer re-synchronised from the filter */
-    uint32_t events_dropped;    /* events lost because the queue was full */
+    uint32_t seq_full;         /* sequencer full: pulses closed early */
+    uint32_t hint_errors;      /* hints the sequencer refused */
+    uint32_t numbering_errors; /* rejected arrivals with innovations longer than any flight */
+    uint32_t seq_resyncs;      /* sequencer re-synchronised from the filter */
+    uint32_t events_dropped;   /* events lost because the queue was full */
+    uint32_t known_starts;     /* (re)starts from a known pose (bl_localizer_start) */
+#if BL_WITH_BEARINGS
     uint32_t bearings_fused;    /* bearings fused (accepted, started, reset) */
     uint32_t bearings_rejected; /* bearings rejected by the gate */
     uint32_t bearings_buffered; /* bearings kept for the triangulation (not started / stale) */
     uint32_t bearings_refused;  /* bearings refused: unknown bearing beacon, non-finite or
                                    out of range (an error returned), or refused by the
                                    filter (a non-finite update; BL_OK) */
+#endif
 } bl_loc_counters;
 
 /* Summary for health reports. */
@@ -318,6 +325,7 @@ int bl_localizer_detection(bl_localizer *loc, const bl_seq_detection *det);
  * skipped, the policy above applied. Errors: BL_EINVAL (NULL), BL_ENOTINIT. */
 int bl_localizer_advance(bl_localizer *loc, int64_t now_us);
 
+#if BL_WITH_BEARINGS /* common.h: not declared in a build without bearings */
 /* One bearing (Vander et al. 2011 eq. 3; bl_filter_fuse_bearing): after a
  * constant-velocity predict when the wheels are silent (as pulses), fused
  * or gated; before the start (or when stale) kept until the bearings of one
@@ -332,6 +340,31 @@ int bl_localizer_advance(bl_localizer *loc, int64_t now_us);
  * (beacon_index >= cfg.bearing_beacon_count), BL_EINVAL (bearing not
  * finite or |bearing| > 1000 rad, |t_us| > BL_SEQ_TIME_LIMIT_US). */
 int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m, bl_fusion_result *res);
+#endif
+
+/* Start, or restart, from a known pose: a robot placed in its start zone
+ * (Eurobot), or put back by hand. The filter starts from *prior
+ * (bl_filter_start, filter.h: position, heading, speeds and their σ, a
+ * firing time t0); the persistent-rejection watch starts empty; event
+ * STARTED if the filter had no state, else RESET with cause KNOWN_POSE (and
+ * the published reset counter +1); counted in known_starts. Pulses and
+ * bearings after it are fused against this pose (gated: a prior σ too small
+ * for the true error gets its measurements rejected until the
+ * persistent-rejection watch restarts from the snapshot). The next wheel
+ * increment is applied from prior->t_us: call it at the time of the last
+ * wheel sample, the robot standing still.
+ * t0: on a site with ultrasonic beacons, the firing time of beacon
+ * t0_beacon_index in any cycle within cfg.max_predict_gap_s of t_us, with
+ * its σ (e.g. sigma_t0_s = cfg.beacon_period_s when unknown: the first
+ * pulses then fix it, the pose's σ held by the prior). On a site without
+ * ultrasonic beacons (cfg.beacon_count 0, bearings only) t0_us,
+ * t0_beacon_index and sigma_t0_s are ignored (any values): nothing
+ * observes them.
+ * Errors: BL_EINVAL (NULL), BL_ENOTINIT, and those of bl_filter_start
+ * (BL_EINVAL: non-finite, σ <= 0, out of range, t0_beacon_index >=
+ * beacon_count; BL_ETIME: t0_us too far from t_us); on any error *loc is
+ * byte-identical. Cost: one bl_filter_start and the event's estimate. */
+int bl_localizer_start(bl_localizer *loc, const bl_filter_prior *prior);
 
 /* One wheel sample. Call bl_localizer_advance(t_us - latency) first so the
  * pulses that arrived before it go first. Not started: only the reference.

@@ -1,0 +1,64 @@
+/* cmocka tests of the per-source build switches (common.h): built against
+ * the double, float and sanitized libraries (BL_WITH_BEARINGS 1) and against
+ * build/lib/nobearing/ (BL_WITH_BEARINGS 0, lib/lib.mk), so each assertion
+ * below checks the build it runs in. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <string.h>
+#include <cmocka.h>
+
+#include "beaconloc.h"
+
+/* A pulse site (kleeman-lab defaults) with 3 bearing beacons added: fine
+ * with bearings, refused by name without them (the library could not fuse
+ * them, and would silently ignore them). */
+static void test_pulse_site_with_bearing_beacons(void **state)
+{
+    (void)state;
+    bl_config c;
+    assert_int_equal(bl_config_default(&c), BL_OK);
+    const char *field = "untouched";
+    assert_int_equal(bl_config_check(&c, &field), BL_OK);
+    c.bearing_beacon_count = 3;
+#if BL_WITH_BEARINGS
+    c.bearing_beacons[0] = (bl_beacon){3, (bl_real)2.1, 0};
+    c.bearing_beacons[1] = (bl_beacon){0, (bl_real)1.05, 0};
+    c.bearing_beacons[2] = (bl_beacon){3, 0, 0};
+    assert_int_equal(bl_config_check(&c, &field), BL_OK);
+#else
+    assert_int_equal(bl_config_check(&c, &field), BL_ECONFIG);
+    assert_non_null(field);
+    assert_string_equal(field, "bearing_beacon_count");
+#endif
+}
+
+/* A pulse-only localizer inits in either build; the bearing counters are
+ * there only with bearings (a compile-time check: this file builds in both). */
+static void test_pulse_localizer_inits(void **state)
+{
+    (void)state;
+    bl_config c;
+    assert_int_equal(bl_config_default(&c), BL_OK);
+    bl_seq_config sc;
+    const char *why = NULL, *field = NULL;
+    assert_int_equal(bl_localizer_seq_config(&c, &sc, &why, &field), BL_OK);
+    static bl_localizer loc;
+    assert_int_equal(bl_localizer_init(&loc, &c, &sc), BL_OK);
+    bl_loc_counters k;
+    assert_int_equal(bl_localizer_counters(&loc, &k), BL_OK);
+    assert_int_equal(k.pulses_in, 0);
+#if BL_WITH_BEARINGS
+    assert_int_equal(k.bearings_fused, 0);
+#endif
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_pulse_site_with_bearing_beacons),
+        cmocka_unit_test(test_pulse_localizer_inits),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
