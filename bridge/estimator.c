@@ -239,6 +239,44 @@ int estimator_init(struct estimator *e, const struct bridge_config *cfg, char *e
     return 0;
 }
 
+void estimator_set_initial_pose(struct estimator *e, const struct est_initial_pose *pose)
+{
+    e->initial_pose = *pose;
+}
+
+/* The known start pose, once, at filter time t_us (before the first start). */
+static void start_from_initial_pose(struct estimator *e, int64_t t_us)
+{
+    if (!e->initial_pose.set)
+        return;
+    e->initial_pose.set = false;
+    bl_loc_status st;
+    if (bl_localizer_status(&e->loc, &st) == BL_OK && st.ever_started)
+        return; /* the filter found its own start first */
+    const struct est_initial_pose *p = &e->initial_pose;
+    bl_filter_prior prior = {
+        .t_us = t_us,
+        .x_m = (bl_real)p->x_m,
+        .y_m = (bl_real)p->y_m,
+        .theta_rad = (bl_real)p->heading_rad,
+        .sigma_xy_m = (bl_real)p->sigma_m,
+        .sigma_theta_rad = (bl_real)p->sigma_heading_rad,
+        .sigma_v_mps = e->blcfg.initial_sigma_v_mps,
+        .sigma_omega_radps = e->blcfg.initial_sigma_omega_radps,
+        /* the firing time is unknown: one cycle's σ, the first pulses fix
+         * it (ignored on a site without ultrasonic beacons) */
+        .t0_us = t_us,
+        .t0_beacon_index = 0,
+        .sigma_t0_s = e->blcfg.beacon_period_s,
+    };
+    int rc = bl_localizer_start(&e->loc, &prior);
+    if (rc != BL_OK)
+        event(e, EST_EV_WARNING, "initial pose refused by the filter: %s", bl_strerror(rc));
+    else
+        log_info("started from the initial pose (%.3f, %.3f) m, heading %.1f deg, sigma %.3f m",
+                 p->x_m, p->y_m, p->heading_rad * 180.0 / M_PI, p->sigma_m);
+}
+
 int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg, char *err,
                           size_t errlen)
 {
@@ -385,6 +423,7 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int
         event(e, EST_EV_NOTICE, "encoders back after %.1f s", (double)gap / 1e6);
     }
     e->enc_seen = true;
+    start_from_initial_pose(e, t);
     /* Each wheel's distance from its ticks: d = n_ticks · 2πr /
      * ticks_per_rev (m), the dead-reckoning input of Kleeman 1992 §3.8. */
     bl_wheel_increment inc = {
@@ -457,6 +496,7 @@ void estimator_bearing(struct estimator *e, const struct frame_bearing *b, int64
     };
     if (rx_us > e->latest_rx_us)
         e->latest_rx_us = rx_us;
+    start_from_initial_pose(e, t);
     int rc = bl_localizer_bearing(&e->loc, &m, NULL);
     if (rc != BL_OK)
         log_debug("localizer bearing: %s", bl_strerror(rc));

@@ -140,6 +140,16 @@ struct est_health {
     unsigned window_rejected; /* of those, rejected by the gate */
 };
 
+/* A known start pose (--initial-pose): the localizer is started from it at
+ * the first sensor sample mapped onto the filter's timebase
+ * (bl_localizer_start), instead of waiting for the snapshot solvers. Site
+ * frame; σ of x and of y each sigma_m. */
+struct est_initial_pose {
+    bool set;
+    double x_m, y_m, heading_rad;
+    double sigma_m, sigma_heading_rad;
+};
+
 struct estimator {
     struct bridge_config cfg; /* the site as configured (geometry for SIGHUP) */
     bl_config blcfg;
@@ -177,6 +187,7 @@ struct estimator {
     struct est_counters c;
     struct est_event events[EST_EVENT_QUEUE];
     unsigned ev_head, ev_len;
+    struct est_initial_pose initial_pose; /* pending until used (set false then) */
 };
 
 /*
@@ -184,6 +195,10 @@ struct estimator {
  * Returns 0, or -1 with a message naming the site-file key in err.
  */
 int estimator_init(struct estimator *e, const struct bridge_config *cfg, char *err, size_t errlen);
+
+/* Start from *pose at the next sensor sample (before the filter has started
+ * once; a started filter ignores it). */
+void estimator_set_initial_pose(struct estimator *e, const struct est_initial_pose *pose);
 
 /* Translate a bridge config to the library's (for tests and reload).
  * Returns 0 or -1 with a message in err. */

@@ -17,9 +17,10 @@ truth:
                  (lib/bench/triangulate.c; triangulation_rmse_mm over the
                  fixes it accepts, triangulation_refused_pct of the scans it
                  refused near the degenerate circle)
-Every figure pools the seeds over t >= 2 s (the first 20 scans excluded: the
-bound starts from the simulator's own prior, the filter from 7 cm). The bound
-is the truth CSV's pcrb_pos_m at each estimate. The filter's consistency: the
+Every figure pools the seeds over t >= 2 s (the first 20 scans excluded). The
+bound is the truth CSV's pcrb_pos_m at each estimate, computed with the prior
+the filter is given (beaconloc-sim run --bound-prior 0.07,5: sigma 7 cm in x
+and y, 5 deg in heading about the true start pose). The filter's consistency: the
 share of estimates whose position error lies inside the reported 3 sigma
 ellipse (Mahalanobis distance below sqrt(chi2_2(0.9973)) = 3.44), target 95 %.
 diverged counts seeds whose bridge failed or ended (last 2 s) above 0.5 m.
@@ -118,8 +119,12 @@ def one_run(bridge: Path, tool: Path, scenario: str, seed: int, out: Path,
     d = out / f"{scenario}-s{seed:02d}"
     d.mkdir(parents=True, exist_ok=True)
     log, truth_p, odo_p, est_p = d / "bus.log", d / "truth.csv", d / "odometry.csv", d / "est.csv"
+    # the bound gets the prior the filter gets (--initial-pose below); self-started, the
+    # simulator's weak default prior
+    prior = [] if self_start else ["--bound-prior",
+                                   f"{INITIAL_ERROR_M!r},{INITIAL_SIGMA_THETA_DEG!r}"]
     sim = subprocess.run([str(h.SIM), "run", scenario, "--log", str(log), "--truth", str(truth_p),
-                          "--odometry", str(odo_p), "--seed", str(seed)],
+                          "--odometry", str(odo_p), "--seed", str(seed)] + prior,
                          capture_output=True, text=True)
     if sim.returncode != 0:
         return {"seed": seed, "ok": False, "why": f"simulator exit {sim.returncode}: "
@@ -129,8 +134,8 @@ def one_run(bridge: Path, tool: Path, scenario: str, seed: int, out: Path,
     # Vander's initial error: 7 cm in a direction drawn per seed
     ang = np.random.default_rng(seed).uniform(0, 2 * math.pi)
     off = INITIAL_ERROR_M * np.array([math.cos(ang), math.sin(ang)])
-    x0, y0 = truth["x_m"][0] + off[0], truth["y_m"][0] + off[1]
-    heading0 = math.degrees(truth["theta_rad"][0])
+    x0, y0 = float(truth["x_m"][0] + off[0]), float(truth["y_m"][0] + off[1])
+    heading0 = math.degrees(float(truth["theta_rad"][0]))
     start = [] if self_start else [
         "--initial-pose", f"{x0!r},{y0!r},{heading0!r},{INITIAL_ERROR_M!r},"
         f"{INITIAL_SIGMA_THETA_DEG!r}"]
