@@ -162,6 +162,7 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->seq_repeats = sc->repeats;
     r->repeats_skipped = d->est.c.repeats_skipped;
     r->snapshot_restarts = d->est.c.snapshot_restarts;
+    r->known_starts = d->est.c.known_starts;
     r->encoder_jumps = d->est.c.encoder_jumps;
     r->node_restarts = d->est.c.node_restarts;
     r->numbering_errors = d->est.c.numbering_errors;

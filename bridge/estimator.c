@@ -124,6 +124,7 @@ static void sync(struct estimator *e)
     c->pulses_spurious = lc.pulses_spurious;
     c->repeats_skipped = lc.repeats_skipped;
     c->snapshot_restarts = lc.snapshot_restarts;
+    c->known_starts = lc.known_starts;
     c->fuse_errors = lc.fuse_errors;
     c->predicts = lc.predicts;
     c->cv_predicts = lc.cv_predicts;

@@ -83,6 +83,7 @@ struct est_counters {
     uint64_t pulses_spurious;
     uint64_t repeats_skipped;
     uint64_t snapshot_restarts; /* restarts by the persistent-rejection watch */
+    uint64_t known_starts;      /* (re)starts from a known pose (--initial-pose) */
     uint64_t fuse_errors;       /* library returned an error */
     uint64_t predicts;          /* odometry predicts */
     uint64_t cv_predicts;       /* constant-velocity predicts (encoders silent) */

@@ -163,6 +163,7 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"unmapped_bearings\": %llu,\n", (unsigned long long)r->unmapped_bearings);
     fprintf(f, "  \"repeats_skipped\": %llu,\n", (unsigned long long)r->repeats_skipped);
     fprintf(f, "  \"snapshot_restarts\": %llu,\n", (unsigned long long)r->snapshot_restarts);
+    fprintf(f, "  \"known_starts\": %llu,\n", (unsigned long long)r->known_starts);
     fprintf(f, "  \"encoder_jumps\": %llu,\n", (unsigned long long)r->encoder_jumps);
     fprintf(f, "  \"node_restarts\": %llu,\n", (unsigned long long)r->node_restarts);
     fprintf(f, "  \"numbering_errors\": %llu,\n", (unsigned long long)r->numbering_errors);

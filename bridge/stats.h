@@ -61,7 +61,7 @@ struct stats_report {
     /* sequencer counters (bl_seq_counters) */
     uint64_t seq_detections, seq_merged, seq_double_pulses, seq_double_conflicts,
         seq_locks_acquired, seq_locks_lost, seq_repeats, repeats_skipped, snapshot_restarts,
-        encoder_jumps, node_restarts, numbering_errors, seq_resyncs;
+        known_starts, encoder_jumps, node_restarts, numbering_errors, seq_resyncs;
     /* bearings (struct est_counters) and pulses on a site without ultrasonic beacons */
     uint64_t bearings_fused, bearings_rejected, bearings_buffered, bearings_refused,
         bearings_unknown_beacon, bearings_unexpected, stale_bearings, unmapped_bearings,

@@ -230,3 +230,33 @@ def test_bearings_on_a_site_without_bearing_beacons(bridge_bin, tmp_path):
     p, est, stats = replay(bridge_bin, log, tmp_path)
     assert stats["bearings_unexpected"] == stats["frames_received"]["bearing"] > 50
     assert stats["bearings_fused"] + stats["bearings_buffered"] == 0
+
+
+def test_initial_pose_starts_the_filter_at_once(bridge_bin, tmp_path):
+    """--initial-pose: the filter starts at the first sample from the given pose
+    (7 cm off the truth, sigma 7 cm) instead of waiting for a triangulation, its
+    first estimate is that pose, its covariance honest, and it converges."""
+    log, truth_path = run_sim(tmp_path, "eurobot", 6)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    x0, y0 = float(truth["x_m"][0]) + 0.07, float(truth["y_m"][0])
+    heading = float(np.degrees(truth["theta_rad"][0]))
+    p, est, stats = replay(bridge_bin, log, tmp_path, "--initial-pose",
+                           f"{x0!r},{y0!r},{heading!r},0.07", site=EUROBOT)
+    assert "started from the initial pose" in p.stderr
+    assert stats["known_starts"] == 1 and stats["estimator_resets"] == 0
+    t_sim, err = errors(est, truth)
+    assert t_sim[0] < 0.05   # the first sample, not a triangulation a scan or more later
+    assert abs(est["x_m"][0] - x0) < 0.01 and abs(est["y_m"][0] - y0) < 0.01
+    assert 0.05 < np.sqrt(est["var_x_m2"][0]) < 0.08
+    assert np.sqrt(np.mean(err[t_sim > 2.0] ** 2)) < 0.03
+    # without it the same log starts later, from the bearings
+    p, est2, stats2 = replay(bridge_bin, log, tmp_path, site=EUROBOT)
+    assert stats2["known_starts"] == 0 and errors(est2, truth)[0][0] > t_sim[0]
+
+
+@pytest.mark.parametrize("value", ["1,2,3", "1,2,3,0", "1,2,3,-1", "1,2,3,0.1,0", "a,b,c,d",
+                                   "1,2,3,0.1,5,6", "1e5,0,0,0.1", "1,2,nan,0.1"])
+def test_initial_pose_bad_values_exit_78(bridge_bin, value):
+    p = subprocess.run([str(bridge_bin), "--site", str(EUROBOT), "--replay", "/dev/null",
+                        "--initial-pose", value], capture_output=True, text=True, timeout=20)
+    assert p.returncode == 78 and f"--initial-pose: '{value}'" in p.stderr, p.stderr

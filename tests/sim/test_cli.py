@@ -168,3 +168,24 @@ def test_run_eurobot_writes_a_candump_log_of_bearing_frames_and_the_bound(tmp_pa
     assert rows[0] == TRUTH_HEADER and len(truth) == 12 * 50 + 1
     assert np.all(np.diff(truth[:, 0]) > 0) and truth[:, 0].max() > 2**32   # bearing clock wraps
     assert np.all(truth[:, 12] > 0) and truth[-1, 12] < 0.01
+
+
+def test_bound_prior_is_the_estimators_start(tmp_path, capsys):
+    """--bound-prior: the bound starts from the given sigma about the true start pose (the
+    information a known start gives the estimator) and stays below the default prior's."""
+    def pcrb(*extra):
+        truth = tmp_path / "truth.csv"
+        assert cli.main(["run", "eurobot", "--duration", "3", "--truth", str(truth), *extra]) == 0
+        with open(truth) as fh:
+            rows = list(csv.reader(fh))
+        return np.array(rows[1:], dtype=float)[:, TRUTH_HEADER.index("pcrb_pos_m")]
+    weak, known = pcrb(), pcrb("--bound-prior", "0.07,5")
+    # after the first scan (t = 0): the prior and one triangulation in the poor lower-left
+    # corner; the 7 cm prior dominates, the 1 m one does not
+    assert 0.06 < known[0] < 0.07 * np.sqrt(2)
+    assert 0.3 < weak[0] < np.sqrt(2)
+    assert np.all(known <= weak + 1e-12) and known[-1] < weak[-1]
+    for bad in ("0,5", "0.07", "0.07,0", "x,y", "0.07,361"):
+        assert cli.main(["run", "eurobot", "--duration", "1", "--truth", str(tmp_path / "t"),
+                         "--bound-prior", bad]) == 64
+        assert "--bound-prior" in capsys.readouterr().err
