@@ -4,6 +4,7 @@
 #include "config.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -19,10 +20,10 @@
 enum key_type { K_INT, K_REAL, K_STR, K_LOGLEVEL, K_ENDPOINT, K_IFNAME };
 
 struct key_desc {
-    const char *section; /* "beaconN" for the per-beacon sections */
+    const char *section; /* "beaconN" for a per-item section */
     const char *key;
     enum key_type type;
-    size_t offset;   /* in struct bridge_config (or config_beacon) */
+    size_t offset;   /* in struct bridge_config (or the item's struct config_<prefix>) */
     size_t size;     /* string capacity */
     double min, max; /* inclusive range for numbers */
     bool min_open;   /* min excluded */
@@ -37,9 +38,8 @@ static const struct key_desc keys[] = {SITE_KEYS(KEY_ROW)};
 #undef KEY_ROW
 #define NKEYS (sizeof keys / sizeof keys[0])
 
-/* A key's built-in default, by its struct and type ([beaconN] has none). */
-#define DEFAULT_config_beacon(type, member, def)
-#define DEFAULT_bridge_config(type, member, def) DEFAULT_##type(member, def)
+/* A key's built-in default, by its type (the per-item sections' keys have
+ * none: every one is required). */
 #define DEFAULT_K_REAL(member, def) cfg->member = def;
 #define DEFAULT_K_INT(member, def) cfg->member = def;
 #define DEFAULT_STRING(member, def) snprintf(cfg->member, sizeof cfg->member, "%s", def);
@@ -51,10 +51,84 @@ static const struct key_desc keys[] = {SITE_KEYS(KEY_ROW)};
 void config_defaults(struct bridge_config *cfg)
 {
     memset(cfg, 0, sizeof *cfg);
-#define KEY_DEFAULT(sec, k, type, strct, member, lo, hi, open, def)                                \
-    DEFAULT_##strct(type, member, def)
-    SITE_KEYS(KEY_DEFAULT)
+#define KEY_DEFAULT(sec, k, type, strct, member, lo, hi, open, def) DEFAULT_##type(member, def)
+    SITE_KEYS_SINGLE(KEY_DEFAULT)
 #undef KEY_DEFAULT
+}
+
+/* ---- per-item sections ------------------------------------------------ */
+
+/* One per-item section [<prefix>N] of the schema (SITE_ITEM_SECTIONS):
+ * item N is cfg-><prefix>[N-1], N = 1..the count of its count section. */
+struct item_desc {
+    const char *section;       /* "bearing_beaconN": the rows' section in keys[] */
+    const char *prefix;        /* "bearing_beacon": the header of item N is prefix + N */
+    const char *count_section; /* "bearing_beacons" */
+    size_t array_offset;       /* cfg-><prefix>[0] in struct bridge_config */
+    size_t item_size;
+    size_t count_offset; /* its count (int) in struct bridge_config */
+    int max;             /* largest count */
+};
+
+static const struct item_desc items[CONFIG_ITEM_SECTIONS] = {
+#define ITEM_DESC(sec, pfx, strct, count_sec, count_member, mx)                                    \
+    {#sec,                                                                                         \
+     #pfx,                                                                                         \
+     #count_sec,                                                                                   \
+     offsetof(struct bridge_config, pfx),                                                          \
+     sizeof(struct strct),                                                                         \
+     offsetof(struct bridge_config, count_member),                                                 \
+     mx},
+    SITE_ITEM_SECTIONS(ITEM_DESC)
+#undef ITEM_DESC
+};
+
+#define ITEM_BOUNDS(sec, pfx, strct, count_sec, count_member, mx)                                  \
+    _Static_assert(mx <= CONFIG_MAX_ITEMS, "CONFIG_MAX_ITEMS below [" #sec "]'s count");
+SITE_ITEM_SECTIONS(ITEM_BOUNDS)
+#undef ITEM_BOUNDS
+
+/* The per-item section whose header `section` is ("bearing_beacon3": prefix
+ * then a positive decimal, case-insensitive), with *n = 3; else NULL. */
+static const struct item_desc *item_of(const char *section, long *n)
+{
+    for (size_t s = 0; s < CONFIG_ITEM_SECTIONS; s++) {
+        size_t len = strlen(items[s].prefix);
+        if (strncasecmp(section, items[s].prefix, len) != 0)
+            continue;
+        const char *p = section + len;
+        if (*p < '1' || *p > '9' || strspn(p, "0123456789") != strlen(p))
+            continue;
+        errno = 0;
+        long v = strtol(p, NULL, 10);
+        *n = errno == ERANGE ? LONG_MAX : v;
+        return &items[s];
+    }
+    return NULL;
+}
+
+/* The per-item section a row of keys[] belongs to, or NULL. */
+static const struct item_desc *item_of_row(const struct key_desc *d)
+{
+    for (size_t s = 0; s < CONFIG_ITEM_SECTIONS; s++)
+        if (!strcmp(d->section, items[s].section))
+            return &items[s];
+    return NULL;
+}
+
+static int item_count(const struct bridge_config *cfg, const struct item_desc *it)
+{
+    return *(const int *)(const void *)((const char *)cfg + it->count_offset);
+}
+
+/* "bearing beacon" for the prefix "bearing_beacon" (messages). */
+static const char *item_word(const struct item_desc *it, char *buf, size_t len)
+{
+    snprintf(buf, len, "%s", it->prefix);
+    for (char *p = buf; *p; p++)
+        if (*p == '_')
+            *p = ' ';
+    return buf;
 }
 
 /* ---- parsing ---------------------------------------------------------- */
@@ -63,12 +137,11 @@ struct parse_ctx {
     struct bridge_config *cfg;
     const char *path;
     FILE *file;
-    int line;                            /* current line (counted by reader) */
-    int section_line;                    /* line of the last [section] header */
-    int key_line[NKEYS];                 /* line where a key was set, 0 = not */
-    int beacon_line[CONFIG_MAX_BEACONS]; /* first line of [beaconN] keys */
-    bool beacon_seen[CONFIG_MAX_BEACONS];
-    bool beacon_key_seen[CONFIG_MAX_BEACONS][3];
+    int line;            /* current line (counted by reader) */
+    int section_line;    /* line of the last [section] header */
+    int key_line[NKEYS]; /* line where a key was set, 0 = not */
+    /* keys of each item given in this file (bit i: the section's key i) */
+    uint32_t item_keys[CONFIG_ITEM_SECTIONS][CONFIG_MAX_ITEMS];
     char *err;
     size_t errlen;
     bool failed;
@@ -94,31 +167,18 @@ static void fail(struct parse_ctx *ctx, int line, const char *section, const cha
         snprintf(ctx->err, ctx->errlen, "%s: [%s] %s: %s", ctx->path, section, key, why);
 }
 
-/* "beacon<N>" with N a positive decimal: returns N, else 0. */
-static int beacon_section_number(const char *section)
-{
-    if (strncasecmp(section, "beacon", 6) != 0)
-        return 0;
-    const char *p = section + 6;
-    if (*p < '1' || *p > '9')
-        return 0;
-    char *end;
-    long n = strtol(p, &end, 10);
-    if (*end != '\0' || n > 1000000)
-        return 0;
-    return (int)n;
-}
-
 /* The sections a site file holds: ours, plus [site] (the simulator's room:
- * hw_sim/beaconloc_sim/site.py reads [site], [beacons], [beaconN],
- * [receivers], [robot], [noise] and leaves [bridge] to us; scenario
- * settings live in their own *.scenario.ini files). */
+ * hw_sim/beaconloc_sim/site.py reads every section but [bridge] and leaves
+ * that to us; scenario settings live in their own *.scenario.ini files). */
 static bool our_section(const char *section)
 {
+    long n;
+    if (item_of(section, &n))
+        return true;
     for (size_t i = 0; i < NKEYS; i++)
-        if (strcmp(keys[i].section, "beaconN") && !strcasecmp(section, keys[i].section))
+        if (!item_of_row(&keys[i]) && !strcasecmp(section, keys[i].section))
             return true;
-    return beacon_section_number(section) > 0;
+    return false;
 }
 
 /* The sections the schema leaves to the simulator ([site]). */
@@ -246,34 +306,37 @@ static int handler(void *user, const char *section, const char *name, const char
         ctx->failed = true;
         return 0;
     }
-    int beacon = beacon_section_number(section);
-    if (beacon > CONFIG_MAX_BEACONS) {
-        fail(ctx, ctx->line, section, name, "beacon number %d above the maximum %d", beacon,
-             CONFIG_MAX_BEACONS);
+    long n = 0;
+    const struct item_desc *it = item_of(section, &n);
+    if (it && n > it->max) {
+        char word[64];
+        fail(ctx, ctx->line, section, name, "%s number %ld above the maximum %d",
+             item_word(it, word, sizeof word), n, it->max);
         return 0;
     }
-    for (size_t i = 0; i < NKEYS; i++) {
+    for (size_t i = 0, bit = 0; i < NKEYS; i++) {
         const struct key_desc *d = &keys[i];
-        bool sec_match = beacon ? !strcmp(d->section, "beaconN") : !strcasecmp(d->section, section);
-        if (!sec_match || strcasecmp(d->key, name))
+        const struct item_desc *row_item = item_of_row(d);
+        if (it ? row_item != it : row_item || strcasecmp(d->section, section))
+            continue; /* another section's key */
+        if (strcasecmp(d->key, name)) {
+            bit++; /* the key's number in its section */
             continue;
-        if (beacon) {
-            int kidx = d->key[0] - 'x'; /* x_m, y_m, z_m -> 0, 1, 2 */
-            int b = beacon - 1;
-            if (ctx->beacon_key_seen[b][kidx]) {
+        }
+        if (it) {
+            size_t s = (size_t)(it - items), item = (size_t)n - 1;
+            struct config_item_seen *seen = &ctx->cfg->item_seen[s][item];
+            if (ctx->item_keys[s][item] >> bit & 1u) {
                 fail(ctx, ctx->line, section, name, "given twice");
                 return 0;
             }
-            if (set_value(ctx, d, &ctx->cfg->beacon[b], section, value))
+            if (set_value(ctx, d, (char *)ctx->cfg + it->array_offset + item * it->item_size,
+                          section, value))
                 return 0;
-            ctx->beacon_key_seen[b][kidx] = true;
-            if (!ctx->beacon_seen[b])
-                ctx->beacon_line[b] = ctx->line;
-            ctx->beacon_seen[b] = true;
-            bool *set = kidx == 0   ? &ctx->cfg->beacon[b].set_x
-                        : kidx == 1 ? &ctx->cfg->beacon[b].set_y
-                                    : &ctx->cfg->beacon[b].set_z;
-            *set = true;
+            if (!ctx->item_keys[s][item])
+                seen->line = ctx->line;
+            ctx->item_keys[s][item] |= 1u << bit;
+            seen->keys |= 1u << bit;
             return 1;
         }
         if (ctx->key_line[i]) {
@@ -312,41 +375,79 @@ static const struct key_desc *find_key(const char *section, const char *key, siz
     return NULL;
 }
 
+/* Line of a key in the file being loaded (0: not in it, or no file). */
+static int key_line_of(const struct parse_ctx *ctx, const char *section, const char *key)
+{
+    size_t ki = 0;
+    return ctx && find_key(section, key, &ki) ? ctx->key_line[ki] : 0;
+}
+
+/* Name of key `bit` of a per-item section (schema order). */
+static const char *item_key_name(const struct item_desc *it, unsigned bit)
+{
+    unsigned k = 0;
+    for (size_t i = 0; i < NKEYS; i++)
+        if (item_of_row(&keys[i]) == it && k++ == bit)
+            return keys[i].key;
+    return "?";
+}
+
+/* The items of every per-item section: 1..count complete (every key
+ * given), none beyond count. */
+static int check_items(const struct bridge_config *cfg, struct parse_ctx *ctx)
+{
+    for (size_t s = 0; s < CONFIG_ITEM_SECTIONS; s++) {
+        const struct item_desc *it = &items[s];
+        unsigned nkeys = 0;
+        for (size_t i = 0; i < NKEYS; i++) nkeys += item_of_row(&keys[i]) == it;
+        const uint32_t all = nkeys >= 32u ? UINT32_MAX : (1u << nkeys) - 1u;
+        const int count = item_count(cfg, it);
+        const int count_line = key_line_of(ctx, it->count_section, "count");
+        char sec[64], word[64];
+        for (int n = 0; n < it->max; n++) {
+            const struct config_item_seen *seen = &cfg->item_seen[s][n];
+            snprintf(sec, sizeof sec, "%s%d", it->prefix, n + 1);
+            if (n < count && (seen->keys & all) != all) {
+                unsigned missing = 0;
+                while (seen->keys >> missing & 1u) missing++;
+                fail(ctx, seen->line ? seen->line : count_line, sec, item_key_name(it, missing),
+                     "missing (count = %d %s)", count, it->count_section);
+                return -1;
+            }
+            if (n >= count && seen->keys) {
+                unsigned first = 0;
+                while (!(seen->keys >> first & 1u)) first++;
+                fail(ctx, seen->line, sec, item_key_name(it, first), "%s beyond [%s] count = %d",
+                     item_word(it, word, sizeof word), it->count_section, count);
+                return -1;
+            }
+        }
+    }
+    return 0;
+}
+
 /* Check with line numbers when ctx is given. */
 static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
 {
     size_t ki = 0;
-    int count_line = 0;
-    if (find_key("beacons", "count", &ki) && ctx)
-        count_line = ctx->key_line[ki];
-    if (cfg->beacon_count < 1) {
-        fail(ctx, count_line, "beacons", "count", "not set: the site file must give the beacons");
+    /* A site needs its beacons: ultrasonic ones (the library wants >= 3),
+     * or none and >= 3 bearing beacons (their triangulation starts the
+     * filter, Vander et al. 2011 eq. 1). */
+    if (cfg->beacon_count < 1 && cfg->bearing_beacon_count < 3) {
+        int line = key_line_of(ctx, "beacons", "count");
+        if (line > 0)
+            fail(ctx, line, "beacons", "count",
+                 "0 allowed only for a bearing-only site, with [bearing_beacons] count >= 3 "
+                 "(it is %d)",
+                 cfg->bearing_beacon_count);
+        else
+            fail(ctx, line, "beacons", "count",
+                 "not set: the site file must give the beacons ([beacons] count >= 3, or "
+                 "[bearing_beacons] count >= 3)");
         return -1;
     }
-    for (int b = 0; b < cfg->beacon_count; b++) {
-        const struct config_beacon *bc = &cfg->beacon[b];
-        char sec[24];
-        snprintf(sec, sizeof sec, "beacon%d", b + 1);
-        if (!bc->set_x || !bc->set_y || !bc->set_z) {
-            int line = ctx ? ctx->beacon_line[b] : 0;
-            fail(ctx, line ? line : count_line, sec,
-                 !bc->set_x   ? "x_m"
-                 : !bc->set_y ? "y_m"
-                              : "z_m",
-                 "missing (count = %d beacons)", cfg->beacon_count);
-            return -1;
-        }
-    }
-    for (int b = cfg->beacon_count; b < CONFIG_MAX_BEACONS; b++) {
-        const struct config_beacon *bc = &cfg->beacon[b];
-        if (bc->set_x || bc->set_y || bc->set_z) {
-            char sec[24];
-            snprintf(sec, sizeof sec, "beacon%d", b + 1);
-            fail(ctx, ctx ? ctx->beacon_line[b] : 0, sec, "x_m",
-                 "beacon beyond [beacons] count = %d", cfg->beacon_count);
-            return -1;
-        }
-    }
+    if (check_items(cfg, ctx))
+        return -1;
     /* The node's window for the second burst must end before the next firing. */
     if (cfg->double_pulse_spacing_s + cfg->double_pulse_tolerance_s >= cfg->period_s) {
         find_key("receivers", "double_pulse_tolerance_s", &ki);
@@ -378,9 +479,10 @@ void config_format_error(const struct bridge_config *cfg, const char *section, c
                          const char *why, char *err, size_t errlen)
 {
     int line = 0;
-    int b = beacon_section_number(section);
-    if (b > 0 && b <= CONFIG_MAX_BEACONS) {
-        line = cfg->beacon_line[b - 1];
+    long n = 0;
+    const struct item_desc *it = item_of(section, &n);
+    if (it && n <= it->max) {
+        line = cfg->item_seen[it - items][n - 1].line;
     } else {
         for (size_t i = 0; i < NKEYS; i++)
             if (!strcmp(keys[i].section, section) && !strcmp(keys[i].key, key))
@@ -409,9 +511,6 @@ int config_load_file(struct bridge_config *cfg, const char *path, char *err, siz
     for (size_t i = 0; i < NKEYS; i++)
         if (ctx.key_line[i])
             cfg->key_line[i] = ctx.key_line[i];
-    for (int b = 0; b < CONFIG_MAX_BEACONS; b++)
-        if (ctx.beacon_line[b])
-            cfg->beacon_line[b] = ctx.beacon_line[b];
     if (rc != 0) {
         /* inih's own syntax errors (no '=', unterminated section). */
         snprintf(err, errlen,

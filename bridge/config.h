@@ -10,9 +10,18 @@
  * of config.c are generated from it at build time (site_keys.h,
  * bridge/site_schema.mk), so a key here is a member below with the schema's
  * name (a schema key without its member does not compile).
- * Our sections are [beacons], [beaconN], [receivers], [robot], [noise],
- * [tuning] (the estimator's tuning, bridge/tuning.h) and [bridge]; an unknown key in one of them is an error (a typo must not be
- * silently ignored). [site] is the simulator's (room size) and skipped; any
+ * Our sections are [beacons], [beaconN], [receivers], [bearing_beacons],
+ * [bearing_beaconN], [bearing_sensor], [robot], [noise], [tuning] (the
+ * estimator's tuning, bridge/tuning.h) and [bridge]; an unknown key in one
+ * of them is an error (a typo must not be silently ignored).
+ * Per-item sections ([beaconN], [bearing_beaconN]: every schema section
+ * whose name ends in N, SITE_ITEM_SECTIONS) are one mechanism: item N of
+ * [<prefix>N] is member <prefix>[N-1] of struct bridge_config, a struct
+ * config_<prefix> made from the section's keys; N is 1..the count of its
+ * count section, every key of an item in 1..count is required, an item
+ * beyond count is an error. A site needs its beacons: [beacons] count >= 3
+ * (the library checks 1 and 2), or count = 0 (a bearing-only site) with
+ * [bearing_beacons] count >= 3. [site] is the simulator's (room size) and skipped; any
  * other section with keys is an error too ("file:line: [section] unknown
  * section", line of its header), like a key before the first section.
  * Errors read "file:line: [section] key: why".
@@ -22,21 +31,55 @@
 
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
 
 #include "tuning.h"
 
 /* The largest beacon and receiver counts of the site schema (site_keys.h). */
 #define CONFIG_MAX_BEACONS SITE_MAX_BEACONS
+#define CONFIG_MAX_BEARING_BEACONS SITE_MAX_BEARING_BEACONS
 #define CONFIG_MAX_RECEIVERS SITE_MAX_RECEIVERS
 #define CONFIG_ERR_LEN 512
 #define CONFIG_STR_LEN 128
-#define CONFIG_MAX_KEYS 64
+#define CONFIG_MAX_KEYS 96
+#define CONFIG_MAX_ITEMS 32     /* bound on every per-item section's largest count */
+#define CONFIG_MAX_ITEM_KEYS 32 /* bound on the keys of one per-item section */
 
 #define EX_CONFIG_STATUS 78 /* sysexits.h EX_CONFIG */
 
-struct config_beacon {
-    double x_m, y_m, z_m;
-    bool set_x, set_y, set_z; /* key given in the file */
+/* One struct per per-item section, its members the section's keys
+ * (struct config_beacon {x_m, y_m, z_m} of [beaconN], struct
+ * config_bearing_beacon {x_m, y_m} of [bearing_beaconN]). */
+#define CONFIG_ITEM_MEMBER(sec, key, type, strct, member, lo, hi, open, def)                       \
+    BRIDGE_CTYPE_##type member;
+#define CONFIG_ITEM_STRUCT(sec, prefix, strct, count_sec, count_member, max)                       \
+    struct strct {                                                                                 \
+        SITE_KEYS_##sec(CONFIG_ITEM_MEMBER)                                                        \
+    };
+SITE_ITEM_SECTIONS(CONFIG_ITEM_STRUCT)
+#undef CONFIG_ITEM_STRUCT
+#undef CONFIG_ITEM_MEMBER
+
+/* The per-item sections, numbered in schema order (CONFIG_ITEM_beaconN = 0, ...). */
+enum config_item_section {
+#define CONFIG_ITEM_ENUM(sec, prefix, strct, count_sec, count_member, max) CONFIG_ITEM_##sec,
+    SITE_ITEM_SECTIONS(CONFIG_ITEM_ENUM)
+#undef CONFIG_ITEM_ENUM
+        CONFIG_ITEM_SECTIONS
+};
+
+/* Where an item's keys were given in the file. */
+struct config_item_seen {
+    int line;      /* first line of the item's keys, 0 = none given */
+    uint32_t keys; /* bit i: the section's key i (schema order) given */
+};
+
+/* [bearing_sensor] (site_keys.h: SITE_KEYS_bearing_sensor) */
+struct config_bearing_sensor {
+#define CONFIG_SENSOR_MEMBER(sec, key, type, strct, member, lo, hi, open, def)                     \
+    BRIDGE_CTYPE_##type key;
+    SITE_KEYS_bearing_sensor(CONFIG_SENSOR_MEMBER)
+#undef CONFIG_SENSOR_MEMBER
 };
 
 struct bridge_config {
@@ -45,7 +88,11 @@ struct bridge_config {
     double period_s;               /* nominal time between firings (T) */
     double double_pulse_spacing_s; /* beacon 1's second burst delay */
     double burst_length_s;
-    struct config_beacon beacon[CONFIG_MAX_BEACONS];
+    /* [beaconN], [bearing_beaconN]: item N at <prefix>[N-1] */
+#define CONFIG_ITEM_ARRAY(sec, prefix, strct, count_sec, count_member, max)                        \
+    struct strct prefix[max];
+    SITE_ITEM_SECTIONS(CONFIG_ITEM_ARRAY)
+#undef CONFIG_ITEM_ARRAY
     /* [receivers] */
     int receiver_count;
     double ring_radius_m;
@@ -56,6 +103,10 @@ struct bridge_config {
     double double_pulse_tolerance_s; /* the receiver node's ± window for beacon 1's
                                         second burst; it holds each detection for
                                         double_pulse_spacing_s + this before sending */
+    /* [bearing_beacons] */
+    int bearing_beacon_count;
+    /* [bearing_sensor] */
+    struct config_bearing_sensor bearing_sensor;
     /* [robot] */
     double wheel_base_m;
     double wheel_radius_m;
@@ -65,6 +116,7 @@ struct bridge_config {
     /* [noise] */
     double sigma_arrival_s;
     double sigma_wheel_per_m;
+    double sigma_distance_per_m; /* odometry noise common to both wheels, 1/sqrt(m) */
     double speed_of_sound_mps;
     double sigma_speed_of_sound_mps;
     double gate_sigma;
@@ -85,7 +137,7 @@ struct bridge_config {
     /* where each value came from, for error messages */
     char path[256]; /* site file ("" = built-in defaults) */
     int key_line[CONFIG_MAX_KEYS];
-    int beacon_line[CONFIG_MAX_BEACONS];
+    struct config_item_seen item_seen[CONFIG_ITEM_SECTIONS][CONFIG_MAX_ITEMS];
 };
 
 /*

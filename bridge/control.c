@@ -166,6 +166,15 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->node_restarts = d->est.c.node_restarts;
     r->numbering_errors = d->est.c.numbering_errors;
     r->seq_resyncs = d->est.c.seq_resyncs;
+    r->pulses_unexpected = d->est.c.pulses_unexpected;
+    r->bearings_fused = d->est.c.bearings_fused;
+    r->bearings_rejected = d->est.c.bearings_rejected;
+    r->bearings_buffered = d->est.c.bearings_buffered;
+    r->bearings_refused = d->est.c.bearings_refused;
+    r->bearings_unknown_beacon = d->est.c.bearings_unknown_beacon;
+    r->bearings_unexpected = d->est.c.bearings_unexpected;
+    r->stale_bearings = d->est.c.stale_bearings;
+    r->unmapped_bearings = d->est.c.unmapped_bearings;
     r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;

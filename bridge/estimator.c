@@ -29,6 +29,19 @@
 #define STORM_WINDOW_US 5000000
 #define STORM_MIN_PULSES 10
 
+/* The filter's timebase (estimator.h, "Timebases"): the receiver array's
+ * clock on a site with ultrasonic beacons, else the bearing sensor's. */
+static const struct node_clock *ref_clock(const struct estimator *e)
+{
+    return e->blcfg.beacon_count > 0 ? &e->rx_clock : &e->brg_clock;
+}
+
+/* The reference clock has an observation (times can be mapped onto it). */
+static bool ref_seen(const struct estimator *e)
+{
+    return ref_clock(e)->have_first;
+}
+
 /* ---- events ----------------------------------------------------------- */
 
 static void event(struct estimator *e, enum est_event_severity sev, const char *fmt, ...)
@@ -120,6 +133,10 @@ static void sync(struct estimator *e)
     c->hint_errors = lc.hint_errors;
     c->numbering_errors = lc.numbering_errors;
     c->seq_resyncs = lc.seq_resyncs;
+    c->bearings_fused = lc.bearings_fused;
+    c->bearings_rejected = lc.bearings_rejected;
+    c->bearings_buffered = lc.bearings_buffered;
+    c->bearings_refused = lc.bearings_refused;
     const bool fused = st.measurements != e->measurements_seen;
     if (fused) {
         e->measurements_seen = st.measurements;
@@ -212,6 +229,7 @@ int estimator_init(struct estimator *e, const struct bridge_config *cfg, char *e
     }
     node_clock_init(&e->rx_clock, NULL);
     node_clock_init(&e->enc_clock, NULL);
+    node_clock_init(&e->brg_clock, NULL);
     /* wheel travel per tick (m): circumference 2·π·r over ticks per turn
      * (input of Kleeman 1992 §3.8, eq. 24) */
     e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
@@ -219,6 +237,44 @@ int estimator_init(struct estimator *e, const struct bridge_config *cfg, char *e
     e->echo_storm_ratio = cfg->echo_storm_ratio;
     reset_runtime(e);
     return 0;
+}
+
+void estimator_set_initial_pose(struct estimator *e, const struct est_initial_pose *pose)
+{
+    e->initial_pose = *pose;
+}
+
+/* The known start pose, once, at filter time t_us (before the first start). */
+static void start_from_initial_pose(struct estimator *e, int64_t t_us)
+{
+    if (!e->initial_pose.set)
+        return;
+    e->initial_pose.set = false;
+    bl_loc_status st;
+    if (bl_localizer_status(&e->loc, &st) == BL_OK && st.ever_started)
+        return; /* the filter found its own start first */
+    const struct est_initial_pose *p = &e->initial_pose;
+    bl_filter_prior prior = {
+        .t_us = t_us,
+        .x_m = (bl_real)p->x_m,
+        .y_m = (bl_real)p->y_m,
+        .theta_rad = (bl_real)p->heading_rad,
+        .sigma_xy_m = (bl_real)p->sigma_m,
+        .sigma_theta_rad = (bl_real)p->sigma_heading_rad,
+        .sigma_v_mps = e->blcfg.initial_sigma_v_mps,
+        .sigma_omega_radps = e->blcfg.initial_sigma_omega_radps,
+        /* the firing time is unknown: one cycle's σ, the first pulses fix
+         * it (ignored on a site without ultrasonic beacons) */
+        .t0_us = t_us,
+        .t0_beacon_index = 0,
+        .sigma_t0_s = e->blcfg.beacon_period_s,
+    };
+    int rc = bl_localizer_start(&e->loc, &prior);
+    if (rc != BL_OK)
+        event(e, EST_EV_WARNING, "initial pose refused by the filter: %s", bl_strerror(rc));
+    else
+        log_info("started from the initial pose (%.3f, %.3f) m, heading %.1f deg, sigma %.3f m",
+                 p->x_m, p->y_m, p->heading_rad * 180.0 / M_PI, p->sigma_m);
 }
 
 int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg, char *err,
@@ -262,10 +318,13 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg, 
 
 void estimator_pulse(struct estimator *e, const struct frame_pulse *p, int64_t rx_us)
 {
+    if (e->blcfg.beacon_count == 0) {
+        e->c.pulses_unexpected++; /* no ultrasonic beacon on this site */
+        return;
+    }
     /* The clock fit sees the frame as if sent the moment the detection was
      * made: minus the node's hold (see estimator.h, "Timebases"). */
     int64_t t = node_clock_observe(&e->rx_clock, p->node_time_us, rx_us - e->pulse_hold_us);
-    e->rx_seen = true;
     if (e->rx_clock.last_event == NODE_CLOCK_RESTART) {
         e->c.node_restarts++;
         (void)bl_localizer_sequencer_reset(&e->loc);
@@ -312,8 +371,8 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int
         e->c.stale_encoders++;
         return;
     }
-    if (!e->rx_seen) {
-        /* No receiver-node clock to map onto yet: keep the ticks as the
+    if (!ref_seen(e)) {
+        /* No reference clock to map onto yet: keep the ticks as the
          * reference (they are cumulative, nothing is lost). */
         e->c.unmapped_encoders++;
         e->enc_left = f->left_ticks;
@@ -322,7 +381,7 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int
         return;
     }
     int64_t local = node_clock_to_local(&e->enc_clock, te);
-    int64_t t = node_clock_to_node(&e->rx_clock, local);
+    int64_t t = node_clock_to_node(ref_clock(e), local);
     if (e->enc_seen && t <= e->enc_last_node_us) {
         /* mapped onto the receiver clock not after the last sample (a
          * re-fit of either clock): the localizer needs increasing times */
@@ -364,6 +423,7 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int
         event(e, EST_EV_NOTICE, "encoders back after %.1f s", (double)gap / 1e6);
     }
     e->enc_seen = true;
+    start_from_initial_pose(e, t);
     /* Each wheel's distance from its ticks: d = n_ticks · 2πr /
      * ticks_per_rev (m), the dead-reckoning input of Kleeman 1992 §3.8. */
     bl_wheel_increment inc = {
@@ -391,18 +451,70 @@ void estimator_status(struct estimator *e, const struct frame_status *s, int64_t
     (void)e;
 }
 
+/* ---- bearings --------------------------------------------------------- */
+
+void estimator_bearing(struct estimator *e, const struct frame_bearing *b, int64_t rx_us)
+{
+    if (e->blcfg.bearing_beacon_count == 0) {
+        e->c.bearings_unexpected++; /* no bearing beacon on this site */
+        return;
+    }
+    int64_t tb = node_clock_observe(&e->brg_clock, b->node_time_us, rx_us);
+    if (e->brg_clock.last_event == NODE_CLOCK_OUT_OF_ORDER) {
+        /* Older than a bearing already handed on: the localizer has moved
+         * past it. (NODE_CLOCK_DUPLICATE, the same node time, is another
+         * bearing of the same scan: kept.) */
+        e->c.stale_bearings++;
+        return;
+    }
+    if (e->brg_clock.last_event == NODE_CLOCK_RESTART) {
+        e->c.node_restarts++;
+        event(e, EST_EV_WARNING, "bearing sensor clock restarted");
+    }
+    if (b->beacon < 1 || b->beacon > e->blcfg.bearing_beacon_count) {
+        e->c.bearings_unknown_beacon++; /* the handler's check: see sensor_bearing.c */
+        return;
+    }
+    int64_t t = tb; /* a bearing-only site runs on the bearing sensor's clock */
+    if (e->blcfg.beacon_count > 0) {
+        if (!ref_seen(e)) {
+            e->c.unmapped_bearings++; /* no receiver-node clock to map onto yet */
+            return;
+        }
+        t = node_clock_to_node(&e->rx_clock, node_clock_to_local(&e->brg_clock, tb));
+    }
+    if (t > e->latest_node_us)
+        e->latest_node_us = t;
+    /* Pulses that arrived before this bearing go first. */
+    (void)bl_localizer_advance(&e->loc, t - POP_SLACK_ENC_US);
+    bl_bearing_meas m = {
+        .t_us = t,
+        .beacon_index = (uint32_t)b->beacon - 1u, /* [bearing_beaconN] -> N-1 */
+        /* body-frame bearing, deg -> rad (Vander et al. 2011 eq. 3 is in rad) */
+        .bearing_rad = (bl_real)(b->bearing_deg * (M_PI / 180.0)),
+        .tag = (uint32_t)rx_us,
+    };
+    if (rx_us > e->latest_rx_us)
+        e->latest_rx_us = rx_us;
+    start_from_initial_pose(e, t);
+    int rc = bl_localizer_bearing(&e->loc, &m, NULL);
+    if (rc != BL_OK)
+        log_debug("localizer bearing: %s", bl_strerror(rc));
+    sync(e);
+}
+
 /* ---- periodic --------------------------------------------------------- */
 
 int64_t estimator_local_to_node(const struct estimator *e, int64_t local_us)
 {
-    if (!e->rx_seen)
+    if (!ref_seen(e))
         return local_us;
-    return node_clock_to_node(&e->rx_clock, local_us);
+    return node_clock_to_node(ref_clock(e), local_us);
 }
 
 void estimator_tick(struct estimator *e, int64_t local_now_us)
 {
-    if (!e->rx_seen)
+    if (!ref_seen(e))
         return;
     int64_t now = estimator_local_to_node(e, local_now_us);
     (void)bl_localizer_advance(&e->loc, now - POP_SLACK_TICK_US);
@@ -481,7 +593,7 @@ int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_
     }
     out->valid = true;
     out->t_node_us = est.t_us;
-    out->t_local_us = e->rx_seen ? node_clock_to_local(&e->rx_clock, est.t_us) : est.t_us;
+    out->t_local_us = ref_seen(e) ? node_clock_to_local(ref_clock(e), est.t_us) : est.t_us;
     out->x_m = est.x_m;
     out->y_m = est.y_m;
     out->theta_rad = est.theta_rad;

@@ -5,12 +5,17 @@
  * Timebases:
  *   local  the bridge clock: CLOCK_MONOTONIC us live, the log's clock in
  *          replay; frames carry their receive time on it (rx_us).
- *   node   the receiver-array node's clock, unwrapped to int64 us by
- *          node_clock. The filter and the sequencer run on it: pulse arrival
- *          times are used exactly as the node measured them (no mapping
- *          noise on the time of flight); encoder samples are mapped
- *          encoder node -> local -> receiver node. The estimates CSV's t_us
- *          is on this clock, as is the simulator's truth.
+ *   node   the reference node's clock, unwrapped to int64 us by
+ *          node_clock: the receiver array's (node 1) on a site with
+ *          ultrasonic beacons, else (a bearing-only site, [beacons] count
+ *          = 0) the bearing sensor's (node 3). The filter and the sequencer
+ *          run on it: pulse arrival times (on a bearing-only site, bearing
+ *          times) are used exactly as the node measured them (no mapping
+ *          noise on the time of flight); encoder samples, and bearings on a
+ *          site with both kinds, are mapped
+ *          their node -> local -> reference node. The estimates CSV's t_us
+ *          is on this clock, as is the simulator's truth on a site with
+ *          ultrasonic beacons.
  *   The receiver node holds every detection for the double-pulse window
  *   before it sends it (docs/protocol.md: spacing + 1 ms tolerance after
  *   NodeTime), the encoder node sends its samples at once. That hold is
@@ -27,6 +32,17 @@
  * cumulative, the newer sample already holds its distance. Pulse stamps
  * need not increase (the receivers' frames of one firing leave in the order
  * of their own latency), so pulses are not dropped on the clock's flags.
+ *
+ * Bearings (BEARING frames, node 3): node time -> bridge clock by their own
+ * node_clock as the other nodes' (a frame older than the newest bearing,
+ * node clock OUT_OF_ORDER, is counted in stale_bearings and dropped; equal
+ * node times are the bearings of one scan and are kept); a beacon id beyond
+ * the site's [bearing_beacons] count is counted (bearings_unknown_beacon)
+ * and dropped; the bearing in degrees becomes radians for
+ * bl_localizer_bearing (Vander et al. 2011 eq. 3). A site without bearing
+ * beacons counts bearing frames in bearings_unexpected and drops them; a
+ * site without ultrasonic beacons does the same with pulse frames
+ * (pulses_unexpected): it runs on bearings and encoders.
  *
  * Detections and wheel increments go to the library's localizer
  * (beaconloc/localizer.h: sequencer, filter, and the policy between them:
@@ -77,10 +93,20 @@ struct est_counters {
     uint64_t reinits;           /* re-initialisations done by the bridge */
     uint64_t node_restarts;
     uint64_t seq_errors;
-    uint64_t hint_errors;      /* hints the sequencer refused */
-    uint64_t numbering_errors; /* innovations longer than any flight */
-    uint64_t seq_resyncs;      /* sequencer re-synchronised from the filter */
-    uint64_t stale_encoders;   /* encoder samples not newer than the last: dropped */
+    uint64_t hint_errors;       /* hints the sequencer refused */
+    uint64_t numbering_errors;  /* innovations longer than any flight */
+    uint64_t seq_resyncs;       /* sequencer re-synchronised from the filter */
+    uint64_t stale_encoders;    /* encoder samples not newer than the last: dropped */
+    uint64_t pulses_unexpected; /* pulse frames on a site without ultrasonic beacons: dropped */
+    /* bearings */
+    uint64_t bearings_fused;          /* localizer: fused (accepted, or the triangulation start) */
+    uint64_t bearings_rejected;       /* localizer: gated out */
+    uint64_t bearings_buffered;       /* localizer: kept for the triangulation start */
+    uint64_t bearings_refused;        /* localizer: refused (bad value; an error) */
+    uint64_t bearings_unknown_beacon; /* beacon id beyond [bearing_beacons] count: dropped */
+    uint64_t bearings_unexpected;     /* bearing frames on a site without bearing beacons */
+    uint64_t stale_bearings;          /* bearings older than the newest on the sensor's clock */
+    uint64_t unmapped_bearings;       /* bearings before the reference clock (mixed site) */
 };
 
 /* One published estimate. */
@@ -114,6 +140,16 @@ struct est_health {
     unsigned window_rejected; /* of those, rejected by the gate */
 };
 
+/* A known start pose (--initial-pose): the localizer is started from it at
+ * the first sensor sample mapped onto the filter's timebase
+ * (bl_localizer_start), instead of waiting for the snapshot solvers. Site
+ * frame; σ of x and of y each sigma_m. */
+struct est_initial_pose {
+    bool set;
+    double x_m, y_m, heading_rad;
+    double sigma_m, sigma_heading_rad;
+};
+
 struct estimator {
     struct bridge_config cfg; /* the site as configured (geometry for SIGHUP) */
     bl_config blcfg;
@@ -121,7 +157,7 @@ struct estimator {
     bl_localizer loc;            /* sequencer + filter + estimation policy */
     struct node_clock rx_clock;  /* receiver array (node 1) */
     struct node_clock enc_clock; /* wheel encoders (node 2) */
-    bool rx_seen;                /* rx_clock has an observation */
+    struct node_clock brg_clock; /* bearing sensor (node 3) */
     /* encoders */
     bool enc_have_ref;            /* enc_left/right are the reference */
     bool enc_seen;                /* an encoder frame was mapped */
@@ -151,6 +187,7 @@ struct estimator {
     struct est_counters c;
     struct est_event events[EST_EVENT_QUEUE];
     unsigned ev_head, ev_len;
+    struct est_initial_pose initial_pose; /* pending until used (set false then) */
 };
 
 /*
@@ -158,6 +195,10 @@ struct estimator {
  * Returns 0, or -1 with a message naming the site-file key in err.
  */
 int estimator_init(struct estimator *e, const struct bridge_config *cfg, char *err, size_t errlen);
+
+/* Start from *pose at the next sensor sample (before the filter has started
+ * once; a started filter ignores it). */
+void estimator_set_initial_pose(struct estimator *e, const struct est_initial_pose *pose);
 
 /* Translate a bridge config to the library's (for tests and reload).
  * Returns 0 or -1 with a message in err. */
@@ -176,6 +217,7 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg, 
 void estimator_pulse(struct estimator *e, const struct frame_pulse *p, int64_t rx_us);
 void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int64_t rx_us);
 void estimator_status(struct estimator *e, const struct frame_status *s, int64_t rx_us);
+void estimator_bearing(struct estimator *e, const struct frame_bearing *b, int64_t rx_us);
 
 /* Periodic work at local time now (pops pulses whose merge window closed
  * while no later frame came, health checks). */
@@ -200,7 +242,7 @@ int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_
 /* Next pending health event; false when none. */
 bool estimator_next_event(struct estimator *e, struct est_event *ev);
 
-/* Local time -> receiver-node time (identity before the first frame). */
+/* Local time -> reference-node time (identity before its first frame). */
 int64_t estimator_local_to_node(const struct estimator *e, int64_t local_us);
 
 #endif /* BRIDGE_ESTIMATOR_H */

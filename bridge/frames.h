@@ -57,7 +57,13 @@ struct can_msg {
 
 /* The sensor kinds, in the order of the sensor table (bridge/sensors.c:
  * frame ids, names, counter moduli, decoders, handlers). */
-enum frame_kind { FRAME_PULSE = 0, FRAME_ENCODERS = 1, FRAME_STATUS = 2, FRAME_KIND_COUNT = 3 };
+enum frame_kind {
+    FRAME_PULSE = 0,
+    FRAME_ENCODERS = 1,
+    FRAME_STATUS = 2,
+    FRAME_BEARING = 3,
+    FRAME_KIND_COUNT = 4
+};
 
 /* Result of frame_decode(). */
 enum frame_result {
@@ -95,12 +101,23 @@ struct frame_status {
     uint8_t overruns;
 };
 
+/* One bearing to one bearing beacon (BEARING, bridge/sensor_bearing.c). */
+struct frame_bearing {
+    uint32_t node_time_us; /* when the bearing was taken, bearing-sensor node clock */
+    uint8_t beacon;        /* bearing beacon id 1..15 ([bearing_beaconN]); the site's
+                              count is the handler's check */
+    double bearing_deg;    /* body frame, CCW from the robot's forward axis, [0, 360) deg */
+    uint8_t quality;       /* 0 barely seen .. 255 strongest */
+    uint8_t counter;
+};
+
 struct frame {
     enum frame_kind kind;
     union {
         struct frame_pulse pulse;
         struct frame_encoders enc;
         struct frame_status status;
+        struct frame_bearing bearing;
     } u;
 };
 

@@ -86,6 +86,7 @@ int main(int argc, char **argv)
         fprintf(stderr, "error: %s\n", err);
         return EX_CONFIG_STATUS;
     }
+    estimator_set_initial_pose(&d->est, &d->opt.initial_pose);
     d->run_start_mono_us = mono_us();
     d->mode = !d->opt.replay ? MODE_LIVE : d->opt.speed > 0 ? MODE_REPLAY_PACED : MODE_REPLAY_FAST;
     d->loop.epfd = -1;

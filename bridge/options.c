@@ -16,26 +16,32 @@
 
 static void usage(FILE *f)
 {
-    fprintf(f, "usage: beaconloc-bridge [--site FILE] [--can IFACE] [--mavlink ENDPOINT]\n"
-               "                        [--rate HZ] [--sysid N] [--compid N] [--log-level LEVEL]\n"
-               "                        [--replay LOG [--realtime | --speed X]] [--record LOG]\n"
-               "                        [--estimates CSV] [--stats JSON] [--status-interval S]\n"
-               "                        [--help] [--version]\n"
-               "  --site FILE        site file (beacons, receivers, robot, noise, [bridge])\n"
-               "  --can IFACE        SocketCAN interface (default vcan0)\n"
-               "  --mavlink EP       udpout:HOST:PORT | udpin:HOST:PORT | serial:DEV:BAUD\n"
-               "                     (repeat for up to 4 endpoints; each gets every message)\n"
-               "  --rate HZ          ODOMETRY rate (default 30)\n"
-               "  --sysid N --compid N   MAVLink ids (default 1, 197)\n"
-               "  --log-level L      error, warning, info, debug\n"
-               "  --replay LOG       read a candump log instead of the bus (as fast as possible)\n"
-               "  --realtime         pace the replay at the log's own speed\n"
-               "  --speed X          pace the replay at X times the log's speed\n"
-               "  --record LOG       write every frame read to a candump log\n"
-               "  --estimates CSV    write every estimate (receiver-node clock)\n"
-               "  --stats JSON       write counters and latency at exit\n"
-               "  --status-interval S  status line period in seconds (0 = off)\n"
-               "See docs/bridge.md.\n");
+    fprintf(f,
+            "usage: beaconloc-bridge [--site FILE] [--can IFACE] [--mavlink ENDPOINT]\n"
+            "                        [--rate HZ] [--sysid N] [--compid N] [--log-level LEVEL]\n"
+            "                        [--replay LOG [--realtime | --speed X]] [--record LOG]\n"
+            "                        [--estimates CSV] [--stats JSON] [--status-interval S]\n"
+            "                        [--initial-pose X,Y,HEADING_DEG,SIGMA_M[,SIGMA_HEADING_DEG]]\n"
+            "                        [--help] [--version]\n"
+            "  --site FILE        site file (beacons, receivers, robot, noise, [bridge])\n"
+            "  --can IFACE        SocketCAN interface (default vcan0)\n"
+            "  --mavlink EP       udpout:HOST:PORT | udpin:HOST:PORT | serial:DEV:BAUD\n"
+            "                     (repeat for up to 4 endpoints; each gets every message)\n"
+            "  --rate HZ          ODOMETRY rate (default 30)\n"
+            "  --sysid N --compid N   MAVLink ids (default 1, 197)\n"
+            "  --log-level L      error, warning, info, debug\n"
+            "  --replay LOG       read a candump log instead of the bus (as fast as possible)\n"
+            "  --realtime         pace the replay at the log's own speed\n"
+            "  --speed X          pace the replay at X times the log's speed\n"
+            "  --record LOG       write every frame read to a candump log\n"
+            "  --estimates CSV    write every estimate (receiver-node clock)\n"
+            "  --stats JSON       write counters and latency at exit\n"
+            "  --status-interval S  status line period in seconds (0 = off)\n"
+            "  --initial-pose X,Y,HEADING_DEG,SIGMA_M[,SIGMA_HEADING_DEG]\n"
+            "                     start from this pose (site frame, m and deg; sigma of x\n"
+            "                     and y; heading sigma default 5 deg) instead of waiting\n"
+            "                     for the beacons' snapshot\n"
+            "See docs/bridge.md.\n");
 }
 
 static int parse_double_opt(const char *name, const char *s, double lo, double hi, double *out)
@@ -67,6 +73,42 @@ static int parse_id_opt(const char *name, const char *s, int *out)
     return 0;
 }
 
+/* "X,Y,HEADING_DEG,SIGMA_M[,SIGMA_HEADING_DEG]" -> *p (radians inside). */
+static int parse_pose_opt(const char *s, struct est_initial_pose *p)
+{
+    double v[5] = {0, 0, 0, 0, 5.0};
+    int n = 0;
+    const char *q = s;
+    while (n < 5) {
+        char *end;
+        errno = 0;
+        v[n] = strtod(q, &end);
+        if (end == q || errno || !isfinite(v[n]))
+            break;
+        n++;
+        q = end;
+        if (*q != ',')
+            break;
+        q++;
+    }
+    if ((n != 4 && n != 5) || *q || fabs(v[0]) > 1e4 || fabs(v[1]) > 1e4 || !(v[3] > 0) ||
+        v[3] > 1e3 || !(v[4] > 0) || v[4] > 360) {
+        fprintf(stderr,
+                "error: command line: --initial-pose: '%s' is not X,Y,HEADING_DEG,SIGMA_M"
+                "[,SIGMA_HEADING_DEG] (|X|, |Y| <= 1e4 m, 0 < SIGMA_M <= 1e3, "
+                "0 < SIGMA_HEADING_DEG <= 360)\n",
+                s);
+        return -1;
+    }
+    p->set = true;
+    p->x_m = v[0];
+    p->y_m = v[1];
+    p->heading_rad = v[2] * M_PI / 180.0;
+    p->sigma_m = v[3];
+    p->sigma_heading_rad = v[4] * M_PI / 180.0;
+    return 0;
+}
+
 int parse_args(int argc, char **argv, struct options *o, int *status)
 {
     enum {
@@ -84,6 +126,7 @@ int parse_args(int argc, char **argv, struct options *o, int *status)
         O_ESTIMATES,
         O_STATS,
         O_STATUS,
+        O_POSE,
         O_VERSION
     };
     static const struct option longopts[] = {{"site", required_argument, 0, O_SITE},
@@ -100,6 +143,7 @@ int parse_args(int argc, char **argv, struct options *o, int *status)
                                              {"estimates", required_argument, 0, O_ESTIMATES},
                                              {"stats", required_argument, 0, O_STATS},
                                              {"status-interval", required_argument, 0, O_STATUS},
+                                             {"initial-pose", required_argument, 0, O_POSE},
                                              {"help", no_argument, 0, 'h'},
                                              {"version", no_argument, 0, O_VERSION},
                                              {0, 0, 0, 0}};
@@ -166,6 +210,9 @@ int parse_args(int argc, char **argv, struct options *o, int *status)
                 o->status_interval_s = v;
             break;
         }
+        case O_POSE:
+            rc = parse_pose_opt(optarg, &o->initial_pose);
+            break;
         case 'h':
             usage(stdout);
             *status = EX_OK_STATUS;

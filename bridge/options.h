@@ -6,6 +6,7 @@
 #define BRIDGE_OPTIONS_H
 
 #include "config.h"
+#include "estimator.h"
 #include "mav_links.h"
 
 #define EX_OK_STATUS 0
@@ -28,10 +29,11 @@ struct options {
     const char *estimates;
     const char *stats;
     const char *log_level;
-    double rate_hz;           /* 0 = not given */
-    int sysid, compid;        /* 0 = not given */
-    double speed;             /* paced replay speed factor, 0 = fast */
-    double status_interval_s; /* <0 = not given */
+    double rate_hz;                       /* 0 = not given */
+    int sysid, compid;                    /* 0 = not given */
+    double speed;                         /* paced replay speed factor, 0 = fast */
+    double status_interval_s;             /* <0 = not given */
+    struct est_initial_pose initial_pose; /* --initial-pose (set false: not given) */
 };
 
 /* Parse argv into *o. Returns 0, or -1 when the program is to exit now with

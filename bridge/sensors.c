@@ -10,6 +10,10 @@
  * plus the node's latency jitter (0.3 ms): a late pulse frame may be newer
  * than the newest by this much (us). */
 #define PULSE_STAMP_SLACK_US 2000
+/* Bearings of one scan of a sensor that is not rotating share their NodeTime
+ * (Vander et al. 2011: all cameras read at once): a late frame's stamp may
+ * equal the newest's (us). */
+#define BEARING_STAMP_SLACK_US 1
 
 /* clang-format off: one kind per block, aligned as a table */
 const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
@@ -48,6 +52,18 @@ const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
             .tracks = FRAME_MAX_NODES, /* one per node id */
             .decode = sensor_status_decode,
             .handle = sensor_status_handle,
+        },
+    [FRAME_BEARING] =
+        {
+            .name = "bearing",
+            .short_name = "brg",
+            .id_first = BEACONLOC_CAN_BEARING_FRAME_ID,
+            .id_last = BEACONLOC_CAN_BEARING_FRAME_ID,
+            .counter_in_range = beaconloc_can_bearing_counter_is_in_range,
+            .stamp_slack_us = BEARING_STAMP_SLACK_US,
+            .tracks = 1,
+            .decode = sensor_bearing_decode,
+            .handle = sensor_bearing_handle,
         },
 };
 /* clang-format on */

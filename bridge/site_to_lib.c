@@ -11,7 +11,8 @@
 /* bl_config field -> site-file key, for the library's config check: the
  * keys of the schema that set a field, by the field's member path as
  * bl_config_check names it ("pulse.gate_sigma"), and [beacon1] x_m for
- * "beacons". */
+ * "beacons", [bearing_beacon1] x_m for "bearing_beacons" (the library names
+ * the array, not the item). */
 struct field_key {
     const char *field, *section, *key;
 };
@@ -21,6 +22,7 @@ static const struct field_key field_keys[] = {
     SITE_LIB_FIELDS(FIELD_KEY)
 #undef FIELD_KEY
         {"beacons", "beacon1", "x_m"},
+    {"bearing_beacons", "bearing_beacon1", "x_m"},
 };
 
 /* The site-file key that sets bl_config field `field` (NULL: not known, the
@@ -53,6 +55,12 @@ void site_to_lib(const struct bridge_config *cfg, bl_config *out)
 #define APPLY_BEACON(member, field) out->beacons[i].field = (bl_real)cfg->beacon[i].member;
         SITE_LIB_BEACON_FIELDS(APPLY_BEACON)
 #undef APPLY_BEACON
+    }
+    for (int i = 0; i < cfg->bearing_beacon_count && i < BL_MAX_BEACONS; i++) {
+#define APPLY_BEARING_BEACON(member, field)                                                        \
+    out->bearing_beacons[i].field = (bl_real)cfg->bearing_beacon[i].member;
+        SITE_LIB_BEARING_BEACON_FIELDS(APPLY_BEARING_BEACON)
+#undef APPLY_BEARING_BEACON
     }
 }
 

@@ -151,6 +151,16 @@ int stats_write_json(const struct stats_report *r, const char *path)
             (unsigned long long)r->seq_double_pulses, (unsigned long long)r->seq_double_conflicts,
             (unsigned long long)r->seq_locks_acquired, (unsigned long long)r->seq_locks_lost,
             (unsigned long long)r->seq_repeats);
+    fprintf(f, "  \"pulses_unexpected\": %llu,\n", (unsigned long long)r->pulses_unexpected);
+    fprintf(f, "  \"bearings_fused\": %llu,\n", (unsigned long long)r->bearings_fused);
+    fprintf(f, "  \"bearings_rejected\": %llu,\n", (unsigned long long)r->bearings_rejected);
+    fprintf(f, "  \"bearings_buffered\": %llu,\n", (unsigned long long)r->bearings_buffered);
+    fprintf(f, "  \"bearings_refused\": %llu,\n", (unsigned long long)r->bearings_refused);
+    fprintf(f, "  \"bearings_unknown_beacon\": %llu,\n",
+            (unsigned long long)r->bearings_unknown_beacon);
+    fprintf(f, "  \"bearings_unexpected\": %llu,\n", (unsigned long long)r->bearings_unexpected);
+    fprintf(f, "  \"stale_bearing_samples\": %llu,\n", (unsigned long long)r->stale_bearings);
+    fprintf(f, "  \"unmapped_bearings\": %llu,\n", (unsigned long long)r->unmapped_bearings);
     fprintf(f, "  \"repeats_skipped\": %llu,\n", (unsigned long long)r->repeats_skipped);
     fprintf(f, "  \"snapshot_restarts\": %llu,\n", (unsigned long long)r->snapshot_restarts);
     fprintf(f, "  \"encoder_jumps\": %llu,\n", (unsigned long long)r->encoder_jumps);
@@ -196,12 +206,14 @@ void stats_status_line(const struct stats_report *r, const char *prefix, const c
                               sensor_kinds[k].short_name, fc->received[k]);
     log_info("%s: frames %" PRIu64 " (%s) bad %" PRIu64 " unknown %" PRIu64 " range %" PRIu64
              " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64 " kdrop %" PRIu64 " errfr %" PRIu64
-             " | pulses ok %" PRIu64 " rej %" PRIu64 " | %s | odom %" PRIu64 " werr %" PRIu64
-             " | latency p50 %" PRId64 " p99 %" PRId64 " us"
+             " | pulses ok %" PRIu64 " rej %" PRIu64 " | bearings ok %" PRIu64 " rej %" PRIu64
+             " unk %" PRIu64 " | %s | odom %" PRIu64 " werr %" PRIu64 " | latency p50 %" PRId64
+             " p99 %" PRId64 " us"
              " (interval p50 %" PRId64 " p99 %" PRId64 " us)",
              prefix, r->frames_total, kinds, fc->malformed, fc->unknown_id, fc->out_of_range,
              frame_lost_total(fc), frame_duplicates_total(fc), frame_out_of_order_total(fc),
-             r->kernel_drops, r->error_frames, r->pulses_accepted, r->pulses_rejected, estimate,
+             r->kernel_drops, r->error_frames, r->pulses_accepted, r->pulses_rejected,
+             r->bearings_fused, r->bearings_rejected, r->bearings_unknown_beacon, estimate,
              r->odometry_sent, r->record_write_errors + r->estimates_write_errors,
              r->latency_p50_us, r->latency_p99_us, r->latency_interval_p50_us,
              r->latency_interval_p99_us);

@@ -62,6 +62,10 @@ struct stats_report {
     uint64_t seq_detections, seq_merged, seq_double_pulses, seq_double_conflicts,
         seq_locks_acquired, seq_locks_lost, seq_repeats, repeats_skipped, snapshot_restarts,
         encoder_jumps, node_restarts, numbering_errors, seq_resyncs;
+    /* bearings (struct est_counters) and pulses on a site without ultrasonic beacons */
+    uint64_t bearings_fused, bearings_rejected, bearings_buffered, bearings_refused,
+        bearings_unknown_beacon, bearings_unexpected, stale_bearings, unmapped_bearings,
+        pulses_unexpected;
     int64_t latency_p50_us, latency_p99_us, latency_max_us;
     uint64_t latency_samples;
     /* the interval the latest status line closed (latency_interval_close) */

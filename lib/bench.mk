@@ -31,3 +31,9 @@ $(BENCH_DIR)/seq_replay: lib/bench/seq_replay.c $(BUILD)/lib/libbeaconloc.a $(BE
 
 bench-sequencer: $(BENCH_DIR)/seq_replay | $(SETUP_STAMP)
 	$(PY) lib/bench/bench_sequencer.py --replay $(BENCH_DIR)/seq_replay
+
+# The bearing triangulation on a stream of scans, for make bench-bearing
+# (tests/bench/bearing.py, tests/integration/integration.mk).
+$(BENCH_DIR)/triangulate: lib/bench/triangulate.c $(BUILD)/lib/libbeaconloc.a $(BENCH_HDRS)
+	@mkdir -p $(@D)
+	$(CC) $(BENCH_CFLAGS) $< $(BUILD)/lib/libbeaconloc.a -lm -o $@

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import math
 import signal
 import sys
 import time
@@ -44,6 +46,16 @@ def _cmd_run(args) -> int:
     except ConfigError as exc:
         print(f"beaconloc-sim: {exc}", file=sys.stderr)
         return EX_CONFIG
+    if args.bound_prior is not None:
+        try:
+            xy_m, th_deg = (float(v) for v in args.bound_prior.split(","))
+        except ValueError:
+            xy_m = th_deg = math.nan
+        if not (0 < xy_m <= 1e3 and 0 < th_deg <= 360):
+            print("beaconloc-sim run: --bound-prior takes SIGMA_XY_M,SIGMA_HEADING_DEG "
+                  "(0 < m <= 1000, 0 < deg <= 360)", file=sys.stderr)
+            return EX_USAGE
+        scn = dataclasses.replace(scn, bound_prior=(xy_m, math.radians(th_deg)))
     if args.window is not None:
         return _run_windows(scn, args)
     t0 = time.perf_counter()
@@ -206,6 +218,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--odometry", metavar="FILE", help="odometry-only dead-reckoning CSV")
     r.add_argument("--stats", metavar="FILE", help="JSON statistics (frames per id, live lateness)")
     r.add_argument("--seed", type=int, help="override the scenario's seed")
+    r.add_argument("--bound-prior", metavar="SIGMA_XY_M,SIGMA_HEADING_DEG",
+                   help="the Cramer-Rao bound's prior on the start pose: the estimator is "
+                   "started with this sigma about the true pose (default: 1 m, 29 deg)")
     r.add_argument("--duration", type=float, metavar="S", help="override the duration, s")
     r.add_argument("--window", type=float, metavar="S",
                    help="simulate and write in windows of S seconds of simulated time (long runs "

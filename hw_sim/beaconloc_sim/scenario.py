@@ -94,6 +94,10 @@ class Scenario:
     # common-mode random slip of both wheels: ground-distance error std after 1 m of mean
     # travel, m (adds to the per-wheel sigma_wheel_per_m; 0 = none)
     sigma_distance_per_m: float = 0.0
+    # the bound's prior on the start pose: (sigma of x and y, m; of the heading, rad), the
+    # information the estimator is given at its start (beaconloc-sim run --bound-prior);
+    # None: a weak prior (1 m, 0.5 rad), the estimator finds its own start
+    bound_prior: tuple[float, float] | None = None
     bearing_outage_probability: tuple[float, ...] = ()   # per bearing beacon, share of scans
     bearing_outage_burst_s: float = 0.0      # mean outage burst, s (0: independent scans)
     bearing_max_range_m: float = math.inf    # beacons farther than this are not seen
@@ -347,7 +351,8 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
                                       maximum=2**40),
         bearing_drift_ppm=ini.number("clocks", "bearing_drift_ppm", 20.0, minimum=-1000,
                                      maximum=1000),
-        sigma_distance_per_m=ini.number("encoders", "sigma_distance_per_m", 0.0, minimum=0),
+        sigma_distance_per_m=ini.number("encoders", "sigma_distance_per_m",
+                                        site.sigma_distance_per_m, minimum=0),
         bearing_outage_probability=outage_p,
         bearing_outage_burst_s=burst_s,
         bearing_max_range_m=ini.number("bearings", "max_range_m", positive=True)

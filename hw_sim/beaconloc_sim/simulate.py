@@ -190,12 +190,13 @@ def _truth(scn: Scenario, rx_clock: NodeClock,
 
 def bound_model(scn: Scenario) -> crb.BoundModel:
     site = scn.site
+    xy, th = scn.bound_prior if scn.bound_prior is not None else (1.0, 0.5)
     return crb.BoundModel(
         sigma_arrival_s=site.sigma_arrival_s, sigma_wheel_per_m=scn.sigma_wheel_per_m,
         wheel_base_m=site.wheel_base_m, ring_radius_m=site.ring_radius_m,
         rx_height_m=site.rx_height_m,
         m_per_tick=2 * math.pi * site.wheel_radius_m / site.ticks_per_rev,
-        prior_sigma=(1.0, 1.0, 0.5, 0.5, 0.5, site.sigma_speed_of_sound_mps, 1e-4, 0.1),
+        prior_sigma=(xy, xy, th, 0.5, 0.5, site.sigma_speed_of_sound_mps, 1e-4, 0.1),
         sigma_bearing_rad=site.sigma_bearing_rad,
         bearing_offset_m=tuple(float(v) for v in site.bearing_offset_m),
         sigma_common_per_m=scn.sigma_distance_per_m)

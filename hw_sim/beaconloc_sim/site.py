@@ -76,6 +76,7 @@ class Site:
     encoder_rate_hz: float
     sigma_arrival_s: float
     sigma_wheel_per_m: float         # wheel travel std after 1 m, m (variance grows with distance)
+    sigma_distance_per_m: float      # common-mode (both wheels) travel std after 1 m, m
     speed_of_sound_mps: float
     sigma_speed_of_sound_mps: float
     gate_sigma: float
@@ -162,6 +163,7 @@ def load_site(path: str | Path) -> Site:
         encoder_rate_hz=v(("robot", "encoder_rate_hz")),
         sigma_arrival_s=v(("noise", "sigma_arrival_s")),
         sigma_wheel_per_m=v(("noise", "sigma_wheel_per_m")),
+        sigma_distance_per_m=v(("noise", "sigma_distance_per_m")),
         speed_of_sound_mps=v(("noise", "speed_of_sound_mps")),
         sigma_speed_of_sound_mps=v(("noise", "sigma_speed_of_sound_mps")),
         gate_sigma=v(("noise", "gate_sigma")),

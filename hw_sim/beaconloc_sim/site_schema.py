@@ -288,6 +288,16 @@ def c_header(schema: Schema) -> str:
                         [_c_row(k) for k in s.keys])
     out += _c_macro("SITE_KEYS", "every key the bridge reads, in file order",
                     [f"SITE_KEYS_{s.name}(X)" for s in bridge_sections])
+    out += _c_macro("SITE_KEYS_SINGLE", "the keys of the sections that are not per-item "
+                    "(members of struct bridge_config)",
+                    [f"SITE_KEYS_{s.name}(X)" for s in bridge_sections if not s.indexed_by])
+    items = [s for s in bridge_sections if s.indexed_by]
+    out += _c_macro("SITE_ITEM_SECTIONS", "X(section, prefix, struct, count section, "
+                    "bridge_config count member, largest count): the per-item sections "
+                    "[<prefix>N], N = 1..count; their keys are SITE_KEYS_<section>",
+                    [f"X({s.name}, {s.prefix}, {_c_struct(s.name)}, {s.indexed_by}, "
+                     f"{schema.section(s.indexed_by).key('count').bridge}, "
+                     f"{schema.max_items(s)})" for s in items])
     lib_keys = [k for s in bridge_sections if not s.indexed_by for k in s.keys if k.lib]
     out += _c_macro("SITE_LIB_FIELDS", "X(section, key, type, bridge_config member, bl_config "
                     "field, geometry): the keys that set a bl_config field; geometry is "

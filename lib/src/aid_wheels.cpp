@@ -67,7 +67,11 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
     const real half_b = real(0.5) * cfg->wheel_base_m;
     const real dl_pred_m = std::fabs(x(V) - x(W) * half_b) * dt_s;
     const real dr_pred_m = std::fabs(x(V) + x(W) * half_b) * dt_s;
-    const real rv = (k2 * real(0.25) * (dl_pred_m + dr_pred_m)) / (dt_s * dt_s) + floor_v * floor_v;
+    // The common-mode slip (sigma_distance_per_m, σ_c) moves both wheels
+    // alike: in z_v only, R_v += σ_c²·|v|·dt / dt² (z_ω unchanged).
+    const real kc2 = cfg->wheels.sigma_distance_per_m * cfg->wheels.sigma_distance_per_m;
+    const real dc_pred_m = std::fabs(x(V)) * dt_s;
+    const real rv = (k2 * real(0.25) * (dl_pred_m + dr_pred_m) + kc2 * dc_pred_m) / (dt_s * dt_s) + floor_v * floor_v;
     const real rw =
         (k2 * (dl_pred_m + dr_pred_m) / (cfg->wheel_base_m * cfg->wheel_base_m)) / (dt_s * dt_s) + floor_v * floor_v;
     const real rs[2] = {rv, rw};

@@ -45,6 +45,7 @@ const char *check_pulse_params(const bl_pulse_params *p, real beacon_period_s)
 void default_wheel_params(bl_wheel_params *w)
 {
     w->sigma_wheel_per_m = real(0.01);
+    w->sigma_distance_per_m = real(0);
     w->heading_noise_rad_per_sqrt_s = real(0.005);
     w->heading_noise_fraction = real(0.02);
     w->stationary_noise_scale = real(0.01);
@@ -54,6 +55,9 @@ const char *check_wheel_params(const bl_wheel_params *w)
 {
     if (!(is_finite(w->sigma_wheel_per_m) && w->sigma_wheel_per_m >= real(0) && w->sigma_wheel_per_m < real(1)))
         return "wheels.sigma_wheel_per_m";
+    if (!(is_finite(w->sigma_distance_per_m) && w->sigma_distance_per_m >= real(0) &&
+          w->sigma_distance_per_m < real(1)))
+        return "wheels.sigma_distance_per_m";
     if (!(is_finite(w->heading_noise_rad_per_sqrt_s) && w->heading_noise_rad_per_sqrt_s >= real(0)))
         return "wheels.heading_noise_rad_per_sqrt_s";
     if (!(is_finite(w->heading_noise_fraction) && w->heading_noise_fraction >= real(0) &&

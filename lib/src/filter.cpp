@@ -497,10 +497,19 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     // rolled, independent per wheel, as hw_sim draws slip), Q_u =
     // diag(σ_w²|mL| k_l², σ_w²|mR| k_r²) on the calibrated distances
     // (∂f/∂m = g·k); G Q_u Gᵀ touches only the (x, y, θ) block.
+    // Plus the slip common to both wheels (sigma_distance_per_m, ours, as
+    // hw_sim draws it): the same error on both calibrated distances, of
+    // variance σ_c²·|(k_l·mL + k_r·mR)/2| (m²), i.e. Q_u += q_c·[1 1; 1 1]:
+    // G Q_u Gᵀ += q_c·(g_L + g_R)(g_L + g_R)ᵀ (distance only: g_L + g_R
+    // has no heading component, Kleeman eq. 24).
     const real k2 = cfg->wheels.sigma_wheel_per_m * cfg->wheels.sigma_wheel_per_m;
     const real qu[2] = {k2 * std::fabs(d_left_m) * x(KL) * x(KL), k2 * std::fabs(d_right_m) * x(KR) * x(KR)};
+    const real qc = cfg->wheels.sigma_distance_per_m * cfg->wheels.sigma_distance_per_m * real(0.5) *
+                    std::fabs(x(KL) * d_left_m + x(KR) * d_right_m);
     for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) Pn(r, c) += J.g[r][0] * qu[0] * J.g[c][0] + J.g[r][1] * qu[1] * J.g[c][1];
+        for (int c = 0; c < 3; ++c)
+            Pn(r, c) += J.g[r][0] * qu[0] * J.g[c][0] + J.g[r][1] * qu[1] * J.g[c][1] +
+                        (J.g[r][0] + J.g[r][1]) * qc * (J.g[c][0] + J.g[c][1]);
     // Motion type (Kleeman 1992 §3.10): "stationary, no acceleration,
     // straight ramp and curve"; "the incorporation of the dead-reckoning
     // heading information as an input sets the heading variance to the

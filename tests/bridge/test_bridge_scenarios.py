@@ -12,9 +12,9 @@ from bridge_helpers import SITE, run_sim
 BEACON_CYCLE_S = 6 * 0.150
 
 
-def replay(bridge_bin, log, tmp_path, *extra):
+def replay(bridge_bin, log, tmp_path, *extra, site=SITE):
     est, stats = tmp_path / "est.csv", tmp_path / "stats.json"
-    p = subprocess.run([str(bridge_bin), "--site", str(SITE), "--replay", str(log),
+    p = subprocess.run([str(bridge_bin), "--site", str(site), "--replay", str(log),
                         "--mavlink", "udpout:127.0.0.1:9", "--estimates", str(est),
                         "--stats", str(stats), "--status-interval", "0", *extra],
                        capture_output=True, text=True, timeout=120)
@@ -161,3 +161,72 @@ def test_temperature_ramp_speed_of_sound_followed(bridge_bin, tmp_path):
     last = t_sim >= t_sim[-1] - 10.0
     assert np.sqrt(np.mean(err[last] ** 2)) < 0.1
     assert stats["estimator_resets"] == 0
+
+
+# --------------------------------------------------------------------------
+# Bearings (issue 11): the eurobot table of Vander et al. 2011, a site of
+# three bearing beacons and no ultrasonic one.
+# --------------------------------------------------------------------------
+
+EUROBOT = SITE.parent / "eurobot.ini"
+
+
+def _bearing_lines_to_unknown_beacon(log, every: int) -> int:
+    """Every `every`-th BEARING frame of the candump log names bearing beacon 7
+    (the site has 3; the DBC allows 1..15): returns how many were changed."""
+    lines = log.read_text().splitlines()
+    changed = seen = 0
+    for i, line in enumerate(lines):
+        parts = line.split()
+        if len(parts) < 3 or not parts[2].startswith("140#"):
+            continue
+        seen += 1
+        if seen % every:
+            continue
+        data = bytearray.fromhex(parts[2][4:])
+        data[4] = (data[4] & 0xF0) | 7  # Beacon: bits 32..35
+        parts[2] = "140#" + data.hex().upper()
+        lines[i] = " ".join(parts)
+        changed += 1
+    log.write_text("\n".join(lines) + "\n")
+    return changed
+
+
+def test_eurobot_bearings_only(bridge_bin, tmp_path):
+    """The eurobot scenario replayed: the filter starts from the bearings'
+    triangulation and follows the robot on bearings and encoders; every
+    bearing frame is accounted for; a bearing from a beacon the site does
+    not have is counted and dropped."""
+    log, truth_path = run_sim(tmp_path, "eurobot", 12)
+    unknown = _bearing_lines_to_unknown_beacon(log, 25)
+    assert unknown > 5
+    p, est, stats = replay(bridge_bin, log, tmp_path, site=EUROBOT)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    # the estimates are on the bearing sensor's clock, the truth's time base
+    # on a site without ultrasonic beacons
+    assert est["t_us"][0] >= truth["t_us"][0] and est["t_us"][-1] <= truth["t_us"][-1]
+    t_sim, err = errors(est, truth)
+    assert t_sim[0] < 2.0, "the filter did not start from the bearings"
+    keep = t_sim > 2.0
+    assert np.sqrt(np.mean(err[keep] ** 2)) < 0.04, float(np.sqrt(np.mean(err[keep] ** 2)))
+    assert np.max(err[t_sim > 8.0]) < 0.02  # standing at the end, Vander Fig. 7
+    received = stats["frames_received"]["bearing"]
+    assert received > 300  # 3 beacons at 10 Hz for 12 s
+    assert stats["bearings_unknown_beacon"] == unknown
+    assert (stats["bearings_fused"] + stats["bearings_rejected"] + stats["bearings_buffered"]
+            + stats["bearings_refused"] + stats["bearings_unknown_beacon"]
+            + stats["stale_bearing_samples"] + stats["bearings_unexpected"]
+            + stats["unmapped_bearings"]) == received
+    assert stats["bearings_refused"] == 0 and stats["bearings_unexpected"] == 0
+    assert stats["frames_received"]["pulse_detection"] == 0
+    assert stats["estimator_resets"] == 0
+    assert "bearings ok" in p.stderr  # the final status line
+
+
+def test_bearings_on_a_site_without_bearing_beacons(bridge_bin, tmp_path):
+    """kleeman-lab has no bearing beacons: the eurobot log's bearing frames
+    are counted as unexpected and dropped, its encoder frames still used."""
+    log, _ = run_sim(tmp_path, "eurobot", 4)
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    assert stats["bearings_unexpected"] == stats["frames_received"]["bearing"] > 50
+    assert stats["bearings_fused"] + stats["bearings_buffered"] == 0

@@ -148,9 +148,16 @@ static void test_unknown_section(void **state)
     char body[2048];
     snprintf(body, sizeof body, "%s; comment\n[bridg]\nodometry_rate_hz = 20\n", good_body);
     expect_error(body, ":23: [bridg] unknown section (a site file holds [site], [beacons], "
-                       "[beacon1]..[beacon16], [receivers], [robot], [noise], [tuning], [bridge])");
+                       "[beacon1]..[beacon16], [receivers], [bearing_beacons], "
+                       "[bearing_beacon1]..[bearing_beacon15], [bearing_sensor], [robot], "
+                       "[noise], [tuning], [bridge])");
     snprintf(body, sizeof body, "%s[beacon0]\n\nx_m = 1\n", good_body);
     expect_error(body, ":22: [beacon0] unknown section");
+    snprintf(body, sizeof body, "%s[bearing_beacon01]\nx_m = 1\n", good_body);
+    expect_error(body, ":22: [bearing_beacon01] unknown section");
+    /* the schema's name of a per-item section is no header */
+    snprintf(body, sizeof body, "%s[bearing_beaconN]\nx_m = 1\n", good_body);
+    expect_error(body, ":22: [bearing_beaconN] unknown section");
     snprintf(body, sizeof body, "%s[scenario]\nseed = 3\n", good_body);
     expect_error(body, ":22: [scenario] unknown section");
     snprintf(body, sizeof body, "gate_sigma = 3\n%s", good_body);
@@ -295,6 +302,118 @@ static void test_beacons_incomplete_or_extra(void **state)
     expect_error(body, ":23: [beacon17] x_m: beacon number 17 above the maximum 16");
 }
 
+/* A bearing-only site (Eurobot, Vander et al. 2011 Fig. 1): no ultrasonic
+ * beacons, three bearing beacons, the sensor's section. */
+static const char *bearing_body =
+    "[beacons]\n"                    /* 1 */
+    "count = 0\n"                    /* 2 */
+    "[bearing_beacons]\n"            /* 3 */
+    "count = 3\n"                    /* 4 */
+    "[bearing_beacon1]\n"            /* 5 */
+    "x_m = 3\n" "y_m = 2.1\n"        /* 6-7 */
+    "[bearing_beacon2]\n"            /* 8 */
+    "x_m = 0\n" "y_m = 1.05\n"       /* 9-10 */
+    "[bearing_beacon3]\n"            /* 11 */
+    "x_m = 3\n" "y_m = 0\n"          /* 12-13 */
+    "[bearing_sensor]\n"             /* 14 */
+    "sigma_deg = 0.5\n"              /* 15 */
+    "offset_x_m = 0.05\n"            /* 16 */
+    "gate_sigma = 4\n"               /* 17 */
+    "[noise]\n"                      /* 18 */
+    "gate_sigma = 3.5\n";            /* 19 */
+
+static void test_bearing_site(void **state)
+{
+    (void)state;
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    load_ok(bearing_body, &cfg);
+    assert_int_equal(cfg.beacon_count, 0);
+    assert_int_equal(cfg.bearing_beacon_count, 3);
+    assert_true(cfg.bearing_beacon[0].x_m == 3.0 && cfg.bearing_beacon[0].y_m == 2.1);
+    assert_true(cfg.bearing_beacon[1].x_m == 0.0 && cfg.bearing_beacon[1].y_m == 1.05);
+    assert_true(cfg.bearing_sensor.sigma_deg == 0.5);
+    assert_true(cfg.bearing_sensor.offset_x_m == 0.05);
+    assert_true(cfg.bearing_sensor.offset_y_m == 0.0);  /* default */
+    assert_true(cfg.bearing_sensor.scan_rate_hz == 10.0); /* default */
+    /* the two gate_sigma keys are two fields */
+    assert_true(cfg.bearing_sensor.gate_sigma == 4.0 && cfg.gate_sigma == 3.5);
+    /* the library's config: the bearing beacons and the sensor's block */
+    bl_config c;
+    char err[CONFIG_ERR_LEN] = "";
+    if (estimator_make_config(&cfg, &c, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    assert_int_equal(c.beacon_count, 0);
+    assert_int_equal(c.bearing_beacon_count, 3);
+    assert_true(c.bearing_beacons[1].x_m == (bl_real)0.0 &&
+                c.bearing_beacons[1].y_m == (bl_real)1.05);
+    assert_true(c.bearing_beacons[2].x_m == (bl_real)3.0 &&
+                c.bearing_beacons[2].y_m == (bl_real)0.0);
+    assert_true(c.bearing.sigma_deg == (bl_real)0.5 && c.bearing.gate_sigma == (bl_real)4.0);
+    assert_true(c.bearing.offset_x_m == (bl_real)0.05);
+    assert_true(c.pulse.gate_sigma == (bl_real)3.5);
+    /* a complaint about a bearing beacon names [bearing_beacon1] and the line
+     * of its first key */
+    cfg.bearing_beacon[1] = cfg.bearing_beacon[0]; /* two beacons on one spot */
+    assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), -1);
+    char want[CONFIG_ERR_LEN + 64];
+    snprintf(want, sizeof want, "%s:6: [bearing_beacon1] x_m: rejected by the estimator "
+             "(bearing_beacons: ", cfg.path);
+    if (strncmp(err, want, strlen(want)) != 0)
+        fail_msg("got '%s', want prefix '%s'", err, want);
+    /* config_format_error finds an item's line */
+    config_format_error(&cfg, "bearing_beacon3", "y_m", "why", err, sizeof err);
+    snprintf(want, sizeof want, "%s:12: [bearing_beacon3] y_m: why", cfg.path);
+    assert_string_equal(err, want);
+}
+
+/* [bearing_beaconN] goes through the one per-item mechanism: the errors of
+ * [beaconN], with its own words. */
+static void test_bearing_beacons_incomplete_or_extra(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%s", bearing_body);
+    char *p = strstr(body, "y_m = 1.05\n");
+    memmove(p, p + 11, strlen(p + 11) + 1); /* drop bearing beacon 2's y_m */
+    expect_error(body, ":9: [bearing_beacon2] y_m: missing (count = 3 bearing_beacons)");
+    snprintf(body, sizeof body, "%s[bearing_beacon4]\ny_m = 1\n", bearing_body);
+    expect_error(body, ":21: [bearing_beacon4] y_m: bearing beacon beyond [bearing_beacons] "
+                       "count = 3");
+    snprintf(body, sizeof body, "%s[bearing_beacon16]\nx_m = 1\n", bearing_body);
+    expect_error(body, ":21: [bearing_beacon16] x_m: bearing beacon number 16 above the "
+                       "maximum 15");
+    snprintf(body, sizeof body, "%s[bearing_beacon2]\nx_m = 1\n", bearing_body);
+    expect_error(body, ":21: [bearing_beacon2] x_m: given twice");
+    snprintf(body, sizeof body, "%s[Bearing_Beacon3]\nz_m = 1\n", bearing_body);
+    expect_error(body, ":21: [Bearing_Beacon3] z_m: unknown key");
+    /* a beacon site with bearing beacons beyond their count (0) */
+    snprintf(body, sizeof body, "%s[bearing_beacon1]\nx_m = 1\ny_m = 2\n", good_body);
+    expect_error(body, ":23: [bearing_beacon1] x_m: bearing beacon beyond [bearing_beacons] "
+                       "count = 0");
+}
+
+/* [beacons] count = 0 only with >= 3 bearing beacons. */
+static void test_zero_beacons_needs_bearing_beacons(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%s", bearing_body);
+    char *p = strstr(body, "count = 3\n");
+    p[8] = '2'; /* [bearing_beacons] count = 2 */
+    p = strstr(body, "[bearing_beacon3]");
+    *p = '\0';
+    expect_error(body, ":2: [beacons] count: 0 allowed only for a bearing-only site, with "
+                       "[bearing_beacons] count >= 3 (it is 2)");
+    /* and a site of both kinds is fine */
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    snprintf(body, sizeof body, "%s%s", good_body, strstr(bearing_body, "[bearing_beacons]"));
+    load_ok(body, &cfg);
+    assert_int_equal(cfg.beacon_count, 3);
+    assert_int_equal(cfg.bearing_beacon_count, 3);
+}
+
 static void test_syntax_error_and_missing_file(void **state)
 {
     (void)state;
@@ -416,8 +535,12 @@ static void test_every_schema_key_has_its_range(void **state)
         /* first in the file (good_body gives some keys); [beacon4] beyond
          * count = 3: the range is checked while parsing, before the beacons
          * are counted */
-        const char *sec = !strcmp(k->section, "beaconN") ? "beacon4" : k->section;
-        char body[2048], want[256];
+        char sec[64], body[2048], want[256];
+        size_t len = strlen(k->section);
+        if (k->section[len - 1] == 'N') /* a per-item section: its item 4 */
+            snprintf(sec, sizeof sec, "%.*s4", (int)(len - 1), k->section);
+        else
+            snprintf(sec, sizeof sec, "%s", k->section);
         double above = k->max + 1 + fabs(k->max);
         if (is_int)
             snprintf(body, sizeof body, "[%s]\n%s = %.0f\n%s", sec, k->key, above, good_body);
@@ -618,6 +741,9 @@ int main(void)
         cmocka_unit_test(test_duplicate_key),
         cmocka_unit_test(test_beacons_incomplete_or_extra),
         cmocka_unit_test(test_syntax_error_and_missing_file),
+        cmocka_unit_test(test_bearing_site),
+        cmocka_unit_test(test_bearing_beacons_incomplete_or_extra),
+        cmocka_unit_test(test_zero_beacons_needs_bearing_beacons),
         cmocka_unit_test(test_no_beacons_is_an_error),
         cmocka_unit_test(test_same_geometry),
         cmocka_unit_test(test_format_error_uses_lines),

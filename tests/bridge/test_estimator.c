@@ -381,7 +381,6 @@ static void test_reconfigure(void **state)
     assert_int_equal(estimator_reconfigure(&W.est, &c, err, sizeof err), 1);
     assert_int_equal(estimator_output(&W.est, 0, &after), -1);
     c.beacon_count = 2; /* refused, nothing changes */
-    c.beacon[2].set_x = false;
     assert_int_equal(estimator_reconfigure(&W.est, &c, err, sizeof err), -1);
     assert_non_null(strstr(err, "rejected by the estimator"));
     W.cfg.beacon[4].x_m -= 0.05; /* the world agrees with the new site */
@@ -565,6 +564,67 @@ static void test_health_figures(void **state)
     assert_true(h.since_update_us > 2400000);
 }
 
+/* A site of both kinds: bearings (BEARING, node 3, its own clock) are mapped
+ * bearing node -> bridge clock -> receiver node, as encoder samples are, and
+ * fused beside the pulses; a bearing before the receiver clock is known is
+ * counted (unmapped) and dropped. The robot moves at 0.3 m/s: bearings
+ * timed on their own node's clock unmapped, or mapped 1 s off, pull the
+ * estimate more than 3 cm off (checked by hand: both fail this test; 0.1 s
+ * off, 0.3 deg at these ranges against sigma 1 deg, does not). */
+#define BRG_NODE_OFFSET_US 3000000000LL /* bearing node clock = bridge + this: wraps at 1.3 s */
+static const double BRG_BEACON_XY[3][2] = {{0.5, 0.5}, {11.0, 1.0}, {6.0, 11.5}};
+
+static void send_bearings(struct world *w, int64_t t_us, uint8_t *counter)
+{
+    double x, y;
+    pose_at(w, t_us, &x, &y);
+    for (int b = 0; b < 3; b++) {
+        /* Vander et al. 2011 eq. 1: phi = atan2(yb - y, xb - x) - theta, [0, 360) deg */
+        double deg = fmod(
+            (atan2(BRG_BEACON_XY[b][1] - y, BRG_BEACON_XY[b][0] - x) - w->th) * 180.0 / M_PI + 720.0,
+            360.0);
+        struct frame_bearing f = {
+            .node_time_us = (uint32_t)(t_us + BRG_NODE_OFFSET_US),
+            .beacon = (uint8_t)(b + 1), .bearing_deg = deg, .quality = 100,
+            .counter = (uint8_t)((*counter)++ & 15),
+        };
+        estimator_bearing(&w->est, &f, t_us + DELAY_US);
+    }
+}
+
+static void test_mixed_site_bearings_on_receiver_clock(void **state)
+{
+    (void)state;
+    W.cfg.bearing_beacon_count = 3;
+    for (int b = 0; b < 3; b++) {
+        W.cfg.bearing_beacon[b].x_m = BRG_BEACON_XY[b][0];
+        W.cfg.bearing_beacon[b].y_m = BRG_BEACON_XY[b][1];
+    }
+    char err[CONFIG_ERR_LEN];
+    if (estimator_init(&W.est, &W.cfg, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    W.t_move_us = 6000000;
+    W.v_mps = 0.3;
+    uint8_t counter = 0;
+    send_bearings(&W, 500000, &counter); /* before any pulse */
+    assert_int_equal(W.est.c.unmapped_bearings, 3);
+    for (int64_t t = 1000000; t < 14000000; t += 100000) {
+        run(&W, t, t + 100000);
+        send_bearings(&W, t + 99000, &counter);
+    }
+    struct est_output o;
+    assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+    double x, y;
+    pose_at(&W, o.t_node_us - RX_NODE_OFFSET_US, &x, &y);
+    assert_true(hypot(o.x_m - x, o.y_m - y) < 0.03);
+    const struct est_counters *c = &W.est.c;
+    assert_int_equal(c->unmapped_bearings, 3);
+    assert_true(c->bearings_fused > 300); /* 3 per 0.1 s for 13 s, less the start */
+    assert_true(c->bearings_rejected * 50 < c->bearings_fused);
+    assert_true(c->pulses_accepted > 50); /* both kinds in the one filter */
+    assert_int_equal(c->stale_bearings + c->bearings_unknown_beacon + c->bearings_unexpected, 0);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -580,6 +640,7 @@ int main(void)
         cmocka_unit_test_setup(test_held_pulse_reports_its_own_frame, setup),
         cmocka_unit_test_setup(test_reconfigure_tuning_keeps_filter, setup),
         cmocka_unit_test_setup(test_health_figures, setup),
+        cmocka_unit_test_setup(test_mixed_site_bearings_on_receiver_clock, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -117,7 +117,13 @@ static void test_json_report(void **state)
     fc.duplicates[FRAME_PULSE] = 6;
     fc.duplicates[FRAME_STATUS] = 1;
     fc.out_of_order[FRAME_ENCODERS] = 8;
+    fc.received[FRAME_BEARING] = 33;
+    fc.out_of_order[FRAME_BEARING] = 2;
     struct stats_report r = { .frames = &fc, .kernel_drops = 5,
+                              .bearings_fused = 30, .bearings_rejected = 3,
+                              .bearings_buffered = 4, .bearings_refused = 1,
+                              .bearings_unknown_beacon = 5, .bearings_unexpected = 6,
+                              .stale_bearings = 7, .pulses_unexpected = 8,
                               .latency_p50_us = 42, .latency_p99_us = 99,
                               .latency_interval_samples = 1234,
                               .latency_interval_p50_us = 17, .latency_interval_p99_us = 61,
@@ -147,12 +153,20 @@ static void test_json_report(void **state)
     assert_non_null(strstr(buf, "\"replay_frames_per_s\": 12345.6,"));
     assert_non_null(strstr(buf, "\"duplicates\": 7,"));
     assert_non_null(strstr(buf, "\"duplicates_per_frame\": {\"pulse_detection\": 6, "
-                                "\"wheel_encoders\": 0, \"node_status\": 1}"));
+                                "\"wheel_encoders\": 0, \"node_status\": 1, \"bearing\": 0}"));
     assert_non_null(strstr(buf, "\"frames_received_by_id\": {\"0x100\": 11, \"0x110\": 22, "
-                                "\"0x120\": 0}"));
-    assert_non_null(strstr(buf, "\"out_of_order\": 8,"));
+                                "\"0x120\": 0, \"0x140\": 33}"));
+    assert_non_null(strstr(buf, "\"out_of_order\": 10,"));
     assert_non_null(strstr(buf, "\"out_of_order_per_frame\": {\"pulse_detection\": 0, "
-                                "\"wheel_encoders\": 8, \"node_status\": 0}"));
+                                "\"wheel_encoders\": 8, \"node_status\": 0, \"bearing\": 2}"));
+    assert_non_null(strstr(buf, "\"bearings_fused\": 30,"));
+    assert_non_null(strstr(buf, "\"bearings_rejected\": 3,"));
+    assert_non_null(strstr(buf, "\"bearings_buffered\": 4,"));
+    assert_non_null(strstr(buf, "\"bearings_refused\": 1,"));
+    assert_non_null(strstr(buf, "\"bearings_unknown_beacon\": 5,"));
+    assert_non_null(strstr(buf, "\"bearings_unexpected\": 6,"));
+    assert_non_null(strstr(buf, "\"stale_bearing_samples\": 7,"));
+    assert_non_null(strstr(buf, "\"pulses_unexpected\": 8,"));
     assert_non_null(strstr(buf, "\"write_errors\": 11,"));
     assert_non_null(strstr(buf, "\"write_errors_per_file\": {\"record\": 9, \"estimates\": 2}"));
     assert_int_equal(stats_write_json(&r, "/nonexistent/dir/s.json") < 0, 1);
@@ -222,7 +236,10 @@ static void test_status_line_text(void **state)
     fc.lost[FRAME_PULSE] = 4;
     fc.duplicates[FRAME_ENCODERS] = 5;
     fc.out_of_order[FRAME_STATUS] = 6;
-    struct stats_report r = { .frames = &fc, .frames_total = 1201, .kernel_drops = 7,
+    fc.received[FRAME_BEARING] = 40;
+    struct stats_report r = { .frames = &fc, .frames_total = 1241, .kernel_drops = 7,
+                              .bearings_fused = 35, .bearings_rejected = 2,
+                              .bearings_unknown_beacon = 3,
                               .error_frames = 8, .pulses_accepted = 69, .pulses_rejected = 9,
                               .odometry_sent = 284, .record_write_errors = 10,
                               .estimates_write_errors = 1, .latency_p50_us = 8,
@@ -233,8 +250,9 @@ static void test_status_line_text(void **state)
     char text[1024];
     captured_log(f, text, sizeof text);
     assert_string_equal(text,
-                        "info: final: frames 1201 (pulse 181 enc 1000 status 20) bad 1 unknown 2 "
-                        "range 3 lost 4 dup 5 late 6 kdrop 7 errfr 8 | pulses ok 69 rej 9 | "
+                        "info: final: frames 1241 (pulse 181 enc 1000 status 20 brg 40) bad 1 "
+                        "unknown 2 range 3 lost 4 dup 5 late 6 kdrop 7 errfr 8 | pulses ok 69 "
+                        "rej 9 | bearings ok 35 rej 2 unk 3 | "
                         "x=5.369 y=2.848 | odom 284 werr 11 | latency p50 8 p99 21 us "
                         "(interval p50 7 p99 -1 us)\n");
 }

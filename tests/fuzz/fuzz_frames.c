@@ -3,7 +3,9 @@
  * (bridge/can_in.c, recvmsg replaced), frame decoding (bridge/frames.c and
  * the cantools codec) and the decoded frames driving the estimator
  * (bridge/estimator.c, node_clock.c, the library) as bridge/frame_in.c's
- * handle_frame() does, on the kleeman-lab site.
+ * handle_frame() does, on the kleeman-lab site, or on the eurobot site (bearings
+ * and encoders, no ultrasonic beacon) when bit 2 of the input's first byte is
+ * set (the first opcode reads only bits 0-1).
  *
  * Input: a sequence of records, each one opcode byte then its fields:
  *   op 0, 1  socket read: size selector (CAN_MTU, CANFD_MTU, any size, a
@@ -19,7 +21,7 @@
  * Invariants checked after every frame:
  *   - can_in_read: a length within the classic/FD maximum, counters add up
  *     (frames + error frames + bad sizes = reads of data);
- *   - frame_decode: FRAME_OK only for our three ids, classic, 8 bytes; the
+ *   - frame_decode: FRAME_OK only for our four ids, classic, 8 bytes; the
  *     result counters add up to the frames decoded;
  *   - the estimator's output, when valid, is finite with a covariance whose
  *     diagonal is >= 0; its health says finite.
@@ -45,6 +47,7 @@
 #include "frames.h"
 #include "fuzz_common.h"
 #include "log.h"
+#include "sensors.h"
 
 int LLVMFuzzerInitialize(int *argc, char ***argv);
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -108,6 +111,7 @@ ssize_t __wrap_recvmsg(int fd, struct msghdr *mh, int flags)
 
 static struct bridge_config site;
 static struct estimator est_template; /* estimator_init'ed once, copied per input */
+static struct estimator est_bearing_template; /* the same on the bearing-only site */
 static struct estimator est;
 static int dummy_fd = -1;             /* a real descriptor for can_in to own */
 
@@ -120,6 +124,13 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
     config_defaults(&site);
     if (config_load_file(&site, FUZZ_SITE, err, sizeof err) != 0 ||
         estimator_init(&est_template, &site, err, sizeof err) != 0) {
+        fprintf(stderr, "fuzz_frames: %s\n", err);
+        abort();
+    }
+    struct bridge_config bearing_site;
+    config_defaults(&bearing_site);
+    if (config_load_file(&bearing_site, FUZZ_BEARING_SITE, err, sizeof err) != 0 ||
+        estimator_init(&est_bearing_template, &bearing_site, err, sizeof err) != 0) {
         fprintf(stderr, "fuzz_frames: %s\n", err);
         abort();
     }
@@ -170,7 +181,7 @@ static void check_output(const struct estimator *e, int64_t now)
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     struct fz z = { data, size };
-    memcpy(&est, &est_template, sizeof est);
+    memcpy(&est, size > 0 && (data[0] & 4) ? &est_bearing_template : &est_template, sizeof est);
     struct frame_counters fc;
     frame_counters_init(&fc);
     struct can_in ci;
@@ -264,15 +275,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                                                       CAN_MSG_FD | CAN_MSG_ERROR)) &&
                            (msg.id == BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID ||
                             msg.id == BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_NODE_STATUS_FRAME_ID),
+                            msg.id == BEACONLOC_CAN_NODE_STATUS_FRAME_ID ||
+                            msg.id == BEACONLOC_CAN_BEARING_FRAME_ID),
                        "FRAME_OK for id 0x%x len %u flags 0x%x", (unsigned)msg.id,
                        msg.len, msg.flags);
-            switch (f.kind) {
-            case FRAME_PULSE: estimator_pulse(&est, &f.u.pulse, msg.rx_us); break;
-            case FRAME_ENCODERS: estimator_encoders(&est, &f.u.enc, msg.rx_us); break;
-            case FRAME_STATUS: estimator_status(&est, &f.u.status, msg.rx_us); break;
-            default: FUZZ_CHECK(0, "kind %d", (int)f.kind);
-            }
+            FUZZ_CHECK(f.kind >= 0 && f.kind < FRAME_KIND_COUNT &&
+                           sensor_kind_of_id(msg.id) == &sensor_kinds[f.kind],
+                       "kind %d for id 0x%x", (int)f.kind, (unsigned)msg.id);
+            /* the sensor table's handler, as bridge/frame_in.c calls it */
+            sensor_kinds[f.kind].handle(&est, &f, msg.rx_us);
             int64_t rx;
             if (estimator_take_update(&est, &rx))
                 check_output(&est, now);

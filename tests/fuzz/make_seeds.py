@@ -25,7 +25,8 @@ import cantools
 ROOT = Path(__file__).resolve().parents[2]
 DBC = ROOT / "hw_sim/beaconloc_sim/data/beaconloc.dbc"
 SITE = ROOT / "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"
-SCENARIOS = [("kleeman-lab", 4.0), ("echo-storm", 3.0), ("encoder-silence", 3.0), ("kidnap", 3.0)]
+SCENARIOS = [("kleeman-lab", 4.0), ("echo-storm", 3.0), ("encoder-silence", 3.0), ("kidnap", 3.0),
+             ("eurobot", 3.0)]
 
 
 def sim_log(work: Path, scenario: str, seconds: float) -> list:
@@ -91,6 +92,8 @@ def seeds_frames(out: Path, logs: dict) -> None:
             blob += dt_code(nxt - t)
             if i % 50 == 49:
                 blob += bytes([3, 0])  # periodic work
+        if scn.startswith("eurobot") and blob:
+            blob[0] |= 4  # fuzz_frames: the eurobot site for this input
         write(out, f"{scn}.replay", bytes(blob))
         # the first frames as SocketCAN reads (struct can_frame, CAN_MTU)
         blob = bytearray()
@@ -98,6 +101,8 @@ def seeds_frames(out: Path, logs: dict) -> None:
             nxt = frames[i + 1][0]
             frame = struct.pack("<IBBBB", ident, len(data), 0, 0, 0) + data.ljust(64, b"\0")
             blob += bytes([0, 0]) + frame + dt_code(nxt - t)
+        if scn.startswith("eurobot") and blob:
+            blob[0] |= 4
         write(out, f"{scn}.socket", bytes(blob))
     # error frame, FD, RTR, extended and short frames through the socket path
     blob = bytearray()
@@ -116,6 +121,8 @@ def seeds_site(out: Path) -> None:
     write(out, "kleeman-lab-tuning.ini", tuning.encode())
     write(out, "other-ring.ini", text.replace("ring_radius_m = 0.10", "ring_radius_m = 0.12")
           .replace("count = 8", "count = 6").encode())
+    # a bearing-only site (per-item [bearing_beaconN] sections, [beacons] count = 0)
+    write(out, "eurobot.ini", (SITE.parent / "eurobot.ini").read_bytes())
 
 
 def seeds_mavlink(out: Path) -> None:

@@ -163,18 +163,20 @@ def odometry_site_pos_cov(msg) -> np.ndarray:
 
 class NodeClockProbe:
     """Listens on the bus (python-can, a socket of its own) and records, for
-    every PULSE_DETECTION frame, the receiver-array node time (decoded with
-    cantools from the DBC) and the kernel receive time. The lower envelope
-    of (receive - node) maps CLOCK_MONOTONIC to the node clock, the time base
-    of the truth CSV, so the bridge's ODOMETRY (stamped on CLOCK_MONOTONIC)
-    can be compared with the truth independently of the bridge's own
-    estimates file."""
+    every frame of the truth's time base (PULSE_DETECTION: the receiver
+    array; BEARING on a site without ultrasonic beacons: the bearing sensor),
+    the node time (decoded with cantools from the DBC) and the kernel
+    receive time. The lower envelope of (receive - node) maps CLOCK_MONOTONIC
+    to the node clock, the time base of the truth CSV, so the bridge's
+    ODOMETRY (stamped on CLOCK_MONOTONIC) can be compared with the truth
+    independently of the bridge's own estimates file."""
 
-    def __init__(self, iface: str):
+    def __init__(self, iface: str, frame: str = "PULSE_DETECTION"):
         import can
         import cantools
         self._db = cantools.database.load_file(str(DBC))
-        self._pulse = self._db.get_message_by_name("PULSE_DETECTION")
+        self.frame = frame
+        self._pulse = self._db.get_message_by_name(frame)
         ours = [{"can_id": m.frame_id, "can_mask": 0x7FF} for m in self._db.messages]
         self.bus = can.Bus(interface="socketcan", channel=iface, can_filters=ours,
                            receive_own_messages=False)
@@ -373,9 +375,10 @@ class Rig:
             self.listener = MavlinkListener(self.port)
         return self.listener
 
-    def watch_node_clock(self) -> NodeClockProbe:
+    def watch_node_clock(self, frame: str = "PULSE_DETECTION") -> NodeClockProbe:
+        """The probe of the truth's node clock, read from `frame`'s NodeTime."""
         if self.probe is None:
-            self.probe = NodeClockProbe(self.iface)
+            self.probe = NodeClockProbe(self.iface, frame)
         return self.probe
 
     def _spawn(self, name: str, argv: list[str], env: dict | None = None,
@@ -499,7 +502,7 @@ class LiveRun:
         """(t_s since the truth start, error m, Mahalanobis distance under the
         ODOMETRY's own covariance, quality) for every ODOMETRY received,
         using the bus-derived mapping of CLOCK_MONOTONIC to the node clock."""
-        assert self.node_map is not None, "too few PULSE_DETECTION frames seen on the bus"
+        assert self.node_map is not None, "too few frames of the truth's node clock on the bus"
         t_mono = np.array([r.msg.time_usec for r in self.odometry], dtype=float) / 1e6
         t_node = self.node_map(t_mono)
         xy = np.array([odometry_site_xy(r.msg) for r in self.odometry])
@@ -519,13 +522,15 @@ def run_live(rig: Rig, scenario: str, duration_s: float, *, seed: int | None = N
              site: Path = SITE, bridge_extra: list[str] | None = None,
              bridge_env: dict | None = None,
              actions: list | None = None, timesync_every_s: float = 0.0,
-             stop_bridge: bool = True) -> LiveRun:
+             stop_bridge: bool = True, clock_frame: str = "PULSE_DETECTION") -> LiveRun:
     """Bridge first (waits for its HEARTBEAT), then the simulator live on the
     rig's bus for duration_s; `actions` = [(seconds after the simulator
-    started, callable(rig))] run in order; finally SIGTERM to the bridge."""
+    started, callable(rig))] run in order; finally SIGTERM to the bridge.
+    clock_frame: the frame whose NodeTime is the truth's clock (BEARING on a
+    site without ultrasonic beacons)."""
     lst = rig.listen()
     rig.start_bridge(site=site, extra=bridge_extra, env=bridge_env)
-    probe = rig.watch_node_clock()
+    probe = rig.watch_node_clock(clock_frame)
     sim = rig.start_sim(scenario, duration_s=duration_s, seed=seed)
     # Times count from the simulator's first frame on the bus (its start-up,
     # slow in an emulated VM, is not part of the scenario).

@@ -3,6 +3,7 @@
 #   make test-integration [IT_ARGS='-k nominal'] [IT_GUESTS=N]
 #                                                  the pytest suite in N UML guests
 #   make bench-accuracy                            20 seeds x 2 scenarios, --replay
+#   make bench-bearing                             Vander 2011 Fig. 7: eurobot, 20 seeds, --replay
 #   make demo [DEMO_S=120]                         kleeman-lab live, plot in build/demo/
 #   make vm-check                                  boot, python-can round trip on vcan0
 #   make bench-bus                                 simulator pacing + bridge latency on the bus
@@ -17,7 +18,7 @@ IT_ARGS      ?=
 IT_GUESTS    ?= $(shell n=$$(nproc); [ $$n -gt 4 ] && n=4; echo $$n)
 DEMO_S       ?= 120
 
-.PHONY: test-integration bench-accuracy demo vm-check test-vm-runner bench-bus
+.PHONY: test-integration bench-accuracy bench-bearing demo vm-check test-vm-runner bench-bus
 
 # The runner's own logic (host side, no VM): part of `make test-py`.
 PY_TESTS += test-vm-runner
@@ -37,6 +38,12 @@ bench-bus: $(SETUP_STAMP) $(IT_BRIDGE)
 
 bench-accuracy: $(SETUP_STAMP) $(IT_BRIDGE)
 	$(PY) tests/bench/accuracy.py --bridge $(IT_BRIDGE) --out $(BUILD)/bench/accuracy
+
+# The filter vs odometry vs the library's triangulation on the eurobot
+# scenarios (tests/bench/bearing.py; lib/bench/triangulate.c in lib/bench.mk).
+bench-bearing: $(SETUP_STAMP) $(IT_BRIDGE) $(BUILD)/bench/triangulate
+	$(PY) tests/bench/bearing.py --bridge $(IT_BRIDGE) --triangulate $(BUILD)/bench/triangulate \
+	    --out $(BUILD)/bench/bearing
 
 demo: $(SETUP_STAMP) $(IT_BRIDGE)
 	$(VM_RUN) --results $(DEMO_OUT) --tail live.txt tests/demo/demo.sh $(DEMO_S)

@@ -4,6 +4,8 @@ what happened (STATUSTEXT), and the accuracy comes back afterwards.
     echo-storm        30 % of the firings also give a strong wall echo
     beacon-outage     2 of 6 beacons dead for 20 s
     encoder-silence   the encoder node sends nothing for a while (scenario file)
+    eurobot           bearings to 3 beacons and encoders, no ultrasonic beacon
+                      (Vander et al. 2011, issue 11)
 
 The temperature ramp's checks (the estimate follows the speed of sound)
 need no live bus: tests/bridge/test_bridge_scenarios.py replays it.
@@ -77,3 +79,49 @@ def test_scenario_output_never_stops_and_recovers(rig, scenario):
     last = e.t_s >= e.t_s[-1] - 10.0
     rms = float(np.sqrt(np.nanmean(e.pos_m[last] ** 2)))
     assert rms < RECOVERED_RMS_M, f"rms position error over the last 10 s: {rms * 1e3:.0f} mm"
+
+
+# The eurobot table (Vander et al. 2011 Fig. 1, 6): a bearing-only site, the
+# robot crosses the table in 9.7 s on one arc and stands; 12 s in all.
+EUROBOT_SITE = h.SCENARIOS / "eurobot.ini"
+EUROBOT_JUDGE_AFTER_S = 2.0  # the triangulation start and its first second
+EUROBOT_RMS_M = 0.04         # replayed: 18 mm after 2 s, 2 mm standing at the end
+
+
+def test_eurobot_bearings_end_to_end(rig):
+    """simulator -> vcan -> bridge -> MAVLink on a site of three bearing
+    beacons and no ultrasonic one: the pymavlink-decoded ODOMETRY against
+    the truth (on the bearing sensor's clock, mapped from the bus) and
+    against its own reported covariance."""
+    sc = h.scenario_events("eurobot")
+    run = h.run_live(rig, "eurobot", sc.duration_s, site=EUROBOT_SITE, clock_frame="BEARING")
+    assert run.bridge_rc == 0, rig.logs()
+
+    # 1. The output starts from the bearings (no pulse ever) and does not stop.
+    times = [x.t_mono_s for x in run.odometry
+             if run.t_sim_start_mono_s + EUROBOT_JUDGE_AFTER_S <= x.t_mono_s
+             <= run.t_sim_end_mono_s]
+    assert len(times) > 20 * (sc.duration_s - EUROBOT_JUDGE_AFTER_S - 1.0), len(times)
+    assert h.max_gap_s(times) < 0.5
+
+    # 2. Against the truth and its own 3 sigma.
+    t_s, err, mahal, _quality = run.odometry_vs_truth()
+    np.savetxt(rig.workdir / "odometry-vs-truth.csv", np.column_stack([t_s, err, mahal]),
+               delimiter=",", header="t_s,err_m,mahal", comments="")
+    ok = (t_s >= EUROBOT_JUDGE_AFTER_S) & np.isfinite(err) & np.isfinite(mahal)
+    assert ok.sum() > 100, ok.sum()
+    inside = float(np.mean(mahal[ok] <= 3.0))
+    rms = float(np.sqrt(np.mean(err[ok] ** 2)))
+    print(f"eurobot live: odometry={int(ok.sum())} rms_mm={rms * 1e3:.1f} "
+          f"max_mm={float(np.max(err[ok])) * 1e3:.1f} inside_3sigma={inside:.3f}")
+    assert inside >= 0.95, f"only {inside:.1%} of ODOMETRY inside their 3 sigma"
+    assert rms < EUROBOT_RMS_M, f"rms position error {rms * 1e3:.0f} mm"
+
+    # 3. Every bearing frame went to the filter; no pulse on this bus.
+    stats = run.bridge_stats
+    assert stats is not None, rig.logs()
+    received = stats["frames_received"]["bearing"]
+    assert received > 250, received  # 3 beacons at 10 Hz for 12 s, less the bus's losses
+    assert stats["bearings_fused"] > 0.8 * received
+    assert stats["bearings_unknown_beacon"] == 0 and stats["bearings_refused"] == 0
+    assert stats["frames_received"]["pulse_detection"] == 0

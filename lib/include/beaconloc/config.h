@@ -60,6 +60,11 @@ typedef struct bl_wheel_params {
     bl_real sigma_wheel_per_m;            /* [noise] sigma_wheel_per_m: odometry noise: each
                                              wheel's distance variance grows by this² · |d|
                                              (m²) over a travel of |d| m (1 cm per metre), >= 0 */
+    bl_real sigma_distance_per_m;         /* [noise] sigma_distance_per_m: odometry noise common
+                                             to both wheels (the robot slips, distance only):
+                                             the distance travelled, (d_left + d_right)/2, gets
+                                             variance this² · |d| (m²) more; 0 (default) = none,
+                                             >= 0, < 1 */
     bl_real heading_noise_rad_per_sqrt_s; /* [tuning]: heading noise while moving: σ² grows
                                              by this² per second (the "offset", Kleeman
                                              §3.10) ... */
