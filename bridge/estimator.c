@@ -175,11 +175,15 @@ static void sync(struct estimator *e)
             case BL_LOC_CAUSE_STALE_PULSE:
                 event(e, EST_EV_WARNING, "re-initialised: stale filter");
                 break;
+            case BL_LOC_CAUSE_KNOWN_POSE:
+                event(e, EST_EV_NOTICE, "restarted from a known pose (reset %u)", ev.reset_counter);
+                break;
             default:
                 event(e, EST_EV_WARNING, "re-initialised: site geometry changed");
                 break;
             }
-            if (ev.cause != BL_LOC_CAUSE_PERSISTENT_REJECTION && ev.cause != BL_LOC_CAUSE_SNAPSHOT)
+            if (ev.cause != BL_LOC_CAUSE_PERSISTENT_REJECTION &&
+                ev.cause != BL_LOC_CAUSE_SNAPSHOT && ev.cause != BL_LOC_CAUSE_KNOWN_POSE)
                 e->was_started = false; /* fresh filter: beacons wait for it */
             break;
         case BL_LOC_EV_CONVERGED:
