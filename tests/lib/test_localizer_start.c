@@ -102,38 +102,65 @@ static start_result run_trial(uint64_t seed, double outage, bool wheels)
     return out;
 }
 
-/* 200 trials with 50 % outage (fixed seeds): the start lies inside its
- * reported 3σ (2-dof Mahalanobis, 99.73 %) in >= 95 % of them. Without the
- * motion compensation (no wheel samples: the bearings of the window taken
- * as simultaneous) the same trials are measured and printed: the share
- * inside is lower (about 80 % with the library before the compensation). */
+/* 200 trials (fixed seeds): the share of starts inside their reported 3σ
+ * (2-dof Mahalanobis, 99.73 %), with and without the motion compensation
+ * (no wheel samples: the bearings of one window taken as simultaneous, as
+ * the library did before the compensation for any robot). */
+typedef struct {
+    int started, inside, started_naive, inside_naive;
+    double mean_t_s;
+} start_stats;
+
+static start_stats measure(double outage, const char *name)
+{
+    const int trials = 200;
+    start_stats st;
+    memset(&st, 0, sizeof st);
+    double sum_t = 0, worst_m2 = 0, sum_e2 = 0;
+    for (int k = 0; k < trials; k++) {
+        const start_result r = run_trial(1000 + (uint64_t)k, outage, true);
+        if (r.started) {
+            st.started++;
+            sum_t += r.t_s;
+            sum_e2 += r.err_m * r.err_m;
+            if (r.mahal2 <= MAHAL2_3SIGMA) st.inside++;
+            if (r.mahal2 > worst_m2) worst_m2 = r.mahal2;
+        }
+        const start_result n = run_trial(1000 + (uint64_t)k, outage, false);
+        if (n.started) {
+            st.started_naive++;
+            if (n.mahal2 <= MAHAL2_3SIGMA) st.inside_naive++;
+        }
+    }
+    st.mean_t_s = sum_t / (st.started ? st.started : 1);
+    print_message("moving start, %s outage: started %d of %d (mean %.2f s), inside 3 sigma %d (%.1f %%), rms error "
+                  "%.1f mm, worst d2 %.1f; without wheels started %d, inside %d\n",
+                  name, st.started, trials, st.mean_t_s, st.inside, 100.0 * st.inside / trials,
+                  1e3 * sqrt(sum_e2 / (st.started ? st.started : 1)), worst_m2, st.started_naive, st.inside_naive);
+    return st;
+}
+
+/* 50 % outage: every trial starts, >= 95 % inside their 3σ (measured with
+ * the library before the compensation: 152 of 200, 76 %, worst d² 245). */
 static void test_moving_start_inside_3sigma(void **state)
 {
     (void)state;
-    const int trials = 200;
-    int inside = 0, started = 0, inside_naive = 0, started_naive = 0;
-    double sum_t = 0, worst_m2 = 0, sum_e2 = 0;
-    for (int k = 0; k < trials; k++) {
-        const start_result r = run_trial(1000 + (uint64_t)k, 0.5, true);
-        if (r.started) {
-            started++;
-            sum_t += r.t_s;
-            sum_e2 += r.err_m * r.err_m;
-            if (r.mahal2 <= MAHAL2_3SIGMA) inside++;
-            if (r.mahal2 > worst_m2) worst_m2 = r.mahal2;
-        }
-        const start_result n = run_trial(1000 + (uint64_t)k, 0.5, false);
-        if (n.started) {
-            started_naive++;
-            if (n.mahal2 <= MAHAL2_3SIGMA) inside_naive++;
-        }
-    }
-    print_message("moving start, 50 %% outage: started %d of %d (mean %.2f s), inside 3 sigma %d (%.1f %%), rms error "
-                  "%.1f mm, worst d2 %.1f; without wheels inside %d of %d\n",
-                  started, trials, sum_t / (started ? started : 1), inside, 100.0 * inside / trials,
-                  1e3 * sqrt(sum_e2 / (started ? started : 1)), worst_m2, inside_naive, started_naive);
-    assert_int_equal(started, trials);
-    assert_true(inside >= trials * 95 / 100);
+    const start_stats st = measure(0.5, "50 %");
+    assert_int_equal(st.started, 200);
+    assert_true(st.inside >= 190);
+    assert_true(st.inside_naive < 190); /* the compensation is what makes the difference */
+}
+
+/* 80 % outage: the longer compensated window (4 windows, 1 s) starts
+ * nearly every trial within 4 s, inside its 3σ; measured with the plain
+ * 0.25 s window: 187 started after 1.17 s on average. */
+static void test_heavy_outage_starts_sooner(void **state)
+{
+    (void)state;
+    const start_stats st = measure(0.8, "80 %");
+    assert_true(st.started >= 195);
+    assert_true(st.mean_t_s < 1.0);
+    assert_true(st.inside >= 190);
 }
 
 /* Odometry only moves the bearings it can place: a silence in the wheels
@@ -203,6 +230,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_track_errors_and_breaks),
         cmocka_unit_test(test_moving_start_inside_3sigma),
+        cmocka_unit_test(test_heavy_outage_starts_sooner),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

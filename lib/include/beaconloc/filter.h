@@ -358,7 +358,8 @@ int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us
  * and value) for a triangulation (re)start.
  * Not started: kept (BL_FUSION_BUFFERED); the filter starts itself
  * (BL_FUSION_STARTED) from bl_solve_bearings (solver.h) once the kept
- * bearings within cfg.bearing.snapshot_window_s of the newest cover >= 3
+ * bearings within cfg.bearing.snapshot_window_s of the newest (4 times
+ * that when the odometry track motion-compensates them) cover >= 3
  * bearing beacons and the fix's drms is <= cfg.bearing.max_fix_drms_m
  * (see bl_filter_start_bearings). Stale (t_us more than
  * cfg.max_predict_gap_s after the state time): kept, and the same
@@ -402,9 +403,12 @@ int bl_filter_track_wheels(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real
  * within cfg.bearing.snapshot_window_s of the newest, one per bearing
  * beacon (its latest), >= 3 beacons, solved by bl_solve_bearings (Vander
  * et al. 2011 eq. 1, with the sensor offset) with σ cfg.bearing.sigma_deg.
- * Motion compensation: when every bearing used has a pose on the same
- * odometry track (bl_filter_track_wheels), the fix is the pose at the
- * newest bearing's time and each older bearing is taken from where the
+ * Motion compensation: the bearings within 4·cfg.bearing.snapshot_window_s
+ * of the newest (1 s at the default) that have a pose on the newest one's
+ * odometry track (bl_filter_track_wheels), when they cover >= 3 bearing
+ * beacons; else those within one window, uncompensated (below). The fix is
+ * then the pose at the newest bearing's time and each older bearing is
+ * taken from where the
  * odometry puts the sensor then (solver.h: body_dx_m, body_dy_m,
  * body_dtheta_rad, the track's relative pose in the newest one's body
  * frame), so a moving robot's bearings from different scans are not
@@ -420,8 +424,8 @@ int bl_filter_track_wheels(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real
  * from the first fix (the filter's own odometry noise model, filter.h
  * predict_odometry, with the position σ taken whole across the line of
  * sight: conservative), then solved again.
- * Without it (no wheels, or the bearings on different tracks) the bearings
- * are taken as simultaneous; the fix gives x, y and θ with their
+ * Without it (no wheels, or fewer than 3 beacons on the newest bearing's
+ * track) the bearings within one window are taken as simultaneous; the fix gives x, y and θ with their
  * covariance, the start's P block; when the filter runs, that block is
  * inflated by the motion over the window (variance + (|v|·span)² in x and
  * y, + (|ω|·span)² in θ, span = newest - oldest bearing used). v = ω = 0 with σ cfg.initial_sigma_v_mps,
