@@ -14,22 +14,7 @@
 
 #define IS_FLOAT (sizeof(bl_real) == 4)
 
-/* ---- seeded RNG (xorshift64*) ---- */
-static uint64_t rng_state = 0x9e3779b97f4a7c15ull;
-static void rng_seed(uint64_t s) { rng_state = s ? s : 1; }
-static double rng_uniform(void) /* [0, 1) */
-{
-    rng_state ^= rng_state >> 12;
-    rng_state ^= rng_state << 25;
-    rng_state ^= rng_state >> 27;
-    return (double)((rng_state * 2685821657736338717ull) >> 11) * (1.0 / 9007199254740992.0);
-}
-static double rng_gauss(void)
-{
-    double u1 = rng_uniform(), u2 = rng_uniform();
-    if (u1 < 1e-300) u1 = 1e-300;
-    return sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2);
-}
+#include "test_rng.h"
 
 static double dist3(const double p[3], const bl_beacon *b)
 {
