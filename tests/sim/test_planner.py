@@ -259,7 +259,8 @@ def test_range_centre_of_square(a_m, dz_m, sigma_m, per_m):
         drms, _, degenerate = planner.position_bound(F)
         assert not degenerate
         assert drms == pytest.approx(sigma * d / a_m, rel=1e-12)
-        np.testing.assert_allclose(np.linalg.inv(F), np.eye(2) * sigma ** 2 * d ** 2 / (2 * a_m ** 2),
+        np.testing.assert_allclose(np.linalg.inv(F),
+                                   np.eye(2) * sigma ** 2 * d ** 2 / (2 * a_m ** 2),
                                    rtol=1e-12, atol=1e-18)
 
 
