@@ -145,7 +145,8 @@ def test_tof_jacobian_matches_finite_differences():
         p, m = [x, y, th, s], [x, y, th, s]
         p[i] += h[i]
         m[i] -= h[i]
-        num = (range_m(*p[:3], b, off, 0.3) / p[3] - range_m(*m[:3], b, off, 0.3) / m[3]) / (2 * h[i])
+        num = (range_m(*p[:3], b, off, 0.3) / p[3]
+               - range_m(*m[:3], b, off, 0.3) / m[3]) / (2 * h[i])
         np.testing.assert_allclose(J[:, i], num, rtol=1e-6)
     np.testing.assert_allclose(range_jacobian(x, y, th, b, off, 0.3), J[:, :3] * s, rtol=1e-12)
 

@@ -86,7 +86,7 @@ class Ranges:
 class RangeReceiver(Node):
     message = "RANGE"
     node_id = 4
-    status_phase_us = 250_000
+    status_phase_us = 0
 
     def __init__(self, clock: NodeClock, scn):
         super().__init__(clock)
