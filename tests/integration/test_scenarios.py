@@ -135,16 +135,16 @@ def test_eurobot_bearings_end_to_end(rig):
 MARVELMIND_SITE = h.SCENARIOS / "marvelmind.ini"
 MARVELMIND_LIVE_S = 30.0
 MARVELMIND_JUDGE_AFTER_S = 2.0  # the trilateration start and its first second
-MARVELMIND_RMS_M = 0.04         # replayed: 17 mm over 30 s (seed 1); live: 20 mm
+MARVELMIND_RMS_M = 0.04         # replayed: 17 mm over 30 s (seed 1); live: 17 to 20 mm
 # Share of ODOMETRY inside its own 3 sigma (2D Mahalanobis <= 3; 98.9 % for
 # an exactly consistent filter). Measured: replayed 96.3 % (seed 1; 96.2,
 # 96.7, 99.8 % for seeds 2-4: the filter's covariance is a little optimistic
-# on this site), live in the UML guest 90.0 %: the extra loss is transient,
-# at 16-18 s and 22-24 s of the lap, where live and replayed estimates part
-# (the same frames, other receive times: the encoder samples' mapping onto the
-# range receiver's clock under the guest's scheduling, frames up to 42 ms
-# late). The floor below catches a broken covariance, not the 95 % target of
-# the other cases, which this case does not meet live yet.
+# on this site); live in the UML guest 96.5 % (17.4 mm rms), but 90.0 % in a
+# run on a host loaded by other jobs (load 2.6 on 2 cores, frames up to 42 ms
+# late): there live and replayed estimates parted at 16-18 s and 22-24 s of
+# the lap (the same frames, other receive times: the encoder samples' mapping
+# onto the range receiver's clock). The floor below catches a broken
+# covariance; the other cases' 95 % is met on a quiet host only, by 1.5 %.
 MARVELMIND_INSIDE_3SIGMA = 0.85
 RANGE_COUNTERS = ("ranges_fused", "ranges_rejected", "ranges_buffered", "ranges_refused",
                   "ranges_unknown_beacon", "ranges_unexpected", "ranges_other_receiver",
