@@ -159,12 +159,12 @@ typedef struct bl_bearing_meas {
 /* One time of flight from a fixed range beacon (bl_filter_fuse_range; the
  * DBC RANGE frame 0x130). */
 typedef struct bl_range_meas {
-    int64_t t_us;               /* emission time of the pulse (the RF sync) on the caller's
+    int64_t t_us;             /* emission time of the pulse (the RF sync) on the caller's
                                    timebase (the frame's NodeTime, unwrapped), us */
-    uint32_t beacon_index;      /* 0-based range beacon (cfg.range_beacons): the frame's
+    uint32_t beacon_index;    /* 0-based range beacon (cfg.range_beacons): the frame's
                                    Beacon field minus 1 */
-    bl_real time_of_flight_s;   /* ultrasonic time of flight (s), >= 0 */
-    uint32_t tag;               /* caller's tag, never read by the library */
+    bl_real time_of_flight_s; /* ultrasonic time of flight (s), >= 0 */
+    uint32_t tag;             /* caller's tag, never read by the library */
 } bl_range_meas;
 #endif
 
