@@ -378,6 +378,48 @@ static void test_start_from_ranges(void **state)
     assert_true(hypot(pxs, pys) > 1e-3); /* the position moves with s */
 }
 
+/* A mixed site: the kleeman-lab pulse beacons plus 3 range beacons. The
+ * pulses start and converge the filter; a range that agrees is fused, one
+ * 1 m long is gated out, each counted for its range beacon only. */
+static void test_mixed_site_pulses_and_ranges(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.range_beacon_count = 3;
+    const double rb[3][2] = {{1, 1}, {11, 1}, {6, 11}};
+    for (int j = 0; j < 3; ++j) cfg.range_beacons[j] = (bl_beacon){(bl_real)rb[j][0], (bl_real)rb[j][1], 2.5f};
+    cfg.range.max_range_m = 15;
+    const char *field = NULL;
+    assert_int_equal(bl_config_check(&cfg, &field), BL_OK);
+    static bl_filter f;
+    int64_t t_us;
+    const double px = 5.0, py = 4.0;
+    converged_filter(&f, &cfg, &t_us, px, py);
+    bl_estimate est;
+    assert_int_equal(bl_filter_estimate(&f, &est), BL_OK);
+    assert_true(est.converged);
+    /* s: the pulses' estimate (the truth of converged_filter is 343 m/s) */
+    for (int j = 0; j < 3; ++j) {
+        const double dx = px - rb[j][0], dy = py - rb[j][1], dz = 0.2 - 2.5;
+        const double tof = sqrt(dx * dx + dy * dy + dz * dz) / 343.0;
+        bl_fusion_result res;
+        assert_int_equal(bl_filter_fuse_range(&f, (uint32_t)j, t_us, (bl_real)tof, &res), BL_OK);
+        assert_int_equal(res.status, BL_FUSION_ACCEPTED);
+        assert_true(res.test_ratio < 1);
+        assert_int_equal(bl_filter_fuse_range(&f, (uint32_t)j, t_us, (bl_real)(tof + 1.0 / 343.0), &res), BL_OK);
+        assert_int_equal(res.status, BL_FUSION_REJECTED);
+        assert_true(res.test_ratio > 1);
+    }
+    assert_int_equal(bl_filter_estimate(&f, &est), BL_OK);
+    for (int j = 0; j < 3; ++j) {
+        assert_int_equal(est.range_accepted[j], 1);
+        assert_int_equal(est.range_rejected[j], 1);
+    }
+    for (int j = 3; j < BL_MAX_BEACONS; ++j) assert_int_equal(est.range_accepted[j] + est.range_rejected[j], 0);
+    assert_true(hypot((double)est.x_m - px, (double)est.y_m - py) < 0.05);
+}
+
 /* Config errors are named by their path. */
 static void test_config_errors_named(void **state)
 {
@@ -545,6 +587,7 @@ int main(void)
         cmocka_unit_test(test_multipath_rejected_and_counted),
         cmocka_unit_test(test_errors_leave_state_identical),
         cmocka_unit_test(test_start_from_ranges),
+        cmocka_unit_test(test_mixed_site_pulses_and_ranges),
         cmocka_unit_test(test_config_errors_named),
         cmocka_unit_test(test_localizer_ranges_and_kidnap),
     };

@@ -23,6 +23,7 @@
  *     on encoder frame:  bl_filter_predict_odometry(&f, t_us, d_left_m, d_right_m);
  *     on beacon pulse:   bl_filter_fuse_pulse(&f, beacon_index, arrival_us, rx, &res);
  *     on a bearing:      bl_filter_fuse_bearing(&f, bearing_beacon_index, t_us, bearing_rad, &res);
+ *     on a range:        bl_filter_fuse_range(&f, range_beacon_index, t_emit_us, tof_s, &res);
  *     to publish:        bl_filter_estimate_at(&f, now_us, &est);
  * The filter starts itself from the snapshot solver (bl_solve_tdoa_2d) once
  * the buffered pulses of the latest firing cycle cover 4 beacons (all of
@@ -36,6 +37,10 @@
  * from the triangulation of the bearings (bl_filter_fuse_bearing,
  * bl_filter_start_bearings), whichever kind completes first; a site
  * without ultrasonic beacons (cfg.beacon_count == 0) only from them.
+ * Likewise a site with range beacons (cfg.range_beacon_count > 0) starts
+ * from the trilateration of its ranges (bl_filter_fuse_range,
+ * bl_filter_start_ranges), with no heading (learned from the motion); a
+ * range-only site only from them.
  *
  * Heading from the ring (cfg.ring_heading, on by default): the receivers are
  * directional (cfg.beamwidth_deg <= 180), so the ones that heard a beacon's
