@@ -24,6 +24,11 @@ constexpr real kIekfTolerance_m = real(1e-4);
 // 1992 §3.9's start-up gate, as bearings: a trilateration start has no
 // heading, so the first motion is poorly predicted).
 constexpr real kStartupGateFactor = real(2);
+// While the heading σ exceeds this (rad) the ranges are not gated (our
+// choice): a start from the trilateration has no heading (σ
+// cfg.reset_sigma_theta_rad), the first motion is then predicted in a wrong
+// direction, and a gate would reject the very ranges that show the heading.
+constexpr real kHeadingUnknown_rad = real(0.3);
 // A range beyond this many times cfg.range.max_range_m is refused as bad
 // input (filter.h: a sensor reporting a little past its rating and an
 // s error of up to 50 % still pass).
@@ -109,6 +114,7 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t j, int64_t t_u
     m.z = tof_s;
     m.R = sigma_s * sigma_s;
     m.gate_sigma = conv ? cfg->range.gate_sigma : kStartupGateFactor * cfg->range.gate_sigma;
+    if (P(TH, TH) > kHeadingUnknown_rad * kHeadingUnknown_rad) m.gate_sigma = 0;
     m.max_iterations = kIekfIterations;
     m.step_tolerance_m = kIekfTolerance_m;
     const int rc = fuse_scalar(model, m, x, P, result);

@@ -195,8 +195,7 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     // Range beacons likewise: a kidnap along a circle round one beacon
     // leaves its range unchanged.
     const uint32_t n_beacons = cfg.beacon_count + cfg.bearing_beacon_count + cfg.range_beacon_count;
-    const uint32_t cap =
-        (cfg.bearing_beacon_count > 0 || cfg.range_beacon_count > 0) ? n_beacons - 1 : n_beacons;
+    const uint32_t cap = (cfg.bearing_beacon_count > 0 || cfg.range_beacon_count > 0) ? n_beacons - 1 : n_beacons;
     const int need = static_cast<int>(cap < 3 ? cap : 3);
     if (n < loc->reject_k_ || __builtin_popcountll(mask) < need) return false;
     if (!bl::started(&loc->filter)) return false;

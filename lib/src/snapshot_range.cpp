@@ -75,17 +75,31 @@ uint32_t fill_problem(const bl_filter *f, real s_mps, bl_range_problem *prob, in
 // The trilateration of the kept ranges at s_mps and at s_mps + kDs_mps (the
 // problem lives only in this frame; noinline keeps it off the callers'
 // stacks).
-__attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mps, RangeSnapshot *out)
+__attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mps, real var_s, RangeSnapshot *out)
 {
     bl_range_problem prob;
     int64_t newest = 0, oldest = 0;
-    if (fill_problem(f, s_mps, &prob, &newest, &oldest) < 3) return BL_EDEGENERATE;
+    // min(4, N) beacons, as the pulse snapshot: with 4 the fix is
+    // over-determined and a late (multipath) range shows in its residual.
+    const uint32_t n_site = f->cfg_.range_beacon_count;
+    const uint32_t m = fill_problem(f, s_mps, &prob, &newest, &oldest);
+    if (m < 3 || m < (n_site < 4 ? n_site : 4u)) return BL_EDEGENERATE;
     bl_range_solution sol;
     int rc = bl_solve_ranges_2d(&prob, &sol);
     if (rc == BL_EINVAL) rc = BL_EDEGENERATE;  // the problem is well-formed: the geometry is at fault
     if (rc != BL_OK) return rc;
     // Mirror ambiguity (collinear beacons): refuse rather than guess.
     if (sol.ambiguous) return BL_EDEGENERATE;
+    // The fix must explain the ranges: every residual within 3σ, σ with
+    // the speed of sound's share (r·σs/s) added, as the pulse snapshot's
+    // residual test (filter.h). Checked by the rms, per range: rms <= 3σ_max.
+    real sig_max = 0;
+    for (uint32_t j = 0; j < m; ++j) {
+        const real ss = prob.range_m[j] * std::sqrt(var_s) / s_mps;
+        const real sj = std::sqrt(prob.sigma_m[j] * prob.sigma_m[j] + ss * ss);
+        if (sj > sig_max) sig_max = sj;
+    }
+    if (m > 3 && !(sol.residual_rms_m <= real(3) * sig_max)) return BL_ENOCONVERGE;
     bl_range_problem prob2;
     int64_t n2 = 0, o2 = 0;
     fill_problem(f, s_mps + kDs_mps, &prob2, &n2, &o2);
@@ -115,7 +129,7 @@ int start_from_ranges(bl_filter *f)
     const real s_mps = was_started ? f->x_[S] : cfg->speed_of_sound_mps;
     const real var_s = was_started ? cov(f)(S, S) : cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps;
     RangeSnapshot snap;
-    const int rc = solve_range_snapshot(f, s_mps, &snap);
+    const int rc = solve_range_snapshot(f, s_mps, var_s, &snap);
     if (rc != BL_OK) return rc;
     VX x = VX::Zero();
     MX P = MX::Zero();

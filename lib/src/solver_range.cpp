@@ -238,8 +238,8 @@ extern "C" int bl_solve_ranges_2d(const bl_range_problem *prob, bl_range_solutio
     out.ambiguous = ambiguous;
     out.mirror_x_m = other.p(0);
     out.mirror_y_m = other.p(1);
-    const real v[] = {out.x_m, out.y_m, out.cov[0], out.cov[1], out.cov[3], out.drms_m, out.hdop, out.mirror_x_m,
-                      out.mirror_y_m};
+    const real v[] = {out.x_m,    out.y_m,  out.cov[0],     out.cov[1],    out.cov[3],
+                      out.drms_m, out.hdop, out.mirror_x_m, out.mirror_y_m};
     for (real x : v)
         if (!is_finite(x)) return BL_EDEGENERATE;
     *sol = out;

@@ -23,6 +23,7 @@
  *     on encoder frame:  bl_filter_predict_odometry(&f, t_us, d_left_m, d_right_m);
  *     on beacon pulse:   bl_filter_fuse_pulse(&f, beacon_index, arrival_us, rx, &res);
  *     on a bearing:      bl_filter_fuse_bearing(&f, bearing_beacon_index, t_us, bearing_rad, &res);
+ *     on a range:        bl_filter_fuse_range(&f, range_beacon_index, t_emit_us, tof_s, &res);
  *     to publish:        bl_filter_estimate_at(&f, now_us, &est);
  * The filter starts itself from the snapshot solver (bl_solve_tdoa_2d) once
  * the buffered pulses of the latest firing cycle cover 4 beacons (all of
@@ -36,6 +37,10 @@
  * from the triangulation of the bearings (bl_filter_fuse_bearing,
  * bl_filter_start_bearings), whichever kind completes first; a site
  * without ultrasonic beacons (cfg.beacon_count == 0) only from them.
+ * Likewise a site with range beacons (cfg.range_beacon_count > 0) starts
+ * from the trilateration of its ranges (bl_filter_fuse_range,
+ * bl_filter_start_ranges), with no heading (learned from the motion); a
+ * range-only site only from them.
  *
  * Heading from the ring (cfg.ring_heading, on by default): the receivers are
  * directional (cfg.beamwidth_deg <= 180), so the ones that heard a beacon's
@@ -425,8 +430,11 @@ int bl_filter_start_bearings(bl_filter *f);
  * bl_filter_predict; the state time is not changed). σ of the time of
  * flight = (cfg.range.sigma_m + cfg.range.sigma_per_m·d)/s, d the
  * predicted range (m); gate cfg.range.gate_sigma, twice that until
- * converged; the shared update (fusion.h: IEKF, 2 iterations, Joseph
- * form). Multipath late arrivals (a reflection heard instead of the direct
+ * converged, and none while the heading σ exceeds 0.3 rad (a start from
+ * ranges has no heading: the first motion is predicted in a wrong
+ * direction, and a gate would reject the very ranges that show the
+ * heading; multipath in that phase can lock a wrong heading: lib/README.md);
+ * the shared update (fusion.h: IEKF, 2 iterations, Joseph form). Multipath late arrivals (a reflection heard instead of the direct
  * path; Millibots §3.2) fall outside the gate: BL_FUSION_REJECTED, counted
  * in bl_estimate.range_rejected, state untouched.
  * Every range that returns BL_OK is kept as its beacon's latest for a
@@ -453,14 +461,17 @@ int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us
 
 /* Start (or restart) from the trilateration of the kept ranges: the latest
  * of each range beacon within cfg.range.snapshot_window_s of the newest,
- * >= 3 range beacons, ranges = s·time of flight (s: the state's on a
+ * covering min(4, N) range beacons (as the pulse snapshot: with 4 the fix
+ * is over-determined and a multipath range shows), ranges = s·time of flight (s: the state's on a
  * running filter, cfg.speed_of_sound_mps on a first start), solved by
  * bl_solve_ranges_2d (solver.h) at the receiver height cfg.range.height_m
  * with the mount offset taken as zero for the fix: the offset turns with
  * the unknown heading, so the fix is the receiver's, and the wheel-base
  * centre is put there with the offset's length added to its σ.
  * Refused unless the fix is unambiguous (no mirror solution within the
- * beacons' collinearity: solver.h) and its drms is <= cfg.range.max_fix_drms_m.
+ * beacons' collinearity: solver.h), explains the ranges (with more than 3:
+ * rms residual <= 3 σ, σ the largest range σ with its speed-of-sound share
+ * d·σs/s added) and its drms is <= cfg.range.max_fix_drms_m.
  * Ranges give no heading: a running filter keeps its heading (σ grown to
  * at least cfg.reset_sigma_theta_rad), a first start takes
  * cfg.initial_theta_rad with σ cfg.reset_sigma_theta_rad (large: the
@@ -474,9 +485,10 @@ int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us
  * of one window are a few ms of flight apart from their emissions). s, T, t0 and the wheel scales: as bl_filter_start_bearings.
  * Counts as a reset if the filter was started before.
  * Errors (*f byte-identical): BL_EINVAL (NULL), BL_ENOTINIT,
- * BL_EDEGENERATE (fewer than 3 range beacons in the window, singular or
- * ambiguous geometry, or a drms above cfg.range.max_fix_drms_m),
- * BL_ENOCONVERGE (the solver did not converge, or a non-finite fix). */
+ * BL_EDEGENERATE (fewer than min(4, N) range beacons in the window,
+ * singular or ambiguous geometry, or a drms above cfg.range.max_fix_drms_m),
+ * BL_ENOCONVERGE (the solver did not converge, a residual above 3 σ, or a
+ * non-finite fix). */
 int bl_filter_start_ranges(bl_filter *f);
 
 /* The range model at state x (tests, diagnostics): the time of flight h_s

@@ -103,8 +103,9 @@
  * Memory: caller-owned struct (filter + sequencer + policy state), no heap,
  * no globals, no pulse buffer (a closed pulse's members are fused from the
  * sequencer's slot they were merged in). sizeof on Cortex-M4F, float (make
- * size-m4): 2,032 B with BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 984,
- * sequencer 704, policy + counters + events 344), 2,736 B with 16/16.
+ * size-m4, BL_WITH_BEARINGS = BL_WITH_RANGES = 0): 2,048 B with
+ * BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 1,000, sequencer 704,
+ * policy + counters + events 344), 2,736 B with 16/16.
  * Cost per call: a
  * detection O(BL_SEQ_MAX_PENDING + BL_MAX_RECEIVERS) plus what it closes;
  * every pulse closed costs one bl_filter_fuse_pulse per member (O(NX²) per
@@ -159,12 +160,12 @@ typedef struct bl_bearing_meas {
 /* One time of flight from a fixed range beacon (bl_filter_fuse_range; the
  * DBC RANGE frame 0x130). */
 typedef struct bl_range_meas {
-    int64_t t_us;               /* emission time of the pulse (the RF sync) on the caller's
+    int64_t t_us;             /* emission time of the pulse (the RF sync) on the caller's
                                    timebase (the frame's NodeTime, unwrapped), us */
-    uint32_t beacon_index;      /* 0-based range beacon (cfg.range_beacons): the frame's
+    uint32_t beacon_index;    /* 0-based range beacon (cfg.range_beacons): the frame's
                                    Beacon field minus 1 */
-    bl_real time_of_flight_s;   /* ultrasonic time of flight (s), >= 0 */
-    uint32_t tag;               /* caller's tag, never read by the library */
+    bl_real time_of_flight_s; /* ultrasonic time of flight (s), >= 0 */
+    uint32_t tag;             /* caller's tag, never read by the library */
 } bl_range_meas;
 #endif
 
