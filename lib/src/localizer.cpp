@@ -564,6 +564,14 @@ extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *
     const int64_t last = loc->wheel_last_us_;
     const int64_t gap = inc->t_us - last;
     const bool had_ref = loc->wheel_ref_ && loc->wheel_seen_ && !inc->reference_only;
+#if BL_WITH_BEARINGS
+    // Dead reckoning for the triangulation's motion compensation (filter.h,
+    // bl_filter_track_wheels), started or not; a silence breaks the track.
+    // Arguments checked above: it cannot fail.
+    if (loc->filter.cfg_.bearing_beacon_count > 0)
+        (void)bl_filter_track_wheels(&loc->filter, inc->t_us, inc->d_left_m, inc->d_right_m,
+                                     !loc->wheel_seen_ || inc->reference_only || gap > BL_LOC_WHEEL_SILENCE_US);
+#endif
     loc->wheel_last_us_ = inc->t_us;
     loc->wheel_seen_ = true;
     loc->wheel_ref_ = true;

@@ -19,6 +19,13 @@
 // ToTal's D = 0).
 // N beacons: weighted Gauss-Newton on the wrapped bearing residuals from
 // the closed form of the best-conditioned triple.
+// Displaced sensors (solver.h: body_dx_m, body_dy_m, body_dtheta_rad, a
+// moving robot's bearings motion-compensated by odometry): bearing j's
+// sensor sits at s_j = s + R(theta)·e_j, e_j = d_j + R(dθ_j)·o - o (body
+// frame, from the reference pose's sensor s), and its bearing counts from
+// theta + dθ_j. The unknowns stay q = (xs, ys, theta) of the reference
+// pose; e_j = 0 and dθ_j = 0 give the one-sensor model exactly (every term
+// they add is skipped, so the results are bit for bit the same).
 #include "internal.hpp"
 
 #include <cstring>
@@ -45,6 +52,8 @@ constexpr real kDefaultMaxDrms_m = real(0.5);
 // the circle (measured: tests/lib/test_solver_bearing.c, the grid across
 // the circle).
 constexpr real kLinearity = real(0.5);
+// Largest displacement of a sensor (m, rad; solver.h).
+constexpr real kMaxDisplacement = real(1e3);
 // An exactly determined fix (N = 3) must reproduce its bearings to within
 // kConsistency·sigma_j (rounding only); else it is refused.
 #if defined(BL_USE_FLOAT) && BL_USE_FLOAT
@@ -72,8 +81,42 @@ bool problem_valid(const bl_bearing_problem *p)
         if (!is_finite(p->beacons[j].x_m) || !is_finite(p->beacons[j].y_m)) return false;
         if (!is_finite(p->bearing_rad[j])) return false;
         if (!is_finite(p->sigma_rad[j]) || !(p->sigma_rad[j] > real(0))) return false;
+        const real d[3] = {p->body_dx_m[j], p->body_dy_m[j], p->body_dtheta_rad[j]};
+        for (int k = 0; k < 3; ++k)
+            if (!(std::fabs(d[k]) <= kMaxDisplacement)) return false;  // NaN fails too
     }
     return true;
+}
+
+bool displaced(const bl_bearing_problem *p)
+{
+    for (uint32_t j = 0; j < p->count; ++j)
+        if (p->body_dx_m[j] != real(0) || p->body_dy_m[j] != real(0) || p->body_dtheta_rad[j] != real(0)) return true;
+    return false;
+}
+
+// Bearing j in the reference body frame: phi_j + dθ_j (rad).
+inline real turned_bearing(const bl_bearing_problem *p, uint32_t j)
+{
+    return p->body_dtheta_rad[j] != real(0) ? p->bearing_rad[j] + p->body_dtheta_rad[j] : p->bearing_rad[j];
+}
+
+// The sensors' offsets from the reference pose's sensor, body frame (m):
+// e_j = d_j + R(dθ_j)·o - o (solver.h's model with s = (x, y) + R(theta)·o).
+struct Offsets {
+    real ex[BL_MAX_BEACONS];
+    real ey[BL_MAX_BEACONS];
+};
+
+void sensor_offsets(const bl_bearing_problem *p, Offsets &o)
+{
+    const real ox = p->sensor_x_m, oy = p->sensor_y_m;
+    for (uint32_t j = 0; j < p->count; ++j) {
+        const real a = p->body_dtheta_rad[j];
+        const real c = std::cos(a), s = std::sin(a);
+        o.ex[j] = a != real(0) ? p->body_dx_m[j] + (c * ox - s * oy) - ox : p->body_dx_m[j];
+        o.ey[j] = a != real(0) ? p->body_dy_m[j] + (s * ox + c * oy) - oy : p->body_dy_m[j];
+    }
 }
 
 // The bearings as unit vectors (cos phi_j, sin phi_j): every angle
@@ -86,8 +129,9 @@ struct Bearings {
 void bearing_vectors(const bl_bearing_problem *p, Bearings &b)
 {
     for (uint32_t j = 0; j < p->count; ++j) {
-        b.c[j] = std::cos(p->bearing_rad[j]);
-        b.s[j] = std::sin(p->bearing_rad[j]);
+        const real a = turned_bearing(p, j);  // the reference body frame (= phi_j undisplaced)
+        b.c[j] = std::cos(a);
+        b.s[j] = std::sin(a);
     }
 }
 
@@ -204,27 +248,37 @@ bool heading(const bl_bearing_problem *p, const Bearings &b, const uint32_t id[3
 
 // Weighted normal matrix A = JᵀWJ at the sensor position (unknowns xs, ys,
 // theta): the row of bearing j (Vander eq. 1 differentiated),
-//   ∂phi_j/∂(xs, ys, theta) = (dy/r², -dx/r², -1), (dx, dy) = b_j - s,
-// W = diag(1/sigma_j²). With res = true also g = JᵀW e and chi2 = Σ w e²,
-// e_j = wrap(phi_j - atan2(dy, dx) + theta) (rad). False if the sensor is
-// on a beacon.
-bool normal_equations(const bl_bearing_problem *p, const uint32_t *id, uint32_t n, const Vec3 &q, bool res, Mat3 &A,
-                      Vec3 &g, real &chi2)
+//   ∂phi_j/∂(xs, ys, theta) = (dy/r², -dx/r², -1), (dx, dy) = b_j - s_j,
+// with a displaced sensor s_j = s + R(theta)·e_j (see the top) the theta
+// entry gains ∂β/∂s_j · R'(theta)·e_j, R'(theta)·e = (-sin ex - cos ey,
+// cos ex - sin ey); W = diag(1/sigma_j²). With res = true also g = JᵀW e
+// and chi2 = Σ w e², e_j = wrap(phi_j + dθ_j - atan2(dy, dx) + theta)
+// (rad). False if a sensor is on a beacon.
+bool normal_equations(const bl_bearing_problem *p, const Offsets &off, const uint32_t *id, uint32_t n, const Vec3 &q,
+                      bool res, Mat3 &A, Vec3 &g, real &chi2)
 {
     A.setZero();
     g.setZero();
     chi2 = 0;
+    const real cq = std::cos(q(2)), sq = std::sin(q(2));
     for (uint32_t a = 0; a < n; ++a) {
         const uint32_t j = id[a];
-        const real dx = p->beacons[j].x_m - q(0), dy = p->beacons[j].y_m - q(1);
+        const real ex = off.ex[j], ey = off.ey[j];
+        const bool moved = ex != real(0) || ey != real(0);
+        real dx = p->beacons[j].x_m - q(0), dy = p->beacons[j].y_m - q(1);
+        if (moved) {
+            dx -= cq * ex - sq * ey;  // s_j = s + R(theta)·e_j
+            dy -= sq * ex + cq * ey;
+        }
         const real r2 = dx * dx + dy * dy;
         if (!(r2 > real(0))) return false;
         const real w = real(1) / (p->sigma_rad[j] * p->sigma_rad[j]);
         Vec3 row;
         row << dy / r2, -dx / r2, real(-1);
+        if (moved) row(2) += row(0) * (-sq * ex - cq * ey) + row(1) * (cq * ex - sq * ey);
         A.noalias() += (w * row) * row.transpose();
         if (res) {
-            const real e = wrap_angle(p->bearing_rad[j] - std::atan2(dy, dx) + q(2));
+            const real e = wrap_angle(turned_bearing(p, j) - std::atan2(dy, dx) + q(2));
             g.noalias() += (w * e) * row;
             chi2 += w * e * e;
         }
@@ -357,9 +411,12 @@ bool closed_form(const bl_bearing_problem *p, const Bearings &b, const uint32_t 
 
 extern "C" int bl_solve_bearings_3(const bl_bearing_problem *prob, bl_bearing_solution *sol)
 {
-    if (prob == nullptr || sol == nullptr || !problem_valid(prob) || prob->count != 3) return BL_EINVAL;
+    if (prob == nullptr || sol == nullptr || !problem_valid(prob) || prob->count != 3 || displaced(prob))
+        return BL_EINVAL;
     Bearings b;
     bearing_vectors(prob, b);
+    Offsets off;
+    sensor_offsets(prob, off);  // all zero
     static const uint32_t id[3] = {0, 1, 2};
     Vec3 q;
     real cth, sth;
@@ -367,7 +424,7 @@ extern "C" int bl_solve_bearings_3(const bl_bearing_problem *prob, bl_bearing_so
     Mat3 A;
     Vec3 g;
     real chi2;
-    if (!normal_equations(prob, id, 3, q, false, A, g, chi2)) return BL_EDEGENERATE;
+    if (!normal_equations(prob, off, id, 3, q, false, A, g, chi2)) return BL_EDEGENERATE;
     return finish(prob, q, cth, sth, A, real(0), 3, 0, sol);
 }
 
@@ -377,6 +434,8 @@ extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solu
     const uint32_t N = prob->count;
     Bearings b;
     bearing_vectors(prob, b);
+    Offsets off;
+    sensor_offsets(prob, off);
     uint32_t all[BL_MAX_BEACONS];
     for (uint32_t j = 0; j < N; ++j) all[j] = j;
 
@@ -395,7 +454,7 @@ extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solu
                 Vec3 qt;
                 real c, s;
                 if (!closed_form(prob, b, id, qt, c, s)) continue;
-                if (!normal_equations(prob, id, 3, qt, false, A, g, chi2) || !scaled_inverse(A, inv)) continue;
+                if (!normal_equations(prob, off, id, 3, qt, false, A, g, chi2) || !scaled_inverse(A, inv)) continue;
                 const real cond = condition_of(A, inv);
                 if (cond > best) {
                     best = cond;
@@ -409,7 +468,7 @@ extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solu
     uint32_t it = 0;
     bool converged = false;
     while (it < kMaxIterations) {
-        if (!normal_equations(prob, all, N, q, true, A, g, chi2) || !scaled_inverse(A, inv)) return BL_EDEGENERATE;
+        if (!normal_equations(prob, off, all, N, q, true, A, g, chi2) || !scaled_inverse(A, inv)) return BL_EDEGENERATE;
         const Vec3 step = inv * g;
         if (!step.allFinite()) return BL_EDEGENERATE;
         q += step;
@@ -424,6 +483,6 @@ extern "C" int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solu
         }
     }
     if (!converged) return BL_ENOCONVERGE;
-    if (!normal_equations(prob, all, N, q, true, A, g, chi2)) return BL_EDEGENERATE;
+    if (!normal_equations(prob, off, all, N, q, true, A, g, chi2)) return BL_EDEGENERATE;
     return finish(prob, q, std::cos(q(2)), std::sin(q(2)), A, chi2, N, it, sol);
 }

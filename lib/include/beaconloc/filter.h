@@ -158,6 +158,16 @@ typedef struct bl_filter {
     bl_real bearing_rad_[BL_MAX_BEACONS];  /* its bearing (rad, body frame) */
     uint32_t bearing_accepted_[BL_MAX_BEACONS];
     uint32_t bearing_rejected_[BL_MAX_BEACONS];
+    /* dead reckoning for the triangulation's motion compensation
+     * (bl_filter_track_wheels): a relative odometry pose, and with each kept
+     * bearing the track's pose at its time */
+    int64_t odo_t_us_;                           /* time of the track's last sample */
+    bl_real odo_[6];                             /* x, y (m), θ (rad) from the track's origin; Σ|d_left|,
+                                    Σ|d_right| (m), Σ|Δθ| (rad) along it */
+    bl_real odo_rate_[2];                        /* v (m/s), ω (rad/s) of the last increment */
+    uint32_t odo_track_;                         /* track number, +1 at every break; 0 = no track */
+    uint32_t bearing_odo_track_[BL_MAX_BEACONS]; /* track of bearing j's odo (0 = none) */
+    bl_real bearing_odo_[BL_MAX_BEACONS][6];     /* odo_ at bearing j's time */
 #endif
 #if BL_WITH_RANGES
     /* ranges (aid_range.cpp): the latest time of flight of each range
@@ -368,7 +378,8 @@ int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us
  * and value) for a triangulation (re)start.
  * Not started: kept (BL_FUSION_BUFFERED); the filter starts itself
  * (BL_FUSION_STARTED) from bl_solve_bearings (solver.h) once the kept
- * bearings within cfg.bearing.snapshot_window_s of the newest cover >= 3
+ * bearings within cfg.bearing.snapshot_window_s of the newest (4 times
+ * that when the odometry track motion-compensates them) cover >= 3
  * bearing beacons and the fix's drms is <= cfg.bearing.max_fix_drms_m
  * (see bl_filter_start_bearings). Stale (t_us more than
  * cfg.max_predict_gap_s after the state time): kept, and the same
@@ -388,14 +399,56 @@ int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us
 int bl_filter_fuse_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us, bl_real bearing_rad,
                            bl_fusion_result *result);
 
+/* Dead reckoning for the triangulation (re)start's motion compensation.
+ * Call with every wheel sample, started or not (the localizer does): the
+ * filter integrates a relative odometry pose (Kleeman 1992 eq. 24, the
+ * midpoint form of Vander et al. 2011 eq. 2: d = (d_l + d_r)/2, δ = (d_r -
+ * d_l)/wheel_base, x += d cos(θ + δ/2), y += d sin(θ + δ/2), θ += δ; nominal
+ * wheel scales) from the wheel increments over (previous sample, t_us],
+ * and keeps with every bearing the track's pose at the bearing's time
+ * (extrapolated with the last increment's v, ω over at most 0.1 s; a
+ * bearing further from the track's last sample gets none). Independent of
+ * the state: bl_filter_predict_odometry does not feed it, and it changes
+ * nothing but the track.
+ * The track breaks (starts again at the origin, at t_us, with a new
+ * number) on reference_only (no increment known: the first sample, an
+ * encoder restart, a silence the caller could not bridge), or when t_us is
+ * more than cfg.max_predict_gap_s after the previous sample; bearings on
+ * different tracks are not compensated against each other.
+ * Errors: BL_EINVAL (NULL, non-finite, |d| > 10 m), BL_ENOTINIT, BL_ETIME
+ * (t_us not after the previous sample of the track). Cost: O(1). */
+int bl_filter_track_wheels(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real d_right_m, bool reference_only);
+
 /* Start (or restart) from the triangulation of the kept bearings: those
  * within cfg.bearing.snapshot_window_s of the newest, one per bearing
  * beacon (its latest), >= 3 beacons, solved by bl_solve_bearings (Vander
  * et al. 2011 eq. 1, with the sensor offset) with σ cfg.bearing.sigma_deg.
- * The fix gives x, y and θ with their covariance, the start's P block; when
- * the filter runs, that block is inflated by the motion over the window
- * (variance + (|v|·span)² in x and y, + (|ω|·span)² in θ, span = newest -
- * oldest bearing used). v = ω = 0 with σ cfg.initial_sigma_v_mps,
+ * Motion compensation: the bearings within 4·cfg.bearing.snapshot_window_s
+ * of the newest (1 s at the default) that have a pose on the newest one's
+ * odometry track (bl_filter_track_wheels), when they cover >= 3 bearing
+ * beacons; else those within one window, uncompensated (below). The fix is
+ * then the pose at the newest bearing's time and each older bearing is
+ * taken from where the
+ * odometry puts the sensor then (solver.h: body_dx_m, body_dy_m,
+ * body_dtheta_rad, the track's relative pose in the newest one's body
+ * frame), so a moving robot's bearings from different scans are not
+ * treated as simultaneous. The odometry's own error over the path from
+ * bearing j to the newest, first order, is added to bearing j's variance:
+ *     σ_j² = σ² + σθ_j² + σp_j² / r_j²,
+ *     σθ_j² = sigma_wheel_per_m²·(L_l + L_r)/b² + (heading_noise_fraction·Ψ)²
+ *             + heading_noise_rad_per_sqrt_s²·Δt + sigma_wheel_scale²·(L_l² + L_r²)/b²,
+ *     σp_j² = (sigma_wheel_per_m²/2 + sigma_distance_per_m²)·L
+ *             + (sigma_wheel_scale·L)² + L²·σθ_j²,
+ * L_l, L_r each wheel's travel, L = (L_l + L_r)/2, Ψ the turn, Δt the time
+ * between the two bearings, b the wheel base, r_j the beacon's distance
+ * from the first fix (the filter's own odometry noise model, filter.h
+ * predict_odometry, with the position σ taken whole across the line of
+ * sight: conservative), then solved again.
+ * Without it (no wheels, or fewer than 3 beacons on the newest bearing's
+ * track) the bearings within one window are taken as simultaneous; the fix gives x, y and θ with their
+ * covariance, the start's P block; when the filter runs, that block is
+ * inflated by the motion over the window (variance + (|v|·span)² in x and
+ * y, + (|ω|·span)² in θ, span = newest - oldest bearing used). v = ω = 0 with σ cfg.initial_sigma_v_mps,
  * cfg.initial_sigma_omega_radps. The state time becomes the newest
  * bearing's. s, T, t0 and the wheel scales: a started filter keeps them
  * (with their covariance); a first start takes s and T from cfg with their

@@ -417,7 +417,13 @@ int bl_localizer_range(bl_localizer *loc, const bl_range_meas *m, bl_fusion_resu
 int bl_localizer_start(bl_localizer *loc, const bl_filter_prior *prior);
 
 /* One wheel sample. Call bl_localizer_advance(t_us - latency) first so the
- * pulses that arrived before it go first. Not started: only the reference.
+ * pulses that arrived before it go first. Not started: only the reference
+ * for the filter, and, on a site with bearing beacons (started or not), the
+ * dead reckoning that motion-compensates the bearings of a triangulation
+ * (re)start (bl_filter_track_wheels, filter.h; a silence longer than
+ * BL_LOC_WHEEL_SILENCE_US or a reference_only sample breaks that track):
+ * so a robot that drives before its start triangulates from bearings of
+ * different scans at its pose at the newest one.
  * Errors: BL_EINVAL (NULL, NaN/inf, |d| > 10 m), BL_ENOTINIT, BL_ETIME
  * (t_us not after the previous wheel sample). */
 int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *inc);

@@ -116,6 +116,10 @@ int bl_solve_tdoa_3d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol);
  *   on the development machine, double: N = 4 about 1.5 µs, N = 8 about
  *   30 µs, N = 16 about 150 µs). For N = 3
  *   it returns the closed form's fix (one or two steps that confirm it).
+ *   With displaced sensors (body_dx_m, body_dy_m, body_dtheta_rad below)
+ *   the closed form starts from the bearings turned by dθ_j into the
+ *   reference body frame, ignoring the displacements, and Gauss-Newton
+ *   solves the displaced model (for N = 3 too: a few real steps).
  *
  * Outputs (both solvers):
  *   cov       first-order covariance (JᵀWJ)⁻¹ of (x, y, theta), J = ∂phi/∂(x,
@@ -137,9 +141,11 @@ int bl_solve_tdoa_3d(const bl_tdoa_problem *prob, bl_tdoa_solution *sol);
  *
  * Returns BL_OK with *sol filled;
  *   BL_EINVAL      prob or sol NULL; count < 3 or > BL_MAX_BEACONS (for
- *                  bl_solve_bearings_3: count != 3); a beacon x/y, bearing,
- *                  sigma, sensor offset or max_drms_m not finite; sigma_rad
- *                  <= 0; max_drms_m < 0. *sol untouched;
+ *                  bl_solve_bearings_3: count != 3, or a non-zero
+ *                  displacement); a beacon x/y, bearing, sigma, sensor
+ *                  offset, displacement or max_drms_m not finite; sigma_rad
+ *                  <= 0; max_drms_m < 0; |displacement| > 1e3.
+ *                  *sol untouched;
  *   BL_EDEGENERATE the geometry cannot fix the pose; *sol untouched — never
  *                  a wrong answer:
  *                  - two of the three beacons coincident (for N > 3: no
@@ -175,6 +181,20 @@ typedef struct bl_bearing_problem {
     bl_real sensor_x_m, sensor_y_m;      /* sensor mount, body frame (m) */
     bl_real max_drms_m;                  /* refuse a fix whose drms exceeds this (m), >= 0;
                                             0 = the default 0.5 m */
+    /* Displaced sensors (a moving robot: bearings from different instants,
+     * motion-compensated with odometry; all zero = one sensor, the model
+     * above). Bearing j was taken with the robot displaced by (body_dx_m[j],
+     * body_dy_m[j]) (m) and turned by body_dtheta_rad[j] (rad) from the
+     * pose solved for, in that pose's body frame. Model:
+     *     phi_j = atan2(yb_j - ys_j, xb_j - xs_j) - (theta + dθ_j),
+     *     (xs_j, ys_j) = (x, y) + R(theta)·(d_j + R(dθ_j)·(sensor_x_m, sensor_y_m)),
+     * Vander et al. 2011 eq. 1 with the sensor of bearing j where it was.
+     * Only bl_solve_bearings takes them (bl_solve_bearings_3: BL_EINVAL if
+     * any is non-zero). Zero for every j gives the results above bit for
+     * bit. Must be finite, |.| <= 1e3 (m, rad). */
+    bl_real body_dx_m[BL_MAX_BEACONS];
+    bl_real body_dy_m[BL_MAX_BEACONS];
+    bl_real body_dtheta_rad[BL_MAX_BEACONS];
 } bl_bearing_problem;
 
 typedef struct bl_bearing_solution {
