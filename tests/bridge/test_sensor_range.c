@@ -362,7 +362,9 @@ static void test_range_only_run_near_truth(void **state)
 static void test_bad_ranges_counted_and_dropped(void **state)
 {
     (void)state;
-    run(&W, 1000000, 3000000, INT64_MAX, 0.0, 0.0);
+    /* moving: ranges alone give no heading on a standing robot, and the
+     * library leaves ranges ungated until it knows the heading */
+    run(&W, 1000000, 3000000, 1500000, 0.3, 0.2);
     struct est_counters before = W.est.c;
     struct est_output o0, o1;
     assert_int_equal(estimator_output(&W.est, 0, &o0), 0);
@@ -396,9 +398,9 @@ static void test_bad_ranges_counted_and_dropped(void **state)
     assert_int_equal(W.est.c.ranges_rejected, before.ranges_rejected + 1);
     assert_ranges_add_up(&W);
     /* and the run goes on */
-    run(&W, 3100000, 4000000, INT64_MAX, 0.0, 0.0);
+    run(&W, 3100000, 4000000, 1500000, 0.3, 0.2);
     assert_true(W.est.c.ranges_fused > before.ranges_fused);
-    assert_true(pos_error(&W) < 0.02);
+    assert_true(pos_error(&W) < 0.03);
     assert_ranges_add_up(&W);
 }
 
