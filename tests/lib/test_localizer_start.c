@@ -151,9 +151,9 @@ static void test_moving_start_inside_3sigma(void **state)
     assert_true(st.inside_naive < 190); /* the compensation is what makes the difference */
 }
 
-/* 80 % outage: the longer compensated window (4 windows, 1 s) starts
+/* 80 % outage: the longer compensated window (2 windows, 0.5 s) starts
  * nearly every trial within 4 s, inside its 3σ; measured with the plain
- * 0.25 s window: 187 started after 1.17 s on average. */
+ * 0.25 s window: 187 started, after 1.17 s on average. */
 static void test_heavy_outage_starts_sooner(void **state)
 {
     (void)state;

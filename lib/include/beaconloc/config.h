@@ -89,7 +89,7 @@ typedef struct bl_bearing_params {
                                   left (m), |.| < 100; GEOMETRY */
     bl_real snapshot_window_s; /* [tuning] bearing_snapshot_window_s: buffered bearings within
                                   this of the newest form one triangulation snapshot (s), > 0;
-                                  4 times this when the wheel odometry motion-compensates
+                                  twice this when the wheel odometry motion-compensates
                                   them (filter.h, bl_filter_start_bearings) */
     bl_real max_fix_drms_m;    /* [tuning] max_fix_drms_m: a triangulation (re)start is refused
                                   when the fix's drms sqrt(σx² + σy²) exceeds this (m), > 0 */

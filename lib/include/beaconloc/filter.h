@@ -24,6 +24,9 @@
  *     on beacon pulse:   bl_filter_fuse_pulse(&f, beacon_index, arrival_us, rx, &res);
  *     on a bearing:      bl_filter_fuse_bearing(&f, bearing_beacon_index, t_us, bearing_rad, &res);
  *     on a range:        bl_filter_fuse_range(&f, range_beacon_index, t_emit_us, tof_s, &res);
+ *     (bearing sites, every encoder frame, started or not:
+ *                        bl_filter_track_wheels(&f, t_us, d_left_m, d_right_m, first);
+ *      the dead reckoning that motion-compensates a triangulation start)
  *     to publish:        bl_filter_estimate_at(&f, now_us, &est);
  * The filter starts itself from the snapshot solver (bl_solve_tdoa_2d) once
  * the buffered pulses of the latest firing cycle cover 4 beacons (all of
@@ -378,7 +381,7 @@ int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us
  * and value) for a triangulation (re)start.
  * Not started: kept (BL_FUSION_BUFFERED); the filter starts itself
  * (BL_FUSION_STARTED) from bl_solve_bearings (solver.h) once the kept
- * bearings within cfg.bearing.snapshot_window_s of the newest (4 times
+ * bearings within cfg.bearing.snapshot_window_s of the newest (twice
  * that when the odometry track motion-compensates them) cover >= 3
  * bearing beacons and the fix's drms is <= cfg.bearing.max_fix_drms_m
  * (see bl_filter_start_bearings). Stale (t_us more than
@@ -423,8 +426,8 @@ int bl_filter_track_wheels(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real
  * within cfg.bearing.snapshot_window_s of the newest, one per bearing
  * beacon (its latest), >= 3 beacons, solved by bl_solve_bearings (Vander
  * et al. 2011 eq. 1, with the sensor offset) with σ cfg.bearing.sigma_deg.
- * Motion compensation: the bearings within 4·cfg.bearing.snapshot_window_s
- * of the newest (1 s at the default) that have a pose on the newest one's
+ * Motion compensation: the bearings within 2·cfg.bearing.snapshot_window_s
+ * of the newest (0.5 s at the default) that have a pose on the newest one's
  * odometry track (bl_filter_track_wheels), when they cover >= 3 bearing
  * beacons; else those within one window, uncompensated (below). The fix is
  * then the pose at the newest bearing's time and each older bearing is
