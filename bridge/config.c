@@ -432,18 +432,19 @@ static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
     size_t ki = 0;
     /* A site needs its beacons: ultrasonic ones (the library wants >= 3),
      * or none and >= 3 bearing beacons (their triangulation starts the
-     * filter, Vander et al. 2011 eq. 1). */
-    if (cfg->beacon_count < 1 && cfg->bearing_beacon_count < 3) {
+     * filter, Vander et al. 2011 eq. 1) or >= 3 range beacons (their
+     * trilateration starts it). */
+    if (cfg->beacon_count < 1 && cfg->bearing_beacon_count < 3 && cfg->range_beacon_count < 3) {
         int line = key_line_of(ctx, "beacons", "count");
         if (line > 0)
             fail(ctx, line, "beacons", "count",
-                 "0 allowed only for a bearing-only site, with [bearing_beacons] count >= 3 "
-                 "(it is %d)",
-                 cfg->bearing_beacon_count);
+                 "0 allowed only with [bearing_beacons] count >= 3 or [range_beacons] count >= 3 "
+                 "(they are %d and %d)",
+                 cfg->bearing_beacon_count, cfg->range_beacon_count);
         else
             fail(ctx, line, "beacons", "count",
-                 "not set: the site file must give the beacons ([beacons] count >= 3, or "
-                 "[bearing_beacons] count >= 3)");
+                 "not set: the site file must give the beacons ([beacons] count >= 3, "
+                 "[bearing_beacons] count >= 3 or [range_beacons] count >= 3)");
         return -1;
     }
     if (check_items(cfg, ctx))

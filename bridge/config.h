@@ -11,17 +11,19 @@
  * bridge/site_schema.mk), so a key here is a member below with the schema's
  * name (a schema key without its member does not compile).
  * Our sections are [beacons], [beaconN], [receivers], [bearing_beacons],
- * [bearing_beaconN], [bearing_sensor], [robot], [noise], [tuning] (the
+ * [bearing_beaconN], [bearing_sensor], [range_beacons], [range_beaconN],
+ * [range_sensor], [robot], [noise], [tuning] (the
  * estimator's tuning, bridge/tuning.h) and [bridge]; an unknown key in one
  * of them is an error (a typo must not be silently ignored).
- * Per-item sections ([beaconN], [bearing_beaconN]: every schema section
+ * Per-item sections ([beaconN], [bearing_beaconN], [range_beaconN]: every schema section
  * whose name ends in N, SITE_ITEM_SECTIONS) are one mechanism: item N of
  * [<prefix>N] is member <prefix>[N-1] of struct bridge_config, a struct
  * config_<prefix> made from the section's keys; N is 1..the count of its
  * count section, every key of an item in 1..count is required, an item
  * beyond count is an error. A site needs its beacons: [beacons] count >= 3
- * (the library checks 1 and 2), or count = 0 (a bearing-only site) with
- * [bearing_beacons] count >= 3. [site] is the simulator's (room size) and skipped; any
+ * (the library checks 1 and 2), or count = 0 with [bearing_beacons] count
+ * >= 3 (a bearing site) or [range_beacons] count >= 3 (a range site).
+ * [site] is the simulator's (room size) and skipped; any
  * other section with keys is an error too ("file:line: [section] unknown
  * section", line of its header), like a key before the first section.
  * Errors read "file:line: [section] key: why".
@@ -38,6 +40,7 @@
 /* The largest beacon and receiver counts of the site schema (site_keys.h). */
 #define CONFIG_MAX_BEACONS SITE_MAX_BEACONS
 #define CONFIG_MAX_BEARING_BEACONS SITE_MAX_BEARING_BEACONS
+#define CONFIG_MAX_RANGE_BEACONS SITE_MAX_RANGE_BEACONS
 #define CONFIG_MAX_RECEIVERS SITE_MAX_RECEIVERS
 #define CONFIG_ERR_LEN 512
 #define CONFIG_STR_LEN 128
@@ -49,7 +52,8 @@
 
 /* One struct per per-item section, its members the section's keys
  * (struct config_beacon {x_m, y_m, z_m} of [beaconN], struct
- * config_bearing_beacon {x_m, y_m} of [bearing_beaconN]). */
+ * config_bearing_beacon {x_m, y_m} of [bearing_beaconN], struct
+ * config_range_beacon {x_m, y_m, z_m} of [range_beaconN]). */
 #define CONFIG_ITEM_MEMBER(sec, key, type, strct, member, lo, hi, open, def)                       \
     BRIDGE_CTYPE_##type member;
 #define CONFIG_ITEM_STRUCT(sec, prefix, strct, count_sec, count_member, max)                       \
@@ -82,13 +86,21 @@ struct config_bearing_sensor {
 #undef CONFIG_SENSOR_MEMBER
 };
 
+/* [range_sensor] (site_keys.h: SITE_KEYS_range_sensor) */
+struct config_range_sensor {
+#define CONFIG_SENSOR_MEMBER(sec, key, type, strct, member, lo, hi, open, def)                     \
+    BRIDGE_CTYPE_##type key;
+    SITE_KEYS_range_sensor(CONFIG_SENSOR_MEMBER)
+#undef CONFIG_SENSOR_MEMBER
+};
+
 struct bridge_config {
     /* [beacons] */
     int beacon_count;
     double period_s;               /* nominal time between firings (T) */
     double double_pulse_spacing_s; /* beacon 1's second burst delay */
     double burst_length_s;
-    /* [beaconN], [bearing_beaconN]: item N at <prefix>[N-1] */
+    /* [beaconN], [bearing_beaconN], [range_beaconN]: item N at <prefix>[N-1] */
 #define CONFIG_ITEM_ARRAY(sec, prefix, strct, count_sec, count_member, max)                        \
     struct strct prefix[max];
     SITE_ITEM_SECTIONS(CONFIG_ITEM_ARRAY)
@@ -107,6 +119,10 @@ struct bridge_config {
     int bearing_beacon_count;
     /* [bearing_sensor] */
     struct config_bearing_sensor bearing_sensor;
+    /* [range_beacons] */
+    int range_beacon_count;
+    /* [range_sensor] */
+    struct config_range_sensor range_sensor;
     /* [robot] */
     double wheel_base_m;
     double wheel_radius_m;

@@ -176,6 +176,16 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->bearings_unexpected = d->est.c.bearings_unexpected;
     r->stale_bearings = d->est.c.stale_bearings;
     r->unmapped_bearings = d->est.c.unmapped_bearings;
+    r->ranges_fused = d->est.c.ranges_fused;
+    r->ranges_rejected = d->est.c.ranges_rejected;
+    r->ranges_buffered = d->est.c.ranges_buffered;
+    r->ranges_refused = d->est.c.ranges_refused;
+    r->ranges_unknown_beacon = d->est.c.ranges_unknown_beacon;
+    r->ranges_unexpected = d->est.c.ranges_unexpected;
+    r->ranges_other_receiver = d->est.c.ranges_other_receiver;
+    r->ranges_bad_tof = d->est.c.ranges_bad_tof;
+    r->stale_ranges = d->est.c.stale_ranges;
+    r->unmapped_ranges = d->est.c.unmapped_ranges;
     r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;

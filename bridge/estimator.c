@@ -29,17 +29,38 @@
 #define STORM_WINDOW_US 5000000
 #define STORM_MIN_PULSES 10
 
-/* The filter's timebase (estimator.h, "Timebases"): the receiver array's
- * clock on a site with ultrasonic beacons, else the bearing sensor's. */
+/* The filter's timebase (estimator.h, "Timebases"), the one rule: the
+ * receiver array's clock on a site with ultrasonic beacons, else the bearing
+ * sensor's on a site with bearing beacons, else the range receiver's. */
 static const struct node_clock *ref_clock(const struct estimator *e)
 {
-    return e->blcfg.beacon_count > 0 ? &e->rx_clock : &e->brg_clock;
+    if (e->blcfg.beacon_count > 0)
+        return &e->rx_clock;
+    if (e->blcfg.bearing_beacon_count > 0)
+        return &e->brg_clock;
+    return &e->rng_clock;
 }
 
 /* The reference clock has an observation (times can be mapped onto it). */
 static bool ref_seen(const struct estimator *e)
 {
     return ref_clock(e)->have_first;
+}
+
+/* A time t_own (us) on clock `own` on the filter's timebase: itself when
+ * `own` is the reference, else mapped own -> local -> reference. Returns
+ * false while the reference clock has no observation (nothing to map onto). */
+static bool to_ref_time(const struct estimator *e, const struct node_clock *own, int64_t t_own,
+                        int64_t *t_ref)
+{
+    if (own == ref_clock(e)) {
+        *t_ref = t_own;
+        return true;
+    }
+    if (!ref_seen(e))
+        return false;
+    *t_ref = node_clock_to_node(ref_clock(e), node_clock_to_local(own, t_own));
+    return true;
 }
 
 /* ---- events ----------------------------------------------------------- */
@@ -138,6 +159,10 @@ static void sync(struct estimator *e)
     c->bearings_rejected = lc.bearings_rejected;
     c->bearings_buffered = lc.bearings_buffered;
     c->bearings_refused = lc.bearings_refused;
+    c->ranges_fused = lc.ranges_fused;
+    c->ranges_rejected = lc.ranges_rejected;
+    c->ranges_buffered = lc.ranges_buffered;
+    c->ranges_refused = lc.ranges_refused;
     const bool fused = st.measurements != e->measurements_seen;
     if (fused) {
         e->measurements_seen = st.measurements;
@@ -235,6 +260,7 @@ int estimator_init(struct estimator *e, const struct bridge_config *cfg, char *e
     node_clock_init(&e->rx_clock, NULL);
     node_clock_init(&e->enc_clock, NULL);
     node_clock_init(&e->brg_clock, NULL);
+    node_clock_init(&e->rng_clock, NULL);
     /* wheel travel per tick (m): circumference 2·π·r over ticks per turn
      * (input of Kleeman 1992 §3.8, eq. 24) */
     e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
@@ -480,13 +506,10 @@ void estimator_bearing(struct estimator *e, const struct frame_bearing *b, int64
         e->c.bearings_unknown_beacon++; /* the handler's check: see sensor_bearing.c */
         return;
     }
-    int64_t t = tb; /* a bearing-only site runs on the bearing sensor's clock */
-    if (e->blcfg.beacon_count > 0) {
-        if (!ref_seen(e)) {
-            e->c.unmapped_bearings++; /* no receiver-node clock to map onto yet */
-            return;
-        }
-        t = node_clock_to_node(&e->rx_clock, node_clock_to_local(&e->brg_clock, tb));
+    int64_t t;
+    if (!to_ref_time(e, &e->brg_clock, tb, &t)) {
+        e->c.unmapped_bearings++; /* no reference clock to map onto yet */
+        return;
     }
     if (t > e->latest_node_us)
         e->latest_node_us = t;
@@ -505,6 +528,63 @@ void estimator_bearing(struct estimator *e, const struct frame_bearing *b, int64
     int rc = bl_localizer_bearing(&e->loc, &m, NULL);
     if (rc != BL_OK)
         log_debug("localizer bearing: %s", bl_strerror(rc));
+    sync(e);
+}
+
+/* ---- ranges ----------------------------------------------------------- */
+
+void estimator_range(struct estimator *e, const struct frame_range *r, int64_t rx_us)
+{
+    if (e->blcfg.range_beacon_count == 0) {
+        e->c.ranges_unexpected++; /* no range beacon on this site */
+        return;
+    }
+    if (r->receiver != 1) {
+        /* Another robot's receiver (a team's host): its own clock and its
+         * own estimate, not ours; one robot for now. */
+        e->c.ranges_other_receiver++;
+        return;
+    }
+    if (r->time_of_flight_us == 0 || r->time_of_flight_us >= 65534) {
+        e->c.ranges_bad_tof++; /* nothing timed, or the counter saturated (sensor_range.c) */
+        return;
+    }
+    /* The node sends the range once it heard the pulse: the clock fit sees
+     * the frame as if sent at the emission (estimator.h, "Ranges"). */
+    int64_t tr = node_clock_observe(&e->rng_clock, r->node_time_us, rx_us - r->time_of_flight_us);
+    if (e->rng_clock.last_event == NODE_CLOCK_OUT_OF_ORDER) {
+        e->c.stale_ranges++; /* older than a range already handed on */
+        return;
+    }
+    if (e->rng_clock.last_event == NODE_CLOCK_RESTART) {
+        e->c.node_restarts++;
+        event(e, EST_EV_WARNING, "range receiver clock restarted");
+    }
+    if (r->beacon < 1 || r->beacon > e->blcfg.range_beacon_count) {
+        e->c.ranges_unknown_beacon++; /* the handler's check: see sensor_range.c */
+        return;
+    }
+    int64_t t;
+    if (!to_ref_time(e, &e->rng_clock, tr, &t)) {
+        e->c.unmapped_ranges++; /* no reference clock to map onto yet */
+        return;
+    }
+    if (t > e->latest_node_us)
+        e->latest_node_us = t;
+    /* Pulses that arrived before this range go first. */
+    (void)bl_localizer_advance(&e->loc, t - POP_SLACK_ENC_US);
+    bl_range_meas m = {
+        .t_us = t,                                /* the emission (RF sync) */
+        .beacon_index = (uint32_t)r->beacon - 1u, /* [range_beaconN] -> N-1 */
+        .time_of_flight_s = (bl_real)((double)r->time_of_flight_us * 1e-6), /* us -> s */
+        .tag = (uint32_t)rx_us,
+    };
+    if (rx_us > e->latest_rx_us)
+        e->latest_rx_us = rx_us;
+    start_from_initial_pose(e, t);
+    int rc = bl_localizer_range(&e->loc, &m, NULL);
+    if (rc != BL_OK)
+        log_debug("localizer range: %s", bl_strerror(rc));
     sync(e);
 }
 

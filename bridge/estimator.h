@@ -6,13 +6,16 @@
  *   local  the bridge clock: CLOCK_MONOTONIC us live, the log's clock in
  *          replay; frames carry their receive time on it (rx_us).
  *   node   the reference node's clock, unwrapped to int64 us by
- *          node_clock: the receiver array's (node 1) on a site with
- *          ultrasonic beacons, else (a bearing-only site, [beacons] count
- *          = 0) the bearing sensor's (node 3). The filter and the sequencer
- *          run on it: pulse arrival times (on a bearing-only site, bearing
- *          times) are used exactly as the node measured them (no mapping
- *          noise on the time of flight); encoder samples, and bearings on a
- *          site with both kinds, are mapped
+ *          node_clock. ONE rule (estimator.c, ref_clock): the receiver
+ *          array's (node 1) on a site with ultrasonic beacons, else the
+ *          bearing sensor's (node 3) on a site with bearing beacons, else
+ *          the range receiver's (node 4: a range-only site). The filter and
+ *          the sequencer run on it: the reference node's own measurements
+ *          (pulse arrivals; bearings on a bearing site without pulses;
+ *          range emission times on a range-only site) are used exactly as
+ *          the node measured them (no mapping noise); encoder samples, and
+ *          bearings or ranges on a site where another node is the
+ *          reference, are mapped
  *          their node -> local -> reference node. The estimates CSV's t_us
  *          is on this clock, as is the simulator's truth on a site with
  *          ultrasonic beacons.
@@ -43,6 +46,20 @@
  * beacons counts bearing frames in bearings_unexpected and drops them; a
  * site without ultrasonic beacons does the same with pulse frames
  * (pulses_unexpected): it runs on bearings and encoders.
+ *
+ * Ranges (RANGE frames, node 4): in order, each counted once where it
+ * stops: ranges_unexpected (a site without range beacons),
+ * ranges_other_receiver (Receiver != 1: one robot for now),
+ * ranges_bad_tof (TimeOfFlight 0 or 65534, sensor_range.c), stale_ranges
+ * (older than the newest range on the receiver's clock), then
+ * ranges_unknown_beacon (beacon id beyond [range_beacons] count),
+ * unmapped_ranges (before the reference clock, on a site where node 4 is
+ * not the reference), and else the localizer's ranges_fused, _rejected,
+ * _buffered or _refused (bl_localizer_range; a range beyond 1.5 times
+ * [range_sensor] max_range_m is refused there). The receiver node sends a
+ * range once it heard the pulse, TimeOfFlight after NodeTime: that flight
+ * is subtracted from the frame's receive time before it enters the range
+ * clock's fit (as the pulse node's hold is). TimeOfFlight us -> s.
  *
  * Detections and wheel increments go to the library's localizer
  * (beaconloc/localizer.h: sequencer, filter, and the policy between them:
@@ -108,6 +125,17 @@ struct est_counters {
     uint64_t bearings_unexpected;     /* bearing frames on a site without bearing beacons */
     uint64_t stale_bearings;          /* bearings older than the newest on the sensor's clock */
     uint64_t unmapped_bearings;       /* bearings before the reference clock (mixed site) */
+    /* ranges (see the top of this file: every range frame in exactly one) */
+    uint64_t ranges_fused;          /* localizer: fused (accepted, or the trilateration start) */
+    uint64_t ranges_rejected;       /* localizer: gated out (multipath late arrivals) */
+    uint64_t ranges_buffered;       /* localizer: kept for the trilateration start */
+    uint64_t ranges_refused;        /* localizer: refused (bad value, beyond range; an error) */
+    uint64_t ranges_unknown_beacon; /* beacon id beyond [range_beacons] count: dropped */
+    uint64_t ranges_unexpected;     /* range frames on a site without range beacons */
+    uint64_t ranges_other_receiver; /* Receiver != 1 (one robot for now): dropped */
+    uint64_t ranges_bad_tof;        /* TimeOfFlight 0 or 65534 (saturated): dropped */
+    uint64_t stale_ranges;          /* ranges older than the newest on the receiver's clock */
+    uint64_t unmapped_ranges;       /* ranges before the reference clock (mixed site) */
 };
 
 /* One published estimate. */
@@ -159,6 +187,7 @@ struct estimator {
     struct node_clock rx_clock;  /* receiver array (node 1) */
     struct node_clock enc_clock; /* wheel encoders (node 2) */
     struct node_clock brg_clock; /* bearing sensor (node 3) */
+    struct node_clock rng_clock; /* range receiver (node 4) */
     /* encoders */
     bool enc_have_ref;            /* enc_left/right are the reference */
     bool enc_seen;                /* an encoder frame was mapped */
@@ -219,6 +248,7 @@ void estimator_pulse(struct estimator *e, const struct frame_pulse *p, int64_t r
 void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int64_t rx_us);
 void estimator_status(struct estimator *e, const struct frame_status *s, int64_t rx_us);
 void estimator_bearing(struct estimator *e, const struct frame_bearing *b, int64_t rx_us);
+void estimator_range(struct estimator *e, const struct frame_range *r, int64_t rx_us);
 
 /* Periodic work at local time now (pops pulses whose merge window closed
  * while no later frame came, health checks). */

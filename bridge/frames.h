@@ -62,7 +62,8 @@ enum frame_kind {
     FRAME_ENCODERS = 1,
     FRAME_STATUS = 2,
     FRAME_BEARING = 3,
-    FRAME_KIND_COUNT = 4
+    FRAME_RANGE = 4,
+    FRAME_KIND_COUNT = 5
 };
 
 /* Result of frame_decode(). */
@@ -111,6 +112,19 @@ struct frame_bearing {
     uint8_t counter;
 };
 
+/* One range: the time of flight of one range beacon's ultrasonic pulse to one
+ * receiver, started by the beacon's RF sync (RANGE, bridge/sensor_range.c). */
+struct frame_range {
+    uint32_t node_time_us;      /* emission time of the pulse (the RF sync), range-receiver
+                                  node clock */
+    uint8_t beacon;             /* range beacon id 1..15 ([range_beaconN]); the site's count
+                                  is the handler's check */
+    uint8_t receiver;           /* receiver id 1..15 (the robot carrying it; 1 on one robot) */
+    uint16_t time_of_flight_us; /* 0..65534 us (DBC); the handler refuses 0 and 65534 */
+    uint8_t quality;            /* 0 barely heard .. 15 strongest */
+    uint8_t counter;
+};
+
 struct frame {
     enum frame_kind kind;
     union {
@@ -118,6 +132,7 @@ struct frame {
         struct frame_encoders enc;
         struct frame_status status;
         struct frame_bearing bearing;
+        struct frame_range range;
     } u;
 };
 

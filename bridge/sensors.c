@@ -14,6 +14,9 @@
  * (Vander et al. 2011: all cameras read at once): a late frame's stamp may
  * equal the newest's (us). */
 #define BEARING_STAMP_SLACK_US 1
+/* Ranges are one per ping, each ping at its own emission time, and the
+ * receiver sends them in that order: no slack (us). */
+#define RANGE_STAMP_SLACK_US 0
 
 /* clang-format off: one kind per block, aligned as a table */
 const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
@@ -64,6 +67,18 @@ const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
             .tracks = 1,
             .decode = sensor_bearing_decode,
             .handle = sensor_bearing_handle,
+        },
+    [FRAME_RANGE] =
+        {
+            .name = "range",
+            .short_name = "rng",
+            .id_first = BEACONLOC_CAN_RANGE_FRAME_ID,
+            .id_last = BEACONLOC_CAN_RANGE_FRAME_ID,
+            .counter_in_range = beaconloc_can_range_counter_is_in_range,
+            .stamp_slack_us = RANGE_STAMP_SLACK_US,
+            .tracks = 1,
+            .decode = sensor_range_decode,
+            .handle = sensor_range_handle,
         },
 };
 /* clang-format on */

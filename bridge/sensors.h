@@ -9,8 +9,8 @@
  * come from the cantools-generated header (build/gen/can/beaconloc_can.h),
  * never from literals.
  *
- * A new kind (RANGE 0x130-0x13F and SONAR_RING 0x150-0x15F are reserved in
- * the DBC; BEARING 0x140 is the latest kind added): its frames in the DBC, its
+ * A new kind (SONAR_RING 0x150-0x15F is reserved in the DBC; RANGE 0x130
+ * is the latest kind added, after BEARING 0x140): its frames in the DBC, its
  * enumerator and payload in frames.h (enum frame_kind, union in struct
  * frame), a file bridge/sensor_<kind>.c with its decoder and handler
  * (declared below), one entry in sensors.c.
@@ -80,5 +80,8 @@ void sensor_status_handle(struct estimator *e, const struct frame *f, int64_t rx
 enum frame_result sensor_bearing_decode(uint32_t id, const uint8_t data[8], struct frame *out,
                                         struct frame_seq *seq);
 void sensor_bearing_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
+enum frame_result sensor_range_decode(uint32_t id, const uint8_t data[8], struct frame *out,
+                                      struct frame_seq *seq);
+void sensor_range_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
 
 #endif /* BRIDGE_SENSORS_H */

@@ -11,8 +11,8 @@
 /* bl_config field -> site-file key, for the library's config check: the
  * keys of the schema that set a field, by the field's member path as
  * bl_config_check names it ("pulse.gate_sigma"), and [beacon1] x_m for
- * "beacons", [bearing_beacon1] x_m for "bearing_beacons" (the library names
- * the array, not the item). */
+ * "beacons", [bearing_beacon1] x_m for "bearing_beacons", [range_beacon1] x_m
+ * for "range_beacons" (the library names the array, not the item). */
 struct field_key {
     const char *field, *section, *key;
 };
@@ -23,6 +23,7 @@ static const struct field_key field_keys[] = {
 #undef FIELD_KEY
         {"beacons", "beacon1", "x_m"},
     {"bearing_beacons", "bearing_beacon1", "x_m"},
+    {"range_beacons", "range_beacon1", "x_m"},
 };
 
 /* The site-file key that sets bl_config field `field` (NULL: not known, the
@@ -61,6 +62,12 @@ void site_to_lib(const struct bridge_config *cfg, bl_config *out)
     out->bearing_beacons[i].field = (bl_real)cfg->bearing_beacon[i].member;
         SITE_LIB_BEARING_BEACON_FIELDS(APPLY_BEARING_BEACON)
 #undef APPLY_BEARING_BEACON
+    }
+    for (int i = 0; i < cfg->range_beacon_count && i < BL_MAX_BEACONS; i++) {
+#define APPLY_RANGE_BEACON(member, field)                                                          \
+    out->range_beacons[i].field = (bl_real)cfg->range_beacon[i].member;
+        SITE_LIB_RANGE_BEACON_FIELDS(APPLY_RANGE_BEACON)
+#undef APPLY_RANGE_BEACON
     }
 }
 

@@ -161,6 +161,18 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"bearings_unexpected\": %llu,\n", (unsigned long long)r->bearings_unexpected);
     fprintf(f, "  \"stale_bearing_samples\": %llu,\n", (unsigned long long)r->stale_bearings);
     fprintf(f, "  \"unmapped_bearings\": %llu,\n", (unsigned long long)r->unmapped_bearings);
+    fprintf(f, "  \"ranges_fused\": %llu,\n", (unsigned long long)r->ranges_fused);
+    fprintf(f, "  \"ranges_rejected\": %llu,\n", (unsigned long long)r->ranges_rejected);
+    fprintf(f, "  \"ranges_buffered\": %llu,\n", (unsigned long long)r->ranges_buffered);
+    fprintf(f, "  \"ranges_refused\": %llu,\n", (unsigned long long)r->ranges_refused);
+    fprintf(f, "  \"ranges_unknown_beacon\": %llu,\n",
+            (unsigned long long)r->ranges_unknown_beacon);
+    fprintf(f, "  \"ranges_unexpected\": %llu,\n", (unsigned long long)r->ranges_unexpected);
+    fprintf(f, "  \"ranges_other_receiver\": %llu,\n",
+            (unsigned long long)r->ranges_other_receiver);
+    fprintf(f, "  \"ranges_bad_tof\": %llu,\n", (unsigned long long)r->ranges_bad_tof);
+    fprintf(f, "  \"stale_range_samples\": %llu,\n", (unsigned long long)r->stale_ranges);
+    fprintf(f, "  \"unmapped_ranges\": %llu,\n", (unsigned long long)r->unmapped_ranges);
     fprintf(f, "  \"repeats_skipped\": %llu,\n", (unsigned long long)r->repeats_skipped);
     fprintf(f, "  \"snapshot_restarts\": %llu,\n", (unsigned long long)r->snapshot_restarts);
     fprintf(f, "  \"known_starts\": %llu,\n", (unsigned long long)r->known_starts);
@@ -205,17 +217,19 @@ void stats_status_line(const struct stats_report *r, const char *prefix, const c
     for (int k = 0; k < FRAME_KIND_COUNT && n < sizeof kinds; k++)
         n += (size_t)snprintf(kinds + n, sizeof kinds - n, "%s%s %" PRIu64, k ? " " : "",
                               sensor_kinds[k].short_name, fc->received[k]);
-    log_info("%s: frames %" PRIu64 " (%s) bad %" PRIu64 " unknown %" PRIu64 " range %" PRIu64
-             " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64 " kdrop %" PRIu64 " errfr %" PRIu64
-             " | pulses ok %" PRIu64 " rej %" PRIu64 " | bearings ok %" PRIu64 " rej %" PRIu64
-             " unk %" PRIu64 " | %s | odom %" PRIu64 " werr %" PRIu64 " | latency p50 %" PRId64
-             " p99 %" PRId64 " us"
-             " (interval p50 %" PRId64 " p99 %" PRId64 " us)",
-             prefix, r->frames_total, kinds, fc->malformed, fc->unknown_id, fc->out_of_range,
-             frame_lost_total(fc), frame_duplicates_total(fc), frame_out_of_order_total(fc),
-             r->kernel_drops, r->error_frames, r->pulses_accepted, r->pulses_rejected,
-             r->bearings_fused, r->bearings_rejected, r->bearings_unknown_beacon, estimate,
-             r->odometry_sent, r->record_write_errors + r->estimates_write_errors,
-             r->latency_p50_us, r->latency_p99_us, r->latency_interval_p50_us,
-             r->latency_interval_p99_us);
+    log_info(
+        "%s: frames %" PRIu64 " (%s) bad %" PRIu64 " unknown %" PRIu64 " range %" PRIu64
+        " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64 " kdrop %" PRIu64 " errfr %" PRIu64
+        " | pulses ok %" PRIu64 " rej %" PRIu64 " | bearings ok %" PRIu64 " rej %" PRIu64
+        " unk %" PRIu64 " | ranges ok %" PRIu64 " rej %" PRIu64 " unk %" PRIu64 " bad %" PRIu64
+        " | %s | odom %" PRIu64 " werr %" PRIu64 " | latency p50 %" PRId64 " p99 %" PRId64 " us"
+        " (interval p50 %" PRId64 " p99 %" PRId64 " us)",
+        prefix, r->frames_total, kinds, fc->malformed, fc->unknown_id, fc->out_of_range,
+        frame_lost_total(fc), frame_duplicates_total(fc), frame_out_of_order_total(fc),
+        r->kernel_drops, r->error_frames, r->pulses_accepted, r->pulses_rejected, r->bearings_fused,
+        r->bearings_rejected, r->bearings_unknown_beacon, r->ranges_fused, r->ranges_rejected,
+        r->ranges_unknown_beacon, r->ranges_bad_tof + r->ranges_other_receiver + r->ranges_refused,
+        estimate, r->odometry_sent, r->record_write_errors + r->estimates_write_errors,
+        r->latency_p50_us, r->latency_p99_us, r->latency_interval_p50_us,
+        r->latency_interval_p99_us);
 }

@@ -66,6 +66,9 @@ struct stats_report {
     uint64_t bearings_fused, bearings_rejected, bearings_buffered, bearings_refused,
         bearings_unknown_beacon, bearings_unexpected, stale_bearings, unmapped_bearings,
         pulses_unexpected;
+    /* ranges (struct est_counters) */
+    uint64_t ranges_fused, ranges_rejected, ranges_buffered, ranges_refused, ranges_unknown_beacon,
+        ranges_unexpected, ranges_other_receiver, ranges_bad_tof, stale_ranges, unmapped_ranges;
     int64_t latency_p50_us, latency_p99_us, latency_max_us;
     uint64_t latency_samples;
     /* the interval the latest status line closed (latency_interval_close) */

@@ -234,7 +234,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.set_defaults(func=_cmd_plot)
     mp = sub.add_parser("map", help="Cramer-Rao accuracy map of a site (where to put beacons)",
                         description="The snapshot Cramer-Rao bound of one measurement cycle "
-                                    "over the site's room, per kind of measurement: position "
+                                    "over the site's room, per kind of measurement (ultrasonic "
+                                    "TDOA, bearings, ranges, their mix): position "
                                     "drms (and heading sigma for bearings), degenerate cells, "
                                     "median / 90th percentile / worst. Exit 2: the site has no "
                                     "beacons of the requested kind.")
@@ -242,9 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
     mp.add_argument("--out", metavar="PNG", help="draw the maps side by side into this PNG")
     mp.add_argument("--step", type=float, metavar="M",
                     help="grid step, m (default: the room's longer side / 300)")
-    mp.add_argument("--kind", choices=("tdoa", "bearing", "both", "all"), default="all",
-                    help="measurement kind (default all: every kind the site has, and both "
-                         "together on a mixed site)")
+    mp.add_argument("--kind", choices=("tdoa", "bearing", "range", "both", "all"), default="all",
+                    help="measurement kind (default all: every kind the site has, and both: "
+                         "all of them together, on a mixed site)")
     mp.add_argument("--cap", type=float, default=1.0, metavar="M",
                     help="drms above this is marked degenerate, m (default 1)")
     mp.add_argument("--halves", action="store_true",

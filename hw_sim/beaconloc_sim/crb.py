@@ -20,12 +20,17 @@ propagated from one measurement event to the next with the odometry as input
 event, by the arrival time of every direct pulse of a beacon firing actually detected
 on every receiver (Kleeman 1992 eq. 21 with the receiver's 3D position on the ring),
 by every bearing actually delivered at that instant (Vander et al. 2011 eq. 1, the
-sensor offset included: physics.bearings.bearing_jacobian) and by the odometry's speed
+sensor offset included: physics.bearings.bearing_jacobian), by every direct range actually
+delivered at that instant (tof = d / s to a fixed range beacon, Millibots: it observes x, y,
+theta through the receiver's mount offset and the speed of sound s;
+physics.ranges.tof_jacobian; a multipath late arrival carries no information on the direct
+path and is left out, as are dropouts) and by the odometry's speed
 and turn rate (Kleeman 1992 eq. 25), with the wheel noise. The events are the beacon
-firings and the bearing instants in time order; a site without ultrasonic beacons has
-bearing events only (s, T and t0 are then unobserved: they keep their prior, which
-keeps J well conditioned), a site without bearing beacons firings only (the bound is
-then exactly the firing-to-firing recursion it was before bearings existed).
+firings, the bearing instants and the range pings in time order; a site without ultrasonic
+beacons has bearing and range events only (T and t0 are then unobserved, and s too without
+ranges: they keep their prior, which keeps J well conditioned), a site with ultrasonic
+beacons only firings only (the bound is then exactly the firing-to-firing recursion it was
+before bearings and ranges existed).
 """
 from __future__ import annotations
 
@@ -35,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .physics.bearings import bearing_jacobian
+from .physics.ranges import range_m, sigma_range_m, tof_jacobian
 
 STATE = ("x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "s_mps", "T_s", "t0_s")
 IX, IY, ITH, IV, IW, IS, IT, IT0 = range(8)
@@ -124,6 +130,10 @@ class BoundModel:
     sigma_bearing_rad: float = 0.0  # σ of one bearing, rad (bearing sites)
     bearing_offset_m: tuple = (0.0, 0.0)   # bearing sensor mount, body frame (fwd, left), m
     sigma_common_per_m: float = 0.0  # common-mode slip of both wheels, m after 1 m of mean travel
+    range_offset_m: tuple = (0.0, 0.0)   # range receiver mount, body frame (fwd, left), m
+    range_height_m: float = 0.0          # range receiver height, m
+    sigma_range_m: float = 0.0           # σ of one range at short distance, m
+    sigma_range_per_m: float = 0.0       # σ growth per metre of range
 
 
 def wheel_covariance(d_left_m: float, d_right_m: float, m: BoundModel) -> np.ndarray:
@@ -200,7 +210,8 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
                     wheel_right_m: np.ndarray, model: BoundModel, *,
                     start: tuple | None = None, event_time_s: np.ndarray | None = None,
                     fires: np.ndarray | None = None,
-                    bearing_beacons_m: list[np.ndarray] | None = None
+                    bearing_beacons_m: list[np.ndarray] | None = None,
+                    range_beacons_m: list[np.ndarray] | None = None
                     ) -> np.ndarray | tuple[np.ndarray, tuple]:
     """Bound covariance J_k^-1 after each measurement event k, shape (K, 8, 8).
 
@@ -211,7 +222,9 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
     between events). event_time_s: (K,) time of each event, s (default states[:, IT0]: every
     event is a firing, the bound as it was before bearings); fires: (K,) the event is a
     beacon firing (t0 moves on by T into it; default all); bearing_beacons_m[k]: (n, 2)
-    positions of the bearing beacons whose bearing was delivered at event k (default none).
+    positions of the bearing beacons whose bearing was delivered at event k (default none);
+    range_beacons_m[k]: (n, 3) positions of the range beacons whose direct range was delivered
+    at event k (default none).
     start: to go on from an earlier call, its returned end (J, state, wheel_left_m,
     wheel_right_m, time after its last event); then returns (covariances, end). Without it
     the recursion starts from the prior.
@@ -255,6 +268,19 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
                                           model.bearing_offset_m)
             rows.append(H_b)
             variances.append(np.full(len(seen), model.sigma_bearing_rad ** 2))
+        ranged = range_beacons_m[k] if range_beacons_m is not None else None
+        if ranged is not None and len(ranged):
+            # tof = d / s (physics.ranges, Millibots): d(tof)/d(x, y, theta, s) at the true state
+            x, y, th, s = states[k, IX], states[k, IY], states[k, ITH], states[k, IS]
+            H_r = np.zeros((len(ranged), 8))
+            H_r[:, [IX, IY, ITH, IS]] = tof_jacobian(x, y, th, s, ranged, model.range_offset_m,
+                                                     model.range_height_m)
+            rows.append(H_r)
+            # range noise sigma(r) = sigma_m + sigma_per_m r in time units (/ s), plus the
+            # node clock's 1 us quantisation (uniform: variance 1 us^2 / 12)
+            r = range_m(x, y, th, ranged, model.range_offset_m, model.range_height_m)
+            sig = sigma_range_m(r, model.sigma_range_m, model.sigma_range_per_m) / s
+            variances.append(sig ** 2 + (1e-6) ** 2 / 12)
         if prev is not None and dt_s > 0:
             rows.append(odometry_rows())
             variances.append(odometry_variances(wheel_left_m[k] - prev[1],

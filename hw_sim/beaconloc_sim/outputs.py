@@ -110,6 +110,13 @@ def run_stats(result: SimResult, *, wall_time_s: float, lateness_s: np.ndarray |
         stats["bearings"] = {"measured": int(len(b.t_s)), "sent": int(np.sum(b.sent)),
                              "outage": int(np.sum(b.outage)), "occluded": int(np.sum(b.occluded)),
                              "out_of_range": int(np.sum(b.out_of_range))}
+    if result.scenario.site.range_beacon_count:
+        r = result.ranges
+        stats["ranges"] = {"pinged": int(len(r.t_s)), "sent": int(np.sum(r.sent)),
+                           "direct": int(np.sum(r.direct)),
+                           "multipath": int(np.sum(r.sent & r.multipath)),
+                           "dropout": int(np.sum(r.dropout)), "occluded": int(np.sum(r.occluded)),
+                           "out_of_range": int(np.sum(r.out_of_range))}
     if lateness_s is not None:
         late_us = np.asarray(lateness_s) * 1e6
         stats["live"] = {

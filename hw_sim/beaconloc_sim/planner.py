@@ -14,10 +14,19 @@ measurements, R = sigma^2 I):
   with an unknown emission time and a known speed of sound (the snapshot solver's model;
   Kleeman 1992 eq. 21 with v = 0: crb.static_arrival_jacobian), unknowns (x_m, y_m, t0_s),
   sigma = [noise] sigma_arrival_s. Every beacon is heard (no directivity, no occlusion).
-- ``both``: a mixed site's two cycles together, unknowns (x_m, y_m, theta_rad, t0_s).
+- ``range``: one round of pings to every range beacon (tof = d / s, physics/ranges.py, the
+  Millibots' RF-synchronised ranges), unknowns (x_m, y_m) of the receiver (its height and
+  the speed of sound known; the map is over the receiver's position, so its mount offset
+  and the heading play no part), sigma = sigma_m + sigma_per_m r per range (the site's
+  [range_sensor]); a beacon farther than max_range_m is not heard and adds nothing.
+  Closed form at the centre of a square of four beacons at the receiver's height: the unit
+  vectors u_j to the beacons are 90 degrees apart, sum u_j u_j^T = 2 I, so F = 2 I / sigma^2,
+  C = sigma^2 / 2 I and drms = sqrt(sigma^2 / 2 + sigma^2 / 2) = sigma (tests/sim/test_planner.py).
+- ``both``: a mixed site's kinds together (two or three of them), unknowns (x_m, y_m) and
+  theta_rad if the site has bearings, t0_s if it has ultrasonic beacons.
 
 Per cell: position drms = sqrt(C_xx + C_yy) (m) and the heading sigma sqrt(C_theta,theta)
-(rad; bearing and both only). The position block is the inverse of the Schur complement
+(rad; bearing, and both on a site with bearings). The position block is the inverse of the Schur complement
 S = F_pp - F_pn F_nn^-1 F_np (the nuisance unknowns n: heading, emission time eliminated).
 A cell is *degenerate* when S is singular or ill-conditioned, cond(S) = lambda_max /
 lambda_min > COND_MAX (the error ellipse's axes more than 10^4 apart: the robot and the
@@ -33,9 +42,10 @@ import numpy as np
 
 from .crb import static_arrival_jacobian
 from .physics.bearings import bearing_jacobian
+from .physics.ranges import range_jacobian, range_m, sigma_range_m
 from .site import Site
 
-KINDS = ("tdoa", "bearing")
+KINDS = ("tdoa", "bearing", "range")
 COND_MAX = 1e8                 # cond(S) above this: degenerate (S in 1/m^2, scale-free ratio)
 DRMS_CAP_M = 1.0               # drms above this: degenerate (useless for navigation), m
 HEADINGS_RAD = np.arange(8) * (math.pi / 4)   # worst over these when the sensor is offset
@@ -49,11 +59,12 @@ class PlannerError(ValueError):
 
 @dataclass
 class KindMap:
-    kind: str                  # "tdoa", "bearing" or "both"
+    kind: str                  # "tdoa", "bearing", "range" or "both"
     x_m: np.ndarray            # (nx,) cell centres, site frame, m
     y_m: np.ndarray            # (ny,) cell centres, m
     drms_m: np.ndarray         # (ny, nx) position drms, m; NaN where degenerate
-    heading_sigma_rad: np.ndarray | None   # (ny, nx) rad, NaN where degenerate; None for tdoa
+    heading_sigma_rad: np.ndarray | None   # (ny, nx) rad, NaN where degenerate; None without
+                                           # bearings (tdoa, range)
     degenerate: np.ndarray     # (ny, nx) bool
     headings_rad: np.ndarray   # the headings evaluated (worst taken over them)
 
@@ -93,10 +104,11 @@ def _pct(a: np.ndarray, q: float) -> float:
 
 
 def kinds_of(site: Site) -> list[str]:
-    """The kinds of measurement a site has: tdoa (ultrasonic beacons), bearing, both."""
-    kinds = [k for k, n in (("tdoa", site.beacon_count), ("bearing", site.bearing_beacon_count))
-             if n > 0]
-    return kinds + ["both"] if len(kinds) == 2 else kinds
+    """The kinds of measurement a site has: tdoa (ultrasonic beacons), bearing, range, and
+    both (all of them together) when it has two or three."""
+    kinds = [k for k, n in (("tdoa", site.beacon_count), ("bearing", site.bearing_beacon_count),
+                            ("range", site.range_beacon_count)) if n > 0]
+    return kinds + ["both"] if len(kinds) >= 2 else kinds
 
 
 def grid(site: Site, step_m: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
@@ -131,6 +143,21 @@ def tdoa_fisher(x_m, y_m, beacons_m, rx_height_m: float, speed_of_sound_mps: flo
     with np.errstate(divide="ignore", invalid="ignore"):
         return fisher(static_arrival_jacobian(x_m, y_m, beacons_m, rx_height_m, speed_of_sound_mps),
                       sigma_s)
+
+
+def range_fisher(x_m, y_m, beacons_m, height_m: float, sigma_m: float, sigma_per_m: float,
+                 max_range_m: float = math.inf) -> np.ndarray:
+    """Fisher information of one round of pings over the receiver's (x_m, y_m), (*S, 2, 2):
+    F = sum_j u_j u_j^T / sigma_j^2 over the beacons heard (r_j <= max_range_m), u_j the
+    range Jacobian (physics.ranges.range_jacobian: the unit vector from beacon to receiver,
+    projected on the floor), sigma_j = sigma_m + sigma_per_m r_j; non-finite on a beacon."""
+    x = np.asarray(x_m, dtype=float)
+    zero = np.zeros(2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        J = range_jacobian(x, y_m, np.zeros_like(x), beacons_m, zero, height_m)[..., :2]
+        r = range_m(x, y_m, np.zeros_like(x), beacons_m, zero, height_m)
+        w = np.where(r <= max_range_m, 1.0 / sigma_range_m(r, sigma_m, sigma_per_m) ** 2, 0.0)
+        return np.einsum("...m,...mi,...mj->...ij", w, J, J)
 
 
 def position_bound(F: np.ndarray, cap_m: float = DRMS_CAP_M):
@@ -175,19 +202,28 @@ def _kind_fisher(site: Site, kind: str, X: np.ndarray, Y: np.ndarray, theta_rad:
     if kind == "tdoa":
         return tdoa_fisher(X, Y, site.beacons_m, site.rx_height_m, site.speed_of_sound_mps,
                            site.sigma_arrival_s * sigma_scale)
-    # both: unknowns (x, y, theta, t0); the two cycles' measurements are independent
-    F = np.zeros(X.shape + (4, 4))
-    F[..., :3, :3] = _kind_fisher(site, "bearing", X, Y, theta_rad, sigma_scale)
-    Ft = _kind_fisher(site, "tdoa", X, Y, theta_rad, sigma_scale)
-    idx = np.array([0, 1, 3])
-    F[..., idx[:, None], idx] += Ft
+    if kind == "range":
+        return range_fisher(X, Y, site.range_beacons_m, site.range_height_m,
+                            site.sigma_range_m * sigma_scale, site.sigma_range_per_m * sigma_scale,
+                            site.range_max_m)
+    # both: unknowns (x, y[, theta][, t0]); the kinds' measurements are independent, so
+    # their Fisher matrices add on the unknowns they share
+    has = [k for k in kinds_of(site) if k != "both"]
+    unknowns = ["x", "y"] + (["theta"] if "bearing" in has else []) + \
+        (["t0"] if "tdoa" in has else [])
+    kind_unknowns = {"bearing": ["x", "y", "theta"], "tdoa": ["x", "y", "t0"], "range": ["x", "y"]}
+    F = np.zeros(X.shape + (len(unknowns),) * 2)
+    for k in has:
+        idx = np.array([unknowns.index(u) for u in kind_unknowns[k]])
+        F[..., idx[:, None], idx] += _kind_fisher(site, k, X, Y, theta_rad, sigma_scale)
     return F
 
 
 def headings_of(site: Site, kind: str) -> np.ndarray:
     """Headings evaluated: theta = 0 when the bound cannot depend on it (tdoa, or a bearing
     sensor at the wheel-base centre), else HEADINGS_RAD (the map keeps the worst)."""
-    if kind == "tdoa" or not np.any(site.bearing_offset_m):
+    if kind in ("tdoa", "range") or not np.any(site.bearing_offset_m) \
+            or not site.bearing_beacon_count:
         return np.zeros(1)
     return HEADINGS_RAD
 
@@ -201,7 +237,8 @@ def kind_map(site: Site, kind: str, step_m: float | None = None, cap_m: float = 
         have = ", ".join(available) or "none"
         need = {"tdoa": "ultrasonic beacons ([beacons] count > 0)",
                 "bearing": "bearing beacons ([bearing_beacons] count > 0)",
-                "both": "both ultrasonic and bearing beacons"}.get(kind, f"kind {kind!r}")
+                "range": "range beacons ([range_beacons] count > 0)",
+                "both": "two kinds of beacons (ultrasonic, bearing, range)"}.get(kind, f"kind {kind!r}")
         raise PlannerError(f"{site.path}: site {site.name!r} has no {need} (its kinds: {have})")
     x, y, step_m = grid(site, step_m)
     X, Y = np.meshgrid(x, y)
@@ -216,7 +253,8 @@ def kind_map(site: Site, kind: str, step_m: float | None = None, cap_m: float = 
     drms[degenerate] = np.nan
     third[degenerate] = np.nan
     return KindMap(kind=kind, x_m=x, y_m=y, drms_m=drms,
-                   heading_sigma_rad=None if kind == "tdoa" else third,
+                   heading_sigma_rad=third if kind == "bearing" or (
+                       kind == "both" and site.bearing_beacon_count) else None,
                    degenerate=degenerate, headings_rad=headings)
 
 

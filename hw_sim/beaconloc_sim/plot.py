@@ -102,10 +102,12 @@ def plot_map(site, maps, out_path, split_x_m: float | None = None) -> None:
             ax.clabel(c5, fmt="5 cm", fontsize=8)
         fig.colorbar(cs, ax=ax, label="position drms (cm)", ticks=MAP_LEVELS_CM, shrink=0.8)
         beacons = []
-        if m.kind in ("tdoa", "both"):
+        if m.kind in ("tdoa", "both") and site.beacon_count:
             beacons.append((site.beacons_m, "s", "ultrasonic beacon", "U"))
-        if m.kind in ("bearing", "both"):
+        if m.kind in ("bearing", "both") and site.bearing_beacon_count:
             beacons.append((site.bearing_beacons_m, "^", "bearing beacon", "B"))
+        if m.kind in ("range", "both") and site.range_beacon_count:
+            beacons.append((site.range_beacons_m, "o", "range beacon", "R"))
         for pts, marker, label, prefix in beacons:
             ax.plot(pts[:, 0], pts[:, 1], marker, color="white", mec="black", ms=9,
                     clip_on=False, zorder=5, label=label)

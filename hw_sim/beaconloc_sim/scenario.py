@@ -26,11 +26,13 @@ _KNOWN = {
                   "late_arrival_gain", "double_pulse_tolerance_s", "detector_holdoff_s"},
     "clocks": {"beacon_period_ppm", "first_firing_s", "rx_offset_us", "rx_drift_ppm",
                "encoder_offset_us", "encoder_drift_ppm", "bearing_offset_us", "bearing_drift_ppm",
-               "node_latency_s", "bus_bitrate_bps"},
+               "range_offset_us", "range_drift_ppm", "node_latency_s", "bus_bitrate_bps"},
     "encoders": {"wheel_radius_bias", "slip_fraction", "sigma_wheel_per_m", "sigma_distance_per_m",
                  "initial_ticks"},
     # the bearing sensor's imperfections (the site gives its sigma and scan rate)
     "bearings": {"outage_probability", "outage_burst_s", "max_range_m"},
+    # the range receiver's imperfections (the site gives its sigma, max range, ping period)
+    "ranges": {"dropout_probability", "multipath_probability"},
     # a second robot (the Eurobot opponent): a disc on its own path, occluding bearings
     "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
@@ -103,6 +105,11 @@ class Scenario:
     bearing_max_range_m: float = math.inf    # beacons farther than this are not seen
     opponent: Trajectory | None = None       # the opponent robot's path (a disc), or None
     opponent_radius_m: float = 0.0
+    # the range receiver node (nodes/range_receiver.py, docs/simulator.md [ranges])
+    range_offset_us: int = 3_141_592_653
+    range_drift_ppm: float = -15.0
+    range_dropout_probability: float = 0.0   # share of pings lost
+    range_multipath_probability: float = 0.0  # share of pings whose late arrival replaces the direct
     # output
     truth_rate_hz: float = 50.0
     log_epoch_s: float = 1_700_000_000.0
@@ -359,6 +366,14 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         if ini.has("bearings", "max_range_m") else math.inf,
         opponent=opponent,
         opponent_radius_m=opponent_radius,
+        range_offset_us=ini.integer("clocks", "range_offset_us", 3_141_592_653, minimum=0,
+                                    maximum=2**40),
+        range_drift_ppm=ini.number("clocks", "range_drift_ppm", -15.0, minimum=-1000,
+                                   maximum=1000),
+        range_dropout_probability=ini.number("ranges", "dropout_probability", 0.0, minimum=0,
+                                             maximum=1),
+        range_multipath_probability=ini.number("ranges", "multipath_probability", 0.0,
+                                               minimum=0, maximum=1),
         truth_rate_hz=ini.number("output", "truth_rate_hz", 50.0, positive=True, maximum=1000),
         log_epoch_s=ini.number("output", "log_epoch_s", 1_700_000_000.0, minimum=0),
         channel=ini.raw("output", "channel", "vcan0"),

@@ -11,8 +11,8 @@ import numpy as np
 from . import can_out, crb, nodes
 from .bus import FRAME_BITS, Bus, Frames
 from .clocks import NodeClock
-from .nodes import (ODOMETRY_COLUMNS, BearingSensor, Bearings, Node, NodeStatus, ReceiverRing,
-                    WheelEncoders)
+from .nodes import (ODOMETRY_COLUMNS, BearingSensor, Bearings, Node, NodeStatus, RangeReceiver,
+                    Ranges, ReceiverRing, WheelEncoders)
 from .path import wrap_angle
 from .physics import acoustics as ac
 from .physics.pulses import KIND_DIRECT, Detections, Firings, make_firings, simulate_detections
@@ -23,11 +23,13 @@ ID_PULSE = ReceiverRing.frame_spec().frame_id
 ID_ENCODERS = WheelEncoders.frame_spec().frame_id
 ID_STATUS = NodeStatus.frame_spec().frame_id
 ID_BEARING = BearingSensor.frame_spec().frame_id
+ID_RANGE = RangeReceiver.frame_spec().frame_id
 __all__ = ["FRAME_BITS", "Frames", "ODOMETRY_COLUMNS", "TRUTH_COLUMNS", "SimResult", "run",
-           "run_windows", "wrap_angle", "ID_PULSE", "ID_ENCODERS", "ID_STATUS", "ID_BEARING"]
-# child seeds of a run (or of a window): pulses, encoders, latency, firings, bearings. The
-# bearings' is the fifth child, so the first four draw what they drew before it existed.
-_N_SEEDS = 5
+           "run_windows", "wrap_angle", "ID_PULSE", "ID_ENCODERS", "ID_STATUS", "ID_BEARING", "ID_RANGE"]
+# child seeds of a run (or of a window): pulses, encoders, latency, firings, bearings, ranges.
+# The bearings' is the fifth child and the ranges' the sixth, so the first ones draw what
+# they drew before the later existed (SeedSequence children depend only on their index).
+_N_SEEDS = 6
 
 TRUTH_COLUMNS = ("t_us", "t_sim_s", "x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "sos_mps",
                  "period_s", "temperature_c", "pcrb_x_m", "pcrb_y_m", "pcrb_pos_m", "pcrb_lateral_m",
@@ -43,11 +45,14 @@ class SimResult:
     firings: Firings
     detections: Detections
     rx_clock: NodeClock               # the truth's time base: the receiver array's clock, or
-                                      # the bearing sensor's on a site without ultrasonic beacons
+                                      # the bearing sensor's (else the range receiver's) on a
+                                      # site without ultrasonic beacons
     encoder_clock: NodeClock
     pcrb_cov: np.ndarray              # (K, 8, 8) bound after each event, crb.STATE order
-    pcrb_t_s: np.ndarray | None = None   # (K,) true time of each event (firings, bearings), s
+    pcrb_t_s: np.ndarray | None = None   # (K,) true time of each event (firings, bearings,
+                                         # range pings), s
     bearings: Bearings | None = None     # every bearing measured (sent or not, and why not)
+    ranges: Ranges | None = None         # every range ping (sent or not, and why not)
 
 
 def run(scn: Scenario, *, encode: bool = True) -> SimResult:
@@ -80,7 +85,8 @@ def _prefix(res: SimResult, scn: Scenario) -> SimResult:
                        for f in dataclasses.fields(Detections)))
     return SimResult(scn, frames, truth, odometry, firings, det, res.rx_clock, res.encoder_clock,
                      res.pcrb_cov[:n_event], res.pcrb_t_s[:n_event],
-                     res.bearings.select(res.bearings.t_s <= d))
+                     res.bearings.select(res.bearings.t_s <= d),
+                     res.ranges.select(res.ranges.t_s <= d))
 
 
 def _run(scn: Scenario, *, encode: bool = True) -> SimResult:
@@ -95,6 +101,7 @@ class Carry:
     ring: ReceiverRing
     wheels: WheelEncoders
     bearing: BearingSensor | None
+    ranger: RangeReceiver | None
     nodes: list[Node]
     bus: Bus
     pcrb: tuple | None                       # crb.pcrb_along_path end
@@ -127,22 +134,26 @@ def run_windows(scn: Scenario, window_s: float, *, encode: bool = True):
 def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry | None, *,
             encode: bool) -> tuple[SimResult, Carry | None]:
     """The run (win None) or its window win = (t_a, t_b] after carry (None: the first)."""
-    rng_pulse, rng_enc, rng_lat, rng_fire, rng_bear = (np.random.default_rng(s) for s in seeds)
+    rng_pulse, rng_enc, rng_lat, rng_fire, rng_bear, rng_range = (np.random.default_rng(s)
+                                                                   for s in seeds)
     t_a, t_b = win if win is not None else (0.0, scn.duration_s)
     if carry is None:
-        ring, wheels, bearing, on_bus = nodes.on_bus(scn)
-        carry = Carry(ring, wheels, bearing, on_bus, Bus(scn.bus_bitrate_bps),
+        ring, wheels, bearing, ranger, on_bus = nodes.on_bus(scn)
+        carry = Carry(ring, wheels, bearing, ranger, on_bus, Bus(scn.bus_bitrate_bps),
                       None if win is None else crb.prior_start(bound_model(scn)), None)
     enc_clock = carry.wheels.clock
     # the truth's time base: the receiver array's clock (the estimator's, Kleeman's t0), or
-    # the bearing sensor's on a site of bearing beacons only (no receiver array there)
-    rx_clock = carry.ring.clock if scn.site.beacon_count or carry.bearing is None \
-        else carry.bearing.clock
+    # the bearing sensor's on a site without one (no receiver array there), else the range
+    # receiver's
+    if scn.site.beacon_count or (carry.bearing is None and carry.ranger is None):
+        rx_clock = carry.ring.clock
+    else:
+        rx_clock = carry.bearing.clock if carry.bearing is not None else carry.ranger.clock
 
     firings = make_firings(scn, rng_fire, win)
     det = simulate_detections(scn, firings, rng_pulse)
     iv = nodes.Interval(scn, t_a, t_b, firings, det, rng_latency=rng_lat, rng_wheels=rng_enc,
-                        rng_bearings=rng_bear)
+                        rng_bearings=rng_bear, rng_ranges=rng_range)
     # a window sends what is ready before its end; the rest waits in its node for the next one
     until_s = t_b if win is not None else math.inf
     frames = carry.bus.transmit([node.release(iv, until_s) for node in carry.nodes], until_s)
@@ -152,12 +163,15 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
     measured = carry.bearing.measured if carry.bearing is not None else Bearings.empty()
     seen = carry.bearing.bound_events(t_b if win is not None else math.inf) \
         if carry.bearing is not None else Bearings.empty()
+    pinged = carry.ranger.measured if carry.ranger is not None else Ranges.empty()
+    ranged = carry.ranger.bound_events(t_b if win is not None else math.inf) \
+        if carry.ranger is not None else Ranges.empty()
     truth = _truth(scn, rx_clock, win)
-    pcrb_t, pcrb_cov, pcrb_end = _pcrb(scn, firings, det, seen, rx_clock, carry.pcrb)
+    pcrb_t, pcrb_cov, pcrb_end = _pcrb(scn, firings, det, seen, rx_clock, carry.pcrb, ranged)
     _attach_bound(truth, pcrb_t, pcrb_cov, scn, carry.last_cov)
     odometry = carry.wheels.odometry(rx_clock)
     result = SimResult(scn, frames, truth, odometry, firings, det, rx_clock, enc_clock, pcrb_cov,
-                       pcrb_t, measured)
+                       pcrb_t, measured, pinged)
     if win is None:
         return result, None
     carry.pcrb = pcrb_end
@@ -199,21 +213,27 @@ def bound_model(scn: Scenario) -> crb.BoundModel:
         prior_sigma=(xy, xy, th, 0.5, 0.5, site.sigma_speed_of_sound_mps, 1e-4, 0.1),
         sigma_bearing_rad=site.sigma_bearing_rad,
         bearing_offset_m=tuple(float(v) for v in site.bearing_offset_m),
-        sigma_common_per_m=scn.sigma_distance_per_m)
+        sigma_common_per_m=scn.sigma_distance_per_m,
+        range_offset_m=tuple(float(v) for v in site.range_offset_m),
+        range_height_m=site.range_height_m, sigma_range_m=site.sigma_range_m,
+        sigma_range_per_m=site.sigma_range_per_m)
 
 
 def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
-          clock: NodeClock, start: tuple | None = None
+          clock: NodeClock, start: tuple | None = None, ranged: Ranges | None = None
           ) -> tuple[np.ndarray, np.ndarray, tuple | None]:
     """Bound after each measurement event: each firing with the receivers that really
-    detected its direct pulse, each instant with bearings delivered (seen), in time order;
+    detected its direct pulse, each instant with bearings delivered (seen), each ping whose
+    direct range was delivered (ranged), in time order;
     the event times (true, s) and the recursion's end (crb.pcrb_along_path) to go on from in
     the next window. clock: the time base (event times and t0 on it)."""
-    if len(firings.t_s) + len(seen.t_s) == 0:
+    ranged = ranged if ranged is not None else Ranges.empty()
+    if len(firings.t_s) + len(seen.t_s) + len(ranged.t_s) == 0:
         return np.zeros(0), np.zeros((0, 8, 8)), start
-    # events: the distinct instants of firings and bearings (a non-rotating sensor's scan
-    # is one event); without bearings exactly the firings
-    t_ev = np.unique(np.concatenate([firings.t_s, seen.t_s])) if len(seen.t_s) else firings.t_s
+    # events: the distinct instants of firings, bearings and ranges (a non-rotating sensor's
+    # scan is one event); without bearings and ranges exactly the firings
+    t_ev = np.unique(np.concatenate([firings.t_s, seen.t_s, ranged.t_s])) \
+        if len(seen.t_s) + len(ranged.t_s) else firings.t_s
     k = len(t_ev)
     fire_ev = np.searchsorted(t_ev, firings.t_s)           # event of each firing
     is_fire = np.zeros(k, dtype=bool)
@@ -242,10 +262,17 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
         for e, j in zip(np.searchsorted(t_ev, seen.t_s).tolist(), seen.beacon.tolist()):
             bearing_rows[e].append(scn.site.bearing_beacons_m[j])
         bearing_rows = [np.array(r).reshape(-1, 2) for r in bearing_rows]
+    range_rows = None
+    if len(ranged.t_s):
+        range_rows = [[] for _ in range(k)]
+        for e, j in zip(np.searchsorted(t_ev, ranged.t_s).tolist(), ranged.beacon.tolist()):
+            range_rows[e].append(scn.site.range_beacons_m[j])
+        range_rows = [np.array(r).reshape(-1, 3) for r in range_rows]
     wl, wr = scn.trajectory.wheel_travel(t_ev)
     args = (states, scn.site.beacons_m, beacon, [np.array(h) for h in heard], wl, wr,
             bound_model(scn))
-    kw = dict(event_time_s=t_time, fires=is_fire, bearing_beacons_m=bearing_rows)
+    kw = dict(event_time_s=t_time, fires=is_fire, bearing_beacons_m=bearing_rows,
+              range_beacons_m=range_rows)
     if start is None:
         return t_ev, crb.pcrb_along_path(*args, **kw), None
     cov, end = crb.pcrb_along_path(*args, start=start, **kw)

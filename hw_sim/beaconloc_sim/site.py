@@ -86,6 +86,14 @@ class Site:
     sigma_bearing_rad: float         # σ of one bearing, rad
     bearing_scan_rate_hz: float      # scans per second
     bearing_rotating: bool           # each bearing timed at its own instant within the scan
+    # the range receiver and its fixed beacons (Millibots; Marvelmind-like); none when 0
+    range_beacons_m: np.ndarray      # (K, 3) range beacon positions, site frame, m
+    range_offset_m: np.ndarray       # (2,) receiver mount, body frame (forward, left), m
+    range_height_m: float            # receiver height, site frame z, m
+    sigma_range_m: float             # σ of one range at short distance, m
+    sigma_range_per_m: float         # σ growth per metre of range (σ = sigma_m + this · r)
+    range_max_m: float               # no pulse heard beyond, m
+    range_ping_period_s: float       # the leader pings one beacon every this long, s
 
     @property
     def beacon_count(self) -> int:
@@ -94,6 +102,10 @@ class Site:
     @property
     def bearing_beacon_count(self) -> int:
         return int(self.bearing_beacons_m.shape[0])
+
+    @property
+    def range_beacon_count(self) -> int:
+        return int(self.range_beacons_m.shape[0])
 
     def receiver_angles_rad(self) -> np.ndarray:
         """Body-frame angle of each receiver: first_angle + index * 2*pi/count (DBC comment)."""
@@ -173,10 +185,18 @@ def load_site(path: str | Path) -> Site:
         sigma_bearing_rad=math.radians(v(("bearing_sensor", "sigma_deg"))),
         bearing_scan_rate_hz=v(("bearing_sensor", "scan_rate_hz")),
         bearing_rotating=bool(v(("bearing_sensor", "rotating"))),
+        range_beacons_m=items["range_beaconN"],
+        range_offset_m=np.array([v(("range_sensor", "offset_x_m")),
+                                 v(("range_sensor", "offset_y_m"))]),
+        range_height_m=v(("range_sensor", "height_m")),
+        sigma_range_m=v(("range_sensor", "sigma_m")),
+        sigma_range_per_m=v(("range_sensor", "sigma_per_m")),
+        range_max_m=v(("range_sensor", "max_range_m")),
+        range_ping_period_s=v(("range_sensor", "ping_period_s")),
     )
-    if site.beacon_count == 0 and site.bearing_beacon_count == 0:
-        raise ini.error("beacons", "count", "a site needs beacons: ultrasonic ([beacons] count) "
-                        "or bearing ([bearing_beacons] count)")
+    if site.beacon_count == 0 and site.bearing_beacon_count == 0 and site.range_beacon_count == 0:
+        raise ini.error("beacons", "count", "a site needs beacons: ultrasonic ([beacons] count), "
+                        "bearing ([bearing_beacons] count) or range ([range_beacons] count)")
     if site.double_pulse_spacing_s <= site.burst_length_s:
         raise ini.error("beacons", "double_pulse_spacing_s",
                         "must exceed burst_length_s (the two bursts would merge)")

@@ -95,6 +95,40 @@ const char *check_bearing_params(const bl_bearing_params *b)
 
 #endif
 
+#if BL_WITH_RANGES
+// Ranges (aid_range.cpp): the Millibots' ultrasonic module (8 mm
+// resolution, about 3 m range); Marvelmind-like sites set their own.
+void default_range_params(bl_range_params *r)
+{
+    r->sigma_m = real(0.008);
+    r->sigma_per_m = real(0.005);
+    r->max_range_m = real(3.0);
+    r->gate_sigma = real(3.0);
+    r->offset_x_m = real(0);
+    r->offset_y_m = real(0);
+    r->height_m = real(0.2);
+    r->snapshot_window_s = real(0.5);
+    r->max_fix_drms_m = real(0.25);  // = converged_sigma_xy_m's default
+}
+
+const char *check_range_params(const bl_range_params *r)
+{
+    if (!(is_finite(r->sigma_m) && r->sigma_m > real(0) && r->sigma_m < real(100))) return "range.sigma_m";
+    if (!(is_finite(r->sigma_per_m) && r->sigma_per_m >= real(0) && r->sigma_per_m < real(1)))
+        return "range.sigma_per_m";
+    if (!(is_finite(r->max_range_m) && r->max_range_m > real(0) && r->max_range_m < real(1e4)))
+        return "range.max_range_m";
+    if (!(is_finite(r->gate_sigma) && r->gate_sigma > real(0))) return "range.gate_sigma";
+    if (!(is_finite(r->offset_x_m) && std::fabs(r->offset_x_m) < real(100))) return "range.offset_x_m";
+    if (!(is_finite(r->offset_y_m) && std::fabs(r->offset_y_m) < real(100))) return "range.offset_y_m";
+    if (!(is_finite(r->height_m) && std::fabs(r->height_m) < real(1e5))) return "range.height_m";
+    if (!(is_finite(r->snapshot_window_s) && r->snapshot_window_s > real(0) && r->snapshot_window_s <= real(60)))
+        return "range.snapshot_window_s";
+    if (!(is_finite(r->max_fix_drms_m) && r->max_fix_drms_m > real(0))) return "range.max_fix_drms_m";
+    return nullptr;
+}
+#endif
+
 }  // namespace
 
 extern "C" int bl_config_default(bl_config *cfg)
@@ -136,6 +170,10 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->bearing_beacon_count = 0;  // kleeman-lab has no bearing beacons
 #if BL_WITH_BEARINGS
     default_bearing_params(&cfg->bearing);
+#endif
+    cfg->range_beacon_count = 0;  // kleeman-lab has no range beacons
+#if BL_WITH_RANGES
+    default_range_params(&cfg->range);
 #endif
     // Tuning.
     cfg->sigma_period_s = real(20e-6);  // beacon controller clock: ~100 ppm of 150 ms
@@ -186,7 +224,30 @@ bool bearing_beacons_ok(const bl_config *c)
             if (!(dx * dx + dy * dy > real(1e-6))) return false;
         }
     }
-    return c->beacon_count > 0 || beacons_span_plane(c->bearing_beacons, c->bearing_beacon_count);
+    // (a range-only start needs 3 range beacons: config.h, range_beacon_count)
+    return c->beacon_count > 0 || c->range_beacon_count >= 3 ||
+           beacons_span_plane(c->bearing_beacons, c->bearing_beacon_count);
+}
+#endif
+
+#if BL_WITH_RANGES
+// Range beacons: finite, in range, pairwise distinct in 3D, and spanning the
+// plane when they alone fix the position (a range-only site).
+bool range_beacons_ok(const bl_config *c)
+{
+    for (uint32_t i = 0; i < c->range_beacon_count; ++i) {
+        const bl_beacon *b = &c->range_beacons[i];
+        if (!(is_finite(b->x_m) && is_finite(b->y_m) && is_finite(b->z_m) && std::fabs(b->x_m) < real(1e5) &&
+              std::fabs(b->y_m) < real(1e5) && std::fabs(b->z_m) < real(1e5)))
+            return false;
+        for (uint32_t j = 0; j < i; ++j) {
+            const bl_beacon *o = &c->range_beacons[j];
+            const real dx = b->x_m - o->x_m, dy = b->y_m - o->y_m, dz = b->z_m - o->z_m;
+            if (!(dx * dx + dy * dy + dz * dz > real(1e-6))) return false;
+        }
+    }
+    return c->beacon_count > 0 || c->bearing_beacon_count >= 3 ||
+           beacons_span_plane(c->range_beacons, c->range_beacon_count);
 }
 #endif
 
@@ -226,8 +287,21 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     }
     BL_CHECK(c->beacon_count == 0 || beacons_span_plane(c->beacons, c->beacon_count), "beacons");
     // At least one kind of beacon; without pulses the bearings start the filter (>= 3).
-    BL_CHECK(c->bearing_beacon_count <= BL_MAX_BEACONS && (c->beacon_count > 0 || c->bearing_beacon_count >= 3),
+    BL_CHECK(c->bearing_beacon_count <= BL_MAX_BEACONS &&
+                 (c->beacon_count > 0 || c->bearing_beacon_count >= 3 || c->range_beacon_count > 0),
              "bearing_beacon_count");
+    // A range-only site (no pulse, no bearing beacons) starts from the
+    // trilateration of its ranges: >= 3 range beacons.
+    BL_CHECK(c->range_beacon_count <= BL_MAX_BEACONS &&
+                 (c->beacon_count > 0 || c->bearing_beacon_count > 0 || c->range_beacon_count >= 3),
+             "range_beacon_count");
+#if !BL_WITH_RANGES
+    // Without ranges (common.h BL_WITH_RANGES 0) a site with range beacons
+    // would silently lose them: refused, as bearings above.
+    BL_CHECK(c->range_beacon_count == 0, "range_beacon_count");
+#else
+    BL_CHECK(range_beacons_ok(c), "range_beacons");
+#endif
 #if !BL_WITH_BEARINGS
     // A library built without bearings (common.h BL_WITH_BEARINGS 0) has no
     // bearing fusion and no triangulation start: a site with bearing beacons
@@ -262,6 +336,9 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     if (bad == nullptr) bad = check_wheel_params(&c->wheels);
 #if BL_WITH_BEARINGS
     if (bad == nullptr) bad = check_bearing_params(&c->bearing);
+#endif
+#if BL_WITH_RANGES
+    if (bad == nullptr) bad = check_range_params(&c->range);
 #endif
     BL_CHECK(bad == nullptr, bad);
     BL_CHECK(is_finite(c->sigma_period_s) && c->sigma_period_s > real(0) && c->sigma_period_s < c->beacon_period_s,
@@ -308,8 +385,18 @@ extern "C" bool bl_config_same_geometry(const bl_config *a, const bl_config *b)
         a->first_angle_deg != b->first_angle_deg || a->angle_step_deg != b->angle_step_deg ||
         a->receiver_height_m != b->receiver_height_m || a->wheel_base_m != b->wheel_base_m ||
         (a->sigma_wheel_scale > real(0)) != (b->sigma_wheel_scale > real(0)) ||
-        a->bearing_beacon_count != b->bearing_beacon_count)
+        a->bearing_beacon_count != b->bearing_beacon_count || a->range_beacon_count != b->range_beacon_count)
         return false;
+#if BL_WITH_RANGES
+    if (a->range.offset_x_m != b->range.offset_x_m || a->range.offset_y_m != b->range.offset_y_m ||
+        a->range.height_m != b->range.height_m)
+        return false;
+    const uint32_t nr = a->range_beacon_count < BL_MAX_BEACONS ? a->range_beacon_count : BL_MAX_BEACONS;
+    for (uint32_t i = 0; i < nr; ++i)
+        if (a->range_beacons[i].x_m != b->range_beacons[i].x_m || a->range_beacons[i].y_m != b->range_beacons[i].y_m ||
+            a->range_beacons[i].z_m != b->range_beacons[i].z_m)
+            return false;
+#endif
 #if BL_WITH_BEARINGS
     if (a->bearing.offset_x_m != b->bearing.offset_x_m || a->bearing.offset_y_m != b->bearing.offset_y_m) return false;
     const uint32_t nb = a->bearing_beacon_count < BL_MAX_BEACONS ? a->bearing_beacon_count : BL_MAX_BEACONS;

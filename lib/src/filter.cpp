@@ -230,6 +230,10 @@ void fill_estimate(const bl_filter *f, const XV &x, const PM &P, int64_t t_us, b
         est->bearing_accepted[i] = f->bearing_accepted_[i];
         est->bearing_rejected[i] = f->bearing_rejected_[i];
 #endif
+#if BL_WITH_RANGES
+        est->range_accepted[i] = f->range_accepted_[i];
+        est->range_rejected[i] = f->range_rejected_[i];
+#endif
     }
     if (!est->started) return;
     est->x_m = x(X);

@@ -88,6 +88,15 @@ void remember_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us,
 int start_from_bearings(bl_filter *f);
 #endif
 
+#if BL_WITH_RANGES
+// ---- snapshot_range.cpp
+// Keep a time of flight as its range beacon's latest (the trilateration's input).
+void remember_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, real time_of_flight_s);
+// (Re)start from the trilateration of the kept ranges (filter.h,
+// bl_filter_start_ranges); *f untouched on failure.
+int start_from_ranges(bl_filter *f);
+#endif
+
 // ---- aid_wheels.cpp
 struct WheelSpeedCounts {
     uint32_t fused;    // scalar wheel-speed updates fused

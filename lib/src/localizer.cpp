@@ -165,13 +165,16 @@ void watch(bl_localizer *loc, uint32_t beacon, bool rejected)
     if (loc->win_len_ < loc->reject_w_) loc->win_len_++;
 }
 
-uint32_t window_rejected(const bl_localizer *loc, uint32_t *beacon_mask)
+// The beacon mask: pulse beacons' ids 0.., bearing beacons' from
+// BL_MAX_BEACONS, range beacons' from 2·BL_MAX_BEACONS (64 bits).
+uint32_t window_rejected(const bl_localizer *loc, uint64_t *beacon_mask)
 {
-    uint32_t n = 0, mask = 0;
+    uint32_t n = 0;
+    uint64_t mask = 0;
     for (uint32_t i = 0; i < loc->win_len_; i++)
         if (loc->win_rejected_ & (1u << i)) {
             n++;
-            mask |= 1u << loc->win_beacon_[i];
+            mask |= uint64_t(1) << loc->win_beacon_[i];
         }
     if (beacon_mask) *beacon_mask = mask;
     return n;
@@ -183,16 +186,18 @@ uint32_t window_rejected(const bl_localizer *loc, uint32_t *beacon_mask)
 NOINLINE bool restart_if_persistent(bl_localizer *loc)
 {
     if (loc->reject_k_ == 0 || loc->win_len_ < loc->reject_w_) return false;
-    uint32_t mask = 0;
+    uint64_t mask = 0;
     const uint32_t n = window_rejected(loc, &mask);
     const bl_config &cfg = loc->filter.cfg_;
     // At least min(3, N) beacons rejected (one faulty beacon restarts
     // nothing); with bearing beacons min(3, N - 1): a kidnap along one
     // beacon's line of sight leaves its bearing unchanged (3 bearing beacons: 2).
-    const uint32_t n_beacons = cfg.beacon_count + cfg.bearing_beacon_count;
-    const uint32_t cap = cfg.bearing_beacon_count > 0 ? n_beacons - 1 : n_beacons;
+    // Range beacons likewise: a kidnap along a circle round one beacon
+    // leaves its range unchanged.
+    const uint32_t n_beacons = cfg.beacon_count + cfg.bearing_beacon_count + cfg.range_beacon_count;
+    const uint32_t cap = (cfg.bearing_beacon_count > 0 || cfg.range_beacon_count > 0) ? n_beacons - 1 : n_beacons;
     const int need = static_cast<int>(cap < 3 ? cap : 3);
-    if (n < loc->reject_k_ || __builtin_popcount(mask) < need) return false;
+    if (n < loc->reject_k_ || __builtin_popcountll(mask) < need) return false;
     if (!bl::started(&loc->filter)) return false;
     // The heading kept (read in place: no state copy on this, the deepest, chain).
     const bl_real theta = bl::wrap_angle(loc->filter.x_[BL_IX_THETA]);
@@ -200,6 +205,9 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     if (cfg.beacon_count > 0) rc = bl_filter_start_snapshot(&loc->filter, theta, cfg.reset_sigma_theta_rad);
 #if BL_WITH_BEARINGS
     if (rc != BL_OK && cfg.bearing_beacon_count > 0) rc = bl_filter_start_bearings(&loc->filter);
+#endif
+#if BL_WITH_RANGES
+    if (rc != BL_OK && cfg.range_beacon_count > 0) rc = bl_filter_start_ranges(&loc->filter);
 #endif
     clear_window(loc);
     if (rc != BL_OK) {
@@ -662,6 +670,65 @@ extern "C" int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m,
     return BL_OK;
 }
 #endif  // BL_WITH_BEARINGS
+
+#if BL_WITH_RANGES  // common.h: bl_localizer_range not built without ranges
+// The window's beacon id of range beacon j: after the bearing beacons' ids.
+static_assert(3 * BL_MAX_BEACONS <= 64, "the window's beacon mask holds all three kinds");
+static_assert(3 * BL_MAX_BEACONS <= 256, "window beacon ids fit in uint8_t");
+
+extern "C" int bl_localizer_range(bl_localizer *loc, const bl_range_meas *m, bl_fusion_result *res)
+{
+    if (loc == nullptr || m == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    if (m->beacon_index >= loc->filter.cfg_.range_beacon_count) {
+        loc->counters_.ranges_refused++;
+        return BL_EBEACON;
+    }
+    if (!finite_real(m->time_of_flight_s) || m->time_of_flight_s < 0 || m->t_us > BL_SEQ_TIME_LIMIT_US ||
+        m->t_us < -BL_SEQ_TIME_LIMIT_US) {
+        loc->counters_.ranges_refused++;
+        return BL_EINVAL;
+    }
+    coast_to(loc, m->t_us);
+    bl_fusion_result &r = loc->result_;
+    int rc = bl_filter_fuse_range(&loc->filter, m->beacon_index, m->t_us, m->time_of_flight_s, &r);
+    if (rc == BL_ETIME) {  // older than the state by more than the gap: a new timeline
+        reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
+        rc = bl_filter_fuse_range(&loc->filter, m->beacon_index, m->t_us, m->time_of_flight_s, &r);
+    }
+    if (rc != BL_OK) {  // beyond 1.5 · max range, or a non-finite update: bad data, counted
+        loc->counters_.ranges_refused++;
+        return BL_OK;
+    }
+    const uint32_t window_id = 2 * BL_MAX_BEACONS + m->beacon_index;
+    bool fused = false;
+    switch (r.status) {
+    case BL_FUSION_ACCEPTED:
+    case BL_FUSION_STARTED:
+    case BL_FUSION_RESET:
+        loc->counters_.ranges_fused++;
+        watch(loc, window_id, false);
+        fused = true;
+        break;
+    case BL_FUSION_REJECTED:
+        loc->counters_.ranges_rejected++;
+        watch(loc, window_id, true);
+        fused = restart_if_persistent(loc);
+        break;
+    case BL_FUSION_BUFFERED:
+    default:
+        loc->counters_.ranges_buffered++;
+        break;
+    }
+    const bl_fusion_result out = r;
+    if (fused) {
+        measurement_fused(loc, m->tag);
+        after_update(loc, false);
+    }
+    if (res) *res = out;
+    return BL_OK;
+}
+#endif  // BL_WITH_RANGES
 
 // A known pose (localizer.h): the filter (re)started by bl_filter_start,
 // the persistent-rejection watch emptied, the event queued and counted.

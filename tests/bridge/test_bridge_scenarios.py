@@ -260,3 +260,95 @@ def test_initial_pose_bad_values_exit_78(bridge_bin, value):
     p = subprocess.run([str(bridge_bin), "--site", str(EUROBOT), "--replay", "/dev/null",
                         "--initial-pose", value], capture_output=True, text=True, timeout=20)
     assert p.returncode == 78 and f"--initial-pose: '{value}'" in p.stderr, p.stderr
+
+
+# --------------------------------------------------------------------------
+# Ranges (issue 13): the marvelmind room, four fixed range beacons on the
+# walls and no other beacon (a range-only site: the filter runs on the range
+# receiver's clock, the truth's time base).
+# --------------------------------------------------------------------------
+
+MARVELMIND = SITE.parent / "marvelmind.ini"
+RANGE_COUNTERS = ("ranges_fused", "ranges_rejected", "ranges_buffered", "ranges_refused",
+                  "ranges_unknown_beacon", "ranges_unexpected", "ranges_other_receiver",
+                  "ranges_bad_tof", "stale_range_samples", "unmapped_ranges")
+
+
+def _edit_range_frames(log, every: int, edit) -> int:
+    """Apply edit(bytearray) to every `every`-th RANGE frame (0x130) of the
+    candump log; returns how many were changed."""
+    lines = log.read_text().splitlines()
+    changed = seen = 0
+    for i, line in enumerate(lines):
+        parts = line.split()
+        if len(parts) < 3 or not parts[2].startswith("130#"):
+            continue
+        seen += 1
+        if seen % every:
+            continue
+        data = bytearray.fromhex(parts[2][4:])
+        edit(data)
+        parts[2] = "130#" + data.hex().upper()
+        lines[i] = " ".join(parts)
+        changed += 1
+    log.write_text("\n".join(lines) + "\n")
+    return changed
+
+
+def test_marvelmind_ranges_only(bridge_bin, tmp_path):
+    """The marvelmind scenario replayed: the filter starts from the ranges'
+    trilateration and follows the robot on ranges and encoders, near the
+    truth and inside its own 3 sigma; every range frame lands in exactly one
+    counter; ranges naming a beacon the site does not have (7 of 4), another
+    robot's receiver (2) or a zero time of flight are counted and dropped."""
+    log, truth_path = run_sim(tmp_path, "marvelmind", 30)
+
+    def beacon7(d):
+        d[4] = (d[4] & 0xF0) | 7  # Beacon: bits 32..35
+
+    def receiver2(d):
+        d[4] = (d[4] & 0x0F) | 0x20  # Receiver: bits 36..39
+
+    def zero_tof(d):
+        d[5] = d[6] = 0  # TimeOfFlight: bits 40..55
+
+    unknown = _edit_range_frames(log, 29, beacon7)
+    other = _edit_range_frames(log, 31, receiver2)
+    zero = _edit_range_frames(log, 37, zero_tof)
+    assert unknown > 10 and other > 10 and zero > 10
+    p, est, stats = replay(bridge_bin, log, tmp_path, site=MARVELMIND)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    # the estimates are on the range receiver's clock, the truth's time base
+    assert est["t_us"][0] >= truth["t_us"][0] and est["t_us"][-1] <= truth["t_us"][-1]
+    t_sim, err = errors(est, truth)
+    assert t_sim[0] < 1.0, "the filter did not start from the ranges"
+    keep = t_sim > 2.0
+    rmse = float(np.sqrt(np.mean(err[keep] ** 2)))
+    assert rmse < 0.04, rmse
+    # honest covariance: the position error inside 3 sigma of its own
+    # (larger axis) almost always
+    sigma = np.sqrt(np.maximum(est["var_x_m2"], est["var_y_m2"]))
+    inside = float(np.mean(err[keep] < 3 * np.sqrt(2) * sigma[keep]))
+    assert inside > 0.95, inside
+    received = stats["frames_received"]["range"]
+    assert received > 550  # one ping every 50 ms for 30 s
+    assert sum(stats[k] for k in RANGE_COUNTERS) == received
+    assert stats["ranges_unknown_beacon"] == unknown
+    assert stats["ranges_other_receiver"] == other
+    # a frame edited twice counts where it stopped first (receiver, then ToF)
+    assert stats["ranges_bad_tof"] <= zero and stats["ranges_bad_tof"] >= zero - 2
+    assert stats["ranges_fused"] > 0.8 * (received - unknown - other - zero)
+    assert stats["ranges_refused"] == 0 and stats["ranges_unexpected"] == 0
+    assert stats["stale_range_samples"] == 0 and stats["unmapped_ranges"] == 0
+    assert stats["frames_received"]["pulse_detection"] == 0
+    assert stats["estimator_resets"] == 0
+    assert "ranges ok" in p.stderr  # the final status line
+
+
+def test_ranges_on_a_site_without_range_beacons(bridge_bin, tmp_path):
+    """kleeman-lab has no range beacons: the marvelmind log's range frames
+    are counted as unexpected and dropped."""
+    log, _ = run_sim(tmp_path, "marvelmind", 4)
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    assert stats["ranges_unexpected"] == stats["frames_received"]["range"] > 50
+    assert stats["ranges_fused"] + stats["ranges_buffered"] == 0

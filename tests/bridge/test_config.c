@@ -149,7 +149,8 @@ static void test_unknown_section(void **state)
     snprintf(body, sizeof body, "%s; comment\n[bridg]\nodometry_rate_hz = 20\n", good_body);
     expect_error(body, ":23: [bridg] unknown section (a site file holds [site], [beacons], "
                        "[beacon1]..[beacon16], [receivers], [bearing_beacons], "
-                       "[bearing_beacon1]..[bearing_beacon15], [bearing_sensor], [robot], "
+                       "[bearing_beacon1]..[bearing_beacon15], [bearing_sensor], [range_beacons], "
+                       "[range_beacon1]..[range_beacon15], [range_sensor], [robot], "
                        "[noise], [tuning], [bridge])");
     snprintf(body, sizeof body, "%s[beacon0]\n\nx_m = 1\n", good_body);
     expect_error(body, ":22: [beacon0] unknown section");
@@ -403,8 +404,8 @@ static void test_zero_beacons_needs_bearing_beacons(void **state)
     p[8] = '2'; /* [bearing_beacons] count = 2 */
     p = strstr(body, "[bearing_beacon3]");
     *p = '\0';
-    expect_error(body, ":2: [beacons] count: 0 allowed only for a bearing-only site, with "
-                       "[bearing_beacons] count >= 3 (it is 2)");
+    expect_error(body, ":2: [beacons] count: 0 allowed only with [bearing_beacons] count >= 3 "
+                       "or [range_beacons] count >= 3 (they are 2 and 0)");
     /* and a site of both kinds is fine */
     struct bridge_config cfg;
     config_defaults(&cfg);
@@ -412,6 +413,122 @@ static void test_zero_beacons_needs_bearing_beacons(void **state)
     load_ok(body, &cfg);
     assert_int_equal(cfg.beacon_count, 3);
     assert_int_equal(cfg.bearing_beacon_count, 3);
+}
+
+/* A range-only site (Marvelmind-like, issue 13): no ultrasonic or bearing
+ * beacons, three range beacons, the receiver's section. */
+static const char *range_body =
+    "[beacons]\n"                          /* 1 */
+    "count = 0\n"                          /* 2 */
+    "[range_beacons]\n"                    /* 3 */
+    "count = 3\n"                          /* 4 */
+    "[range_beacon1]\n"                    /* 5 */
+    "x_m = 0.1\n" "y_m = 0.1\n" "z_m = 2.5\n" /* 6-8 */
+    "[range_beacon2]\n"                    /* 9 */
+    "x_m = 5.9\n" "y_m = 0.1\n" "z_m = 2.5\n" /* 10-12 */
+    "[range_beacon3]\n"                    /* 13 */
+    "x_m = 5.9\n" "y_m = 5.9\n" "z_m = 2.4\n" /* 14-16 */
+    "[range_sensor]\n"                     /* 17 */
+    "sigma_m = 0.01\n"                     /* 18 */
+    "height_m = 0.3\n"                     /* 19 */
+    "max_range_m = 8\n";                   /* 20 */
+
+static void test_range_site(void **state)
+{
+    (void)state;
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    load_ok(range_body, &cfg);
+    assert_int_equal(cfg.beacon_count, 0);
+    assert_int_equal(cfg.range_beacon_count, 3);
+    assert_true(cfg.range_beacon[2].x_m == 5.9 && cfg.range_beacon[2].z_m == 2.4);
+    assert_true(cfg.range_sensor.sigma_m == 0.01 && cfg.range_sensor.height_m == 0.3);
+    assert_true(cfg.range_sensor.max_range_m == 8.0);
+    assert_true(cfg.range_sensor.sigma_per_m == 0.005);  /* default */
+    assert_true(cfg.range_sensor.gate_sigma == 3.0);     /* default */
+    assert_true(cfg.range_sensor.ping_period_s == 0.05); /* default */
+    /* the library's config: the range beacons and the receiver's block */
+    bl_config c;
+    char err[CONFIG_ERR_LEN] = "", want[CONFIG_ERR_LEN + 64];
+    if (estimator_make_config(&cfg, &c, err, sizeof err) != 0)
+        fail_msg("%s", err);
+    assert_int_equal(c.range_beacon_count, 3);
+    assert_true(c.range_beacons[1].x_m == (bl_real)5.9 && c.range_beacons[1].y_m == (bl_real)0.1 &&
+                c.range_beacons[1].z_m == (bl_real)2.5);
+    assert_true(c.range.sigma_m == (bl_real)0.01 && c.range.height_m == (bl_real)0.3);
+    assert_true(c.range.max_range_m == (bl_real)8.0 && c.range.gate_sigma == (bl_real)3.0);
+    /* a complaint about a range beacon names [range_beacon1] and its line */
+    cfg.range_beacon[1] = cfg.range_beacon[0]; /* two beacons on one spot */
+    assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), -1);
+    snprintf(want, sizeof want, "%s:6: [range_beacon1] x_m: rejected by the estimator "
+             "(range_beacons: ", cfg.path);
+    if (strncmp(err, want, strlen(want)) != 0)
+        fail_msg("got '%s', want prefix '%s'", err, want);
+    /* a bad range field names its [range_sensor] key and line */
+    cfg.range_beacon[1] = cfg.range_beacon[0];
+    load_ok(range_body, &cfg);
+    cfg.range_sensor.sigma_m = NAN;
+    assert_int_equal(estimator_make_config(&cfg, &c, err, sizeof err), -1);
+    snprintf(want, sizeof want, "%s:18: [range_sensor] sigma_m: rejected by the estimator "
+             "(range.sigma_m: ", cfg.path);
+    if (strncmp(err, want, strlen(want)) != 0)
+        fail_msg("got '%s', want prefix '%s'", err, want);
+    /* config_format_error finds an item's line */
+    config_format_error(&cfg, "range_beacon3", "z_m", "why", err, sizeof err);
+    snprintf(want, sizeof want, "%s:14: [range_beacon3] z_m: why", cfg.path);
+    assert_string_equal(err, want);
+}
+
+/* [range_beaconN] goes through the one per-item mechanism; [range_sensor]
+ * keys are checked against their schema ranges; [beacons] count = 0 needs
+ * >= 3 range beacons when there are no bearing beacons. */
+static void test_range_sections_errors(void **state)
+{
+    (void)state;
+    char body[2048];
+    snprintf(body, sizeof body, "%s", range_body);
+    char *p = strstr(body, "z_m = 2.5\n[range_beacon2]");
+    memmove(p, p + 10, strlen(p + 10) + 1); /* drop range beacon 1's z_m */
+    expect_error(body, ":6: [range_beacon1] z_m: missing (count = 3 range_beacons)");
+    snprintf(body, sizeof body, "%s[range_beacon4]\ny_m = 1\n", range_body);
+    expect_error(body, ":22: [range_beacon4] y_m: range beacon beyond [range_beacons] "
+                       "count = 3");
+    snprintf(body, sizeof body, "%s[range_beacon16]\nx_m = 1\n", range_body);
+    expect_error(body, ":22: [range_beacon16] x_m: range beacon number 16 above the "
+                       "maximum 15");
+    snprintf(body, sizeof body, "%s[range_beacon2]\nz_m = 1\n", range_body);
+    expect_error(body, ":22: [range_beacon2] z_m: given twice");
+    snprintf(body, sizeof body, "%s[range_sensor]\nsigma_deg = 1\n", range_body);
+    expect_error(body, ":22: [range_sensor] sigma_deg: unknown key");
+    snprintf(body, sizeof body, "%s[range_sensor]\ngate_sigma = 0\n", range_body);
+    expect_error(body, ":22: [range_sensor] gate_sigma: 0 out of range (0..1000]");
+    snprintf(body, sizeof body, "%s[range_sensor]\nsigma_per_m = x\n", range_body);
+    expect_error(body, ":22: [range_sensor] sigma_per_m: not a number: 'x'");
+    snprintf(body, sizeof body, "[range_beacons]\ncount = 16\n%s", good_body);
+    expect_error(body, ":2: [range_beacons] count: 16 out of range 0..15");
+    /* two range beacons and no other beacon */
+    snprintf(body, sizeof body, "%s", range_body);
+    p = strstr(body, "count = 3\n");
+    p[8] = '2';
+    p = strstr(body, "[range_beacon3]");
+    memmove(p, strstr(p, "[range_sensor]"), strlen(strstr(p, "[range_sensor]")) + 1);
+    expect_error(body, ":2: [beacons] count: 0 allowed only with [bearing_beacons] count >= 3 "
+                       "or [range_beacons] count >= 3 (they are 0 and 2)");
+    /* a beacon site with range beacons beyond their count (0) */
+    snprintf(body, sizeof body, "%s[range_beacon1]\nx_m = 1\n", good_body);
+    expect_error(body, ":23: [range_beacon1] x_m: range beacon beyond [range_beacons] "
+                       "count = 0");
+    /* and the repository's range site loads */
+    struct bridge_config cfg;
+    config_defaults(&cfg);
+    char err[CONFIG_ERR_LEN];
+    if (config_load_file(&cfg, "hw_sim/beaconloc_sim/data/scenarios/marvelmind.ini", err,
+                         sizeof err) != 0)
+        fail_msg("%s", err);
+    assert_int_equal(cfg.range_beacon_count, 4);
+    bl_config c;
+    if (estimator_make_config(&cfg, &c, err, sizeof err) != 0)
+        fail_msg("%s", err);
 }
 
 static void test_syntax_error_and_missing_file(void **state)
@@ -743,6 +860,8 @@ int main(void)
         cmocka_unit_test(test_syntax_error_and_missing_file),
         cmocka_unit_test(test_bearing_site),
         cmocka_unit_test(test_bearing_beacons_incomplete_or_extra),
+        cmocka_unit_test(test_range_site),
+        cmocka_unit_test(test_range_sections_errors),
         cmocka_unit_test(test_zero_beacons_needs_bearing_beacons),
         cmocka_unit_test(test_no_beacons_is_an_error),
         cmocka_unit_test(test_same_geometry),

@@ -119,7 +119,13 @@ static void test_json_report(void **state)
     fc.out_of_order[FRAME_ENCODERS] = 8;
     fc.received[FRAME_BEARING] = 33;
     fc.out_of_order[FRAME_BEARING] = 2;
+    fc.received[FRAME_RANGE] = 44;
+    fc.duplicates[FRAME_RANGE] = 3;
     struct stats_report r = { .frames = &fc, .kernel_drops = 5,
+                              .ranges_fused = 21, .ranges_rejected = 22, .ranges_buffered = 23,
+                              .ranges_refused = 24, .ranges_unknown_beacon = 25,
+                              .ranges_unexpected = 26, .ranges_other_receiver = 27,
+                              .ranges_bad_tof = 28, .stale_ranges = 29, .unmapped_ranges = 31,
                               .bearings_fused = 30, .bearings_rejected = 3,
                               .bearings_buffered = 4, .bearings_refused = 1,
                               .bearings_unknown_beacon = 5, .bearings_unexpected = 6,
@@ -151,14 +157,16 @@ static void test_json_report(void **state)
     assert_non_null(strstr(buf, "\"latency_interval_p99_us\": 61,"));
     assert_non_null(strstr(buf, "\"latency_interval_max_us\": 512,"));
     assert_non_null(strstr(buf, "\"replay_frames_per_s\": 12345.6,"));
-    assert_non_null(strstr(buf, "\"duplicates\": 7,"));
+    assert_non_null(strstr(buf, "\"duplicates\": 10,"));
     assert_non_null(strstr(buf, "\"duplicates_per_frame\": {\"pulse_detection\": 6, "
-                                "\"wheel_encoders\": 0, \"node_status\": 1, \"bearing\": 0}"));
+                                "\"wheel_encoders\": 0, \"node_status\": 1, \"bearing\": 0, "
+                                "\"range\": 3}"));
     assert_non_null(strstr(buf, "\"frames_received_by_id\": {\"0x100\": 11, \"0x110\": 22, "
-                                "\"0x120\": 0, \"0x140\": 33}"));
+                                "\"0x120\": 0, \"0x140\": 33, \"0x130\": 44}"));
     assert_non_null(strstr(buf, "\"out_of_order\": 10,"));
     assert_non_null(strstr(buf, "\"out_of_order_per_frame\": {\"pulse_detection\": 0, "
-                                "\"wheel_encoders\": 8, \"node_status\": 0, \"bearing\": 2}"));
+                                "\"wheel_encoders\": 8, \"node_status\": 0, \"bearing\": 2, "
+                                "\"range\": 0}"));
     assert_non_null(strstr(buf, "\"bearings_fused\": 30,"));
     assert_non_null(strstr(buf, "\"bearings_rejected\": 3,"));
     assert_non_null(strstr(buf, "\"bearings_buffered\": 4,"));
@@ -167,6 +175,16 @@ static void test_json_report(void **state)
     assert_non_null(strstr(buf, "\"bearings_unexpected\": 6,"));
     assert_non_null(strstr(buf, "\"stale_bearing_samples\": 7,"));
     assert_non_null(strstr(buf, "\"pulses_unexpected\": 8,"));
+    assert_non_null(strstr(buf, "\"ranges_fused\": 21,"));
+    assert_non_null(strstr(buf, "\"ranges_rejected\": 22,"));
+    assert_non_null(strstr(buf, "\"ranges_buffered\": 23,"));
+    assert_non_null(strstr(buf, "\"ranges_refused\": 24,"));
+    assert_non_null(strstr(buf, "\"ranges_unknown_beacon\": 25,"));
+    assert_non_null(strstr(buf, "\"ranges_unexpected\": 26,"));
+    assert_non_null(strstr(buf, "\"ranges_other_receiver\": 27,"));
+    assert_non_null(strstr(buf, "\"ranges_bad_tof\": 28,"));
+    assert_non_null(strstr(buf, "\"stale_range_samples\": 29,"));
+    assert_non_null(strstr(buf, "\"unmapped_ranges\": 31,"));
     assert_non_null(strstr(buf, "\"write_errors\": 11,"));
     assert_non_null(strstr(buf, "\"write_errors_per_file\": {\"record\": 9, \"estimates\": 2}"));
     assert_int_equal(stats_write_json(&r, "/nonexistent/dir/s.json") < 0, 1);
@@ -237,7 +255,11 @@ static void test_status_line_text(void **state)
     fc.duplicates[FRAME_ENCODERS] = 5;
     fc.out_of_order[FRAME_STATUS] = 6;
     fc.received[FRAME_BEARING] = 40;
-    struct stats_report r = { .frames = &fc, .frames_total = 1241, .kernel_drops = 7,
+    fc.received[FRAME_RANGE] = 50;
+    struct stats_report r = { .frames = &fc, .frames_total = 1291, .kernel_drops = 7,
+                              .ranges_fused = 44, .ranges_rejected = 1,
+                              .ranges_unknown_beacon = 2, .ranges_bad_tof = 1,
+                              .ranges_other_receiver = 1, .ranges_refused = 1,
                               .bearings_fused = 35, .bearings_rejected = 2,
                               .bearings_unknown_beacon = 3,
                               .error_frames = 8, .pulses_accepted = 69, .pulses_rejected = 9,
@@ -250,9 +272,10 @@ static void test_status_line_text(void **state)
     char text[1024];
     captured_log(f, text, sizeof text);
     assert_string_equal(text,
-                        "info: final: frames 1241 (pulse 181 enc 1000 status 20 brg 40) bad 1 "
+                        "info: final: frames 1291 (pulse 181 enc 1000 status 20 brg 40 rng 50) "
+                        "bad 1 "
                         "unknown 2 range 3 lost 4 dup 5 late 6 kdrop 7 errfr 8 | pulses ok 69 "
-                        "rej 9 | bearings ok 35 rej 2 unk 3 | "
+                        "rej 9 | bearings ok 35 rej 2 unk 3 | ranges ok 44 rej 1 unk 2 bad 3 | "
                         "x=5.369 y=2.848 | odom 284 werr 11 | latency p50 8 p99 21 us "
                         "(interval p50 7 p99 -1 us)\n");
 }

@@ -5,7 +5,9 @@
  * (bridge/estimator.c, node_clock.c, the library) as bridge/frame_in.c's
  * handle_frame() does, on the kleeman-lab site, or on the eurobot site (bearings
  * and encoders, no ultrasonic beacon) when bit 2 of the input's first byte is
- * set (the first opcode reads only bits 0-1).
+ * set, or on the marvelmind site (ranges and encoders, no other beacon: the
+ * range receiver's clock is the reference) when bit 3 is set and bit 2 not
+ * (the first opcode reads only bits 0-1).
  *
  * Input: a sequence of records, each one opcode byte then its fields:
  *   op 0, 1  socket read: size selector (CAN_MTU, CANFD_MTU, any size, a
@@ -21,7 +23,7 @@
  * Invariants checked after every frame:
  *   - can_in_read: a length within the classic/FD maximum, counters add up
  *     (frames + error frames + bad sizes = reads of data);
- *   - frame_decode: FRAME_OK only for our four ids, classic, 8 bytes; the
+ *   - frame_decode: FRAME_OK only for our five ids, classic, 8 bytes; the
  *     result counters add up to the frames decoded;
  *   - the estimator's output, when valid, is finite with a covariance whose
  *     diagonal is >= 0; its health says finite.
@@ -112,6 +114,7 @@ ssize_t __wrap_recvmsg(int fd, struct msghdr *mh, int flags)
 static struct bridge_config site;
 static struct estimator est_template; /* estimator_init'ed once, copied per input */
 static struct estimator est_bearing_template; /* the same on the bearing-only site */
+static struct estimator est_range_template;   /* the same on the range-only site */
 static struct estimator est;
 static int dummy_fd = -1;             /* a real descriptor for can_in to own */
 
@@ -131,6 +134,13 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
     config_defaults(&bearing_site);
     if (config_load_file(&bearing_site, FUZZ_BEARING_SITE, err, sizeof err) != 0 ||
         estimator_init(&est_bearing_template, &bearing_site, err, sizeof err) != 0) {
+        fprintf(stderr, "fuzz_frames: %s\n", err);
+        abort();
+    }
+    struct bridge_config range_site;
+    config_defaults(&range_site);
+    if (config_load_file(&range_site, FUZZ_RANGE_SITE, err, sizeof err) != 0 ||
+        estimator_init(&est_range_template, &range_site, err, sizeof err) != 0) {
         fprintf(stderr, "fuzz_frames: %s\n", err);
         abort();
     }
@@ -181,7 +191,12 @@ static void check_output(const struct estimator *e, int64_t now)
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     struct fz z = { data, size };
-    memcpy(&est, size > 0 && (data[0] & 4) ? &est_bearing_template : &est_template, sizeof est);
+    const struct estimator *tmpl = &est_template;
+    if (size > 0 && (data[0] & 4))
+        tmpl = &est_bearing_template;
+    else if (size > 0 && (data[0] & 8))
+        tmpl = &est_range_template;
+    memcpy(&est, tmpl, sizeof est);
     struct frame_counters fc;
     frame_counters_init(&fc);
     struct can_in ci;
@@ -276,7 +291,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                            (msg.id == BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID ||
                             msg.id == BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID ||
                             msg.id == BEACONLOC_CAN_NODE_STATUS_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_BEARING_FRAME_ID),
+                            msg.id == BEACONLOC_CAN_BEARING_FRAME_ID ||
+                            msg.id == BEACONLOC_CAN_RANGE_FRAME_ID),
                        "FRAME_OK for id 0x%x len %u flags 0x%x", (unsigned)msg.id,
                        msg.len, msg.flags);
             FUZZ_CHECK(f.kind >= 0 && f.kind < FRAME_KIND_COUNT &&

@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[2]
 DBC = ROOT / "hw_sim/beaconloc_sim/data/beaconloc.dbc"
 SITE = ROOT / "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"
 SCENARIOS = [("kleeman-lab", 4.0), ("echo-storm", 3.0), ("encoder-silence", 3.0), ("kidnap", 3.0),
-             ("eurobot", 3.0)]
+             ("eurobot", 3.0), ("marvelmind", 3.0)]
 
 
 def sim_log(work: Path, scenario: str, seconds: float) -> list:
@@ -94,6 +94,8 @@ def seeds_frames(out: Path, logs: dict) -> None:
                 blob += bytes([3, 0])  # periodic work
         if scn.startswith("eurobot") and blob:
             blob[0] |= 4  # fuzz_frames: the eurobot site for this input
+        if scn.startswith("marvelmind") and blob:
+            blob[0] |= 8  # fuzz_frames: the marvelmind site for this input
         write(out, f"{scn}.replay", bytes(blob))
         # the first frames as SocketCAN reads (struct can_frame, CAN_MTU)
         blob = bytearray()
@@ -103,6 +105,8 @@ def seeds_frames(out: Path, logs: dict) -> None:
             blob += bytes([0, 0]) + frame + dt_code(nxt - t)
         if scn.startswith("eurobot") and blob:
             blob[0] |= 4
+        if scn.startswith("marvelmind") and blob:
+            blob[0] |= 8
         write(out, f"{scn}.socket", bytes(blob))
     # error frame, FD, RTR, extended and short frames through the socket path
     blob = bytearray()
@@ -123,6 +127,8 @@ def seeds_site(out: Path) -> None:
           .replace("count = 8", "count = 6").encode())
     # a bearing-only site (per-item [bearing_beaconN] sections, [beacons] count = 0)
     write(out, "eurobot.ini", (SITE.parent / "eurobot.ini").read_bytes())
+    # a range-only site (per-item [range_beaconN] sections, [range_sensor])
+    write(out, "marvelmind.ini", (SITE.parent / "marvelmind.ini").read_bytes())
 
 
 def seeds_mavlink(out: Path) -> None:

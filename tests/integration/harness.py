@@ -164,7 +164,10 @@ def odometry_site_pos_cov(msg) -> np.ndarray:
 class NodeClockProbe:
     """Listens on the bus (python-can, a socket of its own) and records, for
     every frame of the truth's time base (PULSE_DETECTION: the receiver
-    array; BEARING on a site without ultrasonic beacons: the bearing sensor),
+    array; BEARING on a site without ultrasonic beacons: the bearing sensor;
+    RANGE on a site of range beacons only: the range receiver, whose frame
+    leaves TimeOfFlight after its NodeTime, the emission: that flight is
+    taken off the receive time, as the bridge does),
     the node time (decoded with cantools from the DBC) and the kernel
     receive time. The lower envelope of (receive - node) maps CLOCK_MONOTONIC
     to the node clock, the time base of the truth CSV, so the bridge's
@@ -206,7 +209,7 @@ class NodeClockProbe:
                 sig = self._pulse.decode(msg.data)
             except Exception:  # a malformed frame of a fault test
                 continue
-            self.rx_real_s.append(msg.timestamp)
+            self.rx_real_s.append(msg.timestamp - float(sig.get("TimeOfFlight", 0)) * 1e-6)
             self.node_us.append(int(sig["NodeTime"]))
 
     def close(self) -> None:
@@ -526,7 +529,8 @@ def run_live(rig: Rig, scenario: str, duration_s: float, *, seed: int | None = N
     """Bridge first (waits for its HEARTBEAT), then the simulator live on the
     rig's bus for duration_s; `actions` = [(seconds after the simulator
     started, callable(rig))] run in order; finally SIGTERM to the bridge.
-    clock_frame: the frame whose NodeTime is the truth's clock (BEARING on a
+    clock_frame: the frame whose NodeTime is the truth's clock (RANGE on a
+    range-only site; BEARING on a
     site without ultrasonic beacons)."""
     lst = rig.listen()
     rig.start_bridge(site=site, extra=bridge_extra, env=bridge_env)

@@ -6,6 +6,8 @@ what happened (STATUSTEXT), and the accuracy comes back afterwards.
     encoder-silence   the encoder node sends nothing for a while (scenario file)
     eurobot           bearings to 3 beacons and encoders, no ultrasonic beacon
                       (Vander et al. 2011, issue 11)
+    marvelmind        ranges to 4 fixed range beacons and encoders, no other
+                      beacon (CMU Millibots' RF + ultrasound ranging, issue 13)
 
 The temperature ramp's checks (the estimate follows the speed of sound)
 need no live bus: tests/bridge/test_bridge_scenarios.py replays it.
@@ -125,3 +127,68 @@ def test_eurobot_bearings_end_to_end(rig):
     assert stats["bearings_fused"] > 0.8 * received
     assert stats["bearings_unknown_beacon"] == 0 and stats["bearings_refused"] == 0
     assert stats["frames_received"]["pulse_detection"] == 0
+
+
+# The marvelmind room (issue 13): four fixed range beacons on the walls of a
+# 6 m room, no other beacon; the robot stands 5 s, then laps a rounded 4 m
+# square at 0.4 m/s. 30 s of it live (the start, the stand, most of a lap).
+MARVELMIND_SITE = h.SCENARIOS / "marvelmind.ini"
+MARVELMIND_LIVE_S = 30.0
+MARVELMIND_JUDGE_AFTER_S = 2.0  # the trilateration start and its first second
+MARVELMIND_RMS_M = 0.04         # replayed: 17 mm over 30 s (seed 1); live: 17 to 20 mm
+# Share of ODOMETRY inside its own 3 sigma (2D Mahalanobis <= 3; 98.9 % for
+# an exactly consistent filter). Measured: replayed 96.3 % (seed 1; 96.2,
+# 96.7, 99.8 % for seeds 2-4: the filter's covariance is a little optimistic
+# on this site); live in the UML guest 96.5 % (17.4 mm rms), but 90.0 % in a
+# run on a host loaded by other jobs (load 2.6 on 2 cores, frames up to 42 ms
+# late): there live and replayed estimates parted at 16-18 s and 22-24 s of
+# the lap (the same frames, other receive times: the encoder samples' mapping
+# onto the range receiver's clock). The floor below catches a broken
+# covariance; the other cases' 95 % is met on a quiet host only, by 1.5 %.
+MARVELMIND_INSIDE_3SIGMA = 0.85
+RANGE_COUNTERS = ("ranges_fused", "ranges_rejected", "ranges_buffered", "ranges_refused",
+                  "ranges_unknown_beacon", "ranges_unexpected", "ranges_other_receiver",
+                  "ranges_bad_tof", "stale_range_samples", "unmapped_ranges")
+
+
+def test_marvelmind_ranges_end_to_end(rig):
+    """simulator -> vcan -> bridge -> MAVLink on a site of four fixed range
+    beacons and no other: the pymavlink-decoded ODOMETRY against the truth
+    (on the range receiver's clock, mapped from the bus) and against its own
+    reported covariance; every range frame in exactly one counter."""
+    sc = h.scenario_events("marvelmind")
+    duration = min(sc.duration_s, MARVELMIND_LIVE_S)
+    run = h.run_live(rig, "marvelmind", duration, site=MARVELMIND_SITE, clock_frame="RANGE")
+    assert run.bridge_rc == 0, rig.logs()
+
+    # 1. The output starts from the ranges (no pulse, no bearing) and does not stop.
+    times = [x.t_mono_s for x in run.odometry
+             if run.t_sim_start_mono_s + MARVELMIND_JUDGE_AFTER_S <= x.t_mono_s
+             <= run.t_sim_end_mono_s]
+    assert len(times) > 20 * (duration - MARVELMIND_JUDGE_AFTER_S - 1.0), len(times)
+    assert h.max_gap_s(times) < 0.5
+
+    # 2. Against the truth and its own 3 sigma.
+    t_s, err, mahal, _quality = run.odometry_vs_truth()
+    np.savetxt(rig.workdir / "odometry-vs-truth.csv", np.column_stack([t_s, err, mahal]),
+               delimiter=",", header="t_s,err_m,mahal", comments="")
+    ok = (t_s >= MARVELMIND_JUDGE_AFTER_S) & np.isfinite(err) & np.isfinite(mahal)
+    assert ok.sum() > 100, ok.sum()
+    inside = float(np.mean(mahal[ok] <= 3.0))
+    rms = float(np.sqrt(np.mean(err[ok] ** 2)))
+    print(f"marvelmind live: odometry={int(ok.sum())} rms_mm={rms * 1e3:.1f} "
+          f"max_mm={float(np.max(err[ok])) * 1e3:.1f} inside_3sigma={inside:.3f}")
+    assert inside >= MARVELMIND_INSIDE_3SIGMA, f"only {inside:.1%} of ODOMETRY inside their 3 sigma"
+    assert rms < MARVELMIND_RMS_M, f"rms position error {rms * 1e3:.0f} mm"
+
+    # 3. Every range frame in exactly one counter, nearly all fused; no pulse
+    # and no bearing on this bus.
+    stats = run.bridge_stats
+    assert stats is not None, rig.logs()
+    received = stats["frames_received"]["range"]
+    assert received > 0.8 * duration / 0.05, received  # a ping every 50 ms, less the bus's losses
+    assert sum(stats[k] for k in RANGE_COUNTERS) == received
+    assert stats["ranges_fused"] > 0.8 * received
+    assert stats["ranges_unknown_beacon"] == 0 and stats["ranges_refused"] == 0
+    assert stats["frames_received"]["pulse_detection"] == 0
+    assert stats["frames_received"]["bearing"] == 0

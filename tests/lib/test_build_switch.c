@@ -1,6 +1,7 @@
 /* cmocka tests of the per-source build switches (common.h): built against
- * the double, float and sanitized libraries (BL_WITH_BEARINGS 1) and against
- * build/lib/nobearing/ (BL_WITH_BEARINGS 0, lib/lib.mk), so each assertion
+ * the double, float and sanitized libraries (BL_WITH_BEARINGS 1,
+ * BL_WITH_RANGES 1) and against build/lib/nobearing/ (both 0, lib/lib.mk),
+ * so each assertion
  * below checks the build it runs in. */
 #include <stdarg.h>
 #include <stddef.h>
@@ -34,6 +35,26 @@ static void test_pulse_site_with_bearing_beacons(void **state)
 #endif
 }
 
+/* The same for range beacons (BL_WITH_RANGES). */
+static void test_pulse_site_with_range_beacons(void **state)
+{
+    (void)state;
+    bl_config c;
+    assert_int_equal(bl_config_default(&c), BL_OK);
+    const char *field = "untouched";
+    c.range_beacon_count = 3;
+#if BL_WITH_RANGES
+    c.range_beacons[0] = (bl_beacon){1, 1, (bl_real)2.5};
+    c.range_beacons[1] = (bl_beacon){5, 1, (bl_real)2.5};
+    c.range_beacons[2] = (bl_beacon){3, 5, (bl_real)2.5};
+    assert_int_equal(bl_config_check(&c, &field), BL_OK);
+#else
+    assert_int_equal(bl_config_check(&c, &field), BL_ECONFIG);
+    assert_non_null(field);
+    assert_string_equal(field, "range_beacon_count");
+#endif
+}
+
 /* A pulse-only localizer inits in either build; the bearing counters are
  * there only with bearings (a compile-time check: this file builds in both). */
 static void test_pulse_localizer_inits(void **state)
@@ -52,12 +73,16 @@ static void test_pulse_localizer_inits(void **state)
 #if BL_WITH_BEARINGS
     assert_int_equal(k.bearings_fused, 0);
 #endif
+#if BL_WITH_RANGES
+    assert_int_equal(k.ranges_fused, 0);
+#endif
 }
 
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_pulse_site_with_bearing_beacons),
+        cmocka_unit_test(test_pulse_site_with_range_beacons),
         cmocka_unit_test(test_pulse_localizer_inits),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

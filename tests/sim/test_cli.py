@@ -170,6 +170,47 @@ def test_run_eurobot_writes_a_candump_log_of_bearing_frames_and_the_bound(tmp_pa
     assert np.all(truth[:, 12] > 0) and truth[-1, 12] < 0.01
 
 
+@pytest.mark.parametrize("window", [None, "7"])
+def test_run_marvelmind_writes_a_log_of_range_frames_truth_and_odometry(tmp_path, window):
+    """The range-only site through the command: RANGE frames decode with cantools, their
+    counters roll modulo 16, the stats count the pings, the truth carries the bound (on the
+    range receiver's clock), the odometry is written."""
+    import cantools
+    from beaconloc_sim.resources import dbc_path
+    out = {k: tmp_path / f"{k}" for k in ("log", "truth", "odo", "stats")}
+    args = [str(BIN), "run", "marvelmind-multipath", "--duration", "20", "--log", str(out["log"]),
+            "--truth", str(out["truth"]), "--odometry", str(out["odo"]), "--stats",
+            str(out["stats"])]
+    proc = subprocess.run(args + (["--window", window] if window else []), capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    db = cantools.database.load_file(str(dbc_path()))
+    decoded = [(m.arbitration_id, db.decode_message(m.arbitration_id, m.data))
+               for m in can.CanutilsLogReader(str(out["log"]))]
+    ranges = [s for fid, s in decoded if fid == 0x130]
+    stats = json.loads(out["stats"].read_text())
+    assert len(ranges) == stats["frames"]["0x130"] == stats["ranges"]["sent"]
+    assert stats["frames"]["0x100"] == 0
+    # 400 pings in 20 s, 5 % dropouts, 10 % of the sent ones multipath
+    assert 399 <= stats["ranges"]["pinged"] <= 401
+    assert 0.01 < stats["ranges"]["dropout"] / stats["ranges"]["pinged"] < 0.10
+    assert 0.04 < stats["ranges"]["multipath"] / stats["ranges"]["sent"] < 0.17
+    assert np.all(np.diff([s["Counter"] for s in ranges]) % 16 == 1)
+    assert {s["Beacon"] for s in ranges} == {1, 2, 3, 4}
+    assert {s["NodeId"] for fid, s in decoded if fid == 0x120} == {2, 4}
+    with open(out["truth"]) as fh:
+        rows = list(csv.reader(fh))
+    truth = np.array(rows[1:], dtype=float)
+    assert rows[0] == TRUTH_HEADER and len(truth) == 20 * 50 + 1
+    assert np.all(np.diff(truth[:, 0]) > 0)
+    # the range clock (range_offset_us = 4 290 000 000) wraps 5 s into the run
+    assert truth[0, 0] < 2**32 < truth[-1, 0]
+    assert np.all(truth[25:, 12] < 0.05) and truth[0, 12] > 1.0
+    with open(out["odo"]) as fh:
+        odo = list(csv.reader(fh))
+    assert len(odo) > 20 * 100
+
+
 def test_bound_prior_is_the_estimators_start(tmp_path, capsys):
     """--bound-prior: the bound starts from the given sigma about the true start pose (the
     information a known start gives the estimator) and stays below the default prior's."""

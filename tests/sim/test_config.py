@@ -30,9 +30,13 @@ def test_builtin_scenarios_all_load():
         if scn.site.name == "eurobot":       # Vander 2011: the Eurobot table, bearings only
             assert scn.duration_s == 12 and scn.site.beacon_count == 0
             assert scn.site.bearing_beacon_count == 3
+        elif scn.site.name == "marvelmind":  # fixed range beacons only (issue 13)
+            assert scn.duration_s == 60 and scn.site.beacon_count == 0
+            assert scn.site.range_beacon_count == 4 and scn.site.bearing_beacon_count == 0
         else:
             assert scn.duration_s == 120 and scn.site.beacon_count == 6
     assert {"eurobot", "eurobot-outage20", "eurobot-outage50", "eurobot-opponent"} <= set(names)
+    assert {"marvelmind", "marvelmind-multipath"} <= set(names)
 
 
 def test_bad_site_number_names_file_line_key(make_scenario, tmp_path):

@@ -20,7 +20,7 @@ HERE = Path(__file__).parent
 VANDER = HERE / "vander-table.ini"
 BIN = Path(sys.executable).with_name("beaconloc-sim")
 SIGMA_RAD = math.radians(1.0)
-LINE = re.compile(r"^map site=(\S+) kind=(tdoa|bearing|both) step_m=([0-9.e+-]+) "
+LINE = re.compile(r"^map site=(\S+) kind=(tdoa|bearing|range|both) step_m=([0-9.e+-]+) "
                   r"drms_median_mm=([0-9.]+) drms_p90_mm=([0-9.]+) drms_worst_mm=([0-9.]+) "
                   r"(heading_median_deg=[0-9.]+ heading_p90_deg=[0-9.]+ "
                   r"heading_worst_deg=[0-9.]+ )?"
@@ -233,3 +233,86 @@ def test_bearing_bound_depends_on_heading_only_through_the_offset(tmp_path):
         site.bearing_beacons_m, site.bearing_offset_m, SIGMA_RAD))[0] for th in m.headings_rad]
     ok = ~m.degenerate
     np.testing.assert_array_equal(m.drms_m[ok], np.max(per_heading, axis=0)[ok])
+
+
+def square(a_m: float, centre=(0.0, 0.0), z_m: float = 0.0, first_deg: float = 0.0) -> np.ndarray:
+    """Four beacons at horizontal distance a from centre, 90 degrees apart, at height z, (4, 3)."""
+    ang = np.radians(first_deg + np.array([0.0, 90.0, 180.0, 270.0]))
+    return np.stack([centre[0] + a_m * np.cos(ang), centre[1] + a_m * np.sin(ang),
+                     np.full(4, z_m)], axis=1)
+
+
+@pytest.mark.parametrize("a_m, dz_m, sigma_m, per_m", [(2.0, 0.0, 0.008, 0.005),
+                                                       (4.1, 2.2, 0.008, 0.005),
+                                                       (0.5, 0.0, 0.02, 0.0)])
+def test_range_centre_of_square(a_m, dz_m, sigma_m, per_m):
+    # Each range's Jacobian row (x, y) is the horizontal part of the unit vector from the
+    # beacon, u_j = (a / d) e_j, d = sqrt(a^2 + dz^2), with sigma = sigma_m + per_m d. At the
+    # centre the e_j are 90 degrees apart, sum e_j e_j^T = 2 I, so F = 2 (a/d)^2 I / sigma^2,
+    # C = sigma^2 d^2 / (2 a^2) I and drms = sqrt(C_xx + C_yy) = sigma d / a (= sigma when
+    # the beacons are at the receiver's height).
+    d = math.hypot(a_m, dz_m)
+    sigma = sigma_m + per_m * d
+    for first_deg in (0.0, 45.0, 10.0):
+        F = planner.range_fisher(0.0, 0.0, square(a_m, z_m=0.3 + dz_m, first_deg=first_deg),
+                                 0.3, sigma_m, per_m)
+        drms, _, degenerate = planner.position_bound(F)
+        assert not degenerate
+        assert drms == pytest.approx(sigma * d / a_m, rel=1e-12)
+        np.testing.assert_allclose(np.linalg.inv(F),
+                                   np.eye(2) * sigma ** 2 * d ** 2 / (2 * a_m ** 2),
+                                   rtol=1e-12, atol=1e-18)
+
+
+def test_range_beyond_max_range_adds_nothing_and_two_collinear_are_degenerate():
+    b = square(2.0, z_m=0.3)
+    # only beacons 1 and 3 (on the x axis) within 1.5 m of (0.6, 0): x known, y not
+    F = planner.range_fisher(0.6, 0.0, b, 0.3, 0.01, 0.0, max_range_m=2.0)
+    assert F[1, 1] == pytest.approx(0.0, abs=1e-20)
+    assert planner.position_bound(F)[2]
+    # all four in range: regular
+    assert not planner.position_bound(planner.range_fisher(0.6, 0.0, b, 0.3, 0.01, 0.0))[2]
+
+
+def range_site_text(extra: str = "") -> str:
+    """kleeman-lab with four range beacons at the receiver's height (1.0 m) around (6, 6)."""
+    return SITE_TEXT.replace("[bridge]", "[range_beacons]\ncount = 4\n\n"
+                             "[range_beacon1]\nx_m = 9.0\ny_m = 6.0\nz_m = 1.0\n\n"
+                             "[range_beacon2]\nx_m = 6.0\ny_m = 9.0\nz_m = 1.0\n\n"
+                             "[range_beacon3]\nx_m = 3.0\ny_m = 6.0\nz_m = 1.0\n\n"
+                             "[range_beacon4]\nx_m = 6.0\ny_m = 3.0\nz_m = 1.0\n\n"
+                             "[range_sensor]\nheight_m = 1.0\nsigma_m = 0.01\n"
+                             "sigma_per_m = 0.005\nmax_range_m = 30\n\n" + extra + "[bridge]")
+
+
+def test_range_map_closed_form_at_the_centre_and_mixed_site_fuses_ranges(tmp_path):
+    path = tmp_path / "ranges.ini"
+    path.write_text(range_site_text())
+    site = load_site(path)
+    assert planner.kinds_of(site) == ["tdoa", "range", "both"]
+    # 13 cells a side: the middle one's centre is (6, 6), the beacons' centre
+    maps = {k: planner.kind_map(site, k, 12.0 / 13, cap_m=np.inf) for k in planner.kinds_of(site)}
+    m = maps["range"]
+    assert m.heading_sigma_rad is None and maps["both"].heading_sigma_rad is None
+    i, j = int(np.argmin(np.abs(m.y_m - 6.0))), int(np.argmin(np.abs(m.x_m - 6.0)))
+    assert m.x_m[j] == pytest.approx(6.0) and m.y_m[i] == pytest.approx(6.0)
+    # the closed form: drms = sigma = 0.01 + 0.005 * 3 m (test_range_centre_of_square)
+    assert m.drms_m[i, j] == pytest.approx(0.025, rel=1e-9)
+    ok = ~maps["both"].degenerate & ~maps["tdoa"].degenerate & ~m.degenerate
+    assert ok.mean() > 0.9
+    best = np.fmin(maps["tdoa"].drms_m, m.drms_m)[ok]
+    assert np.all(maps["both"].drms_m[ok] <= best * (1 + 1e-9))
+    assert np.mean(maps["both"].drms_m[ok] < 0.99 * best) > 0.5
+
+
+def test_cli_map_marvelmind_prints_the_range_line(capsys):
+    assert cli.main(["map", "marvelmind", "--step", "0.1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    m = LINE.match(lines[-1])
+    assert m and m.group(1) == "marvelmind" and m.group(2) == "range"
+    assert m.group(7) is None                  # no heading figures without bearings
+    # every cell hears at least three beacons at 8 m: none degenerate; 2.5-6 cm everywhere
+    assert float(m.group(9)) == 0.0
+    assert 25 < float(m.group(4)) < float(m.group(6)) < 65
+    assert cli.main(["map", "kleeman-lab", "--kind", "range"]) == 2
+    assert "no range beacons" in capsys.readouterr().err

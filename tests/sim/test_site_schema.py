@@ -46,11 +46,12 @@ def test_docs_table_has_one_row_per_key():
 def test_schema_sections_in_file_order():
     assert [s.name for s in SCHEMA.sections] == [
         "site", "beacons", BEACON_SECTION, "receivers", "bearing_beacons", "bearing_beaconN",
-        "bearing_sensor", "robot", "noise", "tuning", "bridge"]
+        "bearing_sensor", "range_beacons", "range_beaconN", "range_sensor", "robot", "noise",
+        "tuning", "bridge"]
     assert SCHEMA.sections_phrase("N") == (
         "[site], [beacons], [beacon1]..[beaconN], [receivers], [bearing_beacons], "
-        "[bearing_beacon1]..[bearing_beaconN], [bearing_sensor], [robot], [noise], [tuning], "
-        "[bridge]")
+        "[bearing_beacon1]..[bearing_beaconN], [bearing_sensor], [range_beacons], "
+        "[range_beacon1]..[range_beaconN], [range_sensor], [robot], [noise], [tuning], [bridge]")
     assert "[beacon1]..[beacon16]" in SCHEMA.sections_phrase()
     assert "[bearing_beacon1]..[bearing_beacon15]" in SCHEMA.sections_phrase()
 
@@ -194,6 +195,27 @@ y_m = 0.0
 
 [bearing_sensor]
 sigma_deg = 1.0
+
+[range_beacons]
+count = 3
+
+[range_beacon1]
+x_m = 0.0
+y_m = 0.0
+z_m = 2.0
+
+[range_beacon2]
+x_m = 4.0
+y_m = 0.0
+z_m = 2.0
+
+[range_beacon3]
+x_m = 0.0
+y_m = 4.0
+z_m = 2.0
+
+[range_sensor]
+sigma_m = 0.008
 """
 
 

@@ -12,18 +12,22 @@ from ..scenario import Scenario
 from .base import Interval, Node
 from .bearing_sensor import BearingSensor, Bearings
 from .node_status import NodeStatus
+from .range_receiver import RangeReceiver, Ranges
 from .receiver_ring import ReceiverRing
 from .wheel_encoders import ODOMETRY_COLUMNS, WheelEncoders
 
 __all__ = ["Interval", "Node", "NodeStatus", "ReceiverRing", "WheelEncoders", "BearingSensor",
-           "Bearings", "ODOMETRY_COLUMNS", "on_bus"]
+           "Bearings", "RangeReceiver", "Ranges", "ODOMETRY_COLUMNS", "on_bus"]
 
 
-def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | None, list[Node]]:
+def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | None,
+                                   RangeReceiver | None, list[Node]]:
     """The receiver ring, the wheel encoders, the bearing sensor (None on a site without
-    bearing beacons) and every node in bus order with their clocks: the receiver ring and
-    the wheel encoders, their status frames, then the bearing sensor and its status frame
-    (appended, so a site without bearing beacons has the frames it had before it existed).
+    bearing beacons), the range receiver (None on a site without range beacons) and every
+    node in bus order with their clocks: the receiver ring and the wheel encoders, their
+    status frames, then the bearing sensor and its status frame, then the range receiver and
+    its status frame (each appended, so a site without bearing or range beacons has the
+    frames it had before they existed).
     A site without ultrasonic beacons has no receiver ring on the bus (its clock still
     exists: nothing reads it there)."""
     ring = ReceiverRing(NodeClock(scn.rx_offset_us, scn.rx_drift_ppm))
@@ -34,4 +38,8 @@ def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | 
     if scn.site.bearing_beacon_count:
         bearing = BearingSensor(NodeClock(scn.bearing_offset_us, scn.bearing_drift_ppm), scn)
         nodes += [bearing, NodeStatus(bearing)]
-    return ring, wheels, bearing, nodes
+    ranger = None
+    if scn.site.range_beacon_count:
+        ranger = RangeReceiver(NodeClock(scn.range_offset_us, scn.range_drift_ppm), scn)
+        nodes += [ranger, NodeStatus(ranger)]
+    return ring, wheels, bearing, ranger, nodes

@@ -29,6 +29,7 @@ class Interval:
     rng_latency: np.random.Generator      # node processing latency: drawn by the nodes in bus order
     rng_wheels: np.random.Generator       # random wheel slip (wheel encoders)
     rng_bearings: np.random.Generator | None = None   # bearing noise and outages (bearing sensor)
+    rng_ranges: np.random.Generator | None = None     # range noise, dropouts, multipath
 
     def latency_s(self, n: int) -> np.ndarray:
         """Processing time of n frames before each is queued, s (scenario node_latency_s)."""

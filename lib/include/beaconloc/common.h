@@ -57,6 +57,18 @@ typedef double bl_real;
 #ifndef BL_WITH_BEARINGS
 #define BL_WITH_BEARINGS 1
 #endif
+/*   BL_WITH_RANGES    1 (default): ranges to fixed range beacons (filter.h
+ *                     bl_filter_fuse_range, bl_filter_start_ranges;
+ *                     localizer.h bl_localizer_range, bl_range_meas).
+ *                     0: as BL_WITH_BEARINGS 0 for ranges: those calls and
+ *                     types are not declared, the filter carries no range
+ *                     buffers, bl_estimate and bl_loc_counters no range
+ *                     counters; bl_config keeps range_beacon_count, which
+ *                     bl_config_check then requires to be 0. The solver
+ *                     (solver.h, bl_solve_ranges_2d) stays. */
+#ifndef BL_WITH_RANGES
+#define BL_WITH_RANGES 1
+#endif
 
 /* Error codes: every fallible call returns BL_OK or one of these. */
 typedef enum bl_error {

@@ -95,6 +95,35 @@ typedef struct bl_bearing_params {
                                   when the fix's drms sqrt(σx² + σy²) exceeds this (m), > 0 */
 } bl_bearing_params;
 
+/* Ranges to fixed range beacons (Marvelmind-like; aid_range.cpp; its
+ * trilateration start, snapshot_range.cpp; the CMU Millibots' RF-synchronised
+ * ultrasonic ranging, Navarro-Serment et al.: the RF sync gives the emission
+ * time, the receiver times the flight). The receiver's mount (offset, height)
+ * is geometry (bl_config_same_geometry compares it); the rest is tuning. */
+typedef struct bl_range_params {
+    bl_real sigma_m;           /* [range_sensor] sigma_m: σ of a range at short distance (m), > 0
+                                  (Millibots: 8 mm resolution) */
+    bl_real sigma_per_m;       /* [range_sensor] sigma_per_m: σ grows with the range:
+                                  σ = sigma_m + sigma_per_m·range (m per m), >= 0, < 1 */
+    bl_real max_range_m;       /* [range_sensor] max_range_m: the sensor's maximum range (m), > 0
+                                  (Millibots: about 3 m); a range beyond 1.5 times this is
+                                  refused as bad input (bl_filter_fuse_range) */
+    bl_real gate_sigma;        /* [range_sensor] gate_sigma: innovation gate in σ (chi-square
+                                  with 1 dof), > 0; twice this until converged */
+    bl_real offset_x_m;        /* [range_sensor] offset_x_m: receiver mount, body frame, forward
+                                  of the wheel-base centre (m), |.| < 100; GEOMETRY */
+    bl_real offset_y_m;        /* [range_sensor] offset_y_m: receiver mount, body frame, to the
+                                  left (m), |.| < 100; GEOMETRY */
+    bl_real height_m;          /* [range_sensor] height_m: the receiver's z in the site frame
+                                  (m), |.| < 1e5; GEOMETRY */
+    bl_real snapshot_window_s; /* [tuning] range_snapshot_window_s: the latest range of each
+                                  range beacon within this of the newest forms one
+                                  trilateration snapshot (s), (0, 60] */
+    bl_real max_fix_drms_m;    /* [tuning] range_max_fix_drms_m: a trilateration (re)start is
+                                  refused when the fix's drms sqrt(σx² + σy²) exceeds this (m),
+                                  > 0 (default 0.25 = converged_sigma_xy_m's default) */
+} bl_range_params;
+
 typedef struct bl_config {
     /* ---- [beacons] (ultrasonic pulse beacons) ---- */
     uint32_t beacon_count;          /* count: N, 0 (a bearing-only site: no ultrasonic
@@ -117,6 +146,17 @@ typedef struct bl_config {
 #if BL_WITH_BEARINGS
     bl_beacon bearing_beacons[BL_MAX_BEACONS]; /* x_m, y_m of bearing beacon i at
                                                   bearing_beacons[i-1] (z unused) */
+#endif
+
+    /* ---- [range_beacons], [range_beacon1] .. [range_beaconN] ---- */
+    uint32_t range_beacon_count; /* [range_beacons] count: 0..BL_MAX_BEACONS; >= 3 not
+                                    collinear in x-y when beacon_count and
+                                    bearing_beacon_count are 0 (a range-only site) */
+    /* Without ranges (common.h BL_WITH_RANGES 0) only the count stays, which
+     * bl_config_check then requires to be 0. */
+#if BL_WITH_RANGES
+    bl_beacon range_beacons[BL_MAX_BEACONS]; /* x_m, y_m, z_m of range beacon i at
+                                                range_beacons[i-1] */
 #endif
 
     /* ---- [receivers] ---- */
@@ -155,6 +195,9 @@ typedef struct bl_config {
     bl_wheel_params wheels; /* wheel encoders (odometry predict, aid_wheels.cpp) */
 #if BL_WITH_BEARINGS
     bl_bearing_params bearing; /* bearings to the bearing beacons (aid_bearing.cpp) */
+#endif
+#if BL_WITH_RANGES
+    bl_range_params range; /* ranges to the range beacons (aid_range.cpp) */
 #endif
 
     /* ---- tuning shared by all sources: state, process noise, start-up, policy
@@ -203,7 +246,11 @@ int bl_config_default(bl_config *cfg);
  * at least 3 beacons not collinear in x-y when beacon_count > 0; bearing
  * beacons 0..bearing_beacon_count-1 pairwise distinct in x-y, and when
  * beacon_count is 0 at least 3 of them not collinear: the filter starts from
- * their triangulation). A bad bearing field is named "bearing_beacon_count",
+ * their triangulation); range beacons 0..range_beacon_count-1 finite and
+ * pairwise distinct in 3D, and when neither pulse nor bearing beacons exist
+ * at least 3 of them not collinear in x-y (the filter starts from their
+ * trilateration): named "range_beacon_count", "range_beacons" or
+ * "range.sigma_m" (range.<member>). A bad bearing field is named "bearing_beacon_count",
  * "bearing_beacons" or "bearing.sigma_deg" (its block's member path). Returns BL_OK or BL_ECONFIG
  * (BL_EINVAL if cfg is NULL). Never modifies *cfg.
  * If bad_field is non-NULL it receives the name of the first bad field
@@ -226,6 +273,9 @@ int bl_config_receiver_angle(const bl_config *cfg, uint32_t receiver_index, bl_r
  *   bearing beacons: bearing_beacon_count, x_m and y_m of
  *              bearing_beacons[0 .. bearing_beacon_count-1], and the sensor
  *              mount bearing.offset_x_m, bearing.offset_y_m;
+ *   range beacons: range_beacon_count, x_m, y_m and z_m of
+ *              range_beacons[0 .. range_beacon_count-1], and the receiver
+ *              mount range.offset_x_m, range.offset_y_m, range.height_m;
  *   robot:     wheel_base_m;
  *   state layout: whether the wheel-scale states are on
  *              (sigma_wheel_scale > 0 in both or in neither).

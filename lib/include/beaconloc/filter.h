@@ -23,6 +23,7 @@
  *     on encoder frame:  bl_filter_predict_odometry(&f, t_us, d_left_m, d_right_m);
  *     on beacon pulse:   bl_filter_fuse_pulse(&f, beacon_index, arrival_us, rx, &res);
  *     on a bearing:      bl_filter_fuse_bearing(&f, bearing_beacon_index, t_us, bearing_rad, &res);
+ *     on a range:        bl_filter_fuse_range(&f, range_beacon_index, t_emit_us, tof_s, &res);
  *     (bearing sites, every encoder frame, started or not:
  *                        bl_filter_track_wheels(&f, t_us, d_left_m, d_right_m, first);
  *      the dead reckoning that motion-compensates a triangulation start)
@@ -39,6 +40,10 @@
  * from the triangulation of the bearings (bl_filter_fuse_bearing,
  * bl_filter_start_bearings), whichever kind completes first; a site
  * without ultrasonic beacons (cfg.beacon_count == 0) only from them.
+ * Likewise a site with range beacons (cfg.range_beacon_count > 0) starts
+ * from the trilateration of its ranges (bl_filter_fuse_range,
+ * bl_filter_start_ranges), with no heading (learned from the motion); a
+ * range-only site only from them.
  *
  * Heading from the ring (cfg.ring_heading, on by default): the receivers are
  * directional (cfg.beamwidth_deg <= 180), so the ones that heard a beacon's
@@ -167,6 +172,16 @@ typedef struct bl_filter {
     uint32_t bearing_odo_track_[BL_MAX_BEACONS]; /* track of bearing j's odo (0 = none) */
     bl_real bearing_odo_[BL_MAX_BEACONS][6];     /* odo_ at bearing j's time */
 #endif
+#if BL_WITH_RANGES
+    /* ranges (aid_range.cpp): the latest time of flight of each range
+     * beacon, for the trilateration (re)start (snapshot_range.cpp), and the
+     * counters */
+    uint32_t range_valid_mask_;           /* bit j: range_t_us_[j] is valid */
+    int64_t range_t_us_[BL_MAX_BEACONS];  /* emission time of range beacon j's latest */
+    bl_real range_tof_s_[BL_MAX_BEACONS]; /* its time of flight (s) */
+    uint32_t range_accepted_[BL_MAX_BEACONS];
+    uint32_t range_rejected_[BL_MAX_BEACONS];
+#endif
 } bl_filter;
 
 /* Explicit start: a known pose and firing time. */
@@ -211,6 +226,11 @@ typedef struct bl_estimate {
     uint32_t bearing_accepted[BL_MAX_BEACONS]; /* per bearing beacon index: bearings fused */
     uint32_t bearing_rejected[BL_MAX_BEACONS]; /* per bearing beacon index: bearings rejected
                                                   by the gate */
+#endif
+#if BL_WITH_RANGES
+    uint32_t range_accepted[BL_MAX_BEACONS]; /* per range beacon index: ranges fused */
+    uint32_t range_rejected[BL_MAX_BEACONS]; /* per range beacon index: ranges rejected by
+                                                the gate (multipath late arrivals) */
 #endif
     uint32_t wheel_speed_fused;   /* wheel-speed measurements (v and ω, each one) fused
                                      by bl_filter_predict_odometry (ungated) */
@@ -449,6 +469,92 @@ int bl_filter_track_wheels(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real
  * byte-identical. */
 int bl_filter_start_bearings(bl_filter *f);
 #endif /* BL_WITH_BEARINGS */
+
+#if BL_WITH_RANGES /* common.h: not declared in a build without ranges */
+/* Fuse one time of flight from range beacon range_beacon_index (0-based,
+ * into cfg.range_beacons): the beacon emitted its RF sync and ultrasonic
+ * pulse at t_us (the receiver's clock: the RF sync marks the emission, as
+ * in the CMU Millibots' ranging) and the receiver heard the ultrasound
+ * time_of_flight_s (s) later. Model (Kleeman 1992 eq. 21's flight term,
+ * without its firing time: the RF sync gives it):
+ *     h = |p_rx - b| / s,
+ *     p_rx = ((x, y) + R(θ)·(ox, oy), cfg.range.height_m)   (3D, m),
+ * (ox, oy) = cfg.range.offset_x_m/_y_m (body frame), s the speed-of-sound
+ * state (so the ranges calibrate s too), the robot (x, y, θ) extrapolated
+ * from the state time to the reception instant t_us + time_of_flight_s
+ * with v, ω (constant velocity and turn rate, midpoint heading as
+ * bl_filter_predict; the state time is not changed). σ of the time of
+ * flight = (cfg.range.sigma_m + cfg.range.sigma_per_m·d)/s, d the
+ * predicted range (m); gate cfg.range.gate_sigma, twice that until
+ * converged, and none while the heading σ exceeds 0.3 rad (a start from
+ * ranges has no heading: the first motion is predicted in a wrong
+ * direction, and a gate would reject the very ranges that show the
+ * heading; multipath in that phase can lock a wrong heading: lib/README.md);
+ * the shared update (fusion.h: IEKF, 2 iterations, Joseph form). Multipath late arrivals (a reflection heard instead of the direct
+ * path; Millibots §3.2) fall outside the gate: BL_FUSION_REJECTED, counted
+ * in bl_estimate.range_rejected, state untouched.
+ * Every range that returns BL_OK is kept as its beacon's latest for a
+ * trilateration (re)start. Not started: kept (BL_FUSION_BUFFERED); the
+ * filter starts itself (BL_FUSION_STARTED) as bl_filter_start_ranges
+ * does, once possible. Stale (t_us more than cfg.max_predict_gap_s after
+ * the state time): kept, and the trilateration restarts the filter
+ * (BL_FUSION_RESET) when possible.
+ * *result (may be NULL): status; innovation (s) and its variance (s²),
+ * test ratio for ACCEPTED and REJECTED (0 otherwise); iterations.
+ * Errors (*f byte-identical): BL_EINVAL (NULL f; time_of_flight_s not
+ * finite or negative; a range s·time_of_flight_s beyond
+ * 1.5·cfg.range.max_range_m (s: the state's speed of sound, cfg's before
+ * the start): no direct path is that long, the factor leaves room for a
+ * sensor that reports a little past its rated range and for an s error
+ * of up to 50 %; an update that would leave the state non-finite, or the
+ * receiver within 1 mm of the beacon), BL_ENOTINIT, BL_EBEACON
+ * (range_beacon_index >= cfg.range_beacon_count), BL_ETIME (t_us more than
+ * cfg.max_predict_gap_s before the state time; before the start: older
+ * than a kept range by more than that). Cost: O(NX²) per IEKF iteration
+ * (2 at most); a (re)start adds two bl_solve_ranges_2d. */
+int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, bl_real time_of_flight_s,
+                         bl_fusion_result *result);
+
+/* Start (or restart) from the trilateration of the kept ranges: the latest
+ * of each range beacon within cfg.range.snapshot_window_s of the newest,
+ * covering min(4, N) range beacons (as the pulse snapshot: with 4 the fix
+ * is over-determined and a multipath range shows), ranges = s·time of flight (s: the state's on a
+ * running filter, cfg.speed_of_sound_mps on a first start), solved by
+ * bl_solve_ranges_2d (solver.h) at the receiver height cfg.range.height_m
+ * with the mount offset taken as zero for the fix: the offset turns with
+ * the unknown heading, so the fix is the receiver's, and the wheel-base
+ * centre is put there with the offset's length added to its σ.
+ * Refused unless the fix is unambiguous (no mirror solution within the
+ * beacons' collinearity: solver.h), explains the ranges (with more than 3:
+ * rms residual <= 3 σ, σ the largest range σ with its speed-of-sound share
+ * d·σs/s added) and its drms is <= cfg.range.max_fix_drms_m.
+ * Ranges give no heading: a running filter keeps its heading (σ grown to
+ * at least cfg.reset_sigma_theta_rad), a first start takes
+ * cfg.initial_theta_rad with σ cfg.reset_sigma_theta_rad (large: the
+ * heading is learned from the motion, ranges against odometry). Position
+ * covariance from the solver plus the speed-of-sound uncertainty
+ * (∂p/∂s by a second solve at s + 1 m/s: the (x, y)-s cross-covariance
+ * is kept) and, on a running filter, the motion over the window
+ * ((|v|·span)² per axis). v = ω = 0 with σ cfg.initial_sigma_v_mps,
+ * cfg.initial_sigma_omega_radps. The state time becomes the newest range's
+ * emission time t_us (the fix is the receiver's at about then: the ranges
+ * of one window are a few ms of flight apart from their emissions). s, T, t0 and the wheel scales: as bl_filter_start_bearings.
+ * Counts as a reset if the filter was started before.
+ * Errors (*f byte-identical): BL_EINVAL (NULL), BL_ENOTINIT,
+ * BL_EDEGENERATE (fewer than min(4, N) range beacons in the window,
+ * singular or ambiguous geometry, or a drms above cfg.range.max_fix_drms_m),
+ * BL_ENOCONVERGE (the solver did not converge, a residual above 3 σ, or a
+ * non-finite fix). */
+int bl_filter_start_ranges(bl_filter *f);
+
+/* The range model at state x (tests, diagnostics): the time of flight h_s
+ * (s) from range beacon range_beacon_index to the receiver at dt_s (s)
+ * after the state time, and H = ∂h/∂x (s per unit of each state; may be
+ * NULL). Errors: BL_EINVAL (NULL, non-finite, receiver within 1 mm of the
+ * beacon, s <= 0), BL_EBEACON. */
+int bl_model_range(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t range_beacon_index, bl_real dt_s,
+                   bl_real *h_s, bl_real H[BL_FILTER_NX]);
+#endif /* BL_WITH_RANGES */
 
 /* Raw state and covariance (layout BL_IX_*; t0 relative to the internal
  * epoch; P row-major NXxNX in the units of the states, e.g. P[T0][T0] s²),

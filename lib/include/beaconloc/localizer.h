@@ -11,6 +11,7 @@
  *     known start pose (optional): bl_localizer_start(&loc, &prior);
  *     on a receiver detection: bl_localizer_detection(&loc, &det);  (det.tag: yours)
  *     on a bearing:            bl_localizer_bearing(&loc, &bearing, NULL);  (BL_WITH_BEARINGS)
+ *     on a range:              bl_localizer_range(&loc, &range, NULL);  (BL_WITH_RANGES)
  *     every loop turn:         bl_localizer_advance(&loc, now_us - latency_us);
  *     on an encoder sample:    bl_localizer_advance(&loc, t_us - latency_us);
  *                              bl_localizer_wheels(&loc, &inc);
@@ -72,6 +73,13 @@
  *     the pulse snapshot when the site has ultrasonic beacons and it
  *     succeeds, else the bearings' triangulation (bl_filter_start_bearings).
  *     A site without ultrasonic beacons has an idle sequencer.
+ *   - Ranges (bl_localizer_range): as bearings, through
+ *     bl_filter_fuse_range; rejections (multipath late arrivals, a kidnap)
+ *     enter the same window as beacons of their own, with the
+ *     min(3, N - 1) rule (a kidnap along a circle round one range beacon
+ *     leaves its range unchanged); the restart is the pulse snapshot, else
+ *     the bearings' triangulation, else the ranges' trilateration
+ *     (bl_filter_start_ranges).
  *   The published reset counter is the filter's plus every re-initialisation
  *   done here, so it never goes back.
  *
@@ -95,8 +103,9 @@
  * Memory: caller-owned struct (filter + sequencer + policy state), no heap,
  * no globals, no pulse buffer (a closed pulse's members are fused from the
  * sequencer's slot they were merged in). sizeof on Cortex-M4F, float (make
- * size-m4): 2,032 B with BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 984,
- * sequencer 704, policy + counters + events 344), 2,736 B with 16/16.
+ * size-m4, BL_WITH_BEARINGS = BL_WITH_RANGES = 0): 2,048 B with
+ * BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 1,000, sequencer 704,
+ * policy + counters + events 344), 2,736 B with 16/16.
  * Cost per call: a
  * detection O(BL_SEQ_MAX_PENDING + BL_MAX_RECEIVERS) plus what it closes;
  * every pulse closed costs one bl_filter_fuse_pulse per member (O(NX²) per
@@ -104,7 +113,7 @@
  * restart adds one bl_solve_tdoa_2d; a wheel increment one predict.
  * Errors: every function returns BL_OK or a negative bl_error; on error
  * *loc is left byte-identical, except the counter of refused inputs where a
- * function names one (seq_errors, bearings_refused). Errors are bad arguments only (NULL, not
+ * function names one (seq_errors, bearings_refused, ranges_refused). Errors are bad arguments only (NULL, not
  * initialised, NaN/inf, out of range, time going backwards where stated).
  * Bad data (echoes, outliers, late detections, misnumbered pulses) is
  * counted, never an error. Not thread-safe per instance.
@@ -145,6 +154,19 @@ typedef struct bl_bearing_meas {
                               (|.| <= 1000) */
     uint32_t tag;          /* caller's tag, never read by the library */
 } bl_bearing_meas;
+#endif
+
+#if BL_WITH_RANGES /* common.h */
+/* One time of flight from a fixed range beacon (bl_filter_fuse_range; the
+ * DBC RANGE frame 0x130). */
+typedef struct bl_range_meas {
+    int64_t t_us;             /* emission time of the pulse (the RF sync) on the caller's
+                                   timebase (the frame's NodeTime, unwrapped), us */
+    uint32_t beacon_index;    /* 0-based range beacon (cfg.range_beacons): the frame's
+                                   Beacon field minus 1 */
+    bl_real time_of_flight_s; /* ultrasonic time of flight (s), >= 0 */
+    uint32_t tag;             /* caller's tag, never read by the library */
+} bl_range_meas;
 #endif
 
 /* Wheel travel since the previous sample (differential drive). */
@@ -222,6 +244,15 @@ typedef struct bl_loc_counters {
     uint32_t bearings_refused;  /* bearings refused: unknown bearing beacon, non-finite or
                                    out of range (an error returned), or refused by the
                                    filter (a non-finite update; BL_OK) */
+#endif
+#if BL_WITH_RANGES
+    uint32_t ranges_fused;    /* ranges fused (accepted, started, reset) */
+    uint32_t ranges_rejected; /* ranges rejected by the gate (multipath, kidnap) */
+    uint32_t ranges_buffered; /* ranges kept for the trilateration (not started / stale) */
+    uint32_t ranges_refused;  /* ranges refused: unknown range beacon, non-finite or
+                                 negative time of flight (an error returned), or refused
+                                 by the filter (beyond 1.5·range.max_range_m, a
+                                 non-finite update; BL_OK) */
 #endif
 } bl_loc_counters;
 
@@ -340,6 +371,25 @@ int bl_localizer_advance(bl_localizer *loc, int64_t now_us);
  * (beacon_index >= cfg.bearing_beacon_count), BL_EINVAL (bearing not
  * finite or |bearing| > 1000 rad, |t_us| > BL_SEQ_TIME_LIMIT_US). */
 int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m, bl_fusion_result *res);
+#endif
+
+#if BL_WITH_RANGES /* common.h: not declared in a build without ranges */
+/* One time of flight (bl_filter_fuse_range): as bl_localizer_bearing —
+ * after a constant-velocity predict when the wheels are silent, fused or
+ * gated; before the start (or when stale) kept until the ranges of one
+ * window (cfg.range.snapshot_window_s) cover 3 range beacons with an
+ * unambiguous fix and the filter starts from their trilateration (event
+ * STARTED, or RESET cause SNAPSHOT); rejections enter the
+ * persistent-rejection window (policy above); a range older than the
+ * state by more than cfg.max_predict_gap_s re-initialises the filter
+ * (cause STALE_PULSE). A range the filter refuses (beyond
+ * 1.5·cfg.range.max_range_m: no direct path is that long) is counted in
+ * ranges_refused, BL_OK. *res (may be NULL): the filter's fusion result.
+ * Errors: BL_EINVAL (NULL loc or m), BL_ENOTINIT; and, counted in
+ * ranges_refused (the only change to *loc then): BL_EBEACON
+ * (beacon_index >= cfg.range_beacon_count), BL_EINVAL (time of flight not
+ * finite or negative, |t_us| > BL_SEQ_TIME_LIMIT_US). */
+int bl_localizer_range(bl_localizer *loc, const bl_range_meas *m, bl_fusion_result *res);
 #endif
 
 /* Start, or restart, from a known pose: a robot placed in its start zone

@@ -212,6 +212,63 @@ int bl_solve_bearings_3(const bl_bearing_problem *prob, bl_bearing_solution *sol
 /* Weighted least squares (Gauss-Newton) for N >= 3 beacons. */
 int bl_solve_bearings(const bl_bearing_problem *prob, bl_bearing_solution *sol);
 
+/* ---- Ranges: trilateration (lib/src/solver_range.cpp) ----
+ * The receiver's position in 2D from its 3D distances to N >= 3 fixed range
+ * beacons (Marvelmind-like; the CMU Millibots' RF-synchronised ultrasonic
+ * ranges), receiver height z known:
+ *     range_m[j] = |(x, y, z) - b_j|,    z = receiver_z_m.
+ * Weighted least squares (weights 1/sigma_m[j]²) by Gauss-Newton, started
+ * from the linearised closed form: subtracting beacon 0's squared range
+ * equation from each other's removes x² + y²,
+ *     2 (b_j - b_0)·p = ρ_0² - ρ_j² + |b_j|² - |b_0|²,   ρ_j² = r_j² - (z_j - z)²
+ * (2D vectors; the standard linear trilateration), solved by least squares.
+ * Covariance (JᵀWJ)⁻¹ at the fix; HDOP = sqrt(trace cov) / σ_rms.
+ * No heading: ranges to one receiver do not see it.
+ *
+ * Mirror ambiguity: beacons on one line in x-y cannot tell a point from its
+ * mirror image across that line (both have the same distances). The solver
+ * reflects its fix across the beacons' principal line (least-squares line
+ * through them), runs Gauss-Newton from there too, and reports ambiguous
+ * = true with both candidates when the second converges to a point farther
+ * than max(3·drms, 1 mm) from the first whose weighted residual sum of
+ * squares is within 9 (a 3σ difference) of the first's: the data cannot
+ * tell them apart. (x_m, y_m) is then the candidate with the smaller
+ * residual (an arbitrary choice when exactly collinear) and (mirror_x_m,
+ * mirror_y_m) the other: the caller must not use the fix without another
+ * cue (bl_filter_start_ranges refuses it). Exactly collinear beacons
+ * start from the line's own closed form: the position along the line and
+ * ±the distance from it.
+ * Errors: BL_EINVAL (NULL, count outside 3..BL_MAX_BEACONS, a non-finite
+ * input, a range < 0, σ <= 0, max_iterations > 100, tolerance_m < 0);
+ * BL_EDEGENERATE (all beacons at one point in x-y, a singular normal
+ * matrix at the fix, a non-finite result); BL_ENOCONVERGE (no step below
+ * the tolerance in max_iterations). *sol untouched on error.
+ * Reentrant; no heap; a few hundred bytes of stack; O(N) per iteration. */
+typedef struct bl_range_problem {
+    uint32_t count;                    /* N beacons, 3..BL_MAX_BEACONS */
+    bl_beacon beacons[BL_MAX_BEACONS]; /* site positions (m), 3D */
+    bl_real range_m[BL_MAX_BEACONS];   /* measured 3D distance receiver-beacon j (m), >= 0 */
+    bl_real sigma_m[BL_MAX_BEACONS];   /* σ of each range (m), > 0 (weights) */
+    bl_real receiver_z_m;              /* known receiver height (m) */
+    uint32_t max_iterations;           /* Gauss-Newton steps per start, 1..100; 0 = 20 */
+    bl_real tolerance_m;               /* stop when the step is below this (m); 0 = 1e-9 m
+                                          (1e-6 m for float) */
+} bl_range_problem;
+
+typedef struct bl_range_solution {
+    bl_real x_m, y_m;               /* receiver position (m) */
+    bl_real cov[4];                 /* covariance of (x, y), row-major 2x2, m² */
+    bl_real drms_m;                 /* sqrt(cov_xx + cov_yy) (m) */
+    bl_real hdop;                   /* drms_m / σ_rms (1), σ_rms the rms of sigma_m */
+    bl_real residual_rms_m;         /* rms of the range residuals at the fix (m) */
+    bl_real chi2;                   /* weighted residual sum of squares at the fix (1) */
+    uint32_t iterations;            /* Gauss-Newton steps to the fix */
+    bool ambiguous;                 /* a mirror fix fits as well (see above) */
+    bl_real mirror_x_m, mirror_y_m; /* the mirror candidate when ambiguous, else = x_m, y_m */
+} bl_range_solution;
+
+int bl_solve_ranges_2d(const bl_range_problem *prob, bl_range_solution *sol);
+
 #ifdef __cplusplus
 }
 #endif

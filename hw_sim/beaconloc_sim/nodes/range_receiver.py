@@ -1,0 +1,154 @@
+"""The range-receiver node (CMU Millibots; Marvelmind-like fixed beacons): an RF-synchronised
+ultrasonic receiver on the robot timing each fixed beacon's pulse, one RANGE frame per range.
+
+Ping schedule: the team leader pings the range beacons in turn, 1, 2, ..., K, 1, ..., one
+every ping_period_s of the site's [range_sensor] (Millibots: "A team leader coordinates the
+pinging sequence"). Pings are timed on this node's clock (the RF sync pulse starts its
+timer): ping n is at the node-clock count n P (P = ping_period_s in us, n counted from the
+counter's zero), and pings beacon (n mod K) + 1, so consecutive windows of a run go on with
+the sequence. The frame's NodeTime is the ping's count (the RF sync), wrapped to 32 bits.
+
+Per ping of beacon j emitted at true time t_e (physics.ranges, the one model):
+
+- the direct pulse's time of flight to the moving receiver, tof = d(t_e + tof) / s with s
+  the true speed of sound at t_e (physics.ranges.flight_time_s), its range r = s tof;
+- not heard (no frame) when r > the site's max_range_m, when the sensor-to-beacon line
+  crosses an [obstacles] segment (nodes.bearing_sensor.occluded, one mechanism; a 2D test
+  in the floor plan) or in a dropout ([ranges] dropout_probability, independent per ping);
+- otherwise, with probability [ranges] multipath_probability, a late arrival replaces the
+  direct one: the pulse reflected once by a wall, the floor or the ceiling (one of the six
+  first-order image sources of physics.acoustics.image_sources, Allen & Berkley 1979,
+  uniformly), its flight time the image's; the direct pulse is lost (an occluded or
+  absorbed direct path, the Millibots' "multi-path");
+- the frame carries TimeOfFlight = round((r + n) / s (1 + drift) us), n ~ N(0, sigma^2),
+  sigma = sigma_m + sigma_per_m r (the site's [range_sensor]), the node clock's rate
+  error (1 + drift) included, clipped to the DBC's 0..65534 us;
+- Quality from the path length L: a spherical wave's amplitude falls as 1/L,
+  Quality = clip(round(15 (1 m / L)), 1, 15) (15 within 1 m; 1 is the weakest sent).
+
+The frame is ready at the arrival, t_e + tof, plus the node's processing latency.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..clocks import WRAP_US, NodeClock
+from ..physics import acoustics as ac
+from ..physics.ranges import flight_time_s, receiver_position, sigma_range_m
+from .base import Interval, Node
+from .bearing_sensor import occluded
+
+TOF_MAX_US = 65534           # the DBC's TimeOfFlight range
+
+
+@dataclass
+class Ranges:
+    """The pings of an interval (one row per ping), with why each was not sent."""
+    t_s: np.ndarray            # true emission instant (the RF sync), s
+    ping_us: np.ndarray        # node-clock count of the ping (unwrapped, us)
+    beacon: np.ndarray         # 0-based range beacon index (DBC Beacon - 1)
+    sos_mps: np.ndarray        # true speed of sound at the emission, m/s
+    true_m: np.ndarray         # direct range s tof (receiver moving during the flight), m
+    tof_us: np.ndarray         # TimeOfFlight as sent (noise, multipath, quantised), us
+    multipath: np.ndarray      # a late arrival replaced the direct pulse
+    dropout: np.ndarray        # lost (random dropout)
+    occluded: np.ndarray       # direct path crosses an obstacle segment
+    out_of_range: np.ndarray   # farther than max_range_m
+
+    @property
+    def sent(self) -> np.ndarray:
+        return ~(self.dropout | self.occluded | self.out_of_range)
+
+    @property
+    def direct(self) -> np.ndarray:
+        """Sent and timing the direct pulse (the bound's measurements)."""
+        return self.sent & ~self.multipath
+
+    def select(self, keep) -> Ranges:
+        return Ranges(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
+
+    @staticmethod
+    def empty() -> Ranges:
+        z = np.zeros(0)
+        zi, zb = np.zeros(0, np.int64), np.zeros(0, bool)
+        return Ranges(z, zi, zi, z, z, zi, zb, zb, zb, zb)
+
+    @staticmethod
+    def concat(parts: list[Ranges]) -> Ranges:
+        parts = [Ranges.empty()] + list(parts)
+        return Ranges(*(np.concatenate([getattr(p, f) for p in parts])
+                        for f in Ranges.__dataclass_fields__))
+
+
+class RangeReceiver(Node):
+    message = "RANGE"
+    node_id = 4
+    status_phase_us = 0
+
+    def __init__(self, clock: NodeClock, scn):
+        super().__init__(clock)
+        self.scn = scn
+        self.period_us = int(round(scn.site.range_ping_period_s * 1e6))
+        self.measured = Ranges.empty()        # pings of the last interval (all, sent or not)
+        self._bound_pending = Ranges.empty()  # direct ranges the bound has not taken yet
+
+    def sample(self, iv: Interval) -> tuple[np.ndarray, list[dict]]:
+        scn, site = self.scn, self.scn.site
+        k_count = site.range_beacon_count
+        ping_us = self.periodic_us(iv, self.period_us)
+        n = len(ping_us)
+        rng = iv.rng_ranges
+        # drawn for every ping, sent or not: noise, dropout, multipath, its image
+        noise = rng.standard_normal(n)
+        u_drop, u_multi = rng.random(n), rng.random(n)
+        image = rng.integers(1, 7, size=n)                   # image_sources() rows 1..6
+        t_e = self.clock.true_time_s(ping_us)
+        beacon = (ping_us // self.period_us) % k_count
+        b = site.range_beacons_m[beacon]
+        sos = ac.speed_of_sound_mps(scn.temperature_c(t_e))
+        pose = scn.trajectory.state
+        tof = flight_time_s(pose, t_e, b, site.range_offset_m, site.range_height_m, sos)
+        true_m = sos * tof
+        room = (site.room_x_m, site.room_y_m, site.room_z_m)
+        multipath = u_multi < scn.range_multipath_probability
+        path_m = true_m.copy()
+        if np.any(multipath):
+            idx = np.flatnonzero(multipath)
+            img = np.array([ac.image_sources(b[i], room)[image[i]] for i in idx.tolist()])
+            path_m[idx] = sos[idx] * flight_time_s(pose, t_e[idx], img, site.range_offset_m,
+                                                   site.range_height_m, sos[idx])
+        sigma = sigma_range_m(true_m, site.sigma_range_m, site.sigma_range_per_m)
+        meas_m = path_m + sigma * noise
+        tof_us = np.clip(np.round(meas_m / sos * 1e6 * (1.0 + self.clock.drift_ppm * 1e-6)),
+                         0, TOF_MAX_US).astype(np.int64)
+        st = pose(t_e)
+        p = receiver_position(st["x_m"], st["y_m"], st["theta_rad"], site.range_offset_m,
+                              site.range_height_m)
+        hidden = occluded(p[:, :2], b[:, :2], scn.obstacles_m)
+        rec = Ranges(t_e, ping_us, beacon, sos, true_m, tof_us, multipath,
+                     u_drop < scn.range_dropout_probability, hidden,
+                     true_m > site.range_max_m)
+        self.measured = rec
+        lat = iv.latency_s(n)
+        self._bound_pending = Ranges.concat([self._bound_pending, rec.select(rec.direct)])
+        sent = np.flatnonzero(rec.sent)
+        # Quality: 1/L amplitude of a spherical wave, 15 within 1 m (module docstring)
+        quality = np.clip(np.round(15.0 * np.minimum(1.0, 1.0 / np.maximum(path_m, 1e-9))),
+                          1, 15).astype(np.int64)
+        signals = [{"NodeTime": int(ping_us[i] % WRAP_US), "Beacon": int(beacon[i]) + 1,
+                    "Receiver": 1, "TimeOfFlight": int(tof_us[i]), "Quality": int(quality[i])}
+                   for i in sent.tolist()]
+        arrival = t_e + path_m / sos
+        return arrival[sent] + lat[sent], signals
+
+    def bound_events(self, until_s: float = math.inf) -> Ranges:
+        """The direct ranges delivered at or before until_s not handed out yet (the posterior
+        bound's measurement events), in time order; later ones wait for the next window."""
+        pend = self._bound_pending
+        pend = pend.select(np.argsort(pend.t_s, kind="stable"))
+        now = pend.t_s <= until_s
+        self._bound_pending = pend.select(~now)
+        return pend.select(now)

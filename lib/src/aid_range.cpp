@@ -1,0 +1,199 @@
+// beaconloc — aiding source: times of flight from fixed range beacons
+// (RF-synchronised ultrasonic ranging: the CMU Millibots, Marvelmind-like
+// sites). The model and its Jacobian, the fusion of a started filter
+// through the shared update (fusion.hpp), keeping each time of flight for
+// the trilateration (re)start (snapshot_range.cpp) before the start and
+// after a time gap. Its tuning: cfg.range (bl_range_params, config.h);
+// otherwise only the range beacons' positions.
+#include "filter_internal.hpp"
+
+// The whole source compiles out without ranges (common.h BL_WITH_RANGES).
+#if BL_WITH_RANGES
+
+#include <cstring>
+
+using namespace bl;
+
+namespace {
+
+// IEKF relinearisations per range and their stop (a range is nearly linear
+// at the distances of a site once the position is known to a few cm).
+constexpr uint32_t kIekfIterations = 2;
+constexpr real kIekfTolerance_m = real(1e-4);
+// Until converged the gate is this many times cfg.range.gate_sigma (Kleeman
+// 1992 §3.9's start-up gate, as bearings: a trilateration start has no
+// heading, so the first motion is poorly predicted).
+constexpr real kStartupGateFactor = real(2);
+// While the heading σ exceeds this (rad) the ranges are not gated (our
+// choice): a start from the trilateration has no heading (σ
+// cfg.reset_sigma_theta_rad), the first motion is then predicted in a wrong
+// direction, and a gate would reject the very ranges that show the heading.
+constexpr real kHeadingUnknown_rad = real(0.3);
+// A range beyond this many times cfg.range.max_range_m is refused as bad
+// input (filter.h: a sensor reporting a little past its rating and an
+// s error of up to 50 % still pass).
+constexpr real kMaxRangeFactor = real(1.5);
+
+// Kleeman 1992 eq. 21's flight term without the firing time (the RF sync
+// gives it): h = |p_rx - b| / s, at dt_s after the state time, the robot
+// extrapolated with constant v and ω, midpoint heading (as cv_model, Kleeman
+// eq. 15 with the turn rate; the same extrapolation as bearing_model):
+//   θt = θ + ω dt,  φm = θ + ω dt/2,
+//   p  = (x, y) + v dt (cos φm, sin φm),
+//   (xr, yr) = p + R(θt) (ox, oy),  zr = cfg.range.height_m,
+//   d = |(xr, yr, zr) - b|,  h = d / s.
+// H = ∂h/∂x by the chain rule: with (dx, dy) = (xr - xb, yr - yb),
+//   ∂h/∂xr = dx/(d s), ∂h/∂yr = dy/(d s), ∂h/∂s = -d/s²,
+//   ∂(xr, yr)/∂θ = v dt (-sin φm, cos φm) + R'(θt)(ox, oy),
+//   ∂(xr, yr)/∂ω = v dt (-sin φm, cos φm)·dt/2 + R'(θt)(ox, oy)·dt,
+//   ∂(xr, yr)/∂v = dt (cos φm, sin φm).
+// *d_m: the range d (m). False where undefined (the receiver within 1 mm of
+// the beacon, s <= 0) or not finite.
+bool range_model(const bl_config *cfg, uint32_t j, real dt_s, const VX &x, real *h, RX *H, real *d_m)
+{
+    const bl_beacon &b = cfg->range_beacons[j];
+    const real ox = cfg->range.offset_x_m, oy = cfg->range.offset_y_m;
+    const real tht = x(TH) + x(W) * dt_s;
+    const real phm = x(TH) + real(0.5) * x(W) * dt_s;
+    const real cm = std::cos(phm), sm = std::sin(phm);
+    const real ct = std::cos(tht), st = std::sin(tht);
+    // R'(θt)(ox, oy): derivative of the rotated mount offset
+    const real rox = -st * ox - ct * oy, roy = ct * ox - st * oy;
+    const real xr = x(X) + x(V) * dt_s * cm + ct * ox - st * oy;
+    const real yr = x(Y) + x(V) * dt_s * sm + st * ox + ct * oy;
+    const real dx = xr - b.x_m, dy = yr - b.y_m, dz = cfg->range.height_m - b.z_m;
+    const real d = std::sqrt(dx * dx + dy * dy + dz * dz);
+    const real s = x(S);
+    if (!(d > real(1e-3)) || !(s > real(0))) return false;
+    *h = d / s;
+    if (!is_finite(*h)) return false;
+    if (d_m) *d_m = d;
+    if (H == nullptr) return true;
+    const real gx = dx / (d * s), gy = dy / (d * s);  // ∂h/∂xr, ∂h/∂yr (s/m)
+    RX J = RX::Zero();
+    J(X) = gx;
+    J(Y) = gy;
+    const real vdt = x(V) * dt_s;
+    J(TH) = gx * (-vdt * sm + rox) + gy * (vdt * cm + roy);
+    J(V) = gx * dt_s * cm + gy * dt_s * sm;
+    J(W) = gx * (-vdt * sm * real(0.5) * dt_s + rox * dt_s) + gy * (vdt * cm * real(0.5) * dt_s + roy * dt_s);
+    J(S) = -d / (s * s);
+    if (!J.allFinite()) return false;
+    *H = J;
+    return true;
+}
+
+// The range's measurement model for fuse_scalar.
+struct RangeModel {
+    const bl_config *cfg;
+    uint32_t j;
+    real dt_s;  // reception time - state time (s)
+    bool measure(const VX &x, real *h, RX *H) const { return range_model(cfg, j, dt_s, x, h, H, nullptr); }
+    // The speed of sound must stay positive with a positive variance.
+    bool admissible(const VX &x, const VX &var) const { return x(S) > 0 && var(S) > 0; }
+    int unit_state() const { return -1; }
+};
+
+// fuse_range on a started filter, fresh range: the shared update with the
+// start-up or converged gate. Own frame (noinline), as the other sources.
+__attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t j, int64_t t_us, real tof_s, bl_fusion_result *result)
+{
+    const bl_config *cfg = &f->cfg_;
+    VX x = state(f);
+    MX P = cov(f);
+    // The receiver hears the pulse tof_s after the emission t_us: its
+    // position at that instant.
+    const RangeModel model = {cfg, j, bl::us_to_s(t_us - f->t_us_) + tof_s};
+    real h, d_m;
+    if (!range_model(cfg, j, model.dt_s, x, &h, nullptr, &d_m)) return BL_EINVAL;
+    // σ of the time of flight: (sigma_m + sigma_per_m·d)/s at the predicted
+    // range d (a late multipath arrival does not widen its own σ).
+    const real sigma_s = (cfg->range.sigma_m + cfg->range.sigma_per_m * d_m) / x(S);
+    const bool conv = (f->flags_ & kFlagConverged) != 0;
+    ScalarMeasurement m;
+    m.z = tof_s;
+    m.R = sigma_s * sigma_s;
+    m.gate_sigma = conv ? cfg->range.gate_sigma : kStartupGateFactor * cfg->range.gate_sigma;
+    if (P(TH, TH) > kHeadingUnknown_rad * kHeadingUnknown_rad) m.gate_sigma = 0;
+    m.max_iterations = kIekfIterations;
+    m.step_tolerance_m = kIekfTolerance_m;
+    const int rc = fuse_scalar(model, m, x, P, result);
+    if (rc != BL_OK) return rc;  // undefined or numerically impossible: state untouched
+    remember_range(f, j, t_us, tof_s);
+    if (result->status == BL_FUSION_REJECTED) {
+        f->range_rejected_[j] += 1;
+        return BL_OK;
+    }
+    commit(f, x, P);
+    f->range_accepted_[j] += 1;
+    return BL_OK;
+}
+
+}  // namespace
+
+extern "C" int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, bl_real time_of_flight_s,
+                                    bl_fusion_result *result)
+{
+    if (f == nullptr) return BL_EINVAL;
+    if (!initialised(f)) return BL_ENOTINIT;
+    const bl_config *cfg = &f->cfg_;
+    const uint32_t j = range_beacon_index;
+    if (j >= cfg->range_beacon_count || j >= BL_MAX_BEACONS) return BL_EBEACON;
+    if (!is_finite(time_of_flight_s) || time_of_flight_s < real(0)) return BL_EINVAL;
+    const real s_mps = started(f) ? f->x_[S] : cfg->speed_of_sound_mps;
+    if (!(s_mps * time_of_flight_s <= kMaxRangeFactor * cfg->range.max_range_m)) return BL_EINVAL;
+    bl_fusion_result res;
+    std::memset(&res, 0, sizeof res);
+
+    if (!started(f)) {
+        // Keep the buffer on one timeline: a range far older than a kept
+        // one is a caller error.
+        for (uint32_t k = 0; k < cfg->range_beacon_count; ++k)
+            if ((f->range_valid_mask_ >> k) & 1u) {
+                int64_t d_us;
+                if (!bl::sub_us(f->range_t_us_[k], t_us, &d_us) || bl::us_to_s(d_us) > cfg->max_predict_gap_s)
+                    return BL_ETIME;
+            }
+        remember_range(f, j, t_us, time_of_flight_s);
+        res.status = start_from_ranges(f) == BL_OK ? BL_FUSION_STARTED : BL_FUSION_BUFFERED;
+        if (result) *result = res;
+        return BL_OK;
+    }
+    switch (classify_time(f, t_us)) {
+    case MeasTime::kTooOld:
+        return BL_ETIME;  // a caller error: state untouched
+    case MeasTime::kStale:
+        // No predict for longer than max_predict_gap_s: keep the range and
+        // restart from the trilateration when the window covers 3 beacons
+        // (the kept ranges from before the gap are outside the window).
+        remember_range(f, j, t_us, time_of_flight_s);
+        res.status = start_from_ranges(f) == BL_OK ? BL_FUSION_RESET : BL_FUSION_BUFFERED;
+        if (result) *result = res;
+        return BL_OK;
+    case MeasTime::kFresh:
+        break;
+    }
+    const int rc = fuse_started(f, j, t_us, time_of_flight_s, &res);
+    if (rc != BL_OK) return rc;
+    if (result) *result = res;
+    return BL_OK;
+}
+
+extern "C" int bl_model_range(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t range_beacon_index,
+                              bl_real dt_s, bl_real *h_s, bl_real H[BL_FILTER_NX])
+{
+    if (cfg == nullptr || x == nullptr || h_s == nullptr) return BL_EINVAL;
+    if (range_beacon_index >= cfg->range_beacon_count || range_beacon_index >= BL_MAX_BEACONS) return BL_EBEACON;
+    if (!all_finite(x, NX) || !is_finite(dt_s)) return BL_EINVAL;
+    real h;
+    RX J;
+    if (!range_model(cfg, range_beacon_index, dt_s, Eigen::Map<const VX>(x), &h, &J, nullptr)) return BL_EINVAL;
+    *h_s = h;
+    if (H) {
+        Eigen::Map<RX> Hm(H);
+        Hm = J;
+    }
+    return BL_OK;
+}
+
+#endif  // BL_WITH_RANGES
