@@ -10,8 +10,10 @@ import csv
 import json
 import math
 import os
+import select
 import signal
 import socket
+import struct
 import subprocess
 import threading
 import time
@@ -74,19 +76,33 @@ def tail(path: Path, n_chars: int = 4000) -> str:
 
 @dataclass
 class Received:
-    t_mono_s: float  # CLOCK_MONOTONIC when the datagram was parsed, s
+    t_mono_s: float    # CLOCK_MONOTONIC when the datagram reached the socket
+                       # (the kernel's receive timestamp), s
     msg: object
+    t_parsed_s: float  # CLOCK_MONOTONIC when this process parsed it, s
+
+
+# SO_TIMESTAMPNS (asm-generic/socket.h; Python's socket module may lack the name)
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 
 
 class MavlinkListener:
     """Receives the bridge's udpout stream on udpin:127.0.0.1:PORT in a
-    thread; keeps every message with its monotonic receive time. Replies
-    (TIMESYNC requests) go back to the sender, as udpin does."""
+    thread; keeps every message with the kernel's receive time of its
+    datagram (SO_TIMESTAMPNS), so what is measured is when the bridge's
+    output arrived, not when this Python process got round to it: in the UML
+    guest the test process alone is at times held up for most of a second
+    while the bridge and the simulator run on. Replies (TIMESYNC requests)
+    go back to the sender, as udpin does."""
 
     def __init__(self, port: int):
         self.port = port
         self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}",
                                                source_system=255, source_component=190)
+        self.sock = self.conn.port
+        self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        # CLOCK_REALTIME - CLOCK_MONOTONIC (the kernel stamps in realtime)
+        self.real_minus_mono_s = time.time() - time.monotonic()
         self.received: list[Received] = []
         self.bad_data = 0
         self._lock = threading.Lock()
@@ -94,17 +110,34 @@ class MavlinkListener:
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
+    def _kernel_mono_s(self, ancdata) -> float | None:
+        for level, kind, data in ancdata:
+            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
+                sec, nsec = struct.unpack("qq", data[:16])
+                return sec + nsec * 1e-9 - self.real_minus_mono_s
+        return None
+
     def _run(self) -> None:
         while not self._stop.is_set():
-            msg = self.conn.recv_match(blocking=True, timeout=0.2)
-            if msg is None:
+            ready, _, _ = select.select([self.sock], [], [], 0.2)
+            if not ready:
                 continue
-            now = time.monotonic()
-            if msg.get_type() == "BAD_DATA":
-                self.bad_data += 1
+            try:
+                data, ancdata, _flags, addr = self.sock.recvmsg(65535, 256)
+            except OSError:
                 continue
-            with self._lock:
-                self.received.append(Received(now, msg))
+            parsed = time.monotonic()
+            t_rx = self._kernel_mono_s(ancdata)
+            # replies go back to the sender, as pymavlink's udpin records it
+            self.conn.clients.add(addr)
+            self.conn.clients_last_alive[addr] = time.time()
+            msgs = self.conn.mav.parse_buffer(data) or []
+            for msg in msgs:
+                if msg.get_type() == "BAD_DATA":
+                    self.bad_data += 1
+                    continue
+                with self._lock:
+                    self.received.append(Received(parsed if t_rx is None else t_rx, msg, parsed))
 
     def close(self) -> None:
         self._stop.set()
@@ -573,6 +606,7 @@ def run_live(rig: Rig, scenario: str, duration_s: float, *, seed: int | None = N
                   timesync_sent=timesync_sent,
                   odometry=lst.messages("ODOMETRY"), heartbeats=lst.messages("HEARTBEAT"),
                   statustexts=lst.messages("STATUSTEXT"), node_map=probe.mapping())
+    write_received(rig.workdir / "mavlink-rx.csv", run)
     assert sim_rc == 0, f"simulator exited {sim_rc}\n{rig.logs()}"
     run.truth = read_csv(rig.truth, TRUTH_COLUMNS)
     if rig.estimates.exists():
@@ -582,6 +616,22 @@ def run_live(rig: Rig, scenario: str, duration_s: float, *, seed: int | None = N
     if rig.sim_stats.exists():
         run.sim_stats = read_json(rig.sim_stats)
     return run
+
+
+def write_received(path: Path, run: LiveRun) -> None:
+    """The case's record of what the listener got: per message the kernel's
+    receive time and the time this process parsed it (s after the
+    simulator's first frame), its type and, for ODOMETRY, the bridge's
+    time_usec; the simulator's end as the last row."""
+    t0 = run.t_sim_start_mono_s
+    with open(path, "w") as f:
+        f.write("t_rx_s,t_parsed_s,type,time_usec\n")
+        for r in list(run.rig.listener.received):
+            kind = r.msg.get_type()
+            tu = r.msg.time_usec if kind == "ODOMETRY" else ""
+            f.write(f"{r.t_mono_s - t0:.6f},{r.t_parsed_s - t0:.6f},{kind},{tu}\n")
+        end = run.t_sim_end_mono_s - t0
+        f.write(f"{end:.6f},{end:.6f},SIM_END,\n")
 
 
 def scenario_events(name: str, duration_s: float | None = None):
