@@ -79,30 +79,38 @@ def test_slip_per_metre_and_per_radian_has_its_sigma():
 
 
 def test_track_encoders_dead_reckon_the_turn_with_chi_b_not_b(static):
-    """Robot 4's full turn on the spot (segment 6): its TRACK_ENCODERS ticks, dead-reckoned
-    with the effective width chi b, turn 2 pi within the slip; with the geometric b, chi
-    times as far (the ICR model's point)."""
+    """Robot 4's TRACK_ENCODERS ticks, unwrapped and dead-reckoned (skid_steer.dead_reckoning)
+    with the effective width chi b: its full turn on the spot (segment 6) turns 2 pi within the
+    slip, and the whole 60 s track ends within the slip of the truth; with the geometric b the
+    turn reads chi = 1.5 turns (the ICR model's point)."""
     tscn = static.scenario
     rows = [r for r in decoded(static, TRACKS) if r["Robot"] == 4]
     t, *_ = static.tracks[4]
     assert len(rows) == len(t)
-    left = np.unwrap(np.array([r["LeftTicks"] for r in rows]) * (2 * np.pi / TRACK_TICK_WRAP))
-    right = np.unwrap(np.array([r["RightTicks"] for r in rows]) * (2 * np.pi / TRACK_TICK_WRAP))
     mpt = metres_per_tick(tscn.site)
-    left = left * TRACK_TICK_WRAP / (2 * np.pi) * mpt                # m of track travel
-    right = right * TRACK_TICK_WRAP / (2 * np.pi) * mpt
+
+    def travel(side):
+        wrapped = np.array([r[side] for r in rows])
+        step = (np.diff(wrapped) + TRACK_TICK_WRAP // 2) % TRACK_TICK_WRAP - TRACK_TICK_WRAP // 2
+        return np.cumsum(step) * mpt                     # m from the first sample
+    dl, dr = np.diff(travel("LeftTicks"), prepend=0.0), np.diff(travel("RightTicks"), prepend=0.0)
+    start = tscn.robot(4).start
+    x, y, th = skid_steer.dead_reckoning(dl, dr, *start, tscn.site.wheel_base_m, tscn.icr_factor)
     traj = tscn.robot(4).trajectory
-    t0, t1 = traj.t0_s[5], traj.t0_s[6]                 # the turn 360
-    i0, i1 = np.searchsorted(t, [t0, t1])
-    dl, dr = left[i1] - left[i0 - 1], right[i1] - right[i0 - 1]
-    turned = (dr - dl) / tscn.effective_base_m
+    i0, i1 = np.searchsorted(t, [traj.t0_s[5], traj.t0_s[6]])    # the turn 360
+    turned = th[i1] - th[i0 - 1]
     sigma = 0.05 * math.sqrt(2 * math.pi)
     assert turned == pytest.approx(2 * math.pi, abs=4 * sigma + 0.05)
-    # the geometric width b would read chi = 1.5 turns: far outside the slip
-    assert abs((dr - dl) / tscn.site.wheel_base_m - 2 * math.pi) > 20 * sigma
+    _, _, th_b = skid_steer.dead_reckoning(dl, dr, *start, tscn.site.wheel_base_m, 1.0)
+    assert th_b[i1] - th_b[i0 - 1] == pytest.approx(1.5 * turned)
+    assert abs(th_b[i1] - th_b[i0 - 1] - 2 * math.pi) > 20 * sigma
+    # the whole track: 5.5 m driven, 6 pi turned (arcs and the turn); the end within 4 sigma
+    end = traj.state(np.array([t[-1]]))
+    assert math.hypot(x[-1] - end["x_m"][0], y[-1] - end["y_m"][0]) < 0.25
+    assert abs(th[-1] - end["theta_rad"][0]) < 4 * 0.05 * math.sqrt(6 * math.pi)
     # the counts wrap modulo 4096 (robot 4 starts at 4090 left)
-    assert min(r["LeftTicks"] for r in rows) >= 0 and max(r["LeftTicks"] for r in rows) < 4096
     assert rows[0]["LeftTicks"] == 4090 and any(r["LeftTicks"] < 100 for r in rows)
+    assert all(0 <= r["LeftTicks"] < 4096 and 0 <= r["RightTicks"] < 4096 for r in rows)
 
 
 # ---- the leader's schedule and the ranges --------------------------------------------------
