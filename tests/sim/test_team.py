@@ -352,3 +352,25 @@ def test_single_robot_range_and_bearing_runs_unchanged(tmp_path, name, log_sha, 
     outputs.write_truth(tmp_path / "t.csv", res)
     assert hashlib.sha256((tmp_path / "l.log").read_bytes()).hexdigest() == log_sha
     assert hashlib.sha256((tmp_path / "t.csv").read_bytes()).hexdigest() == truth_sha
+
+
+def test_bound_of_a_standing_pair_is_sigma_over_root_n(tmp_path):
+    """Three robots standing, the speed of sound known: B's x in the team frame is the A-B
+    distance, measured by every direct A-B range (C's two ranges only place C): the bound is
+    sigma(d) / sqrt(n_AB) (the weak 1 m prior and the 1 us quantisation aside, < 0.1 %)."""
+    src = builtin_scenario_path("team-static")
+    site = src.with_name("millibots-room.ini").read_text()
+    (tmp_path / "millibots-room.ini").write_text(
+        site.replace("sigma_speed_of_sound_mps = 0.3", "sigma_speed_of_sound_mps = 1e-6"))
+    text = src.read_text().replace("robots = 4", "robots = 3")
+    text = text[:text.index("[robot4]")] + text[text.index("[environment]"):]
+    (tmp_path / "three.scenario.ini").write_text(text)
+    tscn = load_team_scenario(str(tmp_path / "three.scenario.ini"), duration_s=20)
+    res = team_sim.run(tscn)
+    r = res.ranges.select(res.ranges.direct)
+    n_ab = int(np.sum(np.isin(r.emitter, [1, 2]) & np.isin(r.receiver, [1, 2])))
+    sigma = 0.008 + 0.005 * 2.0                       # d = 2 m
+    tr = res.truth
+    last = (tr["t_sim_s"] == 20) & (tr["robot"] == 2)
+    assert n_ab > 200
+    assert tr["pcrb_x_m"][last][0] == pytest.approx(sigma / math.sqrt(n_ab), rel=1e-3)
