@@ -14,10 +14,11 @@ EX_USAGE, EX_DATAERR, EX_UNAVAILABLE, EX_CONFIG = 64, 65, 69, 78
 
 
 def _cmd_list(_args) -> int:
-    from .scenario import builtin_names, load_scenario
+    from .scenario import builtin_names, is_team_scenario, load_scenario
+    from .team_scenario import load_team_scenario
     for name in builtin_names():
         try:
-            scn = load_scenario(name)
+            scn = load_team_scenario(name) if is_team_scenario(name) else load_scenario(name)
             print(f"{name:18s} {scn.duration_s:6.1f} s  {scn.description}")
         except ConfigError as exc:
             print(f"{name:18s} BROKEN: {exc}")
@@ -26,7 +27,16 @@ def _cmd_list(_args) -> int:
 
 def _cmd_run(args) -> int:
     from . import can_out, outputs, simulate
-    from .scenario import load_scenario
+    from .scenario import is_team_scenario, load_scenario
+    try:
+        team = is_team_scenario(args.scenario)
+    except ConfigError:
+        team = False            # load_scenario below reports it
+    if team:
+        return _run_team(args)
+    if args.roles:
+        print("beaconloc-sim run: --roles is for team scenarios", file=sys.stderr)
+        return EX_USAGE
     if not (args.log or args.channel or args.truth or args.odometry or args.stats):
         print("beaconloc-sim run: nothing to do; give --log, --channel, --truth, --odometry or --stats",
               file=sys.stderr)
@@ -105,6 +115,55 @@ def _cmd_run(args) -> int:
             stats["live"]["interface"] = args.interface
             stats["live"]["channel"] = args.channel
         outputs.write_json(args.stats, stats)
+    return 0
+
+
+def _run_team(args) -> int:
+    """run on a team scenario ([team] section): log, live bus, truth (a robot column), roles
+    JSON, stats (docs/simulator.md "Teams")."""
+    from . import can_out, outputs, team_sim
+    from .team_scenario import load_team_scenario
+    if args.odometry or args.window is not None or args.bound_prior is not None:
+        print("beaconloc-sim run: --odometry, --window and --bound-prior are not for team "
+              "scenarios (the truth CSV holds every robot; [team] bound_prior)", file=sys.stderr)
+        return EX_USAGE
+    if not (args.log or args.channel or args.truth or args.roles or args.stats):
+        print("beaconloc-sim run: nothing to do; give --log, --channel, --truth, --roles or "
+              "--stats", file=sys.stderr)
+        return EX_USAGE
+    if args.duration is not None and not args.duration > 0:
+        print("beaconloc-sim run: --duration must be > 0", file=sys.stderr)
+        return EX_USAGE
+    try:
+        tscn = load_team_scenario(args.scenario, seed=args.seed, duration_s=args.duration)
+    except ConfigError as exc:
+        print(f"beaconloc-sim: {exc}", file=sys.stderr)
+        return EX_CONFIG
+    t0 = time.perf_counter()
+    result = team_sim.run(tscn, bound=bool(args.truth))
+    if args.log:
+        can_out.write_log(result.frames, args.log, tscn.log_epoch_s, args.channel or tscn.channel)
+    if args.truth:
+        outputs.write_csv(args.truth, team_sim.TEAM_TRUTH_COLUMNS, result.truth)
+    if args.roles:
+        outputs.write_json(args.roles, team_sim.roles_document(result))
+    if args.channel:
+        import can
+        try:
+            bus = can.Bus(interface=args.interface, channel=args.channel)
+        except (can.CanError, OSError, ValueError, ImportError) as exc:
+            print(f"beaconloc-sim: cannot open CAN bus {args.interface}:{args.channel}: {exc}",
+                  file=sys.stderr)
+            return EX_UNAVAILABLE
+        try:
+            can_out.send_live(result.frames, bus, spin_s=args.spin_ms * 1e-3)
+        except can.CanError as exc:
+            print(f"beaconloc-sim: send failed on {args.channel}: {exc}", file=sys.stderr)
+            return EX_UNAVAILABLE
+        finally:
+            bus.shutdown()
+    if args.stats:
+        outputs.write_json(args.stats, team_sim.team_stats(result, time.perf_counter() - t0))
     return 0
 
 
@@ -217,6 +276,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--truth", metavar="FILE", help="ground-truth CSV with the Cramer-Rao bound")
     r.add_argument("--odometry", metavar="FILE", help="odometry-only dead-reckoning CSV")
     r.add_argument("--stats", metavar="FILE", help="JSON statistics (frames per id, live lateness)")
+    r.add_argument("--roles", metavar="FILE",
+                   help="team scenarios: JSON of the role changes, leaps and the team frame")
     r.add_argument("--seed", type=int, help="override the scenario's seed")
     r.add_argument("--bound-prior", metavar="SIGMA_XY_M,SIGMA_HEADING_DEG",
                    help="the Cramer-Rao bound's prior on the start pose: the estimator is "

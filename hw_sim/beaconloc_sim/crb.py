@@ -40,7 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .physics.bearings import bearing_jacobian
-from .physics.ranges import range_m, sigma_range_m, tof_jacobian
+from .physics.ranges import (range_jacobian, range_m, receiver_position, sigma_range_m,
+                             tof_jacobian)
 
 STATE = ("x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "s_mps", "T_s", "t0_s")
 IX, IY, ITH, IV, IW, IS, IT, IT0 = range(8)
@@ -292,3 +293,137 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
     if start is None:
         return out
     return out, (J, states[K - 1], wheel_left_m[K - 1], wheel_right_m[K - 1], times[K - 1])
+
+
+# ---- the team's bound ----------------------------------------------------------------------
+#
+# A team of N robots without fixed beacons (CMU Millibots, seed 004): the joint state
+# (x_i, y_i, theta_i for i = 1..N, then s), the posterior bound by the same recursion
+# (info_step: Tichavsky et al. 1998 with the matrix-inversion lemma) from one ping to the next.
+# Process: each robot's track odometry as the input (Millibots 3.2 with the ICR model's
+# effective width chi b, physics.skid_steer), its slip as the process noise: a distance slip
+# of variance sigma_m^2 |ds| and a heading slip sigma_rad^2 |dtheta| per step (the
+# simulator's draw, so the bound's noise is the true one), plus the tick quantisation
+# (variance tick^2/12 on each track's increment, counted only while the robot moves: a
+# standing robot's counts do not change); s random-walks with the temperature.
+# Measurement: every direct range delivered at a ping, tof = |p_r - p_e| / s between the
+# emitter's and the receiver's transducers (physics.ranges.range_jacobian for each end: the
+# distance is symmetric), variance (sigma(d)/s)^2 + 1 us^2 / 12.
+# Gauge: ranges and odometry are invariant to moving the whole team, so the bound is stated
+# in the team's own frame (Millibots 3.2: "assigns the position (0,0) to an arbitrarily
+# robot. A second robot is assigned a position on the X-axis"): at t = 0 robot A (gauge[0])
+# at the origin, robot B (gauge[1]) on +x. The frame is fixed by a prior of 1 um on x_A, y_A
+# and y_B at t = 0 (exact at the bound's scale); the other start coordinates have the weak
+# prior bound_prior. Truth and bound are both expressed in that frame (team_frame).
+
+
+@dataclass
+class TeamBoundModel:
+    n_robots: int
+    base_m: float                 # effective track width chi b, m
+    sigma_per_m: float            # distance slip after 1 m, m
+    sigma_per_rad: float          # heading slip after 1 rad, rad
+    m_per_tick: float             # track encoder resolution, m
+    range_offset_m: tuple         # range transducer mount (fwd, left), m
+    range_height_m: float
+    sigma_range_m: float
+    sigma_range_per_m: float
+    prior_xy_m: float             # weak prior on the start positions (gauge aside), m
+    prior_theta_rad: float        # prior on the start headings, rad
+    sigma_sos_mps: float          # prior on the speed of sound, m/s
+    gauge: tuple = (0, 1)         # 0-based indices of robots A (origin) and B (+x axis)
+
+    @property
+    def n_state(self) -> int:
+        return 3 * self.n_robots + 1
+
+
+GAUGE_SIGMA_M = 1e-6
+
+
+def team_prior(m: TeamBoundModel) -> np.ndarray:
+    """Information of the start state: the weak prior, and the gauge (x_A, y_A, y_B)."""
+    sig = np.tile([m.prior_xy_m, m.prior_xy_m, m.prior_theta_rad], m.n_robots)
+    sig = np.append(sig, m.sigma_sos_mps)
+    a, b = m.gauge
+    sig[3 * a] = sig[3 * a + 1] = sig[3 * b + 1] = GAUGE_SIGMA_M
+    return np.diag(1.0 / sig ** 2)
+
+
+def team_process(theta_rad: np.ndarray, d_left_m: np.ndarray, d_right_m: np.ndarray,
+                 s_change_mps: float, m: TeamBoundModel) -> tuple[np.ndarray, np.ndarray]:
+    """F and Q of one ping-to-ping step: robot i at heading theta_i moving its tracks by
+    dL_i, dR_i (true increments)."""
+    n = m.n_state
+    F, Q = np.eye(n), np.zeros((n, n))
+    tick_var = m.m_per_tick ** 2 / 12
+    for i, (th, dl, dr) in enumerate(zip(theta_rad, d_left_m, d_right_m)):
+        # Millibots 3.2, ICR width: ds = (dL + dR)/2, dtheta = (dR - dL)/(chi b);
+        # x' = x + ds cos(theta + dtheta/2), y' = y + ds sin(theta + dtheta/2)
+        ds, dth = (dl + dr) / 2, (dr - dl) / m.base_m
+        if dl == 0.0 and dr == 0.0:
+            continue
+        mid = th + dth / 2
+        c, s = math.cos(mid), math.sin(mid)
+        k = 3 * i
+        F[k, k + 2] = -ds * s
+        F[k + 1, k + 2] = ds * c
+        # slip (per metre, per radian) and quantisation (two tracks) in (ds, dtheta)
+        var = np.array([m.sigma_per_m ** 2 * abs(ds) + tick_var / 2,
+                        m.sigma_per_rad ** 2 * abs(dth) + 2 * tick_var / m.base_m ** 2])
+        G = np.array([[c, -ds * s / 2], [s, ds * c / 2], [0.0, 1.0]])
+        Q[k:k + 3, k:k + 3] = G @ np.diag(var) @ G.T
+    Q[-1, -1] = s_change_mps ** 2 + 1e-10
+    return F, Q
+
+
+def team_range_rows(poses: np.ndarray, sos_mps: float, emitter: np.ndarray,
+                    receiver: np.ndarray, m: TeamBoundModel) -> tuple[np.ndarray, np.ndarray]:
+    """Rows d(tof)/d(state) and variances of the ranges emitter[j] -> receiver[j] (0-based
+    robot indices) at poses (N, 3)."""
+    H = np.zeros((len(emitter), m.n_state))
+    var = np.zeros(len(emitter))
+    for j, (e, r) in enumerate(zip(emitter.tolist(), receiver.tolist())):
+        pe = receiver_position(*poses[e], m.range_offset_m, m.range_height_m)
+        pr = receiver_position(*poses[r], m.range_offset_m, m.range_height_m)
+        # the same distance seen from either end: d(d)/d(pose_r) with the beacon at p_e, and
+        # d(d)/d(pose_e) with the "beacon" at p_r
+        H[j, 3 * r:3 * r + 3] = range_jacobian(*poses[r], pe[None], m.range_offset_m,
+                                               m.range_height_m)[0] / sos_mps
+        H[j, 3 * e:3 * e + 3] = range_jacobian(*poses[e], pr[None], m.range_offset_m,
+                                               m.range_height_m)[0] / sos_mps
+        d = float(np.linalg.norm(pe - pr))
+        H[j, -1] = -d / sos_mps ** 2
+        sig = float(sigma_range_m(d, m.sigma_range_m, m.sigma_range_per_m)) / sos_mps
+        var[j] = sig ** 2 + (1e-6) ** 2 / 12
+    return H, var
+
+
+def team_pcrb(poses: np.ndarray, sos_mps: np.ndarray, track_left_m: np.ndarray,
+              track_right_m: np.ndarray, events: list, m: TeamBoundModel) -> np.ndarray:
+    """Bound covariance after each ping event k, (K, 3N+1, 3N+1), team frame.
+
+    poses: (K, N, 3) true poses at the events (team frame); sos_mps: (K,) true speed of
+    sound; track_*_m: (K, N) true cumulative track travel (the ICR model's); events[k]:
+    (emitter, receiver) arrays of 0-based robot indices of the direct ranges delivered at k.
+    Before event 0 the state is the start state (t = 0 poses are poses[0]'s when event 0
+    is at t = 0; otherwise the caller puts a first event at t = 0 with no range)."""
+    K = len(poses)
+    out = np.empty((K, m.n_state, m.n_state))
+    J = team_prior(m)
+    for k in range(K):
+        if k > 0:
+            F, Q = team_process(poses[k - 1, :, 2], track_left_m[k] - track_left_m[k - 1],
+                                track_right_m[k] - track_right_m[k - 1],
+                                float(sos_mps[k] - sos_mps[k - 1]), m)
+        else:
+            F, Q = np.eye(m.n_state), np.zeros((m.n_state, m.n_state))
+        emitter, receiver = events[k]
+        H = R = None
+        if len(emitter):
+            H, var = team_range_rows(poses[k], float(sos_mps[k]), np.asarray(emitter),
+                                     np.asarray(receiver), m)
+            R = np.diag(var)
+        J = info_step(J, F, Q, H, R)
+        out[k] = np.linalg.inv(J)
+    return out

@@ -11,7 +11,7 @@ from .physics.pulses import KIND_DIRECT, KIND_FLOOR_CEILING, KIND_LATE, KIND_WAL
 from .dbc import message_names
 from .simulate import ODOMETRY_COLUMNS, TRUTH_COLUMNS, SimResult
 
-_INT_COLUMNS = {"t_us"}
+_INT_COLUMNS = {"t_us", "robot", "beacon"}   # robot, beacon: team truth (team_sim)
 
 
 def write_csv(path: str | Path, columns: tuple[str, ...], data: dict[str, np.ndarray]) -> int:

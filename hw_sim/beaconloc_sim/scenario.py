@@ -185,6 +185,9 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
                   duration_s: float | None = None) -> Scenario:
     path = resolve(name_or_path)
     ini = IniFile(path)
+    if ini.has("team"):
+        raise ini.error("team", None, "a team scenario: load it with "
+                        "team_scenario.load_team_scenario (beaconloc-sim run does)")
     for sec, known in _KNOWN.items():
         if sec not in ("path", "faults", "opponent"):
             ini.check_known(sec, known)
@@ -216,23 +219,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         raise ini.error("faults", fault_keys["kidnap"][-1], "two kidnaps at the same time")
 
     # -- environment -----------------------------------------------------------------
-    if ini.has("environment", "temperature_profile"):
-        pts = []
-        for item in ini.raw("environment", "temperature_profile").split(","):
-            try:
-                t_txt, c_txt = item.split(":")
-                pts.append((float(t_txt), float(c_txt)))
-            except ValueError:
-                raise ini.error("environment", "temperature_profile",
-                                f"expected 't_s:temperature_c, ...', got {item.strip()!r}") from None
-        prof = np.array(pts, dtype=float)
-        if len(prof) == 0 or np.any(np.diff(prof[:, 0]) <= 0) or not np.all(np.isfinite(prof)):
-            raise ini.error("environment", "temperature_profile", "times must increase")
-    else:
-        temp = ini.number("environment", "temperature_c", 20.0, minimum=-50.0, maximum=60.0)
-        prof = np.array([[0.0, temp]])
-    if np.any(prof[:, 1] < -50) or np.any(prof[:, 1] > 60):
-        raise ini.error("environment", "temperature_profile", "temperature outside -50..60 C")
+    prof = temperature_profile(ini)
 
     duration = ini.number("scenario", "duration_s", positive=True) if duration_s is None \
         else float(duration_s)
@@ -381,9 +368,38 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
     )
 
 
-def _read_segments(ini: IniFile, sec: str) -> list:
-    """The path program of section sec ([path], [opponent]): speed_mps, turn_rate_degps and
-    segment1, segment2, ... (docs/simulator.md); any other key is an error."""
+def temperature_profile(ini: IniFile) -> np.ndarray:
+    """[environment] temperature_c or temperature_profile: (K, 2) rows t_s, temperature_c
+    (piecewise linear; one row for a constant temperature)."""
+    if ini.has("environment", "temperature_profile"):
+        pts = []
+        for item in ini.raw("environment", "temperature_profile").split(","):
+            try:
+                t_txt, c_txt = item.split(":")
+                pts.append((float(t_txt), float(c_txt)))
+            except ValueError:
+                raise ini.error("environment", "temperature_profile",
+                                f"expected 't_s:temperature_c, ...', got {item.strip()!r}") from None
+        prof = np.array(pts, dtype=float)
+        if len(prof) == 0 or np.any(np.diff(prof[:, 0]) <= 0) or not np.all(np.isfinite(prof)):
+            raise ini.error("environment", "temperature_profile", "times must increase")
+    else:
+        temp = ini.number("environment", "temperature_c", 20.0, minimum=-50.0, maximum=60.0)
+        prof = np.array([[0.0, temp]])
+    if np.any(prof[:, 1] < -50) or np.any(prof[:, 1] > 60):
+        raise ini.error("environment", "temperature_profile", "temperature outside -50..60 C")
+    return prof
+
+
+def is_team_scenario(name_or_path: str) -> bool:
+    """The scenario file has a [team] section (a team of robots: team_scenario.py)."""
+    return IniFile(resolve(name_or_path)).has("team")
+
+
+def _read_segments(ini: IniFile, sec: str, known: set[str] | None = None) -> list:
+    """The path program of section sec ([path], [opponent], a team's [robotN]): speed_mps,
+    turn_rate_degps and segment1, segment2, ... (docs/simulator.md); any other key (than
+    those of known, default _KNOWN[sec]) is an error."""
     speed = ini.number(sec, "speed_mps", 0.4, positive=True, maximum=5.0)
     turn_rate = math.radians(ini.number(sec, "turn_rate_degps", 30.0, positive=True))
     seg_keys = sorted((k for k in ini.parser.options(sec) if k.startswith("segment")),
@@ -396,8 +412,9 @@ def _read_segments(ini: IniFile, sec: str) -> list:
             segments.append(parse_segment(ini.raw(sec, key), speed, turn_rate))
         except ValueError as exc:
             raise ini.error(sec, key, str(exc)) from None
+    known = _KNOWN[sec] if known is None else known
     for key in ini.parser.options(sec):
-        if key not in _KNOWN[sec] and not key.startswith("segment"):
+        if key not in known and not key.startswith("segment"):
             raise ini.error(sec, key, "unknown key")
     return segments
 

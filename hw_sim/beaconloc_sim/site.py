@@ -127,7 +127,9 @@ def _read_items(ini: IniFile, schema: Schema, section: Section) -> np.ndarray:
     return np.array(rows, dtype=float).reshape(count, len(section.keys))
 
 
-def load_site(path: str | Path) -> Site:
+def load_site(path: str | Path, *, team: bool = False) -> Site:
+    """The site file at path. team: the site of a team of robots (team_scenario.py), whose
+    beacons are the robots themselves: it may have no fixed beacons of any kind."""
     ini = IniFile(path)
     schema = load_schema()
     ours = [s for s in schema.sections if "sim" in s.read_by]
@@ -194,7 +196,8 @@ def load_site(path: str | Path) -> Site:
         range_max_m=v(("range_sensor", "max_range_m")),
         range_ping_period_s=v(("range_sensor", "ping_period_s")),
     )
-    if site.beacon_count == 0 and site.bearing_beacon_count == 0 and site.range_beacon_count == 0:
+    if site.beacon_count == 0 and site.bearing_beacon_count == 0 and \
+            site.range_beacon_count == 0 and not team:
         raise ini.error("beacons", "count", "a site needs beacons: ultrasonic ([beacons] count), "
                         "bearing ([bearing_beacons] count) or range ([range_beacons] count)")
     if site.double_pulse_spacing_s <= site.burst_length_s:

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from beaconloc_sim.inifile import ConfigError
-from beaconloc_sim.scenario import builtin_names, load_scenario
+from beaconloc_sim.scenario import builtin_names, is_team_scenario, load_scenario
 from beaconloc_sim.site import load_site
+from beaconloc_sim.team_scenario import load_team_scenario
 
 from conftest import SITE_TEXT, site_with
 
@@ -26,6 +27,13 @@ def test_builtin_scenarios_all_load():
                      "encoder-silence", "kidnap"):
         assert required in names
     for name in names:
+        if is_team_scenario(name):           # a team of robots, no fixed beacons (issue 13)
+            tscn = load_team_scenario(name)
+            assert len(tscn.robots) == 4 and tscn.site.name.startswith("millibots")
+            assert tscn.site.beacon_count == tscn.site.range_beacon_count == 0
+            with pytest.raises(ConfigError, match="a team scenario"):
+                load_scenario(name)
+            continue
         scn = load_scenario(name)
         if scn.site.name == "eurobot":       # Vander 2011: the Eurobot table, bearings only
             assert scn.duration_s == 12 and scn.site.beacon_count == 0
@@ -37,6 +45,7 @@ def test_builtin_scenarios_all_load():
             assert scn.duration_s == 120 and scn.site.beacon_count == 6
     assert {"eurobot", "eurobot-outage20", "eurobot-outage50", "eurobot-opponent"} <= set(names)
     assert {"marvelmind", "marvelmind-multipath"} <= set(names)
+    assert {"team-static", "team-leapfrog"} <= set(names)
 
 
 def test_bad_site_number_names_file_line_key(make_scenario, tmp_path):

@@ -78,14 +78,19 @@ def test_frame_table_comes_from_the_dbc():
 
     from beaconloc_sim import dbc, nodes
     db = cantools.database.load_file(str(dbc_path()))
-    kinds = {nodes.ReceiverRing, nodes.WheelEncoders, nodes.NodeStatus}
+    from beaconloc_sim.nodes.range_module import RangeModule
+    from beaconloc_sim.nodes.track_encoders import TRACK_TICK_WRAP, TrackEncoders
+    kinds = {nodes.ReceiverRing, nodes.WheelEncoders, nodes.NodeStatus, RangeModule,
+             TrackEncoders}
     for kind in kinds:
         msg = db.get_message_by_name(kind.message)
         counter = msg.get_signal_by_name("Counter")
         assert kind.frame_spec() == dbc.FrameSpec(msg.name, msg.frame_id, 1 << counter.length)
     assert {k.frame_spec().counter_modulo for k in kinds} == {8, 16}
     assert dbc.message_names() == {0x100: "PULSE_DETECTION", 0x110: "WHEEL_ENCODERS",
-                                   0x120: "NODE_STATUS", 0x130: "RANGE", 0x140: "BEARING"}
+                                   0x120: "NODE_STATUS", 0x130: "RANGE", 0x131: "TRACK_ENCODERS",
+                                   0x140: "BEARING"}
+    assert TRACK_TICK_WRAP == dbc.signal_modulo("TRACK_ENCODERS", "RightTicks") == 1 << 12
     from beaconloc_sim.clocks import WRAP_US
     from beaconloc_sim.encoders import TICK_WRAP
     assert TICK_WRAP == dbc.signal_modulo("WHEEL_ENCODERS", "RightTicks") == 1 << 14

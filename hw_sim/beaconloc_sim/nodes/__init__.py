@@ -4,6 +4,10 @@ Adding a kind (RANGE, BEARING, SONAR_RING: ids reserved in the DBC) is a new mod
 a Node subclass, its frame in the DBC and one line in on_bus(). Nodes draw their
 processing latencies in bus order from one generator, so a kind appended at the end
 leaves the frames of the others as they were.
+
+A team of robots (team_sim.py) puts other nodes on its bus, one pair per robot:
+range_module.RangeModule (RANGE, the leader's pings) and track_encoders.TrackEncoders
+(TRACK_ENCODERS); on_bus() is the single robot's.
 """
 from __future__ import annotations
 

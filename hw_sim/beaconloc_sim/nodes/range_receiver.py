@@ -37,7 +37,8 @@ import numpy as np
 
 from ..clocks import WRAP_US, NodeClock
 from ..physics import acoustics as ac
-from ..physics.ranges import flight_time_s, receiver_position, sigma_range_m
+from ..physics.ranges import (flight_time_s, late_arrival_m, measured_tof_us, pulse_quality,
+                              receiver_position)
 from .base import Interval, Node
 from .bearing_sensor import occluded
 
@@ -117,13 +118,10 @@ class RangeReceiver(Node):
         path_m = true_m.copy()
         if np.any(multipath):
             idx = np.flatnonzero(multipath)
-            img = np.array([ac.image_sources(b[i], room)[image[i]] for i in idx.tolist()])
-            path_m[idx] = sos[idx] * flight_time_s(pose, t_e[idx], img, site.range_offset_m,
-                                                   site.range_height_m, sos[idx])
-        sigma = sigma_range_m(true_m, site.sigma_range_m, site.sigma_range_per_m)
-        meas_m = path_m + sigma * noise
-        tof_us = np.clip(np.round(meas_m / sos * 1e6 * (1.0 + self.clock.drift_ppm * 1e-6)),
-                         0, TOF_MAX_US).astype(np.int64)
+            path_m[idx] = late_arrival_m(pose, t_e[idx], b[idx], image[idx], room,
+                                         site.range_offset_m, site.range_height_m, sos[idx])
+        tof_us = measured_tof_us(path_m, true_m, sos, noise, self.clock.drift_ppm,
+                                 site.sigma_range_m, site.sigma_range_per_m, TOF_MAX_US)
         st = pose(t_e)
         p = receiver_position(st["x_m"], st["y_m"], st["theta_rad"], site.range_offset_m,
                               site.range_height_m)
@@ -135,9 +133,7 @@ class RangeReceiver(Node):
         lat = iv.latency_s(n)
         self._bound_pending = Ranges.concat([self._bound_pending, rec.select(rec.direct)])
         sent = np.flatnonzero(rec.sent)
-        # Quality: 1/L amplitude of a spherical wave, 15 within 1 m (module docstring)
-        quality = np.clip(np.round(15.0 * np.minimum(1.0, 1.0 / np.maximum(path_m, 1e-9))),
-                          1, 15).astype(np.int64)
+        quality = pulse_quality(path_m)
         signals = [{"NodeTime": int(ping_us[i] % WRAP_US), "Beacon": int(beacon[i]) + 1,
                     "Receiver": 1, "TimeOfFlight": int(tof_us[i]), "Quality": int(quality[i])}
                    for i in sent.tolist()]

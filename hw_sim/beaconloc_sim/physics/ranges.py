@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import acoustics as ac
 from .bearings import sensor_position
 
 _FLIGHT_ITERATIONS = 6     # fixed point tof = d(t_e + tof) / s: contraction factor v / s ~ 1e-3
@@ -60,6 +61,37 @@ def flight_time_s(pose_at, t_emit_s: np.ndarray, beacon_m: np.ndarray, offset_m,
 def sigma_range_m(r_m, sigma_m: float, sigma_per_m: float):
     """sigma of one range at distance r_m: sigma_m + sigma_per_m r (site [range_sensor])."""
     return sigma_m + sigma_per_m * np.asarray(r_m, dtype=float)
+
+
+def late_arrival_m(pose_at, t_emit_s: np.ndarray, source_m: np.ndarray, image: np.ndarray,
+                   room_m: tuple, offset_m, height_m: float, sos_mps: np.ndarray) -> np.ndarray:
+    """Path length of a late arrival, m: the pulse of each source (n, 3) reflected once by a
+    wall, the floor or the ceiling, image[i] in 1..6 the row of
+    physics.acoustics.image_sources (Allen & Berkley 1979 first-order images) it comes from,
+    timed to the moving receiver like the direct pulse (flight_time_s)."""
+    img = np.array([ac.image_sources(source_m[i], room_m)[image[i]]
+                    for i in range(len(t_emit_s))]).reshape(-1, 3)
+    return sos_mps * flight_time_s(pose_at, t_emit_s, img, offset_m, height_m, sos_mps)
+
+
+def measured_tof_us(path_m: np.ndarray, true_m: np.ndarray, sos_mps: np.ndarray,
+                    noise: np.ndarray, drift_ppm: float, sigma_m: float, sigma_per_m: float,
+                    tof_max_us: int) -> np.ndarray:
+    """TimeOfFlight as a receiver sends it, us: round((L + n) / s (1 + drift) us), L the
+    path length (the direct range, or a late arrival's), n = noise sigma(r) with sigma(r)
+    of the direct range r (sigma_range_m), the receiver clock's rate error (1 + drift)
+    included, clipped to 0..tof_max_us (the DBC's TimeOfFlight range)."""
+    sigma = sigma_range_m(true_m, sigma_m, sigma_per_m)
+    meas_m = path_m + sigma * noise
+    return np.clip(np.round(meas_m / sos_mps * 1e6 * (1.0 + drift_ppm * 1e-6)),
+                   0, tof_max_us).astype(np.int64)
+
+
+def pulse_quality(path_m: np.ndarray) -> np.ndarray:
+    """Quality from the path length L: a spherical wave's amplitude falls as 1/L,
+    Quality = clip(round(15 (1 m / L)), 1, 15) (15 within 1 m; 1 is the weakest sent)."""
+    return np.clip(np.round(15.0 * np.minimum(1.0, 1.0 / np.maximum(path_m, 1e-9))),
+                   1, 15).astype(np.int64)
 
 
 def range_jacobian(x, y, theta, beacons_m, offset_m, height_m: float) -> np.ndarray:

@@ -1,0 +1,376 @@
+"""A team of robots in one world (issue 13, CMU Millibots): skid-steer kinematics with track
+slip, the leader's ping schedule, RANGE and TRACK_ENCODERS frames, the leap-frog plan, the
+team's posterior bound, the command line."""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import cantools
+import numpy as np
+import pytest
+
+from beaconloc_sim import team_sim
+from beaconloc_sim.leapfrog import inside_triangle
+from beaconloc_sim.nodes.track_encoders import TRACK_TICK_WRAP, metres_per_tick
+from beaconloc_sim.physics import acoustics as ac
+from beaconloc_sim.physics import skid_steer
+from beaconloc_sim.physics.ranges import receiver_position
+from beaconloc_sim.resources import builtin_scenario_path, dbc_path
+from beaconloc_sim.team_scenario import load_team_scenario
+
+DB = cantools.database.load_file(str(dbc_path()))
+RANGE = DB.get_message_by_name("RANGE")
+TRACKS = DB.get_message_by_name("TRACK_ENCODERS")
+BIN = Path(sys.executable).with_name("beaconloc-sim")
+
+
+@pytest.fixture(scope="module")
+def static():
+    return team_sim.run(load_team_scenario("team-static"))
+
+
+@pytest.fixture(scope="module")
+def leapfrog():
+    return team_sim.run(load_team_scenario("team-leapfrog"))
+
+
+def decoded(res, message):
+    return [message.decode(d) for i, d in zip(res.frames.arb_id, res.frames.data)
+            if i == message.frame_id]
+
+
+# ---- skid steer ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("chi", [1.0, 1.5, 2.0])
+def test_pure_rotation_turns_at_2v_over_chi_b(chi):
+    b, v, dt = 0.08, 0.1, 0.01
+    x, y, th = 1.0, 2.0, 0.3
+    for _ in range(100):                       # 1 s at track speeds -V, +V
+        x, y, th = skid_steer.millibots_step(x, y, th, -v, v, dt, b, chi)
+    assert th - 0.3 == pytest.approx(2 * v / (chi * b))
+    assert (x, y) == (1.0, 2.0)
+    vl, vr = skid_steer.track_speeds(0.0, 2 * v / (chi * b), b, chi)
+    assert (vl, vr) == pytest.approx((-v, v))
+    # a straight run: both tracks at V, the heading does not move
+    xs, ys, ths = skid_steer.millibots_step(0.0, 0.0, math.pi / 2, v, v, 2.0, b, chi)
+    assert (xs, ys, ths) == pytest.approx((0.0, 2 * v, math.pi / 2), abs=1e-12)
+
+
+def test_slip_per_metre_and_per_radian_has_its_sigma():
+    rng = np.random.default_rng(3)
+    n, b, chi = 20000, 0.08, 1.5
+    # 1 m in 100 steps of 1 cm, and 1 rad in 100 steps: the errors after them
+    dl, dr = skid_steer.track_travel_with_slip(np.full((n, 100), 0.01), np.zeros((n, 100)), b,
+                                               chi, 0.02, 0.05, rng)
+    ds_err = np.sum((dl + dr) / 2, axis=1) - 1.0
+    dl, dr = skid_steer.track_travel_with_slip(np.zeros((n, 100)), np.full((n, 100), 0.01), b,
+                                               chi, 0.02, 0.05, rng)
+    dth_err = np.sum((dr - dl) / (chi * b), axis=1) - 1.0
+    assert np.std(ds_err) == pytest.approx(0.02, rel=0.03)
+    assert np.std(dth_err) == pytest.approx(0.05, rel=0.03)
+    assert abs(np.mean(ds_err)) < 4 * 0.02 / math.sqrt(n)
+
+
+def test_track_encoders_dead_reckon_the_turn_with_chi_b_not_b(static):
+    """Robot 4's TRACK_ENCODERS ticks, unwrapped and dead-reckoned (skid_steer.dead_reckoning)
+    with the effective width chi b: its full turn on the spot (segment 6) turns 2 pi within the
+    slip, and the whole 60 s track ends within the slip of the truth; with the geometric b the
+    turn reads chi = 1.5 turns (the ICR model's point)."""
+    tscn = static.scenario
+    rows = [r for r in decoded(static, TRACKS) if r["Robot"] == 4]
+    t, *_ = static.tracks[4]
+    assert len(rows) == len(t)
+    mpt = metres_per_tick(tscn.site)
+
+    def travel(side):
+        wrapped = np.array([r[side] for r in rows])
+        step = (np.diff(wrapped) + TRACK_TICK_WRAP // 2) % TRACK_TICK_WRAP - TRACK_TICK_WRAP // 2
+        return np.cumsum(step) * mpt                     # m from the first sample
+    dl, dr = np.diff(travel("LeftTicks"), prepend=0.0), np.diff(travel("RightTicks"), prepend=0.0)
+    start = tscn.robot(4).start
+    x, y, th = skid_steer.dead_reckoning(dl, dr, *start, tscn.site.wheel_base_m, tscn.icr_factor)
+    traj = tscn.robot(4).trajectory
+    i0, i1 = np.searchsorted(t, [traj.t0_s[5], traj.t0_s[6]])    # the turn 360
+    turned = th[i1] - th[i0 - 1]
+    sigma = 0.05 * math.sqrt(2 * math.pi)
+    assert turned == pytest.approx(2 * math.pi, abs=4 * sigma + 0.05)
+    _, _, th_b = skid_steer.dead_reckoning(dl, dr, *start, tscn.site.wheel_base_m, 1.0)
+    assert th_b[i1] - th_b[i0 - 1] == pytest.approx(1.5 * turned)
+    assert abs(th_b[i1] - th_b[i0 - 1] - 2 * math.pi) > 20 * sigma
+    # the whole track: 5.5 m driven, 6 pi turned (arcs and the turn); the end within 4 sigma
+    end = traj.state(np.array([t[-1]]))
+    assert math.hypot(x[-1] - end["x_m"][0], y[-1] - end["y_m"][0]) < 0.25
+    assert abs(th[-1] - end["theta_rad"][0]) < 4 * 0.05 * math.sqrt(6 * math.pi)
+    # the counts wrap modulo 4096 (robot 4 starts at 4090 left)
+    assert rows[0]["LeftTicks"] == 4090 and any(r["LeftTicks"] < 100 for r in rows)
+    assert all(0 <= r["LeftTicks"] < 4096 and 0 <= r["RightTicks"] < 4096 for r in rows)
+
+
+# ---- the leader's schedule and the ranges --------------------------------------------------
+
+def test_leader_pings_the_current_beacons_in_turn_never_overlapping(static, leapfrog):
+    for res in (static, leapfrog):
+        tscn, p = res.scenario, res.pings
+        slowest = ac.speed_of_sound_mps(np.min(tscn.temperature_profile[:, 1]))
+        # no two pings within the flight time of the longest range
+        assert np.min(np.diff(p.t_s)) > tscn.site.range_max_m / slowest
+        mask = tscn.beacon_mask(p.t_s)
+        ids = np.array(tscn.robot_ids)
+        assert all(mask[k, list(ids).index(e)] for k, e in enumerate(p.emitter.tolist()))
+    # team-static: 1, 2, 3, 1, ... every 50 ms of the leader's (robot 1's) clock, +20 ppm
+    p = static.pings
+    assert p.emitter[:6].tolist() == [1, 2, 3, 1, 2, 3]
+    assert set(p.emitter.tolist()) == {1, 2, 3}
+    assert np.diff(p.t_s) == pytest.approx(0.05 / (1 + 20e-6), rel=1e-9)
+    # the leapfrog's initialisation pings all four, then three at a time
+    early = leapfrog.pings.emitter[leapfrog.pings.t_s < 2.0]
+    assert set(early.tolist()) == {1, 2, 3, 4}
+
+
+def test_range_frames_decode_and_match_the_true_geometry(static):
+    tscn, r = static.scenario, static.ranges
+    rows = decoded(static, RANGE)
+    assert len(rows) == int(np.sum(r.sent))
+    sent = r.select(r.sent)
+    by_key = {(int(rc), int(nt % 2**32)): i for i, (rc, nt) in
+              enumerate(zip(sent.receiver.tolist(), sent.node_us.tolist()))}
+    err, sig, late = [], [], []
+    for row in rows:
+        assert row["Beacon"] != row["Receiver"] and 1 <= row["Beacon"] <= 3
+        i = by_key[(row["Receiver"], row["NodeTime"])]
+        assert row["Beacon"] == sent.emitter[i]
+        rx = tscn.robot(row["Receiver"])
+        tof_s = row["TimeOfFlight"] * 1e-6 / (1 + rx.clock.drift_ppm * 1e-6)
+        # the truth geometry, independently: the emitter at t_e, the receiver at the arrival
+        t_e = float(sent.t_s[i])
+        e = tscn.robot(row["Beacon"]).trajectory.state(np.array([t_e]))
+        q = rx.trajectory.state(np.array([t_e + tof_s]))
+        site = tscn.site
+        pe = receiver_position(e["x_m"], e["y_m"], e["theta_rad"], site.range_offset_m,
+                               site.range_height_m)[0]
+        pr = receiver_position(q["x_m"], q["y_m"], q["theta_rad"], site.range_offset_m,
+                               site.range_height_m)[0]
+        d = float(np.linalg.norm(pe - pr))
+        e_m = tof_s * float(ac.speed_of_sound_mps(20.0)) - d
+        if sent.multipath[i]:
+            late.append(e_m)
+        else:
+            err.append(e_m)
+            sig.append(site.sigma_range_m + site.sigma_range_per_m * d)
+    err, sig = np.array(err), np.array(sig)
+    assert len(err) > 2000 and np.all(np.abs(err) < 5 * sig + 1e-3)
+    assert np.std(err / sig) == pytest.approx(1.0, rel=0.08)
+    assert len(late) > 10 and np.median(late) > 0.3           # reflections: metres longer
+    # every listener of the team hears: robot 4 and the beacons between their own pings
+    assert {row["Receiver"] for row in rows} == {1, 2, 3, 4}
+
+
+def test_out_of_range_pairs_are_never_heard(tmp_path):
+    """max_range_m 1.9 m: the 2 m beacon-to-beacon pairs of team-static are never heard,
+    robot 4 inside the triangle still hears every beacon at times."""
+    src = builtin_scenario_path("team-static")
+    site = src.with_name("millibots-room.ini").read_text()
+    (tmp_path / "millibots-room.ini").write_text(site.replace("max_range_m = 3.0",
+                                                              "max_range_m = 1.9"))
+    (tmp_path / "short.scenario.ini").write_text(src.read_text())
+    res = team_sim.run(load_team_scenario(str(tmp_path / "short.scenario.ini"), duration_s=20),
+                       bound=False)
+    r = res.ranges
+    assert np.all(r.out_of_range == (r.true_m > 1.9)) and np.any(r.out_of_range)
+    assert np.all(r.true_m[r.sent] <= 1.9)
+    rows = decoded(res, RANGE)
+    assert {(row["Beacon"], row["Receiver"]) for row in rows} == {(1, 4), (2, 4), (3, 4)}
+
+
+# ---- leap-frog -----------------------------------------------------------------------------
+
+def test_leapfrog_one_mover_at_a_time_triangles_in_range_goal_reached(leapfrog):
+    tscn = leapfrog.scenario
+    tr = leapfrog.truth
+    n = len(tscn.robots)
+    moving = ((tr["v_mps"] != 0) | (tr["omega_radps"] != 0)).reshape(-1, n)
+    assert moving.sum(axis=1).max() == 1 and moving.any(axis=1).mean() > 0.8
+    # the roles: always three beacons after the initialisation; the mover is the receiver
+    beacon = tr["beacon"].reshape(-1, n).astype(bool)
+    t = tr["t_sim_s"].reshape(-1, n)[:, 0]
+    assert np.all(beacon[t >= 2.0].sum(axis=1) == 3)
+    assert not np.any(moving & beacon)
+    # every triangle of beacons within the max range (and equilateral-ish, 1.7 m sides)
+    x, y = tr["x_m"].reshape(-1, n), tr["y_m"].reshape(-1, n)
+    for k in np.flatnonzero(t >= 2.0)[::10]:
+        b = np.flatnonzero(beacon[k])
+        pts = np.column_stack([x[k, b], y[k, b]])
+        sides = [np.linalg.norm(pts[i] - pts[j]) for i, j in ((0, 1), (1, 2), (0, 2))]
+        assert max(sides) < tscn.site.range_max_m and min(sides) > 1.5
+        # the mover always within range of at least two beacons
+        m = np.flatnonzero(~beacon[k])[0]
+        d = np.hypot(pts[:, 0] - x[k, m], pts[:, 1] - y[k, m])
+        assert np.sum(d < tscn.site.range_max_m) >= 2
+    # the goal: 20 m down the corridor, inside the final triangle, reached within the run
+    assert tscn.plan_end_s <= tscn.duration_s and len(tscn.leaps) >= 20
+    final = [tscn.robot(i).trajectory.state(np.array([tscn.duration_s])) for i in
+             tscn.leaps[-1].beacons]
+    assert inside_triangle(tscn.goal_m, *((f["x_m"][0], f["y_m"][0]) for f in final))
+    # the L manoeuvre first: robot 4 straight, a quarter turn to the left, straight
+    segs = tscn.robot(4).trajectory.segments
+    assert [s.kind for s in segs[:4]] == ["wait", "straight", "turn", "straight"]
+    assert segs[2].omega_radps > 0 and segs[2].duration_s * segs[2].omega_radps == \
+        pytest.approx(math.pi / 2)
+
+
+def test_leapfrog_roles_json_and_the_replaced_beacon_moves_next(leapfrog):
+    doc = team_sim.roles_document(leapfrog)
+    json.dumps(doc)
+    leaps = doc["leaps"]
+    for a, b in zip(leaps, leaps[1:]):
+        assert b["robot"] == a["replaced"] and b["t_start_s"] >= a["t_end_s"]
+    assert doc["team_frame"] == {"origin_robot": 1, "x_axis_robot": 2,
+                                 "origin_site_m": [1.0, 0.75], "rotation_rad": 0.0}
+
+
+# ---- the team's bound ----------------------------------------------------------------------
+
+def _bound(res, robot: int) -> tuple[np.ndarray, np.ndarray]:
+    tr = res.truth
+    sel = tr["robot"] == robot
+    return tr["t_sim_s"][sel], tr["pcrb_pos_m"][sel]
+
+
+def test_bound_gauge_and_more_ranges_give_a_smaller_bound(static):
+    tscn = static.scenario
+    tr = static.truth
+    # the gauge: robot 1 at the team origin, robot 2 on +x at t = 0 (exact)
+    first = tr["t_sim_s"] == 0
+    assert tr["team_x_m"][first][:2].tolist() == pytest.approx([0.0, 2.0])
+    assert tr["team_y_m"][first][:2].tolist() == pytest.approx([0.0, 0.0], abs=1e-12)
+    end = tr["t_sim_s"] == tscn.duration_s
+    assert tr["pcrb_pos_m"][end][0] < 1e-5 and tr["pcrb_y_m"][end][1] < 1e-5
+    assert tr["pcrb_x_m"][end][1] > 1e-4                       # B's x: from the ranges
+    # fewer ranges (half of them dropped): a larger bound for every robot
+    fewer = team_sim.run(dataclasses.replace(tscn, range_dropout_probability=0.5))
+    late = tr["t_sim_s"][tr["robot"] == 1] > 10
+    for robot in (2, 3, 4):
+        full, half = _bound(static, robot)[1], _bound(fewer, robot)[1]
+        assert np.mean(full[late]) < np.mean(half[late])
+    # with the speed of sound known (its prior is a floor no range lowers), a standing
+    # beacon's bound is range-limited: 0.98 x 0.97 of the ranges direct against 0.5 x 0.97
+    known = dataclasses.replace(tscn.site, sigma_speed_of_sound_mps=1e-6)
+    full = _bound(team_sim.run(dataclasses.replace(tscn, site=known)), 3)[1]
+    half = _bound(team_sim.run(dataclasses.replace(tscn, site=known,
+                                                   range_dropout_probability=0.5)), 3)[1]
+    assert np.median(half[late] / full[late]) == pytest.approx(math.sqrt(0.98 / 0.5), rel=0.1)
+    # the moving robot's bound stays at the ranges' centimetre scale
+    t, b4 = _bound(static, 4)
+    assert 0.002 < np.median(b4[t > 5]) < 0.05
+
+
+def test_bound_grows_with_the_distance_travelled(leapfrog):
+    tscn = leapfrog.scenario
+    tr = leapfrog.truth
+    n = len(tscn.robots)
+    pos = tr["pcrb_pos_m"].reshape(-1, n)
+    t = tr["t_sim_s"].reshape(-1, n)[:, 0]
+    beacon = tr["beacon"].reshape(-1, n).astype(bool)
+    # the beacons' mean bound after each leap rises leap by leap (drift of the team frame)
+    after = [np.searchsorted(t, lp.t_end_s + 1.5) for lp in tscn.leaps]
+    mean_b = np.array([pos[k][beacon[k]].mean() for k in after])
+    assert mean_b[-1] > 3 * mean_b[2]
+    assert np.corrcoef(np.arange(len(mean_b)), mean_b)[0, 1] > 0.9
+    # per metre: the bound at the goal against the distance from the start
+    x = tr["team_x_m"].reshape(-1, n)
+    # 54 mm after 20 m with seed 1: 0.26 % of the distance (docs/simulator.md)
+    assert 0.001 < mean_b[-1] / np.max(x[-1]) < 0.005
+
+
+# ---- the command line ----------------------------------------------------------------------
+
+def test_cli_lists_and_runs_a_team_scenario(tmp_path):
+    out = subprocess.run([str(BIN), "list"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0
+    assert "team-static" in out.stdout and "team-leapfrog" in out.stdout
+    assert "BROKEN" not in out.stdout
+    paths = {k: tmp_path / k for k in ("log", "truth", "roles", "stats")}
+    proc = subprocess.run([str(BIN), "run", "team-static", "--duration", "10",
+                           *(a for k, p in paths.items() for a in (f"--{k}", str(p)))],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    with open(paths["truth"], newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert tuple(rows[0]) == team_sim.TEAM_TRUTH_COLUMNS
+    assert [r["robot"] for r in rows[:5]] == ["1", "2", "3", "4", "1"]
+    assert len(rows) == 4 * (10 * 10 + 1)
+    stats = json.loads(paths["stats"].read_text())
+    roles = json.loads(paths["roles"].read_text())
+    assert [c["role"] for c in roles["role_changes"]] == ["beacon"] * 3 + ["receiver"]
+    assert stats["frames"]["0x130"] == stats["ranges"]["sent"] > 0
+    assert 4 * 200 <= stats["frames"]["0x131"] <= 4 * 201      # 20 Hz per robot
+    bad = subprocess.run([str(BIN), "run", "team-static", "--odometry", str(tmp_path / "o")],
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 64
+
+
+def test_team_scenario_errors_name_the_key(tmp_path):
+    from beaconloc_sim.inifile import ConfigError
+    src = builtin_scenario_path("team-static")
+    (tmp_path / "millibots-room.ini").write_text(src.with_name("millibots-room.ini").read_text())
+    text = src.read_text()
+    for bad, why in ((("role = mover", "role = pilot"), "role"),
+                     (("robots = 4", "robots = 5"), "[robot5] is missing"),
+                     (("gauge = 1, 2", "gauge = 1, 1"), "gauge")):
+        p = tmp_path / "bad.scenario.ini"
+        p.write_text(text.replace(*bad))
+        with pytest.raises(ConfigError, match=re.escape(why)):
+            load_team_scenario(str(p))
+
+
+# ---- the single-robot scenarios are untouched ----------------------------------------------
+
+@pytest.mark.parametrize("name, log_sha, truth_sha", [
+    ("marvelmind", "060948c51131fb31151392e546045c0d04ca18f5d75bf9c1e42e3341d6ea6b7d",
+     "3bb5b9527810ef28105687acb021addbcdd8c8973906a3f3ed2df22c36256912"),
+    ("marvelmind-multipath", "841f822f1d29cc55074006c6714a3260ff036cba1e7a448e8784364c1444aa96",
+     "ddee44b12be7bd765cf7b97004d611895afa215423d25acce8933d3786ade08c"),
+    ("eurobot-opponent", "2ed553c0b8633fd79055d6dc7250695ac222df706ea0384e9d5c6d7ad2f341ba",
+     "990e1a33d1b0beb416616f4a866306fdd6026bddb9cbef1b29569740b9e99e3e"),
+])
+def test_single_robot_range_and_bearing_runs_unchanged(tmp_path, name, log_sha, truth_sha):
+    """20 s of each: log and truth as on the int branch before the team existed (f1eb983; the
+    range physics now shared with the team through physics.ranges)."""
+    import hashlib
+
+    from beaconloc_sim import can_out, outputs, simulate
+    from beaconloc_sim.scenario import load_scenario
+    res = simulate.run(load_scenario(name, duration_s=20))
+    can_out.write_log(res.frames, tmp_path / "l.log", res.scenario.log_epoch_s, "vcan0")
+    outputs.write_truth(tmp_path / "t.csv", res)
+    assert hashlib.sha256((tmp_path / "l.log").read_bytes()).hexdigest() == log_sha
+    assert hashlib.sha256((tmp_path / "t.csv").read_bytes()).hexdigest() == truth_sha
+
+
+def test_bound_of_a_standing_pair_is_sigma_over_root_n(tmp_path):
+    """Three robots standing, the speed of sound known: B's x in the team frame is the A-B
+    distance, measured by every direct A-B range (C's two ranges only place C): the bound is
+    sigma(d) / sqrt(n_AB) (the weak 1 m prior and the 1 us quantisation aside, < 0.1 %)."""
+    src = builtin_scenario_path("team-static")
+    site = src.with_name("millibots-room.ini").read_text()
+    (tmp_path / "millibots-room.ini").write_text(
+        site.replace("sigma_speed_of_sound_mps = 0.3", "sigma_speed_of_sound_mps = 1e-6"))
+    text = src.read_text().replace("robots = 4", "robots = 3")
+    text = text[:text.index("[robot4]")] + text[text.index("[environment]"):]
+    (tmp_path / "three.scenario.ini").write_text(text)
+    tscn = load_team_scenario(str(tmp_path / "three.scenario.ini"), duration_s=20)
+    res = team_sim.run(tscn)
+    r = res.ranges.select(res.ranges.direct)
+    n_ab = int(np.sum(np.isin(r.emitter, [1, 2]) & np.isin(r.receiver, [1, 2])))
+    sigma = 0.008 + 0.005 * 2.0                       # d = 2 m
+    tr = res.truth
+    last = (tr["t_sim_s"] == 20) & (tr["robot"] == 2)
+    assert n_ab > 200
+    assert tr["pcrb_x_m"][last][0] == pytest.approx(sigma / math.sqrt(n_ab), rel=1e-3)
