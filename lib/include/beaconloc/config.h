@@ -81,10 +81,13 @@ typedef struct bl_wheel_params {
      * centres of rotation lie χ·b/2 either side, so
      *     Δθ = (d_r - d_l) / (χ·b),   Δc = (d_r + d_l)/2,
      * in every odometry use (the predict, the wheel speeds, the bearing
-     * dead reckoning). A differential drive is χ = 1. */
+     * dead reckoning). A differential drive is χ = 1. The site-file keys
+     * named below are proposed: the bridge's loader does not read them yet
+     * (defaults from bl_config_default). */
     bl_real skid_factor;                   /* [robot] skid_factor: χ >= 1 (1 = differential drive,
-                                             the default), <= 10; Mandow et al. measured
-                                             χ ≈ 1.5 for a 4-wheel skid-steer robot */
+                                             the default), <= 10; measured per robot and
+                                             floor (Mandow et al. 2007 identify it from
+                                             driven paths) */
     bl_real slip_heading_rad_per_sqrt_rad; /* [noise]: heading slip of skid steering, a random
                                               walk in the angle turned: σ_θ² grows by this²·|Δθ|
                                               (rad²) per turn of |Δθ| rad, >= 0, < 1; default 0 */
@@ -142,7 +145,8 @@ typedef struct bl_range_params {
     bl_real max_fix_drms_m;    /* [tuning] range_max_fix_drms_m: a trilateration (re)start is
                                   refused when the fix's drms sqrt(σx² + σy²) exceeds this (m),
                                   > 0 (default 0.25 = converged_sigma_xy_m's default) */
-    uint32_t team_site;        /* [range_sensor] team_site: 1 = a team without fixed beacons
+    uint32_t team_site;        /* [range_sensor] team_site (proposed key, not read by the
+                                  bridge yet): 1 = a team without fixed beacons
                                   (the CMU Millibots): the receiver ranges to teammates
                                   (filter.h bl_filter_set_team_beacons, BL_WITH_TEAM), so a
                                   site with no beacon of any kind is valid (the filter starts

@@ -592,7 +592,7 @@ int bl_model_range(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t
  *       every ping is then treated as carrying an independent beacon error,
  *       so after n pings the filter believes it has averaged it down by
  *       √n: over-confident (measured: tests/lib/test_filter_team.c, mean
- *       NEES of (x, y) far above 2, lib/README.md);
+ *       NEES of (x, y) 7.9 where (b) gives 1.9, 2 expected; lib/README.md);
  *   (b) a Schmidt "consider" update (Schmidt 1966; Simon 2006, "Optimal
  *       State Estimation", §7.5): the beacons' positions are extra states
  *       that are never updated (gain rows zero) but whose covariance and
