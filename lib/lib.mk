@@ -74,8 +74,7 @@ $(eval $(call LIB_VARIANT,san/,$(LIB_SAN) -g,$(LIB_SAN)))
 # way, so the switches cannot rot (every other test uses the bearing or range
 # API and runs in the three above).
 $(eval $(call LIB_VARIANT,nobearing/,-DBL_WITH_BEARINGS=0 -DBL_WITH_RANGES=0 -DBL_WITH_TEAM=0 -DEIGEN_NO_DEBUG,))
-LIB_NOBEARING_TESTS := test_build_switch test_filter_pulse test_filter_errors test_solver_bearing test_solver_range \
-                       test_solver_team
+LIB_NOBEARING_TESTS := test_build_switch test_filter_pulse test_filter_errors test_solver_bearing test_solver_range
 
 LIB_TEST_BINS := $(foreach v,/ /float/ /san/,$(addprefix $(BUILD)/lib$(v)tests/,$(LIB_TEST_NAMES))) \
                  $(addprefix $(BUILD)/lib/nobearing/tests/,$(LIB_NOBEARING_TESTS))

@@ -562,12 +562,12 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
         // Δc = (dL + dR)/2, φ = θ + Δθ/2 the midpoint heading (eq. 24).
         const real sh = cfg->wheels.slip_heading_rad_per_sqrt_rad, sl = cfg->wheels.slip_lateral_m_per_sqrt_m;
         Pn(TH, TH) += sh * sh * std::fabs(dth);
+        // (cos φ, sin φ) = g_L + g_R's (x, y) rows (odometry_model: the
+        // distance-only direction of eq. 24), so n = (-sin φ, cos φ).
         const real ql = sl * sl * std::fabs(real(0.5) * (cl + cr));
-        const real nx = -std::sin(x(TH) + real(0.5) * dth), ny = std::cos(x(TH) + real(0.5) * dth);
-        Pn(X, X) += ql * nx * nx;
-        Pn(X, Y) += ql * nx * ny;
-        Pn(Y, X) += ql * nx * ny;
-        Pn(Y, Y) += ql * ny * ny;
+        const real n[2] = {-(J.g[1][0] + J.g[1][1]), J.g[0][0] + J.g[0][1]};
+        for (int r = 0; r < 2; ++r)
+            for (int c = 0; c < 2; ++c) Pn(r, c) += ql * n[r] * n[c];
     }
     // v and ω: random walk of the piecewise-constant acceleration model (as
     // in cv_predict, our model): σ_v² += (s·σ_a·dt)² ((m/s)²), σ_ω² +=

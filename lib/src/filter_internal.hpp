@@ -131,6 +131,7 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
 // ---- aid_team.cpp: the state augmented with the team beacons' (x, y)
 constexpr int NB = 2 * BL_TEAM_MAX_BEACONS;
 constexpr int NA = NX + NB;
+static_assert(NA == kTeamNA, "fusion.cpp instantiates the shared update's Joseph form at kTeamNA");
 using VA = VN<NA>;
 using MA = MN<NA>;
 using CX = Mat<NX, NB>;  // cross-covariance state x beacons (m·unit of the state)

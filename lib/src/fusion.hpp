@@ -38,6 +38,7 @@ struct ScalarMeasurement {
     // states (Schmidt 1966; Simon 2006 §7.5): their gain rows are zero, so
     // they and their covariance block stay as they are while the
     // cross-covariance with the estimated states is kept. 0: all estimated.
+    // Read only for a state larger than the filter's own (N > NX).
     int n_solve = 0;
 };
 
@@ -62,37 +63,14 @@ bool outside_gate(const ScalarMeasurement &m, real h, real S, bl_fusion_result *
 // (c, r), computed once.
 template <int N> constexpr int upper_size() { return N * (N + 1) / 2; }
 constexpr int kUpper = upper_size<NX>();
-template <int N> bool joseph_upper(const MN<N> &P, const VN<N> &K, const VN<N> &u, real s, real *up, VN<N> *diag)
-{
-    real nan_if_not_finite = 0;  // v·0 is 0 for a finite v, NaN for ±inf and NaN
-    real *out = up;
-    for (int r = 0; r < N; ++r) {
-        const real kr = K(r), ur = u(r), sk = s * kr;
-        real v = P(r, r) - kr * ur;
-        v -= ur * kr;
-        v += sk * kr;
-        (*diag)(r) = v;
-        *out++ = v;
-        nan_if_not_finite += v * real(0);
-        for (int c = r + 1; c < N; ++c) {
-            real w = P(r, c) - kr * u(c);
-            w -= ur * K(c);
-            w += sk * K(c);
-            *out++ = w;
-            nan_if_not_finite += w * real(0);
-        }
-    }
-    return nan_if_not_finite == real(0);
-}
+// Defined in fusion.cpp for N = NX and, with the team (BL_WITH_TEAM), the
+// team's augmented size kTeamNA: out of line, so that every source's
+// fuse_scalar instance shares one copy (make size-m4's flash).
+template <int N> bool joseph_upper(const MN<N> &P, const VN<N> &K, const VN<N> &u, real s, real *up, VN<N> *diag);
 // P = the symmetric matrix whose upper triangle is up[].
-template <int N> void store_symmetric(const real *up, MN<N> &P)
-{
-    const real *in = up;
-    for (int r = 0; r < N; ++r) {
-        P(r, r) = *in++;
-        for (int c = r + 1; c < N; ++c) P(r, c) = P(c, r) = *in++;
-    }
-}
+template <int N> void store_symmetric(const real *up, MN<N> &P);
+// The state augmented with the team beacons' (x, y) (aid_team.cpp).
+constexpr int kTeamNA = NX + 2 * BL_TEAM_MAX_BEACONS;
 
 // One scalar measurement update of (x, P), P symmetric (every update and
 // predict leaves it so), through the source's model, a
@@ -160,11 +138,15 @@ int fuse_scalar(const Model &model, const ScalarMeasurement &m, VN<N> &x, MN<N> 
     VXn xi = xbar;
     VXn K;
     uint32_t it = 0;
-    const int n_solve = m.n_solve > 0 && m.n_solve < N ? m.n_solve : N;
     for (;;) {
         K = PHt / S;
-        // Consider states: no gain (Schmidt).
-        for (int r = n_solve; r < N; ++r) K(r) = real(0);
+        // Consider states: no gain (Schmidt). They exist only in an
+        // augmented state (N > NX): the filter's own instances compile
+        // without this (make size-m4's flash).
+        if constexpr (N > NX) {
+            const int n_solve = m.n_solve > 0 && m.n_solve < N ? m.n_solve : N;
+            for (int r = n_solve; r < N; ++r) K(r) = real(0);
+        }
         const VXn xn = xbar + K * (m.z - h - H.dot(xbar - xi));
         ++it;
         const real step = (xn.template head<2>() - xi.template head<2>()).norm();

@@ -5,9 +5,13 @@
 // squares, with its gauge-fixed covariance; the mirror reflection
 // (bl_team_mirror) and its resolution by an L-shaped manoeuvre
 // (bl_team_resolve_mirror).
+#include "internal.hpp"
+
+// The whole source compiles out without the team (common.h BL_WITH_TEAM).
+#if BL_WITH_TEAM
+
 #include <cstring>
 
-#include "internal.hpp"
 #include "linalg.hpp"
 
 extern "C" {
@@ -398,3 +402,5 @@ extern "C" int bl_team_resolve_mirror(const bl_team_l_manoeuvre *in, bl_team_mir
     *out = d;
     return BL_OK;
 }
+
+#endif  // BL_WITH_TEAM

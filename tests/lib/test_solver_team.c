@@ -4,8 +4,8 @@
  * (shortest-path start), a multipath range caught by the chi-square test,
  * the mirror convention and bl_team_mirror, the L-shaped manoeuvre that
  * resolves it (bl_team_resolve_mirror, also end to end with trilaterated
- * fixes), and the errors. Built in every library variant (the solvers stay
- * without BL_WITH_TEAM). */
+ * fixes), and the errors. Built against the double, float and sanitized
+ * libraries (BL_WITH_TEAM 1). */
 #include <stdio.h>
 
 #include "filter_world.h"

@@ -75,9 +75,11 @@ typedef double bl_real;
  *                     bl_filter_fuse_team_range, bl_team_beacons). Needs
  *                     BL_WITH_RANGES (its model and σ). 0: those calls and
  *                     types are not declared, the filter carries no team
- *                     block, bl_estimate no team counters. The team solvers
- *                     (solver.h bl_solve_team, bl_team_resolve_mirror,
- *                     bl_team_mirror) stay, as the other solvers. */
+ *                     block, bl_estimate no team counters, and the team
+ *                     solvers (solver.h bl_solve_team, bl_team_resolve_mirror,
+ *                     bl_team_mirror) are not built either: unlike the other
+ *                     solvers, bl_solve_team's ~5 KiB stack frame would
+ *                     dominate a small board's stack report. */
 #ifndef BL_WITH_TEAM
 #define BL_WITH_TEAM BL_WITH_RANGES
 #endif

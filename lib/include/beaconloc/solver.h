@@ -269,6 +269,7 @@ typedef struct bl_range_solution {
 
 int bl_solve_ranges_2d(const bl_range_problem *prob, bl_range_solution *sol);
 
+#if BL_WITH_TEAM /* common.h: the team solvers are part of the team switch */
 /* ---- Team initialisation from pairwise ranges (lib/src/solver_team.cpp) ----
  * The CMU Millibots' start-up (Navarro-Serment et al., "Millibots", §3.2):
  * with no fixed beacon, the team leader has every robot ping and collects
@@ -322,8 +323,10 @@ int bl_solve_ranges_2d(const bl_range_problem *prob, bl_range_solution *sol);
  *   BL_ENOCONVERGE Levenberg–Marquardt took max_iterations steps without a
  *                  step below the tolerance.
  * Cost: one 8x8 eigen-decomposition, O(M + N³) per step (a (2N)x(2N)
- * Cholesky), at most max_iterations steps; no heap; about 6 KiB of stack
- * with double. Reentrant. */
+ * Cholesky), at most max_iterations steps; no heap; about 5.4 KiB of
+ * stack with float (measured by make size-m4's stack report), twice that
+ * with double: a host or team-leader call, not a small board's.
+ * Reentrant. */
 #define BL_TEAM_NONE 0xffffffffu
 typedef struct bl_team_problem {
     uint32_t count; /* N robots, 3..BL_MAX_TEAM */
@@ -409,6 +412,7 @@ typedef struct bl_team_mirror_decision {
  * |c|/σ_c < min_confidence, or the odometry turn too small: |turn| <
  * min_confidence·σ_turn or |turn| < 0.1 rad). */
 int bl_team_resolve_mirror(const bl_team_l_manoeuvre *in, bl_team_mirror_decision *out);
+#endif /* BL_WITH_TEAM */
 
 #ifdef __cplusplus
 }
