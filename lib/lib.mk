@@ -4,7 +4,7 @@
 #   build/lib/float/libbeaconloc.a   -DBL_USE_FLOAT=1
 #   build/lib/san/libbeaconloc.a     double with ASan/UBSan (tests only)
 #   build/lib/nobearing/libbeaconloc.a  double, -DBL_WITH_BEARINGS=0
-#                                    -DBL_WITH_RANGES=0 (tests
+#                                    -DBL_WITH_RANGES=0 -DBL_WITH_TEAM=0 (tests
 #                                    only: LIB_NOBEARING_TESTS below)
 #   make test-lib                    every tests/lib/test_*.c as its own cmocka
 #                                    executable against the double, float and
