@@ -34,7 +34,7 @@ FW_HOST_BIN := $(FW_HOST_DIR)/firmware_host
 M4_ARCH     := -mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard
 M4_COMMON   := $(M4_ARCH) -Os -g -ffunction-sections -fdata-sections -fstack-usage \
                -fcallgraph-info=su -DBL_USE_FLOAT=1 -DBL_MAX_BEACONS=8 -DBL_MAX_RECEIVERS=8 \
-               -DBL_WITH_BEARINGS=0 -DBL_WITH_RANGES=0 -Ilib/include
+               -DBL_WITH_BEARINGS=0 -DBL_WITH_RANGES=0 -DBL_WITH_TEAM=0 -Ilib/include
 # EIGEN_CFLAGS: pkg-config's eigen3 as -isystem (lib/lib.mk, parsed after
 # this file: hence = here). Eigen is headers only, the host's serve the
 # cross build.

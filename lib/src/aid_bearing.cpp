@@ -134,6 +134,7 @@ extern "C" int bl_filter_fuse_bearing(bl_filter *f, uint32_t bearing_beacon_inde
 {
     if (f == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
+    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // filter.h bl_filter_set_team_beacons
     const bl_config *cfg = &f->cfg_;
     const uint32_t j = bearing_beacon_index;
     if (j >= cfg->bearing_beacon_count) return BL_EBEACON;

@@ -49,9 +49,10 @@ constexpr real kMaxRangeFactor = real(1.5);
 //   ∂(xr, yr)/∂v = dt (cos φm, sin φm).
 // *d_m: the range d (m). False where undefined (the receiver within 1 mm of
 // the beacon, s <= 0) or not finite.
-bool range_model(const bl_config *cfg, uint32_t j, real dt_s, const VX &x, real *h, RX *H, real *d_m)
+}  // namespace
+
+bool bl::range_model_at(const bl_config *cfg, const bl_beacon &b, real dt_s, const VX &x, real *h, RX *H, real *d_m)
 {
-    const bl_beacon &b = cfg->range_beacons[j];
     const real ox = cfg->range.offset_x_m, oy = cfg->range.offset_y_m;
     const real tht = x(TH) + x(W) * dt_s;
     const real phm = x(TH) + real(0.5) * x(W) * dt_s;
@@ -83,6 +84,13 @@ bool range_model(const bl_config *cfg, uint32_t j, real dt_s, const VX &x, real 
     return true;
 }
 
+namespace {
+
+bool range_model(const bl_config *cfg, uint32_t j, real dt_s, const VX &x, real *h, RX *H, real *d_m)
+{
+    return range_model_at(cfg, cfg->range_beacons[j], dt_s, x, h, H, d_m);
+}
+
 // The range's measurement model for fuse_scalar.
 struct RangeModel {
     const bl_config *cfg;
@@ -106,17 +114,7 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t j, int64_t t_u
     const RangeModel model = {cfg, j, bl::us_to_s(t_us - f->t_us_) + tof_s};
     real h, d_m;
     if (!range_model(cfg, j, model.dt_s, x, &h, nullptr, &d_m)) return BL_EINVAL;
-    // σ of the time of flight: (sigma_m + sigma_per_m·d)/s at the predicted
-    // range d (a late multipath arrival does not widen its own σ).
-    const real sigma_s = (cfg->range.sigma_m + cfg->range.sigma_per_m * d_m) / x(S);
-    const bool conv = (f->flags_ & kFlagConverged) != 0;
-    ScalarMeasurement m;
-    m.z = tof_s;
-    m.R = sigma_s * sigma_s;
-    m.gate_sigma = conv ? cfg->range.gate_sigma : kStartupGateFactor * cfg->range.gate_sigma;
-    if (P(TH, TH) > kHeadingUnknown_rad * kHeadingUnknown_rad) m.gate_sigma = 0;
-    m.max_iterations = kIekfIterations;
-    m.step_tolerance_m = kIekfTolerance_m;
+    const ScalarMeasurement m = range_measurement(f, P, d_m, tof_s);
     const int rc = fuse_scalar(model, m, x, P, result);
     if (rc != BL_OK) return rc;  // undefined or numerically impossible: state untouched
     remember_range(f, j, t_us, tof_s);
@@ -131,11 +129,29 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t j, int64_t t_u
 
 }  // namespace
 
+ScalarMeasurement bl::range_measurement(const bl_filter *f, const MX &P, real d_m, real tof_s)
+{
+    const bl_config *cfg = &f->cfg_;
+    // σ of the time of flight: (sigma_m + sigma_per_m·d)/s at the predicted
+    // range d (a late multipath arrival does not widen its own σ).
+    const real sigma_s = (cfg->range.sigma_m + cfg->range.sigma_per_m * d_m) / f->x_[S];
+    const bool conv = (f->flags_ & kFlagConverged) != 0;
+    ScalarMeasurement m;
+    m.z = tof_s;
+    m.R = sigma_s * sigma_s;
+    m.gate_sigma = conv ? cfg->range.gate_sigma : kStartupGateFactor * cfg->range.gate_sigma;
+    if (P(TH, TH) > kHeadingUnknown_rad * kHeadingUnknown_rad) m.gate_sigma = 0;
+    m.max_iterations = kIekfIterations;
+    m.step_tolerance_m = kIekfTolerance_m;
+    return m;
+}
+
 extern "C" int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, bl_real time_of_flight_s,
                                     bl_fusion_result *result)
 {
     if (f == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
+    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // filter.h bl_filter_set_team_beacons
     const bl_config *cfg = &f->cfg_;
     const uint32_t j = range_beacon_index;
     if (j >= cfg->range_beacon_count || j >= BL_MAX_BEACONS) return BL_EBEACON;

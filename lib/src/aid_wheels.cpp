@@ -11,23 +11,24 @@ namespace {
 
 // Measurement model of one wheel speed for fuse_scalar: h(x) = x(i) (v in
 // m/s or ω in rad/s), H = e_i (linear: one iteration); any finite update.
-struct StateModel {
+template <int N> struct StateModel {
     int i;
-    bool measure(const VX &x, real *h, RX *H) const
+    bool measure(const VN<N> &x, real *h, RN<N> *H) const
     {
         *h = x(i);
-        *H = RX::Zero();
+        *H = RN<N>::Zero();
         (*H)(i) = real(1);
         return true;
     }
-    bool admissible(const VX &, const VX &) const { return true; }
+    bool admissible(const VN<N> &, const VN<N> &) const { return true; }
     int unit_state() const { return i; }
 };
 
 }  // namespace
 
-void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_s, VX &x, MX &P,
-                       WheelSpeedCounts *counts)
+template <int N>
+void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_s, VN<N> &x, MN<N> &P,
+                       WheelSpeedCounts *counts, int n_solve)
 {
     // Kleeman eq. 25: the wheel speeds are a measurement of v (and ω):
     // z_v = Δc/dt, z_ω = Δθ/dt from the calibrated distances k̂·m (the
@@ -42,7 +43,7 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
     // beacons through the position it moves (the odometry Jacobian's k
     // columns).
     const real dc = real(0.5) * (left_m + right_m);
-    const real dth = (right_m - left_m) / cfg->wheel_base_m;
+    const real dth = (right_m - left_m) / effective_base_m(cfg);
     const real zs[2] = {dc / dt_s, dth / dt_s};  // m/s, rad/s
     const real floor_v = real(1e-3);             // speed resolution floor (m/s, rad/s)
     // The wheel noise variance grows with the distance rolled; it is
@@ -64,7 +65,7 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
     // with the same wheels' noise already added to (x, y, θ) by the
     // prediction.
     const real k2 = cfg->wheels.sigma_wheel_per_m * cfg->wheels.sigma_wheel_per_m;
-    const real half_b = real(0.5) * cfg->wheel_base_m;
+    const real half_b = real(0.5) * effective_base_m(cfg);
     const real dl_pred_m = std::fabs(x(V) - x(W) * half_b) * dt_s;
     const real dr_pred_m = std::fabs(x(V) + x(W) * half_b) * dt_s;
     // The common-mode slip (sigma_distance_per_m, σ_c) moves both wheels
@@ -72,13 +73,16 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
     const real kc2 = cfg->wheels.sigma_distance_per_m * cfg->wheels.sigma_distance_per_m;
     const real dc_pred_m = std::fabs(x(V)) * dt_s;
     const real rv = (k2 * real(0.25) * (dl_pred_m + dr_pred_m) + kc2 * dc_pred_m) / (dt_s * dt_s) + floor_v * floor_v;
-    const real rw =
-        (k2 * (dl_pred_m + dr_pred_m) / (cfg->wheel_base_m * cfg->wheel_base_m)) / (dt_s * dt_s) + floor_v * floor_v;
+    const real rw = (k2 * (dl_pred_m + dr_pred_m) / (effective_base_m(cfg) * effective_base_m(cfg))) / (dt_s * dt_s) +
+                    floor_v * floor_v;
     const real rs[2] = {rv, rw};
     const int idx[2] = {V, W};
+    // b above is the effective base χ·b (config.h wheels.skid_factor: the
+    // ICR model of skid steering, Mandow et al. 2007), b for a differential
+    // drive.
     for (int k = 0; k < 2; ++k) {
-        const StateModel model = {idx[k]};
-        const ScalarMeasurement m = {zs[k], rs[k], real(0), 1u, real(0)};
+        const StateModel<N> model = {idx[k]};
+        const ScalarMeasurement m = {zs[k], rs[k], real(0), 1u, real(0), n_solve};
         bl_fusion_result res;
         if (fuse_scalar(model, m, x, P, &res) == BL_OK)
             counts->fused += 1;
@@ -86,5 +90,10 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
             counts->refused += 1;  // x, P untouched
     }
 }
+
+template void fuse_wheel_speeds<NX>(const bl_config *, real, real, real, VX &, MX &, WheelSpeedCounts *, int);
+#if BL_WITH_TEAM
+template void fuse_wheel_speeds<NA>(const bl_config *, real, real, real, VA &, MA &, WheelSpeedCounts *, int);
+#endif
 
 }  // namespace bl

@@ -49,6 +49,10 @@ void default_wheel_params(bl_wheel_params *w)
     w->heading_noise_rad_per_sqrt_s = real(0.005);
     w->heading_noise_fraction = real(0.02);
     w->stationary_noise_scale = real(0.01);
+    // A differential drive: no skid (Mandow et al. 2007's χ = 1), no slip.
+    w->skid_factor = real(1);
+    w->slip_heading_rad_per_sqrt_rad = real(0);
+    w->slip_lateral_m_per_sqrt_m = real(0);
 }
 
 const char *check_wheel_params(const bl_wheel_params *w)
@@ -66,6 +70,14 @@ const char *check_wheel_params(const bl_wheel_params *w)
     if (!(is_finite(w->stationary_noise_scale) && w->stationary_noise_scale > real(0) &&
           w->stationary_noise_scale <= real(1)))
         return "wheels.stationary_noise_scale";
+    if (!(is_finite(w->skid_factor) && w->skid_factor >= real(1) && w->skid_factor <= real(10)))
+        return "wheels.skid_factor";
+    if (!(is_finite(w->slip_heading_rad_per_sqrt_rad) && w->slip_heading_rad_per_sqrt_rad >= real(0) &&
+          w->slip_heading_rad_per_sqrt_rad < real(1)))
+        return "wheels.slip_heading_rad_per_sqrt_rad";
+    if (!(is_finite(w->slip_lateral_m_per_sqrt_m) && w->slip_lateral_m_per_sqrt_m >= real(0) &&
+          w->slip_lateral_m_per_sqrt_m < real(1)))
+        return "wheels.slip_lateral_m_per_sqrt_m";
     return nullptr;
 }
 
@@ -109,6 +121,7 @@ void default_range_params(bl_range_params *r)
     r->height_m = real(0.2);
     r->snapshot_window_s = real(0.5);
     r->max_fix_drms_m = real(0.25);  // = converged_sigma_xy_m's default
+    r->team_site = 0;
 }
 
 const char *check_range_params(const bl_range_params *r)
@@ -125,6 +138,8 @@ const char *check_range_params(const bl_range_params *r)
     if (!(is_finite(r->snapshot_window_s) && r->snapshot_window_s > real(0) && r->snapshot_window_s <= real(60)))
         return "range.snapshot_window_s";
     if (!(is_finite(r->max_fix_drms_m) && r->max_fix_drms_m > real(0))) return "range.max_fix_drms_m";
+    // A team site needs the team fusion (common.h BL_WITH_TEAM).
+    if (!(r->team_site == 0 || (BL_WITH_TEAM && r->team_site == 1))) return "range.team_site";
     return nullptr;
 }
 #endif
@@ -210,6 +225,18 @@ bool beacons_span_plane(const bl_beacon *b, uint32_t n)
     return false;
 }
 
+// A team site (config.h range.team_site): no fixed beacon of any kind is
+// needed, the robot ranges to its teammates (filter.h, BL_WITH_TEAM).
+bool team_site(const bl_config *c)
+{
+#if BL_WITH_RANGES
+    return c->range.team_site == 1;
+#else
+    (void)c;
+    return false;
+#endif
+}
+
 #if BL_WITH_BEARINGS
 // Bearing beacons: finite, in range, pairwise distinct in x-y (a bearing
 // does not see z), and spanning the plane when they alone fix the pose.
@@ -225,7 +252,7 @@ bool bearing_beacons_ok(const bl_config *c)
         }
     }
     // (a range-only start needs 3 range beacons: config.h, range_beacon_count)
-    return c->beacon_count > 0 || c->range_beacon_count >= 3 ||
+    return c->beacon_count > 0 || c->range_beacon_count >= 3 || team_site(c) ||
            beacons_span_plane(c->bearing_beacons, c->bearing_beacon_count);
 }
 #endif
@@ -246,7 +273,7 @@ bool range_beacons_ok(const bl_config *c)
             if (!(dx * dx + dy * dy + dz * dz > real(1e-6))) return false;
         }
     }
-    return c->beacon_count > 0 || c->bearing_beacon_count >= 3 ||
+    return c->beacon_count > 0 || c->bearing_beacon_count >= 3 || team_site(c) ||
            beacons_span_plane(c->range_beacons, c->range_beacon_count);
 }
 #endif
@@ -288,12 +315,12 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     BL_CHECK(c->beacon_count == 0 || beacons_span_plane(c->beacons, c->beacon_count), "beacons");
     // At least one kind of beacon; without pulses the bearings start the filter (>= 3).
     BL_CHECK(c->bearing_beacon_count <= BL_MAX_BEACONS &&
-                 (c->beacon_count > 0 || c->bearing_beacon_count >= 3 || c->range_beacon_count > 0),
+                 (c->beacon_count > 0 || c->bearing_beacon_count >= 3 || c->range_beacon_count > 0 || team_site(c)),
              "bearing_beacon_count");
     // A range-only site (no pulse, no bearing beacons) starts from the
     // trilateration of its ranges: >= 3 range beacons.
     BL_CHECK(c->range_beacon_count <= BL_MAX_BEACONS &&
-                 (c->beacon_count > 0 || c->bearing_beacon_count > 0 || c->range_beacon_count >= 3),
+                 (c->beacon_count > 0 || c->bearing_beacon_count > 0 || c->range_beacon_count >= 3 || team_site(c)),
              "range_beacon_count");
 #if !BL_WITH_RANGES
     // Without ranges (common.h BL_WITH_RANGES 0) a site with range beacons

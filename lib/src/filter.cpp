@@ -45,6 +45,16 @@ void propagate(MX &P, const SparseEntry *d, int nd)
     for (int k = 0; k < nd; ++k) P.col(d[k].r) += d[k].v * P.col(d[k].c);
 }
 
+#if BL_WITH_TEAM
+// The cross-covariance of the state with static consider states (the team
+// beacons, aid_team.cpp) under the same transition: C = F C (the row
+// updates of propagate(), same order; the beacons do not move: no Q).
+void propagate_rows(CX &C, const SparseEntry *d, int nd)
+{
+    for (int k = 0; k < nd; ++k) C.row(d[k].r) += d[k].v * C.row(d[k].c);
+}
+#endif
+
 // Differential-drive odometry, midpoint form (Kleeman 1992 eq. 24 input
 // form, Vander et al. 2011 eq. 2) on the calibrated wheel distances
 // dL = k_l·mL, dR = k_r·mR (mL, mR the measured increments):
@@ -235,6 +245,12 @@ void fill_estimate(const bl_filter *f, const XV &x, const PM &P, int64_t t_us, b
         est->range_rejected[i] = f->range_rejected_[i];
 #endif
     }
+#if BL_WITH_TEAM
+    for (uint32_t k = 0; k < BL_TEAM_MAX_BEACONS; ++k) {
+        est->team_range_accepted[k] = f->team_accepted_[k];
+        est->team_range_rejected[k] = f->team_rejected_[k];
+    }
+#endif
     if (!est->started) return;
     est->x_m = x(X);
     est->y_m = x(Y);
@@ -436,6 +452,7 @@ extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
     f->t_us_ = p->t_us;
     if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
     f->flags_ = kFlagStarted | kFlagEverStarted;
+    team_forget_cross(f);
     if (converged_now(cfg, P)) f->flags_ |= kFlagConverged;
     return BL_OK;
 }
@@ -480,7 +497,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
 
     VX xo;
     OdoJac J;
-    odometry_model(cfg->wheel_base_m, x, d_left_m, d_right_m, xo, &J);
+    odometry_model(effective_base_m(cfg), x, d_left_m, d_right_m, xo, &J);
     // Kleeman eq. 6 with the input noise mapped through G: P = F P Fᵀ + G Q_u Gᵀ
     // (F = I + the two heading entries and the six wheel-scale entries of
     // odometry_model; heading row last as a target, see propagate()).
@@ -521,7 +538,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     // equation (24)". Stationary = no wheel travel (|d| <= 1 µm each).
     const bool moving = std::fabs(d_left_m) > real(1e-6) || std::fabs(d_right_m) > real(1e-6);
     const real cl = x(KL) * d_left_m, cr = x(KR) * d_right_m;  // calibrated distances (m)
-    const real dth = (cr - cl) / cfg->wheel_base_m;            // Δθ, Kleeman eq. 24 (rad)
+    const real dth = (cr - cl) / effective_base_m(cfg);        // Δθ, Kleeman eq. 24 with χ (rad)
     if (moving) {
         // §3.10 gives no formula; our reading, with the offset as a random
         // walk (so it does not depend on the encoder rate) and the fraction
@@ -534,6 +551,23 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
         const real fr = cfg->wheels.heading_noise_fraction * dth;
         Pn(TH, TH) +=
             cfg->wheels.heading_noise_rad_per_sqrt_s * cfg->wheels.heading_noise_rad_per_sqrt_s * dt + fr * fr;
+        // Skid-steer slip (config.h wheels.slip_*; skid steering slips by
+        // its nature, Millibots §3.1): the ICR model (Martinez et al. 2005;
+        // Mandow et al. 2007) takes the tracks' mean slip into χ; its random
+        // part is our model, a random walk in the angle turned and one
+        // across the heading in the distance travelled:
+        //   σ_θ² += σ_h²·|Δθ|                          (rad²)
+        //   Σ_xy += σ_l²·|Δc|·n nᵀ, n = (-sin φ, cos φ) (m²)
+        // σ_h = slip_heading_rad_per_sqrt_rad, σ_l = slip_lateral_m_per_sqrt_m,
+        // Δc = (dL + dR)/2, φ = θ + Δθ/2 the midpoint heading (eq. 24).
+        const real sh = cfg->wheels.slip_heading_rad_per_sqrt_rad, sl = cfg->wheels.slip_lateral_m_per_sqrt_m;
+        Pn(TH, TH) += sh * sh * std::fabs(dth);
+        // (cos φ, sin φ) = g_L + g_R's (x, y) rows (odometry_model: the
+        // distance-only direction of eq. 24), so n = (-sin φ, cos φ).
+        const real ql = sl * sl * std::fabs(real(0.5) * (cl + cr));
+        const real n[2] = {-(J.g[1][0] + J.g[1][1]), J.g[0][0] + J.g[0][1]};
+        for (int r = 0; r < 2; ++r)
+            for (int c = 0; c < 2; ++c) Pn(r, c) += ql * n[r] * n[c];
     }
     // v and ω: random walk of the piecewise-constant acceleration model (as
     // in cv_predict, our model): σ_v² += (s·σ_a·dt)² ((m/s)²), σ_ω² +=
@@ -551,7 +585,31 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     WheelSpeedCounts wheel = {0, 0};
     // Kleeman eq. 25: the wheel speeds measure v and ω (aid_wheels.cpp).
     symmetrise(P);  // the in-place propagation is symmetric only to rounding
-    if (dt > real(0)) fuse_wheel_speeds(cfg, cl, cr, dt, x, P, &wheel);
+#if BL_WITH_TEAM
+    // Team beacons as consider states (filter.h bl_filter_set_team_beacons):
+    // C = F C, then the wheel speeds fused on the augmented state, the
+    // beacons' gain zero (the same update, n_solve = NX), so the
+    // cross-covariance follows every change of the state.
+    if (team_consider(f)) {
+        CX C = team_cross(f);
+        propagate_rows(C, d, cfg->sigma_wheel_scale > real(0) ? 8 : 2);
+        VA xa;
+        MA Pa;
+        team_join(f, x, P, C, xa, Pa);
+        if (dt > real(0)) fuse_wheel_speeds<NA>(cfg, cl, cr, dt, xa, Pa, &wheel, NX);
+        x = xa.head<NX>();
+        P = Pa.topLeftCorner<NX, NX>();
+        C = Pa.topRightCorner<NX, NB>();
+        if (!C.allFinite()) return BL_EINVAL;
+        const int rc = commit_predict(f, x, P, t_us);
+        if (rc != BL_OK) return rc;
+        team_cross(f) = C;
+        f->wheel_fused_ += wheel.fused;
+        f->wheel_refused_ += wheel.refused;
+        return BL_OK;
+    }
+#endif
+    if (dt > real(0)) fuse_wheel_speeds<NX>(cfg, cl, cr, dt, x, P, &wheel);
     const int rc = commit_predict(f, x, P, t_us);
     if (rc != BL_OK) return rc;
     f->wheel_fused_ += wheel.fused;
@@ -568,8 +626,24 @@ extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
     const bl_config *cfg = &f->cfg_;
     VX x = state(f);
     MX P = cov(f);
-    cv_predict(cfg, x, P, bl::us_to_s(t_us - f->t_us_));
-    return commit_predict(f, x, P, t_us);
+    const real dt = bl::us_to_s(t_us - f->t_us_);
+#if BL_WITH_TEAM
+    // Team beacons as consider states: C = F C with cv_model's entries.
+    CX C = team_cross(f);
+    if (team_consider(f)) {
+        VX xo;
+        SparseEntry d[kCvEntries];
+        cv_model(x, dt, xo, d);
+        propagate_rows(C, d, kCvEntries);
+        if (!C.allFinite()) return BL_EINVAL;
+    }
+#endif
+    cv_predict(cfg, x, P, dt);
+    const int rc = commit_predict(f, x, P, t_us);
+#if BL_WITH_TEAM
+    if (rc == BL_OK) team_cross(f) = C;
+#endif
+    return rc;
 }
 
 extern "C" int bl_filter_get_state(const bl_filter *f, bl_real x[BL_FILTER_NX], bl_real P[BL_FILTER_NX * BL_FILTER_NX])
@@ -616,7 +690,7 @@ extern "C" int bl_model_odometry(const bl_config *cfg, const bl_real x[BL_FILTER
         return BL_EINVAL;
     VX xo;
     OdoJac J;
-    odometry_model(cfg->wheel_base_m, Eigen::Map<const VX>(x), d_left_m, d_right_m, xo, &J);
+    odometry_model(effective_base_m(cfg), Eigen::Map<const VX>(x), d_left_m, d_right_m, xo, &J);
     MX Fl = MX::Identity();
     Fl(X, TH) = J.fx_th;
     Fl(Y, TH) = J.fy_th;

@@ -7,6 +7,8 @@
 #ifndef BEACONLOC_FILTER_INTERNAL_HPP
 #define BEACONLOC_FILTER_INTERNAL_HPP
 
+#include <cstring>
+
 #include "fusion.hpp"
 
 namespace bl {
@@ -39,6 +41,11 @@ inline bool initialised(const bl_filter *f) { return f != nullptr && f->magic_ =
 inline bool started(const bl_filter *f) { return initialised(f) && (f->flags_ & kFlagStarted); }
 
 bool all_finite(const bl_real *v, int n);
+
+// The odometry's effective wheel base (m): the ICR model of skid steering
+// (Mandow et al. 2007; config.h wheels.skid_factor), χ·b; b for a
+// differential drive (χ = 1).
+inline real effective_base_m(const bl_config *cfg) { return cfg->wheels.skid_factor * cfg->wheel_base_m; }
 
 // ---- filter.cpp
 // t0 += k·T (the reference moves k firing slots), then whole microseconds
@@ -89,6 +96,16 @@ int start_from_bearings(bl_filter *f);
 #endif
 
 #if BL_WITH_RANGES
+// ---- aid_range.cpp
+// The range model (filter.h bl_filter_fuse_range) to a beacon at b: the
+// time of flight h (s) to the receiver dt_s after the state time, H =
+// ∂h/∂x (may be NULL), *d_m the range (may be NULL). False where undefined.
+bool range_model_at(const bl_config *cfg, const bl_beacon &b, real dt_s, const VX &x, real *h, RX *H, real *d_m);
+// The scalar measurement of a time of flight tof_s at the predicted range
+// d_m (σ, gate by the convergence and heading σ; filter.h
+// bl_filter_fuse_range) for a filter with covariance P.
+ScalarMeasurement range_measurement(const bl_filter *f, const MX &P, real d_m, real tof_s);
+
 // ---- snapshot_range.cpp
 // Keep a time of flight as its range beacon's latest (the trilateration's input).
 void remember_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, real time_of_flight_s);
@@ -103,9 +120,48 @@ struct WheelSpeedCounts {
     uint32_t refused;  // refused by fuse_scalar (non-finite result)
 };
 // Kleeman eq. 25: the wheel speeds over dt_s > 0 from the calibrated wheel
-// distances left_m, right_m as measurements of v and ω.
-void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_s, VX &x, MX &P,
-                       WheelSpeedCounts *counts);
+// distances left_m, right_m as measurements of v and ω, on the state (N =
+// NX) or on the state augmented with consider states (N = NA, n_solve =
+// NX: a team robot's, aid_team.cpp).
+template <int N>
+void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_s, VN<N> &x, MN<N> &P,
+                       WheelSpeedCounts *counts, int n_solve = 0);
+
+#if BL_WITH_TEAM
+// ---- aid_team.cpp: the state augmented with the team beacons' (x, y)
+constexpr int NB = 2 * BL_TEAM_MAX_BEACONS;
+constexpr int NA = NX + NB;
+static_assert(NA == kTeamNA, "fusion.cpp instantiates the shared update's Joseph form at kTeamNA");
+using VA = VN<NA>;
+using MA = MN<NA>;
+using CX = Mat<NX, NB>;  // cross-covariance state x beacons (m·unit of the state)
+inline Eigen::Map<CX> team_cross(bl_filter *f) { return Eigen::Map<CX>(f->team_C_); }
+inline Eigen::Map<const CX> team_cross(const bl_filter *f) { return Eigen::Map<const CX>(f->team_C_); }
+// Beacons set in BL_TEAM_CONSIDER mode: predicts carry the cross-covariance.
+inline bool team_consider(const bl_filter *f) { return f->team_count_ > 0 && f->team_mode_ == BL_TEAM_CONSIDER; }
+// [x; b], [[P, C], [Cᵀ, P_bb]] (unused beacon slots: zero).
+void team_join(const bl_filter *f, const VX &x, const MX &P, const CX &C, VA &xa, MA &Pa);
+#endif
+// A (re)start: the new pose is independent of the team beacons.
+inline void team_forget_cross(bl_filter *f)
+{
+#if BL_WITH_TEAM
+    std::memset(f->team_C_, 0, sizeof f->team_C_);
+#else
+    (void)f;
+#endif
+}
+// Pulses, bearings and fixed-beacon ranges are refused while team beacons
+// carry a cross-covariance (filter.h bl_filter_set_team_beacons).
+inline bool team_blocks_other_sources(const bl_filter *f)
+{
+#if BL_WITH_TEAM
+    return team_consider(f);
+#else
+    (void)f;
+    return false;
+#endif
+}
 
 }  // namespace bl
 

@@ -23,17 +23,13 @@ bool outside_gate(const ScalarMeasurement &m, real h, real S, bl_fusion_result *
     return !(res->test_ratio <= real(1));
 }
 
-// Joseph form (Kleeman eq. 11) for a scalar measurement, expanded:
-// (I - K H) P (I - K H)ᵀ + K R Kᵀ = P - K uᵀ - u Kᵀ + (H u + R) K Kᵀ with
-// u = P Hᵀ and s = H u + R. Holds for any gain K (the IEKF's last-iterate
-// gain included), O(n²) instead of two NxN products. P is symmetric (its
-// upper triangle is read), and so is the result: one value for (r, c) and
-// (c, r), computed once.
-bool joseph_upper(const MX &P, const VX &K, const VX &u, real s, real up[kUpper], VX *diag)
+// Joseph form and storage (fusion.hpp: the expansion and why it holds for
+// any gain).
+template <int N> bool joseph_upper(const MN<N> &P, const VN<N> &K, const VN<N> &u, real s, real *up, VN<N> *diag)
 {
     real nan_if_not_finite = 0;  // v·0 is 0 for a finite v, NaN for ±inf and NaN
     real *out = up;
-    for (int r = 0; r < NX; ++r) {
+    for (int r = 0; r < N; ++r) {
         const real kr = K(r), ur = u(r), sk = s * kr;
         real v = P(r, r) - kr * ur;
         v -= ur * kr;
@@ -41,7 +37,7 @@ bool joseph_upper(const MX &P, const VX &K, const VX &u, real s, real up[kUpper]
         (*diag)(r) = v;
         *out++ = v;
         nan_if_not_finite += v * real(0);
-        for (int c = r + 1; c < NX; ++c) {
+        for (int c = r + 1; c < N; ++c) {
             real w = P(r, c) - kr * u(c);
             w -= ur * K(c);
             w += sk * K(c);
@@ -51,14 +47,21 @@ bool joseph_upper(const MX &P, const VX &K, const VX &u, real s, real up[kUpper]
     }
     return nan_if_not_finite == real(0);
 }
-
-void store_symmetric(const real up[kUpper], MX &P)
+template <int N> void store_symmetric(const real *up, MN<N> &P)
 {
     const real *in = up;
-    for (int r = 0; r < NX; ++r) {
+    for (int r = 0; r < N; ++r) {
         P(r, r) = *in++;
-        for (int c = r + 1; c < NX; ++c) P(r, c) = P(c, r) = *in++;
+        for (int c = r + 1; c < N; ++c) P(r, c) = P(c, r) = *in++;
     }
 }
+
+template bool joseph_upper<NX>(const MX &, const VX &, const VX &, real, real *, VX *);
+template void store_symmetric<NX>(const real *, MX &);
+#if BL_WITH_TEAM
+template bool joseph_upper<kTeamNA>(const MN<kTeamNA> &, const VN<kTeamNA> &, const VN<kTeamNA> &, real, real *,
+                                    VN<kTeamNA> *);
+template void store_symmetric<kTeamNA>(const real *, MN<kTeamNA> &);
+#endif
 
 }  // namespace bl

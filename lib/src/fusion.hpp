@@ -16,9 +16,16 @@ extern "C" {
 namespace bl {
 
 constexpr int NX = BL_FILTER_NX;
-using VX = Mat<NX, 1>;                  // state vector (units: BL_IX_* in filter.h)
-using MX = Mat<NX, NX>;                 // covariance, row-major as bl_filter.P_
-using RX = Eigen::Matrix<real, 1, NX>;  // Jacobian row of a scalar measurement
+// The shared update is generic over the state size N: the filter's own
+// state (NX) and, for ranges to teammates (aid_team.cpp), the state
+// augmented with the stationary beacon robots' positions as "consider"
+// states (ScalarMeasurement.n_solve below).
+template <int N> using VN = Mat<N, 1>;                  // state vector
+template <int N> using MN = Mat<N, N>;                  // covariance, row-major
+template <int N> using RN = Eigen::Matrix<real, 1, N>;  // Jacobian row of a scalar measurement
+using VX = VN<NX>;                                      // state vector (units: BL_IX_* in filter.h)
+using MX = MN<NX>;                                      // covariance, row-major as bl_filter.P_
+using RX = RN<NX>;                                      // Jacobian row of a scalar measurement
 
 struct ScalarMeasurement {
     real z;                   // measured value, in the measurement's unit
@@ -27,6 +34,12 @@ struct ScalarMeasurement {
     uint32_t max_iterations;  // IEKF iterations, >= 1 (1: the plain EKF update)
     real step_tolerance_m;    // stop iterating once an iterate moves the position
                               // (x, y) less than this (m)
+    // States 0..n_solve-1 are estimated; n_solve..N-1 are "consider"
+    // states (Schmidt 1966; Simon 2006 §7.5): their gain rows are zero, so
+    // they and their covariance block stay as they are while the
+    // cross-covariance with the estimated states is kept. 0: all estimated.
+    // Read only for a state larger than the filter's own (N > NX).
+    int n_solve = 0;
 };
 
 // P = (P + Pᵀ)/2, entry by entry.
@@ -39,12 +52,25 @@ bool outside_gate(const ScalarMeasurement &m, real h, real S, bl_fusion_result *
 // The Joseph-form update of a symmetric P (its upper triangle is read) with
 // gain K, u = P Hᵀ and s = H u + R, computed once per entry of the upper
 // triangle (the result is symmetric by construction) into up[] (row by row,
-// columns r..NX-1), its diagonal (the new variances) into *diag. False if
+// columns r..N-1), its diagonal (the new variances) into *diag. False if
 // an entry is not finite.
-constexpr int kUpper = NX * (NX + 1) / 2;
-bool joseph_upper(const MX &P, const VX &K, const VX &u, real s, real up[kUpper], VX *diag);
+// Joseph form (Kleeman eq. 11) for a scalar measurement, expanded:
+// (I - K H) P (I - K H)ᵀ + K R Kᵀ = P - K uᵀ - u Kᵀ + (H u + R) K Kᵀ with
+// u = P Hᵀ and s = H u + R. Holds for any gain K (the IEKF's last-iterate
+// gain, a consider gain with zero rows included: Bar-Shalom et al. 2001
+// eq. 5.2.3-18), O(n²) instead of two NxN products. P is symmetric (its
+// upper triangle is read), and so is the result: one value for (r, c) and
+// (c, r), computed once.
+template <int N> constexpr int upper_size() { return N * (N + 1) / 2; }
+constexpr int kUpper = upper_size<NX>();
+// Defined in fusion.cpp for N = NX and, with the team (BL_WITH_TEAM), the
+// team's augmented size kTeamNA: out of line, so that every source's
+// fuse_scalar instance shares one copy (make size-m4's flash).
+template <int N> bool joseph_upper(const MN<N> &P, const VN<N> &K, const VN<N> &u, real s, real *up, VN<N> *diag);
 // P = the symmetric matrix whose upper triangle is up[].
-void store_symmetric(const real up[kUpper], MX &P);
+template <int N> void store_symmetric(const real *up, MN<N> &P);
+// The state augmented with the team beacons' (x, y) (aid_team.cpp).
+constexpr int kTeamNA = NX + 2 * BL_TEAM_MAX_BEACONS;
 
 // One scalar measurement update of (x, P), P symmetric (every update and
 // predict leaves it so), through the source's model, a
@@ -72,21 +98,28 @@ void store_symmetric(const real up[kUpper], MX &P);
 // Returns BL_OK with *result filled (status ACCEPTED or REJECTED), or
 // BL_EINVAL (the model is undefined at x̄, or the update would leave x or P
 // non-finite or not admissible: refused, x, P and *result untouched).
-// Cost O(NX²) per iteration; its frame holds the upper triangle of P. A template
-// (one instance per source) rather than a callback, so that the call graph
+// With m.n_solve = n > 0 (a Schmidt "consider" update, Schmidt 1966;
+// Simon 2006 §7.5): the gain rows n..N-1 are zero at every iterate, so the
+// consider states and their covariance block are not changed, and the
+// Joseph form with that gain is the covariance of the estimate so updated
+// (the cross-covariance P[0..n-1, n..N-1] is kept).
+// Cost O(N²) per iteration; its frame holds the upper triangle of P. A template
+// (one instance per source and state size N, deduced from x: NX for the
+// filter's own state) rather than a callback, so that the call graph
 // (make size-m4's stack chains) sees the model.
-template <class Model>
-int fuse_scalar(const Model &model, const ScalarMeasurement &m, VX &x, MX &P, bl_fusion_result *result)
+template <class Model, int N>
+int fuse_scalar(const Model &model, const ScalarMeasurement &m, VN<N> &x, MN<N> &P, bl_fusion_result *result)
 {
+    using VXn = VN<N>;
     real h;
-    RX H;
+    RN<N> H;
     if (!model.measure(x, &h, &H)) return BL_EINVAL;
     // P Hᵀ and H P Hᵀ + R at the current H.
     const int unit = model.unit_state();
-    VX PHt;
+    VXn PHt;
     real S;
     auto project = [&]() {
-        PHt = unit >= 0 ? VX(P.col(unit)) : VX(P.lazyProduct(H.transpose()));
+        PHt = unit >= 0 ? VXn(P.col(unit)) : VXn(P.lazyProduct(H.transpose()));
         S = (unit >= 0 ? P(unit, unit) : H.dot(PHt)) + m.R;
     };
     // Kleeman eq. 7: innovation; its variance H P Hᵀ + R (eq. 9's bracket).
@@ -101,19 +134,26 @@ int fuse_scalar(const Model &model, const ScalarMeasurement &m, VX &x, MX &P, bl
     //   K_i = P Hᵢᵀ (Hᵢ P Hᵢᵀ + R)⁻¹                           (eq. 9)
     //   x_{i+1} = x̄ + K_i (z - h(x_i) - H_i (x̄ - x_i))          (eq. 8)
     // PHt and S hold P Hᵢᵀ and Hᵢ P Hᵢᵀ + R of the current iterate.
-    const VX &xbar = x;
-    VX xi = xbar;
-    VX K;
+    const VXn &xbar = x;
+    VXn xi = xbar;
+    VXn K;
     uint32_t it = 0;
     for (;;) {
         K = PHt / S;
-        const VX xn = xbar + K * (m.z - h - H.dot(xbar - xi));
+        // Consider states: no gain (Schmidt). They exist only in an
+        // augmented state (N > NX): the filter's own instances compile
+        // without this (make size-m4's flash).
+        if constexpr (N > NX) {
+            const int n_solve = m.n_solve > 0 && m.n_solve < N ? m.n_solve : N;
+            for (int r = n_solve; r < N; ++r) K(r) = real(0);
+        }
+        const VXn xn = xbar + K * (m.z - h - H.dot(xbar - xi));
         ++it;
         const real step = (xn.template head<2>() - xi.template head<2>()).norm();
         xi = xn;
         if (it >= m.max_iterations || step < m.step_tolerance_m) break;
         real hn;
-        RX Hn;
+        RN<N> Hn;
         // Relinearisation left the model's domain: keep the last valid step.
         if (!model.measure(xi, &hn, &Hn)) break;
         h = hn;
@@ -123,12 +163,12 @@ int fuse_scalar(const Model &model, const ScalarMeasurement &m, VX &x, MX &P, bl
     // Joseph form (Kleeman eq. 11) with H and K of the last iterate
     // (u = P Hᵀ = PHt, H u + R = S); P symmetric.
     xi(BL_IX_THETA) = wrap_angle(xi(BL_IX_THETA));
-    real up[kUpper];
-    VX var;
-    if (!xi.allFinite() || !joseph_upper(P, K, PHt, S, up, &var) || !model.admissible(xi, var))
+    real up[upper_size<N>()];
+    VXn var;
+    if (!xi.allFinite() || !joseph_upper<N>(P, K, PHt, S, up, &var) || !model.admissible(xi, var))
         return BL_EINVAL;  // numerically impossible update: refused, x and P untouched
     x = xi;
-    store_symmetric(up, P);
+    store_symmetric<N>(up, P);
     res.status = BL_FUSION_ACCEPTED;
     res.iterations = it;
     *result = res;

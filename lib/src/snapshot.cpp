@@ -121,6 +121,7 @@ __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_soluti
     f->t_us_ = ref_arrival_us;
     if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
     f->flags_ = kFlagStarted | kFlagEverStarted;
+    team_forget_cross(f);
 }
 
 // The last-pulse table the snapshot (re)start reads: every pulse fuse_pulse

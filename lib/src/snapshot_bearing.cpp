@@ -63,7 +63,7 @@ void remember_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us,
     for (int k = 0; k < 6; ++k) o[k] = f->odo_[k];
     const real d_m = f->odo_rate_[0] * dt_s, dth_rad = f->odo_rate_[1] * dt_s;
     odometry_step(o, d_m, dth_rad);
-    const real half_b = real(0.5) * f->cfg_.wheel_base_m;
+    const real half_b = real(0.5) * effective_base_m(&f->cfg_);
     o[3] += std::fabs(d_m - half_b * dth_rad);
     o[4] += std::fabs(d_m + half_b * dth_rad);
     o[5] += std::fabs(dth_rad);
@@ -100,7 +100,7 @@ bool odometry_between(const bl_filter *f, uint32_t j, uint32_t r, real disp[3], 
 // bl_filter_predict_odometry, summed along the path, first order).
 real odometry_variance(const bl_config *cfg, const real travel[3], real dt_s, real range_m)
 {
-    const real b = cfg->wheel_base_m;
+    const real b = effective_base_m(cfg);
     const real sw2 = cfg->wheels.sigma_wheel_per_m * cfg->wheels.sigma_wheel_per_m;
     const real sd2 = cfg->wheels.sigma_distance_per_m * cfg->wheels.sigma_distance_per_m;
     const real sk = cfg->sigma_wheel_scale;
@@ -278,6 +278,7 @@ int start_from_bearings(bl_filter *f)
     f->t_us_ = newest_us;
     if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
     f->flags_ = kFlagStarted | kFlagEverStarted;
+    team_forget_cross(f);
     commit(f, x, P);  // state, covariance, converged flag from the position σ
     return BL_OK;
 }
@@ -307,7 +308,7 @@ extern "C" int bl_filter_track_wheels(bl_filter *f, int64_t t_us, bl_real d_left
     // Kleeman 1992 eq. 24: d = (d_l + d_r)/2, Δθ = (d_r - d_l)/b (nominal
     // wheel scales), the midpoint step (Vander et al. 2011 eq. 2).
     const real d_m = real(0.5) * (d_left_m + d_right_m);
-    const real dth_rad = (d_right_m - d_left_m) / f->cfg_.wheel_base_m;
+    const real dth_rad = (d_right_m - d_left_m) / effective_base_m(&f->cfg_);
     odometry_step(f->odo_, d_m, dth_rad);
     f->odo_[3] += std::fabs(d_left_m);
     f->odo_[4] += std::fabs(d_right_m);

@@ -210,6 +210,7 @@ int start_from_ranges(bl_filter *f)
     f->t_us_ = snap.newest_us;
     if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
     f->flags_ = kFlagStarted | kFlagEverStarted;
+    team_forget_cross(f);
     commit(f, x, P);  // state, covariance, converged flag from the position σ
     return BL_OK;
 }

@@ -78,12 +78,45 @@ static void test_pulse_localizer_inits(void **state)
 #endif
 }
 
+/* A team site (range.team_site = 1: no fixed beacon, ranges to teammates)
+ * is valid with the team fusion (BL_WITH_TEAM) and refused by name
+ * without it; the team solver is there with the switch (a compile-time
+ * check: this file builds in both). */
+static void test_team_site(void **state)
+{
+    (void)state;
+    bl_config c;
+    assert_int_equal(bl_config_default(&c), BL_OK);
+    const char *field = NULL;
+#if BL_WITH_RANGES
+    c.beacon_count = 0;
+    c.range.team_site = 1;
+#if BL_WITH_TEAM
+    assert_int_equal(bl_config_check(&c, &field), BL_OK);
+#else
+    assert_int_equal(bl_config_check(&c, &field), BL_ECONFIG);
+    assert_string_equal(field, "range.team_site");
+#endif
+#else
+    assert_int_equal(BL_WITH_TEAM, 0);
+    assert_int_equal(bl_config_check(&c, &field), BL_OK);
+#endif
+#if BL_WITH_TEAM
+    bl_team_problem p;
+    memset(&p, 0, sizeof p);
+    p.count = 2;
+    bl_team_solution s;
+    assert_int_equal(bl_solve_team(&p, &s), BL_EINVAL);
+#endif
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_pulse_site_with_bearing_beacons),
         cmocka_unit_test(test_pulse_site_with_range_beacons),
         cmocka_unit_test(test_pulse_localizer_inits),
+        cmocka_unit_test(test_team_site),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -69,6 +69,32 @@ typedef double bl_real;
 #ifndef BL_WITH_RANGES
 #define BL_WITH_RANGES 1
 #endif
+/*   BL_WITH_TEAM      1 (default): ranges to teammates whose positions are
+ *                     themselves uncertain (the CMU Millibots' stationary
+ *                     beacon robots: filter.h bl_filter_set_team_beacons,
+ *                     bl_filter_fuse_team_range, bl_team_beacons). Needs
+ *                     BL_WITH_RANGES (its model and σ). 0: those calls and
+ *                     types are not declared, the filter carries no team
+ *                     block, bl_estimate no team counters, and the team
+ *                     solvers (solver.h bl_solve_team, bl_team_resolve_mirror,
+ *                     bl_team_mirror) are not built either: unlike the other
+ *                     solvers, bl_solve_team's ~5 KiB stack frame would
+ *                     dominate a small board's stack report. */
+#ifndef BL_WITH_TEAM
+#define BL_WITH_TEAM BL_WITH_RANGES
+#endif
+#if BL_WITH_TEAM && !BL_WITH_RANGES
+#error "BL_WITH_TEAM needs BL_WITH_RANGES (the teammate range model is the range model)"
+#endif
+/* Team sizes: robots in one team solve (solver.h bl_solve_team), and
+ * stationary beacon robots one filter ranges to at a time (the Millibots
+ * keep three; one more lets a leap-frog hand over without a gap). */
+#ifndef BL_MAX_TEAM
+#define BL_MAX_TEAM 8
+#endif
+#ifndef BL_TEAM_MAX_BEACONS
+#define BL_TEAM_MAX_BEACONS 4
+#endif
 
 /* Error codes: every fallible call returns BL_OK or one of these. */
 typedef enum bl_error {

@@ -72,6 +72,29 @@ typedef struct bl_wheel_params {
                                              "fraction of the angle increment", §3.10), 0..1 */
     bl_real stationary_noise_scale;       /* [tuning]: scale of the v/ω process noise while
                                              stationary (no wheel travel), (0, 1] (§3.10) */
+    /* Skid steer (tracked or four-wheel skid-steered robots: the CMU
+     * Millibots): turning scrubs the tracks sideways, so the robot turns
+     * slower than (d_r - d_l)/b. The ICR model (Martinez et al. 2005,
+     * "Approaching trajectory tracking for skid-steered robots"; Mandow et
+     * al. 2007, "Experimental kinematics for wheeled skid-steer mobile
+     * robots", the ICR expansion factor χ): the tracks' instantaneous
+     * centres of rotation lie χ·b/2 either side, so
+     *     Δθ = (d_r - d_l) / (χ·b),   Δc = (d_r + d_l)/2,
+     * in every odometry use (the predict, the wheel speeds, the bearing
+     * dead reckoning). A differential drive is χ = 1. The site-file keys
+     * named below are proposed: the bridge's loader does not read them yet
+     * (defaults from bl_config_default). */
+    bl_real skid_factor;                   /* [robot] skid_factor: χ >= 1 (1 = differential drive,
+                                             the default), <= 10; measured per robot and
+                                             floor (Mandow et al. 2007 identify it from
+                                             driven paths) */
+    bl_real slip_heading_rad_per_sqrt_rad; /* [noise]: heading slip of skid steering, a random
+                                              walk in the angle turned: σ_θ² grows by this²·|Δθ|
+                                              (rad²) per turn of |Δθ| rad, >= 0, < 1; default 0 */
+    bl_real slip_lateral_m_per_sqrt_m;     /* [noise]: sideways slip, a random walk across the
+                                             heading in the distance travelled: the lateral
+                                             position variance grows by this²·|Δc| (m²), >= 0,
+                                             < 1; default 0 */
 } bl_wheel_params;
 
 /* Bearings to self-identifying beacons (aid_bearing.cpp; its triangulation
@@ -122,6 +145,13 @@ typedef struct bl_range_params {
     bl_real max_fix_drms_m;    /* [tuning] range_max_fix_drms_m: a trilateration (re)start is
                                   refused when the fix's drms sqrt(σx² + σy²) exceeds this (m),
                                   > 0 (default 0.25 = converged_sigma_xy_m's default) */
+    uint32_t team_site;        /* [range_sensor] team_site (proposed key, not read by the
+                                  bridge yet): 1 = a team without fixed beacons
+                                  (the CMU Millibots): the receiver ranges to teammates
+                                  (filter.h bl_filter_set_team_beacons, BL_WITH_TEAM), so a
+                                  site with no beacon of any kind is valid (the filter starts
+                                  from bl_filter_start with the team solve's pose); 0
+                                  (default); 1 refused without BL_WITH_TEAM */
 } bl_range_params;
 
 typedef struct bl_config {

@@ -24,6 +24,9 @@
  *     on beacon pulse:   bl_filter_fuse_pulse(&f, beacon_index, arrival_us, rx, &res);
  *     on a bearing:      bl_filter_fuse_bearing(&f, bearing_beacon_index, t_us, bearing_rad, &res);
  *     on a range:        bl_filter_fuse_range(&f, range_beacon_index, t_emit_us, tof_s, &res);
+ *     (a team without fixed beacons, BL_WITH_TEAM: bl_solve_team, bl_filter_start
+ *      from its pose, bl_filter_set_team_beacons; on a teammate's ping:
+ *                        bl_filter_fuse_team_range(&f, robot_id, t_emit_us, tof_s, &res))
  *     (bearing sites, every encoder frame, started or not:
  *                        bl_filter_track_wheels(&f, t_us, d_left_m, d_right_m, first);
  *      the dead reckoning that motion-compensates a triangulation start)
@@ -112,6 +115,7 @@
 #include "beaconloc/common.h"
 #include "beaconloc/config.h"
 #include "beaconloc/fusion.h"
+#include "beaconloc/solver.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -182,6 +186,20 @@ typedef struct bl_filter {
     uint32_t range_accepted_[BL_MAX_BEACONS];
     uint32_t range_rejected_[BL_MAX_BEACONS];
 #endif
+#if BL_WITH_TEAM
+    /* ranges to teammates (aid_team.cpp): the stationary beacon robots
+     * (bl_filter_set_team_beacons), their joint covariance, and the
+     * cross-covariance of this robot's state with their positions (the
+     * Schmidt "consider" block, rows BL_IX_*, columns x0, y0, x1, ...) */
+    uint32_t team_count_; /* beacon robots set (0: none) */
+    uint32_t team_mode_;  /* bl_team_mode */
+    uint32_t team_id_[BL_TEAM_MAX_BEACONS];
+    bl_beacon team_pos_[BL_TEAM_MAX_BEACONS];
+    bl_real team_Pbb_[4 * BL_TEAM_MAX_BEACONS * BL_TEAM_MAX_BEACONS];
+    bl_real team_C_[BL_FILTER_NX * 2 * BL_TEAM_MAX_BEACONS];
+    uint32_t team_accepted_[BL_TEAM_MAX_BEACONS];
+    uint32_t team_rejected_[BL_TEAM_MAX_BEACONS];
+#endif
 } bl_filter;
 
 /* Explicit start: a known pose and firing time. */
@@ -231,6 +249,11 @@ typedef struct bl_estimate {
     uint32_t range_accepted[BL_MAX_BEACONS]; /* per range beacon index: ranges fused */
     uint32_t range_rejected[BL_MAX_BEACONS]; /* per range beacon index: ranges rejected by
                                                 the gate (multipath late arrivals) */
+#endif
+#if BL_WITH_TEAM
+    uint32_t team_range_accepted[BL_TEAM_MAX_BEACONS]; /* per team beacon slot (the order of
+                                                          bl_filter_set_team_beacons): fused */
+    uint32_t team_range_rejected[BL_TEAM_MAX_BEACONS]; /* ... rejected by the gate */
 #endif
     uint32_t wheel_speed_fused;   /* wheel-speed measurements (v and ω, each one) fused
                                      by bl_filter_predict_odometry (ungated) */
@@ -555,6 +578,112 @@ int bl_filter_start_ranges(bl_filter *f);
 int bl_model_range(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t range_beacon_index, bl_real dt_s,
                    bl_real *h_s, bl_real H[BL_FILTER_NX]);
 #endif /* BL_WITH_RANGES */
+
+#if BL_WITH_TEAM /* common.h: not declared in a build without the team */
+/* ---- Ranges to teammates whose positions are uncertain ----
+ * The CMU Millibots (§3.3): no fixed beacon; three robots stand still and
+ * serve as beacons while the others move, their positions known only from
+ * the team's own ranges (bl_solve_team), i.e. with a covariance, and
+ * correlated (they share ranges). A range to such a robot has two error
+ * sources: the ping's own noise, new at every ping, and the beacon robot's
+ * position error, the SAME at every ping until it moves. Three ways to
+ * let the second enter (issue 13):
+ *   (a) inflate R by the beacon's covariance, R + H_b P_b H_bᵀ: simple, but
+ *       every ping is then treated as carrying an independent beacon error,
+ *       so after n pings the filter believes it has averaged it down by
+ *       √n: over-confident (measured: tests/lib/test_filter_team.c, mean
+ *       NEES of (x, y) 7.9 where (b) gives 1.9, 2 expected; lib/README.md);
+ *   (b) a Schmidt "consider" update (Schmidt 1966; Simon 2006, "Optimal
+ *       State Estimation", §7.5): the beacons' positions are extra states
+ *       that are never updated (gain rows zero) but whose covariance and
+ *       cross-covariance with this robot's state are kept, through every
+ *       predict and update; the robot's covariance then stays above the
+ *       beacons' floor. Cost O((NX + 2K)²) per update, 2K = 2 x
+ *       BL_TEAM_MAX_BEACONS extra states, and the same per predict while
+ *       beacons are set; the beacons' estimates are not improved;
+ *   (c) one joint filter of the whole team: the best estimate (the
+ *       beacons improve too) but one state for all robots on one host,
+ *       O((NX·N)²), and every robot's predict in it.
+ * Chosen: (b), BL_TEAM_CONSIDER (the default): consistent (tested: mean
+ * NEES of (x, y) over 200 Monte Carlo runs inside its chi-square 95 %
+ * band), one robot per filter as on a Millibot, and it goes through the
+ * one shared update (fusion.hpp: fuse_scalar on the augmented state with
+ * n_solve = NX). (a) is kept, BL_TEAM_INFLATE, only to show the
+ * difference (the test measures it). A consider update does not improve
+ * the beacons' positions: the team's own estimate of them is the
+ * bl_solve_team survey (repeat it with more pings to tighten it). */
+typedef enum bl_team_mode {
+    BL_TEAM_CONSIDER = 0, /* (b) Schmidt consider update (default) */
+    BL_TEAM_INFLATE = 1   /* (a) R inflated, cross-covariance dropped: over-confident */
+} bl_team_mode;
+
+typedef struct bl_team_beacons {
+    uint32_t count;                         /* K stationary beacon robots, 1..BL_TEAM_MAX_BEACONS */
+    uint32_t robot_id[BL_TEAM_MAX_BEACONS]; /* the caller's ids (e.g. the team solution's
+                                                  indices), pairwise distinct: what
+                                                  bl_filter_fuse_team_range takes */
+    bl_beacon pos[BL_TEAM_MAX_BEACONS];     /* x_m, y_m in the team frame (m); z_m the
+                                                  emitter's height (m), as range_beacons */
+    /* Joint covariance of (x0, y0, x1, y1, ...) of the K robots, row-major
+     * with row stride 2·BL_TEAM_MAX_BEACONS (m²), symmetric PSD; entries
+     * beyond 2K ignored. Zero where the gauge holds a coordinate. */
+    bl_real cov[4 * BL_TEAM_MAX_BEACONS * BL_TEAM_MAX_BEACONS];
+    /* Cross-covariance of this robot's (x, y) (rows) with the beacons'
+     * coordinates (columns x0, y0, x1, ...), row-major 2 x (2·BL_TEAM_MAX_BEACONS)
+     * (m²): non-zero when this robot's start came from the same team solve;
+     * all zero when its pose is independent of them. */
+    bl_real cross[4 * BL_TEAM_MAX_BEACONS];
+    uint32_t mode; /* bl_team_mode */
+} bl_team_beacons;
+
+/* Fill *out from a team solution (solver.h): the robots robots[0..count-1]
+ * (indices into the solution) as beacons, their joint covariance, the
+ * cross-covariance with robot self (BL_TEAM_NONE: zero), emitters at
+ * height z_m, robot_id[k] = robots[k], mode BL_TEAM_CONSIDER.
+ * Errors (*out untouched): BL_EINVAL (NULL, count outside
+ * 1..BL_TEAM_MAX_BEACONS, an index >= sol->count, repeated, equal to self,
+ * z_m not finite). */
+int bl_team_beacons_from_solution(const bl_team_solution *sol, const uint32_t *robots, uint32_t count, uint32_t self,
+                                  bl_real z_m, bl_team_beacons *out);
+
+/* Set (or replace: a leap-frog) the stationary beacon robots of a started
+ * filter. The cross-covariance of this robot's state with a beacon that
+ * was already set (same robot_id) is kept; with a new one it is b->cross
+ * for (x, y), zero for the other states. The augmented covariance
+ * [[P, C], [Cᵀ, cov]] must be positive semi-definite (checked). While
+ * beacons are set in BL_TEAM_CONSIDER mode, every predict also carries
+ * the cross-covariance (F C) and fuses the wheel speeds in the augmented
+ * state; pulses, bearings and fixed-beacon ranges are refused
+ * (BL_ECONFIG: their updates would not carry it). count 0 clears the team
+ * (the cross-covariance is dropped). Any (re)start of the filter drops
+ * the cross-covariance (the new pose is taken as independent of the
+ * beacons) but keeps the beacons.
+ * Errors (*f byte-identical): BL_EINVAL (NULL, count > BL_TEAM_MAX_BEACONS,
+ * repeated ids, a non-finite entry, cov not symmetric, the augmented
+ * covariance not PSD: a negative variance, or its correlation matrix's
+ * least eigenvalue below -1e-9 (-1e-4 with float); mode unknown),
+ * BL_ENOTINIT (not started). */
+int bl_filter_set_team_beacons(bl_filter *f, const bl_team_beacons *b);
+
+/* Fuse one time of flight from team beacon robot robot_id (bl_team_beacons):
+ * as bl_filter_fuse_range (the same model, h = |p_rx - b|/s with the
+ * robot extrapolated to the reception instant, the same σ, gates and IEKF),
+ * with b the beacon robot's estimated position, whose uncertainty enters
+ * by the chosen mode (above): CONSIDER: the shared update on the state
+ * augmented with the beacons' coordinates (∂h/∂b = -∂h/∂p_rx), the
+ * beacons as consider states; INFLATE: R += H_b P_b H_bᵀ.
+ * Not started: BL_ENOTINIT (a team robot starts from the team solve:
+ * bl_filter_start). No trilateration restart from team ranges.
+ * *result (may be NULL): as bl_filter_fuse_range.
+ * Errors (*f byte-identical): BL_EINVAL (NULL f; time_of_flight_s not
+ * finite or negative, or a range s·tof beyond 1.5·cfg.range.max_range_m;
+ * the model undefined, or a non-finite update), BL_ENOTINIT, BL_EBEACON
+ * (robot_id not a set beacon), BL_ETIME (t_us more than
+ * cfg.max_predict_gap_s before or after the state time: predict first).
+ * Cost: O((NX + 2·BL_TEAM_MAX_BEACONS)²) per IEKF iteration (2 at most). */
+int bl_filter_fuse_team_range(bl_filter *f, uint32_t robot_id, int64_t t_us, bl_real time_of_flight_s,
+                              bl_fusion_result *result);
+#endif /* BL_WITH_TEAM */
 
 /* Raw state and covariance (layout BL_IX_*; t0 relative to the internal
  * epoch; P row-major NXxNX in the units of the states, e.g. P[T0][T0] s²),

@@ -269,6 +269,151 @@ typedef struct bl_range_solution {
 
 int bl_solve_ranges_2d(const bl_range_problem *prob, bl_range_solution *sol);
 
+#if BL_WITH_TEAM /* common.h: the team solvers are part of the team switch */
+/* ---- Team initialisation from pairwise ranges (lib/src/solver_team.cpp) ----
+ * The CMU Millibots' start-up (Navarro-Serment et al., "Millibots", §3.2):
+ * with no fixed beacon, the team leader has every robot ping and collects
+ * the ranges between pairs; robot `origin` is put at (0, 0), robot `axis`
+ * on +x, and the others follow. Here, for N robots (3..BL_MAX_TEAM) in 2D
+ * (all transducers at one height):
+ *   1. start: classical multidimensional scaling (Torgerson 1952; Borg &
+ *      Groenen 2005, "Modern Multidimensional Scaling", §12.1): with D² the
+ *      squared ranges (a pair not measured: the shortest path through
+ *      measured ones, as MDS-MAP, Shang et al. 2003) and J = I - 11ᵀ/N,
+ *      B = -½ J D² J (eq. 12.1 of Borg & Groenen), X = V₂ Λ₂^½ from the two
+ *      largest eigenpairs of B (cyclic Jacobi with Eigen's JacobiRotation:
+ *      Eigen's SelfAdjointEigenSolver references malloc through its GEMV
+ *      kernel, lib/src/linalg.hpp);
+ *   2. the gauge: X translated so that origin is at (0, 0), rotated so that
+ *      axis is on +x;
+ *   3. weighted least squares over every measured pair (i < j):
+ *      minimise Σ (r_ij - |p_i - p_j|)² / σ_ij² by Levenberg–Marquardt over
+ *      the 2N - 3 free coordinates (origin's x, y and axis's y held at 0);
+ *   4. covariance: the inverse of the gauge-fixed Fisher information
+ *      JᵀWJ (J: ∂|p_i - p_j|/∂ free coordinates, W = diag(1/σ_ij²)); the
+ *      held coordinates have zero (co)variance: the frame is *defined* by
+ *      the two robots (a "minimal constraint" gauge: Borg & Groenen §5.3's
+ *      Procrustes freedom removed by fixing coordinates);
+ *   5. residual test: χ² = Σ e_ij²/σ_ij² against the chi-square 95 %
+ *      quantile with M - (2N - 3) degrees of freedom (M measured pairs;
+ *      Wilson & Hilferty 1931's approximation), so a multipath range or a
+ *      robot that moved during the survey shows.
+ * The MIRROR: ranges cannot tell the team from its reflection y -> -y (the
+ * same distances). The solution is returned in the reflection where the
+ * lowest-numbered robot off the x axis (|y| > 3σ_y) has y > 0, and
+ * mirror_unresolved = true: resolve it with an L-shaped manoeuvre
+ * (bl_team_resolve_mirror) and flip it with bl_team_mirror.
+ * Placement: origin and axis must have a measured range between them
+ * (at least 3σ and 1 mm long); every other robot needs >= 2 measured
+ * ranges to robots placed before it (greedy, in index order: rigid only
+ * up to a flip across the line of the two when it has exactly 2 — give
+ * it 3 where possible).
+ * Errors (*sol untouched except sol->failed_robot, which names the robot
+ * at fault for BL_EDEGENERATE and is BL_TEAM_NONE otherwise):
+ *   BL_EINVAL      NULL; count outside 3..BL_MAX_TEAM; origin or axis >=
+ *                  count, or origin == axis; a measured range (finite
+ *                  range_m[i][j], i != j) negative, or not equal to
+ *                  range_m[j][i] (NaN both ways for "not measured"), or
+ *                  its σ not finite or <= 0; max_iterations > 100;
+ *   BL_EDEGENERATE the origin-axis range missing or shorter than
+ *                  max(3σ, 1 mm) (failed_robot = axis); a robot with fewer
+ *                  than 2 ranges to placed robots (failed_robot = it); a
+ *                  singular Fisher information (e.g. all robots on one
+ *                  line); fewer than 3 robots connected;
+ *   BL_ENOCONVERGE Levenberg–Marquardt took max_iterations steps without a
+ *                  step below the tolerance.
+ * Cost: one 8x8 eigen-decomposition, O(M + N³) per step (a (2N)x(2N)
+ * Cholesky), at most max_iterations steps; no heap; about 5.4 KiB of
+ * stack with float (measured by make size-m4's stack report), twice that
+ * with double: a host or team-leader call, not a small board's.
+ * Reentrant. */
+#define BL_TEAM_NONE 0xffffffffu
+typedef struct bl_team_problem {
+    uint32_t count; /* N robots, 3..BL_MAX_TEAM */
+    /* range_m[i][j]: measured distance between robots i and j (m), the same
+     * value in [j][i]; NaN = not measured; the diagonal is ignored. A
+     * caller with several pings per pair passes their mean and its σ. */
+    bl_real range_m[BL_MAX_TEAM][BL_MAX_TEAM];
+    bl_real sigma_m[BL_MAX_TEAM][BL_MAX_TEAM]; /* σ of each measured range (m), > 0 */
+    uint32_t origin;                           /* robot put at (0, 0) */
+    uint32_t axis;                             /* robot put on +x */
+    uint32_t max_iterations;                   /* LM steps, 1..100; 0 = 50 */
+    bl_real tolerance_m;                       /* stop when a step moves no coordinate more
+                                                  than this (m); 0 = 1e-9 (1e-6 for float) */
+} bl_team_problem;
+
+typedef struct bl_team_solution {
+    uint32_t count;              /* N */
+    bl_real x_m[BL_MAX_TEAM];    /* robot positions in the team frame (m) */
+    bl_real y_m[BL_MAX_TEAM];    /* (origin: 0, 0; axis: y = 0) */
+    bl_real cov[BL_MAX_TEAM][4]; /* per robot: covariance of (x, y), row-major
+                                            2x2 (m²); zero where the gauge holds it */
+    /* Joint covariance of (x0, y0, x1, y1, ...), row-major
+     * (2·BL_MAX_TEAM)², entries beyond 2N zero (m²): the robots' errors are
+     * correlated (they share ranges), which a filter ranging to several of
+     * them must keep (bl_team_beacons_from_solution). */
+    bl_real joint_cov[4 * BL_MAX_TEAM * BL_MAX_TEAM];
+    uint32_t ranges_used;   /* M measured pairs */
+    uint32_t dof;           /* M - (2N - 3) */
+    bl_real residual_rms_m; /* sqrt(Σ e_ij² / M) (m) */
+    bl_real chi2;           /* Σ e_ij²/σ_ij² (1) */
+    bl_real chi2_limit;     /* its 95 % quantile with dof degrees of freedom (0 when dof = 0) */
+    bool chi2_ok;           /* chi2 <= chi2_limit (true when dof = 0: nothing to test) */
+    uint32_t iterations;    /* LM steps */
+    bool mirror_unresolved; /* always true: the reflection y -> -y fits as well */
+    uint32_t failed_robot;  /* BL_TEAM_NONE, or the robot at fault (BL_EDEGENERATE) */
+} bl_team_solution;
+
+int bl_solve_team(const bl_team_problem *prob, bl_team_solution *sol);
+
+/* The reflection y -> -y of a team solution (in may equal out): every y
+ * negated, and with it the covariance entries that pair an x with a y
+ * (cov[i][1], cov[i][2]; joint_cov (r, c) with one of r, c odd);
+ * mirror_unresolved false (the caller has resolved it).
+ * Errors: BL_EINVAL (NULL, count outside 3..BL_MAX_TEAM); *out untouched. */
+int bl_team_mirror(const bl_team_solution *in, bl_team_solution *out);
+
+/* ---- Mirror resolution by an L-shaped manoeuvre (Millibots §3.2) ----
+ * "The team leader commands one robot to follow a short L-shaped trajectory
+ * and recomputes distance. If the robot turned to the left, but the
+ * assigned coordinate system indicates a right turn, the sign of the
+ * Y-coordinates of all robots are reversed." The moving robot is fixed in
+ * the (possibly mirrored) team frame before the L (p0), at its corner (p1)
+ * and after it (p2), e.g. by bl_solve_ranges_2d against the stationary
+ * robots; its odometry reports the turn at the corner (signed, rad, + =
+ * left / counter-clockwise, from the wheels: (d_r - d_l)/b summed). The
+ * turn the fixes show is the sign of the cross product
+ *     c = (p1 - p0) × (p2 - p1) = ax·by - ay·bx       (m²),
+ * a = p1 - p0, b = p2 - p1: > 0 left, < 0 right in a right-handed frame.
+ * The frame is mirrored when sign(c) != sign(turn). σ_c by first-order
+ * propagation of the three fixes' covariances (independent fixes):
+ *     ∂c/∂p0 = -(by, -bx), ∂c/∂p1 = (by + ay, -bx - ax), ∂c/∂p2 = (-ay, ax),
+ *     σ_c² = Σ_k gₖᵀ Σₖ gₖ;
+ * confidence = |c| / σ_c. */
+typedef struct bl_team_l_manoeuvre {
+    bl_real x_m[3], y_m[3]; /* p0, p1, p2 in the team frame (m) */
+    bl_real cov[3][4];      /* covariance of each fix, row-major 2x2 (m²) */
+    bl_real turn_rad;       /* the odometry's heading change from the first leg to
+                               the second (rad), + = left (CCW) */
+    bl_real sigma_turn_rad; /* its σ (rad), >= 0 */
+    bl_real min_confidence; /* refuse below this |c|/σ_c (and |turn|/σ_turn); 0 = 3 */
+} bl_team_l_manoeuvre;
+
+typedef struct bl_team_mirror_decision {
+    bool mirrored;          /* the frame is the reflection: apply bl_team_mirror */
+    bl_real cross_m2;       /* c (m²) */
+    bl_real sigma_cross_m2; /* σ_c (m²) */
+    bl_real confidence;     /* |c| / σ_c (1) */
+} bl_team_mirror_decision;
+
+/* Errors (*out untouched): BL_EINVAL (NULL, non-finite input, σ_turn < 0,
+ * a covariance with a negative diagonal, min_confidence < 0);
+ * BL_EDEGENERATE (a leg shorter than 1 mm, the L too straight to tell:
+ * |c|/σ_c < min_confidence, or the odometry turn too small: |turn| <
+ * min_confidence·σ_turn or |turn| < 0.1 rad). */
+int bl_team_resolve_mirror(const bl_team_l_manoeuvre *in, bl_team_mirror_decision *out);
+#endif /* BL_WITH_TEAM */
+
 #ifdef __cplusplus
 }
 #endif
