@@ -82,29 +82,9 @@ def _cmd_run(args) -> int:
     lateness = None
     sched = None
     if args.channel:
-        import can
-        stop = {"flag": False}
-
-        def on_signal(_sig, _frm):
-            stop["flag"] = True
-        old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            bus = can.Bus(interface=args.interface, channel=args.channel)
-        except (can.CanError, OSError, ValueError, ImportError) as exc:
-            print(f"beaconloc-sim: cannot open CAN bus {args.interface}:{args.channel}: {exc}",
-                  file=sys.stderr)
-            return EX_UNAVAILABLE
-        sched = can_out.realtime_priority() if args.realtime else "SCHED_OTHER"
-        try:
-            lateness = can_out.send_live(result.frames, bus, spin_s=args.spin_ms * 1e-3,
-                                         stop=lambda: stop["flag"])
-        except can.CanError as exc:
-            print(f"beaconloc-sim: send failed on {args.channel}: {exc}", file=sys.stderr)
-            return EX_UNAVAILABLE
-        finally:
-            bus.shutdown()
-            for s, h in old.items():
-                signal.signal(s, h)
+        rc, lateness, sched = _send_live(result.frames, args)
+        if rc != 0:
+            return rc
         wall = time.perf_counter() - t0
     if args.stats:
         stats = outputs.run_stats(result, wall_time_s=wall, lateness_s=lateness,
@@ -148,23 +128,46 @@ def _run_team(args) -> int:
     if args.roles:
         outputs.write_json(args.roles, team_sim.roles_document(result))
     if args.channel:
-        import can
+        rc, _lateness, _sched = _send_live(result.frames, args)
+        if rc != 0:
+            return rc
+    if args.stats:
+        outputs.write_json(args.stats, team_sim.team_stats(result, time.perf_counter() - t0))
+    return 0
+
+
+def _send_live(frames, args):
+    """run --channel: every frame on the bus at its time (can_out.send_live), SCHED_FIFO
+    unless --no-realtime, stopped early by SIGINT/SIGTERM. (0, lateness s, scheduling
+    policy), or (exit status, None, None) with the error said."""
+    import can
+
+    from . import can_out
+    stop = {"flag": False}
+
+    def on_signal(_sig, _frm):
+        stop["flag"] = True
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
         try:
             bus = can.Bus(interface=args.interface, channel=args.channel)
         except (can.CanError, OSError, ValueError, ImportError) as exc:
             print(f"beaconloc-sim: cannot open CAN bus {args.interface}:{args.channel}: {exc}",
                   file=sys.stderr)
-            return EX_UNAVAILABLE
+            return EX_UNAVAILABLE, None, None
+        sched = can_out.realtime_priority() if args.realtime else "SCHED_OTHER"
         try:
-            can_out.send_live(result.frames, bus, spin_s=args.spin_ms * 1e-3)
+            lateness = can_out.send_live(frames, bus, spin_s=args.spin_ms * 1e-3,
+                                         stop=lambda: stop["flag"])
         except can.CanError as exc:
             print(f"beaconloc-sim: send failed on {args.channel}: {exc}", file=sys.stderr)
-            return EX_UNAVAILABLE
+            return EX_UNAVAILABLE, None, None
         finally:
             bus.shutdown()
-    if args.stats:
-        outputs.write_json(args.stats, team_sim.team_stats(result, time.perf_counter() - t0))
-    return 0
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+    return 0, lateness, sched
 
 
 def _run_windows(scn, args) -> int:

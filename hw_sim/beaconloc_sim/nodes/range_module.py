@@ -39,6 +39,7 @@ from ..physics.ranges import (flight_time_s, late_arrival_m, measured_tof_us, pu
                               receiver_position)
 from .base import Interval, Node
 from .bearing_sensor import occluded
+from .range_receiver import RangeFlags
 from .range_receiver import TOF_MAX_US
 
 
@@ -51,7 +52,7 @@ class Pings:
 
 
 @dataclass
-class TeamRanges:
+class TeamRanges(RangeFlags):
     """One row per (ping, listening robot), with why a range was not sent."""
     ping: np.ndarray           # index into Pings
     t_s: np.ndarray            # true emission instant, s
@@ -67,18 +68,6 @@ class TeamRanges:
     dropout: np.ndarray
     occluded: np.ndarray
     out_of_range: np.ndarray
-
-    @property
-    def sent(self) -> np.ndarray:
-        return ~(self.dropout | self.occluded | self.out_of_range)
-
-    @property
-    def direct(self) -> np.ndarray:
-        """Sent and timing the direct pulse (the bound's measurements)."""
-        return self.sent & ~self.multipath
-
-    def select(self, keep) -> TeamRanges:
-        return TeamRanges(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
 
 
 def leader_pings(tscn) -> Pings:

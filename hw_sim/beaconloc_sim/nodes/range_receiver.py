@@ -45,8 +45,25 @@ from .bearing_sensor import occluded
 TOF_MAX_US = 65534           # the DBC's TimeOfFlight range
 
 
+class RangeFlags:
+    """What every record of ranges answers from its flags (Ranges here, TeamRanges in
+    range_module.py): sent, direct, and a selection of its rows."""
+
+    @property
+    def sent(self) -> np.ndarray:
+        return ~(self.dropout | self.occluded | self.out_of_range)
+
+    @property
+    def direct(self) -> np.ndarray:
+        """Sent and timing the direct pulse (the bound's measurements)."""
+        return self.sent & ~self.multipath
+
+    def select(self, keep):
+        return type(self)(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
+
+
 @dataclass
-class Ranges:
+class Ranges(RangeFlags):
     """The pings of an interval (one row per ping), with why each was not sent."""
     t_s: np.ndarray            # true emission instant (the RF sync), s
     ping_us: np.ndarray        # node-clock count of the ping (unwrapped, us)
@@ -59,17 +76,6 @@ class Ranges:
     occluded: np.ndarray       # direct path crosses an obstacle segment
     out_of_range: np.ndarray   # farther than max_range_m
 
-    @property
-    def sent(self) -> np.ndarray:
-        return ~(self.dropout | self.occluded | self.out_of_range)
-
-    @property
-    def direct(self) -> np.ndarray:
-        """Sent and timing the direct pulse (the bound's measurements)."""
-        return self.sent & ~self.multipath
-
-    def select(self, keep) -> Ranges:
-        return Ranges(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
 
     @staticmethod
     def empty() -> Ranges:
