@@ -392,6 +392,22 @@ static const char *item_key_name(const struct item_desc *it, unsigned bit)
     return "?";
 }
 
+/* The keys an item must give: every one, except with the beacons'
+ * self-survey ([range_beacons] self_survey = 1): a range beacon other than
+ * the survey's origin needs only z_m (its x, y come from the survey,
+ * bridge/survey.h). */
+static uint32_t required_keys(const struct bridge_config *cfg, const struct item_desc *it, int n,
+                              uint32_t all)
+{
+    if (!cfg->range_survey.self_survey || strcmp(it->prefix, "range_beacon") != 0 ||
+        n + 1 == cfg->range_survey.origin)
+        return all;
+    for (unsigned bit = 0; bit < 32u && (all >> bit & 1u); bit++)
+        if (strcmp(item_key_name(it, bit), "z_m") == 0)
+            return 1u << bit;
+    return all;
+}
+
 /* The items of every per-item section: 1..count complete (every key
  * given), none beyond count. */
 static int check_items(const struct bridge_config *cfg, struct parse_ctx *ctx)
@@ -407,9 +423,10 @@ static int check_items(const struct bridge_config *cfg, struct parse_ctx *ctx)
         for (int n = 0; n < it->max; n++) {
             const struct config_item_seen *seen = &cfg->item_seen[s][n];
             snprintf(sec, sizeof sec, "%s%d", it->prefix, n + 1);
-            if (n < count && (seen->keys & all) != all) {
+            const uint32_t need = required_keys(cfg, it, n, all);
+            if (n < count && (seen->keys & need) != need) {
                 unsigned missing = 0;
-                while (seen->keys >> missing & 1u) missing++;
+                while ((seen->keys | ~need) >> missing & 1u) missing++;
                 fail(ctx, seen->line ? seen->line : count_line, sec, item_key_name(it, missing),
                      "missing (count = %d %s)", count, it->count_section);
                 return -1;
@@ -487,6 +504,37 @@ static int check_team(const struct bridge_config *cfg, struct parse_ctx *ctx)
     return 0;
 }
 
+/* [range_beacons] self_survey (bridge/survey.h): a range-only site of 3..8
+ * beacons (bl_solve_team's team size), its gauge two different ones. */
+static int check_survey(const struct bridge_config *cfg, struct parse_ctx *ctx)
+{
+    const struct config_range_survey *rs = &cfg->range_survey;
+    if (!rs->self_survey)
+        return 0;
+    const int n = cfg->range_beacon_count;
+    if (n < 3 || n > BL_MAX_TEAM || cfg->beacon_count > 0 || cfg->bearing_beacon_count > 0 ||
+        config_is_team(cfg)) {
+        fail(ctx, key_line_of(ctx, "range_beacons", "self_survey"), "range_beacons",
+             "self_survey",
+             "a self-survey needs a range-only site of 3..%d range beacons (count = %d, "
+             "[beacons] count = %d, [bearing_beacons] count = %d, [team] robots = %d)",
+             BL_MAX_TEAM, n, cfg->beacon_count, cfg->bearing_beacon_count, cfg->team.robots);
+        return -1;
+    }
+    if (rs->origin > n) {
+        fail(ctx, key_line_of(ctx, "range_beacons", "survey_origin"), "range_beacons",
+             "survey_origin", "%d: beyond count = %d", rs->origin, n);
+        return -1;
+    }
+    if (rs->axis > n || rs->axis == rs->origin) {
+        fail(ctx, key_line_of(ctx, "range_beacons", "survey_axis"), "range_beacons",
+             "survey_axis", "%d: must be in 1..%d and not survey_origin (%d)", rs->axis, n,
+             rs->origin);
+        return -1;
+    }
+    return 0;
+}
+
 /* Check with line numbers when ctx is given. */
 static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
 {
@@ -512,6 +560,8 @@ static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
     if (check_items(cfg, ctx))
         return -1;
     if (check_team(cfg, ctx))
+        return -1;
+    if (check_survey(cfg, ctx))
         return -1;
     /* The node's window for the second burst must end before the next firing. */
     if (cfg->double_pulse_spacing_s + cfg->double_pulse_tolerance_s >= cfg->period_s) {

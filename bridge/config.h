@@ -107,6 +107,17 @@ struct config_team {
 #undef CONFIG_SENSOR_MEMBER
 };
 
+/* [range_beacons] self-survey keys (site_keys.h: the range_survey.* members;
+ * bridge/survey.h) */
+struct config_range_survey {
+    int self_survey;  /* 1: beacon x, y from BEACON_SURVEY ranges */
+    int origin;       /* beacon id at the surveyed frame's origin */
+    int axis;         /* beacon id on its +x axis */
+    double axis_deg;  /* site-frame bearing origin -> axis beacon, CCW from +x (deg) */
+    int min_pings;    /* pings per pair before the solve */
+    double timeout_s; /* solve with what there is this long after the first range (s) */
+};
+
 struct bridge_config {
     /* [beacons] */
     int beacon_count;
@@ -134,6 +145,7 @@ struct bridge_config {
     struct config_bearing_sensor bearing_sensor;
     /* [range_beacons] */
     int range_beacon_count;
+    struct config_range_survey range_survey;
     /* [range_sensor] */
     struct config_range_sensor range_sensor;
     /* [robot] */

@@ -195,6 +195,9 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->ranges_bad_tof = d->est.c.ranges_bad_tof;
     r->stale_ranges = d->est.c.stale_ranges;
     r->unmapped_ranges = d->est.c.unmapped_ranges;
+    r->ranges_before_survey = d->est.c.ranges_before_survey;
+    r->survey_unexpected = d->est.c.survey_unexpected;
+    r->survey = d->est.survey_on ? &d->est.survey : NULL;
     r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;

@@ -244,9 +244,21 @@ static void sync(struct estimator *e)
     }
 }
 
-int estimator_init(struct estimator *e, const struct bridge_config *cfg, char *err, size_t errlen)
+void estimator_event(struct estimator *e, enum est_event_severity sev, const char *text)
+{
+    event(e, sev, "%s", text);
+}
+
+int estimator_init(struct estimator *e, const struct bridge_config *site, char *err, size_t errlen)
 {
     memset(e, 0, sizeof *e);
+    /* the range beacons' positions: typed in, or the self-survey's (estimator.h) */
+    struct bridge_config c = *site;
+    bool restart = true;
+    if (estimator_survey_prepare(NULL, &c, &e->survey, &restart, err, errlen))
+        return -1;
+    e->survey_on = c.range_survey.self_survey != 0;
+    const struct bridge_config *cfg = &c;
     e->cfg = *cfg;
     e->pulse_hold_us = estimator_pulse_hold_us(cfg);
     if (make_configs(cfg, &e->blcfg, &e->seqcfg, err, errlen))
@@ -308,13 +320,26 @@ static void start_from_initial_pose(struct estimator *e, int64_t t_us)
                  p->x_m, p->y_m, p->heading_rad * 180.0 / M_PI, p->sigma_m);
 }
 
-int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg, char *err,
+int estimator_reconfigure(struct estimator *e, const struct bridge_config *site, char *err,
                           size_t errlen)
 {
+    /* the range beacons' positions: typed in, or the self-survey's, which goes
+     * on or starts anew (estimator.h, estimator_survey_prepare) */
+    static struct survey fresh; /* large; the daemon's one loop calls this */
+    struct bridge_config sited = *site;
+    bool restart = false;
+    if (estimator_survey_prepare(e, &sited, &fresh, &restart, err, errlen))
+        return -1;
+    const struct bridge_config *cfg = &sited;
     bl_config c;
     bl_seq_config sc;
     if (make_configs(cfg, &c, &sc, err, errlen))
         return -1;
+    if (restart) {
+        e->survey_on = cfg->range_survey.self_survey != 0;
+        if (e->survey_on)
+            e->survey = fresh;
+    }
     e->beacon_lost_s = cfg->beacon_lost_s;
     e->echo_storm_ratio = cfg->echo_storm_ratio;
     /* Same geometry (beacons, period, receiver ring, wheels; config.c) and
@@ -549,6 +574,11 @@ void estimator_range(struct estimator *e, const struct frame_range *r, int64_t r
         e->c.ranges_bad_tof++; /* nothing timed, or the counter saturated (sensor_range.c) */
         return;
     }
+    if (e->survey_on && e->survey.state != SURVEY_DONE) {
+        /* the beacons are not placed yet: dropped (docs/bridge.md, "Beacon self-survey") */
+        e->c.ranges_before_survey++;
+        return;
+    }
     /* The node sends the range once it heard the pulse: the clock fit sees
      * the frame as if sent at the emission (estimator.h, "Ranges"). */
     int64_t tr = node_clock_observe(&e->rng_clock, r->node_time_us, rx_us - r->time_of_flight_us);
@@ -599,6 +629,7 @@ int64_t estimator_local_to_node(const struct estimator *e, int64_t local_us)
 
 void estimator_tick(struct estimator *e, int64_t local_now_us)
 {
+    estimator_survey_poll(e, local_now_us); /* a survey's timeout */
     if (!ref_seen(e))
         return;
     int64_t now = estimator_local_to_node(e, local_now_us);

@@ -80,6 +80,7 @@
 #include "config.h"
 #include "frames.h"
 #include "node_clock.h"
+#include "survey.h"
 
 #define EST_EVENT_QUEUE 16
 #define EST_EVENT_LEN 64
@@ -137,6 +138,9 @@ struct est_counters {
     uint64_t stale_ranges;          /* ranges older than the newest on the receiver's clock */
     uint64_t unmapped_ranges;       /* ranges before the reference clock (mixed site) */
     uint64_t tracks_unexpected;     /* TRACK_ENCODERS frames on a site that is not a team's */
+    /* the beacons' self-survey (bridge/estimator_survey.c) */
+    uint64_t ranges_before_survey; /* robot ranges while the survey is not done: dropped */
+    uint64_t survey_unexpected;    /* BEACON_SURVEY frames on a site without self_survey */
 };
 
 /* One published estimate. */
@@ -225,6 +229,11 @@ struct estimator {
     struct est_event events[EST_EVENT_QUEUE];
     unsigned ev_head, ev_len;
     struct est_initial_pose initial_pose; /* pending until used (set false then) */
+    /* [range_beacons] self_survey = 1 (bridge/estimator_survey.c): the beacons'
+     * positions from BEACON_SURVEY ranges; until it is done the localizer has
+     * placeholder positions and the robot's ranges are counted and dropped */
+    bool survey_on;
+    struct survey survey;
 };
 
 /*
@@ -256,6 +265,25 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int
 void estimator_status(struct estimator *e, const struct frame_status *s, int64_t rx_us);
 void estimator_bearing(struct estimator *e, const struct frame_bearing *b, int64_t rx_us);
 void estimator_range(struct estimator *e, const struct frame_range *r, int64_t rx_us);
+void estimator_beacon_survey(struct estimator *e, const struct frame_survey *f, int64_t rx_us);
+
+/* The self-survey's part of a (re)configuration (bridge/estimator_survey.c):
+ * decide for site config *cfg whether e's survey goes on (same survey keys,
+ * heights and beacon count: *restart false) or starts anew (*fresh
+ * initialised: *restart true; always at estimator_init, e NULL), and write
+ * the range beacons' positions the localizer gets into *cfg: the surveyed
+ * ones once done, else placeholders (the origin beacon's x, y and the others
+ * on a 1 m circle round it: distinct and not collinear, never used, since
+ * the robot's ranges are dropped until the survey is done). Returns 0, or
+ * -1 with err on survey keys the survey refuses. A site without self_survey:
+ * nothing (0, *restart true, survey off). */
+int estimator_survey_prepare(const struct estimator *e, struct bridge_config *cfg,
+                             struct survey *fresh, bool *restart, char *err, size_t errlen);
+
+/* Solve the survey if it is time (at bridge time now_us); on success the
+ * localizer is re-initialised with the surveyed positions (the
+ * reconfiguration path), STATUSTEXT either way. */
+void estimator_survey_poll(struct estimator *e, int64_t now_us);
 
 /* Periodic work at local time now (pops pulses whose merge window closed
  * while no later frame came, health checks). */
@@ -276,6 +304,9 @@ int64_t estimator_pulse_hold_us(const struct bridge_config *cfg);
 /* The current estimate at the filter's state time (at_local_us = 0) or
  * extrapolated to local time at_local_us (constant velocity). */
 int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_output *out);
+
+/* Queue an event (STATUSTEXT) with this text. */
+void estimator_event(struct estimator *e, enum est_event_severity sev, const char *text);
 
 /* Next pending health event; false when none. */
 bool estimator_next_event(struct estimator *e, struct est_event *ev);

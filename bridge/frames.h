@@ -64,7 +64,8 @@ enum frame_kind {
     FRAME_BEARING = 3,
     FRAME_RANGE = 4,
     FRAME_TRACK_ENCODERS = 5,
-    FRAME_KIND_COUNT = 6
+    FRAME_BEACON_SURVEY = 6,
+    FRAME_KIND_COUNT = 7
 };
 
 /* Result of frame_decode(). */
@@ -136,6 +137,17 @@ struct frame_track_encoders {
     uint8_t counter;       /* the robot's own rolling counter, modulo 16 */
 };
 
+/* One range between two fixed range beacons, the range network's self-survey
+ * (BEACON_SURVEY, bridge/sensor_beacon_survey.c; bridge/survey.h). */
+struct frame_survey {
+    uint32_t node_time_us;      /* emission (RF sync), range network's clock */
+    uint8_t emitter;            /* range beacon id 1..15 that pinged */
+    uint8_t listener;           /* range beacon id 1..15 that heard it */
+    uint16_t time_of_flight_us; /* 0..65534 us (DBC); the survey refuses 0 and 65534 */
+    uint8_t quality;            /* 0 barely heard .. 15 strongest */
+    uint8_t counter;
+};
+
 struct frame {
     enum frame_kind kind;
     union {
@@ -145,6 +157,7 @@ struct frame {
         struct frame_bearing bearing;
         struct frame_range range;
         struct frame_track_encoders track;
+        struct frame_survey survey;
     } u;
 };
 

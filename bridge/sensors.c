@@ -22,6 +22,9 @@
  * slack (us). */
 #define TRACK_STAMP_SLACK_US 0
 
+/* The survey frames of one ping (one per listening beacon) share its NodeTime. */
+#define SURVEY_STAMP_SLACK_US 1
+
 /* clang-format off: one kind per block, aligned as a table */
 const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
     [FRAME_PULSE] =
@@ -95,6 +98,18 @@ const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
             .tracks = FRAME_MAX_NODES, /* one per robot id */
             .decode = sensor_track_encoders_decode,
             .handle = sensor_track_encoders_handle,
+        },
+    [FRAME_BEACON_SURVEY] =
+        {
+            .name = "beacon_survey",
+            .short_name = "srv",
+            .id_first = BEACONLOC_CAN_BEACON_SURVEY_FRAME_ID,
+            .id_last = BEACONLOC_CAN_BEACON_SURVEY_FRAME_ID,
+            .counter_in_range = beaconloc_can_beacon_survey_counter_is_in_range,
+            .stamp_slack_us = SURVEY_STAMP_SLACK_US,
+            .tracks = 1, /* the range network's gateway numbers them */
+            .decode = sensor_beacon_survey_decode,
+            .handle = sensor_beacon_survey_handle,
         },
 };
 /* clang-format on */

@@ -9,6 +9,7 @@
 
 #include "log.h"
 #include "sensors.h"
+#include "survey.h"
 #include "team.h"
 
 void latency_reset(struct latency_hist *h)
@@ -199,6 +200,10 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"latency_interval_max_us\": %lld,\n", (long long)r->latency_interval_max_us);
     fprintf(f, "  \"replay_frames_per_s\": %.1f,\n", r->replay_frames_per_s);
     fprintf(f, "  \"tracks_unexpected\": %llu,\n", (unsigned long long)r->tracks_unexpected);
+    fprintf(f, "  \"ranges_before_survey\": %llu,\n", (unsigned long long)r->ranges_before_survey);
+    fprintf(f, "  \"survey_unexpected\": %llu,\n", (unsigned long long)r->survey_unexpected);
+    if (r->survey)
+        survey_write_json(r->survey, f);
     if (r->team)
         team_write_json(r->team, r->team_odometry_sent, f);
     fprintf(f, "  \"run_time_s\": %.3f\n", r->run_time_s);

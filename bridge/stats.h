@@ -16,6 +16,7 @@
 #include "frames.h"
 
 struct team;
+struct survey;
 
 /* Latency histogram: exact 1 us bins below 4096 us, then 64 bins per
  * power of two (relative resolution 1.6 %) up to 2^36 us. */
@@ -72,6 +73,11 @@ struct stats_report {
     uint64_t ranges_fused, ranges_rejected, ranges_buffered, ranges_refused, ranges_unknown_beacon,
         ranges_unexpected, ranges_other_receiver, ranges_bad_tof, stale_ranges, unmapped_ranges;
     uint64_t tracks_unexpected; /* TRACK_ENCODERS on a site that is not a team's */
+    /* the beacons' self-survey (bridge/survey.h): its section "survey" of the
+     * JSON; NULL on a site without self_survey */
+    const struct survey *survey;
+    uint64_t ranges_before_survey; /* robot ranges dropped before the survey was done */
+    uint64_t survey_unexpected;    /* BEACON_SURVEY frames on a site without self_survey */
     /* a team site (bridge/team.h): its section "team" of the JSON; NULL elsewhere */
     const struct team *team;
     uint64_t team_odometry_sent; /* ODOMETRY sent as the robots' system ids */

@@ -32,7 +32,7 @@ _KNOWN = {
     # the bearing sensor's imperfections (the site gives its sigma and scan rate)
     "bearings": {"outage_probability", "outage_burst_s", "max_range_m"},
     # the range receiver's imperfections (the site gives its sigma, max range, ping period)
-    "ranges": {"dropout_probability", "multipath_probability"},
+    "ranges": {"dropout_probability", "multipath_probability", "survey_s"},
     # a second robot (the Eurobot opponent): a disc on its own path, occluding bearings
     "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
@@ -110,6 +110,7 @@ class Scenario:
     range_drift_ppm: float = -15.0
     range_dropout_probability: float = 0.0   # share of pings lost
     range_multipath_probability: float = 0.0  # share of pings whose late arrival replaces the direct
+    range_survey_s: float = 0.0              # the fixed beacons range each other this long (0: never)
     # output
     truth_rate_hz: float = 50.0
     log_epoch_s: float = 1_700_000_000.0
@@ -285,6 +286,9 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
     initial_ticks = ini.numbers("encoders", "initial_ticks", 2, default=[16000, 300])
     if any(v != int(v) or not 0 <= v < 16384 for v in initial_ticks):
         raise ini.error("encoders", "initial_ticks", "ticks must be integers 0..16383")
+    if ini.has("ranges", "survey_s") and ini.number("ranges", "survey_s", 0.0) > 0 \
+            and site.range_beacon_count < 3:
+        raise ini.error("ranges", "survey_s", "a self-survey needs [range_beacons] count >= 3")
 
     def rng_pair(sec, key, default, lo=0.0):
         vals = _pair(ini, sec, key, default)
@@ -361,6 +365,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
                                              maximum=1),
         range_multipath_probability=ini.number("ranges", "multipath_probability", 0.0,
                                                minimum=0, maximum=1),
+        range_survey_s=ini.number("ranges", "survey_s", 0.0, minimum=0, maximum=3600),
         truth_rate_hz=ini.number("output", "truth_rate_hz", 50.0, positive=True, maximum=1000),
         log_epoch_s=ini.number("output", "log_epoch_s", 1_700_000_000.0, minimum=0),
         channel=ini.raw("output", "channel", "vcan0"),

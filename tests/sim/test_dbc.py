@@ -80,8 +80,9 @@ def test_frame_table_comes_from_the_dbc():
     db = cantools.database.load_file(str(dbc_path()))
     from beaconloc_sim.nodes.range_module import RangeModule
     from beaconloc_sim.nodes.track_encoders import TRACK_TICK_WRAP, TrackEncoders
+    from beaconloc_sim.nodes.beacon_survey import BeaconSurvey
     kinds = {nodes.ReceiverRing, nodes.WheelEncoders, nodes.NodeStatus, RangeModule,
-             TrackEncoders}
+             TrackEncoders, BeaconSurvey}
     for kind in kinds:
         msg = db.get_message_by_name(kind.message)
         counter = msg.get_signal_by_name("Counter")
@@ -89,7 +90,7 @@ def test_frame_table_comes_from_the_dbc():
     assert {k.frame_spec().counter_modulo for k in kinds} == {8, 16}
     assert dbc.message_names() == {0x100: "PULSE_DETECTION", 0x110: "WHEEL_ENCODERS",
                                    0x120: "NODE_STATUS", 0x130: "RANGE", 0x131: "TRACK_ENCODERS",
-                                   0x140: "BEARING"}
+                                   0x133: "BEACON_SURVEY", 0x140: "BEARING"}
     assert TRACK_TICK_WRAP == dbc.signal_modulo("TRACK_ENCODERS", "RightTicks") == 1 << 12
     from beaconloc_sim.clocks import WRAP_US
     from beaconloc_sim.encoders import TICK_WRAP
@@ -99,4 +100,4 @@ def test_frame_table_comes_from_the_dbc():
     package = Path(dbc.__file__).parent
     for path in sorted(package.rglob("*.py")):
         code = re.sub(r'""".*?"""|#[^\n]*', "", path.read_text(), flags=re.DOTALL)
-        assert not re.search(r"\b(0x1[0-5][0-9a-fA-F]|256|272|288|304|320|1 << 14|\(1 << 3\))\b", code), path
+        assert not re.search(r"\b(0x1[0-5][0-9a-fA-F]|256|272|288|304|307|320|1 << 14|\(1 << 3\))\b", code), path

@@ -14,6 +14,7 @@ from __future__ import annotations
 from ..clocks import NodeClock
 from ..scenario import Scenario
 from .base import Interval, Node
+from .beacon_survey import BeaconSurvey, SurveyRanges
 from .bearing_sensor import BearingSensor, Bearings
 from .node_status import NodeStatus
 from .range_receiver import RangeReceiver, Ranges
@@ -21,7 +22,7 @@ from .receiver_ring import ReceiverRing
 from .wheel_encoders import ODOMETRY_COLUMNS, WheelEncoders
 
 __all__ = ["Interval", "Node", "NodeStatus", "ReceiverRing", "WheelEncoders", "BearingSensor",
-           "Bearings", "RangeReceiver", "Ranges", "ODOMETRY_COLUMNS", "on_bus"]
+           "Bearings", "RangeReceiver", "Ranges", "BeaconSurvey", "SurveyRanges", "ODOMETRY_COLUMNS", "on_bus"]
 
 
 def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | None,
@@ -30,8 +31,10 @@ def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | 
     bearing beacons), the range receiver (None on a site without range beacons) and every
     node in bus order with their clocks: the receiver ring and the wheel encoders, their
     status frames, then the bearing sensor and its status frame, then the range receiver and
-    its status frame (each appended, so a site without bearing or range beacons has the
-    frames it had before they existed).
+    its status frame, then the beacons' self-survey (nodes.beacon_survey, on the range
+    receiver's clock) when the scenario's [ranges] survey_s > 0 (each appended, so a site
+    without bearing or range beacons, or a run without a survey, has the frames it had
+    before they existed).
     A site without ultrasonic beacons has no receiver ring on the bus (its clock still
     exists: nothing reads it there)."""
     ring = ReceiverRing(NodeClock(scn.rx_offset_us, scn.rx_drift_ppm))
@@ -46,4 +49,6 @@ def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | 
     if scn.site.range_beacon_count:
         ranger = RangeReceiver(NodeClock(scn.range_offset_us, scn.range_drift_ppm), scn)
         nodes += [ranger, NodeStatus(ranger)]
+        if scn.range_survey_s > 0:
+            nodes.append(BeaconSurvey(ranger, scn))
     return ring, wheels, bearing, ranger, nodes

@@ -30,6 +30,7 @@ class Interval:
     rng_wheels: np.random.Generator       # random wheel slip (wheel encoders)
     rng_bearings: np.random.Generator | None = None   # bearing noise and outages (bearing sensor)
     rng_ranges: np.random.Generator | None = None     # range noise, dropouts, multipath
+    rng_survey: np.random.Generator | None = None     # the fixed beacons' survey ranges
 
     def latency_s(self, n: int) -> np.ndarray:
         """Processing time of n frames before each is queued, s (scenario node_latency_s)."""

@@ -1,0 +1,151 @@
+/*
+ * beaconloc-bridge — the estimator's side of the beacons' self-survey
+ * ([range_beacons] self_survey = 1; the survey itself: bridge/survey.h):
+ * BEACON_SURVEY frames into the survey, its solve onto the localizer by the
+ * reconfiguration path (estimator_reconfigure with the surveyed positions:
+ * one mechanism for every change of the beacons), STATUSTEXT on the outcome.
+ *
+ * Until the survey is done the robot's ranges are counted
+ * (ranges_before_survey) and dropped (estimator_range), not buffered: the
+ * survey takes seconds while the robot waits (Marvelmind's practice: the
+ * map first, then the mobile beacon), the localizer needs its measurements
+ * in time order, and it starts from a trilateration of the first ranges
+ * after the survey anyway.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "estimator.h"
+#include "log.h"
+
+/* Placeholder positions before the survey: a circle of this radius round
+ * the origin beacon (m). */
+#define PLACEHOLDER_RADIUS_M 1.0
+
+static int params_of(const struct bridge_config *cfg, struct survey_params *p, char *err,
+                     size_t errlen)
+{
+    const struct config_range_survey *rs = &cfg->range_survey;
+    memset(p, 0, sizeof *p);
+    p->count = cfg->range_beacon_count;
+    p->origin = rs->origin;
+    p->axis = rs->axis;
+    p->axis_deg = rs->axis_deg;
+    if (p->origin >= 1 && p->origin <= cfg->range_beacon_count) {
+        p->origin_x_m = cfg->range_beacon[p->origin - 1].x_m;
+        p->origin_y_m = cfg->range_beacon[p->origin - 1].y_m;
+    }
+    for (int i = 0; i < cfg->range_beacon_count && i < SURVEY_MAX; i++)
+        p->z_m[i] = cfg->range_beacon[i].z_m;
+    p->min_pings = rs->min_pings;
+    p->timeout_s = rs->timeout_s;
+    p->speed_of_sound_mps = cfg->speed_of_sound_mps;
+    p->sigma_m = cfg->range_sensor.sigma_m;
+    p->sigma_per_m = cfg->range_sensor.sigma_per_m;
+    p->max_range_m = cfg->range_sensor.max_range_m;
+    struct survey probe;
+    if (survey_init(&probe, p)) {
+        config_format_error(cfg, "range_beacons", "self_survey",
+                            "needs 3..8 range beacons and survey_origin != survey_axis, both "
+                            "in 1..count",
+                            err, errlen);
+        return -1;
+    }
+    return 0;
+}
+
+/* The positions the localizer gets (estimator.h): surveyed or placeholders. */
+static void overlay(const struct survey *s, struct bridge_config *cfg)
+{
+    const struct survey_params *p = &s->p;
+    for (int i = 0; i < p->count; i++) {
+        struct config_range_beacon *b = &cfg->range_beacon[i];
+        if (s->state == SURVEY_DONE) {
+            b->x_m = s->x_m[i];
+            b->y_m = s->y_m[i];
+        } else if (i + 1 == p->origin) {
+            b->x_m = p->origin_x_m;
+            b->y_m = p->origin_y_m;
+        } else {
+            const double a = 2.0 * M_PI * i / p->count;
+            b->x_m = p->origin_x_m + PLACEHOLDER_RADIUS_M * cos(a);
+            b->y_m = p->origin_y_m + PLACEHOLDER_RADIUS_M * sin(a);
+        }
+    }
+}
+
+int estimator_survey_prepare(const struct estimator *e, struct bridge_config *cfg,
+                             struct survey *fresh, bool *restart, char *err, size_t errlen)
+{
+    *restart = true;
+    if (!cfg->range_survey.self_survey)
+        return 0;
+    struct survey_params p;
+    if (params_of(cfg, &p, err, errlen))
+        return -1;
+    if (e && e->survey_on && memcmp(&p, &e->survey.p, sizeof p) == 0) {
+        *restart = false; /* the same survey goes on (or stays done) */
+        overlay(&e->survey, cfg);
+        return 0;
+    }
+    (void)survey_init(fresh, &p); /* checked by params_of */
+    overlay(fresh, cfg);
+    return 0;
+}
+
+void estimator_beacon_survey(struct estimator *e, const struct frame_survey *f, int64_t rx_us)
+{
+    if (!e->survey_on) {
+        e->c.survey_unexpected++; /* a site without self_survey */
+        return;
+    }
+    (void)survey_add(&e->survey, f->emitter, f->listener, f->time_of_flight_us, rx_us);
+    estimator_survey_poll(e, rx_us);
+}
+
+void estimator_survey_poll(struct estimator *e, int64_t now_us)
+{
+    if (!e->survey_on)
+        return;
+    struct survey *s = &e->survey;
+    char text[EST_EVENT_LEN];
+    switch (survey_poll(s, now_us)) {
+    case SURVEY_SOLVED: {
+        snprintf(text, sizeof text, "beacons surveyed: chi2 %.2f/%.2f, max sigma %.0f mm", s->chi2,
+                 s->chi2_limit, s->worst_sigma_m * 1e3);
+        estimator_event(e, EST_EV_NOTICE, text);
+        for (int i = 0; i < s->p.count; i++)
+            log_info("surveyed range beacon %d: x %.3f m, y %.3f m, sigma %.1f mm", i + 1,
+                     s->x_m[i], s->y_m[i], s->sigma_max_m[i] * 1e3);
+        /* the localizer gets the surveyed positions: the reconfiguration
+         * path (same survey: kept, its positions overlaid; new geometry:
+         * re-initialised) */
+        struct bridge_config c = e->cfg;
+        char err[256];
+        if (estimator_reconfigure(e, &c, err, sizeof err) < 0) {
+            /* e.g. beacons too close for the library: survey again */
+            log_warn("surveyed beacons refused: %s", err);
+            estimator_event(e, EST_EV_WARNING, "surveyed beacons refused, retrying");
+            s->state = SURVEY_COLLECTING;
+            s->c.failures++;
+            memset(s->n, 0, sizeof s->n);
+            s->have_first = false;
+        }
+        break;
+    }
+    case SURVEY_FAILED:
+        if (s->rc == BL_OK)
+            snprintf(text, sizeof text, "beacon survey failed: chi2 %.1f > %.1f, retrying",
+                     s->chi2, s->chi2_limit);
+        else if (s->failed_beacon)
+            snprintf(text, sizeof text, "beacon survey failed: beacon %u placed badly, retrying",
+                     s->failed_beacon);
+        else
+            snprintf(text, sizeof text, "beacon survey failed: %s, retrying", bl_strerror(s->rc));
+        estimator_event(e, EST_EV_WARNING, text);
+        break;
+    default:
+        break;
+    }
+}
