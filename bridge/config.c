@@ -514,8 +514,7 @@ static int check_survey(const struct bridge_config *cfg, struct parse_ctx *ctx)
     const int n = cfg->range_beacon_count;
     if (n < 3 || n > BL_MAX_TEAM || cfg->beacon_count > 0 || cfg->bearing_beacon_count > 0 ||
         config_is_team(cfg)) {
-        fail(ctx, key_line_of(ctx, "range_beacons", "self_survey"), "range_beacons",
-             "self_survey",
+        fail(ctx, key_line_of(ctx, "range_beacons", "self_survey"), "range_beacons", "self_survey",
              "a self-survey needs a range-only site of 3..%d range beacons (count = %d, "
              "[beacons] count = %d, [bearing_beacons] count = %d, [team] robots = %d)",
              BL_MAX_TEAM, n, cfg->beacon_count, cfg->bearing_beacon_count, cfg->team.robots);
@@ -527,9 +526,8 @@ static int check_survey(const struct bridge_config *cfg, struct parse_ctx *ctx)
         return -1;
     }
     if (rs->axis > n || rs->axis == rs->origin) {
-        fail(ctx, key_line_of(ctx, "range_beacons", "survey_axis"), "range_beacons",
-             "survey_axis", "%d: must be in 1..%d and not survey_origin (%d)", rs->axis, n,
-             rs->origin);
+        fail(ctx, key_line_of(ctx, "range_beacons", "survey_axis"), "range_beacons", "survey_axis",
+             "%d: must be in 1..%d and not survey_origin (%d)", rs->axis, n, rs->origin);
         return -1;
     }
     return 0;

@@ -136,8 +136,8 @@ void estimator_survey_poll(struct estimator *e, int64_t now_us)
     }
     case SURVEY_FAILED:
         if (s->rc == BL_OK)
-            snprintf(text, sizeof text, "beacon survey failed: chi2 %.1f > %.1f, retrying",
-                     s->chi2, s->chi2_limit);
+            snprintf(text, sizeof text, "beacon survey failed: chi2 %.1f > %.1f, retrying", s->chi2,
+                     s->chi2_limit);
         else if (s->failed_beacon)
             snprintf(text, sizeof text, "beacon survey failed: beacon %u placed badly, retrying",
                      s->failed_beacon);

@@ -15,8 +15,8 @@
 #include "beaconloc_can.h"
 #include "estimator.h"
 
-enum frame_result sensor_beacon_survey_decode(uint32_t id, const uint8_t data[8],
-                                              struct frame *out, struct frame_seq *seq)
+enum frame_result sensor_beacon_survey_decode(uint32_t id, const uint8_t data[8], struct frame *out,
+                                              struct frame_seq *seq)
 {
     (void)id;
     struct beaconloc_can_beacon_survey_t m;

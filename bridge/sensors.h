@@ -86,8 +86,8 @@ void sensor_range_handle(struct estimator *e, const struct frame *f, int64_t rx_
 enum frame_result sensor_track_encoders_decode(uint32_t id, const uint8_t data[8],
                                                struct frame *out, struct frame_seq *seq);
 void sensor_track_encoders_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
-enum frame_result sensor_beacon_survey_decode(uint32_t id, const uint8_t data[8],
-                                              struct frame *out, struct frame_seq *seq);
+enum frame_result sensor_beacon_survey_decode(uint32_t id, const uint8_t data[8], struct frame *out,
+                                              struct frame_seq *seq);
 void sensor_beacon_survey_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
 
 #endif /* BRIDGE_SENSORS_H */

@@ -253,8 +253,8 @@ void survey_write_json(const struct survey *s, FILE *f)
         fprintf(f, "\"beacons\": []},\n");
         return;
     }
-    fprintf(f, "\"pairs\": %u, \"dof\": %u, \"chi2\": %.4f, \"chi2_limit\": %.4f, ",
-            s->ranges_used, s->dof, s->chi2, s->chi2_limit);
+    fprintf(f, "\"pairs\": %u, \"dof\": %u, \"chi2\": %.4f, \"chi2_limit\": %.4f, ", s->ranges_used,
+            s->dof, s->chi2, s->chi2_limit);
     fprintf(f, "\"sigma_max_m\": %.6f, \"beacons\": [", s->worst_sigma_m);
     for (int i = 0; i < s->p.count; i++)
         fprintf(f,

@@ -60,14 +60,14 @@
 #define SURVEY_PAIRS (SURVEY_MAX * (SURVEY_MAX - 1) / 2)
 
 struct survey_params {
-    int count;                /* beacons, 3..SURVEY_MAX, ids 1..count */
-    int origin, axis;         /* beacon ids of the gauge */
-    double axis_deg;          /* site-frame bearing origin -> axis (deg, CCW from +x) */
-    double origin_x_m;        /* the origin beacon in the site frame (m) */
+    int count;         /* beacons, 3..SURVEY_MAX, ids 1..count */
+    int origin, axis;  /* beacon ids of the gauge */
+    double axis_deg;   /* site-frame bearing origin -> axis (deg, CCW from +x) */
+    double origin_x_m; /* the origin beacon in the site frame (m) */
     double origin_y_m;
-    double z_m[SURVEY_MAX];   /* every beacon's height (m) */
-    int min_pings;            /* per pair before the solve, >= 1 */
-    double timeout_s;         /* solve with what there is this long after the first range (s) */
+    double z_m[SURVEY_MAX]; /* every beacon's height (m) */
+    int min_pings;          /* per pair before the solve, >= 1 */
+    double timeout_s;       /* solve with what there is this long after the first range (s) */
     double speed_of_sound_mps;
     double sigma_m, sigma_per_m; /* range σ model (m, m/m) */
     double max_range_m;
@@ -79,26 +79,26 @@ enum survey_state { SURVEY_COLLECTING = 0, SURVEY_DONE = 1 };
 enum survey_outcome { SURVEY_WAITING = 0, SURVEY_SOLVED = 1, SURVEY_FAILED = 2 };
 
 struct survey_counters {
-    uint64_t ranges_used;      /* kept for a solve */
-    uint64_t ranges_bad;       /* unknown pair, emitter == listener, bad ToF, too long */
-    uint64_t ranges_overflow;  /* beyond SURVEY_PINGS for their pair */
-    uint64_t ranges_after;     /* arrived once the survey was done: not used */
-    uint64_t outliers;         /* dropped by the per-pair median test (multipath) */
-    uint64_t attempts;         /* solves tried */
-    uint64_t failures;         /* solves refused (the collection restarted) */
+    uint64_t ranges_used;     /* kept for a solve */
+    uint64_t ranges_bad;      /* unknown pair, emitter == listener, bad ToF, too long */
+    uint64_t ranges_overflow; /* beyond SURVEY_PINGS for their pair */
+    uint64_t ranges_after;    /* arrived once the survey was done: not used */
+    uint64_t outliers;        /* dropped by the per-pair median test (multipath) */
+    uint64_t attempts;        /* solves tried */
+    uint64_t failures;        /* solves refused (the collection restarted) */
 };
 
 struct survey {
     struct survey_params p;
     enum survey_state state;
     bool have_first;
-    int64_t first_us;                        /* first range of the current collection */
-    uint16_t n[SURVEY_PAIRS];                /* ranges kept per pair */
-    double r_m[SURVEY_PAIRS][SURVEY_PINGS];  /* the ranges (m) */
+    int64_t first_us;                       /* first range of the current collection */
+    uint16_t n[SURVEY_PAIRS];               /* ranges kept per pair */
+    double r_m[SURVEY_PAIRS][SURVEY_PINGS]; /* the ranges (m) */
     struct survey_counters c;
     /* the last solve (SURVEY_DONE: the map in use) */
-    int rc;                                  /* bl_solve_team's, or BL_OK */
-    uint32_t failed_beacon;                  /* id at fault (BL_EDEGENERATE), 0 = none */
+    int rc;                 /* bl_solve_team's, or BL_OK */
+    uint32_t failed_beacon; /* id at fault (BL_EDEGENERATE), 0 = none */
     bool chi2_ok;
     double chi2, chi2_limit;                 /* residual χ² and its 99.9 % limit */
     uint32_t dof, ranges_used;               /* pairs used and degrees of freedom */
