@@ -10,16 +10,17 @@
  * combinations) and, through frames, robot ranges dropped until the survey
  * is done, then the localizer's beacons the surveyed ones.
  */
-#include <cmocka.h>
-#include <math.h>
-#include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
+#include <setjmp.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
+#include <cmocka.h>
+
 
 #include "beaconloc_can.h"
 #include "config.h"
