@@ -38,13 +38,15 @@ def test_builtin_scenarios_all_load():
         if scn.site.name == "eurobot":       # Vander 2011: the Eurobot table, bearings only
             assert scn.duration_s == 12 and scn.site.beacon_count == 0
             assert scn.site.bearing_beacon_count == 3
-        elif scn.site.name == "marvelmind":  # fixed range beacons only (issue 13)
+        elif scn.site.name.startswith("marvelmind"):  # fixed range beacons only (issue 13)
             assert scn.duration_s == 60 and scn.site.beacon_count == 0
             assert scn.site.range_beacon_count == 4 and scn.site.bearing_beacon_count == 0
+            # the self-surveyed site: its beacons range each other at start
+            assert (scn.range_survey_s > 0) == (scn.site.name == "marvelmind-survey")
         else:
             assert scn.duration_s == 120 and scn.site.beacon_count == 6
     assert {"eurobot", "eurobot-outage20", "eurobot-outage50", "eurobot-opponent"} <= set(names)
-    assert {"marvelmind", "marvelmind-multipath"} <= set(names)
+    assert {"marvelmind", "marvelmind-multipath", "marvelmind-survey"} <= set(names)
     assert {"team-static", "team-leapfrog"} <= set(names)
 
 
