@@ -75,6 +75,22 @@ static void overlay(const struct survey *s, struct bridge_config *cfg)
     }
 }
 
+/* Same survey parameters, field by field (no padding compared). */
+static bool same_params(const struct survey_params *a, const struct survey_params *b)
+{
+    if (a->count != b->count || a->origin != b->origin || a->axis != b->axis ||
+        a->axis_deg != b->axis_deg || a->origin_x_m != b->origin_x_m ||
+        a->origin_y_m != b->origin_y_m || a->min_pings != b->min_pings ||
+        a->timeout_s != b->timeout_s || a->speed_of_sound_mps != b->speed_of_sound_mps ||
+        a->sigma_m != b->sigma_m || a->sigma_per_m != b->sigma_per_m ||
+        a->max_range_m != b->max_range_m)
+        return false;
+    for (int i = 0; i < a->count && i < SURVEY_MAX; i++)
+        if (a->z_m[i] != b->z_m[i])
+            return false;
+    return true;
+}
+
 int estimator_survey_prepare(const struct estimator *e, struct bridge_config *cfg,
                              struct survey *fresh, bool *restart, char *err, size_t errlen)
 {
@@ -84,7 +100,7 @@ int estimator_survey_prepare(const struct estimator *e, struct bridge_config *cf
     struct survey_params p;
     if (params_of(cfg, &p, err, errlen))
         return -1;
-    if (e && e->survey_on && memcmp(&p, &e->survey.p, sizeof p) == 0) {
+    if (e && e->survey_on && same_params(&p, &e->survey.p)) {
         *restart = false; /* the same survey goes on (or stays done) */
         overlay(&e->survey, cfg);
         return 0;
