@@ -125,10 +125,10 @@ void estimator_survey_poll(struct estimator *e, int64_t now_us)
     if (!e->survey_on)
         return;
     struct survey *s = &e->survey;
-    char text[EST_EVENT_LEN];
+    char text[EST_EVENT_LEN]; /* a STATUSTEXT carries 50 characters: the texts fit */
     switch (survey_poll(s, now_us)) {
     case SURVEY_SOLVED: {
-        snprintf(text, sizeof text, "beacons surveyed: chi2 %.2f/%.2f, max sigma %.0f mm", s->chi2,
+        snprintf(text, sizeof text, "beacons surveyed: chi2 %.1f/%.1f, max sigma %.0f mm", s->chi2,
                  s->chi2_limit, s->worst_sigma_m * 1e3);
         estimator_event(e, EST_EV_NOTICE, text);
         for (int i = 0; i < s->p.count; i++)
@@ -155,7 +155,7 @@ void estimator_survey_poll(struct estimator *e, int64_t now_us)
             snprintf(text, sizeof text, "beacon survey failed: chi2 %.1f > %.1f, retrying", s->chi2,
                      s->chi2_limit);
         else if (s->failed_beacon)
-            snprintf(text, sizeof text, "beacon survey failed: beacon %u placed badly, retrying",
+            snprintf(text, sizeof text, "beacon survey failed at beacon %u, retrying",
                      s->failed_beacon);
         else
             snprintf(text, sizeof text, "beacon survey failed: %s, retrying", bl_strerror(s->rc));
