@@ -149,3 +149,22 @@ def test_a_refused_survey_is_said_and_retried(bridge_bin, tmp_path):
     t_sim, err = errors(est, truth)
     assert t_sim[0] > 5.5  # the second collection ends ~3 s after the first
     assert float(np.sqrt(np.mean(err[t_sim > 8.0] ** 2))) < 0.04
+
+
+def test_survey_with_multipath_and_dropouts(bridge_bin, tmp_path):
+    """marvelmind-survey with marvelmind-multipath's imperfections (10 % late arrivals, 5 %
+    lost): the floor's reflections (metres long) fail the per-pair median test, the map
+    stays within 4 of its sigma of the truth."""
+    scn_path = tmp_path / "marvelmind-survey-mp.scenario.ini"
+    (tmp_path / SURVEY_SITE.name).write_text(SURVEY_SITE.read_text())
+    text = (SCENARIOS / "marvelmind-survey.scenario.ini").read_text()
+    text = text.replace("dropout_probability = 0.0", "dropout_probability = 0.05")
+    scn_path.write_text(text.replace("multipath_probability = 0.0", "multipath_probability = 0.10"))
+    log, _ = run_sim(tmp_path, str(scn_path), 30)
+    _, _, stats = replay(bridge_bin, log, tmp_path, SURVEY_SITE, "mp")
+    sv = stats["survey"]
+    assert sv["state"] == "done" and sv["outliers"] > 0, sv
+    assert max(surveyed_error_in_sigma(sv, load_scenario(str(scn_path)).site.range_beacons_m)) < 4
+    # (the robot's estimate is not checked here: on these multipath figures the localizer
+    # loses the robot by metres on some seeds with the beacons typed in as well, e.g. the
+    # plain marvelmind-multipath seeds 2, 3 and 6)
