@@ -335,11 +335,7 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
     bl_seq_config sc;
     if (make_configs(cfg, &c, &sc, err, errlen))
         return -1;
-    if (restart) {
-        e->survey_on = cfg->range_survey.self_survey != 0;
-        if (e->survey_on)
-            e->survey = fresh;
-    }
+    estimator_survey_commit(e, cfg, &fresh, restart);
     e->beacon_lost_s = cfg->beacon_lost_s;
     e->echo_storm_ratio = cfg->echo_storm_ratio;
     /* Same geometry (beacons, period, receiver ring, wheels; config.c) and

@@ -280,6 +280,12 @@ void estimator_beacon_survey(struct estimator *e, const struct frame_survey *f, 
 int estimator_survey_prepare(const struct estimator *e, struct bridge_config *cfg,
                              struct survey *fresh, bool *restart, char *err, size_t errlen);
 
+/* Apply what estimator_survey_prepare decided for site config *cfg: the
+ * fresh survey when restart, else the running one with cfg's tuning
+ * (survey_min_pings, survey_timeout_s: they change no position). */
+void estimator_survey_commit(struct estimator *e, const struct bridge_config *cfg,
+                             const struct survey *fresh, bool restart);
+
 /* Solve the survey if it is time (at bridge time now_us); on success the
  * localizer is re-initialised with the surveyed positions (the
  * reconfiguration path), STATUSTEXT either way. */

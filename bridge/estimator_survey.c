@@ -75,13 +75,13 @@ static void overlay(const struct survey *s, struct bridge_config *cfg)
     }
 }
 
-/* Same survey parameters, field by field (no padding compared). */
+/* Same survey, field by field (no padding compared): everything that moves
+ * a surveyed position; min_pings and timeout_s are tuning. */
 static bool same_params(const struct survey_params *a, const struct survey_params *b)
 {
     if (a->count != b->count || a->origin != b->origin || a->axis != b->axis ||
         a->axis_deg != b->axis_deg || a->origin_x_m != b->origin_x_m ||
-        a->origin_y_m != b->origin_y_m || a->min_pings != b->min_pings ||
-        a->timeout_s != b->timeout_s || a->speed_of_sound_mps != b->speed_of_sound_mps ||
+        a->origin_y_m != b->origin_y_m || a->speed_of_sound_mps != b->speed_of_sound_mps ||
         a->sigma_m != b->sigma_m || a->sigma_per_m != b->sigma_per_m ||
         a->max_range_m != b->max_range_m)
         return false;
@@ -108,6 +108,19 @@ int estimator_survey_prepare(const struct estimator *e, struct bridge_config *cf
     (void)survey_init(fresh, &p); /* checked by params_of */
     overlay(fresh, cfg);
     return 0;
+}
+
+void estimator_survey_commit(struct estimator *e, const struct bridge_config *cfg,
+                             const struct survey *fresh, bool restart)
+{
+    if (restart) {
+        e->survey_on = cfg->range_survey.self_survey != 0;
+        if (e->survey_on)
+            e->survey = *fresh;
+    } else if (e->survey_on) {
+        e->survey.p.min_pings = cfg->range_survey.min_pings;
+        e->survey.p.timeout_s = cfg->range_survey.timeout_s;
+    }
 }
 
 void estimator_beacon_survey(struct estimator *e, const struct frame_survey *f, int64_t rx_us)
