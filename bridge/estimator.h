@@ -50,7 +50,9 @@
  * Ranges (RANGE frames, node 4): in order, each counted once where it
  * stops: ranges_unexpected (a site without range beacons),
  * ranges_other_receiver (Receiver != 1: one robot for now),
- * ranges_bad_tof (TimeOfFlight 0 or 65534, sensor_range.c), stale_ranges
+ * ranges_bad_tof (TimeOfFlight 0 or 65534, sensor_range.c),
+ * ranges_before_survey (a self-surveyed site whose beacons are not placed
+ * yet, bridge/estimator_survey.c), stale_ranges
  * (older than the newest range on the receiver's clock), then
  * ranges_unknown_beacon (beacon id beyond [range_beacons] count),
  * unmapped_ranges (before the reference clock, on a site where node 4 is
