@@ -354,6 +354,24 @@ def test_single_robot_range_and_bearing_runs_unchanged(tmp_path, name, log_sha, 
     assert hashlib.sha256((tmp_path / "t.csv").read_bytes()).hexdigest() == truth_sha
 
 
+@pytest.mark.parametrize("name, log_sha, truth_sha", [
+    ("team-static", "1495bb1cf7ee0d765bab73fb1261829f40455c8019a72c3ea1c723cd3ef1464b",
+     "9f56bdb53bb8ebaac90ee14406a5cf3ea4c5ae3a19c0ee3d4c51541f70a0e6d2"),
+    ("team-leapfrog", "b2d16ad8446b5edb9a0c9cd8a07acb62c186e1dce945e0782bb469789815d564",
+     "17c97bb2759f9866b4953fb07e1233f1df68afd1b5d5b58e8e7ddb5ba51cbf8e"),
+])
+def test_team_runs_unchanged(tmp_path, name, log_sha, truth_sha):
+    """The whole run of each team scenario: log and truth as before the lost robot existed
+    (9cc2bdc): a fault's mechanism draws nothing and changes nothing where it is not used."""
+    import hashlib
+    out = subprocess.run([str(BIN), "run", name, "--log", str(tmp_path / "l.log"),
+                          "--truth", str(tmp_path / "t.csv")], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert hashlib.sha256((tmp_path / "l.log").read_bytes()).hexdigest() == log_sha
+    assert hashlib.sha256((tmp_path / "t.csv").read_bytes()).hexdigest() == truth_sha
+
+
 def test_bound_of_a_standing_pair_is_sigma_over_root_n(tmp_path):
     """Three robots standing, the speed of sound known: B's x in the team frame is the A-B
     distance, measured by every direct A-B range (C's two ranges only place C): the bound is
