@@ -193,12 +193,14 @@ def _fmt(x: float, digits: int) -> str:
     return "n/a" if x is None else ("nan" if not math.isfinite(x) else f"{x:.{digits}f}")
 
 
-def summarise_team(scenario: str, runs: list[dict]) -> tuple[str, dict, list[str]]:
-    """The scenario's team line, its figures and per-robot lines (pooled over the seeds)."""
+def summarise_team(scenario: str, runs: list[dict], n_robots: int | None = None
+                   ) -> tuple[str, dict, list[str]]:
+    """The scenario's team line, its figures and per-robot lines (pooled over the seeds);
+    n_robots: the team's size (default: the robots of the truth of the runs that ran)."""
     good = [r for r in runs if r["ok"]]
     diverged = sum(1 for r in runs if not r["ok"] or r["diverged"])
     robots = sorted({rb for r in good for rb in r["robots"]})
-    n_robots = len(robots) or 0
+    n_robots = len(robots) if n_robots is None else n_robots
     fig = {"robots": n_robots, "diverged": diverged}
     per_robot = []
     err2 = [r["err2"][rb] for r in good for rb in r["err2"]]
@@ -282,7 +284,9 @@ def main() -> int:
         if scenario in FIXED:
             line, fig = fixed_line(scenario, runs)
         else:
-            line, fig, per_robot = summarise_team(scenario, runs)
+            from beaconloc_sim.team_scenario import load_team_scenario
+            line, fig, per_robot = summarise_team(scenario, runs,
+                                                  len(load_team_scenario(scenario).robots))
             for p in per_robot:
                 print(p)
             if fig["drift_pct_of_distance"] is not None:
