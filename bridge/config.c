@@ -426,6 +426,68 @@ static int check_items(const struct bridge_config *cfg, struct parse_ctx *ctx)
     return 0;
 }
 
+/* [team] (config.h): a team site has 3..8 robots and no fixed beacon; its
+ * frame robots are two of them; its robots' MAVLink system ids fit in 1..255
+ * beside the host's own. */
+static int check_team(const struct bridge_config *cfg, struct parse_ctx *ctx)
+{
+    const struct config_team *t = &cfg->team;
+    if (!config_is_team(cfg))
+        return 0;
+    if (t->robots < 3) {
+        fail(ctx, key_line_of(ctx, "team", "robots"), "team", "robots",
+             "%d: a team needs 3..8 robots (0: not a team site)", t->robots);
+        return -1;
+    }
+    static const struct {
+        const char *section;
+        size_t offset;
+    } fixed[] = {
+        {"beacons", offsetof(struct bridge_config, beacon_count)},
+        {"bearing_beacons", offsetof(struct bridge_config, bearing_beacon_count)},
+        {"range_beacons", offsetof(struct bridge_config, range_beacon_count)},
+    };
+    for (size_t i = 0; i < sizeof fixed / sizeof fixed[0]; i++) {
+        int n = *(const int *)(const void *)((const char *)cfg + fixed[i].offset);
+        if (n != 0) {
+            fail(ctx, key_line_of(ctx, fixed[i].section, "count"), fixed[i].section, "count",
+                 "%d on a team site ([team] robots = %d): the robots are the beacons, count = 0",
+                 n, t->robots);
+            return -1;
+        }
+    }
+    if (t->origin_robot > t->robots) {
+        fail(ctx, key_line_of(ctx, "team", "origin_robot"), "team", "origin_robot",
+             "%d beyond robots = %d", t->origin_robot, t->robots);
+        return -1;
+    }
+    if (t->axis_robot > t->robots || t->axis_robot == t->origin_robot) {
+        fail(ctx, key_line_of(ctx, "team", "axis_robot"), "team", "axis_robot",
+             "%d: one of robots 1..%d other than origin_robot %d", t->axis_robot, t->robots,
+             t->origin_robot);
+        return -1;
+    }
+    if (t->lost_s <= t->role_timeout_s) {
+        fail(ctx, key_line_of(ctx, "team", "lost_s"), "team", "lost_s",
+             "%g s not above role_timeout_s %g s", t->lost_s, t->role_timeout_s);
+        return -1;
+    }
+    const int last = t->system_id_first + t->robots - 1;
+    if (last > 255) {
+        fail(ctx, key_line_of(ctx, "team", "system_id_first"), "team", "system_id_first",
+             "%d: robot %d would be system id %d, above 255", t->system_id_first, t->robots,
+             last);
+        return -1;
+    }
+    if (cfg->system_id >= t->system_id_first && cfg->system_id <= last) {
+        fail(ctx, key_line_of(ctx, "team", "system_id_first"), "team", "system_id_first",
+             "%d: the robots' system ids %d..%d include [bridge] system_id %d (the team host's)",
+             t->system_id_first, t->system_id_first, last, cfg->system_id);
+        return -1;
+    }
+    return 0;
+}
+
 /* Check with line numbers when ctx is given. */
 static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
 {
@@ -434,20 +496,23 @@ static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
      * or none and >= 3 bearing beacons (their triangulation starts the
      * filter, Vander et al. 2011 eq. 1) or >= 3 range beacons (their
      * trilateration starts it). */
-    if (cfg->beacon_count < 1 && cfg->bearing_beacon_count < 3 && cfg->range_beacon_count < 3) {
+    if (cfg->beacon_count < 1 && cfg->bearing_beacon_count < 3 && cfg->range_beacon_count < 3 &&
+        !config_is_team(cfg)) {
         int line = key_line_of(ctx, "beacons", "count");
         if (line > 0)
             fail(ctx, line, "beacons", "count",
-                 "0 allowed only with [bearing_beacons] count >= 3 or [range_beacons] count >= 3 "
-                 "(they are %d and %d)",
+                 "0 allowed only with [bearing_beacons] count >= 3, [range_beacons] count >= 3 "
+                 "or [team] robots >= 3 (they are %d and %d)",
                  cfg->bearing_beacon_count, cfg->range_beacon_count);
         else
             fail(ctx, line, "beacons", "count",
                  "not set: the site file must give the beacons ([beacons] count >= 3, "
-                 "[bearing_beacons] count >= 3 or [range_beacons] count >= 3)");
+                 "[bearing_beacons] count >= 3, [range_beacons] count >= 3 or [team] robots >= 3)");
         return -1;
     }
     if (check_items(cfg, ctx))
+        return -1;
+    if (check_team(cfg, ctx))
         return -1;
     /* The node's window for the second burst must end before the next firing. */
     if (cfg->double_pulse_spacing_s + cfg->double_pulse_tolerance_s >= cfg->period_s) {

@@ -12,7 +12,7 @@
  * name (a schema key without its member does not compile).
  * Our sections are [beacons], [beaconN], [receivers], [bearing_beacons],
  * [bearing_beaconN], [bearing_sensor], [range_beacons], [range_beaconN],
- * [range_sensor], [robot], [noise], [tuning] (the
+ * [range_sensor], [robot], [noise], [team], [tuning] (the
  * estimator's tuning, bridge/tuning.h) and [bridge]; an unknown key in one
  * of them is an error (a typo must not be silently ignored).
  * Per-item sections ([beaconN], [bearing_beaconN], [range_beaconN]: every schema section
@@ -22,7 +22,12 @@
  * count section, every key of an item in 1..count is required, an item
  * beyond count is an error. A site needs its beacons: [beacons] count >= 3
  * (the library checks 1 and 2), or count = 0 with [bearing_beacons] count
- * >= 3 (a bearing site) or [range_beacons] count >= 3 (a range site).
+ * >= 3 (a bearing site) or [range_beacons] count >= 3 (a range site), or
+ * none of any kind and [team] robots >= 3 (a team site: the robots are each
+ * other's beacons). [team]: robots 0 (no team) or 3..8; origin_robot and
+ * axis_robot in 1..robots and different; the robots' MAVLink system ids
+ * system_id_first..system_id_first + robots - 1 within 1..255 and not
+ * [bridge] system_id (the team host's own).
  * [site] is the simulator's (room size) and skipped; any
  * other section with keys is an error too ("file:line: [section] unknown
  * section", line of its header), like a key before the first section.
@@ -94,6 +99,14 @@ struct config_range_sensor {
 #undef CONFIG_SENSOR_MEMBER
 };
 
+/* [team] (site_keys.h: SITE_KEYS_team): robots > 0 makes a team site */
+struct config_team {
+#define CONFIG_SENSOR_MEMBER(sec, key, type, strct, member, lo, hi, open, def)                     \
+    BRIDGE_CTYPE_##type key;
+    SITE_KEYS_team(CONFIG_SENSOR_MEMBER)
+#undef CONFIG_SENSOR_MEMBER
+};
+
 struct bridge_config {
     /* [beacons] */
     int beacon_count;
@@ -129,13 +142,18 @@ struct bridge_config {
     int ticks_per_rev;
     double encoder_rate_hz;
     double sigma_wheel_scale; /* online wheel-scale calibration: initial σ, 0 = off */
+    double skid_factor;       /* skid steer: ICR expansion factor χ >= 1 (1 = differential) */
     /* [noise] */
     double sigma_arrival_s;
     double sigma_wheel_per_m;
     double sigma_distance_per_m; /* odometry noise common to both wheels, 1/sqrt(m) */
+    double slip_heading_rad_per_sqrt_rad; /* skid steer: heading slip per sqrt(rad) turned */
+    double slip_lateral_m_per_sqrt_m;     /* skid steer: sideways slip per sqrt(m) travelled */
     double speed_of_sound_mps;
     double sigma_speed_of_sound_mps;
     double gate_sigma;
+    /* [team]: a team site when team.robots > 0 (config_is_team) */
+    struct config_team team;
     /* [tuning]: the library's tuning fields (bridge/tuning.h) */
     struct bridge_tuning tuning;
     /* [bridge] */
@@ -164,6 +182,14 @@ struct bridge_config {
  */
 void config_format_error(const struct bridge_config *cfg, const char *section, const char *key,
                          const char *why, char *err, size_t errlen);
+
+/* A team site ([team] robots > 0): no fixed beacons, one estimate per robot
+ * (bridge/team.h). The one place the bridge decides it; site_to_lib derives
+ * the library's range.team_site from it. */
+static inline bool config_is_team(const struct bridge_config *cfg)
+{
+    return cfg->team.robots > 0;
+}
 
 /* Built-in defaults (the kleeman-lab daemon settings, no beacons). */
 void config_defaults(struct bridge_config *cfg);

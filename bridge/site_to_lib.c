@@ -52,6 +52,8 @@ void site_to_lib(const struct bridge_config *cfg, bl_config *out)
 #define APPLY(sec, k, type, member, field, geometry) out->field = (LIB_CTYPE_##type)cfg->member;
     SITE_LIB_FIELDS(APPLY)
 #undef APPLY
+    /* a team site (config.h config_is_team): ranges to teammates, no fixed beacons */
+    out->range.team_site = config_is_team(cfg) ? 1u : 0u;
     for (int i = 0; i < cfg->beacon_count && i < BL_MAX_BEACONS; i++) {
 #define APPLY_BEACON(member, field) out->beacons[i].field = (bl_real)cfg->beacon[i].member;
         SITE_LIB_BEACON_FIELDS(APPLY_BEACON)

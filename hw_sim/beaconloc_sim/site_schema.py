@@ -319,6 +319,7 @@ def c_header(schema: Schema) -> str:
             for s in bridge_sections if s.indexed_by]
     out += [
             f"#define SITE_MAX_RECEIVERS {int(schema.section('receivers').key('count').range.hi)}",
+            f"#define SITE_MAX_TEAM_ROBOTS {int(schema.section('team').key('robots').range.hi)}",
             "/* \"[site], [beacons], [beacon1]..[beacon16], ...\" */",
             f"#define SITE_SECTIONS_PHRASE {_c_string(schema.sections_phrase())}",
             "", "#endif /* BRIDGE_SITE_KEYS_H */", ""]
