@@ -384,6 +384,24 @@ def test_robot_silence_errors_name_the_key(tmp_path):
                                                          (40.0, 5.0, (2, 4)))
 
 
+# ---- the site the bridge reads agrees with the scenario's truth ------------------------------
+
+@pytest.mark.parametrize("name", ["team-static", "team-lost", "team-leapfrog"])
+def test_team_site_models_the_scenarios_robots(name):
+    """The bridge's model of the robots comes from the site file ([team], [robot]
+    skid_factor, [noise] slip): it must be the one the scenario simulates (the truth's), or
+    the benchmark would judge a model error, not the estimator."""
+    import configparser
+    tscn = load_team_scenario(name)
+    cp = configparser.ConfigParser(inline_comment_prefixes=(";", "#"))
+    cp.read(tscn.site.path)
+    assert cp.getint("team", "robots") == len(tscn.robots)
+    assert (cp.getint("team", "origin_robot"), cp.getint("team", "axis_robot")) == tscn.gauge
+    assert cp.getfloat("robot", "skid_factor") == tscn.icr_factor
+    assert cp.getfloat("noise", "sigma_distance_per_m") == tscn.slip_sigma_per_m
+    assert cp.getfloat("noise", "slip_heading_rad_per_sqrt_rad") == tscn.slip_sigma_per_rad
+
+
 # ---- the command line ----------------------------------------------------------------------
 
 def test_cli_lists_and_runs_a_team_scenario(tmp_path):
