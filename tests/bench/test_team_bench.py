@@ -104,6 +104,8 @@ def test_mirror_divergence_and_missing_robots(run):
     mirrored = dict(est, y_m=-est["y_m"])
     j = tb.judge_team(1, truth, mirrored, roles, RESOLVED)
     assert not j["mirror_truth"] and not j["mirror_ok"]
+    # the survey is judged up to the hand: the mirrored team's is as good
+    assert j["init2"] == pytest.approx(tb.judge_team(1, truth, est, roles, RESOLVED)["init2"])
     assert tb.judge_team(1, truth, est, roles, {"team": {"mirror": {"resolved": False}}}
                          )["mirror_ok"] is False
     silent = tb.judge_team(1, truth, est, roles, {"frames": 1})
