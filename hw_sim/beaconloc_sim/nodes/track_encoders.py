@@ -31,8 +31,8 @@ class TrackEncoders(Node):
         super().__init__(robot.clock)
         self.robot = robot
         self.tscn = tscn
-        # the samples of the last interval (sent or not: a silent robot's too): true time, track travel as the encoders saw it
-        # (m, cumulative from t = 0), ticks (unwrapped)
+        # the samples of the last interval (sent or not: a silent robot's too): true time,
+        # track travel as the encoders saw it (m, cumulative from t = 0), ticks (unwrapped)
         self.samples = (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
                         np.zeros(0, np.int64))
 
