@@ -98,8 +98,21 @@ $(LOC_DATA_DIR)/%.txt: tests/lib/localizer_input.py hw_sim/beaconloc_sim/data/be
 	$(PY) tests/lib/localizer_input.py $* \
 	    $(word 2,$(subst :, ,$(filter $*:%,$(LOC_RUNS)))) 1 $(LOC_DATA_DIR)/$*
 
-test-lib: $(LIB_TEST_BINS) check-lib-clink $(LOC_DATA)
-	@set -e; for t in $(LIB_TEST_BINS); do echo "== $$t"; BL_LOCALIZER_DATA=$(LOC_DATA_DIR) $$t; done
+# test_team's input: team simulator runs turned into the coordinator's
+# inputs on one timebase (tests/lib/team_input.py), made here, never
+# committed. Scenario and seconds simulated (the leap-frog cut after its
+# third leap):
+TEAM_DATA_DIR := $(BUILD)/tests/lib/team
+TEAM_RUNS     := team-static:60 team-leapfrog:66
+TEAM_DATA     := $(foreach r,$(TEAM_RUNS),$(TEAM_DATA_DIR)/$(word 1,$(subst :, ,$(r))).txt)
+$(TEAM_DATA_DIR)/%.txt: tests/lib/team_input.py hw_sim/beaconloc_sim/data/beaconloc.dbc \
+                        hw_sim/beaconloc_sim/data/scenarios/%.scenario.ini | $(SETUP_STAMP)
+	$(PY) tests/lib/team_input.py $* \
+	    $(word 2,$(subst :, ,$(filter $*:%,$(TEAM_RUNS)))) 1 $(TEAM_DATA_DIR)/$*
+
+test-lib: $(LIB_TEST_BINS) check-lib-clink $(LOC_DATA) $(TEAM_DATA)
+	@set -e; for t in $(LIB_TEST_BINS); do echo "== $$t"; \
+	  BL_LOCALIZER_DATA=$(LOC_DATA_DIR) BL_TEAM_DATA=$(TEAM_DATA_DIR) $$t; done
 
 # Pure C program, plain C compiler ($(CC)), no libstdc++: the link itself proves no C++
 # runtime is needed; nm -u proves no heap and no C++ runtime references.

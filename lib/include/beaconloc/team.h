@@ -28,8 +28,8 @@
  *     convergence, χ² test failed) gives BL_TEAM_EV_SURVEY_FAILED and a new
  *     window of survey_s starts at the next range.
  *  2. Roles: a robot is BEACON while it has emitted within role_timeout_s,
- *     else RECEIVER (UNKNOWN until it is first heard or emits); an event on
- *     every change.
+ *     else RECEIVER (UNKNOWN until it emits, or for role_timeout_s after it
+ *     was first heard); an event on every change.
  *  3. Anchors and movers: a robot whose odometry showed no travel for
  *     settle_s stands: it is an ANCHOR with a position in the team frame
  *     and a joint covariance with the other anchors (the survey's, or its
@@ -114,7 +114,8 @@ typedef struct bl_team_params {
     bl_real survey_s;              /* pairwise ranges collected this long (s) from the first range
                                 before the team solve (default 2.0), > 0 */
     bl_real role_timeout_s;        /* a robot is a BEACON while it has emitted a ping within this
-                                (s) (default 1.0), > 0 */
+                                (s), a RECEIVER once it has not for this long (one that never
+                                emitted: this long after it was first heard) (default 1.0), > 0 */
     bl_real lost_s;                /* a robot that neither sends odometry nor is heard for this (s)
                                 is LOST (default 3.0), > role_timeout_s */
     bl_real settle_s;              /* a robot whose tracks did not move for this (s) stands: an
@@ -218,6 +219,7 @@ typedef struct bl_team_robot_ {
     uint32_t flags;         /* private */
     uint32_t role;          /* bl_team_role */
     int64_t last_emit_us;   /* latest emission */
+    int64_t first_heard_us; /* first odometry or range with it */
     int64_t last_heard_us;  /* latest odometry or range with it */
     int64_t last_travel_us; /* latest odometry sample with track travel */
     int64_t odo_t_us;       /* latest odometry sample (INT64_MIN: none) */
@@ -258,7 +260,7 @@ typedef struct bl_team {
     bl_real survey_r_[BL_MAX_TEAM * (BL_MAX_TEAM - 1) / 2][BL_TEAM_SURVEY_PINGS];
     /* heading fit of one mover at a time */
     uint32_t fit_robot_; /* 0-based, BL_TEAM_NONE: none */
-    uint32_t fit_n_, fit_stride_, fit_skip_;
+    uint32_t fit_n_, fit_stride_, fit_skip_, fit_tried_;
     bl_team_fit_sample_ fit_[BL_TEAM_FIT_MAX];
     /* events */
     bl_team_event ev_[BL_TEAM_EVENTS];
