@@ -451,8 +451,8 @@ static int check_team(const struct bridge_config *cfg, struct parse_ctx *ctx)
         int n = *(const int *)(const void *)((const char *)cfg + fixed[i].offset);
         if (n != 0) {
             fail(ctx, key_line_of(ctx, fixed[i].section, "count"), fixed[i].section, "count",
-                 "%d on a team site ([team] robots = %d): the robots are the beacons, count = 0",
-                 n, t->robots);
+                 "%d on a team site ([team] robots = %d): the robots are the beacons, count = 0", n,
+                 t->robots);
             return -1;
         }
     }
@@ -475,8 +475,7 @@ static int check_team(const struct bridge_config *cfg, struct parse_ctx *ctx)
     const int last = t->system_id_first + t->robots - 1;
     if (last > 255) {
         fail(ctx, key_line_of(ctx, "team", "system_id_first"), "team", "system_id_first",
-             "%d: robot %d would be system id %d, above 255", t->system_id_first, t->robots,
-             last);
+             "%d: robot %d would be system id %d, above 255", t->system_id_first, t->robots, last);
         return -1;
     }
     if (cfg->system_id >= t->system_id_first && cfg->system_id <= last) {
@@ -501,8 +500,8 @@ static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
         int line = key_line_of(ctx, "beacons", "count");
         if (line > 0)
             fail(ctx, line, "beacons", "count",
-                 "0 allowed only with [bearing_beacons] count >= 3, [range_beacons] count >= 3 "
-                 "or [team] robots >= 3 (they are %d and %d)",
+                 "0 allowed only with [bearing_beacons] count >= 3 or [range_beacons] count >= 3 "
+                 "(they are %d and %d), or on a team site ([team] robots >= 3)",
                  cfg->bearing_beacon_count, cfg->range_beacon_count);
         else
             fail(ctx, line, "beacons", "count",

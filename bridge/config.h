@@ -146,7 +146,7 @@ struct bridge_config {
     /* [noise] */
     double sigma_arrival_s;
     double sigma_wheel_per_m;
-    double sigma_distance_per_m; /* odometry noise common to both wheels, 1/sqrt(m) */
+    double sigma_distance_per_m;          /* odometry noise common to both wheels, 1/sqrt(m) */
     double slip_heading_rad_per_sqrt_rad; /* skid steer: heading slip per sqrt(rad) turned */
     double slip_lateral_m_per_sqrt_m;     /* skid steer: sideways slip per sqrt(m) travelled */
     double speed_of_sound_mps;

@@ -74,16 +74,20 @@ static enum mav_out_severity severity_of(enum est_event_severity s)
     }
 }
 
+static void emit(struct daemon *d, const struct est_event *ev)
+{
+    if (ev->severity == EST_EV_WARNING)
+        log_warn("%s", ev->text);
+    else
+        log_info("%s", ev->text);
+    statustext(d, severity_of(ev->severity), ev->text);
+}
+
 void drain_events(struct daemon *d)
 {
     struct est_event ev;
-    while (estimator_next_event(&d->est, &ev)) {
-        if (ev.severity == EST_EV_WARNING)
-            log_warn("%s", ev.text);
-        else
-            log_info("%s", ev.text);
-        statustext(d, severity_of(ev.severity), ev.text);
-    }
+    while (estimator_next_event(&d->est, &ev)) emit(d, &ev);
+    while (team_site(d) && team_next_event(&d->team, &ev)) emit(d, &ev);
 }
 
 /* ---- output files ------------------------------------------------------ */
@@ -117,7 +121,9 @@ void status_line(struct daemon *d, const char *prefix)
 {
     struct est_output o;
     char est[200] = "estimate: none yet";
-    if (estimator_output(&d->est, 0, &o) == 0)
+    if (team_site(d))
+        team_status_text(&d->team, est, sizeof est);
+    else if (estimator_output(&d->est, 0, &o) == 0)
         snprintf(est, sizeof est, "x=%.3f y=%.3f th=%.3f sigma=%.3fm sos=%.1f q=%d resets=%u",
                  o.x_m, o.y_m, o.theta_rad, state_cov_sigma_xy_m(o.cov), o.sos_mps, quality_of(&o),
                  o.reset_counter);
@@ -144,6 +150,9 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->record_write_errors = d->rec.write_errors;
     r->estimates_write_errors = d->csv.write_errors;
     r->stale_encoders = d->est.c.stale_encoders;
+    r->tracks_unexpected = d->est.c.tracks_unexpected;
+    r->team = team_site(d) ? &d->team : NULL;
+    r->team_odometry_sent = d->team_odom_sent;
     bl_loc_status st; /* the published reset counter, with or without a filter running */
     r->estimator_resets = bl_localizer_status(&d->est.loc, &st) == BL_OK ? st.reset_counter : 0;
     r->pulses_accepted = d->est.c.pulses_accepted;
@@ -238,6 +247,7 @@ static void reload(struct daemon *d)
     log_info("SIGHUP: %s reloaded; %s", d->opt.site,
              rc == 0 ? "geometry unchanged, filter kept"
                      : "geometry changed, estimator re-initialised");
+    team_reload(d, &nc, rc == 1);
     bool new_ep = strcmp(nc.mavlink, d->cfg.mavlink) != 0 || nc.system_id != d->cfg.system_id ||
                   nc.component_id != d->cfg.component_id;
     bool new_can = strcmp(nc.can_interface, d->cfg.can_interface) != 0;

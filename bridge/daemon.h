@@ -13,6 +13,8 @@
  *   replay_run.c    --replay: fast and paced (the pacing timer)
  *   control.c       signals (SIGHUP reload, SIGUSR1 report), MAVLink
  *                   endpoints in the loop, status line and report, events
+ *   team_out.c      a team site: per-robot ODOMETRY/HEARTBEAT, --estimates
+ *                   rows (the estimation: team.c)
  */
 #ifndef BRIDGE_DAEMON_H
 #define BRIDGE_DAEMON_H
@@ -32,6 +34,7 @@
 #include "record.h"
 #include "replay.h"
 #include "stats.h"
+#include "team.h"
 
 enum timer_id { T_ODOM, T_HEARTBEAT, T_SECOND, T_COUNT };
 
@@ -88,6 +91,8 @@ struct daemon {
     struct mav_links links; /* every --mavlink endpoint */
     struct frame_counters fc;
     struct estimator est;
+    struct team team; /* a team site (est.team points here), else unused */
+    uint64_t team_odom_sent;
     /* ODOMETRY and latency (odometry.c) */
     struct latency_hist lat;                  /* the whole run */
     struct latency_hist lat_interval;         /* since the previous status line */
@@ -148,6 +153,25 @@ void soft_timers_advance(struct daemon *d, int64_t t);
 void timers_close(struct daemon *d);
 /* Replay: the earliest timer deadline, or `limit` if none is earlier. */
 int64_t soft_timers_next(const struct daemon *d, int64_t limit);
+
+/* ---- team_out.c ---- */
+/* A team site: the team initialised, est.team set; else nothing. 0, or -1
+ * with a message naming the site key. */
+int team_start(struct daemon *d, char *err, size_t errlen);
+bool team_site(const struct daemon *d);
+/* The ODOMETRY tick: the team brought to now, events, each valid robot's
+ * ODOMETRY and --estimates row. */
+void team_on_odom_timer(struct daemon *d, int64_t now);
+/* A HEARTBEAT per robot system id. */
+void team_on_heartbeat(struct daemon *d);
+/* SIGHUP: after estimator_reconfigure (reinit: it re-initialised), before
+ * d->cfg = *nc. A team whose geometry (config_same_geometry: [team] robots,
+ * origin_robot, axis_robot, the robots' geometry) changed, or a site that
+ * became a team site, starts a new team; otherwise the team keeps its state
+ * and the old tuning. */
+void team_reload(struct daemon *d, const struct bridge_config *nc, bool reinit);
+/* The host's HEARTBEAT status on a team site. */
+enum mav_out_state team_host_state(const struct daemon *d);
 
 /* ---- replay_run.c ---- */
 void run_replay_fast(struct daemon *d);

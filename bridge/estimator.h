@@ -136,6 +136,7 @@ struct est_counters {
     uint64_t ranges_bad_tof;        /* TimeOfFlight 0 or 65534 (saturated): dropped */
     uint64_t stale_ranges;          /* ranges older than the newest on the receiver's clock */
     uint64_t unmapped_ranges;       /* ranges before the reference clock (mixed site) */
+    uint64_t tracks_unexpected;     /* TRACK_ENCODERS frames on a site that is not a team's */
 };
 
 /* One published estimate. */
@@ -179,8 +180,14 @@ struct est_initial_pose {
     double sigma_m, sigma_heading_rad;
 };
 
+struct team;
+
 struct estimator {
     struct bridge_config cfg; /* the site as configured (geometry for SIGHUP) */
+    /* A team site (config_is_team): the team glue that takes every RANGE and
+     * TRACK_ENCODERS frame instead (bridge/team.h; set by the daemon, NULL
+     * elsewhere, never owned here). */
+    struct team *team;
     bl_config blcfg;
     bl_seq_config seqcfg;
     bl_localizer loc;            /* sequencer + filter + estimation policy */

@@ -63,7 +63,8 @@ enum frame_kind {
     FRAME_STATUS = 2,
     FRAME_BEARING = 3,
     FRAME_RANGE = 4,
-    FRAME_KIND_COUNT = 5
+    FRAME_TRACK_ENCODERS = 5,
+    FRAME_KIND_COUNT = 6
 };
 
 /* Result of frame_decode(). */
@@ -125,6 +126,16 @@ struct frame_range {
     uint8_t counter;
 };
 
+/* Both track encoders of one skid-steer robot of a team (TRACK_ENCODERS,
+ * bridge/sensor_track_encoders.c), forwarded by the team's radio gateway. */
+struct frame_track_encoders {
+    uint32_t node_time_us; /* when the tracks were sampled, the robot's node clock */
+    uint8_t robot;         /* robot id 1..15 ([team] robots is the handler's check) */
+    uint16_t left_ticks;   /* cumulative, modulo 2^12 (forward counts up) */
+    uint16_t right_ticks;  /* cumulative, modulo 2^12 */
+    uint8_t counter;       /* the robot's own rolling counter, modulo 16 */
+};
+
 struct frame {
     enum frame_kind kind;
     union {
@@ -133,6 +144,7 @@ struct frame {
         struct frame_status status;
         struct frame_bearing bearing;
         struct frame_range range;
+        struct frame_track_encoders track;
     } u;
 };
 

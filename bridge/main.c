@@ -35,7 +35,9 @@ static int open_files(struct daemon *d)
         d->recording = true;
     }
     if (d->opt.estimates) {
-        if ((rc = estimates_csv_open(&d->csv, d->opt.estimates)) != 0) {
+        rc = team_site(d) ? estimates_csv_open_team(&d->csv, d->opt.estimates)
+                          : estimates_csv_open(&d->csv, d->opt.estimates);
+        if (rc != 0) {
             fprintf(stderr, "error: --estimates %s: %s\n", d->opt.estimates, strerror(-rc));
             return EX_CANTCREAT_STATUS;
         }
@@ -83,6 +85,10 @@ int main(int argc, char **argv)
     log_set_level(lv);
     char err[CONFIG_ERR_LEN];
     if (estimator_init(&d->est, &d->cfg, err, sizeof err) != 0) {
+        fprintf(stderr, "error: %s\n", err);
+        return EX_CONFIG_STATUS;
+    }
+    if (team_start(d, err, sizeof err) != 0) {
         fprintf(stderr, "error: %s\n", err);
         return EX_CONFIG_STATUS;
     }

@@ -228,6 +228,17 @@ int mav_links_send_heartbeat(struct mav_links *l, enum mav_out_state system_stat
     SEND_ALL(l, mav_out_send_heartbeat(&k->out, system_status));
 }
 
+int mav_links_send_odometry_as(struct mav_links *l, unsigned sysid, const struct mav_odometry *o)
+{
+    SEND_ALL(l, mav_out_send_odometry_as(&k->out, sysid, o));
+}
+
+int mav_links_send_heartbeat_as(struct mav_links *l, unsigned sysid,
+                                enum mav_out_state system_status)
+{
+    SEND_ALL(l, mav_out_send_heartbeat_as(&k->out, sysid, system_status));
+}
+
 int mav_links_send_statustext(struct mav_links *l, enum mav_out_severity severity, const char *text)
 {
     SEND_ALL(l, mav_out_send_statustext(&k->out, severity, text));

@@ -91,6 +91,10 @@ bool mav_links_handle(struct mav_links *l, int fd, int64_t now_us);
  * as the mav_out_send_* call of the same name. */
 int mav_links_send_odometry(struct mav_links *l, const struct mav_odometry *o);
 int mav_links_send_heartbeat(struct mav_links *l, enum mav_out_state system_status);
+/* As system sysid (a team's robot; mav_out_send_*_as). */
+int mav_links_send_odometry_as(struct mav_links *l, unsigned sysid, const struct mav_odometry *o);
+int mav_links_send_heartbeat_as(struct mav_links *l, unsigned sysid,
+                                enum mav_out_state system_status);
 int mav_links_send_statustext(struct mav_links *l, enum mav_out_severity severity,
                               const char *text);
 int mav_links_send_named_float(struct mav_links *l, const char *name, float value,

@@ -528,6 +528,51 @@ int mav_out_send_heartbeat(struct mav_out *m, enum mav_out_state system_status)
     return send_msg(m);
 }
 
+/* Switch m to system `sysid` with that system's sequence numbers (returns
+ * what as_restore needs); as_restore switches back, keeping sysid's next
+ * sequence number. */
+struct as_saved {
+    uint8_t sysid, seq;
+};
+
+static struct as_saved as_switch(struct mav_out *m, unsigned sysid)
+{
+    struct as_saved s = {m->sysid, priv(m)->tx_status.current_tx_seq};
+    m->sysid = (uint8_t)sysid;
+    if (sysid != s.sysid)
+        priv(m)->tx_status.current_tx_seq = m->seq_as[sysid];
+    return s;
+}
+
+static void as_restore(struct mav_out *m, struct as_saved s)
+{
+    if (m->sysid != s.sysid) {
+        m->seq_as[m->sysid] = priv(m)->tx_status.current_tx_seq;
+        priv(m)->tx_status.current_tx_seq = s.seq;
+    }
+    m->sysid = s.sysid;
+}
+
+int mav_out_send_odometry_as(struct mav_out *m, unsigned sysid, const struct mav_odometry *o)
+{
+    if (!m || sysid < 1 || sysid > 255)
+        return -EINVAL;
+    struct as_saved s = as_switch(m, sysid);
+    int rc = mav_out_send_odometry(m, o);
+    as_restore(m, s);
+    return rc;
+}
+
+int mav_out_send_heartbeat_as(struct mav_out *m, unsigned sysid, enum mav_out_state system_status)
+{
+    if (!m || sysid < 1 || sysid > 255)
+        return -EINVAL;
+    struct as_saved s = as_switch(m, sysid);
+    int rc = mav_out_send_heartbeat(m, system_status);
+    as_restore(m, s);
+    return rc;
+}
+
 int mav_out_send_statustext(struct mav_out *m, enum mav_out_severity severity, const char *text)
 {
     if (!m || !text || (int)severity < MAV_OUT_SEV_EMERGENCY || (int)severity > MAV_OUT_SEV_DEBUG)

@@ -109,7 +109,9 @@ struct mav_out {
     bool have_peer; /* UDP: destination known (udpout: resolved; udpin: someone spoke) */
     struct sockaddr_storage peer; /* UDP destination */
     socklen_t peer_len;
-    int peer_sysid; /* system id of the last HEARTBEAT received, -1 if none */
+    int peer_sysid;      /* system id of the last HEARTBEAT received, -1 if none */
+    uint8_t seq_as[256]; /* next sequence number of each other system we send as
+                            (mav_out_send_*_as: a team's robots), by system id */
     struct mav_out_stats stats;
     _Alignas(16) unsigned char priv[MAV_OUT_PRIV_BYTES];
 };
@@ -223,6 +225,16 @@ enum mav_out_state {
 /* HEARTBEAT: type MAV_TYPE_ONBOARD_CONTROLLER, autopilot MAV_AUTOPILOT_INVALID,
  * base_mode 0, custom_mode 0. -EINVAL if system_status is not a MAV_STATE. */
 int mav_out_send_heartbeat(struct mav_out *m, enum mav_out_state system_status);
+
+/*
+ * As mav_out_send_odometry() and mav_out_send_heartbeat(), but sent as system
+ * `sysid` (1..255; our component id): the team host publishes each robot of
+ * a team under the robot's own system id (docs/mavlink.md, "Teams"). Each
+ * system id keeps its own sequence numbers, so a ground station counts every
+ * system's losses right. -EINVAL for a bad sysid, else as the plain call.
+ */
+int mav_out_send_odometry_as(struct mav_out *m, unsigned sysid, const struct mav_odometry *o);
+int mav_out_send_heartbeat_as(struct mav_out *m, unsigned sysid, enum mav_out_state system_status);
 
 /* STATUSTEXT severities (= MAVLink MAV_SEVERITY). */
 enum mav_out_severity {

@@ -138,6 +138,10 @@ void after_update(struct daemon *d)
 
 void on_odom_timer(struct daemon *d, int64_t now)
 {
+    if (team_site(d)) { /* one estimate per robot (team_out.c) */
+        team_on_odom_timer(d, now);
+        return;
+    }
     estimator_tick(&d->est, now);
     after_update(d);
     drain_events(d);

@@ -8,8 +8,8 @@
  * generated checks (Beacon and Receiver 1..15: a 0 is FRAME_OUT_OF_RANGE;
  * TimeOfFlight 0..65534: 65535 is FRAME_OUT_OF_RANGE). What the frame means
  * for this site is the handler's (estimator_range, each counted and
- * dropped): a Receiver other than 1 (one robot for now: a team's host will
- * take one estimate per receiver), a beacon id beyond [range_beacons] count,
+ * dropped): a Receiver other than 1 (one robot; on a team site every range
+ * goes to the team instead, bridge/team.h), a beacon id beyond [range_beacons] count,
  * a TimeOfFlight of 0 (no flight: a receiver never sits on a beacon; a node
  * reports it when it timed nothing) or of 65534 (the counter's saturated
  * value: at least 65.5 ms, the flight itself unknown). The decoder is a
@@ -19,6 +19,7 @@
 
 #include "beaconloc_can.h"
 #include "estimator.h"
+#include "team.h"
 
 enum frame_result sensor_range_decode(uint32_t id, const uint8_t data[8], struct frame *out,
                                       struct frame_seq *seq)
@@ -41,11 +42,16 @@ enum frame_result sensor_range_decode(uint32_t id, const uint8_t data[8], struct
     out->u.range.time_of_flight_us = m.time_of_flight; /* scale 1 us (DBC) */
     out->u.range.quality = m.quality;
     out->u.range.counter = m.counter;
-    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = 0};
+    /* each robot's range module keeps its own counter (a team's host hears
+     * them all through the radio gateway): one track per receiver id */
+    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = m.receiver};
     return FRAME_OK;
 }
 
 void sensor_range_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
-    estimator_range(e, &f->u.range, rx_us);
+    if (e->team) /* a team site: every receiver's ranges are the team's (team.h) */
+        team_range(e->team, &f->u.range, rx_us);
+    else
+        estimator_range(e, &f->u.range, rx_us);
 }

@@ -18,6 +18,10 @@
  * receiver sends them in that order: no slack (us). */
 #define RANGE_STAMP_SLACK_US 0
 
+/* Track samples of one robot leave it in NodeTime order, one frame each: no
+ * slack (us). */
+#define TRACK_STAMP_SLACK_US 0
+
 /* clang-format off: one kind per block, aligned as a table */
 const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
     [FRAME_PULSE] =
@@ -76,9 +80,21 @@ const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
             .id_last = BEACONLOC_CAN_RANGE_FRAME_ID,
             .counter_in_range = beaconloc_can_range_counter_is_in_range,
             .stamp_slack_us = RANGE_STAMP_SLACK_US,
-            .tracks = 1,
+            .tracks = FRAME_MAX_NODES, /* one per receiver id: each robot's module counts */
             .decode = sensor_range_decode,
             .handle = sensor_range_handle,
+        },
+    [FRAME_TRACK_ENCODERS] =
+        {
+            .name = "track_encoders",
+            .short_name = "trk",
+            .id_first = BEACONLOC_CAN_TRACK_ENCODERS_FRAME_ID,
+            .id_last = BEACONLOC_CAN_TRACK_ENCODERS_FRAME_ID,
+            .counter_in_range = beaconloc_can_track_encoders_counter_is_in_range,
+            .stamp_slack_us = TRACK_STAMP_SLACK_US,
+            .tracks = FRAME_MAX_NODES, /* one per robot id */
+            .decode = sensor_track_encoders_decode,
+            .handle = sensor_track_encoders_handle,
         },
 };
 /* clang-format on */

@@ -9,8 +9,8 @@
  * come from the cantools-generated header (build/gen/can/beaconloc_can.h),
  * never from literals.
  *
- * A new kind (SONAR_RING 0x150-0x15F is reserved in the DBC; RANGE 0x130
- * is the latest kind added, after BEARING 0x140): its frames in the DBC, its
+ * A new kind (SONAR_RING 0x150-0x15F is reserved in the DBC; TRACK_ENCODERS
+ * 0x131 is the latest kind added, after RANGE 0x130): its frames in the DBC, its
  * enumerator and payload in frames.h (enum frame_kind, union in struct
  * frame), a file bridge/sensor_<kind>.c with its decoder and handler
  * (declared below), one entry in sensors.c.
@@ -83,5 +83,8 @@ void sensor_bearing_handle(struct estimator *e, const struct frame *f, int64_t r
 enum frame_result sensor_range_decode(uint32_t id, const uint8_t data[8], struct frame *out,
                                       struct frame_seq *seq);
 void sensor_range_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
+enum frame_result sensor_track_encoders_decode(uint32_t id, const uint8_t data[8],
+                                               struct frame *out, struct frame_seq *seq);
+void sensor_track_encoders_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
 
 #endif /* BRIDGE_SENSORS_H */

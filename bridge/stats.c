@@ -9,6 +9,7 @@
 
 #include "log.h"
 #include "sensors.h"
+#include "team.h"
 
 void latency_reset(struct latency_hist *h)
 {
@@ -197,6 +198,9 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"latency_interval_p99_us\": %lld,\n", (long long)r->latency_interval_p99_us);
     fprintf(f, "  \"latency_interval_max_us\": %lld,\n", (long long)r->latency_interval_max_us);
     fprintf(f, "  \"replay_frames_per_s\": %.1f,\n", r->replay_frames_per_s);
+    fprintf(f, "  \"tracks_unexpected\": %llu,\n", (unsigned long long)r->tracks_unexpected);
+    if (r->team)
+        team_write_json(r->team, r->team_odometry_sent, f);
     fprintf(f, "  \"run_time_s\": %.3f\n", r->run_time_s);
     fprintf(f, "}\n");
     if (fclose(f) != 0) {

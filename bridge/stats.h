@@ -15,6 +15,8 @@
 
 #include "frames.h"
 
+struct team;
+
 /* Latency histogram: exact 1 us bins below 4096 us, then 64 bins per
  * power of two (relative resolution 1.6 %) up to 2^36 us. */
 #define LAT_LINEAR 4096
@@ -69,6 +71,10 @@ struct stats_report {
     /* ranges (struct est_counters) */
     uint64_t ranges_fused, ranges_rejected, ranges_buffered, ranges_refused, ranges_unknown_beacon,
         ranges_unexpected, ranges_other_receiver, ranges_bad_tof, stale_ranges, unmapped_ranges;
+    uint64_t tracks_unexpected; /* TRACK_ENCODERS on a site that is not a team's */
+    /* a team site (bridge/team.h): its section "team" of the JSON; NULL elsewhere */
+    const struct team *team;
+    uint64_t team_odometry_sent; /* ODOMETRY sent as the robots' system ids */
     int64_t latency_p50_us, latency_p99_us, latency_max_us;
     uint64_t latency_samples;
     /* the interval the latest status line closed (latency_interval_close) */

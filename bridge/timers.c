@@ -22,6 +22,12 @@ static const char *const timer_names[T_COUNT] = {
 
 static void on_heartbeat(struct daemon *d, int64_t now)
 {
+    if (team_site(d)) { /* the host's own, then one per robot (team_out.c) */
+        if (mav_links_send_heartbeat(&d->links, team_host_state(d)) > 0)
+            d->hb_sent++;
+        team_on_heartbeat(d);
+        return;
+    }
     struct est_output o;
     bool have = estimator_output(&d->est, 0, &o) == 0;
     struct est_health h;

@@ -160,13 +160,13 @@ static void test_json_report(void **state)
     assert_non_null(strstr(buf, "\"duplicates\": 10,"));
     assert_non_null(strstr(buf, "\"duplicates_per_frame\": {\"pulse_detection\": 6, "
                                 "\"wheel_encoders\": 0, \"node_status\": 1, \"bearing\": 0, "
-                                "\"range\": 3}"));
+                                "\"range\": 3, \"track_encoders\": 0}"));
     assert_non_null(strstr(buf, "\"frames_received_by_id\": {\"0x100\": 11, \"0x110\": 22, "
-                                "\"0x120\": 0, \"0x140\": 33, \"0x130\": 44}"));
+                                "\"0x120\": 0, \"0x140\": 33, \"0x130\": 44, \"0x131\": 0}"));
     assert_non_null(strstr(buf, "\"out_of_order\": 10,"));
     assert_non_null(strstr(buf, "\"out_of_order_per_frame\": {\"pulse_detection\": 0, "
                                 "\"wheel_encoders\": 8, \"node_status\": 0, \"bearing\": 2, "
-                                "\"range\": 0}"));
+                                "\"range\": 0, \"track_encoders\": 0}"));
     assert_non_null(strstr(buf, "\"bearings_fused\": 30,"));
     assert_non_null(strstr(buf, "\"bearings_rejected\": 3,"));
     assert_non_null(strstr(buf, "\"bearings_buffered\": 4,"));
@@ -272,7 +272,7 @@ static void test_status_line_text(void **state)
     char text[1024];
     captured_log(f, text, sizeof text);
     assert_string_equal(text,
-                        "info: final: frames 1291 (pulse 181 enc 1000 status 20 brg 40 rng 50) "
+                        "info: final: frames 1291 (pulse 181 enc 1000 status 20 brg 40 rng 50 trk 0) "
                         "bad 1 "
                         "unknown 2 range 3 lost 4 dup 5 late 6 kdrop 7 errfr 8 | pulses ok 69 "
                         "rej 9 | bearings ok 35 rej 2 unk 3 | ranges ok 44 rej 1 unk 2 bad 3 | "
