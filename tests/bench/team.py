@@ -225,8 +225,10 @@ def summarise_team(scenario: str, runs: list[dict], n_robots: int | None = None
             rm = math.sqrt(float(np.nanmean(np.concatenate(e)))) * 1e3
             pm = math.sqrt(float(np.nanmean(np.concatenate(p)))) * 1e3
             fin = [r["final_m"][rb] for r in good if rb in r["final_m"]]
+            # the origin robot's bound is its gauge prior (1 um): no ratio to speak of
+            ratio = f"{rm / pm:.3f}" if pm >= 0.01 else "n/a (the origin)"
             per_robot.append(f"  {scenario} robot {rb}: rmse {rm:.1f} mm, bound {pm:.1f} mm, "
-                             f"ratio {rm / pm:.3f}, final error (RMS over seeds) "
+                             f"ratio {ratio}, final error (RMS over seeds) "
                              f"{math.sqrt(float(np.mean(np.square(fin)))) * 1e3:.1f} mm")
     dist = [r["distance_m"] for r in good]
     if good and min(dist) >= MIN_DISTANCE_M:
