@@ -61,6 +61,7 @@ DIVERGED_M = 0.5                # a robot's final position error above this: div
 MIRROR_MIN_Y_M = 0.2            # rows nearer the x axis say nothing about the mirror
 MIRROR_AGREE = 0.95             # share of those rows with the truth's sign of y
 WRAP_US = 1 << 32               # NodeTime wraps (DBC)
+LEAP_WINDOW_S = 1.0             # per leap: the estimates of this long after its end
 
 TEAM_EST_COLUMNS = ("robot,t_us,x_m,y_m,theta_rad,v_mps,omega_radps,var_x_m2,cov_xy_m2,"
                     "var_y_m2,var_theta_rad2,reset_counter,role").split(",")
@@ -120,7 +121,8 @@ def judge_team(seed: int, truth: dict, est: dict, roles: dict, stats: dict | Non
     start_s = float(leaps[0]["t_start_s"]) if leaps else START_S
     origin = int(roles["team_frame"]["origin_robot"])
     robots = sorted(set(truth["robot"].tolist()))
-    out = {"seed": seed, "ok": True, "robots": robots, "err2": {}, "pcrb2": {}, "final_m": {},
+    out = {"seed": seed, "ok": True, "robots": robots, "err2": {}, "pcrb2": {}, "t_s": {},
+           "leap_end_s": [float(lp["t_end_s"]) for lp in leaps], "final_m": {},
            "final_pcrb_m": {}, "why": []}
     init2 = ([], [])               # the first estimates' squared errors: as they are, mirrored
     agree, asked = 0, 0
@@ -146,6 +148,7 @@ def judge_team(seed: int, truth: dict, est: dict, roles: dict, stats: dict | Non
             out["why"].append(f"robot {r}: non-finite estimate")
         out["err2"][r] = err[sel] ** 2
         out["pcrb2"][r] = at["pcrb_pos_m"][sel] ** 2
+        out["t_s"][r] = at["t_sim_s"][sel]
         last = np.flatnonzero(sel)[-1]
         out["final_m"][r] = float(err[last])
         out["final_pcrb_m"][r] = float(at["pcrb_pos_m"][last])
@@ -240,6 +243,7 @@ def summarise_team(scenario: str, runs: list[dict], n_robots: int | None = None
         fig["distance_m"] = float(np.mean(dist))
     else:
         fig["drift_pct_of_distance"] = fig["bound_drift_pct_of_distance"] = None
+    fig["leaps"] = _by_leap(good)
     init2 = [v for r in good for v in r["init2"]]
     fig["init_rmse_mm"] = math.sqrt(float(np.mean(init2))) * 1e3 if init2 else math.nan
     fig["mirror_resolved_pct"] = 100.0 * sum(1 for r in good if r["mirror_ok"]) / len(runs)
@@ -251,6 +255,26 @@ def summarise_team(scenario: str, runs: list[dict], n_robots: int | None = None
             f"init_rmse_mm={_fmt(fig['init_rmse_mm'], 1)} "
             f"mirror_resolved_pct={fig['mirror_resolved_pct']:.0f} diverged={diverged}")
     return line, fig, per_robot
+
+
+def _by_leap(good: list[dict]) -> list[tuple[float, float, float]]:
+    """Per leap of a leap-frog: (its end, s; RMS error, RMS bound, mm) of every robot's
+    estimates in the LEAP_WINDOW_S after it, pooled over the seeds: where the error grows."""
+    if not good or not good[0]["leap_end_s"]:
+        return []
+    out = []
+    for t_end in good[0]["leap_end_s"]:
+        e2, p2 = [], []
+        for r in good:
+            for rb, t in r["t_s"].items():
+                w = (t >= t_end) & (t < t_end + LEAP_WINDOW_S)
+                e2.append(r["err2"][rb][w])
+                p2.append(r["pcrb2"][rb][w])
+        e2, p2 = np.concatenate(e2), np.concatenate(p2)
+        if len(e2):
+            out.append((t_end, math.sqrt(float(np.nanmean(e2))) * 1e3,
+                        math.sqrt(float(np.nanmean(p2))) * 1e3))
+    return out
 
 
 def fixed_line(scenario: str, runs: list[dict]) -> tuple[str, dict]:
@@ -298,6 +322,9 @@ def main() -> int:
                                                   len(load_team_scenario(scenario).robots))
             for p in per_robot:
                 print(p)
+            if fig["leaps"]:
+                print(f"  {scenario} after each leap (end s: error / bound mm): " + ", ".join(
+                    f"{t:.0f}: {e:.0f}/{b:.0f}" for t, e, b in fig["leaps"]))
             if fig["drift_pct_of_distance"] is not None:
                 print(f"bound scenario={scenario} distance_m={fig['distance_m']:.2f} "
                       f"drift_pct_of_distance={fig['drift_pct_of_distance']:.3f} "

@@ -154,3 +154,22 @@ def test_fixed_beacon_line_has_the_team_keys():
     assert line == ("team scenario=marvelmind robots=1 seeds=2 rmse_mm=20.0 pcrb_mm=10.0 "
                     "ratio=2.000 drift_pct_of_distance=n/a init_rmse_mm=n/a "
                     "mirror_resolved_pct=n/a diverged=0")
+
+
+def test_error_after_each_leap(run):
+    """A leap ending at 20 s: the figures are those of every robot's estimates in the
+    second after it (and the figures start at the first leap's start, 12 s)."""
+    truth, roles = run
+    leapt = dict(roles, leaps=[{"t_start_s": 12.0, "t_end_s": 20.0}])
+    est, noise = fake_estimates(truth, np.random.default_rng(4))
+    j = tb.judge_team(1, truth, est, leapt, RESOLVED)
+    _, fig, _ = tb.summarise_team("leapt", [j])
+    t_s = true_time_of_rows(truth, est)
+    w = (t_s >= 20.0) & (t_s < 20.0 + tb.LEAP_WINDOW_S)
+    assert w.sum() >= 4 * 9
+    (t_end, e_mm, _b_mm), = fig["leaps"]
+    assert t_end == 20.0
+    assert e_mm == pytest.approx(math.sqrt(np.mean(np.sum(noise[w] ** 2, axis=1))) * 1e3, rel=1e-9)
+    after = t_s >= 12.0
+    assert fig["rmse_mm"] == pytest.approx(
+        math.sqrt(np.mean(np.sum(noise[after] ** 2, axis=1))) * 1e3, rel=1e-9)
