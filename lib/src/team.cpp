@@ -417,9 +417,16 @@ void tick(bl_team *t, int64_t now_us)
         bl_team_robot_ &r = t->r_[i];
         if (!(r.flags & kRobotHeard) || (r.flags & kRobotLost)) continue;
         if (now_us - r.last_heard_us > lost_us) {
+            // a running filter's last estimate is kept as its position; a
+            // mover in its heading fit has none
+            if (r.flags & kRobotRunning) {
+                stop_moving(t, i, now_us);
+            } else if (t->fit_robot_ == i) {
+                t->fit_robot_ = BL_TEAM_NONE;
+                r.flags &= ~kRobotValid;
+            }
             r.flags |= kRobotLost;
             r.flags &= ~(kRobotMoving | kRobotRunning | kRobotHeading);
-            if (t->fit_robot_ == i) t->fit_robot_ = BL_TEAM_NONE;
             team_push_event(t, BL_TEAM_EV_ROBOT_LOST, i, now_us, real(0));
             refresh_movers(t);
             continue;

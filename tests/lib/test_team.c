@@ -135,6 +135,8 @@ typedef struct stats {
     double leap_err[8]; /* max error over the robots 1.5 s after each leap's end
                          (m) */
     size_t n_leaps;
+    double anchor_nees; /* Σ NEES of (x, y) of the standing robots at those checks */
+    size_t n_anchor_nees;
     double truth[BL_MAX_TEAM][3];
     int errors; /* calls that returned an error other than a refused range */
     int ranges_refused;
@@ -173,8 +175,14 @@ static void replay(bl_team *t, const run_data *d, int64_t t_end_us, uint32_t cut
             double m = 0;
             for (uint32_t r = 1; r <= 4; ++r) {
                 bl_team_robot_estimate e;
-                if (bl_team_robot(t, r, 0, &e) == BL_OK && e.valid && !e.moving)
-                    m = fmax(m, err_xy(&e, s->truth[r - 1], NULL));
+                if (bl_team_robot(t, r, 0, &e) == BL_OK && e.valid && !e.moving) {
+                    double ne;
+                    m = fmax(m, err_xy(&e, s->truth[r - 1], &ne));
+                    if (isfinite(ne)) { /* (the gauge's robots have a zero variance) */
+                        s->anchor_nees += ne;
+                        s->n_anchor_nees++;
+                    }
+                }
             }
             s->leap_err[s->n_leaps++] = m;
             next_leap_check = -1;
@@ -409,6 +417,11 @@ static void test_leapfrog(void **state)
         printf("leap %zu: max anchor error %.4f m\n", k + 1, s.leap_err[k]);
         assert_true(s.leap_err[k] < 0.10);
     }
+    /* and where their covariance says (mean NEES of (x, y), 2 expected) */
+    const double anees = s.anchor_nees / (double)s.n_anchor_nees;
+    printf("anchors after the leaps: mean NEES %.2f over %zu\n", anees, s.n_anchor_nees);
+    assert_true(s.n_anchor_nees >= 6);
+    assert_true(anees > 0.3 && anees < 5);
     for (uint32_t r = 0; r < 4; ++r)
         if (s.n[r])
             printf("robot %u moving: %zu samples, RMSE %.4f m, PCRB %.4f m, mean "

@@ -61,10 +61,11 @@
  *     is not used here. A robot that stood after its filter ran keeps its
  *     heading (heading_known) and restarts without a fit when it moves.
  *  5. Lost robots: no odometry and no range to/from it for lost_s -> LOST
- *     (event), its filter stops, it is no anchor; heard again -> BACK
- *     (event), it stands as an anchor at its last position with its σ
- *     grown by back_sigma_m and its heading unknown (fitted again when it
- *     moves).
+ *     (event), its filter stops (its last estimate kept as its position; a
+ *     mover still in its heading fit has none), it is no anchor; heard
+ *     again -> BACK (event), it stands as an anchor at its last position
+ *     with its σ grown by back_sigma_m, independent of the others, and its
+ *     heading unknown (fitted again when it moves).
  *
  * Errors: every function returns BL_OK or a negative bl_error; on error the
  * bl_team is byte-identical except the bad-input counters (ranges_bad,
@@ -73,8 +74,8 @@
  * between two moving robots) is counted, not an error.
  *
  * Size: sizeof(bl_team) with double and the default capacities
- * (BL_MAX_TEAM 8, BL_TEAM_MAX_BEACONS 4) is about 76 KiB (measured in
- * tests/lib/test_team.c, printed by it): BL_MAX_TEAM filters, the survey's
+ * (BL_MAX_TEAM 8, BL_TEAM_MAX_BEACONS 4) is 75,944 B (74 KiB; 43,432 B
+ * with float; printed by tests/lib/test_team.c): BL_MAX_TEAM filters, the survey's
  * samples and the heading fit's buffer. Not thread-safe; instances are
  * independent.
  */
@@ -205,7 +206,7 @@ typedef struct bl_team_status {
     uint32_t ranges_unused;          /* neither: between two anchors after the survey, between
                                  two movers, to a lost robot, ... */
     uint32_t ranges_bad;             /* refused: tof not finite, negative, or beyond 1.5 x max
-                                 range; beacon == receiver; time before the team's start */
+                                 range; beacon == receiver */
     uint32_t ranges_unknown_robot;   /* refused: an id outside 1..N */
     uint32_t odometry_in;            /* bl_team_odometry calls that returned BL_OK */
     uint32_t odometry_bad;           /* refused: bad id, non-finite, time going backwards */
