@@ -199,6 +199,8 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"latency_interval_max_us\": %lld,\n", (long long)r->latency_interval_max_us);
     fprintf(f, "  \"replay_frames_per_s\": %.1f,\n", r->replay_frames_per_s);
     fprintf(f, "  \"tracks_unexpected\": %llu,\n", (unsigned long long)r->tracks_unexpected);
+    fprintf(f, "  \"can_tx_frames\": %llu,\n", (unsigned long long)r->can_tx_frames);
+    fprintf(f, "  \"can_tx_errors\": %llu,\n", (unsigned long long)r->can_tx_errors);
     if (r->team)
         team_write_json(r->team, r->team_odometry_sent, f);
     fprintf(f, "  \"run_time_s\": %.3f\n", r->run_time_s);

@@ -71,7 +71,8 @@ struct stats_report {
     /* ranges (struct est_counters) */
     uint64_t ranges_fused, ranges_rejected, ranges_buffered, ranges_refused, ranges_unknown_beacon,
         ranges_unexpected, ranges_other_receiver, ranges_bad_tof, stale_ranges, unmapped_ranges;
-    uint64_t tracks_unexpected; /* TRACK_ENCODERS on a site that is not a team's */
+    uint64_t tracks_unexpected;            /* TRACK_ENCODERS on a site that is not a team's */
+    uint64_t can_tx_frames, can_tx_errors; /* frames the bridge wrote (TEAM_COMMAND) */
     /* a team site (bridge/team.h): its section "team" of the JSON; NULL elsewhere */
     const struct team *team;
     uint64_t team_odometry_sent; /* ODOMETRY sent as the robots' system ids */

@@ -28,7 +28,6 @@ constexpr real kSurveyOutlierSigma = real(3);
 constexpr real kMadToSigma = real(1.4826);
 // A range track increment larger than this is refused as bad input (m).
 constexpr real kMaxIncrementM = real(10);
-constexpr int NB = 2 * BL_TEAM_MAX_BEACONS;
 constexpr int NT = 2 * BL_MAX_TEAM;
 
 bool valid_team(const bl_team *t) { return t != nullptr && t->magic_ == kTeamMagic; }
@@ -176,6 +175,7 @@ void clear_cross(bl_team *t, uint32_t i)
         for (int r = 0; r < 2; ++r)
             for (int c = 0; c < 2; ++c) joint(t, i, j, r, c) = joint(t, j, i, c, r) = 0;
     }
+    t->scale_cross_[2 * i] = t->scale_cross_[2 * i + 1] = 0;
 }
 
 void set_own_cov(bl_team *t, uint32_t i, real xx, real xy, real yy)
@@ -394,6 +394,7 @@ void do_survey(bl_team *t, int64_t now_us)
                     joint(t, i, map[q], r, c) = sol.joint_cov[(2 * p + uint32_t(r)) * NT + 2 * q + uint32_t(c)];
         t->r_[i].flags |= kRobotValid;
     }
+    team_anchors_reset_scale(t);
     t->phase_ = BL_TEAM_PHASE_MIRROR;
     t->st_.ranges_survey += 0;
     team_push_event(t, BL_TEAM_EV_SURVEYED, BL_TEAM_NONE, now_us,
@@ -417,9 +418,16 @@ void tick(bl_team *t, int64_t now_us)
         bl_team_robot_ &r = t->r_[i];
         if (!(r.flags & kRobotHeard) || (r.flags & kRobotLost)) continue;
         if (now_us - r.last_heard_us > lost_us) {
+            // a running filter's last estimate is kept as its position; a
+            // mover in its heading fit has none
+            if (r.flags & kRobotRunning) {
+                stop_moving(t, i, now_us);
+            } else if (t->fit_robot_ == i) {
+                t->fit_robot_ = BL_TEAM_NONE;
+                r.flags &= ~kRobotValid;
+            }
             r.flags |= kRobotLost;
             r.flags &= ~(kRobotMoving | kRobotRunning | kRobotHeading);
-            if (t->fit_robot_ == i) t->fit_robot_ = BL_TEAM_NONE;
             team_push_event(t, BL_TEAM_EV_ROBOT_LOST, i, now_us, real(0));
             refresh_movers(t);
             continue;
@@ -510,6 +518,7 @@ bool bl::team_start_filter(bl_team *t, uint32_t i, int64_t t_us, real x, real y,
 void bl::team_flip(bl_team *t, int64_t t_us)
 {
     (void)bl_team_mirror(&t->anchors_, &t->anchors_);
+    for (int k = 1; k < 2 * BL_MAX_TEAM; k += 2) t->scale_cross_[k] = -t->scale_cross_[k];
     for (uint32_t i = 0; i < t->p_.robots; ++i) {
         bl_team_robot_ &r = t->r_[i];
         if (r.flags & kRobotHeading) r.theta_rad = -r.theta_rad;
@@ -541,6 +550,7 @@ extern "C" int bl_team_params_default(bl_team_params *p)
     p->fit_max_rms_sigma = real(3);
     p->back_sigma_m = real(0.1);
     p->emitter_height_m = std::numeric_limits<real>::quiet_NaN();
+    p->refine_anchors = 1;
     return BL_OK;
 }
 
@@ -560,7 +570,7 @@ extern "C" int bl_team_init(bl_team *t, const bl_config *robot_cfg, const bl_tea
                         q.fit_min_turn_rad, q.mirror_min_delta_chi2, q.fit_max_rms_sigma};
     for (real v : pos)
         if (!is_finite(v) || !(v > real(0)) || v > real(3600)) return BL_EINVAL;
-    if (!(q.lost_s > q.role_timeout_s)) return BL_EINVAL;
+    if (!(q.lost_s > q.role_timeout_s) || q.refine_anchors > 1) return BL_EINVAL;
     if (!is_finite(q.fit_slip_m_per_sqrt_m) || q.fit_slip_m_per_sqrt_m < 0 || !is_finite(q.back_sigma_m) ||
         q.back_sigma_m < 0)
         return BL_EINVAL;
@@ -700,6 +710,18 @@ extern "C" int bl_team_range(bl_team *t, uint32_t beacon, uint32_t receiver, int
             t->st_.ranges_fit += 1;
             out.status = BL_FUSION_BUFFERED;
             used = true;
+        }
+    }
+    // Two standing robots after the survey: the anchors refined.
+    if (!used && t->p_.refine_anchors && t->phase_ != BL_TEAM_PHASE_SURVEYING && is_anchor(t, b) && is_anchor(t, rcv)) {
+        const real dz = t->p_.emitter_height_m - t->cfg_.range.height_m;
+        const real planar = std::sqrt(std::max(range_m * range_m - dz * dz, real(0)));
+        if (team_anchor_range(t, b, rcv, planar, &out)) {
+            used = true;
+            if (out.status == BL_FUSION_ACCEPTED)
+                t->st_.ranges_anchors += 1;
+            else
+                t->st_.ranges_rejected += 1;
         }
     }
     if (!used) t->st_.ranges_unused += 1;

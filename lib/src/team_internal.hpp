@@ -60,6 +60,15 @@ bool team_start_filter(bl_team *t, uint32_t i, int64_t t_us, real x, real y, rea
 // headings, and every running filter restarted in the reflection.
 void team_flip(bl_team *t, int64_t t_us);
 
+// ---- team_anchors.cpp
+// ε = 0 with σ_s/s, uncorrelated with the anchors (after a survey).
+void team_anchors_reset_scale(bl_team *t);
+// One range (m, planar) between the standing robots i and j into the
+// anchors and the running movers; false when it could not be used (the
+// robots on one point, a non-finite result), else *out: ACCEPTED or
+// REJECTED (the gate).
+bool team_anchor_range(bl_team *t, uint32_t i, uint32_t j, real range_m, bl_fusion_result *out);
+
 // ---- team_start.cpp
 // Keep a range between the fitting mover i and robot j (standing) for the
 // heading fit, at the mover's dead reckoning at t_us.

@@ -125,6 +125,14 @@ def test_mirror_resolved_and_stats(team_run):
     f = team["frames"]
     assert f["ranges_unknown_robot"] == f["ranges_self"] == f["ranges_bad_tof"] == 0
     assert f["ranges_used"] > 1000 and f["odometry_used"] > 4000
+    # every team frame in exactly one counter (the held ones handed on at the end)
+    assert f["ranges_in"] == sum(f[k] for k in ("ranges_unknown_robot", "ranges_self",
+                                                 "ranges_bad_tof", "stale_ranges",
+                                                 "ranges_refused", "ranges_used"))
+    assert f["tracks_in"] == sum(f[k] for k in ("tracks_unknown_robot", "stale_tracks",
+                                                 "odometry_refused", "odometry_used"))
+    assert team["library"]["ranges_in"] == f["ranges_used"]
+    assert team["library"]["odometry_in"] == f["odometry_used"]
     assert team_run["stats"]["frames_received"]["track_encoders"] == f["tracks_in"]
     assert team_run["stats"]["lost_by_counter_per_frame"]["range"] == 0
 
