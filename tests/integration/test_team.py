@@ -30,7 +30,7 @@ ROLES = {1: "beacon", 2: "beacon", 3: "beacon", 4: "receiver"}
 COMPONENT = 197
 ORIGIN = 1                 # [team] origin_robot of the site
 RMS_M = 0.03               # per robot; the bound is 2-8 mm (docs/simulator.md "Teams"), live
-                           # in the UML guest 0, 2.4, 8.3 and 12.3 mm (robots 1-4)
+                           # in the UML guest 0, 0.6, 3.7 and 9.5 mm (robots 1-4; 31 s)
 TEAM_TRUTH_COLUMNS = ("robot,t_us,t_sim_s,x_m,y_m,team_x_m,team_y_m,team_theta_rad,"
                       "pcrb_pos_m").split(",")
 TEAM_EST_COLUMNS = ("robot,t_us,x_m,y_m,theta_rad,reset_counter,role").split(",")
