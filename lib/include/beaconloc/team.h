@@ -79,7 +79,7 @@
  * between two moving robots) is counted, not an error.
  *
  * Size: sizeof(bl_team) with double and the default capacities
- * (BL_MAX_TEAM 8, BL_TEAM_MAX_BEACONS 4) is 75,944 B (74 KiB; 43,432 B
+ * (BL_MAX_TEAM 8, BL_TEAM_MAX_BEACONS 4) is 76,096 B (74 KiB; 43,504 B
  * with float; printed by tests/lib/test_team.c): BL_MAX_TEAM filters, the survey's
  * samples and the heading fit's buffer. Not thread-safe; instances are
  * independent.
