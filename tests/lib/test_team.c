@@ -484,6 +484,46 @@ static void test_lost_robot(void **state)
     assert_int_equal(st.robots_lost, 0);
 }
 
+/* The origin robot silent for the first 2.5 s: the first survey is refused
+ * (its window had no range of robot 1), the next window succeeds; robot 4,
+ * which starts to move at 3 s during that window, takes part with its
+ * ranges from before and is fitted from there. A fifth robot that is never
+ * heard takes no part. */
+static void test_survey_retry(void **state)
+{
+    (void)state;
+    static stats s;
+    memset(&s, 0, sizeof s);
+    bl_team *t = &team;
+    bl_config cfg;
+    robot_config(&cfg);
+    bl_team_params p;
+    assert_int_equal(bl_team_params_default(&p), BL_OK);
+    p.robots = 5;
+    assert_int_equal(bl_team_init(t, &cfg, &p), BL_OK);
+    replay(t, &static_run, 30000000, 1, 0, 2500000, &s);
+    assert_int_equal(s.errors, 0);
+    const bl_team_event *f = find_event(&s, BL_TEAM_EV_SURVEY_FAILED, 0);
+    assert_non_null(f);
+    assert_int_equal(f->robot, 1); /* the origin */
+    const bl_team_event *sv = find_event(&s, BL_TEAM_EV_SURVEYED, 0);
+    assert_non_null(sv);
+    assert_true(sv->t_us > f->t_us);
+    assert_true(s.have_survey);
+    assert_int_equal(s.survey.count, 5);
+    bl_team_robot_estimate e;
+    assert_int_equal(bl_team_robot(t, 5, 0, &e), BL_OK);
+    assert_false(e.valid);
+    const bl_team_event *mr = find_event(&s, BL_TEAM_EV_MIRROR_RESOLVED, 0);
+    assert_non_null(mr);
+    assert_false(mr->flipped);
+    const double rmse = sqrt(s.se[3] / (double)s.n[3]);
+    printf("survey retry: failed at %.2f s, surveyed at %.2f s; robot 4 RMSE %.4f m, max %.4f m\n",
+           (double)f->t_us * 1e-6, (double)sv->t_us * 1e-6, rmse, s.max_err[3]);
+    assert_true(s.n[3] > 200);
+    assert_true(s.max_err[3] < 0.05);
+}
+
 static void test_bad_input(void **state)
 {
     (void)state;
@@ -545,8 +585,12 @@ static void test_bad_input(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_static),     cmocka_unit_test(test_static_flipped), cmocka_unit_test(test_leapfrog),
-        cmocka_unit_test(test_lost_robot), cmocka_unit_test(test_bad_input),
+        cmocka_unit_test(test_static),
+        cmocka_unit_test(test_static_flipped),
+        cmocka_unit_test(test_leapfrog),
+        cmocka_unit_test(test_lost_robot),
+        cmocka_unit_test(test_survey_retry),
+        cmocka_unit_test(test_bad_input),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
