@@ -167,6 +167,8 @@ static double err_xy(const bl_team_robot_estimate *e, const double *truth, doubl
 
 /* The team's gauge is origin 2, axis 1 (team-static's truth is 1, 2). */
 static int swapped_gauge;
+/* params.refine_anchors off. */
+static int no_refinement;
 
 /* Replay d into t up to t_end_us; input of robot `cut` (0: none) dropped
  * between cut_from_us and cut_to_us. */
@@ -277,6 +279,7 @@ static void init_team(bl_team *t)
         p.origin_robot = 2;
         p.axis_robot = 1;
     }
+    p.refine_anchors = no_refinement ? 0 : 1;
     assert_int_equal(bl_team_init(t, &cfg, &p), BL_OK);
 }
 
@@ -396,6 +399,20 @@ static void run_static(int swapped)
     assert_true(st.ranges_rejected > 0); /* the multipath late arrivals */
     check_roles(&static_run, &s, 60000000);
     swapped_gauge = 0;
+
+    /* the same run without the anchors' refinement: the survey's error
+     * stays in the anchors (robot 3's 2.3 σ), robot 4 is worse */
+    static stats u;
+    memset(&u, 0, sizeof u);
+    no_refinement = 1;
+    init_team(t);
+    replay(t, &static_run, 60000000, 0, 0, 0, &u);
+    no_refinement = 0;
+    const double rmse_u = sqrt(u.se[3] / (double)u.n[3]), nees_u = u.nees[3] / (double)u.n[3];
+    printf("without the anchors' refinement: robot 4 RMSE %.4f m (ratio %.2f), mean NEES %.2f\n", rmse_u,
+           rmse_u / pcrb, nees_u);
+    assert_true(rmse < rmse_u);
+    assert_true(nees < nees_u);
 }
 
 static void test_static(void **state)
