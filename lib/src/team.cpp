@@ -20,9 +20,8 @@ namespace {
 // A range beyond this many times cfg.range.max_range_m is refused as bad
 // input (as bl_filter_fuse_range).
 constexpr real kMaxRangeFactor = real(1.5);
-// A range track increment larger than this is refused as bad input (m).
+// A track increment larger than this is refused as bad input (m).
 constexpr real kMaxIncrementM = real(10);
-constexpr int NT = 2 * BL_MAX_TEAM;
 
 bool valid_team(const bl_team *t) { return t != nullptr && t->magic_ == kTeamMagic; }
 
