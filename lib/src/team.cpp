@@ -67,37 +67,51 @@ uint32_t choose_anchors(const bl_team *t, uint32_t self, real x, real y, uint32_
     return k;
 }
 
-// The cross-covariance of a mover's position with anchor o, carried
-// through the beacons its consider filter ranged to: the mover's error is
-// A·e_b + (independent), A = C_pb Pbb⁺ (the linear-Gaussian regression of
-// its position error on the beacons' errors; Simon 2006 §7.5's consider
-// block C_pb), so cov(p, o) = A P_bo. C: 2 x NB (rows x, y; the filter's
-// slots), ids: the slots' robots, k slots.
-Mat<2, 2> carried_cross(const bl_team *t, const Mat<2, NB> &C, const uint32_t *ids, uint32_t k, uint32_t o)
+// A = C Pbb⁺ (2 x NB): the regression of the mover's position error on its
+// beacons' errors (slots ids[0..k-1]); Pbb⁺ by the eigen-decomposition
+// (linalg.hpp: no heap; the gauge's zero variances have zero eigenvalues).
+Mat<2, NB> regression(const bl_team *t, const Mat<2, NB> &C, const uint32_t *ids, uint32_t k)
 {
-    for (uint32_t s = 0; s < k; ++s)
-        if (ids[s] == o) return C.block<2, 2>(0, 2 * int(s));
     Mat<NB, NB> Pbb = Mat<NB, NB>::Zero();
-    Mat<NB, 2> Pbo = Mat<NB, 2>::Zero();
-    for (uint32_t a = 0; a < k; ++a) {
-        for (int r = 0; r < 2; ++r) {
+    for (uint32_t a = 0; a < k; ++a)
+        for (int r = 0; r < 2; ++r)
             for (uint32_t b = 0; b < k; ++b)
                 for (int c = 0; c < 2; ++c) Pbb(2 * int(a) + r, 2 * int(b) + c) = joint(t, ids[a], ids[b], r, c);
-            for (int c = 0; c < 2; ++c) Pbo(2 * int(a) + r, c) = joint(t, ids[a], o, r, c);
-        }
-    }
-    // Pbb⁺ by its eigen-decomposition (linalg.hpp: no heap); the gauge's
-    // zero variances (the origin robot) have zero eigenvalues.
     Mat<NB, NB> V;
     Mat<NB, NB> D = Pbb;
-    if (!symmetric_eigen<NB>(D, &V)) return Mat<2, 2>::Zero();
+    if (!symmetric_eigen<NB>(D, &V)) return Mat<2, NB>::Zero();
     real dmax = 0;
     for (int a = 0; a < NB; ++a) dmax = std::max(dmax, D(a, a));
     Mat<NB, NB> Dinv = Mat<NB, NB>::Zero();
     for (int a = 0; a < NB; ++a)
         if (D(a, a) > dmax * real(1e-9) && D(a, a) > real(0)) Dinv(a, a) = real(1) / D(a, a);
-    const Mat<NB, NB> Pinv = V.lazyProduct(Dinv).lazyProduct(V.transpose());
-    return C.lazyProduct(Pinv).lazyProduct(Pbo);
+    return C.lazyProduct(V.lazyProduct(Dinv).lazyProduct(V.transpose()));
+}
+
+// The cross-covariance of a mover's position with anchor o, carried
+// through the beacons its consider filter ranged to: the mover's error is
+// A·e_b + (independent), A = C_pb Pbb⁺ (the linear-Gaussian regression of
+// its position error on the beacons' errors; Simon 2006 §7.5's consider
+// block C_pb), so cov(p, o) = A P_bo; the block C itself for a beacon.
+// C: 2 x NB (rows x, y; the filter's slots), ids: the slots' robots, k slots.
+Mat<2, 2> carried_cross(const bl_team *t, const Mat<2, NB> &C, const uint32_t *ids, uint32_t k, uint32_t o)
+{
+    for (uint32_t s = 0; s < k; ++s)
+        if (ids[s] == o) return C.block<2, 2>(0, 2 * int(s));
+    Mat<NB, 2> Pbo = Mat<NB, 2>::Zero();
+    for (uint32_t a = 0; a < k; ++a)
+        for (int r = 0; r < 2; ++r)
+            for (int c = 0; c < 2; ++c) Pbo(2 * int(a) + r, c) = joint(t, ids[a], o, r, c);
+    return regression(t, C, ids, k).lazyProduct(Pbo);
+}
+
+// ... and with the ranges' scale error ε (team_anchors.cpp): A P_bε.
+Vec2 carried_scale_cross(const bl_team *t, const Mat<2, NB> &C, const uint32_t *ids, uint32_t k)
+{
+    Mat<NB, 1> Pbe = Mat<NB, 1>::Zero();
+    for (uint32_t a = 0; a < k; ++a)
+        for (int r = 0; r < 2; ++r) Pbe(2 * int(a) + r) = t->scale_cross_[2 * ids[a] + uint32_t(r)];
+    return regression(t, C, ids, k).lazyProduct(Pbe);
 }
 
 // Robot i's filter ranges to the current anchors (set or replaced).
@@ -193,7 +207,10 @@ void stop_moving(bl_team *t, uint32_t i, int64_t now_us)
             Mat<2, 2> X[BL_MAX_TEAM];
             for (uint32_t o = 0; o < t->p_.robots; ++o)
                 X[o] = (o != i && is_anchor(t, o)) ? carried_cross(t, C, ids, k, o) : Mat<2, 2>::Zero();
+            const Vec2 E = carried_scale_cross(t, C, ids, k);
             clear_cross(t, i);
+            t->scale_cross_[2 * i] = E(0);
+            t->scale_cross_[2 * i + 1] = E(1);
             for (uint32_t o = 0; o < t->p_.robots; ++o) {
                 if (o == i) continue;
                 for (int a = 0; a < 2; ++a)
