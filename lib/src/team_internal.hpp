@@ -5,6 +5,8 @@
 #ifndef BEACONLOC_TEAM_INTERNAL_HPP
 #define BEACONLOC_TEAM_INTERNAL_HPP
 
+#include <utility>
+
 #include "filter_internal.hpp"
 
 #if BL_WITH_TEAM
@@ -47,6 +49,19 @@ inline real joint(const bl_team *t, uint32_t i, uint32_t j, int r, int c)
 {
     return t->anchors_.joint_cov[(2 * i + uint32_t(r)) * (2 * BL_MAX_TEAM) + 2 * j + uint32_t(c)];
 }
+
+// Survey pair (i < j) index into bl_team.survey_r_: the row-major upper
+// triangle without the diagonal.
+inline int pair_index(uint32_t n, uint32_t i, uint32_t j)
+{
+    if (i > j) std::swap(i, j);
+    return int(i * n - i * (i + 1) / 2 + (j - i - 1));
+}
+
+// ---- team_survey.cpp
+// The survey's team solve at now_us (its window is over): the anchors, or
+// BL_TEAM_EV_SURVEY_FAILED and a new window.
+void team_survey(bl_team *t, int64_t now_us);
 
 // ---- team.cpp
 void team_push_event(bl_team *t, uint32_t kind, uint32_t robot0, int64_t t_us, real value, bool flipped = false,

@@ -79,7 +79,7 @@
  * between two moving robots) is counted, not an error.
  *
  * Size: sizeof(bl_team) with double and the default capacities
- * (BL_MAX_TEAM 8, BL_TEAM_MAX_BEACONS 4) is 75,944 B (74 KiB; 43,432 B
+ * (BL_MAX_TEAM 8, BL_TEAM_MAX_BEACONS 4) is 76,096 B (74 KiB; 43,504 B
  * with float; printed by tests/lib/test_team.c): BL_MAX_TEAM filters, the survey's
  * samples and the heading fit's buffer. Not thread-safe; instances are
  * independent.
@@ -306,9 +306,13 @@ int bl_team_odometry(bl_team *t, uint32_t robot, int64_t t_us, bl_real d_left_m,
 
 /* One range: robot `beacon` emitted at t_emit_us, robot `receiver` timed
  * the flight tof_s (s). res (may be NULL): the fusion result when it went
- * into a mover's filter (status ACCEPTED or REJECTED), else status
- * BUFFERED (kept for the survey or a heading fit) or, unused, REJECTED
- * with test_ratio 0.
+ * into a mover's filter or, between two anchors, into the anchors (status
+ * ACCEPTED or REJECTED by the gate; innovation in s for a filter, in m for
+ * the anchors), else status BUFFERED (kept for the survey or a heading
+ * fit) or, unused, REJECTED with test_ratio 0. Cost: one filter update
+ * (O((NX + 2·BL_TEAM_MAX_BEACONS)²)) or one anchors' update
+ * (O((2·BL_MAX_TEAM)²) plus the movers'); a heading fit every 5 kept
+ * ranges: O(72·BL_TEAM_FIT_MAX).
  * Errors (state untouched but the counter): BL_EINVAL (t NULL or not
  * initialised; beacon == receiver; tof not finite, negative, or its range
  * cfg.speed_of_sound_mps·tof beyond 1.5 x cfg.range.max_range_m:
