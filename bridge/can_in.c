@@ -207,6 +207,28 @@ void can_in_count_error_frame(struct can_in *ci, uint32_t id)
     ci->last_error_class = (uint16_t)(id & CAN_ERR_MASK);
 }
 
+int can_in_write(struct can_in *ci, uint32_t id, const uint8_t data[8])
+{
+    if (ci->fd < 0 || ci->link_down) {
+        ci->c.tx_errors++;
+        return -ENOTCONN;
+    }
+    struct can_frame f;
+    memset(&f, 0, sizeof f);
+    f.can_id = id & CAN_SFF_MASK;
+    f.can_dlc = 8;
+    memcpy(f.data, data, 8);
+    ssize_t n;
+    do n = write(ci->fd, &f, sizeof f);
+    while (n < 0 && errno == EINTR);
+    if (n == (ssize_t)sizeof f) {
+        ci->c.tx_frames++;
+        return 0;
+    }
+    ci->c.tx_errors++;
+    return n < 0 ? -errno : -EIO;
+}
+
 int can_in_read(struct can_in *ci, struct can_msg *msg)
 {
     if (ci->fd < 0)

@@ -33,6 +33,8 @@ struct can_in_counters {
     uint64_t bad_size;     /* reads of a size that is neither CAN_MTU nor CANFD_MTU */
     uint64_t downs;        /* interface lost (ENETDOWN/ENODEV/...) */
     uint64_t reopens;      /* opened again after a loss */
+    uint64_t tx_frames;    /* frames written (can_in_write) */
+    uint64_t tx_errors;    /* writes that failed (down, buffer full, bus error) */
 };
 
 struct can_in {
@@ -57,6 +59,13 @@ void can_in_init(struct can_in *ci, const char *ifname);
  * can_in_retry() tries again.
  */
 int can_in_open(struct can_in *ci);
+
+/* Write one classic frame (standard id, 8 bytes) to the bus, non-blocking:
+ * the bridge's only transmission (TEAM_COMMAND, bridge/team_out.c). 0, or
+ * -errno (counted in tx_errors): -ENOTCONN while down or in replay (no
+ * socket), -EAGAIN when the socket's send buffer is full (the frame is
+ * dropped, never waited for), -ENETDOWN, -ENOBUFS, ... */
+int can_in_write(struct can_in *ci, uint32_t id, const uint8_t data[8]);
 
 /* Open when closed, or check a down link; 0 when up, -errno otherwise. */
 int can_in_retry(struct can_in *ci);

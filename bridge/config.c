@@ -478,6 +478,11 @@ static int check_team(const struct bridge_config *cfg, struct parse_ctx *ctx)
              "%d beyond robots = %d", t->origin_robot, t->robots);
         return -1;
     }
+    if (t->leader > t->robots) {
+        fail(ctx, key_line_of(ctx, "team", "leader"), "team", "leader", "%d beyond robots = %d",
+             t->leader, t->robots);
+        return -1;
+    }
     if (t->axis_robot > t->robots || t->axis_robot == t->origin_robot) {
         fail(ctx, key_line_of(ctx, "team", "axis_robot"), "team", "axis_robot",
              "%d: one of robots 1..%d other than origin_robot %d", t->axis_robot, t->robots,

@@ -23,7 +23,8 @@ static void mav_readable(struct pollable *p)
     struct daemon *d = p->owner;
     const struct mav_pollable *mp = (const struct mav_pollable *)(void *)p;
     mav_links_readable(&d->links, &mp->which, now_local(d));
-    sync_mav_fds(d); /* input answered, or a name lookup's answer */
+    team_commands(d); /* an operator command in that input (team_out.c) */
+    sync_mav_fds(d);  /* input answered, or a name lookup's answer */
 }
 
 void sync_mav_fds(struct daemon *d)
@@ -151,6 +152,8 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->estimates_write_errors = d->csv.write_errors;
     r->stale_encoders = d->est.c.stale_encoders;
     r->tracks_unexpected = d->est.c.tracks_unexpected;
+    r->can_tx_frames = d->can.c.tx_frames;
+    r->can_tx_errors = d->can.c.tx_errors;
     r->team = team_site(d) ? &d->team : NULL;
     r->team_odometry_sent = d->team_odom_sent;
     bl_loc_status st; /* the published reset counter, with or without a filter running */

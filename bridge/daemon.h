@@ -93,6 +93,8 @@ struct daemon {
     struct estimator est;
     struct team team; /* a team site (est.team points here), else unused */
     uint64_t team_odom_sent;
+    uint8_t team_cmd_seq;      /* TEAM_COMMAND Sequence of the next command */
+    unsigned team_cmd_counter; /* TEAM_COMMAND frames sent (Counter modulo 16) */
     /* ODOMETRY and latency (odometry.c) */
     struct latency_hist lat;                  /* the whole run */
     struct latency_hist lat_interval;         /* since the previous status line */
@@ -170,6 +172,10 @@ void team_on_heartbeat(struct daemon *d);
  * became a team site, starts a new team; otherwise the team keeps its state
  * and the old tuning. */
 void team_reload(struct daemon *d, const struct bridge_config *nc, bool reinit);
+/* Operator commands taken from the endpoints (after their input): the
+ * leap-frog's start/pause/resume to the team leader (TEAM_COMMAND), each
+ * answered with COMMAND_ACK and a STATUSTEXT. */
+void team_commands(struct daemon *d);
 /* The host's HEARTBEAT status on a team site. */
 enum mav_out_state team_host_state(const struct daemon *d);
 

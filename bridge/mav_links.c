@@ -239,6 +239,26 @@ int mav_links_send_heartbeat_as(struct mav_links *l, unsigned sysid,
     SEND_ALL(l, mav_out_send_heartbeat_as(&k->out, sysid, system_status));
 }
 
+bool mav_links_take_command(struct mav_links *l, struct mav_command *cmd, int *link)
+{
+    for (int i = 0; i < l->n; i++)
+        if (mav_out_take_command(&l->link[i].out, cmd)) {
+            *link = i;
+            return true;
+        }
+    return false;
+}
+
+int mav_links_send_command_ack(struct mav_links *l, int link, uint16_t command,
+                               enum mav_out_result result, uint8_t target_sysid,
+                               uint8_t target_compid)
+{
+    if (link < 0 || link >= l->n)
+        return -EINVAL;
+    return mav_out_send_command_ack(&l->link[link].out, command, result, target_sysid,
+                                    target_compid);
+}
+
 int mav_links_send_statustext(struct mav_links *l, enum mav_out_severity severity, const char *text)
 {
     SEND_ALL(l, mav_out_send_statustext(&k->out, severity, text));
@@ -265,6 +285,8 @@ void mav_links_stats(const struct mav_links *l, struct mav_out_stats *sum)
         sum->rx_parse_errors += s->rx_parse_errors;
         sum->timesync_answered += s->timesync_answered;
         sum->reopens += s->reopens;
+        sum->commands_received += s->commands_received;
+        sum->commands_unsupported += s->commands_unsupported;
     }
 }
 

@@ -100,6 +100,16 @@ int mav_links_send_statustext(struct mav_links *l, enum mav_out_severity severit
 int mav_links_send_named_float(struct mav_links *l, const char *name, float value,
                                uint32_t time_boot_ms);
 
+/* An operator command taken from any endpoint (mav_out_take_command), once:
+ * true with *cmd and the endpoint it came from in *link. */
+bool mav_links_take_command(struct mav_links *l, struct mav_command *cmd, int *link);
+
+/* COMMAND_ACK on endpoint `link` only (where the command came from); as
+ * mav_out_send_command_ack, -EINVAL for a bad link. */
+int mav_links_send_command_ack(struct mav_links *l, int link, uint16_t command,
+                               enum mav_out_result result, uint8_t target_sysid,
+                               uint8_t target_compid);
+
 /* The counters of every endpoint, summed. */
 void mav_links_stats(const struct mav_links *l, struct mav_out_stats *sum);
 

@@ -56,6 +56,14 @@ _Static_assert(SAME(MAV_OUT_SEV_EMERGENCY, MAV_SEVERITY_EMERGENCY) &&
                    SAME(MAV_OUT_SEV_INFO, MAV_SEVERITY_INFO) &&
                    SAME(MAV_OUT_SEV_DEBUG, MAV_SEVERITY_DEBUG),
                "enum mav_out_severity differs from MAV_SEVERITY");
+_Static_assert(SAME(MAV_OUT_RESULT_ACCEPTED, MAV_RESULT_ACCEPTED) &&
+                   SAME(MAV_OUT_RESULT_TEMPORARILY_REJECTED, MAV_RESULT_TEMPORARILY_REJECTED) &&
+                   SAME(MAV_OUT_RESULT_DENIED, MAV_RESULT_DENIED) &&
+                   SAME(MAV_OUT_RESULT_UNSUPPORTED, MAV_RESULT_UNSUPPORTED) &&
+                   SAME(MAV_OUT_RESULT_FAILED, MAV_RESULT_FAILED) &&
+                   SAME(MAV_OUT_CMD_MISSION_START, MAV_CMD_MISSION_START) &&
+                   SAME(MAV_OUT_CMD_DO_PAUSE_CONTINUE, MAV_CMD_DO_PAUSE_CONTINUE),
+               "enum mav_out_result / MAV_OUT_CMD_* differ from MAVLink");
 #undef SAME
 _Static_assert(MAV_OUT_STATUSTEXT_MAX == MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN,
                "STATUSTEXT text length");
@@ -598,6 +606,26 @@ int mav_out_send_named_float(struct mav_out *m, const char *name, float value,
     return send_msg(m);
 }
 
+int mav_out_send_command_ack(struct mav_out *m, uint16_t command, enum mav_out_result result,
+                             uint8_t target_sysid, uint8_t target_compid)
+{
+    if (!m || (int)result < MAV_OUT_RESULT_ACCEPTED || (int)result > MAV_OUT_RESULT_FAILED)
+        return -EINVAL;
+    mavlink_msg_command_ack_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg,
+                                        command, (uint8_t)result, 0, 0, target_sysid,
+                                        target_compid);
+    return send_msg(m);
+}
+
+bool mav_out_take_command(struct mav_out *m, struct mav_command *out)
+{
+    if (!m || !m->cmd_pending)
+        return false;
+    *out = m->cmd;
+    m->cmd_pending = false;
+    return true;
+}
+
 /* ---- receiving --------------------------------------------------------- */
 
 static void dispatch(struct mav_out *m, const mavlink_message_t *msg, int64_t now_us)
@@ -623,6 +651,26 @@ static void dispatch(struct mav_out *m, const mavlink_message_t *msg, int64_t no
         if (mavlink_msg_heartbeat_get_autopilot(msg) != MAV_AUTOPILOT_INVALID)
             m->peer_sysid = msg->sysid;
         break;
+    case MAVLINK_MSG_ID_COMMAND_LONG: {
+        mavlink_command_long_t c;
+        mavlink_msg_command_long_decode(msg, &c);
+        if ((c.target_system != 0 && c.target_system != m->sysid) ||
+            (c.target_component != 0 && c.target_component != m->compid))
+            break; /* someone else's */
+        m->stats.commands_received++;
+        if (c.command == MAV_CMD_MISSION_START || c.command == MAV_CMD_DO_PAUSE_CONTINUE) {
+            m->cmd = (struct mav_command){.command = c.command,
+                                          .param1 = c.param1,
+                                          .source_sysid = msg->sysid,
+                                          .source_compid = msg->compid};
+            m->cmd_pending = true;
+        } else {
+            m->stats.commands_unsupported++;
+            mav_out_send_command_ack(m, c.command, MAV_OUT_RESULT_UNSUPPORTED, msg->sysid,
+                                     msg->compid);
+        }
+        break;
+    }
     default:
         break;
     }

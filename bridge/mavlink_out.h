@@ -90,9 +90,32 @@ struct mav_out_stats {
     uint64_t tx_no_peer; /* udpin: messages dropped because no peer has spoken yet */
     uint64_t rx_bytes;   /* bytes read from the endpoint */
     uint64_t rx_msgs;    /* MAVLink messages parsed (CRC good) */
-    uint64_t rx_parse_errors;   /* bad CRC / framing, as counted by the generated parser */
-    uint64_t timesync_answered; /* TIMESYNC requests (tc1 == 0) answered */
-    uint64_t reopens;           /* successful (re)opens after the first */
+    uint64_t rx_parse_errors;      /* bad CRC / framing, as counted by the generated parser */
+    uint64_t timesync_answered;    /* TIMESYNC requests (tc1 == 0) answered */
+    uint64_t reopens;              /* successful (re)opens after the first */
+    uint64_t commands_received;    /* COMMAND_LONG addressed to us */
+    uint64_t commands_unsupported; /* of those: answered MAV_RESULT_UNSUPPORTED at once */
+};
+
+/* An operator command addressed to us (COMMAND_LONG whose target_system is
+ * our system id or 0 and target_component ours or 0) that the caller
+ * decides (mav_out_take_command): the leap-frog's start and stop on a team
+ * site (docs/mavlink.md, "Operator commands"). */
+#define MAV_OUT_CMD_DO_PAUSE_CONTINUE 193 /* MAV_CMD_DO_PAUSE_CONTINUE: param1 0 pause, 1 go on */
+#define MAV_OUT_CMD_MISSION_START 300     /* MAV_CMD_MISSION_START */
+struct mav_command {
+    uint16_t command; /* MAV_OUT_CMD_* */
+    float param1;
+    uint8_t source_sysid, source_compid; /* who sent it (the COMMAND_ACK goes to them) */
+};
+
+/* COMMAND_ACK results (= MAVLink MAV_RESULT). */
+enum mav_out_result {
+    MAV_OUT_RESULT_ACCEPTED = 0,
+    MAV_OUT_RESULT_TEMPORARILY_REJECTED = 1,
+    MAV_OUT_RESULT_DENIED = 2,
+    MAV_OUT_RESULT_UNSUPPORTED = 3,
+    MAV_OUT_RESULT_FAILED = 4
 };
 
 /* Opaque space for the generated parser/packer state (mavlink_status_t and
@@ -109,8 +132,10 @@ struct mav_out {
     bool have_peer; /* UDP: destination known (udpout: resolved; udpin: someone spoke) */
     struct sockaddr_storage peer; /* UDP destination */
     socklen_t peer_len;
-    int peer_sysid;      /* system id of the last HEARTBEAT received, -1 if none */
-    uint8_t seq_as[256]; /* next sequence number of each other system we send as
+    int peer_sysid;         /* system id of the last HEARTBEAT received, -1 if none */
+    bool cmd_pending;       /* cmd holds a command the caller has not taken yet */
+    struct mav_command cmd; /* the latest one (an untaken one is replaced) */
+    uint8_t seq_as[256];    /* next sequence number of each other system we send as
                             (mav_out_send_*_as: a team's robots), by system id */
     struct mav_out_stats stats;
     _Alignas(16) unsigned char priv[MAV_OUT_PRIV_BYTES];
@@ -162,13 +187,24 @@ bool mav_out_is_up(const struct mav_out *m);
  * Read everything available (non-blocking, until EAGAIN), parse it with the
  * generated parser and answer what we answer:
  *   TIMESYNC with tc1 == 0  ->  TIMESYNC tc1 = now_us * 1000 (ns), ts1 echoed;
- *   HEARTBEAT               ->  remembered in peer_sysid (nothing sent).
+ *   HEARTBEAT               ->  remembered in peer_sysid (nothing sent);
+ *   COMMAND_LONG to us      ->  MAV_OUT_CMD_MISSION_START and _DO_PAUSE_CONTINUE kept
+ *                               for mav_out_take_command(); any other command
+ *                               answered COMMAND_ACK MAV_RESULT_UNSUPPORTED.
  * udpin: the sender of each datagram becomes the peer for all later sends.
  * Returns the number of MAVLink messages parsed (>= 0), or -errno on a read
  * error other than EAGAIN (a serial port that vanished closes the endpoint;
  * mav_out_retry() reopens it).
  */
 int mav_out_handle_input(struct mav_out *m, int64_t now_us);
+
+/* The command kept by mav_out_handle_input(), once: true with *out. */
+bool mav_out_take_command(struct mav_out *m, struct mav_command *out);
+
+/* COMMAND_ACK of `command` with `result` to target_sysid/compid (the
+ * command's source). -EINVAL for a bad result. */
+int mav_out_send_command_ack(struct mav_out *m, uint16_t command, enum mav_out_result result,
+                             uint8_t target_sysid, uint8_t target_compid);
 
 /* ---- messages ---------------------------------------------------------- */
 

@@ -45,6 +45,8 @@ static void replay_frame(struct daemon *d, struct can_msg *msg)
 
 static void replay_done(struct daemon *d, int rc)
 {
+    if (team_site(d)) /* the inputs still held for time order (team.h) */
+        team_flush(&d->team);
     drain_events(d);
     if (rc < 0)
         log_error("%s: read error: %s", d->opt.replay, strerror(-rc));

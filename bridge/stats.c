@@ -204,6 +204,8 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"survey_unexpected\": %llu,\n", (unsigned long long)r->survey_unexpected);
     if (r->survey)
         survey_write_json(r->survey, f);
+    fprintf(f, "  \"can_tx_frames\": %llu,\n", (unsigned long long)r->can_tx_frames);
+    fprintf(f, "  \"can_tx_errors\": %llu,\n", (unsigned long long)r->can_tx_errors);
     if (r->team)
         team_write_json(r->team, r->team_odometry_sent, f);
     fprintf(f, "  \"run_time_s\": %.3f\n", r->run_time_s);

@@ -232,6 +232,15 @@ void team_tick(struct team *t, int64_t now_us)
     }
 }
 
+void team_flush(struct team *t)
+{
+    if (t->robots == 0)
+        return;
+    release(t, INT64_MAX);
+    if (t->lib_now_us != INT64_MIN && bl_team_tick(&t->lib, t->lib_now_us) == BL_OK)
+        take_events(t);
+}
+
 /* ---- frames --------------------------------------------------------------- */
 
 /* The node clock of robot id (1..N), counting a restart it sees. */

@@ -73,7 +73,9 @@
 #define TEAM_MAX_TRACK_MPS 5.0               /* a faster track step is a glitch (m/s) */
 
 /* Every team frame in exactly one of the counters after ranges_in (ranges)
- * and tracks_in (track samples): see the top of this file. */
+ * and tracks_in (track samples), once handed on (see the top of this file);
+ * tracks_first counts the first samples of the robots among odometry_used
+ * and odometry_refused (the library only takes their time). */
 struct team_counters {
     uint64_t ranges_in;            /* RANGE frames on the team site */
     uint64_t ranges_unknown_robot; /* Beacon or Receiver beyond [team] robots */
@@ -173,6 +175,10 @@ void team_tracks(struct team *t, const struct frame_track_encoders *f, int64_t r
 /* Periodic work at bridge time now: held inputs whose hold ended, then the
  * library's tick at the held time. */
 void team_tick(struct team *t, int64_t now_us);
+
+/* The end of the input (a replay's last frame): every held input handed on
+ * and the library brought to the newest of them. */
+void team_flush(struct team *t);
 
 /* The team time the library has reached (inputs up to it handed on). */
 int64_t team_now(const struct team *t);

@@ -5,11 +5,18 @@
  * a HEARTBEAT per robot system id at 1 Hz, the team's events as STATUSTEXT
  * on the host's own system id, and one --estimates row per robot estimate
  * at every ODOMETRY tick (when the estimate is new since the robot's last
- * row). The estimation is bridge/team.c's.
+ * row). The estimation is bridge/team.c's. And the operator's start/stop of
+ * the leap-frog: a COMMAND_LONG to the host (MAV_CMD_MISSION_START starts,
+ * MAV_CMD_DO_PAUSE_CONTINUE param1 0 pauses, 1 resumes) forwarded to the
+ * team leader as a TEAM_COMMAND frame on the bus, answered with COMMAND_ACK
+ * (to the sender, on its endpoint) and a STATUSTEXT.
  */
 #include <errno.h>
 #include <math.h>
+#include <stdio.h>
+#include <string.h>
 
+#include "beaconloc_can.h" /* generated from the DBC: TEAM_COMMAND */
 #include "covariance.h"
 #include "daemon.h"
 #include "log.h"
@@ -135,4 +142,69 @@ enum mav_out_state team_host_state(const struct daemon *d)
     if (!d->team.surveyed)
         return MAV_OUT_STATE_BOOT;
     return d->team.mirror_resolved ? MAV_OUT_STATE_ACTIVE : MAV_OUT_STATE_STANDBY;
+}
+
+/* TEAM_COMMAND Command values (DBC). */
+enum team_command { TEAM_CMD_START = 1, TEAM_CMD_PAUSE = 2, TEAM_CMD_RESUME = 3 };
+
+static const char *command_name(enum team_command c)
+{
+    return c == TEAM_CMD_START ? "start" : c == TEAM_CMD_PAUSE ? "pause" : "resume";
+}
+
+/* One TEAM_COMMAND to the leader. 0 or -errno (not sent). */
+static int send_team_command(struct daemon *d, enum team_command c)
+{
+    struct beaconloc_can_team_command_t m = {
+        .command = (uint8_t)c,
+        .leader = (uint8_t)d->cfg.team.leader,
+        .sequence = d->team_cmd_seq,
+        .counter = (uint8_t)(d->team_cmd_counter % 16u),
+    };
+    uint8_t data[8];
+    if (beaconloc_can_team_command_pack(data, &m, sizeof data) != 8)
+        return -EINVAL;
+    int rc = can_in_write(&d->can, BEACONLOC_CAN_TEAM_COMMAND_FRAME_ID, data);
+    if (rc == 0) {
+        d->team_cmd_seq++;
+        d->team_cmd_counter++;
+    }
+    return rc;
+}
+
+void team_commands(struct daemon *d)
+{
+    struct mav_command c;
+    int link;
+    while (mav_links_take_command(&d->links, &c, &link)) {
+        enum team_command tc = c.command == MAV_OUT_CMD_MISSION_START ? TEAM_CMD_START
+                               : c.param1 == 0.0f                     ? TEAM_CMD_PAUSE
+                                                                      : TEAM_CMD_RESUME;
+        enum mav_out_result result;
+        char text[MAV_OUT_STATUSTEXT_MAX + 1];
+        if (!team_site(d)) {
+            result = MAV_OUT_RESULT_UNSUPPORTED;
+            snprintf(text, sizeof text, "leap-frog %s: no team here", command_name(tc));
+        } else {
+            int rc = send_team_command(d, tc);
+            if (rc == 0) {
+                result = MAV_OUT_RESULT_ACCEPTED;
+                snprintf(text, sizeof text, "leap-frog %s sent to robot %d", command_name(tc),
+                         d->cfg.team.leader);
+            } else {
+                /* CAN down, replay, a full send buffer: the operator may retry */
+                result = MAV_OUT_RESULT_TEMPORARILY_REJECTED;
+                snprintf(text, sizeof text, "leap-frog %s not sent: %s", command_name(tc),
+                         strerror(-rc));
+            }
+        }
+        mav_links_send_command_ack(&d->links, link, c.command, result, c.source_sysid,
+                                   c.source_compid);
+        if (result == MAV_OUT_RESULT_ACCEPTED)
+            log_info("%s", text);
+        else
+            log_warn("%s", text);
+        statustext(d, result == MAV_OUT_RESULT_ACCEPTED ? MAV_OUT_SEV_NOTICE : MAV_OUT_SEV_WARNING,
+                   text);
+    }
 }

@@ -436,9 +436,10 @@ def _repeated(ini: IniFile, sec: str, segments: list, realization_s: float) -> l
     return segments
 
 
-def _fault_keys(ini: IniFile) -> dict[str, list[str]]:
-    """[faults] keys per kind: KIND or KINDN (N digits), in file order; others are errors."""
-    kinds = {k: [] for k in sorted(_KNOWN["faults"])}
+def _fault_keys(ini: IniFile, known=None) -> dict[str, list[str]]:
+    """[faults] keys per kind (known: the kinds, by default a single-robot scenario's): KIND or
+    KINDN (N digits), in file order; others are errors."""
+    kinds = {k: [] for k in sorted(_KNOWN["faults"] if known is None else known)}
     if not ini.has("faults"):
         return kinds
     for key in ini.parser.options("faults"):

@@ -19,7 +19,7 @@ from .leapfrog import LeapfrogParams, Leap, PlanError, RoleChange, plan_leapfrog
 from .path import Trajectory
 from .physics import acoustics as ac
 from .resources import SCENARIO_SUFFIX as SUFFIX
-from .scenario import _read_segments, resolve, temperature_profile
+from .scenario import _fault_keys, _read_segments, resolve, temperature_profile
 from .site import Site, load_site
 
 ROLES = ("beacon", "receiver", "mover")   # mover: a receiver that drives (its [robotN] path)
@@ -36,6 +36,7 @@ _KNOWN = {
     "ranges": {"dropout_probability", "multipath_probability"},
     "clocks": {"node_latency_s", "bus_bitrate_bps"},
     "output": {"truth_rate_hz", "log_epoch_s", "channel"},
+    "faults": {"robot_silence"},      # each once or numbered (robot_silence2, ...): one window
     # [robotN] (N = 1..robots): _ROBOT_KEYS; [obstacles]: segmentN = x1_m, y1_m, x2_m, y2_m
 }
 
@@ -76,6 +77,9 @@ class TeamScenario:
     goal_m: tuple | None = None          # leapfrog goal (x, y), m
     plan_end_s: float = 0.0              # the last planned move's end, s
     obstacles_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    # [faults] robot_silence: (start_s, duration_s, robot ids), in time order: the robots' range
+    # modules and track encoders send nothing and the leader skips them (a lost robot)
+    robot_silences: tuple = ()
     truth_rate_hz: float = 10.0
     log_epoch_s: float = 1_700_000_000.0
     channel: str = "vcan0"
@@ -96,6 +100,18 @@ class TeamScenario:
     def robot(self, robot_id: int) -> Robot:
         return self.robots[self.robot_ids.index(robot_id)]
 
+    def silent_mask(self, t_s) -> np.ndarray:
+        """(len(t), N): robot (in id order) is silent at true time t (inside a robot_silence
+        window [start, start + duration)): it neither pings nor answers nor sends odometry."""
+        t = np.atleast_1d(np.asarray(t_s, dtype=float))
+        ids = self.robot_ids
+        out = np.zeros((len(t), len(ids)), dtype=bool)
+        for start, dur, robots in self.robot_silences:
+            inside = (t >= start) & (t < start + dur)
+            for r in robots:
+                out[inside, ids.index(r)] = True
+        return out
+
     def beacon_mask(self, t_s) -> np.ndarray:
         """(len(t), N): robot (in id order) is a beacon at true time t (the latest role change
         at or before t)."""
@@ -114,7 +130,8 @@ def load_team_scenario(name_or_path: str, *, seed: int | None = None,
     if not ini.has("team"):
         raise ConfigError(f"{path.name}: no [team] section: not a team scenario")
     for sec, known in _KNOWN.items():
-        ini.check_known(sec, known)
+        if sec != "faults":
+            ini.check_known(sec, known)
     n = ini.integer("team", "robots", minimum=3, maximum=MAX_ROBOTS)
     robot_secs = {f"robot{i}" for i in range(1, n + 1)}
     for sec in ini.parser.sections():
@@ -208,6 +225,7 @@ def load_team_scenario(name_or_path: str, *, seed: int | None = None,
     xy = ini.numbers("team", "bound_prior", 2, default=[1.0, math.degrees(0.5)])
     if not (xy[0] > 0 and xy[1] > 0):
         raise ini.error("team", "bound_prior", "expected sigma_xy_m, sigma_heading_deg > 0")
+    silences = _robot_silences(ini, n, leader)
     latency = tuple(ini.numbers("clocks", "node_latency_s", 2, default=[0.0001, 0.0004]))
     if not 0 <= latency[0] <= latency[1]:
         raise ini.error("clocks", "node_latency_s", "expected 'min, max' with 0 <= min <= max")
@@ -231,10 +249,31 @@ def load_team_scenario(name_or_path: str, *, seed: int | None = None,
         bound_prior=(xy[0], math.radians(xy[1])),
         leaps=leaps, goal_m=goal, plan_end_s=plan_end,
         obstacles_m=np.array(obstacles, dtype=float).reshape(-1, 4),
+        robot_silences=silences,
         truth_rate_hz=ini.number("output", "truth_rate_hz", 10.0, positive=True, maximum=1000),
         log_epoch_s=ini.number("output", "log_epoch_s", 1_700_000_000.0, minimum=0),
         channel=ini.raw("output", "channel", "vcan0"),
     )
+
+
+def _robot_silences(ini: IniFile, n: int, leader: int) -> tuple:
+    """[faults] robot_silence = start_s, duration_s, robot id[, id ...] (numbered for more
+    windows), as the single-robot beacon_outage: the robots stop answering (issue 13's lost
+    robot). The leader cannot be silenced: its clock times every ping."""
+    out = []
+    for key in _fault_keys(ini, _KNOWN["faults"])["robot_silence"]:
+        vals = ini.numbers("faults", key)
+        if len(vals) < 3 or vals[0] < 0 or not vals[1] > 0:
+            raise ini.error("faults", key, "expected 'start_s >= 0, duration_s > 0, robot id"
+                            "[, id ...]'")
+        ids = vals[2:]
+        if any(v != int(v) or not 1 <= v <= n for v in ids):
+            raise ini.error("faults", key, f"robot ids must be integers 1..{n}")
+        if leader in ids:
+            raise ini.error("faults", key, f"robot {leader} is the leader (its clock times the "
+                            "pings): it cannot be silenced")
+        out.append((vals[0], vals[1], tuple(sorted({int(v) for v in ids}))))
+    return tuple(sorted(out))
 
 
 __all__ = ["Robot", "TeamScenario", "load_team_scenario", "Leap", "RoleChange", "ROLES"]

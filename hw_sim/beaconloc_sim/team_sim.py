@@ -171,6 +171,8 @@ def roles_document(res: TeamResult) -> dict:
         "leaps": [{"t_start_s": lp.t_start_s, "t_end_s": lp.t_end_s, "robot": lp.robot,
                    "replaced": lp.replaced, "target_site_m": list(lp.target_m),
                    "beacons": list(lp.beacons)} for lp in tscn.leaps],
+        "robot_silences": [{"t_start_s": start, "t_end_s": start + dur, "robots": list(robots)}
+                           for start, dur, robots in tscn.robot_silences],
     }
 
 
@@ -188,6 +190,7 @@ def team_stats(res: TeamResult, wall_time_s: float) -> dict:
                        "direct": int(np.sum(r.direct)),
                        "multipath": int(np.sum(r.sent & r.multipath)),
                        "dropout": int(np.sum(r.dropout)), "occluded": int(np.sum(r.occluded)),
-                       "out_of_range": int(np.sum(r.out_of_range))},
+                       "out_of_range": int(np.sum(r.out_of_range)),
+                       "silent": int(np.sum(r.silent))},
             "role_changes": len(res.scenario.role_changes), "leaps": len(res.scenario.leaps),
             "wall_time_s": wall_time_s}

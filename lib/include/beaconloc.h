@@ -11,6 +11,7 @@
 #include "beaconloc/fusion.h"
 #include "beaconloc/solver.h"
 #include "beaconloc/filter.h"
+#include "beaconloc/team.h"
 #include "beaconloc/filter_model.h"
 #include "beaconloc/sequencer.h"
 #include "beaconloc/localizer.h"

@@ -20,25 +20,10 @@ namespace {
 // A range beyond this many times cfg.range.max_range_m is refused as bad
 // input (as bl_filter_fuse_range).
 constexpr real kMaxRangeFactor = real(1.5);
-// Survey outliers: a range further than this many robust σ from its pair's
-// median is a multipath late arrival (Millibots §3.2). The robust σ is
-// 1.4826·MAD (the normal consistency constant; Huber 1981 §5.1), floored at
-// the range σ model.
-constexpr real kSurveyOutlierSigma = real(3);
-constexpr real kMadToSigma = real(1.4826);
-// A range track increment larger than this is refused as bad input (m).
+// A track increment larger than this is refused as bad input (m).
 constexpr real kMaxIncrementM = real(10);
-constexpr int NB = 2 * BL_TEAM_MAX_BEACONS;
-constexpr int NT = 2 * BL_MAX_TEAM;
 
 bool valid_team(const bl_team *t) { return t != nullptr && t->magic_ == kTeamMagic; }
-
-int pair_index(uint32_t n, uint32_t i, uint32_t j)
-{
-    if (i > j) std::swap(i, j);
-    // row-major upper triangle without the diagonal
-    return int(i * n - i * (i + 1) / 2 + (j - i - 1));
-}
 
 void set_role(bl_team *t, uint32_t i, int64_t now_us)
 {
@@ -82,37 +67,51 @@ uint32_t choose_anchors(const bl_team *t, uint32_t self, real x, real y, uint32_
     return k;
 }
 
-// The cross-covariance of a mover's position with anchor o, carried
-// through the beacons its consider filter ranged to: the mover's error is
-// A·e_b + (independent), A = C_pb Pbb⁺ (the linear-Gaussian regression of
-// its position error on the beacons' errors; Simon 2006 §7.5's consider
-// block C_pb), so cov(p, o) = A P_bo. C: 2 x NB (rows x, y; the filter's
-// slots), ids: the slots' robots, k slots.
-Mat<2, 2> carried_cross(const bl_team *t, const Mat<2, NB> &C, const uint32_t *ids, uint32_t k, uint32_t o)
+// A = C Pbb⁺ (2 x NB): the regression of the mover's position error on its
+// beacons' errors (slots ids[0..k-1]); Pbb⁺ by the eigen-decomposition
+// (linalg.hpp: no heap; the gauge's zero variances have zero eigenvalues).
+Mat<2, NB> regression(const bl_team *t, const Mat<2, NB> &C, const uint32_t *ids, uint32_t k)
 {
-    for (uint32_t s = 0; s < k; ++s)
-        if (ids[s] == o) return C.block<2, 2>(0, 2 * int(s));
     Mat<NB, NB> Pbb = Mat<NB, NB>::Zero();
-    Mat<NB, 2> Pbo = Mat<NB, 2>::Zero();
-    for (uint32_t a = 0; a < k; ++a) {
-        for (int r = 0; r < 2; ++r) {
+    for (uint32_t a = 0; a < k; ++a)
+        for (int r = 0; r < 2; ++r)
             for (uint32_t b = 0; b < k; ++b)
                 for (int c = 0; c < 2; ++c) Pbb(2 * int(a) + r, 2 * int(b) + c) = joint(t, ids[a], ids[b], r, c);
-            for (int c = 0; c < 2; ++c) Pbo(2 * int(a) + r, c) = joint(t, ids[a], o, r, c);
-        }
-    }
-    // Pbb⁺ by its eigen-decomposition (linalg.hpp: no heap); the gauge's
-    // zero variances (the origin robot) have zero eigenvalues.
     Mat<NB, NB> V;
     Mat<NB, NB> D = Pbb;
-    if (!symmetric_eigen<NB>(D, &V)) return Mat<2, 2>::Zero();
+    if (!symmetric_eigen<NB>(D, &V)) return Mat<2, NB>::Zero();
     real dmax = 0;
     for (int a = 0; a < NB; ++a) dmax = std::max(dmax, D(a, a));
     Mat<NB, NB> Dinv = Mat<NB, NB>::Zero();
     for (int a = 0; a < NB; ++a)
         if (D(a, a) > dmax * real(1e-9) && D(a, a) > real(0)) Dinv(a, a) = real(1) / D(a, a);
-    const Mat<NB, NB> Pinv = V.lazyProduct(Dinv).lazyProduct(V.transpose());
-    return C.lazyProduct(Pinv).lazyProduct(Pbo);
+    return C.lazyProduct(V.lazyProduct(Dinv).lazyProduct(V.transpose()));
+}
+
+// The cross-covariance of a mover's position with anchor o, carried
+// through the beacons its consider filter ranged to: the mover's error is
+// A·e_b + (independent), A = C_pb Pbb⁺ (the linear-Gaussian regression of
+// its position error on the beacons' errors; Simon 2006 §7.5's consider
+// block C_pb), so cov(p, o) = A P_bo; the block C itself for a beacon.
+// C: 2 x NB (rows x, y; the filter's slots), ids: the slots' robots, k slots.
+Mat<2, 2> carried_cross(const bl_team *t, const Mat<2, NB> &C, const uint32_t *ids, uint32_t k, uint32_t o)
+{
+    for (uint32_t s = 0; s < k; ++s)
+        if (ids[s] == o) return C.block<2, 2>(0, 2 * int(s));
+    Mat<NB, 2> Pbo = Mat<NB, 2>::Zero();
+    for (uint32_t a = 0; a < k; ++a)
+        for (int r = 0; r < 2; ++r)
+            for (int c = 0; c < 2; ++c) Pbo(2 * int(a) + r, c) = joint(t, ids[a], o, r, c);
+    return regression(t, C, ids, k).lazyProduct(Pbo);
+}
+
+// ... and with the ranges' scale error ε (team_anchors.cpp): A P_bε.
+Vec2 carried_scale_cross(const bl_team *t, const Mat<2, NB> &C, const uint32_t *ids, uint32_t k)
+{
+    Mat<NB, 1> Pbe = Mat<NB, 1>::Zero();
+    for (uint32_t a = 0; a < k; ++a)
+        for (int r = 0; r < 2; ++r) Pbe(2 * int(a) + r) = t->scale_cross_[2 * ids[a] + uint32_t(r)];
+    return regression(t, C, ids, k).lazyProduct(Pbe);
 }
 
 // Robot i's filter ranges to the current anchors (set or replaced).
@@ -176,6 +175,7 @@ void clear_cross(bl_team *t, uint32_t i)
         for (int r = 0; r < 2; ++r)
             for (int c = 0; c < 2; ++c) joint(t, i, j, r, c) = joint(t, j, i, c, r) = 0;
     }
+    t->scale_cross_[2 * i] = t->scale_cross_[2 * i + 1] = 0;
 }
 
 void set_own_cov(bl_team *t, uint32_t i, real xx, real xy, real yy)
@@ -207,7 +207,10 @@ void stop_moving(bl_team *t, uint32_t i, int64_t now_us)
             Mat<2, 2> X[BL_MAX_TEAM];
             for (uint32_t o = 0; o < t->p_.robots; ++o)
                 X[o] = (o != i && is_anchor(t, o)) ? carried_cross(t, C, ids, k, o) : Mat<2, 2>::Zero();
+            const Vec2 E = carried_scale_cross(t, C, ids, k);
             clear_cross(t, i);
+            t->scale_cross_[2 * i] = E(0);
+            t->scale_cross_[2 * i + 1] = E(1);
             for (uint32_t o = 0; o < t->p_.robots; ++o) {
                 if (o == i) continue;
                 for (int a = 0; a < 2; ++a)
@@ -271,138 +274,6 @@ void start_moving(bl_team *t, uint32_t i, int64_t now_us)
     refresh_movers(t);
 }
 
-void do_survey(bl_team *t, int64_t now_us)
-{
-    const uint32_t n = t->p_.robots;
-    const bl_config *cfg = &t->cfg_;
-    t->st_.surveys += 1;
-    // Per pair: median, robust σ, the inliers' mean and its σ.
-    bl_real mean[BL_MAX_TEAM][BL_MAX_TEAM], sig[BL_MAX_TEAM][BL_MAX_TEAM];
-    uint32_t links[BL_MAX_TEAM] = {};
-    for (uint32_t i = 0; i < n; ++i)
-        for (uint32_t j = 0; j < n; ++j) mean[i][j] = sig[i][j] = std::numeric_limits<real>::quiet_NaN();
-    for (uint32_t i = 0; i < n; ++i)
-        for (uint32_t j = i + 1; j < n; ++j) {
-            const int pi = pair_index(n, i, j);
-            const uint32_t m = std::min<uint32_t>(t->survey_n_[pi], BL_TEAM_SURVEY_PINGS);
-            if (m == 0) continue;
-            real v[BL_TEAM_SURVEY_PINGS], dev[BL_TEAM_SURVEY_PINGS];
-            for (uint32_t k = 0; k < m; ++k) v[k] = t->survey_r_[pi][k];
-            std::sort(v, v + m);
-            const real med = (m % 2) ? v[m / 2] : real(0.5) * (v[m / 2 - 1] + v[m / 2]);
-            for (uint32_t k = 0; k < m; ++k) dev[k] = std::fabs(v[k] - med);
-            std::sort(dev, dev + m);
-            const real mad = (m % 2) ? dev[m / 2] : real(0.5) * (dev[m / 2 - 1] + dev[m / 2]);
-            const real rs = std::max(kMadToSigma * mad, range_sigma_m(cfg, med));
-            real sum = 0;
-            uint32_t kept = 0;
-            for (uint32_t k = 0; k < m; ++k)
-                if (std::fabs(v[k] - med) <= kSurveyOutlierSigma * rs) {
-                    sum += v[k];
-                    ++kept;
-                }
-            t->st_.ranges_survey_outliers += m - kept;
-            if (kept == 0) continue;
-            const real r = sum / real(kept);
-            // σ of the mean: the range σ over √n, plus the speed of sound's
-            // share, common to every ping: r·σ_s/s.
-            const real sr = range_sigma_m(cfg, r);
-            const real ss = r * cfg->sigma_speed_of_sound_mps / cfg->speed_of_sound_mps;
-            mean[i][j] = mean[j][i] = r;
-            sig[i][j] = sig[j][i] = std::sqrt(sr * sr / real(kept) + ss * ss);
-            links[i] += 1;
-            links[j] += 1;
-        }
-    // The robots that take part: the gauge's two and every robot with at
-    // least 2 measured pairs (bl_solve_team's placement), iterated.
-    bool in[BL_MAX_TEAM];
-    for (uint32_t i = 0; i < n; ++i) in[i] = links[i] >= 2;
-    const uint32_t o = t->p_.origin_robot - 1, a = t->p_.axis_robot - 1;
-    for (bool changed = true; changed;) {
-        changed = false;
-        for (uint32_t i = 0; i < n; ++i) {
-            if (!in[i]) continue;
-            uint32_t l = 0;
-            for (uint32_t j = 0; j < n; ++j)
-                if (j != i && in[j] && is_finite(mean[i][j])) ++l;
-            if (l < 2) {
-                in[i] = false;
-                changed = true;
-            }
-        }
-    }
-    uint32_t map[BL_MAX_TEAM], cnt = 0;  // problem index -> robot
-    for (uint32_t i = 0; i < n; ++i)
-        if (in[i]) map[cnt++] = i;
-    int rc = BL_EDEGENERATE;
-    uint32_t failed = BL_TEAM_NONE;
-    bl_team_problem prob;
-    bl_team_solution sol;
-    if (cnt >= 3 && in[o] && in[a]) {
-        std::memset(&prob, 0, sizeof prob);
-        prob.count = cnt;
-        for (uint32_t p = 0; p < BL_MAX_TEAM; ++p)
-            for (uint32_t q = 0; q < BL_MAX_TEAM; ++q) {
-                prob.range_m[p][q] = std::numeric_limits<real>::quiet_NaN();
-                prob.sigma_m[p][q] = std::numeric_limits<real>::quiet_NaN();
-            }
-        for (uint32_t p = 0; p < cnt; ++p) {
-            if (map[p] == o) prob.origin = p;
-            if (map[p] == a) prob.axis = p;
-            for (uint32_t q = 0; q < cnt; ++q) {
-                if (p == q || !is_finite(mean[map[p]][map[q]])) continue;
-                prob.range_m[p][q] = mean[map[p]][map[q]];
-                prob.sigma_m[p][q] = sig[map[p]][map[q]];
-            }
-        }
-        rc = bl_solve_team(&prob, &sol);
-        if (rc == BL_EDEGENERATE && sol.failed_robot != BL_TEAM_NONE && sol.failed_robot < cnt)
-            failed = map[sol.failed_robot];
-        if (rc == BL_OK && !sol.chi2_ok) rc = 1;
-    } else {
-        failed = !in[o] ? o : (!in[a] ? a : BL_TEAM_NONE);
-    }
-    if (rc != BL_OK) {
-        team_push_event(t, BL_TEAM_EV_SURVEY_FAILED, failed == BL_TEAM_NONE ? BL_TEAM_NONE : failed, now_us, real(rc));
-        // a new window from the next range
-        std::memset(t->survey_n_, 0, sizeof t->survey_n_);
-        t->t_start_us_ = kNoTime;
-        for (uint32_t i = 0; i < n; ++i) t->r_[i].flags &= ~kRobotSurveyMoved;
-        return;
-    }
-    // The anchors: the solution mapped onto robot indices.
-    bl_team_solution &an = t->anchors_;
-    std::memset(&an, 0, sizeof an);
-    an.count = n;
-    an.ranges_used = sol.ranges_used;
-    an.dof = sol.dof;
-    an.residual_rms_m = sol.residual_rms_m;
-    an.chi2 = sol.chi2;
-    an.chi2_limit = sol.chi2_limit;
-    an.chi2_ok = sol.chi2_ok;
-    an.iterations = sol.iterations;
-    an.mirror_unresolved = true;
-    an.failed_robot = BL_TEAM_NONE;
-    for (uint32_t p = 0; p < cnt; ++p) {
-        const uint32_t i = map[p];
-        an.x_m[i] = sol.x_m[p];
-        an.y_m[i] = sol.y_m[p];
-        for (int k = 0; k < 4; ++k) an.cov[i][k] = sol.cov[p][k];
-        for (uint32_t q = 0; q < cnt; ++q)
-            for (int r = 0; r < 2; ++r)
-                for (int c = 0; c < 2; ++c)
-                    joint(t, i, map[q], r, c) = sol.joint_cov[(2 * p + uint32_t(r)) * NT + 2 * q + uint32_t(c)];
-        t->r_[i].flags |= kRobotValid;
-    }
-    t->phase_ = BL_TEAM_PHASE_MIRROR;
-    t->st_.ranges_survey += 0;
-    team_push_event(t, BL_TEAM_EV_SURVEYED, BL_TEAM_NONE, now_us,
-                    sol.chi2_limit > real(0) ? sol.chi2 / sol.chi2_limit : real(0));
-    for (uint32_t i = 0; i < n; ++i) t->r_[i].flags &= ~kRobotSurveyMoved;
-    // movers that started during the survey: the fitting one tries now
-    if (t->fit_robot_ != BL_TEAM_NONE) team_fit_try(t, now_us, false);
-}
-
 // Periodic work at now_us (team.h bl_team_tick).
 void tick(bl_team *t, int64_t now_us)
 {
@@ -410,16 +281,23 @@ void tick(bl_team *t, int64_t now_us)
     t->now_us_ = now_us;
     if (t->phase_ == BL_TEAM_PHASE_SURVEYING && t->t_start_us_ != kNoTime &&
         now_us - t->t_start_us_ >= int64_t(t->p_.survey_s * real(1e6)))
-        do_survey(t, now_us);
+        team_survey(t, now_us);
     const int64_t settle_us = int64_t(t->p_.settle_s * real(1e6));
     const int64_t lost_us = int64_t(t->p_.lost_s * real(1e6));
     for (uint32_t i = 0; i < t->p_.robots; ++i) {
         bl_team_robot_ &r = t->r_[i];
         if (!(r.flags & kRobotHeard) || (r.flags & kRobotLost)) continue;
         if (now_us - r.last_heard_us > lost_us) {
+            // a running filter's last estimate is kept as its position; a
+            // mover in its heading fit has none
+            if (r.flags & kRobotRunning) {
+                stop_moving(t, i, now_us);
+            } else if (t->fit_robot_ == i) {
+                t->fit_robot_ = BL_TEAM_NONE;
+                r.flags &= ~kRobotValid;
+            }
             r.flags |= kRobotLost;
             r.flags &= ~(kRobotMoving | kRobotRunning | kRobotHeading);
-            if (t->fit_robot_ == i) t->fit_robot_ = BL_TEAM_NONE;
             team_push_event(t, BL_TEAM_EV_ROBOT_LOST, i, now_us, real(0));
             refresh_movers(t);
             continue;
@@ -510,6 +388,7 @@ bool bl::team_start_filter(bl_team *t, uint32_t i, int64_t t_us, real x, real y,
 void bl::team_flip(bl_team *t, int64_t t_us)
 {
     (void)bl_team_mirror(&t->anchors_, &t->anchors_);
+    for (int k = 1; k < 2 * BL_MAX_TEAM; k += 2) t->scale_cross_[k] = -t->scale_cross_[k];
     for (uint32_t i = 0; i < t->p_.robots; ++i) {
         bl_team_robot_ &r = t->r_[i];
         if (r.flags & kRobotHeading) r.theta_rad = -r.theta_rad;
@@ -541,6 +420,7 @@ extern "C" int bl_team_params_default(bl_team_params *p)
     p->fit_max_rms_sigma = real(3);
     p->back_sigma_m = real(0.1);
     p->emitter_height_m = std::numeric_limits<real>::quiet_NaN();
+    p->refine_anchors = 1;
     return BL_OK;
 }
 
@@ -560,7 +440,7 @@ extern "C" int bl_team_init(bl_team *t, const bl_config *robot_cfg, const bl_tea
                         q.fit_min_turn_rad, q.mirror_min_delta_chi2, q.fit_max_rms_sigma};
     for (real v : pos)
         if (!is_finite(v) || !(v > real(0)) || v > real(3600)) return BL_EINVAL;
-    if (!(q.lost_s > q.role_timeout_s)) return BL_EINVAL;
+    if (!(q.lost_s > q.role_timeout_s) || q.refine_anchors > 1) return BL_EINVAL;
     if (!is_finite(q.fit_slip_m_per_sqrt_m) || q.fit_slip_m_per_sqrt_m < 0 || !is_finite(q.back_sigma_m) ||
         q.back_sigma_m < 0)
         return BL_EINVAL;
@@ -700,6 +580,18 @@ extern "C" int bl_team_range(bl_team *t, uint32_t beacon, uint32_t receiver, int
             t->st_.ranges_fit += 1;
             out.status = BL_FUSION_BUFFERED;
             used = true;
+        }
+    }
+    // Two standing robots after the survey: the anchors refined.
+    if (!used && t->p_.refine_anchors && t->phase_ != BL_TEAM_PHASE_SURVEYING && is_anchor(t, b) && is_anchor(t, rcv)) {
+        const real dz = t->p_.emitter_height_m - t->cfg_.range.height_m;
+        const real planar = std::sqrt(std::max(range_m * range_m - dz * dz, real(0)));
+        if (team_anchor_range(t, b, rcv, planar, &out)) {
+            used = true;
+            if (out.status == BL_FUSION_ACCEPTED)
+                t->st_.ranges_anchors += 1;
+            else
+                t->st_.ranges_rejected += 1;
         }
     }
     if (!used) t->st_.ranges_unused += 1;

@@ -5,6 +5,8 @@
 #ifndef BEACONLOC_TEAM_INTERNAL_HPP
 #define BEACONLOC_TEAM_INTERNAL_HPP
 
+#include <utility>
+
 #include "filter_internal.hpp"
 
 #if BL_WITH_TEAM
@@ -48,6 +50,19 @@ inline real joint(const bl_team *t, uint32_t i, uint32_t j, int r, int c)
     return t->anchors_.joint_cov[(2 * i + uint32_t(r)) * (2 * BL_MAX_TEAM) + 2 * j + uint32_t(c)];
 }
 
+// Survey pair (i < j) index into bl_team.survey_r_: the row-major upper
+// triangle without the diagonal.
+inline int pair_index(uint32_t n, uint32_t i, uint32_t j)
+{
+    if (i > j) std::swap(i, j);
+    return int(i * n - i * (i + 1) / 2 + (j - i - 1));
+}
+
+// ---- team_survey.cpp
+// The survey's team solve at now_us (its window is over): the anchors, or
+// BL_TEAM_EV_SURVEY_FAILED and a new window.
+void team_survey(bl_team *t, int64_t now_us);
+
 // ---- team.cpp
 void team_push_event(bl_team *t, uint32_t kind, uint32_t robot0, int64_t t_us, real value, bool flipped = false,
                      uint32_t role = 0);
@@ -59,6 +74,15 @@ bool team_start_filter(bl_team *t, uint32_t i, int64_t t_us, real x, real y, rea
 // Flip the team frame (y -> -y): the anchors (bl_team_mirror), the known
 // headings, and every running filter restarted in the reflection.
 void team_flip(bl_team *t, int64_t t_us);
+
+// ---- team_anchors.cpp
+// ε = 0 with σ_s/s, uncorrelated with the anchors (after a survey).
+void team_anchors_reset_scale(bl_team *t);
+// One range (m, planar) between the standing robots i and j into the
+// anchors and the running movers; false when it could not be used (the
+// robots on one point, a non-finite result), else *out: ACCEPTED or
+// REJECTED (the gate).
+bool team_anchor_range(bl_team *t, uint32_t i, uint32_t j, real range_m, bl_fusion_result *out);
 
 // ---- team_start.cpp
 // Keep a range between the fitting mover i and robot j (standing) for the

@@ -111,6 +111,7 @@ static void test_millibots_sites_are_team_sites(void **state)
         assert_int_equal(cfg.team.robots, 4);
         assert_int_equal(cfg.team.origin_robot, 1);
         assert_int_equal(cfg.team.axis_robot, 2);
+        assert_int_equal(cfg.team.leader, 1);
         assert_int_equal(cfg.team.system_id_first, 101);
         assert_true(cfg.team.survey_s == 2.0 && cfg.team.role_timeout_s == 1.0 &&
                     cfg.team.lost_s == 3.0);
@@ -195,6 +196,7 @@ static void test_team_errors_name_the_key(void **state)
     expect_error("[robot]\nskid_factor = 0.9\n", ":13: [robot] skid_factor: given twice");
     /* the checks of the whole */
     expect_error("origin_robot = 5\n", ":12: [team] origin_robot: 5 beyond robots = 4");
+    expect_error("leader = 6\n", ":12: [team] leader: 6 beyond robots = 4");
     expect_error("axis_robot = 1\n",
                  ":12: [team] axis_robot: 1: one of robots 1..4 other than origin_robot 1");
     expect_error("lost_s = 0.5\n", ":12: [team] lost_s: 0.5 s not above role_timeout_s 1 s");

@@ -6,8 +6,10 @@
  * handle_frame() does, on the kleeman-lab site, or on the eurobot site (bearings
  * and encoders, no ultrasonic beacon) when bit 2 of the input's first byte is
  * set, or on the marvelmind site (ranges and encoders, no other beacon: the
- * range receiver's clock is the reference) when bit 3 is set and bit 2 not
- * (the first opcode reads only bits 0-1).
+ * range receiver's clock is the reference) when bit 3 is set and bit 2 not,
+ * or on the millibots-room team site (every robot's ranges and track
+ * encoders into the team, bridge/team.c) when bit 4 is set (bits 2 and 3
+ * then do not matter; the first opcode reads only bits 0-1).
  *
  * Input: a sequence of records, each one opcode byte then its fields:
  *   op 0, 1  socket read: size selector (CAN_MTU, CANFD_MTU, any size, a
@@ -16,17 +18,20 @@
  *            (SO_TIMESTAMP, SO_RXQ_OVFL with fuzzed values), time step
  *   op 2     a frame as a replayed log gives it (struct can_msg: flags,
  *            id, len 0..64, data), time step
- *   op 3     periodic work: estimator_tick, output now, health, events
+ *   op 3     periodic work: estimator_tick, output now, health, events (a team
+ *            site: team_tick, every robot's output, events)
  * The time step is a byte: 0..249 -> that many 100 us forward; 250 backwards
  * up to 655 ms; 251 forward up to 71 min; 252 a jump of up to ±2^62 us.
  *
  * Invariants checked after every frame:
  *   - can_in_read: a length within the classic/FD maximum, counters add up
  *     (frames + error frames + bad sizes = reads of data);
- *   - frame_decode: FRAME_OK only for our five ids, classic, 8 bytes; the
+ *   - frame_decode: FRAME_OK only for our six ids, classic, 8 bytes; the
  *     result counters add up to the frames decoded;
  *   - the estimator's output, when valid, is finite with a covariance whose
- *     diagonal is >= 0; its health says finite.
+ *     diagonal is >= 0; its health says finite; on a team site every valid
+ *     robot estimate is finite with a diagonal >= 0, and every team frame
+ *     is in exactly one of the team's counters (or still held).
  */
 #include <errno.h>
 #include <limits.h>
@@ -50,6 +55,7 @@
 #include "fuzz_common.h"
 #include "log.h"
 #include "sensors.h"
+#include "team.h"
 
 int LLVMFuzzerInitialize(int *argc, char ***argv);
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -116,6 +122,9 @@ static struct estimator est_template; /* estimator_init'ed once, copied per inpu
 static struct estimator est_bearing_template; /* the same on the bearing-only site */
 static struct estimator est_range_template;   /* the same on the range-only site */
 static struct estimator est;
+static struct team team_template; /* team_init'ed once on the team site, copied per input */
+static struct team team;
+static struct estimator est_team_template;
 static int dummy_fd = -1;             /* a real descriptor for can_in to own */
 
 int LLVMFuzzerInitialize(int *argc, char ***argv)
@@ -144,6 +153,14 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
         fprintf(stderr, "fuzz_frames: %s\n", err);
         abort();
     }
+    struct bridge_config team_site;
+    config_defaults(&team_site);
+    if (config_load_file(&team_site, FUZZ_TEAM_SITE, err, sizeof err) != 0 ||
+        estimator_init(&est_team_template, &team_site, err, sizeof err) != 0 ||
+        team_init(&team_template, &team_site, err, sizeof err) != 0) {
+        fprintf(stderr, "fuzz_frames: %s\n", err);
+        abort();
+    }
     return 0;
 }
 
@@ -165,6 +182,36 @@ static int64_t time_step(struct fz *z, int64_t t)
         t = (code & 1) ? t - j : t + j;
     }
     return t < 0 ? 0 : t > LOCAL_MAX_US ? LOCAL_MAX_US : t;
+}
+
+/* A team site: every valid robot estimate finite, variances >= 0; every
+ * team frame counted once (or held in the queue). */
+static void check_team(const struct team *t)
+{
+    for (uint32_t k = 1; k <= t->robots; k++) {
+        struct team_output o;
+        if (team_output(t, k, 0, &o) != 0 || !o.valid)
+            continue;
+        bool finite = isfinite(o.x_m) && isfinite(o.y_m) && isfinite(o.theta_rad) &&
+                      isfinite(o.v_mps) && isfinite(o.omega_radps);
+        for (int i = 0; i < 9; i++) finite = finite && isfinite(o.cov[i]);
+        FUZZ_CHECK(finite, "robot %u estimate not finite", k);
+        for (int i = 0; i < 3; i++)
+            FUZZ_CHECK(o.cov[i * 4] >= 0.0, "robot %u negative variance %d", k, i);
+    }
+    const struct team_counters *c = &t->c;
+    uint64_t held_ranges = 0, held_tracks = 0;
+    for (unsigned i = 0; i < t->q_len; i++) {
+        held_ranges += t->q[i].is_range;
+        held_tracks += !t->q[i].is_range;
+    }
+    FUZZ_CHECK(c->ranges_in == c->ranges_unknown_robot + c->ranges_self + c->ranges_bad_tof +
+                                   c->stale_ranges + c->ranges_refused + c->ranges_used +
+                                   held_ranges,
+               "team range counters");
+    FUZZ_CHECK(c->tracks_in == c->tracks_unknown_robot + c->stale_tracks + c->odometry_refused +
+                                   c->odometry_used + held_tracks,
+               "team track counters");
 }
 
 static void check_output(const struct estimator *e, int64_t now)
@@ -196,7 +243,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         tmpl = &est_bearing_template;
     else if (size > 0 && (data[0] & 8))
         tmpl = &est_range_template;
+    const bool on_team = size > 0 && (data[0] & 16);
+    if (on_team)
+        tmpl = &est_team_template;
     memcpy(&est, tmpl, sizeof est);
+    est.team = NULL;
+    if (on_team) {
+        memcpy(&team, &team_template, sizeof team);
+        est.team = &team;
+    }
     struct frame_counters fc;
     frame_counters_init(&fc);
     struct can_in ci;
@@ -274,6 +329,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         } else {
             estimator_tick(&est, now);
             check_output(&est, now);
+            if (on_team) {
+                team_tick(&team, now);
+                check_team(&team);
+                struct est_event ev;
+                while (team_next_event(&team, &ev))
+                    FUZZ_CHECK(memchr(ev.text, '\0', sizeof ev.text), "team event text");
+            }
             struct est_event ev;
             while (estimator_next_event(&est, &ev))
                 FUZZ_CHECK(memchr(ev.text, '\0', sizeof ev.text), "event text");
@@ -292,7 +354,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                             msg.id == BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID ||
                             msg.id == BEACONLOC_CAN_NODE_STATUS_FRAME_ID ||
                             msg.id == BEACONLOC_CAN_BEARING_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_RANGE_FRAME_ID),
+                            msg.id == BEACONLOC_CAN_RANGE_FRAME_ID ||
+                            msg.id == BEACONLOC_CAN_TRACK_ENCODERS_FRAME_ID),
                        "FRAME_OK for id 0x%x len %u flags 0x%x", (unsigned)msg.id,
                        msg.len, msg.flags);
             FUZZ_CHECK(f.kind >= 0 && f.kind < FRAME_KIND_COUNT &&
@@ -311,5 +374,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                    (unsigned long long)sum, (unsigned long long)decoded);
     }
     check_output(&est, now);
+    if (on_team)
+        check_team(&team);
     return 0;
 }

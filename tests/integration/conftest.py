@@ -31,7 +31,7 @@ def _worker_index() -> int:
 
 # Files whose checks share one module-scoped live run (module_rig): each goes
 # whole to one worker. Every other case is a live run of its own.
-SHARED_RUN_FILES = ("test_nominal.py",)
+SHARED_RUN_FILES = ("test_nominal.py", "test_team.py")
 
 
 def live_run_of(nodeid: str) -> str:

@@ -205,9 +205,13 @@ class NodeClockProbe:
     receive time. The lower envelope of (receive - node) maps CLOCK_MONOTONIC
     to the node clock, the time base of the truth CSV, so the bridge's
     ODOMETRY (stamped on CLOCK_MONOTONIC) can be compared with the truth
-    independently of the bridge's own estimates file."""
+    independently of the bridge's own estimates file.
 
-    def __init__(self, iface: str, frame: str = "PULSE_DETECTION"):
+    by: a signal of the frame that names whose clock NodeTime is (a team's
+    TRACK_ENCODERS: Robot, each robot on its own clock): one mapping per
+    value of it, mapping(value)."""
+
+    def __init__(self, iface: str, frame: str = "PULSE_DETECTION", by: str | None = None):
         import can
         import cantools
         self._db = cantools.database.load_file(str(DBC))
@@ -217,8 +221,10 @@ class NodeClockProbe:
         self.bus = can.Bus(interface="socketcan", channel=iface, can_filters=ours,
                            receive_own_messages=False)
         self.first_rx_mono_s: float | None = None  # first frame of any of our ids
+        self.by = by
         self.rx_real_s: list[float] = []
         self.node_us: list[int] = []
+        self.keys: list[int | None] = []
         # CLOCK_REALTIME - CLOCK_MONOTONIC (python-can stamps in realtime).
         self.real_minus_mono_s = time.time() - time.monotonic()
         self._stop = threading.Event()
@@ -244,21 +250,24 @@ class NodeClockProbe:
                 continue
             self.rx_real_s.append(msg.timestamp - float(sig.get("TimeOfFlight", 0)) * 1e-6)
             self.node_us.append(int(sig["NodeTime"]))
+            self.keys.append(int(sig[self.by]) if self.by else None)
 
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2)
         self.bus.shutdown()
 
-    def mapping(self):
+    def mapping(self, key: int | None = None):
         """Returns f(mono_s) -> node-clock us (unwrapped like the truth CSV:
-        from the first frame's value, +2^32 per wrap), or None."""
-        if len(self.node_us) < 20:
+        from the first frame's value, +2^32 per wrap), or None; key: whose
+        clock (the `by` signal's value)."""
+        mine = [i for i, k in enumerate(self.keys) if k == key]
+        if len(mine) < 20:
             return None
-        node = np.asarray(self.node_us, dtype=np.int64)
+        node = np.asarray(self.node_us, dtype=np.int64)[mine]
         wraps = np.concatenate([[0], np.cumsum(np.diff(node) < -(NODE_CLOCK_WRAP_US // 2))])
         node = node + wraps * NODE_CLOCK_WRAP_US
-        rx_us = (np.asarray(self.rx_real_s) - self.real_minus_mono_s) * 1e6
+        rx_us = (np.asarray(self.rx_real_s)[mine] - self.real_minus_mono_s) * 1e6
         # Lower envelope: per 5 s window the smallest (rx - node) is the
         # frame with the least queueing; a line through those minima gives
         # offset and drift.
@@ -411,10 +420,12 @@ class Rig:
             self.listener = MavlinkListener(self.port)
         return self.listener
 
-    def watch_node_clock(self, frame: str = "PULSE_DETECTION") -> NodeClockProbe:
-        """The probe of the truth's node clock, read from `frame`'s NodeTime."""
+    def watch_node_clock(self, frame: str = "PULSE_DETECTION",
+                         by: str | None = None) -> NodeClockProbe:
+        """The probe of the truth's node clock, read from `frame`'s NodeTime
+        (by: NodeClockProbe's, one clock per value of that signal)."""
         if self.probe is None:
-            self.probe = NodeClockProbe(self.iface, frame)
+            self.probe = NodeClockProbe(self.iface, frame, by)
         return self.probe
 
     def _spawn(self, name: str, argv: list[str], env: dict | None = None,
@@ -523,6 +534,7 @@ class LiveRun:
     bridge_stats: dict | None = None
     sim_stats: dict | None = None
     node_map: object = None
+    probe: NodeClockProbe | None = None
 
     def __repr__(self) -> str:
         return f"LiveRun({self.scenario} on {self.rig!r})"
@@ -558,16 +570,19 @@ def run_live(rig: Rig, scenario: str, duration_s: float, *, seed: int | None = N
              site: Path = SITE, bridge_extra: list[str] | None = None,
              bridge_env: dict | None = None,
              actions: list | None = None, timesync_every_s: float = 0.0,
-             stop_bridge: bool = True, clock_frame: str = "PULSE_DETECTION") -> LiveRun:
+             stop_bridge: bool = True, clock_frame: str = "PULSE_DETECTION",
+             clock_by: str | None = None, truth_columns=None, est_columns=None) -> LiveRun:
     """Bridge first (waits for its HEARTBEAT), then the simulator live on the
     rig's bus for duration_s; `actions` = [(seconds after the simulator
     started, callable(rig))] run in order; finally SIGTERM to the bridge.
     clock_frame: the frame whose NodeTime is the truth's clock (RANGE on a
     range-only site; BEARING on a
-    site without ultrasonic beacons)."""
+    site without ultrasonic beacons; a team's TRACK_ENCODERS with clock_by =
+    "Robot": run.probe.mapping(robot) per robot, run.node_map None);
+    truth_columns, est_columns: the CSVs' columns (default: one robot's)."""
     lst = rig.listen()
     rig.start_bridge(site=site, extra=bridge_extra, env=bridge_env)
-    probe = rig.watch_node_clock(clock_frame)
+    probe = rig.watch_node_clock(clock_frame, clock_by)
     sim = rig.start_sim(scenario, duration_s=duration_s, seed=seed)
     # Times count from the simulator's first frame on the bus (its start-up,
     # slow in an emulated VM, is not part of the scenario).
@@ -605,12 +620,13 @@ def run_live(rig: Rig, scenario: str, duration_s: float, *, seed: int | None = N
                   t_sim_start_mono_s=t0, t_sim_end_mono_s=t_end,
                   timesync_sent=timesync_sent,
                   odometry=lst.messages("ODOMETRY"), heartbeats=lst.messages("HEARTBEAT"),
-                  statustexts=lst.messages("STATUSTEXT"), node_map=probe.mapping())
+                  statustexts=lst.messages("STATUSTEXT"),
+                  node_map=None if clock_by else probe.mapping(), probe=probe)
     write_received(rig.workdir / "mavlink-rx.csv", run)
     assert sim_rc == 0, f"simulator exited {sim_rc}\n{rig.logs()}"
-    run.truth = read_csv(rig.truth, TRUTH_COLUMNS)
+    run.truth = read_csv(rig.truth, truth_columns or TRUTH_COLUMNS)
     if rig.estimates.exists():
-        run.est = read_csv(rig.estimates, EST_COLUMNS)
+        run.est = read_csv(rig.estimates, est_columns or EST_COLUMNS)
     if rig.bridge_stats.exists():
         run.bridge_stats = read_json(rig.bridge_stats)
     if rig.sim_stats.exists():

@@ -152,7 +152,8 @@ RANGE_COUNTERS = ("ranges_fused", "ranges_rejected", "ranges_buffered", "ranges_
 
 
 def test_marvelmind_ranges_end_to_end(rig):
-    """simulator -> vcan -> bridge -> MAVLink on a site of four fixed range
+    """Issue 13's fixed-beacon integration case (its team case: test_team.py).
+    simulator -> vcan -> bridge -> MAVLink on a site of four fixed range
     beacons and no other: the pymavlink-decoded ODOMETRY against the truth
     (on the range receiver's clock, mapped from the bus) and against its own
     reported covariance; every range frame in exactly one counter."""

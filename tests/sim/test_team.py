@@ -289,6 +289,119 @@ def test_bound_grows_with_the_distance_travelled(leapfrog):
     assert 0.001 < mean_b[-1] / np.max(x[-1]) < 0.005
 
 
+# ---- a lost robot ([faults] robot_silence) -------------------------------------------------
+
+@pytest.fixture(scope="module")
+def lost():
+    return team_sim.run(load_team_scenario("team-lost"))
+
+
+def test_lost_robot_sends_nothing_and_the_leader_skips_it(lost, static):
+    """team-lost: robot 3 silent in [20, 35) s. On the bus (decoded by cantools, frame times
+    of the simulated bus): no RANGE from or to it and no TRACK_ENCODERS of it in the window
+    (plus the flight and latency at its end), 20 Hz of them outside; the leader's pings go
+    round robots 1 and 2 alone in the window, 1, 2, 3 outside; the tick counts go on across."""
+    tscn = lost.scenario
+    assert tscn.robot_silences == ((20.0, 15.0, (3,)),)
+    t0, t1 = 20.0, 35.0
+    ids, t_bus = lost.frames.arb_id, np.asarray(lost.frames.t_s)
+    inside = (t_bus >= t0 + 0.02) & (t_bus < t1)
+    rng = [(t, RANGE.decode(d)) for t, i, d in zip(t_bus, ids, lost.frames.data)
+           if i == RANGE.frame_id]
+    trk = [(t, TRACKS.decode(d)) for t, i, d in zip(t_bus, ids, lost.frames.data)
+           if i == TRACKS.frame_id]
+    in_win = lambda t: t0 + 0.02 <= t < t1                       # noqa: E731
+    assert not [r for t, r in rng if in_win(t) and 3 in (r["Beacon"], r["Receiver"])]
+    assert not [r for t, r in trk if in_win(t) and r["Robot"] == 3]
+    assert inside.sum() > 0
+    for lo, hi in ((5.0, 20.0), (35.1, 50.0)):
+        n3 = sum(1 for t, r in trk if lo <= t < hi and r["Robot"] == 3)
+        assert n3 == pytest.approx(20 * (hi - lo), abs=2)
+        assert sum(1 for t, r in rng if lo <= t < hi and r["Beacon"] == 3) > 0
+    # every other robot goes on as before: its encoder frames, and ranges to robot 4
+    for robot in (1, 2, 4):
+        assert sum(1 for t, r in trk if in_win(t) and r["Robot"] == robot) == \
+            pytest.approx(20 * (t1 - t0 - 0.02), abs=2)
+    assert sum(1 for t, r in rng if in_win(t) and r["Receiver"] == 4) > 0.9 * 20 * 15
+    p = lost.pings
+    win = (p.t_s >= t0) & (p.t_s < t1)
+    em = p.emitter[win].tolist()
+    assert set(em) == {1, 2} and all(a != b for a, b in zip(em, em[1:]))
+    assert set(p.emitter[~win].tolist()) == {1, 2, 3}
+    assert len(p.t_s) == len(static.pings.t_s)             # the same ping instants
+    assert p.t_s == pytest.approx(static.pings.t_s, abs=0)
+    # the counts are cumulative: robot 3 stands, so its first count after the window is its
+    # last before (a moving robot's would hold the travel of the silence)
+    r3 = [r for _t, r in trk if r["Robot"] == 3]
+    assert len({(r["LeftTicks"], r["RightTicks"]) for r in r3}) == 1
+    r = lost.ranges
+    assert np.all(r.silent == ((r.receiver == 3) & (r.t_s >= t0) & (r.t_s < t1)))
+    assert not np.any(r.sent & r.silent) and np.sum(r.silent) == 20 * 15
+
+
+def test_lost_robot_bound_has_no_ranges_of_it(lost, static):
+    """The bound's events hold no range from or to the silent robot in its window: robot 3
+    (standing, no process noise) keeps its bound through the window, then it shrinks again;
+    robot 4, ranging two beacons instead of three, has a larger bound than in team-static."""
+    r = lost.ranges.select(lost.ranges.direct)
+    win = (r.t_s >= 20.0) & (r.t_s < 35.0)
+    assert not np.any(win & ((r.emitter == 3) | (r.receiver == 3)))
+    assert np.any(~win & (r.emitter == 3)) and np.any(~win & (r.receiver == 3))
+    tr = lost.truth
+
+    def bound(res, robot, lo, hi):
+        t = res.truth
+        sel = (t["robot"] == robot) & (t["t_sim_s"] >= lo) & (t["t_sim_s"] <= hi)
+        return t["pcrb_pos_m"][sel]
+    # robot 3 learns only through its correlation with the others (ranges before the window,
+    # the speed of sound): its bound shrinks by 1.6 % over the window, in team-static by 12 %
+    b3, s3 = bound(lost, 3, 20.0, 35.0), bound(static, 3, 20.0, 35.0)
+    assert np.all(np.diff(b3) <= 0)
+    assert 1 - b3[-1] / b3[0] < 0.2 * (1 - s3[-1] / s3[0])
+    assert bound(lost, 3, 59.9, 60.0)[-1] < 0.9 * b3[-1]   # heard again: it shrinks
+    ratio4 = np.median(bound(lost, 4, 21.0, 35.0) / bound(static, 4, 21.0, 35.0))
+    assert ratio4 > 1.05, ratio4
+    assert len(tr["t_us"]) == len(static.truth["t_us"])
+
+
+def test_robot_silence_errors_name_the_key(tmp_path):
+    from beaconloc_sim.inifile import ConfigError
+    src = builtin_scenario_path("team-lost")
+    (tmp_path / "millibots-room.ini").write_text(src.with_name("millibots-room.ini").read_text())
+    text = src.read_text()
+    for bad, why in ((("robot_silence = 20, 15, 3", "robot_silence = 20, 15, 1"), "leader"),
+                     (("robot_silence = 20, 15, 3", "robot_silence = 20, 15, 7"), "1..4"),
+                     (("robot_silence = 20, 15, 3", "robot_silence = 20, 0, 3"), "duration_s > 0"),
+                     (("robot_silence = 20, 15, 3", "robot_silent = 20, 15, 3"), "robot_silent")):
+        p = tmp_path / "bad.scenario.ini"
+        p.write_text(text.replace(*bad))
+        with pytest.raises(ConfigError, match=re.escape(why)) as err:
+            load_team_scenario(str(p))
+        assert "[faults]" in str(err.value)
+    p.write_text(text.replace("robot_silence = 20, 15, 3",
+                              "robot_silence = 20, 15, 3\nrobot_silence2 = 40, 5, 2, 4"))
+    assert load_team_scenario(str(p)).robot_silences == ((20.0, 15.0, (3,)),
+                                                         (40.0, 5.0, (2, 4)))
+
+
+# ---- the site the bridge reads agrees with the scenario's truth ------------------------------
+
+@pytest.mark.parametrize("name", ["team-static", "team-lost", "team-leapfrog"])
+def test_team_site_models_the_scenarios_robots(name):
+    """The bridge's model of the robots comes from the site file ([team], [robot]
+    skid_factor, [noise] slip): it must be the one the scenario simulates (the truth's), or
+    the benchmark would judge a model error, not the estimator."""
+    import configparser
+    tscn = load_team_scenario(name)
+    cp = configparser.ConfigParser(inline_comment_prefixes=(";", "#"))
+    cp.read(tscn.site.path)
+    assert cp.getint("team", "robots") == len(tscn.robots)
+    assert (cp.getint("team", "origin_robot"), cp.getint("team", "axis_robot")) == tscn.gauge
+    assert cp.getfloat("robot", "skid_factor") == tscn.icr_factor
+    assert cp.getfloat("noise", "sigma_distance_per_m") == tscn.slip_sigma_per_m
+    assert cp.getfloat("noise", "slip_heading_rad_per_sqrt_rad") == tscn.slip_sigma_per_rad
+
+
 # ---- the command line ----------------------------------------------------------------------
 
 def test_cli_lists_and_runs_a_team_scenario(tmp_path):
@@ -350,6 +463,24 @@ def test_single_robot_range_and_bearing_runs_unchanged(tmp_path, name, log_sha, 
     res = simulate.run(load_scenario(name, duration_s=20))
     can_out.write_log(res.frames, tmp_path / "l.log", res.scenario.log_epoch_s, "vcan0")
     outputs.write_truth(tmp_path / "t.csv", res)
+    assert hashlib.sha256((tmp_path / "l.log").read_bytes()).hexdigest() == log_sha
+    assert hashlib.sha256((tmp_path / "t.csv").read_bytes()).hexdigest() == truth_sha
+
+
+@pytest.mark.parametrize("name, log_sha, truth_sha", [
+    ("team-static", "1495bb1cf7ee0d765bab73fb1261829f40455c8019a72c3ea1c723cd3ef1464b",
+     "9f56bdb53bb8ebaac90ee14406a5cf3ea4c5ae3a19c0ee3d4c51541f70a0e6d2"),
+    ("team-leapfrog", "b2d16ad8446b5edb9a0c9cd8a07acb62c186e1dce945e0782bb469789815d564",
+     "17c97bb2759f9866b4953fb07e1233f1df68afd1b5d5b58e8e7ddb5ba51cbf8e"),
+])
+def test_team_runs_unchanged(tmp_path, name, log_sha, truth_sha):
+    """The whole run of each team scenario: log and truth as before the lost robot existed
+    (9cc2bdc): a fault's mechanism draws nothing and changes nothing where it is not used."""
+    import hashlib
+    out = subprocess.run([str(BIN), "run", name, "--log", str(tmp_path / "l.log"),
+                          "--truth", str(tmp_path / "t.csv")], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
     assert hashlib.sha256((tmp_path / "l.log").read_bytes()).hexdigest() == log_sha
     assert hashlib.sha256((tmp_path / "t.csv").read_bytes()).hexdigest() == truth_sha
 

@@ -68,6 +68,11 @@ class TeamRanges(RangeFlags):
     dropout: np.ndarray
     occluded: np.ndarray
     out_of_range: np.ndarray
+    silent: np.ndarray         # the listener was silent at t_e ([faults] robot_silence)
+
+    @property
+    def sent(self) -> np.ndarray:
+        return RangeFlags.sent.fget(self) & ~self.silent
 
 
 def leader_pings(tscn) -> Pings:
@@ -78,7 +83,7 @@ def leader_pings(tscn) -> Pings:
     first = -(-int(leader.unwrapped_us(0.0)) // period_us) * period_us
     counts = np.arange(first, leader.unwrapped_us(tscn.duration_s) + 1, period_us, dtype=np.int64)
     t = leader.true_time_s(counts)
-    mask = tscn.beacon_mask(t)
+    mask = tscn.beacon_mask(t) & ~tscn.silent_mask(t)     # a silent robot is skipped
     ids = np.asarray(tscn.robot_ids)
     emitter = np.zeros(len(t), dtype=np.int64)
     for k in range(len(t)):
@@ -133,7 +138,16 @@ def team_ranges(tscn, pings: Pings, rng: np.random.Generator) -> TeamRanges:
     hidden = occluded(dst[:, :2], src[:, :2], tscn.obstacles_m)
     return TeamRanges(ping, t_e, emitter, recv, node_us, sos, true_m, path_m, tof_us,
                       pulse_quality(path_m), multipath,
-                      u_drop < tscn.range_dropout_probability, hidden, true_m > site.range_max_m)
+                      u_drop < tscn.range_dropout_probability, hidden, true_m > site.range_max_m,
+                      _listener_silent(tscn, t_e, recv))
+
+
+def _listener_silent(tscn, t_e: np.ndarray, recv: np.ndarray) -> np.ndarray:
+    """Per (ping, listener) row: the listener is silent at the emission (it hears nothing and
+    sends nothing)."""
+    silent = tscn.silent_mask(t_e)
+    return silent[np.arange(len(t_e)), np.searchsorted(tscn.robot_ids, recv)] if len(t_e) \
+        else np.zeros(0, dtype=bool)
 
 
 class RangeModule(Node):

@@ -31,8 +31,8 @@ class TrackEncoders(Node):
         super().__init__(robot.clock)
         self.robot = robot
         self.tscn = tscn
-        # the samples of the last interval: true time, track travel as the encoders saw it
-        # (m, cumulative from t = 0), ticks (unwrapped)
+        # the samples of the last interval (sent or not: a silent robot's too): true time,
+        # track travel as the encoders saw it (m, cumulative from t = 0), ticks (unwrapped)
         self.samples = (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
                         np.zeros(0, np.int64))
 
@@ -53,10 +53,15 @@ class TrackEncoders(Node):
         tr = ticks(right / m_per_rad, site.ticks_per_rev, self.robot.initial_ticks[1])
         self.samples = (t, left, right, tl, tr)
         lat = iv.latency_s(len(t))
+        # a silent robot ([faults] robot_silence) sends nothing; its counts go on (cumulative)
+        idx = np.flatnonzero(~self.silent(t)).tolist()
         signals = [{"NodeTime": int(enc_us[i] % WRAP_US), "Robot": self.robot.id,
                     "LeftTicks": int(tl[i] % TRACK_TICK_WRAP),
-                    "RightTicks": int(tr[i] % TRACK_TICK_WRAP)} for i in range(len(t))]
-        return t + lat, signals
+                    "RightTicks": int(tr[i] % TRACK_TICK_WRAP)} for i in idx]
+        return t[idx] + lat[idx], signals
+
+    def silent(self, t_s: np.ndarray) -> np.ndarray:
+        return self.tscn.silent_mask(t_s)[:, self.tscn.robot_ids.index(self.robot.id)]
 
 
 def metres_per_tick(site) -> float:

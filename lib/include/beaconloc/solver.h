@@ -389,7 +389,11 @@ int bl_team_mirror(const bl_team_solution *in, bl_team_solution *out);
  * propagation of the three fixes' covariances (independent fixes):
  *     ∂c/∂p0 = -(by, -bx), ∂c/∂p1 = (by + ay, -bx - ax), ∂c/∂p2 = (-ay, ax),
  *     σ_c² = Σ_k gₖᵀ Σₖ gₖ;
- * confidence = |c| / σ_c. */
+ * confidence = |c| / σ_c.
+ * The team coordinator (team.h, bl_team) does NOT use this: it decides the
+ * hand by one mechanism, the fit of a mover's whole dead-reckoned path to
+ * its ranges in both hands (lib/src/team_start.cpp). This stays for a
+ * caller that has the three fixes of an L. */
 typedef struct bl_team_l_manoeuvre {
     bl_real x_m[3], y_m[3]; /* p0, p1, p2 in the team frame (m) */
     bl_real cov[3][4];      /* covariance of each fix, row-major 2x2 (m²) */

@@ -43,6 +43,11 @@
  *     leap-frog), predicted with its track odometry, fusing every range
  *     to/from an anchor (bl_filter_fuse_team_range: its gate rejects
  *     multipath). When it stands again for settle_s it becomes an anchor.
+ *     The ranges between two anchors refine them (params.refine_anchors):
+ *     one EKF update of the anchors' joint state (positions and the ranges'
+ *     common scale error ε, the speed of sound's, which no averaging
+ *     removes), carried exactly into every running mover's state and
+ *     consider block through its cross-covariance with its beacons.
  *  4. Heading and mirror: ranges give positions, not headings, and the
  *     survey cannot tell the team from its reflection y -> -y. A mover
  *     whose heading was never estimated is FITTED first: its dead-reckoned
@@ -61,10 +66,11 @@
  *     is not used here. A robot that stood after its filter ran keeps its
  *     heading (heading_known) and restarts without a fit when it moves.
  *  5. Lost robots: no odometry and no range to/from it for lost_s -> LOST
- *     (event), its filter stops, it is no anchor; heard again -> BACK
- *     (event), it stands as an anchor at its last position with its σ
- *     grown by back_sigma_m and its heading unknown (fitted again when it
- *     moves).
+ *     (event), its filter stops (its last estimate kept as its position; a
+ *     mover still in its heading fit has none), it is no anchor; heard
+ *     again -> BACK (event), it stands as an anchor at its last position
+ *     with its σ grown by back_sigma_m, independent of the others, and its
+ *     heading unknown (fitted again when it moves).
  *
  * Errors: every function returns BL_OK or a negative bl_error; on error the
  * bl_team is byte-identical except the bad-input counters (ranges_bad,
@@ -73,8 +79,8 @@
  * between two moving robots) is counted, not an error.
  *
  * Size: sizeof(bl_team) with double and the default capacities
- * (BL_MAX_TEAM 8, BL_TEAM_MAX_BEACONS 4) is about 76 KiB (measured in
- * tests/lib/test_team.c, printed by it): BL_MAX_TEAM filters, the survey's
+ * (BL_MAX_TEAM 8, BL_TEAM_MAX_BEACONS 4) is 76,096 B (74 KiB; 43,504 B
+ * with float; printed by tests/lib/test_team.c): BL_MAX_TEAM filters, the survey's
  * samples and the heading fit's buffer. Not thread-safe; instances are
  * independent.
  */
@@ -136,6 +142,9 @@ typedef struct bl_team_params {
                                 (default 0.1), >= 0 */
     bl_real emitter_height_m;      /* z of the teammates' emitters (m): the ranges' model
                                  (default: robot_cfg->range.height_m, all at one height) */
+    uint32_t refine_anchors;       /* 1 (default): a range between two standing robots after the
+                                      survey updates the anchors (and, through their
+                                      cross-covariance, the movers ranging to them); 0: unused */
 } bl_team_params;
 
 /* Fills *p with the defaults above (robots 4); emitter_height_m NaN =
@@ -202,10 +211,12 @@ typedef struct bl_team_status {
     uint32_t ranges_fused;           /* ranges fused into a mover's filter */
     uint32_t ranges_rejected;        /* ranges rejected by a filter's gate (multipath) */
     uint32_t ranges_fit;             /* ranges kept for a heading fit */
+    uint32_t ranges_anchors;         /* ranges between two standing robots fused into the
+                                        anchors (refine_anchors) */
     uint32_t ranges_unused;          /* neither: between two anchors after the survey, between
                                  two movers, to a lost robot, ... */
     uint32_t ranges_bad;             /* refused: tof not finite, negative, or beyond 1.5 x max
-                                 range; beacon == receiver; time before the team's start */
+                                 range; beacon == receiver */
     uint32_t ranges_unknown_robot;   /* refused: an id outside 1..N */
     uint32_t odometry_in;            /* bl_team_odometry calls that returned BL_OK */
     uint32_t odometry_bad;           /* refused: bad id, non-finite, time going backwards */
@@ -254,6 +265,11 @@ typedef struct bl_team {
     /* the anchors' positions and joint covariance (team frame): every robot's
      * last standing position (a bl_team_solution: bl_team_mirror flips it) */
     bl_team_solution anchors_;
+    /* the common scale error of the ranges ε (r = (1 + ε)·distance: the speed
+     * of sound's error), its variance and cross-covariance with the anchors'
+     * coordinates (anchor refinement, team_anchors.cpp) */
+    bl_real scale_, scale_var_;
+    bl_real scale_cross_[2 * BL_MAX_TEAM];
     bl_team_robot_ r_[BL_MAX_TEAM];
     /* survey: ranges per pair (i < j, index i*N+j) */
     uint16_t survey_n_[BL_MAX_TEAM * BL_MAX_TEAM];
@@ -290,9 +306,13 @@ int bl_team_odometry(bl_team *t, uint32_t robot, int64_t t_us, bl_real d_left_m,
 
 /* One range: robot `beacon` emitted at t_emit_us, robot `receiver` timed
  * the flight tof_s (s). res (may be NULL): the fusion result when it went
- * into a mover's filter (status ACCEPTED or REJECTED), else status
- * BUFFERED (kept for the survey or a heading fit) or, unused, REJECTED
- * with test_ratio 0.
+ * into a mover's filter or, between two anchors, into the anchors (status
+ * ACCEPTED or REJECTED by the gate; innovation in s for a filter, in m for
+ * the anchors), else status BUFFERED (kept for the survey or a heading
+ * fit) or, unused, REJECTED with test_ratio 0. Cost: one filter update
+ * (O((NX + 2·BL_TEAM_MAX_BEACONS)²)) or one anchors' update
+ * (O((2·BL_MAX_TEAM)²) plus the movers'); a heading fit every 5 kept
+ * ranges: O(72·BL_TEAM_FIT_MAX).
  * Errors (state untouched but the counter): BL_EINVAL (t NULL or not
  * initialised; beacon == receiver; tof not finite, negative, or its range
  * cfg.speed_of_sound_mps·tof beyond 1.5 x cfg.range.max_range_m:
