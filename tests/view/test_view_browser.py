@@ -24,9 +24,9 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "tests" / "integration"))
 sys.path.insert(0, str(REPO / "tests" / "bridge"))
 import harness as h  # noqa: E402  (MavlinkListener, read_csv, TRUTH_COLUMNS)
-from bridge_helpers import BRIDGE, free_udp_port, run_sim  # noqa: E402
+from bridge_helpers import free_udp_port, run_sim  # noqa: E402
+from view_rig import BRIDGE, start_replay, start_view, stop  # noqa: E402
 
-VIEW = REPO / ".venv" / "bin" / "beaconloc-view"
 SCENARIO = "beacon-outage"        # beacons 2 and 5 dead from 40 s: "beacon N lost" events
 DURATION_S = 46
 SPEED = 4                         # paced replay at 4x: 46 s of log in about 12 s
@@ -51,30 +51,15 @@ def rig(tmp_path):
     for close in closers:
         close()
     for p in procs:
-        if p.poll() is None:
-            p.terminate()
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        stop(p)
 
 
 def test_page_follows_the_bridge(rig):
     tmp, procs, closers = rig
     log, truth_csv = run_sim(tmp, SCENARIO, DURATION_S)
     view_port, test_port = free_udp_port(), free_udp_port()
-    url_file = tmp / "url"
-    view = subprocess.Popen([str(VIEW), "--scenario", SCENARIO, "--mavlink",
-                             f"udpin:127.0.0.1:{view_port}", "--port", "0", "--url-file",
-                             str(url_file)], stdout=(tmp / "view.out").open("w"),
-                            stderr=subprocess.STDOUT)
+    view, url = start_view(tmp, SCENARIO, view_port)
     procs.append(view)
-    deadline = time.monotonic() + 30
-    while not url_file.exists() and time.monotonic() < deadline and view.poll() is None:
-        time.sleep(0.1)
-    assert url_file.exists(), (tmp / "view.out").read_text()
-    url = url_file.read_text().strip()
 
     browser = Browser()
     closers.append(browser.close)
@@ -85,11 +70,7 @@ def test_page_follows_the_bridge(rig):
 
     listener = h.MavlinkListener(test_port)
     closers.insert(0, listener.close)
-    bridge = subprocess.Popen([str(BRIDGE), "--site", str(h.SITE), "--replay", str(log),
-                               "--speed", str(SPEED),
-                               "--mavlink", f"udpout:127.0.0.1:{view_port}",
-                               "--mavlink", f"udpout:127.0.0.1:{test_port}"],
-                              stdout=(tmp / "bridge.out").open("w"), stderr=subprocess.STDOUT)
+    bridge = start_replay(tmp, log, SPEED, [view_port, test_port])
     procs.append(bridge)
     # live: the robot appears while the replay runs
     assert browser.wait_for(robot_js("xM"), 60), "no robot drawn during the replay"
