@@ -2,7 +2,9 @@
 -> MAVLink over UDP, decoded with pymavlink.
 
 Writes, into --out: live.txt (one line a second: pose, sigma, speed of
-sound, beacon period, beacons heard, events), truth.csv, est.csv, the
+sound, beacon period, beacons heard, events), mavlink.raw (the bridge's
+MAVLink frames as received, appended every 50 ms: beaconloc-view on the host
+follows it), truth.csv, est.csv, the
 bridge's and simulator's stats, and summary.json (accuracy vs truth and the
 bound) for tests/demo/summary.py.
 """
@@ -21,6 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integration"))
 import harness as h  # noqa: E402
+from beaconloc_sim.mavframe import odometry_site_heading_rad  # noqa: E402
 
 BEACON_EVENT = re.compile(r"beacon\s*(\d+)\s*(lost|back)", re.I)
 
@@ -51,11 +54,19 @@ def main() -> int:
         beacons = {}
         seen_text = 0
         named = {}
+        # The bridge's stream for beaconloc-view on the host (make demo starts it there):
+        # the guest has no network to the host, the results folder is shared.
+        raw = (out / "mavlink.raw").open("wb", buffering=0)
+        relayed = 0
         say(f"{'t_s':>6} {'x_m':>7} {'y_m':>7} {'yaw_deg':>7} {'sigma_mm':>8} "
             f"{'q':>4} {'sos_mps':>7} {'T_ms':>8} {'odo_hz':>6}  beacons heard")
         next_line = t0 + 1.0
         while sim.alive():
-            time.sleep(0.1)
+            time.sleep(0.05)
+            batch = lst.received[relayed:]
+            relayed += len(batch)
+            if batch:
+                raw.write(b"".join(r.msg.get_msgbuf() for r in batch))
             texts = lst.messages("STATUSTEXT")
             for r in texts[seen_text:]:
                 say(f"  event: {r.msg.text}")
@@ -80,10 +91,7 @@ def main() -> int:
             cov = h.odometry_site_pos_cov(m)
             sigma_mm = math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)) * 1e3 if np.all(np.isfinite(cov)) \
                 else math.nan
-            # FRD yaw (clockwise from north) back to the site's CCW-from-east.
-            q = (m.q[0], m.q[1], m.q[2], m.q[3])
-            yaw_frd = math.atan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2))
-            yaw_site = math.degrees(h.wrap_angle(math.pi / 2 - yaw_frd))
+            yaw_site = math.degrees(odometry_site_heading_rad(m))
             heard = "".join(str(b) if beacons.get(b, True) else "-" for b in range(1, 7))
             if "beacons" in named:
                 heard += f" ({named['beacons']:.0f} this cycle)"
@@ -92,6 +100,8 @@ def main() -> int:
                 f"{len(odo):6d}  {heard}")
         sim_rc = sim.popen.returncode
         time.sleep(1.0)
+        raw.write(b"".join(r.msg.get_msgbuf() for r in lst.received[relayed:]))
+        raw.close()
         bridge = next(p for p in rig.procs if p.name == "bridge")
         bridge_rc = bridge.stop(signal.SIGTERM)
         say(f"simulator exit {sim_rc}, bridge exit {bridge_rc}")

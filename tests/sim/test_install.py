@@ -1,12 +1,15 @@
 """A non-editable install carries its data: `pip install ./hw_sim` into a fresh venv,
 then the console command runs a packaged scenario from outside the repository and
-writes the same log as the development copy."""
+writes the same log as the development copy; beaconloc-view serves its packaged page."""
 from __future__ import annotations
 
+import json
 import shutil
 import site
 import subprocess
 import sys
+import time
+import urllib.request
 from pathlib import Path
 
 import pytest
@@ -59,3 +62,26 @@ def test_installed_package_runs_a_packaged_scenario(installed, tmp_path):
     assert installed_log.count(b"\n") > 100
     assert installed_log == (tmp_path / "dev.log").read_bytes()
     assert (out / "installed.csv").read_bytes() == (tmp_path / "dev.csv").read_bytes()
+
+
+def test_installed_view_serves_its_packaged_page(installed, tmp_path):
+    """beaconloc-view from the installed copy: its page is package data (page.html)."""
+    venv, purelib = installed
+    url_file = tmp_path / "url"
+    proc = subprocess.Popen([str(venv / "bin" / "beaconloc-view"), "--site", "kleeman-lab",
+                             "--mavlink", "udpin:127.0.0.1:0", "--port", "0", "--url-file",
+                             str(url_file)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        for _ in range(300):
+            if url_file.exists() or proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        assert url_file.exists(), proc.stdout.read().decode() if proc.poll() is not None else ""
+        url = url_file.read_text().strip()
+        page = urllib.request.urlopen(url, timeout=10).read()
+        assert page == (purelib / "beaconloc_sim" / "view" / "page.html").read_bytes()
+        site = json.loads(urllib.request.urlopen(url + "site.json", timeout=10).read())
+        assert site["name"] == "kleeman-lab" and len(site["beacons"]) == 6
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)

@@ -1,0 +1,1 @@
+"""beaconloc-view: the live map (docs/view.md)."""
