@@ -179,6 +179,7 @@ def test_every_system_call_of_the_live_daemon_passes_the_units_filter(
                              "--estimates", str(tmp_path / "est.csv"),
                              "--record", str(tmp_path / "rec.log"), "--status-interval", "1"],
                             stderr=subprocess.DEVNULL, env=env)
+    daemon = None
     try:
         can, _ = srv.accept()
         # strace ignores SIGHUP and SIGTERM while it runs a command: signal the daemon
@@ -195,8 +196,14 @@ def test_every_system_call_of_the_live_daemon_passes_the_units_filter(
         os.kill(daemon, signal.SIGTERM)
         assert proc.wait(timeout=10) == 0         # strace exits with the daemon's status
     finally:
-        if proc.poll() is None:
+        if proc.poll() is None:                   # a failure above: leave nothing running
+            if daemon is not None:
+                try:
+                    os.kill(daemon, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
             proc.kill()
+            proc.wait()
     made = set()
     for line in trace.read_text().splitlines():   # "PID name(args) = result"
         m = re.match(r"(?:\d+\s+)?([a-z_0-9]+)\(", line)
