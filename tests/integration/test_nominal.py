@@ -11,6 +11,7 @@ import pytest
 import harness as h
 
 DURATION_S = 60.0
+pytestmark = pytest.mark.live_s(DURATION_S)
 ODOMETRY_RATE_HZ = 30.0  # [bridge] odometry_rate_hz of kleeman-lab.ini
 QUALITY_BY_S = 30.0      # quality >= 0 (converged) this long after the first frame
 
