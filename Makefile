@@ -2,6 +2,7 @@
 #   make            build the library and the bridge daemon
 #   make test       install what is missing, then run every test suite
 #   make demo       live run: simulator -> vcan0 -> bridge -> MAVLink
+#   make install    the daemon, its systemd unit and manual (bridge/install.mk)
 # Each part keeps its own rules in a fragment included below; a fragment adds
 # its test targets to UNIT_TESTS / PY_TESTS so `make test` picks them up.
 

@@ -9,19 +9,50 @@
 
 /* State index of each row/col of the ODOMETRY pose 6x6 (x, y, z, roll,
  * pitch, yaw) and velocity 6x6 (vx, vy, vz, rollrate, pitchrate, yawrate);
- * -1: not estimated (planar robot, differential drive). */
+ * -1: not estimated (planar robot, differential drive or skid steer). */
 static const int pose_of_state[6] = {ST_X, ST_Y, -1, -1, -1, ST_THETA};
 static const int vel_of_state[6] = {ST_V, -1, -1, -1, -1, ST_OMEGA};
 
-void mav_odometry_set_state_cov(struct mav_odometry *o, const double cov[ST_N * ST_N])
+/* What the planar model says of the rows it does not estimate, as variances
+ * (independent of everything else): a ground robot's reference point stays
+ * at its mount height and its body level within the floor's unevenness, and
+ * it does not move sideways or vertically, nor roll or pitch, beyond slip.
+ * Sent finite because autopilots combine these rows with the estimated ones:
+ * ArduPilot's handle_odometry (GCS_Common.cpp) takes the position error as
+ * cbrt(C[0]^2 + C[6]^2 + C[11]^2) and the angle error from C[15], C[18],
+ * C[20] whenever C[0] is not NaN, so a NaN var(down) made both NaN (an
+ * internal error that blocks arming); PX4's EKF2 uses the reported
+ * variances of a vector only when all three are finite (docs/autopilot.md). */
+#define PLANAR_SIGMA_Z_M 0.02           /* height of the reference point, m */
+#define PLANAR_SIGMA_TILT_RAD 0.0349    /* roll and pitch: 2 deg */
+#define PLANAR_SIGMA_VEL_MPS 0.02       /* lateral and vertical speed, m/s */
+#define PLANAR_SIGMA_TILT_RATE_RADPS 0.0349 /* roll and pitch rate: 2 deg/s */
+static const double pose_planar_sigma[6] = {0, 0, PLANAR_SIGMA_Z_M, PLANAR_SIGMA_TILT_RAD,
+                                            PLANAR_SIGMA_TILT_RAD, 0};
+static const double vel_planar_sigma[6] = {0, PLANAR_SIGMA_VEL_MPS, PLANAR_SIGMA_VEL_MPS,
+                                           PLANAR_SIGMA_TILT_RATE_RADPS,
+                                           PLANAR_SIGMA_TILT_RATE_RADPS, 0};
+
+/* One 6x6: the estimated block from the state covariance, the planar rows
+ * diagonal with their model variance, zero between the two. */
+static void set_block(float out[6][6], const int of_state[6], const double planar_sigma[6],
+                      const double cov[ST_N * ST_N])
 {
     for (int i = 0; i < 6; i++)
         for (int j = 0; j < 6; j++) {
-            if (pose_of_state[i] >= 0 && pose_of_state[j] >= 0)
-                o->pose_cov[i][j] = (float)cov[pose_of_state[i] * ST_N + pose_of_state[j]];
-            if (vel_of_state[i] >= 0 && vel_of_state[j] >= 0)
-                o->vel_cov[i][j] = (float)cov[vel_of_state[i] * ST_N + vel_of_state[j]];
+            if (of_state[i] >= 0 && of_state[j] >= 0)
+                out[i][j] = (float)cov[of_state[i] * ST_N + of_state[j]];
+            else if (i == j)
+                out[i][j] = (float)(planar_sigma[i] * planar_sigma[i]);
+            else
+                out[i][j] = 0.0f;
         }
+}
+
+void mav_odometry_set_state_cov(struct mav_odometry *o, const double cov[ST_N * ST_N])
+{
+    set_block(o->pose_cov, pose_of_state, pose_planar_sigma, cov);
+    set_block(o->vel_cov, vel_of_state, vel_planar_sigma, cov);
 }
 
 double state_cov_sigma_xy_m(const double cov[ST_N * ST_N])

@@ -27,7 +27,11 @@ double state_cov_sigma_xy_m(const double cov[ST_N * ST_N]);
 int mav_quality_from_state_cov(const double cov[ST_N * ST_N]);
 
 /* The state covariance into o's pose (x, y, yaw <- x, y, theta) and
- * velocity (vx, yawrate <- v, omega) 6x6; the rest stays NaN (not estimated). */
+ * velocity (vx, yawrate <- v, omega) 6x6; the rows the planar filter does
+ * not estimate (z, roll, pitch; lateral and vertical speed, roll and pitch
+ * rates) get the planar model's variances (covariance.c: 2 cm, 2 deg,
+ * 2 cm/s, 2 deg/s as sigma), uncorrelated: every matrix is finite, as
+ * ArduPilot and PX4 need to use it. */
 void mav_odometry_set_state_cov(struct mav_odometry *o, const double cov[ST_N * ST_N]);
 
 /*

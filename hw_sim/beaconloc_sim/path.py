@@ -179,3 +179,78 @@ def parse_segment(text: str, default_speed_mps: float, turn_rate_radps: float) -
 def wrap_angle(a):
     """Angle wrapped to [-pi, pi), rad."""
     return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
+
+
+@dataclass(frozen=True)
+class PathViolation:
+    """Where a path first leaves the room or crosses an obstacle."""
+    t_s: float                 # time of the first sample outside / past the obstacle, s
+    segment_index: int         # index into Trajectory.segments (-1: the start pose)
+    x_m: float                 # the robot's reference point there, site frame
+    y_m: float
+    why: str                   # "leaves the room ..." | "crosses obstacle segmentN ..."
+    kidnap_index: int = -1     # >= 0: a kidnap put it there (index into Trajectory.kidnaps)
+
+
+def _cross(ax, ay, bx, by):
+    return ax * by - ay * bx
+
+
+def first_violation(traj: Trajectory, room_x_m: float, room_y_m: float,
+                    obstacles_m: np.ndarray | None = None, until_s: float | None = None,
+                    step_m: float = 0.01, step_s: float = 0.05,
+                    obstacle_names: list[str] | None = None) -> PathViolation | None:
+    """The first instant the robot's reference point (the wheel-base centre) is outside the
+    room [0, room_x_m] x [0, room_y_m] or has crossed an obstacle segment (rows x1, y1, x2,
+    y2, m), or None. The path is sampled every step_m of travel and at least every step_s
+    (closed-form poses, Trajectory.state), up to until_s (default: the program's end), and a
+    crossing is a proper intersection of the chord between two samples with an obstacle
+    (a chord ending on the obstacle counts: the robot cannot stand inside a wall). A kidnap
+    that carries the robot outside or through an obstacle is reported with its index."""
+    end = traj.end_s if until_s is None else min(until_s, traj.end_s)
+    obstacles = np.zeros((0, 4)) if obstacles_m is None else np.asarray(obstacles_m, float)
+    times = [np.array([0.0])]
+    for i, seg in enumerate(traj.segments):
+        t0 = traj.t0_s[i]
+        if t0 >= end:
+            break
+        t1 = min(t0 + seg.duration_s, end)
+        speed = abs(seg.v_mps)
+        dt = step_s if speed <= 0 else min(step_s, step_m / speed)
+        n = max(1, int(math.ceil((t1 - t0) / dt)))
+        times.append(t0 + (t1 - t0) * np.arange(1, n + 1) / n)
+    for k in traj.kidnaps:                     # just before and at each kidnap
+        if k[0] <= end:
+            times.append(np.array([max(k[0] - 1e-9, 0.0), k[0]]))
+    t = np.unique(np.concatenate(times))
+    st = traj.state(t)
+    x, y = st["x_m"], st["y_m"]
+    tol = 1e-9
+    outside = (x < -tol) | (x > room_x_m + tol) | (y < -tol) | (y > room_y_m + tol)
+    bad_t, why = math.inf, ""
+    if outside.any():
+        j = int(np.argmax(outside))
+        bad_t, why = float(t[j]), (f"leaves the room (0..{room_x_m:g} m x 0..{room_y_m:g} m) "
+                                   f"at ({x[j]:.3f}, {y[j]:.3f}) m, t = {t[j]:.2f} s")
+    # chords p -> q between successive samples against each obstacle a -> b
+    px, py, qx, qy = x[:-1], y[:-1], x[1:], y[1:]
+    for o, (ax, ay, bx, by) in enumerate(obstacles):
+        d1 = _cross(bx - ax, by - ay, px - ax, py - ay)
+        d2 = _cross(bx - ax, by - ay, qx - ax, qy - ay)
+        d3 = _cross(qx - px, qy - py, ax - px, ay - py)
+        d4 = _cross(qx - px, qy - py, bx - px, by - py)
+        hit = (d1 * d2 <= 0) & (d3 * d4 <= 0) & ((d1 != 0) | (d2 != 0))
+        if hit.any():
+            j = int(np.argmax(hit))
+            if t[j + 1] < bad_t:
+                name = obstacle_names[o] if obstacle_names else f"segment{o + 1}"
+                bad_t, why = float(t[j + 1]), (
+                    f"crosses obstacle {name} at about ({qx[j]:.3f}, {qy[j]:.3f}) m, "
+                    f"t = {t[j + 1]:.2f} s")
+    if not math.isfinite(bad_t):
+        return None
+    st_bad = traj.state(np.array([bad_t]))
+    kidnap_index = next((i for i, k in enumerate(traj.kidnaps) if k[0] == bad_t), -1)
+    seg = -1 if bad_t == 0.0 else int(traj._index(np.array([bad_t - 1e-12]))[0])
+    return PathViolation(bad_t, seg, float(st_bad["x_m"][0]), float(st_bad["y_m"][0]), why,
+                         kidnap_index)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .inifile import ConfigError, IniFile
-from .path import Trajectory, parse_segment
+from .path import Trajectory, first_violation, parse_segment
 from .resources import SCENARIO_SUFFIX as SUFFIX
 from .resources import builtin_scenario_names, builtin_scenario_path
 from .site import Site, load_site
@@ -215,6 +215,8 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         if k[0] < 0:
             raise ini.error("faults", key, "time_s must be >= 0")
         kidnaps.append((k[0], k[1], k[2], math.radians(k[3]) if len(k) == 4 else 0.0))
+    kidnap_keys = [key for _, key in sorted(zip(kidnaps, fault_keys["kidnap"]),
+                                             key=lambda kk: kk[0][0])]
     kidnaps.sort(key=lambda k: k[0])
     if len({k[0] for k in kidnaps}) != len(kidnaps):
         raise ini.error("faults", fault_keys["kidnap"][-1], "two kidnaps at the same time")
@@ -256,12 +258,18 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
                             f"at {site.bearing_scan_rate_hz:g} scans/s (need >= "
                             f"{max(scan_s, scan_s * p / (1 - p)):g} s)")
 
-    obstacles = []
+    obstacles, obstacle_keys = [], []
     if ini.has("obstacles"):
         for key in ini.parser.options("obstacles"):
             if not (key.startswith("segment") and key[7:].isdigit()):
                 raise ini.error("obstacles", key, "obstacle keys are segment1, segment2, ...")
             obstacles.append(ini.numbers("obstacles", key, 4))
+            obstacle_keys.append(key)
+    # the simulator refuses what cannot happen: a path through a wall or an obstacle
+    check_path(ini, "path", trajectory, site, obstacles, obstacle_keys, realization_s,
+               kidnap_keys)
+    if opponent is not None:
+        check_path(ini, "opponent", opponent, site, obstacles, obstacle_keys, realization_s)
     outages = []
     for key in fault_keys["beacon_outage"]:
         vals = ini.numbers("faults", key)
@@ -401,14 +409,38 @@ def is_team_scenario(name_or_path: str) -> bool:
     return IniFile(resolve(name_or_path)).has("team")
 
 
+def check_path(ini: IniFile, sec: str, traj: Trajectory, site: Site, obstacles,
+               obstacle_keys: list[str], until_s: float, kidnap_keys=()) -> None:
+    """Refuse a path program (section sec: [path], [opponent], a team's [robotN]) whose
+    reference point leaves the room or crosses an obstacle before until_s: a ConfigError
+    naming the segment key that does it (the start key for a start outside, the [faults]
+    kidnap key for a kidnap that carries the robot there). path.first_violation."""
+    v = first_violation(traj, site.room_x_m, site.room_y_m,
+                        np.asarray(obstacles, dtype=float).reshape(-1, 4), until_s,
+                        obstacle_names=[f"[obstacles] {k}" for k in obstacle_keys])
+    if v is None:
+        return
+    if v.kidnap_index >= 0:
+        raise ini.error("faults", kidnap_keys[v.kidnap_index], f"the kidnap: the robot {v.why}")
+    if v.segment_index < 0:
+        raise ini.error(sec, "start", f"the robot starts outside: it {v.why}")
+    keys = _segment_keys(ini, sec)
+    raise ini.error(sec, keys[v.segment_index % len(keys)], f"the path {v.why}")
+
+
+def _segment_keys(ini: IniFile, sec: str) -> list[str]:
+    """segment1, segment2, ... of section sec in program order."""
+    return sorted((k for k in ini.parser.options(sec) if k.startswith("segment")),
+                  key=lambda k: int(k[7:]) if k[7:].isdigit() else -1)
+
+
 def _read_segments(ini: IniFile, sec: str, known: set[str] | None = None) -> list:
     """The path program of section sec ([path], [opponent], a team's [robotN]): speed_mps,
     turn_rate_degps and segment1, segment2, ... (docs/simulator.md); any other key (than
     those of known, default _KNOWN[sec]) is an error."""
     speed = ini.number(sec, "speed_mps", 0.4, positive=True, maximum=5.0)
     turn_rate = math.radians(ini.number(sec, "turn_rate_degps", 30.0, positive=True))
-    seg_keys = sorted((k for k in ini.parser.options(sec) if k.startswith("segment")),
-                      key=lambda k: int(k[7:]) if k[7:].isdigit() else -1)
+    seg_keys = _segment_keys(ini, sec)
     segments = []
     for key in seg_keys:
         if not key[7:].isdigit():

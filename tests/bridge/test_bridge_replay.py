@@ -86,7 +86,12 @@ def test_odometry_fields_and_rate(replay_run):
         assert math.isfinite(m.x) and math.isfinite(m.y)
         var_n, var_e = m.pose_covariance[0], m.pose_covariance[6]
         assert var_n > 0 and var_e > 0
-        assert math.isnan(m.pose_covariance[11])  # var(down): not estimated
+        # every entry finite (the planar rows carry the model's variances,
+        # bridge/covariance.c): ArduPilot's posErr = cbrt(C0^2 + C6^2 + C11^2)
+        # is then finite too, and PX4 uses the reported variances
+        assert all(math.isfinite(c) for c in m.pose_covariance)
+        assert all(math.isfinite(c) for c in m.velocity_covariance)
+        assert m.pose_covariance[11] == pytest.approx(0.02 ** 2)  # var(down): 2 cm
     t = np.array([m.time_usec for m in odo], dtype=np.int64)
     assert np.all(np.diff(t) > 0), "ODOMETRY time must increase"
     rate_hz = (len(t) - 1) / ((t[-1] - t[0]) / 1e6)

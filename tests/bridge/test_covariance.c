@@ -192,11 +192,30 @@ static void test_odometry_state_covariance(void **state)
     assert_true(p[ut_index(5, 5)] == 0.03f);    /* yaw = theta */
     assert_true(p[ut_index(0, 5)] == -0.003f);  /* north x (-yaw): -cov(y, theta) */
     assert_true(p[ut_index(1, 5)] == -0.002f);  /* east x (-yaw): -cov(x, theta) */
-    assert_true(isnan(p[ut_index(2, 2)]));      /* z not estimated */
     assert_true(v[ut_index(0, 0)] == 0.04f);    /* forward = v */
     assert_true(v[ut_index(5, 5)] == 0.05f);    /* yaw rate = omega */
     assert_true(v[ut_index(0, 5)] == -0.007f);  /* v x (-omega) */
-    assert_true(isnan(v[ut_index(1, 1)]));      /* no lateral velocity */
+    /* The planar rows: the model's variances (covariance.c), uncorrelated. */
+    assert_true(p[ut_index(2, 2)] == (float)(0.02 * 0.02));     /* down: 2 cm */
+    assert_true(p[ut_index(3, 3)] == (float)(0.0349 * 0.0349)); /* roll: 2 deg */
+    assert_true(p[ut_index(4, 4)] == (float)(0.0349 * 0.0349)); /* pitch */
+    assert_true(v[ut_index(1, 1)] == (float)(0.02 * 0.02));     /* right: 2 cm/s */
+    assert_true(v[ut_index(2, 2)] == (float)(0.02 * 0.02));     /* down */
+    for (int i = 0; i < 6; i++)
+        for (int j = i + 1; j < 6; j++)
+            if (i >= 2 && i <= 4 && (j < 2 || j > 4)) /* a planar row x an estimated one */
+                assert_true(p[ut_index(i, j)] == 0.0f);
+    /* Every entry finite, so the figures autopilots derive are: ArduPilot's
+     * handle_odometry (GCS_Common.cpp) posErr = cbrt(C0^2 + C6^2 + C11^2),
+     * angErr = cbrt(C15^2 + C18^2 + C20^2); PX4 uses a vector's variances
+     * only when all three are finite. */
+    for (int k = 0; k < MAV_COV_UT_LEN; k++) {
+        assert_true(isfinite(p[k]));
+        assert_true(isfinite(v[k]));
+    }
+    double pos_err = cbrt((double)(p[0] * p[0] + p[6] * p[6] + p[11] * p[11]));
+    double ang_err = cbrt((double)(p[15] * p[15] + p[18] * p[18] + p[20] * p[20]));
+    assert_true(isfinite(pos_err) && pos_err > 0 && isfinite(ang_err) && ang_err > 0);
 }
 
 static void test_odometry_rejects_bad_input(void **state)

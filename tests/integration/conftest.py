@@ -54,17 +54,44 @@ def pytest_xdist_make_scheduler(config, log):
     return LiveRunScheduling(config, log)
 
 
+# The weight of a live run for sharding: its live_s mark (the simulated
+# seconds it runs in real time), else LIVE_S_UNMARKED; plus RUN_OVERHEAD_S
+# (start-up of simulator and bridge, the checks) each.
+LIVE_S_UNMARKED = 10.0
+RUN_OVERHEAD_S = 5.0
+
+
+def shard_runs(runs: list[str], seconds: dict[str, float], n: int) -> dict[str, int]:
+    """Guest of each live run: longest first, each to the guest with the least
+    work so far (Graham's LPT rule: the longest guest within 4/3 of the best
+    split), ties to the lower guest and the earlier run: deterministic, the
+    same in every guest."""
+    load, owner = [0.0] * n, {}
+    for k in sorted(range(len(runs)), key=lambda k: (-seconds[runs[k]], k)):
+        g = min(range(n), key=lambda g: (load[g], g))
+        owner[runs[k]] = g
+        load[g] += seconds[runs[k]] + RUN_OVERHEAD_S
+    return owner
+
+
 def pytest_collection_modifyitems(config, items):
     """BL_IT_SHARD=I/N (set by tests/vm/run_in_vm.py --guests N): keep the
-    live runs I, I+N, I+2N, ... in collection order, so N guests side by
-    side share the suite; every test of one live run stays together."""
+    live runs shard_runs gives guest I, in collection order, so N guests side
+    by side share the suite in about equal time; every test of one live run
+    stays together."""
     shard = os.environ.get("BL_IT_SHARD", "")
     if not shard:
         return
     i, n = (int(v) for v in shard.split("/"))
     assert 0 <= i < n, f"BL_IT_SHARD={shard}: want I/N with 0 <= I < N"
     runs = list(dict.fromkeys(live_run_of(it.nodeid) for it in items))
-    mine = set(runs[i::n])
+    seconds = dict.fromkeys(runs, 0.0)
+    for it in items:
+        mark = it.get_closest_marker("live_s")
+        run = live_run_of(it.nodeid)
+        seconds[run] = max(seconds[run], float(mark.args[0]) if mark else LIVE_S_UNMARKED)
+    owner = shard_runs(runs, seconds, n)
+    mine = {r for r in runs if owner[r] == i}
     keep = [it for it in items if live_run_of(it.nodeid) in mine]
     drop = [it for it in items if live_run_of(it.nodeid) not in mine]
     if drop:

@@ -10,10 +10,12 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 import harness as h
 
 RUN_S = 40.0
+SIGTERM_RUN_S = 50.0
 RECOVERED_RMS_M = 0.10
 FLOOD_FRAMES = 3000       # bad frames of six kinds, in turn
 
@@ -30,6 +32,7 @@ def _ip(*args: str) -> None:
     assert r.returncode == 0, f"ip {' '.join(args)}: {r.stderr}"
 
 
+@pytest.mark.live_s(RUN_S)
 def test_interface_down_and_up_mid_run(rig):
     """The bridge's interface taken down for 4 s mid-run and brought back
     (an unplugged adapter): the sensor nodes keep sending on their own bus,
@@ -75,6 +78,7 @@ def test_interface_down_and_up_mid_run(rig):
     assert rms < RECOVERED_RMS_M, f"rms error at the end {rms * 1e3:.0f} mm"
 
 
+@pytest.mark.live_s(RUN_S)
 def test_flood_of_malformed_and_unknown_frames(rig):
     """Thousands of bad frames among the good ones: each kind counted where
     the bridge can see it, nothing crashes, the good frames still all count
@@ -161,6 +165,7 @@ def test_flood_of_malformed_and_unknown_frames(rig):
     assert rms < RECOVERED_RMS_M, f"rms error at the end {rms * 1e3:.0f} mm"
 
 
+@pytest.mark.live_s(SIGTERM_RUN_S)
 def test_sigterm_then_restart(rig):
     """SIGTERM: clean exit 0 with the stats written; a new daemon on the same
     bus picks up the running robot and converges again."""
@@ -174,7 +179,7 @@ def test_sigterm_then_restart(rig):
         state["stats_written"] = r.bridge_stats.exists()
         r.start_bridge(name="bridge2")
 
-    run = h.run_live(rig, "kleeman-lab", 50.0, actions=[(15.0, stop_and_restart)])
+    run = h.run_live(rig, "kleeman-lab", SIGTERM_RUN_S, actions=[(15.0, stop_and_restart)])
     assert state["rc"] == 0, rig.logs()
     assert state["stop_s"] < 5.0, f"SIGTERM took {state['stop_s']:.1f} s"
     assert state["stats_written"], "no --stats JSON after SIGTERM"
@@ -203,6 +208,7 @@ def _site_with(text: str, section: str, key: str, value: str) -> str:
     return "\n".join(out) + "\n"
 
 
+@pytest.mark.live_s(RUN_S)
 def test_sighup_reloads_changed_site_file(rig):
     """SIGHUP with a changed rate: the new rate applies, the filter is kept
     (same geometry: no reset). SIGHUP with a broken file: a clear error, and
@@ -222,7 +228,7 @@ def test_sighup_reloads_changed_site_file(rig):
         marks["t2"] = time.monotonic()
         next(p for p in r.procs if p.name == "bridge").popen.send_signal(signal.SIGHUP)
 
-    run = h.run_live(rig, "kleeman-lab", 40.0, site=site,
+    run = h.run_live(rig, "kleeman-lab", RUN_S, site=site,
                      actions=[(12.0, reload_rate), (26.0, reload_broken)])
     assert run.bridge_rc == 0, rig.logs()
     t = [x.t_mono_s for x in run.odometry]

@@ -16,6 +16,8 @@ import select
 import threading
 import time
 
+import pytest
+
 import harness as h
 
 RUN_S = 30.0
@@ -23,6 +25,7 @@ ODOMETRY_RATE_HZ = 30.0  # [bridge] odometry_rate_hz of kleeman-lab.ini
 SLOW_DNS = h.BUILD / "tests" / "bridge" / "slow_dns_preload.so"
 
 
+@pytest.mark.live_s(RUN_S)
 def test_host_faults_on_a_live_bus(rig):
     assert SLOW_DNS.exists(), f"{SLOW_DNS} not built (make test-bridge-py builds it)"
     master, slave = os.openpty()

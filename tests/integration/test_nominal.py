@@ -11,6 +11,7 @@ import pytest
 import harness as h
 
 DURATION_S = 60.0
+pytestmark = pytest.mark.live_s(DURATION_S)
 ODOMETRY_RATE_HZ = 30.0  # [bridge] odometry_rate_hz of kleeman-lab.ini
 QUALITY_BY_S = 30.0      # quality >= 0 (converged) this long after the first frame
 
@@ -49,8 +50,10 @@ def test_odometry_fields(run):
         assert m.get_srcComponent() == 197 and m.get_srcSystem() == 1
         cov = h.odometry_site_pos_cov(m)
         assert np.all(np.isfinite(cov)) and cov[0, 0] > 0 and cov[1, 1] > 0, cov
-        # z is not estimated: NaN per the MAVLink covariance convention.
-        assert np.isnan(m.pose_covariance[11]), "var(z) should be NaN (not estimated)"
+        # z is not estimated: the planar model's variance (2 cm), finite as
+        # ArduPilot and PX4 need every variance they read to be.
+        assert np.all(np.isfinite(m.pose_covariance)) and np.all(np.isfinite(m.velocity_covariance))
+        assert m.pose_covariance[11] == pytest.approx(0.02 ** 2), m.pose_covariance[11]
 
 
 def test_heartbeat_1hz(run):

@@ -42,7 +42,8 @@ def _event_window(sc) -> tuple[float, float] | None:
     return None
 
 
-@pytest.mark.parametrize("scenario", list(CASES))
+@pytest.mark.parametrize("scenario", [pytest.param(s, marks=pytest.mark.live_s(CASES[s][1]))
+                                      for s in CASES])
 def test_scenario_output_never_stops_and_recovers(rig, scenario):
     pattern, max_duration_s = CASES[scenario]
     sc = h.scenario_events(scenario)
@@ -90,6 +91,7 @@ EUROBOT_JUDGE_AFTER_S = 2.0  # the triangulation start and its first second
 EUROBOT_RMS_M = 0.04         # replayed: 18 mm after 2 s, 2 mm standing at the end
 
 
+@pytest.mark.live_s(12.0)   # the scenario's duration_s (asserted below)
 def test_eurobot_bearings_end_to_end(rig):
     """simulator -> vcan -> bridge -> MAVLink on a site of three bearing
     beacons and no ultrasonic one: the pymavlink-decoded ODOMETRY against
@@ -151,6 +153,7 @@ RANGE_COUNTERS = ("ranges_fused", "ranges_rejected", "ranges_buffered", "ranges_
                   "ranges_bad_tof", "stale_range_samples", "unmapped_ranges")
 
 
+@pytest.mark.live_s(MARVELMIND_LIVE_S)
 def test_marvelmind_ranges_end_to_end(rig):
     """Issue 13's fixed-beacon integration case (its team case: test_team.py).
     simulator -> vcan -> bridge -> MAVLink on a site of four fixed range

@@ -14,6 +14,7 @@ from beaconloc_sim.team_scenario import load_team_scenario
 from conftest import SITE_TEXT, site_with
 
 GOOD_BODY = "duration_s = 5\n[path]\nstart = 3, 3, 0\nsegment1 = straight 1\n"
+LONG_BODY = GOOD_BODY.replace("duration_s = 5", "duration_s = 60")
 
 
 def _line_of(text: str, needle: str, after: str = "") -> int:
@@ -120,6 +121,17 @@ def test_bridge_and_tuning_sections_are_left_to_the_bridge(tmp_path):
     (GOOD_BODY + "[acoustics]\nechoes = 3\n", 8, "acoustics", "echoes", "unknown key"),
     (GOOD_BODY + "[environment]\ntemperature_profile = 0:20, 10\n", 8, "environment",
      "temperature_profile", "expected 't_s:temperature_c"),
+    # the simulator refuses what cannot happen (issue 14): through a wall or an obstacle
+    (LONG_BODY + "segment2 = turn 90\nsegment3 = straight 9.5\n", 8, "path", "segment3",
+     "the path leaves the room (0..12 m x 0..12 m) at (4.000, 12.0"),
+    ("duration_s = 5\n[path]\nstart = -0.5, 3, 0\nsegment1 = straight 1\n", 5, "path",
+     "start", "the robot starts outside: it leaves the room"),
+    (LONG_BODY + "[obstacles]\nsegment1 = 3.5, 2, 3.5, 4\n", 6, "path", "segment1",
+     "the path crosses obstacle [obstacles] segment1 at about (3.5"),
+    (LONG_BODY + "[faults]\nkidnap = 10, 1, 1\nkidnap2 = 2, 9.5, 0\n", 9, "faults", "kidnap2",
+     "the kidnap: the robot leaves the room (0..12 m x 0..12 m) at (13.300, 3.000)"),
+    ("duration_s = 60\n[path]\nstart = 3, 3, 0\nrepeat = yes\nsegment1 = straight 1\n"
+     "segment2 = wait 1\n", 7, "path", "segment1", "at (12.0"),
 ])
 def test_bad_scenario_values(make_scenario, body, line, section, key, why):
     path = make_scenario(body)
@@ -153,3 +165,26 @@ def test_double_pulse_tolerance_from_the_site(make_scenario):
     text = site_with(receivers__double_pulse_tolerance_s="0.004")
     with pytest.raises(ConfigError, match=r"\[receivers\] double_pulse_tolerance_s: must be below"):
         load_scenario(str(make_scenario(GOOD_BODY, text)))
+
+
+def test_first_violation_finds_the_crossing_instant():
+    """path.first_violation on closed-form paths: a straight through a wall is caught at the
+    wall within one sampling step, an arc that stays inside passes, an obstacle is crossed
+    where the geometry says, and a chord ending exactly on an obstacle counts."""
+    from beaconloc_sim.path import Trajectory, first_violation, parse_segment
+    seg = parse_segment("straight 5", 0.5, 0.5)               # 0.5 m/s from x = 1: wall x = 4 at 6 s
+    traj = Trajectory(1.0, 1.0, 0.0, [seg], 0.3)
+    v = first_violation(traj, 4.0, 4.0)
+    assert v is not None and v.segment_index == 0 and v.kidnap_index == -1
+    assert 6.0 <= v.t_s <= 6.0 + 0.01 / 0.5 + 1e-9 and v.x_m >= 4.0
+    arc = Trajectory(2.0, 1.0, 0.0, [parse_segment("arc 360 0.9", 0.5, 0.5)], 0.3)
+    assert first_violation(arc, 4.0, 4.0) is None              # circle of 0.9 m about (2, 1.9)
+    assert first_violation(arc, 4.0, 2.7) is not None          # its top, y = 2.8, is outside
+    obstacle = np.array([[2.5, 0.0, 2.5, 2.0]])
+    v = first_violation(traj, 10.0, 10.0, obstacle)
+    assert v is not None and abs(v.t_s - 3.0) <= 0.021 and "segment1" in v.why
+    assert first_violation(traj, 10.0, 10.0, obstacle, until_s=2.9) is None
+    # an obstacle the path only touches at its end point (a wall it drives up to) counts
+    stop = Trajectory(1.0, 1.0, 0.0, [parse_segment("straight 1.5", 0.5, 0.5)], 0.3)
+    assert first_violation(stop, 10.0, 10.0, obstacle) is not None
+    assert first_violation(stop, 10.0, 10.0, obstacle + [0.01, 0, 0.01, 0]) is None

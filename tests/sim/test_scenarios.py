@@ -54,25 +54,26 @@ def test_kidnap_moves_truth_but_not_the_wheels():
 def test_kidnap_with_a_turn_goes_on_from_the_new_pose(make_scenario):
     """kidnap = t, dx, dy, dtheta: carried and turned; the program goes on from
     there, so the path after is the planned one turned about the pickup point."""
-    body = ("duration_s = 30\n[path]\nstart = 3, 3, 0\nspeed_mps = 0.5\nsegment1 = straight 10\n"
-            "[faults]\nkidnap = 10, 4.0, 5.0, 90\n")
+    body = ("duration_s = 30\n[path]\nstart = 1, 3, 0\nspeed_mps = 0.5\nsegment1 = straight 8\n"
+            "[faults]\nkidnap = 10, 2.0, 5.0, 90\n")
     scn = load_scenario(str(make_scenario(body)))
     tr = scn.trajectory
     before = tr.state(np.array([9.999]))
     after = tr.state(np.array([10.0, 14.0]))
-    # picked up at (8, 3) heading 0, put down at (12, 8) heading 90 deg
-    assert before["x_m"][0] == pytest.approx(8.0, abs=1e-3)
-    assert (after["x_m"][0], after["y_m"][0]) == pytest.approx((12.0, 8.0), abs=1e-3)
+    # picked up at (6, 3) heading 0, put down at (8, 8) heading 90 deg (inside the
+    # 12 m room all the way: a path through a wall is refused)
+    assert before["x_m"][0] == pytest.approx(6.0, abs=1e-3)
+    assert (after["x_m"][0], after["y_m"][0]) == pytest.approx((8.0, 8.0), abs=1e-3)
     assert after["theta_rad"][0] == pytest.approx(math.pi / 2)
     # 4 s later it has driven 2 m north, the way it now faces
-    assert (after["x_m"][1], after["y_m"][1]) == pytest.approx((12.0, 10.0), abs=1e-6)
+    assert (after["x_m"][1], after["y_m"][1]) == pytest.approx((8.0, 10.0), abs=1e-6)
     # the wheels did not turn during the carry
     wl, wr = tr.wheel_travel(np.array([9.999, 10.0]))
     assert wl[1] - wl[0] == pytest.approx(0.0005, abs=1e-6) and wr[1] == pytest.approx(wl[1])
     # without a turn the 3-number form moves only
-    body3 = body.replace("kidnap = 10, 4.0, 5.0, 90", "kidnap = 10, 4.0, 5.0")
+    body3 = body.replace("kidnap = 10, 2.0, 5.0, 90", "kidnap = 10, 2.0, 5.0")
     st = load_scenario(str(make_scenario(body3))).trajectory.state(np.array([14.0]))
-    assert (st["x_m"][0], st["y_m"][0], st["theta_rad"][0]) == pytest.approx((14.0, 8.0, 0.0))
+    assert (st["x_m"][0], st["y_m"][0], st["theta_rad"][0]) == pytest.approx((10.0, 8.0, 0.0))
 
 
 def test_beacon_period_and_node_clock_drift():
