@@ -78,7 +78,6 @@ struct stats_report {
     const struct survey *survey;
     uint64_t ranges_before_survey; /* robot ranges dropped before the survey was done */
     uint64_t survey_unexpected;    /* BEACON_SURVEY frames on a site without self_survey */
-    uint64_t tracks_unexpected;            /* TRACK_ENCODERS on a site that is not a team's */
     uint64_t can_tx_frames, can_tx_errors; /* frames the bridge wrote (TEAM_COMMAND) */
     /* a team site (bridge/team.h): its section "team" of the JSON; NULL elsewhere */
     const struct team *team;
