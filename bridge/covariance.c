@@ -34,10 +34,17 @@ static const double vel_planar_sigma[6] = {0, PLANAR_SIGMA_VEL_MPS, PLANAR_SIGMA
                                            PLANAR_SIGMA_TILT_RATE_RADPS, 0};
 
 /* One 6x6: the estimated block from the state covariance, the planar rows
- * diagonal with their model variance, zero between the two. */
+ * diagonal with their model variance, zero between the two. An estimate
+ * that does not know the block's states (a team robot's estimate has no
+ * v, omega covariance: its odometry drives the team filter, bridge/team_out.c)
+ * leaves the whole matrix NaN, MAVLink's "unknown" (a partly known matrix
+ * must know its first entry, covariance.c cov_map). */
 static void set_block(float out[6][6], const int of_state[6], const double planar_sigma[6],
                       const double cov[ST_N * ST_N])
 {
+    for (int i = 0; i < 6; i++)
+        if (of_state[i] >= 0 && isnan(cov[of_state[i] * ST_N + of_state[i]]))
+            return;
     for (int i = 0; i < 6; i++)
         for (int j = 0; j < 6; j++) {
             if (of_state[i] >= 0 && of_state[j] >= 0)

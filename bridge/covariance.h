@@ -31,7 +31,9 @@ int mav_quality_from_state_cov(const double cov[ST_N * ST_N]);
  * not estimate (z, roll, pitch; lateral and vertical speed, roll and pitch
  * rates) get the planar model's variances (covariance.c: 2 cm, 2 deg,
  * 2 cm/s, 2 deg/s as sigma), uncorrelated: every matrix is finite, as
- * ArduPilot and PX4 need to use it. */
+ * ArduPilot and PX4 need to use it. A block whose estimated states have a
+ * NaN variance in cov (not estimated by this estimate) stays all NaN,
+ * MAVLink's "unknown". */
 void mav_odometry_set_state_cov(struct mav_odometry *o, const double cov[ST_N * ST_N]);
 
 /*

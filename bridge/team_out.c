@@ -70,7 +70,7 @@ static void send_robot(struct daemon *d, const struct team_output *o)
     m.time_usec = (uint64_t)(o->t_team_us > 0 ? o->t_team_us : 0);
     m.x_m = (float)o->x_m;
     m.y_m = (float)o->y_m;
-    m.z_m = 0.0f; /* planar: not estimated (covariance NaN) */
+    m.z_m = 0.0f; /* planar: not estimated (its variance from the planar model) */
     m.yaw_rad = (float)o->theta_rad;
     m.vx_mps = (float)o->v_mps;
     m.vy_mps = 0.0f; /* skid steer: no lateral velocity estimated */

@@ -218,6 +218,41 @@ static void test_odometry_state_covariance(void **state)
     assert_true(isfinite(pos_err) && pos_err > 0 && isfinite(ang_err) && ang_err > 0);
 }
 
+/* A team robot's estimate knows x, y, theta but not v, omega (its odometry
+ * drives the team filter): the pose as above, the velocity matrix "unknown"
+ * (all NaN on the wire), and the message is sent, not refused. */
+static void test_odometry_state_covariance_pose_only(void **state)
+{
+    struct udp_fixture *f = *state;
+    double cov[ST_N * ST_N];
+    for (int i = 0; i < ST_N * ST_N; i++)
+        cov[i] = NAN;
+    const double pose[3][3] = {{0.01, 0.001, 0.002}, {0.001, 0.02, 0.003}, {0.002, 0.003, 0.03}};
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            cov[i * ST_N + j] = pose[i][j];
+    struct mav_odometry o;
+    mav_odometry_init(&o);
+    mav_odometry_set_state_cov(&o, cov);
+    for (int i = 0; i < 6; i++)
+        for (int j = 0; j < 6; j++)
+            assert_true(isnan(o.vel_cov[i][j]));
+    assert_int_equal(mav_out_send_odometry(&f->m, &o), 0);
+    mavlink_message_t msg;
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    mavlink_odometry_t od;
+    mavlink_msg_odometry_decode(&msg, &od);
+    const float *p = od.pose_covariance, *v = od.velocity_covariance;
+    assert_true(p[ut_index(0, 0)] == 0.02f); /* north = state y */
+    assert_true(p[ut_index(1, 1)] == 0.01f); /* east = state x */
+    assert_true(p[ut_index(5, 5)] == 0.03f); /* yaw = theta */
+    assert_true(p[ut_index(2, 2)] == (float)(0.02 * 0.02));
+    for (int k = 0; k < MAV_COV_UT_LEN; k++) {
+        assert_true(isfinite(p[k]));
+        assert_true(isnan(v[k]));
+    }
+}
+
 static void test_odometry_rejects_bad_input(void **state)
 {
     struct udp_fixture *f = *state;
@@ -311,6 +346,8 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_odometry_roundtrip, udp_setup, udp_teardown),
         cmocka_unit_test_setup_teardown(test_odometry_partial_covariance, udp_setup, udp_teardown),
         cmocka_unit_test_setup_teardown(test_odometry_state_covariance, udp_setup, udp_teardown),
+        cmocka_unit_test_setup_teardown(test_odometry_state_covariance_pose_only, udp_setup,
+                                        udp_teardown),
         cmocka_unit_test_setup_teardown(test_odometry_rejects_bad_input, udp_setup, udp_teardown),
         cmocka_unit_test(test_quality_from_cov),
     };
