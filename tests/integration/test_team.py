@@ -35,6 +35,8 @@ TEAM_TRUTH_COLUMNS = ("robot,t_us,t_sim_s,x_m,y_m,team_x_m,team_y_m,team_theta_r
                       "pcrb_pos_m").split(",")
 TEAM_EST_COLUMNS = ("robot,t_us,x_m,y_m,theta_rad,reset_counter,role").split(",")
 
+pytestmark = pytest.mark.live_s(LIVE_S)   # its weight for sharding (conftest.py)
+
 
 def _system_id_first() -> int:
     cp = configparser.ConfigParser(inline_comment_prefixes=(";", "#"))
