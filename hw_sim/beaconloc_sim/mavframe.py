@@ -3,8 +3,7 @@
 The site frame is x east, y north, z up, heading theta counter-clockwise from +x;
 ODOMETRY is MAV_FRAME_LOCAL_FRD with the ENU -> NED axes: x north, y east, z down,
 yaw psi clockwise from north, psi = pi/2 - theta. One place for the mapping back, used by
-beaconloc-view (and meant for every reader of the bridge's stream: the integration
-harness' odometry_site_xy / odometry_site_pos_cov are the same two functions).
+beaconloc-view, the integration harness (tests/integration/harness.py) and the demo.
 """
 from __future__ import annotations
 

@@ -175,19 +175,9 @@ def max_gap_s(times_s: list[float]) -> float:
     return float(np.max(np.diff(np.asarray(times_s))))
 
 
-def odometry_site_xy(msg) -> tuple[float, float]:
-    """ODOMETRY is LOCAL_FRD (x north, y east; docs/mavlink.md): back to the
-    site frame (x east, y north)."""
-    return float(msg.y), float(msg.x)
-
-
-def odometry_site_pos_cov(msg) -> np.ndarray:
-    """2x2 position covariance in the site frame from the FRD upper triangle
-    (row-major: [0]=xx, [1]=xy, [6]=yy of the 6x6 pose covariance)."""
-    c = msg.pose_covariance
-    frd = np.array([[c[0], c[1]], [c[1], c[6]]], dtype=float)
-    # Swap axes (FRD x=north, y=east  ->  site x=east, y=north).
-    return frd[::-1, ::-1].copy()
+# ODOMETRY back in the site frame: the one mapping of beaconloc_sim.mavframe
+# (also beaconloc-view's), re-exported for the cases and the demo.
+from beaconloc_sim.mavframe import odometry_site_pos_cov, odometry_site_xy  # noqa: E402,F401
 
 
 # --------------------------------------------------------------------------
