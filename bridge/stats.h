@@ -76,8 +76,8 @@ struct stats_report {
     /* the beacons' self-survey (bridge/survey.h): its section "survey" of the
      * JSON; NULL on a site without self_survey */
     const struct survey *survey;
-    uint64_t ranges_before_survey; /* robot ranges dropped before the survey was done */
-    uint64_t survey_unexpected;    /* BEACON_SURVEY frames on a site without self_survey */
+    uint64_t ranges_before_survey;         /* robot ranges dropped before the survey was done */
+    uint64_t survey_unexpected;            /* BEACON_SURVEY frames on a site without self_survey */
     uint64_t can_tx_frames, can_tx_errors; /* frames the bridge wrote (TEAM_COMMAND) */
     /* a team site (bridge/team.h): its section "team" of the JSON; NULL elsewhere */
     const struct team *team;
