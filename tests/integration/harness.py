@@ -86,6 +86,10 @@ class Received:
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 
 
+SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)  # socket(7)
+RCVBUF_BYTES = 16 << 20
+
+
 class MavlinkListener:
     """Receives the bridge's udpout stream on udpin:127.0.0.1:PORT in a
     thread; keeps every message with the kernel's receive time of its
@@ -101,6 +105,16 @@ class MavlinkListener:
                                                source_system=255, source_component=190)
         self.sock = self.conn.port
         self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        # Room for seconds of the stream while this process is held up (a
+        # replay at 20x sends ~2400 ODOMETRY/s; the default buffer, ~200 KiB
+        # of kernel memory, held 0.1 s of it and a busy host lost a quarter):
+        # SO_RCVBUFFORCE as root goes past net.core.rmem_max, SO_RCVBUF else.
+        for opt in (SO_RCVBUFFORCE, socket.SO_RCVBUF):
+            try:
+                self.sock.setsockopt(socket.SOL_SOCKET, opt, RCVBUF_BYTES)
+                break
+            except OSError:
+                continue
         # CLOCK_REALTIME - CLOCK_MONOTONIC (the kernel stamps in realtime)
         self.real_minus_mono_s = time.time() - time.monotonic()
         self.received: list[Received] = []
