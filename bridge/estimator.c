@@ -741,3 +741,12 @@ void estimator_health(const struct estimator *e, int64_t local_now_us, struct es
     }
     h->since_update_us = e->last_data_rx_us > 0 ? local_now_us - e->last_data_rx_us : INT64_MAX;
 }
+
+int estimator_reinit(struct estimator *e)
+{
+    if (bl_localizer_reinit(&e->loc, &e->blcfg, &e->seqcfg) != BL_OK)
+        return -1;
+    sync(e);
+    reset_runtime(e);
+    return 0;
+}

@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "log.h"
 #include "mavlink_out.h"
@@ -254,6 +255,19 @@ int build_config(const struct options *o, struct bridge_config *cfg)
     if (o->site && config_load_file(cfg, o->site, err, sizeof err) != 0) {
         fprintf(stderr, "error: %s\n", err);
         return -1;
+    }
+    /* the parameters set over MAVLink ([bridge] param_file, bridge/params.h):
+     * a site-file fragment over the site file; none yet is no error */
+    if (cfg->param_file[0] && access(cfg->param_file, F_OK) == 0) {
+        char site_path[sizeof cfg->path];
+        memcpy(site_path, cfg->path, sizeof site_path);
+        char param_file[sizeof cfg->param_file];
+        memcpy(param_file, cfg->param_file, sizeof param_file);
+        if (config_load_file(cfg, param_file, err, sizeof err) != 0) {
+            fprintf(stderr, "error: %s\n", err);
+            return -1;
+        }
+        memcpy(cfg->path, site_path, sizeof site_path); /* errors name the site file */
     }
     if (o->can) {
         if (!o->can[0] || strlen(o->can) >= 16) {

@@ -14,7 +14,9 @@
 #include <stdio.h>
 
 #include "frames.h"
+#include "mavlink_out.h"
 
+struct mav_control;
 struct team;
 struct survey;
 
@@ -76,12 +78,16 @@ struct stats_report {
     /* the beacons' self-survey (bridge/survey.h): its section "survey" of the
      * JSON; NULL on a site without self_survey */
     const struct survey *survey;
-    uint64_t ranges_before_survey; /* robot ranges dropped before the survey was done */
-    uint64_t survey_unexpected;    /* BEACON_SURVEY frames on a site without self_survey */
+    uint64_t ranges_before_survey;         /* robot ranges dropped before the survey was done */
+    uint64_t survey_unexpected;            /* BEACON_SURVEY frames on a site without self_survey */
     uint64_t can_tx_frames, can_tx_errors; /* frames the bridge wrote (TEAM_COMMAND) */
     /* a team site (bridge/team.h): its section "team" of the JSON; NULL elsewhere */
     const struct team *team;
     uint64_t team_odometry_sent; /* ODOMETRY sent as the robots' system ids */
+    /* the MAVLink control side (bridge/mav_command.h): its section
+     * "mavlink_control" of the JSON, with the endpoints' input counters */
+    const struct mav_control *control;
+    struct mav_out_stats mavlink_in;
     int64_t latency_p50_us, latency_p99_us, latency_max_us;
     uint64_t latency_samples;
     /* the interval the latest status line closed (latency_interval_close) */
