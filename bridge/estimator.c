@@ -204,7 +204,7 @@ static void sync(struct estimator *e)
                 event(e, EST_EV_NOTICE, "restarted from a known pose (reset %u)", ev.reset_counter);
                 break;
             default:
-                event(e, EST_EV_WARNING, "re-initialised: site geometry changed");
+                event(e, EST_EV_WARNING, "re-initialised: new geometry or command");
                 break;
             }
             if (ev.cause != BL_LOC_CAUSE_PERSISTENT_REJECTION &&
