@@ -28,6 +28,7 @@ struct options {
     const char *record;
     const char *estimates;
     const char *stats;
+    const char *param_file; /* --param-file (overrides [bridge] param_file) */
     const char *log_level;
     double rate_hz;                       /* 0 = not given */
     int sysid, compid;                    /* 0 = not given */
