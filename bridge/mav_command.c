@@ -112,8 +112,8 @@ int mav_control_configure(struct mav_control *ctl, const struct bridge_config *c
 /* May this request change state? Counted and logged when not. */
 static bool authorised(struct daemon *d, const struct mav_request *r, const char *what)
 {
-    bool ok = d->ctl.signing ? r->signed_ok
-                             : (d->ctl.allowed[r->source_sysid / 8] >> (r->source_sysid % 8)) & 1u;
+    const unsigned id = r->source_sysid;
+    bool ok = d->ctl.signing ? r->signed_ok : ((unsigned)d->ctl.allowed[id / 8u] >> (id % 8u)) & 1u;
     if (!ok) {
         d->ctl.c.unauthorised++;
         log_warn("%s from system %u component %u refused: %s", what, r->source_sysid,

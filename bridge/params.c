@@ -68,16 +68,18 @@ double params_from_wire(float v)
     return strtod(buf, NULL);
 }
 
-/* "%.17g" shortened to the fewest digits that read back as v. */
+/* "%.17g" shortened to the fewest digits that read back as v, without an
+ * exponent where plain digits do (50, not 5e+01). */
 static void format_value(const struct param_desc *p, double v, char *out, size_t len)
 {
     if (p->is_int) {
         snprintf(out, len, "%d", (int)v);
         return;
     }
+    const bool plain = fabs(v) >= 1e-4 && fabs(v) < 1e15;
     for (int digits = 1; digits <= 17; digits++) {
         snprintf(out, len, "%.*g", digits, v);
-        if (strtod(out, NULL) == v)
+        if (strtod(out, NULL) == v && (!plain || !strchr(out, 'e')))
             return;
     }
 }
