@@ -3,7 +3,8 @@
  *
  * This header is the whole interface: it exposes no MAVLink type. All
  * MAVLink code (headers that pymavlink's mavgen generates at build time into
- * build/gen/mavlink/) lives in the one translation unit mavlink_out.c.
+ * build/gen/mavlink/) lives in mavlink_out.c (endpoints, sending) and
+ * mav_input.c (parsing, answers, requests, signing), behind mav_priv.h.
  *
  * Conventions (as in the rest of the bridge):
  *   - The caller owns `struct mav_out` (plain struct, no heap); mav_out_open()
