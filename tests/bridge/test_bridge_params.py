@@ -168,6 +168,25 @@ def test_param_set_applies_refuses_and_is_saved(bridge):
     assert c["params_set"] == 1 and c["params_refused"] == 2
 
 
+def test_param_set_keeps_the_filter_unless_geometry(bridge):
+    """Tuning (TUN_ACC_NOISE): the filter goes on, reset_counter unchanged; geometry
+    (ROB_WHEEL_BASE): re-initialised as by SIGHUP, reset_counter up by one."""
+    odo = bridge.wait(lambda m: m.get_type() == "ODOMETRY" and m.quality >= 0, 10.0)
+    assert odo is not None
+    before = odo.reset_counter
+    assert bridge.set("TUN_ACC_NOISE", 0.6).param_value == pytest.approx(0.6)
+    txt = bridge.wait_type("STATUSTEXT", 2.0)
+    assert txt is not None and "TUN_ACC_NOISE = 0.6" in txt.text and "re-init" not in txt.text
+    for _ in range(30):  # a second of ODOMETRY: the same filter
+        m = bridge.wait_type("ODOMETRY", 1.0)
+        assert m is not None and m.reset_counter == before
+    assert bridge.set("ROB_WHEEL_BASE", 0.55).param_value == pytest.approx(0.55)
+    txt = bridge.wait(lambda m: m.get_type() == "STATUSTEXT" and "ROB_WHEEL_BASE" in m.text, 2.0)
+    assert txt is not None and "re-initialised" in txt.text
+    after = bridge.wait(lambda m: m.get_type() == "ODOMETRY" and m.reset_counter != before, 10.0)
+    assert after is not None and after.reset_counter == (before + 1) % 256
+
+
 def test_override_file_survives_a_restart(bridge_bin, kleeman_log, tmp_path, udp_port):
     b = Bridge(bridge_bin, kleeman_log[0], tmp_path, udp_port)
     try:
