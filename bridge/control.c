@@ -236,12 +236,9 @@ void write_stats(struct daemon *d, const struct stats_report *rep)
 
 /* ---- signals ------------------------------------------------------------ */
 
-int apply_config(struct daemon *d, const struct bridge_config *nc, char *err, size_t errlen)
+int apply_config(struct daemon *d, const struct bridge_config *nc, const struct mav_control *ctl,
+                 char *err, size_t errlen)
 {
-    /* the control side first: a key file that cannot be read refuses the whole */
-    struct mav_control ctl = d->ctl;
-    if (mav_control_configure(&ctl, nc, err, errlen) != 0)
-        return -1;
     int rc = estimator_reconfigure(&d->est, nc, err, errlen);
     if (rc < 0)
         return -1;
@@ -251,8 +248,10 @@ int apply_config(struct daemon *d, const struct bridge_config *nc, char *err, si
     bool new_can = strcmp(nc->can_interface, d->cfg.can_interface) != 0;
     bool new_rate = nc->odometry_rate_hz != d->cfg.odometry_rate_hz;
     d->cfg = *nc;
-    d->ctl = ctl;
-    mav_links_set_signing(&d->links, d->ctl.signing ? d->ctl.key : NULL);
+    if (ctl) {
+        d->ctl = *ctl;
+        mav_links_set_signing(&d->links, d->ctl.signing ? d->ctl.key : NULL);
+    }
     enum log_level lv;
     if (log_level_parse(nc->log_level, &lv) == 0)
         log_set_level(lv);
@@ -282,7 +281,12 @@ static void reload(struct daemon *d)
         return;
     }
     char err[CONFIG_ERR_LEN];
-    int rc = apply_config(d, &nc, err, sizeof err);
+    /* the control side first (key file read again: a rotated key is taken);
+     * one that cannot be read refuses the whole reload */
+    struct mav_control ctl = d->ctl;
+    int rc = mav_control_configure(&ctl, &nc, err, sizeof err);
+    if (rc == 0)
+        rc = apply_config(d, &nc, &ctl, err, sizeof err);
     if (rc < 0) {
         log_error("SIGHUP: %s (keeping the running configuration)", err);
         return;

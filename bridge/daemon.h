@@ -204,11 +204,13 @@ int signals_open(struct daemon *d);
  * others). Returns 0 or -EINVAL. */
 int open_links(struct daemon *d);
 /* A new configuration applied as SIGHUP does (reload) and PARAM_SET
- * (mav_command.c): the control side (signing key, system ids), the
- * estimator (same geometry: filter kept, returns 0; else re-initialised,
- * returns 1), the team, endpoints, interface, rates. -1 with err (the
- * running configuration kept) when the key file or the estimator refuses. */
-int apply_config(struct daemon *d, const struct bridge_config *nc, char *err, size_t errlen);
+ * (mav_command.c): the estimator (same geometry: filter kept, returns 0;
+ * else re-initialised, returns 1), the team, endpoints, interface, rates,
+ * and the control side ctl (signing key, system ids: SIGHUP's, read by
+ * mav_control_configure) unless NULL (PARAM_SET: unchanged). -1 with err
+ * (the running configuration kept) when the estimator refuses. */
+int apply_config(struct daemon *d, const struct bridge_config *nc, const struct mav_control *ctl,
+                 char *err, size_t errlen);
 /* Bring the loop in line with the endpoints' descriptors after any
  * mav_links call (mav_links.h). Cheap when nothing changed. */
 void sync_mav_fds(struct daemon *d);

@@ -192,7 +192,7 @@ static void param_set(struct daemon *d, const struct mav_request *r, int link)
     else if (config_check(&nc, err, sizeof err) != 0)
         rc = -EINVAL;
     else
-        rc = apply_config(d, &nc, err, sizeof err);
+        rc = apply_config(d, &nc, NULL, err, sizeof err);
     if (rc >= 0) {
         d->ctl.c.params_set++;
         log_info("PARAM_SET %s ([%s] %s) = %g from system %u: %s", p->name, p->section, p->key, v,

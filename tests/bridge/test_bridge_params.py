@@ -41,12 +41,23 @@ class Bridge:
         self.site.write_text(text)  # [bridge] is the site file's last section
         self.conn = mavlink_listener(port) if client_sysid == 255 else \
             mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=client_sysid)
-        if key is not None:
-            self.conn.setup_signing(key, sign_outgoing=True)
+        self.key = key
         self.proc = subprocess.Popen(
             [str(bridge_bin), "--site", str(self.site), "--replay", str(log), "--speed", str(speed),
              "--mavlink", f"udpout:127.0.0.1:{port}", "--stats", str(self.stats_path),
              "--status-interval", "0"], stderr=subprocess.PIPE, text=True)
+
+    def start(self):
+        """The first HEARTBEAT; with a key, the client signs from then on (pymavlink makes a new
+        MAVLink object, without signing, when the first MAVLink 2 frame switches it over) and
+        takes the next HEARTBEAT only with a good signature."""
+        if self.wait_type("HEARTBEAT", 5.0) is None:
+            return False
+        if self.key is not None:
+            self.conn.setup_signing(self.key, sign_outgoing=True)
+            if self.wait_type("HEARTBEAT", 2.0) is None or self.conn.mav.signing.goodsig_count < 1:
+                return False
+        return True
 
     def wait(self, pred, timeout=3.0):
         end = time.monotonic() + timeout
@@ -94,7 +105,7 @@ class Bridge:
 @pytest.fixture
 def bridge(bridge_bin, kleeman_log, tmp_path, udp_port):
     b = Bridge(bridge_bin, kleeman_log[0], tmp_path, udp_port)
-    assert b.wait_type("HEARTBEAT", 5.0) is not None
+    assert b.start()
     yield b
     err = b.stop()
     assert b.proc.returncode == 0, err
@@ -190,7 +201,7 @@ def test_param_set_keeps_the_filter_unless_geometry(bridge):
 def test_override_file_survives_a_restart(bridge_bin, kleeman_log, tmp_path, udp_port):
     b = Bridge(bridge_bin, kleeman_log[0], tmp_path, udp_port)
     try:
-        assert b.wait_type("HEARTBEAT", 5.0)
+        assert b.start()
         assert b.set("TUN_ACC_NOISE", 0.75).param_value == pytest.approx(0.75)
         assert b.set("TUN_IEKF_ITER", 6).param_value == 6
     finally:
@@ -200,7 +211,7 @@ def test_override_file_survives_a_restart(bridge_bin, kleeman_log, tmp_path, udp
     assert "iekf_max_iterations = 6\n" in text
     b = Bridge(bridge_bin, kleeman_log[0], tmp_path, udp_port)
     try:
-        assert b.wait_type("HEARTBEAT", 5.0)
+        assert b.start()
         assert b.param("TUN_ACC_NOISE").param_value == pytest.approx(0.75)
         assert b.param("TUN_IEKF_ITER").param_value == 6
         assert b.param("NSE_GATE").param_value == pytest.approx(site_value("noise", "gate_sigma"))
@@ -248,7 +259,7 @@ def test_system_not_in_control_sysids_is_refused(bridge_bin, kleeman_log, tmp_pa
     b = Bridge(bridge_bin, kleeman_log[0], tmp_path, udp_port, client_sysid=42,
                extra_site="control_sysids = 255, 250\n")
     try:
-        assert b.wait_type("HEARTBEAT", 5.0)
+        assert b.start()
         gate = b.param("NSE_GATE").param_value  # reading is for anyone
         assert b.set("NSE_GATE", 1.0).param_value == gate
         ack = b.command(MAV.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 1)
@@ -277,8 +288,7 @@ def test_signing(bridge_bin, kleeman_log, tmp_path, udp_port):
     extra = f"signing_key_file = {path}\n"
     b = Bridge(bridge_bin, kleeman_log[0], tmp_path, udp_port, extra_site=extra, key=key)
     try:
-        hb = b.wait_type("HEARTBEAT", 5.0)  # our key's client takes it: signed with the key
-        assert hb is not None and b.conn.mav.signing.goodsig_count > 0
+        assert b.start()  # our key's client takes our HEARTBEAT: signed with the key
         assert b.set("NSE_GATE", 2.0).param_value == pytest.approx(2.0)
         ack = b.command(MAV.MAV_CMD_REQUEST_MESSAGE, 0)
         assert ack is not None and ack.result == MAV.MAV_RESULT_ACCEPTED
@@ -315,3 +325,29 @@ def test_key_file_others_can_read_is_refused(bridge_bin, kleeman_log, tmp_path):
     r = subprocess.run([str(bridge_bin), "--site", str(site), "--replay", str(kleeman_log[0])],
                        capture_output=True, text=True, timeout=10)
     assert r.returncode == 78 and "64 hex digits" in r.stderr
+
+
+def test_sighup_keeps_overrides_and_takes_a_new_key(bridge_bin, kleeman_log, tmp_path, udp_port):
+    key, path = key_file(tmp_path, "first")
+    b = Bridge(bridge_bin, kleeman_log[0], tmp_path, udp_port,
+               extra_site=f"signing_key_file = {path}\n", key=key)
+    try:
+        assert b.start()
+        assert b.set("NSE_GATE", 2.5).param_value == pytest.approx(2.5)
+        new_key, _ = key_file(tmp_path, "second")  # rotated in place, mode 0600
+        b.proc.send_signal(signal.SIGHUP)
+        assert b.wait(lambda m: m.get_type() == "STATUSTEXT" and "reloaded" in m.text, 3.0) \
+            is None  # signed with the new key now: our old-key client drops it
+        b.conn.mav.signing.secret_key = new_key
+        # the override file was read again over the site file: the value holds
+        assert b.param("NSE_GATE").param_value == pytest.approx(2.5)
+        assert b.set("NSE_GATE", 1.5).param_value == pytest.approx(1.5)
+        b.conn.mav.signing.secret_key = key  # the old key: dropped now
+        b.conn.mav.param_set_send(1, 197, b"NSE_GATE", 4.0, MAV.MAV_PARAM_TYPE_REAL32)
+        b.conn.mav.signing.secret_key = new_key
+        assert b.param("NSE_GATE").param_value == pytest.approx(1.5)
+        assert b.stats()["mavlink_control"]["signature_bad"] >= 1
+    finally:
+        err = b.stop()
+    assert b.proc.returncode == 0, err
+    assert "SIGHUP" in err and "reloaded" in err

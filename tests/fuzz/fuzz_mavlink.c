@@ -1,8 +1,9 @@
 /*
  * beaconloc fuzzing — the MAVLink input path of the bridge: what a udpin:
  * or serial: endpoint receives, read and parsed by mav_out_handle_input()
- * (bridge/mavlink_out.c, the generated MAVLink parser) and answered
- * (TIMESYNC) or remembered (HEARTBEAT).
+ * (bridge/mav_input.c, the generated MAVLink parser) and answered
+ * (TIMESYNC, unsupported commands), remembered (HEARTBEAT) or kept for the
+ * daemon (commands, the parameter protocol: a bounded queue).
  *
  * Two real endpoints are opened once: udpin:127.0.0.1:<free port> and
  * serial:<pty slave>:57600. Before every input the struct mav_out is
