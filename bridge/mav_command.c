@@ -230,9 +230,15 @@ static void ack(struct daemon *d, const struct mav_request *r, int link, enum ma
 }
 
 /* MAV_CMD_REQUEST_MESSAGE: param1 the message id; ACK first, then it. */
+/* A command parameter that must hold a whole number in [0, max]: it, or -1. */
+static int whole(float v, int max)
+{
+    return isfinite(v) && v >= 0.0f && v <= (float)max && v == floorf(v) ? (int)v : -1;
+}
+
 static void request_message(struct daemon *d, const struct mav_request *r, int link)
 {
-    int id = (int)r->param[0];
+    int id = whole(r->param[0], 16777215); /* a message id has 24 bits */
     int64_t now = now_local(d);
     switch (id) {
     case MSG_HEARTBEAT:
@@ -251,12 +257,12 @@ static void request_message(struct daemon *d, const struct mav_request *r, int l
         break;
     }
     case MSG_PARAM_VALUE: /* param2: the index */
-        if (!params_at((int)r->param[1])) {
+        if (!params_at(whole(r->param[1], PARAMS_COUNT))) {
             ack(d, r, link, MAV_OUT_RESULT_DENIED);
             break;
         }
         ack(d, r, link, MAV_OUT_RESULT_ACCEPTED);
-        send_param(d, link, (int)r->param[1]);
+        send_param(d, link, whole(r->param[1], PARAMS_COUNT));
         break;
     default:
         ack(d, r, link, MAV_OUT_RESULT_DENIED); /* a message we never send */

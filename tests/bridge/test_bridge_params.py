@@ -230,8 +230,14 @@ def test_commands_to_our_component(bridge):
     ack = bridge.command(MAV.MAV_CMD_REQUEST_MESSAGE, ODOMETRY_ID, as_int=True)
     assert ack is not None and ack.result == MAV.MAV_RESULT_ACCEPTED
     assert bridge.wait_type("ODOMETRY", 1.0) is not None
+    ack = bridge.command(MAV.MAV_CMD_REQUEST_MESSAGE, 22, 5)  # PARAM_VALUE, param2 its index
+    assert ack is not None and ack.result == MAV.MAV_RESULT_ACCEPTED
+    m = bridge.wait_type("PARAM_VALUE", 1.0)
+    assert m is not None and m.param_index == 5 and m.param_id == PARAMS[5].param
     ack = bridge.command(MAV.MAV_CMD_REQUEST_MESSAGE, GPS_RAW_INT_ID)
     assert ack is not None and ack.result == MAV.MAV_RESULT_DENIED  # a message we never send
+    ack = bridge.command(MAV.MAV_CMD_REQUEST_MESSAGE, float("nan"))
+    assert ack is not None and ack.result == MAV.MAV_RESULT_DENIED
     # a command we do not do
     ack = bridge.command(MAV.MAV_CMD_COMPONENT_ARM_DISARM, 1)
     assert ack is not None and ack.result == MAV.MAV_RESULT_UNSUPPORTED
