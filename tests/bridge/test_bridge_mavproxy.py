@@ -4,7 +4,9 @@ simulated kleeman-lab log: it fetches the parameter list, `param show`
 reads the site file's value, `param set` changes the pulse gate (checked in
 the daemon: its --stats counters, its override file, the rejections that
 follow) and `reboot` re-initialises the filter (COMMAND_ACK ACCEPTED, the
-daemon's reset counter up by one)."""
+daemon's reset counter up by one); with a signing key file, MAVProxy's
+`param set` is refused until `signing key PASSPHRASE` gives it the same key."""
+import hashlib
 import json
 import os
 import queue
@@ -27,7 +29,7 @@ MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
 class MavProxy:
     """mavproxy.py as a child: commands on its stdin, its output lines in a queue."""
 
-    def __init__(self, port, tmp_path):
+    def __init__(self, port, tmp_path, modules="param,cmdlong,misc"):
         if not MAVPROXY.exists():
             pytest.fail(f"{MAVPROXY} missing: MAVProxy is in .ci/requirements.txt (make setup)")
         home = tmp_path / "home"
@@ -36,7 +38,7 @@ class MavProxy:
         self.proc = subprocess.Popen(
             [sys.executable, str(MAVPROXY), f"--master=udpin:127.0.0.1:{port}",
              "--source-system=255", "--target-system=1", "--target-component=197",
-             f"--state-basedir={tmp_path / 'mavproxy'}", "--default-modules=param,cmdlong,misc",
+             f"--state-basedir={tmp_path / 'mavproxy'}", f"--default-modules={modules}",
              "--nowait"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
             env=env, cwd=tmp_path)
@@ -115,6 +117,37 @@ def test_mavproxy_param_show_set_and_reboot(bridge_bin, kleeman_log, tmp_path, u
         last = stats(bridge, stats_path)
         assert last["mavlink_control"]["filter_resets"] == 1
         assert last["estimator_resets"] >= resets + 1
+    finally:
+        mp.stop()
+        bridge.send_signal(signal.SIGTERM)
+        _, err = bridge.communicate(timeout=15)
+    assert bridge.returncode == 0, err
+
+
+def test_mavproxy_signing_key(bridge_bin, kleeman_log, tmp_path, udp_port):
+    key = tmp_path / "signing.key"
+    key.write_text(hashlib.sha256(b"beaconloc-mavproxy").hexdigest() + "\n")
+    key.chmod(0o600)
+    site = tmp_path / "site.ini"
+    stats_path = tmp_path / "stats.json"
+    site.write_text(SITE.read_text() + f"\nsigning_key_file = {key}\n")
+    mp = MavProxy(udp_port, tmp_path, modules="param,cmdlong,misc,signing")
+    bridge = subprocess.Popen(
+        [str(bridge_bin), "--site", str(site), "--replay", str(kleeman_log[0]), "--speed", "1",
+         "--mavlink", f"udpout:127.0.0.1:{udp_port}", "--stats", str(stats_path),
+         "--status-interval", "0"], stderr=subprocess.PIPE, text=True)
+    try:
+        mp.expect(r"Detected vehicle 1:197")
+        mp.expect(r"Received \d+ parameters", 20.0)  # reading needs no key
+        mp.send("param set NSE_GATE 2.5")  # unsigned: refused, the value sent back unchanged
+        mp.expect(r"NSE_GATE = 2\.5 refused|NSE_GATE refused")
+        assert stats(bridge, stats_path)["mavlink_control"]["unauthorised"] == 1
+        mp.send("signing key beaconloc-mavproxy")
+        mp.expect(r"Setup signing key")
+        mp.send("param set NSE_GATE 2.5")
+        mp.expect(r"NSE_GATE = 2\.5$")
+        c = stats(bridge, stats_path)["mavlink_control"]
+        assert c["params_set"] == 1 and c["unauthorised"] == 1 and c["signing"] is True
     finally:
         mp.stop()
         bridge.send_signal(signal.SIGTERM)
