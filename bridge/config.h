@@ -2,7 +2,9 @@
  * beaconloc-bridge — configuration in layers:
  *   built-in defaults (config_defaults)
  *   < site file given with --site (config_load_file, libinih)
- *   < command line (applied by main.c after the file).
+ *   < the MAVLink parameters' override file ([bridge] param_file, the same
+ *     parser: a site-file fragment, bridge/params.h)
+ *   < command line (applied by options.c after the files).
  *
  * The site file is the one the simulator reads (hw_sim/beaconloc_sim/data/scenarios/NAME.ini).
  * Its keys (type, range, default, bridge_config member) are declared once,
