@@ -18,7 +18,13 @@
 #include "params.h"
 
 /* MAVLink message ids MAV_CMD_REQUEST_MESSAGE can ask for (common.xml). */
-enum { MSG_HEARTBEAT = 0, MSG_PARAM_VALUE = 22, MSG_NAMED_VALUE_FLOAT = 251, MSG_ODOMETRY = 331 };
+enum {
+    MSG_HEARTBEAT = 0,
+    MSG_PARAM_VALUE = 22,
+    MSG_AUTOPILOT_VERSION = 148,
+    MSG_NAMED_VALUE_FLOAT = 251,
+    MSG_ODOMETRY = 331
+};
 
 /* ---- configuration ----------------------------------------------------- */
 
@@ -254,6 +260,13 @@ static void request_message(struct daemon *d, const struct mav_request *r, int l
         }
         ack(d, r, link, MAV_OUT_RESULT_ACCEPTED);
         (void)odometry_send_now(d);
+        break;
+    }
+    case MSG_AUTOPILOT_VERSION: { /* BRIDGE_VERSION "major.minor.patch" */
+        unsigned v[3] = {0, 0, 0};
+        sscanf(BRIDGE_VERSION, "%u.%u.%u", &v[0], &v[1], &v[2]);
+        ack(d, r, link, MAV_OUT_RESULT_ACCEPTED);
+        mav_links_send_version(&d->links, v[0], v[1], v[2]);
         break;
     }
     case MSG_PARAM_VALUE: /* param2: the index */

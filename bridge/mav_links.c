@@ -264,6 +264,11 @@ int mav_links_send_param_value(struct mav_links *l, int link, const char *name, 
     SEND_ALL(l, mav_out_send_param_value(&k->out, name, value, type, count, index));
 }
 
+int mav_links_send_version(struct mav_links *l, unsigned major, unsigned minor, unsigned patch)
+{
+    SEND_ALL(l, mav_out_send_version(&k->out, major, minor, patch));
+}
+
 void mav_links_set_signing(struct mav_links *l, const uint8_t *key)
 {
     for (int i = 0; l && i < l->n; i++) (void)mav_out_set_signing(&l->link[i].out, key);

@@ -110,6 +110,9 @@ bool mav_links_take_request(struct mav_links *l, struct mav_request *req, int *l
 int mav_links_send_param_value(struct mav_links *l, int link, const char *name, float value,
                                enum mav_out_param_type type, uint16_t count, uint16_t index);
 
+/* AUTOPILOT_VERSION (mav_out_send_version) on every endpoint. */
+int mav_links_send_version(struct mav_links *l, unsigned major, unsigned minor, unsigned patch);
+
 /* MAVLink 2 signing on every endpoint (mav_out_set_signing): key 32 bytes,
  * NULL = off. Endpoints opened later by mav_links_open() start without:
  * call it again after that. */

@@ -611,3 +611,19 @@ int mav_out_send_param_value(struct mav_out *m, const char *name, float value,
                                         value, (uint8_t)type, count, index);
     return mav_send_msg(m);
 }
+
+int mav_out_send_version(struct mav_out *m, unsigned major, unsigned minor, unsigned patch)
+{
+    if (!m || major > 255 || minor > 255 || patch > 255)
+        return -EINVAL;
+    const uint64_t caps = MAV_PROTOCOL_CAPABILITY_MAVLINK2 |
+                          MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST |
+                          MAV_PROTOCOL_CAPABILITY_COMMAND_INT;
+    const uint32_t version =
+        (uint32_t)(major << 24 | minor << 16 | patch << 8) | (uint32_t)FIRMWARE_VERSION_TYPE_DEV;
+    const uint8_t none8[8] = {0}, uid2[18] = {0};
+    mavlink_msg_autopilot_version_pack_status(m->sysid, m->compid, tx_status_now(m), &priv(m)->msg,
+                                              caps, version, 0, 0, 0, none8, none8, none8, 0, 0, 0,
+                                              uid2);
+    return mav_send_msg(m);
+}

@@ -237,6 +237,14 @@ bool mav_out_take_request(struct mav_out *m, struct mav_request *out);
 int mav_out_send_param_value(struct mav_out *m, const char *name, float value,
                              enum mav_out_param_type type, uint16_t count, uint16_t index);
 
+/* AUTOPILOT_VERSION (#148, for MAV_CMD_REQUEST_MESSAGE): what this
+ * component speaks — capabilities MAVLINK2, PARAM_ENCODE_C_CAST (the
+ * parameters' values travel C-cast, see mav_out_send_param_value) and
+ * COMMAND_INT —, flight_sw_version the daemon's major.minor.patch as
+ * (major << 24 | minor << 16 | patch << 8 | FIRMWARE_VERSION_TYPE_DEV),
+ * the rest 0. -EINVAL for a version part above 255. */
+int mav_out_send_version(struct mav_out *m, unsigned major, unsigned minor, unsigned patch);
+
 /*
  * MAVLink 2 signing (the protocol's own: SHA-256 over the secret key, the
  * frame and a 48-bit timestamp in 10 us units since 2015-01-01 GMT, from

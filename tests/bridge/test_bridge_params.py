@@ -234,6 +234,16 @@ def test_commands_to_our_component(bridge):
     assert ack is not None and ack.result == MAV.MAV_RESULT_ACCEPTED
     m = bridge.wait_type("PARAM_VALUE", 1.0)
     assert m is not None and m.param_index == 5 and m.param_id == PARAMS[5].param
+    ack = bridge.command(MAV.MAV_CMD_REQUEST_MESSAGE, 148)  # AUTOPILOT_VERSION
+    assert ack is not None and ack.result == MAV.MAV_RESULT_ACCEPTED
+    v = bridge.wait_type("AUTOPILOT_VERSION", 1.0)
+    assert v is not None
+    assert v.capabilities & (1 << 17)  # MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+    assert v.capabilities & (1 << 13) and v.capabilities & (1 << 3)  # MAVLINK2, COMMAND_INT
+    assert not v.capabilities & (1 << 4)  # not PARAM_ENCODE_BYTEWISE
+    out = subprocess.run([str(bridge.proc.args[0]), "--version"], capture_output=True, text=True)
+    major, minor, patch = (int(x) for x in out.stdout.split()[-1].split("."))
+    assert v.flight_sw_version == major << 24 | minor << 16 | patch << 8
     ack = bridge.command(MAV.MAV_CMD_REQUEST_MESSAGE, GPS_RAW_INT_ID)
     assert ack is not None and ack.result == MAV.MAV_RESULT_DENIED  # a message we never send
     ack = bridge.command(MAV.MAV_CMD_REQUEST_MESSAGE, float("nan"))

@@ -174,6 +174,23 @@ static void test_param_value(void **state)
                      -EINVAL);
 }
 
+static void test_version(void **state)
+{
+    struct udp_fixture *f = *state;
+    assert_int_equal(mav_out_send_version(&f->m, 1, 2, 3), 0);
+    mavlink_message_t msg;
+    assert_true(read_msg(f->rx_fd, false, &msg));
+    assert_int_equal(msg.msgid, MAVLINK_MSG_ID_AUTOPILOT_VERSION);
+    mavlink_autopilot_version_t v;
+    mavlink_msg_autopilot_version_decode(&msg, &v);
+    assert_int_equal(v.flight_sw_version, 0x01020300u | FIRMWARE_VERSION_TYPE_DEV);
+    assert_true(v.capabilities & MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST);
+    assert_false(v.capabilities & MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE);
+    assert_true(v.capabilities & MAV_PROTOCOL_CAPABILITY_MAVLINK2);
+    assert_true(v.capabilities & MAV_PROTOCOL_CAPABILITY_COMMAND_INT);
+    assert_int_equal(mav_out_send_version(&f->m, 256, 0, 0), -EINVAL);
+}
+
 static void test_signing(void **state)
 {
     (void)state;
@@ -253,6 +270,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_parameter_requests),
         cmocka_unit_test_setup_teardown(test_param_value, udp_setup, udp_teardown),
+        cmocka_unit_test_setup_teardown(test_version, udp_setup, udp_teardown),
         cmocka_unit_test(test_signing),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
