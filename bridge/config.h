@@ -2,7 +2,9 @@
  * beaconloc-bridge — configuration in layers:
  *   built-in defaults (config_defaults)
  *   < site file given with --site (config_load_file, libinih)
- *   < command line (applied by main.c after the file).
+ *   < the MAVLink parameters' override file ([bridge] param_file, the same
+ *     parser: a site-file fragment, bridge/params.h)
+ *   < command line (applied by options.c after the files).
  *
  * The site file is the one the simulator reads (hw_sim/beaconloc_sim/data/scenarios/NAME.ini).
  * Its keys (type, range, default, bridge_config member) are declared once,
@@ -49,7 +51,8 @@
 #define CONFIG_MAX_RECEIVERS SITE_MAX_RECEIVERS
 #define CONFIG_ERR_LEN 512
 #define CONFIG_STR_LEN 128
-#define CONFIG_MAX_KEYS 96
+#define CONFIG_PATH_LEN 256
+#define CONFIG_MAX_KEYS 128
 #define CONFIG_MAX_ITEMS 32     /* bound on every per-item section's largest count */
 #define CONFIG_MAX_ITEM_KEYS 32 /* bound on the keys of one per-item section */
 
@@ -180,6 +183,10 @@ struct bridge_config {
     double echo_storm_ratio;  /* (echoes+rejected)/all arrivals over 5 s */
     double max_coast_s;       /* no data this long: the filter re-starts; until then
                                    constant-velocity output with growing covariance */
+    /* [bridge]: the MAVLink control side (bridge/mav_command.h, docs/mavlink.md) */
+    char param_file[CONFIG_PATH_LEN];       /* PARAM_SET overrides, "" = not kept */
+    char signing_key_file[CONFIG_PATH_LEN]; /* MAVLink 2 signing key, "" = no signing */
+    char control_sysids[CONFIG_STR_LEN];    /* without signing: who may change state */
     /* where each value came from, for error messages */
     char path[256]; /* site file ("" = built-in defaults) */
     int key_line[CONFIG_MAX_KEYS];

@@ -23,8 +23,8 @@ static void mav_readable(struct pollable *p)
     struct daemon *d = p->owner;
     const struct mav_pollable *mp = (const struct mav_pollable *)(void *)p;
     mav_links_readable(&d->links, &mp->which, now_local(d));
-    team_commands(d); /* an operator command in that input (team_out.c) */
-    sync_mav_fds(d);  /* input answered, or a name lookup's answer */
+    mav_control_requests(d); /* commands and parameters in that input (mav_command.c) */
+    sync_mav_fds(d);         /* input answered, or a name lookup's answer */
 }
 
 void sync_mav_fds(struct daemon *d)
@@ -51,6 +51,7 @@ int open_links(struct daemon *d)
     for (int i = 0; i < d->opt.n_mavlink_more; i++) specs[i + 1] = d->opt.mavlink_more[i];
     int rc = mav_links_open(&d->links, specs, 1 + d->opt.n_mavlink_more, (unsigned)d->cfg.system_id,
                             (unsigned)d->cfg.component_id);
+    mav_links_set_signing(&d->links, d->ctl.signing ? d->ctl.key : NULL);
     sync_mav_fds(d);
     return rc;
 }
@@ -209,6 +210,8 @@ void fill_report(struct daemon *d, struct stats_report *r)
     mav_links_stats(&d->links, &ms);
     r->mavlink_tx_errors = ms.tx_errors;
     r->timesync_answered = ms.timesync_answered;
+    r->control = &d->ctl;
+    r->mavlink_in = ms;
     r->latency_samples = d->lat.count;
     r->latency_p50_us = latency_quantile(&d->lat, 0.5);
     r->latency_p99_us = latency_quantile(&d->lat, 0.99);
@@ -233,6 +236,39 @@ void write_stats(struct daemon *d, const struct stats_report *rep)
 
 /* ---- signals ------------------------------------------------------------ */
 
+int apply_config(struct daemon *d, const struct bridge_config *nc, const struct mav_control *ctl,
+                 char *err, size_t errlen)
+{
+    int rc = estimator_reconfigure(&d->est, nc, err, errlen);
+    if (rc < 0)
+        return -1;
+    team_reload(d, nc, rc == 1);
+    bool new_ep = strcmp(nc->mavlink, d->cfg.mavlink) != 0 || nc->system_id != d->cfg.system_id ||
+                  nc->component_id != d->cfg.component_id;
+    bool new_can = strcmp(nc->can_interface, d->cfg.can_interface) != 0;
+    bool new_rate = nc->odometry_rate_hz != d->cfg.odometry_rate_hz;
+    d->cfg = *nc;
+    if (ctl) {
+        d->ctl = *ctl;
+        mav_links_set_signing(&d->links, d->ctl.signing ? d->ctl.key : NULL);
+    }
+    enum log_level lv;
+    if (log_level_parse(nc->log_level, &lv) == 0)
+        log_set_level(lv);
+    if (new_ep) {
+        /* out of the set before anything can reuse the numbers */
+        mav_links_close(&d->links);
+        sync_mav_fds(d);
+        if (open_links(d) != 0) /* checked by build_config() */
+            log_error("MAVLink endpoint %s rejected", d->cfg.mavlink);
+    }
+    if (new_can)
+        can_switch_interface(d);
+    if (new_rate && timer_arm(d, T_ODOM, odom_period_us(d)) != 0)
+        log_error("ODOMETRY rate %.1f Hz not applied to the timer", d->cfg.odometry_rate_hz);
+    return rc;
+}
+
 static void reload(struct daemon *d)
 {
     if (!d->opt.site) {
@@ -245,7 +281,12 @@ static void reload(struct daemon *d)
         return;
     }
     char err[CONFIG_ERR_LEN];
-    int rc = estimator_reconfigure(&d->est, &nc, err, sizeof err);
+    /* the control side first (key file read again: a rotated key is taken);
+     * one that cannot be read refuses the whole reload */
+    struct mav_control ctl = d->ctl;
+    int rc = mav_control_configure(&ctl, &nc, err, sizeof err);
+    if (rc == 0)
+        rc = apply_config(d, &nc, &ctl, err, sizeof err);
     if (rc < 0) {
         log_error("SIGHUP: %s (keeping the running configuration)", err);
         return;
@@ -253,27 +294,6 @@ static void reload(struct daemon *d)
     log_info("SIGHUP: %s reloaded; %s", d->opt.site,
              rc == 0 ? "geometry unchanged, filter kept"
                      : "geometry changed, estimator re-initialised");
-    team_reload(d, &nc, rc == 1);
-    bool new_ep = strcmp(nc.mavlink, d->cfg.mavlink) != 0 || nc.system_id != d->cfg.system_id ||
-                  nc.component_id != d->cfg.component_id;
-    bool new_can = strcmp(nc.can_interface, d->cfg.can_interface) != 0;
-    bool new_rate = nc.odometry_rate_hz != d->cfg.odometry_rate_hz;
-    d->cfg = nc;
-    enum log_level lv;
-    if (log_level_parse(nc.log_level, &lv) == 0)
-        log_set_level(lv);
-    if (new_ep) {
-        /* out of the set before anything can reuse the numbers */
-        mav_links_close(&d->links);
-        sync_mav_fds(d);
-        if (open_links(d) != 0) /* checked by build_config() */
-            log_error("SIGHUP: MAVLink endpoint %s rejected", d->cfg.mavlink);
-    }
-    if (new_can)
-        can_switch_interface(d);
-    if (new_rate && timer_arm(d, T_ODOM, odom_period_us(d)) != 0)
-        log_error("SIGHUP: ODOMETRY rate %.1f Hz not applied to the timer",
-                  d->cfg.odometry_rate_hz);
     statustext(d, MAV_OUT_SEV_INFO,
                rc == 0 ? "config reloaded" : "config reloaded, re-initialised");
 }

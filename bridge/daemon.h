@@ -15,6 +15,8 @@
  *                   endpoints in the loop, status line and report, events
  *   team_out.c      a team site: per-robot ODOMETRY/HEARTBEAT, --estimates
  *                   rows (the estimation: team.c)
+ *   mav_command.c   the MAVLink control side: parameters (params.c),
+ *                   commands, who may change what (signing, system ids)
  */
 #ifndef BRIDGE_DAEMON_H
 #define BRIDGE_DAEMON_H
@@ -28,6 +30,7 @@
 #include "estimator.h"
 #include "frames.h"
 #include "loop.h"
+#include "mav_command.h"
 #include "mav_links.h"
 #include "mavlink_out.h"
 #include "options.h"
@@ -89,6 +92,7 @@ struct daemon {
     bool csv_open;
     bool record_err_logged, csv_err_logged;
     struct mav_links links; /* every --mavlink endpoint */
+    struct mav_control ctl; /* parameters, commands, signing (mav_command.c) */
     struct frame_counters fc;
     struct estimator est;
     struct team team; /* a team site (est.team points here), else unused */
@@ -172,12 +176,22 @@ void team_on_heartbeat(struct daemon *d);
  * became a team site, starts a new team; otherwise the team keeps its state
  * and the old tuning. */
 void team_reload(struct daemon *d, const struct bridge_config *nc, bool reinit);
-/* Operator commands taken from the endpoints (after their input): the
- * leap-frog's start/pause/resume to the team leader (TEAM_COMMAND), each
- * answered with COMMAND_ACK and a STATUSTEXT. */
-void team_commands(struct daemon *d);
+/* An operator command from endpoint `link` (mav_command.c decided the
+ * sender may): the leap-frog's start/pause/resume (MISSION_START,
+ * DO_PAUSE_CONTINUE) to the team leader (TEAM_COMMAND), answered with
+ * COMMAND_ACK and a STATUSTEXT. */
+void team_command(struct daemon *d, const struct mav_request *c, int link);
 /* The host's HEARTBEAT status on a team site. */
 enum mav_out_state team_host_state(const struct daemon *d);
+
+/* ---- timers.c ---- */
+/* HEARTBEAT now (and the NAMED_VALUE_FLOATs that go with it). */
+void heartbeat_send(struct daemon *d, int64_t now);
+
+/* ---- odometry.c ---- */
+/* One ODOMETRY of the current estimate, at now (MAV_CMD_REQUEST_MESSAGE).
+ * 0, or -EAGAIN when there is none (not started, or a team site). */
+int odometry_send_now(struct daemon *d);
 
 /* ---- replay_run.c ---- */
 void run_replay_fast(struct daemon *d);
@@ -189,6 +203,14 @@ int signals_open(struct daemon *d);
 /* Open every endpoint ([bridge] mavlink or the first --mavlink, then the
  * others). Returns 0 or -EINVAL. */
 int open_links(struct daemon *d);
+/* A new configuration applied as SIGHUP does (reload) and PARAM_SET
+ * (mav_command.c): the estimator (same geometry: filter kept, returns 0;
+ * else re-initialised, returns 1), the team, endpoints, interface, rates,
+ * and the control side ctl (signing key, system ids: SIGHUP's, read by
+ * mav_control_configure) unless NULL (PARAM_SET: unchanged). -1 with err
+ * (the running configuration kept) when the estimator refuses. */
+int apply_config(struct daemon *d, const struct bridge_config *nc, const struct mav_control *ctl,
+                 char *err, size_t errlen);
 /* Bring the loop in line with the endpoints' descriptors after any
  * mav_links call (mav_links.h). Cheap when nothing changed. */
 void sync_mav_fds(struct daemon *d);

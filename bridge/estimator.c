@@ -204,7 +204,7 @@ static void sync(struct estimator *e)
                 event(e, EST_EV_NOTICE, "restarted from a known pose (reset %u)", ev.reset_counter);
                 break;
             default:
-                event(e, EST_EV_WARNING, "re-initialised: site geometry changed");
+                event(e, EST_EV_WARNING, "re-initialised: new geometry or command");
                 break;
             }
             if (ev.cause != BL_LOC_CAUSE_PERSISTENT_REJECTION &&
@@ -740,4 +740,13 @@ void estimator_health(const struct estimator *e, int64_t local_now_us, struct es
         h->window_rejected = st.window_rejected;
     }
     h->since_update_us = e->last_data_rx_us > 0 ? local_now_us - e->last_data_rx_us : INT64_MAX;
+}
+
+int estimator_reinit(struct estimator *e)
+{
+    if (bl_localizer_reinit(&e->loc, &e->blcfg, &e->seqcfg) != BL_OK)
+        return -1;
+    sync(e);
+    reset_runtime(e);
+    return 0;
 }

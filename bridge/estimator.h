@@ -261,6 +261,12 @@ int estimator_make_config(const struct bridge_config *cfg, bl_config *out, char 
 int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg, char *err,
                           size_t errlen);
 
+/* The operator's reset (MAVLink, bridge/mav_command.c): a fresh filter and
+ * sequencer with the running configuration; the filter starts again from
+ * the snapshot solver, the reset counter is bumped (if it had started).
+ * 0, or -1 when the library refuses. */
+int estimator_reinit(struct estimator *e);
+
 /* Feed decoded frames with their local receive time. */
 void estimator_pulse(struct estimator *e, const struct frame_pulse *p, int64_t rx_us);
 void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int64_t rx_us);

@@ -84,6 +84,11 @@ int main(int argc, char **argv)
     log_level_parse(d->cfg.log_level, &lv);
     log_set_level(lv);
     char err[CONFIG_ERR_LEN];
+    for (int i = 0; i < MAV_LINKS_MAX; i++) d->ctl.list_next[i] = -1;
+    if (mav_control_configure(&d->ctl, &d->cfg, err, sizeof err) != 0) {
+        fprintf(stderr, "error: %s\n", err);
+        return EX_CONFIG_STATUS;
+    }
     if (estimator_init(&d->est, &d->cfg, err, sizeof err) != 0) {
         fprintf(stderr, "error: %s\n", err);
         return EX_CONFIG_STATUS;

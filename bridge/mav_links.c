@@ -239,14 +239,39 @@ int mav_links_send_heartbeat_as(struct mav_links *l, unsigned sysid,
     SEND_ALL(l, mav_out_send_heartbeat_as(&k->out, sysid, system_status));
 }
 
-bool mav_links_take_command(struct mav_links *l, struct mav_command *cmd, int *link)
+bool mav_links_take_request(struct mav_links *l, struct mav_request *req, int *link)
 {
     for (int i = 0; i < l->n; i++)
-        if (mav_out_take_command(&l->link[i].out, cmd)) {
+        if (mav_out_take_request(&l->link[i].out, req)) {
             *link = i;
             return true;
         }
     return false;
+}
+
+int mav_links_send_param_value(struct mav_links *l, int link, const char *name, float value,
+                               enum mav_out_param_type type, uint16_t count, uint16_t index)
+{
+    if (link >= 0) {
+        if (link >= l->n)
+            return -EINVAL;
+        struct mav_link *k = &l->link[link];
+        struct link_fds before = fds_of(k);
+        int rc = mav_out_send_param_value(&k->out, name, value, type, count, index);
+        note_fds(l, k, before);
+        return rc == 0 ? 1 : rc == -EINVAL ? -EINVAL : 0;
+    }
+    SEND_ALL(l, mav_out_send_param_value(&k->out, name, value, type, count, index));
+}
+
+int mav_links_send_version(struct mav_links *l, unsigned major, unsigned minor, unsigned patch)
+{
+    SEND_ALL(l, mav_out_send_version(&k->out, major, minor, patch));
+}
+
+void mav_links_set_signing(struct mav_links *l, const uint8_t *key)
+{
+    for (int i = 0; l && i < l->n; i++) (void)mav_out_set_signing(&l->link[i].out, key);
 }
 
 int mav_links_send_command_ack(struct mav_links *l, int link, uint16_t command,
@@ -287,6 +312,9 @@ void mav_links_stats(const struct mav_links *l, struct mav_out_stats *sum)
         sum->reopens += s->reopens;
         sum->commands_received += s->commands_received;
         sum->commands_unsupported += s->commands_unsupported;
+        sum->param_requests += s->param_requests;
+        sum->requests_dropped += s->requests_dropped;
+        sum->signature_bad += s->signature_bad;
     }
 }
 

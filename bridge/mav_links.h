@@ -100,9 +100,23 @@ int mav_links_send_statustext(struct mav_links *l, enum mav_out_severity severit
 int mav_links_send_named_float(struct mav_links *l, const char *name, float value,
                                uint32_t time_boot_ms);
 
-/* An operator command taken from any endpoint (mav_out_take_command), once:
- * true with *cmd and the endpoint it came from in *link. */
-bool mav_links_take_command(struct mav_links *l, struct mav_command *cmd, int *link);
+/* A request taken from any endpoint (mav_out_take_request), once: true
+ * with *req and the endpoint it came from in *link. */
+bool mav_links_take_request(struct mav_links *l, struct mav_request *req, int *link);
+
+/* PARAM_VALUE (mav_out_send_param_value) on endpoint `link`, or on every
+ * endpoint when link is -1. As the SEND_ALL calls: endpoints that took it,
+ * or -EINVAL. */
+int mav_links_send_param_value(struct mav_links *l, int link, const char *name, float value,
+                               enum mav_out_param_type type, uint16_t count, uint16_t index);
+
+/* AUTOPILOT_VERSION (mav_out_send_version) on every endpoint. */
+int mav_links_send_version(struct mav_links *l, unsigned major, unsigned minor, unsigned patch);
+
+/* MAVLink 2 signing on every endpoint (mav_out_set_signing): key 32 bytes,
+ * NULL = off. Endpoints opened later by mav_links_open() start without:
+ * call it again after that. */
+void mav_links_set_signing(struct mav_links *l, const uint8_t *key);
 
 /* COMMAND_ACK on endpoint `link` only (where the command came from); as
  * mav_out_send_command_ack, -EINVAL for a bad link. */

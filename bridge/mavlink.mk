@@ -8,8 +8,9 @@
 # bridge/bridge.mk also builds and runs both tests under test-bridge.
 #
 # Include generated headers only with -isystem $(BUILD)/gen/mavlink, and only
-# from bridge/mavlink_out.c (the one translation unit that sees MAVLink; the
-# covariance it sends is reshaped in bridge/covariance.c, no MAVLink type).
+# through bridge/mav_priv.h, from bridge/mavlink_out.c and bridge/mav_input.c
+# (the code that sees MAVLink; the covariance it sends is reshaped in
+# bridge/covariance.c, no MAVLink type).
 
 MAVLINK_GEN    := $(BUILD)/gen/mavlink
 MAVLINK_STAMP  := $(MAVLINK_GEN)/.stamp
@@ -40,7 +41,11 @@ $(MAVLINK_STAMP): .ci/requirements.txt bridge/mavlink.mk | $(SETUP_STAMP)
 	mv $(MAVLINK_GEN).tmp $(MAVLINK_GEN)
 	touch $@
 
-$(MAVOUT_DIR)/mavlink_out.o: bridge/mavlink_out.c bridge/mavlink_out.h $(MAVLINK_STAMP)
+$(MAVOUT_DIR)/mavlink_out.o: bridge/mavlink_out.c bridge/mavlink_out.h bridge/mav_priv.h $(MAVLINK_STAMP)
+	@mkdir -p $(@D)
+	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
+
+$(MAVOUT_DIR)/mav_input.o: bridge/mav_input.c bridge/mavlink_out.h bridge/mav_priv.h $(MAVLINK_STAMP)
 	@mkdir -p $(@D)
 	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
 
@@ -67,11 +72,11 @@ $(MAVOUT_DIR)/test_node_clock.o: tests/bridge/test_node_clock.c bridge/node_cloc
 	$(CC) $(MAVOUT_CPPFLAGS) $(MAVOUT_CFLAGS) -c -o $@ $<
 
 $(MAVOUT_DIR)/test_mavlink_out: $(MAVOUT_DIR)/test_mavlink_out.o $(MAVOUT_DIR)/mavlink_out.o \
-                                 $(MAVOUT_DIR)/covariance.o
+                                 $(MAVOUT_DIR)/mav_input.o $(MAVOUT_DIR)/covariance.o
 	$(CC) -fsanitize=address,undefined -o $@ $^ -lcmocka -lm
 
 $(MAVOUT_DIR)/test_covariance: $(MAVOUT_DIR)/test_covariance.o $(MAVOUT_DIR)/mavlink_out.o \
-                                $(MAVOUT_DIR)/covariance.o
+                                $(MAVOUT_DIR)/mav_input.o $(MAVOUT_DIR)/covariance.o
 	$(CC) -fsanitize=address,undefined -o $@ $^ -lcmocka -lm
 
 $(MAVOUT_DIR)/test_node_clock: $(MAVOUT_DIR)/test_node_clock.o $(MAVOUT_DIR)/node_clock.o

@@ -1,18 +1,17 @@
 /*
- * beaconloc bridge — MAVLink 2 output. The ONE translation unit that sees
- * MAVLink: the headers are generated at build time by pymavlink's mavgen
- * (bridge/mavlink.mk) and included with -isystem, which is the only place
- * their warnings are silenced. Contracts: bridge/mavlink_out.h; what goes on
- * the wire, field by field: docs/mavlink.md.
+ * beaconloc bridge — MAVLink 2 output: endpoints and sending. With
+ * mav_input.c (parsing, answers, requests, signing) the only code that sees
+ * MAVLink, through bridge/mav_priv.h: the headers are generated at build
+ * time by pymavlink's mavgen (bridge/mavlink.mk) and included with -isystem,
+ * which is the only place their warnings are silenced. Contracts:
+ * bridge/mavlink_out.h; what goes on the wire, field by field: docs/mavlink.md.
  */
 #ifndef _GNU_SOURCE
 #define _GNU_SOURCE /* cfmakeraw, SOCK_NONBLOCK */
 #endif
 
-#include "mavlink_out.h"
 #include "covariance.h"
-
-#include <common/mavlink.h>
+#include "mav_priv.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -27,17 +26,6 @@
 
 /* ---- compile-time checks of the wrapper against the generated code ----- */
 
-struct mav_priv {
-    mavlink_status_t tx_status;              /* our outgoing sequence number */
-    mavlink_status_t rx_status;              /* parser state */
-    mavlink_message_t rx_msg;                /* parser's message under construction */
-    mavlink_message_t msg;                   /* scratch: last parsed / packed message */
-    uint8_t pending[MAVLINK_MAX_PACKET_LEN]; /* serial: unsent tail of the last frame */
-    uint16_t pending_off, pending_len;
-};
-
-_Static_assert(sizeof(struct mav_priv) <= MAV_OUT_PRIV_BYTES, "MAV_OUT_PRIV_BYTES too small");
-_Static_assert(_Alignof(struct mav_priv) <= 16, "mav_out.priv alignment too small");
 #define SAME(a, b) ((int)(a) == (int)(b))
 _Static_assert(SAME(MAV_OUT_STATE_UNINIT, MAV_STATE_UNINIT) &&
                    SAME(MAV_OUT_STATE_BOOT, MAV_STATE_BOOT) &&
@@ -62,21 +50,22 @@ _Static_assert(SAME(MAV_OUT_RESULT_ACCEPTED, MAV_RESULT_ACCEPTED) &&
                    SAME(MAV_OUT_RESULT_UNSUPPORTED, MAV_RESULT_UNSUPPORTED) &&
                    SAME(MAV_OUT_RESULT_FAILED, MAV_RESULT_FAILED) &&
                    SAME(MAV_OUT_CMD_MISSION_START, MAV_CMD_MISSION_START) &&
-                   SAME(MAV_OUT_CMD_DO_PAUSE_CONTINUE, MAV_CMD_DO_PAUSE_CONTINUE),
+                   SAME(MAV_OUT_CMD_DO_PAUSE_CONTINUE, MAV_CMD_DO_PAUSE_CONTINUE) &&
+                   SAME(MAV_OUT_CMD_PREFLIGHT_REBOOT_SHUTDOWN, MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN) &&
+                   SAME(MAV_OUT_CMD_REQUEST_MESSAGE, MAV_CMD_REQUEST_MESSAGE) &&
+                   SAME(MAV_OUT_PARAM_INT32, MAV_PARAM_TYPE_INT32) &&
+                   SAME(MAV_OUT_PARAM_REAL32, MAV_PARAM_TYPE_REAL32),
                "enum mav_out_result / MAV_OUT_CMD_* differ from MAVLink");
 #undef SAME
 _Static_assert(MAV_OUT_STATUSTEXT_MAX == MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN,
                "STATUSTEXT text length");
+_Static_assert(MAV_OUT_PARAM_ID_MAX == MAVLINK_MSG_PARAM_VALUE_FIELD_PARAM_ID_LEN,
+               "PARAM_VALUE param_id length");
 _Static_assert(MAV_OUT_NAME_MAX == MAVLINK_MSG_NAMED_VALUE_FLOAT_FIELD_NAME_LEN,
                "NAMED_VALUE_FLOAT name length");
 _Static_assert(MAV_COV_UT_LEN == MAVLINK_MSG_ODOMETRY_FIELD_POSE_COVARIANCE_LEN &&
                    MAV_COV_UT_LEN == MAVLINK_MSG_ODOMETRY_FIELD_VELOCITY_COVARIANCE_LEN,
                "ODOMETRY covariance length");
-
-static struct mav_priv *priv(struct mav_out *m)
-{
-    return (struct mav_priv *)(void *)m->priv;
-}
 
 /* ---- endpoint strings -------------------------------------------------- */
 
@@ -385,12 +374,6 @@ bool mav_out_is_up(const struct mav_out *m)
 
 /* ---- sending ----------------------------------------------------------- */
 
-/* An error after which a serial device is gone and must be reopened. */
-static bool device_gone(int err)
-{
-    return err == EIO || err == ENXIO || err == ENODEV || err == EBADF;
-}
-
 static int fail(struct mav_out *m, int err)
 {
     m->stats.tx_errors++;
@@ -398,7 +381,6 @@ static int fail(struct mav_out *m, int err)
     return -err;
 }
 
-/* Serialise priv(m)->msg and hand it to the endpoint. */
 /* Serial: write what is left of a partly written frame. 0 when nothing is
  * pending any more, -EAGAIN if some still is, other -errno on failure. */
 static int flush_pending(struct mav_out *m)
@@ -435,8 +417,7 @@ static int busy(struct mav_out *m)
     return fail(m, EAGAIN);
 }
 
-/* Serialise priv(m)->msg and hand it to the endpoint. */
-static int send_msg(struct mav_out *m)
+int mav_send_msg(struct mav_out *m)
 {
     struct mav_priv *p = priv(m);
     uint8_t buf[MAVLINK_MAX_PACKET_LEN];
@@ -470,7 +451,7 @@ static int send_msg(struct mav_out *m)
         if (rc == -EAGAIN || rc == -EWOULDBLOCK || rc == -EINTR)
             return busy(m);
         if (rc < 0) {
-            if (device_gone(-rc))
+            if (mav_device_gone(-rc))
                 mav_out_close(m);
             return fail(m, -rc);
         }
@@ -513,7 +494,7 @@ int mav_out_send_odometry(struct mav_out *m, const struct mav_odometry *o)
     mavlink_euler_to_quaternion(0.0f, 0.0f, (float)psi, q);
 
     mavlink_msg_odometry_pack_status(
-        m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg, o->time_usec, MAV_FRAME_LOCAL_FRD,
+        m->sysid, m->compid, tx_status_now(m), &priv(m)->msg, o->time_usec, MAV_FRAME_LOCAL_FRD,
         MAV_FRAME_BODY_FRD, o->y_m,    /* x: north */
         o->x_m,                        /* y: east */
         -o->z_m,                       /* z: down */
@@ -522,7 +503,7 @@ int mav_out_send_odometry(struct mav_out *m, const struct mav_odometry *o)
         -o->vz_mps,                    /* down = -up */
         0.0f, 0.0f, -o->yawrate_radps, /* about down = -(about up) */
         pose_ut, vel_ut, o->reset_counter, MAV_ESTIMATOR_TYPE_VISION, o->quality);
-    return send_msg(m);
+    return mav_send_msg(m);
 }
 
 int mav_out_send_heartbeat(struct mav_out *m, enum mav_out_state system_status)
@@ -530,10 +511,10 @@ int mav_out_send_heartbeat(struct mav_out *m, enum mav_out_state system_status)
     if (!m || (int)system_status < MAV_OUT_STATE_UNINIT ||
         (int)system_status > MAV_OUT_STATE_EMERGENCY)
         return -EINVAL;
-    mavlink_msg_heartbeat_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg,
+    mavlink_msg_heartbeat_pack_status(m->sysid, m->compid, tx_status_now(m), &priv(m)->msg,
                                       MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0,
                                       (uint8_t)system_status);
-    return send_msg(m);
+    return mav_send_msg(m);
 }
 
 /* Switch m to system `sysid` with that system's sequence numbers (returns
@@ -588,9 +569,9 @@ int mav_out_send_statustext(struct mav_out *m, enum mav_out_severity severity, c
     char buf[MAV_OUT_STATUSTEXT_MAX + 1];
     memset(buf, 0, sizeof buf);
     strncpy(buf, text, MAV_OUT_STATUSTEXT_MAX); /* 50 chars without NUL is legal on the wire */
-    mavlink_msg_statustext_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg,
+    mavlink_msg_statustext_pack_status(m->sysid, m->compid, tx_status_now(m), &priv(m)->msg,
                                        (uint8_t)severity, buf, 0, 0);
-    return send_msg(m);
+    return mav_send_msg(m);
 }
 
 int mav_out_send_named_float(struct mav_out *m, const char *name, float value,
@@ -601,9 +582,9 @@ int mav_out_send_named_float(struct mav_out *m, const char *name, float value,
     char buf[MAV_OUT_NAME_MAX + 1];
     memset(buf, 0, sizeof buf);
     memcpy(buf, name, strlen(name));
-    mavlink_msg_named_value_float_pack_status(m->sysid, m->compid, &priv(m)->tx_status,
-                                              &priv(m)->msg, time_boot_ms, buf, value);
-    return send_msg(m);
+    mavlink_msg_named_value_float_pack_status(m->sysid, m->compid, tx_status_now(m), &priv(m)->msg,
+                                              time_boot_ms, buf, value);
+    return mav_send_msg(m);
 }
 
 int mav_out_send_command_ack(struct mav_out *m, uint16_t command, enum mav_out_result result,
@@ -611,133 +592,38 @@ int mav_out_send_command_ack(struct mav_out *m, uint16_t command, enum mav_out_r
 {
     if (!m || (int)result < MAV_OUT_RESULT_ACCEPTED || (int)result > MAV_OUT_RESULT_FAILED)
         return -EINVAL;
-    mavlink_msg_command_ack_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg,
+    mavlink_msg_command_ack_pack_status(m->sysid, m->compid, tx_status_now(m), &priv(m)->msg,
                                         command, (uint8_t)result, 0, 0, target_sysid,
                                         target_compid);
-    return send_msg(m);
+    return mav_send_msg(m);
 }
 
-bool mav_out_take_command(struct mav_out *m, struct mav_command *out)
+int mav_out_send_param_value(struct mav_out *m, const char *name, float value,
+                             enum mav_out_param_type type, uint16_t count, uint16_t index)
 {
-    if (!m || !m->cmd_pending)
-        return false;
-    *out = m->cmd;
-    m->cmd_pending = false;
-    return true;
-}
-
-/* ---- receiving --------------------------------------------------------- */
-
-static void dispatch(struct mav_out *m, const mavlink_message_t *msg, int64_t now_us)
-{
-    switch (msg->msgid) {
-    case MAVLINK_MSG_ID_TIMESYNC: {
-        mavlink_timesync_t ts;
-        mavlink_msg_timesync_decode(msg, &ts);
-        if (ts.tc1 != 0)
-            break; /* a response (to someone else): nothing to do */
-        /* MAVLink timesync protocol (common.xml TIMESYNC): answer with
-         * tc1 = our time in ns, ts1 mirrored. now_us is a log's time in
-         * replay (any 12-digit second count): saturate rather than overflow
-         * int64 ns, and never answer tc1 = 0, which would read as a request. */
-        int64_t tc1_ns = now_us >= INT64_MAX / 1000 ? INT64_MAX : now_us > 0 ? now_us * 1000 : 1;
-        mavlink_msg_timesync_pack_status(m->sysid, m->compid, &priv(m)->tx_status, &priv(m)->msg,
-                                         tc1_ns, ts.ts1);
-        if (send_msg(m) == 0)
-            m->stats.timesync_answered++;
-        break;
-    }
-    case MAVLINK_MSG_ID_HEARTBEAT:
-        if (mavlink_msg_heartbeat_get_autopilot(msg) != MAV_AUTOPILOT_INVALID)
-            m->peer_sysid = msg->sysid;
-        break;
-    case MAVLINK_MSG_ID_COMMAND_LONG: {
-        mavlink_command_long_t c;
-        mavlink_msg_command_long_decode(msg, &c);
-        if ((c.target_system != 0 && c.target_system != m->sysid) ||
-            (c.target_component != 0 && c.target_component != m->compid))
-            break; /* someone else's */
-        m->stats.commands_received++;
-        if (c.command == MAV_CMD_MISSION_START || c.command == MAV_CMD_DO_PAUSE_CONTINUE) {
-            m->cmd = (struct mav_command){.command = c.command,
-                                          .param1 = c.param1,
-                                          .source_sysid = msg->sysid,
-                                          .source_compid = msg->compid};
-            m->cmd_pending = true;
-        } else {
-            m->stats.commands_unsupported++;
-            mav_out_send_command_ack(m, c.command, MAV_OUT_RESULT_UNSUPPORTED, msg->sysid,
-                                     msg->compid);
-        }
-        break;
-    }
-    default:
-        break;
-    }
-}
-
-static int parse_bytes(struct mav_out *m, const uint8_t *buf, size_t n, int64_t now_us)
-{
-    struct mav_priv *p = priv(m);
-    int parsed = 0;
-    for (size_t i = 0; i < n; i++) {
-        mavlink_message_t msg;
-        mavlink_status_t st;
-        uint8_t r = mavlink_frame_char_buffer(&p->rx_msg, &p->rx_status, buf[i], &msg, &st);
-        if (r == MAVLINK_FRAMING_OK) {
-            m->stats.rx_msgs++;
-            parsed++;
-            dispatch(m, &msg, now_us);
-        } else if (r == MAVLINK_FRAMING_BAD_CRC || r == MAVLINK_FRAMING_BAD_SIGNATURE) {
-            m->stats.rx_parse_errors++;
-        }
-    }
-    return parsed;
-}
-
-int mav_out_handle_input(struct mav_out *m, int64_t now_us)
-{
-    if (!m)
+    if (!m || !name || name[0] == '\0' || strlen(name) > MAV_OUT_PARAM_ID_MAX || !isfinite(value) ||
+        index >= count || (type != MAV_OUT_PARAM_INT32 && type != MAV_OUT_PARAM_REAL32))
         return -EINVAL;
-    int parsed = 0;
-    /* Bounded so one chatty peer cannot starve the event loop. */
-    for (int round = 0; round < 64 && mav_out_is_up(m); round++) {
-        uint8_t buf[2048];
-        ssize_t n;
-        if (m->ep.kind == MAV_ENDPOINT_SERIAL) {
-            n = read(m->fd, buf, sizeof buf);
-        } else {
-            struct sockaddr_storage from;
-            socklen_t fromlen = sizeof from;
-            n = recvfrom(m->fd, buf, sizeof buf, MSG_DONTWAIT, (struct sockaddr *)&from, &fromlen);
-            if (n >= 0 && m->ep.kind == MAV_ENDPOINT_UDPIN && fromlen <= sizeof m->peer) {
-                m->peer = from;
-                m->peer_len = fromlen;
-                m->have_peer = true;
-            }
-        }
-        if (n < 0) {
-            int err = errno;
-            if (err == EAGAIN || err == EWOULDBLOCK || err == EINTR)
-                break;
-            /* UDP: an ICMP error from an earlier send; not a read failure. */
-            if (m->ep.kind != MAV_ENDPOINT_SERIAL &&
-                (err == ECONNREFUSED || err == EHOSTUNREACH || err == ENETUNREACH))
-                continue;
-            m->last_errno = err;
-            if (m->ep.kind == MAV_ENDPOINT_SERIAL && device_gone(err))
-                mav_out_close(m);
-            return -err;
-        }
-        if (n == 0 && m->ep.kind == MAV_ENDPOINT_SERIAL) {
-            /* End of file on a tty = hang-up (device unplugged, pty master
-             * closed): close it; mav_out_retry() reopens. */
-            m->last_errno = EIO;
-            mav_out_close(m);
-            return -EIO;
-        }
-        m->stats.rx_bytes += (uint64_t)n;
-        parsed += parse_bytes(m, buf, (size_t)n, now_us);
-    }
-    return parsed;
+    char id[MAV_OUT_PARAM_ID_MAX + 1];
+    memset(id, 0, sizeof id);
+    memcpy(id, name, strlen(name)); /* 16 characters without NUL is legal on the wire */
+    mavlink_msg_param_value_pack_status(m->sysid, m->compid, tx_status_now(m), &priv(m)->msg, id,
+                                        value, (uint8_t)type, count, index);
+    return mav_send_msg(m);
+}
+
+int mav_out_send_version(struct mav_out *m, unsigned major, unsigned minor, unsigned patch)
+{
+    if (!m || major > 255 || minor > 255 || patch > 255)
+        return -EINVAL;
+    const uint64_t caps = MAV_PROTOCOL_CAPABILITY_MAVLINK2 |
+                          MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST |
+                          MAV_PROTOCOL_CAPABILITY_COMMAND_INT;
+    const uint32_t version =
+        (uint32_t)(major << 24 | minor << 16 | patch << 8) | (uint32_t)FIRMWARE_VERSION_TYPE_DEV;
+    const uint8_t none8[8] = {0}, uid2[18] = {0};
+    mavlink_msg_autopilot_version_pack_status(m->sysid, m->compid, tx_status_now(m), &priv(m)->msg,
+                                              caps, version, 0, 0, 0, none8, none8, none8, 0, 0, 0,
+                                              uid2);
+    return mav_send_msg(m);
 }

@@ -3,7 +3,8 @@
  *
  * This header is the whole interface: it exposes no MAVLink type. All
  * MAVLink code (headers that pymavlink's mavgen generates at build time into
- * build/gen/mavlink/) lives in the one translation unit mavlink_out.c.
+ * build/gen/mavlink/) lives in mavlink_out.c (endpoints, sending) and
+ * mav_input.c (parsing, answers, requests, signing), behind mav_priv.h.
  *
  * Conventions (as in the rest of the bridge):
  *   - The caller owns `struct mav_out` (plain struct, no heap); mav_out_open()
@@ -93,21 +94,49 @@ struct mav_out_stats {
     uint64_t rx_parse_errors;      /* bad CRC / framing, as counted by the generated parser */
     uint64_t timesync_answered;    /* TIMESYNC requests (tc1 == 0) answered */
     uint64_t reopens;              /* successful (re)opens after the first */
-    uint64_t commands_received;    /* COMMAND_LONG addressed to us */
+    uint64_t commands_received;    /* COMMAND_LONG / COMMAND_INT addressed to us */
     uint64_t commands_unsupported; /* of those: answered MAV_RESULT_UNSUPPORTED at once */
+    uint64_t param_requests;       /* PARAM_REQUEST_LIST / _READ / PARAM_SET to us */
+    uint64_t requests_dropped;     /* requests not kept: MAV_OUT_REQUESTS_MAX untaken */
+    uint64_t signature_bad;        /* signing on: messages with a wrong or stale signature */
 };
 
-/* An operator command addressed to us (COMMAND_LONG whose target_system is
- * our system id or 0 and target_component ours or 0) that the caller
- * decides (mav_out_take_command): the leap-frog's start and stop on a team
- * site (docs/mavlink.md, "Operator commands"). */
+/* What the daemon decides (mav_out_take_request; docs/mavlink.md, "Messages
+ * answered"): a COMMAND_LONG or COMMAND_INT whose target_system is our
+ * system id or 0 and target_component ours or 0, of one of the commands
+ * below (any other is answered MAV_RESULT_UNSUPPORTED at once), and the
+ * parameter protocol's PARAM_REQUEST_LIST, PARAM_REQUEST_READ and PARAM_SET
+ * to us (target component ours or 0). */
 #define MAV_OUT_CMD_DO_PAUSE_CONTINUE 193 /* MAV_CMD_DO_PAUSE_CONTINUE: param1 0 pause, 1 go on */
-#define MAV_OUT_CMD_MISSION_START 300     /* MAV_CMD_MISSION_START */
-struct mav_command {
-    uint16_t command; /* MAV_OUT_CMD_* */
-    float param1;
-    uint8_t source_sysid, source_compid; /* who sent it (the COMMAND_ACK goes to them) */
+#define MAV_OUT_CMD_PREFLIGHT_REBOOT_SHUTDOWN 246 /* the filter re-initialised (docs/mavlink.md) */
+#define MAV_OUT_CMD_MISSION_START 300             /* MAV_CMD_MISSION_START */
+#define MAV_OUT_CMD_REQUEST_MESSAGE 512           /* param1: the message id */
+enum mav_request_kind {
+    MAV_REQ_COMMAND = 1, /* command, param[] */
+    MAV_REQ_PARAM_LIST,  /* PARAM_REQUEST_LIST */
+    MAV_REQ_PARAM_READ,  /* PARAM_REQUEST_READ: param_id, or param_index when >= 0 */
+    MAV_REQ_PARAM_SET    /* PARAM_SET: param_id, param_value, param_type */
 };
+#define MAV_OUT_PARAM_ID_MAX 16 /* PARAM_VALUE param_id: characters, no NUL when 16 */
+/* MAV_PARAM_TYPE of the parameters we have (checked at compile time). */
+enum mav_out_param_type { MAV_OUT_PARAM_INT32 = 6, MAV_OUT_PARAM_REAL32 = 9 };
+struct mav_request {
+    enum mav_request_kind kind;
+    uint8_t source_sysid, source_compid; /* who sent it (the answer goes to them) */
+    /* It came signed with our key and the signature held (mav_out_set_signing;
+     * without a key always false). With a key, a PARAM_SET or command that
+     * came unsigned is still handed over, signed_ok false, for the daemon to
+     * refuse and count; a wrong signature never gets here (signature_bad). */
+    bool signed_ok;
+    uint16_t command; /* MAV_OUT_CMD_* */
+    bool command_int; /* came as COMMAND_INT (param[4], param[5]: x, y as float; param[6]: z) */
+    float param[7];   /* param1..param7 */
+    char param_id[MAV_OUT_PARAM_ID_MAX + 1]; /* NUL-terminated */
+    int16_t param_index;                     /* PARAM_REQUEST_READ: -1 = by param_id */
+    float param_value;                       /* PARAM_SET (C-cast: an INT32's value as float) */
+    uint8_t param_type;                      /* PARAM_SET: MAV_PARAM_TYPE as sent */
+};
+#define MAV_OUT_REQUESTS_MAX 16 /* untaken requests kept; more are dropped and counted */
 
 /* COMMAND_ACK results (= MAVLink MAV_RESULT). */
 enum mav_out_result {
@@ -121,7 +150,7 @@ enum mav_out_result {
 /* Opaque space for the generated parser/packer state (mavlink_status_t and
  * mavlink_message_t); its size is checked against the generated types at
  * compile time in mavlink_out.c. */
-#define MAV_OUT_PRIV_BYTES 1024
+#define MAV_OUT_PRIV_BYTES 1536
 
 struct mav_out {
     struct mav_endpoint ep;
@@ -132,10 +161,10 @@ struct mav_out {
     bool have_peer; /* UDP: destination known (udpout: resolved; udpin: someone spoke) */
     struct sockaddr_storage peer; /* UDP destination */
     socklen_t peer_len;
-    int peer_sysid;         /* system id of the last HEARTBEAT received, -1 if none */
-    bool cmd_pending;       /* cmd holds a command the caller has not taken yet */
-    struct mav_command cmd; /* the latest one (an untaken one is replaced) */
-    uint8_t seq_as[256];    /* next sequence number of each other system we send as
+    int peer_sysid; /* system id of the last HEARTBEAT received, -1 if none */
+    struct mav_request req[MAV_OUT_REQUESTS_MAX]; /* untaken requests, oldest at req_head */
+    unsigned req_head, req_count;
+    uint8_t seq_as[256]; /* next sequence number of each other system we send as
                             (mav_out_send_*_as: a team's robots), by system id */
     struct mav_out_stats stats;
     _Alignas(16) unsigned char priv[MAV_OUT_PRIV_BYTES];
@@ -188,9 +217,10 @@ bool mav_out_is_up(const struct mav_out *m);
  * generated parser and answer what we answer:
  *   TIMESYNC with tc1 == 0  ->  TIMESYNC tc1 = now_us * 1000 (ns), ts1 echoed;
  *   HEARTBEAT               ->  remembered in peer_sysid (nothing sent);
- *   COMMAND_LONG to us      ->  MAV_OUT_CMD_MISSION_START and _DO_PAUSE_CONTINUE kept
- *                               for mav_out_take_command(); any other command
- *                               answered COMMAND_ACK MAV_RESULT_UNSUPPORTED.
+ *   COMMAND_LONG/_INT to us ->  the MAV_OUT_CMD_* commands kept for
+ *                               mav_out_take_request(); any other command
+ *                               answered COMMAND_ACK MAV_RESULT_UNSUPPORTED;
+ *   PARAM_REQUEST_LIST/_READ, PARAM_SET to us -> kept for mav_out_take_request().
  * udpin: the sender of each datagram becomes the peer for all later sends.
  * Returns the number of MAVLink messages parsed (>= 0), or -errno on a read
  * error other than EAGAIN (a serial port that vanished closes the endpoint;
@@ -198,8 +228,36 @@ bool mav_out_is_up(const struct mav_out *m);
  */
 int mav_out_handle_input(struct mav_out *m, int64_t now_us);
 
-/* The command kept by mav_out_handle_input(), once: true with *out. */
-bool mav_out_take_command(struct mav_out *m, struct mav_command *out);
+/* The oldest request kept by mav_out_handle_input(), once: true with *out. */
+bool mav_out_take_request(struct mav_out *m, struct mav_request *out);
+
+/* PARAM_VALUE: name (1..16 characters), value (an INT32's as float: C-cast
+ * encoding, as ArduPilot), type, the parameter count and this one's index.
+ * -EINVAL for a bad name, type, index >= count, or a NaN/inf value. */
+int mav_out_send_param_value(struct mav_out *m, const char *name, float value,
+                             enum mav_out_param_type type, uint16_t count, uint16_t index);
+
+/* AUTOPILOT_VERSION (#148, for MAV_CMD_REQUEST_MESSAGE): what this
+ * component speaks — capabilities MAVLINK2, PARAM_ENCODE_C_CAST (the
+ * parameters' values travel C-cast, see mav_out_send_param_value) and
+ * COMMAND_INT —, flight_sw_version the daemon's major.minor.patch as
+ * (major << 24 | minor << 16 | patch << 8 | FIRMWARE_VERSION_TYPE_DEV),
+ * the rest 0. -EINVAL for a version part above 255. */
+int mav_out_send_version(struct mav_out *m, unsigned major, unsigned minor, unsigned patch);
+
+/*
+ * MAVLink 2 signing (the protocol's own: SHA-256 over the secret key, the
+ * frame and a 48-bit timestamp in 10 us units since 2015-01-01 GMT, from
+ * CLOCK_REALTIME). key: 32 bytes, or NULL to switch signing off. With a
+ * key every message sent is signed (link id 0), an incoming PARAM_SET,
+ * COMMAND_LONG or COMMAND_INT must be signed with it (unsigned: handed
+ * over with signed_ok false; wrongly signed, replayed or older than a
+ * minute: dropped, counted in signature_bad), other messages are taken
+ * signed or not. The replay windows (one per sender's system, component
+ * and link) are kept per process, shared by every endpoint. -EINVAL for a
+ * never opened struct.
+ */
+int mav_out_set_signing(struct mav_out *m, const uint8_t *key);
 
 /* COMMAND_ACK of `command` with `result` to target_sysid/compid (the
  * command's source). -EINVAL for a bad result. */

@@ -153,3 +153,13 @@ void on_odom_timer(struct daemon *d, int64_t now)
         return;
     send_odometry(d, &o, now, now);
 }
+
+int odometry_send_now(struct daemon *d)
+{
+    struct est_output o;
+    int64_t now = now_local(d);
+    if (team_site(d) || estimator_output(&d->est, now, &o) != 0)
+        return -EAGAIN;
+    send_odometry(d, &o, now, now);
+    return 0;
+}

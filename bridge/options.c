@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "log.h"
 #include "mavlink_out.h"
@@ -22,6 +23,7 @@ static void usage(FILE *f)
             "                        [--replay LOG [--realtime | --speed X]] [--record LOG]\n"
             "                        [--estimates CSV] [--stats JSON] [--status-interval S]\n"
             "                        [--initial-pose X,Y,HEADING_DEG,SIGMA_M[,SIGMA_HEADING_DEG]]\n"
+            "                        [--param-file FILE]\n"
             "                        [--help] [--version]\n"
             "  --site FILE        site file (beacons, receivers, robot, noise, [bridge])\n"
             "  --can IFACE        SocketCAN interface (default vcan0)\n"
@@ -41,6 +43,7 @@ static void usage(FILE *f)
             "                     start from this pose (site frame, m and deg; sigma of x\n"
             "                     and y; heading sigma default 5 deg) instead of waiting\n"
             "                     for the beacons' snapshot\n"
+            "  --param-file FILE  the MAVLink parameters' override file ([bridge] param_file)\n"
             "See docs/bridge.md.\n");
 }
 
@@ -127,6 +130,7 @@ int parse_args(int argc, char **argv, struct options *o, int *status)
         O_STATS,
         O_STATUS,
         O_POSE,
+        O_PARAMFILE,
         O_VERSION
     };
     static const struct option longopts[] = {{"site", required_argument, 0, O_SITE},
@@ -144,6 +148,7 @@ int parse_args(int argc, char **argv, struct options *o, int *status)
                                              {"stats", required_argument, 0, O_STATS},
                                              {"status-interval", required_argument, 0, O_STATUS},
                                              {"initial-pose", required_argument, 0, O_POSE},
+                                             {"param-file", required_argument, 0, O_PARAMFILE},
                                              {"help", no_argument, 0, 'h'},
                                              {"version", no_argument, 0, O_VERSION},
                                              {0, 0, 0, 0}};
@@ -213,6 +218,9 @@ int parse_args(int argc, char **argv, struct options *o, int *status)
         case O_POSE:
             rc = parse_pose_opt(optarg, &o->initial_pose);
             break;
+        case O_PARAMFILE:
+            o->param_file = optarg;
+            break;
         case 'h':
             usage(stdout);
             *status = EX_OK_STATUS;
@@ -254,6 +262,27 @@ int build_config(const struct options *o, struct bridge_config *cfg)
     if (o->site && config_load_file(cfg, o->site, err, sizeof err) != 0) {
         fprintf(stderr, "error: %s\n", err);
         return -1;
+    }
+    if (o->param_file) {
+        if (!o->param_file[0] || strlen(o->param_file) >= sizeof cfg->param_file) {
+            fprintf(stderr, "error: command line: --param-file: '%s' is not a file name\n",
+                    o->param_file);
+            return -1;
+        }
+        snprintf(cfg->param_file, sizeof cfg->param_file, "%s", o->param_file);
+    }
+    /* the parameters set over MAVLink ([bridge] param_file, bridge/params.h):
+     * a site-file fragment over the site file; none yet is no error */
+    if (cfg->param_file[0] && access(cfg->param_file, F_OK) == 0) {
+        char site_path[sizeof cfg->path];
+        memcpy(site_path, cfg->path, sizeof site_path);
+        char param_file[sizeof cfg->param_file];
+        memcpy(param_file, cfg->param_file, sizeof param_file);
+        if (config_load_file(cfg, param_file, err, sizeof err) != 0) {
+            fprintf(stderr, "error: %s\n", err);
+            return -1;
+        }
+        memcpy(cfg->path, site_path, sizeof site_path); /* errors name the site file */
     }
     if (o->can) {
         if (!o->can[0] || strlen(o->can) >= 16) {

@@ -1,6 +1,8 @@
 /*
  * beaconloc-bridge — the command line (getopt_long) and the configuration
- * layers: defaults < site file < command line (docs/bridge.md, OPTIONS).
+ * layers: defaults < site file < the parameters' override file ([bridge]
+ * param_file or --param-file, bridge/params.h) < command line
+ * (docs/bridge.md, OPTIONS).
  */
 #ifndef BRIDGE_OPTIONS_H
 #define BRIDGE_OPTIONS_H
@@ -28,6 +30,7 @@ struct options {
     const char *record;
     const char *estimates;
     const char *stats;
+    const char *param_file; /* --param-file (overrides [bridge] param_file) */
     const char *log_level;
     double rate_hz;                       /* 0 = not given */
     int sysid, compid;                    /* 0 = not given */
@@ -41,8 +44,8 @@ struct options {
  * value: EX_CONFIG_STATUS), the message printed. */
 int parse_args(int argc, char **argv, struct options *o, int *status);
 
-/* Layers: defaults < site file < command line, every endpoint checked.
- * Returns 0 or -1 (message printed). */
+/* Layers: defaults < site file < override file < command line, every
+ * endpoint checked. Returns 0 or -1 (message printed). */
 int build_config(const struct options *o, struct bridge_config *cfg);
 
 #endif /* BRIDGE_OPTIONS_H */

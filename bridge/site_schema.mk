@@ -2,7 +2,8 @@
 # the site file declared once. At build time it gives the bridge's C tables
 # (build/gen/site/site_keys.h: parser, defaults, [tuning] struct, geometry,
 # bl_config mapping), never committed; the simulator reads the schema itself.
-#   make docs-site-keys   rewrite the key table of docs/bridge.md from it
+#   make docs-site-keys   rewrite the key table of docs/bridge.md and the MAVLink
+#                         parameter table of docs/mavlink.md from it
 #                         (tests/sim/test_site_schema.py fails while they differ)
 
 SITE_SCHEMA     := hw_sim/beaconloc_sim/data/site_schema.toml
@@ -20,6 +21,7 @@ $(SITE_KEYS_H): $(SITE_SCHEMA) $(SITE_SCHEMA_PY) | $(SETUP_STAMP)
 
 docs-site-keys: | $(SETUP_STAMP)
 	$(PY) -m beaconloc_sim.site_schema docs-update -o $(SITE_DOCS)
+	$(PY) -m beaconloc_sim.site_schema params-update -o docs/mavlink.md
 
 # Every bridge object includes config.h (-> tuning.h -> site_keys.h): the
 # header first. (The compilers' .d files keep later rebuilds exact.)

@@ -11,6 +11,7 @@
 #include "sensors.h"
 #include "survey.h"
 #include "team.h"
+#include "mav_command.h"
 
 void latency_reset(struct latency_hist *h)
 {
@@ -208,6 +209,8 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"can_tx_errors\": %llu,\n", (unsigned long long)r->can_tx_errors);
     if (r->team)
         team_write_json(r->team, r->team_odometry_sent, f);
+    if (r->control)
+        mav_control_write_json(r->control, &r->mavlink_in, f);
     fprintf(f, "  \"run_time_s\": %.3f\n", r->run_time_s);
     fprintf(f, "}\n");
     if (fclose(f) != 0) {

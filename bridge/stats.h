@@ -14,7 +14,9 @@
 #include <stdio.h>
 
 #include "frames.h"
+#include "mavlink_out.h"
 
+struct mav_control;
 struct team;
 struct survey;
 
@@ -82,6 +84,10 @@ struct stats_report {
     /* a team site (bridge/team.h): its section "team" of the JSON; NULL elsewhere */
     const struct team *team;
     uint64_t team_odometry_sent; /* ODOMETRY sent as the robots' system ids */
+    /* the MAVLink control side (bridge/mav_command.h): its section
+     * "mavlink_control" of the JSON, with the endpoints' input counters */
+    const struct mav_control *control;
+    struct mav_out_stats mavlink_in;
     int64_t latency_p50_us, latency_p99_us, latency_max_us;
     uint64_t latency_samples;
     /* the interval the latest status line closed (latency_interval_close) */

@@ -172,39 +172,35 @@ static int send_team_command(struct daemon *d, enum team_command c)
     return rc;
 }
 
-void team_commands(struct daemon *d)
+void team_command(struct daemon *d, const struct mav_request *c, int link)
 {
-    struct mav_command c;
-    int link;
-    while (mav_links_take_command(&d->links, &c, &link)) {
-        enum team_command tc = c.command == MAV_OUT_CMD_MISSION_START ? TEAM_CMD_START
-                               : c.param1 == 0.0f                     ? TEAM_CMD_PAUSE
-                                                                      : TEAM_CMD_RESUME;
-        enum mav_out_result result;
-        char text[MAV_OUT_STATUSTEXT_MAX + 1];
-        if (!team_site(d)) {
-            result = MAV_OUT_RESULT_UNSUPPORTED;
-            snprintf(text, sizeof text, "leap-frog %s: no team here", command_name(tc));
+    enum team_command tc = c->command == MAV_OUT_CMD_MISSION_START ? TEAM_CMD_START
+                           : c->param[0] == 0.0f                   ? TEAM_CMD_PAUSE
+                                                                   : TEAM_CMD_RESUME;
+    enum mav_out_result result;
+    char text[MAV_OUT_STATUSTEXT_MAX + 1];
+    if (!team_site(d)) {
+        result = MAV_OUT_RESULT_UNSUPPORTED;
+        snprintf(text, sizeof text, "leap-frog %s: no team here", command_name(tc));
+    } else {
+        int rc = send_team_command(d, tc);
+        if (rc == 0) {
+            result = MAV_OUT_RESULT_ACCEPTED;
+            snprintf(text, sizeof text, "leap-frog %s sent to robot %d", command_name(tc),
+                     d->cfg.team.leader);
         } else {
-            int rc = send_team_command(d, tc);
-            if (rc == 0) {
-                result = MAV_OUT_RESULT_ACCEPTED;
-                snprintf(text, sizeof text, "leap-frog %s sent to robot %d", command_name(tc),
-                         d->cfg.team.leader);
-            } else {
-                /* CAN down, replay, a full send buffer: the operator may retry */
-                result = MAV_OUT_RESULT_TEMPORARILY_REJECTED;
-                snprintf(text, sizeof text, "leap-frog %s not sent: %s", command_name(tc),
-                         strerror(-rc));
-            }
+            /* CAN down, replay, a full send buffer: the operator may retry */
+            result = MAV_OUT_RESULT_TEMPORARILY_REJECTED;
+            snprintf(text, sizeof text, "leap-frog %s not sent: %s", command_name(tc),
+                     strerror(-rc));
         }
-        mav_links_send_command_ack(&d->links, link, c.command, result, c.source_sysid,
-                                   c.source_compid);
-        if (result == MAV_OUT_RESULT_ACCEPTED)
-            log_info("%s", text);
-        else
-            log_warn("%s", text);
-        statustext(d, result == MAV_OUT_RESULT_ACCEPTED ? MAV_OUT_SEV_NOTICE : MAV_OUT_SEV_WARNING,
-                   text);
     }
+    mav_links_send_command_ack(&d->links, link, c->command, result, c->source_sysid,
+                               c->source_compid);
+    if (result == MAV_OUT_RESULT_ACCEPTED)
+        log_info("%s", text);
+    else
+        log_warn("%s", text);
+    statustext(d, result == MAV_OUT_RESULT_ACCEPTED ? MAV_OUT_SEV_NOTICE : MAV_OUT_SEV_WARNING,
+               text);
 }

@@ -20,7 +20,7 @@ static const char *const timer_names[T_COUNT] = {
     [T_SECOND] = "1 s",
 };
 
-static void on_heartbeat(struct daemon *d, int64_t now)
+void heartbeat_send(struct daemon *d, int64_t now)
 {
     if (team_site(d)) { /* the host's own, then one per robot (team_out.c) */
         if (mav_links_send_heartbeat(&d->links, team_host_state(d)) > 0)
@@ -64,9 +64,10 @@ static void fire_timer(struct daemon *d, enum timer_id id, int64_t now)
     switch (id) {
     case T_ODOM:
         on_odom_timer(d, now);
+        mav_control_tick(d); /* a parameter list in progress */
         break;
     case T_HEARTBEAT:
-        on_heartbeat(d, now);
+        heartbeat_send(d, now);
         break;
     case T_SECOND:
         on_second(d, now);

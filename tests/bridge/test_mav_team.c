@@ -3,7 +3,7 @@
  * sending as another system id (a robot) with that system's own sequence
  * numbers while our own continue undisturbed, and the operator's commands
  * (COMMAND_LONG addressed to us: MISSION_START and DO_PAUSE_CONTINUE kept
- * for the daemon, any other answered UNSUPPORTED at once, someone else's
+ * for the daemon (mav_out_take_request), any other answered UNSUPPORTED at once, someone else's
  * ignored; COMMAND_ACK to the sender).
  */
 #include "mav_test_util.h"
@@ -51,15 +51,15 @@ static void test_commands(void **state)
     (void)state;
     struct pair p;
     open_pair(&p);
-    struct mav_command c;
-    assert_false(mav_out_take_command(&p.m, &c));
+    struct mav_request c;
+    assert_false(mav_out_take_request(&p.m, &c));
     /* MISSION_START to us: kept for the daemon, nothing sent yet */
     command(&p, 1, 197, MAV_CMD_MISSION_START, 0);
-    assert_true(mav_out_take_command(&p.m, &c));
+    assert_true(mav_out_take_request(&p.m, &c));
     assert_int_equal(c.command, MAV_OUT_CMD_MISSION_START);
     assert_int_equal(c.source_sysid, 255);
     assert_int_equal(c.source_compid, 190);
-    assert_false(mav_out_take_command(&p.m, &c)); /* once */
+    assert_false(mav_out_take_request(&p.m, &c)); /* once */
     assert_true(nothing_to_read(p.peer));
     /* the daemon's answer */
     assert_int_equal(mav_out_send_command_ack(&p.m, c.command, MAV_OUT_RESULT_ACCEPTED,
@@ -77,18 +77,18 @@ static void test_commands(void **state)
     assert_int_equal(ack.target_component, 190);
     /* DO_PAUSE_CONTINUE to any system (0): kept with its param1 */
     command(&p, 0, 0, MAV_CMD_DO_PAUSE_CONTINUE, 1.0f);
-    assert_true(mav_out_take_command(&p.m, &c));
+    assert_true(mav_out_take_request(&p.m, &c));
     assert_int_equal(c.command, MAV_OUT_CMD_DO_PAUSE_CONTINUE);
-    assert_true(c.param1 == 1.0f);
+    assert_true(c.param[0] == 1.0f);
     /* another system's or another component's: ignored, not answered */
     command(&p, 77, 197, MAV_CMD_MISSION_START, 0);
     command(&p, 1, 1, MAV_CMD_MISSION_START, 0);
-    assert_false(mav_out_take_command(&p.m, &c));
+    assert_false(mav_out_take_request(&p.m, &c));
     assert_true(nothing_to_read(p.peer));
     assert_int_equal(p.m.stats.commands_received, 2);
     /* a command we do not do: UNSUPPORTED at once, not kept */
     command(&p, 1, 197, MAV_CMD_COMPONENT_ARM_DISARM, 1.0f);
-    assert_false(mav_out_take_command(&p.m, &c));
+    assert_false(mav_out_take_request(&p.m, &c));
     mavlink_reset_channel_status(MAVLINK_COMM_1);
     assert_true(read_msg(p.peer, false, &msg));
     mavlink_msg_command_ack_decode(&msg, &ack);

@@ -5,7 +5,7 @@
 #                  (bridge/can_in.c, frames.c, estimator.c, node_clock.c)
 #   fuzz_site      the site file (bridge/config.c, [tuning] included) up to
 #                  the estimator's init and a SIGHUP reconfigure
-#   fuzz_mavlink   what udpin: and serial endpoints receive (bridge/mavlink_out.c)
+#   fuzz_mavlink   what udpin: and serial endpoints receive (bridge/mav_input.c)
 #   fuzz_lib_api   the library API as a state machine (lib/include/beaconloc/*.h)
 #
 #   make fuzz [FUZZ_SECONDS=60]   build and run each harness FUZZ_SECONDS; one

@@ -1,14 +1,17 @@
 /*
  * beaconloc fuzzing — the MAVLink input path of the bridge: what a udpin:
  * or serial: endpoint receives, read and parsed by mav_out_handle_input()
- * (bridge/mavlink_out.c, the generated MAVLink parser) and answered
- * (TIMESYNC) or remembered (HEARTBEAT).
+ * (bridge/mav_input.c, the generated MAVLink parser) and answered
+ * (TIMESYNC, unsupported commands), remembered (HEARTBEAT) or kept for the
+ * daemon (commands, the parameter protocol: a bounded queue).
  *
  * Two real endpoints are opened once: udpin:127.0.0.1:<free port> and
  * serial:<pty slave>:57600. Before every input the struct mav_out is
  * restored from a copy taken right after opening (same descriptor, fresh
  * parser state and counters), so inputs do not depend on each other.
- * Input: byte 0 bit 0 picks the endpoint, the next 8 bytes give now_us
+ * Input: byte 0 bit 0 picks the endpoint, bit 1 switches MAVLink 2 signing
+ * on (a fixed key: the signature check, unsigned state changers handed
+ * over, the rest taken), the next 8 bytes give now_us
  * (modulo FUZZ_MAV_NOW_MAX_US); then
  *   udpin:  datagrams, each a 16-bit little-endian length and that many
  *           bytes (up to 65507: longer than the 2048-byte read buffer, so
@@ -16,9 +19,10 @@
  *   serial: the rest as one byte stream (at most 4000 bytes, the pty's
  *           buffer), parser state carried across reads.
  * Invariants: handle_input returns the messages parsed (= rx_msgs), never
- * an error; rx_bytes counts what was delivered; udpin: every TIMESYNC
- * answer reaches the sender (one datagram each) and the sender becomes
- * the peer; the remembered autopilot system id is -1 or 0..255.
+ * an error; rx_bytes counts what was delivered; udpin: every answer
+ * (TIMESYNC, an UNSUPPORTED command's COMMAND_ACK) reaches the sender (one
+ * datagram each) and the sender becomes the peer; the requests kept never
+ * exceed the queue; the remembered autopilot system id is -1 or 0..255.
  */
 #include <errno.h>
 #include <fcntl.h>
@@ -139,9 +143,13 @@ static void wait_readable(int fd, int want)
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     struct fz z = { data, size };
-    bool serial = fz_u8(&z) & 1;
+    uint8_t mode = fz_u8(&z);
+    bool serial = mode & 1;
     int64_t now_us = (int64_t)(fz_u64(&z) % (uint64_t)FUZZ_MAV_NOW_MAX_US);
     memcpy(&m, serial ? &ser_snap : &udp_snap, sizeof m);
+    static const uint8_t key[32] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16,
+                                    17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32};
+    FUZZ_CHECK(mav_out_set_signing(&m, (mode & 2) ? key : NULL) == 0, "set_signing");
     int fd = mav_out_fd(&m);
     drain(fd); /* nothing of an earlier input may remain */
     uint64_t delivered = 0;
@@ -174,14 +182,17 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                (unsigned long long)m.stats.rx_msgs);
     FUZZ_CHECK(m.stats.rx_bytes == delivered, "rx_bytes %llu, delivered %llu",
                (unsigned long long)m.stats.rx_bytes, (unsigned long long)delivered);
-    FUZZ_CHECK(m.stats.timesync_answered <= m.stats.rx_msgs, "more answers than messages");
+    FUZZ_CHECK(m.stats.timesync_answered + m.stats.commands_unsupported <= m.stats.rx_msgs,
+               "more answers than messages");
+    FUZZ_CHECK(m.req_count <= MAV_OUT_REQUESTS_MAX, "request queue over its bound");
     FUZZ_CHECK(m.peer_sysid >= -1 && m.peer_sysid <= 255, "peer_sysid %d", m.peer_sysid);
     FUZZ_CHECK(mav_out_is_up(&m), "endpoint went down");
     if (!serial) {
         FUZZ_CHECK(datagrams == 0 || m.have_peer, "udpin: sender not taken as peer");
         unsigned answers = drain(peer_fd);
-        FUZZ_CHECK(answers == m.stats.timesync_answered, "%u answers received, %llu sent",
-                   answers, (unsigned long long)m.stats.timesync_answered);
+        uint64_t sent = m.stats.timesync_answered + m.stats.commands_unsupported;
+        FUZZ_CHECK(answers == sent, "%u answers received, %llu sent", answers,
+                   (unsigned long long)sent);
     } else {
         drain(master_fd);
     }

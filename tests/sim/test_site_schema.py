@@ -18,8 +18,9 @@ import pytest
 from beaconloc_sim.inifile import ConfigError
 from beaconloc_sim.resources import builtin_site_path
 from beaconloc_sim.site import load_site
-from beaconloc_sim.site_schema import (BEACON_SECTION, DOCS_BEGIN, DOCS_END, Range, c_header,
-                                       docs_table, load_schema, parse_schema)
+from beaconloc_sim.site_schema import (BEACON_SECTION, DOCS_BEGIN, DOCS_END, PARAMS_BEGIN,
+                                       PARAMS_END, Range, c_header, docs_table, load_schema,
+                                       params_table, parse_schema)
 
 from conftest import SITE_TEXT
 
@@ -35,6 +36,47 @@ def test_docs_key_table_is_the_schemas():
     documented = text[begin:end + len(DOCS_END)]
     assert documented == docs_table(SCHEMA), \
         "docs/bridge.md's site-key table differs from the schema: run `make docs-site-keys`"
+
+
+def test_docs_param_table_is_the_schemas():
+    """docs/mavlink.md carries the generated parameter table: `make docs-site-keys`."""
+    text = (REPO / "docs" / "mavlink.md").read_text(encoding="utf-8")
+    begin, end = text.find(PARAMS_BEGIN), text.find(PARAMS_END)
+    assert 0 <= begin < end, "the mavlink-params markers are missing from docs/mavlink.md"
+    assert text[begin:end + len(PARAMS_END)] == params_table(SCHEMA), \
+        "docs/mavlink.md's parameter table differs from the schema: run `make docs-site-keys`"
+
+
+def test_params_fit_mavlink_and_are_in_the_c_header():
+    """Each parameter: a unique name of <= 16 characters (PARAM_VALUE param_id), a number the
+    bridge reads with its range, one SITE_PARAMS row in index order."""
+    params = SCHEMA.params()
+    assert len(params) >= 40
+    names = [k.param for k in params]
+    assert len(set(names)) == len(names) and all(len(n) <= 16 for n in names)
+    header = c_header(SCHEMA)
+    rows = re.findall(r"    X\(([A-Z][A-Z0-9_]*), ([a-z_]+), ([a-z0-9_]+), (K_[A-Z]+), ", header)
+    assert [r[0] for r in rows] == names
+    for (name, sec, key, ctype), k in zip(rows, params):
+        assert (sec, key) == (k.section, k.name) and ctype in ("K_REAL", "K_INT")
+    assert f"#define SITE_PARAM_COUNT {len(params)}" in header
+
+
+@pytest.mark.parametrize("extra, why", [
+    ('range = "(0, 10]"\ndefault = 1.0\nparam = "BCN_PERIOD_TOO_LONG"\n', "parameter name"),
+    ('range = "(0, 10]"\ndefault = 1.0\nparam = "bcn_period"\n', "parameter name"),
+    ('range = "(0, 10]"\nparam = "BCN_PERIOD"\n', "with a range and a default"),
+])
+def test_bad_param_is_refused(extra, why):
+    with pytest.raises(ValueError, match=why):
+        parse_schema(_SECTION + _KEY + extra)
+
+
+def test_param_declared_twice_is_refused():
+    two = _KEY + 'range = "(0, 10]"\ndefault = 1.0\nparam = "BCN_X"\n'
+    other = two.replace('name = "period_s"', 'name = "other_s"')
+    with pytest.raises(ValueError, match="parameter name declared twice"):
+        parse_schema(_SECTION + two + other)
 
 
 def test_docs_table_has_one_row_per_key():
