@@ -31,13 +31,16 @@
 
 /* The filter's timebase (estimator.h, "Timebases"), the one rule: the
  * receiver array's clock on a site with ultrasonic beacons, else the bearing
- * sensor's on a site with bearing beacons, else the range receiver's. */
+ * sensor's on a site with bearing beacons, else the range receiver's on a
+ * site with range beacons, else the sonar ring's on a site with a ring. */
 static const struct node_clock *ref_clock(const struct estimator *e)
 {
     if (e->blcfg.beacon_count > 0)
         return &e->rx_clock;
     if (e->blcfg.bearing_beacon_count > 0)
         return &e->brg_clock;
+    if (e->blcfg.range_beacon_count == 0 && e->sonar.on)
+        return &e->snr_clock;
     return &e->rng_clock;
 }
 
@@ -61,6 +64,23 @@ static bool to_ref_time(const struct estimator *e, const struct node_clock *own,
         return false;
     *t_ref = node_clock_to_node(ref_clock(e), node_clock_to_local(own, t_own));
     return true;
+}
+
+bool estimator_ref_time(struct estimator *e, const struct node_clock *own, int64_t t_own,
+                        int64_t *t_ref)
+{
+    const bool ok = to_ref_time(e, own, t_own, t_ref);
+    if (ok && *t_ref > e->latest_node_us)
+        e->latest_node_us = *t_ref;
+    return ok;
+}
+
+void estimator_note_update(struct estimator *e, int64_t rx_us)
+{
+    e->updated = true;
+    e->last_update_rx_us = rx_us;
+    if (rx_us > e->last_data_rx_us)
+        e->last_data_rx_us = rx_us;
 }
 
 /* ---- events ----------------------------------------------------------- */
@@ -263,13 +283,18 @@ int estimator_init(struct estimator *e, const struct bridge_config *site, char *
     e->pulse_hold_us = estimator_pulse_hold_us(cfg);
     if (make_configs(cfg, &e->blcfg, &e->seqcfg, err, errlen))
         return -1;
+    if (sonar_configure(&e->sonar, cfg, false, err, errlen))
+        return -1;
     int rc = bl_localizer_init(&e->loc, &e->blcfg, &e->seqcfg);
+    if (rc == BL_OK)
+        rc = sonar_attach(&e->sonar, &e->loc.filter);
     if (rc != BL_OK) {
         snprintf(err, errlen, "%s: estimator initialisation failed: %s",
                  cfg->path[0] ? cfg->path : "defaults", bl_strerror(rc));
         return -1;
     }
     node_clock_init(&e->rx_clock, NULL);
+    node_clock_init(&e->snr_clock, NULL);
     node_clock_init(&e->enc_clock, NULL);
     node_clock_init(&e->brg_clock, NULL);
     node_clock_init(&e->rng_clock, NULL);
@@ -288,6 +313,14 @@ void estimator_set_initial_pose(struct estimator *e, const struct est_initial_po
 }
 
 /* The known start pose, once, at filter time t_us (before the first start). */
+static void start_from_initial_pose(struct estimator *e, int64_t t_us);
+
+void estimator_start_pending(struct estimator *e, int64_t t_us)
+{
+    start_from_initial_pose(e, t_us);
+    sync(e);
+}
+
 static void start_from_initial_pose(struct estimator *e, int64_t t_us)
 {
     if (!e->initial_pose.set)
@@ -335,6 +368,9 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
     bl_seq_config sc;
     if (make_configs(cfg, &c, &sc, err, errlen))
         return -1;
+    /* the sonar's map and ring (same storage: the filter's pointers stay valid) */
+    if (sonar_configure(&e->sonar, cfg, true, err, errlen))
+        return -1;
     estimator_survey_commit(e, cfg, &fresh, restart);
     e->beacon_lost_s = cfg->beacon_lost_s;
     e->echo_storm_ratio = cfg->echo_storm_ratio;
@@ -348,6 +384,7 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
         e->seqcfg = sc;
         e->cfg = *cfg;
         e->pulse_hold_us = estimator_pulse_hold_us(cfg); /* the node's tolerance may change */
+        (void)sonar_attach(&e->sonar, &e->loc.filter);
         sync(e);
         return 0;
     }
@@ -361,6 +398,7 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
     e->seqcfg = sc;
     e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
     e->pulse_hold_us = estimator_pulse_hold_us(cfg);
+    (void)sonar_attach(&e->sonar, &e->loc.filter);
     sync(e);
     reset_runtime(e);
     return 1;
@@ -493,6 +531,7 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int
         log_debug("localizer wheels: %s", bl_strerror(rc));
     }
     sync(e);
+    estimator_sonar_wheels(e, t, had_ref ? dl * e->m_per_tick : 0.0, had_ref ? dr * e->m_per_tick : 0.0);
 }
 
 void estimator_status(struct estimator *e, const struct frame_status *s, int64_t rx_us)
@@ -626,6 +665,7 @@ int64_t estimator_local_to_node(const struct estimator *e, int64_t local_us)
 void estimator_tick(struct estimator *e, int64_t local_now_us)
 {
     estimator_survey_poll(e, local_now_us); /* a survey's timeout */
+    estimator_sonar_tick(e, local_now_us);  /* a burst whose last frames were lost */
     if (!ref_seen(e))
         return;
     int64_t now = estimator_local_to_node(e, local_now_us);
