@@ -1,0 +1,189 @@
+// beaconloc — aiding source: a ring of sonar rangefinders against a map of
+// wall segments (Hoppenot & Colle 1997, seed 001, for the physics and the
+// nearest-segment association; the fusion goes beyond the paper): each
+// range against its associated segment, the model and its Jacobian, gated,
+// through the shared update (fusion.hpp). Contract and the heading
+// discussion: filter.h bl_filter_set_sonar, bl_filter_fuse_sonar.
+#include "filter_internal.hpp"
+#include "sonar_internal.hpp"
+
+#if BL_WITH_SONAR
+
+using namespace bl;
+
+namespace {
+
+// IEKF relinearisations per range and their stop (a range to a wall is
+// linear in the position while the association holds).
+constexpr uint32_t kIekfIterations = 2;
+constexpr real kIekfTolerance_m = real(1e-4);
+// Innovation gate (σ, chi-square with 1 dof): an unknown obstacle or a
+// phantom from multiple reflections falls outside it.
+constexpr real kGateSigma = real(3);
+// The association's cone is the beam's half-width widened by this many σ
+// of the heading (filter.h), never beyond a right angle.
+constexpr real kConeHeadingSigmas = real(3);
+// A transducer within this of its segment has no defined direction (m).
+constexpr real kMinRange_m = real(1e-3);
+
+// The transducer of sensor mount m at dt_s after the state time, the robot
+// extrapolated with v and ω (midpoint heading, as bl_filter_fuse_range):
+//   θt = θ + ω dt, φm = θ + ω dt/2,
+//   p_s = (x, y) + v dt (cos φm, sin φm) + R(θt) m,
+// and ∂p_s/∂(θ, v, ω) (columns; ∂p_s/∂(x, y) = I).
+struct Transducer {
+    real px, py;    // p_s (m)
+    real axis_rad;  // beam axis θt + θ_i
+    real dth[2];    // ∂p_s/∂θ (m/rad)
+    real dv[2];     // ∂p_s/∂v (s)
+    real dw[2];     // ∂p_s/∂ω (m·s/rad)
+};
+
+Transducer transducer(const bl_sonar_mount &m, const VX &x, real dt_s)
+{
+    Transducer t;
+    const real tht = x(TH) + x(W) * dt_s;
+    const real phm = x(TH) + real(0.5) * x(W) * dt_s;
+    const real cm = std::cos(phm), sm = std::sin(phm);
+    const real ct = std::cos(tht), st = std::sin(tht);
+    const real vdt = x(V) * dt_s;
+    // R'(θt) m: derivative of the rotated mount offset
+    const real rox = -st * m.x_m - ct * m.y_m, roy = ct * m.x_m - st * m.y_m;
+    t.px = x(X) + vdt * cm + ct * m.x_m - st * m.y_m;
+    t.py = x(Y) + vdt * sm + st * m.x_m + ct * m.y_m;
+    t.axis_rad = tht + m.angle_rad;
+    t.dth[0] = -vdt * sm + rox;
+    t.dth[1] = vdt * cm + roy;
+    t.dv[0] = dt_s * cm;
+    t.dv[1] = dt_s * sm;
+    t.dw[0] = -vdt * sm * real(0.5) * dt_s + rox * dt_s;
+    t.dw[1] = vdt * cm * real(0.5) * dt_s + roy * dt_s;
+    return t;
+}
+
+// The range's model for fuse_scalar (filter.h): h = |p_s − Q|, Q the point
+// of the associated segment nearest the transducer (Hoppenot & Colle eq. 3
+// — the perpendicular, specular return — or eq. 4 — an end point, a corner
+// return), H = u · ∂p_s/∂x with u = (p_s − Q)/h.
+struct SonarModel {
+    const bl_sonar_mount *mount;
+    const bl_segment *seg;
+    real dt_s;
+    bool measure(const VX &x, real *h, RX *H) const
+    {
+        const Transducer t = transducer(*mount, x, dt_s);
+        real qx, qy;
+        const real d = std::sqrt(segment_nearest(*seg, t.px, t.py, &qx, &qy));
+        if (!is_finite(d) || !(d > kMinRange_m)) return false;
+        *h = d;
+        if (H == nullptr) return true;
+        const real ux = (t.px - qx) / d, uy = (t.py - qy) / d;
+        RX J = RX::Zero();
+        J(X) = ux;
+        J(Y) = uy;
+        J(TH) = ux * t.dth[0] + uy * t.dth[1];
+        J(V) = ux * t.dv[0] + uy * t.dv[1];
+        J(W) = ux * t.dw[0] + uy * t.dw[1];
+        if (!J.allFinite()) return false;
+        *H = J;
+        return true;
+    }
+    bool admissible(const VX &, const VX &) const { return true; }
+    int unit_state() const { return -1; }
+};
+
+// The association (filter.h): of the segments whose nearest point to the
+// transducer lies inside the beam cone (half-width widened by the heading's
+// σ), the one whose predicted range is nearest the measured range z; -1
+// when none.
+int associate(const bl_map *map, const bl_sonar_ring *ring, const Transducer &t, real sigma_th, real z)
+{
+    real half = real(0.5) * ring->beam_width_rad + kConeHeadingSigmas * sigma_th;
+    if (half > real(0.5) * kPi) half = real(0.5) * kPi;
+    const real cos_half = std::cos(half);
+    const real ax = std::cos(t.axis_rad), ay = std::sin(t.axis_rad);
+    int best = -1;
+    real best_err = real(0);
+    for (uint32_t k = 0; k < map->count; ++k) {
+        real qx, qy;
+        const real d = std::sqrt(segment_nearest(map->segments[k], t.px, t.py, &qx, &qy));
+        if (!(d > kMinRange_m)) continue;
+        // Q inside the cone: cos(angle(Q − p_s, axis)) >= cos(half)
+        if (!(((qx - t.px) * ax + (qy - t.py) * ay) / d >= cos_half)) continue;
+        const real err = std::fabs(z - d);
+        if (best < 0 || err < best_err) {
+            best = int(k);
+            best_err = err;
+        }
+    }
+    return best;
+}
+
+}  // namespace
+
+extern "C" int bl_filter_set_sonar(bl_filter *f, const bl_map *map, const bl_sonar_ring *ring)
+{
+    if (f == nullptr) return BL_EINVAL;
+    if (!initialised(f)) return BL_ENOTINIT;
+    if ((map == nullptr) != (ring == nullptr)) return BL_EINVAL;
+    if (map != nullptr && (bl_map_check(map, nullptr) != BL_OK || bl_sonar_ring_check(ring, nullptr) != BL_OK))
+        return BL_EINVAL;
+    f->sonar_map_ = map;
+    f->sonar_ring_ = ring;
+    return BL_OK;
+}
+
+extern "C" int bl_filter_fuse_sonar(bl_filter *f, int64_t t_us, const bl_sonar_range *range, bl_fusion_result *result)
+{
+    if (f == nullptr || range == nullptr) return BL_EINVAL;
+    if (!initialised(f) || !started(f)) return BL_ENOTINIT;
+    if (f->sonar_map_ == nullptr || f->sonar_ring_ == nullptr) return BL_ECONFIG;
+    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // filter.h bl_filter_set_team_beacons
+    if (classify_time(f, t_us) != MeasTime::kFresh) return BL_ETIME;
+    const bl_map *map = f->sonar_map_;
+    const bl_sonar_ring *ring = f->sonar_ring_;
+    bl_fusion_result res;
+    std::memset(&res, 0, sizeof res);
+    res.status = BL_FUSION_DROPPED;
+    bl_sonar_drops drops;
+    std::memset(&drops, 0, sizeof drops);
+    if (!sonar_range_usable(ring, range->sensor, range->range_m, range->flags, &drops)) {
+        f->sonar_dropped_ += 1;
+        if (result) *result = res;
+        return BL_OK;
+    }
+    VX x = state(f);
+    MX P = cov(f);
+    const bl_sonar_mount *mount = &ring->mounts[range->sensor];
+    const real z = range->range_m;
+    const SonarModel model = {mount, nullptr, bl::us_to_s(t_us - f->t_us_)};
+    const int k = associate(map, ring, transducer(*mount, x, model.dt_s), std::sqrt(P(TH, TH)), z);
+    if (k < 0) {
+        f->sonar_unmatched_ += 1;
+        if (result) *result = res;
+        return BL_OK;
+    }
+    SonarModel mk = model;
+    mk.seg = &map->segments[k];
+    // σ(r) = max(sigma_range_m, sigma_range_rel·r) (sonar.h bl_sonar_ring).
+    real sigma = ring->sigma_range_rel * z;
+    if (sigma < ring->sigma_range_m) sigma = ring->sigma_range_m;
+    ScalarMeasurement m;
+    m.z = z;
+    m.R = sigma * sigma;
+    m.gate_sigma = kGateSigma;
+    m.max_iterations = kIekfIterations;
+    m.step_tolerance_m = kIekfTolerance_m;
+    const int rc = fuse_scalar(mk, m, x, P, &res);
+    if (rc != BL_OK) return rc;  // undefined or numerically impossible: state untouched
+    if (res.status == BL_FUSION_REJECTED) {
+        f->sonar_rejected_ += 1;
+    } else {
+        commit(f, x, P);
+        f->sonar_accepted_ += 1;
+    }
+    if (result) *result = res;
+    return BL_OK;
+}
+
+#endif  // BL_WITH_SONAR
