@@ -54,7 +54,7 @@
 #define CONFIG_MAX_RECEIVERS SITE_MAX_RECEIVERS
 #define CONFIG_ERR_LEN 512
 #define CONFIG_STR_LEN 128
-#define CONFIG_MAX_KEYS 96
+#define CONFIG_MAX_KEYS 128
 #define CONFIG_MAX_ITEMS 64     /* bound on every per-item section's largest count ([map] walls) */
 #define CONFIG_MAX_ITEM_KEYS 32 /* bound on the keys of one per-item section */
 

@@ -23,15 +23,18 @@ static const int vel_of_state[6] = {ST_V, -1, -1, -1, -1, ST_OMEGA};
  * C[20] whenever C[0] is not NaN, so a NaN var(down) made both NaN (an
  * internal error that blocks arming); PX4's EKF2 uses the reported
  * variances of a vector only when all three are finite (docs/autopilot.md). */
-#define PLANAR_SIGMA_Z_M 0.02           /* height of the reference point, m */
-#define PLANAR_SIGMA_TILT_RAD 0.0349    /* roll and pitch: 2 deg */
-#define PLANAR_SIGMA_VEL_MPS 0.02       /* lateral and vertical speed, m/s */
+#define PLANAR_SIGMA_Z_M 0.02               /* height of the reference point, m */
+#define PLANAR_SIGMA_TILT_RAD 0.0349        /* roll and pitch: 2 deg */
+#define PLANAR_SIGMA_VEL_MPS 0.02           /* lateral and vertical speed, m/s */
 #define PLANAR_SIGMA_TILT_RATE_RADPS 0.0349 /* roll and pitch rate: 2 deg/s */
-static const double pose_planar_sigma[6] = {0, 0, PLANAR_SIGMA_Z_M, PLANAR_SIGMA_TILT_RAD,
-                                            PLANAR_SIGMA_TILT_RAD, 0};
-static const double vel_planar_sigma[6] = {0, PLANAR_SIGMA_VEL_MPS, PLANAR_SIGMA_VEL_MPS,
+static const double pose_planar_sigma[6] = {
+    0, 0, PLANAR_SIGMA_Z_M, PLANAR_SIGMA_TILT_RAD, PLANAR_SIGMA_TILT_RAD, 0};
+static const double vel_planar_sigma[6] = {0,
+                                           PLANAR_SIGMA_VEL_MPS,
+                                           PLANAR_SIGMA_VEL_MPS,
                                            PLANAR_SIGMA_TILT_RATE_RADPS,
-                                           PLANAR_SIGMA_TILT_RATE_RADPS, 0};
+                                           PLANAR_SIGMA_TILT_RATE_RADPS,
+                                           0};
 
 /* One 6x6: the estimated block from the state covariance, the planar rows
  * diagonal with their model variance, zero between the two. An estimate

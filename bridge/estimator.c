@@ -531,7 +531,8 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int
         log_debug("localizer wheels: %s", bl_strerror(rc));
     }
     sync(e);
-    estimator_sonar_wheels(e, t, had_ref ? dl * e->m_per_tick : 0.0, had_ref ? dr * e->m_per_tick : 0.0);
+    estimator_sonar_wheels(e, t, had_ref ? dl * e->m_per_tick : 0.0,
+                           had_ref ? dr * e->m_per_tick : 0.0);
 }
 
 void estimator_status(struct estimator *e, const struct frame_status *s, int64_t rx_us)

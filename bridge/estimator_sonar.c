@@ -75,8 +75,7 @@ static bool pose_at(const struct sonar *s, int64_t t_us, bl_pose *est, bl_pose *
     for (uint32_t k = 1; k < s->hist_len; k++) {
         const struct sonar_pose_at *older = hist_at(s, k);
         if (older->t_us <= t_us) {
-            const double w =
-                (double)(t_us - older->t_us) / (double)(newer->t_us - older->t_us);
+            const double w = (double)(t_us - older->t_us) / (double)(newer->t_us - older->t_us);
             *est = lerp_pose(&older->est, &newer->est, w);
             *odo = lerp_pose(&older->odo, &newer->odo, w);
             return true;

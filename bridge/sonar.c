@@ -69,8 +69,8 @@ static int build_map(const struct bridge_config *cfg, bl_segment *seg, uint32_t 
                      w->x1_m, w->y1_m, w->x2_m, w->y2_m, len_m);
             return item_error(cfg, "wall", (uint32_t)i, "x2_m", why, err, errlen);
         }
-        seg[i] = (bl_segment){(bl_real)w->x1_m, (bl_real)w->y1_m, (bl_real)w->x2_m,
-                              (bl_real)w->y2_m};
+        seg[i] =
+            (bl_segment){(bl_real)w->x1_m, (bl_real)w->y1_m, (bl_real)w->x2_m, (bl_real)w->y2_m};
     }
     *count = (uint32_t)walls;
     bl_map map = {.segments = seg, .count = *count};
@@ -95,7 +95,8 @@ static int build_ring(const struct bridge_config *cfg, bl_sonar_mount *mounts, b
     uint32_t unused = 0;
     for (int i = 0; i < n; i++) {
         const struct config_sonar *m = &cfg->sonar[i];
-        mounts[i] = (bl_sonar_mount){(bl_real)m->x_m, (bl_real)m->y_m, (bl_real)rad_of(m->angle_deg)};
+        mounts[i] =
+            (bl_sonar_mount){(bl_real)m->x_m, (bl_real)m->y_m, (bl_real)rad_of(m->angle_deg)};
         if (!m->used)
             unused |= 1u << i;
     }

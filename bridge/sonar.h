@@ -64,12 +64,12 @@ struct sonar_counters {
     uint64_t unexpected, stale, unknown_sensor, no_echo, max_range, unused, out_of_range, unmapped,
         before_start, fused, rejected, unmatched, refused, burst_ranges;
     /* bursts and what became of them */
-    uint64_t bursts;    /* bursts closed with at least one valid range */
-    uint64_t corrected; /* corrector: whole correction (BL_PINPOINT_CONVERGED) */
-    uint64_t partial;   /* corrector: some axes (BL_PINPOINT_PARTIAL) */
+    uint64_t bursts;      /* bursts closed with at least one valid range */
+    uint64_t corrected;   /* corrector: whole correction (BL_PINPOINT_CONVERGED) */
+    uint64_t partial;     /* corrector: some axes (BL_PINPOINT_PARTIAL) */
     uint64_t uncorrected; /* corrector: none (too few matches; BL_PINPOINT_NONE) */
-    uint64_t too_large; /* corrector: refused as too large (BL_PINPOINT_REFUSED) */
-    uint64_t errors;    /* a library call returned an error (not counted above) */
+    uint64_t too_large;   /* corrector: refused as too large (BL_PINPOINT_REFUSED) */
+    uint64_t errors;      /* a library call returned an error (not counted above) */
     /* time per correction (us): sum, max, count of the timed bursts */
     double time_us_sum, time_us_max;
     uint64_t timed;
@@ -93,19 +93,19 @@ struct sonar {
     bl_sonar_ring ring;
     bl_pinpoint_params pinpoint;
     bl_memory_corrector memory;
-    double period_s;   /* burst period */
-    int64_t hold_us;   /* the node's listening window: a frame leaves this long after its ping */
+    double period_s; /* burst period */
+    int64_t hold_us; /* the node's listening window: a frame leaves this long after its ping */
     double wheel_base_m;
     /* the burst being gathered */
     bool burst_open;
     bl_sonar_range burst[BL_SONAR_MAX_SENSORS];
-    uint32_t burst_n;         /* valid ranges in burst[] */
-    uint32_t burst_seen;      /* bit i: sensor i's frame of this burst came */
-    int64_t burst_first_us;   /* ping of its first frame (filter timebase) */
-    int64_t burst_sum_us;     /* sum of its valid ranges' ping times, relative to the first */
+    uint32_t burst_n;          /* valid ranges in burst[] */
+    uint32_t burst_seen;       /* bit i: sensor i's frame of this burst came */
+    int64_t burst_first_us;    /* ping of its first frame (filter timebase) */
+    int64_t burst_sum_us;      /* sum of its valid ranges' ping times, relative to the first */
     int64_t burst_first_rx_us; /* receive time of its first frame (bridge clock) */
-    double burst_time_us;     /* method filter: fuse time of its ranges so far */
-    int64_t newest_ping_us;   /* newest ping seen (stale check) */
+    double burst_time_us;      /* method filter: fuse time of its ranges so far */
+    int64_t newest_ping_us;    /* newest ping seen (stale check) */
     bool have_ping;
     /* dead reckoning (memory corrector) and the pose history */
     bl_pose odo;

@@ -230,12 +230,11 @@ void stats_status_line(const struct stats_report *r, const char *prefix, const c
     char sonar[160] = "";
     if (r->sonar && r->sonar->on) {
         const struct sonar_counters *c = &r->sonar->c;
-        snprintf(sonar, sizeof sonar,
-                 " | sonar ok %" PRIu64 " rej %" PRIu64 " unm %" PRIu64 " bad %" PRIu64
-                 " corr %" PRIu64,
-                 c->fused, c->rejected, c->unmatched,
-                 c->unknown_sensor + c->out_of_range + c->stale + c->refused,
-                 c->corrected + c->partial);
+        snprintf(
+            sonar, sizeof sonar,
+            " | sonar ok %" PRIu64 " rej %" PRIu64 " unm %" PRIu64 " bad %" PRIu64 " corr %" PRIu64,
+            c->fused, c->rejected, c->unmatched,
+            c->unknown_sensor + c->out_of_range + c->stale + c->refused, c->corrected + c->partial);
     }
     char kinds[32 * FRAME_KIND_COUNT] = "";
     size_t n = 0;

@@ -77,8 +77,8 @@ struct stats_report {
     /* the beacons' self-survey (bridge/survey.h): its section "survey" of the
      * JSON; NULL on a site without self_survey */
     const struct survey *survey;
-    uint64_t ranges_before_survey; /* robot ranges dropped before the survey was done */
-    uint64_t survey_unexpected;    /* BEACON_SURVEY frames on a site without self_survey */
+    uint64_t ranges_before_survey;         /* robot ranges dropped before the survey was done */
+    uint64_t survey_unexpected;            /* BEACON_SURVEY frames on a site without self_survey */
     uint64_t can_tx_frames, can_tx_errors; /* frames the bridge wrote (TEAM_COMMAND) */
     /* the sonar ring (bridge/sonar.h): its section "sonar" of the JSON, and
      * its part of the status line; NULL on a team site */
