@@ -12,6 +12,10 @@
 #include "estimator.h"
 #include "log.h"
 
+/* The share of the burst period a burst's pings may span (the next burst
+ * starts one period after this one's first ping). */
+#define BURST_SPAN 0.95
+
 /* Wall-clock time (us) for the time per correction (sonar.h). */
 static double mono_now_us(void)
 {
@@ -215,7 +219,8 @@ void estimator_sonar_tick(struct estimator *e, int64_t local_now_us)
 {
     struct sonar *s = &e->sonar;
     /* a burst whose last frames were lost: closed a period after its first */
-    if (s->burst_open && local_now_us - s->burst_first_rx_us > (int64_t)(s->period_s * 1e6))
+    if (s->burst_open &&
+        local_now_us - s->burst_first_rx_us > (int64_t)(s->period_s * 1e6) + s->hold_us)
         close_burst(e);
 }
 
@@ -226,9 +231,12 @@ static void join_burst(struct estimator *e, const struct frame_sonar *f, int64_t
 {
     struct sonar *s = &e->sonar;
     const uint32_t bit = 1u << f->sensor;
-    const int64_t half_us = (int64_t)(s->period_s * 0.5e6);
-    if (s->burst_open && ((s->burst_seen & bit) || t - s->burst_first_us >= half_us ||
-                          t < s->burst_first_us - half_us))
+    /* The ring fires its sensors one after the other over most of the period
+     * (docs/protocol.md, SONAR): a ping within BURST_SPAN of the burst's
+     * first is of it, unless its sensor has sent already. */
+    const int64_t span_us = (int64_t)(s->period_s * BURST_SPAN * 1e6);
+    if (s->burst_open &&
+        ((s->burst_seen & bit) || t - s->burst_first_us >= span_us || t < s->burst_first_us))
         close_burst(e);
     if (!s->burst_open) {
         s->burst_open = true;
@@ -325,8 +333,8 @@ void estimator_sonar(struct estimator *e, const struct frame_sonar *f, int64_t r
         estimator_event(e, EST_EV_WARNING, "sonar ring clock restarted");
         s->have_ping = false;
     }
-    if (s->have_ping && tn < s->newest_ping_us - (int64_t)(s->period_s * 0.5e6)) {
-        s->c.stale++; /* older than the burst being gathered */
+    if (s->have_ping && tn < s->newest_ping_us) {
+        s->c.stale++; /* older than a ping already handed on (the ring sends in ping order) */
         return;
     }
     if (f->sensor >= s->ring.count) {

@@ -20,8 +20,9 @@
  * bl_filter_set_pose).
  *
  * Bursts: every sensor sends one frame per burst, echo or not (docs/protocol.md,
- * SONAR). A burst is the frames whose pings lie within period_s / 2 of its
- * first one, each sensor once; it is complete when every sensor of the ring
+ * SONAR: the ring fires its sensors one after the other, each listening
+ * until the next fires). A burst is the frames whose pings lie within 0.95
+ * period_s after its first one, each sensor once; it is complete when every sensor of the ring
  * has sent, or when a frame of the next burst comes (a lost frame), or at
  * the next tick after period_s without a frame. Its time is the mean ping
  * time of its valid ranges. A corrector works on the pose at that time (the
@@ -30,7 +31,7 @@
  *
  * Every SONAR frame is counted once where it stops (struct sonar_counters,
  * the stats JSON's "sonar" object): unexpected (a site without a ring),
- * stale (older than the newest ping beyond the burst's slack), unknown_sensor
+ * stale (a ping older than the newest one: the ring sends in ping order), unknown_sensor
  * (Sensor >= [sonar_ring] count), no_echo / max_range (the node's Flags),
  * unused (a sensor with [sonarN] used = 0), out_of_range (outside
  * [min_range_m, max_range_m]), unmapped (before the reference clock), before_start
