@@ -169,12 +169,20 @@ static void correct_burst(struct estimator *e)
         rc = bl_pinpoint_correct(&s->map, &s->ring, s->burst, s->burst_n, &s->pinpoint, &corrected,
                                  &res);
         outcome = res.outcome;
+        log_debug("pinpoint at %.3f s: %u ranges, %u matched, %u iterations, outcome %d, "
+                  "correction (%.3f, %.3f) m %.2f deg",
+                  (double)t_b * 1e-6, s->burst_n, res.matched, res.iterations, (int)res.outcome,
+                  (double)res.dx_m, (double)res.dy_m, (double)res.dtheta_rad * 180.0 / M_PI);
     } else {
         bl_memory_result res = {.outcome = BL_PINPOINT_NONE};
         rc = bl_memory_push(&s->memory, &s->ring, &odo_b, s->burst, s->burst_n);
         if (rc == BL_OK)
             rc = bl_memory_correct(&s->memory, &s->map, &s->ring, &corrected, &res);
         outcome = res.outcome;
+        log_debug("memory at %.3f s: %u points, %u matched, %u segments, outcome %d, "
+                  "correction (%.3f, %.3f) m %.2f deg",
+                  (double)t_b * 1e-6, res.points, res.matched, res.segments, (int)res.outcome,
+                  (double)res.dx_m, (double)res.dy_m, (double)res.dtheta_rad * 180.0 / M_PI);
     }
     note_time(s, mono_now_us() - t0);
     if (rc != BL_OK) {
@@ -193,9 +201,11 @@ static void correct_burst(struct estimator *e)
         log_debug("sonar set pose: %s", bl_strerror(rc));
         return;
     }
-    /* the history holds the corrected pose from now on */
-    if (s->hist_len)
-        s->hist[s->hist_head].est = p;
+    /* the history moves with the pose: the next burst's pose is found in it */
+    for (uint32_t k = 0; k < s->hist_len; k++) {
+        struct sonar_pose_at *h = &s->hist[(s->hist_head + SONAR_HISTORY - k) % SONAR_HISTORY];
+        h->est = apply_correction(&est_b, &corrected, &h->est);
+    }
     estimator_note_update(e, s->burst_first_rx_us);
 }
 
