@@ -1,6 +1,6 @@
 /*
  * A room for the sonar tests (Hoppenot & Colle 1997, Fig. 1-2 in spirit):
- * a 6 m x 4 m rectangle whose right wall has a 0.9 m door aperture, and a
+ * a 6 m x 4 m rectangle whose top wall has a 0.9 m door aperture, and a
  * ring of eight sensors on a 0.2 m radius at 0, ±30, ±60, ±90 and 180
  * degrees, the rear one unused (the paper uses the seven forward ones).
  * Ranges are computed analytically here, independently of the library:
@@ -25,16 +25,16 @@
 #define WORLD_SENSORS 8
 
 static const bl_segment world_segments[WORLD_SEGMENTS] = {
-    {0, 0, 6, 0},       /* bottom */
-    {6, 0, 6, 1.5},     /* right, below the door */
-    {6, 2.4, 6, 4},     /* right, above the door (door 1.5 .. 2.4) */
-    {6, 4, 0, 4},       /* top */
-    {0, 4, 0, 0},       /* left */
+    {0, 0, 6, 0},   /* bottom */
+    {6, 0, 6, 4},   /* right */
+    {6, 4, 3.6, 4}, /* top, right of the door */
+    {2.7, 4, 0, 4}, /* top, left of the door (door x 2.7 .. 3.6) */
+    {0, 4, 0, 0},   /* left */
 };
 
 static bl_sonar_mount world_mounts[WORLD_SENSORS];
 
-static void world_ring(bl_sonar_ring *ring)
+static inline void world_ring(bl_sonar_ring *ring)
 {
     static const double deg[WORLD_SENSORS] = {0, 30, 60, 90, 180, -90, -60, -30};
     for (int i = 0; i < WORLD_SENSORS; ++i) {
@@ -54,14 +54,14 @@ static void world_ring(bl_sonar_ring *ring)
     ring->gate_m = (bl_real)0.25;
 }
 
-static void world_map(bl_map *map)
+static inline void world_map(bl_map *map)
 {
     map->segments = world_segments;
     map->count = WORLD_SEGMENTS;
 }
 
 /* The transducer of sensor i at pose (x, y, th): position and axis angle. */
-static void world_transducer(int i, double x, double y, double th, double *sx, double *sy, double *axis)
+static inline void world_transducer(int i, double x, double y, double th, double *sx, double *sy, double *axis)
 {
     const double mx = (double)world_mounts[i].x_m, my = (double)world_mounts[i].y_m;
     *sx = x + cos(th) * mx - sin(th) * my;
@@ -70,7 +70,7 @@ static void world_transducer(int i, double x, double y, double th, double *sx, d
 }
 
 /* Along the axis to the first segment crossed; NAN if none. */
-static double world_axis_range(const bl_segment *segs, int n, int i, double x, double y, double th)
+static inline double world_axis_range(const bl_segment *segs, int n, int i, double x, double y, double th)
 {
     double sx, sy, a;
     world_transducer(i, x, y, th, &sx, &sy, &a);
@@ -90,7 +90,7 @@ static double world_axis_range(const bl_segment *segs, int n, int i, double x, d
 }
 
 /* The first specular or corner echo inside the cone; NAN if none. */
-static double world_specular_range(const bl_segment *segs, int n, int i, double x, double y, double th,
+static inline double world_specular_range(const bl_segment *segs, int n, int i, double x, double y, double th,
                                    double half_beam_rad)
 {
     double sx, sy, a;
