@@ -61,23 +61,40 @@ Transducer transducer(const bl_sonar_mount &m, const VX &x, real dt_s)
     return t;
 }
 
-// The range's model for fuse_scalar (filter.h): h = |p_s − Q|, Q the point
-// of the associated segment nearest the transducer (Hoppenot & Colle eq. 3
-// — the perpendicular, specular return — or eq. 4 — an end point, a corner
-// return), H = u · ∂p_s/∂x with u = (p_s − Q)/h.
+// What a range is associated with (filter.h): a wall's perpendicular foot
+// (the specular return: Hoppenot & Colle eq. 3, the distance to the
+// segment's line) or a segment's end point (a corner return: eq. 4).
+struct Target {
+    bool point;   // end point (eq. 4) rather than line (eq. 3)
+    real ax, ay;  // the end point, or a point of the line (m)
+    real nx, ny;  // the line's unit normal (line only)
+};
+
+// The range's model for fuse_scalar: h = |n·(p_s − A)| (eq. 3) or
+// h = |p_s − E| (eq. 4), H = u · ∂p_s/∂x, u = ∂h/∂p_s (the unit normal
+// towards the transducer, or (p_s − E)/h).
 struct SonarModel {
     const bl_sonar_mount *mount;
-    const bl_segment *seg;
+    Target target;
     real dt_s;
     bool measure(const VX &x, real *h, RX *H) const
     {
         const Transducer t = transducer(*mount, x, dt_s);
-        real qx, qy;
-        const real d = std::sqrt(segment_nearest(*seg, t.px, t.py, &qx, &qy));
+        real d, ux, uy;
+        if (target.point) {
+            const real dx = t.px - target.ax, dy = t.py - target.ay;
+            d = std::sqrt(dx * dx + dy * dy);
+            ux = dx / d;
+            uy = dy / d;
+        } else {
+            const real sd = target.nx * (t.px - target.ax) + target.ny * (t.py - target.ay);
+            d = std::fabs(sd);
+            ux = sd < 0 ? -target.nx : target.nx;
+            uy = sd < 0 ? -target.ny : target.ny;
+        }
         if (!is_finite(d) || !(d > kMinRange_m)) return false;
         *h = d;
         if (H == nullptr) return true;
-        const real ux = (t.px - qx) / d, uy = (t.py - qy) / d;
         RX J = RX::Zero();
         J(X) = ux;
         J(Y) = uy;
@@ -92,31 +109,48 @@ struct SonarModel {
     int unit_state() const { return -1; }
 };
 
-// The association (filter.h): of the segments whose nearest point to the
-// transducer lies inside the beam cone (half-width widened by the heading's
-// σ), the one whose predicted range is nearest the measured range z; -1
-// when none.
-int associate(const bl_map *map, const bl_sonar_ring *ring, const Transducer &t, real sigma_th, real z)
+// The association (filter.h): of the echo points inside the beam cone
+// (half-width widened by the heading's σ) — each segment's perpendicular
+// foot when it lies on the segment, and its two end points — the one whose
+// distance is nearest the measured range z. False when none.
+bool associate(const bl_map *map, const bl_sonar_ring *ring, const Transducer &t, real sigma_th, real z, Target *out)
 {
     real half = real(0.5) * ring->beam_width_rad + kConeHeadingSigmas * sigma_th;
     if (half > real(0.5) * kPi) half = real(0.5) * kPi;
     const real cos_half = std::cos(half);
     const real ax = std::cos(t.axis_rad), ay = std::sin(t.axis_rad);
-    int best = -1;
+    bool found = false;
     real best_err = real(0);
     for (uint32_t k = 0; k < map->count; ++k) {
-        real qx, qy;
-        const real d = std::sqrt(segment_nearest(map->segments[k], t.px, t.py, &qx, &qy));
-        if (!(d > kMinRange_m)) continue;
-        // Q inside the cone: cos(angle(Q − p_s, axis)) >= cos(half)
-        if (!(((qx - t.px) * ax + (qy - t.py) * ay) / d >= cos_half)) continue;
-        const real err = std::fabs(z - d);
-        if (best < 0 || err < best_err) {
-            best = int(k);
+        const bl_segment &sg = map->segments[k];
+        const real ex = sg.x2_m - sg.x1_m, ey = sg.y2_m - sg.y1_m, l = std::sqrt(ex * ex + ey * ey);
+        // Candidates: 0 the foot (eq. 2, on the segment only), 1-2 the ends.
+        for (int c = 0; c < 3; ++c) {
+            real qx, qy;
+            if (c == 0) {
+                const real u = ((t.px - sg.x1_m) * ex + (t.py - sg.y1_m) * ey) / (l * l);
+                if (u < real(0) || u > real(1)) continue;
+                qx = sg.x1_m + u * ex;
+                qy = sg.y1_m + u * ey;
+            } else {
+                qx = c == 1 ? sg.x1_m : sg.x2_m;
+                qy = c == 1 ? sg.y1_m : sg.y2_m;
+            }
+            const real dx = qx - t.px, dy = qy - t.py, d = std::sqrt(dx * dx + dy * dy);
+            if (!(d > kMinRange_m)) continue;
+            if (!((dx * ax + dy * ay) / d >= cos_half)) continue;  // outside the cone
+            const real err = std::fabs(z - d);
+            if (found && !(err < best_err)) continue;
+            found = true;
             best_err = err;
+            out->point = c != 0;
+            out->ax = c == 0 ? sg.x1_m : qx;
+            out->ay = c == 0 ? sg.y1_m : qy;
+            out->nx = -ey / l;
+            out->ny = ex / l;
         }
     }
-    return best;
+    return found;
 }
 
 }  // namespace
@@ -156,15 +190,14 @@ extern "C" int bl_filter_fuse_sonar(bl_filter *f, int64_t t_us, const bl_sonar_r
     MX P = cov(f);
     const bl_sonar_mount *mount = &ring->mounts[range->sensor];
     const real z = range->range_m;
-    const SonarModel model = {mount, nullptr, bl::us_to_s(t_us - f->t_us_)};
-    const int k = associate(map, ring, transducer(*mount, x, model.dt_s), std::sqrt(P(TH, TH)), z);
-    if (k < 0) {
+    SonarModel model;
+    model.mount = mount;
+    model.dt_s = bl::us_to_s(t_us - f->t_us_);
+    if (!associate(map, ring, transducer(*mount, x, model.dt_s), std::sqrt(P(TH, TH)), z, &model.target)) {
         f->sonar_unmatched_ += 1;
         if (result) *result = res;
         return BL_OK;
     }
-    SonarModel mk = model;
-    mk.seg = &map->segments[k];
     // σ(r) = max(sigma_range_m, sigma_range_rel·r) (sonar.h bl_sonar_ring).
     real sigma = ring->sigma_range_rel * z;
     if (sigma < ring->sigma_range_m) sigma = ring->sigma_range_m;
@@ -174,7 +207,7 @@ extern "C" int bl_filter_fuse_sonar(bl_filter *f, int64_t t_us, const bl_sonar_r
     m.gate_sigma = kGateSigma;
     m.max_iterations = kIekfIterations;
     m.step_tolerance_m = kIekfTolerance_m;
-    const int rc = fuse_scalar(mk, m, x, P, &res);
+    const int rc = fuse_scalar(model, m, x, P, &res);
     if (rc != BL_OK) return rc;  // undefined or numerically impossible: state untouched
     if (res.status == BL_FUSION_REJECTED) {
         f->sonar_rejected_ += 1;

@@ -140,7 +140,13 @@ LsOutcome bl::least_squares(LsEvalFn eval, const void *problem, const bl_pinpoin
             step *= real(0.5);
         }
         out.iterations += 1;
-        if (en.F > e.F) break;  // no descent along the step: q is where F stops falling
+        if (en.F > e.F) {
+            // No descent along the step (the matches changed under it: F is
+            // only piecewise smooth) and no stopping rule met: as if n
+            // reached N (step 7: the per-axis fall-back).
+            stopped_on_n = true;
+            break;
+        }
         q = qn;
         e = en;
     }

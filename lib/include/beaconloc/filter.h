@@ -736,22 +736,24 @@ int bl_filter_set_sonar(bl_filter *f, const bl_map *map, const bl_sonar_ring *ri
  * at p_s = (x, y) + v·dt·(cos φm, sin φm) + R(θ + ω dt)·m_i (the state
  * extrapolated to t_us as bl_filter_fuse_range does, m_i the mount offset),
  * its beam axis θ + ω dt + θ_i. A specular wall returns the PERPENDICULAR
- * distance when its normal lies inside the beam cone, a corner (a segment's
- * end point) its own distance: the predicted range is the distance from p_s
- * to the associated segment,
- *     h = |p_s − Q|,  Q the nearest point of the segment to p_s
- * (Hoppenot & Colle eq. 3 when the foot of the perpendicular lies on the
- * segment, eq. 4 — the nearer end point — otherwise, applied to the
- * transducer instead of the impact), ∂h/∂(x, y) = u = (p_s − Q)/h,
+ * distance when its normal lies inside the beam cone, a corner (a
+ * segment's end point: a room corner, a door jamb) its own distance; the
+ * predicted range is the distance to the associated echo point:
+ *     h = |n·(p_s − A)|   the wall's line (Hoppenot & Colle eq. 3, applied
+ *                         to the transducer instead of the impact), n its
+ *                         unit normal, A a point of it;
+ *     h = |p_s − E|       an end point E (eq. 4);
+ * ∂h/∂(x, y) = u (the unit vector from the echo point to p_s),
  * ∂h/∂θ = u·(v dt(−sin φm, cos φm) + R'(θ + ω dt) m_i), ∂h/∂v, ∂h/∂ω
  * likewise.
- * Association (the paper's nearest-segment matching, made for a beam): a
- * segment is a candidate when Q lies inside the beam cone (within
- * ring.beam_width_rad/2 of the predicted axis, widened by 3 σ of the
- * heading, at most to π/2) — a wall whose normal points outside the cone
- * gives no specular echo; of the candidates, the one whose predicted range
- * is nearest the measured one. No candidate: counted as unmatched
- * (bl_estimate.sonar_unmatched), state untouched.
+ * Association (the paper's nearest-segment matching, made for a beam): the
+ * echo points are each segment's perpendicular foot when it lies on the
+ * segment, and its two end points; a point is a candidate when it lies
+ * inside the beam cone (within ring.beam_width_rad/2 of the predicted axis,
+ * widened by 3 σ of the heading, at most to π/2) — a wall whose normal
+ * points outside the cone gives no specular echo; of the candidates, the
+ * one whose distance is nearest the measured range. No candidate: counted
+ * as unmatched (bl_estimate.sonar_unmatched), state untouched.
  * σ of a range r: max(ring.sigma_range_m, ring.sigma_range_rel·r); gate: 3 σ
  * of the innovation (chi-square, 1 dof) — an unknown obstacle or a phantom
  * from multiple reflections is rejected and counted (sonar_rejected); the
