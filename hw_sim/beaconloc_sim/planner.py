@@ -29,7 +29,7 @@ measurements, R = sigma^2 I):
   burst: a burst of perpendicular distances observes the heading only through the ring's
   lever arm, issue 12), worst over HEADINGS_RAD. Each sonar whose first echo is the specular
   echo of a wall (physics.sonar.specular_grid: the perpendicular foot on the segment, inside
-  the cone, unobstructed) measures r = |n . (p_s - a)|, d r / d(x, y) = +-n (the wall's
+  the cone, unobstructed, between min_range_m and max_range_m) measures r = |n . (p_s - a)|, d r / d(x, y) = +-n (the wall's
   normal), sigma(r) = max(sigma_range_m, sigma_range_rel r) of the site's [sonar_ring]; the
   others (no echo, oblique, phantoms) add nothing. Only the map's walls: the scenario's
   unknown obstacles are not the site's. Seeing walls of one direction only (a corridor)
@@ -187,7 +187,8 @@ def sonar_fisher(site: Site, X: np.ndarray, Y: np.ndarray, theta_rad: float,
     for mount in site.sonar_mounts[site.sonar_mounts[:, 3] > 0]:
         pos, axis = so.sensor_pose(X.ravel(), np.asarray(Y, float).ravel(),
                                    np.full(X.size, theta_rad), mount)
-        wall, r = so.specular_grid(pos, axis, walls, site.sonar_beam_width_rad / 2)
+        wall, r = so.specular_grid(pos, axis, walls, site.sonar_beam_width_rad / 2,
+                                   site.sonar_min_range_m, site.sonar_max_range_m)
         seen = wall >= 0
         g = normal[np.maximum(wall, 0)]          # d r / d(x, y) = +-n: the sign cancels in g g^T
         w = np.where(seen, 1.0 / (site.sonar_sigma_m(np.nan_to_num(r)) * sigma_scale) ** 2, 0.0)

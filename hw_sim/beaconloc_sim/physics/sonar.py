@@ -346,14 +346,16 @@ def perpendicular_rows(x_m: float, y_m: float, theta_rad: float, mount, wall) ->
     return abs(off), sign * np.array([n[0], n[1], float(n @ dps_dth)])
 
 
-def specular_grid(p: np.ndarray, axis_rad: np.ndarray, walls: np.ndarray, half_width_rad: float
+def specular_grid(p: np.ndarray, axis_rad: np.ndarray, walls: np.ndarray, half_width_rad: float,
+                  min_range_m: float = 0.0, max_range_m: float = math.inf
                   ) -> tuple[np.ndarray, np.ndarray]:
     """The reading of many sonars at once (positions p (N, 2), axes (N,)) when only the
     specular first-order echoes of walls (W, 4) count (the accuracy map: planner.py): for
     each sonar the index of the wall whose perpendicular echo comes first (-1: none) and its
     range, m. A wall's specular echo exists when the foot of the perpendicular lies on the
     segment, inside the cone and unobstructed by the other walls (first_order's specular
-    case, vectorised; oblique echoes and double bounces are left out)."""
+    case, vectorised; oblique echoes and double bounces are left out); a first echo closer
+    than min_range_m (blanked) or beyond max_range_m gives no reading."""
     p = np.asarray(p, dtype=float).reshape(-1, 2)
     walls = np.asarray(walls, dtype=float).reshape(-1, 4)
     n_s, n_w = len(p), len(walls)
@@ -377,5 +379,5 @@ def specular_grid(p: np.ndarray, axis_rad: np.ndarray, walls: np.ndarray, half_w
     r_ok = np.where(ok, r, np.inf)
     first = np.argmin(r_ok, axis=1)
     rng = r_ok[np.arange(n_s), first]
-    none = ~np.isfinite(rng)
+    none = ~np.isfinite(rng) | (rng < min_range_m) | (rng > max_range_m)
     return np.where(none, -1, first), np.where(none, np.nan, rng)
