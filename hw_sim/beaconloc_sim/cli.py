@@ -311,9 +311,11 @@ def build_parser() -> argparse.ArgumentParser:
     mp.add_argument("--out", metavar="PNG", help="draw the maps side by side into this PNG")
     mp.add_argument("--step", type=float, metavar="M",
                     help="grid step, m (default: the room's longer side / 300)")
-    mp.add_argument("--kind", choices=("tdoa", "bearing", "range", "both", "all"), default="all",
+    mp.add_argument("--kind", choices=("tdoa", "bearing", "range", "both", "sonar", "all"),
+                    default="all",
                     help="measurement kind (default all: every kind the site has, and both: "
-                         "all of them together, on a mixed site)")
+                         "all of them together, on a mixed site; sonar: one burst of the sonar "
+                         "ring against the site's map)")
     mp.add_argument("--cap", type=float, default=1.0, metavar="M",
                     help="drms above this is marked degenerate, m (default 1)")
     mp.add_argument("--halves", action="store_true",

@@ -114,6 +114,10 @@ def plot_map(site, maps, out_path, split_x_m: float | None = None) -> None:
             for i, p in enumerate(pts):
                 ax.annotate(f"{prefix}{i + 1}", (p[0], p[1]), textcoords="offset points",
                             xytext=(6, 4), fontsize=8, annotation_clip=False)
+        if m.kind == "sonar":          # the map the sonars are matched against
+            for i, (x1, y1, x2, y2) in enumerate(site.walls_m):
+                ax.plot([x1, x2], [y1, y2], color="white", lw=3, solid_capstyle="butt",
+                        label="map wall" if i == 0 else None, zorder=4)
         if split_x_m is not None:
             ax.axvline(split_x_m, color="white", ls="--", lw=1)
         handles = ax.get_legend_handles_labels()[0]

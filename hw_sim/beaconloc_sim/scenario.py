@@ -35,7 +35,7 @@ _KNOWN = {
     # the range receiver's imperfections (the site gives its sigma, max range, ping period)
     "ranges": {"dropout_probability", "multipath_probability", "survey_s"},
     # the sonar ring's physics (the site gives its mounts, beam, noise; physics/sonar.py)
-    "sonar": {"fire_interval_s", "critical_angle_deg", "reflection", "threshold", "crosstalk",
+    "sonar": {"fire_interval_s", "listen_s", "critical_angle_deg", "reflection", "threshold", "crosstalk",
               "double_bounce"},
     # a second robot (the Eurobot opponent): a disc on its own path, occluding bearings
     "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
@@ -118,7 +118,8 @@ class Scenario:
     # the sonar-ring node (nodes/sonar_ring.py, physics/sonar.py, docs/simulator.md [sonar])
     sonar_offset_us: int = 2_718_281_828
     sonar_drift_ppm: float = 25.0
-    sonar_fire_interval_s: float = 0.06      # between successive sonars of a burst = listening window
+    sonar_fire_interval_s: float = 0.06      # between successive sonars of a burst, s
+    sonar_listen_s: float = 0.06             # each sonar's listening window after its ping, s
     sonar_critical_rad: float = math.radians(5.0)   # largest incidence a wall still echoes at
     sonar_reflection: float = 1.0            # amplitude reflection coefficient of every segment
     sonar_threshold: float = 0.02            # relative echo amplitude heard
@@ -418,6 +419,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
                                     maximum=2**40),
         sonar_drift_ppm=ini.number("clocks", "sonar_drift_ppm", 25.0, minimum=-1000, maximum=1000),
         sonar_fire_interval_s=fire_s,
+        sonar_listen_s=ini.number("sonar", "listen_s", 0.06, positive=True, maximum=1.0),
         sonar_critical_rad=math.radians(ini.number("sonar", "critical_angle_deg", 5.0, minimum=0,
                                                    maximum=90)),
         sonar_reflection=ini.number("sonar", "reflection", 1.0, positive=True, maximum=1),

@@ -329,6 +329,9 @@ def c_header(schema: Schema) -> str:
                     [f"X({s.name})" for s in schema.sections if "bridge" not in s.read_by])
     out += [f"#define SITE_MAX_{s.prefix.upper()}S {schema.max_items(s)}"
             for s in bridge_sections if s.indexed_by]
+    out += ["/* the count key of each per-item section's count section ([map] walls) */"]
+    out += [f"#define SITE_ITEM_COUNT_KEY_{s.prefix} {_c_string(s.count_key)}"
+            for s in bridge_sections if s.indexed_by]
     out += [
             f"#define SITE_MAX_RECEIVERS {int(schema.section('receivers').key('count').range.hi)}",
             f"#define SITE_MAX_TEAM_ROBOTS {int(schema.section('team').key('robots').range.hi)}",

@@ -5,9 +5,10 @@ Burst schedule (on this node's clock): burst n starts at the count n P (P = the 
 [sonar_ring] period_s in us, counted from the counter's zero, so consecutive windows of a
 run go on with the sequence); within a burst the sonars fire one after the other in ring
 order, sonar i (DBC Sensor i, [sonar(i+1)] of the site) at n P + i F, F = the scenario's
-[sonar] fire_interval_s. Each listens for F after its ping (its listening window: the next
-sonar fires then); the frame is ready when the window closes, plus the node's processing
-latency. NodeTime is the ping's count.
+[sonar] fire_interval_s. Each listens for W = [sonar] listen_s after its ping (0.06 s: about
+10.3 m), whatever the others do (the ring's sonars listen at once: fired closer together
+than W they hear each other, crosstalk); the frame is ready when its window closes, plus the
+node's processing latency. NodeTime is the ping's count.
 
 Per ping at true time t_f (physics.sonar, the one model; the sonar at its mount on the robot
 at the true pose of t_f, the robot's motion during the flight of a few ms neglected):
@@ -16,10 +17,10 @@ at the true pose of t_f, the robot's motion during the flight of a few ms neglec
 - candidates: the first-order echoes (perpendicular distance when the wall's normal is in
   the cone, nothing beyond the critical incidence), the double bounces (phantoms) when
   [sonar] double_bounce = 1, and when [sonar] crosstalk = 1 the echoes of the sonars fired
-  in the 100 ms before (this burst's and the previous one's) that reach this sonar
-  after its own ping;
+  in the 2 W before (this burst's and the previous one's) that reach this sonar after its
+  own ping;
 - heard: relative amplitude >= [sonar] threshold, arrival time tau after the ping with
-  c_node tau / 2 >= min_range_m (blanking: the transducer still rings) and tau <= F (the
+  c_node tau / 2 >= min_range_m (blanking: the transducer still rings) and tau <= W (the
   listening window); the FIRST heard echo is the reading; tau = 2 r / c, c the true speed
   of sound at t_f (physics.acoustics, from the temperature);
 - the node converts with its own speed of sound c_node = the site's [noise]
@@ -43,7 +44,6 @@ from ..physics import sonar as so
 from .base import Interval, Node
 
 FLAG_NO_ECHO, FLAG_MAX_RANGE = 1, 2      # DBC SONAR Flags bits
-CROSSTALK_LOOKBACK_S = 0.1               # pings older than this cannot reach a sonar in time
 
 
 @dataclass
@@ -129,7 +129,7 @@ class SonarRing(Node):
         st = scn.trajectory.state(t_f)
         sos = ac.speed_of_sound_mps(scn.temperature_c(t_f))
         c_node = site.speed_of_sound_mps
-        listen_s = self.fire_us * 1e-6
+        listen_s = scn.sonar_listen_s
         mounts = site.sonar_mounts
         rec = {k: np.zeros(n) for k in ("x", "y", "axis", "true")}
         kind = np.zeros(n, np.int64)
@@ -164,8 +164,10 @@ class SonarRing(Node):
                            rec["true"], range_mm, flags, amplitude, kind, wall,
                            (wall >= 0) & (wall < self.n_map))
         self.measured = pings
+        # the bound's: informative readings of the sonars the estimator uses ([sonarN] used)
+        used = site.sonar_mounts[sensor, 3] > 0 if n else np.zeros(0, bool)
         self._bound_pending = SonarPings.concat([self._bound_pending,
-                                                 pings.select(pings.informative)])
+                                                 pings.select(pings.informative & used)])
         signals = [{"NodeTime": int(counts[i] % WRAP_US), "Sensor": int(sensor[i]),
                     "Range": int(range_mm[i]), "Amplitude": int(amplitude[i]),
                     "Flags": int(flags[i])} for i in range(n)]
@@ -173,10 +175,10 @@ class SonarRing(Node):
 
     def _with_crosstalk(self, t_k: float, p, axis: float, sos: float, tau: np.ndarray,
                         cand: so.Echoes) -> tuple[np.ndarray, so.Echoes]:
-        """Add to this ping's candidates the echoes of the sonars fired in the last
-        CROSSTALK_LOOKBACK_S: a path of length 2 r from a ping at t_j arrives t_j + 2 r / c,
+        """Add to this ping's candidates the echoes of the sonars fired in the last two
+        listening windows: a path of length 2 r from a ping at t_j arrives t_j + 2 r / c,
         tau = that - t_k after this ping (kept when > 0)."""
-        self._recent = [r for r in self._recent if t_k - r[0] < CROSSTALK_LOOKBACK_S]
+        self._recent = [r for r in self._recent if t_k - r[0] < 2 * self.scn.sonar_listen_s]
         taus, parts = [tau], [cand]
         for t_j, p_j, ax_j in self._recent:
             x = so.crosstalk_paths(p_j, ax_j, p, axis, self.world, self.beam)

@@ -344,3 +344,40 @@ def perpendicular_rows(x_m: float, y_m: float, theta_rad: float, mount, wall) ->
     sign = 1.0 if off >= 0 else -1.0
     dps_dth = np.array([-s * mount[0] - c * mount[1], c * mount[0] - s * mount[1]])
     return abs(off), sign * np.array([n[0], n[1], float(n @ dps_dth)])
+
+
+def specular_grid(p: np.ndarray, axis_rad: np.ndarray, walls: np.ndarray, half_width_rad: float,
+                  min_range_m: float = 0.0, max_range_m: float = math.inf
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The reading of many sonars at once (positions p (N, 2), axes (N,)) when only the
+    specular first-order echoes of walls (W, 4) count (the accuracy map: planner.py): for
+    each sonar the index of the wall whose perpendicular echo comes first (-1: none) and its
+    range, m. A wall's specular echo exists when the foot of the perpendicular lies on the
+    segment, inside the cone and unobstructed by the other walls (first_order's specular
+    case, vectorised; oblique echoes and double bounces are left out); a first echo closer
+    than min_range_m (blanked) or beyond max_range_m gives no reading."""
+    p = np.asarray(p, dtype=float).reshape(-1, 2)
+    walls = np.asarray(walls, dtype=float).reshape(-1, 4)
+    n_s, n_w = len(p), len(walls)
+    if n_w == 0 or n_s == 0:
+        return np.full(n_s, -1), np.full(n_s, np.nan)
+    a, t, n, length = _seg_parts(walls)
+    rel = p[:, None, :] - a[None]                               # (N, W, 2)
+    s_foot = np.einsum("nwk,wk->nw", rel, t)
+    foot = a[None] + s_foot[..., None] * t[None]
+    v = foot - p[:, None, :]
+    r = np.hypot(v[..., 0], v[..., 1])
+    u = np.column_stack([np.cos(axis_rad), np.sin(axis_rad)])   # (N, 2)
+    cos_psi = np.einsum("nwk,nk->nw", v, u) / np.maximum(r, _EPS)
+    ok = (s_foot >= 0) & (s_foot <= length[None]) & (r > _EPS) \
+        & (cos_psi >= math.cos(half_width_rad) - 1e-12)
+    # occlusion: the leg sonar -> foot against every other wall
+    lam, mu = crossing(p[:, None, None, :], foot[:, :, None, :], walls[None, None, :, :])
+    hit = (lam > 1e-7) & (lam < 1 - 1e-7) & (mu >= -1e-9) & (mu <= 1 + 1e-9)
+    hit &= ~np.eye(n_w, dtype=bool)[None]
+    ok &= ~hit.any(axis=2)
+    r_ok = np.where(ok, r, np.inf)
+    first = np.argmin(r_ok, axis=1)
+    rng = r_ok[np.arange(n_s), first]
+    none = ~np.isfinite(rng) | (rng < min_range_m) | (rng > max_range_m)
+    return np.where(none, -1, first), np.where(none, np.nan, rng)
