@@ -105,6 +105,7 @@ def test_summary_line_and_table():
     assert "pinpoint 8 | 8 (+0)" in table and "memory 11 | 12 (+1)" in table
     assert "pinpoint 3 | 2 (-1)" in table and "memory 4.75 | 5 (+0.25)" in table
     assert "filter - | 25" in table
+    assert "filter - | >= 25" in "\n".join(sb.table1(pct, 25.0))
 
 
 def test_site_and_scenario_rewrites(tmp_path):
