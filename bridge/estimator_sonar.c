@@ -160,6 +160,18 @@ static void correct_burst(struct estimator *e)
         s->c.uncorrected++; /* no pose yet: nothing to correct */
         return;
     }
+    /* Each range moved to the burst's time (sonar.h): less the displacement
+     * from its ping to t_b along its beam, d' = d - (p_b - p_i) . u_i,
+     * u_i the beam's axis in the site frame at the burst's heading. */
+    for (uint32_t i = 0; i < s->burst_n; i++) {
+        bl_pose est_i, odo_i;
+        if (!pose_at(s, s->burst_ping_us[i], &est_i, &odo_i))
+            continue;
+        const double a = (double)est_b.theta_rad + (double)s->ring.mounts[s->burst[i].sensor].angle_rad;
+        const double along = ((double)est_b.x_m - est_i.x_m) * cos(a) +
+                             ((double)est_b.y_m - est_i.y_m) * sin(a);
+        s->burst[i].range_m = (bl_real)((double)s->burst[i].range_m - along);
+    }
     bl_pose corrected = est_b;
     bl_pinpoint_outcome outcome = BL_PINPOINT_NONE;
     int rc;
@@ -324,6 +336,7 @@ static void take_range(struct estimator *e, const struct frame_sonar *f, int64_t
     }
     s->c.burst_ranges++;
     s->burst[s->burst_n] = r;
+    s->burst_ping_us[s->burst_n] = t;
     s->burst_sum_us += t - s->burst_first_us;
     s->burst_n++;
 }
