@@ -377,7 +377,7 @@ def main() -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--bridge", default=str(h.BRIDGE))
     ap.add_argument("--out", default=str(REPO / "build" / "bench" / "sonar"))
-    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--step", type=float, default=1.0, help="degradation grid step, %%")
     ap.add_argument("--max-pct", type=float, default=40.0, help="largest degradation, %%")
