@@ -3,6 +3,10 @@
 // place, for comparing them through the same daemon).
 #include "filter_internal.hpp"
 
+// Built with the sonar ring only (common.h BL_WITH_SONAR), whose correctors
+// it serves: the M4 firmware's flash stays as it was.
+#if BL_WITH_SONAR
+
 using namespace bl;
 
 namespace {
@@ -28,3 +32,5 @@ extern "C" int bl_filter_set_pose(bl_filter *f, int64_t t_us, bl_real x_m, bl_re
     f->x_[TH] = wrap_angle(theta_rad);
     return BL_OK;
 }
+
+#endif  // BL_WITH_SONAR

@@ -90,10 +90,13 @@ typedef double bl_real;
  *                     segments (sonar.h: the map and ring types, the
  *                     pin-point and memory correctors of Hoppenot & Colle
  *                     1997; filter.h bl_filter_set_sonar,
- *                     bl_filter_fuse_sonar). 0: none of it is declared or
- *                     built, the filter carries no sonar fields, bl_estimate
- *                     no sonar counters; bl_config keeps sonar_site, which
- *                     bl_config_check then requires to be 0. */
+ *                     bl_filter_fuse_sonar, bl_filter_set_pose). 0: none of
+ *                     it is declared or built, the filter carries no sonar
+ *                     fields, bl_estimate no sonar counters, bl_config no
+ *                     sonar_site (a site without beacons is then refused):
+ *                     the M4 firmware's build (lib/firmware.mk), whose
+ *                     flash and localizer RAM were already at their
+ *                     targets. */
 #ifndef BL_WITH_SONAR
 #define BL_WITH_SONAR 1
 #endif

@@ -703,6 +703,7 @@ int bl_filter_fuse_team_range(bl_filter *f, uint32_t robot_id, int64_t t_us, bl_
                               bl_fusion_result *result);
 #endif /* BL_WITH_TEAM */
 
+#if BL_WITH_SONAR /* common.h: not declared in a build without sonar */
 /* Replace the pose (x_m, y_m, theta_rad: wheel-base centre and heading in
  * the site frame) at t_us, keeping the covariance and every other state:
  * for running an external corrector's output (sonar.h: the pin-point and
@@ -717,7 +718,6 @@ int bl_filter_fuse_team_range(bl_filter *f, uint32_t robot_id, int64_t t_us, bl_
  * time or more than cfg.max_predict_gap_s after it). */
 int bl_filter_set_pose(bl_filter *f, int64_t t_us, bl_real x_m, bl_real y_m, bl_real theta_rad);
 
-#if BL_WITH_SONAR /* common.h: not declared in a build without sonar */
 /* ---- A sonar ring against a map of walls (sonar.h; Hoppenot & Colle
  * 1997 give the physics and the association, the fusion goes beyond the
  * paper: every range through the shared update, with a covariance) ----
