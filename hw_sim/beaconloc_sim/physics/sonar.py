@@ -330,7 +330,8 @@ def sensor_pose(x_m, y_m, theta_rad, mount) -> tuple[np.ndarray, np.ndarray]:
     return np.column_stack([px, py]), th + mount[2]
 
 
-def perpendicular_rows(x_m: float, y_m: float, theta_rad: float, mount, wall) -> tuple[float, np.ndarray]:
+def perpendicular_rows(x_m: float, y_m: float, theta_rad: float, mount,
+                       wall) -> tuple[float, np.ndarray]:
     """The specular range r = |n . (p_s - a)| from a sonar (mount) to the line of wall
     (x1, y1, x2, y2), and its gradient d r / d(x, y, theta) (3,): r does not depend on the
     heading but through the mount's lever arm, n . d p_s / d theta."""
