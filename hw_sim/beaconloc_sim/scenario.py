@@ -35,8 +35,8 @@ _KNOWN = {
     # the range receiver's imperfections (the site gives its sigma, max range, ping period)
     "ranges": {"dropout_probability", "multipath_probability", "survey_s"},
     # the sonar ring's physics (the site gives its mounts, beam, noise; physics/sonar.py)
-    "sonar": {"fire_interval_s", "listen_s", "critical_angle_deg", "reflection", "threshold", "crosstalk",
-              "double_bounce"},
+    "sonar": {"fire_interval_s", "listen_s", "critical_angle_deg", "reflection", "threshold",
+              "crosstalk", "double_bounce"},
     # a second robot (the Eurobot opponent): a disc on its own path, occluding bearings
     "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each

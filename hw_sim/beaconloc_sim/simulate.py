@@ -54,7 +54,7 @@ class SimResult:
     encoder_clock: NodeClock
     pcrb_cov: np.ndarray              # (K, 8, 8) bound after each event, crb.STATE order
     pcrb_t_s: np.ndarray | None = None   # (K,) true time of each event (firings, bearings,
-                                         # range pings), s
+                                         # range pings, informative sonar pings), s
     bearings: Bearings | None = None     # every bearing measured (sent or not, and why not)
     ranges: Ranges | None = None         # every range ping (sent or not, and why not)
     sonar: SonarPings | None = None      # every sonar ping (its reading, flags, echo kind)

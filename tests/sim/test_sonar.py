@@ -325,3 +325,18 @@ def test_cli_map_draws_the_sonar_accuracy(tmp_path, capsys):
     assert 30.0 < median < 70.0          # two or three 3-4 cm ranges per burst
     assert png.stat().st_size > 10_000
     assert cli.main(["map", "kleeman-lab", "--kind", "sonar"]) == 2
+
+
+def test_draw_walls_draws_the_map_and_the_obstacles():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from beaconloc_sim.plot import draw_walls
+    scn = load_scenario("hoppenot-obstacle")
+    fig, ax = plt.subplots()
+    draw_walls(ax, scn.site, scn.obstacles_m)
+    lines = ax.get_lines()
+    assert len(lines) == len(scn.site.walls_m) + len(scn.obstacles_m) == 5 + 6
+    assert [ln.get_label() for ln in lines].count("map wall") == 1
+    np.testing.assert_allclose(lines[1].get_xydata(), [[6.0, 0.0], [6.0, 1.5]])
+    plt.close(fig)

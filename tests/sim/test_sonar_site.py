@@ -131,3 +131,88 @@ def test_a_sonar_site_needs_no_beacons(tmp_path):
     assert site.beacon_count == 0 and site.sonar_count == 3
     with pytest.raises(ConfigError, match="a site needs beacons"):
         load_site(_write(tmp_path, text[:text.index("[sonar_ring]")]))
+
+
+# ---- the scenario side: the map as walls, [sonar] keys, --set -----------------------------
+
+def _hoppenot_scenario(tmp_path, body: str):
+    from beaconloc_sim.resources import builtin_site_path
+    (tmp_path / "site.ini").write_text(builtin_site_path("hoppenot-room").read_text())
+    path = tmp_path / "t.scenario.ini"
+    path.write_text("[scenario]\nsite = site.ini\n" + body)
+    return path
+
+
+def test_a_path_through_a_map_wall_is_refused(tmp_path):
+    from beaconloc_sim.scenario import load_scenario
+    path = _hoppenot_scenario(tmp_path, "duration_s = 20\n[path]\nstart = 5, 1, 0\n"
+                                        "segment1 = straight 2\n")
+    with pytest.raises(ConfigError, match=r"t.scenario.ini:6: \[path\] segment1: the path crosses "
+                                          r"obstacle \[wall2\] of the map at about \(6.0"):
+        load_scenario(str(path))
+
+
+@pytest.mark.parametrize("body, key, why", [
+    ("[sonar]\nfire_interval_s = 0.07\n", "fire_interval_s",
+     "8 sonars fired 0.07 s apart do not fit in the burst period 0.5 s"),
+    ("[sonar]\ncrosstalk = 2\n", "crosstalk", "must be <= 1"),
+    ("[sonar]\ncritical_angle_deg = 91\n", "critical_angle_deg", "must be <= 90"),
+    ("[sonar]\nechoes = 1\n", "echoes", "unknown key"),
+])
+def test_bad_sonar_scenario_keys(tmp_path, body, key, why):
+    from beaconloc_sim.scenario import load_scenario
+    path = _hoppenot_scenario(tmp_path, "duration_s = 5\n[path]\nstart = 1, 1, 0\n"
+                                        "segment1 = wait 5\n" + body)
+    with pytest.raises(ConfigError, match=rf"t.scenario.ini:8: \[sonar\] {key}: {re.escape(why)}"):
+        load_scenario(str(path))
+
+
+def test_set_overrides_a_scenario_key_and_names_itself_in_errors():
+    """--set encoders.wheel_radius_bias=0,-0.08 (Hoppenot & Colle s. 4.2, the right wheel 8 %
+    under-inflated): the odometry believes the right wheel went 1/0.92 times as far, so after
+    the first 2.5 m straight it has turned left by 2.5 (1/0.92 - 1) / 0.40 = 0.543 rad."""
+    from beaconloc_sim import simulate
+    from beaconloc_sim.scenario import load_scenario
+    scn = load_scenario("hoppenot-room", overrides=["encoders.wheel_radius_bias=0,-0.08"])
+    assert scn.wheel_radius_bias == (0.0, -0.08)
+    assert load_scenario("hoppenot-room").wheel_radius_bias == (0.0, 0.0)
+    res = simulate.run(load_scenario("hoppenot-room", duration_s=14.5,
+                                     overrides=["encoders.wheel_radius_bias=0,-0.08"]))
+    assert res.odometry["theta_rad"][-1] == pytest.approx(2.5 * (1 / 0.92 - 1) / 0.40, abs=0.03)
+    with pytest.raises(ConfigError, match=r"--set \[encoders\] wheel_radius_bias: expected 2"):
+        load_scenario("hoppenot-room", overrides=["encoders.wheel_radius_bias=0"])
+    with pytest.raises(ConfigError, match=r"--set 'encoders': expected SECTION.KEY=VALUE"):
+        load_scenario("hoppenot-room", overrides=["encoders"])
+    with pytest.raises(ConfigError, match=r"--set \[encoders\] wheel_bias: unknown key"):
+        load_scenario("hoppenot-room", overrides=["encoders.wheel_bias=1,1"])
+
+
+def test_cli_run_set_and_sonar_stats(tmp_path):
+    import json
+    from beaconloc_sim import cli
+    stats = tmp_path / "s.json"
+    assert cli.main(["run", "hoppenot-obstacle", "--duration", "10", "--stats", str(stats),
+                     "--set", "sonar.double_bounce=0"]) == 0
+    s = json.loads(stats.read_text())["sonar"]
+    # bursts every 0.5 s of the node clock from 0.218 s (its count 2718281828 + 218172 us is
+    # a multiple of 500000): 20 in 10 s, the last one's sonars 6..8 fire after 10 s
+    assert s["pinged"] == 8 * 20 - 3 and s["double"] == 0
+    assert s["echo"] + s["no_echo"] + s["max_range"] == s["pinged"]
+    assert s["specular"] + s["oblique"] + s["crosstalk"] == s["echo"]
+    assert cli.main(["run", "hoppenot-room", "--stats", str(stats), "--set", "nope"]) == 78
+
+
+@pytest.mark.parametrize("extra, why", [
+    ('count_key = "walls"\n', "count_key without indexed_by"),
+])
+def test_schema_count_key(extra, why):
+    from beaconloc_sim.site_schema import parse_schema
+    text = ('[[section]]\nname = "map"\nread_by = ["sim"]\n' + extra +
+            '[[section.key]]\nname = "walls"\ntype = "int"\nunit = ""\nrange = "[0, 64]"\n'
+            'default = 0\nsim = "optional"\ndoc = "d"\n')
+    with pytest.raises(ValueError, match=why):
+        parse_schema(text)
+    item = ('[[section]]\nname = "wallN"\nread_by = ["sim"]\nindexed_by = "map"\n'
+            'count_key = "segments"\n')
+    with pytest.raises(ValueError, match=r"\[wallN\]: indexed_by 'map' has no segments key"):
+        parse_schema(text.replace(extra, "") + item)

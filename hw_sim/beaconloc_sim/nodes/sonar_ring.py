@@ -145,8 +145,8 @@ class SonarRing(Node):
             if scn.sonar_crosstalk:
                 tau, cand = self._with_crosstalk(t_f[i], p, ax, sos[i], tau, cand)
                 self._recent.append((float(t_f[i]), p, ax))
-            heard = (cand.amplitude >= scn.sonar_threshold) & (c_node * tau / 2 >= site.sonar_min_range_m) \
-                & (tau <= listen_s)
+            heard = (cand.amplitude >= scn.sonar_threshold) \
+                & (c_node * tau / 2 >= site.sonar_min_range_m) & (tau <= listen_s)
             if not heard.any():
                 rec["true"][i] = math.nan
                 continue

@@ -43,8 +43,7 @@ import numpy as np
 KIND_NONE, KIND_SPECULAR, KIND_OBLIQUE, KIND_DOUBLE, KIND_CROSSTALK = 0, 1, 2, 3, 4
 KIND_NAMES = ("none", "specular", "oblique", "double", "crosstalk")
 _EPS = 1e-9
-# 2 J1(x) / x = 1 / sqrt(2) at x = X_HALF_POWER (the first root, by bisection once)
-_J1_TERMS = 40
+_J1_TERMS = 40                # terms of J1's power series
 
 
 def bessel_j1(x) -> np.ndarray:
@@ -76,6 +75,7 @@ def _piston(x) -> np.ndarray:
     return np.where(np.abs(x) < 1e-9, 1.0, 2.0 * bessel_j1(safe) / safe)
 
 
+# 2 J1(x) / x = 1 / sqrt(2) at x = X_HALF_POWER (the main lobe's root, by bisection once)
 X_HALF_POWER = _bisect(lambda x: float(_piston(x)) - 1.0 / math.sqrt(2.0), 0.1, 3.0)
 
 
@@ -330,7 +330,8 @@ def sensor_pose(x_m, y_m, theta_rad, mount) -> tuple[np.ndarray, np.ndarray]:
     return np.column_stack([px, py]), th + mount[2]
 
 
-def perpendicular_rows(x_m: float, y_m: float, theta_rad: float, mount, wall) -> tuple[float, np.ndarray]:
+def perpendicular_rows(x_m: float, y_m: float, theta_rad: float, mount,
+                       wall) -> tuple[float, np.ndarray]:
     """The specular range r = |n . (p_s - a)| from a sonar (mount) to the line of wall
     (x1, y1, x2, y2), and its gradient d r / d(x, y, theta) (3,): r does not depend on the
     heading but through the mount's lever arm, n . d p_s / d theta."""
