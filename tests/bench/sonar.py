@@ -340,10 +340,10 @@ def plot_paths(runner: Runner, scenarios: list[str], pct: float, out_png: Path) 
     fig, axes = plt.subplots(1, len(scenarios), figsize=(7 * len(scenarios), 5), squeeze=False)
     for ax, scenario in zip(axes[0], scenarios):
         scn = scenario_path(scenario)
-        for (x1, y1, x2, y2) in map_walls(site_of(scn)):
-            ax.plot([x1, x2], [y1, y2], "k-", lw=2)
-        for (x1, y1, x2, y2) in obstacles(scn):
-            ax.plot([x1, x2], [y1, y2], color="0.6", lw=2, ls="--")
+        # the floor plan as the simulator draws it (map walls, obstacles not in the map)
+        from beaconloc_sim.plot import draw_walls
+        from beaconloc_sim.site import load_site
+        draw_walls(ax, load_site(site_of(scn)), obstacles(scn))
         sim = runner.simulate(scenario, pct, 1)
         if not sim["ok"]:
             continue
@@ -351,7 +351,7 @@ def plot_paths(runner: Runner, scenarios: list[str], pct: float, out_png: Path) 
         ax.plot(tr["x_m"], tr["y_m"], "k", lw=1.5, label="truth")
         try:
             od = read_columns(sim["odometry"], ("t_us", "x_m", "y_m"))
-            ax.plot(od["x_m"], od["y_m"], color="tab:red", lw=1, label="odometry alone")
+            ax.plot(od["x_m"], od["y_m"], color="tab:purple", lw=1, label="odometry alone")
         except (ValueError, OSError):
             pass
         for m, c in zip(METHODS, ("tab:orange", "tab:green", "tab:blue")):
