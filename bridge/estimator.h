@@ -289,6 +289,13 @@ void estimator_sonar_tick(struct estimator *e, int64_t local_now_us);
  * the frame behind it, so that it is published. */
 bool estimator_ref_time(struct estimator *e, const struct node_clock *own, int64_t t_own,
                         int64_t *t_ref);
+/* The localizer's counters and events into the estimator's, after a call
+ * into it (estimator_beacons.c). */
+void estimator_sync(struct estimator *e);
+/* Slack subtracted from a measurement's time before the pulses that arrived
+ * before it are closed (bl_localizer_advance), covering node-clock mapping
+ * error and transmission order (us). */
+#define ESTIMATOR_POP_SLACK_US 5000
 void estimator_start_pending(struct estimator *e, int64_t t_us);
 void estimator_note_update(struct estimator *e, int64_t rx_us);
 

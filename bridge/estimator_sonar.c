@@ -167,9 +167,10 @@ static void correct_burst(struct estimator *e)
         bl_pose est_i, odo_i;
         if (!pose_at(s, s->burst_ping_us[i], &est_i, &odo_i))
             continue;
-        const double a = (double)est_b.theta_rad + (double)s->ring.mounts[s->burst[i].sensor].angle_rad;
-        const double along = ((double)est_b.x_m - est_i.x_m) * cos(a) +
-                             ((double)est_b.y_m - est_i.y_m) * sin(a);
+        const double a =
+            (double)est_b.theta_rad + (double)s->ring.mounts[s->burst[i].sensor].angle_rad;
+        const double along =
+            ((double)est_b.x_m - est_i.x_m) * cos(a) + ((double)est_b.y_m - est_i.y_m) * sin(a);
         s->burst[i].range_m = (bl_real)((double)s->burst[i].range_m - along);
     }
     bl_pose corrected = est_b;

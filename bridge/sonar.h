@@ -107,9 +107,9 @@ struct sonar {
     bool burst_open;
     bl_sonar_range burst[BL_SONAR_MAX_SENSORS];
     int64_t burst_ping_us[BL_SONAR_MAX_SENSORS]; /* each range's ping (filter timebase) */
-    uint32_t burst_n;          /* valid ranges in burst[] */
-    uint32_t burst_seen;       /* bit i: sensor i's frame of this burst came */
-    int64_t burst_first_us;    /* ping of its first frame (filter timebase) */
+    uint32_t burst_n;                            /* valid ranges in burst[] */
+    uint32_t burst_seen;                         /* bit i: sensor i's frame of this burst came */
+    int64_t burst_first_us;                      /* ping of its first frame (filter timebase) */
     int64_t burst_sum_us;      /* sum of its valid ranges' ping times, relative to the first */
     int64_t burst_first_rx_us; /* receive time of its first frame (bridge clock) */
     double burst_time_us;      /* method filter: fuse time of its ranges so far */
