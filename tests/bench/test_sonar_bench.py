@@ -106,6 +106,8 @@ def test_summary_line_and_table():
     assert "pinpoint 3 | 2 (-1)" in table and "memory 4.75 | 5 (+0.25)" in table
     assert "filter - | 25" in table
     assert "filter - | >= 25" in "\n".join(sb.table1(pct, 25.0))
+    assert "(SYMMETRIC degradation)" in sb.table1(pct, symmetric=True)[0]
+    assert "SYMMETRIC" not in table
 
 
 def test_site_and_scenario_rewrites(tmp_path):
