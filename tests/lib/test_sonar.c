@@ -278,6 +278,10 @@ static void test_pinpoint_refuses_bad_input(void **state)
  * 0.5 s), odometry exact, the current estimate off by (dx, dy, dθ): the
  * heading comes back from the fitted walls' orientations, then the
  * position from their midpoints. */
+/* When set, the -90° sensor's ranges alternate 15 cm long and short: a
+ * scatter inside the 25 cm gate (phantoms, an obstacle beside the wall). */
+static int g_scatter_bottom = 0;
+
 static uint32_t drive_arc(bl_memory_corrector *m, const bl_sonar_ring *ring, double *x, double *y, double *th)
 {
     uint32_t valid = 0; /* ranges with an echo */
@@ -291,7 +295,10 @@ static uint32_t drive_arc(bl_memory_corrector *m, const bl_sonar_ring *ring, dou
         }
         bl_sonar_range b[8];
         const uint32_t n = axis_burst(px, py, pth, b);
-        for (uint32_t i = 0; i < n; ++i) valid += b[i].flags == 0;
+        for (uint32_t i = 0; i < n; ++i) {
+            valid += b[i].flags == 0;
+            if (g_scatter_bottom && b[i].sensor == 5) b[i].range_m += (bl_real)(k % 2 ? 0.15 : -0.15);
+        }
         /* odometry in its own frame: here the site frame shifted by (10, -3) */
         const bl_pose odo = {(bl_real)(px + 10), (bl_real)(py - 3), (bl_real)pth};
         assert_int_equal(bl_memory_push(m, ring, &odo, b, n), BL_OK);
@@ -331,6 +338,31 @@ static void test_memory_recovers_offset(void **state)
     assert_true(fabs((double)p.x_m - x) < 0.02);
     assert_true(fabs((double)p.y_m - y) < 0.02);
     assert_true(fabs((double)r.dtheta_rad + 0.05) < 0.005);
+}
+
+/* A wall whose impacts scatter (±15 cm, inside the 25 cm gate) gives no
+ * fit (Crowley's alignment test): the heading still comes from the right
+ * wall alone, and y (observed only by the bottom wall's fit) is left. */
+static void test_memory_scattered_fit_refused(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    bl_memory_corrector m;
+    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
+    double x, y, th;
+    g_scatter_bottom = 1;
+    drive_arc(&m, &ring, &x, &y, &th);
+    g_scatter_bottom = 0;
+    bl_pose p = {(bl_real)(x + 0.10), (bl_real)(y - 0.08), (bl_real)(th + 0.05)};
+    bl_memory_result r;
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
+    assert_int_equal(r.segments, 1);
+    assert_true(fabs((double)p.theta_rad - th) < 0.005);
+    assert_true(fabs((double)p.x_m - x) < 0.02);
+    assert_true(fabs((double)p.y_m - (y - 0.08)) < 0.01); /* unobserved: not moved */
 }
 
 /* The 20° incidence gate: with it at 1° only the shots within 1° of a
@@ -460,6 +492,7 @@ int main(void)
         cmocka_unit_test(test_pinpoint_recovers_offset),  cmocka_unit_test(test_pinpoint_endpoint_case),
         cmocka_unit_test(test_pinpoint_gate),             cmocka_unit_test(test_pinpoint_bad_ranges_counted),
         cmocka_unit_test(test_pinpoint_refuses_bad_input), cmocka_unit_test(test_memory_recovers_offset),
+        cmocka_unit_test(test_memory_scattered_fit_refused),
         cmocka_unit_test(test_memory_incidence_gate),     cmocka_unit_test(test_memory_refuses_bad_input),
         cmocka_unit_test(test_odometry_step),
     };
