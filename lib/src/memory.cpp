@@ -18,6 +18,9 @@ constexpr uint32_t kMemoryMagic = 0x424c4d31u;  // "BLM1"
 // one spot ten times): not fitted (our choice).
 constexpr real kMinSpread_m = real(0.03);
 constexpr uint8_t kNoSegment = 0xff;
+// A fit's impacts must lie within this many σ of a range of its line
+// (rms across the fit).
+constexpr real kAlignSigmas = real(2);
 
 inline bool memory_ok(const bl_memory_corrector *m) { return m->magic_ == kMemoryMagic; }
 
@@ -168,7 +171,7 @@ extern "C" int bl_memory_correct(const bl_memory_corrector *m, const bl_map *map
     uint32_t nf = 0;
     for (uint32_t j = 0; j < map->count && nf < BL_MEMORY_MAX_FITS; ++j) {
         if (per_seg[j] < prm.min_points) continue;
-        real sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0, w = 0;
+        real sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0, w = 0, sr = 0;
         for (uint32_t k = 0; k < m->count_; ++k)
             for (uint32_t i = 0; i < m->n_[k]; ++i) {
                 if (seg_of[k][i] != j) continue;
@@ -180,6 +183,7 @@ extern "C" int bl_memory_correct(const bl_memory_corrector *m, const bl_map *map
                 mx -= x;
                 my -= y;
                 w += 1;
+                sr += m->range_m_[k][i];
                 sx += mx;
                 sy += my;
                 sxx += mx * mx;
@@ -191,7 +195,18 @@ extern "C" int bl_memory_correct(const bl_memory_corrector *m, const bl_map *map
         // Largest eigenvalue of the scatter: the variance along the fit.
         const real half_tr = real(0.5) * (cxx + cyy);
         const real disc = std::sqrt(real(0.25) * (cxx - cyy) * (cxx - cyy) + cxy * cxy);
-        if (!(half_tr + disc >= kMinSpread_m * kMinSpread_m)) continue;
+        const real along = half_tr + disc, across = half_tr - disc;  // variances (m²)
+        if (!(along >= kMinSpread_m * kMinSpread_m)) continue;
+        // Crowley's (1989) alignment test, here as a fit's quality (our
+        // choice): the impacts must lie on a line within kAlignSigmas σ of a
+        // range (a phantom or an unknown obstacle matched with a wall
+        // scatters), and the orientation's standard error
+        // σφ = σ_r / √(n·var_along) (the orthogonal regression's) must be at
+        // most max_fit_sigma_rad: a short fit's orientation is its noise.
+        real sigma_r = ring->sigma_range_rel * sr / w;
+        if (sigma_r < ring->sigma_range_m) sigma_r = ring->sigma_range_m;
+        if (!(across <= kAlignSigmas * kAlignSigmas * sigma_r * sigma_r)) continue;
+        if (!(sigma_r * sigma_r <= prm.max_fit_sigma_rad * prm.max_fit_sigma_rad * w * along)) continue;
         fits[nf].cx = mx + x;
         fits[nf].cy = my + y;
         fits[nf].phi = real(0.5) * std::atan2(real(2) * cxy, cxx - cyy);
@@ -221,7 +236,7 @@ extern "C" int bl_memory_correct(const bl_memory_corrector *m, const bl_map *map
     // same least squares (eq. 3/4, stopping rules, per-axis fall-back).
     const Midpoints mp = {map, fits, nf, x, y};
     const Vec3 q0(x, y, th + dth);
-    const LsOutcome o = least_squares(midpoints_eval, &mp, prm.position, BL_AXIS_X | BL_AXIS_Y, q0);
+    const LsOutcome o = least_squares(midpoints_eval, &mp, prm.position, BL_AXIS_X | BL_AXIS_Y, q0, false);
     res.iterations = o.iterations;
     const real ddx = o.q(0) - x, ddy = o.q(1) - y;
     if (std::sqrt(ddx * ddx + ddy * ddy) > prm.position.max_correction_m ||

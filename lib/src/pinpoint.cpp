@@ -18,6 +18,8 @@ constexpr real kDampingRel = real(1e-9);
 // A step that raises F is halved at most this many times (then the
 // iteration stops where it is: F cannot be lowered along the step).
 constexpr int kMaxHalvings = 4;
+// Bisections for the first point of a step with F < ε (least_squares).
+constexpr int kBisections = 6;
 
 // The pin-point problem: one burst's valid ranges, re-matched at every pose.
 struct Burst {
@@ -94,7 +96,7 @@ void bl::ls_add_term(const bl_segment &s, real mx, real my, real tx, real ty, Ls
 }
 
 LsOutcome bl::least_squares(LsEvalFn eval, const void *problem, const bl_pinpoint_params &prm, uint32_t axes_mask,
-                            const Vec3 &q0)
+                            const Vec3 &q0, bool first_below_eps)
 {
     LsOutcome out;
     out.q = q0;
@@ -146,6 +148,27 @@ LsOutcome bl::least_squares(LsEvalFn eval, const void *problem, const bl_pinpoin
             // reached N (step 7: the per-axis fall-back).
             stopped_on_n = true;
             break;
+        }
+        if (first_below_eps && en.F < prm.epsilon_cost_m2 && e.F >= prm.epsilon_cost_m2) {
+            // The paper descends in small steps from the odometric pose and
+            // stops as soon as F < ε (step 6-1): its pose is the first one
+            // along the descent with F < ε, not the minimum (which, with
+            // few matched ranges, fits their noise). Along the step: the
+            // smallest fraction with F < ε, by bisection.
+            real lo = 0, hi = 1;
+            LsEval eh = en;
+            for (int b = 0; b < kBisections; ++b) {
+                const real mid = real(0.5) * (lo + hi);
+                const LsEval em = eval(problem, q + mid * step);
+                if (em.F < prm.epsilon_cost_m2) {
+                    hi = mid;
+                    eh = em;
+                } else {
+                    lo = mid;
+                }
+            }
+            qn = q + hi * step;
+            en = eh;
         }
         q = qn;
         e = en;
@@ -204,7 +227,7 @@ extern "C" int bl_pinpoint_correct(const bl_map *map, const bl_sonar_ring *ring,
     res.matched = e0.matched;
     res.outcome = BL_PINPOINT_NONE;
     if (e0.matched >= params->min_matches) {
-        const LsOutcome o = least_squares(burst_eval, &b, *params, BL_AXIS_X | BL_AXIS_Y | BL_AXIS_THETA, q0);
+        const LsOutcome o = least_squares(burst_eval, &b, *params, BL_AXIS_X | BL_AXIS_Y | BL_AXIS_THETA, q0, true);
         res.iterations = o.iterations;
         const Vec3 d = o.q - q0;
         if (std::sqrt(d(0) * d(0) + d(1) * d(1)) > params->max_correction_m ||

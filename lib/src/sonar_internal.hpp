@@ -70,8 +70,12 @@ struct LsOutcome {
 // correctors: make size-m4's flash).
 typedef LsEval (*LsEvalFn)(const void *problem, const Vec3 &q);
 // Hoppenot & Colle §3.1 steps 4-8 on the axes in axes_mask, from q0.
+// first_below_eps: a step that brings F below ε is cut to its first point
+// with F < ε (the pin-point's: sonar.h); false: to the minimum (the
+// memory's position step, whose fitted midpoints already average the
+// ranges' noise).
 LsOutcome least_squares(LsEvalFn eval, const void *problem, const bl_pinpoint_params &prm, uint32_t axes_mask,
-                        const Vec3 &q0);
+                        const Vec3 &q0, bool first_below_eps);
 // One term of F for the point M matched with segment s: r = |M - Q|,
 // ∂r/∂M = u = (M - Q)/r (the segment's unit normal when r = 0), dM/dθ = t
 // (m/rad); added to *e with J = (u_x, u_y, u·t).

@@ -38,7 +38,8 @@ bool bl::memory_params_ok(const bl_memory_params *p)
 {
     return p->depth >= 1 && p->depth <= BL_MEMORY_MAX_BURSTS && is_finite(p->incidence_gate_rad) &&
            p->incidence_gate_rad > real(0) && p->incidence_gate_rad < real(0.5) * kPi && p->min_points >= 2 &&
-           p->min_segments >= 1 && pinpoint_params_ok(&p->position);
+           p->min_segments >= 1 && is_finite(p->max_fit_sigma_rad) && p->max_fit_sigma_rad > real(0) &&
+           pinpoint_params_ok(&p->position);
 }
 
 bool bl::sonar_range_usable(const bl_sonar_ring *ring, uint32_t sensor, real range_m, uint32_t flags,
@@ -165,6 +166,7 @@ extern "C" int bl_memory_default(bl_memory_params *p)
     p->incidence_gate_rad = real(20) * kDegToRad;  // §5.2: the 20° incidence gate
     p->min_points = 3;                             // three aligned points make a segment (Crowley 1989)
     p->min_segments = 1;
+    p->max_fit_sigma_rad = real(0.1);  // ~6°: three impacts over 10 cm give ~0.8 rad (our choice)
     return bl_pinpoint_default(&p->position);
 }
 
