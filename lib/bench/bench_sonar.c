@@ -187,8 +187,8 @@ int main(int argc, char **argv)
             if (r == 0 && hypot((double)p.x_m - px[k], (double)p.y_m - py[k]) < 0.08) ++improved;
         }
     const double pin_us = median_ns(t, nt) * 1e-3;
-    printf("pin-point: %d corrections, median %.2f us, %.1f %% nearer the truth than the odometry's 8 cm\n", nt,
-           pin_us, 100.0 * improved / POSES);
+    printf("pin-point: %d corrections, median %.2f us, %.1f %% nearer the truth than the odometry's 8 cm\n", nt, pin_us,
+           100.0 * improved / POSES);
 
     /* ---- memory */
     bl_memory_corrector m;
@@ -218,8 +218,7 @@ int main(int argc, char **argv)
         mem_err = hypot((double)p.x_m - x, (double)p.y_m - y);
     }
     const double mem_us = median_ns(t, nt) * 1e-3;
-    printf("memory: %d corrections (70 ranges, 10 bursts), median %.2f us, error after %.3f m\n", nt, mem_us,
-           mem_err);
+    printf("memory: %d corrections (70 ranges, 10 bursts), median %.2f us, error after %.3f m\n", nt, mem_us, mem_err);
 
     /* ---- the filter: one burst of seven specular ranges */
     bl_config cfg;
@@ -256,8 +255,8 @@ int main(int argc, char **argv)
             t[nt++] = now_ns() - a - tc;
         }
     const double fuse_us = median_ns(t, nt) * 1e-3;
-    printf("fuse_sonar: %d bursts of 7 ranges, median %.2f us per burst (%.1f ranges fused per burst)\n", nt,
-           fuse_us, (double)accepted / POSES);
+    printf("fuse_sonar: %d bursts of 7 ranges, median %.2f us per burst (%.1f ranges fused per burst)\n", nt, fuse_us,
+           (double)accepted / POSES);
     free(t);
     /* ---- the correctors against the degradation (largest error of 3 seeds) */
     static const double degs[] = {0, 0.02, 0.04, 0.08, 0.11, 0.15};

@@ -42,7 +42,7 @@ static void test_pinpoint_recovers_offset(void **state)
     world_map(&map);
     world_ring(&ring);
     rng_seed(12);
-    int exact = 0;
+    int exact = 0, cut = 0;
     for (int trial = 0; trial < 40; ++trial) {
         const double x = 1.5 + 2.5 * rng_uniform(), y = 1.0 + 2.0 * rng_uniform();
         const double th = -3.0 + 6.0 * rng_uniform();
@@ -69,6 +69,12 @@ static void test_pinpoint_recovers_offset(void **state)
         if (rp.outcome == BL_PINPOINT_CONVERGED) {
             assert_true((double)rp.cost_after_m2 < 5e-3 || rp.iterations < 10);
             assert_true((double)rp.cost_after_m2 <= (double)rp.cost_before_m2);
+            /* the first point with F < ε: just inside ε when the odometric
+             * pose was outside it, not at the minimum (F ~ 0 here) */
+            if ((double)rp.cost_before_m2 >= 5e-3 && (double)rp.cost_after_m2 < 5e-3) {
+                ++cut;
+                assert_true((double)rp.cost_after_m2 > 0.5 * 5e-3);
+            }
         }
         const double ex = (double)p.x_m - x, ey = (double)p.y_m - y;
         const double eth = remainder((double)p.theta_rad - th, 6.283185307179586);
@@ -86,6 +92,7 @@ static void test_pinpoint_recovers_offset(void **state)
      * the rest are the paper's known failure, a beam matched with the wrong
      * wall near a corner at the odometric pose (a local minimum). */
     assert_true(exact >= 36);
+    assert_true(cut >= 20); /* the paper's stop at work on most of them */
 }
 
 /* The end-point case (eq. 4): an impact beyond a segment's end costs its
