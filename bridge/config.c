@@ -54,6 +54,8 @@ void config_defaults(struct bridge_config *cfg)
 #define KEY_DEFAULT(sec, k, type, strct, member, lo, hi, open, def) DEFAULT_##type(member, def)
     SITE_KEYS_SINGLE(KEY_DEFAULT)
 #undef KEY_DEFAULT
+    /* the optional item keys' defaults (optional_item_keys below) */
+    for (size_t i = 0; i < sizeof cfg->sonar / sizeof cfg->sonar[0]; i++) cfg->sonar[i].used = 1;
 }
 
 /* ---- per-item sections ------------------------------------------------ */
@@ -120,6 +122,23 @@ static int item_count(const struct bridge_config *cfg, const struct item_desc *i
 {
     return *(const int *)(const void *)((const char *)cfg + it->count_offset);
 }
+
+/* The name of the key giving an item section's count ("count" of [beacons],
+ * "walls" of [map]): the row of its count section at its count's offset. */
+static const char *count_key_of(const struct item_desc *it)
+{
+    for (size_t i = 0; i < NKEYS; i++)
+        if (!strcmp(keys[i].section, it->count_section) && keys[i].offset == it->count_offset)
+            return keys[i].key;
+    return "count";
+}
+
+/* The item keys the schema gives a default ([sonarN] used = 1): optional,
+ * the default set for every item by config_defaults. Every other item key is
+ * required. */
+static const struct {
+    const char *prefix, *key;
+} optional_item_keys[] = {{"sonar", "used"}};
 
 /* "bearing beacon" for the prefix "bearing_beacon" (messages). */
 static const char *item_word(const struct item_desc *it, char *buf, size_t len)
@@ -399,6 +418,11 @@ static const char *item_key_name(const struct item_desc *it, unsigned bit)
 static uint32_t required_keys(const struct bridge_config *cfg, const struct item_desc *it, int n,
                               uint32_t all)
 {
+    for (size_t o = 0; o < sizeof optional_item_keys / sizeof optional_item_keys[0]; o++)
+        if (!strcmp(it->prefix, optional_item_keys[o].prefix))
+            for (unsigned bit = 0; bit < 32u && (all >> bit & 1u); bit++)
+                if (!strcmp(item_key_name(it, bit), optional_item_keys[o].key))
+                    all &= ~(1u << bit);
     if (!cfg->range_survey.self_survey || strcmp(it->prefix, "range_beacon") != 0 ||
         n + 1 == cfg->range_survey.origin)
         return all;
@@ -418,7 +442,8 @@ static int check_items(const struct bridge_config *cfg, struct parse_ctx *ctx)
         for (size_t i = 0; i < NKEYS; i++) nkeys += item_of_row(&keys[i]) == it;
         const uint32_t all = nkeys >= 32u ? UINT32_MAX : (1u << nkeys) - 1u;
         const int count = item_count(cfg, it);
-        const int count_line = key_line_of(ctx, it->count_section, "count");
+        const char *count_key = count_key_of(it);
+        const int count_line = key_line_of(ctx, it->count_section, count_key);
         char sec[64], word[64];
         for (int n = 0; n < it->max; n++) {
             const struct config_item_seen *seen = &cfg->item_seen[s][n];
@@ -428,14 +453,14 @@ static int check_items(const struct bridge_config *cfg, struct parse_ctx *ctx)
                 unsigned missing = 0;
                 while ((seen->keys | ~need) >> missing & 1u) missing++;
                 fail(ctx, seen->line ? seen->line : count_line, sec, item_key_name(it, missing),
-                     "missing (count = %d %s)", count, it->count_section);
+                     "missing (%s = %d %s)", count_key, count, it->count_section);
                 return -1;
             }
             if (n >= count && seen->keys) {
                 unsigned first = 0;
                 while (!(seen->keys >> first & 1u)) first++;
-                fail(ctx, seen->line, sec, item_key_name(it, first), "%s beyond [%s] count = %d",
-                     item_word(it, word, sizeof word), it->count_section, count);
+                fail(ctx, seen->line, sec, item_key_name(it, first), "%s beyond [%s] %s = %d",
+                     item_word(it, word, sizeof word), it->count_section, count_key, count);
                 return -1;
             }
         }
@@ -547,17 +572,19 @@ static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
      * filter, Vander et al. 2011 eq. 1) or >= 3 range beacons (their
      * trilateration starts it). */
     if (cfg->beacon_count < 1 && cfg->bearing_beacon_count < 3 && cfg->range_beacon_count < 3 &&
-        !config_is_team(cfg)) {
+        !config_is_team(cfg) && !config_is_sonar(cfg)) {
         int line = key_line_of(ctx, "beacons", "count");
         if (line > 0)
             fail(ctx, line, "beacons", "count",
                  "0 allowed only with [bearing_beacons] count >= 3 or [range_beacons] count >= 3 "
-                 "(they are %d and %d), or on a team site ([team] robots >= 3)",
+                 "(they are %d and %d), on a team site ([team] robots >= 3), or with a sonar ring "
+                 "and its map ([sonar_ring] count >= 1, [map] walls >= 1)",
                  cfg->bearing_beacon_count, cfg->range_beacon_count);
         else
             fail(ctx, line, "beacons", "count",
                  "not set: the site file must give the beacons ([beacons] count >= 3, "
-                 "[bearing_beacons] count >= 3, [range_beacons] count >= 3 or [team] robots >= 3)");
+                 "[bearing_beacons] count >= 3, [range_beacons] count >= 3, [team] robots >= 3 "
+                 "or [sonar_ring] count >= 1 with [map] walls >= 1)");
         return -1;
     }
     if (check_items(cfg, ctx))

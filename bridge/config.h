@@ -14,7 +14,8 @@
  * name (a schema key without its member does not compile).
  * Our sections are [beacons], [beaconN], [receivers], [bearing_beacons],
  * [bearing_beaconN], [bearing_sensor], [range_beacons], [range_beaconN],
- * [range_sensor], [robot], [noise], [team], [tuning] (the
+ * [range_sensor], [robot], [noise], [sonar_ring], [sonarN], [map], [wallN],
+ * [team], [tuning] (the
  * estimator's tuning, bridge/tuning.h) and [bridge]; an unknown key in one
  * of them is an error (a typo must not be silently ignored).
  * Per-item sections ([beaconN], [bearing_beaconN], [range_beaconN]: every schema section
@@ -26,7 +27,11 @@
  * (the library checks 1 and 2), or count = 0 with [bearing_beacons] count
  * >= 3 (a bearing site) or [range_beacons] count >= 3 (a range site), or
  * none of any kind and [team] robots >= 3 (a team site: the robots are each
- * other's beacons). [team]: robots 0 (no team) or 3..8; origin_robot and
+ * other's beacons), or none of any kind and a sonar ring ([sonar_ring] count
+ * >= 1) with a map ([map] walls >= 1): a sonar site, started from a known
+ * pose (--initial-pose) as Hoppenot & Colle's robot. An item key with a
+ * default in the schema ([sonarN] used) is optional; the others are required.
+ * [team]: robots 0 (no team) or 3..8; origin_robot and
  * axis_robot in 1..robots and different; the robots' MAVLink system ids
  * system_id_first..system_id_first + robots - 1 within 1..255 and not
  * [bridge] system_id (the team host's own).
@@ -53,7 +58,7 @@
 #define CONFIG_STR_LEN 128
 #define CONFIG_PATH_LEN 256
 #define CONFIG_MAX_KEYS 128
-#define CONFIG_MAX_ITEMS 32     /* bound on every per-item section's largest count */
+#define CONFIG_MAX_ITEMS 64     /* bound on every per-item section's largest count ([map] walls) */
 #define CONFIG_MAX_ITEM_KEYS 32 /* bound on the keys of one per-item section */
 
 #define EX_CONFIG_STATUS 78 /* sysexits.h EX_CONFIG */
@@ -121,6 +126,26 @@ struct config_range_survey {
     double timeout_s; /* solve with what there is this long after the first range (s) */
 };
 
+/* [sonar_ring] (site_keys.h: the sonar_ring.* members; bridge/sonar.h): count > 0
+ * makes a sonar site, whose filter runs on the sonar ring's clock when it has
+ * no beacons (bridge/estimator.c, ref_clock) */
+struct config_sonar_ring {
+    int count;              /* sonars on the ring, 0 = none ([sonarN] N = 1..count) */
+    double period_s;        /* burst period (s) */
+    double beam_width_deg;  /* full beam width (deg) */
+    double min_range_m;     /* blanking (m) */
+    double max_range_m;     /* largest range (m) */
+    double sigma_range_m;   /* range sigma floor (m) */
+    double sigma_range_rel; /* range sigma relative to the range (1) */
+    double gate_m;          /* the correctors' association gate (m) */
+    char method[16];        /* filter | pinpoint | memory (bridge/sonar.h) */
+};
+
+/* [map] (site_keys.h: map.walls): the wall segments [wallN] the sonar ranges to */
+struct config_map {
+    int walls;
+};
+
 struct bridge_config {
     /* [beacons] */
     int beacon_count;
@@ -167,6 +192,9 @@ struct bridge_config {
     double speed_of_sound_mps;
     double sigma_speed_of_sound_mps;
     double gate_sigma;
+    /* [sonar_ring], [map]; [sonarN] and [wallN] are the item arrays sonar[], wall[] */
+    struct config_sonar_ring sonar_ring;
+    struct config_map map;
     /* [team]: a team site when team.robots > 0 (config_is_team) */
     struct config_team team;
     /* [tuning]: the library's tuning fields (bridge/tuning.h) */
@@ -208,6 +236,14 @@ void config_format_error(const struct bridge_config *cfg, const char *section, c
 static inline bool config_is_team(const struct bridge_config *cfg)
 {
     return cfg->team.robots > 0;
+}
+
+/* A sonar site: a sonar ring and the map it ranges to ([sonar_ring] count
+ * > 0, [map] walls > 0; bridge/sonar.h). The one place the bridge decides
+ * it; site_to_lib derives the library's sonar_site from it. */
+static inline bool config_is_sonar(const struct bridge_config *cfg)
+{
+    return cfg->sonar_ring.count > 0 && cfg->map.walls > 0;
 }
 
 /* Built-in defaults (the kleeman-lab daemon settings, no beacons). */

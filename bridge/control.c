@@ -202,6 +202,7 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->ranges_before_survey = d->est.c.ranges_before_survey;
     r->survey_unexpected = d->est.c.survey_unexpected;
     r->survey = d->est.survey_on ? &d->est.survey : NULL;
+    r->sonar = team_site(d) ? NULL : &d->est.sonar;
     r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;

@@ -21,9 +21,8 @@
 /* Encoder silences longer than this are counted (encoder_gaps); the
  * localizer coasts through them at constant velocity. */
 #define ENC_SILENCE_US BL_LOC_WHEEL_SILENCE_US
-/* Slack subtracted from "now" before closing pulses, covering node-clock
- * mapping error and transmission order (us). */
-#define POP_SLACK_ENC_US 5000
+/* Slack subtracted from "now" before closing pulses (estimator.h). */
+#define POP_SLACK_ENC_US ESTIMATOR_POP_SLACK_US
 #define POP_SLACK_TICK_US 20000
 /* Echo-storm evaluation window (us). */
 #define STORM_WINDOW_US 5000000
@@ -31,13 +30,16 @@
 
 /* The filter's timebase (estimator.h, "Timebases"), the one rule: the
  * receiver array's clock on a site with ultrasonic beacons, else the bearing
- * sensor's on a site with bearing beacons, else the range receiver's. */
+ * sensor's on a site with bearing beacons, else the range receiver's on a
+ * site with range beacons, else the sonar ring's on a site with a ring. */
 static const struct node_clock *ref_clock(const struct estimator *e)
 {
     if (e->blcfg.beacon_count > 0)
         return &e->rx_clock;
     if (e->blcfg.bearing_beacon_count > 0)
         return &e->brg_clock;
+    if (e->blcfg.range_beacon_count == 0 && e->sonar.on)
+        return &e->snr_clock;
     return &e->rng_clock;
 }
 
@@ -61,6 +63,30 @@ static bool to_ref_time(const struct estimator *e, const struct node_clock *own,
         return false;
     *t_ref = node_clock_to_node(ref_clock(e), node_clock_to_local(own, t_own));
     return true;
+}
+
+bool estimator_ref_time(struct estimator *e, const struct node_clock *own, int64_t t_own,
+                        int64_t *t_ref)
+{
+    const bool ok = to_ref_time(e, own, t_own, t_ref);
+    if (ok && *t_ref > e->latest_node_us)
+        e->latest_node_us = *t_ref;
+    return ok;
+}
+
+static void sync(struct estimator *e);
+
+void estimator_sync(struct estimator *e)
+{
+    sync(e);
+}
+
+void estimator_note_update(struct estimator *e, int64_t rx_us)
+{
+    e->updated = true;
+    e->last_update_rx_us = rx_us;
+    if (rx_us > e->last_data_rx_us)
+        e->last_data_rx_us = rx_us;
 }
 
 /* ---- events ----------------------------------------------------------- */
@@ -263,13 +289,18 @@ int estimator_init(struct estimator *e, const struct bridge_config *site, char *
     e->pulse_hold_us = estimator_pulse_hold_us(cfg);
     if (make_configs(cfg, &e->blcfg, &e->seqcfg, err, errlen))
         return -1;
+    if (sonar_configure(&e->sonar, cfg, false, err, errlen))
+        return -1;
     int rc = bl_localizer_init(&e->loc, &e->blcfg, &e->seqcfg);
+    if (rc == BL_OK)
+        rc = sonar_attach(&e->sonar, &e->loc.filter);
     if (rc != BL_OK) {
         snprintf(err, errlen, "%s: estimator initialisation failed: %s",
                  cfg->path[0] ? cfg->path : "defaults", bl_strerror(rc));
         return -1;
     }
     node_clock_init(&e->rx_clock, NULL);
+    node_clock_init(&e->snr_clock, NULL);
     node_clock_init(&e->enc_clock, NULL);
     node_clock_init(&e->brg_clock, NULL);
     node_clock_init(&e->rng_clock, NULL);
@@ -288,6 +319,14 @@ void estimator_set_initial_pose(struct estimator *e, const struct est_initial_po
 }
 
 /* The known start pose, once, at filter time t_us (before the first start). */
+static void start_from_initial_pose(struct estimator *e, int64_t t_us);
+
+void estimator_start_pending(struct estimator *e, int64_t t_us)
+{
+    start_from_initial_pose(e, t_us);
+    sync(e);
+}
+
 static void start_from_initial_pose(struct estimator *e, int64_t t_us)
 {
     if (!e->initial_pose.set)
@@ -335,6 +374,9 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
     bl_seq_config sc;
     if (make_configs(cfg, &c, &sc, err, errlen))
         return -1;
+    /* the sonar's map and ring (same storage: the filter's pointers stay valid) */
+    if (sonar_configure(&e->sonar, cfg, true, err, errlen))
+        return -1;
     estimator_survey_commit(e, cfg, &fresh, restart);
     e->beacon_lost_s = cfg->beacon_lost_s;
     e->echo_storm_ratio = cfg->echo_storm_ratio;
@@ -348,6 +390,7 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
         e->seqcfg = sc;
         e->cfg = *cfg;
         e->pulse_hold_us = estimator_pulse_hold_us(cfg); /* the node's tolerance may change */
+        (void)sonar_attach(&e->sonar, &e->loc.filter);
         sync(e);
         return 0;
     }
@@ -361,6 +404,7 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
     e->seqcfg = sc;
     e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
     e->pulse_hold_us = estimator_pulse_hold_us(cfg);
+    (void)sonar_attach(&e->sonar, &e->loc.filter);
     sync(e);
     reset_runtime(e);
     return 1;
@@ -493,6 +537,8 @@ void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int
         log_debug("localizer wheels: %s", bl_strerror(rc));
     }
     sync(e);
+    estimator_sonar_wheels(e, t, had_ref ? dl * e->m_per_tick : 0.0,
+                           had_ref ? dr * e->m_per_tick : 0.0);
 }
 
 void estimator_status(struct estimator *e, const struct frame_status *s, int64_t rx_us)
@@ -501,117 +547,6 @@ void estimator_status(struct estimator *e, const struct frame_status *s, int64_t
     if (s->flags & 0x4)
         log_warn("node %u reports a sensor fault (flags 0x%x)", s->node_id, s->flags);
     (void)e;
-}
-
-/* ---- bearings --------------------------------------------------------- */
-
-void estimator_bearing(struct estimator *e, const struct frame_bearing *b, int64_t rx_us)
-{
-    if (e->blcfg.bearing_beacon_count == 0) {
-        e->c.bearings_unexpected++; /* no bearing beacon on this site */
-        return;
-    }
-    int64_t tb = node_clock_observe(&e->brg_clock, b->node_time_us, rx_us);
-    if (e->brg_clock.last_event == NODE_CLOCK_OUT_OF_ORDER) {
-        /* Older than a bearing already handed on: the localizer has moved
-         * past it. (NODE_CLOCK_DUPLICATE, the same node time, is another
-         * bearing of the same scan: kept.) */
-        e->c.stale_bearings++;
-        return;
-    }
-    if (e->brg_clock.last_event == NODE_CLOCK_RESTART) {
-        e->c.node_restarts++;
-        event(e, EST_EV_WARNING, "bearing sensor clock restarted");
-    }
-    if (b->beacon < 1 || b->beacon > e->blcfg.bearing_beacon_count) {
-        e->c.bearings_unknown_beacon++; /* the handler's check: see sensor_bearing.c */
-        return;
-    }
-    int64_t t;
-    if (!to_ref_time(e, &e->brg_clock, tb, &t)) {
-        e->c.unmapped_bearings++; /* no reference clock to map onto yet */
-        return;
-    }
-    if (t > e->latest_node_us)
-        e->latest_node_us = t;
-    /* Pulses that arrived before this bearing go first. */
-    (void)bl_localizer_advance(&e->loc, t - POP_SLACK_ENC_US);
-    bl_bearing_meas m = {
-        .t_us = t,
-        .beacon_index = (uint32_t)b->beacon - 1u, /* [bearing_beaconN] -> N-1 */
-        /* body-frame bearing, deg -> rad (Vander et al. 2011 eq. 3 is in rad) */
-        .bearing_rad = (bl_real)(b->bearing_deg * (M_PI / 180.0)),
-        .tag = (uint32_t)rx_us,
-    };
-    if (rx_us > e->latest_rx_us)
-        e->latest_rx_us = rx_us;
-    start_from_initial_pose(e, t);
-    int rc = bl_localizer_bearing(&e->loc, &m, NULL);
-    if (rc != BL_OK)
-        log_debug("localizer bearing: %s", bl_strerror(rc));
-    sync(e);
-}
-
-/* ---- ranges ----------------------------------------------------------- */
-
-void estimator_range(struct estimator *e, const struct frame_range *r, int64_t rx_us)
-{
-    if (e->blcfg.range_beacon_count == 0) {
-        e->c.ranges_unexpected++; /* no range beacon on this site */
-        return;
-    }
-    if (r->receiver != 1) {
-        /* Another robot's receiver (a team's host): its own clock and its
-         * own estimate, not ours; one robot for now. */
-        e->c.ranges_other_receiver++;
-        return;
-    }
-    if (r->time_of_flight_us == 0 || r->time_of_flight_us >= 65534) {
-        e->c.ranges_bad_tof++; /* nothing timed, or the counter saturated (sensor_range.c) */
-        return;
-    }
-    if (e->survey_on && e->survey.state != SURVEY_DONE) {
-        /* the beacons are not placed yet: dropped (docs/bridge.md, "Beacon self-survey") */
-        e->c.ranges_before_survey++;
-        return;
-    }
-    /* The node sends the range once it heard the pulse: the clock fit sees
-     * the frame as if sent at the emission (estimator.h, "Ranges"). */
-    int64_t tr = node_clock_observe(&e->rng_clock, r->node_time_us, rx_us - r->time_of_flight_us);
-    if (e->rng_clock.last_event == NODE_CLOCK_OUT_OF_ORDER) {
-        e->c.stale_ranges++; /* older than a range already handed on */
-        return;
-    }
-    if (e->rng_clock.last_event == NODE_CLOCK_RESTART) {
-        e->c.node_restarts++;
-        event(e, EST_EV_WARNING, "range receiver clock restarted");
-    }
-    if (r->beacon < 1 || r->beacon > e->blcfg.range_beacon_count) {
-        e->c.ranges_unknown_beacon++; /* the handler's check: see sensor_range.c */
-        return;
-    }
-    int64_t t;
-    if (!to_ref_time(e, &e->rng_clock, tr, &t)) {
-        e->c.unmapped_ranges++; /* no reference clock to map onto yet */
-        return;
-    }
-    if (t > e->latest_node_us)
-        e->latest_node_us = t;
-    /* Pulses that arrived before this range go first. */
-    (void)bl_localizer_advance(&e->loc, t - POP_SLACK_ENC_US);
-    bl_range_meas m = {
-        .t_us = t,                                /* the emission (RF sync) */
-        .beacon_index = (uint32_t)r->beacon - 1u, /* [range_beaconN] -> N-1 */
-        .time_of_flight_s = (bl_real)((double)r->time_of_flight_us * 1e-6), /* us -> s */
-        .tag = (uint32_t)rx_us,
-    };
-    if (rx_us > e->latest_rx_us)
-        e->latest_rx_us = rx_us;
-    start_from_initial_pose(e, t);
-    int rc = bl_localizer_range(&e->loc, &m, NULL);
-    if (rc != BL_OK)
-        log_debug("localizer range: %s", bl_strerror(rc));
-    sync(e);
 }
 
 /* ---- periodic --------------------------------------------------------- */
@@ -626,6 +561,7 @@ int64_t estimator_local_to_node(const struct estimator *e, int64_t local_us)
 void estimator_tick(struct estimator *e, int64_t local_now_us)
 {
     estimator_survey_poll(e, local_now_us); /* a survey's timeout */
+    estimator_sonar_tick(e, local_now_us);  /* a burst whose last frames were lost */
     if (!ref_seen(e))
         return;
     int64_t now = estimator_local_to_node(e, local_now_us);

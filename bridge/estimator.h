@@ -82,6 +82,7 @@
 #include "config.h"
 #include "frames.h"
 #include "node_clock.h"
+#include "sonar.h"
 #include "survey.h"
 
 #define EST_EVENT_QUEUE 16
@@ -201,6 +202,7 @@ struct estimator {
     struct node_clock enc_clock; /* wheel encoders (node 2) */
     struct node_clock brg_clock; /* bearing sensor (node 3) */
     struct node_clock rng_clock; /* range receiver (node 4) */
+    struct node_clock snr_clock; /* sonar ring (node 5) */
     /* encoders */
     bool enc_have_ref;            /* enc_left/right are the reference */
     bool enc_seen;                /* an encoder frame was mapped */
@@ -236,6 +238,8 @@ struct estimator {
      * placeholder positions and the robot's ranges are counted and dropped */
     bool survey_on;
     struct survey survey;
+    /* the sonar ring and its map (bridge/sonar.h, bridge/estimator_sonar.c) */
+    struct sonar sonar;
 };
 
 /*
@@ -274,6 +278,32 @@ void estimator_status(struct estimator *e, const struct frame_status *s, int64_t
 void estimator_bearing(struct estimator *e, const struct frame_bearing *b, int64_t rx_us);
 void estimator_range(struct estimator *e, const struct frame_range *r, int64_t rx_us);
 void estimator_beacon_survey(struct estimator *e, const struct frame_survey *f, int64_t rx_us);
+void estimator_sonar(struct estimator *e, const struct frame_sonar *f, int64_t rx_us);
+
+/* The sonar ring's side (bridge/estimator_sonar.c, contract bridge/sonar.h):
+ * one wheel increment (m, at filter time t_us, after the localizer took it:
+ * the correctors' dead reckoning and pose history), and the periodic close
+ * of a burst whose last frames were lost. */
+void estimator_sonar_wheels(struct estimator *e, int64_t t_us, double d_left_m, double d_right_m);
+void estimator_sonar_tick(struct estimator *e, int64_t local_now_us);
+
+/* For the sensor kinds' own files (estimator_sonar.c): a time t_own on node
+ * clock `own` onto the filter's timebase (false while the reference clock
+ * has no observation); the known start pose taken at filter time t_us if
+ * pending (--initial-pose); a filter update made outside the localizer
+ * (bl_filter_fuse_sonar, bl_filter_set_pose) noted with the receive time of
+ * the frame behind it, so that it is published. */
+bool estimator_ref_time(struct estimator *e, const struct node_clock *own, int64_t t_own,
+                        int64_t *t_ref);
+/* The localizer's counters and events into the estimator's, after a call
+ * into it (estimator_beacons.c). */
+void estimator_sync(struct estimator *e);
+/* Slack subtracted from a measurement's time before the pulses that arrived
+ * before it are closed (bl_localizer_advance), covering node-clock mapping
+ * error and transmission order (us). */
+#define ESTIMATOR_POP_SLACK_US 5000
+void estimator_start_pending(struct estimator *e, int64_t t_us);
+void estimator_note_update(struct estimator *e, int64_t rx_us);
 
 /* The self-survey's part of a (re)configuration (bridge/estimator_survey.c):
  * decide for site config *cfg whether e's survey goes on (same survey keys,

@@ -65,7 +65,8 @@ enum frame_kind {
     FRAME_RANGE = 4,
     FRAME_TRACK_ENCODERS = 5,
     FRAME_BEACON_SURVEY = 6,
-    FRAME_KIND_COUNT = 7
+    FRAME_SONAR = 7,
+    FRAME_KIND_COUNT = 8
 };
 
 /* Result of frame_decode(). */
@@ -148,6 +149,18 @@ struct frame_survey {
     uint8_t counter;
 };
 
+/* One reading of one sonar of the ring: the first echo of one sensor's ping
+ * (SONAR, bridge/sensor_sonar.c; Hoppenot & Colle 1997). */
+struct frame_sonar {
+    uint32_t node_time_us; /* emission of the ping, sonar-ring node clock */
+    uint8_t sensor;        /* ring index 0..15 ([sonarN] is N-1); the site's count is the
+                              handler's check */
+    uint16_t range_mm;     /* 0..16383 mm from the sensor's mount; meaningless with a flag */
+    uint8_t amplitude;     /* echo amplitude 1..255, 0 = no echo */
+    uint8_t flags;         /* bit 0 NO_ECHO, bit 1 MAX_RANGE (DBC) */
+    uint8_t counter;
+};
+
 struct frame {
     enum frame_kind kind;
     union {
@@ -158,6 +171,7 @@ struct frame {
         struct frame_range range;
         struct frame_track_encoders track;
         struct frame_survey survey;
+        struct frame_sonar sonar;
     } u;
 };
 

@@ -25,6 +25,12 @@
 /* The survey frames of one ping (one per listening beacon) share its NodeTime. */
 #define SURVEY_STAMP_SLACK_US 1
 
+/* The sonar ring fires its sensors one after the other within a burst, each
+ * frame sent when that sensor's listening window closes: NodeTime order, but
+ * sensors fired together (one NodeTime) are allowed: a late frame's stamp may
+ * equal the newest's (us). */
+#define SONAR_STAMP_SLACK_US 1
+
 /* clang-format off: one kind per block, aligned as a table */
 const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
     [FRAME_PULSE] =
@@ -110,6 +116,18 @@ const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT] = {
             .tracks = 1, /* the range network's gateway numbers them */
             .decode = sensor_beacon_survey_decode,
             .handle = sensor_beacon_survey_handle,
+        },
+    [FRAME_SONAR] =
+        {
+            .name = "sonar",
+            .short_name = "snr",
+            .id_first = BEACONLOC_CAN_SONAR_FRAME_ID,
+            .id_last = BEACONLOC_CAN_SONAR_FRAME_ID,
+            .counter_in_range = beaconloc_can_sonar_counter_is_in_range,
+            .stamp_slack_us = SONAR_STAMP_SLACK_US,
+            .tracks = 1, /* one ring node */
+            .decode = sensor_sonar_decode,
+            .handle = sensor_sonar_handle,
         },
 };
 /* clang-format on */

@@ -9,8 +9,8 @@
  * come from the cantools-generated header (build/gen/can/beaconloc_can.h),
  * never from literals.
  *
- * A new kind (SONAR_RING 0x150-0x15F is reserved in the DBC; TRACK_ENCODERS
- * 0x131 is the latest kind added, after RANGE 0x130): its frames in the DBC, its
+ * A new kind (SONAR 0x150 of the sonar ring is the latest kind added, after
+ * TRACK_ENCODERS 0x131 and RANGE 0x130): its frames in the DBC, its
  * enumerator and payload in frames.h (enum frame_kind, union in struct
  * frame), a file bridge/sensor_<kind>.c with its decoder and handler
  * (declared below), one entry in sensors.c.
@@ -89,5 +89,8 @@ void sensor_track_encoders_handle(struct estimator *e, const struct frame *f, in
 enum frame_result sensor_beacon_survey_decode(uint32_t id, const uint8_t data[8], struct frame *out,
                                               struct frame_seq *seq);
 void sensor_beacon_survey_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
+enum frame_result sensor_sonar_decode(uint32_t id, const uint8_t data[8], struct frame *out,
+                                      struct frame_seq *seq);
+void sensor_sonar_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
 
 #endif /* BRIDGE_SENSORS_H */

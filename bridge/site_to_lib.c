@@ -54,6 +54,8 @@ void site_to_lib(const struct bridge_config *cfg, bl_config *out)
 #undef APPLY
     /* a team site (config.h config_is_team): ranges to teammates, no fixed beacons */
     out->range.team_site = config_is_team(cfg) ? 1u : 0u;
+    /* a sonar site (config.h config_is_sonar): may have no beacon at all */
+    out->sonar_site = config_is_sonar(cfg) ? 1u : 0u;
     for (int i = 0; i < cfg->beacon_count && i < BL_MAX_BEACONS; i++) {
 #define APPLY_BEACON(member, field) out->beacons[i].field = (bl_real)cfg->beacon[i].member;
         SITE_LIB_BEACON_FIELDS(APPLY_BEACON)

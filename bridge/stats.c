@@ -9,6 +9,7 @@
 
 #include "log.h"
 #include "sensors.h"
+#include "sonar.h"
 #include "survey.h"
 #include "team.h"
 #include "mav_command.h"
@@ -211,6 +212,8 @@ int stats_write_json(const struct stats_report *r, const char *path)
         team_write_json(r->team, r->team_odometry_sent, f);
     if (r->control)
         mav_control_write_json(r->control, &r->mavlink_in, f);
+    if (r->sonar)
+        sonar_write_json(r->sonar, f);
     fprintf(f, "  \"run_time_s\": %.3f\n", r->run_time_s);
     fprintf(f, "}\n");
     if (fclose(f) != 0) {
@@ -226,6 +229,16 @@ int stats_write_json(const struct stats_report *r, const char *path)
 void stats_status_line(const struct stats_report *r, const char *prefix, const char *estimate)
 {
     const struct frame_counters *fc = r->frames;
+    /* a sonar site's part: " | sonar ok N rej N unm N bad N corr N" */
+    char sonar[160] = "";
+    if (r->sonar && r->sonar->on) {
+        const struct sonar_counters *c = &r->sonar->c;
+        snprintf(
+            sonar, sizeof sonar,
+            " | sonar ok %" PRIu64 " rej %" PRIu64 " unm %" PRIu64 " bad %" PRIu64 " corr %" PRIu64,
+            c->fused, c->rejected, c->unmatched,
+            c->unknown_sensor + c->out_of_range + c->stale + c->refused, c->corrected + c->partial);
+    }
     char kinds[32 * FRAME_KIND_COUNT] = "";
     size_t n = 0;
     for (int k = 0; k < FRAME_KIND_COUNT && n < sizeof kinds; k++)
@@ -236,14 +249,14 @@ void stats_status_line(const struct stats_report *r, const char *prefix, const c
         " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64 " kdrop %" PRIu64 " errfr %" PRIu64
         " | pulses ok %" PRIu64 " rej %" PRIu64 " | bearings ok %" PRIu64 " rej %" PRIu64
         " unk %" PRIu64 " | ranges ok %" PRIu64 " rej %" PRIu64 " unk %" PRIu64 " bad %" PRIu64
-        " | %s | odom %" PRIu64 " werr %" PRIu64 " | latency p50 %" PRId64 " p99 %" PRId64 " us"
+        "%s | %s | odom %" PRIu64 " werr %" PRIu64 " | latency p50 %" PRId64 " p99 %" PRId64 " us"
         " (interval p50 %" PRId64 " p99 %" PRId64 " us)",
         prefix, r->frames_total, kinds, fc->malformed, fc->unknown_id, fc->out_of_range,
         frame_lost_total(fc), frame_duplicates_total(fc), frame_out_of_order_total(fc),
         r->kernel_drops, r->error_frames, r->pulses_accepted, r->pulses_rejected, r->bearings_fused,
         r->bearings_rejected, r->bearings_unknown_beacon, r->ranges_fused, r->ranges_rejected,
         r->ranges_unknown_beacon, r->ranges_bad_tof + r->ranges_other_receiver + r->ranges_refused,
-        estimate, r->odometry_sent, r->record_write_errors + r->estimates_write_errors,
+        sonar, estimate, r->odometry_sent, r->record_write_errors + r->estimates_write_errors,
         r->latency_p50_us, r->latency_p99_us, r->latency_interval_p50_us,
         r->latency_interval_p99_us);
 }

@@ -19,6 +19,7 @@
 struct mav_control;
 struct team;
 struct survey;
+struct sonar;
 
 /* Latency histogram: exact 1 us bins below 4096 us, then 64 bins per
  * power of two (relative resolution 1.6 %) up to 2^36 us. */
@@ -81,6 +82,9 @@ struct stats_report {
     uint64_t ranges_before_survey;         /* robot ranges dropped before the survey was done */
     uint64_t survey_unexpected;            /* BEACON_SURVEY frames on a site without self_survey */
     uint64_t can_tx_frames, can_tx_errors; /* frames the bridge wrote (TEAM_COMMAND) */
+    /* the sonar ring (bridge/sonar.h): its section "sonar" of the JSON, and
+     * its part of the status line; NULL on a team site */
+    const struct sonar *sonar;
     /* a team site (bridge/team.h): its section "team" of the JSON; NULL elsewhere */
     const struct team *team;
     uint64_t team_odometry_sent; /* ODOMETRY sent as the robots' system ids */

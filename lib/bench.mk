@@ -37,3 +37,21 @@ bench-sequencer: $(BENCH_DIR)/seq_replay | $(SETUP_STAMP)
 $(BENCH_DIR)/triangulate: lib/bench/triangulate.c $(BUILD)/lib/libbeaconloc.a $(BENCH_HDRS)
 	@mkdir -p $(@D)
 	$(CC) $(BENCH_CFLAGS) $< $(BUILD)/lib/libbeaconloc.a -lm -o $@
+
+# make bench-sonar-lib: us per correction of the sonar ring's pin-point and
+# memory correctors and per burst fused by the filter (lib/bench/bench_sonar.c,
+# the room of tests/lib/sonar_world.h), float then double. Last line (double):
+#   bench_sonar real=double pinpoint_us=<n> memory_us=<n> fuse_sonar_burst_us=<n> pinpoint_target_us=20 memory_target_us=200 pinpoint_improved_pct=<%>
+# (make bench-sonar, tests/bench/sonar.mk, reproduces Table 1 through the bridge.)
+.PHONY: bench-sonar-lib
+$(BENCH_DIR)/bench_sonar_double: lib/bench/bench_sonar.c tests/lib/sonar_world.h $(BUILD)/lib/libbeaconloc.a $(BENCH_HDRS)
+	@mkdir -p $(@D)
+	$(CC) $(BENCH_CFLAGS) -Itests/lib $< $(BUILD)/lib/libbeaconloc.a -lm -o $@
+
+$(BENCH_DIR)/bench_sonar_float: lib/bench/bench_sonar.c tests/lib/sonar_world.h $(BUILD)/lib/float/libbeaconloc.a $(BENCH_HDRS)
+	@mkdir -p $(@D)
+	$(CC) $(BENCH_CFLAGS) -Itests/lib -DBL_USE_FLOAT=1 $< $(BUILD)/lib/float/libbeaconloc.a -lm -o $@
+
+bench-sonar-lib: $(BENCH_DIR)/bench_sonar_double $(BENCH_DIR)/bench_sonar_float
+	$(BENCH_DIR)/bench_sonar_float
+	$(BENCH_DIR)/bench_sonar_double

@@ -52,7 +52,8 @@ def _cmd_run(args) -> int:
               file=sys.stderr)
         return EX_USAGE
     try:
-        scn = load_scenario(args.scenario, seed=args.seed, duration_s=args.duration)
+        scn = load_scenario(args.scenario, seed=args.seed, duration_s=args.duration,
+                            overrides=args.set)
     except ConfigError as exc:
         print(f"beaconloc-sim: {exc}", file=sys.stderr)
         return EX_CONFIG
@@ -103,8 +104,8 @@ def _run_team(args) -> int:
     JSON, stats (docs/simulator.md "Teams")."""
     from . import can_out, outputs, team_sim
     from .team_scenario import load_team_scenario
-    if args.odometry or args.window is not None or args.bound_prior is not None:
-        print("beaconloc-sim run: --odometry, --window and --bound-prior are not for team "
+    if args.odometry or args.window is not None or args.bound_prior is not None or args.set:
+        print("beaconloc-sim run: --odometry, --window, --bound-prior and --set are not for team "
               "scenarios (the truth CSV holds every robot; [team] bound_prior)", file=sys.stderr)
         return EX_USAGE
     if not (args.log or args.channel or args.truth or args.roles or args.stats):
@@ -286,6 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the Cramer-Rao bound's prior on the start pose: the estimator is "
                    "started with this sigma about the true pose (default: 1 m, 29 deg)")
     r.add_argument("--duration", type=float, metavar="S", help="override the duration, s")
+    r.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="replace or add a key of the scenario file, checked like the file's; "
+                        "repeatable (a sweep: --set encoders.wheel_radius_bias=0,-0.05)")
     r.add_argument("--window", type=float, metavar="S",
                    help="simulate and write in windows of S seconds of simulated time (long runs "
                         "in bounded memory; files only; each window draws its own noise)")
@@ -307,9 +311,11 @@ def build_parser() -> argparse.ArgumentParser:
     mp.add_argument("--out", metavar="PNG", help="draw the maps side by side into this PNG")
     mp.add_argument("--step", type=float, metavar="M",
                     help="grid step, m (default: the room's longer side / 300)")
-    mp.add_argument("--kind", choices=("tdoa", "bearing", "range", "both", "all"), default="all",
+    mp.add_argument("--kind", choices=("tdoa", "bearing", "range", "both", "sonar", "all"),
+                    default="all",
                     help="measurement kind (default all: every kind the site has, and both: "
-                         "all of them together, on a mixed site)")
+                         "all of them together, on a mixed site; sonar: one burst of the sonar "
+                         "ring against the site's map)")
     mp.add_argument("--cap", type=float, default=1.0, metavar="M",
                     help="drms above this is marked degenerate, m (default 1)")
     mp.add_argument("--halves", action="store_true",

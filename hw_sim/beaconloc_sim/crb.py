@@ -24,8 +24,10 @@ sensor offset included: physics.bearings.bearing_jacobian), by every direct rang
 delivered at that instant (tof = d / s to a fixed range beacon, Millibots: it observes x, y,
 theta through the receiver's mount offset and the speed of sound s;
 physics.ranges.tof_jacobian; a multipath late arrival carries no information on the direct
-path and is left out, as are dropouts) and by the odometry's speed
-and turn rate (Kleeman 1992 eq. 25), with the wheel noise. The events are the beacon
+path and is left out, as are dropouts) by every sonar reading that is the
+specular echo of a map wall (the perpendicular distance from the sonar to the wall's line,
+Hoppenot & Colle 1997; phantoms, obstacles and crosstalk are left out like multipath) and by
+the odometry's speed and turn rate (Kleeman 1992 eq. 25), with the wheel noise. The events are the beacon
 firings, the bearing instants and the range pings in time order; a site without ultrasonic
 beacons has bearing and range events only (T and t0 are then unobserved, and s too without
 ranges: they keep their prior, which keeps J well conditioned), a site with ultrasonic
@@ -212,7 +214,8 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
                     start: tuple | None = None, event_time_s: np.ndarray | None = None,
                     fires: np.ndarray | None = None,
                     bearing_beacons_m: list[np.ndarray] | None = None,
-                    range_beacons_m: list[np.ndarray] | None = None
+                    range_beacons_m: list[np.ndarray] | None = None,
+                    sonar_rows: list[tuple[np.ndarray, np.ndarray]] | None = None
                     ) -> np.ndarray | tuple[np.ndarray, tuple]:
     """Bound covariance J_k^-1 after each measurement event k, shape (K, 8, 8).
 
@@ -225,7 +228,8 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
     beacon firing (t0 moves on by T into it; default all); bearing_beacons_m[k]: (n, 2)
     positions of the bearing beacons whose bearing was delivered at event k (default none);
     range_beacons_m[k]: (n, 3) positions of the range beacons whose direct range was delivered
-    at event k (default none).
+    at event k (default none); sonar_rows[k]: (H, var) of the sonar readings at event k, H
+    (n, 4) their derivatives in (x, y, theta, s), var (n,) their variances (default none).
     start: to go on from an earlier call, its returned end (J, state, wheel_left_m,
     wheel_right_m, time after its last event); then returns (covariances, end). Without it
     the recursion starts from the prior.
@@ -282,6 +286,14 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
             r = range_m(x, y, th, ranged, model.range_offset_m, model.range_height_m)
             sig = sigma_range_m(r, model.sigma_range_m, model.sigma_range_per_m) / s
             variances.append(sig ** 2 + (1e-6) ** 2 / 12)
+        sonar = sonar_rows[k] if sonar_rows is not None else None
+        if sonar is not None and len(sonar[1]):
+            # sonar ranges against the map (Hoppenot & Colle; simulate._sonar_rows): their
+            # rows in (x, y, theta, s), the rest 0
+            H_s = np.zeros((len(sonar[1]), 8))
+            H_s[:, [IX, IY, ITH, IS]] = sonar[0]
+            rows.append(H_s)
+            variances.append(sonar[1])
         if prev is not None and dt_s > 0:
             rows.append(odometry_rows())
             variances.append(odometry_variances(wheel_left_m[k] - prev[1],

@@ -44,6 +44,7 @@ class IniFile:
             match = _KEY_RE.match(line)
             if match and section is not None and not line[:1].isspace():
                 self._lines.setdefault((section, match.group(1).strip().lower()), number)
+        self._overridden: set[tuple[str, str]] = set()
         self.parser = configparser.ConfigParser(
             inline_comment_prefixes=(";", "#"), interpolation=None, strict=True)
         try:
@@ -61,8 +62,18 @@ class IniFile:
             raise ConfigError(f"{self.name}:{lineno}: cannot parse line: {line.strip()!r}") from exc
 
     # -- locations -------------------------------------------------------
+    def override(self, section: str, key: str, value: str) -> None:
+        """Set [section] key = value as if the file said so (a command line's --set); its
+        errors then name the option: ``file: --set [section] key: ...``."""
+        if not self.parser.has_section(section):
+            self.parser.add_section(section)
+        self.parser.set(section, key, value)
+        self._overridden.add((section, key.lower()))
+
     def where(self, section: str, key: str | None = None) -> str:
         """``file:line: [section] key`` for messages (line of the section if the key is absent)."""
+        if key is not None and (section, key.lower()) in self._overridden:
+            return f"{self.name}: --set [{section}] {key}"
         line = self._lines.get((section, key.lower() if key else None)) \
             or self._lines.get((section, None))
         loc = f"{self.name}:{line}" if line else f"{self.name}"

@@ -117,6 +117,16 @@ def run_stats(result: SimResult, *, wall_time_s: float, lateness_s: np.ndarray |
                            "multipath": int(np.sum(r.sent & r.multipath)),
                            "dropout": int(np.sum(r.dropout)), "occluded": int(np.sum(r.occluded)),
                            "out_of_range": int(np.sum(r.out_of_range))}
+    if result.scenario.site.sonar_count:
+        from .physics.sonar import KIND_NAMES
+        so = result.sonar
+        stats["sonar"] = {"pinged": int(len(so.t_s)), "echo": int(np.sum(so.flags == 0)),
+                          "no_echo": int(np.sum(so.flags == 1)),
+                          "max_range": int(np.sum(so.flags == 2)),
+                          "informative": int(np.sum(so.informative)),
+                          "obstacle": int(np.sum((so.wall >= 0) & ~so.in_map))}
+        stats["sonar"].update({name: int(np.sum((so.kind == k) & (so.flags == 0)))
+                               for k, name in enumerate(KIND_NAMES) if k})
     if lateness_s is not None:
         late_us = np.asarray(lateness_s) * 1e6
         stats["live"] = {

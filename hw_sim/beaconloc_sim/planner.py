@@ -24,6 +24,16 @@ measurements, R = sigma^2 I):
   C = sigma^2 / 2 I and drms = sqrt(sigma^2 / 2 + sigma^2 / 2) = sigma (tests/sim/test_planner.py).
 - ``both``: a mixed site's kinds together (two or three of them), unknowns (x_m, y_m) and
   theta_rad if the site has bearings, t0_s if it has ultrasonic beacons.
+- ``sonar``: one burst of the used sonars of the ring against the site's [map] (Hoppenot &
+  Colle 1997), unknowns (x_m, y_m) with the heading known (the odometry holds it over a
+  burst: a burst of perpendicular distances observes the heading only through the ring's
+  lever arm, issue 12), worst over HEADINGS_RAD. Each sonar whose first echo is the specular
+  echo of a wall (physics.sonar.specular_grid: the perpendicular foot on the segment, inside
+  the cone, unobstructed, between min_range_m and max_range_m) measures r = |n . (p_s - a)|, d r / d(x, y) = +-n (the wall's
+  normal), sigma(r) = max(sigma_range_m, sigma_range_rel r) of the site's [sonar_ring]; the
+  others (no echo, oblique, phantoms) add nothing. Only the map's walls: the scenario's
+  unknown obstacles are not the site's. Seeing walls of one direction only (a corridor)
+  leaves the position along them unobserved: degenerate.
 
 Per cell: position drms = sqrt(C_xx + C_yy) (m) and the heading sigma sqrt(C_theta,theta)
 (rad; bearing, and both on a site with bearings). The position block is the inverse of the Schur complement
@@ -42,10 +52,11 @@ import numpy as np
 
 from .crb import static_arrival_jacobian
 from .physics.bearings import bearing_jacobian
+from .physics import sonar as so
 from .physics.ranges import range_jacobian, range_m, sigma_range_m
 from .site import Site
 
-KINDS = ("tdoa", "bearing", "range")
+KINDS = ("tdoa", "bearing", "range", "sonar")
 COND_MAX = 1e8                 # cond(S) above this: degenerate (S in 1/m^2, scale-free ratio)
 DRMS_CAP_M = 1.0               # drms above this: degenerate (useless for navigation), m
 HEADINGS_RAD = np.arange(8) * (math.pi / 4)   # worst over these when the sensor is offset
@@ -59,7 +70,7 @@ class PlannerError(ValueError):
 
 @dataclass
 class KindMap:
-    kind: str                  # "tdoa", "bearing", "range" or "both"
+    kind: str                  # "tdoa", "bearing", "range", "both" or "sonar"
     x_m: np.ndarray            # (nx,) cell centres, site frame, m
     y_m: np.ndarray            # (ny,) cell centres, m
     drms_m: np.ndarray         # (ny, nx) position drms, m; NaN where degenerate
@@ -105,10 +116,11 @@ def _pct(a: np.ndarray, q: float) -> float:
 
 def kinds_of(site: Site) -> list[str]:
     """The kinds of measurement a site has: tdoa (ultrasonic beacons), bearing, range, and
-    both (all of them together) when it has two or three."""
+    both (all of them together) when it has two or three; sonar (a sonar ring and its map)."""
     kinds = [k for k, n in (("tdoa", site.beacon_count), ("bearing", site.bearing_beacon_count),
                             ("range", site.range_beacon_count)) if n > 0]
-    return kinds + ["both"] if len(kinds) >= 2 else kinds
+    kinds = kinds + ["both"] if len(kinds) >= 2 else kinds
+    return kinds + ["sonar"] if site.sonar_count and len(site.walls_m) else kinds
 
 
 def grid(site: Site, step_m: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
@@ -160,6 +172,30 @@ def range_fisher(x_m, y_m, beacons_m, height_m: float, sigma_m: float, sigma_per
         return np.einsum("...m,...mi,...mj->...ij", w, J, J)
 
 
+def sonar_fisher(site: Site, X: np.ndarray, Y: np.ndarray, theta_rad: float,
+                 sigma_scale: float = 1.0) -> np.ndarray:
+    """Fisher information of one burst of the used sonars over (x_m, y_m) at the known
+    heading theta_rad, (*S, 2, 2) (module doc, ``sonar``): F = sum over the sonars whose
+    first echo is a wall's specular one of n n^T / sigma(r)^2."""
+    X = np.asarray(X, dtype=float)
+    F = np.zeros(X.shape + (2, 2))
+    walls = site.walls_m.reshape(-1, 4)
+    a = walls[:, 0:2]
+    d = walls[:, 2:4] - a
+    t = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+    normal = np.column_stack([-t[:, 1], t[:, 0]])
+    for mount in site.sonar_mounts[site.sonar_mounts[:, 3] > 0]:
+        pos, axis = so.sensor_pose(X.ravel(), np.asarray(Y, float).ravel(),
+                                   np.full(X.size, theta_rad), mount)
+        wall, r = so.specular_grid(pos, axis, walls, site.sonar_beam_width_rad / 2,
+                                   site.sonar_min_range_m, site.sonar_max_range_m)
+        seen = wall >= 0
+        g = normal[np.maximum(wall, 0)]          # d r / d(x, y) = +-n: the sign cancels in g g^T
+        w = np.where(seen, 1.0 / (site.sonar_sigma_m(np.nan_to_num(r)) * sigma_scale) ** 2, 0.0)
+        F += (w[:, None, None] * g[:, :, None] * g[:, None, :]).reshape(F.shape)
+    return F
+
+
 def position_bound(F: np.ndarray, cap_m: float = DRMS_CAP_M):
     """From Fisher matrices (*S, k, k), position (x, y) first: (drms_m, third_sigma, degenerate).
 
@@ -202,13 +238,15 @@ def _kind_fisher(site: Site, kind: str, X: np.ndarray, Y: np.ndarray, theta_rad:
     if kind == "tdoa":
         return tdoa_fisher(X, Y, site.beacons_m, site.rx_height_m, site.speed_of_sound_mps,
                            site.sigma_arrival_s * sigma_scale)
+    if kind == "sonar":
+        return sonar_fisher(site, X, Y, theta_rad, sigma_scale)
     if kind == "range":
         return range_fisher(X, Y, site.range_beacons_m, site.range_height_m,
                             site.sigma_range_m * sigma_scale, site.sigma_range_per_m * sigma_scale,
                             site.range_max_m)
     # both: unknowns (x, y[, theta][, t0]); the kinds' measurements are independent, so
     # their Fisher matrices add on the unknowns they share
-    has = [k for k in kinds_of(site) if k != "both"]
+    has = [k for k in kinds_of(site) if k not in ("both", "sonar")]
     unknowns = ["x", "y"] + (["theta"] if "bearing" in has else []) + \
         (["t0"] if "tdoa" in has else [])
     kind_unknowns = {"bearing": ["x", "y", "theta"], "tdoa": ["x", "y", "t0"], "range": ["x", "y"]}
@@ -221,7 +259,10 @@ def _kind_fisher(site: Site, kind: str, X: np.ndarray, Y: np.ndarray, theta_rad:
 
 def headings_of(site: Site, kind: str) -> np.ndarray:
     """Headings evaluated: theta = 0 when the bound cannot depend on it (tdoa, or a bearing
-    sensor at the wheel-base centre), else HEADINGS_RAD (the map keeps the worst)."""
+    sensor at the wheel-base centre), else HEADINGS_RAD (the map keeps the worst; always for
+    the sonar ring, whose sonars see other walls at every heading)."""
+    if kind == "sonar":
+        return HEADINGS_RAD
     if kind in ("tdoa", "range") or not np.any(site.bearing_offset_m) \
             or not site.bearing_beacon_count:
         return np.zeros(1)
@@ -238,7 +279,8 @@ def kind_map(site: Site, kind: str, step_m: float | None = None, cap_m: float = 
         need = {"tdoa": "ultrasonic beacons ([beacons] count > 0)",
                 "bearing": "bearing beacons ([bearing_beacons] count > 0)",
                 "range": "range beacons ([range_beacons] count > 0)",
-                "both": "two kinds of beacons (ultrasonic, bearing, range)"}.get(kind, f"kind {kind!r}")
+                "both": "two kinds of beacons (ultrasonic, bearing, range)",
+                "sonar": "sonar ring and map ([sonar_ring] count > 0, [map] walls > 0)"}.get(kind, f"kind {kind!r}")
         raise PlannerError(f"{site.path}: site {site.name!r} has no {need} (its kinds: {have})")
     x, y, step_m = grid(site, step_m)
     X, Y = np.meshgrid(x, y)

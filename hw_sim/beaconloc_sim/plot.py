@@ -69,6 +69,18 @@ def plot(truth_path, estimates_path, odometry_path, out_path) -> None:
 MAP_LEVELS_CM = (0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100)
 
 
+def draw_walls(ax, site, obstacles_m=None, color: str = "black") -> None:
+    """A site's map walls ([wallN], thick, labelled "map wall") and, when given, a scenario's
+    obstacles (segments not in the map, red, "not in the map") on a matplotlib axis: the
+    floor plan of the sonar figures (beaconloc-sim map, the sonar benchmark's paths)."""
+    for i, (x1, y1, x2, y2) in enumerate(site.walls_m):
+        ax.plot([x1, x2], [y1, y2], color=color, lw=3, solid_capstyle="butt",
+                label="map wall" if i == 0 else None, zorder=4)
+    for i, (x1, y1, x2, y2) in enumerate(() if obstacles_m is None else obstacles_m):
+        ax.plot([x1, x2], [y1, y2], color="tab:red", lw=2, solid_capstyle="butt",
+                label="not in the map" if i == 0 else None, zorder=4)
+
+
 def plot_map(site, maps, out_path, split_x_m: float | None = None) -> None:
     """The planner's accuracy maps side by side: filled drms contours (cm, levels
     MAP_LEVELS_CM), the 5 cm contour heavy, degenerate cells hatched grey, beacons drawn;
@@ -114,6 +126,8 @@ def plot_map(site, maps, out_path, split_x_m: float | None = None) -> None:
             for i, p in enumerate(pts):
                 ax.annotate(f"{prefix}{i + 1}", (p[0], p[1]), textcoords="offset points",
                             xytext=(6, 4), fontsize=8, annotation_clip=False)
+        if m.kind == "sonar":          # the map the sonars are matched against
+            draw_walls(ax, site, color="white")
         if split_x_m is not None:
             ax.axvline(split_x_m, color="white", ls="--", lw=1)
         handles = ax.get_legend_handles_labels()[0]

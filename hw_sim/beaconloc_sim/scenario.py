@@ -26,13 +26,17 @@ _KNOWN = {
                   "late_arrival_gain", "double_pulse_tolerance_s", "detector_holdoff_s"},
     "clocks": {"beacon_period_ppm", "first_firing_s", "rx_offset_us", "rx_drift_ppm",
                "encoder_offset_us", "encoder_drift_ppm", "bearing_offset_us", "bearing_drift_ppm",
-               "range_offset_us", "range_drift_ppm", "node_latency_s", "bus_bitrate_bps"},
+               "range_offset_us", "range_drift_ppm", "sonar_offset_us", "sonar_drift_ppm",
+               "node_latency_s", "bus_bitrate_bps"},
     "encoders": {"wheel_radius_bias", "slip_fraction", "sigma_wheel_per_m", "sigma_distance_per_m",
                  "initial_ticks"},
     # the bearing sensor's imperfections (the site gives its sigma and scan rate)
     "bearings": {"outage_probability", "outage_burst_s", "max_range_m"},
     # the range receiver's imperfections (the site gives its sigma, max range, ping period)
     "ranges": {"dropout_probability", "multipath_probability", "survey_s"},
+    # the sonar ring's physics (the site gives its mounts, beam, noise; physics/sonar.py)
+    "sonar": {"fire_interval_s", "listen_s", "critical_angle_deg", "reflection", "threshold",
+              "crosstalk", "double_bounce"},
     # a second robot (the Eurobot opponent): a disc on its own path, occluding bearings
     "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
@@ -111,6 +115,16 @@ class Scenario:
     range_dropout_probability: float = 0.0   # share of pings lost
     range_multipath_probability: float = 0.0  # share of pings whose late arrival replaces the direct
     range_survey_s: float = 0.0              # the fixed beacons range each other this long (0: never)
+    # the sonar-ring node (nodes/sonar_ring.py, physics/sonar.py, docs/simulator.md [sonar])
+    sonar_offset_us: int = 2_718_281_828
+    sonar_drift_ppm: float = 25.0
+    sonar_fire_interval_s: float = 0.06      # between successive sonars of a burst, s
+    sonar_listen_s: float = 0.06             # each sonar's listening window after its ping, s
+    sonar_critical_rad: float = math.radians(5.0)   # largest incidence a wall still echoes at
+    sonar_reflection: float = 1.0            # amplitude reflection coefficient of every segment
+    sonar_threshold: float = 0.02            # relative echo amplitude heard
+    sonar_crosstalk: bool = True             # sonars hear the echoes of the ones fired before
+    sonar_double_bounce: bool = True         # double reflections (phantom ranges)
     # output
     truth_rate_hz: float = 50.0
     log_epoch_s: float = 1_700_000_000.0
@@ -182,10 +196,29 @@ def _pair(ini, sec, key, default):
     return tuple(ini.numbers(sec, key, 2, default=list(default)))
 
 
+def parse_overrides(items) -> list[tuple[str, str, str]]:
+    """``SECTION.KEY=VALUE`` strings (beaconloc-sim run --set) -> (section, key, value);
+    ConfigError on a malformed one."""
+    out = []
+    for item in items or ():
+        name, eq, value = item.partition("=")
+        section, dot, key = name.strip().partition(".")
+        if not (eq and dot and section and key.strip()):
+            raise ConfigError(f"--set {item!r}: expected SECTION.KEY=VALUE "
+                              "(e.g. encoders.wheel_radius_bias=0,-0.05)")
+        out.append((section.strip(), key.strip(), value.strip()))
+    return out
+
+
 def load_scenario(name_or_path: str, *, seed: int | None = None,
-                  duration_s: float | None = None) -> Scenario:
+                  duration_s: float | None = None, overrides=()) -> Scenario:
+    """The scenario file (a built-in name or a path); overrides: SECTION.KEY=VALUE strings
+    that replace or add keys of the scenario file (not of its site), checked like the file's
+    (a sweep: encoders.wheel_radius_bias=0,-0.05 for Hoppenot & Colle's s. 4.2 degradation)."""
     path = resolve(name_or_path)
     ini = IniFile(path)
+    for section, key, value in parse_overrides(overrides):
+        ini.override(section, key, value)
     if ini.has("team"):
         raise ini.error("team", None, "a team scenario: load it with "
                         "team_scenario.load_team_scenario (beaconloc-sim run does)")
@@ -265,11 +298,19 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
                 raise ini.error("obstacles", key, "obstacle keys are segment1, segment2, ...")
             obstacles.append(ini.numbers("obstacles", key, 4))
             obstacle_keys.append(key)
-    # the simulator refuses what cannot happen: a path through a wall or an obstacle
-    check_path(ini, "path", trajectory, site, obstacles, obstacle_keys, realization_s,
-               kidnap_keys)
+    # the simulator refuses what cannot happen: a path through a wall of the map or an obstacle
+    walls = [list(w) for w in site.walls_m]
+    wall_names = [f"[wall{i}] of the map" for i in range(1, len(walls) + 1)]
+    check_path(ini, "path", trajectory, site, obstacles + walls, obstacle_keys + wall_names,
+               realization_s, kidnap_keys)
     if opponent is not None:
-        check_path(ini, "opponent", opponent, site, obstacles, obstacle_keys, realization_s)
+        check_path(ini, "opponent", opponent, site, obstacles + walls,
+                   obstacle_keys + wall_names, realization_s)
+    fire_s = ini.number("sonar", "fire_interval_s", 0.06, positive=True, maximum=1.0)
+    if site.sonar_count and site.sonar_count * fire_s > site.sonar_period_s + 1e-9:
+        raise ini.error("sonar", "fire_interval_s", f"{site.sonar_count} sonars fired "
+                        f"{fire_s:g} s apart do not fit in the burst period "
+                        f"{site.sonar_period_s:g} s ([sonar_ring] period_s)")
     outages = []
     for key in fault_keys["beacon_outage"]:
         vals = ini.numbers("faults", key)
@@ -374,11 +415,27 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         range_multipath_probability=ini.number("ranges", "multipath_probability", 0.0,
                                                minimum=0, maximum=1),
         range_survey_s=ini.number("ranges", "survey_s", 0.0, minimum=0, maximum=3600),
+        sonar_offset_us=ini.integer("clocks", "sonar_offset_us", 2_718_281_828, minimum=0,
+                                    maximum=2**40),
+        sonar_drift_ppm=ini.number("clocks", "sonar_drift_ppm", 25.0, minimum=-1000, maximum=1000),
+        sonar_fire_interval_s=fire_s,
+        sonar_listen_s=ini.number("sonar", "listen_s", 0.06, positive=True, maximum=1.0),
+        sonar_critical_rad=math.radians(ini.number("sonar", "critical_angle_deg", 5.0, minimum=0,
+                                                   maximum=90)),
+        sonar_reflection=ini.number("sonar", "reflection", 1.0, positive=True, maximum=1),
+        sonar_threshold=ini.number("sonar", "threshold", 0.02, minimum=0, maximum=1),
+        sonar_crosstalk=_switch(ini, "sonar", "crosstalk", True),
+        sonar_double_bounce=_switch(ini, "sonar", "double_bounce", True),
         truth_rate_hz=ini.number("output", "truth_rate_hz", 50.0, positive=True, maximum=1000),
         log_epoch_s=ini.number("output", "log_epoch_s", 1_700_000_000.0, minimum=0),
         channel=ini.raw("output", "channel", "vcan0"),
         realization_s=realization_s,
     )
+
+
+def _switch(ini: IniFile, sec: str, key: str, default: bool) -> bool:
+    """A 0/1 key."""
+    return bool(ini.integer(sec, key, int(default), minimum=0, maximum=1))
 
 
 def temperature_profile(ini: IniFile) -> np.ndarray:
@@ -417,7 +474,8 @@ def check_path(ini: IniFile, sec: str, traj: Trajectory, site: Site, obstacles,
     kidnap key for a kidnap that carries the robot there). path.first_violation."""
     v = first_violation(traj, site.room_x_m, site.room_y_m,
                         np.asarray(obstacles, dtype=float).reshape(-1, 4), until_s,
-                        obstacle_names=[f"[obstacles] {k}" for k in obstacle_keys])
+                        obstacle_names=[k if k.startswith("[") else f"[obstacles] {k}"
+                                        for k in obstacle_keys])
     if v is None:
         return
     if v.kidnap_index >= 0:

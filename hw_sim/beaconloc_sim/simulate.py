@@ -12,9 +12,10 @@ from . import can_out, crb, nodes
 from .bus import FRAME_BITS, Bus, Frames
 from .clocks import NodeClock
 from .nodes import (ODOMETRY_COLUMNS, BearingSensor, Bearings, Node, NodeStatus, RangeReceiver,
-                    Ranges, ReceiverRing, WheelEncoders)
+                    Ranges, ReceiverRing, SonarPings, SonarRing, WheelEncoders)
 from .path import wrap_angle
 from .physics import acoustics as ac
+from .physics.sonar import perpendicular_rows
 from .physics.pulses import KIND_DIRECT, Detections, Firings, make_firings, simulate_detections
 from .scenario import Scenario
 
@@ -24,13 +25,15 @@ ID_ENCODERS = WheelEncoders.frame_spec().frame_id
 ID_STATUS = NodeStatus.frame_spec().frame_id
 ID_BEARING = BearingSensor.frame_spec().frame_id
 ID_RANGE = RangeReceiver.frame_spec().frame_id
+ID_SONAR = SonarRing.frame_spec().frame_id
 __all__ = ["FRAME_BITS", "Frames", "ODOMETRY_COLUMNS", "TRUTH_COLUMNS", "SimResult", "run",
-           "run_windows", "wrap_angle", "ID_PULSE", "ID_ENCODERS", "ID_STATUS", "ID_BEARING", "ID_RANGE"]
+           "run_windows", "wrap_angle", "ID_PULSE", "ID_ENCODERS", "ID_STATUS", "ID_BEARING", "ID_RANGE",
+           "ID_SONAR"]
 # child seeds of a run (or of a window): pulses, encoders, latency, firings, bearings, ranges,
-# the beacons' survey. The bearings' is the fifth child, the ranges' the sixth and the
-# survey's the seventh, so the first ones draw what they drew before the later existed
-# (SeedSequence children depend only on their index).
-_N_SEEDS = 7
+# the beacons' survey, the sonar ring. The bearings' is the fifth child, the ranges' the
+# sixth, the survey's the seventh and the sonars' the eighth, so the first ones draw what
+# they drew before the later existed (SeedSequence children depend only on their index).
+_N_SEEDS = 8
 
 TRUTH_COLUMNS = ("t_us", "t_sim_s", "x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "sos_mps",
                  "period_s", "temperature_c", "pcrb_x_m", "pcrb_y_m", "pcrb_pos_m", "pcrb_lateral_m",
@@ -46,14 +49,15 @@ class SimResult:
     firings: Firings
     detections: Detections
     rx_clock: NodeClock               # the truth's time base: the receiver array's clock, or
-                                      # the bearing sensor's (else the range receiver's) on a
-                                      # site without ultrasonic beacons
+                                      # the bearing sensor's (else the range receiver's, else
+                                      # the sonar ring's) on a site without ultrasonic beacons
     encoder_clock: NodeClock
     pcrb_cov: np.ndarray              # (K, 8, 8) bound after each event, crb.STATE order
     pcrb_t_s: np.ndarray | None = None   # (K,) true time of each event (firings, bearings,
-                                         # range pings), s
+                                         # range pings, informative sonar pings), s
     bearings: Bearings | None = None     # every bearing measured (sent or not, and why not)
     ranges: Ranges | None = None         # every range ping (sent or not, and why not)
+    sonar: SonarPings | None = None      # every sonar ping (its reading, flags, echo kind)
 
 
 def run(scn: Scenario, *, encode: bool = True) -> SimResult:
@@ -87,7 +91,8 @@ def _prefix(res: SimResult, scn: Scenario) -> SimResult:
     return SimResult(scn, frames, truth, odometry, firings, det, res.rx_clock, res.encoder_clock,
                      res.pcrb_cov[:n_event], res.pcrb_t_s[:n_event],
                      res.bearings.select(res.bearings.t_s <= d),
-                     res.ranges.select(res.ranges.t_s <= d))
+                     res.ranges.select(res.ranges.t_s <= d),
+                     res.sonar.select(res.sonar.t_s <= d))
 
 
 def _run(scn: Scenario, *, encode: bool = True) -> SimResult:
@@ -107,6 +112,10 @@ class Carry:
     bus: Bus
     pcrb: tuple | None                       # crb.pcrb_along_path end
     last_cov: np.ndarray | None              # bound after the last event
+
+    @property
+    def sonar(self) -> SonarRing | None:
+        return next((n for n in self.nodes if isinstance(n, SonarRing)), None)
 
 
 def run_windows(scn: Scenario, window_s: float, *, encode: bool = True):
@@ -135,7 +144,7 @@ def run_windows(scn: Scenario, window_s: float, *, encode: bool = True):
 def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry | None, *,
             encode: bool) -> tuple[SimResult, Carry | None]:
     """The run (win None) or its window win = (t_a, t_b] after carry (None: the first)."""
-    rng_pulse, rng_enc, rng_lat, rng_fire, rng_bear, rng_range, rng_survey = (
+    rng_pulse, rng_enc, rng_lat, rng_fire, rng_bear, rng_range, rng_survey, rng_sonar = (
         np.random.default_rng(s) for s in seeds)
     t_a, t_b = win if win is not None else (0.0, scn.duration_s)
     if carry is None:
@@ -145,16 +154,21 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
     enc_clock = carry.wheels.clock
     # the truth's time base: the receiver array's clock (the estimator's, Kleeman's t0), or
     # the bearing sensor's on a site without one (no receiver array there), else the range
-    # receiver's
-    if scn.site.beacon_count or (carry.bearing is None and carry.ranger is None):
+    # receiver's, else the sonar ring's
+    sonar = carry.sonar
+    if scn.site.beacon_count or (carry.bearing is None and carry.ranger is None
+                                 and sonar is None):
         rx_clock = carry.ring.clock
-    else:
+    elif carry.bearing is not None or carry.ranger is not None:
         rx_clock = carry.bearing.clock if carry.bearing is not None else carry.ranger.clock
+    else:
+        rx_clock = sonar.clock
 
     firings = make_firings(scn, rng_fire, win)
     det = simulate_detections(scn, firings, rng_pulse)
     iv = nodes.Interval(scn, t_a, t_b, firings, det, rng_latency=rng_lat, rng_wheels=rng_enc,
-                        rng_bearings=rng_bear, rng_ranges=rng_range, rng_survey=rng_survey)
+                        rng_bearings=rng_bear, rng_ranges=rng_range, rng_survey=rng_survey,
+                        rng_sonar=rng_sonar)
     # a window sends what is ready before its end; the rest waits in its node for the next one
     until_s = t_b if win is not None else math.inf
     frames = carry.bus.transmit([node.release(iv, until_s) for node in carry.nodes], until_s)
@@ -167,12 +181,16 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
     pinged = carry.ranger.measured if carry.ranger is not None else Ranges.empty()
     ranged = carry.ranger.bound_events(t_b if win is not None else math.inf) \
         if carry.ranger is not None else Ranges.empty()
+    pinged_sonar = sonar.measured if sonar is not None else SonarPings.empty()
+    echoed = sonar.bound_events(t_b if win is not None else math.inf) \
+        if sonar is not None else SonarPings.empty()
     truth = _truth(scn, rx_clock, win)
-    pcrb_t, pcrb_cov, pcrb_end = _pcrb(scn, firings, det, seen, rx_clock, carry.pcrb, ranged)
+    pcrb_t, pcrb_cov, pcrb_end = _pcrb(scn, firings, det, seen, rx_clock, carry.pcrb, ranged,
+                                       echoed)
     _attach_bound(truth, pcrb_t, pcrb_cov, scn, carry.last_cov)
     odometry = carry.wheels.odometry(rx_clock)
     result = SimResult(scn, frames, truth, odometry, firings, det, rx_clock, enc_clock, pcrb_cov,
-                       pcrb_t, measured, pinged)
+                       pcrb_t, measured, pinged, pinged_sonar)
     if win is None:
         return result, None
     carry.pcrb = pcrb_end
@@ -221,20 +239,22 @@ def bound_model(scn: Scenario) -> crb.BoundModel:
 
 
 def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
-          clock: NodeClock, start: tuple | None = None, ranged: Ranges | None = None
-          ) -> tuple[np.ndarray, np.ndarray, tuple | None]:
+          clock: NodeClock, start: tuple | None = None, ranged: Ranges | None = None,
+          echoed: SonarPings | None = None) -> tuple[np.ndarray, np.ndarray, tuple | None]:
     """Bound after each measurement event: each firing with the receivers that really
     detected its direct pulse, each instant with bearings delivered (seen), each ping whose
-    direct range was delivered (ranged), in time order;
+    direct range was delivered (ranged), each sonar ping whose reading is the specular echo
+    of a map wall (echoed: its perpendicular distance, _sonar_rows), in time order;
     the event times (true, s) and the recursion's end (crb.pcrb_along_path) to go on from in
     the next window. clock: the time base (event times and t0 on it)."""
     ranged = ranged if ranged is not None else Ranges.empty()
-    if len(firings.t_s) + len(seen.t_s) + len(ranged.t_s) == 0:
+    echoed = echoed if echoed is not None else SonarPings.empty()
+    if len(firings.t_s) + len(seen.t_s) + len(ranged.t_s) + len(echoed.t_s) == 0:
         return np.zeros(0), np.zeros((0, 8, 8)), start
-    # events: the distinct instants of firings, bearings and ranges (a non-rotating sensor's
-    # scan is one event); without bearings and ranges exactly the firings
-    t_ev = np.unique(np.concatenate([firings.t_s, seen.t_s, ranged.t_s])) \
-        if len(seen.t_s) + len(ranged.t_s) else firings.t_s
+    # events: the distinct instants of firings, bearings, ranges and sonar echoes (a
+    # non-rotating sensor's scan is one event); without them exactly the firings
+    t_ev = np.unique(np.concatenate([firings.t_s, seen.t_s, ranged.t_s, echoed.t_s])) \
+        if len(seen.t_s) + len(ranged.t_s) + len(echoed.t_s) else firings.t_s
     k = len(t_ev)
     fire_ev = np.searchsorted(t_ev, firings.t_s)           # event of each firing
     is_fire = np.zeros(k, dtype=bool)
@@ -269,15 +289,36 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
         for e, j in zip(np.searchsorted(t_ev, ranged.t_s).tolist(), ranged.beacon.tolist()):
             range_rows[e].append(scn.site.range_beacons_m[j])
         range_rows = [np.array(r).reshape(-1, 3) for r in range_rows]
+    sonar_rows = _sonar_rows(scn, echoed, t_ev, states) if len(echoed.t_s) else None
     wl, wr = scn.trajectory.wheel_travel(t_ev)
     args = (states, scn.site.beacons_m, beacon, [np.array(h) for h in heard], wl, wr,
             bound_model(scn))
     kw = dict(event_time_s=t_time, fires=is_fire, bearing_beacons_m=bearing_rows,
-              range_beacons_m=range_rows)
+              range_beacons_m=range_rows, sonar_rows=sonar_rows)
     if start is None:
         return t_ev, crb.pcrb_along_path(*args, **kw), None
     cov, end = crb.pcrb_along_path(*args, start=start, **kw)
     return t_ev, cov, end
+
+
+def _sonar_rows(scn: Scenario, echoed: SonarPings, t_ev: np.ndarray, states: np.ndarray
+                ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per event, the sonar readings' rows d(range)/d(x, y, theta, s) (n, 4) and variances (n,):
+    the specular echo of a map wall, range = r c_node / s (the node converts the round trip
+    with its own speed of sound c_node, the sound travels at the true s), r the perpendicular
+    distance from the sonar to the wall's line (physics.sonar.perpendicular_rows), variance
+    sigma(r)^2 (the site's [sonar_ring]) plus the 1 mm quantisation (1 mm^2 / 12)."""
+    site = scn.site
+    c_node = site.speed_of_sound_mps
+    rows: list[list] = [[] for _ in range(len(t_ev))]
+    variances: list[list] = [[] for _ in range(len(t_ev))]
+    for e, i in zip(np.searchsorted(t_ev, echoed.t_s).tolist(), range(len(echoed.t_s))):
+        x, y, th, s = states[e, crb.IX], states[e, crb.IY], states[e, crb.ITH], states[e, crb.IS]
+        r, grad = perpendicular_rows(x, y, th, site.sonar_mounts[echoed.sensor[i]],
+                                     site.walls_m[echoed.wall[i]])
+        rows[e].append(np.append(grad * c_node / s, -r * c_node / s ** 2))
+        variances[e].append(float(site.sonar_sigma_m(r)) ** 2 + 1e-6 / 12)
+    return [(np.array(r).reshape(-1, 4), np.array(v)) for r, v in zip(rows, variances)]
 
 
 def _attach_bound(truth, event_t_s: np.ndarray, cov: np.ndarray, scn: Scenario,

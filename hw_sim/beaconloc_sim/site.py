@@ -94,6 +94,15 @@ class Site:
     sigma_range_per_m: float         # σ growth per metre of range (σ = sigma_m + this · r)
     range_max_m: float               # no pulse heard beyond, m
     range_ping_period_s: float       # the leader pings one beacon every this long, s
+    # the sonar ring (Hoppenot & Colle 1997) and the map it is corrected against; none when 0
+    sonar_mounts: np.ndarray         # (S, 4): x_m, y_m (body frame), axis angle rad (CCW), used 0/1
+    sonar_period_s: float            # burst period, s
+    sonar_beam_width_rad: float      # full beam width, rad
+    sonar_min_range_m: float         # blanking, m
+    sonar_max_range_m: float         # largest range, m
+    sonar_sigma_range_m: float       # range σ floor, m: σ(r) = max(this, rel · r)
+    sonar_sigma_range_rel: float     # range σ relative to the range
+    walls_m: np.ndarray              # (W, 4): x1, y1, x2, y2 of each map segment, site frame, m
 
     @property
     def beacon_count(self) -> int:
@@ -107,6 +116,15 @@ class Site:
     def range_beacon_count(self) -> int:
         return int(self.range_beacons_m.shape[0])
 
+    @property
+    def sonar_count(self) -> int:
+        return int(self.sonar_mounts.shape[0])
+
+    def sonar_sigma_m(self, range_m):
+        """σ of a sonar range, m: σ(r) = max(sigma_range_m, sigma_range_rel · r) (issue 12;
+        Polaroid-class: about 1 % of the range with a few cm floor)."""
+        return np.maximum(self.sonar_sigma_range_m, self.sonar_sigma_range_rel * np.asarray(range_m))
+
     def receiver_angles_rad(self) -> np.ndarray:
         """Body-frame angle of each receiver: first_angle + index * 2*pi/count (DBC comment)."""
         return self.first_angle_rad + np.arange(self.rx_count) * (2.0 * math.pi / self.rx_count)
@@ -115,16 +133,34 @@ class Site:
 def _read_items(ini: IniFile, schema: Schema, section: Section) -> np.ndarray:
     """The rows of a per-item section ([beacon1]..[beaconN]): (count, keys) array, N the
     count key of the section it is indexed by."""
-    count = _read_key(ini, section.indexed_by, schema.section(section.indexed_by).key("count"))
+    count_key = schema.count_key_of(section)
+    count = _read_key(ini, section.indexed_by, count_key)
     rows = []
     for i in range(1, count + 1):
         sec = f"{section.prefix}{i}"
         if not ini.has(sec):
-            raise ConfigError(f"{ini.where(section.indexed_by, 'count')}: count = {count} "
+            raise ConfigError(f"{ini.where(section.indexed_by, count_key.name)}: "
+                              f"{count_key.name} = {count} "
                               f"but [{sec}] is missing")
         ini.check_known(sec, {k.name for k in section.keys})
         rows.append([_read_key(ini, sec, k) for k in section.keys])
     return np.array(rows, dtype=float).reshape(count, len(section.keys))
+
+
+def _sonar_mounts(rows: np.ndarray) -> np.ndarray:
+    """[sonarN] rows (x_m, y_m, angle_deg, used) -> (x_m, y_m, angle_rad, used)."""
+    out = rows.copy()
+    out[:, 2] = np.radians(rows[:, 2])
+    return out
+
+
+def _check_walls(ini: IniFile, walls_m: np.ndarray) -> None:
+    """A map segment must have a length (its ends are finite: the reader refuses others).
+    The error names the segment's second end, the key that would have to change."""
+    for i, (x1, y1, x2, y2) in enumerate(walls_m, start=1):
+        if math.hypot(x2 - x1, y2 - y1) < 1e-6:
+            raise ini.error(f"wall{i}", "x2_m", f"zero-length segment ({x1:g}, {y1:g}) to "
+                            f"({x2:g}, {y2:g}): a wall needs two distinct ends")
 
 
 def load_site(path: str | Path, *, team: bool = False) -> Site:
@@ -146,7 +182,8 @@ def load_site(path: str | Path, *, team: bool = False) -> Site:
             section, n = item
             if n > items[section.name].shape[0]:
                 raise ini.error(sec, None, f"{section.prefix.replace('_', ' ')} beyond "
-                                f"[{section.indexed_by}] count = {items[section.name].shape[0]}")
+                                f"[{section.indexed_by}] {section.count_key} = "
+                                f"{items[section.name].shape[0]}")
         elif sec not in plain and sec not in not_ours:
             raise ini.error(sec, None, "unknown section (a site file holds "
                             f"{schema.sections_phrase('N')})")
@@ -195,11 +232,26 @@ def load_site(path: str | Path, *, team: bool = False) -> Site:
         sigma_range_per_m=v(("range_sensor", "sigma_per_m")),
         range_max_m=v(("range_sensor", "max_range_m")),
         range_ping_period_s=v(("range_sensor", "ping_period_s")),
+        sonar_mounts=_sonar_mounts(items["sonarN"]),
+        sonar_period_s=v(("sonar_ring", "period_s")),
+        sonar_beam_width_rad=math.radians(v(("sonar_ring", "beam_width_deg"))),
+        sonar_min_range_m=v(("sonar_ring", "min_range_m")),
+        sonar_max_range_m=v(("sonar_ring", "max_range_m")),
+        sonar_sigma_range_m=v(("sonar_ring", "sigma_range_m")),
+        sonar_sigma_range_rel=v(("sonar_ring", "sigma_range_rel")),
+        walls_m=items["wallN"],
     )
+    _check_walls(ini, site.walls_m)
+    if site.sonar_min_range_m >= site.sonar_max_range_m:
+        raise ini.error("sonar_ring", "min_range_m", "must be below max_range_m")
     if site.beacon_count == 0 and site.bearing_beacon_count == 0 and \
-            site.range_beacon_count == 0 and not team:
+            site.range_beacon_count == 0 and site.sonar_count == 0 and not team:
         raise ini.error("beacons", "count", "a site needs beacons: ultrasonic ([beacons] count), "
-                        "bearing ([bearing_beacons] count) or range ([range_beacons] count)")
+                        "bearing ([bearing_beacons] count) or range ([range_beacons] count); "
+                        "or a sonar ring ([sonar_ring] count) and its [map]")
+    if site.sonar_count > 0 and site.walls_m.shape[0] == 0:
+        raise ini.error("map", "walls", "a sonar ring ([sonar_ring] count > 0) needs a map: "
+                        "walls > 0")
     if site.double_pulse_spacing_s <= site.burst_length_s:
         raise ini.error("beacons", "double_pulse_spacing_s",
                         "must exceed burst_length_s (the two bursts would merge)")

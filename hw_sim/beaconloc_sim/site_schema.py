@@ -103,6 +103,7 @@ class Section:
     doc: str
     keys: tuple[Key, ...]
     indexed_by: str | None = None   # per-item "<prefix>N": the section whose count says how many
+    count_key: str = "count"        # per-item: that section's key giving the count ([map] walls)
 
     @property
     def prefix(self) -> str:
@@ -141,7 +142,11 @@ class Schema:
 
     def max_items(self, section: Section) -> int:
         """The largest count of a per-item section's items (its count key's range)."""
-        return int(self.section(section.indexed_by).key("count").range.hi)
+        return int(self.count_key_of(section).range.hi)
+
+    def count_key_of(self, section: Section) -> Key:
+        """The key giving a per-item section's count ([beacons] count, [map] walls)."""
+        return self.section(section.indexed_by).key(section.count_key)
 
     def indexed(self) -> list[Section]:
         """The per-item sections ([beaconN], [bearing_beaconN])."""
@@ -235,7 +240,11 @@ def parse_schema(text: str) -> Schema:
         indexed_by = raw.get("indexed_by")
         if indexed_by is not None and not raw["name"].endswith("N"):
             raise ValueError(f"[{raw['name']}]: a per-item section's name ends in N")
-        sections.append(Section(raw["name"], read_by, raw.get("doc", ""), keys, indexed_by))
+        count_key = raw.get("count_key", "count")
+        if count_key != "count" and indexed_by is None:
+            raise ValueError(f"[{raw['name']}]: count_key without indexed_by")
+        sections.append(Section(raw["name"], read_by, raw.get("doc", ""), keys, indexed_by,
+                                count_key))
     if len({s.name for s in sections}) != len(sections):
         raise ValueError("a section declared twice")
     for s in sections:
@@ -247,11 +256,14 @@ def parse_schema(text: str) -> Schema:
     schema = Schema(tuple(sections))
     for s in schema.indexed():
         try:
-            count = schema.section(s.indexed_by).key("count")
+            count = schema.count_key_of(s)
         except KeyError:
-            raise ValueError(f"[{s.name}]: indexed_by {s.indexed_by!r} has no count key") from None
+            raise ValueError(f"[{s.name}]: indexed_by {s.indexed_by!r} has no "
+                             f"{s.count_key} key") from None
         if count.range is None and count.sim_range is None:
-            raise ValueError(f"[{s.indexed_by}] count: a range is needed (the largest N)")
+            raise ValueError(f"[{s.indexed_by}] {s.count_key}: a range is needed (the largest N)")
+        if count.type != "int":
+            raise ValueError(f"[{s.indexed_by}] {s.count_key}: a count is an int")
     return schema
 
 
@@ -322,7 +334,7 @@ def c_header(schema: Schema) -> str:
                     "bridge_config count member, largest count): the per-item sections "
                     "[<prefix>N], N = 1..count; their keys are SITE_KEYS_<section>",
                     [f"X({s.name}, {s.prefix}, {_c_struct(s.name)}, {s.indexed_by}, "
-                     f"{schema.section(s.indexed_by).key('count').bridge}, "
+                     f"{schema.count_key_of(s).bridge}, "
                      f"{schema.max_items(s)})" for s in items])
     lib_keys = [k for s in bridge_sections if not s.indexed_by for k in s.keys if k.lib]
     out += _c_macro("SITE_LIB_FIELDS", "X(section, key, type, bridge_config member, bl_config "
@@ -350,6 +362,9 @@ def c_header(schema: Schema) -> str:
     out += _c_macro("SITE_SIM_SECTIONS", "X(section): the simulator's alone (the bridge skips them)",
                     [f"X({s.name})" for s in schema.sections if "bridge" not in s.read_by])
     out += [f"#define SITE_MAX_{s.prefix.upper()}S {schema.max_items(s)}"
+            for s in bridge_sections if s.indexed_by]
+    out += ["/* the count key of each per-item section's count section ([map] walls) */"]
+    out += [f"#define SITE_ITEM_COUNT_KEY_{s.prefix} {_c_string(s.count_key)}"
             for s in bridge_sections if s.indexed_by]
     out += [
             f"#define SITE_MAX_RECEIVERS {int(schema.section('receivers').key('count').range.hi)}",

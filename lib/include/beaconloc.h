@@ -10,6 +10,7 @@
 #include "beaconloc/config.h"
 #include "beaconloc/fusion.h"
 #include "beaconloc/solver.h"
+#include "beaconloc/sonar.h"
 #include "beaconloc/filter.h"
 #include "beaconloc/team.h"
 #include "beaconloc/filter_model.h"

@@ -202,6 +202,9 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->initial_theta_rad = real(0.0);
     cfg->reset_sigma_theta_rad = real(1.0);
     cfg->ring_heading = 1;
+#if BL_WITH_SONAR
+    cfg->sonar_site = 0;  // kleeman-lab has no sonar ring
+#endif
     cfg->initial_sigma_v_mps = real(0.5);
     cfg->initial_sigma_omega_radps = real(0.5);
     cfg->max_predict_gap_s = real(2.0);
@@ -223,6 +226,18 @@ bool beacons_span_plane(const bl_beacon *b, uint32_t n)
                 if (std::fabs(ax * by - ay * bx) * real(0.5) > real(1e-3)) return true;
             }
     return false;
+}
+
+// A sonar site (config.h sonar_site): no beacon of any kind is needed, the
+// sonar ring corrects the odometry against the map (filter.h, BL_WITH_SONAR).
+bool sonar_site(const bl_config *c)
+{
+#if BL_WITH_SONAR
+    return c->sonar_site == 1;
+#else
+    (void)c;
+    return false;
+#endif
 }
 
 // A team site (config.h range.team_site): no fixed beacon of any kind is
@@ -252,7 +267,7 @@ bool bearing_beacons_ok(const bl_config *c)
         }
     }
     // (a range-only start needs 3 range beacons: config.h, range_beacon_count)
-    return c->beacon_count > 0 || c->range_beacon_count >= 3 || team_site(c) ||
+    return c->beacon_count > 0 || c->range_beacon_count >= 3 || team_site(c) || sonar_site(c) ||
            beacons_span_plane(c->bearing_beacons, c->bearing_beacon_count);
 }
 #endif
@@ -273,7 +288,7 @@ bool range_beacons_ok(const bl_config *c)
             if (!(dx * dx + dy * dy + dz * dz > real(1e-6))) return false;
         }
     }
-    return c->beacon_count > 0 || c->bearing_beacon_count >= 3 || team_site(c) ||
+    return c->beacon_count > 0 || c->bearing_beacon_count >= 3 || team_site(c) || sonar_site(c) ||
            beacons_span_plane(c->range_beacons, c->range_beacon_count);
 }
 #endif
@@ -314,13 +329,13 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     }
     BL_CHECK(c->beacon_count == 0 || beacons_span_plane(c->beacons, c->beacon_count), "beacons");
     // At least one kind of beacon; without pulses the bearings start the filter (>= 3).
-    BL_CHECK(c->bearing_beacon_count <= BL_MAX_BEACONS &&
-                 (c->beacon_count > 0 || c->bearing_beacon_count >= 3 || c->range_beacon_count > 0 || team_site(c)),
+    BL_CHECK(c->bearing_beacon_count <= BL_MAX_BEACONS && (c->beacon_count > 0 || c->bearing_beacon_count >= 3 ||
+                                                           c->range_beacon_count > 0 || team_site(c) || sonar_site(c)),
              "bearing_beacon_count");
     // A range-only site (no pulse, no bearing beacons) starts from the
     // trilateration of its ranges: >= 3 range beacons.
-    BL_CHECK(c->range_beacon_count <= BL_MAX_BEACONS &&
-                 (c->beacon_count > 0 || c->bearing_beacon_count > 0 || c->range_beacon_count >= 3 || team_site(c)),
+    BL_CHECK(c->range_beacon_count <= BL_MAX_BEACONS && (c->beacon_count > 0 || c->bearing_beacon_count > 0 ||
+                                                         c->range_beacon_count >= 3 || team_site(c) || sonar_site(c)),
              "range_beacon_count");
 #if !BL_WITH_RANGES
     // Without ranges (common.h BL_WITH_RANGES 0) a site with range beacons
@@ -384,6 +399,9 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     BL_CHECK(is_finite(c->initial_theta_rad) && std::fabs(c->initial_theta_rad) <= real(100), "initial_theta_rad");
     BL_CHECK(is_finite(c->reset_sigma_theta_rad) && c->reset_sigma_theta_rad > real(0), "reset_sigma_theta_rad");
     BL_CHECK(c->ring_heading <= 1, "ring_heading");
+#if BL_WITH_SONAR
+    BL_CHECK(c->sonar_site <= 1, "sonar_site");
+#endif
     BL_CHECK(is_finite(c->initial_sigma_v_mps) && c->initial_sigma_v_mps > real(0), "initial_sigma_v_mps");
     BL_CHECK(is_finite(c->initial_sigma_omega_radps) && c->initial_sigma_omega_radps > real(0),
              "initial_sigma_omega_radps");

@@ -251,6 +251,12 @@ void fill_estimate(const bl_filter *f, const XV &x, const PM &P, int64_t t_us, b
         est->team_range_rejected[k] = f->team_rejected_[k];
     }
 #endif
+#if BL_WITH_SONAR
+    est->sonar_accepted = f->sonar_accepted_;
+    est->sonar_rejected = f->sonar_rejected_;
+    est->sonar_unmatched = f->sonar_unmatched_;
+    est->sonar_dropped = f->sonar_dropped_;
+#endif
     if (!est->started) return;
     est->x_m = x(X);
     est->y_m = x(Y);

@@ -237,10 +237,10 @@ static void test_open_sets_up_socket(void **state)
     assert_int_equal(can_in_open(&ci), 0);
     assert_int_equal(ci.fd, FAKE_FD);
     assert_int_equal(bound_ifindex, 42);
-    assert_int_equal(seen_filter_count, 7);
-    canid_t ids[7] = { seen_filters[0].can_id, seen_filters[1].can_id,
+    assert_int_equal(seen_filter_count, 8);
+    canid_t ids[8] = { seen_filters[0].can_id, seen_filters[1].can_id,
                        seen_filters[2].can_id, seen_filters[3].can_id, seen_filters[4].can_id,
-                       seen_filters[5].can_id, seen_filters[6].can_id };
+                       seen_filters[5].can_id, seen_filters[6].can_id, seen_filters[7].can_id };
     assert_int_equal(ids[0], 0x100);
     assert_int_equal(ids[1], 0x110);
     assert_int_equal(ids[2], 0x120);
@@ -248,7 +248,8 @@ static void test_open_sets_up_socket(void **state)
     assert_int_equal(ids[4], 0x130); /* RANGE */
     assert_int_equal(ids[5], 0x131); /* TRACK_ENCODERS */
     assert_int_equal(ids[6], 0x133); /* BEACON_SURVEY */
-    for (int i = 0; i < 7; i++)
+    assert_int_equal(ids[7], 0x150); /* SONAR */
+    for (int i = 0; i < 8; i++)
         assert_int_equal(seen_filters[i].can_mask, CAN_SFF_MASK | CAN_EFF_FLAG);
     assert_int_equal(seen_err_mask, CAN_ERR_BUSOFF | CAN_ERR_CRTL | CAN_ERR_RESTARTED);
     assert_int_equal(seen_timestamp, 1);

@@ -13,6 +13,7 @@
 #include <cmocka.h>
 
 #include "log.h"
+#include "sonar.h"
 #include "stats.h"
 
 static struct latency_hist h;
@@ -160,13 +161,16 @@ static void test_json_report(void **state)
     assert_non_null(strstr(buf, "\"duplicates\": 10,"));
     assert_non_null(strstr(buf, "\"duplicates_per_frame\": {\"pulse_detection\": 6, "
                                 "\"wheel_encoders\": 0, \"node_status\": 1, \"bearing\": 0, "
-                                "\"range\": 3, \"track_encoders\": 0, \"beacon_survey\": 0}"));
+                                "\"range\": 3, \"track_encoders\": 0, \"beacon_survey\": 0, "
+                                "\"sonar\": 0}"));
     assert_non_null(strstr(buf, "\"frames_received_by_id\": {\"0x100\": 11, \"0x110\": 22, "
-                                "\"0x120\": 0, \"0x140\": 33, \"0x130\": 44, \"0x131\": 0, \"0x133\": 0}"));
+                                "\"0x120\": 0, \"0x140\": 33, \"0x130\": 44, \"0x131\": 0, \"0x133\": 0, "
+                                "\"0x150\": 0}"));
     assert_non_null(strstr(buf, "\"out_of_order\": 10,"));
     assert_non_null(strstr(buf, "\"out_of_order_per_frame\": {\"pulse_detection\": 0, "
                                 "\"wheel_encoders\": 8, \"node_status\": 0, \"bearing\": 2, "
-                                "\"range\": 0, \"track_encoders\": 0, \"beacon_survey\": 0}"));
+                                "\"range\": 0, \"track_encoders\": 0, \"beacon_survey\": 0, "
+                                "\"sonar\": 0}"));
     assert_non_null(strstr(buf, "\"bearings_fused\": 30,"));
     assert_non_null(strstr(buf, "\"bearings_rejected\": 3,"));
     assert_non_null(strstr(buf, "\"bearings_buffered\": 4,"));
@@ -272,12 +276,60 @@ static void test_status_line_text(void **state)
     char text[1024];
     captured_log(f, text, sizeof text);
     assert_string_equal(text,
-                        "info: final: frames 1291 (pulse 181 enc 1000 status 20 brg 40 rng 50 trk 0 srv 0) "
+                        "info: final: frames 1291 (pulse 181 enc 1000 status 20 brg 40 rng 50 trk 0 srv 0 "
+                        "snr 0) "
                         "bad 1 "
                         "unknown 2 range 3 lost 4 dup 5 late 6 kdrop 7 errfr 8 | pulses ok 69 "
                         "rej 9 | bearings ok 35 rej 2 unk 3 | ranges ok 44 rej 1 unk 2 bad 3 | "
                         "x=5.369 y=2.848 | odom 284 werr 11 | latency p50 8 p99 21 us "
                         "(interval p50 7 p99 -1 us)\n");
+    /* a sonar site adds its part after the ranges' (sonar.h counters) */
+    static struct sonar s;
+    s.on = true;
+    s.c = (struct sonar_counters){.fused = 120, .rejected = 7, .unmatched = 30,
+                                  .unknown_sensor = 1, .out_of_range = 2, .stale = 3,
+                                  .refused = 4, .corrected = 9, .partial = 1};
+    r.sonar = &s;
+    f = capture_log();
+    stats_status_line(&r, "final", "x=5.369 y=2.848");
+    captured_log(f, text, sizeof text);
+    assert_non_null(strstr(text, "| ranges ok 44 rej 1 unk 2 bad 3 | sonar ok 120 rej 7 unm 30 "
+                                 "bad 10 corr 10 | x=5.369 y=2.848 |"));
+}
+
+/* The "sonar" object of the JSON: method, counters, time per correction. */
+static void test_json_sonar(void **state)
+{
+    (void)state;
+    struct frame_counters fc;
+    frame_counters_init(&fc);
+    static struct sonar s;
+    s.on = true;
+    s.method = SONAR_MEMORY;
+    s.ring.count = 8;
+    s.map.count = 9;
+    s.c = (struct sonar_counters){.no_echo = 11, .burst_ranges = 500, .bursts = 80,
+                                  .corrected = 70, .uncorrected = 10, .timed = 4,
+                                  .time_us_sum = 100.0, .time_us_max = 40.0};
+    struct stats_report r = {.frames = &fc, .sonar = &s};
+    char path[] = "/tmp/test_stats_XXXXXX";
+    int fd = mkstemp(path);
+    close(fd);
+    assert_int_equal(stats_write_json(&r, path), 0);
+    FILE *f = fopen(path, "r");
+    char buf[8192];
+    size_t n = fread(buf, 1, sizeof buf - 1, f);
+    buf[n] = '\0';
+    fclose(f);
+    unlink(path);
+    assert_non_null(strstr(buf, "\"sonar\": {\"method\": \"memory\", \"sensors\": 8, "
+                                "\"walls\": 9, "));
+    assert_non_null(strstr(buf, "\"no_echo\": 11,"));
+    assert_non_null(strstr(buf, "\"burst_ranges\": 500, \"bursts\": 80, \"corrected\": 70,"));
+    assert_non_null(strstr(buf, "\"uncorrected\": 10,"));
+    /* 100 us over 4 bursts */
+    assert_non_null(strstr(buf, "\"timed_bursts\": 4, \"us_per_correction\": 25.000, "
+                                "\"us_per_correction_max\": 40.000}"));
 }
 
 int main(void)
@@ -287,6 +339,7 @@ int main(void)
         cmocka_unit_test(test_quantiles_log_bins),
         cmocka_unit_test(test_interval_close_resets),
         cmocka_unit_test(test_json_report),
+        cmocka_unit_test(test_json_sonar),
         cmocka_unit_test(test_log_repeats_summarised),
         cmocka_unit_test(test_status_line_text),
     };

@@ -355,7 +355,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                             msg.id == BEACONLOC_CAN_NODE_STATUS_FRAME_ID ||
                             msg.id == BEACONLOC_CAN_BEARING_FRAME_ID ||
                             msg.id == BEACONLOC_CAN_RANGE_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_TRACK_ENCODERS_FRAME_ID),
+                            msg.id == BEACONLOC_CAN_TRACK_ENCODERS_FRAME_ID ||
+                            msg.id == BEACONLOC_CAN_BEACON_SURVEY_FRAME_ID ||
+                            msg.id == BEACONLOC_CAN_SONAR_FRAME_ID),
                        "FRAME_OK for id 0x%x len %u flags 0x%x", (unsigned)msg.id,
                        msg.len, msg.flags);
             FUZZ_CHECK(f.kind >= 0 && f.kind < FRAME_KIND_COUNT &&

@@ -1,6 +1,6 @@
 /* cmocka tests of the per-source build switches (common.h): built against
  * the double, float and sanitized libraries (BL_WITH_BEARINGS 1,
- * BL_WITH_RANGES 1) and against build/lib/nobearing/ (both 0, lib/lib.mk),
+ * BL_WITH_RANGES 1, BL_WITH_SONAR 1) and against build/lib/nobearing/ (all 0, lib/lib.mk),
  * so each assertion
  * below checks the build it runs in. */
 #include <stdarg.h>
@@ -110,6 +110,34 @@ static void test_team_site(void **state)
 #endif
 }
 
+/* A sonar-only site (no beacons, sonar_site 1): valid with the sonar ring
+ * built in (BL_WITH_SONAR); without it there is no sonar_site, no sonar
+ * API, no sonar counters, and a site without beacons is refused. */
+static void test_sonar_site(void **state)
+{
+    (void)state;
+    bl_config c;
+    assert_int_equal(bl_config_default(&c), BL_OK);
+    c.beacon_count = 0;
+    const char *field = "untouched";
+#if BL_WITH_SONAR
+    c.sonar_site = 1;
+    assert_int_equal(bl_config_check(&c, &field), BL_OK);
+    c.sonar_site = 2;
+    assert_int_equal(bl_config_check(&c, &field), BL_ECONFIG);
+    bl_estimate e;
+    e.sonar_accepted = 0;
+    assert_int_equal(e.sonar_accepted, 0);
+    bl_pinpoint_params p;
+    assert_int_equal(bl_pinpoint_default(&p), BL_OK);
+#else
+    /* no sonar_site to declare: a site without beacons is refused */
+    assert_int_equal(bl_config_check(&c, &field), BL_ECONFIG);
+    assert_non_null(field);
+    assert_string_equal(field, "bearing_beacon_count");
+#endif
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -117,6 +145,7 @@ int main(void)
         cmocka_unit_test(test_pulse_site_with_range_beacons),
         cmocka_unit_test(test_pulse_localizer_inits),
         cmocka_unit_test(test_team_site),
+        cmocka_unit_test(test_sonar_site),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -44,11 +44,16 @@ def test_builtin_scenarios_all_load():
             assert scn.site.range_beacon_count == 4 and scn.site.bearing_beacon_count == 0
             # the self-surveyed site: its beacons range each other at start
             assert (scn.range_survey_s > 0) == (scn.site.name == "marvelmind-survey")
+        elif scn.site.name == "hoppenot-room":   # Hoppenot & Colle: sonar ring + map (issue 12)
+            assert scn.duration_s == 40 and scn.site.beacon_count == 0
+            assert scn.site.sonar_count == 8 and scn.site.walls_m.shape == (5, 4)
+            assert scn.obstacles_m.shape[0] >= 3      # beyond the door: not in the map
         else:
             assert scn.duration_s == 120 and scn.site.beacon_count == 6
     assert {"eurobot", "eurobot-outage20", "eurobot-outage50", "eurobot-opponent"} <= set(names)
     assert {"marvelmind", "marvelmind-multipath", "marvelmind-survey"} <= set(names)
     assert {"team-static", "team-leapfrog"} <= set(names)
+    assert {"hoppenot-room", "hoppenot-obstacle"} <= set(names)
 
 
 def test_bad_site_number_names_file_line_key(make_scenario, tmp_path):

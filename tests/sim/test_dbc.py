@@ -82,7 +82,7 @@ def test_frame_table_comes_from_the_dbc():
     from beaconloc_sim.nodes.track_encoders import TRACK_TICK_WRAP, TrackEncoders
     from beaconloc_sim.nodes.beacon_survey import BeaconSurvey
     kinds = {nodes.ReceiverRing, nodes.WheelEncoders, nodes.NodeStatus, RangeModule,
-             TrackEncoders, BeaconSurvey}
+             TrackEncoders, BeaconSurvey, nodes.SonarRing}
     for kind in kinds:
         msg = db.get_message_by_name(kind.message)
         counter = msg.get_signal_by_name("Counter")
@@ -90,7 +90,8 @@ def test_frame_table_comes_from_the_dbc():
     assert {k.frame_spec().counter_modulo for k in kinds} == {8, 16}
     assert dbc.message_names() == {0x100: "PULSE_DETECTION", 0x110: "WHEEL_ENCODERS",
                                    0x120: "NODE_STATUS", 0x130: "RANGE", 0x131: "TRACK_ENCODERS",
-                                   0x132: "TEAM_COMMAND", 0x133: "BEACON_SURVEY", 0x140: "BEARING"}
+                                   0x132: "TEAM_COMMAND", 0x133: "BEACON_SURVEY", 0x140: "BEARING",
+                                   0x150: "SONAR"}
     assert TRACK_TICK_WRAP == dbc.signal_modulo("TRACK_ENCODERS", "RightTicks") == 1 << 12
     from beaconloc_sim.clocks import WRAP_US
     from beaconloc_sim.encoders import TICK_WRAP
@@ -100,4 +101,27 @@ def test_frame_table_comes_from_the_dbc():
     package = Path(dbc.__file__).parent
     for path in sorted(package.rglob("*.py")):
         code = re.sub(r'""".*?"""|#[^\n]*', "", path.read_text(), flags=re.DOTALL)
-        assert not re.search(r"\b(0x1[0-5][0-9a-fA-F]|256|272|288|304|307|320|1 << 14|\(1 << 3\))\b", code), path
+        assert not re.search(r"\b(0x1[0-5][0-9a-fA-F]|256|272|288|304|307|320|336|1 << 14|\(1 << 3\))\b", code), path
+
+
+def test_sonar_frame_layout_and_round_trip():
+    """SONAR (0x150, issue 12): the shared interface's bit layout, and a reading with its flags
+    round-trips through cantools."""
+    db = cantools.database.load_file(str(dbc_path()))
+    msg = db.get_message_by_name("SONAR")
+    assert msg.frame_id == 0x150 and msg.length == 8 and msg.senders == ["SONAR_RING"]
+    layout = {s.name: (s.start, s.length, s.scale, s.unit or "") for s in msg.signals}
+    assert layout == {"NodeTime": (0, 32, 1, "us"), "Sensor": (32, 4, 1, ""),
+                      "Range": (36, 14, 1, "mm"), "Amplitude": (50, 8, 1, ""),
+                      "Flags": (58, 2, 1, ""), "Counter": (60, 4, 1, "")}
+    assert all(not s.is_signed and s.byte_order == "little_endian" for s in msg.signals)
+    reading = {"NodeTime": 4_294_000_123, "Sensor": 6, "Range": 2345, "Amplitude": 200,
+               "Flags": 0, "Counter": 15}
+    data = msg.encode(reading)
+    assert msg.decode(data) == reading
+    # the bits by hand: Range 2345 mm sits in bits 36..49, Flags MAX_RANGE (2) in 58..59
+    word = int.from_bytes(data, "little")
+    assert (word >> 36) & 0x3FFF == 2345 and (word >> 32) & 0xF == 6
+    flagged = msg.encode(dict(reading, Flags=2, Range=0, Amplitude=0))
+    assert (int.from_bytes(flagged, "little") >> 58) & 0x3 == 2
+    assert msg.decode(flagged)["Flags"] == 2

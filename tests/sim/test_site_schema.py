@@ -89,20 +89,23 @@ def test_schema_sections_in_file_order():
     assert [s.name for s in SCHEMA.sections] == [
         "site", "beacons", BEACON_SECTION, "receivers", "bearing_beacons", "bearing_beaconN",
         "bearing_sensor", "range_beacons", "range_beaconN", "range_sensor", "robot", "noise",
-        "team", "tuning", "bridge"]
+        "sonar_ring", "sonarN", "map", "wallN", "team", "tuning", "bridge"]
     assert SCHEMA.sections_phrase("N") == (
         "[site], [beacons], [beacon1]..[beaconN], [receivers], [bearing_beacons], "
         "[bearing_beacon1]..[bearing_beaconN], [bearing_sensor], [range_beacons], "
-        "[range_beacon1]..[range_beaconN], [range_sensor], [robot], [noise], [team], [tuning], "
-        "[bridge]")
+        "[range_beacon1]..[range_beaconN], [range_sensor], [robot], [noise], [sonar_ring], "
+        "[sonar1]..[sonarN], [map], [wall1]..[wallN], [team], [tuning], [bridge]")
     assert "[beacon1]..[beacon16]" in SCHEMA.sections_phrase()
     assert "[bearing_beacon1]..[bearing_beacon15]" in SCHEMA.sections_phrase()
+    assert "[sonar1]..[sonar15]" in SCHEMA.sections_phrase()
+    assert "[wall1]..[wall64]" in SCHEMA.sections_phrase()   # [map] walls, not count
 
 
 @pytest.mark.parametrize("header, item", [
     ("beacon1", ("beaconN", 1)), ("Beacon16", ("beaconN", 16)), ("beacon17", ("beaconN", 17)),
     ("bearing_beacon3", ("bearing_beaconN", 3)), ("beacon0", None), ("beacon01", None),
-    ("beacons", None), ("beacon", None), ("bearing_beacons", None), ("bearing_beacon", None)])
+    ("beacons", None), ("beacon", None), ("bearing_beacons", None), ("bearing_beacon", None),
+    ("sonar_ring", None), ("sonar3", ("sonarN", 3)), ("wall64", ("wallN", 64)), ("walls", None)])
 def test_item_sections_by_header(header, item):
     got = SCHEMA.item_of(header)
     assert (None if got is None else (got[0].name, got[1])) == item
@@ -261,6 +264,36 @@ z_m = 2.0
 sigma_m = 0.008
 """
 
+SONAR_TEXT = """
+[sonar_ring]
+count = 2
+
+[sonar1]
+x_m = 0.2
+y_m = 0.0
+angle_deg = 0
+
+[sonar2]
+x_m = 0.1
+y_m = 0.1
+angle_deg = 45
+
+[map]
+walls = 2
+
+[wall1]
+x1_m = 0.0
+y1_m = 0.0
+x2_m = 6.0
+y2_m = 0.0
+
+[wall2]
+x1_m = 6.0
+y1_m = 0.0
+x2_m = 6.0
+y2_m = 4.0
+"""
+
 
 def _file_value(section: str, key: str, text: str) -> float:
     for sec, k, v in _ini_text_keys(text):
@@ -280,14 +313,15 @@ def _nudged(k) -> str:
     return repr(float(v) * 1.01)
 
 
+COUNT_KEYS = {(s.indexed_by, s.count_key) for s in SCHEMA.indexed()}
 SIM_READ = [(s.name, k) for s in SCHEMA.sections if "sim" in s.read_by for k in s.keys
-            if k.sim in ("required", "optional") and k.numeric and k.name != "count"]
+            if k.sim in ("required", "optional") and k.numeric and (s.name, k.name) not in COUNT_KEYS]
 
 
 @pytest.mark.parametrize("section, key", SIM_READ, ids=[f"{s}.{k.name}" for s, k in SIM_READ])
 def test_simulator_reads_every_schema_key(tmp_path, section, key):
     """A key the schema gives the simulator changes the simulated site (no key dropped)."""
-    text = SITE_TEXT + BEARING_TEXT   # kleeman-lab with three bearing beacons too
+    text = SITE_TEXT + BEARING_TEXT + SONAR_TEXT   # kleeman-lab with bearings and sonars too
     sec = f"{SCHEMA.section(section).prefix}2" if SCHEMA.section(section).indexed_by else section
     base = tmp_path / "base.ini"
     base.write_text(text)

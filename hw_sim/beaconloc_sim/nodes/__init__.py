@@ -19,10 +19,12 @@ from .bearing_sensor import BearingSensor, Bearings
 from .node_status import NodeStatus
 from .range_receiver import RangeReceiver, Ranges
 from .receiver_ring import ReceiverRing
+from .sonar_ring import SonarPings, SonarRing
 from .wheel_encoders import ODOMETRY_COLUMNS, WheelEncoders
 
 __all__ = ["Interval", "Node", "NodeStatus", "ReceiverRing", "WheelEncoders", "BearingSensor",
-           "Bearings", "RangeReceiver", "Ranges", "BeaconSurvey", "SurveyRanges", "ODOMETRY_COLUMNS", "on_bus"]
+           "Bearings", "RangeReceiver", "Ranges", "BeaconSurvey", "SurveyRanges", "SonarRing",
+           "SonarPings", "ODOMETRY_COLUMNS", "on_bus"]
 
 
 def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | None,
@@ -32,9 +34,10 @@ def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | 
     node in bus order with their clocks: the receiver ring and the wheel encoders, their
     status frames, then the bearing sensor and its status frame, then the range receiver and
     its status frame, then the beacons' self-survey (nodes.beacon_survey, on the range
-    receiver's clock) when the scenario's [ranges] survey_s > 0 (each appended, so a site
-    without bearing or range beacons, or a run without a survey, has the frames it had
-    before they existed).
+    receiver's clock) when the scenario's [ranges] survey_s > 0, then the sonar ring and its
+    status frame on a site with one ([sonar_ring] count > 0; find it in the list: a
+    SonarRing) (each appended, so a site without bearing or range beacons, or a run without
+    a survey or a sonar ring, has the frames it had before they existed).
     A site without ultrasonic beacons has no receiver ring on the bus (its clock still
     exists: nothing reads it there)."""
     ring = ReceiverRing(NodeClock(scn.rx_offset_us, scn.rx_drift_ppm))
@@ -51,4 +54,7 @@ def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | 
         nodes += [ranger, NodeStatus(ranger)]
         if scn.range_survey_s > 0:
             nodes.append(BeaconSurvey(ranger, scn))
+    if scn.site.sonar_count:
+        sonar = SonarRing(NodeClock(scn.sonar_offset_us, scn.sonar_drift_ppm), scn)
+        nodes += [sonar, NodeStatus(sonar)]
     return ring, wheels, bearing, ranger, nodes

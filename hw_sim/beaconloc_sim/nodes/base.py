@@ -31,6 +31,7 @@ class Interval:
     rng_bearings: np.random.Generator | None = None   # bearing noise and outages (bearing sensor)
     rng_ranges: np.random.Generator | None = None     # range noise, dropouts, multipath
     rng_survey: np.random.Generator | None = None     # the fixed beacons' survey ranges
+    rng_sonar: np.random.Generator | None = None      # the sonar ring's range noise
 
     def latency_s(self, n: int) -> np.ndarray:
         """Processing time of n frames before each is queued, s (scenario node_latency_s)."""

@@ -86,6 +86,20 @@ typedef double bl_real;
 #if BL_WITH_TEAM && !BL_WITH_RANGES
 #error "BL_WITH_TEAM needs BL_WITH_RANGES (the teammate range model is the range model)"
 #endif
+/*   BL_WITH_SONAR     1 (default): a sonar ring against a map of wall
+ *                     segments (sonar.h: the map and ring types, the
+ *                     pin-point and memory correctors of Hoppenot & Colle
+ *                     1997; filter.h bl_filter_set_sonar,
+ *                     bl_filter_fuse_sonar, bl_filter_set_pose). 0: none of
+ *                     it is declared or built, the filter carries no sonar
+ *                     fields, bl_estimate no sonar counters, bl_config no
+ *                     sonar_site (a site without beacons is then refused):
+ *                     the M4 firmware's build (lib/firmware.mk), whose
+ *                     flash and localizer RAM were already at their
+ *                     targets. */
+#ifndef BL_WITH_SONAR
+#define BL_WITH_SONAR 1
+#endif
 /* Team sizes: robots in one team solve (solver.h bl_solve_team), and
  * stationary beacon robots one filter ranges to at a time (the Millibots
  * keep three; one more lets a leap-frog hand over without a gap). */

@@ -265,6 +265,17 @@ typedef struct bl_config {
                                          pulse further ahead finds the filter stale and
                                          it re-initialises itself from the snapshot of
                                          the fresh pulses (filter.h, "Time gaps") */
+#if BL_WITH_SONAR
+    uint32_t sonar_site; /* [sonar_ring] count > 0 (bridge): 1 = the robot has
+                                         a sonar ring and a wall map (filter.h
+                                         bl_filter_set_sonar; Hoppenot & Colle 1997), so a
+                                         site with no beacon of any kind is valid: the
+                                         filter starts from bl_filter_start with the known
+                                         start pose (as the paper's robot) and the sonar
+                                         corrects the odometry; 0 (default), 1. Only with
+                                         BL_WITH_SONAR (common.h): a build without it
+                                         (the M4 firmware) keeps its 2 KiB localizer */
+#endif
 } bl_config;
 
 /* Fills *cfg with the kleeman-lab site (hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini)

@@ -22,7 +22,9 @@ typedef enum bl_fusion_status {
     BL_FUSION_REJECTED = 1, /* outside the innovation gate; counted */
     BL_FUSION_BUFFERED = 2, /* kept for a snapshot (re)start */
     BL_FUSION_STARTED = 3,  /* completed a snapshot: filter started */
-    BL_FUSION_RESET = 4     /* re-initialised from the snapshot solver */
+    BL_FUSION_RESET = 4,    /* re-initialised from the snapshot solver */
+    BL_FUSION_DROPPED = 5   /* not fused, nothing changed: bad data, or no model explains it
+                               (a sonar range with no wall in its beam); counted */
 } bl_fusion_status;
 
 typedef struct bl_fusion_result {

@@ -1,0 +1,198 @@
+"""The sonar-ring node (Hoppenot & Colle 1997, Fig. 2): a ring of Polaroid-class ultrasonic
+rangefinders, each its own emitter and receiver, sending one SONAR frame per sonar per burst.
+
+Burst schedule (on this node's clock): burst n starts at the count n P (P = the site's
+[sonar_ring] period_s in us, counted from the counter's zero, so consecutive windows of a
+run go on with the sequence); within a burst the sonars fire one after the other in ring
+order, sonar i (DBC Sensor i, [sonar(i+1)] of the site) at n P + i F, F = the scenario's
+[sonar] fire_interval_s. Each listens for W = [sonar] listen_s after its ping (0.06 s: about
+10.3 m), whatever the others do (the ring's sonars listen at once: fired closer together
+than W they hear each other, crosstalk); the frame is ready when its window closes, plus the
+node's processing latency. NodeTime is the ping's count.
+
+Per ping at true time t_f (physics.sonar, the one model; the sonar at its mount on the robot
+at the true pose of t_f, the robot's motion during the flight of a few ms neglected):
+- the world is every segment of the site's [map] plus the scenario's [obstacles] (the
+  unknown obstacles and whatever lies beyond the map, e.g. past the door: never in the map);
+- candidates: the first-order echoes (perpendicular distance when the wall's normal is in
+  the cone, nothing beyond the critical incidence), the double bounces (phantoms) when
+  [sonar] double_bounce = 1, and when [sonar] crosstalk = 1 the echoes of the sonars fired
+  in the 2 W before (this burst's and the previous one's) that reach this sonar after its
+  own ping;
+- heard: relative amplitude >= [sonar] threshold, arrival time tau after the ping with
+  c_node tau / 2 >= min_range_m (blanking: the transducer still rings) and tau <= W (the
+  listening window); the FIRST heard echo is the reading; tau = 2 r / c, c the true speed
+  of sound at t_f (physics.acoustics, from the temperature);
+- the node converts with its own speed of sound c_node = the site's [noise]
+  speed_of_sound_mps: range = c_node tau / 2 + n, n ~ N(0, sigma(range)^2), sigma(r) =
+  max(sigma_range_m, sigma_range_rel r) (the site's [sonar_ring]), rounded to mm;
+- flags: NO_ECHO when nothing was heard, MAX_RANGE when the first echo is beyond the site's
+  max_range_m (the listening window reaches further than that); Range then 0;
+- Amplitude = clip(round(255 a), 1, 255) for the echo's relative amplitude a (0 for none).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..clocks import WRAP_US, NodeClock
+from ..dbc import signal_modulo
+from ..physics import acoustics as ac
+from ..physics import sonar as so
+from .base import Interval, Node
+
+FLAG_NO_ECHO, FLAG_MAX_RANGE = 1, 2      # DBC SONAR Flags bits
+
+
+@dataclass
+class SonarPings:
+    """The pings of an interval (one row per sonar per burst): what was sent and why."""
+    t_s: np.ndarray            # true firing instant, s
+    ping_us: np.ndarray        # node-clock count of the ping (unwrapped, us)
+    sensor: np.ndarray         # ring index (DBC Sensor)
+    x_m: np.ndarray            # the sonar's position at the ping, site frame, m
+    y_m: np.ndarray
+    axis_rad: np.ndarray       # its axis, site frame, rad
+    sos_mps: np.ndarray        # true speed of sound, m/s
+    true_m: np.ndarray         # c_node tau / 2 of the reported echo, no noise (nan: none), m
+    range_mm: np.ndarray       # Range as sent (0 with a flag)
+    flags: np.ndarray          # Flags as sent
+    amplitude: np.ndarray      # Amplitude as sent
+    kind: np.ndarray           # physics.sonar KIND_* of the reported echo
+    wall: np.ndarray           # first segment the echo hit (world index), -1 for none
+    in_map: np.ndarray         # that segment is one of the site's [map] walls
+
+    @staticmethod
+    def empty() -> SonarPings:
+        z, zi, zb = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, bool)
+        return SonarPings(z, zi, zi, z, z, z, z, z, zi, zi, zi, zi, zi, zb)
+
+    @staticmethod
+    def concat(parts: list[SonarPings]) -> SonarPings:
+        parts = [SonarPings.empty()] + list(parts)
+        return SonarPings(*(np.concatenate([getattr(p, f) for p in parts])
+                            for f in SonarPings.__dataclass_fields__))
+
+    def select(self, keep) -> SonarPings:
+        return SonarPings(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
+
+    @property
+    def informative(self) -> np.ndarray:
+        """Sent with a range, the specular echo of a map wall: the perpendicular distance
+        the posterior bound takes (the others: no echo, phantoms, obstacles, crosstalk)."""
+        return (self.flags == 0) & (self.kind == so.KIND_SPECULAR) & self.in_map
+
+
+def world_segments(scn) -> tuple[np.ndarray, int]:
+    """What the sound meets: the site's map walls, then the scenario's obstacles (K, 4); and
+    how many of the first rows are map walls."""
+    walls = scn.site.walls_m.reshape(-1, 4)
+    return np.vstack([walls, scn.obstacles_m.reshape(-1, 4)]), len(walls)
+
+
+class SonarRing(Node):
+    message = "SONAR"
+    node_id = 5
+    status_phase_us = 500_000
+
+    def __init__(self, clock: NodeClock, scn):
+        super().__init__(clock)
+        self.scn = scn
+        site = scn.site
+        self.period_us = int(round(site.sonar_period_s * 1e6))
+        self.fire_us = int(round(scn.sonar_fire_interval_s * 1e6))
+        self.beam = so.Beam.of(site.sonar_beam_width_rad, scn.sonar_critical_rad,
+                               scn.sonar_reflection)
+        self.world, self.n_map = world_segments(scn)
+        self.range_max_mm = signal_modulo(self.message, "Range") - 1
+        self.measured = SonarPings.empty()        # pings of the last interval
+        self._bound_pending = SonarPings.empty()  # informative pings the bound has not taken
+        self._recent: list[tuple[float, np.ndarray, float]] = []   # (t_s, position, axis)
+
+    def ping_counts(self, iv: Interval) -> tuple[np.ndarray, np.ndarray]:
+        """Node-clock counts (unwrapped, us) and ring indices of the pings of the bursts
+        starting in the interval, in firing order."""
+        bursts = self.periodic_us(iv, self.period_us)
+        n_s = self.scn.site.sonar_count
+        counts = (bursts[:, None] + np.arange(n_s)[None, :] * self.fire_us).ravel()
+        return counts, np.tile(np.arange(n_s), len(bursts))
+
+    def sample(self, iv: Interval) -> tuple[np.ndarray, list[dict]]:
+        scn, site = self.scn, self.scn.site
+        counts, sensor = self.ping_counts(iv)
+        n = len(counts)
+        rng = iv.rng_sonar
+        noise = rng.standard_normal(n)          # drawn for every ping, heard or not
+        t_f = self.clock.true_time_s(counts)
+        st = scn.trajectory.state(t_f)
+        sos = ac.speed_of_sound_mps(scn.temperature_c(t_f))
+        c_node = site.speed_of_sound_mps
+        listen_s = scn.sonar_listen_s
+        mounts = site.sonar_mounts
+        rec = {k: np.zeros(n) for k in ("x", "y", "axis", "true")}
+        kind = np.zeros(n, np.int64)
+        wall = np.full(n, -1, np.int64)
+        amp = np.zeros(n)
+        for i in range(n):
+            pos, axis = so.sensor_pose(st["x_m"][i], st["y_m"][i], st["theta_rad"][i],
+                                       mounts[sensor[i]])
+            p, ax = pos[0], float(axis[0])
+            rec["x"][i], rec["y"][i], rec["axis"][i] = p[0], p[1], ax
+            cand = so.echoes(p, ax, self.world, self.beam, double=scn.sonar_double_bounce)
+            tau = 2.0 * cand.range_m / sos[i]
+            if scn.sonar_crosstalk:
+                tau, cand = self._with_crosstalk(t_f[i], p, ax, sos[i], tau, cand)
+                self._recent.append((float(t_f[i]), p, ax))
+            heard = (cand.amplitude >= scn.sonar_threshold) \
+                & (c_node * tau / 2 >= site.sonar_min_range_m) & (tau <= listen_s)
+            if not heard.any():
+                rec["true"][i] = math.nan
+                continue
+            j = np.flatnonzero(heard)[np.argmin(tau[heard])]
+            rec["true"][i] = c_node * tau[j] / 2
+            kind[i], wall[i], amp[i] = cand.kind[j], cand.first[j], cand.amplitude[j]
+        measured_m = rec["true"] + site.sonar_sigma_m(np.nan_to_num(rec["true"])) * noise
+        none = np.isnan(rec["true"])
+        beyond = ~none & (rec["true"] > site.sonar_max_range_m)
+        flags = np.where(none, FLAG_NO_ECHO, np.where(beyond, FLAG_MAX_RANGE, 0)).astype(np.int64)
+        range_mm = np.where(flags == 0, np.clip(np.round(np.nan_to_num(measured_m) * 1000.0), 0,
+                                                self.range_max_mm), 0).astype(np.int64)
+        amplitude = np.where(none, 0, np.clip(np.round(255.0 * amp), 1, 255)).astype(np.int64)
+        pings = SonarPings(t_f, counts, sensor, rec["x"], rec["y"], rec["axis"], sos,
+                           rec["true"], range_mm, flags, amplitude, kind, wall,
+                           (wall >= 0) & (wall < self.n_map))
+        self.measured = pings
+        # the bound's: informative readings of the sonars the estimator uses ([sonarN] used)
+        used = site.sonar_mounts[sensor, 3] > 0 if n else np.zeros(0, bool)
+        self._bound_pending = SonarPings.concat([self._bound_pending,
+                                                 pings.select(pings.informative & used)])
+        signals = [{"NodeTime": int(counts[i] % WRAP_US), "Sensor": int(sensor[i]),
+                    "Range": int(range_mm[i]), "Amplitude": int(amplitude[i]),
+                    "Flags": int(flags[i])} for i in range(n)]
+        return t_f + listen_s + iv.latency_s(n), signals
+
+    def _with_crosstalk(self, t_k: float, p, axis: float, sos: float, tau: np.ndarray,
+                        cand: so.Echoes) -> tuple[np.ndarray, so.Echoes]:
+        """Add to this ping's candidates the echoes of the sonars fired in the last two
+        listening windows: a path of length 2 r from a ping at t_j arrives t_j + 2 r / c,
+        tau = that - t_k after this ping (kept when > 0)."""
+        self._recent = [r for r in self._recent if t_k - r[0] < 2 * self.scn.sonar_listen_s]
+        taus, parts = [tau], [cand]
+        for t_j, p_j, ax_j in self._recent:
+            x = so.crosstalk_paths(p_j, ax_j, p, axis, self.world, self.beam)
+            tau_x = t_j + 2.0 * x.range_m / sos - t_k
+            keep = tau_x > 0
+            taus.append(tau_x[keep])
+            parts.append(so.Echoes(*(getattr(x, f)[keep] for f in so.Echoes.__dataclass_fields__)))
+        return np.concatenate(taus), so.Echoes.concat(parts)
+
+    def bound_events(self, until_s: float = math.inf) -> SonarPings:
+        """The informative pings at or before until_s not handed out yet (the posterior
+        bound's measurement events), in time order; later ones wait for the next window."""
+        pend = self._bound_pending
+        pend = pend.select(np.argsort(pend.t_s, kind="stable"))
+        now = pend.t_s <= until_s
+        self._bound_pending = pend.select(~now)
+        return pend.select(now)

@@ -1,0 +1,507 @@
+/* cmocka tests of the sonar correctors (sonar.h; Hoppenot & Colle 1997
+ * §3.1 pin-point, §3.2 with memory) in the room of sonar_world.h: known
+ * pose offsets recovered from exact ranges, the end-point case of eq. 4,
+ * the 25 cm gate, the 20° incidence gate, bad data counted, bad input
+ * refused with the pose and the memory untouched. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <string.h>
+#include <math.h>
+#include <cmocka.h>
+
+#include "beaconloc.h"
+#include "sonar_world.h"
+#include "test_rng.h"
+
+/* The burst of the seven used sensors at the true pose, along the axis
+ * (eq. 1's impact model: exact). Returns the number of ranges. */
+static uint32_t axis_burst(double x, double y, double th, bl_sonar_range *b)
+{
+    uint32_t n = 0;
+    for (int i = 0; i < WORLD_SENSORS; ++i) {
+        if (i == 4) continue; /* the unused rear sensor */
+        const double r = world_axis_range(world_segments, WORLD_SEGMENTS, i, x, y, th);
+        b[n].sensor = (uint32_t)i;
+        b[n].range_m = (bl_real)(isnan(r) ? 0 : r);
+        b[n].flags = isnan(r) ? BL_SONAR_NO_ECHO : 0;
+        b[n].user_reference = NULL;
+        ++n;
+    }
+    return n;
+}
+
+/* A known pose offset is recovered from exact ranges, at many poses of
+ * the room (away from the door: every beam on a wall of the map). */
+static void test_pinpoint_recovers_offset(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    rng_seed(12);
+    int exact = 0, cut = 0;
+    for (int trial = 0; trial < 40; ++trial) {
+        const double x = 1.5 + 2.5 * rng_uniform(), y = 1.0 + 2.0 * rng_uniform();
+        const double th = -3.0 + 6.0 * rng_uniform();
+        bl_sonar_range b[8];
+        const uint32_t n = axis_burst(x, y, th, b);
+        /* odometric pose: 8 cm, 0.04 rad off in a random direction */
+        const double a = 6.283185307179586 * rng_uniform();
+        bl_pose p = {(bl_real)(x + 0.08 * cos(a)), (bl_real)(y + 0.08 * sin(a)),
+                     (bl_real)(th + (trial % 2 ? 0.04 : -0.04))};
+        /* the paper's ε = ε' = 5e-3 stop at a few cm of residual; tight
+         * ones show the minimiser's own accuracy on exact ranges */
+        bl_pinpoint_params prm;
+        bl_pinpoint_default(&prm);
+        prm.epsilon_cost_m2 = (bl_real)1e-10;
+        prm.epsilon_grad = (bl_real)1e-7;
+        const bl_pose odo = p;
+        bl_pinpoint_result r;
+        assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_OK);
+        assert_int_equal(r.valid + r.dropped.flagged, 7); /* a beam through the door: no echo */
+        /* the paper's stopping rules: F below ε, never worse than the odometry */
+        bl_pose pp = odo;
+        bl_pinpoint_result rp;
+        assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, NULL, &pp, &rp), BL_OK);
+        if (rp.outcome == BL_PINPOINT_CONVERGED) {
+            assert_true((double)rp.cost_after_m2 < 5e-3 || rp.iterations < 10);
+            assert_true((double)rp.cost_after_m2 <= (double)rp.cost_before_m2);
+            /* the first point with F < ε: just inside ε when the odometric
+             * pose was outside it, not at the minimum (F ~ 0 here) */
+            if ((double)rp.cost_before_m2 >= 5e-3 && (double)rp.cost_after_m2 < 5e-3) {
+                ++cut;
+                assert_true((double)rp.cost_after_m2 > 0.5 * 5e-3);
+            }
+        }
+        const double ex = (double)p.x_m - x, ey = (double)p.y_m - y;
+        const double eth = remainder((double)p.theta_rad - th, 6.283185307179586);
+        /* never a higher cost than the odometric pose's */
+        assert_true((double)r.cost_after_m2 <= (double)r.cost_before_m2);
+        if (r.outcome == BL_PINPOINT_CONVERGED && sqrt(ex * ex + ey * ey) < 0.005 && fabs(eth) < 0.002) {
+            ++exact;
+            /* the reported correction is the one applied */
+            assert_true(fabs((double)r.dx_m - (x - (double)odo.x_m)) < 0.005);
+            assert_true(fabs((double)r.dy_m - (y - (double)odo.y_m)) < 0.005);
+        }
+    }
+    /* Exact ranges: the true pose is F's global minimum (F = 0) and the
+     * corrector reaches it from an 8 cm / 0.04 rad error nearly always;
+     * the rest are the paper's known failure, a beam matched with the wrong
+     * wall near a corner at the odometric pose (a local minimum). */
+    assert_true(exact >= 36);
+    assert_true(cut >= 20); /* the paper's stop at work on most of them */
+}
+
+/* The end-point case (eq. 4): an impact beyond a segment's end costs its
+ * squared distance to that end, not to the line (eq. 3). */
+static void test_pinpoint_endpoint_case(void **state)
+{
+    (void)state;
+    static const bl_segment seg[1] = {{0, 0, 1, 0}};
+    bl_map map = {seg, 1};
+    bl_sonar_mount mount = {0, 0, 0};
+    bl_sonar_ring ring;
+    world_ring(&ring);
+    ring.mounts = &mount;
+    ring.count = 1;
+    ring.unused_mask = 0;
+    /* robot at (1.1, 1.05) facing -y (θ = -π/2): a 1.0 m range hits (1.1, 0.05) */
+    bl_pose p = {(bl_real)1.1, (bl_real)1.05, (bl_real)(-1.5707963267948966)};
+    const bl_sonar_range b = {0, 1, 0, NULL};
+    bl_pinpoint_params prm;
+    bl_pinpoint_default(&prm);
+    prm.min_matches = 3; /* one impact: evaluated, not corrected */
+    bl_pinpoint_result r;
+    const bl_pose before = p;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, &b, 1, &prm, &p, &r), BL_OK);
+    assert_int_equal(r.matched, 1);
+    assert_int_equal(r.outcome, BL_PINPOINT_NONE);
+    assert_memory_equal(&p, &before, sizeof p);
+    /* eq. 4: 0.1² + 0.05² = 0.0125 m²; eq. 3 would give 0.05² = 0.0025 */
+    assert_true(fabs((double)r.cost_before_m2 - 0.0125) < 1e-6);
+    /* over the segment (x = 0.9): eq. 3, the perpendicular distance */
+    p.x_m = (bl_real)0.9;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, &b, 1, &prm, &p, &r), BL_OK);
+    assert_true(fabs((double)r.cost_before_m2 - 0.0025) < 1e-6);
+    /* and with one impact allowed to correct, the pose moves it onto the end's
+     * circle: the residual is gone, F continuously derivable across eq. 3/4 */
+    prm.min_matches = 1;
+    p = before;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, &b, 1, &prm, &p, &r), BL_OK);
+    assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
+    assert_true((double)r.cost_after_m2 < 5e-3);
+    assert_true((double)r.cost_after_m2 < (double)r.cost_before_m2);
+}
+
+/* The 25 cm association gate: an impact 24 cm from the only wall is
+ * matched, one 26 cm away is not. */
+static void test_pinpoint_gate(void **state)
+{
+    (void)state;
+    static const bl_segment seg[1] = {{0, 0, 4, 0}};
+    bl_map map = {seg, 1};
+    bl_sonar_mount mount = {0, 0, 0};
+    bl_sonar_ring ring;
+    world_ring(&ring);
+    ring.mounts = &mount;
+    ring.count = 1;
+    ring.unused_mask = 0;
+    bl_pinpoint_params prm;
+    bl_pinpoint_default(&prm);
+    bl_pinpoint_result r;
+    const bl_sonar_range b = {0, 1, 0, NULL};
+    bl_pose p = {2, (bl_real)1.24, (bl_real)(-1.5707963267948966)}; /* impact at y = 0.24 */
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, &b, 1, &prm, &p, &r), BL_OK);
+    assert_int_equal(r.matched, 1);
+    p.y_m = (bl_real)1.26; /* impact at y = 0.26 */
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, &b, 1, &prm, &p, &r), BL_OK);
+    assert_int_equal(r.matched, 0);
+    assert_true(r.cost_before_m2 == 0);
+    /* the gate is the ring's */
+    ring.gate_m = (bl_real)0.3;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, &b, 1, &prm, &p, &r), BL_OK);
+    assert_int_equal(r.matched, 1);
+}
+
+/* Bad data is counted and dropped, by cause; the pose is still corrected
+ * from the good ranges. */
+static void test_pinpoint_bad_ranges_counted(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    bl_sonar_range b[14];
+    uint32_t n = axis_burst(2.5, 2.0, 0.2, b);
+    uint32_t no_echo = 0; /* beams through the door */
+    for (uint32_t k = 0; k < n; ++k) no_echo += b[k].flags != 0;
+    const bl_sonar_range bad[] = {
+        {8, 1, 0, NULL},                      /* unknown sensor */
+        {4, 1, 0, NULL},                      /* unused (rear) sensor */
+        {1, 1, BL_SONAR_NO_ECHO, NULL},       /* flagged */
+        {2, 1, BL_SONAR_MAX_RANGE, NULL},     /* flagged */
+        {3, (bl_real)NAN, 0, NULL},           /* non-finite */
+        {5, (bl_real)0.1, 0, NULL},           /* inside the blanking */
+        {6, (bl_real)10.5, 0, NULL},          /* beyond max_range_m */
+    };
+    memcpy(&b[n], bad, sizeof bad);
+    n += 7;
+    bl_pose p = {(bl_real)2.55, (bl_real)1.95, (bl_real)0.22};
+    bl_pinpoint_result r;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, NULL, &p, &r), BL_OK);
+    assert_int_equal(r.valid, 7 - no_echo);
+    assert_int_equal(r.dropped.unknown_sensor, 1);
+    assert_int_equal(r.dropped.unused_sensor, 1);
+    assert_int_equal(r.dropped.flagged, 2 + no_echo);
+    assert_int_equal(r.dropped.non_finite, 1);
+    assert_int_equal(r.dropped.out_of_range, 2);
+    assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
+    /* the paper's stop (F < ε = 5e-3 m²): the pose nearer than the odometry's 7 cm */
+    assert_true((double)r.cost_after_m2 < 5e-3);
+    assert_true(hypot((double)p.x_m - 2.5, (double)p.y_m - 2.0) < 0.8 * hypot(0.05, 0.05));
+}
+
+/* Bad input is refused with BL_EINVAL and nothing written. */
+static void test_pinpoint_refuses_bad_input(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    bl_sonar_range b[8];
+    const uint32_t n = axis_burst(2.5, 2.0, 0.2, b);
+    const bl_pose start = {(bl_real)2.55, (bl_real)1.95, (bl_real)0.22};
+    bl_pose p = start;
+    bl_pinpoint_result r, r0;
+    memset(&r, 0x5a, sizeof r);
+    r0 = r;
+    assert_int_equal(bl_pinpoint_correct(NULL, &ring, b, n, NULL, &p, &r), BL_EINVAL);
+    assert_int_equal(bl_pinpoint_correct(&map, NULL, b, n, NULL, &p, &r), BL_EINVAL);
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, NULL, n, NULL, &p, &r), BL_EINVAL);
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, NULL, NULL, &r), BL_EINVAL);
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, BL_SONAR_MAX_SENSORS + 1, NULL, &p, &r), BL_EINVAL);
+    p.theta_rad = (bl_real)NAN;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, NULL, &p, &r), BL_EINVAL);
+    assert_true(isnan((double)p.theta_rad));
+    p = start;
+    /* a zero-length segment: the map is refused, its index named */
+    bl_segment segs[WORLD_SEGMENTS];
+    memcpy(segs, world_segments, sizeof segs);
+    segs[3].x2_m = segs[3].x1_m;
+    segs[3].y2_m = segs[3].y1_m;
+    bl_map bad_map = {segs, WORLD_SEGMENTS};
+    uint32_t idx = 99;
+    assert_int_equal(bl_map_check(&bad_map, &idx), BL_EINVAL);
+    assert_int_equal(idx, 3);
+    assert_int_equal(bl_pinpoint_correct(&bad_map, &ring, b, n, NULL, &p, &r), BL_EINVAL);
+    memcpy(segs, world_segments, sizeof segs);
+    segs[1].y2_m = (bl_real)INFINITY;
+    assert_int_equal(bl_map_check(&bad_map, &idx), BL_EINVAL);
+    assert_int_equal(idx, 1);
+    bl_map null_map = {NULL, 2};
+    assert_int_equal(bl_map_check(&null_map, NULL), BL_EINVAL);
+    bl_map big_map = {world_segments, BL_MAP_MAX_SEGMENTS + 1};
+    assert_int_equal(bl_map_check(&big_map, NULL), BL_EINVAL);
+    /* a bad ring */
+    bl_sonar_ring bad_ring = ring;
+    bad_ring.max_range_m = bad_ring.min_range_m;
+    assert_int_equal(bl_pinpoint_correct(&map, &bad_ring, b, n, NULL, &p, &r), BL_EINVAL);
+    bad_ring = ring;
+    bad_ring.count = 0;
+    assert_int_equal(bl_sonar_ring_check(&bad_ring, NULL), BL_EINVAL);
+    bad_ring = ring;
+    bad_ring.beam_width_rad = 0;
+    assert_int_equal(bl_sonar_ring_check(&bad_ring, NULL), BL_EINVAL);
+    bl_sonar_mount mounts[WORLD_SENSORS];
+    memcpy(mounts, world_mounts, sizeof mounts);
+    mounts[6].angle_rad = (bl_real)NAN;
+    bad_ring = ring;
+    bad_ring.mounts = mounts;
+    assert_int_equal(bl_sonar_ring_check(&bad_ring, &idx), BL_EINVAL);
+    assert_int_equal(idx, 6);
+    /* bad parameters */
+    bl_pinpoint_params prm;
+    bl_pinpoint_default(&prm);
+    prm.max_iterations = 0;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
+    bl_pinpoint_default(&prm);
+    prm.epsilon_grad = (bl_real)NAN;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
+    /* nothing written by any of them */
+    assert_memory_equal(&p, &start, sizeof p);
+    assert_memory_equal(&r, &r0, sizeof r);
+    assert_int_equal(bl_map_check(&map, NULL), BL_OK);
+    assert_int_equal(bl_sonar_ring_check(&ring, NULL), BL_OK);
+}
+
+/* ---- the memory corrector ---- */
+
+/* Ten bursts along an arc (v = 0.2 m/s, ω = 0.07 rad/s, a burst every
+ * 0.5 s), odometry exact, the current estimate off by (dx, dy, dθ): the
+ * heading comes back from the fitted walls' orientations, then the
+ * position from their midpoints. */
+/* When set, the -90° sensor's ranges alternate 15 cm long and short: a
+ * scatter inside the 25 cm gate (phantoms, an obstacle beside the wall). */
+static int g_scatter_bottom = 0;
+
+static uint32_t drive_arc(bl_memory_corrector *m, const bl_sonar_ring *ring, double *x, double *y, double *th)
+{
+    uint32_t valid = 0; /* ranges with an echo */
+    double px = 1.5, py = 1.6, pth = -0.16;
+    for (int k = 0; k < 10; ++k) {
+        if (k > 0) {
+            const double dth = 0.07 * 0.5, ds = 0.2 * 0.5;
+            px += ds * cos(pth + 0.5 * dth);
+            py += ds * sin(pth + 0.5 * dth);
+            pth += dth;
+        }
+        bl_sonar_range b[8];
+        const uint32_t n = axis_burst(px, py, pth, b);
+        for (uint32_t i = 0; i < n; ++i) {
+            valid += b[i].flags == 0;
+            if (g_scatter_bottom && b[i].sensor == 5) b[i].range_m += (bl_real)(k % 2 ? 0.15 : -0.15);
+        }
+        /* odometry in its own frame: here the site frame shifted by (10, -3) */
+        const bl_pose odo = {(bl_real)(px + 10), (bl_real)(py - 3), (bl_real)pth};
+        assert_int_equal(bl_memory_push(m, ring, &odo, b, n), BL_OK);
+    }
+    *x = px;
+    *y = py;
+    *th = pth;
+    return valid;
+}
+
+static void test_memory_recovers_offset(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    bl_memory_corrector m;
+    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
+    double x, y, th;
+    const uint32_t valid = drive_arc(&m, &ring, &x, &y, &th);
+    bl_pose p = {(bl_real)(x + 0.10), (bl_real)(y - 0.08), (bl_real)(th + 0.05)};
+    bl_memory_result r;
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
+    assert_int_equal(r.points, valid);
+    assert_true(valid >= 60);
+    /* the bottom and right walls are fitted; the top wall's impacts spread
+     * 4 cm only (the arc turns the +90° sensor back over its own hits), so
+     * its orientation would be noise: no fit (max_fit_sigma_rad) */
+    assert_int_equal(r.segments, 2);
+    assert_true(r.matched >= 3 * 3);
+    assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
+    assert_int_equal(r.axes, BL_AXIS_X | BL_AXIS_Y | BL_AXIS_THETA);
+    /* heading to a few mrad, then the position to about a centimetre (the
+     * fitted midpoints sit on the known walls) */
+    assert_true(fabs((double)p.theta_rad - th) < 0.005);
+    assert_true(fabs((double)p.x_m - x) < 0.02);
+    assert_true(fabs((double)p.y_m - y) < 0.02);
+    assert_true(fabs((double)r.dtheta_rad + 0.05) < 0.005);
+}
+
+/* A wall whose impacts scatter (±15 cm, inside the 25 cm gate) gives no
+ * fit (Crowley's alignment test): the heading still comes from the right
+ * wall alone, and y (observed only by the bottom wall's fit) is left. */
+static void test_memory_scattered_fit_refused(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    bl_memory_corrector m;
+    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
+    double x, y, th;
+    g_scatter_bottom = 1;
+    drive_arc(&m, &ring, &x, &y, &th);
+    g_scatter_bottom = 0;
+    bl_pose p = {(bl_real)(x + 0.10), (bl_real)(y - 0.08), (bl_real)(th + 0.05)};
+    bl_memory_result r;
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
+    assert_int_equal(r.segments, 1);
+    assert_true(fabs((double)p.theta_rad - th) < 0.005);
+    assert_true(fabs((double)p.x_m - x) < 0.02);
+    assert_true(fabs((double)p.y_m - (y - 0.08)) < 0.01); /* unobserved: not moved */
+}
+
+/* The 20° incidence gate: with it at 1° only the shots within 1° of a
+ * wall's normal are matched (fewer), and the memory is not changed by a
+ * correction (the same correction twice gives the same pose). */
+static void test_memory_incidence_gate(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    bl_memory_corrector m;
+    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
+    double x, y, th;
+    drive_arc(&m, &ring, &x, &y, &th);
+    const bl_pose p0 = {(bl_real)(x + 0.05), (bl_real)y, (bl_real)th};
+    bl_pose p = p0;
+    bl_memory_result r20, r1;
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r20), BL_OK);
+    bl_pose q = p0;
+    bl_memory_result again;
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &q, &again), BL_OK);
+    assert_memory_equal(&p, &q, sizeof p);
+    /* the heading is -0.16 .. +0.155 rad (9°) along the arc: at 1° most of
+     * the side-wall and front-wall shots fall outside */
+    bl_memory_params prm;
+    bl_memory_default(&prm);
+    prm.incidence_gate_rad = (bl_real)(1.0 * 3.141592653589793 / 180.0);
+    bl_memory_corrector m1;
+    assert_int_equal(bl_memory_init(&m1, &prm), BL_OK);
+    drive_arc(&m1, &ring, &x, &y, &th);
+    p = p0;
+    assert_int_equal(bl_memory_correct(&m1, &map, &ring, &p, &r1), BL_OK);
+    assert_true(r1.matched < r20.matched / 3);
+    /* the gate's count at 20°: the ±30° and ±60° sensors never hit a wall
+     * within 20° of its normal on this arc (heading within ±9.2°), the
+     * 0° and ±90° ones always do: 3 per burst */
+    assert_int_equal(r20.matched, 30);
+}
+
+/* Bad input refused, the corrector byte-identical; bad ranges counted. */
+static void test_memory_refuses_bad_input(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    bl_memory_corrector m;
+    memset(&m, 0, sizeof m);
+    bl_pose origin = {0, 0, 0};
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &origin, NULL), BL_ENOTINIT);
+    assert_int_equal(bl_memory_init(NULL, NULL), BL_EINVAL);
+    bl_memory_params prm;
+    bl_memory_default(&prm);
+    prm.depth = BL_MEMORY_MAX_BURSTS + 1;
+    memset(&m, 0, sizeof m);
+    assert_int_equal(bl_memory_init(&m, &prm), BL_EINVAL);
+    assert_int_equal(bl_memory_push(&m, &ring, &(bl_pose){0, 0, 0}, NULL, 0), BL_ENOTINIT);
+    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
+    double x, y, th;
+    drive_arc(&m, &ring, &x, &y, &th);
+    bl_memory_corrector copy;
+    memcpy(&copy, &m, sizeof m);
+    bl_sonar_range b[8];
+    const uint32_t n = axis_burst(1.8, 2, -0.3, b); /* every beam on a wall */
+    for (uint32_t k = 0; k < n; ++k) assert_int_equal(b[k].flags, 0);
+    const bl_pose good = {(bl_real)1.8, 2, (bl_real)-0.3};
+    const bl_pose nan_pose = {(bl_real)NAN, 2, 0};
+    assert_int_equal(bl_memory_push(NULL, &ring, &good, b, n), BL_EINVAL);
+    assert_int_equal(bl_memory_push(&m, NULL, &good, b, n), BL_EINVAL);
+    assert_int_equal(bl_memory_push(&m, &ring, NULL, b, n), BL_EINVAL);
+    assert_int_equal(bl_memory_push(&m, &ring, &good, NULL, n), BL_EINVAL);
+    assert_int_equal(bl_memory_push(&m, &ring, &nan_pose, b, n), BL_EINVAL);
+    assert_int_equal(bl_memory_push(&m, &ring, &good, b, BL_SONAR_MAX_SENSORS + 1), BL_EINVAL);
+    bl_pose p = nan_pose;
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, NULL), BL_EINVAL);
+    p = good;
+    bl_segment segs[WORLD_SEGMENTS];
+    memcpy(segs, world_segments, sizeof segs);
+    segs[0].x1_m = (bl_real)NAN;
+    const bl_map bad_map = {segs, WORLD_SEGMENTS};
+    assert_int_equal(bl_memory_correct(&m, &bad_map, &ring, &p, NULL), BL_EINVAL);
+    assert_int_equal(bl_memory_correct(&m, NULL, &ring, &p, NULL), BL_EINVAL);
+    assert_memory_equal(&m, &copy, sizeof m);
+    assert_memory_equal(&p, &good, sizeof p);
+    /* bad data: counted at the push, cumulative */
+    bl_memory_result r;
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
+    const uint32_t flagged0 = r.dropped.flagged, last_points = r.points;
+    b[0].flags = BL_SONAR_NO_ECHO;
+    b[1].sensor = 12;
+    b[2].range_m = (bl_real)NAN;
+    assert_int_equal(bl_memory_push(&m, &ring, &good, b, n), BL_OK);
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
+    assert_int_equal(r.dropped.flagged, flagged0 + 1);
+    assert_int_equal(r.dropped.unknown_sensor, 1);
+    assert_int_equal(r.dropped.non_finite, 1);
+    /* the oldest burst (<= 7 ranges) went, the new one brought its good ones */
+    const uint32_t added = n - 3;
+    assert_true(r.points <= last_points + added && r.points + 7 >= last_points + added);
+}
+
+/* The dead-reckoning step: a turn in place and a straight run. */
+static void test_odometry_step(void **state)
+{
+    (void)state;
+    bl_pose p = {1, 2, 0};
+    assert_int_equal(bl_pose_odometry_step(&p, (bl_real)-0.25 * (bl_real)3.141592653589793,
+                                           (bl_real)0.25 * (bl_real)3.141592653589793, 1),
+                     BL_OK);
+    assert_true(fabs((double)p.theta_rad - 1.5707963267948966) < 1e-6);
+    assert_true(fabs((double)p.x_m - 1) < 1e-6 && fabs((double)p.y_m - 2) < 1e-6);
+    assert_int_equal(bl_pose_odometry_step(&p, 1, 1, 1), BL_OK);
+    assert_true(fabs((double)p.x_m - 1) < 1e-6 && fabs((double)p.y_m - 3) < 1e-6);
+    const bl_pose before = p;
+    assert_int_equal(bl_pose_odometry_step(&p, 1, 1, 0), BL_EINVAL);
+    assert_int_equal(bl_pose_odometry_step(&p, (bl_real)NAN, 1, 1), BL_EINVAL);
+    assert_memory_equal(&p, &before, sizeof p);
+}
+
+int main(void)
+{
+    (void)rng_gauss; /* test_rng.h: only the uniform draws here */
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_pinpoint_recovers_offset),  cmocka_unit_test(test_pinpoint_endpoint_case),
+        cmocka_unit_test(test_pinpoint_gate),             cmocka_unit_test(test_pinpoint_bad_ranges_counted),
+        cmocka_unit_test(test_pinpoint_refuses_bad_input), cmocka_unit_test(test_memory_recovers_offset),
+        cmocka_unit_test(test_memory_scattered_fit_refused),
+        cmocka_unit_test(test_memory_incidence_gate),     cmocka_unit_test(test_memory_refuses_bad_input),
+        cmocka_unit_test(test_odometry_step),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
