@@ -96,28 +96,40 @@ static void event(struct estimator *e, enum est_event_severity sev, const char *
 
 static void event(struct estimator *e, enum est_event_severity sev, const char *fmt, ...)
 {
-    struct est_event ev;
-    ev.severity = sev;
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(ev.text, sizeof ev.text, fmt, ap);
+    est_event_vpush(&e->events, sev, fmt, ap);
     va_end(ap);
-    if (e->ev_len == EST_EVENT_QUEUE) { /* drop the oldest */
-        e->ev_head = (e->ev_head + 1) % EST_EVENT_QUEUE;
-        e->ev_len--;
+}
+
+void est_event_vpush(struct est_event_queue *q, enum est_event_severity sev, const char *fmt,
+                     va_list ap)
+{
+    struct est_event ev;
+    ev.severity = sev;
+    vsnprintf(ev.text, sizeof ev.text, fmt, ap);
+    if (q->len == EST_EVENT_QUEUE) { /* drop the oldest */
+        q->head = (q->head + 1) % EST_EVENT_QUEUE;
+        q->len--;
+        q->dropped++;
     }
-    e->events[(e->ev_head + e->ev_len) % EST_EVENT_QUEUE] = ev;
-    e->ev_len++;
+    q->ev[(q->head + q->len) % EST_EVENT_QUEUE] = ev;
+    q->len++;
+}
+
+bool est_event_pop(struct est_event_queue *q, struct est_event *ev)
+{
+    if (q->len == 0)
+        return false;
+    *ev = q->ev[q->head];
+    q->head = (q->head + 1) % EST_EVENT_QUEUE;
+    q->len--;
+    return true;
 }
 
 bool estimator_next_event(struct estimator *e, struct est_event *ev)
 {
-    if (e->ev_len == 0)
-        return false;
-    *ev = e->events[e->ev_head];
-    e->ev_head = (e->ev_head + 1) % EST_EVENT_QUEUE;
-    e->ev_len--;
-    return true;
+    return est_event_pop(&e->events, ev);
 }
 
 /* ---- configuration ---------------------------------------------------- */

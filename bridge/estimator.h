@@ -75,6 +75,7 @@
 #ifndef BRIDGE_ESTIMATOR_H
 #define BRIDGE_ESTIMATOR_H
 
+#include <stdarg.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -94,6 +95,21 @@ struct est_event {
     enum est_event_severity severity;
     char text[EST_EVENT_LEN];
 };
+
+/* The events a source queues for STATUSTEXT and the log, oldest first; a
+ * full queue drops its oldest (counted). One queue type for the estimator
+ * and the team host (bridge/team.c). */
+struct est_event_queue {
+    struct est_event ev[EST_EVENT_QUEUE];
+    unsigned head, len;
+    uint64_t dropped;
+};
+
+/* Queue one event, text from fmt (vsnprintf, cut at EST_EVENT_LEN). */
+void est_event_vpush(struct est_event_queue *q, enum est_event_severity sev, const char *fmt,
+                     va_list ap) __attribute__((format(printf, 3, 0)));
+/* The oldest event into *ev and off the queue; false when empty. */
+bool est_event_pop(struct est_event_queue *q, struct est_event *ev);
 
 struct est_counters {
     uint64_t pulses_in; /* sequencer output pulses */
@@ -230,8 +246,7 @@ struct estimator {
     int64_t last_data_rx_us;    /* newest receive time of a fused measurement's frame */
     bool updated;               /* an update since estimator_take_update */
     struct est_counters c;
-    struct est_event events[EST_EVENT_QUEUE];
-    unsigned ev_head, ev_len;
+    struct est_event_queue events;
     struct est_initial_pose initial_pose; /* pending until used (set false then) */
     /* [range_beacons] self_survey = 1 (bridge/estimator_survey.c): the beacons'
      * positions from BEACON_SURVEY ranges; until it is done the localizer has

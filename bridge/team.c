@@ -25,29 +25,15 @@ static void event(struct team *t, enum est_event_severity sev, const char *fmt, 
 
 static void event(struct team *t, enum est_event_severity sev, const char *fmt, ...)
 {
-    struct est_event ev;
-    ev.severity = sev;
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(ev.text, sizeof ev.text, fmt, ap);
+    est_event_vpush(&t->events, sev, fmt, ap);
     va_end(ap);
-    if (t->ev_len == EST_EVENT_QUEUE) { /* drop the oldest */
-        t->ev_head = (t->ev_head + 1) % EST_EVENT_QUEUE;
-        t->ev_len--;
-        t->events_dropped++;
-    }
-    t->events[(t->ev_head + t->ev_len) % EST_EVENT_QUEUE] = ev;
-    t->ev_len++;
 }
 
 bool team_next_event(struct team *t, struct est_event *ev)
 {
-    if (t->ev_len == 0)
-        return false;
-    *ev = t->events[t->ev_head];
-    t->ev_head = (t->ev_head + 1) % EST_EVENT_QUEUE;
-    t->ev_len--;
-    return true;
+    return est_event_pop(&t->events, ev);
 }
 
 static const char *role_name(uint32_t role)
@@ -418,7 +404,7 @@ void team_write_json(const struct team *t, uint64_t odometry_sent, FILE *f)
             t->mirror_resolved ? "true" : "false", t->mirror_flipped ? "true" : "false",
             t->mirror_robot);
     fprintf(f, "\"robots_lost\": %u, \"odometry_sent\": %llu, \"events_dropped\": %llu,\n",
-            st.robots_lost, U(odometry_sent), U(t->events_dropped + st.events_dropped));
+            st.robots_lost, U(odometry_sent), U(t->events.dropped + st.events_dropped));
     fprintf(f,
             "    \"frames\": {\"ranges_in\": %llu, \"ranges_unknown_robot\": %llu, "
             "\"ranges_self\": %llu, \"ranges_bad_tof\": %llu, \"stale_ranges\": %llu, "

@@ -150,9 +150,7 @@ struct team {
     bool mirror_resolved, mirror_flipped;
     uint32_t mirror_robot;
     struct team_counters c;
-    struct est_event events[EST_EVENT_QUEUE];
-    unsigned ev_head, ev_len;
-    uint64_t events_dropped;
+    struct est_event_queue events;
 };
 
 /* Robot k's MAVLink system id (docs/mavlink.md, "Teams"). */
