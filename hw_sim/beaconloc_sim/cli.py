@@ -121,20 +121,70 @@ def _run_team(args) -> int:
         print(f"beaconloc-sim: {exc}", file=sys.stderr)
         return EX_CONFIG
     t0 = time.perf_counter()
-    result = team_sim.run(tscn, bound=bool(args.truth))
+    live = None
+    if args.channel:
+        # live: stepwise, the leader obeying the TEAM_COMMAND frames it reads from the bus
+        result, live = _run_team_live(tscn, args)
+        if result is None:
+            return live
+    else:
+        result = team_sim.run(tscn, bound=bool(args.truth))
     if args.log:
         can_out.write_log(result.frames, args.log, tscn.log_epoch_s, args.channel or tscn.channel)
     if args.truth:
         outputs.write_csv(args.truth, team_sim.TEAM_TRUTH_COLUMNS, result.truth)
     if args.roles:
         outputs.write_json(args.roles, team_sim.roles_document(result))
-    if args.channel:
-        rc, _lateness, _sched = _send_live(result.frames, args)
-        if rc != 0:
-            return rc
     if args.stats:
-        outputs.write_json(args.stats, team_sim.team_stats(result, time.perf_counter() - t0))
+        stats = team_sim.team_stats(result, time.perf_counter() - t0)
+        if live is not None:
+            stats["live"] = live
+        outputs.write_json(args.stats, stats)
     return 0
+
+
+def _run_team_live(tscn, args):
+    """run TEAM --channel: team_steps.run_live on the bus, stopped early by SIGINT/SIGTERM.
+    (result, live stats) or (None, exit status) with the error said."""
+    import can
+    import numpy as np
+
+    from . import can_out, team_steps
+    stop = {"flag": False}
+
+    def on_signal(_sig, _frm):
+        stop["flag"] = True
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        try:
+            bus = can.Bus(interface=args.interface, channel=args.channel,
+                          can_filters=team_steps.command_filter())
+        except (can.CanError, OSError, ValueError, ImportError) as exc:
+            print(f"beaconloc-sim: cannot open CAN bus {args.interface}:{args.channel}: {exc}",
+                  file=sys.stderr)
+            return None, EX_UNAVAILABLE
+        sched = can_out.realtime_priority() if args.realtime else "SCHED_OTHER"
+        try:
+            result, lateness = team_steps.run_live(tscn, bus, spin_s=args.spin_ms * 1e-3,
+                                                   stop=lambda: stop["flag"],
+                                                   bound=bool(args.truth))
+        except can.CanError as exc:
+            print(f"beaconloc-sim: send failed on {args.channel}: {exc}", file=sys.stderr)
+            return None, EX_UNAVAILABLE
+        finally:
+            bus.shutdown()
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+    # the single-robot run's live statistics (outputs.run_stats), and where it ran
+    late_us = np.asarray(lateness) * 1e6
+    pct = (lambda q: float(np.percentile(late_us, q))) if len(late_us) else (lambda q: None)
+    live = {"frames_sent": int(len(late_us)),
+            "lateness_us": {"p50": pct(50), "p99": pct(99),
+                            "max": float(np.max(late_us)) if len(late_us) else None},
+            "frames_late_over_1ms": int(np.sum(late_us > 1000.0)),
+            "scheduling": sched, "interface": args.interface, "channel": args.channel}
+    return result, live
 
 
 def _send_live(frames, args):
