@@ -37,11 +37,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .dbc import signal_modulo
+
 COMMANDS = {1: "start", 2: "pause", 3: "resume"}          # DBC TEAM_COMMAND Command
 CODES = {name: code for code, name in COMMANDS.items()}
 STATES = ("waiting", "running", "paused")
 REPEAT_WINDOW_S = 10.0      # a Sequence taken within this long before is the same command
-SEQUENCE_MODULO = 256       # DBC TEAM_COMMAND Sequence: 8 bits
+SEQUENCE_MODULO = signal_modulo("TEAM_COMMAND", "Sequence")     # 8 bits: 256
 
 
 class PlanClock:
@@ -249,7 +251,7 @@ def parse_commands(text: str, leader_id: int) -> tuple:
         seq = i % SEQUENCE_MODULO
         if len(parts) == 3:
             if not (parts[2].isdigit() and int(parts[2]) < SEQUENCE_MODULO):
-                raise ValueError(f"{item!r}: sequence must be 0..255")
+                raise ValueError(f"{item!r}: sequence must be 0..{SEQUENCE_MODULO - 1}")
             seq = int(parts[2])
         out.append((t, {"Command": code, "Leader": leader_id, "Sequence": seq}))
     return tuple(sorted(out, key=lambda c: c[0]))
