@@ -6,6 +6,7 @@ go on), resume (the same leap completed), repeated Sequences and unknown command
 and ignored, the scripted run the bus-commanded one byte for byte."""
 from __future__ import annotations
 
+import csv
 import json
 import math
 import re
@@ -271,3 +272,51 @@ def test_leader_state_machine_alone():
     lead.receive(20.0, {"Command": 3, "Leader": 1, "Sequence": 2})
     lead.tick(20.0)
     assert lead.commands[-1].outcome == "taken" and lead.state == "running"
+
+
+def test_live_from_the_command_line_obeys_the_bus(tmp_path):
+    """beaconloc-sim run TEAM --channel (the CLI's live path, its receive filter): START from
+    the bus starts the team; every frame made is on the bus; truth, roles and stats after."""
+    from beaconloc_sim import cli
+    p = tmp_path / "cli-live.scenario.ini"
+    p.write_text(scenario_text(duration_s=4.0))
+    channel = f"hT2-team-cli-{time.monotonic_ns()}"
+    op = can.Bus(interface="virtual", channel=channel)
+    got = []
+
+    def operator():
+        while not got:
+            m = op.recv(timeout=10.0)
+            if m is None:
+                return
+            got.append(m)
+        time.sleep(0.5)
+        op.send(can.Message(arbitration_id=CMD.frame_id, is_extended_id=False,
+                            data=CMD.encode({"Command": 1, "Leader": 1, "Sequence": 0,
+                                             "Counter": 0})))
+        while True:
+            m = op.recv(timeout=1.0)
+            if m is None:
+                return
+            got.append(m)
+    th = threading.Thread(target=operator, daemon=True)
+    th.start()
+    out = {k: tmp_path / f"{k}.{ext}" for k, ext in (("truth", "csv"), ("roles", "json"),
+                                                    ("stats", "json"))}
+    try:
+        assert cli.main(["run", str(p), "--channel", channel, "--interface", "virtual",
+                         "--spin-ms", "0", "--no-realtime",
+                         *(a for k, v in out.items() for a in (f"--{k}", str(v)))]) == 0
+    finally:
+        th.join(timeout=5)
+        op.shutdown()
+    stats = json.loads(out["stats"].read_text())
+    assert stats["live"]["frames_sent"] == stats["frames"]["total"] == len(got)
+    assert stats["team_commands"]["taken"] == 1
+    states = json.loads(out["roles"].read_text())["leader_control"]["states"]
+    assert [s["state"] for s in states] == ["waiting", "running"]
+    t_go = states[1]["t_s"]
+    assert 0.5 <= t_go < 1.5
+    rows = list(csv.DictReader(out["truth"].open()))
+    moved = [float(r["t_sim_s"]) for r in rows if float(r["v_mps"]) or float(r["omega_radps"])]
+    assert moved and min(moved) >= t_go + 1.0 - 1e-9      # robot 4 starts init_s after START
