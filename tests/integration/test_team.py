@@ -76,8 +76,8 @@ def run(module_rig):
     return r
 
 
-def _by_robot(run) -> dict[int, list]:
-    first = _system_id_first()
+def _by_robot(run, site=SITE) -> dict[int, list]:
+    first = _system_id_first(site)
     out = {r: [] for r in ROBOTS}
     for rec in run.odometry:
         robot = rec.msg.get_srcSystem() - first + 1
@@ -195,7 +195,7 @@ def test_operator_pauses_and_resumes_the_leapfrog(rig):
     # the robot's ODOMETRY (its own system id) shows it: standing during the pause, moving
     # before (it drives from 11 s on: 0.25 m in the last second) and after (0.5 m in 2 s, the
     # last of it maybe its turn towards the leap's target)
-    recs = _by_robot(run)[MOVER]
+    recs = _by_robot(run, LEAP_SITE)[MOVER]
     to_node = run.probe.mapping(MOVER)
     assert to_node is not None, f"too few TRACK_ENCODERS of robot {MOVER} on the bus"
     t_node = to_node(np.array([r.msg.time_usec for r in recs], dtype=float) / 1e6)
