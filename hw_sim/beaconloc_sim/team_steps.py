@@ -26,6 +26,7 @@ import dataclasses
 import math
 import time
 
+import cantools
 import numpy as np
 
 from . import can_out
@@ -36,6 +37,7 @@ from .nodes.range_module import Pings, RangeModule, TeamRanges, leader_pings, te
 from .nodes.track_encoders import TrackEncoders
 from .team_leader import TeamLeader, WarpedTrajectory
 from .team_scenario import TeamScenario
+from .team_sim import _N_SEEDS, TeamResult, _pcrb, _truth, team_frame
 
 STEP_S = 0.1                # the leader's tick, s of true time
 TEAM_COMMAND = "TEAM_COMMAND"
@@ -55,7 +57,6 @@ class TeamSteps:
     """One stepwise run: step(w) makes window w's frames; result() the run's TeamResult."""
 
     def __init__(self, tscn: TeamScenario, step_s: float = STEP_S, encode: bool = True):
-        from .team_sim import _N_SEEDS
         if not step_s > 0:
             raise ValueError("step_s must be > 0")
         self.tscn, self.step_s, self.encode = tscn, step_s, encode
@@ -123,7 +124,6 @@ class TeamSteps:
 
     def result(self, bound: bool = True):
         """The TeamResult of the windows made (a live run stopped early: up to there)."""
-        from .team_sim import TeamResult, _pcrb, _truth, team_frame
         t_end = self.window(self.done - 1)[1] if self.done else 0.0
         view = self._mapped(dataclasses.replace(self.view, duration_s=t_end))
         # what the run never reached is not in its record
@@ -167,7 +167,7 @@ def decode_command(msg) -> dict | None:
         return None
     try:
         return spec.decode(bytes(msg.data), decode_choices=False)
-    except Exception:          # noqa: BLE001  (cantools raises several kinds on bad data)
+    except (cantools.database.DecodeError, ValueError, KeyError):
         return None
 
 

@@ -320,3 +320,17 @@ def test_live_from_the_command_line_obeys_the_bus(tmp_path):
     rows = list(csv.DictReader(out["truth"].open()))
     moved = [float(r["t_sim_s"]) for r in rows if float(r["v_mps"]) or float(r["omega_radps"])]
     assert moved and min(moved) >= t_go + 1.0 - 1e-9      # robot 4 starts init_s after START
+
+
+def test_a_frame_that_does_not_decode_is_counted_not_taken():
+    good = CMD.encode({"Command": 2, "Leader": 1, "Sequence": 4, "Counter": 0})
+    msg = can.Message(arbitration_id=CMD.frame_id, is_extended_id=False, data=good)
+    assert team_steps.decode_command(msg) == {"Command": 2, "Leader": 1, "Sequence": 4,
+                                              "Counter": 0}
+    for bad in (can.Message(arbitration_id=CMD.frame_id, is_extended_id=False, data=good[:4]),
+                can.Message(arbitration_id=CMD.frame_id, is_extended_id=True, data=good)):
+        assert team_steps.decode_command(bad) is None
+    lead = TeamLeader(1, wait_for_start=False, ramp_s=0.5, react_s=0.05)
+    lead.receive(1.0, team_steps.decode_command(bad))
+    lead.tick(1.0)
+    assert lead.counts["bad_frames"] == 1 and lead.commands == [] and lead.state == "running"
