@@ -24,6 +24,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import queue
+import sys
+import threading
 import time
 
 import cantools
@@ -179,43 +182,74 @@ def command_filter() -> list[dict]:
 
 def run_live(tscn: TeamScenario, bus, *, step_s: float = STEP_S, spin_s: float = 0.0015,
              lead_s: float = 0.05, stop=None, bound: bool = True):
-    """The stepwise run live on a python-can bus: window w is made lead_s before its start
-    (real time from one monotonic start instant, as can_out.send_live), its frames sent at
-    their times, and the bus read while waiting: every TEAM_COMMAND goes to the leader's next
-    tick. Returns (TeamResult of the windows made, lateness of every frame sent, s)."""
+    """The stepwise run live on a python-can bus, in two threads from one monotonic start
+    instant (as can_out.send_live). The leader's thread makes window w lead_s before its start
+    and reads the bus until then: every TEAM_COMMAND goes to the leader's next tick. This
+    thread sends every frame made at its time (sleeps, then spins the last spin_s), so the
+    making of a window delays no frame by more than the interpreter's switch interval.
+    Returns (TeamResult of the windows made, lateness of every frame sent, s); stopped early,
+    the frames made but not sent are in the result (what the run made), not in the lateness."""
     import can
     steps = TeamSteps(tscn, step_s)
     fid = database().get_message_by_name(TEAM_COMMAND).frame_id
-    received: list = []
-    lateness: list[float] = []
+    made: queue.Queue = queue.Queue()        # (t_s, id, data) in bus order; None: the end
+    halt = threading.Event()
+    failed: list[BaseException] = []
     clock = time.perf_counter
-
-    def wait_until(deadline: float) -> bool:
-        """Read the bus until shortly before deadline, then spin; False: stop asked."""
-        while True:
-            if stop is not None and stop():
-                return False
-            remaining = deadline - clock()
-            if remaining <= spin_s:
-                break
-            msg = bus.recv(timeout=min(remaining - spin_s, 0.1))
-            if msg is not None and msg.arbitration_id == fid:
-                received.append(decode_command(msg))
-        while clock() < deadline:
-            pass
-        return True
-
     start = clock() + 0.05
-    for w in range(steps.n_windows):
-        if not wait_until(start + steps.window(w)[0] - lead_s):
-            break
-        frames = steps.step(w, received)
-        received.clear()
-        for t, arb, data in zip(frames.t_s.tolist(), frames.arb_id.tolist(), frames.data):
+
+    def lead() -> None:
+        try:
+            received: list = []
+            for w in range(steps.n_windows):
+                make_at = start + steps.window(w)[0] - lead_s
+                while not halt.is_set() and clock() < make_at:
+                    msg = bus.recv(timeout=min(max(make_at - clock(), 0.0), 0.1))
+                    if msg is not None and msg.arbitration_id == fid:
+                        received.append(decode_command(msg))
+                if halt.is_set():
+                    break
+                frames = steps.step(w, received)
+                received = []
+                for item in zip(frames.t_s.tolist(), frames.arb_id.tolist(), frames.data):
+                    made.put(item)
+        except BaseException as exc:       # noqa: BLE001  (raised again in the caller)
+            failed.append(exc)
+        finally:
+            made.put(None)
+
+    leader = threading.Thread(target=lead, name="team-leader", daemon=True)
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(0.0005)        # the sender gets the interpreter back within 0.5 ms
+    leader.start()
+    lateness: list[float] = []
+    try:
+        while True:
+            try:
+                item = made.get(timeout=0.1)
+            except queue.Empty:
+                if stop is not None and stop():
+                    break
+                continue
+            if item is None:
+                break
+            t, arb, data = item
             deadline = start + t
-            if not wait_until(deadline):
-                return steps.result(bound), np.array(lateness)
+            while (remaining := deadline - clock()) > spin_s:
+                if stop is not None and stop():
+                    break
+                time.sleep(min(remaining - spin_s, 0.1))
+            if stop is not None and stop():
+                break
+            while clock() < deadline:
+                pass
             can_out._send_retrying(bus, can.Message(arbitration_id=arb, is_extended_id=False,
                                                     data=data), deadline)
             lateness.append(clock() - deadline)
+    finally:
+        halt.set()
+        leader.join()
+        sys.setswitchinterval(switch)
+    if failed:
+        raise failed[0]
     return steps.result(bound), np.array(lateness)
