@@ -22,6 +22,7 @@ import pytest
 
 from beaconloc_sim import team_sim, team_steps
 from beaconloc_sim.dbc import database
+from beaconloc_sim.nodes.track_encoders import metres_per_tick
 from beaconloc_sim.resources import builtin_scenario_path, builtin_site_path
 from beaconloc_sim.team_leader import CODES, PlanClock, TeamLeader, parse_commands
 from beaconloc_sim.team_scenario import load_team_scenario
@@ -228,6 +229,21 @@ def test_without_commands_the_run_is_the_precomputed_one(tmp_path):
     assert np.array_equal(pre.pings.t_s, steps.pings.t_s)
     assert np.array_equal(pre.pings.emitter, steps.pings.emitter)
     assert len(steps.frames) == pytest.approx(len(pre.frames), rel=0.02)
+    # the track encoders carried from window to window: the same sample instants, the
+    # travel the true one within its slip (sigma_per_m sqrt(d) per track), counts continuous
+    for robot in tscn.robots:
+        t_pre, t_st = pre.tracks[robot.id][0], steps.tracks[robot.id][0]
+        assert np.array_equal(t_pre, t_st)
+        wl, wr = robot.trajectory.wheel_travel(t_st)
+        _, left, right, ticks_l, ticks_r = steps.tracks[robot.id]
+        for true_m, seen_m in ((wl, left), (wr, right)):
+            sigma = tscn.slip_sigma_per_m * np.sqrt(np.abs(true_m)) + 1e-3
+            assert np.all(np.abs(seen_m - true_m) < 5 * sigma + tscn.effective_base_m)
+        m_tick = metres_per_tick(tscn.site)
+        for ticks, seen_m in ((ticks_l, left), (ticks_r, right)):
+            assert np.all(np.abs(np.diff(ticks) * m_tick - np.diff(seen_m)) <= m_tick * 1.001)
+    moved = steps.tracks[4][1][-1]
+    assert moved > 1.0                       # robot 4 drove its L and into the first leap
 
 
 # ---- the plan clock and the parser, alone -------------------------------------------------
