@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import math
 import signal
@@ -121,26 +122,60 @@ def _run_team(args) -> int:
         print(f"beaconloc-sim: {exc}", file=sys.stderr)
         return EX_CONFIG
     t0 = time.perf_counter()
-    result = team_sim.run(tscn, bound=bool(args.truth))
+    live = None
+    if args.channel:
+        # live: stepwise, the leader obeying the TEAM_COMMAND frames it reads from the bus
+        result, live = _run_team_live(tscn, args)
+        if result is None:
+            return live
+    else:
+        result = team_sim.run(tscn, bound=bool(args.truth))
     if args.log:
         can_out.write_log(result.frames, args.log, tscn.log_epoch_s, args.channel or tscn.channel)
     if args.truth:
         outputs.write_csv(args.truth, team_sim.TEAM_TRUTH_COLUMNS, result.truth)
     if args.roles:
         outputs.write_json(args.roles, team_sim.roles_document(result))
-    if args.channel:
-        rc, _lateness, _sched = _send_live(result.frames, args)
-        if rc != 0:
-            return rc
     if args.stats:
-        outputs.write_json(args.stats, team_sim.team_stats(result, time.perf_counter() - t0))
+        stats = team_sim.team_stats(result, time.perf_counter() - t0)
+        if live is not None:
+            stats["live"] = live
+        outputs.write_json(args.stats, stats)
     return 0
 
 
-def _send_live(frames, args):
-    """run --channel: every frame on the bus at its time (can_out.send_live), SCHED_FIFO
-    unless --no-realtime, stopped early by SIGINT/SIGTERM. (0, lateness s, scheduling
-    policy), or (exit status, None, None) with the error said."""
+def _run_team_live(tscn, args):
+    """run TEAM --channel: team_steps.run_live on the bus (reading TEAM_COMMAND frames).
+    (result, live stats) or (None, exit status) with the error said."""
+    import can
+    import numpy as np
+
+    from . import team_steps
+    with _live_bus(args, can_filters=team_steps.command_filter()) as (bus, stop, sched):
+        if bus is None:
+            return None, EX_UNAVAILABLE
+        try:
+            result, lateness = team_steps.run_live(tscn, bus, spin_s=args.spin_ms * 1e-3,
+                                                   stop=stop, bound=bool(args.truth))
+        except can.CanError as exc:
+            print(f"beaconloc-sim: send failed on {args.channel}: {exc}", file=sys.stderr)
+            return None, EX_UNAVAILABLE
+    # the single-robot run's live statistics (outputs.run_stats), and where it ran
+    late_us = np.asarray(lateness) * 1e6
+    pct = (lambda q: float(np.percentile(late_us, q))) if len(late_us) else (lambda q: None)
+    live = {"frames_sent": int(len(late_us)),
+            "lateness_us": {"p50": pct(50), "p99": pct(99),
+                            "max": float(np.max(late_us)) if len(late_us) else None},
+            "frames_late_over_1ms": int(np.sum(late_us > 1000.0)),
+            "scheduling": sched, "interface": args.interface, "channel": args.channel}
+    return result, live
+
+
+@contextlib.contextmanager
+def _live_bus(args, **bus_kwargs):
+    """The bus of run --channel: SCHED_FIFO asked unless --no-realtime, SIGINT/SIGTERM only
+    setting the stop flag. Yields (bus, stop() -> bool, scheduling policy), or (None, None,
+    None) with the error said when the bus cannot be opened."""
     import can
 
     from . import can_out
@@ -151,23 +186,37 @@ def _send_live(frames, args):
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         try:
-            bus = can.Bus(interface=args.interface, channel=args.channel)
+            bus = can.Bus(interface=args.interface, channel=args.channel, **bus_kwargs)
         except (can.CanError, OSError, ValueError, ImportError) as exc:
             print(f"beaconloc-sim: cannot open CAN bus {args.interface}:{args.channel}: {exc}",
                   file=sys.stderr)
-            return EX_UNAVAILABLE, None, None
+            yield None, None, None
+            return
         sched = can_out.realtime_priority() if args.realtime else "SCHED_OTHER"
         try:
-            lateness = can_out.send_live(frames, bus, spin_s=args.spin_ms * 1e-3,
-                                         stop=lambda: stop["flag"])
-        except can.CanError as exc:
-            print(f"beaconloc-sim: send failed on {args.channel}: {exc}", file=sys.stderr)
-            return EX_UNAVAILABLE, None, None
+            yield bus, (lambda: stop["flag"]), sched
         finally:
             bus.shutdown()
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
+
+
+def _send_live(frames, args):
+    """run --channel: every frame on the bus at its time (can_out.send_live), SCHED_FIFO
+    unless --no-realtime, stopped early by SIGINT/SIGTERM. (0, lateness s, scheduling
+    policy), or (exit status, None, None) with the error said."""
+    import can
+
+    from . import can_out
+    with _live_bus(args) as (bus, stop, sched):
+        if bus is None:
+            return EX_UNAVAILABLE, None, None
+        try:
+            lateness = can_out.send_live(frames, bus, spin_s=args.spin_ms * 1e-3, stop=stop)
+        except can.CanError as exc:
+            print(f"beaconloc-sim: send failed on {args.channel}: {exc}", file=sys.stderr)
+            return EX_UNAVAILABLE, None, None
     return 0, lateness, sched
 
 

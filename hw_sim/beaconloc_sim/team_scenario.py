@@ -16,6 +16,7 @@ import numpy as np
 from .clocks import NodeClock
 from .inifile import ConfigError, IniFile
 from .leapfrog import LeapfrogParams, Leap, PlanError, RoleChange, plan_leapfrog
+from .team_leader import parse_commands
 from .path import Trajectory
 from .physics import acoustics as ac
 from .resources import SCENARIO_SUFFIX as SUFFIX
@@ -24,13 +25,14 @@ from .site import Site, load_site
 
 ROLES = ("beacon", "receiver", "mover")   # mover: a receiver that drives (its [robotN] path)
 MAX_ROBOTS = 15                           # the DBC's Beacon / Receiver / Robot ids 1..15
+REACTION_S = 0.05                         # the leader acts on a command this long after its tick
 _ROBOT_KEYS = {"start", "role", "clock_offset_us", "clock_drift_ppm", "initial_ticks",
                "speed_mps", "turn_rate_degps"}           # + segmentN (planner = none)
 _KNOWN = {
     "scenario": {"site", "description", "duration_s", "seed"},
     "team": {"robots", "leader", "ping_period_s", "icr_factor", "slip_sigma_per_m",
              "slip_sigma_per_rad", "gauge", "planner", "speed_mps", "turn_rate_degps",
-             "bound_prior"},
+             "bound_prior", "wait_for_start", "commands", "acceleration_mps2"},
     "leapfrog": {"goal", "side_m", "init_s", "settle_s", "l_leg_m", "max_leaps"},
     "environment": {"temperature_c", "temperature_profile"},
     "ranges": {"dropout_probability", "multipath_probability"},
@@ -83,6 +85,24 @@ class TeamScenario:
     truth_rate_hz: float = 10.0
     log_epoch_s: float = 1_700_000_000.0
     channel: str = "vcan0"
+    # the leader's control of the plan (team_leader.py): hold still until START; scripted
+    # TEAM_COMMANDs ((t_s, signals), ...); the ramp of a stop or start; the reaction time
+    wait_for_start: bool = False
+    commands: tuple = ()
+    speed_mps: float = 0.2                 # [team] speed_mps: the planner's straights, m/s
+    acceleration_mps2: float = 0.5         # a stop or start ramps the speed at this, m/s^2
+    react_s: float = REACTION_S            # command -> the ramp begins, s (> flight of max range)
+
+    @property
+    def stepwise(self) -> bool:
+        """The leader has something to obey offline (team_steps.run); else team_sim.run's
+        precomputed run, the same truth."""
+        return self.wait_for_start or bool(self.commands)
+
+    @property
+    def ramp_s(self) -> float:
+        """The plan clock's 0 <-> 1 ramp: speed_mps / acceleration_mps2, s."""
+        return self.speed_mps / self.acceleration_mps2
 
     def temperature_c(self, t_s) -> np.ndarray:
         prof = self.temperature_profile
@@ -226,6 +246,13 @@ def load_team_scenario(name_or_path: str, *, seed: int | None = None,
     if not (xy[0] > 0 and xy[1] > 0):
         raise ini.error("team", "bound_prior", "expected sigma_xy_m, sigma_heading_deg > 0")
     silences = _robot_silences(ini, n, leader)
+    wait = ini.raw("team", "wait_for_start", "false").strip().lower()
+    if wait not in ("true", "false", "yes", "no", "1", "0"):
+        raise ini.error("team", "wait_for_start", f"expected true or false, got {wait!r}")
+    try:
+        commands = parse_commands(ini.raw("team", "commands", ""), leader)
+    except ValueError as exc:
+        raise ini.error("team", "commands", str(exc)) from None
     latency = tuple(ini.numbers("clocks", "node_latency_s", 2, default=[0.0001, 0.0004]))
     if not 0 <= latency[0] <= latency[1]:
         raise ini.error("clocks", "node_latency_s", "expected 'min, max' with 0 <= min <= max")
@@ -253,6 +280,11 @@ def load_team_scenario(name_or_path: str, *, seed: int | None = None,
         truth_rate_hz=ini.number("output", "truth_rate_hz", 10.0, positive=True, maximum=1000),
         log_epoch_s=ini.number("output", "log_epoch_s", 1_700_000_000.0, minimum=0),
         channel=ini.raw("output", "channel", "vcan0"),
+        wait_for_start=wait in ("true", "yes", "1"), commands=commands, speed_mps=speed,
+        acceleration_mps2=ini.number("team", "acceleration_mps2", 0.5, positive=True,
+                                     maximum=100.0),
+        # the leader's reaction outlasts any range in flight (team_leader.py)
+        react_s=max(REACTION_S, 2 * site.range_max_m / slowest),
     )
 
 

@@ -39,6 +39,7 @@ class TeamResult:
     frame: tuple                 # team frame: (origin x_m, y_m, rotation_rad) in the site frame
     pcrb_t_s: np.ndarray         # (K,) events of the bound (t = 0, then the pings), s
     pcrb_cov: np.ndarray         # (K, 3N+1, 3N+1) bound after each, team frame
+    leader: object = None        # team_leader.TeamLeader of a stepwise run (team_steps.py)
 
 
 def team_frame(tscn: TeamScenario) -> tuple[float, float, float]:
@@ -70,7 +71,11 @@ def bound_model(tscn: TeamScenario) -> crb.TeamBoundModel:
 
 
 def run(tscn: TeamScenario, *, encode: bool = True, bound: bool = True) -> TeamResult:
-    """Simulate the team scenario (one interval: the whole run)."""
+    """Simulate the team scenario (one interval: the whole run); a scenario whose leader has
+    something to obey ([team] wait_for_start, commands) runs stepwise (team_steps.run)."""
+    if tscn.stepwise:
+        from . import team_steps
+        return team_steps.run(tscn, encode=encode, bound=bound)
     rng_range, rng_track, rng_lat = (np.random.default_rng(s) for s in
                                      np.random.SeedSequence(tscn.seed).spawn(_N_SEEDS))
     pings = leader_pings(tscn)
@@ -159,7 +164,7 @@ def _truth(tscn: TeamScenario, frame, ev_t: np.ndarray, cov: np.ndarray) -> dict
 def roles_document(res: TeamResult) -> dict:
     """The role changes, the leaps and the team frame (the --roles JSON)."""
     tscn = res.scenario
-    return {
+    doc = {
         "scenario": tscn.name, "seed": tscn.seed, "robots": tscn.robot_ids,
         "leader": tscn.leader, "planner": tscn.planner,
         "team_frame": {"origin_robot": tscn.gauge[0], "x_axis_robot": tscn.gauge[1],
@@ -174,6 +179,9 @@ def roles_document(res: TeamResult) -> dict:
         "robot_silences": [{"t_start_s": start, "t_end_s": start + dur, "robots": list(robots)}
                            for start, dur, robots in tscn.robot_silences],
     }
+    if res.leader is not None:         # a stepwise run: the leader's states and commands
+        doc["leader_control"] = res.leader.document()
+    return doc
 
 
 def team_stats(res: TeamResult, wall_time_s: float) -> dict:
@@ -193,4 +201,5 @@ def team_stats(res: TeamResult, wall_time_s: float) -> dict:
                        "out_of_range": int(np.sum(r.out_of_range)),
                        "silent": int(np.sum(r.silent))},
             "role_changes": len(res.scenario.role_changes), "leaps": len(res.scenario.leaps),
-            "wall_time_s": wall_time_s}
+            "wall_time_s": wall_time_s,
+            **({"team_commands": res.leader.counts} if res.leader is not None else {})}

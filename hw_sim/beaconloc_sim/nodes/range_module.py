@@ -75,20 +75,30 @@ class TeamRanges(RangeFlags):
         return RangeFlags.sent.fget(self) & ~self.silent
 
 
-def leader_pings(tscn) -> Pings:
+def leader_pings(tscn, window: tuple[float, float] | None = None) -> Pings:
     """The pings of the run (module docstring): every P of the leader's clock in
-    [0, duration_s], emitter by round robin over the beacons of the instant."""
+    [0, duration_s], emitter by round robin over the beacons of the instant. window (t_a,
+    t_b): only the counts in (U(t_a), U(t_b)] of the leader's clock U (the run's first window
+    from t = 0), numbered as in the whole run (the stepwise run, team_steps.py)."""
     leader = tscn.robot(tscn.leader).clock
     period_us = int(round(tscn.ping_period_s * 1e6))
     first = -(-int(leader.unwrapped_us(0.0)) // period_us) * period_us
-    counts = np.arange(first, leader.unwrapped_us(tscn.duration_s) + 1, period_us, dtype=np.int64)
+    if window is None:
+        counts = np.arange(first, leader.unwrapped_us(tscn.duration_s) + 1, period_us,
+                           dtype=np.int64)
+        k_run = np.arange(len(counts))
+    else:
+        lo = first if window[0] <= 0 else \
+            max(first, -(-(int(leader.unwrapped_us(window[0])) + 1) // period_us) * period_us)
+        counts = np.arange(lo, leader.unwrapped_us(window[1]) + 1, period_us, dtype=np.int64)
+        k_run = (counts - first) // period_us
     t = leader.true_time_s(counts)
     mask = tscn.beacon_mask(t) & ~tscn.silent_mask(t)     # a silent robot is skipped
     ids = np.asarray(tscn.robot_ids)
     emitter = np.zeros(len(t), dtype=np.int64)
     for k in range(len(t)):
         current = ids[mask[k]]
-        emitter[k] = current[k % len(current)] if len(current) else 0
+        emitter[k] = current[int(k_run[k]) % len(current)] if len(current) else 0
     keep = emitter > 0                           # no beacon at that instant: no ping
     return Pings(t[keep], counts[keep], emitter[keep])
 
@@ -158,7 +168,12 @@ class RangeModule(Node):
     def __init__(self, robot, ranges: TeamRanges):
         super().__init__(robot.clock)
         self.robot = robot
-        self.ranges = ranges.select((ranges.receiver == robot.id) & ranges.sent)
+        self.take(ranges)
+
+    def take(self, ranges: TeamRanges) -> None:
+        """The ranges its next sample() sends: those of ranges it heard and sends (the
+        whole run's, or a window's in the stepwise run)."""
+        self.ranges = ranges.select((ranges.receiver == self.robot.id) & ranges.sent)
 
     def sample(self, iv: Interval) -> tuple[np.ndarray, list[dict]]:
         r = self.ranges

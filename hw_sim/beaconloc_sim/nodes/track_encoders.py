@@ -35,19 +35,25 @@ class TrackEncoders(Node):
         # track travel as the encoders saw it (m, cumulative from t = 0), ticks (unwrapped)
         self.samples = (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
                         np.zeros(0, np.int64))
+        # carried from one interval to the next (the stepwise run): the last sample's true
+        # time and the tracks' travel as the encoders saw it there, m
+        self._last = (0.0, 0.0, 0.0)
 
     def sample(self, iv: Interval) -> tuple[np.ndarray, list[dict]]:
         tscn, site = self.tscn, self.tscn.site
         enc_us = self.periodic_us(iv, int(round(1e6 / site.encoder_rate_hz)))
         t = self.clock.true_time_s(enc_us)
-        wl, wr = self.robot.trajectory.wheel_travel(np.concatenate([[0.0], t]))
+        t_last, left_m, right_m = self._last
+        wl, wr = self.robot.trajectory.wheel_travel(np.concatenate([[t_last], t]))
         base = tscn.effective_base_m
         ds = np.diff((wl + wr) / 2)
         dth = np.diff((wr - wl) / base)
         dl, dr = track_travel_with_slip(ds, dth, site.wheel_base_m, tscn.icr_factor,
                                         tscn.slip_sigma_per_m, tscn.slip_sigma_per_rad,
                                         iv.rng_wheels)
-        left, right = np.cumsum(dl), np.cumsum(dr)
+        left, right = left_m + np.cumsum(dl), right_m + np.cumsum(dr)
+        if len(t):
+            self._last = (float(t[-1]), float(left[-1]), float(right[-1]))
         m_per_rad = site.wheel_radius_m
         tl = ticks(left / m_per_rad, site.ticks_per_rev, self.robot.initial_ticks[0])
         tr = ticks(right / m_per_rad, site.ticks_per_rev, self.robot.initial_ticks[1])
