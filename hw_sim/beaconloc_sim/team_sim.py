@@ -90,13 +90,19 @@ def run(tscn: TeamScenario, *, encode: bool = True, bound: bool = True) -> TeamR
         frames.data = can_out.encode_all(frames)
     tracks = {n.robot.id: n.samples for n in nodes if isinstance(n, TrackEncoders)}
     frame = team_frame(tscn)
+    ev_t, cov, truth = bound_and_truth(tscn, pings, ranges, frame, bound)
+    return TeamResult(tscn, frames, truth, pings, ranges, tracks, frame, ev_t, cov)
+
+
+def bound_and_truth(tscn, pings, ranges, frame, bound: bool):
+    """The team's bound at its events (all NaN when not wanted) and the truth
+    table with it: (event times, covariances, truth)."""
     if bound:
         ev_t, cov = _pcrb(tscn, pings, ranges, frame)
     else:
         n = 3 * len(tscn.robots) + 1
         ev_t, cov = np.zeros(1), np.full((1, n, n), np.nan)
-    truth = _truth(tscn, frame, ev_t, cov)
-    return TeamResult(tscn, frames, truth, pings, ranges, tracks, frame, ev_t, cov)
+    return ev_t, cov, _truth(tscn, frame, ev_t, cov)
 
 
 def _poses(tscn: TeamScenario, t_s: np.ndarray, frame) -> np.ndarray:

@@ -40,7 +40,7 @@ from .nodes.range_module import Pings, RangeModule, TeamRanges, leader_pings, te
 from .nodes.track_encoders import TrackEncoders
 from .team_leader import TeamLeader, WarpedTrajectory
 from .team_scenario import TeamScenario
-from .team_sim import _N_SEEDS, TeamResult, _pcrb, _truth, team_frame
+from .team_sim import _N_SEEDS, TeamResult, bound_and_truth, team_frame
 
 STEP_S = 0.1                # the leader's tick, s of true time
 TEAM_COMMAND = "TEAM_COMMAND"
@@ -143,12 +143,7 @@ class TeamSteps:
         tracks = {i: tuple(np.concatenate([s[k] for s in v]) for k in range(5)) if v else ()
                   for i, v in self._samples.items()}
         frame = team_frame(view)
-        if bound:
-            ev_t, cov = _pcrb(view, pings, ranges, frame)
-        else:
-            n = 3 * len(view.robots) + 1
-            ev_t, cov = np.zeros(1), np.full((1, n, n), np.nan)
-        truth = _truth(view, frame, ev_t, cov)
+        ev_t, cov, truth = bound_and_truth(view, pings, ranges, frame, bound)
         return TeamResult(view, frames, truth, pings, ranges, tracks, frame, ev_t, cov,
                           leader=self.leader)
 
