@@ -169,6 +169,13 @@ typedef struct bl_pinpoint_params {
     uint32_t min_matches;       /* fewer matched impacts: no correction; >= 1, default 3 */
     bl_real max_correction_m;   /* refuse a position correction longer than this (m), > 0 */
     bl_real max_correction_rad; /* refuse a heading correction larger than this (rad), > 0 */
+    bl_real heading_sigma_rad;  /* σ of the odometric heading at a burst (rad), >= 0: the
+                                   pin-point's F gets the term (σ_r (θ − θ_odo)/σ_θ)², σ_r =
+                                   sigma_range_m (the paper's "the odometry being considered
+                                   as not too bad", §3.1). Specular echoes observe the heading
+                                   only through the ring's lever arm and the beam's edge:
+                                   without it their noise turns the heading. 0: none (the
+                                   paper's F). Default 0.05. Unused by the memory corrector */
 } bl_pinpoint_params;
 
 /* The paper's values (ε = ε' = 5e-3, N = 10) and min_matches 3,
