@@ -364,6 +364,29 @@ static void test_memory_recovers_offset(void **state)
     assert_true(fabs((double)r.dtheta_rad + 0.05) < 0.005);
 }
 
+/* A small position offset (3 cm, 4 cm: F of the two fitted midpoints below
+ * the paper's ε = 5e-3 m²) is corrected too: the position step stops at
+ * its own ε (bl_memory_default: 1e-4 m²), not at the ranges' (which left
+ * every offset up to 7 cm standing while the odometry drifted). */
+static void test_memory_corrects_small_offset(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    bl_memory_corrector m;
+    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
+    double x, y, th;
+    (void)drive_arc(&m, &ring, &x, &y, &th);
+    bl_pose p = {(bl_real)(x + 0.03), (bl_real)(y - 0.04), (bl_real)th};
+    bl_memory_result r;
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
+    assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
+    assert_true(r.iterations >= 1);
+    assert_true(hypot((double)p.x_m - x, (double)p.y_m - y) < 0.01);
+}
+
 /* A wall whose impacts scatter (±15 cm, inside the 25 cm gate) gives no
  * fit (Crowley's alignment test): the heading still comes from the right
  * wall alone, and y (observed only by the bottom wall's fit) is left. */
@@ -517,6 +540,7 @@ int main(void)
         cmocka_unit_test(test_pinpoint_specular_true_pose_is_kept),  cmocka_unit_test(test_pinpoint_endpoint_case),
         cmocka_unit_test(test_pinpoint_gate),             cmocka_unit_test(test_pinpoint_bad_ranges_counted),
         cmocka_unit_test(test_pinpoint_refuses_bad_input), cmocka_unit_test(test_memory_recovers_offset),
+        cmocka_unit_test(test_memory_corrects_small_offset),
         cmocka_unit_test(test_memory_scattered_fit_refused),
         cmocka_unit_test(test_memory_incidence_gate),     cmocka_unit_test(test_memory_refuses_bad_input),
         cmocka_unit_test(test_odometry_step),
