@@ -219,6 +219,7 @@ extern "C" int bl_memory_default(bl_memory_params *p)
     // 7 cm off its wall uncorrected at every burst while the odometry
     // drifts (measured: make bench-sonar). Stop at (1 cm)² (our choice).
     p->position.epsilon_cost_m2 = real(1e-4);
+    p->position.max_correction_m = real(0.25);  // the association gate (sonar.h)
     return BL_OK;
 }
 

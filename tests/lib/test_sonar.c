@@ -298,30 +298,33 @@ static void test_pinpoint_refuses_bad_input(void **state)
 
 /* ---- the memory corrector ---- */
 
-/* Ten bursts along an arc (v = 0.2 m/s, ω = 0.07 rad/s, a burst every
- * 0.5 s), odometry exact, the current estimate off by (dx, dy, dθ): the
- * heading comes back from the fitted walls' orientations, then the
- * position from their midpoints. */
-/* When set, the -90° sensor's ranges alternate 15 cm long and short: a
+/* Ten bursts of specular ranges along a straight line at 40° towards the
+ * room's top-right corner (v = 0.2 m/s, a burst every 0.5 s): the -30°
+ * sensor (axis 10°) hears the right wall at normal incidence, the 60° one
+ * (axis 100°) the top wall, their feet moving 0.6-0.8 m along them.
+ * Odometry exact, the current estimate off by (dx, dy, dθ): the heading
+ * comes back from the fitted walls' orientations, then the position from
+ * their midpoints. */
+/* When set, the -30° sensor's ranges alternate 15 cm long and short: a
  * scatter inside the 25 cm gate (phantoms, an obstacle beside the wall). */
 static int g_scatter_bottom = 0;
 
 static uint32_t drive_arc(bl_memory_corrector *m, const bl_sonar_ring *ring, double *x, double *y, double *th)
 {
     uint32_t valid = 0; /* ranges with an echo */
-    double px = 1.5, py = 1.6, pth = -0.16;
+    double px = 3.8, py = 1.5, pth = 0.7;
     for (int k = 0; k < 10; ++k) {
         if (k > 0) {
-            const double dth = 0.07 * 0.5, ds = 0.2 * 0.5;
+            const double dth = 0, ds = 0.2 * 0.5;
             px += ds * cos(pth + 0.5 * dth);
             py += ds * sin(pth + 0.5 * dth);
             pth += dth;
         }
         bl_sonar_range b[8];
-        const uint32_t n = burst_of(px, py, pth, 0, b);
+        const uint32_t n = burst_of(px, py, pth, 1, b);
         for (uint32_t i = 0; i < n; ++i) {
             valid += b[i].flags == 0;
-            if (g_scatter_bottom && b[i].sensor == 5) b[i].range_m += (bl_real)(k % 2 ? 0.15 : -0.15);
+            if (g_scatter_bottom && b[i].sensor == 7) b[i].range_m += (bl_real)(k % 2 ? 0.15 : -0.15);
         }
         /* odometry in its own frame: here the site frame shifted by (10, -3) */
         const bl_pose odo = {(bl_real)(px + 10), (bl_real)(py - 3), (bl_real)pth};
@@ -348,10 +351,10 @@ static void test_memory_recovers_offset(void **state)
     bl_memory_result r;
     assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
     assert_int_equal(r.points, valid);
-    assert_true(valid >= 60);
-    /* the bottom and right walls are fitted; the top wall's impacts spread
-     * 4 cm only (the arc turns the +90° sensor back over its own hits), so
-     * its orientation would be noise: no fit (max_fit_sigma_rad) */
+    assert_true(valid >= 2 * 10); /* at least the two walls' echoes of each burst */
+    /* the right and top walls are fitted, from impacts placed at their
+     * perpendicular feet (on the beam axes, 10° off the normals, the
+     * traces would tilt by ~0.2 rad as the ranges shrink) */
     assert_int_equal(r.segments, 2);
     assert_true(r.matched >= 3 * 3);
     assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
@@ -408,8 +411,8 @@ static void test_memory_scattered_fit_refused(void **state)
     assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
     assert_int_equal(r.segments, 1);
     assert_true(fabs((double)p.theta_rad - th) < 0.005);
-    assert_true(fabs((double)p.x_m - x) < 0.02);
-    assert_true(fabs((double)p.y_m - (y - 0.08)) < 0.01); /* unobserved: not moved */
+    assert_true(fabs((double)p.y_m - y) < 0.02);
+    assert_true(fabs((double)p.x_m - (x + 0.10)) < 0.01); /* unobserved: not moved */
 }
 
 /* The 20° incidence gate: with it at 1° only the shots within 1° of a
@@ -434,8 +437,8 @@ static void test_memory_incidence_gate(void **state)
     bl_memory_result again;
     assert_int_equal(bl_memory_correct(&m, &map, &ring, &q, &again), BL_OK);
     assert_memory_equal(&p, &q, sizeof p);
-    /* the heading is -0.16 .. +0.155 rad (9°) along the arc: at 1° most of
-     * the side-wall and front-wall shots fall outside */
+    /* at 40° the right and top walls' normals are 10° off the -30° and 60°
+     * sensors' axes: at a 1° gate none of their shots is matched */
     bl_memory_params prm;
     bl_memory_default(&prm);
     prm.incidence_gate_rad = (bl_real)(1.0 * 3.141592653589793 / 180.0);
@@ -445,10 +448,10 @@ static void test_memory_incidence_gate(void **state)
     p = p0;
     assert_int_equal(bl_memory_correct(&m1, &map, &ring, &p, &r1), BL_OK);
     assert_true(r1.matched < r20.matched / 3);
-    /* the gate's count at 20°: the ±30° and ±60° sensors never hit a wall
-     * within 20° of its normal on this arc (heading within ±9.2°), the
-     * 0° and ±90° ones always do: 3 per burst */
-    assert_int_equal(r20.matched, 30);
+    /* the gate's count at 20°: those two sensors' shots, 2 per burst (the
+     * others hear corners or nothing: no wall's normal within 20°) */
+    assert_int_equal(r20.matched, 20);
+    assert_int_equal(r1.matched, 0);
 }
 
 /* Bad input refused, the corrector byte-identical; bad ranges counted. */
