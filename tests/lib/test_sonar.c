@@ -108,6 +108,49 @@ static void test_pinpoint_specular_true_pose_is_kept(void **state)
     }
 }
 
+/* The heading's prior (heading_sigma_rad): with noisy specular ranges
+ * (σ = max(3 cm, 1 %)) at the true pose, the heading the corrector gives back
+ * stays near the odometry's; without the prior (0: the paper's F) the
+ * ranges' noise, seen through the ring's 0.2 m lever arm only, turns it
+ * several times further. */
+static void test_pinpoint_heading_prior(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    double sum_prior = 0, sum_none = 0;
+    int used = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+        rng_seed(31);
+        bl_pinpoint_params prm;
+        bl_pinpoint_default(&prm);
+        if (pass == 1) prm.heading_sigma_rad = 0;
+        for (int k = 0; k < 200; ++k) {
+            const double x = 1.5 + 3.0 * rng_uniform(), y = 1.0 + 2.0 * rng_uniform();
+            const double th = -3.0 + 6.0 * rng_uniform();
+            bl_sonar_range b[8];
+            const uint32_t n = burst_of(x, y, th, 1, b);
+            for (uint32_t i = 0; i < n; ++i)
+                b[i].range_m += (bl_real)(fmax(0.03, 0.01 * (double)b[i].range_m) * rng_gauss());
+            bl_pose p = {(bl_real)x, (bl_real)y, (bl_real)th};
+            bl_pinpoint_result r;
+            assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_OK);
+            const double dth = fabs(remainder((double)p.theta_rad - th, 6.283185307179586));
+            if (pass == 0) {
+                sum_prior += dth;
+                ++used;
+            } else {
+                sum_none += dth;
+            }
+        }
+    }
+    assert_int_equal(used, 200);
+    assert_true(sum_prior / used < 0.01);  /* mean |Δθ| under 0.6° */
+    assert_true(sum_none > 3 * sum_prior); /* the prior is what holds it */
+}
+
 /* The end-point case (eq. 4): an impact beyond a segment's end costs its
  * squared distance to that end, not to the line (eq. 3). */
 static void test_pinpoint_endpoint_case(void **state)
@@ -288,6 +331,9 @@ static void test_pinpoint_refuses_bad_input(void **state)
     assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
     bl_pinpoint_default(&prm);
     prm.epsilon_grad = (bl_real)NAN;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
+    bl_pinpoint_default(&prm);
+    prm.heading_sigma_rad = (bl_real)-0.01;
     assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
     /* nothing written by any of them */
     assert_memory_equal(&p, &start, sizeof p);
@@ -540,7 +586,8 @@ int main(void)
     (void)rng_gauss; /* test_rng.h: only the uniform draws here */
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_pinpoint_recovers_offset),
-        cmocka_unit_test(test_pinpoint_specular_true_pose_is_kept),  cmocka_unit_test(test_pinpoint_endpoint_case),
+        cmocka_unit_test(test_pinpoint_specular_true_pose_is_kept),
+        cmocka_unit_test(test_pinpoint_heading_prior),  cmocka_unit_test(test_pinpoint_endpoint_case),
         cmocka_unit_test(test_pinpoint_gate),             cmocka_unit_test(test_pinpoint_bad_ranges_counted),
         cmocka_unit_test(test_pinpoint_refuses_bad_input), cmocka_unit_test(test_memory_recovers_offset),
         cmocka_unit_test(test_memory_corrects_small_offset),
