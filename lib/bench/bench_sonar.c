@@ -170,7 +170,7 @@ int main(int argc, char **argv)
         py[k] = 0.8 + 2.4 * rng_uniform();
         pth[k] = -3.1 + 6.2 * rng_uniform();
         pa[k] = 6.283185307179586 * rng_uniform();
-        pn[k] = burst_at(px[k], py[k], pth[k], 1, pb[k]);
+        pn[k] = burst_at(px[k], py[k], pth[k], 0, pb[k]);
     }
     int64_t *t = malloc(sizeof(int64_t) * (size_t)(POSES * reps));
     if (!t) return 1;
@@ -193,16 +193,18 @@ int main(int argc, char **argv)
     /* ---- memory */
     bl_memory_corrector m;
     if (bl_memory_init(&m, NULL) != BL_OK) return 1;
-    double x = 1.5, y = 1.6, th = -0.15;
+    /* ten bursts of specular ranges on a straight line at 40° (the right
+     * and top walls heard at 10° off normal incidence: tests/lib/test_sonar.c) */
+    double x = 3.8, y = 1.5, th = 0.7;
     for (int k = 0; k < 10; ++k) {
         if (k > 0) {
-            const double dth = 0.03, ds = 0.1;
+            const double dth = 0, ds = 0.1;
             x += ds * cos(th + 0.5 * dth);
             y += ds * sin(th + 0.5 * dth);
             th += dth;
         }
         bl_sonar_range b[8];
-        const uint32_t n = burst_at(x, y, th, 1, b);
+        const uint32_t n = burst_at(x, y, th, 0, b);
         const bl_pose odo = {(bl_real)x, (bl_real)y, (bl_real)th};
         if (bl_memory_push(&m, &ring, &odo, b, n) != BL_OK) return 1;
     }

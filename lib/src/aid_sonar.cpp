@@ -9,6 +9,8 @@
 
 #if BL_WITH_SONAR
 
+#include <limits>
+
 using namespace bl;
 
 namespace {
@@ -117,40 +119,17 @@ bool associate(const bl_map *map, const bl_sonar_ring *ring, const Transducer &t
 {
     real half = real(0.5) * ring->beam_width_rad + kConeHeadingSigmas * sigma_th;
     if (half > real(0.5) * kPi) half = real(0.5) * kPi;
-    const real cos_half = std::cos(half);
-    const real ax = std::cos(t.axis_rad), ay = std::sin(t.axis_rad);
-    bool found = false;
-    real best_err = real(0);
-    for (uint32_t k = 0; k < map->count; ++k) {
-        const bl_segment &sg = map->segments[k];
-        const real ex = sg.x2_m - sg.x1_m, ey = sg.y2_m - sg.y1_m, l = std::sqrt(ex * ex + ey * ey);
-        // Candidates: 0 the foot (eq. 2, on the segment only), 1-2 the ends.
-        for (int c = 0; c < 3; ++c) {
-            real qx, qy;
-            if (c == 0) {
-                const real u = ((t.px - sg.x1_m) * ex + (t.py - sg.y1_m) * ey) / (l * l);
-                if (u < real(0) || u > real(1)) continue;
-                qx = sg.x1_m + u * ex;
-                qy = sg.y1_m + u * ey;
-            } else {
-                qx = c == 1 ? sg.x1_m : sg.x2_m;
-                qy = c == 1 ? sg.y1_m : sg.y2_m;
-            }
-            const real dx = qx - t.px, dy = qy - t.py, d = std::sqrt(dx * dx + dy * dy);
-            if (!(d > kMinRange_m)) continue;
-            if (!((dx * ax + dy * ay) / d >= cos_half)) continue;  // outside the cone
-            const real err = std::fabs(z - d);
-            if (found && !(err < best_err)) continue;
-            found = true;
-            best_err = err;
-            out->point = c != 0;
-            out->ax = c == 0 ? sg.x1_m : qx;
-            out->ay = c == 0 ? sg.y1_m : qy;
-            out->nx = -ey / l;
-            out->ny = ex / l;
-        }
-    }
-    return found;
+    // The pin-point's echo search (sonar_internal.hpp nearest_echo); no
+    // distance gate here: the innovation gate decides.
+    Echo ec;
+    if (nearest_echo(map, t.px, t.py, t.axis_rad, half, z, std::numeric_limits<real>::infinity(), false, &ec) < 0)
+        return false;
+    out->point = ec.kind == EchoKind::kEnd;
+    out->ax = ec.qx;
+    out->ay = ec.qy;
+    out->nx = ec.nx;
+    out->ny = ec.ny;
+    return true;
 }
 
 }  // namespace

@@ -29,6 +29,7 @@ inline bool memory_ok(const bl_memory_corrector *m) { return m->magic_ == kMemor
 struct Fit {
     real cx, cy;   // midpoint (m): the impacts' centroid
     real phi;      // orientation (rad), modulo π
+    real w;        // its weight in the heading step, 1/σφ² (1/rad²)
     uint32_t seg;  // index into the map
 };
 
@@ -136,11 +137,17 @@ extern "C" int bl_memory_correct(const bl_memory_corrector *m, const bl_map *map
         bp[k].theta_rad = th + (ok.theta_rad - on.theta_rad);
     }
     // Matching (§3.2 "a sensor measure is assigned to a segment of the
-    // environment taking odometric position into account"): the nearest
-    // segment within the gate (eq. 2-4), and only when the shot is within
-    // the incidence gate of its normal (§5.2: 20°).
-    const real cos_gate = std::cos(prm.incidence_gate_rad);
+    // environment taking odometric position into account"; §5.2 "a measure
+    // is associated to a segment if and only if the difference between the
+    // direction of the shot and the normal to the wall is less than 20
+    // degrees"): the segment whose perpendicular foot lies within the
+    // incidence gate of the shot and whose range explains the measured one
+    // within the gate (eq. 2-4), the impact placed on that normal, where the
+    // specular echo comes from (sonar_internal.hpp Echo; on the beam axis it
+    // would be up to d(1 − cos 20°) = 6 % of the range short of the wall).
     uint8_t seg_of[BL_MEMORY_MAX_BURSTS][BL_SONAR_MAX_SENSORS];
+    real imp_x[BL_MEMORY_MAX_BURSTS][BL_SONAR_MAX_SENSORS];  // impacts relative to the robot (m)
+    real imp_y[BL_MEMORY_MAX_BURSTS][BL_SONAR_MAX_SENSORS];
     uint32_t per_seg[BL_MAP_MAX_SEGMENTS];
     std::memset(per_seg, 0, sizeof per_seg);
     for (uint32_t k = 0; k < m->count_; ++k)
@@ -150,15 +157,17 @@ extern "C" int bl_memory_correct(const bl_memory_corrector *m, const bl_map *map
             if (sensor >= ring->count) continue;  // a ring smaller than the one pushed with
             res.points += 1;
             const bl_sonar_mount &mt = ring->mounts[sensor];
-            real mx, my, d2;
-            sonar_impact(mt, bp[k].x_m, bp[k].y_m, bp[k].theta_rad, m->range_m_[k][i], &mx, &my);
-            const int j = nearest_segment(map, mx, my, ring->gate_m, &d2);
+            real sx, sy, dsx, dsy;
+            sonar_transducer(mt, bp[k].x_m, bp[k].y_m, bp[k].theta_rad, &sx, &sy, &dsx, &dsy);
+            const real d = m->range_m_[k][i];
+            Echo ec;
+            const int j = nearest_echo(map, sx, sy, bp[k].theta_rad + mt.angle_rad, prm.incidence_gate_rad, d,
+                                       ring->gate_m, true, &ec);
             if (j < 0) continue;
-            const bl_segment &sg = map->segments[j];
-            const real ex = sg.x2_m - sg.x1_m, ey = sg.y2_m - sg.y1_m, l = std::sqrt(ex * ex + ey * ey);
-            const real a = bp[k].theta_rad + mt.angle_rad;
-            // |cos(shot, normal)|, the normal (−ey, ex)/l
-            if (!(std::fabs(-std::cos(a) * ey + std::sin(a) * ex) / l >= cos_gate)) continue;
+            // M = S + d (Q − S)/h, centred on the robot: the regression's
+            // sums keep their precision far from the site origin.
+            imp_x[k][i] = sx + d * (ec.qx - sx) / ec.h_m - x;
+            imp_y[k][i] = sy + d * (ec.qy - sy) / ec.h_m - y;
             seg_of[k][i] = uint8_t(j);
             per_seg[j] += 1;
             res.matched += 1;
@@ -175,13 +184,7 @@ extern "C" int bl_memory_correct(const bl_memory_corrector *m, const bl_map *map
         for (uint32_t k = 0; k < m->count_; ++k)
             for (uint32_t i = 0; i < m->n_[k]; ++i) {
                 if (seg_of[k][i] != j) continue;
-                real mx, my;
-                sonar_impact(ring->mounts[m->sensor_[k][i]], bp[k].x_m, bp[k].y_m, bp[k].theta_rad, m->range_m_[k][i],
-                             &mx, &my);
-                // Centred on the robot: the sums keep their precision far
-                // from the site origin.
-                mx -= x;
-                my -= y;
+                const real mx = imp_x[k][i], my = imp_y[k][i];
                 w += 1;
                 sr += m->range_m_[k][i];
                 sx += mx;
@@ -211,6 +214,7 @@ extern "C" int bl_memory_correct(const bl_memory_corrector *m, const bl_map *map
         fits[nf].cy = my + y;
         fits[nf].phi = real(0.5) * std::atan2(real(2) * cxy, cxx - cyy);
         fits[nf].seg = j;
+        fits[nf].w = w * along / (sigma_r * sigma_r);  // 1/σφ², σφ² = σ_r²/(n·var_along)
         nf += 1;
     }
     res.segments = nf;
@@ -219,12 +223,13 @@ extern "C" int bl_memory_correct(const bl_memory_corrector *m, const bl_map *map
         return BL_OK;
     }
     // Heading first (§3.2): the mean of (known − fitted) orientations.
-    real dth = 0;
+    real dth = 0, wsum = 0;
     for (uint32_t k = 0; k < nf; ++k) {
         const bl_segment &sg = map->segments[fits[k].seg];
-        dth += line_angle_diff(std::atan2(sg.y2_m - sg.y1_m, sg.x2_m - sg.x1_m), fits[k].phi);
+        dth += fits[k].w * line_angle_diff(std::atan2(sg.y2_m - sg.y1_m, sg.x2_m - sg.x1_m), fits[k].phi);
+        wsum += fits[k].w;
     }
-    dth /= real(nf);
+    dth /= wsum;
     // The fitted midpoints turn with the heading about the robot.
     const real cd = std::cos(dth), sd = std::sin(dth);
     for (uint32_t k = 0; k < nf; ++k) {

@@ -26,12 +26,18 @@ struct Burst {
     const bl_map *map;
     const bl_sonar_ring *ring;
     uint32_t n;
+    real theta0_rad;      // the odometric heading (rad)
+    real heading_weight;  // σ_r/σ_θ of the heading's prior (m/rad), 0: none
+    real half_cone_rad;   // the cone searched for echoes (rad)
     uint8_t sensor[BL_SONAR_MAX_SENSORS];
     real range_m[BL_SONAR_MAX_SENSORS];
 };
 
-// Steps 2-4 at q: impacts (eq. 1), matching with the nearest segment within
-// the gate (eq. 2-4), F = Σ F_i (eq. 3/4) and its derivatives.
+// Steps 2-4 at q: each range's impact at the incidence that makes its echo
+// specular (eq. 1 with the echo's direction, sonar_internal.hpp Echo),
+// matched with the segment whose echo inside the beam cone best explains
+// it within the gate (eq. 2-4), F = Σ F_i (eq. 3/4: F_i = (d − h)², the
+// impact's squared distance to its echo point) and its derivatives.
 LsEval burst_eval(const void *problem, const Vec3 &q)
 {
     const Burst &b = *static_cast<const Burst *>(problem);
@@ -40,15 +46,24 @@ LsEval burst_eval(const void *problem, const Vec3 &q)
     e.g.setZero();
     e.JtJ.setZero();
     e.matched = 0;
+    const real half = b.half_cone_rad;
     for (uint32_t k = 0; k < b.n; ++k) {
         const bl_sonar_mount &m = b.ring->mounts[b.sensor[k]];
-        real mx, my, d2;
-        sonar_impact(m, q(0), q(1), q(2), b.range_m[k], &mx, &my);
-        const int j = nearest_segment(b.map, mx, my, b.ring->gate_m, &d2);
-        if (j < 0) continue;
-        // dM/dθ (eq. 1 differentiated): the impact turns about the robot,
-        // (−(M_y − y), M_x − x).
-        ls_add_term(b.map->segments[j], mx, my, -(my - q(1)), mx - q(0), &e);
+        real sx, sy, dsx, dsy;
+        sonar_transducer(m, q(0), q(1), q(2), &sx, &sy, &dsx, &dsy);
+        Echo ec;
+        if (nearest_echo(b.map, sx, sy, q(2) + m.angle_rad, half, b.range_m[k], b.ring->gate_m, false, &ec) < 0)
+            continue;
+        // r = d − h(q): ∂r/∂(x, y) = −∂h/∂S, ∂r/∂θ = −∂h/∂S·∂S/∂θ (the
+        // ring's lever arm: a specular range barely sees the heading).
+        const Vec3 J(-ec.dh_ds[0], -ec.dh_ds[1], -(ec.dh_ds[0] * dsx + ec.dh_ds[1] * dsy));
+        ls_add_residual(b.range_m[k] - ec.h_m, J, &e);
+    }
+    if (b.heading_weight > real(0)) {
+        // The heading's prior (sonar.h heading_sigma_rad): r = w (θ − θ_odo).
+        const real w = b.heading_weight;
+        ls_add_residual(w * (q(2) - b.theta0_rad), Vec3(0, 0, w), &e);
+        e.matched -= 1;  // not an impact
     }
     return e;
 }
@@ -86,10 +101,14 @@ void bl::ls_add_term(const bl_segment &s, real mx, real my, real tx, real ty, Ls
         ux = -ey / l;
         uy = ex / l;
     }
-    const Vec3 J(ux, uy, ux * tx + uy * ty);
+    ls_add_residual(r, Vec3(ux, uy, ux * tx + uy * ty), e);
+}
+
+void bl::ls_add_residual(real r, const Vec3 &J, LsEval *e)
+{
     // F_i = r²: ∂F_i/∂q = 2 r J (§3.1: F continuously derivable across the
     // eq. 3/4 junction, so is r J).
-    e->F += d2;
+    e->F += r * r;
     e->g += real(2) * r * J;
     e->JtJ += J * J.transpose();
     e->matched += 1;
@@ -220,6 +239,12 @@ extern "C" int bl_pinpoint_correct(const bl_map *map, const bl_sonar_ring *ring,
         b.n += 1;
     }
     res.valid = b.n;
+    b.theta0_rad = pose_in_out->theta_rad;
+    // The beam's half-width widened by 3 σ of the heading (the filter's
+    // association, filter.h), never beyond a right angle.
+    b.half_cone_rad = real(0.5) * ring->beam_width_rad + real(3) * params->heading_sigma_rad;
+    if (b.half_cone_rad > real(0.5) * kPi) b.half_cone_rad = real(0.5) * kPi;
+    b.heading_weight = params->heading_sigma_rad > real(0) ? ring->sigma_range_m / params->heading_sigma_rad : real(0);
     const Vec3 q0(pose_in_out->x_m, pose_in_out->y_m, pose_in_out->theta_rad);
     const LsEval e0 = burst_eval(&b, q0);
     res.cost_before_m2 = e0.F;

@@ -41,6 +41,51 @@ real segment_nearest(const bl_segment &s, real px, real py, real *qx, real *qy);
 // 25 cm association gate): its index, or -1; *d2 its squared distance.
 int nearest_segment(const bl_map *map, real px, real py, real gate_m, real *d2);
 
+// ---- The echo of a wall (the specular physics of issue 12; docs/simulator.md)
+// A Polaroid-class sonar hears a wall where its sound meets it at normal
+// incidence: the echo comes from the perpendicular foot of the wall when the
+// foot lies inside the beam cone (half-width β = 15° for the paper's 30°
+// transducer, §5.1), NOT from the beam axis, and the range is the
+// perpendicular distance. Hoppenot & Colle's eq. 1 puts the impact on the
+// axis; with a 30° cone that point is up to d(1 − cos β) (3.4 % of the range)
+// in front of the wall and d·sin β beside the echo, and a fit of it drifts
+// the heading. Here the impact is placed at the incidence that makes the echo
+// specular: M = S + d (Q − S)/|Q − S|, Q this echo point, so that eq. 3/4's
+// distance of M to the matched segment is |d − |Q − S||: the measured range
+// against the range of the segment inside the cone.
+enum class EchoKind : uint8_t {
+    kFoot,  // the perpendicular foot (eq. 2) on the segment, inside the cone: normal incidence (eq. 3)
+    kEnd    // a segment end inside the cone: a corner or an edge (eq. 4)
+};
+struct Echo {
+    real qx, qy;    // the echo point Q (m)
+    real h_m;       // its range |Q − S| (m)
+    real dh_ds[2];  // ∂h/∂S = (S − Q)/h (1), S the transducer's position
+    real nx, ny;    // the segment's unit normal (its line's, either side)
+    EchoKind kind;
+};
+// Hoppenot & Colle §3.1 step 3 with the echo above, for a transducer at
+// (sx, sy), its axis at axis_rad and a cone of half-width half_rad: of the
+// echo points of the map's segments inside the cone (each segment's foot
+// when it lies on the segment and, unless foot_only, its two ends), the one
+// whose range h is nearest the measured range d, if |d − h| <= gate_m (the
+// paper's 25 cm association gate on the impact's distance to the segment).
+// Its segment's index, or -1; *e its echo. Cost O(map.count).
+int nearest_echo(const bl_map *map, real sx, real sy, real axis_rad, real half_rad, real d_m, real gate_m,
+                 bool foot_only, Echo *e);
+
+// Sensor i's transducer S = (x, y) + R(θ) m_i and ∂S/∂θ = R'(θ) m_i (m/rad)
+// for a robot pose (x, y, θ).
+inline void sonar_transducer(const bl_sonar_mount &m, real x, real y, real th, real *sx, real *sy, real *dsx_dth,
+                             real *dsy_dth)
+{
+    const real c = std::cos(th), s = std::sin(th);
+    *sx = x + c * m.x_m - s * m.y_m;
+    *sy = y + s * m.x_m + c * m.y_m;
+    *dsx_dth = -s * m.x_m - c * m.y_m;
+    *dsy_dth = c * m.x_m - s * m.y_m;
+}
+
 // Sensor i's transducer and impact for a robot pose (x, y, θ) and a range
 // d (Hoppenot & Colle eq. 1 with the mount offset m_i):
 //   S = (x, y) + R(θ) m_i,  M = S + d (cos(θ + θ_i), sin(θ + θ_i)).
@@ -76,6 +121,9 @@ typedef LsEval (*LsEvalFn)(const void *problem, const Vec3 &q);
 // ranges' noise).
 LsOutcome least_squares(LsEvalFn eval, const void *problem, const bl_pinpoint_params &prm, uint32_t axes_mask,
                         const Vec3 &q0, bool first_below_eps);
+// One term of F with its residual r (m) and J = ∂r/∂q: F += r²,
+// ∂F/∂q += 2 r J, JᵀJ += J Jᵀ.
+void ls_add_residual(real r, const Vec3 &J, LsEval *e);
 // One term of F for the point M matched with segment s: r = |M - Q|,
 // ∂r/∂M = u = (M - Q)/r (the segment's unit normal when r = 0), dM/dθ = t
 // (m/rad); added to *e with J = (u_x, u_y, u·t).

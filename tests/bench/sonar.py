@@ -60,12 +60,6 @@ PAPER_PCT = {("pinpoint", "hoppenot-room"): 8.0, ("memory", "hoppenot-room"): 11
              ("pinpoint", "hoppenot-obstacle"): 3.0, ("memory", "hoppenot-obstacle"): 4.75}
 PAPER_US = {"pinpoint": 2500.0, "memory": 50000.0}   # s. 5.3, 1997 hardware
 EST_COLUMNS = ("t_us", "x_m", "y_m", "var_x_m2", "cov_xy_m2", "var_y_m2")
-# Site keys the bridge runs with when the site file does not give them (the same for every
-# method): the filter's online wheel-scale calibration (docs/bridge.md, [robot]
-# sigma_wheel_scale: the initial sigma of each wheel's scale), which the sonar ranges drive
-# (filter.h, bl_filter_fuse_sonar: an asymmetric wheel-diameter error is learned); the
-# correctors do not use the filter's wheel scales.
-SITE_DEFAULTS = {("robot", "sigma_wheel_scale"): "0.05"}
 
 
 # ---- the files of a run --------------------------------------------------
@@ -131,22 +125,10 @@ def degraded_scenario(scenario: Path, pct: float, symmetric: bool, out: Path) ->
     return path
 
 
-def set_default(text: str, section: str, key: str, value: str) -> str:
-    """The site text with `key = value` in [section] unless the section gives the key."""
-    m = re.search(rf"(?ms)^\[{section}\]\s*$(.*?)(?=^\[|\Z)", text)
-    if m is None:
-        return text + f"\n[{section}]\n{key} = {value}\n"
-    if re.search(rf"(?m)^{key}\s*=", m.group(1)):
-        return text
-    return text[:m.end(0) - len(m.group(1))] + f"\n{key} = {value}" + text[m.end(0) - len(m.group(1)):]
-
-
 def method_site(site: Path, method: str, out: Path) -> Path:
-    """The site file with [sonar_ring] method = method (the bridge's only), and the
-    SITE_DEFAULTS it does not give."""
+    """The site file with [sonar_ring] method = method (the bridge's only); every other key
+    as the site gives it (what the site needs, e.g. [robot] sigma_wheel_scale, is in it)."""
     text = site.read_text()
-    for (section, key), value in SITE_DEFAULTS.items():
-        text = set_default(text, section, key, value)
     text = re.sub(r"(?m)^method\s*=.*\n", "", text)
     text, n = re.subn(r"(?m)^\[sonar_ring\]\s*$", f"[sonar_ring]\nmethod = {method}", text,
                       count=1)
@@ -415,8 +397,6 @@ def main() -> int:
             if shares:
                 inside = float(np.mean(shares))
     us_med = {m: float(np.median(v)) if v else math.nan for m, v in us.items()}
-    print("site keys the bridge ran with where the site did not give them: " + ", ".join(
-        f"[{sec}] {key} = {val}" for (sec, key), val in SITE_DEFAULTS.items()))
     for line in table1(pct, grid[-1], args.symmetric):
         print(line)
     print("time per correction (us, median at 0 %): " + ", ".join(

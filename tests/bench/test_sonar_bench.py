@@ -118,18 +118,9 @@ def test_site_and_scenario_rewrites(tmp_path):
     out = sb.method_site(site, "memory", tmp_path)
     text = out.read_text()
     assert text.count("method =") == 1 and "[sonar_ring]\nmethod = memory\n" in text
-    # the bench's site defaults: added to their section when absent, never over the site's
-    for (sec, key), value in sb.SITE_DEFAULTS.items():
-        assert sb.read_ini(out).get(sec, key) == value
+    # the site as given: no key of the bench's own, only the method
+    assert text.replace("method = memory\n", "") == site.read_text().replace("method = filter\n", "")
     assert sb.read_ini(sb.method_site(site, "filter", tmp_path)).get("beacons", "count") == "0"
-    mine = sb.set_default("[robot]\nwheel_base_m = 0.4\nsigma_wheel_scale = 0.2\n\n[x]\n",
-                          "robot", "sigma_wheel_scale", "0.05")
-    assert mine.count("sigma_wheel_scale") == 1 and "= 0.2" in mine
-    added = sb.set_default("[robot]\nwheel_base_m = 0.4\n\n[noise]\na = 1\n", "robot",
-                           "sigma_wheel_scale", "0.05")
-    cp = sb.configparser.ConfigParser()
-    cp.read_string(added)
-    assert cp.get("robot", "sigma_wheel_scale") == "0.05" and cp.get("noise", "a") == "1"
     assert sb.map_walls(out) == [(0.0, 0.0, 6.0, 0.0), (6.0, 0.0, 6.0, 4.0)]
     assert sb.map_box(sb.map_walls(out)) == (0.0, 0.0, 6.0, 4.0)
     scn = tmp_path / "room.scenario.ini"

@@ -15,14 +15,21 @@
 #include "sonar_world.h"
 #include "test_rng.h"
 
-/* The burst of the seven used sensors at the true pose, along the axis
- * (eq. 1's impact model: exact). Returns the number of ranges. */
-static uint32_t axis_burst(double x, double y, double th, bl_sonar_range *b)
+#define HALF_BEAM_RAD (15.0 * 3.141592653589793 / 180.0)
+
+/* The burst of the seven used sensors at the true pose: along the axis
+ * (eq. 1's impact model, what the memory corrector places; specular 0) or
+ * the sonar's specular physics (the first echo inside the cone, the
+ * perpendicular foot or a wall's end: what the simulator and a Polaroid
+ * return, and what the pin-point corrector models; specular 1). Returns the
+ * number of ranges. */
+static uint32_t burst_of(double x, double y, double th, int specular, bl_sonar_range *b)
 {
     uint32_t n = 0;
     for (int i = 0; i < WORLD_SENSORS; ++i) {
         if (i == 4) continue; /* the unused rear sensor */
-        const double r = world_axis_range(world_segments, WORLD_SEGMENTS, i, x, y, th);
+        const double r = specular ? world_specular_range(world_segments, WORLD_SEGMENTS, i, x, y, th, HALF_BEAM_RAD)
+                                  : world_axis_range(world_segments, WORLD_SEGMENTS, i, x, y, th);
         b[n].sensor = (uint32_t)i;
         b[n].range_m = (bl_real)(isnan(r) ? 0 : r);
         b[n].flags = isnan(r) ? BL_SONAR_NO_ECHO : 0;
@@ -32,8 +39,9 @@ static uint32_t axis_burst(double x, double y, double th, bl_sonar_range *b)
     return n;
 }
 
-/* A known pose offset is recovered from exact ranges, at many poses of
- * the room (away from the door: every beam on a wall of the map). */
+/* A known position offset is recovered from exact specular ranges, at many
+ * poses of the room; the heading, which a specular range sees only through
+ * the ring's 0.2 m lever arm, stays near the odometry's (its prior). */
 static void test_pinpoint_recovers_offset(void **state)
 {
     (void)state;
@@ -42,57 +50,105 @@ static void test_pinpoint_recovers_offset(void **state)
     world_map(&map);
     world_ring(&ring);
     rng_seed(12);
-    int exact = 0, cut = 0;
+    int exact = 0, trials = 0;
     for (int trial = 0; trial < 40; ++trial) {
         const double x = 1.5 + 2.5 * rng_uniform(), y = 1.0 + 2.0 * rng_uniform();
         const double th = -3.0 + 6.0 * rng_uniform();
         bl_sonar_range b[8];
-        const uint32_t n = axis_burst(x, y, th, b);
-        /* odometric pose: 8 cm, 0.04 rad off in a random direction */
+        const uint32_t n = burst_of(x, y, th, 1, b);
+        /* odometric pose: 8 cm off in a random direction, the heading true */
         const double a = 6.283185307179586 * rng_uniform();
-        bl_pose p = {(bl_real)(x + 0.08 * cos(a)), (bl_real)(y + 0.08 * sin(a)),
-                     (bl_real)(th + (trial % 2 ? 0.04 : -0.04))};
-        /* the paper's ε = ε' = 5e-3 stop at a few cm of residual; tight
-         * ones show the minimiser's own accuracy on exact ranges */
+        bl_pose p = {(bl_real)(x + 0.08 * cos(a)), (bl_real)(y + 0.08 * sin(a)), (bl_real)th};
         bl_pinpoint_params prm;
         bl_pinpoint_default(&prm);
         prm.epsilon_cost_m2 = (bl_real)1e-10;
         prm.epsilon_grad = (bl_real)1e-7;
-        const bl_pose odo = p;
         bl_pinpoint_result r;
         assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_OK);
-        assert_int_equal(r.valid + r.dropped.flagged, 7); /* a beam through the door: no echo */
-        /* the paper's stopping rules: F below ε, never worse than the odometry */
-        bl_pose pp = odo;
-        bl_pinpoint_result rp;
-        assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, NULL, &pp, &rp), BL_OK);
-        if (rp.outcome == BL_PINPOINT_CONVERGED) {
-            assert_true((double)rp.cost_after_m2 < 5e-3 || rp.iterations < 10);
-            assert_true((double)rp.cost_after_m2 <= (double)rp.cost_before_m2);
-            /* the first point with F < ε: just inside ε when the odometric
-             * pose was outside it, not at the minimum (F ~ 0 here) */
-            if ((double)rp.cost_before_m2 >= 5e-3 && (double)rp.cost_after_m2 < 5e-3) {
-                ++cut;
-                assert_true((double)rp.cost_after_m2 > 0.5 * 5e-3);
-            }
-        }
+        assert_true((double)r.cost_after_m2 <= (double)r.cost_before_m2);
+        if (r.matched < 3) continue; /* too few echoes here: nothing to check */
+        ++trials;
         const double ex = (double)p.x_m - x, ey = (double)p.y_m - y;
         const double eth = remainder((double)p.theta_rad - th, 6.283185307179586);
-        /* never a higher cost than the odometric pose's */
-        assert_true((double)r.cost_after_m2 <= (double)r.cost_before_m2);
-        if (r.outcome == BL_PINPOINT_CONVERGED && sqrt(ex * ex + ey * ey) < 0.005 && fabs(eth) < 0.002) {
-            ++exact;
-            /* the reported correction is the one applied */
-            assert_true(fabs((double)r.dx_m - (x - (double)odo.x_m)) < 0.005);
-            assert_true(fabs((double)r.dy_m - (y - (double)odo.y_m)) < 0.005);
+        assert_true(fabs(eth) < 0.02);
+        if (r.outcome == BL_PINPOINT_CONVERGED && hypot(ex, ey) < 0.01) ++exact;
+    }
+    /* every pose with two walls at an angle in its echoes; the rest see
+     * parallel walls only, or match a wall's end with another one near a
+     * corner at the odometric pose (the paper's local minimum) */
+    assert_true(trials >= 20);
+    assert_true(exact >= trials * 3 / 4);
+}
+
+/* The specular echo (the perpendicular foot inside the cone) is not where
+ * eq. 1 puts the impact (on the beam axis): at the true pose with exact
+ * specular ranges and the heading up to 14° off every wall's normal, the
+ * corrector leaves the pose where it is (F = 0 there). With the axis model
+ * the impacts lie up to d (1 − cos 15°) short of the walls and the pose
+ * moved by centimetres and degrees at every burst. */
+static void test_pinpoint_specular_true_pose_is_kept(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    const double deg = 3.141592653589793 / 180.0;
+    for (int k = -14; k <= 14; k += 4) {
+        const double x = 2.0, y = 1.5, th = k * deg;
+        bl_sonar_range b[8];
+        const uint32_t n = burst_of(x, y, th, 1, b);
+        bl_pose p = {(bl_real)x, (bl_real)y, (bl_real)th};
+        bl_pinpoint_result r;
+        assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, NULL, &p, &r), BL_OK);
+        assert_true(r.matched >= 3);
+        assert_true((double)r.cost_before_m2 < 1e-10);
+        assert_true(hypot((double)p.x_m - x, (double)p.y_m - y) < 1e-3);
+        assert_true(fabs((double)p.theta_rad - th) < 1e-3);
+    }
+}
+
+/* The heading's prior (heading_sigma_rad): with noisy specular ranges
+ * (σ = max(3 cm, 1 %)) at the true pose, the heading the corrector gives back
+ * stays near the odometry's; without the prior (0: the paper's F) the
+ * ranges' noise, seen through the ring's 0.2 m lever arm only, turns it
+ * several times further. */
+static void test_pinpoint_heading_prior(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    double sum_prior = 0, sum_none = 0;
+    int used = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+        rng_seed(31);
+        bl_pinpoint_params prm;
+        bl_pinpoint_default(&prm);
+        if (pass == 1) prm.heading_sigma_rad = 0;
+        for (int k = 0; k < 200; ++k) {
+            const double x = 1.5 + 3.0 * rng_uniform(), y = 1.0 + 2.0 * rng_uniform();
+            const double th = -3.0 + 6.0 * rng_uniform();
+            bl_sonar_range b[8];
+            const uint32_t n = burst_of(x, y, th, 1, b);
+            for (uint32_t i = 0; i < n; ++i)
+                b[i].range_m += (bl_real)(fmax(0.03, 0.01 * (double)b[i].range_m) * rng_gauss());
+            bl_pose p = {(bl_real)x, (bl_real)y, (bl_real)th};
+            bl_pinpoint_result r;
+            assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_OK);
+            const double dth = fabs(remainder((double)p.theta_rad - th, 6.283185307179586));
+            if (pass == 0) {
+                sum_prior += dth;
+                ++used;
+            } else {
+                sum_none += dth;
+            }
         }
     }
-    /* Exact ranges: the true pose is F's global minimum (F = 0) and the
-     * corrector reaches it from an 8 cm / 0.04 rad error nearly always;
-     * the rest are the paper's known failure, a beam matched with the wrong
-     * wall near a corner at the odometric pose (a local minimum). */
-    assert_true(exact >= 36);
-    assert_true(cut >= 20); /* the paper's stop at work on most of them */
+    assert_int_equal(used, 200);
+    assert_true(sum_prior / used < 0.01);  /* mean |Δθ| under 0.6° */
+    assert_true(sum_none > 3 * sum_prior); /* the prior is what holds it */
 }
 
 /* The end-point case (eq. 4): an impact beyond a segment's end costs its
@@ -108,9 +164,10 @@ static void test_pinpoint_endpoint_case(void **state)
     ring.mounts = &mount;
     ring.count = 1;
     ring.unused_mask = 0;
-    /* robot at (1.1, 1.05) facing -y (θ = -π/2): a 1.0 m range hits (1.1, 0.05) */
+    /* robot at (1.1, 1.05) facing -y (θ = -π/2): the foot (1.1, 0) is off the
+     * segment, its end (1, 0) inside the cone at |(0.1, 1.05)| m */
     bl_pose p = {(bl_real)1.1, (bl_real)1.05, (bl_real)(-1.5707963267948966)};
-    const bl_sonar_range b = {0, 1, 0, NULL};
+    const bl_sonar_range b = {0, (bl_real)0.9, 0, NULL};
     bl_pinpoint_params prm;
     bl_pinpoint_default(&prm);
     prm.min_matches = 3; /* one impact: evaluated, not corrected */
@@ -120,12 +177,14 @@ static void test_pinpoint_endpoint_case(void **state)
     assert_int_equal(r.matched, 1);
     assert_int_equal(r.outcome, BL_PINPOINT_NONE);
     assert_memory_equal(&p, &before, sizeof p);
-    /* eq. 4: 0.1² + 0.05² = 0.0125 m²; eq. 3 would give 0.05² = 0.0025 */
-    assert_true(fabs((double)r.cost_before_m2 - 0.0125) < 1e-6);
+    /* eq. 4: a 0.9 m range, the impact on the ray to the end,
+     * (0.9 − |(0.1, 1.05)|)² m²; eq. 3 would give (1.05 − 0.9)² = 0.0225 */
+    const double h = hypot(0.1, 1.05);
+    assert_true(fabs((double)r.cost_before_m2 - (0.9 - h) * (0.9 - h)) < 1e-6);
     /* over the segment (x = 0.9): eq. 3, the perpendicular distance */
     p.x_m = (bl_real)0.9;
     assert_int_equal(bl_pinpoint_correct(&map, &ring, &b, 1, &prm, &p, &r), BL_OK);
-    assert_true(fabs((double)r.cost_before_m2 - 0.0025) < 1e-6);
+    assert_true(fabs((double)r.cost_before_m2 - 0.0225) < 1e-6);
     /* and with one impact allowed to correct, the pose moves it onto the end's
      * circle: the residual is gone, F continuously derivable across eq. 3/4 */
     prm.min_matches = 1;
@@ -176,7 +235,7 @@ static void test_pinpoint_bad_ranges_counted(void **state)
     world_map(&map);
     world_ring(&ring);
     bl_sonar_range b[14];
-    uint32_t n = axis_burst(2.5, 2.0, 0.2, b);
+    uint32_t n = burst_of(2.5, 2.0, 0.2, 1, b);
     uint32_t no_echo = 0; /* beams through the door */
     for (uint32_t k = 0; k < n; ++k) no_echo += b[k].flags != 0;
     const bl_sonar_range bad[] = {
@@ -200,7 +259,8 @@ static void test_pinpoint_bad_ranges_counted(void **state)
     assert_int_equal(r.dropped.non_finite, 1);
     assert_int_equal(r.dropped.out_of_range, 2);
     assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
-    /* the paper's stop (F < ε = 5e-3 m²): the pose nearer than the odometry's 7 cm */
+    /* the paper's stop (F < ε = 5e-3 m²): the pose nearer than the odometry's 7 cm
+     * (exact specular ranges) */
     assert_true((double)r.cost_after_m2 < 5e-3);
     assert_true(hypot((double)p.x_m - 2.5, (double)p.y_m - 2.0) < 0.8 * hypot(0.05, 0.05));
 }
@@ -214,7 +274,7 @@ static void test_pinpoint_refuses_bad_input(void **state)
     world_map(&map);
     world_ring(&ring);
     bl_sonar_range b[8];
-    const uint32_t n = axis_burst(2.5, 2.0, 0.2, b);
+    const uint32_t n = burst_of(2.5, 2.0, 0.2, 1, b);
     const bl_pose start = {(bl_real)2.55, (bl_real)1.95, (bl_real)0.22};
     bl_pose p = start;
     bl_pinpoint_result r, r0;
@@ -272,6 +332,9 @@ static void test_pinpoint_refuses_bad_input(void **state)
     bl_pinpoint_default(&prm);
     prm.epsilon_grad = (bl_real)NAN;
     assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
+    bl_pinpoint_default(&prm);
+    prm.heading_sigma_rad = (bl_real)-0.01;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
     /* nothing written by any of them */
     assert_memory_equal(&p, &start, sizeof p);
     assert_memory_equal(&r, &r0, sizeof r);
@@ -281,30 +344,33 @@ static void test_pinpoint_refuses_bad_input(void **state)
 
 /* ---- the memory corrector ---- */
 
-/* Ten bursts along an arc (v = 0.2 m/s, ω = 0.07 rad/s, a burst every
- * 0.5 s), odometry exact, the current estimate off by (dx, dy, dθ): the
- * heading comes back from the fitted walls' orientations, then the
- * position from their midpoints. */
-/* When set, the -90° sensor's ranges alternate 15 cm long and short: a
+/* Ten bursts of specular ranges along a straight line at 40° towards the
+ * room's top-right corner (v = 0.2 m/s, a burst every 0.5 s): the -30°
+ * sensor (axis 10°) hears the right wall at normal incidence, the 60° one
+ * (axis 100°) the top wall, their feet moving 0.6-0.8 m along them.
+ * Odometry exact, the current estimate off by (dx, dy, dθ): the heading
+ * comes back from the fitted walls' orientations, then the position from
+ * their midpoints. */
+/* When set, the -30° sensor's ranges alternate 15 cm long and short: a
  * scatter inside the 25 cm gate (phantoms, an obstacle beside the wall). */
 static int g_scatter_bottom = 0;
 
 static uint32_t drive_arc(bl_memory_corrector *m, const bl_sonar_ring *ring, double *x, double *y, double *th)
 {
     uint32_t valid = 0; /* ranges with an echo */
-    double px = 1.5, py = 1.6, pth = -0.16;
+    double px = 3.8, py = 1.5, pth = 0.7;
     for (int k = 0; k < 10; ++k) {
         if (k > 0) {
-            const double dth = 0.07 * 0.5, ds = 0.2 * 0.5;
+            const double dth = 0, ds = 0.2 * 0.5;
             px += ds * cos(pth + 0.5 * dth);
             py += ds * sin(pth + 0.5 * dth);
             pth += dth;
         }
         bl_sonar_range b[8];
-        const uint32_t n = axis_burst(px, py, pth, b);
+        const uint32_t n = burst_of(px, py, pth, 1, b);
         for (uint32_t i = 0; i < n; ++i) {
             valid += b[i].flags == 0;
-            if (g_scatter_bottom && b[i].sensor == 5) b[i].range_m += (bl_real)(k % 2 ? 0.15 : -0.15);
+            if (g_scatter_bottom && b[i].sensor == 7) b[i].range_m += (bl_real)(k % 2 ? 0.15 : -0.15);
         }
         /* odometry in its own frame: here the site frame shifted by (10, -3) */
         const bl_pose odo = {(bl_real)(px + 10), (bl_real)(py - 3), (bl_real)pth};
@@ -331,10 +397,10 @@ static void test_memory_recovers_offset(void **state)
     bl_memory_result r;
     assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
     assert_int_equal(r.points, valid);
-    assert_true(valid >= 60);
-    /* the bottom and right walls are fitted; the top wall's impacts spread
-     * 4 cm only (the arc turns the +90° sensor back over its own hits), so
-     * its orientation would be noise: no fit (max_fit_sigma_rad) */
+    assert_true(valid >= 2 * 10); /* at least the two walls' echoes of each burst */
+    /* the right and top walls are fitted, from impacts placed at their
+     * perpendicular feet (on the beam axes, 10° off the normals, the
+     * traces would tilt by ~0.2 rad as the ranges shrink) */
     assert_int_equal(r.segments, 2);
     assert_true(r.matched >= 3 * 3);
     assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
@@ -345,6 +411,29 @@ static void test_memory_recovers_offset(void **state)
     assert_true(fabs((double)p.x_m - x) < 0.02);
     assert_true(fabs((double)p.y_m - y) < 0.02);
     assert_true(fabs((double)r.dtheta_rad + 0.05) < 0.005);
+}
+
+/* A small position offset (3 cm, 4 cm: F of the two fitted midpoints below
+ * the paper's ε = 5e-3 m²) is corrected too: the position step stops at
+ * its own ε (bl_memory_default: 1e-4 m²), not at the ranges' (which left
+ * every offset up to 7 cm standing while the odometry drifted). */
+static void test_memory_corrects_small_offset(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    bl_memory_corrector m;
+    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
+    double x, y, th;
+    (void)drive_arc(&m, &ring, &x, &y, &th);
+    bl_pose p = {(bl_real)(x + 0.03), (bl_real)(y - 0.04), (bl_real)th};
+    bl_memory_result r;
+    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
+    assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
+    assert_true(r.iterations >= 1);
+    assert_true(hypot((double)p.x_m - x, (double)p.y_m - y) < 0.01);
 }
 
 /* A wall whose impacts scatter (±15 cm, inside the 25 cm gate) gives no
@@ -368,8 +457,8 @@ static void test_memory_scattered_fit_refused(void **state)
     assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
     assert_int_equal(r.segments, 1);
     assert_true(fabs((double)p.theta_rad - th) < 0.005);
-    assert_true(fabs((double)p.x_m - x) < 0.02);
-    assert_true(fabs((double)p.y_m - (y - 0.08)) < 0.01); /* unobserved: not moved */
+    assert_true(fabs((double)p.y_m - y) < 0.02);
+    assert_true(fabs((double)p.x_m - (x + 0.10)) < 0.01); /* unobserved: not moved */
 }
 
 /* The 20° incidence gate: with it at 1° only the shots within 1° of a
@@ -394,8 +483,8 @@ static void test_memory_incidence_gate(void **state)
     bl_memory_result again;
     assert_int_equal(bl_memory_correct(&m, &map, &ring, &q, &again), BL_OK);
     assert_memory_equal(&p, &q, sizeof p);
-    /* the heading is -0.16 .. +0.155 rad (9°) along the arc: at 1° most of
-     * the side-wall and front-wall shots fall outside */
+    /* at 40° the right and top walls' normals are 10° off the -30° and 60°
+     * sensors' axes: at a 1° gate none of their shots is matched */
     bl_memory_params prm;
     bl_memory_default(&prm);
     prm.incidence_gate_rad = (bl_real)(1.0 * 3.141592653589793 / 180.0);
@@ -405,10 +494,10 @@ static void test_memory_incidence_gate(void **state)
     p = p0;
     assert_int_equal(bl_memory_correct(&m1, &map, &ring, &p, &r1), BL_OK);
     assert_true(r1.matched < r20.matched / 3);
-    /* the gate's count at 20°: the ±30° and ±60° sensors never hit a wall
-     * within 20° of its normal on this arc (heading within ±9.2°), the
-     * 0° and ±90° ones always do: 3 per burst */
-    assert_int_equal(r20.matched, 30);
+    /* the gate's count at 20°: those two sensors' shots, 2 per burst (the
+     * others hear corners or nothing: no wall's normal within 20°) */
+    assert_int_equal(r20.matched, 20);
+    assert_int_equal(r1.matched, 0);
 }
 
 /* Bad input refused, the corrector byte-identical; bad ranges counted. */
@@ -436,7 +525,7 @@ static void test_memory_refuses_bad_input(void **state)
     bl_memory_corrector copy;
     memcpy(&copy, &m, sizeof m);
     bl_sonar_range b[8];
-    const uint32_t n = axis_burst(1.8, 2, -0.3, b); /* every beam on a wall */
+    const uint32_t n = burst_of(1.8, 2, -0.3, 0, b); /* every beam on a wall */
     for (uint32_t k = 0; k < n; ++k) assert_int_equal(b[k].flags, 0);
     const bl_pose good = {(bl_real)1.8, 2, (bl_real)-0.3};
     const bl_pose nan_pose = {(bl_real)NAN, 2, 0};
@@ -496,9 +585,12 @@ int main(void)
 {
     (void)rng_gauss; /* test_rng.h: only the uniform draws here */
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_pinpoint_recovers_offset),  cmocka_unit_test(test_pinpoint_endpoint_case),
+        cmocka_unit_test(test_pinpoint_recovers_offset),
+        cmocka_unit_test(test_pinpoint_specular_true_pose_is_kept),
+        cmocka_unit_test(test_pinpoint_heading_prior),  cmocka_unit_test(test_pinpoint_endpoint_case),
         cmocka_unit_test(test_pinpoint_gate),             cmocka_unit_test(test_pinpoint_bad_ranges_counted),
         cmocka_unit_test(test_pinpoint_refuses_bad_input), cmocka_unit_test(test_memory_recovers_offset),
+        cmocka_unit_test(test_memory_corrects_small_offset),
         cmocka_unit_test(test_memory_scattered_fit_refused),
         cmocka_unit_test(test_memory_incidence_gate),     cmocka_unit_test(test_memory_refuses_bad_input),
         cmocka_unit_test(test_odometry_step),

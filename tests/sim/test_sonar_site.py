@@ -216,3 +216,18 @@ def test_schema_count_key(extra, why):
             'count_key = "segments"\n')
     with pytest.raises(ValueError, match=r"\[wallN\]: indexed_by 'map' has no segments key"):
         parse_schema(text.replace(extra, "") + item)
+
+
+def test_hoppenot_room_site_gives_the_filter_its_wheel_scale_calibration():
+    """What the filter needs on this site is in the site file, not injected by a benchmark:
+    [robot] sigma_wheel_scale > 0 (the ranges learn an under-inflated tyre, Hoppenot & Colle
+    s. 4.2); tests/bench/test_sonar_bench.py checks the bench adds no key of its own."""
+    import configparser
+    from pathlib import Path
+
+    from beaconloc_sim.resources import builtin_site_path
+
+    site = Path(builtin_site_path("hoppenot-room"))
+    cp = configparser.ConfigParser(inline_comment_prefixes=(";", "#"), strict=False)
+    cp.read(site)
+    assert 0 < cp.getfloat("robot", "sigma_wheel_scale") <= 0.5

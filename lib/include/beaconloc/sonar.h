@@ -169,6 +169,13 @@ typedef struct bl_pinpoint_params {
     uint32_t min_matches;       /* fewer matched impacts: no correction; >= 1, default 3 */
     bl_real max_correction_m;   /* refuse a position correction longer than this (m), > 0 */
     bl_real max_correction_rad; /* refuse a heading correction larger than this (rad), > 0 */
+    bl_real heading_sigma_rad;  /* σ of the odometric heading at a burst (rad), >= 0: the
+                                   pin-point's F gets the term (σ_r (θ − θ_odo)/σ_θ)², σ_r =
+                                   sigma_range_m (the paper's "the odometry being considered
+                                   as not too bad", §3.1). Specular echoes observe the heading
+                                   only through the ring's lever arm and the beam's edge:
+                                   without it their noise turns the heading. 0: none (the
+                                   paper's F). Default 0.05. Unused by the memory corrector */
 } bl_pinpoint_params;
 
 /* The paper's values (ε = ε' = 5e-3, N = 10) and min_matches 3,
@@ -210,7 +217,7 @@ typedef struct bl_pinpoint_result {
  * with n > 0; n > BL_SONAR_MAX_SENSORS; a non-finite pose or one beyond 1e5
  * m; a map or ring that fails its check; params out of range).
  * Cost O(iterations · n · map.count) (measured: lib/README.md, make
- * bench-sonar-lib); stack (x86-64, double, -O2, -fstack-usage): 768 B
+ * bench-sonar-lib); stack (x86-64, double, -O2, -fstack-usage): 784 B
  * for this frame plus 768 B for the least squares and ~300 B below it. */
 int bl_pinpoint_correct(const bl_map *map, const bl_sonar_ring *ring, const bl_sonar_range *burst, uint32_t n,
                         const bl_pinpoint_params *params, bl_pose *pose_in_out, bl_pinpoint_result *result);
@@ -221,9 +228,14 @@ int bl_pinpoint_correct(const bl_map *map, const bl_sonar_ring *ring, const bl_s
  *   - places every kept range by odometry: burst k's pose relative to the
  *     newest is odo_newest⁻¹ ∘ odo_k (pure dead reckoning), composed with
  *     *pose_in_out (the current estimate at the newest burst);
- *   - matches each impact (eq. 1) with the nearest segment within ring.gate_m
- *     (eq. 2-4), and only if the shot is within incidence_gate_rad (the
- *     paper's 20°) of the segment's normal;
+ *   - matches each range with the segment whose normal through the
+ *     transducer is within incidence_gate_rad (the paper's 20°) of the shot,
+ *     whose foot lies on the segment and whose perpendicular distance h is
+ *     nearest the range d, |d − h| <= ring.gate_m (eq. 2-4); the impact is
+ *     placed on that normal, M = S + d·(foot − S)/h, where the specular echo
+ *     comes from (eq. 1 puts it on the beam axis: up to 20° off the normal,
+ *     and a trace of such impacts tilts by ~sin 20° times the rate at which
+ *     the range changes along the path);
  *   - fits, for every segment with >= min_points matched impacts, a line
  *     by linear regression in Crowley's (1989) form (a midpoint and an
  *     orientation): the midpoint is the impacts' centroid (x̄, ȳ), the
@@ -238,7 +250,8 @@ int bl_pinpoint_correct(const bl_map *map, const bl_sonar_ring *ring, const bl_s
  *     max(sigma_range_m, sigma_range_rel · their mean range);
  *   - heading first: Δθ = mean over the fitted segments of (known
  *     orientation − fitted orientation), each difference taken modulo π into
- *     (−π/2, π/2]; the fitted centres turn by Δθ about the robot;
+ *     (−π/2, π/2], weighted by 1/σφ² (the paper's plain mean when the fits
+ *     are alike); the fitted centres turn by Δθ about the robot;
  *   - then position: (Δx, Δy) minimising Σ over the fitted segments of the
  *     squared distance (eq. 3/4) of the fitted centre + (Δx, Δy) to its
  *     known segment, by the pin-point's least squares and stopping rules
@@ -258,8 +271,12 @@ typedef struct bl_memory_params {
                                     default 0.1 */
 } bl_memory_params;
 
-/* depth 10, 20°, min_points 3, min_segments 1, position = bl_pinpoint_default,
- * max_fit_sigma_rad 0.1.
+/* depth 10, 20°, min_points 3, min_segments 1, position = bl_pinpoint_default
+ * but epsilon_cost_m2 1e-4 (its F sums squared distances of fitted
+ * midpoints, each the mean of several ranges: the paper's 5e-3 m² stop would
+ * leave a midpoint 7 cm off its wall uncorrected) and max_correction_m 0.25
+ * (the paper's association gate: a larger correction contradicts the
+ * matching it came from), max_fit_sigma_rad 0.1.
  * Errors: BL_EINVAL (NULL). */
 int bl_memory_default(bl_memory_params *params);
 
@@ -312,7 +329,7 @@ int bl_memory_push(bl_memory_corrector *m, const bl_sonar_ring *ring, const bl_p
  * At most BL_MEMORY_MAX_FITS (16) segments are fitted (the first ones in
  * map order with enough impacts; result.segments counts them).
  * Cost O(points · map.count + segments · iterations); stack (x86-64,
- * double, -O2, -fstack-usage): 1,712 B for this frame plus the least
+ * double, -O2, -fstack-usage): 4,352 B for this frame (the kept impacts) plus the least
  * squares' ~1.1 KiB (less with float). */
 int bl_memory_correct(const bl_memory_corrector *m, const bl_map *map, const bl_sonar_ring *ring, bl_pose *pose_in_out,
                       bl_memory_result *result);
