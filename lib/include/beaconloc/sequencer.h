@@ -28,8 +28,11 @@
  *      double pulse (re)anchors the model. A double pulse where the hint or
  *      the locked model expects another beacon (or no firing) is numbered as
  *      expected and counted in double_conflicts; only a second conflicting
- *      double whole cycles later, with no consistent beacon 1 in between,
- *      drops the hint and relocks on it.
+ *      double whole cycles later, with no consistent beacon 1 in between and
+ *      the model's own beacon 1 heard without its signature since (evidence
+ *      against the model: echoes 3 ms late mimic a double pulse for several
+ *      cycles, and beacon 1 may be out of hearing range), drops the hint and
+ *      relocks on it.
  *   3. Numbering (Kleeman 1992 eq. 19: arrival = firing + flight, flight in
  *      [0, max_flight_us]). From beacon 1's arrival a1 its firing time lies
  *      in [a1 - max_flight_us, a1]; firing slot j (j = 0, 1, 2, ... after
@@ -197,6 +200,17 @@ typedef struct bl_seq_hint {
     bl_real period_us;       /* predicted T (us), > 0 */
     bl_real fire_sigma_us;   /* σ of fire_us (us), >= 0 */
     bl_real period_sigma_us; /* σ of period_us (us), >= 0 */
+    /* Tracking windows (optional): with flights_valid, beacon b's pulse is
+     * expected flight_us[b] after its firing, within ±(3·flight_sigma_us[b]
+     * + flight_margin_us + flight_rate_us_per_s·|firing - fire_us| + the
+     * firing-time tolerance) instead of anywhere in [0, max_flight]
+     * (Kleeman 1992 eq. 20-21 at the filter's position and speed of sound;
+     * bl_sequencer_hint_flights fills them). false: start-up windows only. */
+    bool flights_valid;
+    bl_real flight_us[BL_MAX_BEACONS];       /* predicted flight to the ring centre (us), [0, T] */
+    bl_real flight_sigma_us[BL_MAX_BEACONS]; /* its σ (position, speed of sound, noise) (us), [0, T] */
+    bl_real flight_margin_us;                /* added both sides, e.g. ring radius / s (us), [0, T] */
+    bl_real flight_rate_us_per_s;            /* bound on |d flight / dt|, e.g. (|v| + 3σ_v) / s (us/s), [0, 1e6] */
 } bl_seq_hint;
 
 /* Counters: read-only for the caller, uint32 wrapping. */
@@ -262,6 +276,14 @@ typedef struct bl_sequencer {
     int64_t hint_fire_sigma_ns;
     int64_t hint_period_sigma_ns;
     int64_t beacon_last_us[BL_MAX_BEACONS]; /* first arrival of each beacon's last firing */
+    int64_t ref_lo_us;                      /* own model: firing of beacon ref_beacon's last */
+    int64_t ref_hi_us;                      /* numbered firing lies in [ref_lo_us, ref_hi_us] */
+    int32_t ref_beacon;
+    int32_t hint_flight_rate_us_per_s;
+    int32_t hint_flight_us[BL_MAX_BEACONS];     /* hint's tracking windows: centre (us) */
+    int32_t hint_flight_tol_us[BL_MAX_BEACONS]; /* and half width (us) */
+    bool hint_flights;
+    bool one_single_seen; /* beacon 1 numbered without its signature since the last anchor */
 } bl_sequencer;
 
 /* Model summary for logs and health reports. */
@@ -294,6 +316,23 @@ int bl_sequencer_config_default(bl_seq_config *cfg);
  * [0, period), ring radius not in [0, 100) m, distances beyond 1000 km, or
  * the resulting windows overlap, see bl_sequencer_config_check). */
 int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m, bl_seq_config *out);
+
+/* The shortest beacon period the sequencer takes for a site, and why. */
+typedef struct bl_seq_min_period {
+    bl_real min_period_s;  /* shortest accepted beacon_period_s (s): the arrival windows of the
+                              two firings after beacon 1, 2·max_flight + 2·tol_1 wide, must
+                              be disjoint (bl_sequencer_config_check) */
+    bl_real max_flight_s;  /* longest direct flight (s): distance_m / (s - 3σ_s) */
+    bl_real distance_m;    /* the distance that sets it (m) */
+    bool by_hearing_range; /* distance_m is the site's hearing_range_m (else the largest
+                              beacon-to-beacon distance plus the ring radius) */
+} bl_seq_min_period;
+
+/* Fills *out for the site (its period is not used): for error messages that
+ * name the real cause, and for choosing a period. *out is written only on
+ * success. Errors: as bl_sequencer_config_from_site with max_distance_m 0,
+ * except that the period is not checked. */
+int bl_sequencer_min_period(const bl_config *site, bl_seq_min_period *out);
 
 /* Checks ranges and that the windows cannot overlap:
  *   2·max_flight + 2·tol_N < T (the windows of successive firings are disjoint
