@@ -32,10 +32,12 @@ import numpy as np
 
 from beaconloc_sim import simulate
 from beaconloc_sim.physics.pulses import KIND_DIRECT
-from beaconloc_sim.scenario import builtin_names, load_scenario
+from beaconloc_sim.scenario import builtin_names, is_team_scenario, load_scenario
 
 
 def run_scenario(name, replay, seed, duration):
+    if is_team_scenario(name):
+        return None  # robots ranging to each other: no beacon to sequence
     scn = load_scenario(name, seed=seed, duration_s=duration)
     if scn.site.beacon_count == 0:
         return None  # bearings, ranges or sonar only: no beacon to sequence

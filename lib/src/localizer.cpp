@@ -117,6 +117,8 @@ NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
     }
     bl_seq_hint h;
     int rc = bl_sequencer_hint_from_estimate(&est, &h);
+    // tracking windows around each beacon's predicted flight (hQ2, issue 14)
+    if (rc == BL_OK) rc = bl_sequencer_hint_flights(&loc->filter, &h);
     if (rc == BL_OK) rc = bl_sequencer_set_hint(&loc->seq, &h);
     if (rc == BL_OK)
         loc->hint_set_ = true;

@@ -377,6 +377,19 @@ int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint);
  * false). */
 int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint);
 
+/* Adds the tracking windows to *hint (flights_valid and the flight fields;
+ * the rest is kept): each beacon's predicted flight to the ring centre and
+ * its σ from a started filter (bl_filter_expected_arrival at the state
+ * time: position, speed of sound and their covariance, Kleeman 1992 eq.
+ * 20-21), the ring radius / (s - 3σ_s) as margin, and (|v| + 3σ_v +
+ * (|ω| + 3σ_ω)·ring radius) / (s - 3σ_s) as the rate at which a flight may
+ * change. Once the filter has converged this turns the window of width
+ * max_flight into one of a few σ around the expected arrival. *hint is
+ * written only on success. Errors: BL_EINVAL (NULL, a non-finite
+ * prediction, s - 3σ_s <= 100 m/s), BL_ENOTINIT (filter not started),
+ * and those of bl_filter_expected_arrival. */
+int bl_sequencer_hint_flights(const bl_filter *f, bl_seq_hint *hint);
+
 /* Drops the hint (the own model continues). Errors: BL_EINVAL, BL_ENOTINIT. */
 int bl_sequencer_clear_hint(bl_sequencer *seq);
 
