@@ -570,11 +570,10 @@ int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint)
         for (uint32_t b = 0; b < c.beacon_count; ++b) {
             seq->hint_flight_us[b] = static_cast<int32_t>(hint->flight_us[b] + static_cast<bl_real>(0.5));
             // 3σ of the predicted flight plus the caller's margin (ring spread, motion)
-            seq->hint_flight_tol_us[b] = static_cast<int32_t>(3 * hint->flight_sigma_us[b] + hint->flight_margin_us +
-                                                              static_cast<bl_real>(0.5));
+            seq->hint_flight_tol_us[b] =
+                static_cast<int32_t>(3 * hint->flight_sigma_us[b] + hint->flight_margin_us + static_cast<bl_real>(0.5));
         }
-        seq->hint_flight_rate_us_per_s =
-            static_cast<int32_t>(hint->flight_rate_us_per_s + static_cast<bl_real>(0.5));
+        seq->hint_flight_rate_us_per_s = static_cast<int32_t>(hint->flight_rate_us_per_s + static_cast<bl_real>(0.5));
     }
     seq->hint_valid = true;
     seq->hint_fire_us = hint->fire_us;

@@ -40,8 +40,8 @@ extern "C" int bl_sequencer_hint_flights(const bl_filter *f, bl_seq_hint *hint)
     // receiver's position at arrival).
     const bl_real v_sigma = std::sqrt(est.cov[3 * 5 + 3] > 0 ? est.cov[3 * 5 + 3] : 0);
     const bl_real w_sigma = std::sqrt(est.cov[4 * 5 + 4] > 0 ? est.cov[4 * 5 + 4] : 0);
-    const bl_real speed_mps = std::fabs(est.v_mps) + 3 * v_sigma +
-                              (std::fabs(est.omega_radps) + 3 * w_sigma) * cfg.ring_radius_m;
+    const bl_real speed_mps =
+        std::fabs(est.v_mps) + 3 * v_sigma + (std::fabs(est.omega_radps) + 3 * w_sigma) * cfg.ring_radius_m;
     h.flight_rate_us_per_s = speed_mps / s_min * us_per_s;
     if (!std::isfinite(h.flight_margin_us) || !std::isfinite(h.flight_rate_us_per_s)) return BL_EINVAL;
     if (h.flight_rate_us_per_s > us_per_s) h.flight_rate_us_per_s = us_per_s;
