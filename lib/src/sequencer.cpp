@@ -21,6 +21,7 @@ constexpr uint32_t kMagic = 0x5E9B1C01u;
 constexpr int64_t kNsPerUs = bl::kSeqNsPerUs;
 constexpr int64_t kMaxPeriodUs = bl::kSeqMaxPeriodUs;
 constexpr uint32_t kMaxTimeoutCycles = bl::kSeqMaxTimeoutCycles;
+constexpr int64_t kFlightUnitUs = 16;  // the hint's stored flights (bl_sequencer.hint_flight_u)
 
 bool finite_real(bl_real v) { return std::isfinite(v); }
 
@@ -96,9 +97,9 @@ void hint_window(const bl_sequencer *s, int32_t b, int64_t fire_ns_rel, int64_t 
     *hi_ns = static_cast<int64_t>(c.max_flight_us) * kNsPerUs + tol_ns;
     if (!s->hint_flights) return;
     const int64_t age_us = abs64(fire_ns_rel) / kNsPerUs;
-    const int64_t spread_ns = static_cast<int64_t>(s->hint_flight_tol_us[b]) * kNsPerUs + tol_ns +
+    const int64_t spread_ns = static_cast<int64_t>(s->hint_flight_tol_u[b]) * kFlightUnitUs * kNsPerUs + tol_ns +
                               age_us * s->hint_flight_rate_us_per_s / 1000;  // us/s · us -> ns
-    const int64_t centre_ns = static_cast<int64_t>(s->hint_flight_us[b]) * kNsPerUs;
+    const int64_t centre_ns = static_cast<int64_t>(s->hint_flight_u[b]) * kFlightUnitUs * kNsPerUs;
     *lo_ns = max64(*lo_ns, centre_ns - spread_ns);
     *hi_ns = min64(*hi_ns, centre_ns + spread_ns);
 }
@@ -565,13 +566,23 @@ int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint)
         }
     }
     const bool was_locked = is_locked(seq);
-    seq->hint_flights = hint->flights_valid;
-    if (hint->flights_valid) {
+    // Stored in units of kFlightUnitUs (uint16: 1.05 s at most; a flight
+    // longer than that, 360 m, leaves the start-up windows alone): the
+    // centre rounded, the half width rounded up plus one unit for the
+    // centre's rounding.
+    bool flights = hint->flights_valid;
+    for (uint32_t b = 0; flights && b < c.beacon_count; ++b)
+        flights = hint->flight_us[b] < static_cast<bl_real>(65535 * kFlightUnitUs);
+    seq->hint_flights = flights;
+    if (flights) {
         for (uint32_t b = 0; b < c.beacon_count; ++b) {
-            seq->hint_flight_us[b] = static_cast<int32_t>(hint->flight_us[b] + static_cast<bl_real>(0.5));
-            // 3σ of the predicted flight plus the caller's margin (ring spread, motion)
-            seq->hint_flight_tol_us[b] =
-                static_cast<int32_t>(3 * hint->flight_sigma_us[b] + hint->flight_margin_us + static_cast<bl_real>(0.5));
+            seq->hint_flight_u[b] = static_cast<uint16_t>(hint->flight_us[b] / static_cast<bl_real>(kFlightUnitUs) +
+                                                          static_cast<bl_real>(0.5));
+            // 3σ of the predicted flight plus the caller's margin (ring spread)
+            const bl_real tol_u =
+                (3 * hint->flight_sigma_us[b] + hint->flight_margin_us) / static_cast<bl_real>(kFlightUnitUs) + 2;
+            seq->hint_flight_tol_u[b] =
+                tol_u < static_cast<bl_real>(65535) ? static_cast<uint16_t>(tol_u) : static_cast<uint16_t>(65535);
         }
         seq->hint_flight_rate_us_per_s = static_cast<int32_t>(hint->flight_rate_us_per_s + static_cast<bl_real>(0.5));
     }

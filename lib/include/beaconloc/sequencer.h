@@ -247,9 +247,10 @@ typedef struct bl_seq_pending {
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
  * `counters` are private. Size: BL_SEQ_MAX_PENDING · (24 + 10·BL_MAX_RECEIVERS)
- * + 224 + 8·BL_MAX_BEACONS bytes on x86-64 and on Cortex-M4 (4 of the 10
- * bytes per receiver are the caller's tags): 704 B with 8 beacons and 8
- * receivers (the M4 example), 1,088 B with 16/16. */
+ * + 256 + 12·BL_MAX_BEACONS bytes on x86-64 and on Cortex-M4 (4 of the 10
+ * bytes per receiver are the caller's tags): 768 B with 8 beacons and 8
+ * receivers (the M4 example), 1,184 B with 16/16 (the own model's firing
+ * interval and the hint's tracking windows took 64 B / 96 B of that). */
 typedef struct bl_sequencer {
     bl_seq_config cfg;
     bl_seq_counters counters;
@@ -280,8 +281,8 @@ typedef struct bl_sequencer {
     int64_t ref_hi_us;                      /* numbered firing lies in [ref_lo_us, ref_hi_us] */
     int32_t ref_beacon;
     int32_t hint_flight_rate_us_per_s;
-    int32_t hint_flight_us[BL_MAX_BEACONS];     /* hint's tracking windows: centre (us) */
-    int32_t hint_flight_tol_us[BL_MAX_BEACONS]; /* and half width (us) */
+    uint16_t hint_flight_u[BL_MAX_BEACONS];     /* hint's tracking windows: centre and */
+    uint16_t hint_flight_tol_u[BL_MAX_BEACONS]; /* half width (units of 16 us) */
     bool hint_flights;
     bool one_single_seen; /* beacon 1 numbered without its signature since the last anchor */
 } bl_sequencer;
