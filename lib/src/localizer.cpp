@@ -451,7 +451,8 @@ extern "C" int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out
         longer.beacon_period_s = 10;
         bl_seq_config probe;
         if (bl_sequencer_config_from_site(&longer, 0, &probe) == BL_OK) {
-            w = "period too short for the beacons' spread: the beacon time windows overlap";
+            w = "period too short for the longest flight (hearing range, else the beacons' spread): the beacon "
+                "time windows overlap (bl_sequencer_min_period says the shortest)";
             f = "beacon_period_s";
         } else {
             // Windows of one firing: merge window (ring diameter) against
