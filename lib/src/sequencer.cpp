@@ -23,8 +23,6 @@ constexpr int64_t kMaxPeriodUs = bl::kSeqMaxPeriodUs;
 constexpr uint32_t kMaxTimeoutCycles = bl::kSeqMaxTimeoutCycles;
 constexpr int64_t kFlightUnitUs = 16;  // the hint's stored flights (bl_sequencer.hint_flight_u)
 
-bool finite_real(bl_real v) { return std::isfinite(v); }
-
 bool time_ok(int64_t t_us) { return t_us <= BL_SEQ_TIME_LIMIT_US && t_us >= -BL_SEQ_TIME_LIMIT_US; }
 
 int64_t abs64(int64_t v) { return v < 0 ? -v : v; }
@@ -594,26 +592,6 @@ int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint)
     seq->hint_period_sigma_ns = static_cast<int64_t>(ps * static_cast<bl_real>(kNsPerUs) + static_cast<bl_real>(0.5));
     seq->consecutive_spurious = 0;
     count_lock_change(seq, was_locked, false);
-    return BL_OK;
-}
-
-int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint)
-{
-    if (est == nullptr || hint == nullptr) return BL_EINVAL;
-    if (!est->started) return BL_ENOTINIT;
-    const bl_real us_per_s = static_cast<bl_real>(1e6);
-    bl_seq_hint h;
-    h.fire_us = est->t0_us;
-    h.beacon = 0;
-    h.period_us = est->period_s * us_per_s;
-    h.fire_sigma_us = est->sigma_t0_s * us_per_s;
-    h.period_sigma_us = est->sigma_period_s * us_per_s;
-    h.flights_valid = false;  // bl_sequencer_hint_flights adds them
-    h.flight_margin_us = 0;
-    h.flight_rate_us_per_s = 0;
-    for (uint32_t b = 0; b < BL_MAX_BEACONS; ++b) h.flight_us[b] = h.flight_sigma_us[b] = 0;
-    if (!finite_real(h.period_us) || !finite_real(h.fire_sigma_us) || !finite_real(h.period_sigma_us)) return BL_EINVAL;
-    *hint = h;
     return BL_OK;
 }
 

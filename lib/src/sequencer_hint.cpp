@@ -1,5 +1,6 @@
-// beaconloc — the sequencer's tracking windows from the filter (see
-// lib/include/beaconloc/sequencer.h, bl_sequencer_hint_flights).
+// beaconloc — the sequencer's hint from the filter (see
+// lib/include/beaconloc/sequencer.h): firing times (bl_sequencer_hint_from_estimate)
+// and the tracking windows (bl_sequencer_hint_flights).
 
 #include <stdint.h>
 
@@ -8,6 +9,27 @@
 extern "C" {
 #include "beaconloc/filter.h"
 #include "beaconloc/sequencer.h"
+}
+
+extern "C" int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint)
+{
+    if (est == nullptr || hint == nullptr) return BL_EINVAL;
+    if (!est->started) return BL_ENOTINIT;
+    const bl_real us_per_s = static_cast<bl_real>(1e6);
+    bl_seq_hint h;
+    h.fire_us = est->t0_us;
+    h.beacon = 0;
+    h.period_us = est->period_s * us_per_s;
+    h.fire_sigma_us = est->sigma_t0_s * us_per_s;
+    h.period_sigma_us = est->sigma_period_s * us_per_s;
+    h.flights_valid = false;  // bl_sequencer_hint_flights adds them
+    h.flight_margin_us = 0;
+    h.flight_rate_us_per_s = 0;
+    for (uint32_t b = 0; b < BL_MAX_BEACONS; ++b) h.flight_us[b] = h.flight_sigma_us[b] = 0;
+    if (!std::isfinite(h.period_us) || !std::isfinite(h.fire_sigma_us) || !std::isfinite(h.period_sigma_us))
+        return BL_EINVAL;
+    *hint = h;
+    return BL_OK;
 }
 
 extern "C" int bl_sequencer_hint_flights(const bl_filter *f, bl_seq_hint *hint)
