@@ -107,6 +107,8 @@ void clear_hint(bl_localizer *loc)
     }
 }
 
+uint32_t window_rejected(const bl_localizer *loc, uint64_t *beacon_mask);
+
 NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
 {
     // Only a known firing time is a hint: after a start from bearings on a
@@ -117,8 +119,10 @@ NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
     }
     bl_seq_hint h;
     int rc = bl_sequencer_hint_from_estimate(&est, &h);
-    // tracking windows around each beacon's predicted flight (hQ2, issue 14)
-    if (rc == BL_OK) rc = bl_sequencer_hint_flights(&loc->filter, &h);
+    // tracking windows around each beacon's predicted flight (hQ2, issue 14),
+    // only while the filter explains the pulses (none rejected in the
+    // persistent-rejection window): else the pulses must reach its gate
+    if (rc == BL_OK && window_rejected(loc, nullptr) == 0) rc = bl_sequencer_hint_flights(&loc->filter, &h);
     if (rc == BL_OK) rc = bl_sequencer_set_hint(&loc->seq, &h);
     if (rc == BL_OK)
         loc->hint_set_ = true;

@@ -74,11 +74,16 @@ int64_t own_max_slot(const bl_seq_config &c)
 
 bool seq_ok(const bl_sequencer *s) { return s->magic == kMagic; }
 
+// Tracking-window misses in a row that drop the hint's flights: a cycle,
+// at most half of max_consecutive_spurious's default (12).
+uint32_t tracking_misses_max(const bl_seq_config &c) { return c.beacon_count < 6 ? c.beacon_count : 6; }
+
 struct Assignment {
     bool assigned;
     int32_t beacon;
     int64_t fire_us;
     int64_t fire_lo_us, fire_hi_us;  // own model: this firing's time interval (us)
+    bool tracking_miss;              // hint: outside every tracking window, inside slot k0's start-up one
 };
 
 // Arrival window of slot k's firing at fire_ns_rel (ns after the hint's
@@ -137,6 +142,11 @@ bool number_by_hint(const bl_sequencer *s, int64_t t_us, Assignment *a)
             a->fire_lo_us = a->fire_hi_us = a->fire_us;
         }
         if (in) break;
+        if (i == 0 && s->hint_flights) {
+            // A miss of the tracking windows where the start-up window
+            // would have numbered the pulse: an echo, or the filter lost.
+            a->tracking_miss = off_ns >= -tol_ns && off_ns <= static_cast<int64_t>(c.max_flight_us) * kNsPerUs + tol_ns;
+        }
     }
     return true;
 }
@@ -186,6 +196,21 @@ bool number_by_model(const bl_sequencer *s, int64_t t_us, int64_t jmax, Assignme
     a->fire_hi_us = fhi;
     a->fire_us = flo + (fhi - flo) / 2;
     return true;
+}
+
+// Tracking windows that keep missing pulses the start-up windows would take
+// (tracking_misses_max in a row) are wrong, not the pulses: the robot was
+// carried, or the filter is lost. They are dropped (the firing times stay)
+// so the pulses reach the filter, whose gate and restart decide.
+void note_tracking(bl_sequencer *s, const Assignment &a)
+{
+    if (!s->hint_flights) return;
+    if (a.assigned) {
+        s->tracking_misses = 0;
+    } else if (a.tracking_miss && ++s->tracking_misses >= tracking_misses_max(s->cfg)) {
+        s->hint_flights = false;
+        s->counters.tracking_dropped++;
+    }
 }
 
 // Lock transitions are counted by the public entry points from the state
@@ -274,7 +299,7 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
     const int64_t t = p->arrival_us;
     const bool was_locked = is_locked(s);
     bool relocked = false;
-    Assignment a = {false, BL_SEQ_UNASSIGNED, 0, 0, 0};
+    Assignment a = {false, BL_SEQ_UNASSIGNED, 0, 0, 0, false};
     bool numbered = false;  // a numbering method was available
 
     if (p->double_pulse) {
@@ -282,11 +307,12 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
         // Which beacon the model expects here: the hint's windows if a hint
         // is in use, else the own model's (one extra cycle allowed: the
         // double pulse itself confirms the slot).
-        Assignment e = {false, BL_SEQ_UNASSIGNED, 0, 0, 0};
+        Assignment e = {false, BL_SEQ_UNASSIGNED, 0, 0, 0, false};
         bool have_expect = false;
         if (s->hint_valid) {
             if (number_by_hint(s, t, &e)) {
                 have_expect = true;
+                note_tracking(s, e);
             } else {
                 s->hint_valid = false;  // stale
             }
@@ -351,6 +377,7 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
         if (s->hint_valid) {
             if (number_by_hint(s, t, &a)) {
                 numbered = true;
+                note_tracking(s, a);
             } else {
                 s->hint_valid = false;  // stale
             }
@@ -572,6 +599,7 @@ int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint)
     for (uint32_t b = 0; flights && b < c.beacon_count; ++b)
         flights = hint->flight_us[b] < static_cast<bl_real>(65535 * kFlightUnitUs);
     seq->hint_flights = flights;
+    seq->tracking_misses = 0;
     if (flights) {
         for (uint32_t b = 0; b < c.beacon_count; ++b) {
             seq->hint_flight_u[b] = static_cast<uint16_t>(hint->flight_us[b] / static_cast<bl_real>(kFlightUnitUs) +

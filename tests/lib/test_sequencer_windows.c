@@ -198,6 +198,35 @@ static void test_tracking_windows(void **state) {
         assert_int_equal(seq.counters.spurious, with_flights ? 1 : 0);
     }
 
+    /* Flights that are wrong (the robot was carried: every beacon 20 ms
+     * nearer than the hint says) miss every pulse the start-up windows would
+     * number: after min(N, 6) = 6 in a row they are dropped (the firing
+     * times stay) and the pulses are numbered again, for the filter's gate. */
+    {
+        bl_sequencer carried;
+        init_seq(&carried);
+        bl_seq_hint wrong = h;
+        wrong.flights_valid = true;
+        for (int b = 0; b < N_BEACONS; ++b) wrong.flight_us[b] = h.flight_us[b] + (bl_real)20000;
+        assert_int_equal(bl_sequencer_set_hint(&carried, &wrong), BL_OK);
+        const size_t n = run_train(&carried, &g_tr, g_out, MAX_DET);
+        assert_int_equal(carried.counters.tracking_dropped, 1);
+        size_t spurious_direct = 0, numbered = 0;
+        for (size_t k = 0; k < n; ++k) {
+            const int f = truth_firing(&g_tr, g_out[k].arrival_us);
+            if (f < 0) continue;
+            if (g_out[k].status == BL_SEQ_SPURIOUS) {
+                spurious_direct++;
+                continue;
+            }
+            assert_int_equal(g_out[k].status, BL_SEQ_ASSIGNED);
+            assert_int_equal(g_out[k].beacon, g_tr.fire_beacon[f]);
+            numbered++;
+        }
+        assert_int_equal(spurious_direct, 6);
+        assert_int_equal(numbered, (size_t)g_tr.n_firings - 6);
+    }
+
     /* Bad flights are refused and leave the sequencer as it was. */
     bl_sequencer seq;
     init_seq(&seq);

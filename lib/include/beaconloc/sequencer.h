@@ -205,7 +205,11 @@ typedef struct bl_seq_hint {
      * + flight_margin_us + flight_rate_us_per_s·|firing - fire_us| + the
      * firing-time tolerance) instead of anywhere in [0, max_flight]
      * (Kleeman 1992 eq. 20-21 at the filter's position and speed of sound;
-     * bl_sequencer_hint_flights fills them). false: start-up windows only. */
+     * bl_sequencer_hint_flights fills them). false: start-up windows only.
+     * min(N, 6) pulses in a row outside every tracking window but inside
+     * the start-up one drop the flights until the next hint (counted in
+     * tracking_dropped): the robot was carried or the filter is lost, and
+     * the pulses must reach the filter's gate. */
     bool flights_valid;
     bl_real flight_us[BL_MAX_BEACONS];       /* predicted flight to the ring centre (us), [0, T] */
     bl_real flight_sigma_us[BL_MAX_BEACONS]; /* its σ (position, speed of sound, noise) (us), [0, T] */
@@ -229,6 +233,8 @@ typedef struct bl_seq_counters {
     uint32_t locks_lost;       /* locked -> unlocked transitions */
     uint32_t period_updates;   /* accepted T measurements */
     uint32_t hint_rejections;  /* hints dropped because double pulses contradicted them */
+    uint32_t tracking_dropped; /* hint tracking windows dropped: min(N, 6) pulses in a row outside
+                                  them but inside the start-up window (robot carried, filter lost) */
 } bl_seq_counters;
 
 /* Private: one pulse whose merge window is open. */
@@ -281,6 +287,7 @@ typedef struct bl_sequencer {
     int64_t ref_hi_us;                      /* numbered firing lies in [ref_lo_us, ref_hi_us] */
     int32_t ref_beacon;
     int32_t hint_flight_rate_us_per_s;
+    uint32_t tracking_misses;                   /* pulses in a row outside the tracking windows (start-up: inside) */
     uint16_t hint_flight_u[BL_MAX_BEACONS];     /* hint's tracking windows: centre and */
     uint16_t hint_flight_tol_u[BL_MAX_BEACONS]; /* half width (units of 16 us) */
     bool hint_flights;
