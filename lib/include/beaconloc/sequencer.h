@@ -34,26 +34,41 @@
  *      cycles, and beacon 1 may be out of hearing range), drops the hint and
  *      relocks on it.
  *   3. Numbering (Kleeman 1992 eq. 19: arrival = firing + flight, flight in
- *      [0, max_flight_us]). From beacon 1's arrival a1 its firing time lies
- *      in [a1 - max_flight_us, a1]; firing slot j (j = 0, 1, 2, ... after
- *      beacon 1, beacon index j mod N) then arrives in
- *          [a1 - max_flight_us + j·T - tol_j,  a1 + j·T + max_flight_us + tol_j]
- *      with tol_j = window_margin_us + j·T·period_tolerance_ppm/1e6. With a
- *      hint from the filter (predicted firing time t0 of some beacon and T,
- *      with their σ) the firing time is known and the window is half as wide:
+ *      [0, max_flight_us]; max_flight_us from the site's hearing range, the
+ *      distance beyond which a beacon is not heard, or the beacons' spread:
+ *      bl_sequencer_config_from_site). The own model keeps an interval
+ *      [lo, hi] for the firing time of the last numbered firing: beacon 1's
+ *      double pulse at a1 starts it at [a1 - max_flight_us, a1]; slot j
+ *      after it fires in [lo + j·T - d_j, hi + j·T + d_j],
+ *      d_j = |j|·T·period_tolerance_ppm/1e6, and arrives in
+ *          [lo + j·T - d_j - margin,  hi + j·T + d_j + max_flight_us + margin]
+ *      (margin = window_margin_us); a pulse numbered there narrows the
+ *      interval to its intersection with [arrival - max_flight_us, arrival]
+ *      and becomes the reference. So every numbered pulse, not only beacon
+ *      1, keeps the model (beacon 1 may be out of hearing range), and the
+ *      window right after beacon 1, 2·max_flight_us + 2·tol_1 wide, is the
+ *      widest a period must hold (bl_sequencer_config_check). With a hint
+ *      from the filter (predicted firing time t0 of some beacon and T, with
+ *      their σ) the firing time is known and the window is
  *          [t0 + k·T - tol_k,  t0 + k·T + max_flight_us + tol_k],
- *      tol_k = window_margin_us + 3·(σ_t0 + |k|·σ_T); the hint is dropped
- *      when its windows would overlap (stale) or double pulses contradict
- *      it twice (see 2). A pulse is numbered by the slot whose window contains it, so
- *      missed beacons (including a missed beacon 1) never shift the
- *      numbering of the next ones; a pulse outside every window is spurious.
+ *      tol_k = window_margin_us + 3·(σ_t0 + |k|·σ_T); with the hint's
+ *      predicted flight per beacon (tracking windows,
+ *      bl_sequencer_hint_flights) it narrows to the predicted flight ± its
+ *      3σ and margins. The hint is dropped when its windows would overlap
+ *      (stale) or double pulses contradict it twice (see 2); its tracking
+ *      windows when they miss min(N, 6) pulses in a row that the start-up
+ *      window would number. A pulse is numbered by the slot whose window
+ *      contains it, so missed beacons (including a missed beacon 1) never
+ *      shift the numbering of the next ones; a pulse outside every window
+ *      is spurious.
  *   4. Firing-time model. T is tracked from successive arrivals of the same
  *      beacon (the first pulse numbered in each firing): T_meas = Δt / (m·N)
  *      for m whole cycles, smoothed with gain 1/period_gain_div, accepted
- *      within the period tolerance. No beacon 1 for lock_timeout_cycles
- *      cycles (a double pulse may still confirm one cycle more), or
- *      max_consecutive_spurious pulses in a row outside every window, loses
- *      the lock; the next double pulse (or a hint) re-acquires it.
+ *      within the period tolerance. Nothing numbered for lock_timeout_cycles
+ *      cycles (a double pulse may still confirm one cycle more), a window
+ *      as wide as T, or max_consecutive_spurious pulses in a row outside
+ *      every window, loses the lock; the next double pulse (or a hint)
+ *      re-acquires it.
  *
  * Echoes: the sequencer does not reject echoes beyond merging. A later
  * arrival in the window of a firing that already produced a pulse is passed
@@ -65,7 +80,8 @@
  * T - max_flight_us can fall into the next firing's window and is numbered
  * as the next beacon (without `repeat` if it comes first): again the
  * filter's gate rejects it. With a hint the windows are tight enough that
- * echoes later than max_flight_us after the firing are spurious.
+ * echoes later than max_flight_us after the firing are spurious; with its
+ * tracking windows, echoes a few σ later than the predicted flight.
  *
  * Stream API: push every detection as it arrives (any order within a merge
  * window), then pop pulses whose merge window has closed: a pulse is ready
@@ -134,7 +150,7 @@ typedef struct bl_seq_config {
     int32_t double_width_min_us;       /* one envelope at least this wide is a double pulse (us);
                                        0 = off */
     int32_t min_width_us;              /* narrower detections are spurious (us); 0 = off */
-    uint32_t lock_timeout_cycles;      /* lock lost after this many cycles without beacon 1, >= 1 */
+    uint32_t lock_timeout_cycles;      /* lock lost after this many cycles with nothing numbered, >= 1 */
     uint32_t max_consecutive_spurious; /* lock lost after this many pulses in a row outside every
                                        window; 0 = never */
     uint32_t period_gain_div;          /* T smoothing: T += (T_meas - T) / period_gain_div, >= 1 */
@@ -312,17 +328,21 @@ int bl_sequencer_config_default(bl_seq_config *cfg);
  * double-pulse spacing, receiver count; merge window = 2·ring radius /
  * s_min + window margin; max flight = max_distance_m / s_min, where
  * s_min = speed_of_sound_mps - 3·sigma_speed_of_sound_mps and
- * max_distance_m <= 0 means "largest distance between two beacons plus the
- * ring radius" (robot inside the beacons' hull). Tolerances keep their
+ * max_distance_m <= 0 means the site's hearing_range_m when that is > 0
+ * and shorter than the geometric bound, else the geometric bound: the
+ * largest distance between two beacons plus the ring radius (robot inside
+ * the beacons' hull). Tolerances keep their
  * bl_sequencer_config_default values. *out is written only on success.
  * Errors: BL_EINVAL (NULL; NaN/inf in max_distance_m or in a site field
  * used here: speed_of_sound_mps, sigma_speed_of_sound_mps, beacon_period_s,
  * double_pulse_spacing_s, burst_length_s, ring_radius_m, receiver_height_m,
- * beacons[0..beacon_count-1]; max_distance_m > 1e6 m), BL_ECONFIG (finite
+ * hearing_range_m, beacons[0..beacon_count-1]; max_distance_m > 1e6 m),
+ * BL_ECONFIG (finite
  * but unusable: beacon or receiver count out of range, s_min outside
  * (100, 1000) m/s, period outside (0, 10] s, spacing or burst not in
- * [0, period), ring radius not in [0, 100) m, distances beyond 1000 km, or
- * the resulting windows overlap, see bl_sequencer_config_check). */
+ * [0, period), ring radius not in [0, 100) m, hearing range not in
+ * [0, 1e4] m, distances beyond 1000 km, or the resulting windows overlap,
+ * see bl_sequencer_config_check; bl_sequencer_min_period says why). */
 int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m, bl_seq_config *out);
 
 /* The shortest beacon period the sequencer takes for a site, and why. */
@@ -343,8 +363,10 @@ typedef struct bl_seq_min_period {
 int bl_sequencer_min_period(const bl_config *site, bl_seq_min_period *out);
 
 /* Checks ranges and that the windows cannot overlap:
- *   2·max_flight + 2·tol_N < T (the windows of successive firings are disjoint
- *   for a whole cycle), merge_window < double_spacing - double_tolerance.
+ *   2·max_flight + 2·tol_1 < T (the windows of the two firings after beacon
+ *   1's double pulse are disjoint; later ones narrow as pulses are numbered,
+ *   and one as wide as T drops the lock at run time),
+ *   merge_window < double_spacing - double_tolerance.
  * Returns BL_OK, BL_ECONFIG, or BL_EINVAL (NULL). */
 int bl_sequencer_config_check(const bl_seq_config *cfg);
 
