@@ -152,6 +152,7 @@ struct bridge_config {
     double period_s;               /* nominal time between firings (T) */
     double double_pulse_spacing_s; /* beacon 1's second burst delay */
     double burst_length_s;
+    double hearing_range_m; /* no beacon heard beyond (m); 0 = largest beacon distance */
     /* [beaconN], [bearing_beaconN], [range_beaconN]: item N at <prefix>[N-1] */
 #define CONFIG_ITEM_ARRAY(sec, prefix, strct, count_sec, count_member, max)                        \
     struct strct prefix[max];

@@ -595,7 +595,8 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
         event(e, EST_EV_WARNING, "encoders silent");
     }
     /* echo storm: share of firings gated out, and of echoes (later
-     * arrivals of a firing), over the window (localizer counters) */
+     * arrivals of a firing, or, with the filter's tracking windows, pulses
+     * outside every window), over the window (localizer counters) */
     bl_loc_counters lc;
     if (bl_localizer_counters(&e->loc, &lc) != BL_OK)
         return;
@@ -603,12 +604,12 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
         e->storm_window_start_us = now;
         e->storm_base_acc = lc.firings_accepted;
         e->storm_base_rej = lc.firings_rejected;
-        e->storm_base_echo = lc.repeats_skipped;
+        e->storm_base_echo = lc.repeats_skipped + lc.pulses_spurious;
     }
     if (now - e->storm_window_start_us >= STORM_WINDOW_US) {
         uint32_t acc = lc.firings_accepted - e->storm_base_acc;
-        uint32_t bad =
-            (lc.firings_rejected - e->storm_base_rej) + (lc.repeats_skipped - e->storm_base_echo);
+        uint32_t bad = (lc.firings_rejected - e->storm_base_rej) +
+                       (lc.repeats_skipped + lc.pulses_spurious - e->storm_base_echo);
         uint32_t n = acc + bad;
         double ratio = n ? (double)bad / n : 0.0;
         if (!e->storm && n >= STORM_MIN_PULSES && ratio > e->echo_storm_ratio) {
@@ -620,7 +621,7 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
         }
         e->storm_base_acc = lc.firings_accepted;
         e->storm_base_rej = lc.firings_rejected;
-        e->storm_base_echo = lc.repeats_skipped;
+        e->storm_base_echo = lc.repeats_skipped + lc.pulses_spurious;
         e->storm_window_start_us = now;
     }
 }

@@ -104,9 +104,28 @@ int make_seq_config(const struct bridge_config *cfg, const bl_config *c, bl_seq_
     if (rc != BL_OK) {
         const char *section = "beacons", *key = "period_s";
         key_of_field(field, &section, &key);
-        char why[200];
-        snprintf(why, sizeof why, "refused by the beacon sequencer: %s (%s)", cause ? cause : "?",
-                 bl_strerror(rc));
+        char why[320];
+        bl_seq_min_period mp;
+        if (field && !strcmp(field, "beacon_period_s") &&
+            bl_sequencer_min_period(c, &mp) == BL_OK && c->beacon_period_s < mp.min_period_s) {
+            /* The real cause: the longest flight the windows must allow. */
+            char what[96];
+            if (mp.by_hearing_range)
+                snprintf(what, sizeof what, "hearing range %g m", (double)mp.distance_m);
+            else
+                snprintf(what, sizeof what,
+                         "largest beacon distance %.1f m (no [beacons] hearing_range_m)",
+                         (double)mp.distance_m);
+            snprintf(
+                why, sizeof why,
+                "%s needs %.0f ms per beacon (2 x %.1f ms flight + margins); period %g s too short "
+                "for the beacon sequencer (%s)",
+                what, (double)mp.min_period_s * 1e3, (double)mp.max_flight_s * 1e3,
+                (double)c->beacon_period_s, bl_strerror(rc));
+        } else {
+            snprintf(why, sizeof why, "refused by the beacon sequencer: %s (%s)",
+                     cause ? cause : "?", bl_strerror(rc));
+        }
         config_format_error(cfg, section, key, why, err, errlen);
         return -1;
     }

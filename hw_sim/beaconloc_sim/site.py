@@ -64,6 +64,7 @@ class Site:
     period_s: float                  # nominal time between successive firings (Kleeman's T)
     double_pulse_spacing_s: float    # beacon 1's second burst follows after this, s
     burst_length_s: float            # length of one 40 kHz burst, s
+    hearing_range_m: float           # no burst heard over a longer path, m; 0 = no limit
     rx_count: int
     ring_radius_m: float
     first_angle_rad: float
@@ -202,6 +203,7 @@ def load_site(path: str | Path, *, team: bool = False) -> Site:
         period_s=v(("beacons", "period_s")),
         double_pulse_spacing_s=v(("beacons", "double_pulse_spacing_s")),
         burst_length_s=v(("beacons", "burst_length_s")),
+        hearing_range_m=v(("beacons", "hearing_range_m")),
         rx_count=v(("receivers", "count")),
         ring_radius_m=v(("receivers", "ring_radius_m")),
         first_angle_rad=math.radians(v(("receivers", "first_angle_deg"))),

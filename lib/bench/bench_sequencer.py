@@ -2,11 +2,14 @@
 """make bench-sequencer: numbering accuracy of the beacon sequencer on the
 hardware simulator's detections, against its ground truth.
 
-For every built-in hw_sim scenario (echo storms, beacon outages, kidnap,
-temperature ramp, ...) the simulator's receiver-node detections (the
+For every built-in hw_sim scenario with ultrasonic beacons (echo storms,
+beacon outages, kidnap, temperature ramp, a dense room, a hall, a big site,
+...) the simulator's receiver-node detections (the
 content of its PULSE_DETECTION frames: node time unwrapped to int64 us,
 receiver, DoublePulse flag, amplitude, width) run through the C sequencer
-(seq_replay). Every output pulse is traced back to the detection it reports
+(seq_replay), configured from the scenario's own site file as firmware
+would configure it (bl_sequencer_config_from_site: beacons, period,
+hearing range, ring), alone: no filter, no hint. Every output pulse is traced back to the detection it reports
 (its earliest), whose truth says which firing, which beacon and whether the
 burst came by the direct path, a wall/floor echo or a late arrival.
 
@@ -29,16 +32,25 @@ import numpy as np
 
 from beaconloc_sim import simulate
 from beaconloc_sim.physics.pulses import KIND_DIRECT
-from beaconloc_sim.scenario import builtin_names, load_scenario
+from beaconloc_sim.scenario import builtin_names, is_team_scenario, load_scenario
 
 
 def run_scenario(name, replay, seed, duration):
+    if is_team_scenario(name):
+        return None  # robots ranging to each other: no beacon to sequence
     scn = load_scenario(name, seed=seed, duration_s=duration)
+    if scn.site.beacon_count == 0:
+        return None  # bearings, ranges or sonar only: no beacon to sequence
     res = simulate.run(scn, encode=False)
     det = res.detections
     t_us = res.rx_clock.unwrapped_us(det.edge_s).astype(np.int64)
     order = np.argsort(t_us, kind="stable")
-    lines = []
+    site = scn.site
+    lines = [" ".join(["site", str(site.beacon_count)] + [repr(float(v)) for v in (
+        site.period_s, site.double_pulse_spacing_s, site.burst_length_s, site.hearing_range_m)] +
+        [str(site.rx_count)] + [repr(float(v)) for v in (
+            site.ring_radius_m, site.rx_height_m, site.speed_of_sound_mps, site.sigma_speed_of_sound_mps)] +
+        [repr(float(v)) for v in site.beacons_m.ravel()])]
     for i in order.tolist():
         width_us = int(round(det.width_s[i] * 1e6))
         lines.append(f"{t_us[i]} {int(det.receiver[i])} {int(bool(det.double[i]))} "
@@ -84,15 +96,20 @@ def main():
     ap.add_argument("--replay", required=True, help="seq_replay executable")
     ap.add_argument("--seeds", default="1,2,3,4,5", help="comma-separated simulator seeds, each runs every scenario")
     ap.add_argument("--duration", type=float, default=None, help="override each scenario's duration, s")
+    ap.add_argument("--scenarios", default=None, help="comma-separated scenario names (default: every built-in one)")
     a = ap.parse_args()
     tot = dict(direct=0, numbered=0, wrong_direct=0, wrong_echo=0, spurious=0, unlocked=0)
-    names = builtin_names()
+    names = [v for v in a.scenarios.split(",") if v.strip()] if a.scenarios else builtin_names()
+    ran = set()
     seeds = [int(v) for v in a.seeds.split(",") if v.strip()]
     print(f"{'scenario':18s} {'seed':>4s} {'direct':>7s} {'numbered':>9s} {'wrong':>6s} {'wrong_echo':>10s} "
           f"{'spurious':>8s} {'unlocked':>8s} {'repeats':>7s} {'conflicts':>9s} {'locks_lost':>10s}")
     for seed in seeds:
         for name in names:
             r = run_scenario(name, a.replay, seed, a.duration)
+            if r is None:
+                continue
+            ran.add(name)
             c = r["counters"]
             pct = 100.0 * r["numbered"] / max(r["direct"], 1)
             print(f"{name:18s} {seed:4d} {r['direct']:7d} {pct:8.2f}% {r['wrong_direct']:6d} {r['wrong_echo']:10d} "
@@ -101,7 +118,7 @@ def main():
             for k in tot:
                 tot[k] += r[k]
     pct = 100.0 * tot["numbered"] / max(tot["direct"], 1)
-    print(f"sequencer scenarios={len(names)} seeds={len(seeds)} direct={tot['direct']} numbered_pct={pct:.2f} "
+    print(f"sequencer scenarios={len(ran)} seeds={len(seeds)} direct={tot['direct']} numbered_pct={pct:.2f} "
           f"wrong_direct={tot['wrong_direct']} wrong_echo={tot['wrong_echo']} spurious={tot['spurious']} "
           f"unlocked={tot['unlocked']}")
 

@@ -316,6 +316,8 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
              "double_pulse_spacing_s");
     BL_CHECK(is_finite(c->burst_length_s) && c->burst_length_s >= real(0) && c->burst_length_s < c->beacon_period_s,
              "burst_length_s");
+    BL_CHECK(is_finite(c->hearing_range_m) && c->hearing_range_m >= real(0) && c->hearing_range_m <= real(1e4),
+             "hearing_range_m");
     for (uint32_t i = 0; i < c->beacon_count; ++i) {
         const bl_beacon *b = &c->beacons[i];
         BL_CHECK(is_finite(b->x_m) && is_finite(b->y_m) && is_finite(b->z_m) && std::fabs(b->x_m) < real(1e5) &&

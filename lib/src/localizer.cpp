@@ -107,6 +107,8 @@ void clear_hint(bl_localizer *loc)
     }
 }
 
+uint32_t window_rejected(const bl_localizer *loc, uint64_t *beacon_mask);
+
 NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
 {
     // Only a known firing time is a hint: after a start from bearings on a
@@ -117,6 +119,10 @@ NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
     }
     bl_seq_hint h;
     int rc = bl_sequencer_hint_from_estimate(&est, &h);
+    // tracking windows around each beacon's predicted flight (hQ2, issue 14),
+    // only while the filter explains the pulses (none rejected in the
+    // persistent-rejection window): else the pulses must reach its gate
+    if (rc == BL_OK && window_rejected(loc, nullptr) == 0) rc = bl_sequencer_hint_flights(&loc->filter, &h);
     if (rc == BL_OK) rc = bl_sequencer_set_hint(&loc->seq, &h);
     if (rc == BL_OK)
         loc->hint_set_ = true;
@@ -449,7 +455,8 @@ extern "C" int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out
         longer.beacon_period_s = 10;
         bl_seq_config probe;
         if (bl_sequencer_config_from_site(&longer, 0, &probe) == BL_OK) {
-            w = "period too short for the beacons' spread: the beacon time windows overlap";
+            w = "period too short for the longest flight (hearing range, else the beacons' spread): the beacon "
+                "time windows overlap (bl_sequencer_min_period says the shortest)";
             f = "beacon_period_s";
         } else {
             // Windows of one firing: merge window (ring diameter) against

@@ -18,17 +18,16 @@
 namespace {
 
 constexpr uint32_t kMagic = 0x5E9B1C01u;
-constexpr int64_t kNsPerUs = 1000;
-constexpr int64_t kMaxPeriodUs = 10000000;  // 10 s
-constexpr int64_t kMinPeriodUs = 1000;      // 1 ms
-constexpr uint32_t kMaxTimeoutCycles = 1000;
-constexpr uint32_t kMaxGainDiv = 1000000;
-
-bool finite_real(bl_real v) { return std::isfinite(v); }
+constexpr int64_t kNsPerUs = bl::kSeqNsPerUs;
+constexpr int64_t kMaxPeriodUs = bl::kSeqMaxPeriodUs;
+constexpr uint32_t kMaxTimeoutCycles = bl::kSeqMaxTimeoutCycles;
+constexpr int64_t kFlightUnitUs = 16;  // the hint's stored flights (bl_sequencer.hint_flight_u)
 
 bool time_ok(int64_t t_us) { return t_us <= BL_SEQ_TIME_LIMIT_US && t_us >= -BL_SEQ_TIME_LIMIT_US; }
 
 int64_t abs64(int64_t v) { return v < 0 ? -v : v; }
+int64_t max64(int64_t a, int64_t b) { return a > b ? a : b; }
+int64_t min64(int64_t a, int64_t b) { return a < b ? a : b; }
 
 // Floor division for b > 0.
 int64_t floor_div(int64_t a, int64_t b)
@@ -61,58 +60,58 @@ int64_t close_delay_us(const bl_seq_config &c)
     return d;
 }
 
-// Own-model window tolerance for slot j (us): margin + j·T·ppm/1e6.
 int64_t own_tol_us(const bl_seq_config &c, int64_t period_ns, int64_t j)
 {
-    const int64_t slots = abs64(j);
-    return c.window_margin_us + (slots * (period_ns / kNsPerUs) * c.period_tolerance_ppm) / 1000000;
+    return bl::sequencer_own_tol_us(c, period_ns, j);
 }
 
-// Largest slot offset the own model may number before the lock times out.
+// Largest slot offset the own model may number without a numbered pulse
+// before the lock times out.
 int64_t own_max_slot(const bl_seq_config &c)
 {
     return static_cast<int64_t>(c.beacon_count) * c.lock_timeout_cycles - 1;
 }
 
-bool config_ok(const bl_seq_config *c)
-{
-    if (c->beacon_count < 1 || c->beacon_count > BL_MAX_BEACONS) return false;
-    if (c->receiver_count < 1 || c->receiver_count > BL_MAX_RECEIVERS || c->receiver_count > 32) return false;
-    if (c->period_us < kMinPeriodUs || c->period_us > kMaxPeriodUs) return false;
-    if (c->period_tolerance_ppm < 0 || c->period_tolerance_ppm > 100000) return false;
-    if (c->max_flight_us <= 0 || c->max_flight_us >= c->period_us) return false;
-    if (c->merge_window_us <= 0 || c->merge_window_us >= c->period_us) return false;
-    if (c->window_margin_us < 0 || c->window_margin_us >= c->period_us) return false;
-    if (c->double_spacing_us < 0 || c->double_spacing_us >= c->period_us) return false;
-    if (c->double_tolerance_us < 0 || c->double_tolerance_us >= c->period_us) return false;
-    if (c->double_width_min_us < 0 || c->min_width_us < 0) return false;
-    if (c->lock_timeout_cycles < 1 || c->lock_timeout_cycles > kMaxTimeoutCycles) return false;
-    if (c->period_gain_div < 1 || c->period_gain_div > kMaxGainDiv) return false;
-    // The second burst must not fall inside the merge window.
-    if (c->double_spacing_us > 0 &&
-        static_cast<int64_t>(c->merge_window_us) >= static_cast<int64_t>(c->double_spacing_us) - c->double_tolerance_us)
-        return false;
-    // Windows of successive slots j, j+1 must stay disjoint up to the lock
-    // timeout (plus the extra cycle a double pulse may use):
-    // 2·max_flight + tol_j + tol_{j+1} < T.
-    const int64_t jmax = own_max_slot(*c) + c->beacon_count;
-    const int64_t need = 2 * static_cast<int64_t>(c->max_flight_us) + own_tol_us(*c, c->period_us * kNsPerUs, jmax) +
-                         own_tol_us(*c, c->period_us * kNsPerUs, jmax + 1);
-    return need < c->period_us;
-}
-
 bool seq_ok(const bl_sequencer *s) { return s->magic == kMagic; }
+
+// Tracking-window misses in a row that drop the hint's flights: a cycle,
+// at most half of max_consecutive_spurious's default (12).
+uint32_t tracking_misses_max(const bl_seq_config &c) { return c.beacon_count < 6 ? c.beacon_count : 6; }
 
 struct Assignment {
     bool assigned;
     int32_t beacon;
     int64_t fire_us;
+    int64_t fire_lo_us, fire_hi_us;  // own model: this firing's time interval (us)
+    bool tracking_miss;              // hint: outside every tracking window, inside slot k0's start-up one
 };
 
+// Arrival window of slot k's firing at fire_ns_rel (ns after the hint's
+// firing) for beacon b, as offsets arrival - firing (ns): the start-up bound
+// [-tol, max_flight + tol] (Kleeman 1992 eq. 19, flight in [0, max_flight]),
+// narrowed, when the hint carries flight times, to the tracking window
+// flight_b ± (flight_tol_b + rate·|fire - hint fire| + tol): the filter's
+// predicted flight (eq. 20-21 at its position and speed of sound) and its
+// 3σ, widened by how far the robot may move since the hint.
+void hint_window(const bl_sequencer *s, int32_t b, int64_t fire_ns_rel, int64_t tol_ns, int64_t *lo_ns, int64_t *hi_ns)
+{
+    const bl_seq_config &c = s->cfg;
+    *lo_ns = -tol_ns;
+    *hi_ns = static_cast<int64_t>(c.max_flight_us) * kNsPerUs + tol_ns;
+    if (!s->hint_flights) return;
+    const int64_t age_us = abs64(fire_ns_rel) / kNsPerUs;
+    const int64_t spread_ns = static_cast<int64_t>(s->hint_flight_tol_u[b]) * kFlightUnitUs * kNsPerUs + tol_ns +
+                              age_us * s->hint_flight_rate_us_per_s / 1000;  // us/s · us -> ns
+    const int64_t centre_ns = static_cast<int64_t>(s->hint_flight_u[b]) * kFlightUnitUs * kNsPerUs;
+    *lo_ns = max64(*lo_ns, centre_ns - spread_ns);
+    *hi_ns = min64(*hi_ns, centre_ns + spread_ns);
+}
+
 // Numbering by the filter's hint: firing of slot k is hint_fire + k·T; the
-// pulse arrives in [fire - tol_k, fire + max_flight + tol_k] (Kleeman 1992
-// eq. 19, flight in [0, max_flight]), tol_k = margin + 3σ(fire + |k|·T).
-// Returns false when the hint is stale (its windows would overlap).
+// pulse arrives in slot k's window (hint_window), tol_k = margin +
+// 3σ(fire + |k|·T). Slots k0 - 1, k0, k0 + 1 around the nearest are tried
+// (tracking windows of different beacons sit at different flight times).
+// Returns false when the hint is stale (its start-up windows would overlap).
 bool number_by_hint(const bl_sequencer *s, int64_t t_us, Assignment *a)
 {
     const bl_seq_config &c = s->cfg;
@@ -120,38 +119,98 @@ bool number_by_hint(const bl_sequencer *s, int64_t t_us, Assignment *a)
     const int64_t d_us = t_us - s->hint_fire_us;
     // Guard the ns conversion: a hint this old is stale anyway.
     if (abs64(d_us) > static_cast<int64_t>(kMaxTimeoutCycles) * BL_MAX_BEACONS * kMaxPeriodUs) return false;
-    const int64_t k = round_div(d_us * kNsPerUs - half_flight_ns, s->hint_period_ns);
-    const int64_t tol_ns = static_cast<int64_t>(c.window_margin_us) * kNsPerUs +
-                           3 * (s->hint_fire_sigma_ns + abs64(k) * s->hint_period_sigma_ns);
+    const int64_t k0 = round_div(d_us * kNsPerUs - half_flight_ns, s->hint_period_ns);
+    const int64_t tol0_ns = static_cast<int64_t>(c.window_margin_us) * kNsPerUs +
+                            3 * (s->hint_fire_sigma_ns + abs64(k0) * s->hint_period_sigma_ns);
     // Stale when the windows of successive firings overlap: max_flight + 2·tol >= T.
-    if (static_cast<int64_t>(c.max_flight_us) * kNsPerUs + 2 * tol_ns >= s->hint_period_ns) return false;
-    const int64_t fire_ns_rel = k * s->hint_period_ns;     // firing of slot k - hint_fire, ns
-    const int64_t off_ns = d_us * kNsPerUs - fire_ns_rel;  // arrival - firing, ns
-    a->assigned = off_ns >= -tol_ns && off_ns <= static_cast<int64_t>(c.max_flight_us) * kNsPerUs + tol_ns;
-    a->beacon = mod_index(static_cast<int64_t>(s->hint_beacon) + k, c.beacon_count);
-    a->fire_us = s->hint_fire_us + round_div(fire_ns_rel, kNsPerUs);
+    if (static_cast<int64_t>(c.max_flight_us) * kNsPerUs + 2 * tol0_ns >= s->hint_period_ns) return false;
+    const int64_t ks[3] = {k0, k0 - 1, k0 + 1};
+    for (int i = 0; i < 3; ++i) {
+        const int64_t k = ks[i];
+        const int64_t tol_ns = static_cast<int64_t>(c.window_margin_us) * kNsPerUs +
+                               3 * (s->hint_fire_sigma_ns + abs64(k) * s->hint_period_sigma_ns);
+        const int32_t b = mod_index(static_cast<int64_t>(s->hint_beacon) + k, c.beacon_count);
+        const int64_t fire_ns_rel = k * s->hint_period_ns;     // firing of slot k - hint_fire, ns
+        const int64_t off_ns = d_us * kNsPerUs - fire_ns_rel;  // arrival - firing, ns
+        int64_t lo_ns = 0, hi_ns = 0;
+        hint_window(s, b, fire_ns_rel, tol_ns, &lo_ns, &hi_ns);
+        const bool in = off_ns >= lo_ns && off_ns <= hi_ns;
+        if (in || i == 0) {
+            a->assigned = in;
+            a->beacon = b;
+            a->fire_us = s->hint_fire_us + round_div(fire_ns_rel, kNsPerUs);
+            a->fire_lo_us = a->fire_hi_us = a->fire_us;
+        }
+        if (in) break;
+        if (i == 0 && s->hint_flights) {
+            // A miss of the tracking windows where the start-up window
+            // would have numbered the pulse: an echo, or the filter lost.
+            a->tracking_miss = off_ns >= -tol_ns && off_ns <= static_cast<int64_t>(c.max_flight_us) * kNsPerUs + tol_ns;
+        }
+    }
     return true;
 }
 
-// Numbering by the own model anchored at beacon 1's arrival a1: slot j's
-// firing lies in [a1 - max_flight, a1] + j·T, so it arrives within
-// max_flight + tol_j of a1 + j·T (Kleeman 1992 §2 and eq. 19).
-// Returns false when the lock has timed out at t_us.
-// jmax: largest slot offset allowed (own_max_slot, or one cycle more for a
-// double pulse, whose signature confirms the slot).
-bool number_by_model(const bl_sequencer *s, int64_t t_us, int64_t jmax, Assignment *a)
+// The own model: the firing of the reference slot (beacon ref_beacon) lies
+// in [ref_lo_us, ref_hi_us]. Slot j after it fires j·T later, give or take
+// the period's tolerance, so its arrival lies in
+//     [ref_lo + j·T - d_j - margin,  ref_hi + j·T + d_j + max_flight + margin]
+// (Kleeman 1992 §2 and eq. 19), d_j = |j|·T·ppm/1e6. Finds the slot j
+// nearest t_us; false when |j| > jmax (timed out) or the window is as wide
+// as T (stale: it would overlap its neighbour's).
+bool own_slot(const bl_sequencer *s, int64_t t_us, int64_t jmax, int64_t *j_out, int64_t *lo_us, int64_t *hi_us)
 {
     const bl_seq_config &c = s->cfg;
-    const int64_t d_us = t_us - s->anchor_us;
+    const int64_t mid_us = s->ref_lo_us + (s->ref_hi_us - s->ref_lo_us) / 2;
+    const int64_t d_us = t_us - mid_us - c.max_flight_us / 2;
     if (abs64(d_us) > (jmax + 1) * c.period_us * 2) return false;
     const int64_t j = round_div(d_us * kNsPerUs, s->period_ns);
     if (j > jmax || j < -jmax) return false;
-    const int64_t centre_us = s->anchor_us + round_div(j * s->period_ns, kNsPerUs);
-    const int64_t tol_us = own_tol_us(c, s->period_ns, j);
-    a->assigned = abs64(t_us - centre_us) <= static_cast<int64_t>(c.max_flight_us) + tol_us;
-    a->beacon = mod_index(j, c.beacon_count);
-    a->fire_us = centre_us - c.max_flight_us / 2;
+    const int64_t shift_us = round_div(j * s->period_ns, kNsPerUs);
+    const int64_t drift_us = own_tol_us(c, s->period_ns, j) - c.window_margin_us;
+    *lo_us = s->ref_lo_us + shift_us - drift_us;
+    *hi_us = s->ref_hi_us + shift_us + drift_us;
+    if ((*hi_us - *lo_us) + c.max_flight_us + 2 * static_cast<int64_t>(c.window_margin_us) >= s->period_ns / kNsPerUs)
+        return false;
+    *j_out = j;
     return true;
+}
+
+// Numbering by the own model (own_slot). Every numbered pulse bounds its
+// firing time to [t - max_flight, t] (eq. 19): intersected with the
+// propagated interval it narrows the windows that follow. Returns false when
+// the lock has timed out or gone stale at t_us. jmax: largest slot offset
+// allowed (own_max_slot, or one cycle more for a double pulse, whose
+// signature confirms the slot).
+bool number_by_model(const bl_sequencer *s, int64_t t_us, int64_t jmax, Assignment *a)
+{
+    const bl_seq_config &c = s->cfg;
+    int64_t j = 0, lo = 0, hi = 0;
+    if (!own_slot(s, t_us, jmax, &j, &lo, &hi)) return false;
+    const int64_t m = c.window_margin_us;
+    a->assigned = t_us >= lo - m && t_us <= hi + c.max_flight_us + m;
+    a->beacon = mod_index(static_cast<int64_t>(s->ref_beacon) + j, c.beacon_count);
+    int64_t flo = max64(lo, t_us - c.max_flight_us), fhi = min64(hi, t_us);
+    if (flo > fhi) flo = fhi = flo + (fhi - flo) / 2;  // arrival noise: the bounds crossed
+    a->fire_lo_us = flo;
+    a->fire_hi_us = fhi;
+    a->fire_us = flo + (fhi - flo) / 2;
+    return true;
+}
+
+// Tracking windows that keep missing pulses the start-up windows would take
+// (tracking_misses_max in a row) are wrong, not the pulses: the robot was
+// carried, or the filter is lost. They are dropped (the firing times stay)
+// so the pulses reach the filter, whose gate and restart decide.
+void note_tracking(bl_sequencer *s, const Assignment &a)
+{
+    if (!s->hint_flights) return;
+    if (a.assigned) {
+        s->tracking_misses = 0;
+    } else if (a.tracking_miss && ++s->tracking_misses >= tracking_misses_max(s->cfg)) {
+        s->hint_flights = false;
+        s->counters.tracking_dropped++;
+    }
 }
 
 // Lock transitions are counted by the public entry points from the state
@@ -175,11 +234,35 @@ void lose_lock(bl_sequencer *s)
     s->consecutive_spurious = 0;
 }
 
-void anchor_at(bl_sequencer *s, int64_t t_us)
+// The own model follows pulse t_us numbered as beacon b (by any method):
+// its firing lies in [t - max_flight, t] (eq. 19), intersected with the
+// model's prediction for that slot when the model is locked and agrees on
+// the beacon; otherwise the model (re)starts from this pulse alone.
+void own_follow(bl_sequencer *s, int32_t b, int64_t t_us)
 {
+    const bl_seq_config &c = s->cfg;
+    int64_t j = 0, lo = t_us - c.max_flight_us, hi = t_us;
+    int64_t plo = 0, phi = 0;
+    if (s->locked && own_slot(s, t_us, own_max_slot(c) + c.beacon_count, &j, &plo, &phi) &&
+        mod_index(static_cast<int64_t>(s->ref_beacon) + j, c.beacon_count) == b) {
+        lo = max64(lo, plo);
+        hi = min64(hi, phi);
+        if (lo > hi) lo = hi = lo + (hi - lo) / 2;  // arrival noise: the bounds crossed
+    }
     s->locked = true;
+    s->ref_lo_us = lo;
+    s->ref_hi_us = hi;
+    s->ref_beacon = b;
+}
+
+// Beacon 1's double pulse anchors the model (fresh: forget the interval).
+void anchor_at(bl_sequencer *s, int64_t t_us, bool fresh)
+{
+    if (fresh) s->locked = false;
+    own_follow(s, 0, t_us);
     s->anchor_us = t_us;
     s->conflicts_in_row = 0;
+    s->one_single_seen = false;
 }
 
 // Tracks T from successive first arrivals of the same beacon:
@@ -216,7 +299,7 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
     const int64_t t = p->arrival_us;
     const bool was_locked = is_locked(s);
     bool relocked = false;
-    Assignment a = {false, BL_SEQ_UNASSIGNED, 0};
+    Assignment a = {false, BL_SEQ_UNASSIGNED, 0, 0, 0, false};
     bool numbered = false;  // a numbering method was available
 
     if (p->double_pulse) {
@@ -224,13 +307,12 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
         // Which beacon the model expects here: the hint's windows if a hint
         // is in use, else the own model's (one extra cycle allowed: the
         // double pulse itself confirms the slot).
-        Assignment e = {false, BL_SEQ_UNASSIGNED, 0};
+        Assignment e = {false, BL_SEQ_UNASSIGNED, 0, 0, 0, false};
         bool have_expect = false;
-        bool from_hint = false;
         if (s->hint_valid) {
             if (number_by_hint(s, t, &e)) {
                 have_expect = true;
-                from_hint = true;
+                note_tracking(s, e);
             } else {
                 s->hint_valid = false;  // stale
             }
@@ -244,8 +326,7 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
         }
         if (have_expect && e.assigned && e.beacon == 0) {
             a = e;  // beacon 1 where expected
-            if (!from_hint) a.fire_us = t - c.max_flight_us / 2;
-            anchor_at(s, t);
+            anchor_at(s, t, false);
             numbered = true;
         } else if (have_expect) {
             // A double pulse where another beacon (or nothing) is expected:
@@ -259,8 +340,13 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
             if (s->conflicts_in_row > 0) {
                 const int64_t dt = t - s->conflict_us;
                 const int64_t m_cycles = round_div(dt, cycle_us);
+                // ... and only when the model's own beacon 1 was heard
+                // without its signature since: a raised beacon's floor echo
+                // or a wall echo 3 ms late mimics the second burst, over
+                // several cycles at some distances, and with beacon 1 out of
+                // hearing range nothing else would contradict it.
                 confirmed =
-                    m_cycles >= 1 && m_cycles <= static_cast<int64_t>(c.lock_timeout_cycles) &&
+                    s->one_single_seen && m_cycles >= 1 && m_cycles <= static_cast<int64_t>(c.lock_timeout_cycles) &&
                     abs64(dt - m_cycles * cycle_us) <=
                         static_cast<int64_t>(c.max_flight_us) + own_tol_us(c, s->period_ns, m_cycles * c.beacon_count);
             }
@@ -284,13 +370,14 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
             a.fire_us = t - c.max_flight_us / 2;
             s->have_last = false;
             s->beacon_seen_mask = 0;
-            anchor_at(s, t);
+            anchor_at(s, t, true);
             numbered = true;
         }
     } else {
         if (s->hint_valid) {
             if (number_by_hint(s, t, &a)) {
                 numbered = true;
+                note_tracking(s, a);
             } else {
                 s->hint_valid = false;  // stale
             }
@@ -299,7 +386,7 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
             if (number_by_model(s, t, own_max_slot(c), &a)) {
                 numbered = true;
             } else {
-                lose_lock(s);  // no beacon 1 for lock_timeout_cycles
+                lose_lock(s);  // nothing numbered for lock_timeout_cycles, or stale
             }
         }
     }
@@ -324,6 +411,8 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
             s->counters.repeats++;
         } else {
             track_period(s, a.beacon, t);
+            if (!p->double_pulse) own_follow(s, a.beacon, t);  // (a double pulse anchored above)
+            if (!p->double_pulse && a.beacon == 0) s->one_single_seen = true;
         }
         s->have_last = true;
         s->last_beacon = a.beacon;
@@ -337,114 +426,10 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
 
 extern "C" {
 
-int bl_sequencer_config_default(bl_seq_config *cfg)
-{
-    if (cfg == nullptr) return BL_EINVAL;
-    bl_seq_config c;
-    memset(&c, 0, sizeof c);
-    c.beacon_count = 6;             // Kleeman 1992 §2: six beacons
-    c.receiver_count = 8;           // eight receivers at 45°
-    c.period_us = 150000;           // fired 150 ms apart
-    c.period_tolerance_ppm = 5000;  // T known to 0.5 % before tracking
-    // max flight = room diagonal / slowest s = 12·√2 m / 330 m/s = 51.4 ms
-    c.max_flight_us = 51425;
-    // merge = ring diameter / s + margin = 0.20 m / 330 m/s + 500 us
-    c.merge_window_us = 1107;
-    c.window_margin_us = 2000;   // 10 σ of the 0.2 ms arrival noise (§2)
-    c.double_spacing_us = 3000;  // bursts 3 ms apart (§2, Fig. 2)
-    c.double_tolerance_us = 500;
-    c.double_width_min_us = 4000;  // 2.5 ms burst + spacing/2: both bursts in one envelope
-    c.min_width_us = 0;
-    c.lock_timeout_cycles = 3;
-    c.max_consecutive_spurious = 12;  // two cycles of nothing but noise
-    c.period_gain_div = 16;
-    *cfg = c;
-    return BL_OK;
-}
-
-int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m, bl_seq_config *out)
-{
-    if (site == nullptr || out == nullptr) return BL_EINVAL;
-    if (!finite_real(max_distance_m) || max_distance_m > static_cast<bl_real>(1e6)) return BL_EINVAL;
-    bl_seq_config c;
-    bl_sequencer_config_default(&c);
-    if (site->beacon_count < 1 || site->beacon_count > BL_MAX_BEACONS) return BL_ECONFIG;
-    if (site->receiver_count < 1 || site->receiver_count > BL_MAX_RECEIVERS) return BL_ECONFIG;
-    // NaN/inf in any field used here is a bad argument (BL_EINVAL). Checked
-    // first: every comparison with a NaN is false, so a range check written
-    // as "x > max" lets a NaN through (the beacon loop below did).
-    if (!finite_real(site->speed_of_sound_mps) || !finite_real(site->sigma_speed_of_sound_mps) ||
-        !finite_real(site->beacon_period_s) || !finite_real(site->double_pulse_spacing_s) ||
-        !finite_real(site->burst_length_s) || !finite_real(site->ring_radius_m) ||
-        !finite_real(site->receiver_height_m))
-        return BL_EINVAL;
-    for (uint32_t i = 0; i < site->beacon_count; ++i)
-        if (!finite_real(site->beacons[i].x_m) || !finite_real(site->beacons[i].y_m) ||
-            !finite_real(site->beacons[i].z_m))
-            return BL_EINVAL;
-    const bl_real s_min = site->speed_of_sound_mps - 3 * site->sigma_speed_of_sound_mps;
-    if (!(s_min > static_cast<bl_real>(100)) || !(s_min < static_cast<bl_real>(1000))) return BL_ECONFIG;
-    if (!(site->beacon_period_s > 0) || !(site->beacon_period_s <= static_cast<bl_real>(10))) return BL_ECONFIG;
-    if (!(site->double_pulse_spacing_s >= 0) || !(site->double_pulse_spacing_s < site->beacon_period_s))
-        return BL_ECONFIG;
-    if (!(site->burst_length_s >= 0) || !(site->burst_length_s < site->beacon_period_s)) return BL_ECONFIG;
-    if (!(site->ring_radius_m >= 0) || !(site->ring_radius_m < static_cast<bl_real>(100))) return BL_ECONFIG;
-    bl_real dist_m = max_distance_m;
-    if (!(dist_m > 0)) {
-        // Robot inside the beacons' hull: its farthest beacon is no farther
-        // than the largest beacon-beacon distance in x-y, combined with the
-        // largest height difference to the receivers.
-        bl_real dxy2_max = 0, dz_max = 0;
-        for (uint32_t i = 0; i < site->beacon_count; ++i) {
-            const bl_beacon &bi = site->beacons[i];
-            const bl_real dz = bi.z_m - site->receiver_height_m;
-            const bl_real adz = dz < 0 ? -dz : dz;
-            if (adz > dz_max) dz_max = adz;
-            for (uint32_t k = i + 1; k < site->beacon_count; ++k) {
-                const bl_real dx = bi.x_m - site->beacons[k].x_m;
-                const bl_real dy = bi.y_m - site->beacons[k].y_m;
-                const bl_real d2 = dx * dx + dy * dy;
-                if (d2 > dxy2_max) dxy2_max = d2;
-            }
-        }
-        const bl_real d2 = dxy2_max + dz_max * dz_max;
-        if (!(d2 <= static_cast<bl_real>(1e12))) return BL_ECONFIG;  // beyond 1000 km (or overflowed)
-        // Newton iteration for sqrt (no libm dependency of the result's range).
-        bl_real r = d2 > 1 ? d2 : 1;
-        for (int it = 0; it < 60; ++it) r = static_cast<bl_real>(0.5) * (r + d2 / r);
-        dist_m = r + site->ring_radius_m;
-    }
-    // max flight (us) = distance / slowest speed of sound (Kleeman 1992 eq. 19-21, v = 0)
-    const bl_real flight_us = dist_m / s_min * static_cast<bl_real>(1e6);
-    // merge window (us) = ring diameter / slowest speed of sound + margin
-    const bl_real merge_us = 2 * site->ring_radius_m / s_min * static_cast<bl_real>(1e6) + static_cast<bl_real>(500);
-    const bl_real period_us = site->beacon_period_s * static_cast<bl_real>(1e6);
-    if (!(flight_us < period_us)) return BL_ECONFIG;
-    c.beacon_count = site->beacon_count;
-    c.receiver_count = site->receiver_count;
-    c.period_us = static_cast<int64_t>(period_us + static_cast<bl_real>(0.5));
-    c.max_flight_us = static_cast<int32_t>(flight_us) + 1;
-    c.merge_window_us = static_cast<int32_t>(merge_us) + 1;
-    c.double_spacing_us =
-        static_cast<int32_t>(site->double_pulse_spacing_s * static_cast<bl_real>(1e6) + static_cast<bl_real>(0.5));
-    const int32_t burst_us =
-        static_cast<int32_t>(site->burst_length_s * static_cast<bl_real>(1e6) + static_cast<bl_real>(0.5));
-    c.double_width_min_us = (c.double_spacing_us > 0 && burst_us > 0) ? burst_us + c.double_spacing_us / 2 : 0;
-    if (!config_ok(&c)) return BL_ECONFIG;
-    *out = c;
-    return BL_OK;
-}
-
-int bl_sequencer_config_check(const bl_seq_config *cfg)
-{
-    if (cfg == nullptr) return BL_EINVAL;
-    return config_ok(cfg) ? BL_OK : BL_ECONFIG;
-}
-
 int bl_sequencer_init(bl_sequencer *seq, const bl_seq_config *cfg)
 {
     if (seq == nullptr || cfg == nullptr) return BL_EINVAL;
-    if (!config_ok(cfg)) return BL_ECONFIG;
+    if (!bl::sequencer_config_ok(cfg)) return BL_ECONFIG;
     memset(seq, 0, sizeof *seq);
     seq->cfg = *cfg;
     seq->period_ns = cfg->period_us * kNsPerUs;
@@ -597,7 +582,36 @@ int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint)
     const bl_real dev = p > nominal ? p - nominal : nominal - p;
     if (!(dev * static_cast<bl_real>(1e6) <= nominal * static_cast<bl_real>(c.period_tolerance_ppm))) return BL_EINVAL;
     if (!(fs <= nominal) || !(ps <= nominal)) return BL_EINVAL;  // also rejects inf
+    if (hint->flights_valid) {
+        const bl_real fm = hint->flight_margin_us, fr = hint->flight_rate_us_per_s;
+        if (!(fm >= 0) || !(fm <= nominal) || !(fr >= 0) || !(fr <= static_cast<bl_real>(1e6))) return BL_EINVAL;
+        for (uint32_t b = 0; b < c.beacon_count; ++b) {
+            const bl_real f = hint->flight_us[b], fsig = hint->flight_sigma_us[b];
+            if (!(f >= 0) || !(f <= nominal) || !(fsig >= 0) || !(fsig <= nominal)) return BL_EINVAL;
+        }
+    }
     const bool was_locked = is_locked(seq);
+    // Stored in units of kFlightUnitUs (uint16: 1.05 s at most; a flight
+    // longer than that, 360 m, leaves the start-up windows alone): the
+    // centre rounded, the half width rounded up plus one unit for the
+    // centre's rounding.
+    bool flights = hint->flights_valid;
+    for (uint32_t b = 0; flights && b < c.beacon_count; ++b)
+        flights = hint->flight_us[b] < static_cast<bl_real>(65535 * kFlightUnitUs);
+    seq->hint_flights = flights;
+    seq->tracking_misses = 0;
+    if (flights) {
+        for (uint32_t b = 0; b < c.beacon_count; ++b) {
+            seq->hint_flight_u[b] = static_cast<uint16_t>(hint->flight_us[b] / static_cast<bl_real>(kFlightUnitUs) +
+                                                          static_cast<bl_real>(0.5));
+            // 3σ of the predicted flight plus the caller's margin (ring spread)
+            const bl_real tol_u =
+                (3 * hint->flight_sigma_us[b] + hint->flight_margin_us) / static_cast<bl_real>(kFlightUnitUs) + 2;
+            seq->hint_flight_tol_u[b] =
+                tol_u < static_cast<bl_real>(65535) ? static_cast<uint16_t>(tol_u) : static_cast<uint16_t>(65535);
+        }
+        seq->hint_flight_rate_us_per_s = static_cast<int32_t>(hint->flight_rate_us_per_s + static_cast<bl_real>(0.5));
+    }
     seq->hint_valid = true;
     seq->hint_fire_us = hint->fire_us;
     seq->hint_beacon = hint->beacon;
@@ -606,22 +620,6 @@ int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint)
     seq->hint_period_sigma_ns = static_cast<int64_t>(ps * static_cast<bl_real>(kNsPerUs) + static_cast<bl_real>(0.5));
     seq->consecutive_spurious = 0;
     count_lock_change(seq, was_locked, false);
-    return BL_OK;
-}
-
-int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint)
-{
-    if (est == nullptr || hint == nullptr) return BL_EINVAL;
-    if (!est->started) return BL_ENOTINIT;
-    const bl_real us_per_s = static_cast<bl_real>(1e6);
-    bl_seq_hint h;
-    h.fire_us = est->t0_us;
-    h.beacon = 0;
-    h.period_us = est->period_s * us_per_s;
-    h.fire_sigma_us = est->sigma_t0_s * us_per_s;
-    h.period_sigma_us = est->sigma_period_s * us_per_s;
-    if (!finite_real(h.period_us) || !finite_real(h.fire_sigma_us) || !finite_real(h.period_sigma_us)) return BL_EINVAL;
-    *hint = h;
     return BL_OK;
 }
 

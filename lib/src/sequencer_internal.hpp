@@ -14,6 +14,35 @@ extern "C" {
 
 namespace bl {
 
+// Shared by sequencer.cpp and sequencer_config.cpp.
+constexpr int64_t kSeqNsPerUs = 1000;
+constexpr int64_t kSeqMaxPeriodUs = 10000000;  // 10 s
+constexpr int64_t kSeqMinPeriodUs = 1000;      // 1 ms
+constexpr uint32_t kSeqMaxTimeoutCycles = 1000;
+constexpr uint32_t kSeqMaxGainDiv = 1000000;
+
+// Own-model window tolerance for slot offset j (us): arrival margin plus the
+// period's uncertainty over |j| firings, margin + |j|·T·ppm/1e6.
+inline int64_t sequencer_own_tol_us(const bl_seq_config &c, int64_t period_ns, int64_t j)
+{
+    const int64_t slots = j < 0 ? -j : j;
+    return c.window_margin_us + (slots * (period_ns / kSeqNsPerUs) * c.period_tolerance_ppm) / 1000000;
+}
+
+// Width of the own model's arrival window one firing after a fresh anchor
+// (us): the firing lies in [a - max_flight, a] (Kleeman 1992 eq. 19, flight
+// in [0, max_flight]), so the next firing's arrival lies in an interval
+// 2·max_flight + 2·tol_1 wide. Successive windows are disjoint iff this is
+// below T: the physical limit of a sequencer that does not know where the
+// robot is (sequencer.h, bl_sequencer_min_period_s).
+inline int64_t sequencer_startup_window_us(const bl_seq_config &c)
+{
+    return 2 * static_cast<int64_t>(c.max_flight_us) + 2 * sequencer_own_tol_us(c, c.period_us * kSeqNsPerUs, 1);
+}
+
+// bl_sequencer_config_check's test (sequencer_config.cpp).
+bool sequencer_config_ok(const bl_seq_config *c);
+
 // What numbering gives a closed pulse (the bl_seq_pulse fields of the same
 // names).
 struct SeqNumbered {

@@ -53,8 +53,12 @@ static void test_hint(void **state) {
     assert_int_equal(seq.counters.double_pulses, 0);
     assert_int_equal(seq.counters.locks_acquired, 1);
 
-    /* same train, own model locked by an explicit double: the early pulse is
-     * inside the own window and gets numbered */
+    /* same train, own model locked by an explicit double: every numbered
+     * pulse bounds its firing time to [arrival - max_flight, arrival], but
+     * with every beacon nearer than max_flight (51 ms, the room's diagonal)
+     * the lower bound stays more than 10 ms early: the early pulse is inside
+     * the own window and gets numbered. The model keeps its lock without
+     * further double pulses (every numbered pulse refreshes it). */
     init_seq(&seq);
     bl_seq_detection d = {.time_us = t_start - 6 * T + 20000, .receiver = 0, .double_pulse = true, .width_us = 2500};
     bl_seq_pulse p;
@@ -63,12 +67,22 @@ static void test_hint(void **state) {
     assert_int_equal(p.beacon, 0);
     n = run_train(&seq, &g_tr, g_out, MAX_DET);
     assert_int_equal(seq.counters.spurious, 0);
-    /* but the own model times out without further double pulses */
-    assert_int_equal(seq.counters.locks_lost, 1);
+    assert_int_equal(seq.counters.locks_lost, 0);
+    for (size_t k = 0; k < n; ++k) {
+        const int f = truth_firing(&g_tr, g_out[k].arrival_us);
+        if (f >= 0) {
+            assert_int_equal(g_out[k].status, BL_SEQ_ASSIGNED);
+            assert_int_equal(g_out[k].beacon, g_tr.fire_beacon[f]);
+        }
+    }
 
     /* a double pulse where the hint expects beacon 4 (index 3) is numbered
-     * as the hint says (a conflict); a second one a whole cycle later
-     * confirms that the hint is wrong: it is dropped and the model relocks */
+     * as the hint says (a conflict); a second one a whole cycle later does
+     * not drop the hint while the hint's own beacon 1 has not been heard
+     * without its signature (an echo 3 ms late mimics a double pulse for
+     * several cycles, and beacon 1 may be out of hearing range); once it
+     * has, the next conflicting double confirms that the hint is wrong: it
+     * is dropped and the model relocks */
     init_seq(&seq);
     assert_int_equal(bl_sequencer_set_hint(&seq, &h), BL_OK);
     d.time_us = t_start + 3 * T + 20000;
@@ -85,6 +99,20 @@ static void test_hint(void **state) {
     assert_int_equal(bl_sequencer_push(&seq, &d), BL_OK);
     assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), 1);
     assert_int_equal(seq.counters.double_conflicts, 2);
+    assert_int_equal(seq.counters.hint_rejections, 0);
+    assert_int_equal(p.beacon, 3);
+    assert_int_equal(bl_sequencer_state(&seq, &st), BL_OK);
+    assert_true(st.hint_active);
+    /* the hint's beacon 1 heard as a single pulse */
+    bl_seq_detection single = {.time_us = d.time_us + 3 * T, .receiver = 0, .width_us = 2500};
+    assert_int_equal(bl_sequencer_push(&seq, &single), BL_OK);
+    assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), 1);
+    assert_int_equal(p.beacon, 0);
+    assert_false(p.double_pulse);
+    d.time_us += 6 * T;
+    assert_int_equal(bl_sequencer_push(&seq, &d), BL_OK);
+    assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), 1);
+    assert_int_equal(seq.counters.double_conflicts, 3);
     assert_int_equal(seq.counters.hint_rejections, 1);
     assert_int_equal(p.beacon, 0);   /* re-anchored on the double pulse */
     assert_true(p.double_pulse);
@@ -99,8 +127,17 @@ static void test_hint(void **state) {
  * 100 Hz, the filter's estimate fed back as the sequencer's hint). The
  * filter must end up on the true path and accept most pulses, which only
  * happens when the sequencer numbered them right. */
-static void test_sequencer_feeds_filter(void **state) {
-    (void)state;
+typedef struct {
+    uint32_t fused, rejected, hints, flight_checks, flight_outside;
+    double err_m;
+    bl_seq_counters counters;
+} feed_stats;
+
+/* The loop of test_sequencer_feeds_filter; with_flights adds the tracking
+ * windows to every hint (bl_sequencer_hint_flights, as bl_localizer does)
+ * and checks each predicted flight against the truth. */
+static void feed_filter(bool with_flights, feed_stats *st) {
+    memset(st, 0, sizeof *st);
     memset(&g_tr, 0, sizeof g_tr);
     const int64_t T = 150000, t_start = 0;
     const int cycles = 60;   /* 54 s */
@@ -114,14 +151,13 @@ static void test_sequencer_feeds_filter(void **state) {
     assert_int_equal(bl_config_default(&cfg), BL_OK);
     bl_seq_config sc;
     assert_int_equal(bl_sequencer_config_from_site(&cfg, 0, &sc), BL_OK);
-    bl_sequencer seq;
+    static bl_sequencer seq;
     assert_int_equal(bl_sequencer_init(&seq, &sc), BL_OK);
-    bl_filter f;
+    static bl_filter f;
     assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
 
     const double v = 0.5, w = 0.5 / 3.0, b = (double)cfg.wheel_base_m, dt = 0.01;
     int64_t next_odo = 10000;
-    uint32_t fused = 0, rejected = 0, hints = 0;
     size_t k = 0;
     const int64_t t_end = 6 * cycles * T;
     for (int64_t now = 0; now <= t_end; now += 1000) {   /* 1 kHz main loop */
@@ -132,14 +168,34 @@ static void test_sequencer_feeds_filter(void **state) {
             if (p.status != BL_SEQ_ASSIGNED) continue;
             bl_fusion_result res;
             assert_int_equal(bl_filter_fuse_pulse(&f, (uint32_t)p.beacon, p.arrival_us, p.receiver, &res), BL_OK);
-            if (res.status == BL_FUSION_ACCEPTED) fused++;
-            if (res.status == BL_FUSION_REJECTED) rejected++;
+            if (res.status == BL_FUSION_ACCEPTED) st->fused++;
+            if (res.status == BL_FUSION_REJECTED) st->rejected++;
             bl_estimate est;
             assert_int_equal(bl_filter_estimate(&f, &est), BL_OK);
             bl_seq_hint h;
-            if (est.converged && bl_sequencer_hint_from_estimate(&est, &h) == BL_OK &&
-                bl_sequencer_set_hint(&seq, &h) == BL_OK)
-                hints++;
+            if (!est.converged || bl_sequencer_hint_from_estimate(&est, &h) != BL_OK) continue;
+            if (with_flights) {
+                assert_int_equal(bl_sequencer_hint_flights(&f, &h), BL_OK);
+                assert_true(h.flights_valid);
+                /* each predicted flight against the true one to the ring
+                 * centre: of the beacon's next firing whose arrival is at
+                 * or after the estimate's time (bl_filter_expected_arrival),
+                 * the robot where it is at that arrival (eq. 20) */
+                for (int bi = 0; bi < N_BEACONS; ++bi) {
+                    const int64_t flight = (int64_t)h.flight_us[bi], cycle = 6 * T;
+                    int64_t fire = h.fire_us + bi * T;
+                    while (fire + flight < est.t_us) fire += cycle;
+                    while (fire - cycle + flight >= est.t_us) fire -= cycle;
+                    double xt, yt, tht;
+                    robot_pose((double)(fire + flight) * 1e-6, &xt, &yt, &tht);
+                    const double d = hypot(beacon_xy[bi][0] - xt, beacon_xy[bi][1] - yt);
+                    const double tol_us = 3 * (double)h.flight_sigma_us[bi] + (double)h.flight_margin_us +
+                                          (double)h.flight_rate_us_per_s * 0.05;   /* 50 ms of flight */
+                    st->flight_checks++;
+                    if (fabs((double)h.flight_us[bi] - d / SOUND_MPS * 1e6) > tol_us) st->flight_outside++;
+                }
+            }
+            if (bl_sequencer_set_hint(&seq, &h) == BL_OK) st->hints++;
         }
         assert_int_equal(rc, BL_OK);
         if (now >= next_odo) {
@@ -155,16 +211,39 @@ static void test_sequencer_feeds_filter(void **state) {
     assert_true(est.started);
     double xt, yt, tht;
     robot_pose((double)est.t_us * 1e-6, &xt, &yt, &tht);
-    const double err = sqrt(((double)est.x_m - xt) * ((double)est.x_m - xt) + ((double)est.y_m - yt) * ((double)est.y_m - yt));
-    print_message("sequencer->filter: fused %u rejected %u hints %u, final error %.3f m, repeats %u spurious %u\n",
-                  fused, rejected, hints, err, seq.counters.repeats, seq.counters.spurious);
-    assert_true(err < 0.10);
+    st->err_m = sqrt(((double)est.x_m - xt) * ((double)est.x_m - xt) + ((double)est.y_m - yt) * ((double)est.y_m - yt));
+    st->counters = seq.counters;
+    print_message("sequencer->filter%s: fused %u rejected %u hints %u, final error %.3f m, repeats %u spurious %u\n",
+                  with_flights ? " (tracking windows)" : "", st->fused, st->rejected, st->hints, st->err_m,
+                  seq.counters.repeats, seq.counters.spurious);
+}
+
+static void test_sequencer_feeds_filter(void **state) {
+    (void)state;
+    const int cycles = 60;
+    feed_stats a, t;
+    feed_filter(false, &a);
+    assert_true(a.err_m < 0.10);
     /* echoes (7 ms late) are numbered and left to the gate: about one in
      * five firings; everything else must be accepted */
-    assert_true(fused > 6 * cycles * 3 / 4);
-    assert_true(rejected <= seq.counters.repeats + 12);
-    assert_true(hints > 0);
-    assert_true(seq.counters.repeats >= 6 * cycles / 5 - 2);
+    assert_true(a.fused > 6 * cycles * 3 / 4);
+    assert_true(a.rejected <= a.counters.repeats + 12);
+    assert_true(a.hints > 0);
+    assert_true(a.counters.repeats >= 6 * cycles / 5 - 2);
+
+    /* With the tracking windows the 7 ms-late echoes fall outside the
+     * window around the predicted flight once the filter has converged:
+     * spurious, no longer numbered and left to the gate. The predicted
+     * flights are right (within their 3σ + ring + motion margin). */
+    feed_filter(true, &t);
+    assert_true(t.err_m < 0.10);
+    assert_true(t.fused >= a.fused - 6);
+    assert_true(t.hints > 0);
+    assert_true(t.counters.repeats * 4 < a.counters.repeats);
+    assert_true(t.counters.spurious >= a.counters.spurious + (a.counters.repeats - t.counters.repeats) - 6);
+    assert_true(t.rejected * 2 < a.rejected + 2);
+    assert_true(t.flight_checks > 6 * 100);
+    assert_true(t.flight_outside * 100 <= t.flight_checks);
 }
 
 int main(void) {

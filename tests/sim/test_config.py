@@ -22,6 +22,11 @@ def _line_of(text: str, needle: str, after: str = "") -> int:
     return text[:text.index(needle, start)].count("\n") + 1
 
 
+# issue 14's scenarios: duration (s), ultrasonic beacons, hearing range (m; 0 = none)
+SITES_OF_ISSUE_14 = {"dense-room": (120, 16, 12.5), "hall": (120, 8, 16.0), "big-site": (120, 12, 15.0),
+                     "four-beacons": (120, 4, 0.0), "fast-turns": (90, 6, 0.0)}
+
+
 def test_builtin_scenarios_all_load():
     names = builtin_names()
     for required in ("kleeman-lab", "echo-storm", "beacon-outage", "temperature-ramp",
@@ -48,12 +53,17 @@ def test_builtin_scenarios_all_load():
             assert scn.duration_s == 40 and scn.site.beacon_count == 0
             assert scn.site.sonar_count == 8 and scn.site.walls_m.shape == (5, 4)
             assert scn.obstacles_m.shape[0] >= 3      # beyond the door: not in the map
+        elif name in SITES_OF_ISSUE_14:     # sites as large and as dense as the hardware allows
+            duration_s, count, hearing_m = SITES_OF_ISSUE_14[name]
+            assert scn.duration_s == duration_s and scn.site.beacon_count == count
+            assert scn.site.hearing_range_m == hearing_m
         else:
             assert scn.duration_s == 120 and scn.site.beacon_count == 6
     assert {"eurobot", "eurobot-outage20", "eurobot-outage50", "eurobot-opponent"} <= set(names)
     assert {"marvelmind", "marvelmind-multipath", "marvelmind-survey"} <= set(names)
     assert {"team-static", "team-leapfrog"} <= set(names)
     assert {"hoppenot-room", "hoppenot-obstacle"} <= set(names)
+    assert set(SITES_OF_ISSUE_14) <= set(names)
 
 
 def test_bad_site_number_names_file_line_key(make_scenario, tmp_path):

@@ -144,6 +144,12 @@ def simulate_detections(scn, firings: Firings, rng: np.random.Generator) -> Dete
     # amplitude noise (log-normal) and the detector threshold: weaker bursts are missed
     amp_all = amp_all * np.exp(scn.amplitude_noise_rel * rng.standard_normal(len(amp_all)))
     heard = amp_all >= scn.threshold_mv
+    if site.hearing_range_m > 0:
+        # the site's hearing range: no burst over a longer path (direct, echo, or a late
+        # arrival, whose path is its direct flight plus its delay) is heard
+        path_all = np.concatenate([path_m, sos[late_sel] * (t_arr[late_sel] - t_fire[late_sel])
+                                   + sos[late_sel] * firings.late_delay_s[fire_i[late_sel]]])
+        heard &= path_all <= site.hearing_range_m
     t_all, amp_all, rx_all = t_all[heard], amp_all[heard], rx_all[heard]
     fire_all, kind_all, burst_all = fire_all[heard], kind_all[heard], burst_all[heard]
     # arrival-time noise: sigma_arrival (Kleeman 1992 s. 2: 0.6 ms envelope rise -> 0.2 ms std)

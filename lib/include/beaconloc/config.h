@@ -163,6 +163,10 @@ typedef struct bl_config {
     bl_real double_pulse_spacing_s; /* double_pulse_spacing_s: beacon 1's second burst
                                          after its first (used by the sequencer), >= 0 */
     bl_real burst_length_s;         /* burst_length_s: length of one burst, >= 0 */
+    bl_real hearing_range_m;        /* hearing_range_m: distance beyond which a beacon is not
+                                         heard (m), bounds the sequencer's flight time; 0 =
+                                         the largest beacon-to-beacon distance (robot inside
+                                         the beacons' hull); [0, 1e4] */
     /* ---- [beacon1] .. [beaconN] ---- */
     bl_beacon beacons[BL_MAX_BEACONS]; /* x_m, y_m, z_m of beacon i at beacons[i-1] */
 

@@ -28,29 +28,47 @@
  *      double pulse (re)anchors the model. A double pulse where the hint or
  *      the locked model expects another beacon (or no firing) is numbered as
  *      expected and counted in double_conflicts; only a second conflicting
- *      double whole cycles later, with no consistent beacon 1 in between,
- *      drops the hint and relocks on it.
+ *      double whole cycles later, with no consistent beacon 1 in between and
+ *      the model's own beacon 1 heard without its signature since (evidence
+ *      against the model: echoes 3 ms late mimic a double pulse for several
+ *      cycles, and beacon 1 may be out of hearing range), drops the hint and
+ *      relocks on it.
  *   3. Numbering (Kleeman 1992 eq. 19: arrival = firing + flight, flight in
- *      [0, max_flight_us]). From beacon 1's arrival a1 its firing time lies
- *      in [a1 - max_flight_us, a1]; firing slot j (j = 0, 1, 2, ... after
- *      beacon 1, beacon index j mod N) then arrives in
- *          [a1 - max_flight_us + j·T - tol_j,  a1 + j·T + max_flight_us + tol_j]
- *      with tol_j = window_margin_us + j·T·period_tolerance_ppm/1e6. With a
- *      hint from the filter (predicted firing time t0 of some beacon and T,
- *      with their σ) the firing time is known and the window is half as wide:
+ *      [0, max_flight_us]; max_flight_us from the site's hearing range, the
+ *      distance beyond which a beacon is not heard, or the beacons' spread:
+ *      bl_sequencer_config_from_site). The own model keeps an interval
+ *      [lo, hi] for the firing time of the last numbered firing: beacon 1's
+ *      double pulse at a1 starts it at [a1 - max_flight_us, a1]; slot j
+ *      after it fires in [lo + j·T - d_j, hi + j·T + d_j],
+ *      d_j = |j|·T·period_tolerance_ppm/1e6, and arrives in
+ *          [lo + j·T - d_j - margin,  hi + j·T + d_j + max_flight_us + margin]
+ *      (margin = window_margin_us); a pulse numbered there narrows the
+ *      interval to its intersection with [arrival - max_flight_us, arrival]
+ *      and becomes the reference. So every numbered pulse, not only beacon
+ *      1, keeps the model (beacon 1 may be out of hearing range), and the
+ *      window right after beacon 1, 2·max_flight_us + 2·tol_1 wide, is the
+ *      widest a period must hold (bl_sequencer_config_check). With a hint
+ *      from the filter (predicted firing time t0 of some beacon and T, with
+ *      their σ) the firing time is known and the window is
  *          [t0 + k·T - tol_k,  t0 + k·T + max_flight_us + tol_k],
- *      tol_k = window_margin_us + 3·(σ_t0 + |k|·σ_T); the hint is dropped
- *      when its windows would overlap (stale) or double pulses contradict
- *      it twice (see 2). A pulse is numbered by the slot whose window contains it, so
- *      missed beacons (including a missed beacon 1) never shift the
- *      numbering of the next ones; a pulse outside every window is spurious.
+ *      tol_k = window_margin_us + 3·(σ_t0 + |k|·σ_T); with the hint's
+ *      predicted flight per beacon (tracking windows,
+ *      bl_sequencer_hint_flights) it narrows to the predicted flight ± its
+ *      3σ and margins. The hint is dropped when its windows would overlap
+ *      (stale) or double pulses contradict it twice (see 2); its tracking
+ *      windows when they miss min(N, 6) pulses in a row that the start-up
+ *      window would number. A pulse is numbered by the slot whose window
+ *      contains it, so missed beacons (including a missed beacon 1) never
+ *      shift the numbering of the next ones; a pulse outside every window
+ *      is spurious.
  *   4. Firing-time model. T is tracked from successive arrivals of the same
  *      beacon (the first pulse numbered in each firing): T_meas = Δt / (m·N)
  *      for m whole cycles, smoothed with gain 1/period_gain_div, accepted
- *      within the period tolerance. No beacon 1 for lock_timeout_cycles
- *      cycles (a double pulse may still confirm one cycle more), or
- *      max_consecutive_spurious pulses in a row outside every window, loses
- *      the lock; the next double pulse (or a hint) re-acquires it.
+ *      within the period tolerance. Nothing numbered for lock_timeout_cycles
+ *      cycles (a double pulse may still confirm one cycle more), a window
+ *      as wide as T, or max_consecutive_spurious pulses in a row outside
+ *      every window, loses the lock; the next double pulse (or a hint)
+ *      re-acquires it.
  *
  * Echoes: the sequencer does not reject echoes beyond merging. A later
  * arrival in the window of a firing that already produced a pulse is passed
@@ -62,7 +80,8 @@
  * T - max_flight_us can fall into the next firing's window and is numbered
  * as the next beacon (without `repeat` if it comes first): again the
  * filter's gate rejects it. With a hint the windows are tight enough that
- * echoes later than max_flight_us after the firing are spurious.
+ * echoes later than max_flight_us after the firing are spurious; with its
+ * tracking windows, echoes a few σ later than the predicted flight.
  *
  * Stream API: push every detection as it arrives (any order within a merge
  * window), then pop pulses whose merge window has closed: a pulse is ready
@@ -131,7 +150,7 @@ typedef struct bl_seq_config {
     int32_t double_width_min_us;       /* one envelope at least this wide is a double pulse (us);
                                        0 = off */
     int32_t min_width_us;              /* narrower detections are spurious (us); 0 = off */
-    uint32_t lock_timeout_cycles;      /* lock lost after this many cycles without beacon 1, >= 1 */
+    uint32_t lock_timeout_cycles;      /* lock lost after this many cycles with nothing numbered, >= 1 */
     uint32_t max_consecutive_spurious; /* lock lost after this many pulses in a row outside every
                                        window; 0 = never */
     uint32_t period_gain_div;          /* T smoothing: T += (T_meas - T) / period_gain_div, >= 1 */
@@ -197,6 +216,21 @@ typedef struct bl_seq_hint {
     bl_real period_us;       /* predicted T (us), > 0 */
     bl_real fire_sigma_us;   /* σ of fire_us (us), >= 0 */
     bl_real period_sigma_us; /* σ of period_us (us), >= 0 */
+    /* Tracking windows (optional): with flights_valid, beacon b's pulse is
+     * expected flight_us[b] after its firing, within ±(3·flight_sigma_us[b]
+     * + flight_margin_us + flight_rate_us_per_s·|firing - fire_us| + the
+     * firing-time tolerance) instead of anywhere in [0, max_flight]
+     * (Kleeman 1992 eq. 20-21 at the filter's position and speed of sound;
+     * bl_sequencer_hint_flights fills them). false: start-up windows only.
+     * min(N, 6) pulses in a row outside every tracking window but inside
+     * the start-up one drop the flights until the next hint (counted in
+     * tracking_dropped): the robot was carried or the filter is lost, and
+     * the pulses must reach the filter's gate. */
+    bool flights_valid;
+    bl_real flight_us[BL_MAX_BEACONS];       /* predicted flight to the ring centre (us), [0, T] */
+    bl_real flight_sigma_us[BL_MAX_BEACONS]; /* its σ (position, speed of sound, noise) (us), [0, T] */
+    bl_real flight_margin_us;                /* added both sides, e.g. ring radius / s (us), [0, T] */
+    bl_real flight_rate_us_per_s;            /* bound on |d flight / dt|, e.g. (|v| + 3σ_v) / s (us/s), [0, 1e6] */
 } bl_seq_hint;
 
 /* Counters: read-only for the caller, uint32 wrapping. */
@@ -215,6 +249,8 @@ typedef struct bl_seq_counters {
     uint32_t locks_lost;       /* locked -> unlocked transitions */
     uint32_t period_updates;   /* accepted T measurements */
     uint32_t hint_rejections;  /* hints dropped because double pulses contradicted them */
+    uint32_t tracking_dropped; /* hint tracking windows dropped: min(N, 6) pulses in a row outside
+                                  them but inside the start-up window (robot carried, filter lost) */
 } bl_seq_counters;
 
 /* Private: one pulse whose merge window is open. */
@@ -233,9 +269,10 @@ typedef struct bl_seq_pending {
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
  * `counters` are private. Size: BL_SEQ_MAX_PENDING · (24 + 10·BL_MAX_RECEIVERS)
- * + 224 + 8·BL_MAX_BEACONS bytes on x86-64 and on Cortex-M4 (4 of the 10
- * bytes per receiver are the caller's tags): 704 B with 8 beacons and 8
- * receivers (the M4 example), 1,088 B with 16/16. */
+ * + 256 + 12·BL_MAX_BEACONS bytes on x86-64 and on Cortex-M4 (4 of the 10
+ * bytes per receiver are the caller's tags): 768 B with 8 beacons and 8
+ * receivers (the M4 example), 1,184 B with 16/16 (the own model's firing
+ * interval and the hint's tracking windows took 64 B / 96 B of that). */
 typedef struct bl_sequencer {
     bl_seq_config cfg;
     bl_seq_counters counters;
@@ -262,6 +299,15 @@ typedef struct bl_sequencer {
     int64_t hint_fire_sigma_ns;
     int64_t hint_period_sigma_ns;
     int64_t beacon_last_us[BL_MAX_BEACONS]; /* first arrival of each beacon's last firing */
+    int64_t ref_lo_us;                      /* own model: firing of beacon ref_beacon's last */
+    int64_t ref_hi_us;                      /* numbered firing lies in [ref_lo_us, ref_hi_us] */
+    int32_t ref_beacon;
+    int32_t hint_flight_rate_us_per_s;
+    uint32_t tracking_misses;                   /* pulses in a row outside the tracking windows (start-up: inside) */
+    uint16_t hint_flight_u[BL_MAX_BEACONS];     /* hint's tracking windows: centre and */
+    uint16_t hint_flight_tol_u[BL_MAX_BEACONS]; /* half width (units of 16 us) */
+    bool hint_flights;
+    bool one_single_seen; /* beacon 1 numbered without its signature since the last anchor */
 } bl_sequencer;
 
 /* Model summary for logs and health reports. */
@@ -282,22 +328,45 @@ int bl_sequencer_config_default(bl_seq_config *cfg);
  * double-pulse spacing, receiver count; merge window = 2·ring radius /
  * s_min + window margin; max flight = max_distance_m / s_min, where
  * s_min = speed_of_sound_mps - 3·sigma_speed_of_sound_mps and
- * max_distance_m <= 0 means "largest distance between two beacons plus the
- * ring radius" (robot inside the beacons' hull). Tolerances keep their
+ * max_distance_m <= 0 means the site's hearing_range_m when that is > 0
+ * and shorter than the geometric bound, else the geometric bound: the
+ * largest distance between two beacons plus the ring radius (robot inside
+ * the beacons' hull). Tolerances keep their
  * bl_sequencer_config_default values. *out is written only on success.
  * Errors: BL_EINVAL (NULL; NaN/inf in max_distance_m or in a site field
  * used here: speed_of_sound_mps, sigma_speed_of_sound_mps, beacon_period_s,
  * double_pulse_spacing_s, burst_length_s, ring_radius_m, receiver_height_m,
- * beacons[0..beacon_count-1]; max_distance_m > 1e6 m), BL_ECONFIG (finite
+ * hearing_range_m, beacons[0..beacon_count-1]; max_distance_m > 1e6 m),
+ * BL_ECONFIG (finite
  * but unusable: beacon or receiver count out of range, s_min outside
  * (100, 1000) m/s, period outside (0, 10] s, spacing or burst not in
- * [0, period), ring radius not in [0, 100) m, distances beyond 1000 km, or
- * the resulting windows overlap, see bl_sequencer_config_check). */
+ * [0, period), ring radius not in [0, 100) m, hearing range not in
+ * [0, 1e4] m, distances beyond 1000 km, or the resulting windows overlap,
+ * see bl_sequencer_config_check; bl_sequencer_min_period says why). */
 int bl_sequencer_config_from_site(const bl_config *site, bl_real max_distance_m, bl_seq_config *out);
 
+/* The shortest beacon period the sequencer takes for a site, and why. */
+typedef struct bl_seq_min_period {
+    bl_real min_period_s;  /* shortest accepted beacon_period_s (s): the arrival windows of the
+                              two firings after beacon 1, 2·max_flight + 2·tol_1 wide, must
+                              be disjoint (bl_sequencer_config_check) */
+    bl_real max_flight_s;  /* longest direct flight (s): distance_m / (s - 3σ_s) */
+    bl_real distance_m;    /* the distance that sets it (m) */
+    bool by_hearing_range; /* distance_m is the site's hearing_range_m (else the largest
+                              beacon-to-beacon distance plus the ring radius) */
+} bl_seq_min_period;
+
+/* Fills *out for the site (its period is not used): for error messages that
+ * name the real cause, and for choosing a period. *out is written only on
+ * success. Errors: as bl_sequencer_config_from_site with max_distance_m 0,
+ * except that the period is not checked. */
+int bl_sequencer_min_period(const bl_config *site, bl_seq_min_period *out);
+
 /* Checks ranges and that the windows cannot overlap:
- *   2·max_flight + 2·tol_N < T (the windows of successive firings are disjoint
- *   for a whole cycle), merge_window < double_spacing - double_tolerance.
+ *   2·max_flight + 2·tol_1 < T (the windows of the two firings after beacon
+ *   1's double pulse are disjoint; later ones narrow as pulses are numbered,
+ *   and one as wide as T drops the lock at run time),
+ *   merge_window < double_spacing - double_tolerance.
  * Returns BL_OK, BL_ECONFIG, or BL_EINVAL (NULL). */
 int bl_sequencer_config_check(const bl_seq_config *cfg);
 
@@ -337,6 +406,19 @@ int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint);
  * Errors: BL_EINVAL (NULL, NaN/inf period or σ), BL_ENOTINIT (est->started
  * false). */
 int bl_sequencer_hint_from_estimate(const bl_estimate *est, bl_seq_hint *hint);
+
+/* Adds the tracking windows to *hint (flights_valid and the flight fields;
+ * the rest is kept): each beacon's predicted flight to the ring centre and
+ * its σ from a started filter (bl_filter_expected_arrival at the state
+ * time: position, speed of sound and their covariance, Kleeman 1992 eq.
+ * 20-21), the ring radius / (s - 3σ_s) as margin, and (|v| + 3σ_v +
+ * (|ω| + 3σ_ω)·ring radius) / (s - 3σ_s) as the rate at which a flight may
+ * change. Once the filter has converged this turns the window of width
+ * max_flight into one of a few σ around the expected arrival. *hint is
+ * written only on success. Errors: BL_EINVAL (NULL, a non-finite
+ * prediction, s - 3σ_s <= 100 m/s), BL_ENOTINIT (filter not started),
+ * and those of bl_filter_expected_arrival. */
+int bl_sequencer_hint_flights(const bl_filter *f, bl_seq_hint *hint);
 
 /* Drops the hint (the own model continues). Errors: BL_EINVAL, BL_ENOTINIT. */
 int bl_sequencer_clear_hint(bl_sequencer *seq);
