@@ -53,6 +53,23 @@ inline real effective_base_m(const bl_config *cfg) { return cfg->wheels.skid_fac
 void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k);
 // Wheel scales at a (re)start: kept by a started filter, else 1 ± σ.
 void start_wheel_scales(const bl_filter *f, VX &x, MX &P);
+// The speed of sound's two models (filter.cpp, sos_drift_predict): the
+// prediction of s over dt (s) with the drift detector's state change_mps
+// (D, m/s) and var_mps2 (B, (m/s)²), both updated; and an accepted update's
+// correction of s, ds_mps, with the drop of P_ss it made, into the detector.
+void sos_drift_predict(const bl_config *cfg, real &change_mps, real &var_mps2, real &still_share, VX &x, MX &P,
+                       real dt);
+void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2);
+// Its constants (ours, docs/performance.md "Speed of sound"): the detector's
+// window τ (s); the drift model's typical rate r_d (m/s², 0.1 ≈ 10 °C per
+// minute: s moves 0.6 m/s per °C); its prior probability π; the still-air
+// random walk as a fraction ρ of speed_of_sound_drift_mps_per_sqrt_s; a
+// floor on B ((m/s)²) so that D/√B stays defined.
+constexpr real kSosDriftWindow_s = real(20);
+constexpr real kSosDriftRate_mps2 = real(0.1);
+constexpr real kSosDriftPrior = real(0.05);
+constexpr real kSosStillFraction = real(0.5);
+constexpr real kSosDriftVarFloor_mps2 = real(1e-6);
 // Store x, P as the filter's state and update the converged flag.
 void commit(bl_filter *f, const VX &x, const MX &P);
 
