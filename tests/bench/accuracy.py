@@ -26,7 +26,8 @@ the seeds:
   chi2(2*seeds)); within_3sigma_pct = share of the estimates whose position
   error is inside the reported 3-sigma ellipse (Mahalanobis distance <= 3);
   heading_nees and heading_within_3sigma_pct the same for the heading alone
-  (1 dof, interval chi2(seeds)/seeds))
+  (1 dof, interval chi2(seeds)/seeds); on a scenario with a kidnap the
+  estimates from the kidnap to the filter's next reset are left out of these)
 Options: --scenarios, --seeds, and --tuning KEY=VALUE (repeatable) to run the
 bridge with the site file's [tuning] section set so (docs/bridge.md), e.g. a
 smaller speed-of-sound random walk; the figures are then of that tuning.
@@ -133,7 +134,18 @@ def tuned_site(scenario: str, tuning: list[str], out: Path) -> Path:
     return path
 
 
-def judge(seed: int, truth_p: Path, est_p: Path) -> dict:
+def kidnap_time_s(scenario: str | None) -> float | None:
+    """The scenario's [faults] kidnap time (s), or None."""
+    if scenario is None:
+        return None
+    cp = configparser.ConfigParser(inline_comment_prefixes=(";", "#"))
+    cp.read(h.SCENARIOS / f"{scenario}.scenario.ini")
+    if not cp.has_option("faults", "kidnap"):
+        return None
+    return float(cp.get("faults", "kidnap").split(",")[0])
+
+
+def judge(seed: int, truth_p: Path, est_p: Path, scenario: str | None = None) -> dict:
     """One run's figures from its truth and estimates CSVs (also used by
     tests/bench/firmware.py on the firmware's estimates)."""
     truth = h.read_csv(truth_p, h.TRUTH_COLUMNS)
@@ -146,6 +158,16 @@ def judge(seed: int, truth_p: Path, est_p: Path) -> dict:
     last = sel & (e.t_s >= e.t_s[sel][-1] - 10.0)
     final_rms = float(np.sqrt(np.mean(e.pos_m[last] ** 2))) if finite else math.inf
     lat = lateral_error_m(truth, est["t_us"][sel], est["x_m"][sel], est["y_m"][sel])
+    # Honesty: a kidnap (the robot carried without its encoders) is in no
+    # covariance until the filter notices it; the estimates from the kidnap
+    # to the first reset after it are left out of the honesty figures.
+    honest = sel.copy()
+    t_kid = kidnap_time_s(scenario)
+    if t_kid is not None:
+        after = e.t_s >= t_kid
+        bumped = after & (e.reset_counter > (e.reset_counter[after][0] if after.any() else 0))
+        t_reset = e.t_s[bumped][0] if bumped.any() else math.inf
+        honest &= ~((e.t_s >= t_kid) & (e.t_s < t_reset))
     return {
         "seed": seed, "ok": True,
         "diverged": bool(not finite or final_rms > DIVERGED_RMS_M),
@@ -156,8 +178,8 @@ def judge(seed: int, truth_p: Path, est_p: Path) -> dict:
         "sos_pcrb2": h.truth_at(truth, est["t_us"][sel], "pcrb_sos_mps") ** 2,
         "sos2": e.sos_err_mps[sel] ** 2,
         "final_rms_m": final_rms,
-        "nees": e.mahal[sel] ** 2,
-        "heading_nees": heading_nees(truth, est, sel),
+        "nees": e.mahal[honest] ** 2,
+        "heading_nees": heading_nees(truth, est, honest),
         "resets": int(e.reset_counter[-1]),
     }
 
@@ -179,7 +201,7 @@ def one_run(bridge: Path, scenario: str, seed: int, out: Path, site: Path) -> di
     if br.returncode != 0 or not est_p.exists():
         return {"seed": seed, "ok": False, "why": f"bridge exit {br.returncode}: "
                 f"{br.stderr.strip()[-300:]}"}
-    return judge(seed, truth_p, est_p)
+    return judge(seed, truth_p, est_p, scenario)
 
 
 def summarise(scenario: str, runs: list[dict]) -> tuple[str, dict]:
