@@ -145,17 +145,21 @@ void cv_model(const VX &x, real dt, VX &xo, SparseEntry *d)
 void sos_drift_predict(const bl_config *cfg, real &change_mps, real &var_mps2, real &still_share, VX &x, MX &P, real dt)
 {
     const real tau = kSosDriftWindow_s;
-    const real a = std::exp(-dt / tau);
+    // e^{-dt/τ} to first order (dt, the predict step, is far below τ)
+    const real a = real(1) / (real(1) + dt / tau);
     change_mps *= a;
     var_mps2 *= a * a;
-    const real sd2 = (kSosDriftRate_mps2 * tau) * (kSosDriftRate_mps2 * tau);  // σ_D² ((m/s)²)
+    const real rd = sos_drift_rate_mps2(cfg);
+    const real sd2 = (rd * tau) * (rd * tau);  // σ_D² ((m/s)²)
     // B at most P_ss: D is a change of the estimate, which under the model
     // varies no more than s is uncertain (else the start-up convergence's
     // large corrections would blind the detector for several windows).
     const real B = (var_mps2 < P(S, S) ? var_mps2 : P(S, S)) + kSosDriftVarFloor_mps2;
-    const real llr = real(0.5) * std::log(B / (B + sd2)) + real(0.5) * (change_mps * change_mps / B) * sd2 / (B + sd2);
-    const real lp = std::log(kSosDriftPrior / (real(1) - kSosDriftPrior)) + llr;
-    const real w = lp > real(30) ? real(1) : real(1) / (real(1) + std::exp(-lp));
+    // w = 1 / (1 + (1 - π)/π · L_s/L_d), L_s/L_d = √((B + σ_D²)/B)·e^{-½ (D²/B) σ_D²/(B + σ_D²)}
+    // (one exp, no log: make size-m4's flash).
+    const real e = real(0.5) * (change_mps * change_mps / B) * sd2 / (B + sd2);
+    const real odds_still = (real(1) - kSosDriftPrior) / kSosDriftPrior * std::sqrt((B + sd2) / B);
+    const real w = e > real(60) ? real(1) : real(1) / (real(1) + odds_still * std::exp(-e));
     const real rate = w * change_mps / tau;
     x(S) += rate * dt;
     change_mps += rate * dt;
@@ -167,6 +171,16 @@ void sos_drift_predict(const bl_config *cfg, real &change_mps, real &var_mps2, r
 
 void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2)
 {
+    // Start-up: while s is still as uncertain as a drift over a window
+    // (σ_s > r_d·τ, e.g. the 5 m/s prior) its corrections are convergence
+    // from the prior, not drift: the detector starts afresh, with the
+    // convergence still to come (of variance P_ss) as D's expected spread.
+    const real sd = sos_drift_rate_mps2(&f->cfg_) * kSosDriftWindow_s;
+    if (f->P_[S * NX + S] > sd * sd) {
+        f->sos_change_mps_ = real(0);
+        f->sos_change_var_mps2_ = f->P_[S * NX + S];
+        return;
+    }
     f->sos_change_mps_ += ds_mps;
     // B is D's variance under the still-air model: while the drift model
     // holds (weight w, its larger random walk), the drops of P_ss scale with
@@ -617,14 +631,16 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     // between §3.10's "straight" and "curve"):
     //   σ_θ² += σ_off²·dt + (f·Δθ)²   (rad²)
     // σ_off = heading_noise_rad_per_sqrt_s (rad/√s), f =
-    // heading_noise_fraction (1), dt in s. The offset's random walk holds
-    // for a standing robot too (§3.10's "stationary" type, where Δθ = 0):
+    // heading_noise_fraction (1), dt in s. The offset's random walk holds,
+    // scaled by stationary_noise_scale, for a standing robot too (§3.10's
+    // "stationary" type, where Δθ = 0):
     // there the heading is learned from the ring's few centimetres of
     // receiver offsets alone, whose unmodelled errors (directivity, the
     // first receiver to trigger) do not average out; without it the
     // heading's σ shrank as 1/√t while its error stayed, 3.6σ after a
     // minute standing after a restart (issue 14; standing-restart).
-    Pn(TH, TH) += cfg->wheels.heading_noise_rad_per_sqrt_s * cfg->wheels.heading_noise_rad_per_sqrt_s * dt;
+    const real hs = (moving ? real(1) : cfg->wheels.stationary_noise_scale) * cfg->wheels.heading_noise_rad_per_sqrt_s;
+    Pn(TH, TH) += hs * hs * dt;
     if (moving) {
         const real fr = cfg->wheels.heading_noise_fraction * dth;
         Pn(TH, TH) += fr * fr;

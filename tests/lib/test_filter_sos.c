@@ -52,7 +52,7 @@ static void test_ramp_followed(void **state)
 }
 
 /* A standing robot without pulses: its heading variance grows by the
- * heading random walk σ_off²·dt (filter.cpp, Kleeman §3.10 "stationary"),
+ * heading random walk (scale·σ_off)²·dt (filter.cpp, Kleeman §3.10 "stationary"),
  * not held at its start value. */
 static void test_standing_heading_variance_grows(void **state)
 {
@@ -71,7 +71,8 @@ static void test_standing_heading_variance_grows(void **state)
         assert_int_equal(bl_filter_predict_odometry(&f, t, 0, 0), BL_OK);
     }
     assert_int_equal(bl_filter_get_state(&f, x, P1), BL_OK);
-    const double q = (double)cfg.wheels.heading_noise_rad_per_sqrt_s * cfg.wheels.heading_noise_rad_per_sqrt_s;
+    const double hs = (double)cfg.wheels.stationary_noise_scale * cfg.wheels.heading_noise_rad_per_sqrt_s;
+    const double q = hs * hs;
     const double grown = (double)P1[BL_IX_THETA * NX + BL_IX_THETA] - (double)P0[BL_IX_THETA * NX + BL_IX_THETA];
     assert_true(q > 0);
     assert_true(fabs(grown - q * 60.0) < 0.05 * q * 60.0);
