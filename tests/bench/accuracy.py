@@ -53,7 +53,8 @@ sys.path.insert(0, str(REPO / "tests" / "integration"))
 import harness as h  # noqa: E402
 
 # Printed in this order; the last two lines stay echo-storm and kleeman-lab.
-SCENARIOS = ("temperature-swing10", "temperature-swing20", "wheel-worn", "echo-storm", "kleeman-lab")
+SCENARIOS = ("temperature-swing10", "temperature-swing20", "wheel-worn", "standing-restart", "echo-storm",
+             "kleeman-lab")
 SKIP_S = 20.0            # start-up excluded from every figure, s
 DIVERGED_RMS_M = 0.5     # final-10-s RMS error above this: diverged
 LATERAL_MIN_SPEED_MPS = 0.05  # the path's direction is undefined when still
