@@ -631,16 +631,14 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     // between §3.10's "straight" and "curve"):
     //   σ_θ² += σ_off²·dt + (f·Δθ)²   (rad²)
     // σ_off = heading_noise_rad_per_sqrt_s (rad/√s), f =
-    // heading_noise_fraction (1), dt in s. The offset's random walk holds,
-    // scaled by stationary_noise_scale, for a standing robot too (§3.10's
-    // "stationary" type, where Δθ = 0):
+    // heading_noise_fraction (1), dt in s. The offset's random walk holds
+    // for a standing robot too (§3.10's "stationary" type, where Δθ = 0):
     // there the heading is learned from the ring's few centimetres of
     // receiver offsets alone, whose unmodelled errors (directivity, the
     // first receiver to trigger) do not average out; without it the
     // heading's σ shrank as 1/√t while its error stayed, 3.6σ after a
     // minute standing after a restart (issue 14; standing-restart).
-    const real hs = (moving ? real(1) : cfg->wheels.stationary_noise_scale) * cfg->wheels.heading_noise_rad_per_sqrt_s;
-    Pn(TH, TH) += hs * hs * dt;
+    Pn(TH, TH) += cfg->wheels.heading_noise_rad_per_sqrt_s * cfg->wheels.heading_noise_rad_per_sqrt_s * dt;
     if (moving) {
         const real fr = cfg->wheels.heading_noise_fraction * dth;
         Pn(TH, TH) += fr * fr;

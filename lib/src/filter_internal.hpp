@@ -62,8 +62,10 @@ void sos_drift_predict(const bl_config *cfg, real &change_mps, real &var_mps2, r
 void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2);
 // Its constants (ours, docs/performance.md "Speed of sound"): the detector's
 // window τ (s); the drift model's typical rate r_d (m/s², 0.1 ≈ 10 °C per
-// minute: s moves 0.6 m/s per °C; below); its prior probability π; the still-air
-// random walk as a fraction ρ of speed_of_sound_drift_mps_per_sqrt_s; a
+// minute: s moves 0.6 m/s per °C; below); its prior probability π (1 %:
+// the drift is fed forward on strong evidence only, |D| above ~4√B); the
+// still-air random walk as a fraction ρ of speed_of_sound_drift_mps_per_sqrt_s
+// (1: the same random walk in both models, docs/performance.md); a
 // floor on B ((m/s)²) so that D/√B stays defined.
 constexpr real kSosDriftWindow_s = real(20);
 constexpr real kSosDriftRate_per_sqrt_s = real(0.5);
@@ -75,8 +77,8 @@ inline real sos_drift_rate_mps2(const bl_config *cfg)
 {
     return kSosDriftRate_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s;
 }
-constexpr real kSosDriftPrior = real(0.1);
-constexpr real kSosStillFraction = real(0.5);
+constexpr real kSosDriftPrior = real(0.01);
+constexpr real kSosStillFraction = real(1.0);
 constexpr real kSosDriftVarFloor_mps2 = real(1e-6);
 // Store x, P as the filter's state and update the converged flag.
 void commit(bl_filter *f, const VX &x, const MX &P);
