@@ -163,6 +163,8 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
         f->rejected_[beacon_index] += 1;
         return BL_OK;
     }
+    // The speed of sound's drift detector sees this update's correction (filter.cpp).
+    note_sos_correction(f, x(S) - f->x_[S], f->P_[S * NX + S] - P(S, S));
     int64_t epoch = f->epoch_us_;
     uint32_t ref = f->ref_beacon_;
     // The reference follows the newest firing (Kleeman eq. 15: t0 += T per beacon).

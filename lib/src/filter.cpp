@@ -115,20 +115,98 @@ void cv_model(const VX &x, real dt, VX &xo, SparseEntry *d)
     }
 }
 
-// Random walk of s and T over dt (speed-of-sound drift with temperature,
-// beacon clock drift) and of the wheel scales (tyre wear, load); none when
-// calibration is off (sigma_wheel_scale = 0: the scales stay exactly 1).
-// Our model: Kleeman 1992 eq. 15 holds s and T constant (s(k+1) = s(k),
-// T(k+1) = T(k)) and estimates them as unknown constants; a Wiener process
-// (variance growing linearly in time, q·dt) lets them follow slow changes
-// (s moves ~0.6 m/s per °C of air temperature) without assuming a rate:
-//   σ_s² += q_s·dt,  q_s = speed_of_sound_drift_mps_per_sqrt_s²  ((m/s)²/s)
+}  // namespace
+
+// The speed of sound in moving air: two models, one filter (ours; Kleeman
+// 1992 eq. 15 holds s constant). "Still" air: s a random walk of
+// ρ·σ_d (σ_d = speed_of_sound_drift_mps_per_sqrt_s, ρ =
+// kSosStillFraction), tight enough to reach the bound. "Drifting" air (a
+// temperature swing): s a random walk of σ_d plus a drift rate ṡ. Which one
+// holds is read from the innovation sequence through what it does to s:
+// D = Σ_k Δs_k·e^{-(t - t_k)/τ} (m/s), the recent change of the estimate
+// (the pulse updates' corrections Δs_k plus the drift fed forward below),
+// exponentially weighted over τ = kSosDriftWindow_s. In still air the
+// innovations are white (Kleeman §3.9's assumption; Mehra 1970), so D is
+// zero-mean with variance B = Σ_k var(Δs_k)·e^{-2(t - t_k)/τ}, var(Δs_k) =
+// K_s² S = the drop of P_ss at that update ((m/s)²). A drift of rate r
+// makes D ≈ r·τ. The two hypotheses' likelihoods of D (Gaussian, variance
+// B and B + (r_d·τ)², r_d = kSosDriftRate) with the prior kSosDriftPrior
+// give the drift model's posterior weight (a two-model Bayesian switch,
+// Bar-Shalom, Li & Kirubarajan 2001 §11.6 without the mixing step):
+//   w = π L_d / (π L_d + (1 - π) L_s),
+//   ln(L_d/L_s) = ½ ln(B / (B + σ_D²)) + ½ (D²/B) σ_D² / (B + σ_D²),
+// and the prediction over dt mixes the two:
+//   ṡ = w·D/τ  (m/s²),  s += ṡ·dt,  D += ṡ·dt,
+//   σ_s² += (ρ² + w(1 - ρ²))·σ_d²·dt  ((m/s)²).
+// With w = 1 the change D integrates the corrections (the leak D/τ and the
+// feed-forward cancel): a second-order (type-2) tracking loop that follows
+// a ramp without lag; with w ≈ 0 (|D| within ~3√B) it is the still-air
+// random walk. Without pulse updates D and B decay and w falls back.
+void sos_drift_predict(const bl_config *cfg, real &change_mps, real &var_mps2, real &still_share, VX &x, MX &P, real dt)
+{
+    const real tau = kSosDriftWindow_s;
+    // e^{-dt/τ} to first order (dt, the predict step, is far below τ)
+    const real a = real(1) / (real(1) + dt / tau);
+    change_mps *= a;
+    var_mps2 *= a * a;
+    const real rd = sos_drift_rate_mps2(cfg);
+    const real sd2 = (rd * tau) * (rd * tau);  // σ_D² ((m/s)²)
+    // B at most P_ss: D is a change of the estimate, which under the model
+    // varies no more than s is uncertain (else the start-up convergence's
+    // large corrections would blind the detector for several windows).
+    const real B = (var_mps2 < P(S, S) ? var_mps2 : P(S, S)) + kSosDriftVarFloor_mps2;
+    // w = 1 / (1 + (1 - π)/π · L_s/L_d), L_s/L_d = √((B + σ_D²)/B)·e^{-½ (D²/B) σ_D²/(B + σ_D²)}
+    // (one exp, no log: make size-m4's flash).
+    const real e = real(0.5) * (change_mps * change_mps / B) * sd2 / (B + sd2);
+    const real odds_still = (real(1) - kSosDriftPrior) / kSosDriftPrior * std::sqrt((B + sd2) / B);
+    const real w = e > real(60) ? real(1) : real(1) / (real(1) + odds_still * std::exp(-e));
+    const real rate = w * change_mps / tau;
+    x(S) += rate * dt;
+    change_mps += rate * dt;
+    const real rho2 = kSosStillFraction * kSosStillFraction;
+    still_share = rho2 / (rho2 + w * (real(1) - rho2));
+    P(S, S) += (rho2 + w * (real(1) - rho2)) * cfg->speed_of_sound_drift_mps_per_sqrt_s *
+               cfg->speed_of_sound_drift_mps_per_sqrt_s * dt;
+}
+
+void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2)
+{
+    // Start-up: while s is still as uncertain as a drift over a window
+    // (σ_s > r_d·τ, e.g. the 5 m/s prior) its corrections are convergence
+    // from the prior, not drift: the detector starts afresh, with the
+    // convergence still to come (of variance P_ss) as D's expected spread.
+    const real sd = sos_drift_rate_mps2(&f->cfg_) * kSosDriftWindow_s;
+    if (f->P_[S * NX + S] > sd * sd) {
+        f->sos_change_mps_ = real(0);
+        f->sos_change_var_mps2_ = f->P_[S * NX + S];
+        return;
+    }
+    f->sos_change_mps_ += ds_mps;
+    // B is D's variance under the still-air model: while the drift model
+    // holds (weight w, its larger random walk), the drops of P_ss scale with
+    // the random walk that feeds them (steady state: drops per second =
+    // q), so they count with q_still/q = ρ² / (ρ² + w(1 - ρ²)); else the
+    // detector's own switch would raise B and switch itself off.
+    if (var_drop_mps2 > real(0)) f->sos_change_var_mps2_ += var_drop_mps2 * f->sos_still_share_;
+}
+
+namespace {
+
+// Random walk of T over dt (beacon clock drift) and of the wheel scales
+// (tyre wear, load), and the speed of sound's model (sos_drift_predict);
+// none on the scales when calibration is off (sigma_wheel_scale = 0: they
+// stay exactly 1). Kleeman 1992 eq. 15 holds T constant (T(k+1) = T(k)) and
+// estimates it as an unknown constant; a Wiener process (variance growing
+// linearly in time, q·dt) lets it follow slow changes without assuming a rate:
 //   σ_T² += q_T·dt,  q_T = period_drift_s_per_sqrt_s²            (s²/s)
 //   σ_k² += q_k·dt,  q_k = wheel_scale_drift_per_sqrt_s²          (1/s)
-// with dt in s.
-void add_parameter_noise(const bl_config *cfg, MX &P, real dt)
+// with dt in s. sos: the drift detector's state (D, B), updated.
+struct SosDrift {
+    real change_mps, var_mps2, still_share;
+};
+void add_parameter_noise(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
 {
-    P(S, S) += cfg->speed_of_sound_drift_mps_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s * dt;
+    sos_drift_predict(cfg, sos.change_mps, sos.var_mps2, sos.still_share, x, P, dt);
     P(T, T) += cfg->period_drift_s_per_sqrt_s * cfg->period_drift_s_per_sqrt_s * dt;
     if (cfg->sigma_wheel_scale > real(0)) {
         const real qk = cfg->wheel_scale_drift_per_sqrt_s * cfg->wheel_scale_drift_per_sqrt_s * dt;
@@ -138,7 +216,7 @@ void add_parameter_noise(const bl_config *cfg, MX &P, real dt)
 }
 
 // Constant-velocity prediction with white acceleration noise on v and ω.
-void cv_predict(const bl_config *cfg, VX &x, MX &P, real dt)
+void cv_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
 {
     VX xo;
     SparseEntry d[kCvEntries];
@@ -168,9 +246,9 @@ void cv_predict(const bl_config *cfg, VX &x, MX &P, real dt)
     const real qw = cfg->angular_accel_noise_radps2 * cfg->angular_accel_noise_radps2;
     Pn.noalias() += (qa * ga) * ga.transpose();
     Pn.noalias() += (qw * gw) * gw.transpose();
-    add_parameter_noise(cfg, Pn, dt);
-    symmetrise(Pn);
     x = xo;
+    add_parameter_noise(cfg, sos, x, Pn, dt);
+    symmetrise(Pn);
 }
 
 }  // namespace
@@ -369,6 +447,7 @@ extern "C" int bl_filter_init(bl_filter *f, const bl_config *cfg)
     std::memset(f, 0, sizeof *f);
     f->cfg_ = *cfg;
     f->magic_ = kFilterMagic;
+    f->sos_still_share_ = real(1);
     return BL_OK;
 }
 
@@ -545,18 +624,24 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     const bool moving = std::fabs(d_left_m) > real(1e-6) || std::fabs(d_right_m) > real(1e-6);
     const real cl = x(KL) * d_left_m, cr = x(KR) * d_right_m;  // calibrated distances (m)
     const real dth = (cr - cl) / effective_base_m(cfg);        // Δθ, Kleeman eq. 24 with χ (rad)
+    // §3.10 gives no formula; our reading, with the offset as a random
+    // walk (so it does not depend on the encoder rate) and the fraction
+    // proportional to |Δθ| (so a turn adds more than a straight step of
+    // the same wheel travel; that Δθ term is the only difference
+    // between §3.10's "straight" and "curve"):
+    //   σ_θ² += σ_off²·dt + (f·Δθ)²   (rad²)
+    // σ_off = heading_noise_rad_per_sqrt_s (rad/√s), f =
+    // heading_noise_fraction (1), dt in s. The offset's random walk holds
+    // for a standing robot too (§3.10's "stationary" type, where Δθ = 0):
+    // there the heading is learned from the ring's few centimetres of
+    // receiver offsets alone, whose unmodelled errors (directivity, the
+    // first receiver to trigger) do not average out; without it the
+    // heading's σ shrank as 1/√t while its error stayed, 3.6σ after a
+    // minute standing after a restart (issue 14; standing-restart).
+    Pn(TH, TH) += cfg->wheels.heading_noise_rad_per_sqrt_s * cfg->wheels.heading_noise_rad_per_sqrt_s * dt;
     if (moving) {
-        // §3.10 gives no formula; our reading, with the offset as a random
-        // walk (so it does not depend on the encoder rate) and the fraction
-        // proportional to |Δθ| (so a turn adds more than a straight step of
-        // the same wheel travel; that Δθ term is the only difference
-        // between §3.10's "straight" and "curve"):
-        //   σ_θ² += σ_off²·dt + (f·Δθ)²   (rad²)
-        // σ_off = heading_noise_rad_per_sqrt_s (rad/√s), f =
-        // heading_noise_fraction (1), dt in s.
         const real fr = cfg->wheels.heading_noise_fraction * dth;
-        Pn(TH, TH) +=
-            cfg->wheels.heading_noise_rad_per_sqrt_s * cfg->wheels.heading_noise_rad_per_sqrt_s * dt + fr * fr;
+        Pn(TH, TH) += fr * fr;
         // Skid-steer slip (config.h wheels.slip_*; skid steering slips by
         // its nature, Millibots §3.1): the ICR model (Martinez et al. 2005;
         // Mandow et al. 2007) takes the tracks' mean slip into χ; its random
@@ -586,8 +671,9 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     const real sa = scale * cfg->accel_noise_mps2 * dt, sw = scale * cfg->angular_accel_noise_radps2 * dt;
     Pn(V, V) += sa * sa;
     Pn(W, W) += sw * sw;
-    add_parameter_noise(cfg, Pn, dt);
     x = xo;
+    SosDrift sos = {f->sos_change_mps_, f->sos_change_var_mps2_, f->sos_still_share_};
+    add_parameter_noise(cfg, sos, x, Pn, dt);
     WheelSpeedCounts wheel = {0, 0};
     // Kleeman eq. 25: the wheel speeds measure v and ω (aid_wheels.cpp).
     symmetrise(P);  // the in-place propagation is symmetric only to rounding
@@ -610,6 +696,9 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
         const int rc = commit_predict(f, x, P, t_us);
         if (rc != BL_OK) return rc;
         team_cross(f) = C;
+        f->sos_change_mps_ = sos.change_mps;
+        f->sos_change_var_mps2_ = sos.var_mps2;
+        f->sos_still_share_ = sos.still_share;
         f->wheel_fused_ += wheel.fused;
         f->wheel_refused_ += wheel.refused;
         return BL_OK;
@@ -618,6 +707,9 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     if (dt > real(0)) fuse_wheel_speeds<NX>(cfg, cl, cr, dt, x, P, &wheel);
     const int rc = commit_predict(f, x, P, t_us);
     if (rc != BL_OK) return rc;
+    f->sos_change_mps_ = sos.change_mps;
+    f->sos_change_var_mps2_ = sos.var_mps2;
+    f->sos_still_share_ = sos.still_share;
     f->wheel_fused_ += wheel.fused;
     f->wheel_refused_ += wheel.refused;
     return BL_OK;
@@ -644,12 +736,17 @@ extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
         if (!C.allFinite()) return BL_EINVAL;
     }
 #endif
-    cv_predict(cfg, x, P, dt);
+    SosDrift sos = {f->sos_change_mps_, f->sos_change_var_mps2_, f->sos_still_share_};
+    cv_predict(cfg, sos, x, P, dt);
     const int rc = commit_predict(f, x, P, t_us);
+    if (rc != BL_OK) return rc;
+    f->sos_change_mps_ = sos.change_mps;
+    f->sos_change_var_mps2_ = sos.var_mps2;
+    f->sos_still_share_ = sos.still_share;
 #if BL_WITH_TEAM
-    if (rc == BL_OK) team_cross(f) = C;
+    team_cross(f) = C;
 #endif
-    return rc;
+    return BL_OK;
 }
 
 extern "C" int bl_filter_get_state(const bl_filter *f, bl_real x[BL_FILTER_NX], bl_real P[BL_FILTER_NX * BL_FILTER_NX])
@@ -677,7 +774,8 @@ extern "C" int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estima
     if (trc != BL_OK) return trc;
     VX x = state(f);
     MX P = cov(f);
-    cv_predict(&f->cfg_, x, P, bl::us_to_s(t_us - f->t_us_));
+    SosDrift sos = {f->sos_change_mps_, f->sos_change_var_mps2_, f->sos_still_share_};  // a copy: *f is const
+    cv_predict(&f->cfg_, sos, x, P, bl::us_to_s(t_us - f->t_us_));
     // As bl_filter_predict: a non-finite extrapolation (a huge but finite
     // state or P) is refused, never returned (found by fuzzing).
     if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;

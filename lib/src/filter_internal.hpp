@@ -53,6 +53,33 @@ inline real effective_base_m(const bl_config *cfg) { return cfg->wheels.skid_fac
 void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k);
 // Wheel scales at a (re)start: kept by a started filter, else 1 ± σ.
 void start_wheel_scales(const bl_filter *f, VX &x, MX &P);
+// The speed of sound's two models (filter.cpp, sos_drift_predict): the
+// prediction of s over dt (s) with the drift detector's state change_mps
+// (D, m/s) and var_mps2 (B, (m/s)²), both updated; and an accepted update's
+// correction of s, ds_mps, with the drop of P_ss it made, into the detector.
+void sos_drift_predict(const bl_config *cfg, real &change_mps, real &var_mps2, real &still_share, VX &x, MX &P,
+                       real dt);
+void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2);
+// Its constants (ours, docs/performance.md "Speed of sound"): the detector's
+// window τ (s); the drift model's typical rate r_d (m/s², 0.1 ≈ 10 °C per
+// minute: s moves 0.6 m/s per °C; below); its prior probability π (1 %:
+// the drift is fed forward on strong evidence only, |D| above ~4√B); the
+// still-air random walk as a fraction ρ of speed_of_sound_drift_mps_per_sqrt_s
+// (1: the same random walk in both models, docs/performance.md); a
+// floor on B ((m/s)²) so that D/√B stays defined.
+constexpr real kSosDriftWindow_s = real(20);
+constexpr real kSosDriftRate_per_sqrt_s = real(0.5);
+// r_d = kSosDriftRate_per_sqrt_s · speed_of_sound_drift_mps_per_sqrt_s
+// (m/s²): one key sets how fast the air may change, 0.1 m/s² at the
+// default 0.2 m/s/√s; a site that declares still air (e.g. 0.01) gets a
+// drift model too small to matter.
+inline real sos_drift_rate_mps2(const bl_config *cfg)
+{
+    return kSosDriftRate_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s;
+}
+constexpr real kSosDriftPrior = real(0.01);
+constexpr real kSosStillFraction = real(1.0);
+constexpr real kSosDriftVarFloor_mps2 = real(1e-6);
 // Store x, P as the filter's state and update the converged flag.
 void commit(bl_filter *f, const VX &x, const MX &P);
 

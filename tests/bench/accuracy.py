@@ -18,6 +18,16 @@ the seeds:
   too are stated against the physical limit)
   diverged       seeds whose run failed, produced no estimate, a non-finite
                  one, or ended (last 10 s) with an RMS error above 0.5 m
+  (and, on an `honesty ...` line of its own before the last lines: is the
+  reported covariance honest? nees = the position NEES e^T P^-1 e (2 dof,
+  the estimate's own x-y covariance) averaged over the seeds and the run,
+  nees_lo/nees_hi its two-sided 95 % chi-square interval for the mean of
+  `seeds` runs (Bar-Shalom, Li & Kirubarajan 2001 sec. 5.4.2: seeds*nees ~
+  chi2(2*seeds)); within_3sigma_pct = share of the estimates whose position
+  error is inside the reported 3-sigma ellipse (Mahalanobis distance <= 3);
+  heading_nees and heading_within_3sigma_pct the same for the heading alone
+  (1 dof, interval chi2(seeds)/seeds); on a scenario with a kidnap the
+  estimates from the kidnap to the filter's next reset are left out of these)
 Options: --scenarios, --seeds, and --tuning KEY=VALUE (repeatable) to run the
 bridge with the site file's [tuning] section set so (docs/bridge.md), e.g. a
 smaller speed-of-sound random walk; the figures are then of that tuning.
@@ -42,7 +52,9 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "tests" / "integration"))
 import harness as h  # noqa: E402
 
-SCENARIOS = ("echo-storm", "kleeman-lab")  # printed in this order
+# Printed in this order; the last two lines stay echo-storm and kleeman-lab.
+SCENARIOS = ("temperature-swing10", "temperature-swing20", "wheel-worn", "standing-restart", "echo-storm",
+             "kleeman-lab")
 SKIP_S = 20.0            # start-up excluded from every figure, s
 DIVERGED_RMS_M = 0.5     # final-10-s RMS error above this: diverged
 LATERAL_MIN_SPEED_MPS = 0.05  # the path's direction is undefined when still
@@ -74,6 +86,39 @@ def lateral_error_m(truth: dict, t_us: np.ndarray, x: np.ndarray, y: np.ndarray)
     return lat
 
 
+def heading_nees(truth: dict, est: dict, sel: np.ndarray) -> np.ndarray:
+    """e_theta^2 / var_theta of the selected estimates (heading error wrapped to (-pi, pi])."""
+    eth = est["theta_rad"][sel] - h.truth_at(truth, est["t_us"][sel], "theta_rad")
+    eth = (eth + math.pi) % (2 * math.pi) - math.pi
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return eth ** 2 / est["var_theta_rad2"][sel]
+
+
+def chi2_interval(dof_per_run: int, runs: int) -> tuple[float, float]:
+    """Two-sided 95 % interval of the mean NEES of `runs` runs (Bar-Shalom et al. 2001
+    sec. 5.4.2): runs * mean ~ chi2(runs * dof), so [chi2.025, chi2.975] / runs."""
+    from scipy.stats import chi2
+    n = dof_per_run * runs
+    return float(chi2.ppf(0.025, n)) / runs, float(chi2.ppf(0.975, n)) / runs
+
+
+def honesty(good: list[dict], seeds: int) -> dict:
+    """The honesty figures (module doc) of the good runs."""
+    out = {}
+    for key, dof, name in (("nees", 2, "nees"), ("heading_nees", 1, "heading_nees")):
+        # each run's mean over its own estimates, then the mean over the runs
+        per_run = [float(np.nanmean(r[key])) for r in good if np.isfinite(r[key]).any()]
+        allv = np.concatenate([r[key] for r in good])
+        allv = allv[np.isfinite(allv)]
+        lo, hi = chi2_interval(dof, len(per_run) or seeds)
+        out[name] = float(np.mean(per_run)) if per_run else math.nan
+        out[name + "_lo"], out[name + "_hi"] = lo, hi
+        # inside 3 sigma: Mahalanobis distance <= 3, i.e. NEES <= 9
+        pct = 100.0 * float(np.mean(allv <= 9.0)) if allv.size else math.nan
+        out["within_3sigma_pct" if key == "nees" else "heading_within_3sigma_pct"] = pct
+    return out
+
+
 def tuned_site(scenario: str, tuning: list[str], out: Path) -> Path:
     """The scenario's site file, with a [tuning] section of KEY=VALUE items appended."""
     site = site_of(scenario)
@@ -90,7 +135,18 @@ def tuned_site(scenario: str, tuning: list[str], out: Path) -> Path:
     return path
 
 
-def judge(seed: int, truth_p: Path, est_p: Path) -> dict:
+def kidnap_time_s(scenario: str | None) -> float | None:
+    """The scenario's [faults] kidnap time (s), or None."""
+    if scenario is None:
+        return None
+    cp = configparser.ConfigParser(inline_comment_prefixes=(";", "#"))
+    cp.read(h.SCENARIOS / f"{scenario}.scenario.ini")
+    if not cp.has_option("faults", "kidnap"):
+        return None
+    return float(cp.get("faults", "kidnap").split(",")[0])
+
+
+def judge(seed: int, truth_p: Path, est_p: Path, scenario: str | None = None) -> dict:
     """One run's figures from its truth and estimates CSVs (also used by
     tests/bench/firmware.py on the firmware's estimates)."""
     truth = h.read_csv(truth_p, h.TRUTH_COLUMNS)
@@ -103,6 +159,16 @@ def judge(seed: int, truth_p: Path, est_p: Path) -> dict:
     last = sel & (e.t_s >= e.t_s[sel][-1] - 10.0)
     final_rms = float(np.sqrt(np.mean(e.pos_m[last] ** 2))) if finite else math.inf
     lat = lateral_error_m(truth, est["t_us"][sel], est["x_m"][sel], est["y_m"][sel])
+    # Honesty: a kidnap (the robot carried without its encoders) is in no
+    # covariance until the filter notices it; the estimates from the kidnap
+    # to the first reset after it are left out of the honesty figures.
+    honest = sel.copy()
+    t_kid = kidnap_time_s(scenario)
+    if t_kid is not None:
+        after = e.t_s >= t_kid
+        bumped = after & (e.reset_counter > (e.reset_counter[after][0] if after.any() else 0))
+        t_reset = e.t_s[bumped][0] if bumped.any() else math.inf
+        honest &= ~((e.t_s >= t_kid) & (e.t_s < t_reset))
     return {
         "seed": seed, "ok": True,
         "diverged": bool(not finite or final_rms > DIVERGED_RMS_M),
@@ -113,6 +179,8 @@ def judge(seed: int, truth_p: Path, est_p: Path) -> dict:
         "sos_pcrb2": h.truth_at(truth, est["t_us"][sel], "pcrb_sos_mps") ** 2,
         "sos2": e.sos_err_mps[sel] ** 2,
         "final_rms_m": final_rms,
+        "nees": e.mahal[honest] ** 2,
+        "heading_nees": heading_nees(truth, est, honest),
         "resets": int(e.reset_counter[-1]),
     }
 
@@ -134,7 +202,7 @@ def one_run(bridge: Path, scenario: str, seed: int, out: Path, site: Path) -> di
     if br.returncode != 0 or not est_p.exists():
         return {"seed": seed, "ok": False, "why": f"bridge exit {br.returncode}: "
                 f"{br.stderr.strip()[-300:]}"}
-    return judge(seed, truth_p, est_p)
+    return judge(seed, truth_p, est_p, scenario)
 
 
 def summarise(scenario: str, runs: list[dict]) -> tuple[str, dict]:
@@ -158,6 +226,7 @@ def summarise(scenario: str, runs: list[dict]) -> tuple[str, dict]:
     fig["lateral_pcrb_mm"] = math.sqrt(float(np.nanmean(np.concatenate(
         [r["lat_pcrb2"] for r in good])))) * 1e3
     fig["sos_pcrb_mps"] = math.sqrt(float(np.nanmean(np.concatenate([r["sos_pcrb2"] for r in good]))))
+    fig.update(honesty(good, len(runs)))
     line = (f"accuracy scenario={scenario} seeds={len(runs)} rmse_mm={fig['rmse_mm']:.1f} "
             f"pcrb_mm={fig['pcrb_mm']:.1f} ratio={fig['ratio']:.3f} "
             f"lateral_std_mm={fig['lateral_std_mm']:.1f} sos_err_mps={fig['sos_err_mps']:.3f} "
@@ -204,6 +273,11 @@ def main() -> int:
             print(f"bound scenario={scenario} lateral_std_mm={fig['lateral_std_mm']:.1f} "
                   f"lateral_pcrb_mm={fig['lateral_pcrb_mm']:.1f} sos_err_mps={fig['sos_err_mps']:.3f} "
                   f"sos_pcrb_mps={fig['sos_pcrb_mps']:.3f}")
+            print(f"honesty scenario={scenario} nees={fig['nees']:.2f} nees_lo={fig['nees_lo']:.2f} "
+                  f"nees_hi={fig['nees_hi']:.2f} within_3sigma_pct={fig['within_3sigma_pct']:.1f} "
+                  f"heading_nees={fig['heading_nees']:.2f} heading_nees_lo={fig['heading_nees_lo']:.2f} "
+                  f"heading_nees_hi={fig['heading_nees_hi']:.2f} "
+                  f"heading_within_3sigma_pct={fig['heading_within_3sigma_pct']:.1f}")
     (out / "accuracy.json").write_text(json.dumps(report, indent=1))
     for line in lines:
         print(line)

@@ -83,10 +83,19 @@ typedef struct sim_params {
     double initial_sos_mps;    /* speed of sound the filter starts from */
     double wheel_scale_l, wheel_scale_r; /* true wheel travel / reported travel (1 = nominal
                                             radius; 1.03 = wheel 3 % larger than configured) */
+    double s_rate_mps2;        /* the speed of sound changes at this rate (m/s per s) ... */
+    double s_ramp_from_s, s_ramp_to_s; /* ... from this time to this (s): a temperature ramp */
     uint64_t seed;
 } sim_params;
 
 static const sim_params *sim_sp;
+
+/* The true speed of sound at t (s): s_true_mps, plus the ramp. */
+static inline double sim_sos_at(const sim_params *sp, double t)
+{
+    const double a = t < sp->s_ramp_from_s ? sp->s_ramp_from_s : t > sp->s_ramp_to_s ? sp->s_ramp_to_s : t;
+    return sp->s_true_mps + sp->s_rate_mps2 * (a - sp->s_ramp_from_s);
+}
 
 /* Truth, analytic: stationary at (6, 3) heading +x, then round a circle of
  * radius 3 m about the room centre, counter-clockwise, speed
@@ -139,7 +148,7 @@ static inline sim_pulse sim_pulse_of(const sim_params *sp, const bl_config *cfg,
         const double ryp = y + cfg->ring_radius_m * sin(th + alpha);
         const double dz = cfg->receiver_height_m - bc->z_m;
         const double d = sqrt((rxp - bc->x_m) * (rxp - bc->x_m) + (ryp - bc->y_m) * (ryp - bc->y_m) + dz * dz);
-        ta = tf + d / sp->s_true_mps;
+        ta = tf + d / sim_sos_at(sp, tf);
     }
     sim_pulse p = {ta + sp->sigma_arrival_s * rng_gauss(), b, rx, 0, 0};
     if (sp->miss_prob > 0 && rng_uniform() < sp->miss_prob) p.missed = 1;
@@ -171,6 +180,8 @@ typedef struct sim_stats {
     long sample_every;  /* compare every n-th encoder frame (input; 0/1 = all) */
     double sum_v_est, sum_v_true; /* speed bias check */
     double final_kl, final_kr, final_sigma_kl, final_sigma_kr; /* wheel scales */
+    double sum_sos_e2;  /* speed-of-sound error² sum ((m/s)², samples after settle_s) */
+    double sum_sos_nees; /* its error² / its variance */
     /* inputs (kept by sim_run): */
     int check_cov;      /* check P at every sampled frame (cov_* below) */
     double first_until_s, last_from_s; /* > 0: also sum the errors of samples in
@@ -351,6 +362,11 @@ static inline void sim_run(const sim_params *sp, const bl_config *cfg_in, double
             st->samples++;
             if (fabs(ex) <= 3 * sqrt(e.cov[0]) && fabs(ey) <= 3 * sqrt(e.cov[6])) st->within_3sigma++;
             st->sum_e2 += err * err;
+            {
+                const double es = e.speed_of_sound_mps - sim_sos_at(sp, t);
+                st->sum_sos_e2 += es * es;
+                st->sum_sos_nees += es * es / ((double)e.sigma_speed_of_sound_mps * e.sigma_speed_of_sound_mps);
+            }
             {
                 const double a = e.cov[0], b = e.cov[1], c = e.cov[6];
                 st->sum_nees += (c * ex * ex - 2 * b * ex * ey + a * ey * ey) / (a * c - b * b);

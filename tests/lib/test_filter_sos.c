@@ -1,0 +1,89 @@
+/* The speed of sound's two models (filter.cpp sos_drift_predict; issue 14
+ * item 1): in still air s stays tight, in a temperature ramp it follows,
+ * one filter with the default tuning for both. And the standing robot's
+ * heading variance grows (issue 14 item 5). Synthetic world:
+ * filter_world.h. */
+#include "filter_world.h"
+
+/* RMS speed-of-sound error (m/s) and its mean NEES after settle_s of a run. */
+static void run_sos(const sim_params *sp, double settle_s, double *rms_mps, double *nees)
+{
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    sim_stats st;
+    memset(&st, 0, sizeof st);
+    sim_run(sp, &cfg, settle_s, &st);
+    assert_true(st.started);
+    assert_int_equal(st.nan_seen, 0);
+    assert_true(st.samples > 100);
+    *rms_mps = sqrt(st.sum_sos_e2 / st.samples);
+    *nees = st.sum_sos_nees / st.samples;
+    print_stats("sos", &st);
+    print_message("sos rms %.3f m/s, NEES %.2f\n", *rms_mps, *nees);
+}
+
+/* Still air: RMS error 0.65 m/s here (the still-air model alone, the one
+ * random walk of before: 0.64; the drifting-air model with its rate fed
+ * forward all the time: above 1.8). */
+static void test_still_air_tight(void **state)
+{
+    (void)state;
+    sim_params sp = default_sim();
+    sp.duration_s = 150;
+    double rms, nees;
+    run_sos(&sp, 50.0, &rms, &nees);
+    assert_true(rms < 0.7);
+    assert_true(nees < 3.0); /* honest: mean of a 1-dof chi-square is 1 */
+}
+
+/* A 6 m/s ramp over 60 s (0.1 m/s per s, 10 °C per minute) from 40 s, and
+ * the minute after: RMS error 1.21 m/s (float 1.09); the still-air random
+ * walk alone (the filter before): 1.32 (float 1.18). */
+static void test_ramp_followed(void **state)
+{
+    (void)state;
+    sim_params sp = default_sim();
+    sp.duration_s = 160;
+    sp.s_rate_mps2 = 0.1;
+    sp.s_ramp_from_s = 40;
+    sp.s_ramp_to_s = 100;
+    double rms, nees;
+    run_sos(&sp, 40.0, &rms, &nees);
+    assert_true(rms < 1.25);
+}
+
+/* A standing robot without pulses: its heading variance grows by the
+ * heading random walk σ_off²·dt (filter.cpp, Kleeman §3.10 "stationary"),
+ * not held at its start value. */
+static void test_standing_heading_variance_grows(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    bl_filter f;
+    assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+    const bl_filter_prior pr = prior_at(1000000, 6, 3, 0.05, 0.05, 0.1, 1000000, 1e-3);
+    assert_int_equal(bl_filter_start(&f, &pr), BL_OK);
+    bl_real x[NX], P0[NX * NX], P1[NX * NX];
+    assert_int_equal(bl_filter_get_state(&f, x, P0), BL_OK);
+    int64_t t = 1000000;
+    for (int k = 0; k < 100 * 60; ++k) { /* 60 s standing, encoders at 100 Hz */
+        t += 10000;
+        assert_int_equal(bl_filter_predict_odometry(&f, t, 0, 0), BL_OK);
+    }
+    assert_int_equal(bl_filter_get_state(&f, x, P1), BL_OK);
+    const double q = (double)cfg.wheels.heading_noise_rad_per_sqrt_s * cfg.wheels.heading_noise_rad_per_sqrt_s;
+    const double grown = (double)P1[BL_IX_THETA * NX + BL_IX_THETA] - (double)P0[BL_IX_THETA * NX + BL_IX_THETA];
+    assert_true(q > 0);
+    assert_true(fabs(grown - q * 60.0) < 0.05 * q * 60.0);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_still_air_tight),
+        cmocka_unit_test(test_ramp_followed),
+        cmocka_unit_test(test_standing_heading_variance_grows),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
