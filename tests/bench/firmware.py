@@ -51,7 +51,7 @@ def main() -> int:
     ap.add_argument("--out", default=str(acc.REPO / "build" / "bench" / "firmware"))
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--scenarios", default=",".join(acc.SCENARIOS))
+    ap.add_argument("--scenarios", default=",".join(acc.FIRMWARE_SCENARIOS))
     args = ap.parse_args()
     if args.check:
         r = acc.judge(0, Path(args.truth), Path(args.check))

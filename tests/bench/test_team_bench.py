@@ -149,7 +149,8 @@ def test_drift_per_distance_of_a_travelling_formation(run):
 def test_fixed_beacon_line_has_the_team_keys():
     runs = [{"seed": s, "ok": True, "diverged": False, "err2": np.full(10, 4e-4),
              "pcrb2": np.full(10, 1e-4), "lat": np.zeros(3), "lat_pcrb2": np.ones(3),
-             "sos_pcrb2": np.ones(10), "sos2": np.ones(10)} for s in (1, 2)]
+             "sos_pcrb2": np.ones(10), "sos2": np.ones(10), "nees": np.full(10, 2.0),
+             "heading_nees": np.full(10, 1.0)} for s in (1, 2)]
     line, fig = tb.fixed_line("marvelmind", runs)
     assert line == ("team scenario=marvelmind robots=1 seeds=2 rmse_mm=20.0 pcrb_mm=10.0 "
                     "ratio=2.000 drift_pct_of_distance=n/a init_rmse_mm=n/a "
