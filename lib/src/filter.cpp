@@ -624,24 +624,18 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     const bool moving = std::fabs(d_left_m) > real(1e-6) || std::fabs(d_right_m) > real(1e-6);
     const real cl = x(KL) * d_left_m, cr = x(KR) * d_right_m;  // calibrated distances (m)
     const real dth = (cr - cl) / effective_base_m(cfg);        // Δθ, Kleeman eq. 24 with χ (rad)
-    // §3.10 gives no formula; our reading, with the offset as a random
-    // walk (so it does not depend on the encoder rate) and the fraction
-    // proportional to |Δθ| (so a turn adds more than a straight step of
-    // the same wheel travel; that Δθ term is the only difference
-    // between §3.10's "straight" and "curve"):
-    //   σ_θ² += σ_off²·dt + (f·Δθ)²   (rad²)
-    // σ_off = heading_noise_rad_per_sqrt_s (rad/√s), f =
-    // heading_noise_fraction (1), dt in s. The offset's random walk holds
-    // for a standing robot too (§3.10's "stationary" type, where Δθ = 0):
-    // there the heading is learned from the ring's few centimetres of
-    // receiver offsets alone, whose unmodelled errors (directivity, the
-    // first receiver to trigger) do not average out; without it the
-    // heading's σ shrank as 1/√t while its error stayed, 3.6σ after a
-    // minute standing after a restart (issue 14; standing-restart).
-    Pn(TH, TH) += cfg->wheels.heading_noise_rad_per_sqrt_s * cfg->wheels.heading_noise_rad_per_sqrt_s * dt;
     if (moving) {
+        // §3.10 gives no formula; our reading, with the offset as a random
+        // walk (so it does not depend on the encoder rate) and the fraction
+        // proportional to |Δθ| (so a turn adds more than a straight step of
+        // the same wheel travel; that Δθ term is the only difference
+        // between §3.10's "straight" and "curve"):
+        //   σ_θ² += σ_off²·dt + (f·Δθ)²   (rad²)
+        // σ_off = heading_noise_rad_per_sqrt_s (rad/√s), f =
+        // heading_noise_fraction (1), dt in s.
         const real fr = cfg->wheels.heading_noise_fraction * dth;
-        Pn(TH, TH) += fr * fr;
+        Pn(TH, TH) +=
+            cfg->wheels.heading_noise_rad_per_sqrt_s * cfg->wheels.heading_noise_rad_per_sqrt_s * dt + fr * fr;
         // Skid-steer slip (config.h wheels.slip_*; skid steering slips by
         // its nature, Millibots §3.1): the ICR model (Martinez et al. 2005;
         // Mandow et al. 2007) takes the tracks' mean slip into χ; its random
