@@ -79,20 +79,22 @@ static inline void add_det(train_t *tr, int64_t t_us, uint32_t rx, bool dbl, uin
 
 enum { DOUBLE_FLAG = 0, DOUBLE_BURSTS = 1, DOUBLE_WIDTH = 2 };
 
-/* Adds firing number i (beacon i mod 6) fired at fire_us, heard by every
- * receiver facing the beacon. double_mode selects how beacon 1's double
- * pulse shows up. */
-static inline void add_firing(train_t *tr, int i, int64_t fire_us, int double_mode) {
+/* Adds firing number i, of beacon b at (bx_m, by_m), fired at fire_us: every
+ * receiver facing the beacon (±67.5°) within hearing_m hears it after
+ * distance / speed of sound (Kleeman 1992 eq. 19). double_mode selects how
+ * beacon 1's double pulse shows up. first_arrival is -1 when nobody hears it. */
+static inline void add_firing_of(train_t *tr, int i, int b, double bx_m, double by_m, double hearing_m,
+                                 int64_t fire_us, int double_mode) {
     assert_true(i < MAX_FIRINGS);
-    const int b = i % N_BEACONS;
     double x, y, th;
     robot_pose((double)fire_us * 1e-6, &x, &y, &th);
     int64_t first = INT64_MAX;
     for (uint32_t r = 0; r < N_RX; ++r) {
         const double ang = th + (double)r * (2 * PI_RAD / N_RX);
         const double rx = x + RING_R_M * cos(ang), ry = y + RING_R_M * sin(ang);
-        const double dx = beacon_xy[b][0] - rx, dy = beacon_xy[b][1] - ry;
+        const double dx = bx_m - rx, dy = by_m - ry;
         const double d = sqrt(dx * dx + dy * dy);
+        if (d > hearing_m) continue;
         /* the receiver hears the beacon within ±67.5° of its axis */
         if ((dx * cos(ang) + dy * sin(ang)) / d < cos(67.5 * PI_RAD / 180)) continue;
         const int64_t t = fire_us + (int64_t)llround(d / SOUND_MPS * 1e6);
@@ -109,8 +111,14 @@ static inline void add_firing(train_t *tr, int i, int64_t fire_us, int double_mo
         if (t < first) first = t;
     }
     tr->fire_beacon[i] = b;
-    tr->first_arrival[i] = first;
+    tr->first_arrival[i] = first == INT64_MAX ? -1 : first;
     if (i >= tr->n_firings) tr->n_firings = i + 1;
+}
+
+/* Adds firing number i (beacon i mod 6) of this world fired at fire_us. */
+static inline void add_firing(train_t *tr, int i, int64_t fire_us, int double_mode) {
+    const int b = i % N_BEACONS;
+    add_firing_of(tr, i, b, beacon_xy[b][0], beacon_xy[b][1], INFINITY, fire_us, double_mode);
 }
 
 static inline int cmp_det(const void *a, const void *b) {

@@ -33,30 +33,12 @@ static void dense_site(bl_config *site) {
     }
 }
 
-/* Firing i of the dense site (beacon i mod 16) at fire_us: every receiver
- * facing the beacon (±67.5°) within the hearing range hears it after
- * distance / speed of sound (Kleeman 1992 eq. 19), beacon 1 with the
- * node's double-pulse flag. */
+/* Firing i of the dense site (beacon i mod 16) at fire_us, heard within the
+ * hearing range, beacon 1 with the node's double-pulse flag. */
 static void add_dense_firing(train_t *tr, const bl_config *site, int i, int64_t fire_us) {
-    assert_true(i < MAX_FIRINGS);
     const int b = i % DENSE_N;
-    double x, y, th;
-    robot_pose((double)fire_us * 1e-6, &x, &y, &th);
-    int64_t first = INT64_MAX;
-    for (uint32_t r = 0; r < N_RX; ++r) {
-        const double ang = th + (double)r * (2 * PI_RAD / N_RX);
-        const double rx = x + RING_R_M * cos(ang), ry = y + RING_R_M * sin(ang);
-        const double dx = (double)site->beacons[b].x_m - rx, dy = (double)site->beacons[b].y_m - ry;
-        const double d = sqrt(dx * dx + dy * dy);
-        if (d > HEARING_M) continue;
-        if ((dx * cos(ang) + dy * sin(ang)) / d < cos(67.5 * PI_RAD / 180)) continue;
-        const int64_t t = fire_us + (int64_t)llround(d / SOUND_MPS * 1e6);
-        add_det(tr, t, r, b == 0, 2500, i);
-        if (t < first) first = t;
-    }
-    tr->fire_beacon[i] = b;
-    tr->first_arrival[i] = first == INT64_MAX ? -1 : first;
-    if (i >= tr->n_firings) tr->n_firings = i + 1;
+    add_firing_of(tr, i, b, (double)site->beacons[b].x_m, (double)site->beacons[b].y_m, HEARING_M, fire_us,
+                  DOUBLE_FLAG);
 }
 
 static void test_hearing_range_windows(void **state) {
