@@ -3,13 +3,15 @@ then an encoder silence) through the real bridge: the driver's table and last
 line, every target met but the latency one, whose verdict must follow its
 figures; each hour's latency p99 is the median of its 60 per-minute interval
 p99s, checked against the bridge's own status lines, and the hours' boundaries
-against the log. Whether the last hour's p99 is within 20 % of the first
-hour's is, for hours of ~20 us p99 replayed in 2 s of wall time each, as much
-the machine's doing as the bridge's, even as a median of minutes (docs/soak.md,
-"Latency": 17 vs 23 us in one run on an idle machine): `make soak` judges it,
-this test does not. The median itself is checked on made-up minutes."""
+against the log. The latency target compares the last hour with the first hour
+replayed by a fresh bridge beside it (in the same seconds of wall time); that
+bridge must have read exactly the log's first hour. Whether the last hour is
+within 20 % of it is left to `make soak` to judge: hours of ~15 us p99
+replayed in 2 s each still move by a few us with the machine (docs/soak.md,
+"Latency"). The median itself is checked on made-up minutes."""
 from __future__ import annotations
 
+import json
 import os
 import re
 import statistics
@@ -22,10 +24,11 @@ BUILD = Path(os.environ.get("BL_BUILD", REPO / "build"))
 BRIDGE = BUILD / "bridge" / "beaconloc-bridge"
 
 LATENCY_CHECK = re.compile(r"target (met   |MISSED) latency p99 of the last hour within 20% of "
-                           r"the first hour's \(median of the 60 interval p99s\): "
+                           r"the first hour's replayed beside it \(median of the 60 interval "
+                           r"p99s\): "
                            r"last hour (-?\d+) us vs first hour (-?\d+) us")
 INTERVALS = "status intervals: 119 of 119 status lines read + the final one, 60 s each: " \
-            "every hour has its 60"
+            "every hour has its 60, and the first hour replayed beside the last has its 60"
 # the bridge's status lines (docs/bridge.md "STATUS LINE"): the interval p50 and p99
 BRIDGE_INTERVAL = re.compile(r"^info: (status|final): .*\(interval p50 (-?\d+) p99 (-?\d+) us\)$")
 LOG_TIME = re.compile(rb"^\((\d+)\.(\d{6})\) ")
@@ -66,8 +69,11 @@ def test_two_hour_soak_meets_every_target(tmp_path):
     # every status line read, 60 minutes an hour; each hour's p50 / p99 the median (the
     # higher middle one) of its minutes' interval figures, as the bridge printed them
     assert INTERVALS in out, out
-    minutes = [BRIDGE_INTERVAL.match(ln) for ln in (tmp_path / "bridge.err").read_text()
-               .splitlines() if ln.startswith(("info: status:", "info: final:"))]
+    def minutes_of(err):
+        return [BRIDGE_INTERVAL.match(ln) for ln in (tmp_path / err).read_text()
+                .splitlines() if ln.startswith(("info: status:", "info: final:"))]
+
+    minutes = minutes_of("bridge.err")
     assert len(minutes) == 120 and all(minutes), out
     p50s, p99s = [int(m.group(2)) for m in minutes], [int(m.group(3)) for m in minutes]
     p50_rows = [int(r.split()[8]) for r in rows]
@@ -84,7 +90,15 @@ def test_two_hour_soak_meets_every_target(tmp_path):
     lat = LATENCY_CHECK.search(out)
     assert lat, out
     verdict, last, first = lat.group(1).strip(), int(lat.group(2)), int(lat.group(3))
-    assert (first, last) == (p99_rows[0], p99_rows[-1]) and last == int(lat_p99), out
+    # the first hour's figure is the fresh bridge's, which read exactly the log's first hour
+    fresh = minutes_of("first-hour.err")
+    assert len(fresh) == 60 and all(fresh), out
+    fresh_p99s = [int(m.group(3)) for m in fresh if int(m.group(3)) >= 0]
+    assert len(fresh_p99s) == 60, out
+    fresh_stats = json.loads((tmp_path / "first-hour-stats.json").read_text())
+    assert fresh_stats["frames_total"] == int(rows[0].split()[2]), out
+    assert first == statistics.median_high(fresh_p99s), (fresh_p99s, out)
+    assert last == p99_rows[-1] and last == int(lat_p99), out
     assert (verdict == "met") == (last <= 1.2 * first), out
     others = out.replace(lat.group(0), "")
     assert others.count("target met") == 4 and "MISSED" not in others, out
