@@ -99,15 +99,16 @@ void team_on_odom_timer(struct daemon *d, int64_t now)
         struct team_output o;
         if (team_output(&d->team, k, 0, &o) != 0 || !o.valid)
             continue;
+        if (!o.lost)
+            send_robot(d, &o);
         struct team_robot *r = &d->team.r[k - 1];
+        /* the row after the send, as after_update() (odometry.c) */
         if (d->csv_open && o.t_team_us != r->last_row_us) {
             r->last_row_us = o.t_team_us;
             int rc = estimates_csv_write_team(&d->csv, &o);
             if (rc != 0)
                 write_failed("--estimates", d->opt.estimates, rc, &d->csv_err_logged);
         }
-        if (!o.lost)
-            send_robot(d, &o);
     }
     sync_mav_fds(d);
 }
