@@ -227,7 +227,7 @@ bool range_beacons_ok(const bl_config *c)
 // unused). `name` is the field's member path, the one bl_config_check
 // reports (and the site schema's `lib` entry for the key that sets it).
 // One table checked by one loop (rule_ok) instead of ~50 inline checks:
-// 1.4 KiB less flash on the Cortex-M4 (lib/README.md, size-m4).
+// 1.7 KiB less flash on the Cortex-M4 (lib/README.md, size-m4).
 enum RuleFlags : uint8_t {
     kLoGt = 1u << 0,   // v > lo
     kLoGe = 1u << 1,   // v >= lo
@@ -239,11 +239,18 @@ enum RuleFlags : uint8_t {
     kHiRef = 1u << 7,  // hi is the bl_real field at ref
 };
 
+// The constant bounds, by index (a row holds two indices, not two reals).
+enum Bound : uint8_t { b0, bHalf, b1, b10, b20, b60, b90, b100, b360, b3600, b1e4, b1e5, bMaxRx, kNone = b0 };
+// clang-format off
+const real kBound[] = {real(0), real(0.5), real(1), real(10), real(20), real(60), real(90), real(100),
+                       real(360), real(3600), real(1e4), real(1e5), real(BL_MAX_RECEIVERS)};
+// clang-format on
+
 struct Rule {
     uint16_t field;  // offsetof(bl_config, member path)
     uint16_t ref;    // offsetof the bound's field (kLoRef / kHiRef)
     uint8_t flags;
-    real lo, hi;
+    Bound lo, hi;  // kBound[lo], kBound[hi] (kNone: the row has no flag for it)
     const char *name;
 };
 
@@ -252,93 +259,92 @@ struct Rule {
 // lo, hi, ref path) with kLoRef / kHiRef.
 #define RULE(path, flags, lo, hi)                                                                                      \
     {                                                                                                                  \
-        BL_OFF(path), 0, (flags), real(lo), real(hi), #path                                                            \
+        BL_OFF(path), 0, (flags), (lo), (hi), #path                                                                    \
     }
 #define RULE_REF(path, flags, lo, hi, ref)                                                                             \
     {                                                                                                                  \
-        BL_OFF(path), BL_OFF(ref), (flags), real(lo), real(hi), #path                                                  \
+        BL_OFF(path), BL_OFF(ref), (flags), (lo), (hi), #path                                                          \
     }
-constexpr real kNone = real(0);  // a bound the row does not check (no flag for it)
 constexpr uint8_t kOpen = kLoGt | kHiLt, kGeLt = kLoGe | kHiLt, kGeLe = kLoGe | kHiLe, kGtLe = kLoGt | kHiLe;
 
 // The firing cycle, checked before the beacons.
 const Rule kCycleRules[] = {
-    RULE(beacon_period_s, kOpen, 0, 10),
-    RULE_REF(double_pulse_spacing_s, kGeLt | kHiRef, 0, kNone, beacon_period_s),
-    RULE_REF(burst_length_s, kGeLt | kHiRef, 0, kNone, beacon_period_s),
-    RULE(hearing_range_m, kGeLe, 0, 1e4),
+    RULE(beacon_period_s, kOpen, b0, b10),
+    RULE_REF(double_pulse_spacing_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
+    RULE_REF(burst_length_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
+    RULE(hearing_range_m, kGeLe, b0, b1e4),
 };
 
 // Everything after the beacons, in bl_config's order.
 const Rule kRules[] = {
-    RULE(receiver_count, kU32 | kGeLe, 1, BL_MAX_RECEIVERS),
-    RULE(ring_radius_m, kGeLt, 0, 10),
-    RULE(first_angle_deg, kAbs | kHiLe, kNone, 360),
-    RULE(angle_step_deg, kAbs | kHiLe, kNone, 360),
-    RULE(receiver_height_m, kAbs | kHiLt, kNone, 1e5),
-    RULE(beamwidth_deg, kGtLe, 0, 360),
-    RULE(wheel_base_m, kOpen, 0, 100),
-    RULE(wheel_radius_m, kOpen, 0, 100),
-    RULE(ticks_per_rev, kU32 | kLoGt, 0, kNone),
-    RULE(encoder_rate_hz, kLoGt, 0, kNone),
-    RULE(sigma_wheel_scale, kGeLe, 0, 0.5),
-    RULE(speed_of_sound_mps, kOpen, 1, 1e4),
-    RULE_REF(sigma_speed_of_sound_mps, kOpen | kHiRef, 0, kNone, speed_of_sound_mps),
+    RULE(receiver_count, kU32 | kGeLe, b1, bMaxRx),
+    RULE(ring_radius_m, kGeLt, b0, b10),
+    RULE(first_angle_deg, kAbs | kHiLe, kNone, b360),
+    RULE(angle_step_deg, kAbs | kHiLe, kNone, b360),
+    RULE(receiver_height_m, kAbs | kHiLt, kNone, b1e5),
+    RULE(beamwidth_deg, kGtLe, b0, b360),
+    RULE(wheel_base_m, kOpen, b0, b100),
+    RULE(wheel_radius_m, kOpen, b0, b100),
+    RULE(ticks_per_rev, kU32 | kLoGt, b0, kNone),
+    RULE(encoder_rate_hz, kLoGt, b0, kNone),
+    RULE(sigma_wheel_scale, kGeLe, b0, bHalf),
+    RULE(speed_of_sound_mps, kOpen, b1, b1e4),
+    RULE_REF(sigma_speed_of_sound_mps, kOpen | kHiRef, b0, kNone, speed_of_sound_mps),
     // Pulse arrival times (aid_pulse.cpp): Kleeman 1992 §3.11 σ, §3.9 start-up.
-    RULE(pulse.sigma_arrival_s, kOpen, 0, 1),
-    RULE_REF(pulse.startup_sigma_arrival_s, kGeLt | kLoRef, kNone, 1, pulse.sigma_arrival_s),
-    RULE(pulse.gate_sigma, kLoGt, 0, kNone),
+    RULE(pulse.sigma_arrival_s, kOpen, b0, b1),
+    RULE_REF(pulse.startup_sigma_arrival_s, kGeLt | kLoRef, kNone, b1, pulse.sigma_arrival_s),
+    RULE(pulse.gate_sigma, kLoGt, b0, kNone),
     RULE_REF(pulse.startup_gate_sigma, kLoGe | kLoRef, kNone, kNone, pulse.gate_sigma),
-    RULE_REF(pulse.firing_jitter_s, kGeLt | kHiRef, 0, kNone, beacon_period_s),
-    RULE(pulse.iekf_max_iterations, kU32 | kGeLe, 1, 20),
-    RULE(pulse.iekf_step_tolerance, kLoGe, 0, kNone),
+    RULE_REF(pulse.firing_jitter_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
+    RULE(pulse.iekf_max_iterations, kU32 | kGeLe, b1, b20),
+    RULE(pulse.iekf_step_tolerance, kLoGe, b0, kNone),
     // Wheel encoders (odometry predict, aid_wheels.cpp): Kleeman 1992 §3.10.
-    RULE(wheels.sigma_wheel_per_m, kGeLt, 0, 1),
-    RULE(wheels.sigma_distance_per_m, kGeLt, 0, 1),
-    RULE(wheels.heading_noise_rad_per_sqrt_s, kLoGe, 0, kNone),
-    RULE(wheels.heading_noise_fraction, kGeLe, 0, 1),
-    RULE(wheels.stationary_noise_scale, kGtLe, 0, 1),
-    RULE(wheels.skid_factor, kGeLe, 1, 10),
-    RULE(wheels.slip_heading_rad_per_sqrt_rad, kGeLt, 0, 1),
-    RULE(wheels.slip_lateral_m_per_sqrt_m, kGeLt, 0, 1),
+    RULE(wheels.sigma_wheel_per_m, kGeLt, b0, b1),
+    RULE(wheels.sigma_distance_per_m, kGeLt, b0, b1),
+    RULE(wheels.heading_noise_rad_per_sqrt_s, kLoGe, b0, kNone),
+    RULE(wheels.heading_noise_fraction, kGeLe, b0, b1),
+    RULE(wheels.stationary_noise_scale, kGtLe, b0, b1),
+    RULE(wheels.skid_factor, kGeLe, b1, b10),
+    RULE(wheels.slip_heading_rad_per_sqrt_rad, kGeLt, b0, b1),
+    RULE(wheels.slip_lateral_m_per_sqrt_m, kGeLt, b0, b1),
 #if BL_WITH_BEARINGS
     // Bearings (aid_bearing.cpp).
-    RULE(bearing.sigma_deg, kOpen, 0, 90),
-    RULE(bearing.gate_sigma, kLoGt, 0, kNone),
-    RULE(bearing.offset_x_m, kAbs | kHiLt, kNone, 100),
-    RULE(bearing.offset_y_m, kAbs | kHiLt, kNone, 100),
-    RULE(bearing.snapshot_window_s, kGtLe, 0, 60),
-    RULE(bearing.max_fix_drms_m, kLoGt, 0, kNone),
+    RULE(bearing.sigma_deg, kOpen, b0, b90),
+    RULE(bearing.gate_sigma, kLoGt, b0, kNone),
+    RULE(bearing.offset_x_m, kAbs | kHiLt, kNone, b100),
+    RULE(bearing.offset_y_m, kAbs | kHiLt, kNone, b100),
+    RULE(bearing.snapshot_window_s, kGtLe, b0, b60),
+    RULE(bearing.max_fix_drms_m, kLoGt, b0, kNone),
 #endif
 #if BL_WITH_RANGES
     // Ranges (aid_range.cpp); range.team_site is checked by bl_config_check.
-    RULE(range.sigma_m, kOpen, 0, 100),
-    RULE(range.sigma_per_m, kGeLt, 0, 1),
-    RULE(range.max_range_m, kOpen, 0, 1e4),
-    RULE(range.gate_sigma, kLoGt, 0, kNone),
-    RULE(range.offset_x_m, kAbs | kHiLt, kNone, 100),
-    RULE(range.offset_y_m, kAbs | kHiLt, kNone, 100),
-    RULE(range.height_m, kAbs | kHiLt, kNone, 1e5),
-    RULE(range.snapshot_window_s, kGtLe, 0, 60),
-    RULE(range.max_fix_drms_m, kLoGt, 0, kNone),
+    RULE(range.sigma_m, kOpen, b0, b100),
+    RULE(range.sigma_per_m, kGeLt, b0, b1),
+    RULE(range.max_range_m, kOpen, b0, b1e4),
+    RULE(range.gate_sigma, kLoGt, b0, kNone),
+    RULE(range.offset_x_m, kAbs | kHiLt, kNone, b100),
+    RULE(range.offset_y_m, kAbs | kHiLt, kNone, b100),
+    RULE(range.height_m, kAbs | kHiLt, kNone, b1e5),
+    RULE(range.snapshot_window_s, kGtLe, b0, b60),
+    RULE(range.max_fix_drms_m, kLoGt, b0, kNone),
 #endif
     // Tuning.
-    RULE_REF(sigma_period_s, kOpen | kHiRef, 0, kNone, beacon_period_s),
-    RULE(converged_sigma_xy_m, kLoGt, 0, kNone),
-    RULE(accel_noise_mps2, kLoGe, 0, kNone),
-    RULE(angular_accel_noise_radps2, kLoGe, 0, kNone),
-    RULE(speed_of_sound_drift_mps_per_sqrt_s, kLoGe, 0, kNone),
-    RULE(period_drift_s_per_sqrt_s, kLoGe, 0, kNone),
-    RULE(wheel_scale_drift_per_sqrt_s, kGeLt, 0, 1),
-    RULE(initial_theta_rad, kAbs | kHiLe, kNone, 100),
-    RULE(reset_sigma_theta_rad, kLoGt, 0, kNone),
-    RULE(ring_heading, kU32 | kHiLe, kNone, 1),
+    RULE_REF(sigma_period_s, kOpen | kHiRef, b0, kNone, beacon_period_s),
+    RULE(converged_sigma_xy_m, kLoGt, b0, kNone),
+    RULE(accel_noise_mps2, kLoGe, b0, kNone),
+    RULE(angular_accel_noise_radps2, kLoGe, b0, kNone),
+    RULE(speed_of_sound_drift_mps_per_sqrt_s, kLoGe, b0, kNone),
+    RULE(period_drift_s_per_sqrt_s, kLoGe, b0, kNone),
+    RULE(wheel_scale_drift_per_sqrt_s, kGeLt, b0, b1),
+    RULE(initial_theta_rad, kAbs | kHiLe, kNone, b100),
+    RULE(reset_sigma_theta_rad, kLoGt, b0, kNone),
+    RULE(ring_heading, kU32 | kHiLe, kNone, b1),
 #if BL_WITH_SONAR
-    RULE(sonar_site, kU32 | kHiLe, kNone, 1),
+    RULE(sonar_site, kU32 | kHiLe, kNone, b1),
 #endif
-    RULE(initial_sigma_v_mps, kLoGt, 0, kNone),
-    RULE(initial_sigma_omega_radps, kLoGt, 0, kNone),
-    RULE(max_predict_gap_s, kGtLe, 0, 3600),
+    RULE(initial_sigma_v_mps, kLoGt, b0, kNone),
+    RULE(initial_sigma_omega_radps, kLoGt, b0, kNone),
+    RULE(max_predict_gap_s, kGtLe, b0, b3600),
 };
 #undef RULE
 #undef RULE_REF
@@ -363,8 +369,8 @@ bool rule_ok(const bl_config *c, const Rule &r)
         if (!is_finite(v)) return false;
     }
     if (r.flags & kAbs) v = std::fabs(v);
-    const real lo = r.flags & kLoRef ? field_at(c, r.ref) : r.lo;
-    const real hi = r.flags & kHiRef ? field_at(c, r.ref) : r.hi;
+    const real lo = r.flags & kLoRef ? field_at(c, r.ref) : kBound[r.lo];
+    const real hi = r.flags & kHiRef ? field_at(c, r.ref) : kBound[r.hi];
     if ((r.flags & kLoGt) && !(v > lo)) return false;
     if ((r.flags & kLoGe) && !(v >= lo)) return false;
     if ((r.flags & kHiLt) && !(v < hi)) return false;
