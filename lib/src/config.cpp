@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <cstring>
+#include <limits>
 
 using bl::is_finite;
 using bl::real;
@@ -226,6 +227,8 @@ bool range_beacons_ok(const bl_config *c)
 // (e.g. pulse.firing_jitter_s < beacon_period_s). kAbs bounds |v| (lo
 // unused). `name` is the field's member path, the one bl_config_check
 // reports (and the site schema's `lib` entry for the key that sets it).
+// The site schema's range of the key that sets a field lies within the
+// field's rule here (tests/lib/test_config.c, through bl_config_range_of).
 // One table checked by one loop (rule_ok) instead of ~50 inline checks:
 // 1.7 KiB less flash on the Cortex-M4 (lib/README.md, size-m4).
 enum RuleFlags : uint8_t {
@@ -269,7 +272,7 @@ constexpr uint8_t kOpen = kLoGt | kHiLt, kGeLt = kLoGe | kHiLt, kGeLe = kLoGe | 
 
 // The firing cycle, checked before the beacons.
 const Rule kCycleRules[] = {
-    RULE(beacon_period_s, kOpen, b0, b10),
+    RULE(beacon_period_s, kGtLe, b0, b10),
     RULE_REF(double_pulse_spacing_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
     RULE_REF(burst_length_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
     RULE(hearing_range_m, kGeLe, b0, b1e4),
@@ -278,29 +281,29 @@ const Rule kCycleRules[] = {
 // Everything after the beacons, in bl_config's order.
 const Rule kRules[] = {
     RULE(receiver_count, kU32 | kGeLe, b1, bMaxRx),
-    RULE(ring_radius_m, kGeLt, b0, b10),
+    RULE(ring_radius_m, kGeLe, b0, b10),
     RULE(first_angle_deg, kAbs | kHiLe, kNone, b360),
     RULE(angle_step_deg, kAbs | kHiLe, kNone, b360),
     RULE(receiver_height_m, kAbs | kHiLt, kNone, b1e5),
     RULE(beamwidth_deg, kGtLe, b0, b360),
-    RULE(wheel_base_m, kOpen, b0, b100),
-    RULE(wheel_radius_m, kOpen, b0, b100),
+    RULE(wheel_base_m, kGtLe, b0, b100),
+    RULE(wheel_radius_m, kGtLe, b0, b100),
     RULE(ticks_per_rev, kU32 | kLoGt, b0, kNone),
     RULE(encoder_rate_hz, kLoGt, b0, kNone),
     RULE(sigma_wheel_scale, kGeLe, b0, bHalf),
     RULE(speed_of_sound_mps, kOpen, b1, b1e4),
     RULE_REF(sigma_speed_of_sound_mps, kOpen | kHiRef, b0, kNone, speed_of_sound_mps),
     // Pulse arrival times (aid_pulse.cpp): Kleeman 1992 §3.11 σ, §3.9 start-up.
-    RULE(pulse.sigma_arrival_s, kOpen, b0, b1),
-    RULE_REF(pulse.startup_sigma_arrival_s, kGeLt | kLoRef, kNone, b1, pulse.sigma_arrival_s),
+    RULE(pulse.sigma_arrival_s, kGtLe, b0, b1),
+    RULE_REF(pulse.startup_sigma_arrival_s, kGeLe | kLoRef, kNone, b1, pulse.sigma_arrival_s),
     RULE(pulse.gate_sigma, kLoGt, b0, kNone),
     RULE_REF(pulse.startup_gate_sigma, kLoGe | kLoRef, kNone, kNone, pulse.gate_sigma),
     RULE_REF(pulse.firing_jitter_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
     RULE(pulse.iekf_max_iterations, kU32 | kGeLe, b1, b20),
     RULE(pulse.iekf_step_tolerance, kLoGe, b0, kNone),
     // Wheel encoders (odometry predict, aid_wheels.cpp): Kleeman 1992 §3.10.
-    RULE(wheels.sigma_wheel_per_m, kGeLt, b0, b1),
-    RULE(wheels.sigma_distance_per_m, kGeLt, b0, b1),
+    RULE(wheels.sigma_wheel_per_m, kGeLe, b0, b10),
+    RULE(wheels.sigma_distance_per_m, kGeLe, b0, b10),
     RULE(wheels.heading_noise_rad_per_sqrt_s, kLoGe, b0, kNone),
     RULE(wheels.heading_noise_fraction, kGeLe, b0, b1),
     RULE(wheels.stationary_noise_scale, kGtLe, b0, b1),
@@ -309,7 +312,7 @@ const Rule kRules[] = {
     RULE(wheels.slip_lateral_m_per_sqrt_m, kGeLt, b0, b1),
 #if BL_WITH_BEARINGS
     // Bearings (aid_bearing.cpp).
-    RULE(bearing.sigma_deg, kOpen, b0, b90),
+    RULE(bearing.sigma_deg, kGtLe, b0, b90),
     RULE(bearing.gate_sigma, kLoGt, b0, kNone),
     RULE(bearing.offset_x_m, kAbs | kHiLt, kNone, b100),
     RULE(bearing.offset_y_m, kAbs | kHiLt, kNone, b100),
@@ -319,7 +322,7 @@ const Rule kRules[] = {
 #if BL_WITH_RANGES
     // Ranges (aid_range.cpp); range.team_site is checked by bl_config_check.
     RULE(range.sigma_m, kOpen, b0, b100),
-    RULE(range.sigma_per_m, kGeLt, b0, b1),
+    RULE(range.sigma_per_m, kGeLe, b0, b1),
     RULE(range.max_range_m, kOpen, b0, b1e4),
     RULE(range.gate_sigma, kLoGt, b0, kNone),
     RULE(range.offset_x_m, kAbs | kHiLt, kNone, b100),
@@ -335,7 +338,7 @@ const Rule kRules[] = {
     RULE(angular_accel_noise_radps2, kLoGe, b0, kNone),
     RULE(speed_of_sound_drift_mps_per_sqrt_s, kLoGe, b0, kNone),
     RULE(period_drift_s_per_sqrt_s, kLoGe, b0, kNone),
-    RULE(wheel_scale_drift_per_sqrt_s, kGeLt, b0, b1),
+    RULE(wheel_scale_drift_per_sqrt_s, kGeLe, b0, b1),
     RULE(initial_theta_rad, kAbs | kHiLe, kNone, b100),
     RULE(reset_sigma_theta_rad, kLoGt, b0, kNone),
     RULE(ring_heading, kU32 | kHiLe, kNone, b1),
@@ -448,6 +451,41 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     // A team site needs the team fusion (common.h BL_WITH_TEAM).
     BL_CHECK(c->range.team_site == 0 || (BL_WITH_TEAM && c->range.team_site == 1), "range.team_site");
 #endif
+    return BL_OK;
+}
+
+namespace {
+const Rule *rule_at(uint16_t field)
+{
+    for (const Rule &r : kCycleRules)
+        if (r.field == field) return &r;
+    for (const Rule &r : kRules)
+        if (r.field == field) return &r;
+    return nullptr;
+}
+}  // namespace
+
+extern "C" int bl_config_range_of(const char *field, bl_config_range *out)
+{
+    if (field == nullptr || out == nullptr) return BL_EINVAL;
+    const Rule *r = nullptr;
+    for (const Rule &c : kCycleRules)
+        if (std::strcmp(c.name, field) == 0) r = &c;
+    for (const Rule &c : kRules)
+        if (std::strcmp(c.name, field) == 0) r = &c;
+    if (r == nullptr) return BL_EINVAL;
+    const real inf = std::numeric_limits<real>::infinity(), nan = std::numeric_limits<real>::quiet_NaN();
+    bl_config_range g;
+    std::memset(&g, 0, sizeof g);
+    g.lo = r->flags & kLoRef ? nan : (r->flags & (kLoGt | kLoGe)) ? kBound[r->lo] : -inf;
+    g.hi = r->flags & kHiRef ? nan : (r->flags & (kHiLt | kHiLe)) ? kBound[r->hi] : inf;
+    g.lo_open = (r->flags & kLoGt) != 0;
+    g.hi_open = (r->flags & kHiLt) != 0;
+    g.abs_value = (r->flags & kAbs) != 0;
+    const Rule *ref = r->flags & (kLoRef | kHiRef) ? rule_at(r->ref) : nullptr;
+    if (r->flags & kLoRef) g.lo_field = ref ? ref->name : nullptr;
+    if (r->flags & kHiRef) g.hi_field = ref ? ref->name : nullptr;
+    *out = g;
     return BL_OK;
 }
 
