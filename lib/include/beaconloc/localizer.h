@@ -103,9 +103,9 @@
  * Memory: caller-owned struct (filter + sequencer + policy state), no heap,
  * no globals, no pulse buffer (a closed pulse's members are fused from the
  * sequencer's slot they were merged in). sizeof on Cortex-M4F, float (make
- * size-m4, BL_WITH_BEARINGS = BL_WITH_RANGES = 0): 2,048 B with
- * BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 1,000, sequencer 704,
- * policy + counters + events 344), 2,736 B with 16/16.
+ * size-m4, BL_WITH_BEARINGS = BL_WITH_RANGES = BL_WITH_TEAM = BL_WITH_SONAR
+ * = 0): 2,016 B with BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 1,024,
+ * sequencer 696, policy + counters + events 296), 2,688 B with 16/16.
  * Cost per call: a
  * detection O(BL_SEQ_MAX_PENDING + BL_MAX_RECEIVERS) plus what it closes;
  * every pulse closed costs one bl_filter_fuse_pulse per member (O(NX²) per

@@ -272,11 +272,11 @@ typedef struct bl_seq_pending {
 } bl_seq_pending;
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
- * `counters` are private. Size: BL_SEQ_MAX_PENDING · (24 + 10·BL_MAX_RECEIVERS)
- * + 256 + 12·BL_MAX_BEACONS bytes on x86-64 and on Cortex-M4 (4 of the 10
- * bytes per receiver are the caller's tags): 768 B with 8 beacons and 8
- * receivers (the M4 example), 1,184 B with 16/16 (the own model's firing
- * interval and the hint's tracking windows took 64 B / 96 B of that). */
+ * `counters` are private. Size: BL_SEQ_MAX_PENDING · (24 + 8·BL_MAX_RECEIVERS)
+ * + 243 + 12·BL_MAX_BEACONS bytes, rounded up to 8, on x86-64 and on
+ * Cortex-M4 (4 of the 8 bytes per receiver are the caller's tags): 696 B
+ * with 8 beacons and 8 receivers (the M4 example; 776 B before issue 10's
+ * uint16 member offsets and byte-sized indices), 1,048 B with 16/16. */
 typedef struct bl_sequencer {
     bl_seq_config cfg;
     bl_seq_counters counters;
