@@ -26,14 +26,14 @@ int64_t state_time_us(const bl_filter *f) { return f->t_us_; }
 // deepest chain (pulse -> fusion -> snapshot solver).
 #define INLINE inline __attribute__((always_inline))
 
-NOINLINE void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset_cause cause, uint16_t count)
+NOINLINE void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset_cause cause, uint8_t count)
 {
     bl_loc_event ev;
     std::memset(&ev, 0, sizeof ev);
     ev.kind = static_cast<uint8_t>(kind);
     ev.cause = static_cast<uint8_t>(cause);
     ev.count = count;
-    ev.window_len = static_cast<uint16_t>(loc->reject_w_);
+    ev.window_len = loc->reject_w_;
     bl_estimate est;
     if (bl_filter_estimate(&loc->filter, &est) == BL_OK && est.started) {
         ev.t_us = est.t_us;
@@ -44,7 +44,7 @@ NOINLINE void push_event(bl_localizer *loc, bl_loc_event_kind kind, bl_loc_reset
         ev.reset_counter = loc->reset_base_;
     }
     if (loc->ev_len_ == BL_LOC_EVENT_QUEUE) {  // drop the oldest
-        loc->ev_head_ = (loc->ev_head_ + 1) % BL_LOC_EVENT_QUEUE;
+        loc->ev_head_ = static_cast<uint8_t>((loc->ev_head_ + 1) % BL_LOC_EVENT_QUEUE);
         loc->ev_len_--;
         loc->counters_.events_dropped++;
     }
@@ -59,13 +59,16 @@ void clear_window(bl_localizer *loc)
     loc->win_rejected_ = 0;
 }
 
+// The window's counts and the queue's indices are uint8_t (bl_localizer).
+static_assert(BL_LOC_REJECT_WINDOW_MAX <= 32 && BL_LOC_EVENT_QUEUE <= 255, "bl_localizer's small fields");
+
 void set_window(bl_localizer *loc, uint32_t k)
 {
     uint32_t w = k + k / 2;
     if (w > BL_LOC_REJECT_WINDOW_MAX) w = BL_LOC_REJECT_WINDOW_MAX;
     if (k > w) k = w;
-    loc->reject_k_ = k;
-    loc->reject_w_ = w;
+    loc->reject_k_ = static_cast<uint8_t>(k);
+    loc->reject_w_ = static_cast<uint8_t>(w);
     clear_window(loc);
 }
 
@@ -167,7 +170,7 @@ void watch(bl_localizer *loc, uint32_t beacon, bool rejected)
     const uint32_t bit = 1u << loc->win_next_;
     loc->win_beacon_[loc->win_next_] = static_cast<uint8_t>(beacon);
     loc->win_rejected_ = rejected ? (loc->win_rejected_ | bit) : (loc->win_rejected_ & ~bit);
-    loc->win_next_ = (loc->win_next_ + 1) % loc->reject_w_;
+    loc->win_next_ = static_cast<uint8_t>((loc->win_next_ + 1) % loc->reject_w_);
     if (loc->win_len_ < loc->reject_w_) loc->win_len_++;
 }
 
@@ -223,7 +226,7 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     loc->counters_.snapshot_restarts++;
     loc->wheel_ref_ = false;                           // the state time moved to the latest arrival
     loc->last_reset_seen_ = loc->filter.reset_count_;  // this reset is reported here, once
-    push_event(loc, BL_LOC_EV_RESET, BL_LOC_CAUSE_PERSISTENT_REJECTION, static_cast<uint16_t>(n));
+    push_event(loc, BL_LOC_EV_RESET, BL_LOC_CAUSE_PERSISTENT_REJECTION, static_cast<uint8_t>(n));  // n <= W
     return true;
 }
 
@@ -835,7 +838,7 @@ extern "C" int bl_localizer_next_event(bl_localizer *loc, bl_loc_event *ev)
     if (!valid(loc)) return BL_ENOTINIT;
     if (loc->ev_len_ == 0) return 0;
     *ev = loc->events_[loc->ev_head_];
-    loc->ev_head_ = (loc->ev_head_ + 1) % BL_LOC_EVENT_QUEUE;
+    loc->ev_head_ = static_cast<uint8_t>((loc->ev_head_ + 1) % BL_LOC_EVENT_QUEUE);
     loc->ev_len_--;
     return 1;
 }

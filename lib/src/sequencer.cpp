@@ -22,6 +22,9 @@ constexpr int64_t kNsPerUs = bl::kSeqNsPerUs;
 constexpr int64_t kMaxPeriodUs = bl::kSeqMaxPeriodUs;
 constexpr uint32_t kMaxTimeoutCycles = bl::kSeqMaxTimeoutCycles;
 constexpr int64_t kFlightUnitUs = 16;  // the hint's stored flights (bl_sequencer.hint_flight_u)
+// bl_sequencer keeps beacon indices in int8_t / uint8_t, its pending count in uint8_t.
+static_assert(BL_MAX_BEACONS <= 64 && BL_MAX_RECEIVERS <= 32 && BL_SEQ_MAX_PENDING <= 255,
+              "bl_sequencer's small fields");
 
 bool time_ok(int64_t t_us) { return t_us <= BL_SEQ_TIME_LIMIT_US && t_us >= -BL_SEQ_TIME_LIMIT_US; }
 
@@ -230,7 +233,7 @@ void lose_lock(bl_sequencer *s)
     s->hint_valid = false;
     s->have_last = false;
     s->beacon_seen_mask = 0;
-    s->conflicts_in_row = 0;
+    s->conflict_pending = false;
     s->consecutive_spurious = 0;
 }
 
@@ -252,7 +255,7 @@ void own_follow(bl_sequencer *s, int32_t b, int64_t t_us)
     s->locked = true;
     s->ref_lo_us = lo;
     s->ref_hi_us = hi;
-    s->ref_beacon = b;
+    s->ref_beacon = static_cast<int8_t>(b);
 }
 
 // Beacon 1's double pulse anchors the model (fresh: forget the interval).
@@ -261,7 +264,7 @@ void anchor_at(bl_sequencer *s, int64_t t_us, bool fresh)
     if (fresh) s->locked = false;
     own_follow(s, 0, t_us);
     s->anchor_us = t_us;
-    s->conflicts_in_row = 0;
+    s->conflict_pending = false;
     s->one_single_seen = false;
 }
 
@@ -337,7 +340,7 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
             s->counters.double_conflicts++;
             const int64_t cycle_us = s->period_ns * c.beacon_count / kNsPerUs;
             bool confirmed = false;
-            if (s->conflicts_in_row > 0) {
+            if (s->conflict_pending) {
                 const int64_t dt = t - s->conflict_us;
                 const int64_t m_cycles = round_div(dt, cycle_us);
                 // ... and only when the model's own beacon 1 was heard
@@ -355,7 +358,7 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
                 lose_lock(s);
                 relocked = was_locked;
             } else {
-                s->conflicts_in_row++;
+                s->conflict_pending = true;
                 s->conflict_us = t;
                 a = e;
                 p->double_pulse = false;
@@ -415,7 +418,7 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
             if (!p->double_pulse && a.beacon == 0) s->one_single_seen = true;
         }
         s->have_last = true;
-        s->last_beacon = a.beacon;
+        s->last_beacon = static_cast<int8_t>(a.beacon);
         s->last_fire_us = a.fire_us;
         s->counters.assigned++;
     }
@@ -460,17 +463,24 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det)
     for (uint32_t i = 0; i < seq->n_pending; ++i) {
         bl_seq_pending &g = seq->pending[i];
         if (abs64(t - g.start_us) > c.merge_window_us) continue;
-        if (t < g.start_us) {
-            // New earliest detection: rebase every member's offset on it
-            // (offsets stay within 2 merge windows < T <= 10 s: int32).
-            const int32_t shift = static_cast<int32_t>(g.start_us - t);
+        // The members' offsets are uint16 (us): a merge that would spread
+        // them over more than 65,535 us is not taken (the detection opens
+        // its own pulse). Members lie within a merge window of the start,
+        // a new earliest one moves it by at most another: a merge window
+        // up to 32,767 us (a ring radius up to ~5 m) never meets this.
+        const int64_t start_new = t < g.start_us ? t : g.start_us;
+        const int64_t shift = g.start_us - start_new;
+        const int64_t span = max64(g.span_us + shift, t - start_new);
+        if (span > UINT16_MAX) continue;
+        g.span_us = static_cast<uint16_t>(span);
+        if (shift > 0) {
+            // New earliest detection: rebase every member's offset on it.
             for (uint32_t m = g.rx_mask; m != 0; m &= m - 1) {
                 const uint32_t r = static_cast<uint32_t>(__builtin_ctz(m));
-                g.rx_offset_us[r] += shift;
+                g.rx_offset_us[r] = static_cast<uint16_t>(g.rx_offset_us[r] + shift);
             }
         }
-        const int64_t start_new = t < g.start_us ? t : g.start_us;
-        const int32_t off = static_cast<int32_t>(t - start_new);
+        const uint16_t off = static_cast<uint16_t>(t - start_new);
         // A receiver keeps its own earliest detection (a later one of the
         // same receiver in the window is an echo of the same firing).
         if ((g.rx_mask & bit) == 0 || off < g.rx_offset_us[det->receiver]) {
@@ -482,7 +492,7 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det)
         if (det->double_pulse || wide) g.double_mask |= bit;
         if (t < g.start_us) {
             g.start_us = t;
-            g.receiver = det->receiver;
+            g.receiver = static_cast<uint8_t>(det->receiver);
             g.amplitude_mv = det->amplitude_mv;
             g.width_us = det->width_us;
             // keep pending[] sorted by start time
@@ -524,7 +534,8 @@ int bl_sequencer_push(bl_sequencer *seq, const bl_seq_detection *det)
     }
     bl_seq_pending &g = seq->pending[pos];
     g.start_us = t;
-    g.receiver = det->receiver;
+    g.receiver = static_cast<uint8_t>(det->receiver);
+    g.span_us = 0;
     g.rx_mask = bit;
     g.amplitude_mv = det->amplitude_mv;
     g.width_us = det->width_us;
@@ -614,7 +625,7 @@ int bl_sequencer_set_hint(bl_sequencer *seq, const bl_seq_hint *hint)
     }
     seq->hint_valid = true;
     seq->hint_fire_us = hint->fire_us;
-    seq->hint_beacon = hint->beacon;
+    seq->hint_beacon = static_cast<uint8_t>(hint->beacon);
     seq->hint_period_ns = static_cast<int64_t>(p * static_cast<bl_real>(kNsPerUs) + static_cast<bl_real>(0.5));
     seq->hint_fire_sigma_ns = static_cast<int64_t>(fs * static_cast<bl_real>(kNsPerUs) + static_cast<bl_real>(0.5));
     seq->hint_period_sigma_ns = static_cast<int64_t>(ps * static_cast<bl_real>(kNsPerUs) + static_cast<bl_real>(0.5));
@@ -673,7 +684,7 @@ uint32_t sequencer_member_order(const bl_seq_pending &g, uint8_t order[BL_MAX_RE
     uint32_t n = 0;
     for (uint32_t m = g.rx_mask; m != 0; m &= m - 1) {
         const uint32_t r = static_cast<uint32_t>(__builtin_ctz(m));
-        const int32_t off = g.rx_offset_us[r];
+        const uint16_t off = g.rx_offset_us[r];
         uint32_t k = n;
         while (k > 0 &&
                (g.rx_offset_us[order[k - 1]] > off || (g.rx_offset_us[order[k - 1]] == off && r == g.receiver))) {

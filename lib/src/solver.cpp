@@ -6,6 +6,7 @@
 // the common emission time as an extra unknown is weighted Gauss-Newton; for
 // the exactly determined case (3D N = 4) its step equals eq. 8.
 #include "internal.hpp"
+#include "linalg.hpp"
 
 #include <cstring>
 #include <limits>
@@ -154,31 +155,32 @@ template <int D> int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
         }
         return true;
     };
-    // Pivoted LDLᵀ of the normal matrix; reciprocal condition estimate from
-    // the pivots after Jacobi scaling (dimensionless columns).
-    auto factor_ok = [&](Eigen::LDLT<MatN> &ldlt) -> bool {
-        VecN scale;
+    // The normal matrix after Jacobi scaling, As = S A S with S = diag(1 /
+    // sqrt(A_kk)) (dimensionless columns), factored once by Cholesky
+    // (linalg.hpp, G&VL Alg. 4.2.1): As = L Lᵀ. Its pivot ratio (min L_kk /
+    // max L_kk)² = min D_k / max D_k of As = L D Lᵀ is the reciprocal
+    // condition estimate; A⁻¹ b = S As⁻¹ (S b) then needs no second factor.
+    VecN jacobi;  // S's diagonal
+    MatN L;
+    auto factor_ok = [&]() -> bool {
         for (int k = 0; k < n; ++k) {
             if (!(A(k, k) > real(0))) return false;
-            scale(k) = real(1) / std::sqrt(A(k, k));
+            jacobi(k) = real(1) / std::sqrt(A(k, k));
         }
-        const MatN As = scale.asDiagonal() * A * scale.asDiagonal();
-        Eigen::LDLT<MatN> sc(As);
-        if (sc.info() != Eigen::Success) return false;
-        const VecN dv = sc.vectorD();
-        const real dmax = dv.cwiseAbs().maxCoeff();
-        const real dmin = dv.minCoeff();
-        if (!(dmax > real(0)) || !(dmin > kMinRcond * dmax)) return false;
-        ldlt.compute(A);
-        return ldlt.info() == Eigen::Success;
+        const MatN As = jacobi.asDiagonal() * A * jacobi.asDiagonal();
+        real ratio = 0;
+        return bl::cholesky<n>(As, &L, &ratio) && ratio > kMinRcond;
+    };
+    // x = A⁻¹ b = S As⁻¹ S b.
+    auto solve_normal = [&](const VecN &b) -> VecN {
+        return jacobi.cwiseProduct(bl::cholesky_solve<n>(L, jacobi.cwiseProduct(b)));
     };
 
     uint32_t it = 0;
     bool converged = false;
-    Eigen::LDLT<MatN> ldlt;
     while (it < max_it) {
-        if (!linearise(p, tau) || !factor_ok(ldlt)) return BL_EDEGENERATE;
-        const VecN step = ldlt.solve(g);
+        if (!linearise(p, tau) || !factor_ok()) return BL_EDEGENERATE;
+        const VecN step = solve_normal(g);
         if (!step.allFinite()) return BL_EDEGENERATE;
         ++it;
         // The next iterate p + step, checked before it is taken (scalar loop:
@@ -209,11 +211,11 @@ template <int D> int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
         }
     }
     // Covariance and error vector at the final point.
-    if (!linearise(p, tau) || !factor_ok(ldlt)) return BL_EDEGENERATE;
+    if (!linearise(p, tau) || !factor_ok()) return BL_EDEGENERATE;
     // (JᵀWJ)⁻¹ in units of (m, tau m); column by column (vector solves stay
     // off Eigen's level-3 kernels, which reference malloc).
     MatN cov_m;
-    for (int k = 0; k < n; ++k) cov_m.col(k) = ldlt.solve(VecN::Unit(k));
+    for (int k = 0; k < n; ++k) cov_m.col(k) = solve_normal(VecN::Unit(k));
     // The column solves are symmetric only to rounding: make it exact.
     for (int r = 0; r < n; ++r)
         for (int c = r + 1; c < n; ++c) cov_m(r, c) = cov_m(c, r) = real(0.5) * (cov_m(r, c) + cov_m(c, r));

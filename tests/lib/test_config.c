@@ -345,6 +345,73 @@ static void test_receiver_angles(void **state)
     assert_true(fabs((double)a - (10 - 90) * PI / 180) < 1e-6);
 }
 
+/* The site schema (hw_sim/beaconloc_sim/data/site_schema.toml, through the
+ * generated site_keys.h) and the library's range rules agree: every value
+ * the bridge takes for a key that sets a bl_config field passes that
+ * field's range in bl_config_check (bl_config_range_of); a side bounded by
+ * another field (e.g. below beacon_period_s) is the library's alone. */
+typedef struct schema_range {
+    const char *section, *key;
+    double lo, hi;
+    bool lo_open;
+} schema_range;
+#define SCHEMA_RANGE_K_REAL(sec, k, st, member, lo, hi, lo_open) {#sec, #k, lo, hi, lo_open},
+#define SCHEMA_RANGE_K_INT(sec, k, st, member, lo, hi, lo_open) {#sec, #k, lo, hi, lo_open},
+#define SCHEMA_RANGE_K_STR(sec, k, st, member, lo, hi, lo_open)
+#define SCHEMA_RANGE_K_LOGLEVEL(sec, k, st, member, lo, hi, lo_open)
+#define SCHEMA_RANGE_K_ENDPOINT(sec, k, st, member, lo, hi, lo_open)
+#define SCHEMA_RANGE_K_IFNAME(sec, k, st, member, lo, hi, lo_open)
+#define SCHEMA_RANGE(sec, k, type, st, member, lo, hi, lo_open, def) SCHEMA_RANGE_##type(sec, k, st, member, lo, hi, lo_open)
+static const schema_range schema_ranges[] = {SITE_KEYS_SINGLE(SCHEMA_RANGE)};
+#define LIB_KEY(sec, k, type, member, field, geometry) {#sec, #k, #field},
+static const struct {
+    const char *section, *key, *field;
+} lib_keys[] = {SITE_LIB_FIELDS(LIB_KEY)};
+
+static void test_schema_ranges_within_library(void **state)
+{
+    (void)state;
+    int compared = 0, disagree = 0;
+    for (size_t i = 0; i < sizeof lib_keys / sizeof lib_keys[0]; ++i) {
+        bl_config_range lib;
+        if (bl_config_range_of(lib_keys[i].field, &lib) != BL_OK) continue; /* counts: not a range rule */
+        const schema_range *sr = NULL;
+        for (size_t j = 0; j < sizeof schema_ranges / sizeof schema_ranges[0]; ++j)
+            if (!strcmp(schema_ranges[j].section, lib_keys[i].section) && !strcmp(schema_ranges[j].key, lib_keys[i].key))
+                sr = &schema_ranges[j];
+        assert_non_null(sr); /* a numeric key: it has a range */
+        /* the library's interval on v (|v| <= hi is -hi <= v <= hi) */
+        double lo = (double)lib.lo, hi = (double)lib.hi;
+        bool lo_open = lib.lo_open;
+        if (lib.abs_value) {
+            lo = -hi;
+            lo_open = lib.hi_open;
+        }
+        const bool lo_ok = isnan(lo) || sr->lo > lo || (sr->lo == lo && (sr->lo_open || !lo_open));
+        const bool hi_ok = isnan(hi) || sr->hi < hi || (sr->hi == hi && !lib.hi_open); /* schema: hi closed */
+        if (!lo_ok || !hi_ok) {
+            print_error("[%s] %s: schema %s%g, %g] outside the library's %s %s%g, %g%s\n", sr->section, sr->key,
+                        sr->lo_open ? "(" : "[", sr->lo, sr->hi, lib_keys[i].field, lo_open ? "(" : "[", lo, hi,
+                        lib.hi_open ? ")" : "]");
+            disagree++;
+        }
+        compared++;
+    }
+    assert_true(compared >= 40); /* nearly every estimator key has a range rule */
+    assert_int_equal(disagree, 0);
+    /* the lookup itself: constant, open and field-relative sides */
+    bl_config_range r;
+    assert_int_equal(bl_config_range_of("pulse.firing_jitter_s", &r), BL_OK);
+    assert_true(r.lo == 0 && !r.lo_open && isnan((double)r.hi) && r.hi_open);
+    assert_string_equal(r.hi_field, "beacon_period_s");
+    assert_null(r.lo_field);
+    assert_int_equal(bl_config_range_of("receiver_height_m", &r), BL_OK);
+    assert_true(r.abs_value && r.hi == (bl_real)1e5 && r.hi_open && isinf((double)r.lo));
+    assert_int_equal(bl_config_range_of("beacons", &r), BL_EINVAL);
+    assert_int_equal(bl_config_range_of(NULL, &r), BL_EINVAL);
+    assert_int_equal(bl_config_range_of("beacon_period_s", NULL), BL_EINVAL);
+}
+
 static void test_strerror(void **state)
 {
     (void)state;
@@ -370,6 +437,7 @@ int main(void)
         cmocka_unit_test(test_beacon_count_uses_only_first_n),
         cmocka_unit_test(test_bearing_sites),
         cmocka_unit_test(test_receiver_angles),
+        cmocka_unit_test(test_schema_ranges_within_library),
         cmocka_unit_test(test_strerror),
     };
     return cmocka_run_group_tests_name(IS_FLOAT ? "config (float)" : "config (double)", tests, NULL, NULL);

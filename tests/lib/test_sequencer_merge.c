@@ -34,6 +34,43 @@ static void test_out_of_order_receivers(void **state) {
     assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), BL_OK);
 }
 
+/* Members' offsets from the pulse's start are uint16 us: with a merge
+ * window of 40 ms (a ring radius of ~7 m), detections reported ever earlier
+ * keep merging while the members span at most 65,535 us, each member keeping
+ * its own exact arrival (60 ms after the start here); the one that would
+ * widen the span to 70 ms opens its own pulse instead. */
+static void test_wide_merge_offsets(void **state) {
+    (void)state;
+    bl_sequencer seq;
+    bl_seq_config c = kleeman_cfg();
+    c.merge_window_us = 40000;
+    c.double_spacing_us = 0; /* no second burst: the window may be wide */
+    assert_int_equal(bl_sequencer_init(&seq, &c), BL_OK);
+    const int64_t t[4] = {1100000, 1070000, 1040000, 1030000};
+    for (uint32_t r = 0; r < 4; ++r) {
+        bl_seq_detection d = {.time_us = t[r], .receiver = r, .amplitude_mv = (uint16_t)(100 + r), .width_us = 1000,
+                              .tag = 7 + r};
+        assert_int_equal(bl_sequencer_push(&seq, &d), BL_OK);
+    }
+    assert_int_equal(seq.counters.merged, 2); /* receivers 1 and 2, not 3 */
+    bl_seq_pulse p;
+    assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), 1);
+    assert_int_equal(p.arrival_us, 1030000);
+    assert_int_equal(p.member_count, 1);
+    assert_int_equal(p.receiver, 3);
+    assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), 1);
+    assert_int_equal(p.arrival_us, 1040000);
+    assert_int_equal(p.member_count, 3);
+    for (uint32_t m = 0; m < 3; ++m) {
+        const uint32_t r = 2 - m; /* earliest first */
+        assert_int_equal(p.members[m].receiver, r);
+        assert_int_equal(p.members[m].arrival_us, t[r]);
+        assert_int_equal(p.members[m].amplitude_mv, 100 + r);
+        assert_int_equal(p.members[m].tag, 7 + r);
+    }
+    assert_int_equal(bl_sequencer_pop(&seq, INT64_MAX, &p), BL_OK);
+}
+
 /* Every merged pulse carries each receiver's own detection as a member:
  * one member per receiver that heard the firing, with that receiver's own
  * (true) arrival time, sorted by time, the first one being the pulse's
@@ -152,6 +189,7 @@ static void test_members_out_of_order(void **state) {
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_out_of_order_receivers),
+        cmocka_unit_test(test_wide_merge_offsets),
         cmocka_unit_test(test_members),
         cmocka_unit_test(test_members_out_of_order),
     };

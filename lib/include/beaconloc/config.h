@@ -127,7 +127,7 @@ typedef struct bl_range_params {
     bl_real sigma_m;           /* [range_sensor] sigma_m: σ of a range at short distance (m), > 0
                                   (Millibots: 8 mm resolution) */
     bl_real sigma_per_m;       /* [range_sensor] sigma_per_m: σ grows with the range:
-                                  σ = sigma_m + sigma_per_m·range (m per m), >= 0, < 1 */
+                                  σ = sigma_m + sigma_per_m·range (m per m), 0..1 */
     bl_real max_range_m;       /* [range_sensor] max_range_m: the sensor's maximum range (m), > 0
                                   (Millibots: about 3 m); a range beyond 1.5 times this is
                                   refused as bad input (bl_filter_fuse_range) */
@@ -304,6 +304,23 @@ int bl_config_default(bl_config *cfg);
  * (static storage): its member path, e.g. "beacon_period_s", "pulse.gate_sigma"
  * (a source's block, then the member), or NULL when BL_OK. */
 int bl_config_check(const bl_config *cfg, const char **bad_field);
+
+/* The range bl_config_check gives one field, by the name it reports
+ * ("beacon_period_s", "pulse.gate_sigma"): lo < v (lo_open) or lo <= v, and
+ * v < hi (hi_open) or v <= hi, on |v| when abs_value; a side that is not
+ * bounded is -inf / +inf; a side bounded by another field (e.g.
+ * pulse.firing_jitter_s < beacon_period_s) is NaN, that field's name in
+ * lo_field / hi_field (else NULL). For tests and tools that check a site
+ * schema against the library (tests/lib/test_config.c). Errors: BL_EINVAL
+ * (NULL, or a field without a range rule: the beacon counts and positions,
+ * whose checks are not ranges, and fields bl_config_check does not check). */
+typedef struct bl_config_range {
+    bl_real lo, hi;
+    bool lo_open, hi_open;
+    bool abs_value;
+    const char *lo_field, *hi_field;
+} bl_config_range;
+int bl_config_range_of(const char *field, bl_config_range *out);
 
 /* Receiver k's body-frame angle (rad): first_angle_deg + k·step, in radians.
  * Errors: BL_EINVAL (NULL, k >= receiver_count). */

@@ -103,9 +103,9 @@
  * Memory: caller-owned struct (filter + sequencer + policy state), no heap,
  * no globals, no pulse buffer (a closed pulse's members are fused from the
  * sequencer's slot they were merged in). sizeof on Cortex-M4F, float (make
- * size-m4, BL_WITH_BEARINGS = BL_WITH_RANGES = 0): 2,048 B with
- * BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 1,000, sequencer 704,
- * policy + counters + events 344), 2,736 B with 16/16.
+ * size-m4, BL_WITH_BEARINGS = BL_WITH_RANGES = BL_WITH_TEAM = BL_WITH_SONAR
+ * = 0): 2,016 B with BL_MAX_BEACONS = BL_MAX_RECEIVERS = 8 (filter 1,024,
+ * sequencer 696, policy + counters + events 296), 2,688 B with 16/16.
  * Cost per call: a
  * detection O(BL_SEQ_MAX_PENDING + BL_MAX_RECEIVERS) plus what it closes;
  * every pulse closed costs one bl_filter_fuse_pulse per member (O(NX²) per
@@ -204,8 +204,9 @@ typedef enum bl_loc_reset_cause {
 typedef struct bl_loc_event {
     uint8_t kind;           /* bl_loc_event_kind */
     uint8_t cause;          /* bl_loc_reset_cause (RESET), else 0 */
-    uint16_t count;         /* PERSISTENT_REJECTION: rejected arrivals in the window */
-    uint16_t window_len;    /* PERSISTENT_REJECTION: arrivals in the window (W) */
+    uint8_t count;          /* PERSISTENT_REJECTION: rejected arrivals in the window
+                               (<= W <= BL_LOC_REJECT_WINDOW_MAX) */
+    uint8_t window_len;     /* PERSISTENT_REJECTION: arrivals in the window (W) */
     uint32_t reset_counter; /* published reset counter after the event */
     int64_t t_us;           /* state time after the event (0 when not started) */
     bl_real x_m, y_m;       /* position after the event (STARTED, RESET from a snapshot) */
@@ -280,16 +281,18 @@ typedef struct bl_localizer {
     /* ---- private ---- */
     int64_t wheel_last_us_; /* last wheel sample */
     uint32_t magic_;
-    uint32_t reject_k_;     /* K */
-    uint32_t reject_w_;     /* W */
     uint32_t win_rejected_; /* bit i: slot i rejected */
-    uint32_t win_len_, win_next_;
     uint32_t reset_base_;
     uint32_t last_reset_seen_;
-    uint32_t misnumbered_in_row_;
     uint32_t measurements_;
     uint32_t newest_tag_;
-    uint32_t ev_head_, ev_len_;
+    /* (bytes last: the window's counts are <= BL_LOC_REJECT_WINDOW_MAX, the
+       queue's <= BL_LOC_EVENT_QUEUE, misnumbered_in_row_ <= 2) */
+    uint8_t reject_k_; /* K */
+    uint8_t reject_w_; /* W */
+    uint8_t win_len_, win_next_;
+    uint8_t ev_head_, ev_len_;
+    uint8_t misnumbered_in_row_;
     uint8_t win_beacon_[BL_LOC_REJECT_WINDOW_MAX];
     bool have_tag_;
     bool was_started_;

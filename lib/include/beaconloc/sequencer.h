@@ -256,39 +256,33 @@ typedef struct bl_seq_counters {
 /* Private: one pulse whose merge window is open. */
 typedef struct bl_seq_pending {
     int64_t start_us; /* earliest detection (us); windows count from it */
-    uint32_t receiver;
+    uint8_t receiver; /* the earliest detection's (< BL_MAX_RECEIVERS <= 32) */
+    uint8_t reserved_;
+    uint16_t span_us; /* largest of rx_offset_us[] (us) */
     uint32_t rx_mask; /* receivers heard (bit per receiver) */
     uint16_t amplitude_mv;
     uint16_t width_us;
-    uint32_t double_mask;                   /* receivers showing beacon 1's signature */
-    int32_t rx_offset_us[BL_MAX_RECEIVERS]; /* per receiver in rx_mask: its earliest
-                                                 detection - start_us (us, >= 0) */
+    uint32_t double_mask;                    /* receivers showing beacon 1's signature */
+    uint16_t rx_offset_us[BL_MAX_RECEIVERS]; /* per receiver in rx_mask: its earliest
+                                                  detection - start_us (us, 0..65,535: a
+                                                  merge that would spread the members
+                                                  wider is not taken, see push) */
     uint16_t rx_amplitude_mv[BL_MAX_RECEIVERS];
     uint32_t rx_tag[BL_MAX_RECEIVERS]; /* per receiver: its earliest detection's tag */
 } bl_seq_pending;
 
 /* The sequencer. Initialise with bl_sequencer_init; fields other than
- * `counters` are private. Size: BL_SEQ_MAX_PENDING · (24 + 10·BL_MAX_RECEIVERS)
- * + 256 + 12·BL_MAX_BEACONS bytes on x86-64 and on Cortex-M4 (4 of the 10
- * bytes per receiver are the caller's tags): 768 B with 8 beacons and 8
- * receivers (the M4 example), 1,184 B with 16/16 (the own model's firing
- * interval and the hint's tracking windows took 64 B / 96 B of that). */
+ * `counters` are private. Size: BL_SEQ_MAX_PENDING · (24 + 8·BL_MAX_RECEIVERS)
+ * + 243 + 12·BL_MAX_BEACONS bytes, rounded up to 8, on x86-64 and on
+ * Cortex-M4 (4 of the 8 bytes per receiver are the caller's tags): 696 B
+ * with 8 beacons and 8 receivers (the M4 example; 776 B before issue 10's
+ * uint16 member offsets and byte-sized indices), 1,048 B with 16/16. */
 typedef struct bl_sequencer {
     bl_seq_config cfg;
     bl_seq_counters counters;
     /* ---- private ---- */
     bl_seq_pending pending[BL_SEQ_MAX_PENDING];
-    /* (4-byte fields first, then the int64 ones: no padding) */
-    uint32_t n_pending;
-    uint32_t magic;
-    uint32_t consecutive_spurious;
-    int32_t last_beacon; /* beacon of the last assigned pulse */
-    uint32_t conflicts_in_row;
-    uint32_t hint_beacon;
-    uint32_t beacon_seen_mask; /* beacons with a valid beacon_last_us */
-    bool locked;
-    bool hint_valid;
-    bool have_last;       /* last_* valid */
+    /* (int64 fields first, then the 4-, 2- and 1-byte ones: no padding) */
     int64_t horizon_us;   /* earliest time a new detection may have (us) */
     int64_t anchor_us;    /* beacon-1 arrival of the model (us) */
     int64_t period_ns;    /* tracked T (ns) */
@@ -301,11 +295,23 @@ typedef struct bl_sequencer {
     int64_t beacon_last_us[BL_MAX_BEACONS]; /* first arrival of each beacon's last firing */
     int64_t ref_lo_us;                      /* own model: firing of beacon ref_beacon's last */
     int64_t ref_hi_us;                      /* numbered firing lies in [ref_lo_us, ref_hi_us] */
-    int32_t ref_beacon;
+    uint32_t magic;
+    uint32_t consecutive_spurious;
+    uint32_t beacon_seen_mask; /* beacons with a valid beacon_last_us */
     int32_t hint_flight_rate_us_per_s;
-    uint32_t tracking_misses;                   /* pulses in a row outside the tracking windows (start-up: inside) */
     uint16_t hint_flight_u[BL_MAX_BEACONS];     /* hint's tracking windows: centre and */
     uint16_t hint_flight_tol_u[BL_MAX_BEACONS]; /* half width (units of 16 us) */
+    /* beacon indices (< BL_MAX_BEACONS <= 64, sequencer.cpp) and small counts */
+    uint8_t n_pending;       /* <= BL_SEQ_MAX_PENDING */
+    int8_t last_beacon;      /* beacon of the last assigned pulse, or BL_SEQ_UNASSIGNED */
+    uint8_t hint_beacon;     /* the hint's beacon */
+    int8_t ref_beacon;       /* own model's reference beacon */
+    uint8_t tracking_misses; /* pulses in a row outside the tracking windows (start-up: inside);
+                                <= 6, then the windows are dropped */
+    bool conflict_pending;   /* a double pulse contradicted the model (conflict_us valid) */
+    bool locked;
+    bool hint_valid;
+    bool have_last; /* last_* valid */
     bool hint_flights;
     bool one_single_seen; /* beacon 1 numbered without its signature since the last anchor */
 } bl_sequencer;
