@@ -93,6 +93,7 @@ class Ranges(RangeFlags):
 class RangeReceiver(Node):
     message = "RANGE"
     node_id = 4
+    stream = ("ranges", 5)   # range noise, dropouts, multipath
     status_phase_us = 0
 
     def __init__(self, clock: NodeClock, scn):
@@ -107,7 +108,7 @@ class RangeReceiver(Node):
         k_count = site.range_beacon_count
         ping_us = self.periodic_us(iv, self.period_us)
         n = len(ping_us)
-        rng = iv.rng_ranges
+        rng = iv.rng(self)
         # drawn for every ping, sent or not: noise, dropout, multipath, its image
         noise = rng.standard_normal(n)
         u_drop, u_multi = rng.random(n), rng.random(n)

@@ -95,6 +95,7 @@ def world_segments(scn) -> tuple[np.ndarray, int]:
 class SonarRing(Node):
     message = "SONAR"
     node_id = 5
+    stream = ("sonar", 7)   # the ring's range noise
     status_phase_us = 500_000
 
     def __init__(self, clock: NodeClock, scn):
@@ -123,7 +124,7 @@ class SonarRing(Node):
         scn, site = self.scn, self.scn.site
         counts, sensor = self.ping_counts(iv)
         n = len(counts)
-        rng = iv.rng_sonar
+        rng = iv.rng(self)
         noise = rng.standard_normal(n)          # drawn for every ping, heard or not
         t_f = self.clock.true_time_s(counts)
         st = scn.trajectory.state(t_f)
