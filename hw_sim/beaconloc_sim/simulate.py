@@ -60,6 +60,15 @@ class SimResult:
     ranges: Ranges | None = None         # every range ping (sent or not, and why not)
     sonar: SonarPings | None = None      # every sonar ping (its reading, flags, echo kind)
 
+    def measured(self) -> dict:
+        """The record of every sensor kind the site has, by its name in the simulator's stats
+        (outputs.py): each counts itself (stats())."""
+        site = self.scenario.site
+        return {name: record for name, record, present in (
+            ("bearings", self.bearings, site.bearing_beacon_count),
+            ("ranges", self.ranges, site.range_beacon_count),
+            ("sonar", self.sonar, site.sonar_count)) if present}
+
 
 def run(scn: Scenario, *, encode: bool = True) -> SimResult:
     """Simulate scn. A run shorter than the scenario file's is the prefix of the

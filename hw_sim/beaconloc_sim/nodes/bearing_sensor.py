@@ -69,6 +69,12 @@ class Bearings:
     def select(self, keep) -> Bearings:
         return Bearings(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
 
+    def stats(self) -> dict:
+        """The run's bearings counted, for the simulator's stats ("bearings", outputs.py)."""
+        return {"measured": int(len(self.t_s)), "sent": int(np.sum(self.sent)),
+                "outage": int(np.sum(self.outage)), "occluded": int(np.sum(self.occluded)),
+                "out_of_range": int(np.sum(self.out_of_range))}
+
     @staticmethod
     def empty() -> Bearings:
         z = np.zeros(0)

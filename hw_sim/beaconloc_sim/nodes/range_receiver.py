@@ -83,6 +83,14 @@ class Ranges(RangeFlags):
         zi, zb = np.zeros(0, np.int64), np.zeros(0, bool)
         return Ranges(z, zi, zi, z, z, zi, zb, zb, zb, zb)
 
+    def stats(self) -> dict:
+        """The run's pings counted, for the simulator's stats ("ranges", outputs.py)."""
+        return {"pinged": int(len(self.t_s)), "sent": int(np.sum(self.sent)),
+                "direct": int(np.sum(self.direct)),
+                "multipath": int(np.sum(self.sent & self.multipath)),
+                "dropout": int(np.sum(self.dropout)), "occluded": int(np.sum(self.occluded)),
+                "out_of_range": int(np.sum(self.out_of_range))}
+
     @staticmethod
     def concat(parts: list[Ranges]) -> Ranges:
         parts = [Ranges.empty()] + list(parts)

@@ -78,6 +78,17 @@ class SonarPings:
     def select(self, keep) -> SonarPings:
         return SonarPings(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
 
+    def stats(self) -> dict:
+        """The run's pings counted, for the simulator's stats ("sonar", outputs.py)."""
+        out = {"pinged": int(len(self.t_s)), "echo": int(np.sum(self.flags == 0)),
+               "no_echo": int(np.sum(self.flags == 1)),
+               "max_range": int(np.sum(self.flags == 2)),
+               "informative": int(np.sum(self.informative)),
+               "obstacle": int(np.sum((self.wall >= 0) & ~self.in_map))}
+        out.update({name: int(np.sum((self.kind == k) & (self.flags == 0)))
+                    for k, name in enumerate(so.KIND_NAMES) if k})
+        return out
+
     @property
     def informative(self) -> np.ndarray:
         """Sent with a range, the specular echo of a map wall: the perpendicular distance
