@@ -128,7 +128,7 @@ struct config_range_survey {
 
 /* [sonar_ring] (site_keys.h: the sonar_ring.* members; bridge/sonar.h): count > 0
  * makes a sonar site, whose filter runs on the sonar ring's clock when it has
- * no beacons (bridge/estimator.c, ref_clock) */
+ * no beacons (bridge/timebase.c, estimator_ref_clock) */
 struct config_sonar_ring {
     int count;              /* sonars on the ring, 0 = none ([sonarN] N = 1..count) */
     double period_s;        /* burst period (s) */

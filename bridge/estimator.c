@@ -14,65 +14,13 @@
 #include "log.h"
 #include "site_to_lib.h"
 
-/* Fastest plausible wheel (m/s): a larger count difference is a glitch. */
-#define MAX_WHEEL_MPS 10.0
 /* Encoders silent this long are reported (STATUSTEXT). */
 #define ENC_REPORT_US 500000
-/* Encoder silences longer than this are counted (encoder_gaps); the
- * localizer coasts through them at constant velocity. */
-#define ENC_SILENCE_US BL_LOC_WHEEL_SILENCE_US
-/* Slack subtracted from "now" before closing pulses (estimator.h). */
-#define POP_SLACK_ENC_US ESTIMATOR_POP_SLACK_US
+/* Slack subtracted from "now" before closing pulses at a tick (us). */
 #define POP_SLACK_TICK_US 20000
 /* Echo-storm evaluation window (us). */
 #define STORM_WINDOW_US 5000000
 #define STORM_MIN_PULSES 10
-
-/* The filter's timebase (estimator.h, "Timebases"), the one rule: the
- * receiver array's clock on a site with ultrasonic beacons, else the bearing
- * sensor's on a site with bearing beacons, else the range receiver's on a
- * site with range beacons, else the sonar ring's on a site with a ring. */
-static const struct node_clock *ref_clock(const struct estimator *e)
-{
-    if (e->blcfg.beacon_count > 0)
-        return &e->rx_clock;
-    if (e->blcfg.bearing_beacon_count > 0)
-        return &e->brg_clock;
-    if (e->blcfg.range_beacon_count == 0 && e->sonar.on)
-        return &e->snr_clock;
-    return &e->rng_clock;
-}
-
-/* The reference clock has an observation (times can be mapped onto it). */
-static bool ref_seen(const struct estimator *e)
-{
-    return ref_clock(e)->have_first;
-}
-
-/* A time t_own (us) on clock `own` on the filter's timebase: itself when
- * `own` is the reference, else mapped own -> local -> reference. Returns
- * false while the reference clock has no observation (nothing to map onto). */
-static bool to_ref_time(const struct estimator *e, const struct node_clock *own, int64_t t_own,
-                        int64_t *t_ref)
-{
-    if (own == ref_clock(e)) {
-        *t_ref = t_own;
-        return true;
-    }
-    if (!ref_seen(e))
-        return false;
-    *t_ref = node_clock_to_node(ref_clock(e), node_clock_to_local(own, t_own));
-    return true;
-}
-
-bool estimator_ref_time(struct estimator *e, const struct node_clock *own, int64_t t_own,
-                        int64_t *t_ref)
-{
-    const bool ok = to_ref_time(e, own, t_own, t_ref);
-    if (ok && *t_ref > e->latest_node_us)
-        e->latest_node_us = *t_ref;
-    return ok;
-}
 
 static void sync(struct estimator *e);
 
@@ -174,14 +122,9 @@ static void sync(struct estimator *e)
     if (bl_localizer_counters(&e->loc, &lc) != BL_OK || bl_localizer_status(&e->loc, &st) != BL_OK)
         return;
     struct est_counters *c = &e->c;
-    const bool pulses_fused = lc.pulses_accepted != c->pulses_accepted;
+    const bool pulses_fused = lc.pulses_accepted != e->pulses_accepted_seen;
+    e->pulses_accepted_seen = lc.pulses_accepted;
     c->pulses_in = lc.pulses_in;
-    c->pulses_accepted = lc.pulses_accepted;
-    c->pulses_rejected = lc.pulses_rejected;
-    c->pulses_buffered = lc.pulses_buffered;
-    c->pulses_unassigned = lc.pulses_unassigned;
-    c->pulses_spurious = lc.pulses_spurious;
-    c->repeats_skipped = lc.repeats_skipped;
     c->snapshot_restarts = lc.snapshot_restarts;
     c->known_starts = lc.known_starts;
     c->fuse_errors = lc.fuse_errors;
@@ -191,16 +134,8 @@ static void sync(struct estimator *e)
     c->reinits = lc.reinits;
     c->seq_errors = lc.seq_errors;
     c->hint_errors = lc.hint_errors;
-    c->numbering_errors = lc.numbering_errors;
-    c->seq_resyncs = lc.seq_resyncs;
-    c->bearings_fused = lc.bearings_fused;
-    c->bearings_rejected = lc.bearings_rejected;
-    c->bearings_buffered = lc.bearings_buffered;
-    c->bearings_refused = lc.bearings_refused;
-    c->ranges_fused = lc.ranges_fused;
-    c->ranges_rejected = lc.ranges_rejected;
-    c->ranges_buffered = lc.ranges_buffered;
-    c->ranges_refused = lc.ranges_refused;
+    /* the kinds' counters that are the library's (their tables, sensors.h) */
+    sensor_counts_from_library(&e->counts, &lc, &e->loc.seq.counters);
     const bool fused = st.measurements != e->measurements_seen;
     if (fused) {
         e->measurements_seen = st.measurements;
@@ -287,6 +222,21 @@ void estimator_event(struct estimator *e, enum est_event_severity sev, const cha
     event(e, sev, "%s", text);
 }
 
+void estimator_eventf(struct estimator *e, enum est_event_severity sev, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    est_event_vpush(&e->events, sev, fmt, ap);
+    va_end(ap);
+}
+
+void estimator_counts_refresh(struct estimator *e)
+{
+    bl_loc_counters lc;
+    if (bl_localizer_counters(&e->loc, &lc) == BL_OK)
+        sensor_counts_from_library(&e->counts, &lc, &e->loc.seq.counters);
+}
+
 int estimator_init(struct estimator *e, const struct bridge_config *site, char *err, size_t errlen)
 {
     memset(e, 0, sizeof *e);
@@ -311,11 +261,7 @@ int estimator_init(struct estimator *e, const struct bridge_config *site, char *
                  cfg->path[0] ? cfg->path : "defaults", bl_strerror(rc));
         return -1;
     }
-    node_clock_init(&e->rx_clock, NULL);
-    node_clock_init(&e->snr_clock, NULL);
-    node_clock_init(&e->enc_clock, NULL);
-    node_clock_init(&e->brg_clock, NULL);
-    node_clock_init(&e->rng_clock, NULL);
+    for (int k = 0; k < FRAME_KIND_COUNT; k++) node_clock_init(&e->clock[k], NULL);
     /* wheel travel per tick (m): circumference 2·π·r over ticks per turn
      * (input of Kleeman 1992 §3.8, eq. 24) */
     e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
@@ -330,16 +276,14 @@ void estimator_set_initial_pose(struct estimator *e, const struct est_initial_po
     e->initial_pose = *pose;
 }
 
-/* The known start pose, once, at filter time t_us (before the first start). */
-static void start_from_initial_pose(struct estimator *e, int64_t t_us);
-
 void estimator_start_pending(struct estimator *e, int64_t t_us)
 {
-    start_from_initial_pose(e, t_us);
+    estimator_start_known_pose(e, t_us);
     sync(e);
 }
 
-static void start_from_initial_pose(struct estimator *e, int64_t t_us)
+/* The known start pose, once, at filter time t_us (before the first start). */
+void estimator_start_known_pose(struct estimator *e, int64_t t_us)
 {
     if (!e->initial_pose.set)
         return;
@@ -422,159 +366,13 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
     return 1;
 }
 
-/* ---- pulses ----------------------------------------------------------- */
-
-void estimator_pulse(struct estimator *e, const struct frame_pulse *p, int64_t rx_us)
-{
-    if (e->blcfg.beacon_count == 0) {
-        e->c.pulses_unexpected++; /* no ultrasonic beacon on this site */
-        return;
-    }
-    /* The clock fit sees the frame as if sent the moment the detection was
-     * made: minus the node's hold (see estimator.h, "Timebases"). */
-    int64_t t = node_clock_observe(&e->rx_clock, p->node_time_us, rx_us - e->pulse_hold_us);
-    if (e->rx_clock.last_event == NODE_CLOCK_RESTART) {
-        e->c.node_restarts++;
-        (void)bl_localizer_sequencer_reset(&e->loc);
-        event(e, EST_EV_WARNING, "receiver node clock restarted");
-    }
-    if (t > e->latest_node_us)
-        e->latest_node_us = t;
-    bl_seq_detection d = {
-        .time_us = t,
-        .receiver = p->receiver,
-        .double_pulse = p->double_pulse,
-        .amplitude_mv = p->amplitude_mv,
-        .width_us = (uint16_t)(p->width_us > 65535 ? 65535 : p->width_us),
-        .tag = (uint32_t)rx_us, /* low 32 bits; comes back as the newest fused measurement's */
-    };
-    if (rx_us > e->latest_rx_us)
-        e->latest_rx_us = rx_us;
-    int rc = bl_localizer_detection(&e->loc, &d);
-    if (rc != BL_OK) {
-        e->c.seq_errors++;
-        log_debug("localizer detection: %s", bl_strerror(rc));
-    }
-    (void)bl_localizer_advance(&e->loc, t);
-    sync(e);
-}
-
-/* ---- encoders --------------------------------------------------------- */
-
-/* Signed difference of two 14-bit wrapping tick counts. */
-static int tick_delta(uint16_t now, uint16_t before)
-{
-    int d = (int)((now - before) & 0x3fff);
-    return d >= 0x2000 ? d - 0x4000 : d;
-}
-
-void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int64_t rx_us)
-{
-    int64_t te = node_clock_observe(&e->enc_clock, f->node_time_us, rx_us);
-    if (e->enc_clock.last_event == NODE_CLOCK_OUT_OF_ORDER ||
-        e->enc_clock.last_event == NODE_CLOCK_DUPLICATE) {
-        /* Not newer than a sample already used: its ticks are already in
-         * the reference (cumulative counts); taking it as the reference
-         * would count the distance since it twice. */
-        e->c.stale_encoders++;
-        return;
-    }
-    if (!ref_seen(e)) {
-        /* No reference clock to map onto yet: keep the ticks as the
-         * reference (they are cumulative, nothing is lost). */
-        e->c.unmapped_encoders++;
-        e->enc_left = f->left_ticks;
-        e->enc_right = f->right_ticks;
-        e->enc_have_ref = false;
-        return;
-    }
-    int64_t local = node_clock_to_local(&e->enc_clock, te);
-    int64_t t = node_clock_to_node(ref_clock(e), local);
-    if (e->enc_seen && t <= e->enc_last_node_us) {
-        /* mapped onto the receiver clock not after the last sample (a
-         * re-fit of either clock): the localizer needs increasing times */
-        e->c.stale_encoders++;
-        return;
-    }
-    if (t > e->latest_node_us)
-        e->latest_node_us = t;
-    /* Pulses that arrived before this sample go first. */
-    (void)bl_localizer_advance(&e->loc, t - POP_SLACK_ENC_US);
-
-    bool had_ref = e->enc_have_ref;
-    if (e->enc_clock.last_event == NODE_CLOCK_RESTART) {
-        /* The encoder node restarted: its counts restarted too, the
-         * difference to the old reference means nothing. */
-        had_ref = false;
-        e->c.node_restarts++;
-        event(e, EST_EV_WARNING, "encoder node clock restarted");
-    }
-    int dl = tick_delta(f->left_ticks, e->enc_left);
-    int dr = tick_delta(f->right_ticks, e->enc_right);
-    int64_t gap = t - e->enc_last_node_us;
-    /* More ticks than MAX_WHEEL_MPS allows since the last sample (at least
-     * one sample period): not a wheel, a glitch or a missed restart. */
-    double max_ticks = MAX_WHEEL_MPS * ((double)(gap > 10000 ? gap : 10000) / 1e6) / e->m_per_tick;
-    if (had_ref && (abs(dl) > max_ticks || abs(dr) > max_ticks)) {
-        e->c.encoder_jumps++;
-        log_warn("encoder counts jumped (%d, %d ticks): new reference", dl, dr);
-        had_ref = false;
-    }
-    e->enc_left = f->left_ticks;
-    e->enc_right = f->right_ticks;
-    e->enc_have_ref = true;
-    e->enc_last_node_us = t;
-    if (e->enc_seen && gap > ENC_SILENCE_US)
-        e->c.encoder_gaps++;
-    if (e->enc_silent) {
-        e->enc_silent = false;
-        event(e, EST_EV_NOTICE, "encoders back after %.1f s", (double)gap / 1e6);
-    }
-    e->enc_seen = true;
-    start_from_initial_pose(e, t);
-    /* Each wheel's distance from its ticks: d = n_ticks · 2πr /
-     * ticks_per_rev (m), the dead-reckoning input of Kleeman 1992 §3.8. */
-    bl_wheel_increment inc = {
-        .t_us = t,
-        .d_left_m = (bl_real)(dl * e->m_per_tick),
-        .d_right_m = (bl_real)(dr * e->m_per_tick),
-        .reference_only = !had_ref,
-        .tag = (uint32_t)rx_us,
-    };
-    if (rx_us > e->latest_rx_us)
-        e->latest_rx_us = rx_us;
-    int rc = bl_localizer_wheels(&e->loc, &inc);
-    if (rc != BL_OK) {
-        e->c.predict_errors++;
-        log_debug("localizer wheels: %s", bl_strerror(rc));
-    }
-    sync(e);
-    estimator_sonar_wheels(e, t, had_ref ? dl * e->m_per_tick : 0.0,
-                           had_ref ? dr * e->m_per_tick : 0.0);
-}
-
-void estimator_status(struct estimator *e, const struct frame_status *s, int64_t rx_us)
-{
-    (void)rx_us;
-    if (s->flags & 0x4)
-        log_warn("node %u reports a sensor fault (flags 0x%x)", s->node_id, s->flags);
-    (void)e;
-}
-
 /* ---- periodic --------------------------------------------------------- */
-
-int64_t estimator_local_to_node(const struct estimator *e, int64_t local_us)
-{
-    if (!ref_seen(e))
-        return local_us;
-    return node_clock_to_node(ref_clock(e), local_us);
-}
 
 void estimator_tick(struct estimator *e, int64_t local_now_us)
 {
     estimator_survey_poll(e, local_now_us); /* a survey's timeout */
     estimator_sonar_tick(e, local_now_us);  /* a burst whose last frames were lost */
-    if (!ref_seen(e))
+    if (!estimator_ref_seen(e))
         return;
     int64_t now = estimator_local_to_node(e, local_now_us);
     (void)bl_localizer_advance(&e->loc, now - POP_SLACK_TICK_US);
@@ -654,7 +452,8 @@ int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_
     }
     out->valid = true;
     out->t_node_us = est.t_us;
-    out->t_local_us = ref_seen(e) ? node_clock_to_local(ref_clock(e), est.t_us) : est.t_us;
+    out->t_local_us =
+        estimator_ref_seen(e) ? node_clock_to_local(estimator_ref_clock(e), est.t_us) : est.t_us;
     out->x_m = est.x_m;
     out->y_m = est.y_m;
     out->theta_rad = est.theta_rad;

@@ -6,7 +6,7 @@
  *   local  the bridge clock: CLOCK_MONOTONIC us live, the log's clock in
  *          replay; frames carry their receive time on it (rx_us).
  *   node   the reference node's clock, unwrapped to int64 us by
- *          node_clock. ONE rule (estimator.c, ref_clock): the receiver
+ *          node_clock. ONE rule (timebase.c, estimator_ref_clock): the receiver
  *          array's (node 1) on a site with ultrasonic beacons, else the
  *          bearing sensor's (node 3) on a site with bearing beacons, else
  *          the range receiver's (node 4: a range-only site). The filter and
@@ -83,6 +83,7 @@
 #include "config.h"
 #include "frames.h"
 #include "node_clock.h"
+#include "sensors.h"
 #include "sonar.h"
 #include "survey.h"
 
@@ -111,55 +112,21 @@ void est_event_vpush(struct est_event_queue *q, enum est_event_severity sev, con
 /* The oldest event into *ev and off the queue; false when empty. */
 bool est_event_pop(struct est_event_queue *q, struct est_event *ev);
 
+/* The estimator's own counters; each sensor kind's are in its table
+ * (struct sensor_counts, sensors.h: bridge/sensor_<kind>.c). */
 struct est_counters {
-    uint64_t pulses_in; /* sequencer output pulses */
-    uint64_t pulses_accepted;
-    uint64_t pulses_rejected;
-    uint64_t pulses_buffered;   /* before the start */
-    uint64_t pulses_unassigned; /* sequencer could not number them */
-    uint64_t pulses_spurious;
-    uint64_t repeats_skipped;
+    uint64_t pulses_in;         /* sequencer output pulses */
     uint64_t snapshot_restarts; /* restarts by the persistent-rejection watch */
     uint64_t known_starts;      /* (re)starts from a known pose (--initial-pose) */
     uint64_t fuse_errors;       /* library returned an error */
     uint64_t predicts;          /* odometry predicts */
     uint64_t cv_predicts;       /* constant-velocity predicts (encoders silent) */
     uint64_t predict_errors;
-    uint64_t encoder_gaps;      /* encoder silences longer than the gap limit */
-    uint64_t encoder_jumps;     /* implausible count differences (new reference) */
     uint64_t unmapped_encoders; /* encoder frames before the receiver clock */
     uint64_t reinits;           /* re-initialisations done by the bridge */
     uint64_t node_restarts;
     uint64_t seq_errors;
-    uint64_t hint_errors;       /* hints the sequencer refused */
-    uint64_t numbering_errors;  /* innovations longer than any flight */
-    uint64_t seq_resyncs;       /* sequencer re-synchronised from the filter */
-    uint64_t stale_encoders;    /* encoder samples not newer than the last: dropped */
-    uint64_t pulses_unexpected; /* pulse frames on a site without ultrasonic beacons: dropped */
-    /* bearings */
-    uint64_t bearings_fused;          /* localizer: fused (accepted, or the triangulation start) */
-    uint64_t bearings_rejected;       /* localizer: gated out */
-    uint64_t bearings_buffered;       /* localizer: kept for the triangulation start */
-    uint64_t bearings_refused;        /* localizer: refused (bad value; an error) */
-    uint64_t bearings_unknown_beacon; /* beacon id beyond [bearing_beacons] count: dropped */
-    uint64_t bearings_unexpected;     /* bearing frames on a site without bearing beacons */
-    uint64_t stale_bearings;          /* bearings older than the newest on the sensor's clock */
-    uint64_t unmapped_bearings;       /* bearings before the reference clock (mixed site) */
-    /* ranges (see the top of this file: every range frame in exactly one) */
-    uint64_t ranges_fused;          /* localizer: fused (accepted, or the trilateration start) */
-    uint64_t ranges_rejected;       /* localizer: gated out (multipath late arrivals) */
-    uint64_t ranges_buffered;       /* localizer: kept for the trilateration start */
-    uint64_t ranges_refused;        /* localizer: refused (bad value, beyond range; an error) */
-    uint64_t ranges_unknown_beacon; /* beacon id beyond [range_beacons] count: dropped */
-    uint64_t ranges_unexpected;     /* range frames on a site without range beacons */
-    uint64_t ranges_other_receiver; /* Receiver != 1 (one robot for now): dropped */
-    uint64_t ranges_bad_tof;        /* TimeOfFlight 0 or 65534 (saturated): dropped */
-    uint64_t stale_ranges;          /* ranges older than the newest on the receiver's clock */
-    uint64_t unmapped_ranges;       /* ranges before the reference clock (mixed site) */
-    uint64_t tracks_unexpected;     /* TRACK_ENCODERS frames on a site that is not a team's */
-    /* the beacons' self-survey (bridge/estimator_survey.c) */
-    uint64_t ranges_before_survey; /* robot ranges while the survey is not done: dropped */
-    uint64_t survey_unexpected;    /* BEACON_SURVEY frames on a site without self_survey */
+    uint64_t hint_errors; /* hints the sequencer refused */
 };
 
 /* One published estimate. */
@@ -213,12 +180,11 @@ struct estimator {
     struct team *team;
     bl_config blcfg;
     bl_seq_config seqcfg;
-    bl_localizer loc;            /* sequencer + filter + estimation policy */
-    struct node_clock rx_clock;  /* receiver array (node 1) */
-    struct node_clock enc_clock; /* wheel encoders (node 2) */
-    struct node_clock brg_clock; /* bearing sensor (node 3) */
-    struct node_clock rng_clock; /* range receiver (node 4) */
-    struct node_clock snr_clock; /* sonar ring (node 5) */
+    bl_localizer loc; /* sequencer + filter + estimation policy */
+    /* each kind's node clock (a kind's handler observes its own: receiver
+     * array node 1, wheel encoders node 2, bearing sensor node 3, range
+     * receiver node 4, sonar ring node 5; the others unused) */
+    struct node_clock clock[FRAME_KIND_COUNT];
     /* encoders */
     bool enc_have_ref;            /* enc_left/right are the reference */
     bool enc_seen;                /* an encoder frame was mapped */
@@ -246,6 +212,8 @@ struct estimator {
     int64_t last_data_rx_us;    /* newest receive time of a fused measurement's frame */
     bool updated;               /* an update since estimator_take_update */
     struct est_counters c;
+    struct sensor_counts counts;   /* each kind's counters (sensors.h) */
+    uint64_t pulses_accepted_seen; /* localizer's accepted pulses, last seen (beacons back) */
     struct est_event_queue events;
     struct est_initial_pose initial_pose; /* pending until used (set false then) */
     /* [range_beacons] self_survey = 1 (bridge/estimator_survey.c): the beacons'
@@ -286,13 +254,8 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *cfg, 
  * 0, or -1 when the library refuses. */
 int estimator_reinit(struct estimator *e);
 
-/* Feed decoded frames with their local receive time. */
-void estimator_pulse(struct estimator *e, const struct frame_pulse *p, int64_t rx_us);
-void estimator_encoders(struct estimator *e, const struct frame_encoders *f, int64_t rx_us);
-void estimator_status(struct estimator *e, const struct frame_status *s, int64_t rx_us);
-void estimator_bearing(struct estimator *e, const struct frame_bearing *b, int64_t rx_us);
-void estimator_range(struct estimator *e, const struct frame_range *r, int64_t rx_us);
-void estimator_beacon_survey(struct estimator *e, const struct frame_survey *f, int64_t rx_us);
+/* The sonar ring's frame (bridge/estimator_sonar.c); the other kinds'
+ * handlers call the localizer themselves (bridge/sensor_<kind>.c). */
 void estimator_sonar(struct estimator *e, const struct frame_sonar *f, int64_t rx_us);
 
 /* The sonar ring's side (bridge/estimator_sonar.c, contract bridge/sonar.h):
@@ -302,7 +265,7 @@ void estimator_sonar(struct estimator *e, const struct frame_sonar *f, int64_t r
 void estimator_sonar_wheels(struct estimator *e, int64_t t_us, double d_left_m, double d_right_m);
 void estimator_sonar_tick(struct estimator *e, int64_t local_now_us);
 
-/* For the sensor kinds' own files (estimator_sonar.c): a time t_own on node
+/* For the sensor kinds' own files (sensor_<kind>.c, estimator_sonar.c): a time t_own on node
  * clock `own` onto the filter's timebase (false while the reference clock
  * has no observation); the known start pose taken at filter time t_us if
  * pending (--initial-pose); a filter update made outside the localizer
@@ -310,14 +273,23 @@ void estimator_sonar_tick(struct estimator *e, int64_t local_now_us);
  * the frame behind it, so that it is published. */
 bool estimator_ref_time(struct estimator *e, const struct node_clock *own, int64_t t_own,
                         int64_t *t_ref);
+/* The same mapping without noting the newest reference time (bridge/timebase.c),
+ * and whether the reference clock has an observation. */
+bool estimator_to_ref_time(const struct estimator *e, const struct node_clock *own, int64_t t_own,
+                           int64_t *t_ref);
+bool estimator_ref_seen(const struct estimator *e);
+/* The clock the filter runs on (the one rule, bridge/timebase.c). */
+const struct node_clock *estimator_ref_clock(const struct estimator *e);
 /* The localizer's counters and events into the estimator's, after a call
- * into it (estimator_beacons.c). */
+ * into it (the kinds' handlers, bridge/sensor_<kind>.c). */
 void estimator_sync(struct estimator *e);
 /* Slack subtracted from a measurement's time before the pulses that arrived
  * before it are closed (bl_localizer_advance), covering node-clock mapping
  * error and transmission order (us). */
 #define ESTIMATOR_POP_SLACK_US 5000
 void estimator_start_pending(struct estimator *e, int64_t t_us);
+/* The same without the sync after it (the caller syncs after its own call). */
+void estimator_start_known_pose(struct estimator *e, int64_t t_us);
 void estimator_note_update(struct estimator *e, int64_t rx_us);
 
 /* The self-survey's part of a (re)configuration (bridge/estimator_survey.c):
@@ -338,6 +310,11 @@ int estimator_survey_prepare(const struct estimator *e, struct bridge_config *cf
  * (survey_min_pings, survey_timeout_s: they change no position). */
 void estimator_survey_commit(struct estimator *e, const struct bridge_config *cfg,
                              const struct survey *fresh, bool restart);
+
+/* A robot's range on a self-surveyed site whose beacons are not placed yet:
+ * counted (ranges_before_survey) and true, the range is dropped
+ * (bridge/sensor_beacon_survey.c). */
+bool sensor_beacon_survey_holds_range(struct estimator *e);
 
 /* Solve the survey if it is time (at bridge time now_us); on success the
  * localizer is re-initialised with the surveyed positions (the
@@ -364,8 +341,20 @@ int64_t estimator_pulse_hold_us(const struct bridge_config *cfg);
  * extrapolated to local time at_local_us (constant velocity). */
 int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_output *out);
 
-/* Queue an event (STATUSTEXT) with this text. */
+/* Queue an event (STATUSTEXT) with this text, or with text from fmt. */
 void estimator_event(struct estimator *e, enum est_event_severity sev, const char *text);
+void estimator_eventf(struct estimator *e, enum est_event_severity sev, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
+/* Count one of kind k's counters (i: the kind's own counter index). */
+static inline void estimator_count(struct estimator *e, enum frame_kind k, unsigned i)
+{
+    e->counts.n[k][i]++;
+}
+
+/* The kind's counters with the library's current values copied in (before a
+ * report). */
+void estimator_counts_refresh(struct estimator *e);
 
 /* Next pending health event; false when none. */
 bool estimator_next_event(struct estimator *e, struct est_event *ev);

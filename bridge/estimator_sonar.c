@@ -351,8 +351,8 @@ void estimator_sonar(struct estimator *e, const struct frame_sonar *f, int64_t r
     }
     /* The node sends a reading when its listening window closes: the clock
      * fit sees the frame as if sent at the ping (estimator.h, "Sonar"). */
-    int64_t tn = node_clock_observe(&e->snr_clock, f->node_time_us, rx_us - s->hold_us);
-    if (e->snr_clock.last_event == NODE_CLOCK_RESTART) {
+    int64_t tn = node_clock_observe(&e->clock[FRAME_SONAR], f->node_time_us, rx_us - s->hold_us);
+    if (e->clock[FRAME_SONAR].last_event == NODE_CLOCK_RESTART) {
         e->c.node_restarts++;
         estimator_event(e, EST_EV_WARNING, "sonar ring clock restarted");
         s->have_ping = false;
@@ -369,7 +369,7 @@ void estimator_sonar(struct estimator *e, const struct frame_sonar *f, int64_t r
         s->newest_ping_us = tn;
     s->have_ping = true;
     int64_t t;
-    if (!estimator_ref_time(e, &e->snr_clock, tn, &t)) {
+    if (!estimator_ref_time(e, &e->clock[FRAME_SONAR], tn, &t)) {
         s->c.unmapped++; /* no reference clock to map onto yet */
         return;
     }

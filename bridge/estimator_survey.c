@@ -1,12 +1,13 @@
 /*
  * beaconloc-bridge — the estimator's side of the beacons' self-survey
  * ([range_beacons] self_survey = 1; the survey itself: bridge/survey.h):
- * BEACON_SURVEY frames into the survey, its solve onto the localizer by the
+ * the survey's (re)configuration, its solve onto the localizer by the
  * reconfiguration path (estimator_reconfigure with the surveyed positions:
  * one mechanism for every change of the beacons), STATUSTEXT on the outcome.
  *
  * Until the survey is done the robot's ranges are counted
- * (ranges_before_survey) and dropped (estimator_range), not buffered: the
+ * (ranges_before_survey) and dropped (sensor_beacon_survey_holds_range,
+ * called by the range handler), not buffered: the
  * survey takes seconds while the robot waits (Marvelmind's practice: the
  * map first, then the mobile beacon), the localizer needs its measurements
  * in time order, and it starts from a trilateration of the first ranges
@@ -121,16 +122,6 @@ void estimator_survey_commit(struct estimator *e, const struct bridge_config *cf
         e->survey.p.min_pings = cfg->range_survey.min_pings;
         e->survey.p.timeout_s = cfg->range_survey.timeout_s;
     }
-}
-
-void estimator_beacon_survey(struct estimator *e, const struct frame_survey *f, int64_t rx_us)
-{
-    if (!e->survey_on) {
-        e->c.survey_unexpected++; /* a site without self_survey */
-        return;
-    }
-    (void)survey_add(&e->survey, f->emitter, f->listener, f->time_of_flight_us, rx_us);
-    estimator_survey_poll(e, rx_us);
 }
 
 void estimator_survey_poll(struct estimator *e, int64_t now_us)

@@ -1,12 +1,15 @@
 /*
  * beaconloc-bridge — sensor kind BEARING (the bearing sensor, node 3:
- * bearings to self-identifying beacons, Vander et al. 2011): decoder and
- * handler of its sensor-table entry (sensors.h).
+ * bearings to self-identifying beacons, Vander et al. 2011): decoder,
+ * handler, counters and status-line part of its sensor-table entry
+ * (sensors.h). The handler maps each bearing onto the filter's timebase,
+ * checks and counts it, and gives it to the localizer (estimator.h,
+ * "Bearings").
  *
  * The decoder checks what the DBC says: every signal in its range by the
  * generated checks (Beacon 1..15: a 0 is FRAME_OUT_OF_RANGE), the bearing
  * finite and inside [0, 360) deg. Whether the site has that beacon is the
- * handler's check (estimator_bearing: counted in bearings_unknown_beacon):
+ * handler's check (counted in bearings_unknown_beacon):
  * the decoder is a function of the frame alone (sensor_decode_fn has no
  * site), the site's count changes on SIGHUP while the frame layer's
  * counters must not depend on it, and a frame of a beacon the site does
@@ -15,10 +18,50 @@
  */
 #include "sensors.h"
 
+#include <inttypes.h>
 #include <math.h>
 
+#include "beaconloc.h"
 #include "beaconloc_can.h"
 #include "estimator.h"
+#include "log.h"
+#include "stats.h"
+
+/* Its counters: the index of each in its table below. */
+enum {
+    BRG_FUSED,          /* localizer: fused (accepted, or the triangulation start) */
+    BRG_REJECTED,       /* localizer: gated out */
+    BRG_BUFFERED,       /* localizer: kept for the triangulation start */
+    BRG_REFUSED,        /* localizer: refused (bad value; an error) */
+    BRG_UNKNOWN_BEACON, /* beacon id beyond [bearing_beacons] count: dropped */
+    BRG_UNEXPECTED,     /* bearing frames on a site without bearing beacons */
+    BRG_STALE,          /* bearings older than the newest on the sensor's clock */
+    BRG_UNMAPPED,       /* bearings before the reference clock (mixed site) */
+    BRG_COUNTERS
+};
+
+const struct sensor_counter sensor_bearing_counters[BRG_COUNTERS + 1] = {
+    [BRG_FUSED] = SENSOR_LOC_COUNTER("bearings_fused", SENSOR_SLOT_MEASUREMENTS, bearings_fused),
+    [BRG_REJECTED] =
+        SENSOR_LOC_COUNTER("bearings_rejected", SENSOR_SLOT_MEASUREMENTS, bearings_rejected),
+    [BRG_BUFFERED] =
+        SENSOR_LOC_COUNTER("bearings_buffered", SENSOR_SLOT_MEASUREMENTS, bearings_buffered),
+    [BRG_REFUSED] =
+        SENSOR_LOC_COUNTER("bearings_refused", SENSOR_SLOT_MEASUREMENTS, bearings_refused),
+    [BRG_UNKNOWN_BEACON] = SENSOR_COUNTER("bearings_unknown_beacon", SENSOR_SLOT_MEASUREMENTS),
+    [BRG_UNEXPECTED] = SENSOR_COUNTER("bearings_unexpected", SENSOR_SLOT_MEASUREMENTS),
+    [BRG_STALE] = SENSOR_COUNTER("stale_bearing_samples", SENSOR_SLOT_MEASUREMENTS),
+    [BRG_UNMAPPED] = SENSOR_COUNTER("unmapped_bearings", SENSOR_SLOT_MEASUREMENTS),
+    {0},
+};
+
+void sensor_bearing_status(const struct stats_report *r, char *buf, size_t len)
+{
+    snprintf(buf, len, " | bearings ok %" PRIu64 " rej %" PRIu64 " unk %" PRIu64,
+             sensor_counts_get(r->counts, FRAME_BEARING, BRG_FUSED),
+             sensor_counts_get(r->counts, FRAME_BEARING, BRG_REJECTED),
+             sensor_counts_get(r->counts, FRAME_BEARING, BRG_UNKNOWN_BEACON));
+}
 
 enum frame_result sensor_bearing_decode(uint32_t id, const uint8_t data[8], struct frame *out,
                                         struct frame_seq *seq)
@@ -49,5 +92,47 @@ enum frame_result sensor_bearing_decode(uint32_t id, const uint8_t data[8], stru
 
 void sensor_bearing_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
-    estimator_bearing(e, &f->u.bearing, rx_us);
+    const struct frame_bearing *b = &f->u.bearing;
+    struct node_clock *clock = &e->clock[FRAME_BEARING];
+    if (e->blcfg.bearing_beacon_count == 0) {
+        estimator_count(e, FRAME_BEARING, BRG_UNEXPECTED); /* no bearing beacon on this site */
+        return;
+    }
+    int64_t tb = node_clock_observe(clock, b->node_time_us, rx_us);
+    if (clock->last_event == NODE_CLOCK_OUT_OF_ORDER) {
+        /* Older than a bearing already handed on: the localizer has moved
+         * past it. (NODE_CLOCK_DUPLICATE, the same node time, is another
+         * bearing of the same scan: kept.) */
+        estimator_count(e, FRAME_BEARING, BRG_STALE);
+        return;
+    }
+    if (clock->last_event == NODE_CLOCK_RESTART) {
+        e->c.node_restarts++;
+        estimator_event(e, EST_EV_WARNING, "bearing sensor clock restarted");
+    }
+    if (b->beacon < 1 || b->beacon > e->blcfg.bearing_beacon_count) {
+        estimator_count(e, FRAME_BEARING, BRG_UNKNOWN_BEACON); /* the handler's check, above */
+        return;
+    }
+    int64_t t;
+    if (!estimator_ref_time(e, clock, tb, &t)) {
+        estimator_count(e, FRAME_BEARING, BRG_UNMAPPED); /* no reference clock to map onto yet */
+        return;
+    }
+    /* Pulses that arrived before this bearing go first. */
+    (void)bl_localizer_advance(&e->loc, t - ESTIMATOR_POP_SLACK_US);
+    bl_bearing_meas m = {
+        .t_us = t,
+        .beacon_index = (uint32_t)b->beacon - 1u, /* [bearing_beaconN] -> N-1 */
+        /* body-frame bearing, deg -> rad (Vander et al. 2011 eq. 3 is in rad) */
+        .bearing_rad = (bl_real)(b->bearing_deg * (M_PI / 180.0)),
+        .tag = (uint32_t)rx_us,
+    };
+    if (rx_us > e->latest_rx_us)
+        e->latest_rx_us = rx_us;
+    estimator_start_pending(e, t);
+    int rc = bl_localizer_bearing(&e->loc, &m, NULL);
+    if (rc != BL_OK)
+        log_debug("localizer bearing: %s", bl_strerror(rc));
+    estimator_sync(e);
 }

@@ -1,11 +1,83 @@
 /*
- * beaconloc-bridge — sensor kind PULSE_DETECTION (receiver array): decoder
- * and handler of its sensor-table entry (sensors.h).
+ * beaconloc-bridge — sensor kind PULSE_DETECTION (receiver array, node 1):
+ * decoder, handler, counters and status-line part of its sensor-table entry
+ * (sensors.h). The handler maps each detection onto the receiver's clock
+ * (the filter's timebase on a site with ultrasonic beacons) and gives it to
+ * the localizer (sequencer, filter and the policy between them); a site
+ * without ultrasonic beacons counts it in pulses_unexpected (estimator.h,
+ * "Timebases").
  */
 #include "sensors.h"
 
+#include <inttypes.h>
+
+#include "beaconloc.h"
 #include "beaconloc_can.h"
 #include "estimator.h"
+#include "log.h"
+#include "stats.h"
+
+/* Its counters: the index of each in its table below. */
+enum {
+    PULSE_ACCEPTED,
+    PULSE_REJECTED,
+    PULSE_BUFFERED,
+    PULSE_UNASSIGNED,
+    PULSE_SPURIOUS,
+    PULSE_SEQUENCER, /* the object "sequencer": the next 7 */
+    PULSE_SEQ_DETECTIONS,
+    PULSE_SEQ_MERGED,
+    PULSE_SEQ_DOUBLE_PULSES,
+    PULSE_SEQ_DOUBLE_CONFLICTS,
+    PULSE_SEQ_LOCKS_ACQUIRED,
+    PULSE_SEQ_LOCKS_LOST,
+    PULSE_SEQ_REPEATS,
+    PULSE_UNEXPECTED, /* pulse frames on a site without ultrasonic beacons: dropped */
+    PULSE_REPEATS_SKIPPED,
+    PULSE_NUMBERING_ERRORS,
+    PULSE_SEQ_RESYNCS,
+    PULSE_COUNTERS
+};
+_Static_assert(PULSE_COUNTERS <= SENSOR_COUNTERS_MAX, "SENSOR_COUNTERS_MAX");
+
+const struct sensor_counter sensor_pulse_counters[PULSE_COUNTERS + 1] = {
+    [PULSE_ACCEPTED] =
+        SENSOR_LOC_COUNTER("pulses_accepted", SENSOR_SLOT_MEASUREMENTS, pulses_accepted),
+    [PULSE_REJECTED] =
+        SENSOR_LOC_COUNTER("pulses_rejected", SENSOR_SLOT_MEASUREMENTS, pulses_rejected),
+    [PULSE_BUFFERED] =
+        SENSOR_LOC_COUNTER("pulses_buffered", SENSOR_SLOT_MEASUREMENTS, pulses_buffered),
+    [PULSE_UNASSIGNED] =
+        SENSOR_LOC_COUNTER("pulses_unassigned", SENSOR_SLOT_MEASUREMENTS, pulses_unassigned),
+    [PULSE_SPURIOUS] =
+        SENSOR_LOC_COUNTER("sequencer_spurious", SENSOR_SLOT_MEASUREMENTS, pulses_spurious),
+    [PULSE_SEQUENCER] = {.key = "sequencer", .slot = SENSOR_SLOT_MEASUREMENTS, .group = 7},
+    [PULSE_SEQ_DETECTIONS] = SENSOR_SEQ_COUNTER("detections", SENSOR_SLOT_MEASUREMENTS, detections),
+    [PULSE_SEQ_MERGED] = SENSOR_SEQ_COUNTER("merged", SENSOR_SLOT_MEASUREMENTS, merged),
+    [PULSE_SEQ_DOUBLE_PULSES] =
+        SENSOR_SEQ_COUNTER("double_pulses", SENSOR_SLOT_MEASUREMENTS, double_pulses),
+    [PULSE_SEQ_DOUBLE_CONFLICTS] =
+        SENSOR_SEQ_COUNTER("double_conflicts", SENSOR_SLOT_MEASUREMENTS, double_conflicts),
+    [PULSE_SEQ_LOCKS_ACQUIRED] =
+        SENSOR_SEQ_COUNTER("locks_acquired", SENSOR_SLOT_MEASUREMENTS, locks_acquired),
+    [PULSE_SEQ_LOCKS_LOST] = SENSOR_SEQ_COUNTER("locks_lost", SENSOR_SLOT_MEASUREMENTS, locks_lost),
+    [PULSE_SEQ_REPEATS] = SENSOR_SEQ_COUNTER("repeats", SENSOR_SLOT_MEASUREMENTS, repeats),
+    [PULSE_UNEXPECTED] = SENSOR_COUNTER("pulses_unexpected", SENSOR_SLOT_MEASUREMENTS),
+    [PULSE_REPEATS_SKIPPED] =
+        SENSOR_LOC_COUNTER("repeats_skipped", SENSOR_SLOT_REPEATS, repeats_skipped),
+    [PULSE_NUMBERING_ERRORS] =
+        SENSOR_LOC_COUNTER("numbering_errors", SENSOR_SLOT_NUMBERING, numbering_errors),
+    [PULSE_SEQ_RESYNCS] =
+        SENSOR_LOC_COUNTER("sequencer_resyncs", SENSOR_SLOT_NUMBERING, seq_resyncs),
+    {0},
+};
+
+void sensor_pulse_status(const struct stats_report *r, char *buf, size_t len)
+{
+    snprintf(buf, len, " | pulses ok %" PRIu64 " rej %" PRIu64,
+             sensor_counts_get(r->counts, FRAME_PULSE, PULSE_ACCEPTED),
+             sensor_counts_get(r->counts, FRAME_PULSE, PULSE_REJECTED));
+}
 
 enum frame_result sensor_pulse_decode(uint32_t id, const uint8_t data[8], struct frame *out,
                                       struct frame_seq *seq)
@@ -34,5 +106,37 @@ enum frame_result sensor_pulse_decode(uint32_t id, const uint8_t data[8], struct
 
 void sensor_pulse_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
-    estimator_pulse(e, &f->u.pulse, rx_us);
+    const struct frame_pulse *p = &f->u.pulse;
+    struct node_clock *clock = &e->clock[FRAME_PULSE];
+    if (e->blcfg.beacon_count == 0) {
+        estimator_count(e, FRAME_PULSE, PULSE_UNEXPECTED); /* no ultrasonic beacon here */
+        return;
+    }
+    /* The clock fit sees the frame as if sent the moment the detection was
+     * made: minus the node's hold (see estimator.h, "Timebases"). */
+    int64_t t = node_clock_observe(clock, p->node_time_us, rx_us - e->pulse_hold_us);
+    if (clock->last_event == NODE_CLOCK_RESTART) {
+        e->c.node_restarts++;
+        (void)bl_localizer_sequencer_reset(&e->loc);
+        estimator_event(e, EST_EV_WARNING, "receiver node clock restarted");
+    }
+    if (t > e->latest_node_us)
+        e->latest_node_us = t;
+    bl_seq_detection d = {
+        .time_us = t,
+        .receiver = p->receiver,
+        .double_pulse = p->double_pulse,
+        .amplitude_mv = p->amplitude_mv,
+        .width_us = (uint16_t)(p->width_us > 65535 ? 65535 : p->width_us),
+        .tag = (uint32_t)rx_us, /* low 32 bits; comes back as the newest fused measurement's */
+    };
+    if (rx_us > e->latest_rx_us)
+        e->latest_rx_us = rx_us;
+    int rc = bl_localizer_detection(&e->loc, &d);
+    if (rc != BL_OK) {
+        e->c.seq_errors++;
+        log_debug("localizer detection: %s", bl_strerror(rc));
+    }
+    (void)bl_localizer_advance(&e->loc, t);
+    estimator_sync(e);
 }

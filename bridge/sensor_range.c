@@ -1,14 +1,15 @@
 /*
  * beaconloc-bridge — sensor kind RANGE (the range receiver, node 4: times of
  * flight of RF-synchronised ultrasonic pulses from fixed range beacons, the
- * CMU Millibots' ranging; Marvelmind-like sites): decoder and handler of its
- * sensor-table entry (sensors.h).
+ * CMU Millibots' ranging; Marvelmind-like sites): decoder, handler, counters
+ * and status-line part of its sensor-table entry (sensors.h). The handler
+ * maps each range onto the filter's timebase, checks and counts it, and
+ * gives it to the localizer (estimator.h, "Ranges").
  *
  * The decoder checks what the DBC says: every signal in its range by the
  * generated checks (Beacon and Receiver 1..15: a 0 is FRAME_OUT_OF_RANGE;
  * TimeOfFlight 0..65534: 65535 is FRAME_OUT_OF_RANGE). What the frame means
- * for this site is the handler's (estimator_range, each counted and
- * dropped): a Receiver other than 1 (one robot; on a team site every range
+ * for this site is the handler's (each counted and dropped): a Receiver other than 1 (one robot; on a team site every range
  * goes to the team instead, bridge/team.h), a beacon id beyond [range_beacons] count,
  * a TimeOfFlight of 0 (no flight: a receiver never sits on a beacon; a node
  * reports it when it timed nothing) or of 65534 (the counter's saturated
@@ -17,9 +18,58 @@
  */
 #include "sensors.h"
 
+#include <inttypes.h>
+
+#include "beaconloc.h"
 #include "beaconloc_can.h"
 #include "estimator.h"
+#include "log.h"
+#include "stats.h"
 #include "team.h"
+
+/* Its counters (estimator.h, "Ranges": every range frame in exactly one,
+ * or in the survey's ranges_before_survey): the index of each below. */
+enum {
+    RNG_FUSED,          /* localizer: fused (accepted, or the trilateration start) */
+    RNG_REJECTED,       /* localizer: gated out (multipath late arrivals) */
+    RNG_BUFFERED,       /* localizer: kept for the trilateration start */
+    RNG_REFUSED,        /* localizer: refused (bad value, beyond range; an error) */
+    RNG_UNKNOWN_BEACON, /* beacon id beyond [range_beacons] count: dropped */
+    RNG_UNEXPECTED,     /* range frames on a site without range beacons */
+    RNG_OTHER_RECEIVER, /* Receiver != 1 (one robot for now): dropped */
+    RNG_BAD_TOF,        /* TimeOfFlight 0 or 65534 (saturated): dropped */
+    RNG_STALE,          /* ranges older than the newest on the receiver's clock */
+    RNG_UNMAPPED,       /* ranges before the reference clock (mixed site) */
+    RNG_COUNTERS
+};
+
+const struct sensor_counter sensor_range_counters[RNG_COUNTERS + 1] = {
+    [RNG_FUSED] = SENSOR_LOC_COUNTER("ranges_fused", SENSOR_SLOT_MEASUREMENTS, ranges_fused),
+    [RNG_REJECTED] =
+        SENSOR_LOC_COUNTER("ranges_rejected", SENSOR_SLOT_MEASUREMENTS, ranges_rejected),
+    [RNG_BUFFERED] =
+        SENSOR_LOC_COUNTER("ranges_buffered", SENSOR_SLOT_MEASUREMENTS, ranges_buffered),
+    [RNG_REFUSED] = SENSOR_LOC_COUNTER("ranges_refused", SENSOR_SLOT_MEASUREMENTS, ranges_refused),
+    [RNG_UNKNOWN_BEACON] = SENSOR_COUNTER("ranges_unknown_beacon", SENSOR_SLOT_MEASUREMENTS),
+    [RNG_UNEXPECTED] = SENSOR_COUNTER("ranges_unexpected", SENSOR_SLOT_MEASUREMENTS),
+    [RNG_OTHER_RECEIVER] = SENSOR_COUNTER("ranges_other_receiver", SENSOR_SLOT_MEASUREMENTS),
+    [RNG_BAD_TOF] = SENSOR_COUNTER("ranges_bad_tof", SENSOR_SLOT_MEASUREMENTS),
+    [RNG_STALE] = SENSOR_COUNTER("stale_range_samples", SENSOR_SLOT_MEASUREMENTS),
+    [RNG_UNMAPPED] = SENSOR_COUNTER("unmapped_ranges", SENSOR_SLOT_MEASUREMENTS),
+    {0},
+};
+
+void sensor_range_status(const struct stats_report *r, char *buf, size_t len)
+{
+    const struct sensor_counts *c = r->counts;
+    snprintf(buf, len, " | ranges ok %" PRIu64 " rej %" PRIu64 " unk %" PRIu64 " bad %" PRIu64,
+             sensor_counts_get(c, FRAME_RANGE, RNG_FUSED),
+             sensor_counts_get(c, FRAME_RANGE, RNG_REJECTED),
+             sensor_counts_get(c, FRAME_RANGE, RNG_UNKNOWN_BEACON),
+             sensor_counts_get(c, FRAME_RANGE, RNG_BAD_TOF) +
+                 sensor_counts_get(c, FRAME_RANGE, RNG_OTHER_RECEIVER) +
+                 sensor_counts_get(c, FRAME_RANGE, RNG_REFUSED));
+}
 
 enum frame_result sensor_range_decode(uint32_t id, const uint8_t data[8], struct frame *out,
                                       struct frame_seq *seq)
@@ -48,10 +98,67 @@ enum frame_result sensor_range_decode(uint32_t id, const uint8_t data[8], struct
     return FRAME_OK;
 }
 
+/* One range of this robot's receiver (not a team site's). */
+static void range_of_robot(struct estimator *e, const struct frame_range *r, int64_t rx_us)
+{
+    struct node_clock *clock = &e->clock[FRAME_RANGE];
+    if (e->blcfg.range_beacon_count == 0) {
+        estimator_count(e, FRAME_RANGE, RNG_UNEXPECTED); /* no range beacon on this site */
+        return;
+    }
+    if (r->receiver != 1) {
+        /* Another robot's receiver (a team's host): its own clock and its
+         * own estimate, not ours; one robot for now. */
+        estimator_count(e, FRAME_RANGE, RNG_OTHER_RECEIVER);
+        return;
+    }
+    if (r->time_of_flight_us == 0 || r->time_of_flight_us >= 65534) {
+        estimator_count(e, FRAME_RANGE, RNG_BAD_TOF); /* nothing timed, or saturated (above) */
+        return;
+    }
+    if (sensor_beacon_survey_holds_range(e))
+        return; /* the beacons are not placed yet (counted there) */
+    /* The node sends the range once it heard the pulse: the clock fit sees
+     * the frame as if sent at the emission (estimator.h, "Ranges"). */
+    int64_t tr = node_clock_observe(clock, r->node_time_us, rx_us - r->time_of_flight_us);
+    if (clock->last_event == NODE_CLOCK_OUT_OF_ORDER) {
+        estimator_count(e, FRAME_RANGE, RNG_STALE); /* older than a range already handed on */
+        return;
+    }
+    if (clock->last_event == NODE_CLOCK_RESTART) {
+        e->c.node_restarts++;
+        estimator_event(e, EST_EV_WARNING, "range receiver clock restarted");
+    }
+    if (r->beacon < 1 || r->beacon > e->blcfg.range_beacon_count) {
+        estimator_count(e, FRAME_RANGE, RNG_UNKNOWN_BEACON); /* the handler's check, above */
+        return;
+    }
+    int64_t t;
+    if (!estimator_ref_time(e, clock, tr, &t)) {
+        estimator_count(e, FRAME_RANGE, RNG_UNMAPPED); /* no reference clock to map onto yet */
+        return;
+    }
+    /* Pulses that arrived before this range go first. */
+    (void)bl_localizer_advance(&e->loc, t - ESTIMATOR_POP_SLACK_US);
+    bl_range_meas m = {
+        .t_us = t,                                /* the emission (RF sync) */
+        .beacon_index = (uint32_t)r->beacon - 1u, /* [range_beaconN] -> N-1 */
+        .time_of_flight_s = (bl_real)((double)r->time_of_flight_us * 1e-6), /* us -> s */
+        .tag = (uint32_t)rx_us,
+    };
+    if (rx_us > e->latest_rx_us)
+        e->latest_rx_us = rx_us;
+    estimator_start_pending(e, t);
+    int rc = bl_localizer_range(&e->loc, &m, NULL);
+    if (rc != BL_OK)
+        log_debug("localizer range: %s", bl_strerror(rc));
+    estimator_sync(e);
+}
+
 void sensor_range_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
     if (e->team) /* a team site: every receiver's ranges are the team's (team.h) */
         team_range(e->team, &f->u.range, rx_us);
     else
-        estimator_range(e, &f->u.range, rx_us);
+        range_of_robot(e, &f->u.range, rx_us);
 }

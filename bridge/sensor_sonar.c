@@ -13,8 +13,39 @@
  */
 #include "sensors.h"
 
+#include <inttypes.h>
+
 #include "beaconloc_can.h"
 #include "estimator.h"
+#include "stats.h"
+
+/* The JSON's "sonar" object (bridge/sonar.h; not on a team site). */
+static void write_sonar(FILE *f, const struct stats_report *r)
+{
+    if (r->sonar)
+        sonar_write_json(r->sonar, f);
+}
+
+/* Its counters are the ring's own (struct sonar_counters, bridge/sonar.h),
+ * reported as one section. */
+const struct sensor_counter sensor_sonar_counters[2] = {
+    {.key = "sonar", .slot = SENSOR_SLOT_SECTIONS, .write = write_sonar},
+    {0},
+};
+
+/* A sonar site's part of the status line: " | sonar ok N rej N unm N bad N corr N". */
+void sensor_sonar_status(const struct stats_report *r, char *buf, size_t len)
+{
+    buf[0] = '\0';
+    if (!r->sonar || !r->sonar->on)
+        return;
+    const struct sonar_counters *c = &r->sonar->c;
+    snprintf(
+        buf, len,
+        " | sonar ok %" PRIu64 " rej %" PRIu64 " unm %" PRIu64 " bad %" PRIu64 " corr %" PRIu64,
+        c->fused, c->rejected, c->unmatched,
+        c->unknown_sensor + c->out_of_range + c->stale + c->refused, c->corrected + c->partial);
+}
 
 enum frame_result sensor_sonar_decode(uint32_t id, const uint8_t data[8], struct frame *out,
                                       struct frame_seq *seq)

@@ -1,12 +1,16 @@
 /*
  * beaconloc-bridge — sensor kind NODE_STATUS (every node, 1 Hz): decoder
  * and handler of its sensor-table entry (sensors.h). Its rolling counter
- * is followed per node id.
+ * is followed per node id; a node's sensor fault flag is logged.
  */
 #include "sensors.h"
 
 #include "beaconloc_can.h"
 #include "estimator.h"
+#include "log.h"
+
+/* No counters of its own (the frame layer counts its frames per node). */
+const struct sensor_counter sensor_status_counters[1] = {{0}};
 
 enum frame_result sensor_status_decode(uint32_t id, const uint8_t data[8], struct frame *out,
                                        struct frame_seq *seq)
@@ -34,5 +38,9 @@ enum frame_result sensor_status_decode(uint32_t id, const uint8_t data[8], struc
 
 void sensor_status_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
-    estimator_status(e, &f->u.status, rx_us);
+    (void)e;
+    (void)rx_us;
+    const struct frame_status *s = &f->u.status;
+    if (s->flags & 0x4)
+        log_warn("node %u reports a sensor fault (flags 0x%x)", s->node_id, s->flags);
 }

@@ -16,6 +16,17 @@
 #include "estimator.h"
 #include "team.h"
 
+/* Its counters (a team's are the team's, bridge/team.h). */
+enum {
+    TRK_UNEXPECTED, /* TRACK_ENCODERS frames on a site that is not a team's */
+    TRK_COUNTERS
+};
+
+const struct sensor_counter sensor_track_encoders_counters[TRK_COUNTERS + 1] = {
+    [TRK_UNEXPECTED] = SENSOR_COUNTER("tracks_unexpected", SENSOR_SLOT_SITE),
+    {0},
+};
+
 enum frame_result sensor_track_encoders_decode(uint32_t id, const uint8_t data[8],
                                                struct frame *out, struct frame_seq *seq)
 {
@@ -44,5 +55,5 @@ void sensor_track_encoders_handle(struct estimator *e, const struct frame *f, in
     if (e->team)
         team_tracks(e->team, &f->u.track, rx_us);
     else
-        e->c.tracks_unexpected++;
+        estimator_count(e, FRAME_TRACK_ENCODERS, TRK_UNEXPECTED);
 }

@@ -9,21 +9,98 @@
  * come from the cantools-generated header (build/gen/can/beaconloc_can.h),
  * never from literals.
  *
- * A new kind (SONAR 0x150 of the sonar ring is the latest kind added, after
- * TRACK_ENCODERS 0x131 and RANGE 0x130): its frames in the DBC, its
- * enumerator and payload in frames.h (enum frame_kind, union in struct
- * frame), a file bridge/sensor_<kind>.c with its decoder and handler
- * (declared below), one entry in sensors.c.
+ * Each kind also declares its own counters (struct sensor_counter: their
+ * stats JSON keys, where in the JSON they go, which come from the library's
+ * localizer) and its part of the status line; the daemon keeps their values
+ * in one struct sensor_counts, indexed by kind and by the kind's own counter
+ * enum, and the stats JSON and the status line are written from these
+ * tables (stats.c), so a kind's counters appear without any other file
+ * naming them. Its handler calls the library's localizer itself, with its
+ * node's clock from the estimator's per-kind clocks (estimator.h, timebase.c).
+ *
+ * A new kind: its frames in the DBC; its enumerator and payload in frames.h
+ * (enum frame_kind, union in struct frame); a file bridge/sensor_<kind>.c
+ * with its decoder, handler, counters and status-line part; one entry (and
+ * its declarations) in sensors.c. Nothing else in the bridge names it,
+ * unless it needs state of its own in struct estimator (estimator.h) or can
+ * be the filter's timebase (timebase.c).
  */
 #ifndef BRIDGE_SENSORS_H
 #define BRIDGE_SENSORS_H
 
 #include <stdbool.h>
+#include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #include "frames.h"
 
 struct estimator;
+struct stats_report;
+
+/*
+ * Where a kind's counters go in the stats JSON: after which of the report's
+ * own keys (stats.c writes the kinds' counters of one slot there, kind by
+ * kind in table order). The slots keep the JSON's key order of before the
+ * per-kind tables, byte for byte; a new kind puts its counters at
+ * SENSOR_SLOT_MEASUREMENTS and a section of its own at SENSOR_SLOT_SECTIONS.
+ */
+enum sensor_slot {
+    SENSOR_SLOT_FRAMES,       /* after "out_of_order_per_frame" */
+    SENSOR_SLOT_MEASUREMENTS, /* after "estimator_resets": what was fused, rejected, dropped */
+    SENSOR_SLOT_REPEATS,      /* after those, before "snapshot_restarts" */
+    SENSOR_SLOT_STARTS,       /* after "known_starts" */
+    SENSOR_SLOT_NUMBERING,    /* after "node_restarts" */
+    SENSOR_SLOT_SITE,         /* after "replay_frames_per_s" */
+    SENSOR_SLOT_SECTIONS,     /* after "mavlink_control" */
+    SENSOR_SLOT_COUNT
+};
+
+/* Where a counter's value comes from. */
+enum sensor_source {
+    SENSOR_FROM_BRIDGE = 0, /* the kind's handler counts it (sensor_count) */
+    SENSOR_FROM_LOCALIZER,  /* a uint32_t of bl_loc_counters, copied after every call */
+    SENSOR_FROM_SEQUENCER   /* a uint32_t of bl_seq_counters, copied likewise */
+};
+
+/* One counter of a kind (an entry of its table, in JSON order). */
+struct sensor_counter {
+    const char *key; /* stats JSON key; NULL ends the table */
+    enum sensor_slot slot;
+    enum sensor_source source;
+    size_t offset;  /* LOCALIZER / SEQUENCER: offsetof its field in the library's struct */
+    unsigned group; /* > 0: "key": {the next `group` counters}, one JSON object */
+    /* a section the kind writes itself instead of a number (key unused) */
+    void (*write)(FILE *f, const struct stats_report *r);
+};
+
+#define SENSOR_COUNTERS_MAX 20 /* counters (table entries) per kind */
+
+/* A counter the kind's handler counts; one from the localizer's or the
+ * sequencer's counters (field: its member name there). */
+#define SENSOR_COUNTER(key_, slot_)                                                                \
+    {                                                                                              \
+        .key = (key_), .slot = (slot_)                                                             \
+    }
+#define SENSOR_LOC_COUNTER(key_, slot_, field)                                                     \
+    {                                                                                              \
+        .key = (key_), .slot = (slot_), .source = SENSOR_FROM_LOCALIZER,                           \
+        .offset = offsetof(bl_loc_counters, field)                                                 \
+    }
+#define SENSOR_SEQ_COUNTER(key_, slot_, field)                                                     \
+    {                                                                                              \
+        .key = (key_), .slot = (slot_), .source = SENSOR_FROM_SEQUENCER,                           \
+        .offset = offsetof(bl_seq_counters, field)                                                 \
+    }
+
+/* The values of every kind's counters, [kind][the kind's counter index]. */
+struct sensor_counts {
+    uint64_t n[FRAME_KIND_COUNT][SENSOR_COUNTERS_MAX];
+};
+
+/* A kind's part of the status line (" | bearings ok N ..."), written into
+ * buf (len bytes; "" for none), from report r. */
+typedef void (*sensor_status_fn)(const struct stats_report *r, char *buf, size_t len);
 
 /*
  * Decode the 8 bytes of a frame of the kind (its id in the kind's range,
@@ -52,6 +129,8 @@ struct sensor_kind {
                                 (one per node id, struct frame_seq) */
     sensor_decode_fn decode;
     sensor_handle_fn handle;
+    const struct sensor_counter *counters; /* its counters, ended by a NULL key (or NULL) */
+    sensor_status_fn status;               /* its part of the status line, or NULL */
 };
 
 /* The table, indexed by enum frame_kind. */
@@ -67,30 +146,23 @@ unsigned sensor_counter_modulo(const struct sensor_kind *k);
  * kind's id range. */
 void sensor_filter(const struct sensor_kind *k, uint32_t *id, uint32_t *mask);
 
-/* Decoders and handlers, one file per kind (bridge/sensor_<kind>.c). */
-enum frame_result sensor_pulse_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                      struct frame_seq *seq);
-void sensor_pulse_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
-enum frame_result sensor_encoders_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                         struct frame_seq *seq);
-void sensor_encoders_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
-enum frame_result sensor_status_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                       struct frame_seq *seq);
-void sensor_status_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
-enum frame_result sensor_bearing_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                        struct frame_seq *seq);
-void sensor_bearing_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
-enum frame_result sensor_range_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                      struct frame_seq *seq);
-void sensor_range_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
-enum frame_result sensor_track_encoders_decode(uint32_t id, const uint8_t data[8],
-                                               struct frame *out, struct frame_seq *seq);
-void sensor_track_encoders_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
-enum frame_result sensor_beacon_survey_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                              struct frame_seq *seq);
-void sensor_beacon_survey_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
-enum frame_result sensor_sonar_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                      struct frame_seq *seq);
-void sensor_sonar_handle(struct estimator *e, const struct frame *f, int64_t rx_us);
+/* Value of counter i of kind k in c (0 when c is NULL). */
+static inline uint64_t sensor_counts_get(const struct sensor_counts *c, enum frame_kind k,
+                                         unsigned i)
+{
+    return c ? c->n[k][i] : 0;
+}
+
+/* The counter whose stats JSON key is `key`, any kind: its value
+ * (UINT64_MAX when no kind has it), or its place (NULL when none). */
+uint64_t sensor_count(const struct sensor_counts *c, const char *key);
+uint64_t *sensor_count_at(struct sensor_counts *c, const char *key);
+
+/* The localizer's and the sequencer's counters (bl_loc_counters,
+ * bl_seq_counters) into the counters of the kinds that report them. */
+struct bl_loc_counters;
+struct bl_seq_counters;
+void sensor_counts_from_library(struct sensor_counts *c, const struct bl_loc_counters *lc,
+                                const struct bl_seq_counters *sc);
 
 #endif /* BRIDGE_SENSORS_H */

@@ -9,8 +9,6 @@
 
 #include "log.h"
 #include "sensors.h"
-#include "sonar.h"
-#include "survey.h"
 #include "team.h"
 #include "mav_command.h"
 
@@ -103,6 +101,37 @@ static void write_per_frame(FILE *f, const char *name, uint64_t total, const uin
     write_by_kind(f, by_kind);
 }
 
+/* The counters of every kind at `slot` (sensors.h), kind by kind in table
+ * order, each as its table says: a number, an object of the next `group`
+ * counters, or a section the kind writes itself. */
+static void write_slot(FILE *f, const struct stats_report *r, enum sensor_slot slot)
+{
+    for (int k = 0; k < FRAME_KIND_COUNT; k++) {
+        const struct sensor_counter *t = sensor_kinds[k].counters;
+        for (unsigned i = 0; t && t[i].key; i++) {
+            if (t[i].slot != slot)
+                continue;
+            if (t[i].write) {
+                t[i].write(f, r);
+                continue;
+            }
+            fprintf(f, "  \"%s\": ", t[i].key);
+            if (t[i].group == 0) {
+                fprintf(f, "%llu,\n",
+                        (unsigned long long)sensor_counts_get(r->counts, (enum frame_kind)k, i));
+                continue;
+            }
+            fputc('{', f);
+            for (unsigned j = 1; j <= t[i].group && t[i + j].key; j++)
+                fprintf(
+                    f, "%s\"%s\": %llu", j > 1 ? ", " : "", t[i + j].key,
+                    (unsigned long long)sensor_counts_get(r->counts, (enum frame_kind)k, i + j));
+            fputs("},\n", f);
+            i += t[i].group;
+        }
+    }
+}
+
 int stats_write_json(const struct stats_report *r, const char *path)
 {
     char tmp[4096];
@@ -128,7 +157,7 @@ int stats_write_json(const struct stats_report *r, const char *path)
     write_per_frame(f, "lost_by_counter", frame_lost_total(fc), fc->lost);
     write_per_frame(f, "duplicates", frame_duplicates_total(fc), fc->duplicates);
     write_per_frame(f, "out_of_order", frame_out_of_order_total(fc), fc->out_of_order);
-    fprintf(f, "  \"stale_encoder_samples\": %llu,\n", (unsigned long long)r->stale_encoders);
+    write_slot(f, r, SENSOR_SLOT_FRAMES);
     fprintf(f, "  \"error_frames\": %llu,\n", (unsigned long long)r->error_frames);
     fprintf(f, "  \"bus_off\": %llu,\n", (unsigned long long)r->bus_off);
     fprintf(f, "  \"controller_errors\": %llu,\n", (unsigned long long)r->controller_errors);
@@ -142,49 +171,13 @@ int stats_write_json(const struct stats_report *r, const char *path)
             (unsigned long long)r->record_write_errors,
             (unsigned long long)r->estimates_write_errors);
     fprintf(f, "  \"estimator_resets\": %llu,\n", (unsigned long long)r->estimator_resets);
-    fprintf(f, "  \"pulses_accepted\": %llu,\n", (unsigned long long)r->pulses_accepted);
-    fprintf(f, "  \"pulses_rejected\": %llu,\n", (unsigned long long)r->pulses_rejected);
-    fprintf(f, "  \"pulses_buffered\": %llu,\n", (unsigned long long)r->pulses_buffered);
-    fprintf(f, "  \"pulses_unassigned\": %llu,\n", (unsigned long long)r->pulses_unassigned);
-    fprintf(f, "  \"sequencer_spurious\": %llu,\n", (unsigned long long)r->sequencer_spurious);
-    fprintf(f,
-            "  \"sequencer\": {\"detections\": %llu, \"merged\": %llu, "
-            "\"double_pulses\": %llu, \"double_conflicts\": %llu, "
-            "\"locks_acquired\": %llu, \"locks_lost\": %llu, \"repeats\": %llu},\n",
-            (unsigned long long)r->seq_detections, (unsigned long long)r->seq_merged,
-            (unsigned long long)r->seq_double_pulses, (unsigned long long)r->seq_double_conflicts,
-            (unsigned long long)r->seq_locks_acquired, (unsigned long long)r->seq_locks_lost,
-            (unsigned long long)r->seq_repeats);
-    fprintf(f, "  \"pulses_unexpected\": %llu,\n", (unsigned long long)r->pulses_unexpected);
-    fprintf(f, "  \"bearings_fused\": %llu,\n", (unsigned long long)r->bearings_fused);
-    fprintf(f, "  \"bearings_rejected\": %llu,\n", (unsigned long long)r->bearings_rejected);
-    fprintf(f, "  \"bearings_buffered\": %llu,\n", (unsigned long long)r->bearings_buffered);
-    fprintf(f, "  \"bearings_refused\": %llu,\n", (unsigned long long)r->bearings_refused);
-    fprintf(f, "  \"bearings_unknown_beacon\": %llu,\n",
-            (unsigned long long)r->bearings_unknown_beacon);
-    fprintf(f, "  \"bearings_unexpected\": %llu,\n", (unsigned long long)r->bearings_unexpected);
-    fprintf(f, "  \"stale_bearing_samples\": %llu,\n", (unsigned long long)r->stale_bearings);
-    fprintf(f, "  \"unmapped_bearings\": %llu,\n", (unsigned long long)r->unmapped_bearings);
-    fprintf(f, "  \"ranges_fused\": %llu,\n", (unsigned long long)r->ranges_fused);
-    fprintf(f, "  \"ranges_rejected\": %llu,\n", (unsigned long long)r->ranges_rejected);
-    fprintf(f, "  \"ranges_buffered\": %llu,\n", (unsigned long long)r->ranges_buffered);
-    fprintf(f, "  \"ranges_refused\": %llu,\n", (unsigned long long)r->ranges_refused);
-    fprintf(f, "  \"ranges_unknown_beacon\": %llu,\n",
-            (unsigned long long)r->ranges_unknown_beacon);
-    fprintf(f, "  \"ranges_unexpected\": %llu,\n", (unsigned long long)r->ranges_unexpected);
-    fprintf(f, "  \"ranges_other_receiver\": %llu,\n",
-            (unsigned long long)r->ranges_other_receiver);
-    fprintf(f, "  \"ranges_bad_tof\": %llu,\n", (unsigned long long)r->ranges_bad_tof);
-    fprintf(f, "  \"stale_range_samples\": %llu,\n", (unsigned long long)r->stale_ranges);
-    fprintf(f, "  \"unmapped_ranges\": %llu,\n", (unsigned long long)r->unmapped_ranges);
-    fprintf(f, "  \"repeats_skipped\": %llu,\n", (unsigned long long)r->repeats_skipped);
+    write_slot(f, r, SENSOR_SLOT_MEASUREMENTS);
+    write_slot(f, r, SENSOR_SLOT_REPEATS);
     fprintf(f, "  \"snapshot_restarts\": %llu,\n", (unsigned long long)r->snapshot_restarts);
     fprintf(f, "  \"known_starts\": %llu,\n", (unsigned long long)r->known_starts);
-    fprintf(f, "  \"encoder_jumps\": %llu,\n", (unsigned long long)r->encoder_jumps);
+    write_slot(f, r, SENSOR_SLOT_STARTS);
     fprintf(f, "  \"node_restarts\": %llu,\n", (unsigned long long)r->node_restarts);
-    fprintf(f, "  \"numbering_errors\": %llu,\n", (unsigned long long)r->numbering_errors);
-    fprintf(f, "  \"sequencer_resyncs\": %llu,\n", (unsigned long long)r->seq_resyncs);
-    fprintf(f, "  \"encoder_gaps\": %llu,\n", (unsigned long long)r->encoder_gaps);
+    write_slot(f, r, SENSOR_SLOT_NUMBERING);
     fprintf(f, "  \"estimator_errors\": %llu,\n", (unsigned long long)r->predict_errors);
     fprintf(f, "  \"estimates\": %llu,\n", (unsigned long long)r->estimates);
     fprintf(f, "  \"odometry_sent\": %llu,\n", (unsigned long long)r->odometry_sent);
@@ -201,19 +194,14 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"latency_interval_p99_us\": %lld,\n", (long long)r->latency_interval_p99_us);
     fprintf(f, "  \"latency_interval_max_us\": %lld,\n", (long long)r->latency_interval_max_us);
     fprintf(f, "  \"replay_frames_per_s\": %.1f,\n", r->replay_frames_per_s);
-    fprintf(f, "  \"tracks_unexpected\": %llu,\n", (unsigned long long)r->tracks_unexpected);
-    fprintf(f, "  \"ranges_before_survey\": %llu,\n", (unsigned long long)r->ranges_before_survey);
-    fprintf(f, "  \"survey_unexpected\": %llu,\n", (unsigned long long)r->survey_unexpected);
-    if (r->survey)
-        survey_write_json(r->survey, f);
+    write_slot(f, r, SENSOR_SLOT_SITE);
     fprintf(f, "  \"can_tx_frames\": %llu,\n", (unsigned long long)r->can_tx_frames);
     fprintf(f, "  \"can_tx_errors\": %llu,\n", (unsigned long long)r->can_tx_errors);
     if (r->team)
         team_write_json(r->team, r->team_odometry_sent, f);
     if (r->control)
         mav_control_write_json(r->control, &r->mavlink_in, f);
-    if (r->sonar)
-        sonar_write_json(r->sonar, f);
+    write_slot(f, r, SENSOR_SLOT_SECTIONS);
     fprintf(f, "  \"run_time_s\": %.3f\n", r->run_time_s);
     fprintf(f, "}\n");
     if (fclose(f) != 0) {
@@ -229,34 +217,27 @@ int stats_write_json(const struct stats_report *r, const char *path)
 void stats_status_line(const struct stats_report *r, const char *prefix, const char *estimate)
 {
     const struct frame_counters *fc = r->frames;
-    /* a sonar site's part: " | sonar ok N rej N unm N bad N corr N" */
-    char sonar[160] = "";
-    if (r->sonar && r->sonar->on) {
-        const struct sonar_counters *c = &r->sonar->c;
-        snprintf(
-            sonar, sizeof sonar,
-            " | sonar ok %" PRIu64 " rej %" PRIu64 " unm %" PRIu64 " bad %" PRIu64 " corr %" PRIu64,
-            c->fused, c->rejected, c->unmatched,
-            c->unknown_sensor + c->out_of_range + c->stale + c->refused, c->corrected + c->partial);
-    }
     char kinds[32 * FRAME_KIND_COUNT] = "";
     size_t n = 0;
     for (int k = 0; k < FRAME_KIND_COUNT && n < sizeof kinds; k++)
         n += (size_t)snprintf(kinds + n, sizeof kinds - n, "%s%s %" PRIu64, k ? " " : "",
                               sensor_kinds[k].short_name, fc->received[k]);
-    log_info(
-        "%s: frames %" PRIu64 " (%s) bad %" PRIu64 " unknown %" PRIu64 " range %" PRIu64
-        " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64 " kdrop %" PRIu64 " errfr %" PRIu64
-        " | pulses ok %" PRIu64 " rej %" PRIu64 " | bearings ok %" PRIu64 " rej %" PRIu64
-        " unk %" PRIu64 " | ranges ok %" PRIu64 " rej %" PRIu64 " unk %" PRIu64 " bad %" PRIu64
-        "%s | %s | odom %" PRIu64 " werr %" PRIu64 " | latency p50 %" PRId64 " p99 %" PRId64 " us"
-        " (interval p50 %" PRId64 " p99 %" PRId64 " us)",
-        prefix, r->frames_total, kinds, fc->malformed, fc->unknown_id, fc->out_of_range,
-        frame_lost_total(fc), frame_duplicates_total(fc), frame_out_of_order_total(fc),
-        r->kernel_drops, r->error_frames, r->pulses_accepted, r->pulses_rejected, r->bearings_fused,
-        r->bearings_rejected, r->bearings_unknown_beacon, r->ranges_fused, r->ranges_rejected,
-        r->ranges_unknown_beacon, r->ranges_bad_tof + r->ranges_other_receiver + r->ranges_refused,
-        sonar, estimate, r->odometry_sent, r->record_write_errors + r->estimates_write_errors,
-        r->latency_p50_us, r->latency_p99_us, r->latency_interval_p50_us,
-        r->latency_interval_p99_us);
+    /* each kind's own part (" | pulses ok N rej N", ...), in table order */
+    char parts[160 * FRAME_KIND_COUNT] = "";
+    n = 0;
+    for (int k = 0; k < FRAME_KIND_COUNT && n < sizeof parts; k++)
+        if (sensor_kinds[k].status) {
+            sensor_kinds[k].status(r, parts + n, sizeof parts - n);
+            n += strlen(parts + n);
+        }
+    log_info("%s: frames %" PRIu64 " (%s) bad %" PRIu64 " unknown %" PRIu64 " range %" PRIu64
+             " lost %" PRIu64 " dup %" PRIu64 " late %" PRIu64 " kdrop %" PRIu64 " errfr %" PRIu64
+             "%s | %s | odom %" PRIu64 " werr %" PRIu64 " | latency p50 %" PRId64 " p99 %" PRId64
+             " us"
+             " (interval p50 %" PRId64 " p99 %" PRId64 " us)",
+             prefix, r->frames_total, kinds, fc->malformed, fc->unknown_id, fc->out_of_range,
+             frame_lost_total(fc), frame_duplicates_total(fc), frame_out_of_order_total(fc),
+             r->kernel_drops, r->error_frames, parts, estimate, r->odometry_sent,
+             r->record_write_errors + r->estimates_write_errors, r->latency_p50_us,
+             r->latency_p99_us, r->latency_interval_p50_us, r->latency_interval_p99_us);
 }

@@ -17,6 +17,7 @@
 #include "mavlink_out.h"
 
 struct mav_control;
+struct sensor_counts;
 struct team;
 struct survey;
 struct sonar;
@@ -60,27 +61,15 @@ struct stats_report {
         can_downs;
     uint64_t replay_bad_lines;
     uint64_t record_write_errors, estimates_write_errors; /* --record, --estimates */
-    uint64_t stale_encoders;
-    uint64_t estimator_resets, pulses_accepted, pulses_rejected, pulses_buffered, pulses_unassigned,
-        sequencer_spurious, encoder_gaps, predict_errors, estimates;
+    uint64_t estimator_resets, snapshot_restarts, known_starts, node_restarts, predict_errors,
+        estimates;
     uint64_t odometry_sent, heartbeat_sent, mavlink_tx_errors, timesync_answered;
-    /* sequencer counters (bl_seq_counters) */
-    uint64_t seq_detections, seq_merged, seq_double_pulses, seq_double_conflicts,
-        seq_locks_acquired, seq_locks_lost, seq_repeats, repeats_skipped, snapshot_restarts,
-        known_starts, encoder_jumps, node_restarts, numbering_errors, seq_resyncs;
-    /* bearings (struct est_counters) and pulses on a site without ultrasonic beacons */
-    uint64_t bearings_fused, bearings_rejected, bearings_buffered, bearings_refused,
-        bearings_unknown_beacon, bearings_unexpected, stale_bearings, unmapped_bearings,
-        pulses_unexpected;
-    /* ranges (struct est_counters) */
-    uint64_t ranges_fused, ranges_rejected, ranges_buffered, ranges_refused, ranges_unknown_beacon,
-        ranges_unexpected, ranges_other_receiver, ranges_bad_tof, stale_ranges, unmapped_ranges;
-    uint64_t tracks_unexpected; /* TRACK_ENCODERS on a site that is not a team's */
+    /* each sensor kind's counters, written from the kinds' tables
+     * (sensors.h); NULL: all 0 */
+    const struct sensor_counts *counts;
     /* the beacons' self-survey (bridge/survey.h): its section "survey" of the
      * JSON; NULL on a site without self_survey */
     const struct survey *survey;
-    uint64_t ranges_before_survey;         /* robot ranges dropped before the survey was done */
-    uint64_t survey_unexpected;            /* BEACON_SURVEY frames on a site without self_survey */
     uint64_t can_tx_frames, can_tx_errors; /* frames the bridge wrote (TEAM_COMMAND) */
     /* the sonar ring (bridge/sonar.h): its section "sonar" of the JSON, and
      * its part of the status line; NULL on a team site */
@@ -103,7 +92,8 @@ struct stats_report {
 };
 
 /* Write the report as one JSON object (per-kind counts keyed by the sensor
- * table's names). Returns 0 or -errno. */
+ * table's names; each kind's counters from its table, at its slots,
+ * sensors.h). Returns 0 or -errno. */
 int stats_write_json(const struct stats_report *r, const char *path);
 
 /* Log the status line (docs/bridge.md, STATUS LINE) of report r at level

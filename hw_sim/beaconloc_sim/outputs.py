@@ -105,28 +105,8 @@ def run_stats(result: SimResult, *, wall_time_s: float, lateness_s: np.ndarray |
         "sim_time_s": float(result.scenario.duration_s),
         "wall_time_s": wall_time_s,
     }
-    if result.scenario.site.bearing_beacon_count:
-        b = result.bearings
-        stats["bearings"] = {"measured": int(len(b.t_s)), "sent": int(np.sum(b.sent)),
-                             "outage": int(np.sum(b.outage)), "occluded": int(np.sum(b.occluded)),
-                             "out_of_range": int(np.sum(b.out_of_range))}
-    if result.scenario.site.range_beacon_count:
-        r = result.ranges
-        stats["ranges"] = {"pinged": int(len(r.t_s)), "sent": int(np.sum(r.sent)),
-                           "direct": int(np.sum(r.direct)),
-                           "multipath": int(np.sum(r.sent & r.multipath)),
-                           "dropout": int(np.sum(r.dropout)), "occluded": int(np.sum(r.occluded)),
-                           "out_of_range": int(np.sum(r.out_of_range))}
-    if result.scenario.site.sonar_count:
-        from .physics.sonar import KIND_NAMES
-        so = result.sonar
-        stats["sonar"] = {"pinged": int(len(so.t_s)), "echo": int(np.sum(so.flags == 0)),
-                          "no_echo": int(np.sum(so.flags == 1)),
-                          "max_range": int(np.sum(so.flags == 2)),
-                          "informative": int(np.sum(so.informative)),
-                          "obstacle": int(np.sum((so.wall >= 0) & ~so.in_map))}
-        stats["sonar"].update({name: int(np.sum((so.kind == k) & (so.flags == 0)))
-                               for k, name in enumerate(KIND_NAMES) if k})
+    # each sensor kind's record of the run counts itself (its stats(), nodes/<kind>.py)
+    stats.update({name: record.stats() for name, record in result.measured().items()})
     if lateness_s is not None:
         late_us = np.asarray(lateness_s) * 1e6
         stats["live"] = {

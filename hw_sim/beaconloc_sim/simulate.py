@@ -29,11 +29,12 @@ ID_SONAR = SonarRing.frame_spec().frame_id
 __all__ = ["FRAME_BITS", "Frames", "ODOMETRY_COLUMNS", "TRUTH_COLUMNS", "SimResult", "run",
            "run_windows", "wrap_angle", "ID_PULSE", "ID_ENCODERS", "ID_STATUS", "ID_BEARING", "ID_RANGE",
            "ID_SONAR"]
-# child seeds of a run (or of a window): pulses, encoders, latency, firings, bearings, ranges,
-# the beacons' survey, the sonar ring. The bearings' is the fifth child, the ranges' the
-# sixth, the survey's the seventh and the sonars' the eighth, so the first ones draw what
-# they drew before the later existed (SeedSequence children depend only on their index).
-_N_SEEDS = 8
+# child seeds of a run (or of a window): pulses 0, latency 2, firings 3, and each node kind's
+# own stream at the index its class declares (Node.stream: wheels 1, bearings 4, ranges 5,
+# the beacons' survey 6, the sonar ring 7), so the first ones draw what they drew before the
+# later existed (SeedSequence children depend only on their index).
+_SEED_PULSES, _SEED_LATENCY, _SEED_FIRINGS = 0, 2, 3
+_N_SEEDS = 1 + max(_SEED_FIRINGS, *(k.stream[1] for k in nodes.KINDS if k.stream))
 
 TRUTH_COLUMNS = ("t_us", "t_sim_s", "x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "sos_mps",
                  "period_s", "temperature_c", "pcrb_x_m", "pcrb_y_m", "pcrb_pos_m", "pcrb_lateral_m",
@@ -58,6 +59,15 @@ class SimResult:
     bearings: Bearings | None = None     # every bearing measured (sent or not, and why not)
     ranges: Ranges | None = None         # every range ping (sent or not, and why not)
     sonar: SonarPings | None = None      # every sonar ping (its reading, flags, echo kind)
+
+    def measured(self) -> dict:
+        """The record of every sensor kind the site has, by its name in the simulator's stats
+        (outputs.py): each counts itself (stats())."""
+        site = self.scenario.site
+        return {name: record for name, record, present in (
+            ("bearings", self.bearings, site.bearing_beacon_count),
+            ("ranges", self.ranges, site.range_beacon_count),
+            ("sonar", self.sonar, site.sonar_count)) if present}
 
 
 def run(scn: Scenario, *, encode: bool = True) -> SimResult:
@@ -144,8 +154,9 @@ def run_windows(scn: Scenario, window_s: float, *, encode: bool = True):
 def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry | None, *,
             encode: bool) -> tuple[SimResult, Carry | None]:
     """The run (win None) or its window win = (t_a, t_b] after carry (None: the first)."""
-    rng_pulse, rng_enc, rng_lat, rng_fire, rng_bear, rng_range, rng_survey, rng_sonar = (
-        np.random.default_rng(s) for s in seeds)
+    rngs = [np.random.default_rng(s) for s in seeds]
+    rng_pulse, rng_lat, rng_fire = rngs[_SEED_PULSES], rngs[_SEED_LATENCY], rngs[_SEED_FIRINGS]
+    streams = {k.stream[0]: rngs[k.stream[1]] for k in nodes.KINDS if k.stream}
     t_a, t_b = win if win is not None else (0.0, scn.duration_s)
     if carry is None:
         ring, wheels, bearing, ranger, on_bus = nodes.on_bus(scn)
@@ -166,9 +177,7 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
 
     firings = make_firings(scn, rng_fire, win)
     det = simulate_detections(scn, firings, rng_pulse)
-    iv = nodes.Interval(scn, t_a, t_b, firings, det, rng_latency=rng_lat, rng_wheels=rng_enc,
-                        rng_bearings=rng_bear, rng_ranges=rng_range, rng_survey=rng_survey,
-                        rng_sonar=rng_sonar)
+    iv = nodes.Interval(scn, t_a, t_b, firings, det, rng_latency=rng_lat, streams=streams)
     # a window sends what is ready before its end; the rest waits in its node for the next one
     until_s = t_b if win is not None else math.inf
     frames = carry.bus.transmit([node.release(iv, until_s) for node in carry.nodes], until_s)

@@ -84,7 +84,7 @@ def run(tscn: TeamScenario, *, encode: bool = True, bound: bool = True) -> TeamR
     for robot in tscn.robots:
         nodes += [RangeModule(robot, ranges), TrackEncoders(robot, tscn)]
     iv = Interval(tscn, 0.0, tscn.duration_s, None, None, rng_latency=rng_lat,
-                  rng_wheels=rng_track, rng_ranges=rng_range)
+                  streams={"wheels": rng_track, "ranges": rng_range})
     frames = Bus(tscn.bus_bitrate_bps).transmit([node.release(iv, math.inf) for node in nodes])
     if encode:
         frames.data = can_out.encode_all(frames)

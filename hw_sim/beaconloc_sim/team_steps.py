@@ -110,7 +110,7 @@ class TeamSteps:
         for node in self.ranging:
             node.take(ranges)
         iv = Interval(view, t_a, t_b, None, None, rng_latency=self.rng_lat,
-                      rng_wheels=self.rng_track, rng_ranges=self.rng_range)
+                      streams={"wheels": self.rng_track, "ranges": self.rng_range})
         # as team_sim.run: the last window sends every frame ready after the end too
         until_s = math.inf if w == self.n_windows - 1 else t_b
         frames = self.bus.transmit([node.release(iv, until_s) for node in self.nodes], until_s)

@@ -129,7 +129,8 @@ static void send_pulse(struct world *w, int b, int64_t fire_us)
             .counter = w->pulse_counter++ & 7, .amplitude_mv = 800, .width_us = 2500,
         };
         int64_t rx_us = ta[i] + PULSE_HOLD_US + DELAY_US;
-        estimator_pulse(&w->est, &p, rx_us);
+        sensor_kinds[FRAME_PULSE].handle(&w->est, &(struct frame){.kind = FRAME_PULSE, .u.pulse = p},
+                                          rx_us);
         check_update(w, rx_us);
         w->pulse_rx[w->pulse_rx_n++ % 64] = rx_us;
     }
@@ -149,7 +150,8 @@ static void send_encoders_rx(struct world *w, int64_t t_us, int64_t rx_us)
         .node_time_us = (uint32_t)(t_us + ENC_NODE_OFFSET_US),
         .left_ticks = t14, .right_ticks = t14, .counter = w->enc_counter++ & 15,
     };
-    estimator_encoders(&w->est, &f, rx_us);
+    sensor_kinds[FRAME_ENCODERS].handle(&w->est, &(struct frame){.kind = FRAME_ENCODERS, .u.enc = f},
+                                        rx_us);
 }
 
 static void send_encoders(struct world *w, int64_t t_us)
@@ -264,7 +266,7 @@ static void test_static_robot_converges(void **state)
      * delay is part of the offset) */
     assert_true(o.t_node_us > (1LL << 32));
     assert_true(llabs(o.t_local_us + RX_NODE_OFFSET_US - DELAY_US - o.t_node_us) < 50);
-    assert_true(W.est.c.pulses_accepted > 80);
+    assert_true(sensor_count(&W.est.counts, "pulses_accepted") > 80);
     assert_int_equal(W.est.c.seq_errors + W.est.c.fuse_errors + W.est.c.predict_errors, 0);
     char ev[1024];
     drain(&W.est, ev, sizeof ev);
@@ -298,11 +300,13 @@ static void test_every_receiver_of_a_pulse_fused(void **state)
         fail_msg("position error %.3f m", err);
     assert_int_equal(W.est.loc.seq.counters.merged, 2 * (uint32_t)W.firings_sent);
     /* all three members of (nearly) every firing went to the filter */
-    uint64_t fused = W.est.c.pulses_accepted + W.est.c.pulses_rejected + W.est.c.pulses_buffered;
+    uint64_t fused = sensor_count(&W.est.counts, "pulses_accepted")
+                     + sensor_count(&W.est.counts, "pulses_rejected")
+                     + sensor_count(&W.est.counts, "pulses_buffered");
     if (fused < 3 * (uint64_t)W.firings_sent - 12)
         fail_msg("%llu measurements fused from %d firings", (unsigned long long)fused,
                  W.firings_sent);
-    assert_true(W.est.c.pulses_rejected <= 3);
+    assert_true(sensor_count(&W.est.counts, "pulses_rejected") <= 3);
     assert_int_equal(W.est.c.seq_errors + W.est.c.fuse_errors + W.est.c.predict_errors, 0);
 }
 
@@ -400,7 +404,7 @@ static void test_encoder_glitch_ignored(void **state)
     send_encoders(&W, 12005000);
     W.ticks0 = saved;
     run(&W, 12010000, 16000000);
-    assert_int_equal(W.est.c.encoder_jumps, 2); /* off, and back */
+    assert_int_equal(sensor_count(&W.est.counts, "encoder_jumps"), 2); /* off, and back */
     struct est_output o;
     assert_int_equal(estimator_output(&W.est, 0, &o), 0);
     assert_true(hypot(o.x_m - W.x0, o.y_m - W.y0) < 0.03);
@@ -450,7 +454,7 @@ static void test_late_encoder_frame_dropped(void **state)
         run(&W, t + 10001, t + 20000);
         W.encoders_off = false;
     }
-    assert_int_equal(W.est.c.stale_encoders, 200);
+    assert_int_equal(sensor_count(&W.est.counts, "stale_encoder_samples"), 200);
     run(&W, 16000000, 17000000);
     struct est_output o;
     assert_int_equal(estimator_output(&W.est, 0, &o), 0);
@@ -470,7 +474,7 @@ static void test_held_pulse_reports_its_own_frame(void **state)
 {
     (void)state;
     run(&W, 1000000, 12000000);
-    assert_true(W.est.c.pulses_accepted > 40);
+    assert_true(sensor_count(&W.est.counts, "pulses_accepted") > 40);
     int64_t rx;
     (void)estimator_take_update(&W.est, &rx);
     W.encoders_off = true; /* pulses only from here: each one is held */
@@ -512,12 +516,12 @@ static void test_reconfigure_tuning_keeps_filter(void **state)
     assert_int_equal(estimator_output(&W.est, 0, &after), 0);
     assert_true(after.x_m == before.x_m && after.y_m == before.y_m);
     assert_int_equal(after.reset_counter, before.reset_counter);
-    uint64_t accepted = W.est.c.pulses_accepted;
+    uint64_t accepted = sensor_count(&W.est.counts, "pulses_accepted");
     run(&W, 12000000, 16000000);
     assert_int_equal(estimator_output(&W.est, 0, &after), 0);
     assert_true(after.converged);
     assert_int_equal(after.reset_counter, before.reset_counter);
-    assert_true(W.est.c.pulses_accepted > accepted + 20);
+    assert_true(sensor_count(&W.est.counts, "pulses_accepted") > accepted + 20);
     assert_true(hypot(after.x_m - W.x0, after.y_m - W.y0) < 0.03);
     /* a [tuning] key is tuning too: the library takes it, the state stays */
     c.tuning.speed_of_sound_drift_mps_per_sqrt_s = 0.01;
@@ -588,7 +592,8 @@ static void send_bearings(struct world *w, int64_t t_us, uint8_t *counter)
             .beacon = (uint8_t)(b + 1), .bearing_deg = deg, .quality = 100,
             .counter = (uint8_t)((*counter)++ & 15),
         };
-        estimator_bearing(&w->est, &f, t_us + DELAY_US);
+        sensor_kinds[FRAME_BEARING].handle(
+            &w->est, &(struct frame){.kind = FRAME_BEARING, .u.bearing = f}, t_us + DELAY_US);
     }
 }
 
@@ -607,7 +612,7 @@ static void test_mixed_site_bearings_on_receiver_clock(void **state)
     W.v_mps = 0.3;
     uint8_t counter = 0;
     send_bearings(&W, 500000, &counter); /* before any pulse */
-    assert_int_equal(W.est.c.unmapped_bearings, 3);
+    assert_int_equal(sensor_count(&W.est.counts, "unmapped_bearings"), 3);
     for (int64_t t = 1000000; t < 14000000; t += 100000) {
         run(&W, t, t + 100000);
         send_bearings(&W, t + 99000, &counter);
@@ -617,12 +622,14 @@ static void test_mixed_site_bearings_on_receiver_clock(void **state)
     double x, y;
     pose_at(&W, o.t_node_us - RX_NODE_OFFSET_US, &x, &y);
     assert_true(hypot(o.x_m - x, o.y_m - y) < 0.03);
-    const struct est_counters *c = &W.est.c;
-    assert_int_equal(c->unmapped_bearings, 3);
-    assert_true(c->bearings_fused > 300); /* 3 per 0.1 s for 13 s, less the start */
-    assert_true(c->bearings_rejected * 50 < c->bearings_fused);
-    assert_true(c->pulses_accepted > 50); /* both kinds in the one filter */
-    assert_int_equal(c->stale_bearings + c->bearings_unknown_beacon + c->bearings_unexpected, 0);
+    const struct sensor_counts *c = &W.est.counts;
+    assert_int_equal(sensor_count(c, "unmapped_bearings"), 3);
+    assert_true(sensor_count(c, "bearings_fused") > 300); /* 3 per 0.1 s for 13 s, less the start */
+    assert_true(sensor_count(c, "bearings_rejected") * 50 < sensor_count(c, "bearings_fused"));
+    assert_true(sensor_count(c, "pulses_accepted") > 50); /* both kinds in the one filter */
+    assert_int_equal(sensor_count(c, "stale_bearing_samples")
+                     + sensor_count(c, "bearings_unknown_beacon")
+                     + sensor_count(c, "bearings_unexpected"), 0);
 }
 
 int main(void)

@@ -321,12 +321,12 @@ static void test_bearing_only_run_near_truth(void **state)
     pose_error(&W, &pos, &th);
     assert_true(pos < 0.04);
     assert_true(th < 2.0 * M_PI / 180.0);
-    const struct est_counters *c = &W.est.c;
-    assert_true(c->bearings_fused > 400); /* 3 x 150 scans, a few gated or buffered */
-    assert_true(c->bearings_rejected < c->bearings_fused / 20);
-    assert_int_equal(c->bearings_unknown_beacon, 0);
-    assert_int_equal(c->stale_bearings, 0);
-    assert_true(c->predicts > 1000); /* the encoders drove the filter between scans */
+    const struct sensor_counts *c = &W.est.counts;
+    assert_true(sensor_count(c, "bearings_fused") > 400); /* 3 x 150 scans, a few gated or buffered */
+    assert_true(sensor_count(c, "bearings_rejected") < sensor_count(c, "bearings_fused") / 20);
+    assert_int_equal(sensor_count(c, "bearings_unknown_beacon"), 0);
+    assert_int_equal(sensor_count(c, "stale_bearing_samples"), 0);
+    assert_true(W.est.c.predicts > 1000); /* the encoders drove the filter between scans */
     /* the estimate is timed on the bearing sensor's clock, and maps back to
      * the bridge clock by the bearing node's fit */
     struct est_output o;
@@ -342,27 +342,33 @@ static void test_bad_bearings_counted_and_dropped(void **state)
 {
     (void)state;
     run(&W, 1000000, 3000000, INT64_MAX, 0.0, 0.0);
-    struct est_counters before = W.est.c;
+    const struct sensor_counts before = W.est.counts;
     struct est_output o0, o1;
     assert_int_equal(estimator_output(&W.est, 0, &o0), 0);
     send_bearing(&W, 3010000, 4, 1000);  /* beacon 4 of 3 */
     send_bearing(&W, 3010000, 15, 1000); /* the DBC's largest id */
-    assert_int_equal(W.est.c.bearings_unknown_beacon, before.bearings_unknown_beacon + 2);
+    assert_int_equal(sensor_count(&W.est.counts, "bearings_unknown_beacon"),
+                     sensor_count(&before, "bearings_unknown_beacon") + 2);
     /* a frame of a past scan with a fresh counter (after a lost frame, so
      * the frame layer sees no reordering): the node clock does */
     W.brg_counter = (uint8_t)((W.brg_counter + 1) % 16);
     send_bearing(&W, 2500000, 1, bearing_raw(&W, 0, 30.0));
-    assert_int_equal(W.est.c.stale_bearings, before.stale_bearings + 1);
+    assert_int_equal(sensor_count(&W.est.counts, "stale_bearing_samples"),
+                     sensor_count(&before, "stale_bearing_samples") + 1);
     /* none of them reached the localizer */
-    assert_int_equal(W.est.c.bearings_fused, before.bearings_fused);
-    assert_int_equal(W.est.c.bearings_rejected, before.bearings_rejected);
-    assert_int_equal(W.est.c.bearings_buffered, before.bearings_buffered);
-    assert_int_equal(W.est.c.bearings_refused, before.bearings_refused);
+    assert_int_equal(sensor_count(&W.est.counts, "bearings_fused"),
+                     sensor_count(&before, "bearings_fused"));
+    assert_int_equal(sensor_count(&W.est.counts, "bearings_rejected"),
+                     sensor_count(&before, "bearings_rejected"));
+    assert_int_equal(sensor_count(&W.est.counts, "bearings_buffered"),
+                     sensor_count(&before, "bearings_buffered"));
+    assert_int_equal(sensor_count(&W.est.counts, "bearings_refused"),
+                     sensor_count(&before, "bearings_refused"));
     assert_int_equal(estimator_output(&W.est, 0, &o1), 0);
     assert_true(o1.x_m == o0.x_m && o1.y_m == o0.y_m && o1.t_node_us == o0.t_node_us);
     /* and the run goes on */
     run(&W, 3000000, 4000000, INT64_MAX, 0.0, 0.0);
-    assert_true(W.est.c.bearings_fused > before.bearings_fused);
+    assert_true(sensor_count(&W.est.counts, "bearings_fused") > sensor_count(&before, "bearings_fused"));
 }
 
 /* A bearing-only site drops pulse frames (counted); a site without bearing
@@ -376,8 +382,8 @@ static void test_unexpected_kinds(void **state)
     struct can_msg m = { .id = BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID, .len = 8 };
     assert_int_equal(beaconloc_can_pulse_detection_pack(m.data, &p, 8), 8);
     assert_int_equal(deliver(&W, m, 1000000), FRAME_OK);
-    assert_int_equal(W.est.c.pulses_unexpected, 1);
-    assert_false(W.est.rx_clock.have_first); /* not even its clock */
+    assert_int_equal(sensor_count(&W.est.counts, "pulses_unexpected"), 1);
+    assert_false(W.est.clock[FRAME_PULSE].have_first); /* not even its clock */
 
     /* kleeman-lab: ultrasonic beacons only */
     struct estimator *e = &W.est;
@@ -391,9 +397,11 @@ static void test_unexpected_kinds(void **state)
     assert_int_equal(estimator_init(e, &cfg, err, sizeof err), 0);
     frame_counters_init(&W.fc);
     assert_int_equal(deliver(&W, bearing_msg(1000, 1, 100, 10, 0), 1000000), FRAME_OK);
-    assert_int_equal(e->c.bearings_unexpected, 1);
-    assert_false(e->brg_clock.have_first);
-    assert_int_equal(e->c.bearings_fused + e->c.bearings_buffered + e->c.bearings_refused, 0);
+    assert_int_equal(sensor_count(&e->counts, "bearings_unexpected"), 1);
+    assert_false(e->clock[FRAME_BEARING].have_first);
+    assert_int_equal(sensor_count(&e->counts, "bearings_fused")
+                     + sensor_count(&e->counts, "bearings_buffered")
+                     + sensor_count(&e->counts, "bearings_refused"), 0);
 }
 
 /* SIGHUP on a bearing site: the bearing sensor's σ is tuning (the filter

@@ -324,10 +324,11 @@ static double pos_error(const struct world *w)
 /* Every range frame decoded fine is in exactly one of the ten counters. */
 static void assert_ranges_add_up(const struct world *w)
 {
-    const struct est_counters *c = &w->est.c;
-    uint64_t sum = c->ranges_fused + c->ranges_rejected + c->ranges_buffered + c->ranges_refused +
-                   c->ranges_unknown_beacon + c->ranges_unexpected + c->ranges_other_receiver +
-                   c->ranges_bad_tof + c->stale_ranges + c->unmapped_ranges;
+    const struct sensor_counts *c = &w->est.counts;
+    uint64_t sum = sensor_count(c, "ranges_fused") + sensor_count(c, "ranges_rejected")
+                   + sensor_count(c, "ranges_buffered") + sensor_count(c, "ranges_refused") +
+                   sensor_count(c, "ranges_unknown_beacon") + sensor_count(c, "ranges_unexpected") + sensor_count(c, "ranges_other_receiver") +
+                   sensor_count(c, "ranges_bad_tof") + sensor_count(c, "stale_range_samples") + sensor_count(c, "unmapped_ranges");
     assert_int_equal(sum, w->ranges_sent);
     assert_int_equal(w->fc.received[FRAME_RANGE], w->ranges_sent);
 }
@@ -342,12 +343,13 @@ static void test_range_only_run_near_truth(void **state)
     assert_true(pos_error(&W) < 0.02);
     run(&W, 6000000, 16000000, 6000000, 0.3, 0.15); /* 3 m along an arc */
     assert_true(pos_error(&W) < 0.03);
-    const struct est_counters *c = &W.est.c;
-    assert_true(c->ranges_fused > 280); /* 20 Hz for 15 s, a few buffered for the start */
-    assert_true(c->ranges_rejected < c->ranges_fused / 20);
-    assert_int_equal(c->ranges_unknown_beacon + c->ranges_refused + c->stale_ranges, 0);
-    assert_int_equal(c->unmapped_ranges, 0); /* the range clock is the reference */
-    assert_true(c->predicts > 1000);
+    const struct sensor_counts *c = &W.est.counts;
+    assert_true(sensor_count(c, "ranges_fused") > 280); /* 20 Hz for 15 s, a few buffered for the start */
+    assert_true(sensor_count(c, "ranges_rejected") < sensor_count(c, "ranges_fused") / 20);
+    assert_int_equal(sensor_count(c, "ranges_unknown_beacon") + sensor_count(c, "ranges_refused")
+                     + sensor_count(c, "stale_range_samples"), 0);
+    assert_int_equal(sensor_count(c, "unmapped_ranges"), 0); /* the range clock is the reference */
+    assert_true(W.est.c.predicts > 1000);
     assert_ranges_add_up(&W);
     struct est_output o;
     assert_int_equal(estimator_output(&W.est, 0, &o), 0);
@@ -365,41 +367,51 @@ static void test_bad_ranges_counted_and_dropped(void **state)
     /* moving: ranges alone give no heading on a standing robot, and the
      * library leaves ranges ungated until it knows the heading */
     run(&W, 1000000, 3000000, 1500000, 0.3, 0.2);
-    struct est_counters before = W.est.c;
+    const struct sensor_counts before = W.est.counts;
     struct est_output o0, o1;
     assert_int_equal(estimator_output(&W.est, 0, &o0), 0);
     send_range(&W, 3010000, 5, 1, 9000);
     send_range(&W, 3020000, 15, 1, 9000);
-    assert_int_equal(W.est.c.ranges_unknown_beacon, before.ranges_unknown_beacon + 2);
+    assert_int_equal(sensor_count(&W.est.counts, "ranges_unknown_beacon"),
+                     sensor_count(&before, "ranges_unknown_beacon") + 2);
     send_range(&W, 3030000, 1, 2, (uint16_t)lround(tof_us(&W, 0, 0)));
-    assert_int_equal(W.est.c.ranges_other_receiver, before.ranges_other_receiver + 1);
+    assert_int_equal(sensor_count(&W.est.counts, "ranges_other_receiver"),
+                     sensor_count(&before, "ranges_other_receiver") + 1);
     send_range(&W, 3040000, 1, 1, 0);
     send_range(&W, 3050000, 2, 1, 65534);
-    assert_int_equal(W.est.c.ranges_bad_tof, before.ranges_bad_tof + 2);
+    assert_int_equal(sensor_count(&W.est.counts, "ranges_bad_tof"),
+                     sensor_count(&before, "ranges_bad_tof") + 2);
     /* a past ping with a fresh counter (after a lost frame, so the frame
      * layer sees no reordering): the node clock does */
     W.rng_counter = (uint8_t)((W.rng_counter + 1) % 16);
     send_range(&W, 2500000, 1, 1, (uint16_t)lround(tof_us(&W, 0, 0.5)));
-    assert_int_equal(W.est.c.stale_ranges, before.stale_ranges + 1);
+    assert_int_equal(sensor_count(&W.est.counts, "stale_range_samples"),
+                     sensor_count(&before, "stale_range_samples") + 1);
     /* none of them reached the localizer */
-    assert_int_equal(W.est.c.ranges_fused, before.ranges_fused);
-    assert_int_equal(W.est.c.ranges_rejected, before.ranges_rejected);
-    assert_int_equal(W.est.c.ranges_buffered, before.ranges_buffered);
-    assert_int_equal(W.est.c.ranges_refused, before.ranges_refused);
+    assert_int_equal(sensor_count(&W.est.counts, "ranges_fused"),
+                     sensor_count(&before, "ranges_fused"));
+    assert_int_equal(sensor_count(&W.est.counts, "ranges_rejected"),
+                     sensor_count(&before, "ranges_rejected"));
+    assert_int_equal(sensor_count(&W.est.counts, "ranges_buffered"),
+                     sensor_count(&before, "ranges_buffered"));
+    assert_int_equal(sensor_count(&W.est.counts, "ranges_refused"),
+                     sensor_count(&before, "ranges_refused"));
     assert_int_equal(estimator_output(&W.est, 0, &o1), 0);
     assert_true(o1.x_m == o0.x_m && o1.y_m == o0.y_m && o1.t_node_us == o0.t_node_us);
     assert_ranges_add_up(&W);
     /* a range far beyond the receiver's reach (20 m, max_range_m 8): the
      * library refuses it (beyond 1.5 x max_range_m), counted there */
     send_range(&W, 3060000, 3, 1, (uint16_t)lround(20.0 / SOS_MPS * 1e6));
-    assert_int_equal(W.est.c.ranges_refused, before.ranges_refused + 1);
+    assert_int_equal(sensor_count(&W.est.counts, "ranges_refused"),
+                     sensor_count(&before, "ranges_refused") + 1);
     /* a multipath late arrival (0.5 m longer): gated out */
     send_range(&W, 3070000, 4, 1, (uint16_t)lround(tof_us(&W, 3, 0.5)));
-    assert_int_equal(W.est.c.ranges_rejected, before.ranges_rejected + 1);
+    assert_int_equal(sensor_count(&W.est.counts, "ranges_rejected"),
+                     sensor_count(&before, "ranges_rejected") + 1);
     assert_ranges_add_up(&W);
     /* and the run goes on */
     run(&W, 3100000, 4000000, 1500000, 0.3, 0.2);
-    assert_true(W.est.c.ranges_fused > before.ranges_fused);
+    assert_true(sensor_count(&W.est.counts, "ranges_fused") > sensor_count(&before, "ranges_fused"));
     assert_true(pos_error(&W) < 0.03);
     assert_ranges_add_up(&W);
 }
@@ -420,8 +432,8 @@ static void test_ranges_on_a_site_without_range_beacons(void **state)
     assert_int_equal(estimator_init(e, &cfg, err, sizeof err), 0);
     send_range(&W, 1000000, 1, 1, 5000);
     send_range(&W, 1050000, 2, 1, 5000);
-    assert_int_equal(e->c.ranges_unexpected, 2);
-    assert_false(e->rng_clock.have_first);
+    assert_int_equal(sensor_count(&e->counts, "ranges_unexpected"), 2);
+    assert_false(e->clock[FRAME_RANGE].have_first);
     assert_ranges_add_up(&W);
 }
 
@@ -435,15 +447,16 @@ static void test_timebase_rule_with_bearing_beacons(void **state)
     init_world("[bearing_beacons]\ncount = 3\n[bearing_beacon1]\nx_m = 0\ny_m = 0\n"
                "[bearing_beacon2]\nx_m = 6\ny_m = 0\n[bearing_beacon3]\nx_m = 3\ny_m = 6\n");
     send_range(&W, 1000000, 1, 1, (uint16_t)lround(tof_us(&W, 0, 0)));
-    assert_int_equal(W.est.c.unmapped_ranges, 1);
-    assert_true(W.est.rng_clock.have_first); /* its own clock did learn */
+    assert_int_equal(sensor_count(&W.est.counts, "unmapped_ranges"), 1);
+    assert_true(W.est.clock[FRAME_RANGE].have_first); /* its own clock did learn */
     struct beaconloc_can_bearing_t b = {.node_time = 7000000, .beacon = 1, .bearing = 100};
     struct can_msg m = { .id = BEACONLOC_CAN_BEARING_FRAME_ID, .len = 8 };
     assert_int_equal(beaconloc_can_bearing_pack(m.data, &b, 8), 8);
     assert_int_equal(deliver(&W, m, 1010000), FRAME_OK);
     send_range(&W, 1050000, 2, 1, (uint16_t)lround(tof_us(&W, 1, 0)));
-    assert_int_equal(W.est.c.unmapped_ranges, 1);
-    assert_int_equal(W.est.c.ranges_buffered + W.est.c.ranges_fused, 1);
+    assert_int_equal(sensor_count(&W.est.counts, "unmapped_ranges"), 1);
+    assert_int_equal(sensor_count(&W.est.counts, "ranges_buffered")
+                     + sensor_count(&W.est.counts, "ranges_fused"), 1);
     assert_ranges_add_up(&W);
 }
 

@@ -263,7 +263,7 @@ static void test_filter_fuses_and_stays(void **state)
     const struct sonar_counters *c = &W.est.sonar.c;
     assert_true(W.est.sonar.on);
     assert_int_equal(W.est.sonar.method, SONAR_FILTER);
-    assert_true(W.est.snr_clock.have_first);
+    assert_true(W.est.clock[FRAME_SONAR].have_first);
     assert_true(c->fused >= 20);            /* three used sensors, 10 bursts */
     assert_int_equal(c->unused, 10);        /* the back one, each burst */
     assert_int_equal(c->rejected + c->refused + c->unmapped + c->stale, 0);
@@ -324,7 +324,7 @@ static void test_no_start_pose_and_no_ring(void **state)
     send_sonar(0, 0, 1000, 0);
     send_sonar(1000, 1, 1000, 0);
     assert_int_equal(W.est.sonar.c.unexpected, 2);
-    assert_false(W.est.snr_clock.have_first);
+    assert_false(W.est.clock[FRAME_SONAR].have_first);
 }
 
 /* The pin-point corrector (method = pinpoint): a start 6 cm off in x and y

@@ -127,7 +127,7 @@ static void test_handler_routes(void **state)
     frame_counters_init(&c);
     assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
     sensor_kinds[f.kind].handle(&e, &f, 2000);
-    assert_int_equal(e.c.tracks_unexpected, 1);
+    assert_int_equal(sensor_count(&e.counts, "tracks_unexpected"), 1);
     /* a team site */
     config_defaults(&cfg);
     assert_int_equal(
@@ -138,14 +138,14 @@ static void test_handler_routes(void **state)
     assert_int_equal(team_init(&t, &cfg, err, sizeof err), 0);
     e.team = &t;
     sensor_kinds[f.kind].handle(&e, &f, 2000);
-    assert_int_equal(e.c.tracks_unexpected, 0);
+    assert_int_equal(sensor_count(&e.counts, "tracks_unexpected"), 0);
     assert_int_equal(t.c.tracks_in, 1);
     /* and a RANGE frame from receiver 3 goes to the team, not the estimator */
     m = range_msg(5000, 1, 3, 0);
     assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
     sensor_kinds[f.kind].handle(&e, &f, 12000);
     assert_int_equal(t.c.ranges_in, 1);
-    assert_int_equal(e.c.ranges_other_receiver, 0);
+    assert_int_equal(sensor_count(&e.counts, "ranges_other_receiver"), 0);
 }
 
 int main(void)

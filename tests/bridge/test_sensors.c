@@ -5,7 +5,9 @@
  * agree with the modulo derived from its range), id ranges disjoint and
  * each an aligned block the kernel filter can pass exactly, names unique,
  * every kind with its decoder and handler, and the moduli within what the
- * rolling-counter check follows.
+ * rolling-counter check follows; each kind's counter table (keys unique over
+ * all kinds, within SENSOR_COUNTERS_MAX, slots and groups well formed, the
+ * library's fields inside the library's structs).
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -14,6 +16,7 @@
 #include <string.h>
 #include <cmocka.h>
 
+#include "beaconloc.h"
 #include "beaconloc_can.h"
 #include "frames.h"
 #include "sensors.h"
@@ -102,12 +105,58 @@ static void test_filters_and_lookup(void **state)
     assert_int_equal(mask, 0x7ff);
 }
 
+static void test_counter_tables(void **state)
+{
+    (void)state;
+    static struct sensor_counts c;
+    for (int k = 0; k < FRAME_KIND_COUNT; k++) {
+        const struct sensor_counter *t = sensor_kinds[k].counters;
+        assert_non_null(t);
+        unsigned n = 0;
+        while (t[n].key) n++;
+        assert_true(n <= SENSOR_COUNTERS_MAX);
+        for (unsigned i = 0; i < n; i++) {
+            assert_true(t[i].slot < SENSOR_SLOT_COUNT);
+            /* one key, one counter: found at its own place */
+            assert_ptr_equal(sensor_count_at(&c, t[i].key), &c.n[k][i]);
+            if (t[i].source == SENSOR_FROM_LOCALIZER)
+                assert_true(t[i].offset + sizeof(uint32_t) <= sizeof(bl_loc_counters));
+            if (t[i].source == SENSOR_FROM_SEQUENCER)
+                assert_true(t[i].offset + sizeof(uint32_t) <= sizeof(bl_seq_counters));
+            assert_false(t[i].group && t[i].write);
+            for (unsigned j = 1; j <= t[i].group; j++) {
+                /* a group's members: numbers in the same slot, inside the table */
+                assert_true(i + j < n);
+                assert_int_equal(t[i + j].slot, t[i].slot);
+                assert_int_equal(t[i + j].group, 0);
+                assert_null(t[i + j].write);
+            }
+        }
+    }
+    assert_int_equal(sensor_count(&c, "no_such_counter"), UINT64_MAX);
+    assert_null(sensor_count_at(&c, "no_such_counter"));
+    /* the library's counters reach the kinds that report them */
+    bl_loc_counters lc;
+    memset(&lc, 0, sizeof lc);
+    lc.bearings_fused = 7;
+    lc.pulses_spurious = 3;
+    bl_seq_counters sc;
+    memset(&sc, 0, sizeof sc);
+    sc.locks_lost = 2;
+    sensor_counts_from_library(&c, &lc, &sc);
+    assert_int_equal(sensor_count(&c, "bearings_fused"), 7);
+    assert_int_equal(sensor_count(&c, "sequencer_spurious"), 3);
+    assert_int_equal(sensor_count(&c, "locks_lost"), 2);
+    assert_int_equal(sensor_count(&c, "bearings_unknown_beacon"), 0);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_ids_and_moduli_from_the_dbc),
         cmocka_unit_test(test_table_is_consistent),
         cmocka_unit_test(test_filters_and_lookup),
+        cmocka_unit_test(test_counter_tables),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

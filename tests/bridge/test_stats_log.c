@@ -13,6 +13,7 @@
 #include <cmocka.h>
 
 #include "log.h"
+#include "sensors.h"
 #include "sonar.h"
 #include "stats.h"
 
@@ -106,6 +107,14 @@ static void test_interval_close_resets(void **state)
     assert_int_equal(run.count, 1101);
 }
 
+/* Set the kind counter with JSON key `key` (it must exist). */
+static void set_count(struct sensor_counts *c, const char *key, uint64_t n)
+{
+    uint64_t *p = sensor_count_at(c, key);
+    assert_non_null(p);
+    *p = n;
+}
+
 static void test_json_report(void **state)
 {
     (void)state;
@@ -122,15 +131,27 @@ static void test_json_report(void **state)
     fc.out_of_order[FRAME_BEARING] = 2;
     fc.received[FRAME_RANGE] = 44;
     fc.duplicates[FRAME_RANGE] = 3;
-    struct stats_report r = { .frames = &fc, .kernel_drops = 5,
-                              .ranges_fused = 21, .ranges_rejected = 22, .ranges_buffered = 23,
-                              .ranges_refused = 24, .ranges_unknown_beacon = 25,
-                              .ranges_unexpected = 26, .ranges_other_receiver = 27,
-                              .ranges_bad_tof = 28, .stale_ranges = 29, .unmapped_ranges = 31,
-                              .bearings_fused = 30, .bearings_rejected = 3,
-                              .bearings_buffered = 4, .bearings_refused = 1,
-                              .bearings_unknown_beacon = 5, .bearings_unexpected = 6,
-                              .stale_bearings = 7, .pulses_unexpected = 8,
+    /* the kinds' counters, by their JSON keys (the kinds' tables, sensors.h) */
+    static struct sensor_counts k;
+    set_count(&k, "ranges_fused", 21);
+    set_count(&k, "ranges_rejected", 22);
+    set_count(&k, "ranges_buffered", 23);
+    set_count(&k, "ranges_refused", 24);
+    set_count(&k, "ranges_unknown_beacon", 25);
+    set_count(&k, "ranges_unexpected", 26);
+    set_count(&k, "ranges_other_receiver", 27);
+    set_count(&k, "ranges_bad_tof", 28);
+    set_count(&k, "stale_range_samples", 29);
+    set_count(&k, "unmapped_ranges", 31);
+    set_count(&k, "bearings_fused", 30);
+    set_count(&k, "bearings_rejected", 3);
+    set_count(&k, "bearings_buffered", 4);
+    set_count(&k, "bearings_refused", 1);
+    set_count(&k, "bearings_unknown_beacon", 5);
+    set_count(&k, "bearings_unexpected", 6);
+    set_count(&k, "stale_bearing_samples", 7);
+    set_count(&k, "pulses_unexpected", 8);
+    struct stats_report r = { .frames = &fc, .kernel_drops = 5, .counts = &k,
                               .latency_p50_us = 42, .latency_p99_us = 99,
                               .latency_interval_samples = 1234,
                               .latency_interval_p50_us = 17, .latency_interval_p99_us = 61,
@@ -192,6 +213,46 @@ static void test_json_report(void **state)
     assert_non_null(strstr(buf, "\"write_errors\": 11,"));
     assert_non_null(strstr(buf, "\"write_errors_per_file\": {\"record\": 9, \"estimates\": 2}"));
     assert_int_equal(stats_write_json(&r, "/nonexistent/dir/s.json") < 0, 1);
+}
+
+/* Every counter of every kind's table is in the JSON, at its value: the
+ * report is written from the tables (sensors.h), no kind's key is left out. */
+static void test_json_has_every_kind_counter(void **state)
+{
+    (void)state;
+    struct frame_counters fc;
+    frame_counters_init(&fc);
+    static struct sensor_counts k;
+    for (int i = 0; i < FRAME_KIND_COUNT; i++)
+        for (unsigned j = 0; j < SENSOR_COUNTERS_MAX; j++) k.n[i][j] = 1000u + 100u * (unsigned)i + j;
+    struct stats_report r = {.frames = &fc, .counts = &k};
+    char path[] = "/tmp/test_stats_XXXXXX";
+    int fd = mkstemp(path);
+    close(fd);
+    assert_int_equal(stats_write_json(&r, path), 0);
+    FILE *f = fopen(path, "r");
+    static char buf[16384];
+    size_t n = fread(buf, 1, sizeof buf - 1, f);
+    buf[n] = '\0';
+    fclose(f);
+    unlink(path);
+    unsigned seen = 0;
+    for (int i = 0; i < FRAME_KIND_COUNT; i++) {
+        const struct sensor_counter *t = sensor_kinds[i].counters;
+        for (unsigned j = 0; t[j].key; j++) {
+            char want[96];
+            if (t[j].write) /* a section of its own: absent without its source */
+                continue;
+            if (t[j].group)
+                snprintf(want, sizeof want, "\"%s\": {", t[j].key);
+            else
+                snprintf(want, sizeof want, "\"%s\": %u", t[j].key,
+                         1000u + 100u * (unsigned)i + j);
+            assert_non_null(strstr(buf, want));
+            seen++;
+        }
+    }
+    assert_true(seen >= 40); /* pulses, encoders, bearings, ranges, tracks, survey */
 }
 
 /* The log written to a temporary file while the test runs (log_set_stream),
@@ -260,13 +321,20 @@ static void test_status_line_text(void **state)
     fc.out_of_order[FRAME_STATUS] = 6;
     fc.received[FRAME_BEARING] = 40;
     fc.received[FRAME_RANGE] = 50;
+    static struct sensor_counts k;
+    set_count(&k, "ranges_fused", 44);
+    set_count(&k, "ranges_rejected", 1);
+    set_count(&k, "ranges_unknown_beacon", 2);
+    set_count(&k, "ranges_bad_tof", 1);
+    set_count(&k, "ranges_other_receiver", 1);
+    set_count(&k, "ranges_refused", 1);
+    set_count(&k, "bearings_fused", 35);
+    set_count(&k, "bearings_rejected", 2);
+    set_count(&k, "bearings_unknown_beacon", 3);
+    set_count(&k, "pulses_accepted", 69);
+    set_count(&k, "pulses_rejected", 9);
     struct stats_report r = { .frames = &fc, .frames_total = 1291, .kernel_drops = 7,
-                              .ranges_fused = 44, .ranges_rejected = 1,
-                              .ranges_unknown_beacon = 2, .ranges_bad_tof = 1,
-                              .ranges_other_receiver = 1, .ranges_refused = 1,
-                              .bearings_fused = 35, .bearings_rejected = 2,
-                              .bearings_unknown_beacon = 3,
-                              .error_frames = 8, .pulses_accepted = 69, .pulses_rejected = 9,
+                              .counts = &k, .error_frames = 8,
                               .odometry_sent = 284, .record_write_errors = 10,
                               .estimates_write_errors = 1, .latency_p50_us = 8,
                               .latency_p99_us = 21, .latency_interval_p50_us = 7,
@@ -340,6 +408,7 @@ int main(void)
         cmocka_unit_test(test_interval_close_resets),
         cmocka_unit_test(test_json_report),
         cmocka_unit_test(test_json_sonar),
+        cmocka_unit_test(test_json_has_every_kind_counter),
         cmocka_unit_test(test_log_repeats_summarised),
         cmocka_unit_test(test_status_line_text),
     };

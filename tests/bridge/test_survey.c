@@ -449,8 +449,8 @@ static void test_robot_ranges_wait_for_the_survey(void **state)
     assert_int_equal(e.survey.state, SURVEY_DONE);
     /* 20 pings per pair: both directions, 10 pings of each beacon: ~40 pings */
     assert_true(pings >= 39 && pings <= 41);
-    assert_int_equal(e.c.ranges_before_survey, (uint64_t)pings);
-    assert_int_equal(e.c.survey_unexpected, 0);
+    assert_int_equal(sensor_count(&e.counts, "ranges_before_survey"), (uint64_t)pings);
+    assert_int_equal(sensor_count(&e.counts, "survey_unexpected"), 0);
     /* the localizer has the surveyed positions */
     for (int i = 0; i < 4; i++) {
         assert_true(e.cfg.range_beacon[i].x_m == e.survey.x_m[i]);
@@ -471,7 +471,7 @@ static void test_robot_ranges_wait_for_the_survey(void **state)
     /* robot ranges are used now */
     struct can_msg m = range_msg(node, 1, tof_of(3.5, 0), rc);
     feed(&e, &fc, &m, t + 8000);
-    assert_int_equal(e.c.ranges_before_survey, (uint64_t)pings);
+    assert_int_equal(sensor_count(&e.counts, "ranges_before_survey"), (uint64_t)pings);
     /* SIGHUP with new tuning (min pings): still done; a new axis bearing: a new survey,
      * the robot's ranges wait again */
     struct bridge_config tuned = cfg;
@@ -485,7 +485,7 @@ static void test_robot_ranges_wait_for_the_survey(void **state)
     assert_int_equal(e.survey.state, SURVEY_COLLECTING);
     m = range_msg(node + 50000, 2, tof_of(4.0, 0), (uint8_t)((rc + 1) % 16));
     feed(&e, &fc, &m, t + 58000);
-    assert_int_equal(e.c.ranges_before_survey, (uint64_t)pings + 1);
+    assert_int_equal(sensor_count(&e.counts, "ranges_before_survey"), (uint64_t)pings + 1);
     /* a site without self_survey counts survey frames as unexpected */
     static struct estimator plain;
     assert_int_equal(load_site(&cfg,
@@ -499,7 +499,7 @@ static void test_robot_ranges_wait_for_the_survey(void **state)
     assert_int_equal(estimator_init(&plain, &cfg, err, sizeof err), 0);
     struct can_msg s = survey_msg(node, 1, 2, 16900, sc);
     feed(&plain, &fc, &s, t + 20000);
-    assert_int_equal(plain.c.survey_unexpected, 1);
+    assert_int_equal(sensor_count(&plain.counts, "survey_unexpected"), 1);
 }
 
 int main(void)

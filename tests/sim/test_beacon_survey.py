@@ -94,8 +94,8 @@ def test_max_range_dropouts_and_multipath(make_scenario):
     ranger = RangeReceiver(NodeClock(scn.range_offset_us, scn.range_drift_ppm), scn)
     surv = BeaconSurvey(ranger, scn)
     rng = np.random.default_rng(5)
-    iv = Interval(scn, 0.0, 4.0, None, None, rng_latency=rng, rng_wheels=rng, rng_ranges=rng,
-                  rng_survey=np.random.default_rng(6))
+    iv = Interval(scn, 0.0, 4.0, None, None, rng_latency=rng,
+                  streams={"wheels": rng, "ranges": rng, "survey": np.random.default_rng(6)})
     surv.sample(iv)
     m = surv.measured
     late = m.tof_us[m.multipath] * 1e-6 * SOS_20C - m.true_m[m.multipath]

@@ -24,7 +24,12 @@ from .wheel_encoders import ODOMETRY_COLUMNS, WheelEncoders
 
 __all__ = ["Interval", "Node", "NodeStatus", "ReceiverRing", "WheelEncoders", "BearingSensor",
            "Bearings", "RangeReceiver", "Ranges", "BeaconSurvey", "SurveyRanges", "SonarRing",
-           "SonarPings", "ODOMETRY_COLUMNS", "on_bus"]
+           "SonarPings", "ODOMETRY_COLUMNS", "KINDS", "on_bus"]
+
+# The node kinds of one robot's bus (on_bus): a run makes each one's random stream
+# (Node.stream) from its child seed (simulate.py).
+KINDS: tuple[type[Node], ...] = (ReceiverRing, WheelEncoders, NodeStatus, BearingSensor,
+                                 RangeReceiver, BeaconSurvey, SonarRing)
 
 
 def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, BearingSensor | None,

@@ -1,12 +1,13 @@
 """What every sensor node on the bus is: a node clock, one frame kind from the DBC with
 its rolling counter, and frames sampled from the physics of an interval.
 
-A node kind is one module of this package: a Node subclass that names its DBC message
-and implements sample(); nodes/__init__.py lists the kinds a run puts on the bus.
+A node kind is one module of this package: a Node subclass that names its DBC message and
+its random stream and implements sample(); nodes/__init__.py lists the kinds a run puts on
+the bus.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,15 +28,17 @@ class Interval:
     firings: Firings                      # beacon firings of the interval
     detections: Detections                # receiver detections of those firings
     rng_latency: np.random.Generator      # node processing latency: drawn by the nodes in bus order
-    rng_wheels: np.random.Generator       # random wheel slip (wheel encoders)
-    rng_bearings: np.random.Generator | None = None   # bearing noise and outages (bearing sensor)
-    rng_ranges: np.random.Generator | None = None     # range noise, dropouts, multipath
-    rng_survey: np.random.Generator | None = None     # the fixed beacons' survey ranges
-    rng_sonar: np.random.Generator | None = None      # the sonar ring's range noise
+    # each node kind's own random stream, by the name its class declares (Node.stream):
+    # wheel slip, bearing noise and outages, range noise, the survey's ranges, sonar noise
+    streams: dict[str, np.random.Generator] = field(default_factory=dict)
 
     def latency_s(self, n: int) -> np.ndarray:
         """Processing time of n frames before each is queued, s (scenario node_latency_s)."""
         return self.rng_latency.uniform(*self.scn.node_latency_s, size=n)
+
+    def rng(self, node: Node) -> np.random.Generator:
+        """The node's own random stream (its kind's Node.stream)."""
+        return self.streams[node.stream[0]]
 
 
 class Node:
@@ -48,6 +51,11 @@ class Node:
     """
     message: str          # DBC message name; its frame id and counter modulo come from the DBC
     node_id: int          # DBC NODE_STATUS NodeId of the node
+    # the kind's own random stream: its name (Interval.rng) and the index of its child seed
+    # of a run (simulate.py; SeedSequence children depend only on their index, so a new kind
+    # takes the next free index and the others draw what they drew before); None: it draws
+    # nothing but its latency
+    stream: tuple[str, int] | None = None
 
     @classmethod
     def frame_spec(cls) -> FrameSpec:

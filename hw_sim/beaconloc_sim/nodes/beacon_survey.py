@@ -77,6 +77,7 @@ def _standing(xy: np.ndarray):
 
 class BeaconSurvey(Node):
     message = "BEACON_SURVEY"
+    stream = ("survey", 6)   # the fixed beacons' survey ranges
     node_id = 4            # the range network's (DBC RANGE_RX); sends no NODE_STATUS itself
 
     def __init__(self, ranger, scn):
@@ -100,7 +101,7 @@ class BeaconSurvey(Node):
         emitter = emit_of_ping[row_ping]
         listener = listeners[emit_of_ping].reshape(-1)
         n = len(row_ping)
-        rng = iv.rng_survey
+        rng = iv.rng(self)
         noise = rng.standard_normal(n)
         u_drop, u_multi = rng.random(n), rng.random(n)
         image = rng.integers(1, 7, size=n)                   # image_sources() rows 1..6

@@ -69,6 +69,12 @@ class Bearings:
     def select(self, keep) -> Bearings:
         return Bearings(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
 
+    def stats(self) -> dict:
+        """The run's bearings counted, for the simulator's stats ("bearings", outputs.py)."""
+        return {"measured": int(len(self.t_s)), "sent": int(np.sum(self.sent)),
+                "outage": int(np.sum(self.outage)), "occluded": int(np.sum(self.occluded)),
+                "out_of_range": int(np.sum(self.out_of_range))}
+
     @staticmethod
     def empty() -> Bearings:
         z = np.zeros(0)
@@ -111,6 +117,7 @@ def occluded(sensor_xy: np.ndarray, beacon_xy: np.ndarray, obstacles_m: np.ndarr
 class BearingSensor(Node):
     message = "BEARING"
     node_id = 3
+    stream = ("bearings", 4)   # bearing noise and outages
     status_phase_us = 500_000
 
     def __init__(self, clock: NodeClock, scn):
@@ -188,7 +195,7 @@ class BearingSensor(Node):
         scan_us = self.periodic_us(iv, self.period_us)
         t_scan = self.clock.true_time_s(scan_us)
         n = len(t_scan)
-        rng = iv.rng_bearings
+        rng = iv.rng(self)
         # drawn for every scan and beacon (two crossings at most), sent or not
         noise = rng.standard_normal((n, m, 2)) * site.sigma_bearing_rad
         outage = self._outages(rng, n)

@@ -83,6 +83,14 @@ class Ranges(RangeFlags):
         zi, zb = np.zeros(0, np.int64), np.zeros(0, bool)
         return Ranges(z, zi, zi, z, z, zi, zb, zb, zb, zb)
 
+    def stats(self) -> dict:
+        """The run's pings counted, for the simulator's stats ("ranges", outputs.py)."""
+        return {"pinged": int(len(self.t_s)), "sent": int(np.sum(self.sent)),
+                "direct": int(np.sum(self.direct)),
+                "multipath": int(np.sum(self.sent & self.multipath)),
+                "dropout": int(np.sum(self.dropout)), "occluded": int(np.sum(self.occluded)),
+                "out_of_range": int(np.sum(self.out_of_range))}
+
     @staticmethod
     def concat(parts: list[Ranges]) -> Ranges:
         parts = [Ranges.empty()] + list(parts)
@@ -93,6 +101,7 @@ class Ranges(RangeFlags):
 class RangeReceiver(Node):
     message = "RANGE"
     node_id = 4
+    stream = ("ranges", 5)   # range noise, dropouts, multipath
     status_phase_us = 0
 
     def __init__(self, clock: NodeClock, scn):
@@ -107,7 +116,7 @@ class RangeReceiver(Node):
         k_count = site.range_beacon_count
         ping_us = self.periodic_us(iv, self.period_us)
         n = len(ping_us)
-        rng = iv.rng_ranges
+        rng = iv.rng(self)
         # drawn for every ping, sent or not: noise, dropout, multipath, its image
         noise = rng.standard_normal(n)
         u_drop, u_multi = rng.random(n), rng.random(n)

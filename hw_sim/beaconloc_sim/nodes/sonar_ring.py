@@ -78,6 +78,17 @@ class SonarPings:
     def select(self, keep) -> SonarPings:
         return SonarPings(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
 
+    def stats(self) -> dict:
+        """The run's pings counted, for the simulator's stats ("sonar", outputs.py)."""
+        out = {"pinged": int(len(self.t_s)), "echo": int(np.sum(self.flags == 0)),
+               "no_echo": int(np.sum(self.flags == 1)),
+               "max_range": int(np.sum(self.flags == 2)),
+               "informative": int(np.sum(self.informative)),
+               "obstacle": int(np.sum((self.wall >= 0) & ~self.in_map))}
+        out.update({name: int(np.sum((self.kind == k) & (self.flags == 0)))
+                    for k, name in enumerate(so.KIND_NAMES) if k})
+        return out
+
     @property
     def informative(self) -> np.ndarray:
         """Sent with a range, the specular echo of a map wall: the perpendicular distance
@@ -95,6 +106,7 @@ def world_segments(scn) -> tuple[np.ndarray, int]:
 class SonarRing(Node):
     message = "SONAR"
     node_id = 5
+    stream = ("sonar", 7)   # the ring's range noise
     status_phase_us = 500_000
 
     def __init__(self, clock: NodeClock, scn):
@@ -123,7 +135,7 @@ class SonarRing(Node):
         scn, site = self.scn, self.scn.site
         counts, sensor = self.ping_counts(iv)
         n = len(counts)
-        rng = iv.rng_sonar
+        rng = iv.rng(self)
         noise = rng.standard_normal(n)          # drawn for every ping, heard or not
         t_f = self.clock.true_time_s(counts)
         st = scn.trajectory.state(t_f)

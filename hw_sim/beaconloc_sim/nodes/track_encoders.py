@@ -26,6 +26,7 @@ TRACK_TICK_WRAP = signal_modulo("TRACK_ENCODERS", "LeftTicks")
 class TrackEncoders(Node):
     message = "TRACK_ENCODERS"
     node_id = 2
+    stream = ("wheels", 1)   # random track slip (a team's run: team_sim.py's own seeds)
 
     def __init__(self, robot, tscn):
         super().__init__(robot.clock)
@@ -50,7 +51,7 @@ class TrackEncoders(Node):
         dth = np.diff((wr - wl) / base)
         dl, dr = track_travel_with_slip(ds, dth, site.wheel_base_m, tscn.icr_factor,
                                         tscn.slip_sigma_per_m, tscn.slip_sigma_per_rad,
-                                        iv.rng_wheels)
+                                        iv.rng(self))
         left, right = left_m + np.cumsum(dl), right_m + np.cumsum(dr)
         if len(t):
             self._last = (float(t[-1]), float(left[-1]), float(right[-1]))

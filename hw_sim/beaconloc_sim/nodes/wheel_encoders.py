@@ -17,6 +17,7 @@ ODOMETRY_COLUMNS = ("t_us", "x_m", "y_m", "theta_rad")
 class WheelEncoders(Node):
     message = "WHEEL_ENCODERS"
     node_id = 2
+    stream = ("wheels", 1)   # random wheel slip
     status_phase_us = 750_000
 
     def __init__(self, clock: NodeClock, scn):
@@ -37,13 +38,13 @@ class WheelEncoders(Node):
         travel_l, travel_r = scn.trajectory.wheel_travel(t_enc)
         common = None          # drawn only when the scenario has it (the others draw as before)
         if scn.sigma_distance_per_m > 0:
-            common = common_slip_m(travel_l, travel_r, scn.sigma_distance_per_m, iv.rng_wheels,
+            common = common_slip_m(travel_l, travel_r, scn.sigma_distance_per_m, iv.rng(self),
                                    start_l_m=self.travel_m[0], start_r_m=self.travel_m[1])
         rotation = []
         for side, travel in enumerate((travel_l, travel_r)):
             r_true = site.wheel_radius_m * (1.0 + scn.wheel_radius_bias[side])
             rotation.append(wheel_rotation_rad(
-                travel, r_true, scn.slip_fraction[side], scn.sigma_wheel_per_m, iv.rng_wheels,
+                travel, r_true, scn.slip_fraction[side], scn.sigma_wheel_per_m, iv.rng(self),
                 start_travel_m=self.travel_m[side], start_rad=self.rotation_rad[side],
                 common_noise_m=common))
         ticks_l = ticks(rotation[0], site.ticks_per_rev, scn.initial_ticks[0])
