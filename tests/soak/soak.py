@@ -501,7 +501,9 @@ def main() -> int:
         print(f"a fresh bridge's first hour, the last hour's frames beside it: p50 {fresh.lat_p50_us} "
               f"us, p99 {fresh.lat_p99_us} us (its minutes {spread(fresh)}), wall "
               f"{fresh.wall_s:.1f} s, on a CPU {fresh.cpu_pct:.0f} %, others "
-              f"{fresh.others_cores:.2f}")
+              f"{fresh.others_cores:.2f}; CPU per frame {fresh.cpu_s / fresh.frames * 1e6:.2f} us "
+              f"against the aged bridge's {hours[-1].cpu_s / hours[-1].frames * 1e6:.2f} us on "
+              "the same frames")
     print(f"latency (the bridge's, fast replay = processing time): p99 of a fresh bridge's "
           f"first hour beside the last, {lat_first} us; the aged bridge's own first hour "
           f"{hours[0].lat_p99_us} us (its minutes {spread(hours[0])}); last hour {lat_last} us "
