@@ -170,6 +170,8 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     // The reference follows the newest firing (Kleeman eq. 15: t0 += T per beacon).
     shift_reference(cfg, x, P, epoch, ref, g.slot > 0 ? g.slot : 0);
     remember_pulse(f, beacon_index, arrival_us, receiver_index, true);
+    // A heading the restart could not take from the ring: from the ring now.
+    aid_ring_heading(f, x, P, arrival_us);
     commit(f, x, P);
     f->epoch_us_ = epoch;
     f->ref_beacon_ = ref;

@@ -94,6 +94,14 @@ uint32_t restart_mask(const bl_filter *f, uint32_t min_beacons);
 int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_radps, real s_mps, real var_s, real T_s,
                         real var_T, uint32_t min_beacons, uint32_t use_mask = ~0u);
 
+// The ring's heading as a measurement (filter.h "Heading from the ring"):
+// while the state's heading σ exceeds the ring's (after a restart that
+// could not take it, e.g. the kidnap only half a cycle old), the ring
+// heading of the explained firings at the state's (x, y) is fused into
+// x, P (Vander et al. 2011 eq. 3; σ as at a start). latest_us: the newest
+// arrival.
+void aid_ring_heading(bl_filter *f, VX &x, MX &P, int64_t latest_us);
+
 // Where a measurement time lies against the state time t_s (bearings;
 // aid_pulse.cpp classifies pulses the same way).
 enum class MeasTime {
