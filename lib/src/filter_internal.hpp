@@ -57,8 +57,8 @@ void start_wheel_scales(const bl_filter *f, VX &x, MX &P);
 // prediction of s over dt (s) with the drift detector's state change_mps
 // (D, m/s) and var_mps2 (B, (m/s)²), both updated; and an accepted update's
 // correction of s, ds_mps, with the drop of P_ss it made, into the detector.
-void sos_drift_predict(const bl_config *cfg, real &change_mps, real &var_mps2, real &still_share, VX &x, MX &P,
-                       real dt);
+using SosDrift = bl_sos_drift;
+void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt);
 void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2);
 // Its constants (ours, docs/performance.md "Speed of sound"): the detector's
 // window τ (s); the drift model's typical rate r_d (m/s², 0.1 ≈ 10 °C per

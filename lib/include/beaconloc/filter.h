@@ -137,6 +137,15 @@ enum {
     BL_IX_KR = 9     /* right wheel scale, 1 */
 };
 
+/* The speed of sound's drift detector (filter.cpp, sos_drift_predict), a
+ * PRIVATE part of bl_filter. */
+typedef struct bl_sos_drift {
+    bl_real change_mps;  /* D: the recent change of the estimate s, exponentially
+                            weighted over the detector's window (m/s) */
+    bl_real var_mps2;    /* B: its variance in still air from the filter's own gains ((m/s)²) */
+    bl_real still_share; /* q_still / q of the latest predict (1 in still air) */
+} bl_sos_drift;
+
 /* Caller-owned filter. All members are PRIVATE (storage only, so the
  * caller can place it statically): use the functions. */
 typedef struct bl_filter {
@@ -158,13 +167,7 @@ typedef struct bl_filter {
     int64_t ring_t_us_[BL_MAX_BEACONS];  /* earliest arrival of the latest firing */
     uint32_t ring_mask_[BL_MAX_BEACONS]; /* receivers that heard it (bit per receiver) */
     uint32_t ring_explained_mask_;       /* beacons whose latest firing had a fused arrival */
-    /* The speed of sound's drift detector (filter.cpp, sos_drift_predict):
-     * the recent change of the estimate s, exponentially weighted over
-     * BL_SOS_DRIFT_WINDOW_S (m/s), and its variance in still air from the
-     * filter's own gains ((m/s)²). */
-    bl_real sos_change_mps_;
-    bl_real sos_change_var_mps2_;
-    bl_real sos_still_share_; /* q_still / q of the latest predict (1 in still air) */
+    bl_sos_drift sos_drift_;
 #if BL_WITH_BEARINGS
     /* bearings (aid_bearing.cpp): the latest of each bearing beacon, for the
      * triangulation (re)start (snapshot_bearing.cpp), and the counters */
