@@ -62,6 +62,15 @@
  * 0.6 rad; otherwise the given or kept heading with its σ. So a robot
  * switched on, or kidnapped and turned, while standing still starts with
  * its heading known to about 0.1-0.2 rad instead of learning it from motion.
+ * A (re)start that could not take it (e.g. a kidnap half a cycle old: the
+ * last cycle mixes both places and its bearings disagree) takes it later:
+ * while the state's heading σ exceeds the ring's, each fused pulse's cycle
+ * of firings the state explained gives the ring heading at the state's
+ * position, fused as a measurement of θ with the ring's σ (snapshot.cpp,
+ * aid_ring_heading; once fused, P_θθ is below the ring's σ² and it stops).
+ * Without it a standing robot's arrival times hardly see the heading (θ and
+ * θ + π move every receiver by ±ρ along its line of sight, which t0
+ * absorbs) and such a filter settled ~168° off with σ 0.04 rad.
  *
  * Start-up (Kleeman §3.9): until the position σ first falls below
  * cfg.converged_sigma_xy_m, arrivals get σ cfg.pulse.startup_sigma_arrival_s and
