@@ -170,8 +170,6 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     // The reference follows the newest firing (Kleeman eq. 15: t0 += T per beacon).
     shift_reference(cfg, x, P, epoch, ref, g.slot > 0 ? g.slot : 0);
     remember_pulse(f, beacon_index, arrival_us, receiver_index, true);
-    // A heading the restart could not take from the ring: from the ring now.
-    aid_ring_heading(f, x, P, arrival_us);
     commit(f, x, P);
     f->epoch_us_ = epoch;
     f->ref_beacon_ = ref;
@@ -293,6 +291,10 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
     }
     const int rc = fuse_started(f, beacon_index, arrival_us, receiver_index, &res);
     if (rc != BL_OK) return rc;
+    // A heading the restart could not take from the ring: from the ring now
+    // (after fuse_started, not inside it: its frame is gone, make size-m4's
+    // stack chain).
+    if (res.status == BL_FUSION_ACCEPTED) aid_ring_heading(f, arrival_us);
     if (result) *result = res;
     return BL_OK;
 }

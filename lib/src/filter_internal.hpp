@@ -98,9 +98,26 @@ int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_r
 // while the state's heading σ exceeds the ring's (after a restart that
 // could not take it, e.g. the kidnap only half a cycle old), the ring
 // heading of the explained firings at the state's (x, y) is fused into
-// x, P (Vander et al. 2011 eq. 3; σ as at a start). latest_us: the newest
-// arrival.
-void aid_ring_heading(bl_filter *f, VX &x, MX &P, int64_t latest_us);
+// the filter's state (Vander et al. 2011 eq. 3; σ as at a start).
+// latest_us: the newest arrival.
+void aid_ring_heading(bl_filter *f, int64_t latest_us);
+
+// A measurement of one state i itself for fuse_scalar: h(x) = x(i) (its
+// unit), H = e_i (linear: one iteration); any finite update. The wheel
+// speeds (v, ω) and the ring's heading (θ, with z on the branch nearest
+// x(θ)) share it, and so one instance of the update.
+template <int N> struct StateModel {
+    int i;
+    bool measure(const VN<N> &x, real *h, RN<N> *H) const
+    {
+        *h = x(i);
+        *H = RN<N>::Zero();
+        (*H)(i) = real(1);
+        return true;
+    }
+    bool admissible(const VN<N> &, const VN<N> &) const { return true; }
+    int unit_state() const { return i; }
+};
 
 // Where a measurement time lies against the state time t_s (bearings;
 // aid_pulse.cpp classifies pulses the same way).

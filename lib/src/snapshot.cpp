@@ -269,43 +269,29 @@ bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, rea
 
 }  // namespace
 
-namespace {
-
-// The heading as a state of its own for fuse_scalar: h = θ on the branch
-// nearest z (an angle, as aid_bearing.cpp: z - wrap(z - θ)), H = e_θ.
-struct HeadingModel {
-    real z;
-    bool measure(const VX &x, real *h, RX *H) const
-    {
-        *h = z - wrap_angle(z - x(TH));
-        *H = RX::Zero();
-        (*H)(TH) = real(1);
-        return true;
-    }
-    bool admissible(const VX &, const VX &) const { return true; }
-    int unit_state() const { return TH; }
-};
-
-}  // namespace
-
-void aid_ring_heading(bl_filter *f, VX &x, MX &P, int64_t latest_us)
+void aid_ring_heading(bl_filter *f, int64_t latest_us)
 {
     if (!f->cfg_.ring_heading) return;
+    const real var_th = f->P_[TH * NX + TH];
     real th, sg;
     // Only while the heading is less certain than the ring itself: the
     // ring's bearing of a standing robot is one quantised observation, not
     // fresh noise at every cycle (fused once, P_θθ then falls below σ_r²).
     // The firings used are those the state explained (fused): after a
     // restart, the ones heard at the new place.
-    if (!(P(TH, TH) > real(0)) || !ring_heading(f, x(X), x(Y), latest_us, x(W), f->ring_explained_mask_, &th, &sg))
+    if (!(var_th > real(0)) ||
+        !ring_heading(f, f->x_[X], f->x_[Y], latest_us, f->x_[W], f->ring_explained_mask_, &th, &sg))
         return;
-    if (!(P(TH, TH) > sg * sg)) return;
-    const HeadingModel model = {th};
+    if (!(var_th > sg * sg)) return;
+    VX x = state(f);
+    MX P = cov(f);
+    // z on the branch nearest the state's θ: the innovation is the wrapped one.
+    const StateModel<NX> model = {TH};
     // Ungated: while P_θθ exceeds σ_r² the state's heading is the one in
     // doubt (e.g. kept from before a kidnap, σ reset_sigma_theta_rad).
-    const ScalarMeasurement m = {th, sg * sg, real(0), 1u, real(0), 0};
+    const ScalarMeasurement m = {x(TH) + wrap_angle(th - x(TH)), sg * sg, real(0), 1u, real(0), 0};
     bl_fusion_result res;
-    (void)fuse_scalar(model, m, x, P, &res);  // refused: x, P untouched
+    if (fuse_scalar(model, m, x, P, &res) == BL_OK) commit(f, x, P);  // refused: untouched
 }
 
 // Start (or restart) *f from the snapshot of its last pulses, heading from
