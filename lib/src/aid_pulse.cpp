@@ -291,6 +291,10 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
     }
     const int rc = fuse_started(f, beacon_index, arrival_us, receiver_index, &res);
     if (rc != BL_OK) return rc;
+    // A heading the restart could not take from the ring: from the ring now
+    // (after fuse_started, not inside it: its frame is gone, make size-m4's
+    // stack chain).
+    if (res.status == BL_FUSION_ACCEPTED) aid_ring_heading(f, arrival_us);
     if (result) *result = res;
     return BL_OK;
 }

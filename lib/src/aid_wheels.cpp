@@ -7,25 +7,6 @@
 
 namespace bl {
 
-namespace {
-
-// Measurement model of one wheel speed for fuse_scalar: h(x) = x(i) (v in
-// m/s or ω in rad/s), H = e_i (linear: one iteration); any finite update.
-template <int N> struct StateModel {
-    int i;
-    bool measure(const VN<N> &x, real *h, RN<N> *H) const
-    {
-        *h = x(i);
-        *H = RN<N>::Zero();
-        (*H)(i) = real(1);
-        return true;
-    }
-    bool admissible(const VN<N> &, const VN<N> &) const { return true; }
-    int unit_state() const { return i; }
-};
-
-}  // namespace
-
 template <int N>
 void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_s, VN<N> &x, MN<N> &P,
                        WheelSpeedCounts *counts, int n_solve)

@@ -142,8 +142,9 @@ void cv_model(const VX &x, real dt, VX &xo, SparseEntry *d)
 // feed-forward cancel): a second-order (type-2) tracking loop that follows
 // a ramp without lag; with w ≈ 0 (|D| within ~3√B) it is the still-air
 // random walk. Without pulse updates D and B decay and w falls back.
-void sos_drift_predict(const bl_config *cfg, real &change_mps, real &var_mps2, real &still_share, VX &x, MX &P, real dt)
+void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
 {
+    real &change_mps = sos.change_mps, &var_mps2 = sos.var_mps2, &still_share = sos.still_share;
     const real tau = kSosDriftWindow_s;
     // e^{-dt/τ} to first order (dt, the predict step, is far below τ)
     const real a = real(1) / (real(1) + dt / tau);
@@ -177,17 +178,17 @@ void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2)
     // convergence still to come (of variance P_ss) as D's expected spread.
     const real sd = sos_drift_rate_mps2(&f->cfg_) * kSosDriftWindow_s;
     if (f->P_[S * NX + S] > sd * sd) {
-        f->sos_change_mps_ = real(0);
-        f->sos_change_var_mps2_ = f->P_[S * NX + S];
+        f->sos_drift_.change_mps = real(0);
+        f->sos_drift_.var_mps2 = f->P_[S * NX + S];
         return;
     }
-    f->sos_change_mps_ += ds_mps;
+    f->sos_drift_.change_mps += ds_mps;
     // B is D's variance under the still-air model: while the drift model
     // holds (weight w, its larger random walk), the drops of P_ss scale with
     // the random walk that feeds them (steady state: drops per second =
     // q), so they count with q_still/q = ρ² / (ρ² + w(1 - ρ²)); else the
     // detector's own switch would raise B and switch itself off.
-    if (var_drop_mps2 > real(0)) f->sos_change_var_mps2_ += var_drop_mps2 * f->sos_still_share_;
+    if (var_drop_mps2 > real(0)) f->sos_drift_.var_mps2 += var_drop_mps2 * f->sos_drift_.still_share;
 }
 
 namespace {
@@ -201,12 +202,9 @@ namespace {
 //   σ_T² += q_T·dt,  q_T = period_drift_s_per_sqrt_s²            (s²/s)
 //   σ_k² += q_k·dt,  q_k = wheel_scale_drift_per_sqrt_s²          (1/s)
 // with dt in s. sos: the drift detector's state (D, B), updated.
-struct SosDrift {
-    real change_mps, var_mps2, still_share;
-};
 void add_parameter_noise(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
 {
-    sos_drift_predict(cfg, sos.change_mps, sos.var_mps2, sos.still_share, x, P, dt);
+    sos_drift_predict(cfg, sos, x, P, dt);
     P(T, T) += cfg->period_drift_s_per_sqrt_s * cfg->period_drift_s_per_sqrt_s * dt;
     if (cfg->sigma_wheel_scale > real(0)) {
         const real qk = cfg->wheel_scale_drift_per_sqrt_s * cfg->wheel_scale_drift_per_sqrt_s * dt;
@@ -447,7 +445,7 @@ extern "C" int bl_filter_init(bl_filter *f, const bl_config *cfg)
     std::memset(f, 0, sizeof *f);
     f->cfg_ = *cfg;
     f->magic_ = kFilterMagic;
-    f->sos_still_share_ = real(1);
+    f->sos_drift_.still_share = real(1);
     return BL_OK;
 }
 
@@ -666,7 +664,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     Pn(V, V) += sa * sa;
     Pn(W, W) += sw * sw;
     x = xo;
-    SosDrift sos = {f->sos_change_mps_, f->sos_change_var_mps2_, f->sos_still_share_};
+    SosDrift sos = f->sos_drift_;  // stored with the state, on success only
     add_parameter_noise(cfg, sos, x, Pn, dt);
     WheelSpeedCounts wheel = {0, 0};
     // Kleeman eq. 25: the wheel speeds measure v and ω (aid_wheels.cpp).
@@ -690,9 +688,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
         const int rc = commit_predict(f, x, P, t_us);
         if (rc != BL_OK) return rc;
         team_cross(f) = C;
-        f->sos_change_mps_ = sos.change_mps;
-        f->sos_change_var_mps2_ = sos.var_mps2;
-        f->sos_still_share_ = sos.still_share;
+        f->sos_drift_ = sos;
         f->wheel_fused_ += wheel.fused;
         f->wheel_refused_ += wheel.refused;
         return BL_OK;
@@ -701,9 +697,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     if (dt > real(0)) fuse_wheel_speeds<NX>(cfg, cl, cr, dt, x, P, &wheel);
     const int rc = commit_predict(f, x, P, t_us);
     if (rc != BL_OK) return rc;
-    f->sos_change_mps_ = sos.change_mps;
-    f->sos_change_var_mps2_ = sos.var_mps2;
-    f->sos_still_share_ = sos.still_share;
+    f->sos_drift_ = sos;
     f->wheel_fused_ += wheel.fused;
     f->wheel_refused_ += wheel.refused;
     return BL_OK;
@@ -730,13 +724,11 @@ extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
         if (!C.allFinite()) return BL_EINVAL;
     }
 #endif
-    SosDrift sos = {f->sos_change_mps_, f->sos_change_var_mps2_, f->sos_still_share_};
+    SosDrift sos = f->sos_drift_;  // stored with the state, on success only
     cv_predict(cfg, sos, x, P, dt);
     const int rc = commit_predict(f, x, P, t_us);
     if (rc != BL_OK) return rc;
-    f->sos_change_mps_ = sos.change_mps;
-    f->sos_change_var_mps2_ = sos.var_mps2;
-    f->sos_still_share_ = sos.still_share;
+    f->sos_drift_ = sos;
 #if BL_WITH_TEAM
     team_cross(f) = C;
 #endif
@@ -768,7 +760,7 @@ extern "C" int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estima
     if (trc != BL_OK) return trc;
     VX x = state(f);
     MX P = cov(f);
-    SosDrift sos = {f->sos_change_mps_, f->sos_change_var_mps2_, f->sos_still_share_};  // a copy: *f is const
+    SosDrift sos = f->sos_drift_;  // a copy: *f is const
     cv_predict(&f->cfg_, sos, x, P, bl::us_to_s(t_us - f->t_us_));
     // As bl_filter_predict: a non-finite extrapolation (a huge but finite
     // state or P) is refused, never returned (found by fuzzing).

@@ -57,8 +57,8 @@ void start_wheel_scales(const bl_filter *f, VX &x, MX &P);
 // prediction of s over dt (s) with the drift detector's state change_mps
 // (D, m/s) and var_mps2 (B, (m/s)²), both updated; and an accepted update's
 // correction of s, ds_mps, with the drop of P_ss it made, into the detector.
-void sos_drift_predict(const bl_config *cfg, real &change_mps, real &var_mps2, real &still_share, VX &x, MX &P,
-                       real dt);
+using SosDrift = bl_sos_drift;
+void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt);
 void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2);
 // Its constants (ours, docs/performance.md "Speed of sound"): the detector's
 // window τ (s); the drift model's typical rate r_d (m/s², 0.1 ≈ 10 °C per
@@ -93,6 +93,31 @@ uint32_t restart_mask(const bl_filter *f, uint32_t min_beacons);
 // (Re)start from the snapshot of the table's last cycle; *f untouched on failure.
 int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_radps, real s_mps, real var_s, real T_s,
                         real var_T, uint32_t min_beacons, uint32_t use_mask = ~0u);
+
+// The ring's heading as a measurement (filter.h "Heading from the ring"):
+// while the state's heading σ exceeds the ring's (after a restart that
+// could not take it, e.g. the kidnap only half a cycle old), the ring
+// heading of the explained firings at the state's (x, y) is fused into
+// the filter's state (Vander et al. 2011 eq. 3; σ as at a start).
+// latest_us: the newest arrival.
+void aid_ring_heading(bl_filter *f, int64_t latest_us);
+
+// A measurement of one state i itself for fuse_scalar: h(x) = x(i) (its
+// unit), H = e_i (linear: one iteration); any finite update. The wheel
+// speeds (v, ω) and the ring's heading (θ, with z on the branch nearest
+// x(θ)) share it, and so one instance of the update.
+template <int N> struct StateModel {
+    int i;
+    bool measure(const VN<N> &x, real *h, RN<N> *H) const
+    {
+        *h = x(i);
+        *H = RN<N>::Zero();
+        (*H)(i) = real(1);
+        return true;
+    }
+    bool admissible(const VN<N> &, const VN<N> &) const { return true; }
+    int unit_state() const { return i; }
+};
 
 // Where a measurement time lies against the state time t_s (bearings;
 // aid_pulse.cpp classifies pulses the same way).

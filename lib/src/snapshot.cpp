@@ -269,6 +269,31 @@ bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, rea
 
 }  // namespace
 
+void aid_ring_heading(bl_filter *f, int64_t latest_us)
+{
+    if (!f->cfg_.ring_heading) return;
+    const real var_th = f->P_[TH * NX + TH];
+    real th, sg;
+    // Only while the heading is less certain than the ring itself: the
+    // ring's bearing of a standing robot is one quantised observation, not
+    // fresh noise at every cycle (fused once, P_θθ then falls below σ_r²).
+    // The firings used are those the state explained (fused): after a
+    // restart, the ones heard at the new place.
+    if (!(var_th > real(0)) ||
+        !ring_heading(f, f->x_[X], f->x_[Y], latest_us, f->x_[W], f->ring_explained_mask_, &th, &sg))
+        return;
+    if (!(var_th > sg * sg)) return;
+    VX x = state(f);
+    MX P = cov(f);
+    // z on the branch nearest the state's θ: the innovation is the wrapped one.
+    const StateModel<NX> model = {TH};
+    // Ungated: while P_θθ exceeds σ_r² the state's heading is the one in
+    // doubt (e.g. kept from before a kidnap, σ reset_sigma_theta_rad).
+    const ScalarMeasurement m = {x(TH) + wrap_angle(th - x(TH)), sg * sg, real(0), 1u, real(0), 0};
+    bl_fusion_result res;
+    if (fuse_scalar(model, m, x, P, &res) == BL_OK) commit(f, x, P);  // refused: untouched
+}
+
 // Start (or restart) *f from the snapshot of its last pulses, heading from
 // the ring when cfg.ring_heading and the ring gives one, else theta with σ
 // sigma_theta. On failure *f is untouched.

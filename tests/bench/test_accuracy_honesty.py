@@ -46,3 +46,18 @@ def test_an_overconfident_filter_is_above_its_interval():
     assert fig["nees"] > fig["nees_hi"]
     assert fig["heading_nees"] > fig["heading_nees_hi"]
     assert fig["within_3sigma_pct"] < 97.0
+
+
+def test_the_true_heading_is_interpolated_across_the_wrap():
+    # A robot turning at 0.9 rad/s through 180 deg, truth rows every 20 ms; the estimate
+    # is on the true heading, between two rows either side of the wrap.
+    t_us = np.arange(0, 1_000_000, 20_000)
+    theta = acc.h.wrap_angle(3.0 + 0.9 * t_us * 1e-6)
+    truth = {"t_us": t_us, "theta_rad": theta}
+    k = int(np.argmax(np.abs(np.diff(theta)) > np.pi))   # the rows either side of +-pi
+    t_est = np.array([t_us[k] + 10_000])
+    true_est = acc.h.wrap_angle(3.0 + 0.9 * t_est * 1e-6)
+    got = acc.truth_heading_at(truth, t_est)
+    assert abs(acc.h.wrap_angle(got - true_est)[0]) < 1e-9
+    est = {"t_us": t_est, "theta_rad": true_est, "var_theta_rad2": np.array([1e-4])}
+    assert acc.heading_nees(truth, est, np.array([True]))[0] < 1e-9

@@ -182,6 +182,55 @@ static void test_heading_from_ring(void **state)
     assert_true(fabs(wrap((double)e.theta_rad + 2.5)) < 0.2);
 }
 
+/* A running filter whose heading the restart could not take from the ring
+ * (kept from before a kidnap, σ reset_sigma_theta_rad = 1 rad) learns it from
+ * the ring once the firings it explains point (aid_ring_heading): a standing
+ * robot's arrival times alone hardly see the heading (θ and θ + π move the
+ * receivers by ±ρ along every line of sight, which t0 absorbs), and without
+ * the ring it settled 168° off with σ 0.04 rad (issue 14, standing-restart
+ * seeds 10 and 19). */
+static void test_heading_from_ring_after_restart(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.speed_of_sound_mps = 343;
+    static bl_filter f;
+    const double truth[3] = {-1.2, 2.9, 0.4}, kept[3] = {0.5, -1.5, 2.1}; /* 1.7, 1.9, 1.7 rad off */
+    rng_seed(4242);
+    double worst_off = 0;
+    for (int on = 1; on >= 0; --on) {
+        cfg.ring_heading = (uint32_t)on;
+        for (int i = 0; i < 3; ++i) {
+            assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
+            const bl_filter_prior p = {.t_us = 1000000, .x_m = 5, .y_m = 7, .theta_rad = (bl_real)kept[i],
+                                       .sigma_xy_m = (bl_real)0.05, .sigma_theta_rad = cfg.reset_sigma_theta_rad,
+                                       .sigma_v_mps = (bl_real)0.01, .sigma_omega_radps = (bl_real)0.01,
+                                       .t0_us = 1000000, .t0_beacon_index = 0, .sigma_t0_s = (bl_real)1e-4};
+            assert_int_equal(bl_filter_start(&f, &p), BL_OK);
+            for (long c = 0; c < 4; ++c) {
+                assert_int_equal(bl_filter_predict(&f, (int64_t)llround((1.0 + (double)c * 0.9) * 1e6)), BL_OK);
+                assert_false(ring_cycle(&f, &cfg, 5.0, 7.0, truth[i], c, 1.0, 2e-4, 0));
+            }
+            bl_estimate e;
+            assert_int_equal(bl_filter_estimate(&f, &e), BL_OK);
+            assert_int_equal(e.reset_counter, 0);
+            const double err = fabs(wrap((double)e.theta_rad - truth[i]));
+            const double sigma = sqrt((double)e.cov[12]);
+            print_message("ring %s: truth %+.2f rad, kept %+.2f, estimate %+.3f rad, sigma %.3f rad\n",
+                          on ? "on " : "off", truth[i], kept[i], (double)e.theta_rad, sigma);
+            if (on) {
+                assert_true(err < 0.25);
+                assert_true(err < 3 * sigma);
+            } else {
+                /* without the ring, the timing alone leaves it where it was, or worse */
+                worst_off = err > worst_off ? err : worst_off;
+            }
+        }
+    }
+    assert_true(worst_off > 0.25); /* what the "on" case's bound excludes */
+}
+
 /* A caller that only fuses pulses (never predicts): the state time stays at
  * the last (re)start, so max_predict_gap_s after it every pulse is "stale".
  * Before the fix fuse_pulse returned BL_ETIME from then on, forever (and a
@@ -318,6 +367,7 @@ int main(void)
         cmocka_unit_test(test_gap_pulses_only_recovers),
         cmocka_unit_test(test_gap_recovers),
         cmocka_unit_test(test_heading_from_ring),
+        cmocka_unit_test(test_heading_from_ring_after_restart),
     };
     return cmocka_run_group_tests_name(IS_FLOAT ? "filter_snapshot (float)" : "filter_snapshot (double)", tests, NULL, NULL);
 }

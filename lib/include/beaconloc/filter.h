@@ -62,6 +62,15 @@
  * 0.6 rad; otherwise the given or kept heading with its σ. So a robot
  * switched on, or kidnapped and turned, while standing still starts with
  * its heading known to about 0.1-0.2 rad instead of learning it from motion.
+ * A (re)start that could not take it (e.g. a kidnap half a cycle old: the
+ * last cycle mixes both places and its bearings disagree) takes it later:
+ * while the state's heading σ exceeds the ring's, each fused pulse's cycle
+ * of firings the state explained gives the ring heading at the state's
+ * position, fused as a measurement of θ with the ring's σ (snapshot.cpp,
+ * aid_ring_heading; once fused, P_θθ is below the ring's σ² and it stops).
+ * Without it a standing robot's arrival times hardly see the heading (θ and
+ * θ + π move every receiver by ±ρ along its line of sight, which t0
+ * absorbs) and such a filter settled ~168° off with σ 0.04 rad.
  *
  * Start-up (Kleeman §3.9): until the position σ first falls below
  * cfg.converged_sigma_xy_m, arrivals get σ cfg.pulse.startup_sigma_arrival_s and
@@ -137,6 +146,15 @@ enum {
     BL_IX_KR = 9     /* right wheel scale, 1 */
 };
 
+/* The speed of sound's drift detector (filter.cpp, sos_drift_predict), a
+ * PRIVATE part of bl_filter. */
+typedef struct bl_sos_drift {
+    bl_real change_mps;  /* D: the recent change of the estimate s, exponentially
+                            weighted over the detector's window (m/s) */
+    bl_real var_mps2;    /* B: its variance in still air from the filter's own gains ((m/s)²) */
+    bl_real still_share; /* q_still / q of the latest predict (1 in still air) */
+} bl_sos_drift;
+
 /* Caller-owned filter. All members are PRIVATE (storage only, so the
  * caller can place it statically): use the functions. */
 typedef struct bl_filter {
@@ -158,13 +176,7 @@ typedef struct bl_filter {
     int64_t ring_t_us_[BL_MAX_BEACONS];  /* earliest arrival of the latest firing */
     uint32_t ring_mask_[BL_MAX_BEACONS]; /* receivers that heard it (bit per receiver) */
     uint32_t ring_explained_mask_;       /* beacons whose latest firing had a fused arrival */
-    /* The speed of sound's drift detector (filter.cpp, sos_drift_predict):
-     * the recent change of the estimate s, exponentially weighted over
-     * BL_SOS_DRIFT_WINDOW_S (m/s), and its variance in still air from the
-     * filter's own gains ((m/s)²). */
-    bl_real sos_change_mps_;
-    bl_real sos_change_var_mps2_;
-    bl_real sos_still_share_; /* q_still / q of the latest predict (1 in still air) */
+    bl_sos_drift sos_drift_;
 #if BL_WITH_BEARINGS
     /* bearings (aid_bearing.cpp): the latest of each bearing beacon, for the
      * triangulation (re)start (snapshot_bearing.cpp), and the counters */
