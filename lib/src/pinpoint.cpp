@@ -29,6 +29,7 @@ struct Burst {
     real theta0_rad;      // the odometric heading (rad)
     real heading_weight;  // σ_r/σ_θ of the heading's prior (m/rad), 0: none
     real half_cone_rad;   // the cone searched for echoes (rad)
+    bool on_axis;         // bl_pinpoint_impact AXIS: eq. 1's impact on the beam's axis
     uint8_t sensor[BL_SONAR_MAX_SENSORS];
     real range_m[BL_SONAR_MAX_SENSORS];
 };
@@ -51,6 +52,18 @@ LsEval burst_eval(const void *problem, const Vec3 &q)
         const bl_sonar_mount &m = b.ring->mounts[b.sensor[k]];
         real sx, sy, dsx, dsy;
         sonar_transducer(m, q(0), q(1), q(2), &sx, &sy, &dsx, &dsy);
+        if (b.on_axis) {
+            // Step 2, eq. 1: M = S + d (cos(θ + θ_i), sin(θ + θ_i)); step 3,
+            // eq. 2-4: the nearest segment within the 25 cm gate; F_i its
+            // squared distance (eq. 3/4), dM/dθ = ∂S/∂θ + d (−sin, cos)(θ + θ_i).
+            const real d = b.range_m[k], a = q(2) + m.angle_rad;
+            real mx, my, d2;
+            sonar_impact(m, q(0), q(1), q(2), d, &mx, &my);
+            const int sg = nearest_segment(b.map, mx, my, b.ring->gate_m, &d2);
+            if (sg < 0) continue;
+            ls_add_term(b.map->segments[sg], mx, my, dsx - d * std::sin(a), dsy + d * std::cos(a), &e);
+            continue;
+        }
         Echo ec;
         if (nearest_echo(b.map, sx, sy, q(2) + m.angle_rad, half, b.range_m[k], b.ring->gate_m, false, &ec) < 0)
             continue;
@@ -240,6 +253,7 @@ extern "C" int bl_pinpoint_correct(const bl_map *map, const bl_sonar_ring *ring,
     }
     res.valid = b.n;
     b.theta0_rad = pose_in_out->theta_rad;
+    b.on_axis = params->impact == BL_PINPOINT_IMPACT_AXIS;
     // The beam's half-width widened by 3 σ of the heading (the filter's
     // association, filter.h), never beyond a right angle.
     b.half_cone_rad = real(0.5) * ring->beam_width_rad + real(3) * params->heading_sigma_rad;

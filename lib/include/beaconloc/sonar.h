@@ -134,6 +134,9 @@ int bl_sonar_ring_check(const bl_sonar_ring *ring, uint32_t *bad_index);
 
 /* ---- The pin-point corrector (Hoppenot & Colle §3.1) ----
  * From the odometric pose (x, y, θ) and one burst:
+ * (Steps 1-3 as written below are params.impact = BL_PINPOINT_IMPACT_AXIS,
+ * the paper's; the default, BL_PINPOINT_IMPACT_ECHO, matches each range with
+ * the specular echo of a segment inside the beam instead: bl_pinpoint_impact.)
  *   1-2  each valid range d of sensor i gives its impact (eq. 1, with the
  *        transducer's mount offset m_i added: the paper's sensors sit at the
  *        centre)  M_i = (x, y) + R(θ)·m_i + d·(cos(θ+θ_i), sin(θ+θ_i));
@@ -162,6 +165,25 @@ int bl_sonar_ring_check(const bl_sonar_ring *ring, uint32_t *bad_index);
  *   8    else the whole correction.
  * A correction larger than max_correction_m / max_correction_rad is
  * refused (pose given back, outcome BL_PINPOINT_REFUSED). */
+/* Where the pin-point places an impact (bl_pinpoint_params.impact). */
+typedef enum bl_pinpoint_impact {
+    /* At the incidence that makes the echo specular (the echo model of
+     * sonar_internal.hpp): the range is matched with the range of a
+     * segment's foot (or end) inside the beam cone widened by 3 heading_sigma_rad.
+     * Right for a sonar that returns the perpendicular distance; such
+     * ranges observe the heading only through the ring's lever arm, so the
+     * heading stays with odometry (heading_sigma_rad's prior). */
+    BL_PINPOINT_IMPACT_ECHO = 0,
+    /* On the beam's axis, as the paper's eq. 1 (step 2), matched with the
+     * nearest segment by eq. 2-4 within ring.gate_m (step 3), F_i its
+     * squared distance. A wall heard off the perpendicular (a rough wall's
+     * oblique echo, the paper's real data: §5.2 says a 20° incidence gate
+     * left the pin-point too few matches) puts the impact beside the wall
+     * unless the heading turns the axis onto it: the heading is observed.
+     * heading_sigma_rad's prior applies as well (0: the paper's F). */
+    BL_PINPOINT_IMPACT_AXIS = 1
+} bl_pinpoint_impact;
+
 typedef struct bl_pinpoint_params {
     bl_real epsilon_cost_m2;    /* ε: F below this stops (m²); paper 5e-3 */
     bl_real epsilon_grad;       /* ε': every |∂F/∂q| below this stops (m, m²/rad); paper 5e-3 */
@@ -176,6 +198,8 @@ typedef struct bl_pinpoint_params {
                                    only through the ring's lever arm and the beam's edge:
                                    without it their noise turns the heading. 0: none (the
                                    paper's F). Default 0.05. Unused by the memory corrector */
+    bl_pinpoint_impact impact;  /* steps 2-3 (above); default BL_PINPOINT_IMPACT_ECHO. Unused
+                                   by the memory corrector */
 } bl_pinpoint_params;
 
 /* The paper's values (ε = ε' = 5e-3, N = 10) and min_matches 3,
