@@ -96,6 +96,26 @@ bool grad_small(const Vec3 &g, real eps, uint32_t axes, uint32_t *small_axes)
     return all;
 }
 
+// Steps 4-5 (our default minimiser): the Gauss–Newton step on the axes in
+// axes_mask, (JᵀJ + λ I) δ = −Jᵀr = −g/2, the other axes held.
+Vec3 gauss_newton_step(const LsEval &e, uint32_t axes_mask)
+{
+    Mat<3, 3> A = e.JtJ;
+    Vec3 rhs = real(-0.5) * e.g;
+    const real lambda = kDampingRel * (real(1) + A.trace());
+    for (int a = 0; a < 3; ++a) {
+        if (!((axes_mask >> a) & 1u)) {
+            A.row(a).setZero();
+            A.col(a).setZero();
+            A(a, a) = real(1);
+            rhs(a) = real(0);
+        } else {
+            A(a, a) += lambda;
+        }
+    }
+    return A.ldlt().solve(rhs);
+}
+
 }  // namespace
 
 void bl::ls_add_term(const bl_segment &s, real mx, real my, real tx, real ty, LsEval *e)
@@ -145,22 +165,17 @@ LsOutcome bl::least_squares(LsEvalFn eval, const void *problem, const bl_pinpoin
             stopped_on_n = true;
             break;
         }
-        // Steps 4-5: the Gauss–Newton step on the chosen axes,
-        // (JᵀJ + λ I) δ = −Jᵀr = −g/2, the other axes held.
-        Mat<3, 3> A = e.JtJ;
-        Vec3 rhs = real(-0.5) * e.g;
-        const real lambda = kDampingRel * (real(1) + A.trace());
-        for (int a = 0; a < 3; ++a) {
-            if (!((axes_mask >> a) & 1u)) {
-                A.row(a).setZero();
-                A.col(a).setZero();
-                A(a, a) = real(1);
-                rhs(a) = real(0);
-            } else {
-                A(a, a) += lambda;
-            }
+        Vec3 step;
+        if (prm.descent_rate > real(0)) {
+            // Steps 4-5 as the paper's minimiser (§3.1 "The minimisation
+            // method": α_x = α_y = α_θ = 0.1, its "backpropagation
+            // coefficients"): the gradient step δ = −α ∂F/∂q on the chosen
+            // axes. A coordinate the matches observe weakly (small ∂F/∂q)
+            // moves little: it stays with the odometry.
+            for (int a = 0; a < 3; ++a) step(a) = ((axes_mask >> a) & 1u) ? -prm.descent_rate * e.g(a) : real(0);
+        } else {
+            step = gauss_newton_step(e, axes_mask);
         }
-        Vec3 step = A.ldlt().solve(rhs);
         if (!step.allFinite()) break;
         // Step 6: F at the new pose (its own matches: step 2-3 again); a
         // step that raises F halved.

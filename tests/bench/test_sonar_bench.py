@@ -154,26 +154,26 @@ class FakeRunner:
 
 
 def test_sweep_stops_at_first_failure_unless_full_grid():
-    # pinpoint-axis fails at 1 % and passes again at 2 % (a hole); memory passes throughout
+    # pinpoint-paper fails at 1 % and passes again at 2 % (a hole); memory passes throughout
     passes = lambda m, pct: m == "memory" or pct != 1.0  # noqa: E731
     grid = [0.0, 1.0, 2.0]
     saved = sb.METHODS
     try:
-        sb.METHODS = ("pinpoint-axis", "memory")
+        sb.METHODS = ("pinpoint-paper", "memory")
         r = FakeRunner(passes)
         passed, _ = sb.sweep(r, "hoppenot-rough", grid, 2, 1, log=lambda *_: None)
-        assert passed["pinpoint-axis"] == {0.0: True, 1.0: False}
-        assert ("pinpoint-axis", 2.0, 1) not in r.calls
+        assert passed["pinpoint-paper"] == {0.0: True, 1.0: False}
+        assert ("pinpoint-paper", 2.0, 1) not in r.calls
         r = FakeRunner(passes)
         passed, _ = sb.sweep(r, "hoppenot-rough", grid, 2, 1, log=lambda *_: None,
                              full_grid=True)
-        assert passed["pinpoint-axis"] == {0.0: True, 1.0: False, 2.0: True}
-        assert ("pinpoint-axis", 2.0, 2) in r.calls
+        assert passed["pinpoint-paper"] == {0.0: True, 1.0: False, 2.0: True}
+        assert ("pinpoint-paper", 2.0, 2) in r.calls
         # the hole still ends what it survived (the paper's limit)
-        assert sb.largest_survived(passed["pinpoint-axis"]) == 0.0
+        assert sb.largest_survived(passed["pinpoint-paper"]) == 0.0
         assert sb.largest_survived(passed["memory"]) == 2.0
         # the paper's pin-point figures stand beside the pin-point with eq. 1 impacts
-        table = "\n".join(sb.table1({("pinpoint-axis", "room"): 4.0}))
-        assert "pinpoint-axis 8 | 4 (-4)" in table
+        table = "\n".join(sb.table1({("pinpoint-paper", "room"): 4.0}))
+        assert "pinpoint-paper 8 | 4 (-4)" in table
     finally:
         sb.METHODS = saved

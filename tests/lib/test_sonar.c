@@ -141,6 +141,19 @@ static void test_pinpoint_axis_observes_heading(void **state)
         assert_true(r.matched >= 5);
         assert_true(fabs((double)p.theta_rad - th) < 0.2 * deg);
         assert_true(hypot((double)p.x_m - x, (double)p.y_m - y) < 0.01);
+        /* the paper's minimiser (descent_rate 0.1, §3.1) gets there too,
+         * in its small gradient steps: more iterations than Gauss–Newton */
+        const uint32_t gn_iterations = r.iterations;
+        prm.descent_rate = (bl_real)0.1;
+        prm.max_iterations = 100;
+        p = (bl_pose){(bl_real)x, (bl_real)y, (bl_real)(th + sign * 4 * deg)};
+        assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_OK);
+        assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
+        assert_true(r.iterations > gn_iterations);
+        assert_true(fabs((double)p.theta_rad - th) < 0.3 * deg);
+        assert_true(hypot((double)p.x_m - x, (double)p.y_m - y) < 0.01);
+        prm.descent_rate = 0;
+        prm.max_iterations = 10;
         /* the echo model: ranges along the axes are no specular echoes; the
          * matched ones (feet and ends within the 25 cm gate) turn the heading
          * part of the way at most (measured: 0 and 1.7 of the 4°) */
@@ -381,6 +394,11 @@ static void test_pinpoint_refuses_bad_input(void **state)
     assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
     bl_pinpoint_default(&prm);
     prm.impact = (bl_pinpoint_impact)2; /* neither ECHO nor AXIS */
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
+    bl_pinpoint_default(&prm);
+    prm.descent_rate = (bl_real)-0.1;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
+    prm.descent_rate = (bl_real)NAN;
     assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
     /* nothing written by any of them */
     assert_memory_equal(&p, &start, sizeof p);

@@ -146,7 +146,8 @@ int bl_sonar_ring_check(const bl_sonar_ring *ring, uint32_t *bad_index);
  *        nearer end point); not matched if that distance exceeds
  *        ring.gate_m (the paper's 25 cm);
  *   4-6  F = Σ F_i, F_i the squared distance of eq. 3/4, minimised by least
- *        squares: here Gauss–Newton on the residuals r_i = |M_i − Q_i| (Q_i
+ *        squares: by default Gauss–Newton (descent_rate 0; the paper's own
+ *        gradient descent with descent_rate > 0) on the residuals r_i = |M_i − Q_i| (Q_i
  *        the nearest point of the segment; ∂r_i/∂(x, y, θ) by eq. 1, so the
  *        step is the least-squares solution of the linearised residuals,
  *        with a small Levenberg damping that gives an axis the matches do
@@ -198,6 +199,11 @@ typedef struct bl_pinpoint_params {
                                    only through the ring's lever arm and the beam's edge:
                                    without it their noise turns the heading. 0: none (the
                                    paper's F). Default 0.05. Unused by the memory corrector */
+    bl_real descent_rate;       /* steps 4-5's minimiser: 0 (default) Gauss–Newton (above); > 0
+                                   the paper's gradient descent δ = −α ∂F/∂q with α this
+                                   (§3.1: α_x = α_y = α_θ = 0.1; units 1 for x, y, rad²/m² for
+                                   θ), so a coordinate the impacts observe weakly stays with
+                                   the odometry; 0..10 */
     bl_pinpoint_impact impact;  /* steps 2-3 (above); default BL_PINPOINT_IMPACT_ECHO. Unused
                                    by the memory corrector */
 } bl_pinpoint_params;
