@@ -406,7 +406,7 @@ def main() -> int:
         report[scenario] = {m: {"passed": {f"{k:g}": v for k, v in passed[m].items()},
                                 "largest_pct": pct[(m, where)]} for m in METHODS}
         if where == "room":
-            shares = [r["inside_3sigma"] for r in at_zero["filter"] if r.get("ok")]
+            shares = [r["inside_3sigma"] for r in at_zero.get("filter", []) if r.get("ok")]
             if shares:
                 inside = float(np.mean(shares))
     us_med = {m: float(np.median(v)) if v else math.nan for m, v in us.items()}
