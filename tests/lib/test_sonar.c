@@ -393,7 +393,7 @@ static void test_pinpoint_refuses_bad_input(void **state)
     prm.heading_sigma_rad = (bl_real)-0.01;
     assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
     bl_pinpoint_default(&prm);
-    prm.impact = (bl_pinpoint_impact)2; /* neither ECHO nor AXIS */
+    prm.impact = 2; /* neither ECHO nor AXIS */
     assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
     bl_pinpoint_default(&prm);
     prm.descent_rate = (bl_real)-0.1;

@@ -166,24 +166,23 @@ int bl_sonar_ring_check(const bl_sonar_ring *ring, uint32_t *bad_index);
  *   8    else the whole correction.
  * A correction larger than max_correction_m / max_correction_rad is
  * refused (pose given back, outcome BL_PINPOINT_REFUSED). */
-/* Where the pin-point places an impact (bl_pinpoint_params.impact). */
-typedef enum bl_pinpoint_impact {
-    /* At the incidence that makes the echo specular (the echo model of
-     * sonar_internal.hpp): the range is matched with the range of a
-     * segment's foot (or end) inside the beam cone widened by 3 heading_sigma_rad.
-     * Right for a sonar that returns the perpendicular distance; such
-     * ranges observe the heading only through the ring's lever arm, so the
-     * heading stays with odometry (heading_sigma_rad's prior). */
-    BL_PINPOINT_IMPACT_ECHO = 0,
-    /* On the beam's axis, as the paper's eq. 1 (step 2), matched with the
-     * nearest segment by eq. 2-4 within ring.gate_m (step 3), F_i its
-     * squared distance. A wall heard off the perpendicular (a rough wall's
-     * oblique echo, the paper's real data: §5.2 says a 20° incidence gate
-     * left the pin-point too few matches) puts the impact beside the wall
-     * unless the heading turns the axis onto it: the heading is observed.
-     * heading_sigma_rad's prior applies as well (0: the paper's F). */
-    BL_PINPOINT_IMPACT_AXIS = 1
-} bl_pinpoint_impact;
+/* Where the pin-point places an impact (bl_pinpoint_params.impact; a
+ * uint32_t, so that any other value is refused as BL_EINVAL, not undefined). */
+/* At the incidence that makes the echo specular (the echo model of
+ * sonar_internal.hpp): the range is matched with the range of a
+ * segment's foot (or end) inside the beam cone widened by 3 heading_sigma_rad.
+ * Right for a sonar that returns the perpendicular distance; such
+ * ranges observe the heading only through the ring's lever arm, so the
+ * heading stays with odometry (heading_sigma_rad's prior). */
+#define BL_PINPOINT_IMPACT_ECHO 0u
+/* On the beam's axis, as the paper's eq. 1 (step 2), matched with the
+ * nearest segment by eq. 2-4 within ring.gate_m (step 3), F_i its
+ * squared distance. A wall heard off the perpendicular (a rough wall's
+ * oblique echo, the paper's real data: §5.2 says a 20° incidence gate
+ * left the pin-point too few matches) puts the impact beside the wall
+ * unless the heading turns the axis onto it: the heading is observed.
+ * heading_sigma_rad's prior applies as well (0: the paper's F). */
+#define BL_PINPOINT_IMPACT_AXIS 1u
 
 typedef struct bl_pinpoint_params {
     bl_real epsilon_cost_m2;    /* ε: F below this stops (m²); paper 5e-3 */
@@ -204,7 +203,7 @@ typedef struct bl_pinpoint_params {
                                    (§3.1: α_x = α_y = α_θ = 0.1; units 1 for x, y, rad²/m² for
                                    θ), so a coordinate the impacts observe weakly stays with
                                    the odometry; 0..10 */
-    bl_pinpoint_impact impact;  /* steps 2-3 (above); default BL_PINPOINT_IMPACT_ECHO. Unused
+    uint32_t impact;            /* steps 2-3 (above); default BL_PINPOINT_IMPACT_ECHO. Unused
                                    by the memory corrector */
 } bl_pinpoint_params;
 
