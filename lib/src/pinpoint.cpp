@@ -29,7 +29,7 @@ struct Burst {
     real theta0_rad;      // the odometric heading (rad)
     real heading_weight;  // σ_r/σ_θ of the heading's prior (m/rad), 0: none
     real half_cone_rad;   // the cone searched for echoes (rad)
-    bool on_axis;         // bl_pinpoint_impact AXIS: eq. 1's impact on the beam's axis
+    bool on_axis;         // BL_PINPOINT_IMPACT_AXIS: eq. 1's impact on the beam's axis
     uint8_t sensor[BL_SONAR_MAX_SENSORS];
     real range_m[BL_SONAR_MAX_SENSORS];
 };

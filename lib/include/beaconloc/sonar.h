@@ -246,8 +246,8 @@ typedef struct bl_pinpoint_result {
  * with n > 0; n > BL_SONAR_MAX_SENSORS; a non-finite pose or one beyond 1e5
  * m; a map or ring that fails its check; params out of range).
  * Cost O(iterations · n · map.count) (measured: lib/README.md, make
- * bench-sonar-lib); stack (x86-64, double, -O2, -fstack-usage): 784 B
- * for this frame plus 768 B for the least squares and ~300 B below it. */
+ * bench-sonar-lib); stack (x86-64, double, -O2, -fstack-usage): 816 B
+ * for this frame plus 736 B for the least squares and ~300 B below it. */
 int bl_pinpoint_correct(const bl_map *map, const bl_sonar_ring *ring, const bl_sonar_range *burst, uint32_t n,
                         const bl_pinpoint_params *params, bl_pose *pose_in_out, bl_pinpoint_result *result);
 
