@@ -14,8 +14,16 @@ static const char *const method_names[] = {
     [SONAR_MEMORY] = "memory",
 };
 
+/* The pin-point as the paper wrote it (Hoppenot & Colle §3.1): its impacts
+ * on the beam's axis (eq. 1, BL_PINPOINT_IMPACT_AXIS), its F (no heading
+ * prior) and its gradient descent (α = 0.1): method pinpoint with those
+ * bl_pinpoint_params (docs/bridge.md). */
+static const char pinpoint_paper_name[] = "pinpoint-paper";
+
 int sonar_method_of(const char *name)
 {
+    if (!strcasecmp(name, pinpoint_paper_name))
+        return SONAR_PINPOINT;
     for (int m = 0; m < (int)(sizeof method_names / sizeof method_names[0]); m++)
         if (!strcasecmp(name, method_names[m]))
             return m;
@@ -190,6 +198,11 @@ int sonar_configure(struct sonar *s, const struct bridge_config *cfg, bool keep,
         s->ring = (bl_sonar_ring){0};
     }
     (void)bl_pinpoint_default(&s->pinpoint);
+    if (!strcasecmp(r->method, pinpoint_paper_name)) {
+        s->pinpoint.impact = BL_PINPOINT_IMPACT_AXIS;
+        s->pinpoint.heading_sigma_rad = 0;
+        s->pinpoint.descent_rate = (bl_real)0.1;
+    }
     (void)bl_memory_init(&s->memory, NULL); /* a new ring: the kept bursts are not its */
     s->burst_open = false;
     return 0;

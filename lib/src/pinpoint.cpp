@@ -29,6 +29,7 @@ struct Burst {
     real theta0_rad;      // the odometric heading (rad)
     real heading_weight;  // σ_r/σ_θ of the heading's prior (m/rad), 0: none
     real half_cone_rad;   // the cone searched for echoes (rad)
+    bool on_axis;         // BL_PINPOINT_IMPACT_AXIS: eq. 1's impact on the beam's axis
     uint8_t sensor[BL_SONAR_MAX_SENSORS];
     real range_m[BL_SONAR_MAX_SENSORS];
 };
@@ -51,6 +52,18 @@ LsEval burst_eval(const void *problem, const Vec3 &q)
         const bl_sonar_mount &m = b.ring->mounts[b.sensor[k]];
         real sx, sy, dsx, dsy;
         sonar_transducer(m, q(0), q(1), q(2), &sx, &sy, &dsx, &dsy);
+        if (b.on_axis) {
+            // Step 2, eq. 1: M = S + d (cos(θ + θ_i), sin(θ + θ_i)); step 3,
+            // eq. 2-4: the nearest segment within the 25 cm gate; F_i its
+            // squared distance (eq. 3/4), dM/dθ = ∂S/∂θ + d (−sin, cos)(θ + θ_i).
+            const real d = b.range_m[k], a = q(2) + m.angle_rad;
+            real mx, my, d2;
+            sonar_impact(m, q(0), q(1), q(2), d, &mx, &my);
+            const int sg = nearest_segment(b.map, mx, my, b.ring->gate_m, &d2);
+            if (sg < 0) continue;
+            ls_add_term(b.map->segments[sg], mx, my, dsx - d * std::sin(a), dsy + d * std::cos(a), &e);
+            continue;
+        }
         Echo ec;
         if (nearest_echo(b.map, sx, sy, q(2) + m.angle_rad, half, b.range_m[k], b.ring->gate_m, false, &ec) < 0)
             continue;
@@ -81,6 +94,26 @@ bool grad_small(const Vec3 &g, real eps, uint32_t axes, uint32_t *small_axes)
     }
     if (small_axes) *small_axes = s;
     return all;
+}
+
+// Steps 4-5 (our default minimiser): the Gauss–Newton step on the axes in
+// axes_mask, (JᵀJ + λ I) δ = −Jᵀr = −g/2, the other axes held.
+Vec3 gauss_newton_step(const LsEval &e, uint32_t axes_mask)
+{
+    Mat<3, 3> A = e.JtJ;
+    Vec3 rhs = real(-0.5) * e.g;
+    const real lambda = kDampingRel * (real(1) + A.trace());
+    for (int a = 0; a < 3; ++a) {
+        if (!((axes_mask >> a) & 1u)) {
+            A.row(a).setZero();
+            A.col(a).setZero();
+            A(a, a) = real(1);
+            rhs(a) = real(0);
+        } else {
+            A(a, a) += lambda;
+        }
+    }
+    return A.ldlt().solve(rhs);
 }
 
 }  // namespace
@@ -132,22 +165,17 @@ LsOutcome bl::least_squares(LsEvalFn eval, const void *problem, const bl_pinpoin
             stopped_on_n = true;
             break;
         }
-        // Steps 4-5: the Gauss–Newton step on the chosen axes,
-        // (JᵀJ + λ I) δ = −Jᵀr = −g/2, the other axes held.
-        Mat<3, 3> A = e.JtJ;
-        Vec3 rhs = real(-0.5) * e.g;
-        const real lambda = kDampingRel * (real(1) + A.trace());
-        for (int a = 0; a < 3; ++a) {
-            if (!((axes_mask >> a) & 1u)) {
-                A.row(a).setZero();
-                A.col(a).setZero();
-                A(a, a) = real(1);
-                rhs(a) = real(0);
-            } else {
-                A(a, a) += lambda;
-            }
+        Vec3 step;
+        if (prm.descent_rate > real(0)) {
+            // Steps 4-5 as the paper's minimiser (§3.1 "The minimisation
+            // method": α_x = α_y = α_θ = 0.1, its "backpropagation
+            // coefficients"): the gradient step δ = −α ∂F/∂q on the chosen
+            // axes. A coordinate the matches observe weakly (small ∂F/∂q)
+            // moves little: it stays with the odometry.
+            for (int a = 0; a < 3; ++a) step(a) = ((axes_mask >> a) & 1u) ? -prm.descent_rate * e.g(a) : real(0);
+        } else {
+            step = gauss_newton_step(e, axes_mask);
         }
-        Vec3 step = A.ldlt().solve(rhs);
         if (!step.allFinite()) break;
         // Step 6: F at the new pose (its own matches: step 2-3 again); a
         // step that raises F halved.
@@ -240,6 +268,7 @@ extern "C" int bl_pinpoint_correct(const bl_map *map, const bl_sonar_ring *ring,
     }
     res.valid = b.n;
     b.theta0_rad = pose_in_out->theta_rad;
+    b.on_axis = params->impact == BL_PINPOINT_IMPACT_AXIS;
     // The beam's half-width widened by 3 σ of the heading (the filter's
     // association, filter.h), never beyond a right angle.
     b.half_cone_rad = real(0.5) * ring->beam_width_rad + real(3) * params->heading_sigma_rad;

@@ -31,7 +31,9 @@ bool bl::pinpoint_params_ok(const bl_pinpoint_params *p)
     return is_finite(p->epsilon_cost_m2) && p->epsilon_cost_m2 >= real(0) && is_finite(p->epsilon_grad) &&
            p->epsilon_grad >= real(0) && p->max_iterations >= 1 && p->max_iterations <= 100 && p->min_matches >= 1 &&
            is_finite(p->max_correction_m) && p->max_correction_m > real(0) && is_finite(p->max_correction_rad) &&
-           p->max_correction_rad > real(0) && is_finite(p->heading_sigma_rad) && p->heading_sigma_rad >= real(0);
+           p->max_correction_rad > real(0) && is_finite(p->heading_sigma_rad) && p->heading_sigma_rad >= real(0) &&
+           (p->impact == BL_PINPOINT_IMPACT_ECHO || p->impact == BL_PINPOINT_IMPACT_AXIS) &&
+           is_finite(p->descent_rate) && p->descent_rate >= real(0) && p->descent_rate <= real(10);
 }
 
 bool bl::memory_params_ok(const bl_memory_params *p)
@@ -200,6 +202,9 @@ extern "C" int bl_pinpoint_default(bl_pinpoint_params *p)
     p->max_correction_m = real(0.5);
     p->max_correction_rad = real(0.35);
     p->heading_sigma_rad = real(0.05);  // a few degrees per 0.5 s burst (our choice; sonar.h)
+    p->impact = BL_PINPOINT_IMPACT_ECHO;
+    p->descent_rate =
+        0;  // Gauss–Newton (sonar.h; the paper's gradient descent: 0.1)  // our simulator's specular echoes (sonar.h)
     return BL_OK;
 }
 

@@ -51,13 +51,17 @@ sys.path.insert(0, str(REPO / "tests" / "integration"))
 import harness as h  # noqa: E402
 
 SCENARIOS = ("hoppenot-room", "hoppenot-obstacle")   # the room, then with the obstacle
-METHODS = ("pinpoint", "memory", "filter")
+METHODS = ("pinpoint", "memory", "filter")   # --methods may name others: pinpoint-paper
 CRITERION_M = 0.20          # Hoppenot & Colle s. 5.1: "not more than 20 centimetres"
 INSIDE_3SIGMA_TARGET = 0.95  # issue 12: the filter's error inside its 3 sigma at 0 %
 START_SIGMA = "0.02,1.0"    # --initial-pose sigma: m, deg (a known start, the paper's)
 # Table 1 of the paper: the largest asymmetric degradation corrected, %
 PAPER_PCT = {("pinpoint", "hoppenot-room"): 8.0, ("memory", "hoppenot-room"): 11.0,
              ("pinpoint", "hoppenot-obstacle"): 3.0, ("memory", "hoppenot-obstacle"): 4.75}
+# the pin-point as the paper wrote it (eq. 1, its F, its gradient descent: the bridge's
+# method pinpoint-paper)
+PAPER_PCT.update({("pinpoint-paper", k[1]): v for k, v in list(PAPER_PCT.items())
+                  if k[0] == "pinpoint"})
 PAPER_US = {"pinpoint": 2500.0, "memory": 50000.0}   # s. 5.3, 1997 hardware
 EST_COLUMNS = ("t_us", "x_m", "y_m", "var_x_m2", "cov_xy_m2", "var_y_m2")
 
@@ -282,9 +286,10 @@ class Runner:
 
 
 def sweep(runner: Runner, scenario: str, grid: list[float], seeds: int, jobs: int,
-          log=print) -> tuple[dict, dict]:
-    """For each method: {pct: survived} over the grid until its first failure, and the
-    runs at 0 % (for the timings and the 3-sigma share)."""
+          log=print, full_grid: bool = False) -> tuple[dict, dict]:
+    """For each method: {pct: survived} over the grid until its first failure (full_grid:
+    the whole grid, to see the errors beyond it), and the runs at 0 % (for the timings
+    and the 3-sigma share)."""
     alive = set(METHODS)
     passed = {m: {} for m in METHODS}
     at_zero: dict[str, list] = {m: [] for m in METHODS}
@@ -307,7 +312,7 @@ def sweep(runner: Runner, scenario: str, grid: list[float], seeds: int, jobs: in
                     f"error {worst * 100:6.1f} cm{(' (' + why + ')') if why else ''}")
                 if pct == 0.0:
                     at_zero[m] = mine
-                if not ok:
+                if not ok and not full_grid:
                     alive.discard(m)
     return passed, at_zero
 
@@ -338,7 +343,7 @@ def plot_paths(runner: Runner, scenarios: list[str], pct: float, out_png: Path) 
             ax.plot(od["x_m"], od["y_m"], color="tab:purple", lw=1, label="odometry alone")
         except (ValueError, OSError):
             pass
-        for m, c in zip(METHODS, ("tab:orange", "tab:green", "tab:blue")):
+        for m, c in zip(METHODS, ("tab:orange", "tab:green", "tab:blue", "tab:red")):
             r = runner.replay(scenario, pct, 1, m)
             if r.get("ok"):
                 e = read_columns(r["est"], EST_COLUMNS)
@@ -357,6 +362,7 @@ def plot_paths(runner: Runner, scenarios: list[str], pct: float, out_png: Path) 
 
 
 def main() -> int:
+    global METHODS
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--bridge", default=str(h.BRIDGE))
@@ -368,9 +374,15 @@ def main() -> int:
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--symmetric", action="store_true",
                     help="sweep the symmetric degradation instead (both wheels alike)")
+    ap.add_argument("--methods", default=",".join(METHODS),
+                    help="the bridge's [sonar_ring] methods to compare (also pinpoint-paper: "
+                         "the pin-point as the paper wrote it: eq. 1 impacts on the beam axis, its F, its gradient descent)")
+    ap.add_argument("--full-grid", action="store_true",
+                    help="run every grid point (do not stop a method at its first failure)")
     ap.add_argument("--plot-pct", type=float, default=8.0,
                     help="degradation of the paths' PNG, %% (the paper's Fig. 4: 8 %%)")
     args = ap.parse_args()
+    METHODS = tuple(args.methods.split(","))
     bridge, out = Path(args.bridge), Path(args.out)
     if not bridge.exists():
         print(f"sonar: {bridge} not built", file=sys.stderr)
@@ -386,14 +398,15 @@ def main() -> int:
     inside = math.nan
     for scenario in scenarios:
         where = "obstacle" if "obstacle" in scenario else "room"
-        passed, at_zero = sweep(runner, scenario, grid, args.seeds, args.jobs)
+        passed, at_zero = sweep(runner, scenario, grid, args.seeds, args.jobs,
+                                full_grid=args.full_grid)
         for m in METHODS:
             pct[(m, where)] = largest_survived(passed[m]) if passed[m] else None
             us[m] += [r["us"] for r in at_zero[m] if r.get("ok") and math.isfinite(r["us"])]
         report[scenario] = {m: {"passed": {f"{k:g}": v for k, v in passed[m].items()},
                                 "largest_pct": pct[(m, where)]} for m in METHODS}
         if where == "room":
-            shares = [r["inside_3sigma"] for r in at_zero["filter"] if r.get("ok")]
+            shares = [r["inside_3sigma"] for r in at_zero.get("filter", []) if r.get("ok")]
             if shares:
                 inside = float(np.mean(shares))
     us_med = {m: float(np.median(v)) if v else math.nan for m, v in us.items()}

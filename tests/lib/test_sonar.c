@@ -108,6 +108,63 @@ static void test_pinpoint_specular_true_pose_is_kept(void **state)
     }
 }
 
+/* The paper's own impact (eq. 1, BL_PINPOINT_IMPACT_AXIS): with ranges
+ * heard along the beam axes (walls that echo at any incidence, as the
+ * paper's real ones did: §5.2), an odometric heading 4° off is turned back
+ * by the burst alone, the position kept. With the specular echo model (the
+ * default) the same burst leaves most of the heading error: a range matched
+ * at its foot sees the heading through the ring's lever arm only. */
+static void test_pinpoint_axis_observes_heading(void **state)
+{
+    (void)state;
+    bl_map map;
+    bl_sonar_ring ring;
+    world_map(&map);
+    world_ring(&ring);
+    const double deg = 3.141592653589793 / 180.0;
+    const double x = 1.8, y = 2.0, th = -0.3;
+    bl_sonar_range b[8];
+    const uint32_t n = burst_of(x, y, th, 0, b);
+    for (uint32_t k = 0; k < n; ++k) assert_int_equal(b[k].flags, 0); /* every beam on a wall */
+    for (int sign = -1; sign <= 1; sign += 2) {
+        bl_pinpoint_params prm;
+        bl_pinpoint_default(&prm);
+        assert_int_equal(prm.impact, BL_PINPOINT_IMPACT_ECHO);
+        prm.epsilon_cost_m2 = (bl_real)1e-10;
+        prm.epsilon_grad = (bl_real)1e-7;
+        prm.heading_sigma_rad = 0; /* the paper's F */
+        prm.impact = BL_PINPOINT_IMPACT_AXIS;
+        bl_pose p = {(bl_real)x, (bl_real)y, (bl_real)(th + sign * 4 * deg)};
+        bl_pinpoint_result r;
+        assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_OK);
+        assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
+        assert_true(r.matched >= 5);
+        assert_true(fabs((double)p.theta_rad - th) < 0.2 * deg);
+        assert_true(hypot((double)p.x_m - x, (double)p.y_m - y) < 0.01);
+        /* the paper's minimiser (descent_rate 0.1, §3.1) gets there too,
+         * in its small gradient steps: more iterations than Gauss–Newton */
+        const uint32_t gn_iterations = r.iterations;
+        prm.descent_rate = (bl_real)0.1;
+        prm.max_iterations = 100;
+        p = (bl_pose){(bl_real)x, (bl_real)y, (bl_real)(th + sign * 4 * deg)};
+        assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_OK);
+        assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
+        assert_true(r.iterations > gn_iterations);
+        assert_true(fabs((double)p.theta_rad - th) < 0.3 * deg);
+        assert_true(hypot((double)p.x_m - x, (double)p.y_m - y) < 0.01);
+        prm.descent_rate = 0;
+        prm.max_iterations = 10;
+        /* the echo model: ranges along the axes are no specular echoes; the
+         * matched ones (feet and ends within the 25 cm gate) turn the heading
+         * part of the way at most (measured: 0 and 1.7 of the 4°) */
+        prm.impact = BL_PINPOINT_IMPACT_ECHO;
+        prm.heading_sigma_rad = (bl_real)0.05;
+        bl_pose q = {(bl_real)x, (bl_real)y, (bl_real)(th + sign * 4 * deg)};
+        assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &q, &r), BL_OK);
+        assert_true(fabs((double)q.theta_rad - th) > 1 * deg);
+    }
+}
+
 /* The heading's prior (heading_sigma_rad): with noisy specular ranges
  * (σ = max(3 cm, 1 %)) at the true pose, the heading the corrector gives back
  * stays near the odometry's; without the prior (0: the paper's F) the
@@ -335,6 +392,14 @@ static void test_pinpoint_refuses_bad_input(void **state)
     bl_pinpoint_default(&prm);
     prm.heading_sigma_rad = (bl_real)-0.01;
     assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
+    bl_pinpoint_default(&prm);
+    prm.impact = 2; /* neither ECHO nor AXIS */
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
+    bl_pinpoint_default(&prm);
+    prm.descent_rate = (bl_real)-0.1;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
+    prm.descent_rate = (bl_real)NAN;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, n, &prm, &p, &r), BL_EINVAL);
     /* nothing written by any of them */
     assert_memory_equal(&p, &start, sizeof p);
     assert_memory_equal(&r, &r0, sizeof r);
@@ -382,20 +447,49 @@ static uint32_t drive_arc(bl_memory_corrector *m, const bl_sonar_ring *ring, dou
     return valid;
 }
 
-static void test_memory_recovers_offset(void **state)
-{
-    (void)state;
+/* The memory tests' fixture: the room's map and ring, a corrector with the
+ * default parameters and the ten bursts of drive_arc, and the true pose at
+ * the newest burst. */
+struct memory_world {
     bl_map map;
     bl_sonar_ring ring;
-    world_map(&map);
-    world_ring(&ring);
     bl_memory_corrector m;
-    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
-    double x, y, th;
-    const uint32_t valid = drive_arc(&m, &ring, &x, &y, &th);
+    double x, y, th; /* true pose at the newest burst (m, m, rad) */
+    uint32_t valid;  /* ranges with an echo pushed */
+};
+static struct memory_world g_memory_world;
+
+static int memory_world_setup(void **state)
+{
+    struct memory_world *w = &g_memory_world;
+    memset(w, 0, sizeof *w);
+    world_map(&w->map);
+    world_ring(&w->ring);
+    if (bl_memory_init(&w->m, NULL) != BL_OK) return -1;
+    w->valid = drive_arc(&w->m, &w->ring, &w->x, &w->y, &w->th);
+    *state = w;
+    return 0;
+}
+
+/* The same with the -30° sensor's ranges scattered (g_scatter_bottom). */
+static int memory_world_setup_scattered(void **state)
+{
+    g_scatter_bottom = 1;
+    const int rc = memory_world_setup(state);
+    g_scatter_bottom = 0;
+    return rc;
+}
+
+static void test_memory_recovers_offset(void **state)
+{
+    struct memory_world *w = *state;
+    const bl_map map = w->map;
+    const bl_sonar_ring ring = w->ring;
+    const double x = w->x, y = w->y, th = w->th;
+    const uint32_t valid = w->valid;
     bl_pose p = {(bl_real)(x + 0.10), (bl_real)(y - 0.08), (bl_real)(th + 0.05)};
     bl_memory_result r;
-    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
+    assert_int_equal(bl_memory_correct(&w->m, &map, &ring, &p, &r), BL_OK);
     assert_int_equal(r.points, valid);
     assert_true(valid >= 2 * 10); /* at least the two walls' echoes of each burst */
     /* the right and top walls are fitted, from impacts placed at their
@@ -419,18 +513,11 @@ static void test_memory_recovers_offset(void **state)
  * every offset up to 7 cm standing while the odometry drifted). */
 static void test_memory_corrects_small_offset(void **state)
 {
-    (void)state;
-    bl_map map;
-    bl_sonar_ring ring;
-    world_map(&map);
-    world_ring(&ring);
-    bl_memory_corrector m;
-    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
-    double x, y, th;
-    (void)drive_arc(&m, &ring, &x, &y, &th);
-    bl_pose p = {(bl_real)(x + 0.03), (bl_real)(y - 0.04), (bl_real)th};
+    const struct memory_world *w = *state;
+    const double x = w->x, y = w->y;
+    bl_pose p = {(bl_real)(x + 0.03), (bl_real)(y - 0.04), (bl_real)w->th};
     bl_memory_result r;
-    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
+    assert_int_equal(bl_memory_correct(&w->m, &w->map, &w->ring, &p, &r), BL_OK);
     assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
     assert_true(r.iterations >= 1);
     assert_true(hypot((double)p.x_m - x, (double)p.y_m - y) < 0.01);
@@ -441,20 +528,11 @@ static void test_memory_corrects_small_offset(void **state)
  * wall alone, and y (observed only by the bottom wall's fit) is left. */
 static void test_memory_scattered_fit_refused(void **state)
 {
-    (void)state;
-    bl_map map;
-    bl_sonar_ring ring;
-    world_map(&map);
-    world_ring(&ring);
-    bl_memory_corrector m;
-    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
-    double x, y, th;
-    g_scatter_bottom = 1;
-    drive_arc(&m, &ring, &x, &y, &th);
-    g_scatter_bottom = 0;
+    const struct memory_world *w = *state; /* memory_world_setup_scattered */
+    const double x = w->x, y = w->y, th = w->th;
     bl_pose p = {(bl_real)(x + 0.10), (bl_real)(y - 0.08), (bl_real)(th + 0.05)};
     bl_memory_result r;
-    assert_int_equal(bl_memory_correct(&m, &map, &ring, &p, &r), BL_OK);
+    assert_int_equal(bl_memory_correct(&w->m, &w->map, &w->ring, &p, &r), BL_OK);
     assert_int_equal(r.segments, 1);
     assert_true(fabs((double)p.theta_rad - th) < 0.005);
     assert_true(fabs((double)p.y_m - y) < 0.02);
@@ -466,15 +544,11 @@ static void test_memory_scattered_fit_refused(void **state)
  * correction (the same correction twice gives the same pose). */
 static void test_memory_incidence_gate(void **state)
 {
-    (void)state;
-    bl_map map;
-    bl_sonar_ring ring;
-    world_map(&map);
-    world_ring(&ring);
-    bl_memory_corrector m;
-    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
-    double x, y, th;
-    drive_arc(&m, &ring, &x, &y, &th);
+    struct memory_world *w = *state;
+    const bl_map map = w->map;
+    const bl_sonar_ring ring = w->ring;
+    const bl_memory_corrector m = w->m;
+    double x = w->x, y = w->y, th = w->th;
     const bl_pose p0 = {(bl_real)(x + 0.05), (bl_real)y, (bl_real)th};
     bl_pose p = p0;
     bl_memory_result r20, r1;
@@ -503,11 +577,9 @@ static void test_memory_incidence_gate(void **state)
 /* Bad input refused, the corrector byte-identical; bad ranges counted. */
 static void test_memory_refuses_bad_input(void **state)
 {
-    (void)state;
-    bl_map map;
-    bl_sonar_ring ring;
-    world_map(&map);
-    world_ring(&ring);
+    struct memory_world *w = *state;
+    const bl_map map = w->map;
+    const bl_sonar_ring ring = w->ring;
     bl_memory_corrector m;
     memset(&m, 0, sizeof m);
     bl_pose origin = {0, 0, 0};
@@ -519,9 +591,7 @@ static void test_memory_refuses_bad_input(void **state)
     memset(&m, 0, sizeof m);
     assert_int_equal(bl_memory_init(&m, &prm), BL_EINVAL);
     assert_int_equal(bl_memory_push(&m, &ring, &(bl_pose){0, 0, 0}, NULL, 0), BL_ENOTINIT);
-    assert_int_equal(bl_memory_init(&m, NULL), BL_OK);
-    double x, y, th;
-    drive_arc(&m, &ring, &x, &y, &th);
+    m = w->m; /* the fixture's, initialised and driven */
     bl_memory_corrector copy;
     memcpy(&copy, &m, sizeof m);
     bl_sonar_range b[8];
@@ -587,12 +657,15 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_pinpoint_recovers_offset),
         cmocka_unit_test(test_pinpoint_specular_true_pose_is_kept),
+        cmocka_unit_test(test_pinpoint_axis_observes_heading),
         cmocka_unit_test(test_pinpoint_heading_prior),  cmocka_unit_test(test_pinpoint_endpoint_case),
         cmocka_unit_test(test_pinpoint_gate),             cmocka_unit_test(test_pinpoint_bad_ranges_counted),
-        cmocka_unit_test(test_pinpoint_refuses_bad_input), cmocka_unit_test(test_memory_recovers_offset),
-        cmocka_unit_test(test_memory_corrects_small_offset),
-        cmocka_unit_test(test_memory_scattered_fit_refused),
-        cmocka_unit_test(test_memory_incidence_gate),     cmocka_unit_test(test_memory_refuses_bad_input),
+        cmocka_unit_test(test_pinpoint_refuses_bad_input),
+        cmocka_unit_test_setup(test_memory_recovers_offset, memory_world_setup),
+        cmocka_unit_test_setup(test_memory_corrects_small_offset, memory_world_setup),
+        cmocka_unit_test_setup(test_memory_scattered_fit_refused, memory_world_setup_scattered),
+        cmocka_unit_test_setup(test_memory_incidence_gate, memory_world_setup),
+        cmocka_unit_test_setup(test_memory_refuses_bad_input, memory_world_setup),
         cmocka_unit_test(test_odometry_step),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -340,3 +340,20 @@ def test_draw_walls_draws_the_map_and_the_obstacles():
     assert [ln.get_label() for ln in lines].count("map wall") == 1
     np.testing.assert_allclose(lines[1].get_xydata(), [[6.0, 0.0], [6.0, 1.5]])
     plt.close(fig)
+
+
+def test_rough_walls_echo_off_the_normal():
+    """hoppenot-rough (walls that echo up to 30 degrees of incidence, the paper's s. 5.2): the
+    same path as hoppenot-room, and the extra readings are oblique echoes of the map's walls,
+    heard beyond the smooth walls' 20 degrees (docs/performance.md, the pin-point's heading)."""
+    smooth = simulate.run(load_scenario("hoppenot-room")).sonar
+    rough_res = simulate.run(load_scenario("hoppenot-rough"))
+    rough = rough_res.sonar
+    assert rough_res.scenario.sonar_critical_rad == pytest.approx(math.radians(30))
+    n_map = len(rough_res.scenario.site.walls_m)
+    obl_smooth = int(np.sum((smooth.kind == so.KIND_OBLIQUE) & (smooth.wall < n_map)))
+    obl_rough = int(np.sum((rough.kind == so.KIND_OBLIQUE) & (rough.wall < n_map)))
+    # the 80 bursts of the path hear the walls off their normal (measured: 155 oblique echoes
+    # of map walls against 10 with smooth walls)
+    assert obl_rough > obl_smooth + 100
+    assert len(rough.kind) == len(smooth.kind)       # the same pings: only the walls differ

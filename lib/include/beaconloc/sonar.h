@@ -134,6 +134,9 @@ int bl_sonar_ring_check(const bl_sonar_ring *ring, uint32_t *bad_index);
 
 /* ---- The pin-point corrector (Hoppenot & Colle §3.1) ----
  * From the odometric pose (x, y, θ) and one burst:
+ * (Steps 1-3 as written below are params.impact = BL_PINPOINT_IMPACT_AXIS,
+ * the paper's; the default, BL_PINPOINT_IMPACT_ECHO, matches each range with
+ * the specular echo of a segment inside the beam instead: bl_pinpoint_impact.)
  *   1-2  each valid range d of sensor i gives its impact (eq. 1, with the
  *        transducer's mount offset m_i added: the paper's sensors sit at the
  *        centre)  M_i = (x, y) + R(θ)·m_i + d·(cos(θ+θ_i), sin(θ+θ_i));
@@ -143,7 +146,8 @@ int bl_sonar_ring_check(const bl_sonar_ring *ring, uint32_t *bad_index);
  *        nearer end point); not matched if that distance exceeds
  *        ring.gate_m (the paper's 25 cm);
  *   4-6  F = Σ F_i, F_i the squared distance of eq. 3/4, minimised by least
- *        squares: here Gauss–Newton on the residuals r_i = |M_i − Q_i| (Q_i
+ *        squares: by default Gauss–Newton (descent_rate 0; the paper's own
+ *        gradient descent with descent_rate > 0) on the residuals r_i = |M_i − Q_i| (Q_i
  *        the nearest point of the segment; ∂r_i/∂(x, y, θ) by eq. 1, so the
  *        step is the least-squares solution of the linearised residuals,
  *        with a small Levenberg damping that gives an axis the matches do
@@ -162,6 +166,24 @@ int bl_sonar_ring_check(const bl_sonar_ring *ring, uint32_t *bad_index);
  *   8    else the whole correction.
  * A correction larger than max_correction_m / max_correction_rad is
  * refused (pose given back, outcome BL_PINPOINT_REFUSED). */
+/* Where the pin-point places an impact (bl_pinpoint_params.impact; a
+ * uint32_t, so that any other value is refused as BL_EINVAL, not undefined). */
+/* At the incidence that makes the echo specular (the echo model of
+ * sonar_internal.hpp): the range is matched with the range of a
+ * segment's foot (or end) inside the beam cone widened by 3 heading_sigma_rad.
+ * Right for a sonar that returns the perpendicular distance; such
+ * ranges observe the heading only through the ring's lever arm, so the
+ * heading stays with odometry (heading_sigma_rad's prior). */
+#define BL_PINPOINT_IMPACT_ECHO 0u
+/* On the beam's axis, as the paper's eq. 1 (step 2), matched with the
+ * nearest segment by eq. 2-4 within ring.gate_m (step 3), F_i its
+ * squared distance. A wall heard off the perpendicular (a rough wall's
+ * oblique echo, the paper's real data: §5.2 says a 20° incidence gate
+ * left the pin-point too few matches) puts the impact beside the wall
+ * unless the heading turns the axis onto it: the heading is observed.
+ * heading_sigma_rad's prior applies as well (0: the paper's F). */
+#define BL_PINPOINT_IMPACT_AXIS 1u
+
 typedef struct bl_pinpoint_params {
     bl_real epsilon_cost_m2;    /* ε: F below this stops (m²); paper 5e-3 */
     bl_real epsilon_grad;       /* ε': every |∂F/∂q| below this stops (m, m²/rad); paper 5e-3 */
@@ -176,6 +198,13 @@ typedef struct bl_pinpoint_params {
                                    only through the ring's lever arm and the beam's edge:
                                    without it their noise turns the heading. 0: none (the
                                    paper's F). Default 0.05. Unused by the memory corrector */
+    bl_real descent_rate;       /* steps 4-5's minimiser: 0 (default) Gauss–Newton (above); > 0
+                                   the paper's gradient descent δ = −α ∂F/∂q with α this
+                                   (§3.1: α_x = α_y = α_θ = 0.1; units 1 for x, y, rad²/m² for
+                                   θ), so a coordinate the impacts observe weakly stays with
+                                   the odometry; 0..10 */
+    uint32_t impact;            /* steps 2-3 (above); default BL_PINPOINT_IMPACT_ECHO. Unused
+                                   by the memory corrector */
 } bl_pinpoint_params;
 
 /* The paper's values (ε = ε' = 5e-3, N = 10) and min_matches 3,
@@ -217,8 +246,8 @@ typedef struct bl_pinpoint_result {
  * with n > 0; n > BL_SONAR_MAX_SENSORS; a non-finite pose or one beyond 1e5
  * m; a map or ring that fails its check; params out of range).
  * Cost O(iterations · n · map.count) (measured: lib/README.md, make
- * bench-sonar-lib); stack (x86-64, double, -O2, -fstack-usage): 784 B
- * for this frame plus 768 B for the least squares and ~300 B below it. */
+ * bench-sonar-lib); stack (x86-64, double, -O2, -fstack-usage): 816 B
+ * for this frame plus 736 B for the least squares and ~300 B below it. */
 int bl_pinpoint_correct(const bl_map *map, const bl_sonar_ring *ring, const bl_sonar_range *burst, uint32_t n,
                         const bl_pinpoint_params *params, bl_pose *pose_in_out, bl_pinpoint_result *result);
 
