@@ -8,11 +8,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* A range further than this many robust σ from its pair's median is a
- * multipath late arrival; the robust σ is 1.4826·MAD (Huber 1981 §5.1), as
- * lib/src/team.cpp's survey. */
-#define OUTLIER_SIGMA 3.0
-#define MAD_TO_SIGMA 1.4826
 /* A range beyond this many times max_range_m is bad data (as the library's
  * bl_filter_fuse_range refuses it). */
 #define MAX_RANGE_FACTOR 1.5
@@ -85,17 +80,6 @@ bool survey_add(struct survey *s, int emitter, int listener, uint16_t tof_us, in
     return true;
 }
 
-static int cmp_double(const void *a, const void *b)
-{
-    const double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median_sorted(const double *v, int m)
-{
-    return (m % 2) ? v[m / 2] : 0.5 * (v[m / 2 - 1] + v[m / 2]);
-}
-
 /* Ready to solve: every pair heard has min_pings, every beacon >= 2 of them. */
 static bool ready(const struct survey *s)
 {
@@ -131,25 +115,21 @@ static void pair_means(struct survey *s, bl_team_problem *prob)
             s->mean_m[k] = NAN;
             if (m == 0)
                 continue;
-            double v[SURVEY_PINGS], dev[SURVEY_PINGS];
-            memcpy(v, s->r_m[k], (size_t)m * sizeof v[0]);
-            qsort(v, (size_t)m, sizeof v[0], cmp_double);
-            const double med = median_sorted(v, m);
-            for (int q = 0; q < m; q++) dev[q] = fabs(v[q] - med);
-            qsort(dev, (size_t)m, sizeof dev[0], cmp_double);
-            const double sig_med = s->p.sigma_m + s->p.sigma_per_m * med;
-            const double rs = fmax(MAD_TO_SIGMA * median_sorted(dev, m), sig_med);
-            double sum = 0;
-            int kept = 0;
-            for (int q = 0; q < m; q++)
-                if (fabs(v[q] - med) <= OUTLIER_SIGMA * rs) {
-                    sum += v[q];
-                    kept++;
-                }
-            s->c.outliers += (uint64_t)(m - kept);
+            /* multipath late arrivals dropped: the library's robust mean
+             * (solver.h, bl_robust_range_mean), as the team's survey */
+            bl_real v[SURVEY_PINGS], dev[SURVEY_PINGS];
+            for (int q = 0; q < m; q++) v[q] = (bl_real)s->r_m[k][q];
+            bl_real mean = 0;
+            uint32_t kept = 0;
+            if (bl_robust_range_mean(v, dev, (uint32_t)m, (bl_real)s->p.sigma_m,
+                                     (bl_real)s->p.sigma_per_m, &mean, &kept) != BL_OK) {
+                s->c.outliers += (uint64_t)m; /* non-finite: none usable */
+                continue;
+            }
+            s->c.outliers += (uint64_t)m - kept;
             if (kept == 0)
                 continue;
-            const double r = sum / kept;
+            const double r = (double)mean;
             /* σ of the mean: σ(r)/√n (site [range_sensor] model) */
             const double sr = (s->p.sigma_m + s->p.sigma_per_m * r) / sqrt((double)kept);
             /* into the floor plane: r_xy = √(r² − Δz²), σ_xy = σ·r/r_xy */

@@ -10,7 +10,9 @@
 // The whole source compiles out without the team (common.h BL_WITH_TEAM).
 #if BL_WITH_TEAM
 
+#include <algorithm>
 #include <cstring>
+#include <limits>
 
 #include "linalg.hpp"
 
@@ -400,6 +402,37 @@ extern "C" int bl_team_resolve_mirror(const bl_team_l_manoeuvre *in, bl_team_mir
     d.sigma_cross_m2 = sc;
     d.confidence = conf;
     *out = d;
+    return BL_OK;
+}
+
+// One pair's mean range with multipath late arrivals dropped (solver.h):
+// median, robust σ = max(1.4826·MAD, σ model) (Huber 1981 §5.1), the mean of
+// the ranges within 3 robust σ of the median (Millibots §3.2).
+int bl_robust_range_mean(bl_real *v, bl_real *scratch, uint32_t m, bl_real sigma_m, bl_real sigma_per_m,
+                         bl_real *mean_m, uint32_t *kept)
+{
+    constexpr real kOutlierSigma = real(3);
+    constexpr real kMadToSigma = real(1.4826);
+    if (!v || !scratch || !mean_m || !kept || m == 0 || !is_finite(sigma_m) || !is_finite(sigma_per_m) || sigma_m < 0 ||
+        sigma_per_m < 0)
+        return BL_EINVAL;
+    for (uint32_t k = 0; k < m; ++k)
+        if (!is_finite(v[k])) return BL_EINVAL;
+    auto median_sorted = [m](const real *x) { return (m % 2) ? x[m / 2] : real(0.5) * (x[m / 2 - 1] + x[m / 2]); };
+    std::sort(v, v + m);
+    const real med = median_sorted(v);
+    for (uint32_t k = 0; k < m; ++k) scratch[k] = std::fabs(v[k] - med);
+    std::sort(scratch, scratch + m);
+    const real rs = std::max(kMadToSigma * median_sorted(scratch), sigma_m + sigma_per_m * med);
+    real sum = 0;
+    uint32_t n = 0;
+    for (uint32_t k = 0; k < m; ++k)
+        if (std::fabs(v[k] - med) <= kOutlierSigma * rs) {
+            sum += v[k];
+            ++n;
+        }
+    *mean_m = n > 0 ? sum / real(n) : std::numeric_limits<real>::quiet_NaN();
+    *kept = n;
     return BL_OK;
 }
 

@@ -13,12 +13,6 @@ using namespace bl;
 
 namespace {
 
-// Survey outliers: a range further than this many robust σ from its pair's
-// median is a multipath late arrival (Millibots §3.2). The robust σ is
-// 1.4826·MAD (the normal consistency constant; Huber 1981 §5.1), floored at
-// the range σ model.
-constexpr real kSurveyOutlierSigma = real(3);
-constexpr real kMadToSigma = real(1.4826);
 constexpr int NT = 2 * BL_MAX_TEAM;
 
 }  // namespace
@@ -38,24 +32,15 @@ void bl::team_survey(bl_team *t, int64_t now_us)
             const int pi = pair_index(n, i, j);
             const uint32_t m = std::min<uint32_t>(t->survey_n_[pi], BL_TEAM_SURVEY_PINGS);
             if (m == 0) continue;
+            // Multipath late arrivals dropped (solver.h, bl_robust_range_mean).
             real v[BL_TEAM_SURVEY_PINGS], dev[BL_TEAM_SURVEY_PINGS];
             for (uint32_t k = 0; k < m; ++k) v[k] = t->survey_r_[pi][k];
-            std::sort(v, v + m);
-            const real med = (m % 2) ? v[m / 2] : real(0.5) * (v[m / 2 - 1] + v[m / 2]);
-            for (uint32_t k = 0; k < m; ++k) dev[k] = std::fabs(v[k] - med);
-            std::sort(dev, dev + m);
-            const real mad = (m % 2) ? dev[m / 2] : real(0.5) * (dev[m / 2 - 1] + dev[m / 2]);
-            const real rs = std::max(kMadToSigma * mad, range_sigma_m(cfg, med));
-            real sum = 0;
+            real r = 0;
             uint32_t kept = 0;
-            for (uint32_t k = 0; k < m; ++k)
-                if (std::fabs(v[k] - med) <= kSurveyOutlierSigma * rs) {
-                    sum += v[k];
-                    ++kept;
-                }
+            if (bl_robust_range_mean(v, dev, m, cfg->range.sigma_m, cfg->range.sigma_per_m, &r, &kept) != BL_OK)
+                continue;
             t->st_.ranges_survey_outliers += m - kept;
             if (kept == 0) continue;
-            const real r = sum / real(kept);
             // σ of the mean: the range σ over √n, plus the speed of sound's
             // share, common to every ping: r·σ_s/s.
             const real sr = range_sigma_m(cfg, r);

@@ -418,6 +418,42 @@ static void test_errors(void **state)
 #undef EXPECT
 }
 
+/* bl_robust_range_mean: a late arrival (multipath) beyond 3 robust σ of the
+ * median is dropped and the others averaged; the σ model floors the robust
+ * σ, so close ranges are all kept; bad input is refused, outputs untouched. */
+static void test_robust_range_mean(void **state)
+{
+    (void)state;
+    bl_real v[6] = {2.00, 2.02, 1.98, 2.01, 2.60, 1.99}, scratch[6];
+    bl_real mean = -1;
+    uint32_t kept = 99;
+    assert_int_equal(bl_robust_range_mean(v, scratch, 6, (bl_real)0.008, 0, &mean, &kept), BL_OK);
+    assert_int_equal(kept, 5); /* 2.60 m is 0.6 m late: out */
+    assert_true(fabs((double)mean - 2.0) < 1e-5);
+    for (int k = 1; k < 6; k++) assert_true(v[k - 1] <= v[k]); /* sorted in place */
+    /* spread of 4 cm but a σ model of 5 cm: every range within 3σ, all kept */
+    bl_real w[4] = {3.00, 3.04, 2.96, 3.00};
+    assert_int_equal(bl_robust_range_mean(w, scratch, 4, (bl_real)0.05, 0, &mean, &kept), BL_OK);
+    assert_int_equal(kept, 4);
+    assert_true(fabs((double)mean - 3.0) < 1e-5);
+    /* the σ per metre counts: 1 cm + 1 %/m of 3 m = 4 cm; a range 15 cm off
+     * (> 3 × 4 cm) is out, one 10 cm off is in */
+    bl_real u[5] = {3.00, 3.00, 3.00, 3.10, 3.15};
+    assert_int_equal(bl_robust_range_mean(u, scratch, 5, (bl_real)0.01, (bl_real)0.01, &mean, &kept),
+                     BL_OK);
+    assert_int_equal(kept, 4);
+    assert_true(fabs((double)mean - 3.025) < 1e-5);
+    /* refused: untouched */
+    mean = -1;
+    kept = 99;
+    bl_real bad[3] = {1.0, (bl_real)NAN, 1.0};
+    assert_int_equal(bl_robust_range_mean(bad, scratch, 3, (bl_real)0.01, 0, &mean, &kept), BL_EINVAL);
+    assert_int_equal(bl_robust_range_mean(v, scratch, 0, (bl_real)0.01, 0, &mean, &kept), BL_EINVAL);
+    assert_int_equal(bl_robust_range_mean(v, scratch, 6, (bl_real)-0.01, 0, &mean, &kept), BL_EINVAL);
+    assert_int_equal(bl_robust_range_mean(v, NULL, 6, (bl_real)0.01, 0, &mean, &kept), BL_EINVAL);
+    assert_true(mean == -1 && kept == 99);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -429,6 +465,7 @@ int main(void)
         cmocka_unit_test(test_resolve_mirror),
         cmocka_unit_test(test_l_manoeuvre_end_to_end),
         cmocka_unit_test(test_errors),
+        cmocka_unit_test(test_robust_range_mean),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

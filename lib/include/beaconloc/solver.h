@@ -366,6 +366,20 @@ typedef struct bl_team_solution {
 
 int bl_solve_team(const bl_team_problem *prob, bl_team_solution *sol);
 
+/* ---- One pair's mean range, multipath late arrivals dropped ----
+ * (Millibots §3.2: late arrivals are rejected; the team survey and the
+ * bridge's self-survey of fixed range beacons both use this.) The m ranges
+ * v (m) are sorted in place; med is their median, and the robust σ
+ *     rs = max(1.4826·MAD, sigma_m + sigma_per_m·med)            (m)
+ * (1.4826: the normal consistency constant of the median absolute
+ * deviation, Huber 1981 §5.1; floored at the range σ model). A range
+ * further than 3·rs from med is an outlier; *mean_m is the mean of the
+ * others, *kept their count (0: *mean_m NaN). scratch: m values the caller
+ * owns. Errors: BL_EINVAL (NULL, m == 0, a σ < 0 or non-finite, a
+ * non-finite range); the outputs untouched. */
+int bl_robust_range_mean(bl_real *v, bl_real *scratch, uint32_t m, bl_real sigma_m, bl_real sigma_per_m,
+                         bl_real *mean_m, uint32_t *kept);
+
 /* The reflection y -> -y of a team solution (in may equal out): every y
  * negated, and with it the covariance entries that pair an x with a y
  * (cov[i][1], cov[i][2]; joint_cov (r, c) with one of r, c odd);
