@@ -29,6 +29,7 @@ Last line:
 from __future__ import annotations
 
 import argparse
+import bisect
 import itertools
 import json
 import math
@@ -203,30 +204,49 @@ def raise_priority(pid: int) -> str:
     return ", ".join(done)
 
 
-def hour_log(log: Path, hour: int, dest: Path) -> int:
+def hour_log(log: Path, hour: int, dest: Path) -> list[int]:
     """Copy one hour of the log (log time in [first frame + hour x 3600 s, + 3600 s): the
     bridge's hour, its timers start at the first frame; the last hour to the log's end) to
-    dest, for the fresh bridge of the latency target. Returns its frames."""
-    n, t_first = 0, None
+    dest, for the fresh bridge of the latency target. Returns the byte offset in the log
+    at which each hour begins (hour k's first frame), for the RSS samples' hours."""
+    starts: list[int] = []
+    t_first, pos = None, 0
     with log.open("rb") as src, dest.open("wb") as dst:
         for line in src:
             t_us = int(line[1:line.index(b")")].replace(b".", b""))
             if t_first is None:
                 t_first = t_us
             k = (t_us - t_first) // int(HOUR_S * 1e6)
+            while len(starts) <= k:
+                starts.append(pos)
             if k == hour:
                 dst.write(line)
-                n += 1
-    return n
+            pos += len(line)
+    return starts
+
+
+def bytes_read(pid: int) -> int | None:
+    """Bytes the process has read (/proc/PID/io rchar): in a replay, its place in the log."""
+    try:
+        with open(f"/proc/{pid}/io") as fh:
+            for line in fh:
+                if line.startswith("rchar:"):
+                    return int(line.split()[1])
+    except (FileNotFoundError, ProcessLookupError, PermissionError):
+        return None
+    return None
 
 
 def replay(bridge: Path, site: Path, log: Path, out: Path, name: str, hours: list[Hour],
            priority: bool, interval_s: int = STATUS_INTERVAL_S,
-           on_interval=None) -> tuple[dict, float, str, int]:
+           on_interval=None, hour_starts: list[int] | None = None) -> tuple[dict, float, str, int]:
     """Run the bridge on a log with a status line every interval_s of log time; give
     each hour its intervals (frames, wall time, latency, CPU) and its RSS samples.
     Its files are out/<name>-stats.json, out/<name>.err and out/<name>-est.csv.
     on_interval(k), if given, is called as the k-th status line is read (k from 1).
+    hour_starts, if given (hour_log), tags each RSS sample with the hour of the bridge's
+    place in the log (the bytes it has read), not with the status lines read so far: a
+    driver the machine starves reads those late (a CI run's last hour got no sample).
     Returns the stats JSON, the wall time, the priority, and the status lines read."""
     per_hour = int(HOUR_S) // interval_s
     stats_path, err_path = out / f"{name}-stats.json", out / f"{name}.err"
@@ -278,8 +298,13 @@ def replay(bridge: Path, site: Path, log: Path, out: Path, name: str, hours: lis
                 proc.returncode = os.waitstatus_to_exitcode(status)
                 break
             rss = vm_rss_kib(proc.pid)
+            at = bytes_read(proc.pid) if hour_starts else None
             if rss is not None:
-                hours[min(len(intervals) // per_hour, len(hours) - 1)].rss_kib.append(rss)
+                if at is not None:
+                    k = bisect.bisect_right(hour_starts, at) - 1
+                else:
+                    k = len(intervals) // per_hour
+                hours[max(0, min(k, len(hours) - 1))].rss_kib.append(rss)
             time.sleep(RSS_POLL_S)
     except BaseException:
         proc.kill()  # its own session: an interrupt of the driver does not reach it
@@ -322,7 +347,7 @@ def replay_with_fresh_beside(bridge: Path, site: Path, out: Path, hours: list[Ho
     status lines) and the fresh bridge's hour (an Hour, or None if it did not run)."""
     per_hour = int(HOUR_S) // interval_s
     fresh_log = out / "last-hour.log"
-    hour_log(out / "bus.log", len(hours) - 1, fresh_log)
+    hour_starts = hour_log(out / "bus.log", len(hours) - 1, fresh_log)
     fresh: list[Hour] = [Hour()]
     done: dict = {}
 
@@ -343,7 +368,7 @@ def replay_with_fresh_beside(bridge: Path, site: Path, out: Path, hours: list[Ho
     if start_at <= 0:
         beside.start()
     result = replay(bridge, site, out / "bus.log", out, "bridge", hours, priority,
-                    interval_s, on_interval)
+                    interval_s, on_interval, hour_starts)
     if beside.ident is not None:
         beside.join()
     if "error" in done:
