@@ -483,8 +483,9 @@ extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
                             p->sigma_omega_radps,
                             p->sigma_t0_s};
     if (!all_finite(vals, int(sizeof vals / sizeof vals[0]))) return BL_EINVAL;
-    if (!(p->sigma_xy_m > 0) || !(p->sigma_theta_rad > 0) || !(p->sigma_v_mps > 0) || !(p->sigma_omega_radps > 0) ||
-        !(p->sigma_t0_s > 0))
+    if (!bl::usable_sigma(p->sigma_xy_m) || !bl::usable_sigma(p->sigma_theta_rad) ||
+        !bl::usable_sigma(p->sigma_v_mps) || !bl::usable_sigma(p->sigma_omega_radps) ||
+        !bl::usable_sigma(p->sigma_t0_s))
         return BL_EINVAL;
     // Physical ranges (found by fuzzing: a finite theta or v of 1e308 was
     // taken, and every later extrapolation overflowed).
@@ -544,7 +545,7 @@ extern "C" int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real
 {
     if (f == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
-    if (!is_finite(theta_rad) || !is_finite(sigma_theta_rad) || !(sigma_theta_rad > 0)) return BL_EINVAL;
+    if (!is_finite(theta_rad) || !bl::usable_sigma(sigma_theta_rad)) return BL_EINVAL;
     const bl_config *cfg = &f->cfg_;
     real s = cfg->speed_of_sound_mps, Tp = cfg->beacon_period_s;
     real vs = cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps;

@@ -141,11 +141,22 @@ static void check_estimate(const bl_estimate *e, const char *what)
 /* After every call on the filter: rc < 0 -> unchanged; state sane. */
 static void after_filter_call(int rc, const char *what, bool is_const)
 {
+    if (trace)
+        fprintf(stderr, "%s -> %d\n", what, rc);
     if (rc < 0 || is_const)
         FUZZ_CHECK(!memcmp(&f, &f_before, sizeof f), "%s returned %d (%s) but changed the filter",
                    what, rc, bl_strerror(rc));
     bl_real x[NX], P[NX * NX];
     if (bl_filter_get_state(&f, x, P) == BL_OK) {
+        if (trace) {
+            fprintf(stderr, "  x");
+            for (int i = 0; i < NX; i++)
+                fprintf(stderr, " %.6g", x[i]);
+            fprintf(stderr, "\n  sigma");
+            for (int i = 0; i < NX; i++)
+                fprintf(stderr, " %.3g", sqrt(fabs((double)P[i * NX + i])));
+            fprintf(stderr, "\n");
+        }
         FUZZ_CHECK(all_finite(x, NX), "after %s: state not finite", what);
         check_covariance(P, NX, what);
     }
@@ -220,8 +231,12 @@ static void perturb_config(struct fz *z, bl_config *c)
     if (k < nr) {
         double v = fz_real(z, fabs((double)*reals[k]) > 0 ? (double)*reals[k] : 1.0);
         *reals[k] = (bl_real)v;
+        if (trace)
+            fprintf(stderr, "config real #%u = %g\n", (unsigned)k, v);
     } else if (k < nr + ni) {
         *ints[k - nr] = fz_u8(z) % 24;
+        if (trace)
+            fprintf(stderr, "config int #%u = %u\n", (unsigned)(k - nr), (unsigned)*ints[k - nr]);
     } else {
         uint8_t b = fz_u8(z) % BL_MAX_BEACONS;
         c->beacons[b].x_m = (bl_real)fz_real(z, 6.0);
@@ -333,6 +348,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         }
         case 2: { /* explicit start */
             bl_filter_prior p;
+            memset(&p, 0, sizeof p);
             p.t_us = fuzz_time(&z);
             p.x_m = (bl_real)fz_real(&z, 6.0);
             p.y_m = (bl_real)fz_real(&z, 6.0);
@@ -359,6 +375,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         case 3: {
             bl_real th = (bl_real)fz_real(&z, 3.0), s = (bl_real)fz_real(&z, 0.5);
             f_before = f;
+            if (trace)
+                fprintf(stderr, "start_snapshot th %g sigma %g\n", th, s);
             rc = bl_filter_start_snapshot(&f, th, s);
             after_filter_call(rc, "start_snapshot", false);
             break;
@@ -422,6 +440,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         }
         case 12: case 13: { /* sequencer push: a detection near now */
             bl_seq_detection d;
+            memset(&d, 0, sizeof d); /* d.tag too (found with MSan) */
             d.time_us = now_us + (int64_t)fz_u16(&z) * 4 - 20000;
             d.receiver = fz_u8(&z) % (sc.receiver_count + 1);
             uint8_t fl = fz_u8(&z);
@@ -458,6 +477,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         case 15: { /* hint from the filter, or a fuzzed one */
             bl_seq_hint h;
             bl_estimate e;
+            /* every field set: the fuzzed hint once left flights_valid and
+             * the flights uninitialised (stack garbage of an earlier input:
+             * a crash that did not repeat on its own; found with MSan) */
+            memset(&h, 0, sizeof h);
             if (fz_u8(&z) & 1) {
                 if (bl_filter_estimate(&f, &e) != BL_OK ||
                     bl_sequencer_hint_from_estimate(&e, &h) != BL_OK)
@@ -468,6 +491,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 h.period_us = (bl_real)fz_real(&z, 150000.0);
                 h.fire_sigma_us = (bl_real)fz_real(&z, 100.0);
                 h.period_sigma_us = (bl_real)fz_real(&z, 10.0);
+                h.flights_valid = fz_u8(&z) & 1;
+                if (h.flights_valid) {
+                    h.flight_margin_us = (bl_real)fz_real(&z, 300.0);
+                    h.flight_rate_us_per_s = (bl_real)fz_real(&z, 100.0);
+                    for (uint32_t b = 0; b < BL_MAX_BEACONS; b++) {
+                        h.flight_us[b] = (bl_real)fz_real(&z, 20000.0);
+                        h.flight_sigma_us[b] = (bl_real)fz_real(&z, 100.0);
+                    }
+                }
             }
             seq_before = seq;
             rc = bl_sequencer_set_hint(&seq, &h);
@@ -506,6 +538,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             if (bl_filter_get_state(&f, x, NULL) != BL_OK)
                 break;
             bl_pulse_geometry g;
+            memset(&g, 0, sizeof g);
             g.beacon_index = fz_u8(&z) % 8;
             g.receiver_index = fz_u8(&z) % 10;
             g.slot = (int32_t)(int8_t)fz_u8(&z);

@@ -158,8 +158,20 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         drain(master_fd);
         size_t n = z.n < SERIAL_MAX ? z.n : SERIAL_MAX;
         if (n > 0) {
-            ssize_t w = write(master_fd, z.p, n);
-            FUZZ_CHECK(w == (ssize_t)n, "pty write %zd of %zu", w, n);
+            /* The pty takes a write in chunks as its buffers drain to the
+             * slave (a write of 2415 bytes once returned 2048): write on. */
+            size_t done = 0;
+            for (int i = 0; done < n && i < 2000; i++) {
+                ssize_t w = write(master_fd, z.p + done, n - done);
+                FUZZ_CHECK(w >= 0 || errno == EAGAIN || errno == EINTR, "pty write: %s", strerror(errno));
+                if (w > 0) {
+                    done += (size_t)w;
+                } else {
+                    struct timespec ts = { 0, 20000 };
+                    nanosleep(&ts, NULL);
+                }
+            }
+            FUZZ_CHECK(done == n, "pty write %zu of %zu", done, n);
             wait_readable(fd, (int)n);
         }
         delivered = n;

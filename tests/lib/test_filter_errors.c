@@ -37,6 +37,17 @@ static void test_fuzz_out_of_range_refused(void **state)
     pr.x_m = (bl_real)2e6;
     assert_int_equal(bl_filter_start(&f, &pr), BL_EINVAL); SAME();
     pr.x_m = 6;
+    /* a sigma whose square underflows: a variance of 0 that later products
+     * left a covariance of 1e-274 (P not PSD); the float build's limit is
+     * its own FLT_MIN */
+    pr.sigma_xy_m = (bl_real)(sizeof(bl_real) == sizeof(double) ? 3.88e-265 : 1e-25);
+    assert_int_equal(bl_filter_start(&f, &pr), BL_EINVAL); SAME();
+    pr.sigma_xy_m = 1;
+    assert_int_equal(bl_filter_start_snapshot(&f, 0, (bl_real)(sizeof(bl_real) == sizeof(double) ? 1e-200 : 1e-25)),
+                     BL_EINVAL); SAME();
+    assert_int_equal(bl_filter_start_snapshot(&f, 0, (bl_real)(sizeof(bl_real) == sizeof(double) ? 1e300 : 1e30)),
+                     BL_EINVAL); SAME(); /* squared: inf in P */
+    assert_int_equal(bl_filter_start_snapshot(&f, 0, -1), BL_EINVAL); SAME();
     assert_int_equal(bl_filter_start(&f, &pr), BL_OK); /* in range: taken */
     bl_real P[BL_FILTER_NX * BL_FILTER_NX];
     assert_int_equal(bl_filter_get_state(&f, NULL, P), BL_OK);
