@@ -12,7 +12,19 @@
 IT_RESULTS   := $(BUILD)/vm
 DEMO_OUT     := $(BUILD)/demo
 IT_BRIDGE    := $(BUILD)/bridge/beaconloc-bridge
-VM_RUN       := tests/vm/run-in-vm.sh
+# LD_PRELOAD shim that lets UML 6.1 run where the host's XSAVE area is larger
+# than UML knows (AVX-512, AMX: tests/vm/uml_xstate.c); every guest gets it.
+UML_SHIM     := $(BUILD)/vm-shim/uml_xstate.so
+VM_RUN       := BL_UML_SHIM=$(CURDIR)/$(UML_SHIM) tests/vm/run-in-vm.sh
+
+$(UML_SHIM): tests/vm/uml_xstate.c tests/integration/integration.mk
+	@mkdir -p $(@D)
+	$(CC) -std=c11 -O2 -Wall -Wextra -Werror -shared -fPIC -o $@ $< -ldl -lpthread
+# Its check in the guest (tests/integration/test_guest_fpu.py).
+FPU_CHECK    := $(BUILD)/vm-shim/fpu_check
+$(FPU_CHECK): tests/vm/fpu_check.c tests/integration/integration.mk
+	@mkdir -p $(@D)
+	$(CC) -std=c11 -D_GNU_SOURCE -O1 -Wall -Wextra -Werror -mavx512f -pthread -o $@ $<
 IT_ARGS      ?=
 # UML guests side by side (a guest has one CPU), one per host core, at most 4:
 # a live case runs in real time and keeps a guest about a third busy (measured:
@@ -33,15 +45,15 @@ test-vm-runner: $(SETUP_STAMP)
 
 # What the vcan suite runs (built first by make test, which starts the suite
 # while the rest is built).
-IT_BUILDS    = $(IT_BRIDGE) $(BRIDGE_SLOWDNS)
+IT_BUILDS    = $(IT_BRIDGE) $(BRIDGE_SLOWDNS) $(UML_SHIM) $(FPU_CHECK)
 test-integration: $(SETUP_STAMP) $(IT_BUILDS)
 	$(VM_RUN) --results $(IT_RESULTS) --junit junit.xml --guests $(IT_GUESTS) \
 	    tests/integration/run-suite.sh $(IT_ARGS)
 
-vm-check: $(SETUP_STAMP)
+vm-check: $(SETUP_STAMP) $(UML_SHIM)
 	$(VM_RUN) --results $(BUILD)/vm-check true
 
-bench-bus: $(SETUP_STAMP) $(IT_BRIDGE)
+bench-bus: $(SETUP_STAMP) $(IT_BRIDGE) $(UML_SHIM)
 	$(VM_RUN) --results $(BUILD)/bench-bus --tail script.log \
 	    $(PY) tests/vm/bench_bus.py
 
@@ -54,6 +66,6 @@ bench-bearing: $(SETUP_STAMP) $(IT_BRIDGE) $(BUILD)/bench/triangulate
 	$(PY) tests/bench/bearing.py --bridge $(IT_BRIDGE) --triangulate $(BUILD)/bench/triangulate \
 	    --out $(BUILD)/bench/bearing
 
-demo: $(SETUP_STAMP) $(IT_BRIDGE)
+demo: $(SETUP_STAMP) $(IT_BRIDGE) $(UML_SHIM)
 	$(VM_RUN) --results $(DEMO_OUT) --tail live.txt tests/demo/demo.sh $(DEMO_S)
 	$(PY) tests/demo/summary.py $(DEMO_OUT)

@@ -73,6 +73,19 @@ def uml_kernel() -> tuple[str, str]:
     return kernel, found[-1]
 
 
+def uml_shim() -> str | None:
+    """The LD_PRELOAD shim of tests/vm/uml_xstate.c (BL_UML_SHIM, as the
+    Makefile builds it; else build/vm-shim/uml_xstate.so if built). UML 6.1
+    panics without it where the host's XSAVE area is larger than it knows
+    ("userspace - ptrace set fp regs failed, errno = 14": AVX-512, AMX)."""
+    path = os.environ.get("BL_UML_SHIM") or str(REPO / "build" / "vm-shim" / "uml_xstate.so")
+    if not Path(path).is_file():
+        if os.environ.get("BL_UML_SHIM"):
+            raise SystemExit(f"run-in-vm: BL_UML_SHIM={path} missing: build it with make")
+        return None
+    return path
+
+
 def uml_argv(kernel: str, job: Path, memory: str) -> list[str]:
     """The UML command line: the host's own root file system over hostfs
     (read-write: results come back through it), uml-init.sh as PID 1, the
@@ -146,6 +159,9 @@ def run(args: argparse.Namespace, results: Path, shard: str | None) -> tuple[str
                        + f"cd {_shquote(str(REPO))}\n"
                        + "exec " + " ".join(_shquote(a) for a in guest_cmd) + "\n")
         argv = uml_argv(kernel, job, args.memory)
+        shim = uml_shim()
+        if shim is not None:
+            env["LD_PRELOAD"] = shim
         log(f"{label}booting User-Mode Linux {ver} ({args.memory}); boot timeout "
             f"{args.boot_timeout:.0f} s")
         boot_timeout = args.boot_timeout
@@ -189,6 +205,14 @@ def run(args: argparse.Namespace, results: Path, shard: str | None) -> tuple[str
     if not code_file.exists():
         if how == "finished":
             how = "the command never reported an exit code (guest crashed or never booted)"
+            try:
+                if b"ptrace set fp regs failed" in (results / "console.log").read_bytes():
+                    how += ("; UML could not restore a task's FPU state: this host's XSAVE "
+                            "area is larger than UML 6.1 knows (tests/vm/uml_xstate.c"
+                            + (" was preloaded" if args.mode == "uml" and uml_shim() else
+                               " was not preloaded: build it with make") + ")")
+            except OSError:
+                pass
         return how, None
     try:
         return how, int(code_file.read_text().strip())
