@@ -273,6 +273,29 @@ void estimator_sonar_tick(struct estimator *e, int64_t local_now_us);
  * the frame behind it, so that it is published. */
 bool estimator_ref_time(struct estimator *e, const struct node_clock *own, int64_t t_own,
                         int64_t *t_ref);
+/* A beacon measurement's frame (a bearing, a range) up to the point where the
+ * localizer takes it, the one path both kinds share (bridge/timebase.c): its
+ * node clock observed (node_time_us, sent at local time sent_local_us); a
+ * frame older than one already handed on counted (counter_stale) and
+ * dropped; a clock restart counted and warned about ("<node_name> clock
+ * restarted"); a beacon number outside 1..beacon_count counted
+ * (counter_unknown_beacon) and dropped; the time mapped onto the filter's
+ * timebase, counted (counter_unmapped) and dropped while the reference clock
+ * has no observation; the pulses that arrived before it closed; the frame's
+ * receive time rx_us noted; the pending start pose taken. The counters are
+ * the kind's own (sensor_<kind>.c). True with *t (filter time, us) when the
+ * localizer is to take the measurement. */
+struct beacon_frame {
+    uint32_t node_time_us; /* the frame's node time (us, the node's wrapping counter) */
+    int64_t sent_local_us; /* local time the node time is taken to be sent at (us) */
+    int64_t rx_us;         /* the frame's receive time (us) */
+    unsigned beacon;       /* 1-based beacon number of the frame */
+    unsigned beacon_count; /* the site's beacons of this kind */
+    const char *node_name; /* "bearing sensor", "range receiver" */
+    unsigned counter_stale, counter_unknown_beacon, counter_unmapped;
+};
+bool estimator_beacon_frame(struct estimator *e, enum frame_kind kind,
+                            const struct beacon_frame *bf, int64_t *t);
 /* The same mapping without noting the newest reference time (bridge/timebase.c),
  * and whether the reference clock has an observation. */
 bool estimator_to_ref_time(const struct estimator *e, const struct node_clock *own, int64_t t_own,

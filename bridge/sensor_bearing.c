@@ -93,34 +93,24 @@ enum frame_result sensor_bearing_decode(uint32_t id, const uint8_t data[8], stru
 void sensor_bearing_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
     const struct frame_bearing *b = &f->u.bearing;
-    struct node_clock *clock = &e->clock[FRAME_BEARING];
     if (e->blcfg.bearing_beacon_count == 0) {
         estimator_count(e, FRAME_BEARING, BRG_UNEXPECTED); /* no bearing beacon on this site */
         return;
     }
-    int64_t tb = node_clock_observe(clock, b->node_time_us, rx_us);
-    if (clock->last_event == NODE_CLOCK_OUT_OF_ORDER) {
-        /* Older than a bearing already handed on: the localizer has moved
-         * past it. (NODE_CLOCK_DUPLICATE, the same node time, is another
-         * bearing of the same scan: kept.) */
-        estimator_count(e, FRAME_BEARING, BRG_STALE);
-        return;
-    }
-    if (clock->last_event == NODE_CLOCK_RESTART) {
-        e->c.node_restarts++;
-        estimator_event(e, EST_EV_WARNING, "bearing sensor clock restarted");
-    }
-    if (b->beacon < 1 || b->beacon > e->blcfg.bearing_beacon_count) {
-        estimator_count(e, FRAME_BEARING, BRG_UNKNOWN_BEACON); /* the handler's check, above */
-        return;
-    }
+    const struct beacon_frame bf = {
+        .node_time_us = b->node_time_us,
+        .sent_local_us = rx_us,
+        .rx_us = rx_us,
+        .beacon = b->beacon,
+        .beacon_count = e->blcfg.bearing_beacon_count,
+        .node_name = "bearing sensor",
+        .counter_stale = BRG_STALE,
+        .counter_unknown_beacon = BRG_UNKNOWN_BEACON, /* the handler's check, above */
+        .counter_unmapped = BRG_UNMAPPED,
+    };
     int64_t t;
-    if (!estimator_ref_time(e, clock, tb, &t)) {
-        estimator_count(e, FRAME_BEARING, BRG_UNMAPPED); /* no reference clock to map onto yet */
+    if (!estimator_beacon_frame(e, FRAME_BEARING, &bf, &t))
         return;
-    }
-    /* Pulses that arrived before this bearing go first. */
-    (void)bl_localizer_advance(&e->loc, t - ESTIMATOR_POP_SLACK_US);
     bl_bearing_meas m = {
         .t_us = t,
         .beacon_index = (uint32_t)b->beacon - 1u, /* [bearing_beaconN] -> N-1 */
@@ -128,9 +118,6 @@ void sensor_bearing_handle(struct estimator *e, const struct frame *f, int64_t r
         .bearing_rad = (bl_real)(b->bearing_deg * (M_PI / 180.0)),
         .tag = (uint32_t)rx_us,
     };
-    if (rx_us > e->latest_rx_us)
-        e->latest_rx_us = rx_us;
-    estimator_start_pending(e, t);
     int rc = bl_localizer_bearing(&e->loc, &m, NULL);
     if (rc != BL_OK)
         log_debug("localizer bearing: %s", bl_strerror(rc));

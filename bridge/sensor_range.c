@@ -101,7 +101,6 @@ enum frame_result sensor_range_decode(uint32_t id, const uint8_t data[8], struct
 /* One range of this robot's receiver (not a team site's). */
 static void range_of_robot(struct estimator *e, const struct frame_range *r, int64_t rx_us)
 {
-    struct node_clock *clock = &e->clock[FRAME_RANGE];
     if (e->blcfg.range_beacon_count == 0) {
         estimator_count(e, FRAME_RANGE, RNG_UNEXPECTED); /* no range beacon on this site */
         return;
@@ -120,35 +119,26 @@ static void range_of_robot(struct estimator *e, const struct frame_range *r, int
         return; /* the beacons are not placed yet (counted there) */
     /* The node sends the range once it heard the pulse: the clock fit sees
      * the frame as if sent at the emission (estimator.h, "Ranges"). */
-    int64_t tr = node_clock_observe(clock, r->node_time_us, rx_us - r->time_of_flight_us);
-    if (clock->last_event == NODE_CLOCK_OUT_OF_ORDER) {
-        estimator_count(e, FRAME_RANGE, RNG_STALE); /* older than a range already handed on */
-        return;
-    }
-    if (clock->last_event == NODE_CLOCK_RESTART) {
-        e->c.node_restarts++;
-        estimator_event(e, EST_EV_WARNING, "range receiver clock restarted");
-    }
-    if (r->beacon < 1 || r->beacon > e->blcfg.range_beacon_count) {
-        estimator_count(e, FRAME_RANGE, RNG_UNKNOWN_BEACON); /* the handler's check, above */
-        return;
-    }
+    const struct beacon_frame bf = {
+        .node_time_us = r->node_time_us,
+        .sent_local_us = rx_us - r->time_of_flight_us,
+        .rx_us = rx_us,
+        .beacon = r->beacon,
+        .beacon_count = e->blcfg.range_beacon_count,
+        .node_name = "range receiver",
+        .counter_stale = RNG_STALE,
+        .counter_unknown_beacon = RNG_UNKNOWN_BEACON, /* the handler's check, above */
+        .counter_unmapped = RNG_UNMAPPED,
+    };
     int64_t t;
-    if (!estimator_ref_time(e, clock, tr, &t)) {
-        estimator_count(e, FRAME_RANGE, RNG_UNMAPPED); /* no reference clock to map onto yet */
+    if (!estimator_beacon_frame(e, FRAME_RANGE, &bf, &t))
         return;
-    }
-    /* Pulses that arrived before this range go first. */
-    (void)bl_localizer_advance(&e->loc, t - ESTIMATOR_POP_SLACK_US);
     bl_range_meas m = {
         .t_us = t,                                /* the emission (RF sync) */
         .beacon_index = (uint32_t)r->beacon - 1u, /* [range_beaconN] -> N-1 */
         .time_of_flight_s = (bl_real)((double)r->time_of_flight_us * 1e-6), /* us -> s */
         .tag = (uint32_t)rx_us,
     };
-    if (rx_us > e->latest_rx_us)
-        e->latest_rx_us = rx_us;
-    estimator_start_pending(e, t);
     int rc = bl_localizer_range(&e->loc, &m, NULL);
     if (rc != BL_OK)
         log_debug("localizer range: %s", bl_strerror(rc));

@@ -52,6 +52,38 @@ bool estimator_ref_time(struct estimator *e, const struct node_clock *own, int64
     return ok;
 }
 
+bool estimator_beacon_frame(struct estimator *e, enum frame_kind kind,
+                            const struct beacon_frame *bf, int64_t *t)
+{
+    struct node_clock *clock = &e->clock[kind];
+    int64_t t_own = node_clock_observe(clock, bf->node_time_us, bf->sent_local_us);
+    if (clock->last_event == NODE_CLOCK_OUT_OF_ORDER) {
+        /* Older than a measurement already handed on: the localizer has
+         * moved past it. (NODE_CLOCK_DUPLICATE, the same node time, is
+         * another measurement of the same scan or cycle: kept.) */
+        estimator_count(e, kind, bf->counter_stale);
+        return false;
+    }
+    if (clock->last_event == NODE_CLOCK_RESTART) {
+        e->c.node_restarts++;
+        estimator_eventf(e, EST_EV_WARNING, "%s clock restarted", bf->node_name);
+    }
+    if (bf->beacon < 1 || bf->beacon > bf->beacon_count) {
+        estimator_count(e, kind, bf->counter_unknown_beacon);
+        return false;
+    }
+    if (!estimator_ref_time(e, clock, t_own, t)) {
+        estimator_count(e, kind, bf->counter_unmapped); /* no reference clock to map onto yet */
+        return false;
+    }
+    /* Pulses that arrived before this measurement go first. */
+    (void)bl_localizer_advance(&e->loc, *t - ESTIMATOR_POP_SLACK_US);
+    if (bf->rx_us > e->latest_rx_us)
+        e->latest_rx_us = bf->rx_us;
+    estimator_start_pending(e, *t);
+    return true;
+}
+
 int64_t estimator_local_to_node(const struct estimator *e, int64_t local_us)
 {
     if (!estimator_ref_seen(e))
