@@ -143,39 +143,12 @@ extern "C" int bl_filter_fuse_bearing(bl_filter *f, uint32_t bearing_beacon_inde
     bl_fusion_result res;
     std::memset(&res, 0, sizeof res);
 
-    if (!started(f)) {
-        // Keep the buffer on one timeline: a bearing far older than a kept
-        // one is a caller error.
-        for (uint32_t k = 0; k < cfg->bearing_beacon_count; ++k)
-            if ((f->bearing_valid_mask_ >> k) & 1u) {
-                int64_t d_us;
-                if (!bl::sub_us(f->bearing_t_us_[k], t_us, &d_us) || bl::us_to_s(d_us) > cfg->max_predict_gap_s)
-                    return BL_ETIME;
-            }
-        remember_bearing(f, j, t_us, z);
-        res.status = start_from_bearings(f) == BL_OK ? BL_FUSION_STARTED : BL_FUSION_BUFFERED;
-        if (result) *result = res;
-        return BL_OK;
-    }
-    switch (classify_time(f, t_us)) {
-    case MeasTime::kTooOld:
-        return BL_ETIME;  // a caller error: state untouched
-    case MeasTime::kStale:
-        // No predict for longer than max_predict_gap_s: the pose cannot be
-        // extrapolated that far; keep the bearing and restart from the
-        // triangulation when the window covers 3 beacons (the kept bearings
-        // from before the gap are outside the window).
-        remember_bearing(f, j, t_us, z);
-        res.status = start_from_bearings(f) == BL_OK ? BL_FUSION_RESET : BL_FUSION_BUFFERED;
-        if (result) *result = res;
-        return BL_OK;
-    case MeasTime::kFresh:
-        break;
-    }
-    const int rc = fuse_started(f, j, t_us, z, &res);
-    if (rc != BL_OK) return rc;
-    if (result) *result = res;
-    return BL_OK;
+    int rc;
+    if (!snapshot_source_step(f, cfg->bearing_beacon_count, f->bearing_valid_mask_, f->bearing_t_us_, remember_bearing,
+                              start_from_bearings, j, t_us, z, &res, &rc))
+        rc = fuse_started(f, j, t_us, z, &res);
+    if (rc == BL_OK && result) *result = res;
+    return rc;
 }
 
 extern "C" int bl_model_bearing(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t bearing_beacon_index,

@@ -161,38 +161,12 @@ extern "C" int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, i
     bl_fusion_result res;
     std::memset(&res, 0, sizeof res);
 
-    if (!started(f)) {
-        // Keep the buffer on one timeline: a range far older than a kept
-        // one is a caller error.
-        for (uint32_t k = 0; k < cfg->range_beacon_count; ++k)
-            if ((f->range_valid_mask_ >> k) & 1u) {
-                int64_t d_us;
-                if (!bl::sub_us(f->range_t_us_[k], t_us, &d_us) || bl::us_to_s(d_us) > cfg->max_predict_gap_s)
-                    return BL_ETIME;
-            }
-        remember_range(f, j, t_us, time_of_flight_s);
-        res.status = start_from_ranges(f) == BL_OK ? BL_FUSION_STARTED : BL_FUSION_BUFFERED;
-        if (result) *result = res;
-        return BL_OK;
-    }
-    switch (classify_time(f, t_us)) {
-    case MeasTime::kTooOld:
-        return BL_ETIME;  // a caller error: state untouched
-    case MeasTime::kStale:
-        // No predict for longer than max_predict_gap_s: keep the range and
-        // restart from the trilateration when the window covers 3 beacons
-        // (the kept ranges from before the gap are outside the window).
-        remember_range(f, j, t_us, time_of_flight_s);
-        res.status = start_from_ranges(f) == BL_OK ? BL_FUSION_RESET : BL_FUSION_BUFFERED;
-        if (result) *result = res;
-        return BL_OK;
-    case MeasTime::kFresh:
-        break;
-    }
-    const int rc = fuse_started(f, j, t_us, time_of_flight_s, &res);
-    if (rc != BL_OK) return rc;
-    if (result) *result = res;
-    return BL_OK;
+    int rc;
+    if (!snapshot_source_step(f, cfg->range_beacon_count, f->range_valid_mask_, f->range_t_us_, remember_range,
+                              start_from_ranges, j, t_us, time_of_flight_s, &res, &rc))
+        rc = fuse_started(f, j, t_us, time_of_flight_s, &res);
+    if (rc == BL_OK && result) *result = res;
+    return rc;
 }
 
 extern "C" int bl_model_range(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t range_beacon_index,

@@ -138,6 +138,52 @@ inline MeasTime classify_time(const bl_filter *f, int64_t t_us)
     return MeasTime::kFresh;
 }
 
+// A beacon source whose filter (re)starts from a snapshot of its own kind
+// (bearings: the triangulation, snapshot_bearing.cpp; ranges: the
+// trilateration, snapshot_range.cpp): what happens to one measurement z of
+// beacon j at t_us before it can be fused. Before the start it is kept as
+// its beacon's latest and a start from the kept ones is tried (status
+// STARTED, else BUFFERED); one far older than a kept one (beyond
+// max_predict_gap_s: keep the buffer on one timeline) is a caller error.
+// Once started: older than the state by more than max_predict_gap_s is a
+// caller error; newer by more than that (no predict for that long: the pose
+// cannot be extrapolated so far) it is kept and a restart from the kept ones
+// is tried (status RESET, else BUFFERED; the kept ones from before the gap
+// are outside the window). Caller errors: BL_ETIME, *f untouched. Returns
+// true when the measurement was taken care of here (*rc, and *res when
+// *rc is BL_OK), false when it is fresh: fuse it.
+inline bool snapshot_source_step(bl_filter *f, uint32_t count, uint32_t valid_mask, const int64_t *kept_t_us,
+                                 void (*remember)(bl_filter *, uint32_t, int64_t, real), int (*start)(bl_filter *),
+                                 uint32_t j, int64_t t_us, real z, bl_fusion_result *res, int *rc)
+{
+    *rc = BL_OK;
+    if (!started(f)) {
+        for (uint32_t k = 0; k < count; ++k)
+            if ((valid_mask >> k) & 1u) {
+                int64_t d_us;
+                if (!sub_us(kept_t_us[k], t_us, &d_us) || us_to_s(d_us) > f->cfg_.max_predict_gap_s) {
+                    *rc = BL_ETIME;
+                    return true;
+                }
+            }
+        remember(f, j, t_us, z);
+        res->status = start(f) == BL_OK ? BL_FUSION_STARTED : BL_FUSION_BUFFERED;
+        return true;
+    }
+    switch (classify_time(f, t_us)) {
+    case MeasTime::kTooOld:
+        *rc = BL_ETIME;
+        return true;
+    case MeasTime::kStale:
+        remember(f, j, t_us, z);
+        res->status = start(f) == BL_OK ? BL_FUSION_RESET : BL_FUSION_BUFFERED;
+        return true;
+    case MeasTime::kFresh:
+        break;
+    }
+    return false;
+}
+
 #if BL_WITH_BEARINGS
 // ---- snapshot_bearing.cpp
 // Keep a bearing as its beacon's latest (the triangulation's input).
