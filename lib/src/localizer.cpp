@@ -622,6 +622,66 @@ extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *
     return BL_OK;
 }
 
+#if BL_WITH_BEARINGS || BL_WITH_RANGES
+namespace {
+// A beacon measurement kind's counters (localizer.h bl_loc_counters).
+struct BeaconCounters {
+    uint32_t *fused, *rejected, *buffered, *refused;
+};
+
+// One beacon measurement (a bearing, a range: checked by the caller) through
+// the filter, the same policy for both: coast to its time; fuse it
+// (fuse(&result) calls the filter); older than the state by more than the
+// gap: a new timeline (the filter reinitialised, fused again); refused by
+// the filter (bad data): counted, not an error. Then by status: fused
+// (accepted, started, reset) or rejected into the persistent-rejection
+// window under window_id (a restart when rejections persist), or kept for
+// the snapshot start; a fused measurement published with its tag.
+template <typename Fuse>
+int fuse_beacon_measurement(bl_localizer *loc, int64_t t_us, uint32_t window_id, uint32_t tag, Fuse fuse,
+                            const BeaconCounters &n, bl_fusion_result *res)
+{
+    coast_to(loc, t_us);
+    bl_fusion_result &r = loc->result_;
+    int rc = fuse(&r);
+    if (rc == BL_ETIME) {
+        reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
+        rc = fuse(&r);
+    }
+    if (rc != BL_OK) {
+        (*n.refused)++;
+        return BL_OK;
+    }
+    bool fused = false;
+    switch (r.status) {
+    case BL_FUSION_ACCEPTED:
+    case BL_FUSION_STARTED:
+    case BL_FUSION_RESET:
+        (*n.fused)++;
+        watch(loc, window_id, false);
+        fused = true;
+        break;
+    case BL_FUSION_REJECTED:
+        (*n.rejected)++;
+        watch(loc, window_id, true);
+        fused = restart_if_persistent(loc);
+        break;
+    case BL_FUSION_BUFFERED:
+    default:
+        (*n.buffered)++;
+        break;
+    }
+    const bl_fusion_result out = r;
+    if (fused) {
+        measurement_fused(loc, tag);
+        after_update(loc, false);
+    }
+    if (res) *res = out;
+    return BL_OK;
+}
+}  // namespace
+#endif
+
 #if BL_WITH_BEARINGS  // common.h: bl_localizer_bearing not built without bearings
 // The window's beacon id of bearing beacon j: after the pulse beacons' ids
 // (0..BL_MAX_BEACONS-1), so that the window's beacon mask counts both kinds.
@@ -640,44 +700,15 @@ extern "C" int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m,
         loc->counters_.bearings_refused++;
         return BL_EINVAL;
     }
-    coast_to(loc, m->t_us);
-    bl_fusion_result &r = loc->result_;
-    int rc = bl_filter_fuse_bearing(&loc->filter, m->beacon_index, m->t_us, m->bearing_rad, &r);
-    if (rc == BL_ETIME) {  // older than the state by more than the gap: a new timeline
-        reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
-        rc = bl_filter_fuse_bearing(&loc->filter, m->beacon_index, m->t_us, m->bearing_rad, &r);
-    }
-    if (rc != BL_OK) {  // refused by the filter (a non-finite update): bad data, counted
-        loc->counters_.bearings_refused++;
-        return BL_OK;
-    }
-    const uint32_t window_id = BL_MAX_BEACONS + m->beacon_index;
-    bool fused = false;
-    switch (r.status) {
-    case BL_FUSION_ACCEPTED:
-    case BL_FUSION_STARTED:
-    case BL_FUSION_RESET:
-        loc->counters_.bearings_fused++;
-        watch(loc, window_id, false);
-        fused = true;
-        break;
-    case BL_FUSION_REJECTED:
-        loc->counters_.bearings_rejected++;
-        watch(loc, window_id, true);
-        fused = restart_if_persistent(loc);
-        break;
-    case BL_FUSION_BUFFERED:
-    default:
-        loc->counters_.bearings_buffered++;
-        break;
-    }
-    const bl_fusion_result out = r;
-    if (fused) {
-        measurement_fused(loc, m->tag);
-        after_update(loc, false);
-    }
-    if (res) *res = out;
-    return BL_OK;
+    // window id: after the ultrasonic beacons' ids
+    return fuse_beacon_measurement(
+        loc, m->t_us, BL_MAX_BEACONS + m->beacon_index, m->tag,
+        [&](bl_fusion_result *r) {
+            return bl_filter_fuse_bearing(&loc->filter, m->beacon_index, m->t_us, m->bearing_rad, r);
+        },
+        BeaconCounters{&loc->counters_.bearings_fused, &loc->counters_.bearings_rejected,
+                       &loc->counters_.bearings_buffered, &loc->counters_.bearings_refused},
+        res);
 }
 #endif  // BL_WITH_BEARINGS
 
@@ -699,44 +730,16 @@ extern "C" int bl_localizer_range(bl_localizer *loc, const bl_range_meas *m, bl_
         loc->counters_.ranges_refused++;
         return BL_EINVAL;
     }
-    coast_to(loc, m->t_us);
-    bl_fusion_result &r = loc->result_;
-    int rc = bl_filter_fuse_range(&loc->filter, m->beacon_index, m->t_us, m->time_of_flight_s, &r);
-    if (rc == BL_ETIME) {  // older than the state by more than the gap: a new timeline
-        reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
-        rc = bl_filter_fuse_range(&loc->filter, m->beacon_index, m->t_us, m->time_of_flight_s, &r);
-    }
-    if (rc != BL_OK) {  // beyond 1.5 · max range, or a non-finite update: bad data, counted
-        loc->counters_.ranges_refused++;
-        return BL_OK;
-    }
-    const uint32_t window_id = 2 * BL_MAX_BEACONS + m->beacon_index;
-    bool fused = false;
-    switch (r.status) {
-    case BL_FUSION_ACCEPTED:
-    case BL_FUSION_STARTED:
-    case BL_FUSION_RESET:
-        loc->counters_.ranges_fused++;
-        watch(loc, window_id, false);
-        fused = true;
-        break;
-    case BL_FUSION_REJECTED:
-        loc->counters_.ranges_rejected++;
-        watch(loc, window_id, true);
-        fused = restart_if_persistent(loc);
-        break;
-    case BL_FUSION_BUFFERED:
-    default:
-        loc->counters_.ranges_buffered++;
-        break;
-    }
-    const bl_fusion_result out = r;
-    if (fused) {
-        measurement_fused(loc, m->tag);
-        after_update(loc, false);
-    }
-    if (res) *res = out;
-    return BL_OK;
+    // window id: after the bearing beacons' ids; refused by the filter:
+    // beyond 1.5 · max range, or a non-finite update
+    return fuse_beacon_measurement(
+        loc, m->t_us, 2 * BL_MAX_BEACONS + m->beacon_index, m->tag,
+        [&](bl_fusion_result *r) {
+            return bl_filter_fuse_range(&loc->filter, m->beacon_index, m->t_us, m->time_of_flight_s, r);
+        },
+        BeaconCounters{&loc->counters_.ranges_fused, &loc->counters_.ranges_rejected, &loc->counters_.ranges_buffered,
+                       &loc->counters_.ranges_refused},
+        res);
 }
 #endif  // BL_WITH_RANGES
 
