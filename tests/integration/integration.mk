@@ -40,8 +40,8 @@ DEMO_S       ?= 120
 
 # The runner's own logic (host side, no VM): part of `make test-py`.
 PY_TESTS += test-vm-runner
-test-vm-runner: $(SETUP_STAMP)
-	PYTHONDONTWRITEBYTECODE=1 $(PYTEST) -p no:cacheprovider -q -n 3 tests/vm/test_run_in_vm.py
+test-vm-runner: $(SETUP_STAMP) $(UML_SHIM)
+	BL_UML_SHIM=$(CURDIR)/$(UML_SHIM) PYTHONDONTWRITEBYTECODE=1 $(PYTEST) -p no:cacheprovider -q -n 3 tests/vm/test_run_in_vm.py
 
 # What the vcan suite runs (built first by make test, which starts the suite
 # while the rest is built).
