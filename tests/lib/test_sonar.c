@@ -1,6 +1,7 @@
 /* cmocka tests of the sonar correctors (sonar.h; Hoppenot & Colle 1997
  * §3.1 pin-point, §3.2 with memory) in the room of sonar_world.h: known
- * pose offsets recovered from exact ranges, the end-point case of eq. 4,
+ * pose offsets recovered from exact ranges, the stopping rules and the
+ * per-axis fall-back (steps 6-8), the end-point case of eq. 4,
  * the 25 cm gate, the 20° incidence gate, bad data counted, bad input
  * refused with the pose and the memory untouched. */
 #include <stdarg.h>
@@ -250,6 +251,72 @@ static void test_pinpoint_endpoint_case(void **state)
     assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
     assert_true((double)r.cost_after_m2 < 5e-3);
     assert_true((double)r.cost_after_m2 < (double)r.cost_before_m2);
+}
+
+/* The stopping rules and the per-axis fall-back (§3.1 steps 6-8), on the
+ * paper's impacts (eq. 1 on the axis) and its gradient descent. A corridor:
+ * walls y = 0 and y = 4, x = 6 ahead; sensors forward, left and right, 0.2 m
+ * from the centre, their ranges exact from (2, 1, 0). From (2.2, 1.1, 0):
+ * the forward impact is 0.2 m beyond x = 6, the two side impacts 0.1 m
+ * above their walls: F = 0.04 + 2·0.01 = 0.06 m²; ∂F/∂θ = 0 (every impact's
+ * dM/dθ runs along its wall). */
+static void test_pinpoint_stopping_rules(void **state)
+{
+    (void)state;
+    static const bl_segment seg[3] = {{-10, 0, 10, 0}, {-10, 4, 10, 4}, {6, -10, 6, 10}};
+    static const bl_sonar_mount mounts[3] = {
+        {(bl_real)0.2, 0, 0}, {0, (bl_real)0.2, (bl_real)1.5707963267948966}, {0, (bl_real)-0.2, (bl_real)-1.5707963267948966}};
+    bl_map map = {seg, 3};
+    bl_sonar_ring ring;
+    world_ring(&ring);
+    ring.mounts = mounts;
+    ring.count = 3;
+    ring.unused_mask = 0;
+    const bl_sonar_range b[3] = {{0, (bl_real)3.8, 0, NULL}, {1, (bl_real)2.8, 0, NULL}, {2, (bl_real)0.8, 0, NULL}};
+    bl_pinpoint_params prm;
+    bl_pinpoint_default(&prm);
+    prm.impact = BL_PINPOINT_IMPACT_AXIS;
+    prm.heading_sigma_rad = 0; /* the paper's F */
+    /* α = 0.25: δ = −α ∂F/∂q = −0.5 Σ r_i J_i takes y (two impacts, J_y = 1
+     * each) onto its walls in one step and x (one impact) half-way */
+    prm.descent_rate = (bl_real)0.25;
+    prm.max_iterations = 1;
+    bl_pose p = {(bl_real)2.2, (bl_real)1.1, 0};
+    bl_pinpoint_result r;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, 3, &prm, &p, &r), BL_OK);
+    assert_int_equal(r.matched, 3);
+    assert_true(fabs((double)r.cost_before_m2 - 0.06) < 1e-6);
+    /* 6-1: after n = N = 1, F = 0.01 m² > ε and ∂F/∂x = 0.2 m > ε': stopped
+     * on N. 7: the original pose, except y (∂F/∂y = 0: 7-2) and θ (7-3); x
+     * is given back (a global correction would move it to 2.1) */
+    assert_int_equal(r.iterations, 1);
+    assert_int_equal(r.outcome, BL_PINPOINT_PARTIAL);
+    assert_int_equal(r.axes, BL_AXIS_Y | BL_AXIS_THETA);
+    assert_true(fabs((double)p.x_m - 2.2) < 1e-5);
+    assert_true(fabs((double)p.y_m - 1.0) < 1e-5);
+    assert_true(fabs((double)p.theta_rad) < 1e-5);
+    /* 8: with N = 10 the descent goes on until F < ε (6-1): its second
+     * step (x 10 → 5 cm beyond its wall) is cut at its first point with
+     * F < ε: the whole correction, x left at the edge of the paper's
+     * deadband, √ε = 7.07 cm beyond its wall */
+    prm.max_iterations = 10;
+    p = (bl_pose){(bl_real)2.2, (bl_real)1.1, 0};
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, 3, &prm, &p, &r), BL_OK);
+    assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
+    assert_int_equal(r.axes, BL_AXIS_X | BL_AXIS_Y | BL_AXIS_THETA);
+    assert_true((double)r.cost_after_m2 < 5e-3);
+    assert_true((double)p.x_m - 2.0 > 0.069 && (double)p.x_m - 2.0 < 0.0708);
+    assert_true(fabs((double)p.y_m - 1.0) < 1e-5);
+    /* 6-1 at n = 0: F already below ε at the odometric pose (3 cm off in y:
+     * F = 1.8e-3 m²): no step, the pose untouched, an error the burst sees
+     * left standing */
+    p = (bl_pose){2, (bl_real)1.03, 0};
+    const bl_pose before = p;
+    assert_int_equal(bl_pinpoint_correct(&map, &ring, b, 3, &prm, &p, &r), BL_OK);
+    assert_int_equal(r.outcome, BL_PINPOINT_CONVERGED);
+    assert_int_equal(r.iterations, 0);
+    assert_true(fabs((double)r.cost_before_m2 - 1.8e-3) < 1e-6);
+    assert_memory_equal(&p, &before, sizeof p);
 }
 
 /* The 25 cm association gate: an impact 24 cm from the only wall is
@@ -659,7 +726,7 @@ int main(void)
         cmocka_unit_test(test_pinpoint_specular_true_pose_is_kept),
         cmocka_unit_test(test_pinpoint_axis_observes_heading),
         cmocka_unit_test(test_pinpoint_heading_prior),  cmocka_unit_test(test_pinpoint_endpoint_case),
-        cmocka_unit_test(test_pinpoint_gate),             cmocka_unit_test(test_pinpoint_bad_ranges_counted),
+        cmocka_unit_test(test_pinpoint_stopping_rules), cmocka_unit_test(test_pinpoint_gate),             cmocka_unit_test(test_pinpoint_bad_ranges_counted),
         cmocka_unit_test(test_pinpoint_refuses_bad_input),
         cmocka_unit_test_setup(test_memory_recovers_offset, memory_world_setup),
         cmocka_unit_test_setup(test_memory_corrects_small_offset, memory_world_setup),
