@@ -153,15 +153,20 @@ def simulate(hours: int, out: Path) -> tuple[dict, float]:
     return json.loads((out / "sim-stats.json").read_text()), time.monotonic() - t0
 
 
-def vm_rss_kib(pid: int) -> int | None:
+def proc_field(pid: int, name: str, key: str) -> int | None:
+    """The number after `key` in /proc/PID/name (None once the process is gone)."""
     try:
-        with open(f"/proc/{pid}/status") as fh:
+        with open(f"/proc/{pid}/{name}") as fh:
             for line in fh:
-                if line.startswith("VmRSS:"):
+                if line.startswith(key):
                     return int(line.split()[1])
-    except (FileNotFoundError, ProcessLookupError):
+    except (FileNotFoundError, ProcessLookupError, PermissionError):
         return None
     return None
+
+
+def vm_rss_kib(pid: int) -> int | None:
+    return proc_field(pid, "status", "VmRSS:")
 
 
 def cpu_ticks(pid: int) -> int | None:
@@ -227,14 +232,7 @@ def hour_log(log: Path, hour: int, dest: Path) -> list[int]:
 
 def bytes_read(pid: int) -> int | None:
     """Bytes the process has read (/proc/PID/io rchar): in a replay, its place in the log."""
-    try:
-        with open(f"/proc/{pid}/io") as fh:
-            for line in fh:
-                if line.startswith("rchar:"):
-                    return int(line.split()[1])
-    except (FileNotFoundError, ProcessLookupError, PermissionError):
-        return None
-    return None
+    return proc_field(pid, "io", "rchar:")
 
 
 def replay(bridge: Path, site: Path, log: Path, out: Path, name: str, hours: list[Hour],

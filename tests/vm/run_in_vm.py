@@ -78,12 +78,13 @@ def uml_shim() -> str | None:
     Makefile builds it; else build/vm-shim/uml_xstate.so if built). UML 6.1
     panics without it where the host's XSAVE area is larger than it knows
     ("userspace - ptrace set fp regs failed, errno = 14": AVX-512, AMX)."""
-    path = os.environ.get("BL_UML_SHIM") or str(REPO / "build" / "vm-shim" / "uml_xstate.so")
-    if not Path(path).is_file():
-        if os.environ.get("BL_UML_SHIM"):
-            raise SystemExit(f"run-in-vm: BL_UML_SHIM={path} missing: build it with make")
-        return None
-    return path
+    given = os.environ.get("BL_UML_SHIM")
+    path = Path(given or REPO / "build" / "vm-shim" / "uml_xstate.so")
+    if path.is_file():
+        return str(path)
+    if given:
+        raise SystemExit(f"run-in-vm: BL_UML_SHIM={given} missing: build it with make")
+    return None
 
 
 def uml_argv(kernel: str, job: Path, memory: str) -> list[str]:
@@ -137,6 +138,7 @@ def run(args: argparse.Namespace, results: Path, shard: str | None) -> tuple[str
     results.mkdir(parents=True, exist_ok=True)
     label = f"guest{shard.split('/')[0]}: " if shard else ""
     guest_cmd = [str(GUEST_INIT), str(results), *args.command]
+    shim = uml_shim() if args.mode == "uml" else None
     env = dict(os.environ)
     env["PATH"] = f"{REPO / '.venv' / 'bin'}:{env.get('PATH', '')}"
     if args.ifaces:
@@ -159,7 +161,6 @@ def run(args: argparse.Namespace, results: Path, shard: str | None) -> tuple[str
                        + f"cd {_shquote(str(REPO))}\n"
                        + "exec " + " ".join(_shquote(a) for a in guest_cmd) + "\n")
         argv = uml_argv(kernel, job, args.memory)
-        shim = uml_shim()
         if shim is not None:
             env["LD_PRELOAD"] = shim
         log(f"{label}booting User-Mode Linux {ver} ({args.memory}); boot timeout "
@@ -209,7 +210,7 @@ def run(args: argparse.Namespace, results: Path, shard: str | None) -> tuple[str
                 if b"ptrace set fp regs failed" in (results / "console.log").read_bytes():
                     how += ("; UML could not restore a task's FPU state: this host's XSAVE "
                             "area is larger than UML 6.1 knows (tests/vm/uml_xstate.c"
-                            + (" was preloaded" if args.mode == "uml" and uml_shim() else
+                            + (" was preloaded" if shim else
                                " was not preloaded: build it with make") + ")")
             except OSError:
                 pass
