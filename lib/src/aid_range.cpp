@@ -24,10 +24,15 @@ constexpr real kIekfTolerance_m = real(1e-4);
 // 1992 §3.9's start-up gate, as bearings: a trilateration start has no
 // heading, so the first motion is poorly predicted).
 constexpr real kStartupGateFactor = real(2);
-// While the heading σ exceeds this (rad) the ranges are not gated (our
+// While the heading σ exceeds this (rad) the gate is the start-up one (our
 // choice): a start from the trilateration has no heading (σ
 // cfg.reset_sigma_theta_rad), the first motion is then predicted in a wrong
-// direction, and a gate would reject the very ranges that show the heading.
+// direction; the covariance carries that (the odometry's ∂(x, y)/∂θ), so
+// the innovation variance grows with the motion and the wide gate passes
+// the ranges that show the heading. Ungated (as before), a standing
+// robot — whose heading moves no receiver — fused multipath late arrivals
+// of a metre and more (marvelmind-multipath: 3 of 8 runs lost for good;
+// docs/performance.md, "Ranges").
 constexpr real kHeadingUnknown_rad = real(0.3);
 // A range beyond this many times cfg.range.max_range_m is refused as bad
 // input (filter.h: a sensor reporting a little past its rating and an
@@ -139,8 +144,8 @@ ScalarMeasurement bl::range_measurement(const bl_filter *f, const MX &P, real d_
     ScalarMeasurement m;
     m.z = tof_s;
     m.R = sigma_s * sigma_s;
-    m.gate_sigma = conv ? cfg->range.gate_sigma : kStartupGateFactor * cfg->range.gate_sigma;
-    if (P(TH, TH) > kHeadingUnknown_rad * kHeadingUnknown_rad) m.gate_sigma = 0;
+    const bool heading_unknown = P(TH, TH) > kHeadingUnknown_rad * kHeadingUnknown_rad;
+    m.gate_sigma = conv && !heading_unknown ? cfg->range.gate_sigma : kStartupGateFactor * cfg->range.gate_sigma;
     m.max_iterations = kIekfIterations;
     m.step_tolerance_m = kIekfTolerance_m;
     return m;

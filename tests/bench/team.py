@@ -3,6 +3,8 @@ seeds 1..20 of each scenario, runs side by side on the cores, judged against the
 the posterior Cramer-Rao bound (Tichavsky et al. 1998; the team's bound: crb.team_pcrb).
 
 Scenarios (printed in this order, the leap-frog last):
+  marvelmind-multipath  the same with 10 % of the pings a reflection (metres long) and 5 %
+                 lost: what the gate must reject
   marvelmind     fixed range beacons, one robot (a Marvelmind-like site): accuracy.py's own
                  run and judgement (after 20 s), on the team line; the team-only figures n/a
   team-static    4 robots, 3 standing beacons on a 2 m triangle, robot 4 driving inside
@@ -52,8 +54,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import accuracy as acc  # noqa: E402  (also puts tests/integration on the path)
 import harness as h  # noqa: E402
 
-SCENARIOS = ("marvelmind", "team-static", "team-leapfrog")   # printed in this order
-FIXED = {"marvelmind"}          # single robot, fixed beacons: accuracy.py's run and judge
+SCENARIOS = ("marvelmind-multipath", "marvelmind", "team-static",
+             "team-leapfrog")   # printed in this order
+FIXED = {"marvelmind", "marvelmind-multipath"}   # single robot, fixed beacons: accuracy.py's
+                                                 # run and judge
 START_S = 15.0                  # without leaps: figures from this true time, s (team-static:
                                 # robot 4 has driven 1.7 m and turned pi rad: the mirror test done)
 MIN_DISTANCE_M = 1.0            # drift per distance only for a formation that travels

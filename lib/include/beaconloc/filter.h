@@ -546,10 +546,12 @@ int bl_filter_start_bearings(bl_filter *f);
  * bl_filter_predict; the state time is not changed). σ of the time of
  * flight = (cfg.range.sigma_m + cfg.range.sigma_per_m·d)/s, d the
  * predicted range (m); gate cfg.range.gate_sigma, twice that until
- * converged, and none while the heading σ exceeds 0.3 rad (a start from
- * ranges has no heading: the first motion is predicted in a wrong
- * direction, and a gate would reject the very ranges that show the
- * heading; multipath in that phase can lock a wrong heading: lib/README.md);
+ * converged and while the heading σ exceeds 0.3 rad (a start from ranges
+ * has no heading: the first motion is predicted in a wrong direction, its
+ * covariance grows with the motion, and the wide gate passes the ranges
+ * that show the heading; a standing robot's multipath arrivals are
+ * rejected; multipath while moving in that phase can lock a wrong
+ * heading: lib/README.md);
  * the shared update (fusion.h: IEKF, 2 iterations, Joseph form). Multipath late arrivals (a reflection heard instead of the direct
  * path; Millibots §3.2) fall outside the gate: BL_FUSION_REJECTED, counted
  * in bl_estimate.range_rejected, state untouched.
