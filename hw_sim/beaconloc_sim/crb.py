@@ -182,6 +182,53 @@ def process_model(state: np.ndarray, next_state: np.ndarray, d_left_m: float, d_
     return F, Q
 
 
+def carried_covariance(cov: np.ndarray, state: np.ndarray, row_state: np.ndarray,
+                       d_left_m: np.ndarray, d_right_m: np.ndarray, dt_s: np.ndarray,
+                       m: BoundModel) -> np.ndarray:
+    """The bound carried from an event to a later instant with no measurement in between,
+    for n rows at once: cov (n, 8, 8) after each row's event, state (n, 8) the true state
+    at that event, row_state (n, 8) the true state at the row, d_*_m (n,) the true wheel
+    travel from the event to the row, m; dt_s (n,) the time between them, s. F and Q are
+    those of process_model(state, row_state, dL, dR, dt, s_row - s_event, m, fires=False)
+    (tests/sim/test_crb.py checks it row by row); a row with dt_s = 0 is the event's own
+    instant and keeps cov. Returns (n, 8, 8)."""
+    n = len(cov)
+    b = m.wheel_base_m
+    # differential-drive increments (Vander 2011 eq. 2): ds = (dL + dR)/2, dth = (dR - dL)/b, m, rad
+    ds = (d_left_m + d_right_m) / 2
+    dth = (d_right_m - d_left_m) / b
+    mid = state[:, ITH] + dth / 2
+    c, s = np.cos(mid), np.sin(mid)
+    F = np.tile(np.eye(8), (n, 1, 1))
+    # x' = x + ds cos(th + dth/2), y' = y + ds sin(th + dth/2): d/dth (Kleeman 1992 eq. 24);
+    # t0 stays between firings (Kleeman 1992 eq. 15 applies at a firing only)
+    F[:, IX, ITH] = -ds * s
+    F[:, IY, ITH] = ds * c
+    # wheel noise mapped by G = d(x, y, th)/d(dL, dR) (process_model), (n, 3, 2)
+    G = np.empty((n, 3, 2))
+    G[:, 0, 0], G[:, 0, 1] = c / 2 + ds * s / (2 * b), c / 2 - ds * s / (2 * b)
+    G[:, 1, 0], G[:, 1, 1] = s / 2 - ds * c / (2 * b), s / 2 + ds * c / (2 * b)
+    G[:, 2, 0], G[:, 2, 1] = -1 / b, 1 / b
+    # wheel_covariance of each row's increments, m^2, (n, 2, 2)
+    W = np.zeros((n, 2, 2))
+    W[:, 0, 0] = m.sigma_wheel_per_m ** 2 * np.abs(d_left_m) + m.m_per_tick ** 2 / 6
+    W[:, 1, 1] = m.sigma_wheel_per_m ** 2 * np.abs(d_right_m) + m.m_per_tick ** 2 / 6
+    if m.sigma_common_per_m > 0:
+        W += (m.sigma_common_per_m ** 2 * np.abs(d_left_m + d_right_m) / 2)[:, None, None]
+    Q = np.zeros((n, 8, 8))
+    Q[:, :3, :3] = G @ W @ np.swapaxes(G, 1, 2)
+    Q[:, IV, IV] = (m.sigma_accel_mps2 * dt_s) ** 2 + (row_state[:, IV] - state[:, IV]) ** 2
+    Q[:, IW, IW] = (m.sigma_angacc_radps2 * dt_s) ** 2 + (row_state[:, IW] - state[:, IW]) ** 2
+    Q[:, IS, IS] = (row_state[:, IS] - state[:, IS]) ** 2 + (1e-4) ** 2
+    Q[:, IT, IT] = 1e-20
+    Q[:, IT0, IT0] = 1e-16
+    # the prediction half of info_step (Tichavsky 1998 with the inversion lemma):
+    # J^-1 -> Q + F J^-1 F^T
+    P = F @ cov @ np.swapaxes(F, 1, 2) + Q
+    P = (P + np.swapaxes(P, 1, 2)) / 2
+    return np.where((np.asarray(dt_s) > 0)[:, None, None], P, cov)
+
+
 def odometry_rows() -> np.ndarray:
     """Kleeman 1992 eq. 25: the odometry measures speed(k+1) = v(k+1) (and the turn rate omega)."""
     H = np.zeros((2, 8))

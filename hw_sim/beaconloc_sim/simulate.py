@@ -59,6 +59,8 @@ class SimResult:
     bearings: Bearings | None = None     # every bearing measured (sent or not, and why not)
     ranges: Ranges | None = None         # every range ping (sent or not, and why not)
     sonar: SonarPings | None = None      # every sonar ping (its reading, flags, echo kind)
+    pcrb_complete_s: np.ndarray | None = None   # (K,) true time by which each event's
+                                                # measurements all exist (_complete_times), s
 
     def measured(self) -> dict:
         """The record of every sensor kind the site has, by its name in the simulator's stats
@@ -102,7 +104,8 @@ def _prefix(res: SimResult, scn: Scenario) -> SimResult:
                      res.pcrb_cov[:n_event], res.pcrb_t_s[:n_event],
                      res.bearings.select(res.bearings.t_s <= d),
                      res.ranges.select(res.ranges.t_s <= d),
-                     res.sonar.select(res.sonar.t_s <= d))
+                     res.sonar.select(res.sonar.t_s <= d),
+                     pcrb_complete_s=res.pcrb_complete_s[:n_event])
 
 
 def _run(scn: Scenario, *, encode: bool = True) -> SimResult:
@@ -111,9 +114,36 @@ def _run(scn: Scenario, *, encode: bool = True) -> SimResult:
 
 
 @dataclass
+class BoundEvents:
+    """Measurement events of the bound, in time order: each event's true time, the true time by
+    which its measurements are all available (_complete_times), s, and the bound after it,
+    (K, 8, 8) in crb.STATE order. The true state and wheel travel at an event are the
+    trajectory's at its time, so the time is all a later instant needs to carry the bound on."""
+    t_s: np.ndarray
+    complete_s: np.ndarray
+    cov: np.ndarray
+
+    @staticmethod
+    def empty() -> BoundEvents:
+        return BoundEvents(np.zeros(0), np.zeros(0), np.zeros((0, 8, 8)))
+
+    def __getitem__(self, sel) -> BoundEvents:
+        return BoundEvents(self.t_s[sel], self.complete_s[sel], self.cov[sel])
+
+    @staticmethod
+    def concat(a: BoundEvents | None, b: BoundEvents) -> BoundEvents:
+        if a is None or not len(a.t_s):
+            return b
+        return BoundEvents(*(np.concatenate([getattr(a, f), getattr(b, f)])
+                             for f in ("t_s", "complete_s", "cov")))
+
+
+@dataclass
 class Carry:
     """What one window of a windowed run hands to the next (run_windows): the nodes (their
-    clocks, counters, waiting frames and wheel state), the bus schedule and the bound."""
+    clocks, counters, waiting frames and wheel state), the bus schedule and the bound (its
+    recursion, the last event complete by the window's end and the events still waiting for
+    their measurements: a few at most, so memory stays bounded)."""
     ring: ReceiverRing
     wheels: WheelEncoders
     bearing: BearingSensor | None
@@ -121,7 +151,8 @@ class Carry:
     nodes: list[Node]
     bus: Bus
     pcrb: tuple | None                       # crb.pcrb_along_path end
-    last_cov: np.ndarray | None              # bound after the last event
+    held: BoundEvents | None = None          # the last event complete by the window's end
+    waiting: BoundEvents | None = None       # the events after it (measurements still to come)
 
     @property
     def sonar(self) -> SonarRing | None:
@@ -161,7 +192,7 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
     if carry is None:
         ring, wheels, bearing, ranger, on_bus = nodes.on_bus(scn)
         carry = Carry(ring, wheels, bearing, ranger, on_bus, Bus(scn.bus_bitrate_bps),
-                      None if win is None else crb.prior_start(bound_model(scn)), None)
+                      None if win is None else crb.prior_start(bound_model(scn)))
     enc_clock = carry.wheels.clock
     # the truth's time base: the receiver array's clock (the estimator's, Kleeman's t0), or
     # the bearing sensor's on a site without one (no receiver array there), else the range
@@ -194,17 +225,17 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
     echoed = sonar.bound_events(t_b if win is not None else math.inf) \
         if sonar is not None else SonarPings.empty()
     truth = _truth(scn, rx_clock, win)
-    pcrb_t, pcrb_cov, pcrb_end = _pcrb(scn, firings, det, seen, rx_clock, carry.pcrb, ranged,
-                                       echoed)
-    _attach_bound(truth, pcrb_t, pcrb_cov, scn, carry.last_cov)
+    events, pcrb_end = _pcrb(scn, firings, det, seen, rx_clock, carry.pcrb, ranged, echoed)
+    waiting = carry.waiting if carry.waiting is not None else BoundEvents.empty()
+    held, waiting = _attach_bound(truth, scn, BoundEvents.concat(waiting, events), carry.held,
+                                  until_s)
     odometry = carry.wheels.odometry(rx_clock)
-    result = SimResult(scn, frames, truth, odometry, firings, det, rx_clock, enc_clock, pcrb_cov,
-                       pcrb_t, measured, pinged, pinged_sonar)
+    result = SimResult(scn, frames, truth, odometry, firings, det, rx_clock, enc_clock, events.cov,
+                       events.t_s, measured, pinged, pinged_sonar,
+                       pcrb_complete_s=events.complete_s)
     if win is None:
         return result, None
-    carry.pcrb = pcrb_end
-    if len(pcrb_cov):
-        carry.last_cov = pcrb_cov[-1]
+    carry.pcrb, carry.held, carry.waiting = pcrb_end, held, waiting
     return result, carry
 
 
@@ -249,17 +280,17 @@ def bound_model(scn: Scenario) -> crb.BoundModel:
 
 def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
           clock: NodeClock, start: tuple | None = None, ranged: Ranges | None = None,
-          echoed: SonarPings | None = None) -> tuple[np.ndarray, np.ndarray, tuple | None]:
+          echoed: SonarPings | None = None) -> tuple[BoundEvents, tuple | None]:
     """Bound after each measurement event: each firing with the receivers that really
     detected its direct pulse, each instant with bearings delivered (seen), each ping whose
     direct range was delivered (ranged), each sonar ping whose reading is the specular echo
     of a map wall (echoed: its perpendicular distance, _sonar_rows), in time order;
-    the event times (true, s) and the recursion's end (crb.pcrb_along_path) to go on from in
-    the next window. clock: the time base (event times and t0 on it)."""
+    the events (times, complete times, bound) and the recursion's end (crb.pcrb_along_path)
+    to go on from in the next window. clock: the time base (event times and t0 on it)."""
     ranged = ranged if ranged is not None else Ranges.empty()
     echoed = echoed if echoed is not None else SonarPings.empty()
     if len(firings.t_s) + len(seen.t_s) + len(ranged.t_s) + len(echoed.t_s) == 0:
-        return np.zeros(0), np.zeros((0, 8, 8)), start
+        return BoundEvents.empty(), start
     # events: the distinct instants of firings, bearings, ranges and sonar echoes (a
     # non-rotating sensor's scan is one event); without them exactly the firings
     t_ev = np.unique(np.concatenate([firings.t_s, seen.t_s, ranged.t_s, echoed.t_s])) \
@@ -304,10 +335,38 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
             bound_model(scn))
     kw = dict(event_time_s=t_time, fires=is_fire, bearing_beacons_m=bearing_rows,
               range_beacons_m=range_rows, sonar_rows=sonar_rows)
+    complete = _complete_times(scn, t_ev, firings, det, ranged, echoed)
     if start is None:
-        return t_ev, crb.pcrb_along_path(*args, **kw), None
+        return BoundEvents(t_ev, complete, crb.pcrb_along_path(*args, **kw)), None
     cov, end = crb.pcrb_along_path(*args, start=start, **kw)
-    return t_ev, cov, end
+    return BoundEvents(t_ev, complete, cov), end
+
+
+def _complete_times(scn: Scenario, t_ev: np.ndarray, firings: Firings, det: Detections,
+                    ranged: Ranges, echoed: SonarPings) -> np.ndarray:
+    """True time by which every measurement the bound takes at each event (_pcrb) exists, s:
+    the latest of them. An estimate at an earlier instant cannot have used them. Each is the
+    instant its node has the measurement ready to send (the node's processing latency and the
+    bus after it are delivery, left out alike for every kind, a few ms at most):
+    - a firing: the leading edge of the last of its direct pulses the bound counts (direct,
+      first burst, detected: _pcrb's `heard`), up to ~35 ms of flight after the firing; the
+      receivers timestamp each edge then (nodes.receiver_ring);
+    - a bearing: its own instant (the beam crosses the beacon then; nodes.bearing_sensor
+      sends it after the processing latency only);
+    - a range: the direct pulse's arrival, emission + true_m / s (nodes.range_receiver: the
+      node times the flight and has the range when the pulse arrives);
+    - a sonar reading: the end of its listening window, ping + listen_s (nodes.sonar_ring
+      reports the first echo when the window closes, not when the echo returns)."""
+    done = t_ev.astype(float)          # bearings: their own instants, the events'
+    direct = (det.kind == KIND_DIRECT) & (det.burst == 1)
+    fire_ev = np.searchsorted(t_ev, firings.t_s)
+    np.maximum.at(done, fire_ev[det.firing[direct]], det.edge_s[direct])
+    if len(ranged.t_s):
+        np.maximum.at(done, np.searchsorted(t_ev, ranged.t_s),
+                      ranged.t_s + ranged.true_m / ranged.sos_mps)
+    if len(echoed.t_s):
+        np.maximum.at(done, np.searchsorted(t_ev, echoed.t_s), echoed.t_s + scn.sonar_listen_s)
+    return done
 
 
 def _sonar_rows(scn: Scenario, echoed: SonarPings, t_ev: np.ndarray, states: np.ndarray
@@ -330,21 +389,51 @@ def _sonar_rows(scn: Scenario, echoed: SonarPings, t_ev: np.ndarray, states: np.
     return [(np.array(r).reshape(-1, 4), np.array(v)) for r, v in zip(rows, variances)]
 
 
-def _attach_bound(truth, event_t_s: np.ndarray, cov: np.ndarray, scn: Scenario,
-                  before: np.ndarray | None = None) -> None:
-    """Bound at each truth row: the posterior bound after the latest measurement event
-    (before the first: the bound `before` it, from an earlier window, or the prior)."""
+def _true_states(scn: Scenario, t_s: np.ndarray) -> np.ndarray:
+    """(n, 8) true state at true times t_s, crb.STATE order (T the receiver clock's period;
+    t0 0: a carry between firings, fires=False, does not use it)."""
+    st = scn.trajectory.state(t_s)
+    period_rx = scn.true_period_s * (1.0 + scn.rx_drift_ppm * 1e-6)
+    return np.column_stack([st["x_m"], st["y_m"], st["theta_rad"], st["v_mps"],
+                            st["omega_radps"], ac.speed_of_sound_mps(scn.temperature_c(t_s)),
+                            np.full(len(t_s), period_rx), np.zeros(len(t_s))])
+
+
+def _attach_bound(truth, scn: Scenario, events: BoundEvents, held: BoundEvents | None = None,
+                  until_s: float = math.inf) -> tuple[BoundEvents | None, BoundEvents]:
+    """Bound at each truth row, at the row's instant t: the bound after the latest event e
+    such that every event up to e is complete by t (complete_s; the bound after e holds the
+    information of all of them), carried from e's true state to the row's with the
+    odometry's process model (crb.carried_covariance: F P F^T + Q with the true wheel travel,
+    time and change of s between them). Before any such event: `held`, the last event
+    complete by an earlier window's end, carried likewise, else the prior (held at the
+    first event by the recursion too, crb.pcrb_along_path).
+    Returns what the next window needs: the last event complete by until_s (else `held`)
+    and the events after it, whose measurements come after until_s."""
     t = truth["t_sim_s"]
-    i = np.searchsorted(event_t_s, t, side="right") - 1
-    prior = bound_model(scn).prior_sigma
-    ix, iy, isos = crb.IX, crb.IY, crb.IS
-
-    def bound(a: int, b: int, prior_var: float) -> np.ndarray:
-        earlier = prior_var if before is None else before[a, b]
-        return np.where(i >= 0, cov[np.maximum(i, 0), a, b] if len(cov) else 0, earlier)
-
-    var_x, var_y = bound(ix, ix, prior[ix] ** 2), bound(iy, iy, prior[iy] ** 2)
-    cov_xy = bound(ix, iy, 0.0)
+    model = bound_model(scn)
+    prior = np.asarray(model.prior_sigma, dtype=float)
+    # running maximum of the complete times: event k's bound needs events 0..k complete, s
+    ready = np.maximum.accumulate(events.complete_s) if len(events.t_s) else np.zeros(0)
+    origin = BoundEvents.concat(held, events)
+    j = np.searchsorted(ready, t, side="right") - 1 + (len(origin.t_s) - len(events.t_s))
+    cov = np.empty((len(t), 8, 8))
+    cov[j < 0] = np.diag(prior ** 2)
+    rows = np.flatnonzero(j >= 0)
+    if len(rows):
+        ev, back = np.unique(j[rows], return_inverse=True)
+        t_o, t_r = origin.t_s[ev], t[rows]
+        wl_o, wr_o = scn.trajectory.wheel_travel(t_o)
+        wl_r, wr_r = scn.trajectory.wheel_travel(t_r)
+        row_state = np.column_stack([truth["x_m"][rows], truth["y_m"][rows],
+                                     truth["theta_rad"][rows], truth["v_mps"][rows],
+                                     truth["omega_radps"][rows], truth["sos_mps"][rows],
+                                     np.zeros((len(rows), 2))])
+        cov[rows] = crb.carried_covariance(origin.cov[ev][back], _true_states(scn, t_o)[back],
+                                           row_state, wl_r - wl_o[back], wr_r - wr_o[back],
+                                           t_r - t_o[back], model)
+    var_x, var_y = cov[:, crb.IX, crb.IX], cov[:, crb.IY, crb.IY]
+    cov_xy = cov[:, crb.IX, crb.IY]
     truth["pcrb_x_m"] = np.sqrt(var_x)
     truth["pcrb_y_m"] = np.sqrt(var_y)
     truth["pcrb_pos_m"] = np.sqrt(var_x + var_y)
@@ -354,4 +443,6 @@ def _attach_bound(truth, event_t_s: np.ndarray, cov: np.ndarray, scn: Scenario,
     nx, ny = -np.sin(th), np.cos(th)
     truth["pcrb_lateral_m"] = np.sqrt(np.maximum(nx * nx * var_x + 2 * nx * ny * cov_xy
                                                  + ny * ny * var_y, 0.0))
-    truth["pcrb_sos_mps"] = np.sqrt(bound(isos, isos, prior[isos] ** 2))
+    truth["pcrb_sos_mps"] = np.sqrt(cov[:, crb.IS, crb.IS])
+    n_done = int(np.searchsorted(ready, until_s, side="right"))
+    return (events[n_done - 1:n_done] if n_done else held), events[n_done:]

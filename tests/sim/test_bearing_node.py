@@ -313,7 +313,9 @@ def test_a_mixed_site_fuses_firings_and_bearings():
 
 def test_existing_sites_unchanged(tmp_path):
     """kleeman-lab's log and truth (with its bound) are those of the simulator before the
-    bearing node existed: sha256 recorded on the schema branch (08b7878)."""
+    bearing node existed: sha256 recorded on the schema branch (08b7878); the truth's re-recorded
+    when its bound (the pcrb_* columns, all the others unchanged) was carried to each row's
+    instant (issue 14)."""
     from beaconloc_sim import can_out, outputs
     res = simulate.run(load_scenario("kleeman-lab", duration_s=20))
     can_out.write_log(res.frames, tmp_path / "l.log", res.scenario.log_epoch_s, "vcan0")
@@ -321,4 +323,4 @@ def test_existing_sites_unchanged(tmp_path):
     log = hashlib.sha256((tmp_path / "l.log").read_bytes()).hexdigest()
     truth = hashlib.sha256((tmp_path / "t.csv").read_bytes()).hexdigest()
     assert log == "8332fbc4b3052e363531605b9f6615354a97cde7f307fe46a1d44a51d4cafdf9"
-    assert truth == "2b96a1c7621b3eccaad86d1d15494edb94829fe681126615c918c39f9ea0ba03"
+    assert truth == "074ee505d7afa836ade0aa0b1a88310fc4e311b3e4cac1922919c224d87866c0"

@@ -84,3 +84,86 @@ def test_lateral_and_speed_of_sound_bounds_follow_the_path():
     sos = tr["pcrb_sos_mps"]
     assert sos[0] == pytest.approx(res.scenario.site.sigma_speed_of_sound_mps)
     assert sos[-1] < 0.5 * sos[0]
+
+
+# ---- the bound at each truth row's instant (issue 14: the benchmark's bound) ----------------
+
+def _carried_by_hand(scn, cov, t_event_s, t_row_s):
+    """F P F^T + Q of crb.process_model (fires=False) from the true state at t_event_s to the
+    true state at t_row_s, with the true wheel travel, time and change of s between them."""
+    st = simulate._true_states(scn, np.array([t_event_s, t_row_s]))
+    wl, wr = scn.trajectory.wheel_travel(np.array([t_event_s, t_row_s]))
+    F, Q = crb.process_model(st[0], st[1], wl[1] - wl[0], wr[1] - wr[0], t_row_s - t_event_s,
+                             st[1, crb.IS] - st[0, crb.IS], simulate.bound_model(scn),
+                             fires=False)
+    return F @ cov @ F.T + Q
+
+
+def _pos(cov):
+    return np.sqrt(cov[crb.IX, crb.IX] + cov[crb.IY, crb.IY])
+
+
+def test_carried_covariance_is_process_model_row_by_row():
+    scn = load_scenario("fast-turns")
+    m = simulate.bound_model(scn)
+    rng = np.random.default_rng(3)
+    n = 6
+    cov = np.stack([_random_spd(rng, 8, 1e-3) for _ in range(n)])
+    st, row = rng.normal(size=(n, 8)), rng.normal(size=(n, 8))
+    dl, dr = rng.uniform(-0.05, 0.3, n), rng.uniform(-0.05, 0.3, n)
+    dt = np.array([0.0, 0.01, 0.02, 0.05, 0.1, 0.3])
+    got = crb.carried_covariance(cov, st, row, dl, dr, dt, m)
+    np.testing.assert_array_equal(got[0], cov[0])             # dt = 0: the event's own instant
+    for i in range(1, n):
+        F, Q = crb.process_model(st[i], row[i], dl[i], dr[i], dt[i], row[i, crb.IS] - st[i, crb.IS],
+                                 m, fires=False)
+        np.testing.assert_allclose(got[i], F @ cov[i] @ F.T + Q, rtol=1e-12, atol=1e-18)
+
+
+def test_bound_waits_for_a_firings_pulses_and_grows_between_events():
+    """fast-turns (1 m/s): a row after a firing but before its last direct pulse arrived has
+    the bound of the previous complete event carried to the row, not the new firing's (the
+    held bound before issue 14's fix); between two events the carried bound grows."""
+    scn = load_scenario("fast-turns", duration_s=30)
+    res = simulate.run(scn, encode=False)
+    tr, t_ev, done, cov = res.truth, res.pcrb_t_s, res.pcrb_complete_s, res.pcrb_cov
+    t = tr["t_sim_s"]
+    assert np.all(done >= t_ev) and np.max(done - t_ev) > 0.01   # flight times of up to ~35 ms
+    ready = np.maximum.accumulate(done)
+    ratios = []
+    for i in np.flatnonzero((t > 5) & (tr["v_mps"] > 0.5)):
+        k = np.searchsorted(t_ev, t[i], side="right") - 1       # latest event at or before
+        e = np.searchsorted(ready, t[i], side="right") - 1      # latest complete one
+        if e != k - 1 or t[i] == t_ev[k]:
+            continue
+        # (a) the new firing's pulses are still in flight: the previous event's bound, carried
+        want = _carried_by_hand(scn, cov[e], t_ev[e], t[i])
+        assert tr["pcrb_pos_m"][i] == pytest.approx(_pos(want), rel=1e-9)
+        assert tr["pcrb_sos_mps"][i] == pytest.approx(np.sqrt(want[crb.IS, crb.IS]), rel=1e-9)
+        ratios.append(tr["pcrb_pos_m"][i] / _pos(cov[k]))       # to the held bound
+    assert len(ratios) > 20
+    assert min(ratios) > 1.0 and np.median(ratios) > 1.03, (min(ratios), np.median(ratios))
+    # (b) rows carried from one and the same event grow with the travel since (moving robot)
+    e = np.searchsorted(ready, t, side="right") - 1
+    pos = tr["pcrb_pos_m"]
+    same = (e[1:] == e[:-1]) & (e[1:] >= 0) & (tr["v_mps"][1:] > 0.5) & (t[1:] > 5)
+    assert same.sum() > 50
+    assert np.all(pos[1:][same] > pos[:-1][same])
+
+
+def test_bound_at_an_event_without_delay_is_the_event_bound():
+    """(c) At the instant of an event whose measurements are there at once, the bound is the
+    one after the event (the held bound): no carry over zero time."""
+    scn = load_scenario("kleeman-lab", duration_s=20)
+    res = simulate.run(scn, encode=False)
+    ev = simulate.BoundEvents(res.pcrb_t_s, res.pcrb_t_s.copy(), res.pcrb_cov)  # no delay
+    t = res.pcrb_t_s[10:60]
+    st = scn.trajectory.state(t)
+    truth = {"t_sim_s": t, "x_m": st["x_m"], "y_m": st["y_m"], "theta_rad": st["theta_rad"],
+             "v_mps": st["v_mps"], "omega_radps": st["omega_radps"],
+             "sos_mps": simulate.ac.speed_of_sound_mps(scn.temperature_c(t))}
+    simulate._attach_bound(truth, scn, ev)
+    held = np.array([_pos(c) for c in res.pcrb_cov[10:60]])
+    np.testing.assert_array_equal(truth["pcrb_pos_m"], held)
+    np.testing.assert_array_equal(truth["pcrb_sos_mps"],
+                                  np.sqrt(res.pcrb_cov[10:60, crb.IS, crb.IS]))

@@ -447,15 +447,17 @@ def test_team_scenario_errors_name_the_key(tmp_path):
 
 @pytest.mark.parametrize("name, log_sha, truth_sha", [
     ("marvelmind", "060948c51131fb31151392e546045c0d04ca18f5d75bf9c1e42e3341d6ea6b7d",
-     "3bb5b9527810ef28105687acb021addbcdd8c8973906a3f3ed2df22c36256912"),
+     "65a3e620173068021b66c95af2e88d7c9b672452ef52f14a4a781a09b31e1d65"),
     ("marvelmind-multipath", "841f822f1d29cc55074006c6714a3260ff036cba1e7a448e8784364c1444aa96",
-     "ddee44b12be7bd765cf7b97004d611895afa215423d25acce8933d3786ade08c"),
+     "ad4303c25a4d535ec7c7754df58984d928e0f128463c4d5c785ce1c00cb13569"),
     ("eurobot-opponent", "2ed553c0b8633fd79055d6dc7250695ac222df706ea0384e9d5c6d7ad2f341ba",
-     "990e1a33d1b0beb416616f4a866306fdd6026bddb9cbef1b29569740b9e99e3e"),
+     "6ab432032b0843408855098924e0d10263976b8a60ed63ee25a80b97c10a7017"),
 ])
 def test_single_robot_range_and_bearing_runs_unchanged(tmp_path, name, log_sha, truth_sha):
     """20 s of each: log and truth as on the int branch before the team existed (f1eb983; the
-    range physics now shared with the team through physics.ranges)."""
+    range physics now shared with the team through physics.ranges); the truth re-recorded when
+    its bound (the pcrb_* columns, all the others unchanged) was carried to each row's instant
+    (issue 14)."""
     import hashlib
 
     from beaconloc_sim import can_out, outputs, simulate
