@@ -98,11 +98,11 @@ def bound_and_truth(tscn, pings, ranges, frame, bound: bool):
     """The team's bound at its events (all NaN when not wanted) and the truth
     table with it: (event times, covariances, truth)."""
     if bound:
-        ev_t, cov = _pcrb(tscn, pings, ranges, frame)
+        ev_t, complete, cov = _pcrb(tscn, pings, ranges, frame)
     else:
         n = 3 * len(tscn.robots) + 1
-        ev_t, cov = np.zeros(1), np.full((1, n, n), np.nan)
-    return ev_t, cov, _truth(tscn, frame, ev_t, cov)
+        ev_t, complete, cov = np.zeros(1), np.zeros(1), np.full((1, n, n), np.nan)
+    return ev_t, cov, _truth(tscn, frame, ev_t, cov, complete)
 
 
 def _poses(tscn: TeamScenario, t_s: np.ndarray, frame) -> np.ndarray:
@@ -116,7 +116,10 @@ def _poses(tscn: TeamScenario, t_s: np.ndarray, frame) -> np.ndarray:
 
 
 def _pcrb(tscn: TeamScenario, pings: Pings, ranges: TeamRanges, frame):
-    """The bound at t = 0 (the prior) and after every ping (its direct ranges delivered)."""
+    """The bound at t = 0 (the prior) and after every ping (its direct ranges delivered):
+    (event times, complete times, covariances). A ping is complete when the last of its direct
+    ranges exists, at the pulse's arrival, emission + true_m / s (the receiving module times
+    the flight; its processing latency and the radio after it are delivery, left out), s."""
     ev_t = np.concatenate([[0.0], pings.t_s])
     poses = _poses(tscn, ev_t, frame)
     sos = ac.speed_of_sound_mps(tscn.temperature_c(ev_t))
@@ -133,15 +136,49 @@ def _pcrb(tscn: TeamScenario, pings: Pings, ranges: TeamRanges, frame):
         sl = slice(cut[k], cut[k + 1])
         events.append((np.array([index[e] for e in direct.emitter[sl].tolist()], np.int64),
                        np.array([index[r] for r in direct.receiver[sl].tolist()], np.int64)))
-    return ev_t, crb.team_pcrb(poses, sos, tl, tr, events, bound_model(tscn))
+    complete = ev_t.copy()
+    np.maximum.at(complete, direct.ping + 1, direct.t_s + direct.true_m / direct.sos_mps)
+    return ev_t, complete, crb.team_pcrb(poses, sos, tl, tr, events, bound_model(tscn))
 
 
-def _truth(tscn: TeamScenario, frame, ev_t: np.ndarray, cov: np.ndarray) -> dict:
+def _bound_at(tscn: TeamScenario, frame, t: np.ndarray, ev_t: np.ndarray, cov: np.ndarray,
+              complete: np.ndarray) -> np.ndarray:
+    """The bound at each instant t (T, 3N+1, 3N+1), team frame: the bound after the latest event
+    e with every event up to e complete by t (running maximum of the complete times), carried
+    from e to t by one odometry step (P = F P F^T + Q, the prediction half of crb.info_step, F
+    and Q of crb.team_process with the true track travel and change of s between them); at an
+    event's own instant, dt = 0, the event's bound."""
+    ready = np.maximum.accumulate(complete)
+    k = np.clip(np.searchsorted(ready, t, side="right") - 1, 0, len(ev_t) - 1)
+    out = cov[k].copy()
+    rows = np.flatnonzero((t > ev_t[k]) & np.isfinite(out[:, 0, 0]))
+    if not len(rows):
+        return out
+    n = len(tscn.robots)
+    t_e = ev_t[k[rows]]
+    theta_e = _poses(tscn, t_e, frame)[:, :, 2]
+    dl, dr = np.zeros((len(rows), n)), np.zeros((len(rows), n))
+    for i, robot in enumerate(tscn.robots):
+        l_e, r_e = robot.trajectory.wheel_travel(t_e)
+        l_t, r_t = robot.trajectory.wheel_travel(t[rows])
+        dl[:, i], dr[:, i] = l_t - l_e, r_t - r_e
+    ds = ac.speed_of_sound_mps(tscn.temperature_c(t[rows])) \
+        - ac.speed_of_sound_mps(tscn.temperature_c(t_e))
+    m = bound_model(tscn)
+    for j, row in enumerate(rows.tolist()):
+        F, Q = crb.team_process(theta_e[j], dl[j], dr[j], float(ds[j]), m)
+        P = F @ out[row] @ F.T + Q
+        out[row] = (P + P.T) / 2
+    return out
+
+
+def _truth(tscn: TeamScenario, frame, ev_t: np.ndarray, cov: np.ndarray,
+           complete: np.ndarray) -> dict:
     """Truth rows at truth_rate_hz, each time then each robot (robot column), with the bound
-    after the latest event at or before the row."""
+    at the row's instant (_bound_at)."""
     t = np.arange(int(math.floor(tscn.duration_s * tscn.truth_rate_hz + 1e-9)) + 1) \
         / tscn.truth_rate_hz
-    k = np.clip(np.searchsorted(ev_t, t, side="right") - 1, 0, len(ev_t) - 1)
+    at = _bound_at(tscn, frame, t, ev_t, cov, complete)
     beacon = tscn.beacon_mask(t)
     temp = tscn.temperature_c(t)
     cols = {c: [] for c in TEAM_TRUTH_COLUMNS}
@@ -150,7 +187,7 @@ def _truth(tscn: TeamScenario, frame, ev_t: np.ndarray, cov: np.ndarray) -> dict
         tx, ty, tth = to_team(frame, st["x_m"], st["y_m"], st["theta_rad"])
         vl, vr = track_speeds(st["v_mps"], st["omega_radps"], tscn.site.wheel_base_m,
                               tscn.icr_factor)
-        P = cov[k][:, 3 * i:3 * i + 3, 3 * i:3 * i + 3]
+        P = at[:, 3 * i:3 * i + 3, 3 * i:3 * i + 3]
         part = {"robot": np.full(len(t), robot.id), "t_us": robot.clock.unwrapped_us(t),
                 "t_sim_s": t, "x_m": st["x_m"], "y_m": st["y_m"],
                 "theta_rad": wrap_angle(st["theta_rad"]), "team_x_m": tx, "team_y_m": ty,

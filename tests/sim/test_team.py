@@ -271,6 +271,45 @@ def test_bound_gauge_and_more_ranges_give_a_smaller_bound(static):
     assert 0.002 < np.median(b4[t > 5]) < 0.05
 
 
+def test_bound_at_a_row_waits_for_the_pings_ranges_and_grows_on_the_move(static):
+    """The bound at a truth row is the one after the latest ping whose direct ranges have all
+    arrived (emission + true_m / s) by the row's instant, carried to the row by crb.team_process
+    (F P F^T + Q): a row after a ping but before its pulses arrived has the previous ping's
+    bound carried, above the held bound of the new ping (what the truth held before issue 14),
+    and the moving robot's bound grows from its event to the row."""
+    from beaconloc_sim import crb
+    tscn, tr, ev_t, cov = static.scenario, static.truth, static.pcrb_t_s, static.pcrb_cov
+    direct = static.ranges.select(static.ranges.direct)
+    complete = ev_t.copy()
+    np.maximum.at(complete, direct.ping + 1, direct.t_s + direct.true_m / direct.sos_mps)
+    ready = np.maximum.accumulate(complete)
+    n, i = len(tscn.robots), tscn.robot_ids.index(4)            # robot 4 moves
+    t = tr["t_sim_s"].reshape(-1, n)[:, 0]
+    pos = tr["pcrb_pos_m"].reshape(-1, n)[:, i]
+    moving = np.abs(tr["v_mps"].reshape(-1, n)[:, i]) > 0.01
+    m = team_sim.bound_model(tscn)
+
+    def block(P):
+        return math.sqrt(P[3 * i, 3 * i] + P[3 * i + 1, 3 * i + 1])
+
+    in_flight, grown = [], []
+    for j in np.flatnonzero((t > 5) & moving):
+        k = np.searchsorted(ev_t, t[j], side="right") - 1
+        e = np.searchsorted(ready, t[j], side="right") - 1
+        te = np.array([ev_t[e], t[j]])
+        theta = team_sim._poses(tscn, te[:1], static.frame)[0, :, 2]
+        travel = np.array([r.trajectory.wheel_travel(te) for r in tscn.robots])   # (n, 2, 2)
+        sos = ac.speed_of_sound_mps(tscn.temperature_c(te))
+        F, Q = crb.team_process(theta, travel[:, 0, 1] - travel[:, 0, 0],
+                                travel[:, 1, 1] - travel[:, 1, 0], float(sos[1] - sos[0]), m)
+        assert pos[j] == pytest.approx(block(F @ cov[e] @ F.T + Q), rel=1e-9)
+        grown.append(pos[j] / block(cov[e]))
+        if e == k - 1:
+            in_flight.append(pos[j] / block(cov[k]))
+    assert len(in_flight) > 20 and min(in_flight) > 1.0
+    assert min(grown) > 1.0
+
+
 def test_bound_grows_with_the_distance_travelled(leapfrog):
     tscn = leapfrog.scenario
     tr = leapfrog.truth
@@ -471,13 +510,15 @@ def test_single_robot_range_and_bearing_runs_unchanged(tmp_path, name, log_sha, 
 
 @pytest.mark.parametrize("name, log_sha, truth_sha", [
     ("team-static", "1495bb1cf7ee0d765bab73fb1261829f40455c8019a72c3ea1c723cd3ef1464b",
-     "9f56bdb53bb8ebaac90ee14406a5cf3ea4c5ae3a19c0ee3d4c51541f70a0e6d2"),
+     "2abc44c9cf4e0325569ec3e8793f2de23b46b2b2473b1fac48969e1c7a249ad8"),
     ("team-leapfrog", "b2d16ad8446b5edb9a0c9cd8a07acb62c186e1dce945e0782bb469789815d564",
-     "17c97bb2759f9866b4953fb07e1233f1df68afd1b5d5b58e8e7ddb5ba51cbf8e"),
+     "9a8ad9e6f0edc28a2b88421120b68ec79090e9690e920980f732a09a2c015ec7"),
 ])
 def test_team_runs_unchanged(tmp_path, name, log_sha, truth_sha):
     """The whole run of each team scenario: log and truth as before the lost robot existed
-    (9cc2bdc): a fault's mechanism draws nothing and changes nothing where it is not used."""
+    (9cc2bdc): a fault's mechanism draws nothing and changes nothing where it is not used; the
+    truth re-recorded when its bound (the pcrb_* columns, all the others unchanged) was carried
+    to each row's instant (issue 14)."""
     import hashlib
     out = subprocess.run([str(BIN), "run", name, "--log", str(tmp_path / "l.log"),
                           "--truth", str(tmp_path / "t.csv")], capture_output=True, text=True,
@@ -490,7 +531,8 @@ def test_team_runs_unchanged(tmp_path, name, log_sha, truth_sha):
 def test_bound_of_a_standing_pair_is_sigma_over_root_n(tmp_path):
     """Three robots standing, the speed of sound known: B's x in the team frame is the A-B
     distance, measured by every direct A-B range (C's two ranges only place C): the bound is
-    sigma(d) / sqrt(n_AB) (the weak 1 m prior and the 1 us quantisation aside, < 0.1 %)."""
+    sigma(d) / sqrt(n_AB) (the weak 1 m prior and the 1 us quantisation aside, < 0.1 %), n_AB
+    those of the pings whose ranges have all arrived by the row's instant (t = 20 s)."""
     src = builtin_scenario_path("team-static")
     site = src.with_name("millibots-room.ini").read_text()
     (tmp_path / "millibots-room.ini").write_text(
@@ -501,7 +543,12 @@ def test_bound_of_a_standing_pair_is_sigma_over_root_n(tmp_path):
     tscn = load_team_scenario(str(tmp_path / "three.scenario.ini"), duration_s=20)
     res = team_sim.run(tscn)
     r = res.ranges.select(res.ranges.direct)
-    n_ab = int(np.sum(np.isin(r.emitter, [1, 2]) & np.isin(r.receiver, [1, 2])))
+    # each ping's last arrival, emission + true_m / s, and the running maximum over the pings, s
+    arrived = np.full(len(res.pings.t_s), -np.inf)
+    np.maximum.at(arrived, r.ping, r.t_s + r.true_m / r.sos_mps)
+    counted = np.maximum.accumulate(arrived)[r.ping] <= 20.0
+    assert not counted.all()                          # the last ping's pulses still in flight
+    n_ab = int(np.sum(np.isin(r.emitter, [1, 2]) & np.isin(r.receiver, [1, 2]) & counted))
     sigma = 0.008 + 0.005 * 2.0                       # d = 2 m
     tr = res.truth
     last = (tr["t_sim_s"] == 20) & (tr["robot"] == 2)
