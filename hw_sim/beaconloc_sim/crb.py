@@ -229,6 +229,27 @@ def carried_covariance(cov: np.ndarray, state: np.ndarray, row_state: np.ndarray
     return np.where((np.asarray(dt_s) > 0)[:, None, None], P, cov)
 
 
+IR = 8      # the speed of sound's rate, m/s^2 (with_sos_rate's 9th state)
+
+
+def with_sos_rate(F: np.ndarray, Q: np.ndarray, dt_s: float, s_change_mps: float,
+                  rate_mps2: float, next_rate_mps2: float) -> tuple[np.ndarray, np.ndarray]:
+    """F and Q of process_model for the state extended by the speed of sound's rate r (IR):
+    a drift of unknown rate (the drifting-air model of the library's sos_drift_predict, its
+    rate a state here instead of a feed-forward):
+        s(k+1) = s(k) + r(k) dt,   r(k+1) = r(k),
+    and, as process_model prices the true change of s (Q_ss = ds^2), the true departures
+    from it: Q_ss = (ds - r_true(k) dt)^2 + (1e-4 m/s)^2 (zero on a ramp), Q_rr =
+    (r_true(k+1) - r_true(k))^2 + (1e-6 m/s^2)^2 (zero but where the ramp's rate changes).
+    F, Q: process_model's (8, 8); rates in m/s^2, dt_s in s, s_change_mps in m/s. (9, 9)."""
+    F9, Q9 = np.eye(9), np.zeros((9, 9))
+    F9[:8, :8], Q9[:8, :8] = F, Q
+    F9[IS, IR] = dt_s
+    Q9[IS, IS] = (s_change_mps - rate_mps2 * dt_s) ** 2 + (1e-4) ** 2
+    Q9[IR, IR] = (next_rate_mps2 - rate_mps2) ** 2 + (1e-6) ** 2
+    return F9, Q9
+
+
 def odometry_rows() -> np.ndarray:
     """Kleeman 1992 eq. 25: the odometry measures speed(k+1) = v(k+1) (and the turn rate omega)."""
     H = np.zeros((2, 8))
@@ -262,7 +283,8 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
                     fires: np.ndarray | None = None,
                     bearing_beacons_m: list[np.ndarray] | None = None,
                     range_beacons_m: list[np.ndarray] | None = None,
-                    sonar_rows: list[tuple[np.ndarray, np.ndarray]] | None = None
+                    sonar_rows: list[tuple[np.ndarray, np.ndarray]] | None = None,
+                    sos_rate: tuple[float, np.ndarray] | None = None
                     ) -> np.ndarray | tuple[np.ndarray, tuple]:
     """Bound covariance J_k^-1 after each measurement event k, shape (K, 8, 8).
 
@@ -280,14 +302,21 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
     start: to go on from an earlier call, its returned end (J, state, wheel_left_m,
     wheel_right_m, time after its last event); then returns (covariances, end). Without it
     the recursion starts from the prior.
+    sos_rate: (prior sigma of the rate, m/s^2; (K,) true rate ds/dt at each event, m/s^2):
+    an analysis, not the simulator's bound (docs/performance.md, "Speed of sound"): the
+    state gets a 9th entry, the speed of sound's rate r (IR), unknown with that prior, and s
+    follows it (with_sos_rate); returns (K, 9, 9). Only without start.
     """
     K = len(states)
-    out = np.empty((K, 8, 8))
+    n = 8 if sos_rate is None else 9
+    out = np.empty((K, n, n))
     times = states[:, IT0] if event_time_s is None else np.asarray(event_time_s, dtype=float)
     if start is None:
-        J = np.diag(1.0 / np.asarray(model.prior_sigma, dtype=float) ** 2)
+        sig = np.asarray(model.prior_sigma, dtype=float)
+        J = np.diag(1.0 / (sig if sos_rate is None else np.append(sig, sos_rate[0])) ** 2)
         prev = None
     else:
+        assert sos_rate is None
         J, *prev = start
         if prev[0] is None:               # prior_start(): the first window
             prev = None
@@ -306,6 +335,12 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
                                  fires=True if fires is None else bool(fires[k]))
         else:
             F, Q = np.eye(8), np.diag(np.full(8, 1e-20))
+        if sos_rate is not None and prev is not None:
+            F, Q = with_sos_rate(F, Q, dt_s, states[k, IS] - prev[0][IS], sos_rate[1][k - 1],
+                                 sos_rate[1][k])
+        elif sos_rate is not None:           # the first event: the prior, as for the others
+            F, Q = with_sos_rate(F, Q, 0.0, 0.0, 0.0, 0.0)
+            Q[IS, IS] = Q[IR, IR] = 1e-20
         angles = heard_rx_angles[k]
         rows, variances = [], []
         if len(angles):
@@ -347,6 +382,8 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
                                                 wheel_right_m[k] - prev[2], dt_s, model))
         H = np.vstack(rows) if rows else None
         R = np.diag(np.concatenate(variances)) if rows else None
+        if H is not None and n > 8:
+            H = np.hstack([H, np.zeros((len(H), n - 8))])     # no measurement sees the rate
         J = info_step(J, F, Q, H, R)
         out[k] = np.linalg.inv(J)
     if start is None:

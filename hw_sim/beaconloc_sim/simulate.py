@@ -280,13 +280,16 @@ def bound_model(scn: Scenario) -> crb.BoundModel:
 
 def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
           clock: NodeClock, start: tuple | None = None, ranged: Ranges | None = None,
-          echoed: SonarPings | None = None) -> tuple[BoundEvents, tuple | None]:
+          echoed: SonarPings | None = None, sos_rate_prior_mps2: float | None = None
+          ) -> tuple[BoundEvents, tuple | None]:
     """Bound after each measurement event: each firing with the receivers that really
     detected its direct pulse, each instant with bearings delivered (seen), each ping whose
     direct range was delivered (ranged), each sonar ping whose reading is the specular echo
     of a map wall (echoed: its perpendicular distance, _sonar_rows), in time order;
     the events (times, complete times, bound) and the recursion's end (crb.pcrb_along_path)
-    to go on from in the next window. clock: the time base (event times and t0 on it)."""
+    to go on from in the next window. clock: the time base (event times and t0 on it).
+    sos_rate_prior_mps2: an analysis (crb.with_sos_rate): the bound with the speed of sound's
+    rate an unknown of that prior, m/s^2, its covariances (K, 9, 9); not the truth's bound."""
     ranged = ranged if ranged is not None else Ranges.empty()
     echoed = echoed if echoed is not None else SonarPings.empty()
     if len(firings.t_s) + len(seen.t_s) + len(ranged.t_s) + len(echoed.t_s) == 0:
@@ -335,6 +338,13 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
             bound_model(scn))
     kw = dict(event_time_s=t_time, fires=is_fire, bearing_beacons_m=bearing_rows,
               range_beacons_m=range_rows, sonar_rows=sonar_rows)
+    if sos_rate_prior_mps2 is not None:
+        # the true rate ds/dt at each event, m/s^2: central difference over +-1 ms of the
+        # scenario's temperature profile (physics.acoustics' s of the temperature)
+        h = 1e-3
+        rate = (ac.speed_of_sound_mps(scn.temperature_c(t_ev + h))
+                - ac.speed_of_sound_mps(scn.temperature_c(t_ev - h))) / (2 * h)
+        kw["sos_rate"] = (sos_rate_prior_mps2, rate)
     complete = _complete_times(scn, t_ev, firings, det, ranged, echoed)
     if start is None:
         return BoundEvents(t_ev, complete, crb.pcrb_along_path(*args, **kw)), None

@@ -1,6 +1,8 @@
 """The posterior Cramer-Rao bound against the Kalman filter on a linear-Gaussian model."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -167,3 +169,41 @@ def test_bound_at_an_event_without_delay_is_the_event_bound():
     np.testing.assert_array_equal(truth["pcrb_pos_m"], held)
     np.testing.assert_array_equal(truth["pcrb_sos_mps"],
                                   np.sqrt(res.pcrb_cov[10:60, crb.IS, crb.IS]))
+
+
+# ---- the speed of sound with its rate unknown (issue 14 item 1, an analysis) ----------------
+
+def test_sos_rate_step_follows_a_ramp_and_prices_only_departures_from_it():
+    F, Q = crb.with_sos_rate(np.eye(8), np.zeros((8, 8)), 0.15, 0.15 * 0.1, 0.1, 0.1)
+    assert F.shape == Q.shape == (9, 9) and F[crb.IS, crb.IR] == 0.15
+    # s(k+1) = s(k) + r dt: a ramp of the state's own rate is no process noise
+    assert Q[crb.IS, crb.IS] == pytest.approx(1e-8) and Q[crb.IR, crb.IR] == pytest.approx(1e-12)
+    # the rate changing from 0.1 to -0.1 m/s^2 (the swing's top): its true jump is
+    _, Q = crb.with_sos_rate(np.eye(8), np.zeros((8, 8)), 0.15, 0.0, 0.1, -0.1)
+    assert Q[crb.IR, crb.IR] == pytest.approx(0.04) and Q[crb.IS, crb.IS] > (0.015) ** 2
+
+
+def test_bound_with_the_sos_rate_unknown():
+    """A rate known to be 0 (prior 1e-9 m/s^2) in still air gives the simulator's bound on s (to
+    0.2 %: the rate's 1e-6 m/s^2 per event of process noise floor); a
+    rate unknown with 0.1 m/s^2 of prior gives a larger one (s and its rate from the same
+    pulses), and on the swing too, where the simulator's bound prices the drift as a random
+    walk of the drift's size."""
+    from beaconloc_sim.nodes import Bearings
+    for name in ("kleeman-lab", "temperature-swing10"):
+        scn = load_scenario(name, duration_s=50)
+        res = simulate.run(scn, encode=False)
+        after = res.pcrb_t_s > 20
+        held = res.pcrb_cov[after, crb.IS, crb.IS]
+
+        def rate_bound(prior_mps2):
+            ev, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(),
+                                   res.rx_clock, sos_rate_prior_mps2=prior_mps2)
+            assert ev.cov.shape[1:] == (9, 9)
+            return ev.cov[after, crb.IS, crb.IS]
+
+        if name == "kleeman-lab":
+            np.testing.assert_allclose(rate_bound(1e-9), held, rtol=2e-3)
+        unknown = rate_bound(0.1)
+        assert np.all(unknown > held)
+        assert math.sqrt(np.mean(unknown)) > 1.5 * math.sqrt(np.mean(held))

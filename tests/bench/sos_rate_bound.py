@@ -1,0 +1,65 @@
+"""The speed-of-sound bound with the drift's rate unknown (issue 14 item 1, an analysis).
+
+The simulator's bound (crb.process_model) takes the true change of s between two events as
+process noise of that size (Q_ss = ds^2): a random walk as large as the drift, not a drift of
+unknown rate. Here the state also holds the rate r of s (crb.with_sos_rate: s(k+1) = s(k) +
+r dt, r constant but where the true ramp's rate changes, prior sigma_r), and the bound is run
+along the same true paths with the same detections (simulate._pcrb). Both figures are the RMS
+over the events after 20 s and over the seeds of the bound's sigma_s, m/s (the benchmark's
+sos_pcrb_mps takes the bound at the estimates' instants: within a few % of these).
+
+  .venv/bin/python tests/bench/sos_rate_bound.py [--seeds 20] [--rate-prior 0.1]
+Last lines (machine-readable), one per scenario:
+  sos-rate-bound scenario=temperature-swing10 seeds=20 rate_prior_mps2=0.1 sos_pcrb_mps=..
+                 sos_rate_pcrb_mps=..
+"""
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from beaconloc_sim import crb, simulate
+from beaconloc_sim.nodes import Bearings
+from beaconloc_sim.scenario import load_scenario
+
+SCENARIOS = ("kleeman-lab", "temperature-swing10", "temperature-swing20")
+AFTER_S = 20.0      # the benchmark's start-up, s
+
+
+def sos_bounds(name: str, seed: int, rate_prior_mps2: float) -> tuple[np.ndarray, np.ndarray]:
+    """sigma_s^2 after each event after AFTER_S, (m/s)^2: the simulator's bound, and the bound
+    with the rate unknown (prior rate_prior_mps2, m/s^2)."""
+    scn = load_scenario(name, seed=seed)
+    res = simulate.run(scn, encode=False)
+    events, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(), res.rx_clock,
+                               sos_rate_prior_mps2=rate_prior_mps2)
+    after = res.pcrb_t_s > AFTER_S
+    assert np.array_equal(events.t_s, res.pcrb_t_s)
+    return res.pcrb_cov[after, crb.IS, crb.IS], events.cov[after, crb.IS, crb.IS]
+
+
+def figures(name: str, seeds: int, rate_prior_mps2: float) -> tuple[float, float]:
+    """RMS sigma_s over the events after AFTER_S and the seeds: (the simulator's bound, the
+    bound with the rate unknown), m/s."""
+    held, rate = zip(*(sos_bounds(name, s, rate_prior_mps2) for s in range(1, seeds + 1)))
+    return (math.sqrt(np.mean(np.concatenate(held))), math.sqrt(np.mean(np.concatenate(rate))))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--rate-prior", type=float, default=0.1, help="sigma of the rate, m/s^2")
+    ap.add_argument("--scenarios", default=",".join(SCENARIOS))
+    args = ap.parse_args()
+    for name in args.scenarios.split(","):
+        now, with_rate = figures(name, args.seeds, args.rate_prior)
+        print(f"sos-rate-bound scenario={name} seeds={args.seeds} "
+              f"rate_prior_mps2={args.rate_prior:g} sos_pcrb_mps={now:.3f} "
+              f"sos_rate_pcrb_mps={with_rate:.3f}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
