@@ -9,7 +9,11 @@
  * range receiver's clock is the reference) when bit 3 is set and bit 2 not,
  * or on the millibots-room team site (every robot's ranges and track
  * encoders into the team, bridge/team.c) when bit 4 is set (bits 2 and 3
- * then do not matter; the first opcode reads only bits 0-1).
+ * then do not matter), or on the hoppenot-room sonar site (a sonar ring
+ * against the map's walls, started from its scenario's start pose as
+ * --initial-pose starts it, bridge/estimator_sonar.c) when bit 5 is set and
+ * bit 4 not, its [sonar_ring] method chosen by bits 6-7 (0 filter,
+ * 1 pinpoint, 2 memory, 3 filter); the first opcode reads only bits 0-1.
  *
  * Input: a sequence of records, each one opcode byte then its fields:
  *   op 0, 1  socket read: size selector (CAN_MTU, CANFD_MTU, any size, a
@@ -55,6 +59,7 @@
 #include "fuzz_common.h"
 #include "log.h"
 #include "sensors.h"
+#include "sonar.h"
 #include "team.h"
 
 int LLVMFuzzerInitialize(int *argc, char ***argv);
@@ -121,6 +126,8 @@ static struct bridge_config site;
 static struct estimator est_template; /* estimator_init'ed once, copied per input */
 static struct estimator est_bearing_template; /* the same on the bearing-only site */
 static struct estimator est_range_template;   /* the same on the range-only site */
+/* the same on the sonar site, one per [sonar_ring] method (enum sonar_method) */
+static struct estimator est_sonar_template[3];
 static struct estimator est;
 static struct team team_template; /* team_init'ed once on the team site, copied per input */
 static struct team team;
@@ -152,6 +159,25 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
         estimator_init(&est_range_template, &range_site, err, sizeof err) != 0) {
         fprintf(stderr, "fuzz_frames: %s\n", err);
         abort();
+    }
+    for (int m = 0; m < 3; m++) {
+        struct bridge_config sonar_site;
+        config_defaults(&sonar_site);
+        if (config_load_file(&sonar_site, FUZZ_SONAR_SITE, err, sizeof err) != 0) {
+            fprintf(stderr, "fuzz_frames: %s\n", err);
+            abort();
+        }
+        snprintf(sonar_site.sonar_ring.method, sizeof sonar_site.sonar_ring.method, "%s",
+                 sonar_method_name((enum sonar_method)m));
+        if (estimator_init(&est_sonar_template[m], &sonar_site, err, sizeof err) != 0) {
+            fprintf(stderr, "fuzz_frames: %s\n", err);
+            abort();
+        }
+        /* hoppenot-room.scenario.ini's start, as the sonar bench's --initial-pose
+         * (2 cm, 1 deg) */
+        const struct est_initial_pose pose = {.set = true, .x_m = 1.0, .y_m = 1.0, .heading_rad = 0.0,
+                                              .sigma_m = 0.02, .sigma_heading_rad = M_PI / 180.0};
+        estimator_set_initial_pose(&est_sonar_template[m], &pose);
     }
     struct bridge_config team_site;
     config_defaults(&team_site);
@@ -244,10 +270,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     else if (size > 0 && (data[0] & 8))
         tmpl = &est_range_template;
     const bool on_team = size > 0 && (data[0] & 16);
+    const bool on_sonar = !on_team && size > 0 && (data[0] & 32);
     if (on_team)
         tmpl = &est_team_template;
+    else if (on_sonar)
+        tmpl = &est_sonar_template[(data[0] >> 6) % 3];
     memcpy(&est, tmpl, sizeof est);
     est.team = NULL;
+    if (on_sonar) /* the filter's map and ring: the copy's, not the template's */
+        FUZZ_CHECK(sonar_attach(&est.sonar, &est.loc.filter) == BL_OK, "sonar_attach");
     if (on_team) {
         memcpy(&team, &team_template, sizeof team);
         est.team = &team;

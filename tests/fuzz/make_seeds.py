@@ -5,7 +5,8 @@ tests/fuzz/corpus/<name>/ (committed; `make fuzz-seeds` rewrites it).
   replay   the first lines of simulator candump logs (kleeman-lab and fault
            scenarios), plus every line syntax replay.c accepts
   frames   the same logs as fuzz_frames records: replayed frames (op 2) and
-           SocketCAN reads (op 0)
+           SocketCAN reads (op 0); and hoppenot-room's (SONAR frames) on the sonar
+           site, once per [sonar_ring] method
   site     the site file, and one with a [tuning] section
   mavlink  TIMESYNC and HEARTBEAT packed by pymavlink (MAVLink 2 and 1),
            truncated, glued to garbage, oversized datagrams, a serial stream
@@ -27,6 +28,9 @@ DBC = ROOT / "hw_sim/beaconloc_sim/data/beaconloc.dbc"
 SITE = ROOT / "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"
 SCENARIOS = [("kleeman-lab", 4.0), ("echo-storm", 3.0), ("encoder-silence", 3.0), ("kidnap", 3.0),
              ("eurobot", 3.0), ("marvelmind", 3.0)]
+# frames only (fuzz_frames' sonar site): SONAR frames, one per sensor per 0.5 s burst
+FRAME_SCENARIOS = [("hoppenot-room", 4.0)]
+SONAR_METHODS = ("filter", "pinpoint", "memory")   # fuzz_frames: first byte's bits 6-7
 
 
 def sim_log(work: Path, scenario: str, seconds: float) -> list:
@@ -96,6 +100,12 @@ def seeds_frames(out: Path, logs: dict) -> None:
             blob[0] |= 4  # fuzz_frames: the eurobot site for this input
         if scn.startswith("marvelmind") and blob:
             blob[0] |= 8  # fuzz_frames: the marvelmind site for this input
+        if scn.startswith("hoppenot") and blob:
+            blob[0] |= 32  # fuzz_frames: the sonar site, each method (bits 6-7)
+            for m, method in enumerate(SONAR_METHODS):
+                blob[0] = (blob[0] & 0x3f) | (m << 6)
+                write(out, f"{scn}-{method}.replay", bytes(blob))
+            continue
         write(out, f"{scn}.replay", bytes(blob))
         # the first frames as SocketCAN reads (struct can_frame, CAN_MTU)
         blob = bytearray()
@@ -219,7 +229,7 @@ def main() -> int:
     a.work.mkdir(parents=True, exist_ok=True)
     logs = {scn: sim_log(a.work, scn, s) for scn, s in SCENARIOS}
     seeds_replay(a.out / "replay", logs)
-    seeds_frames(a.out / "frames", logs)
+    seeds_frames(a.out / "frames", {**logs, **{scn: sim_log(a.work, scn, s) for scn, s in FRAME_SCENARIOS}})
     seeds_site(a.out / "site")
     seeds_mavlink(a.out / "mavlink")
     seeds_lib_api(a.out / "lib_api", logs)
