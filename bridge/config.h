@@ -182,8 +182,9 @@ struct bridge_config {
     double wheel_radius_m;
     int ticks_per_rev;
     double encoder_rate_hz;
-    double sigma_wheel_scale; /* online wheel-scale calibration: initial σ, 0 = off */
-    double skid_factor;       /* skid steer: ICR expansion factor χ >= 1 (1 = differential) */
+    double sigma_wheel_scale;        /* online wheel-scale calibration: initial σ, 0 = off */
+    double sigma_wheel_scale_common; /* its common part (k_l + k_r)/2: initial σ */
+    double skid_factor; /* skid steer: ICR expansion factor χ >= 1 (1 = differential) */
     /* [noise] */
     double sigma_arrival_s;
     double sigma_wheel_per_m;

@@ -101,11 +101,16 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->wheel_radius_m = real(0.10);
     cfg->ticks_per_rev = 4096;
     cfg->encoder_rate_hz = real(100);
-    // Online wheel-scale calibration off by default: on nominal wheels the two
-    // extra unknowns cost accuracy (kleeman-lab through the bridge, 20 seeds:
-    // RMSE ratio 1.026 -> 1.063..1.088, σ 0.03 per wheel); sites with
-    // uncalibrated wheels set it (wheel-bias ±3 %: 1.757 -> ~1.09). See lib/README.md.
-    cfg->sigma_wheel_scale = real(0);
+    // Online wheel-scale calibration on by default: each wheel's scale
+    // starts at 1 ± 5 % (Hoppenot & Colle §4.2's 8 % asymmetric degradation is
+    // 1.6 σ of the difference), the common scale (k_l + k_r)/2 held at the
+    // configured radius: it trades against the speed of sound (both scale
+    // distances) and learning it costs the position bound 8-10 % on
+    // kleeman-lab (σ 0.01-0.05), the difference 1.3 %, which the published
+    // two-hypothesis average (filter.cpp average_wheel_hypotheses) gives back
+    // on nominal wheels. docs/performance.md "Wheel calibration".
+    cfg->sigma_wheel_scale = real(0.05);
+    cfg->sigma_wheel_scale_common = real(0);
     cfg->speed_of_sound_mps = real(343.0);
     cfg->sigma_speed_of_sound_mps = real(5.0);
     default_pulse_params(&cfg->pulse);
@@ -291,6 +296,7 @@ const Rule kRules[] = {
     RULE(ticks_per_rev, kU32 | kLoGt, b0, kNone),
     RULE(encoder_rate_hz, kLoGt, b0, kNone),
     RULE(sigma_wheel_scale, kGeLe, b0, bHalf),
+    RULE(sigma_wheel_scale_common, kGeLe, b0, bHalf),
     RULE(speed_of_sound_mps, kOpen, b1, b1e4),
     RULE_REF(sigma_speed_of_sound_mps, kOpen | kHiRef, b0, kNone, speed_of_sound_mps),
     // Pulse arrival times (aid_pulse.cpp): Kleeman 1992 §3.11 σ, §3.9 start-up.

@@ -216,17 +216,20 @@ static void test_double_pulse_tolerance_key(void **state)
                        "+ this not below period_s 0.2 s");
 }
 
-/* The optional wheel-scale calibration key reaches the estimator's config. */
+/* The optional wheel-scale calibration keys reach the estimator's config. */
 static void test_wheel_scale_calibration_key(void **state)
 {
     (void)state;
     char body[2048];
-    snprintf(body, sizeof body, "%s[robot]\nsigma_wheel_scale = 0.03\n", good_body);
+    snprintf(body, sizeof body, "%s[robot]\nsigma_wheel_scale = 0.03\nsigma_wheel_scale_common = 0.01\n", good_body);
     struct bridge_config cfg;
     config_defaults(&cfg);
-    assert_true(cfg.sigma_wheel_scale == 0.0); /* off by default */
+    /* on by default, the common scale held (the library's defaults) */
+    assert_true(cfg.sigma_wheel_scale == 0.05);
+    assert_true(cfg.sigma_wheel_scale_common == 0.0);
     load_ok(body, &cfg);
     assert_true(cfg.sigma_wheel_scale == 0.03);
+    assert_true(cfg.sigma_wheel_scale_common == 0.01);
 }
 
 /* [tuning]: every key defaults to the library's own value; a key given
@@ -595,9 +598,11 @@ static void test_same_geometry(void **state)
     b = a; b.beacon[9].x_m = 3.0;            assert_true(config_same_geometry(&a, &b));
     /* the wheel-scale calibration: switching it on or off is geometry (the
      * library refuses it as tuning), its σ is tuning */
-    b = a; b.sigma_wheel_scale = 0.03;       assert_false(config_same_geometry(&a, &b));
-    a.sigma_wheel_scale = 0.02;              assert_true(config_same_geometry(&a, &b));
-    b.sigma_wheel_scale = 0;                 assert_false(config_same_geometry(&a, &b));
+    b = a; b.sigma_wheel_scale = 0;          assert_false(config_same_geometry(&a, &b));
+    a.sigma_wheel_scale = 0;                 assert_true(config_same_geometry(&a, &b));
+    b.sigma_wheel_scale = 0.03;              assert_false(config_same_geometry(&a, &b));
+    /* the common scale's σ is a prior: tuning */
+    b = a; b.sigma_wheel_scale_common = 0.02; assert_true(config_same_geometry(&a, &b));
 }
 
 static void test_format_error_uses_lines(void **state)
@@ -814,6 +819,10 @@ static void test_library_geometry_is_the_schemas(void **state)
     assert_int_equal(config_load_file(&site, SITE, err, sizeof err), 0);
     bl_config base, c;
     assert_int_equal(estimator_make_config(&site, &base, err, sizeof err), 0);
+    /* sigma_wheel_scale is geometry as the calibration's switch (0 <-> > 0):
+     * from off, its nudge (0 -> 0.01) switches it on (on by default) */
+    const bl_real sigma_wheel_scale = base.sigma_wheel_scale;
+    base.sigma_wheel_scale = 0;
     int geometry = 0;
 #define LIB_GEOMETRY(sec, k, type, member, field, g)                           \
     c = base;                                                                  \
@@ -826,6 +835,7 @@ static void test_library_geometry_is_the_schemas(void **state)
     SITE_LIB_FIELDS(LIB_GEOMETRY)
 #undef LIB_GEOMETRY
     assert_true(geometry >= 8);
+    base.sigma_wheel_scale = sigma_wheel_scale;
     /* [beaconN] x_m, y_m, z_m: geometry = "library" */
 #define BEACON_GEOMETRY(member, field)                                         \
     c = base;                                                                  \

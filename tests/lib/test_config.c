@@ -184,6 +184,8 @@ MUT(m_gap, c->max_predict_gap_s = 0)
 MUT(m_ring_heading, c->ring_heading = 2)
 MUT(m_wscale_neg, c->sigma_wheel_scale = -0.01f)
 MUT(m_wscale_high, c->sigma_wheel_scale = 0.6f)
+MUT(m_wscale_common_neg, c->sigma_wheel_scale_common = -0.01f)
+MUT(m_wscale_common_nan, c->sigma_wheel_scale_common = (bl_real)NAN)
 MUT(m_wscale_drift, c->wheel_scale_drift_per_sqrt_s = (bl_real)NAN)
 /* bearings (config.h, bl_bearing_params) */
 static void three_bearing_beacons(bl_config *c)
@@ -234,6 +236,7 @@ static void test_every_check(void **state)
         {m_sig_v, "initial_sigma_v_mps"}, {m_sig_w, "initial_sigma_omega_radps"}, {m_gap, "max_predict_gap_s"},
         {m_ring_heading, "ring_heading"},
         {m_wscale_neg, "sigma_wheel_scale"}, {m_wscale_high, "sigma_wheel_scale"},
+        {m_wscale_common_neg, "sigma_wheel_scale_common"}, {m_wscale_common_nan, "sigma_wheel_scale_common"},
         {m_wscale_drift, "wheel_scale_drift_per_sqrt_s"},
         {m_bsigma0, "bearing.sigma_deg"}, {m_bsigma_nan, "bearing.sigma_deg"}, {m_bgate, "bearing.gate_sigma"},
         {m_boffx, "bearing.offset_x_m"}, {m_boffy, "bearing.offset_y_m"},

@@ -56,11 +56,12 @@ static void test_wheel_scale_calibration(void **state)
     sp.wheel_scale_l = 1.03;
     sp.wheel_scale_r = 0.97;
     sim_stats off = {0}, on = {0};
-    assert_true(cfg.sigma_wheel_scale == 0); /* default: off */
-    sim_run(&sp, &cfg, 40.0, &off);
+    /* default: on, 5 % per wheel, the common scale held (config.h) */
+    assert_true(cfg.sigma_wheel_scale == (bl_real)0.05 && cfg.sigma_wheel_scale_common == 0);
+    bl_config cfg_off = cfg;
+    cfg_off.sigma_wheel_scale = 0;
+    sim_run(&sp, &cfg_off, 40.0, &off);
     print_stats("wheel bias, calibration off", &off);
-    cfg.sigma_wheel_scale = (bl_real)0.05;
-    assert_int_equal(bl_config_check(&cfg, NULL), BL_OK);
     on.check_cov = 1; /* all 10 states live */
     sim_run(&sp, &cfg, 40.0, &on);
     print_message("calibration on: P checked %d times: max asymmetry %g, smallest correlation eigenvalue %.3g\n",

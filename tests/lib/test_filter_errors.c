@@ -188,7 +188,7 @@ static void test_same_geometry(void **state)
         case 6: c.angle_step_deg = 40; break;
         case 7: c.receiver_height_m += (bl_real)0.01; break;
         case 8: c.wheel_base_m += (bl_real)0.01; break;
-        case 9: c.sigma_wheel_scale = (bl_real)0.03; break; /* state layout: calibration on */
+        case 9: c.sigma_wheel_scale = 0; break; /* state layout: calibration off (default on) */
         case 10: c.beacon_count = 5; break;
         case 11: c.beacons[0].x_m += (bl_real)0.01; break;
         }

@@ -321,6 +321,7 @@ static double skid_run(uint64_t seed, double chi_filter)
     cfg.wheels.skid_factor = (bl_real)chi_filter;
     cfg.wheels.slip_heading_rad_per_sqrt_rad = (bl_real)SK_SLIP_H;
     cfg.wheels.slip_lateral_m_per_sqrt_m = (bl_real)SK_SLIP_L;
+    cfg.sigma_wheel_scale = 0; /* the wheels are exact here: the slip model alone is judged */
     assert_int_equal(bl_config_check(&cfg, NULL), BL_OK);
     static bl_filter f;
     assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);

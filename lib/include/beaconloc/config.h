@@ -207,17 +207,27 @@ typedef struct bl_config {
                                          (simulator / sequencer), (0, 360] */
 
     /* ---- [robot] ---- */
-    bl_real wheel_base_m;      /* wheel_base_m: distance between the wheels, > 0 */
-    bl_real wheel_radius_m;    /* wheel_radius_m: > 0 (ticks -> metres in the caller) */
-    uint32_t ticks_per_rev;    /* ticks_per_rev: encoder ticks per wheel turn, > 0 */
-    bl_real encoder_rate_hz;   /* encoder_rate_hz: nominal encoder frame rate, > 0 */
-    bl_real sigma_wheel_scale; /* sigma_wheel_scale (optional key, default 0 = off):
+    bl_real wheel_base_m;             /* wheel_base_m: distance between the wheels, > 0 */
+    bl_real wheel_radius_m;           /* wheel_radius_m: > 0 (ticks -> metres in the caller) */
+    uint32_t ticks_per_rev;           /* ticks_per_rev: encoder ticks per wheel turn, > 0 */
+    bl_real encoder_rate_hz;          /* encoder_rate_hz: nominal encoder frame rate, > 0 */
+    bl_real sigma_wheel_scale;        /* sigma_wheel_scale (optional key, default 0.05):
                                          initial σ (dimensionless) of each of the two
                                          wheel-scale states (true wheel distance = scale ·
                                          measured increment; both start at 1), 0..0.5;
                                          0 = no online calibration (scales stay exactly 1,
                                          the filter is the uncalibrated one); e.g. 0.03 for
                                          wheels known only to ±3 % */
+    bl_real sigma_wheel_scale_common; /* sigma_wheel_scale_common (optional key, default
+                                         0): initial σ
+                                         of the common scale (k_l + k_r)/2, 0..0.5, at
+                                         most sigma_wheel_scale (a larger value counts as
+                                         that); the rest of each wheel's σ is their
+                                         difference. The common scale trades against the
+                                         speed of sound (both scale distances): 0 holds it
+                                         at the wheel radius, as an uncalibrated filter
+                                         does, and learns the difference only;
+                                         sigma_wheel_scale/√2 = independent wheels */
 
     /* ---- [noise] ---- */
     bl_real speed_of_sound_mps;       /* speed_of_sound_mps: initial speed of sound, > 0 */

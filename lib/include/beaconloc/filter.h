@@ -10,7 +10,8 @@
  * microsecond epoch that moves forward with every fused pulse, so float32
  * keeps sub-microsecond resolution for days of uptime), k_left, k_right
  * (wheel scale factors, dimensionless: true wheel distance = k · measured
- * increment; start at 1 with σ cfg.sigma_wheel_scale, random walk
+ * increment; start at 1 with σ cfg.sigma_wheel_scale each, cfg.
+ * sigma_wheel_scale_common of it common to both, random walk
  * cfg.wheel_scale_drift_per_sqrt_s; learned online from the beacons).
  *
  * Time: every absolute time is int64 microseconds on one monotonic timebase
@@ -248,6 +249,14 @@ typedef struct bl_filter_prior {
      * beacon_period_s) with σ sigma_speed_of_sound_mps, sigma_period_s. */
 } bl_filter_prior;
 
+/* The published estimate (bl_filter_estimate, bl_filter_estimate_at). With
+ * wheel-scale calibration on, its pose, speeds, speed of sound and their
+ * covariance are the average of two hypotheses on the wheels, "as
+ * configured" (scale difference 0: the state conditioned on it) and
+ * "unknown difference" (the state), weighted by the Savage–Dickey Bayes
+ * factor (filter.cpp average_wheel_hypotheses; lib/README.md "Online
+ * wheel-scale calibration"); bl_filter_get_state returns the state itself.
+ * Without calibration both are the state. */
 typedef struct bl_estimate {
     int64_t t_us;                /* time the estimate refers to */
     bl_real x_m, y_m, theta_rad; /* theta wrapped to (-pi, pi] */
