@@ -228,6 +228,7 @@ int main(int argc, char **argv)
     cfg.beacon_count = 0;
     cfg.sonar_site = 1;
     cfg.sigma_wheel_scale = (bl_real)0.05;
+    cfg.sigma_wheel_scale_common = (bl_real)0.0354; /* as hoppenot-room.ini */
     if (bl_config_check(&cfg, NULL) != BL_OK) return 1;
     static bl_filter f0, f;
     nt = 0;

@@ -31,6 +31,8 @@ static void sonar_config(bl_config *cfg)
     cfg->beacon_count = 0;
     cfg->sonar_site = 1;
     cfg->sigma_wheel_scale = (bl_real)0.05;
+    /* as hoppenot-room.ini: no beacons to trade against, both wheels free */
+    cfg->sigma_wheel_scale_common = (bl_real)0.0354;
     const char *bad = NULL;
     assert_int_equal(bl_config_check(cfg, &bad), BL_OK);
 }
