@@ -323,7 +323,7 @@ bool converged_now(const bl_config *cfg, const MX &P)
 // get w₀ = 0, the calibrated estimate. The filter's own state, gates and
 // wheel-scale outputs stay H1's. xm, Pm: x and P's leading (x, y, θ, v, ω,
 // s) block, replaced by x̄, P̄.
-constexpr real kWheelsNominalPrior = real(0.5);  // π: prior probability of H0 (1)
+constexpr real kWheelsNominalPrior = real(0.5);  // π: prior probability of H0 (dimensionless)
 constexpr int kOut = S + 1;                      // x, y, θ, v, ω, s
 static_assert(X == 0 && Y == 1 && TH == 2 && V == 3 && W == 4 && S == 5, "published block");
 template <class XV, class PM>
@@ -335,16 +335,16 @@ void average_wheel_hypotheses(const bl_config *cfg, const XV &x, const PM &P, re
     }
     const real sw = cfg->sigma_wheel_scale;
     const real sc = cfg->sigma_wheel_scale_common < sw ? cfg->sigma_wheel_scale_common : sw;
-    const real p0 = sw * sw - sc * sc;  // σ_δ² (1)
-    const real d = real(0.5) * (x(KR) - x(KL));
-    const real p = real(0.25) * (P(KL, KL) + P(KR, KR) - real(2) * P(KL, KR));
-    if (!(p0 > real(0)) || !(p > real(0))) return;  // no calibration, or δ known
+    const real p0 = sw * sw - sc * sc;                                          // σ_δ², eq. (1) (dimensionless²)
+    const real d = real(0.5) * (x(KR) - x(KL));                                 // δ̂ (dimensionless)
+    const real p = real(0.25) * (P(KL, KL) + P(KR, KR) - real(2) * P(KL, KR));  // P_δδ (dimensionless²)
+    if (!(p0 > real(0)) || !(p > real(0))) return;                              // no calibration, or δ known
     // w₀ = 1 / (1 + (1 - π)/π / B₀₁), 1/B₀₁ = √(p/σ_δ²)·e^{δ̂²/(2p)} (one exp, no log)
     const real e = real(0.5) * d * d / p;
     const real w0 = e > real(60) ? real(0)
                                  : real(1) / (real(1) + (real(1) - kWheelsNominalPrior) / kWheelsNominalPrior *
                                                             std::sqrt(p / p0) * std::exp(e));
-    real cv[kOut];
+    real cv[kOut];  // c = P_{·δ}, in the unit of each state (m, rad, m/s, rad/s, m/s)
     for (int r = 0; r < kOut; ++r) cv[r] = real(0.5) * (P(r, KR) - P(r, KL));
     for (int r = 0; r < kOut; ++r) {
         const real gr = cv[r] * d / p;
