@@ -434,7 +434,7 @@ int check_time(const bl_filter *f, int64_t t_us)
 // (σ_c = σ_w/√2: independent wheels; σ_c = 0: the common scale held at 1).
 void start_wheel_scales(const bl_filter *f, VX &x, MX &P)
 {
-    if (f->flags_ & kFlagStarted) {
+    if (f->flags_ & (kFlagStarted | kFlagScalesKept)) {
         const auto xs = state(f);
         const auto Ps = cov(f);
         x(KL) = xs(KL);
@@ -449,6 +449,27 @@ void start_wheel_scales(const bl_filter *f, VX &x, MX &P)
         P(KL, KL) = P(KR, KR) = sw * sw;
         P(KL, KR) = P(KR, KL) = real(2) * sc * sc - sw * sw;
     }
+}
+
+// The wheels are the robot's, not the fix's: a time gap (the bus silent,
+// the robot carried) says nothing about them, so a re-initialisation keeps
+// k_l, k_r and their covariance (ours; the scale random walk over the gap is
+// not added: its length is not known here, and at the default 1e-5/√s a
+// day adds σ 0.003).
+void reinit_keeping_wheel_scales(bl_filter *f)
+{
+    const bool keep = (f->flags_ & (kFlagStarted | kFlagScalesKept)) != 0 && f->cfg_.sigma_wheel_scale > real(0);
+    const real kl = f->x_[KL], kr = f->x_[KR];
+    const real pll = f->P_[KL * NX + KL], plr = f->P_[KL * NX + KR], prr = f->P_[KR * NX + KR];
+    const bl_config c = f->cfg_;
+    (void)bl_filter_init(f, &c);  // c passed its check when f was initialised
+    if (!keep) return;
+    f->x_[KL] = kl;
+    f->x_[KR] = kr;
+    f->P_[KL * NX + KL] = pll;
+    f->P_[KL * NX + KR] = f->P_[KR * NX + KL] = plr;
+    f->P_[KR * NX + KR] = prr;
+    f->flags_ |= kFlagScalesKept;
 }
 
 bool all_finite(const bl_real *v, int n)

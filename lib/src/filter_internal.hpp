@@ -17,6 +17,10 @@ constexpr uint32_t kFilterMagic = 0x424c4631u;  // "BLF1"
 constexpr uint32_t kFlagStarted = 1u;
 constexpr uint32_t kFlagConverged = 2u;
 constexpr uint32_t kFlagEverStarted = 4u;
+// Not started, but the wheel scales and their 2x2 covariance in x_, P_ are
+// a re-initialised filter's (reinit_keeping_wheel_scales): the next start
+// takes them.
+constexpr uint32_t kFlagScalesKept = 8u;
 
 // State indices (filter.h BL_IX_*), short.
 enum : int {
@@ -51,8 +55,14 @@ inline real effective_base_m(const bl_config *cfg) { return cfg->wheels.skid_fac
 // t0 += k·T (the reference moves k firing slots), then whole microseconds
 // move from the t0 offset into the epoch.
 void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k);
-// Wheel scales at a (re)start: kept by a started filter, else 1 ± σ.
+// Wheel scales at a (re)start: kept by a started filter (or one
+// re-initialised with them kept), else 1 ± σ.
 void start_wheel_scales(const bl_filter *f, VX &x, MX &P);
+// bl_filter_init with the same configuration, keeping what the filter has
+// learned of the wheels (their scales and covariance) for its next start,
+// when calibration is on; nothing else survives. The localizer's restart
+// after a time gap (localizer.cpp reinit_filter).
+void reinit_keeping_wheel_scales(bl_filter *f);
 // The speed of sound's two models (filter.cpp, sos_drift_predict): the
 // prediction of s over dt (s) with the drift detector's state change_mps
 // (D, m/s) and var_mps2 (B, (m/s)²), both updated; and an accepted update's

@@ -135,14 +135,13 @@ NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
 
 // ---- re-initialisation ---------------------------------------------------
 
-// A fresh filter (pulses buffer until the next snapshot start); the
-// published reset counter keeps counting.
+// A fresh filter (pulses buffer until the next snapshot start) that keeps
+// only the wheels' calibration; the published reset counter keeps counting.
 NOINLINE void reinit_filter(bl_localizer *loc, bl_loc_reset_cause cause)
 {
     const bool was = bl::started(&loc->filter);
     if (was) loc->reset_base_ += loc->filter.reset_count_ + 1;
-    const bl_config c = loc->filter.cfg_;
-    (void)bl_filter_init(&loc->filter, &c);
+    bl::reinit_keeping_wheel_scales(&loc->filter);  // the wheels' calibration kept
     if (has_sequencer(loc)) (void)bl_sequencer_clear_hint(&loc->seq);
     loc->hint_set_ = false;
     loc->counters_.reinits++;

@@ -268,6 +268,86 @@ static void test_multipath_rejected_and_counted(void **state)
     assert_true(sqrt(e2 / samples) < 0.03);
 }
 
+/* The bus silent for 3 s (past max_predict_gap_s: the localizer starts a
+ * fresh filter, BL_LOC_CAUSE_TIME_GAP) on a robot whose wheels are worn
+ * (left 4 % larger, right 4 % smaller, Hoppenot & Colle's 8 % asymmetric
+ * degradation): the restarted filter keeps the wheel scales it had learned
+ * (within 3σ of the truth at its first estimate) instead of starting over
+ * from 1 ± sigma_wheel_scale (localizer.h, BL_LOC_CAUSE_TIME_GAP). */
+static void test_time_gap_restart_keeps_wheel_calibration(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(mm_config(&cfg), BL_OK);
+    cfg.sigma_wheel_scale = (bl_real)0.05; /* on (the default), the common scale held */
+    cfg.sigma_wheel_scale_common = 0;
+    bl_seq_config sc;
+    const char *why = NULL, *field = NULL;
+    assert_int_equal(bl_localizer_seq_config(&cfg, &sc, &why, &field), BL_OK);
+    static bl_localizer loc;
+    assert_int_equal(bl_localizer_init(&loc, &cfg, &sc), BL_OK);
+    rng_seed(41);
+    const double half = 0.5 * (double)cfg.wheel_base_m, dt = 0.01;
+    const double k_left = 1.04, k_right = 0.96; /* true distance / measured */
+    const double gap_from = 30.0, gap_to = 33.0;
+    long next_ping = 0;
+    bl_wheel_increment inc;
+    memset(&inc, 0, sizeof inc);
+    inc.t_us = mm_us(0);
+    inc.reference_only = true;
+    assert_int_equal(bl_localizer_wheels(&loc, &inc), BL_OK);
+    double before_l = 0, before_sl = 0, after_l = 0, after_sl = 0;
+    int started = 0, gap_resets = 0;
+    for (long i = 1; i <= 3600; ++i) {
+        const double t = (double)i * dt;
+        double v, w;
+        mm_vw(t - 0.5 * dt, &v, &w);
+        const double dl = (v - w * half) * dt, dr = (v + w * half) * dt;
+        const int silent = t > gap_from && t <= gap_to;
+        if (!silent) {
+            inc.t_us = mm_us(t);
+            inc.reference_only = false;
+            inc.d_left_m = (bl_real)((dl + 0.01 * sqrt(fabs(dl)) * rng_gauss()) / k_left);
+            inc.d_right_m = (bl_real)((dr + 0.01 * sqrt(fabs(dr)) * rng_gauss()) / k_right);
+            assert_int_equal(bl_localizer_wheels(&loc, &inc), BL_OK);
+        }
+        for (;;) {
+            const double te = 0.003 + MM_PING_PERIOD_S * (double)next_ping;
+            const int j = (int)(next_ping % MM_BEACONS);
+            const double d = mm_distance(&cfg, mm_truth(te), j);
+            const double tof = d / MM_TRUE_SPEED_OF_SOUND;
+            if (te + tof > t) break;
+            ++next_ping;
+            if (te > gap_from && te + tof <= gap_to) continue; /* lost in the silence */
+            bl_range_meas m;
+            m.t_us = mm_us(te);
+            m.beacon_index = (uint32_t)j;
+            m.time_of_flight_s = (bl_real)(tof + mm_sigma_m(&cfg, d) * rng_gauss() / MM_TRUE_SPEED_OF_SOUND);
+            m.tag = (uint32_t)next_ping;
+            assert_int_equal(bl_localizer_range(&loc, &m, NULL), BL_OK);
+        }
+        bl_loc_event ev;
+        while (bl_localizer_next_event(&loc, &ev) == 1)
+            if (ev.kind == BL_LOC_EV_RESET && ev.cause == BL_LOC_CAUSE_TIME_GAP) gap_resets++;
+        bl_estimate est;
+        if (bl_localizer_estimate(&loc, &est) != BL_OK) continue;
+        if (t <= gap_from) {
+            before_l = (double)est.wheel_scale_left;
+            before_sl = (double)est.sigma_wheel_scale_left;
+        } else if (gap_resets > 0 && !started) {
+            started = 1; /* the restarted filter's first estimate */
+            after_l = (double)est.wheel_scale_left;
+            after_sl = (double)est.sigma_wheel_scale_left;
+        }
+    }
+    print_message("wheel scale (left, truth %.2f): %.4f ± %.4f before the gap, %.4f ± %.4f at the restart\n", k_left,
+                  before_l, before_sl, after_l, after_sl);
+    assert_int_equal(gap_resets, 1);
+    assert_true(started);
+    assert_true(fabs(before_l - k_left) < 3 * before_sl && before_sl < 0.01); /* learned before */
+    assert_true(after_l == before_l && after_sl == before_sl);                  /* kept, not 1 ± 0.05 */
+}
+
 /* A started, converged filter in the Marvelmind world (ranges only, 5 s). */
 static void converged_range_filter(bl_filter *f, bl_config *cfg)
 {
@@ -655,6 +735,7 @@ int main(void)
         cmocka_unit_test(test_mixed_site_pulses_and_ranges),
         cmocka_unit_test(test_config_errors_named),
         cmocka_unit_test(test_localizer_ranges_and_kidnap),
+        cmocka_unit_test(test_time_gap_restart_keeps_wheel_calibration),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -195,8 +195,9 @@ typedef enum bl_loc_reset_cause {
                                               arrivals of window_len */
     BL_LOC_CAUSE_SNAPSHOT = 2,             /* the filter restarted itself from the snapshot (a stale
                                      state after a time gap) */
-    BL_LOC_CAUSE_TIME_GAP = 3,             /* a predict beyond max_predict_gap_s: fresh filter */
-    BL_LOC_CAUSE_STALE_PULSE = 4,          /* a pulse too old for the state: fresh filter */
+    BL_LOC_CAUSE_TIME_GAP = 3,             /* a predict beyond max_predict_gap_s: fresh filter
+                                              (the wheel scales learned so far kept) */
+    BL_LOC_CAUSE_STALE_PULSE = 4,          /* a pulse too old for the state: fresh filter (the same) */
     BL_LOC_CAUSE_CONFIG = 5,               /* bl_localizer_reinit (new geometry): fresh filter */
     BL_LOC_CAUSE_KNOWN_POSE = 6            /* bl_localizer_start: restarted from a known pose */
 } bl_loc_reset_cause;
