@@ -118,77 +118,104 @@ void cv_model(const VX &x, real dt, VX &xo, SparseEntry *d)
 }  // namespace
 
 // The speed of sound in moving air: two models, one filter (ours; Kleeman
-// 1992 eq. 15 holds s constant). "Still" air: s a random walk of
-// ρ·σ_d (σ_d = speed_of_sound_drift_mps_per_sqrt_s, ρ =
-// kSosStillFraction), tight enough to reach the bound. "Drifting" air (a
-// temperature swing): s a random walk of σ_d plus a drift rate ṡ. Which one
-// holds is read from the innovation sequence through what it does to s:
-// D = Σ_k Δs_k·e^{-(t - t_k)/τ} (m/s), the recent change of the estimate
-// (the pulse updates' corrections Δs_k plus the drift fed forward below),
-// exponentially weighted over τ = kSosDriftWindow_s. In still air the
-// innovations are white (Kleeman §3.9's assumption; Mehra 1970), so D is
-// zero-mean with variance B = Σ_k var(Δs_k)·e^{-2(t - t_k)/τ}, var(Δs_k) =
-// K_s² S = the drop of P_ss at that update ((m/s)²). A drift of rate r
-// makes D ≈ r·τ. The two hypotheses' likelihoods of D (Gaussian, variance
-// B and B + (r_d·τ)², r_d = kSosDriftRate) with the prior kSosDriftPrior
-// give the drift model's posterior weight (a two-model Bayesian switch,
-// Bar-Shalom, Li & Kirubarajan 2001 §11.6 without the mixing step):
-//   w = π L_d / (π L_d + (1 - π) L_s),
-//   ln(L_d/L_s) = ½ ln(B / (B + σ_D²)) + ½ (D²/B) σ_D² / (B + σ_D²),
-// and the prediction over dt mixes the two:
-//   ṡ = w·D/τ  (m/s²),  s += ṡ·dt,  D += ṡ·dt,
-//   σ_s² += (ρ² + w(1 - ρ²))·σ_d²·dt  ((m/s)²).
-// With w = 1 the change D integrates the corrections (the leak D/τ and the
-// feed-forward cancel): a second-order (type-2) tracking loop that follows
-// a ramp without lag; with w ≈ 0 (|D| within ~3√B) it is the still-air
-// random walk. Without pulse updates D and B decay and w falls back.
+// 1992 eq. 15 holds s constant). "Still" air: s a random walk of σ_d
+// (speed_of_sound_drift_mps_per_sqrt_s). "Drifting" air (a temperature
+// swing): the same random walk plus a rate r (m/s²), s(t + dt) = s + r·dt.
+// The drift model's rate r̂, its variance P_rr and its covariance with s
+// P_sr live beside the filter (bl_sos_drift): the filter's state augmented
+// by one component that no measurement sees directly and that correlates
+// with the other states only through s (a two-stage augmentation,
+// Friedland 1969: P_r,j = β·P_s,j, β = P_sr/P_ss), so a pulse update's
+// correction of s moves r̂ by β times as much (note_sos_correction). The
+// drift model also keeps its own s, ahead of the filter's by δ = lead_mps
+// (the rate the filter did not take, below), so that its corrections are
+// its own innovations, not the filter's lag. Prediction over dt:
+//   drift model (Singer 1970, the rate a first-order Gauss–Markov process
+//   of variance r_d² and time T_r = kSosRateTime_s; the (s, r) pair
+//   propagated as a kinematic model, Bar-Shalom, Li & Kirubarajan 2001
+//   ch. 6, first order in dt):
+//     a = e^{-dt/T_r},  r̂ ← a r̂,  P_sr ← a P_sr,  P_rr ← a² P_rr + (1 - a²) r_d²,
+//   which model holds: r̂ is sufficient for r, and under each hypothesis it is
+//   zero-mean Gaussian with variance V1 = r_d² - P_rr (drift, r ~ N(0, r_d²))
+//   or V0 = V1·P_rr/r_d² (still, r = 0: the part of r̂ that is noise). With the
+//   prior π = kSosDriftPrior the drift model's posterior weight (a two-model
+//   Bayesian switch, Bar-Shalom et al. §11.6 without the mixing step) is
+//     w = π L_d / (π L_d + (1 - π) L_s),  L_s/L_d = √(V1/V0)·e^{-½ r̂² (1/V0 - 1/V1)},
+//   the filter takes the mixture's rate, the drift model the whole:
+//     s += w·r̂·dt,  δ += (1 - w)·r̂·dt,
+//   and its covariance (the rate's error carried into s with weight w², ours:
+//   measured, w instead gave kleeman-lab 0.824 m/s against 0.799, 8 seeds,
+//   prior 10 %; the random walk σ_d covers the rate the filter did not take):
+//     P_ss += w² (2 P_sr dt + P_rr dt²) + σ_d² dt,  P_s,j *= 1 + w² β dt (j ≠ s),
+//     P_sr += P_rr dt.
+// In still air r̂ stays within its noise, w ≈ π and s is the random walk
+// alone; along a temperature ramp r̂ settles on the rate and w → 1.
 void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
 {
-    real &change_mps = sos.change_mps, &var_mps2 = sos.var_mps2, &still_share = sos.still_share;
-    const real tau = kSosDriftWindow_s;
-    // e^{-dt/τ} to first order (dt, the predict step, is far below τ)
-    const real a = real(1) / (real(1) + dt / tau);
-    change_mps *= a;
-    var_mps2 *= a * a;
-    const real rd = sos_drift_rate_mps2(cfg);
-    const real sd2 = (rd * tau) * (rd * tau);  // σ_D² ((m/s)²)
-    // B at most P_ss: D is a change of the estimate, which under the model
-    // varies no more than s is uncertain (else the start-up convergence's
-    // large corrections would blind the detector for several windows).
-    const real B = (var_mps2 < P(S, S) ? var_mps2 : P(S, S)) + kSosDriftVarFloor_mps2;
-    // w = 1 / (1 + (1 - π)/π · L_s/L_d), L_s/L_d = √((B + σ_D²)/B)·e^{-½ (D²/B) σ_D²/(B + σ_D²)}
-    // (one exp, no log: make size-m4's flash).
-    const real e = real(0.5) * (change_mps * change_mps / B) * sd2 / (B + sd2);
-    const real odds_still = (real(1) - kSosDriftPrior) / kSosDriftPrior * std::sqrt((B + sd2) / B);
+    const real rd2 = sos_drift_rate_mps2(cfg) * sos_drift_rate_mps2(cfg);  // r_d² ((m/s²)²)
+    // e^{-dt/T_r} to first order (dt, the predict step, is far below T_r)
+    const real a = real(1) / (real(1) + dt / kSosRateTime_s);
+    const real r = sos.rate_mps2 * a;
+    const real Prr = a * a * sos.rate_var_m2ps4 + (real(1) - a * a) * rd2;
+    real Psr = sos.rate_cov_m2ps3 * a;
+    // (s, r) stays positive semi-definite, P_sr² <= P_rr P_ss, where an
+    // update this model did not see (range, bearing) shrank P_ss.
+    const real Psr_max = std::sqrt(Prr * P(S, S));
+    Psr = Psr > Psr_max ? Psr_max : (Psr < -Psr_max ? -Psr_max : Psr);
+    // w = 1 / (1 + (1 - π)/π · L_s/L_d) (one exp, no log: make size-m4's flash)
+    const real V1 = (rd2 > Prr ? rd2 - Prr : real(0)) + kSosRateVarFloor_m2ps4;
+    const real V0 = V1 * Prr / (rd2 + kSosRateVarFloor_m2ps4) + kSosRateVarFloor_m2ps4;  // r_d = 0 too
+    const real e = real(0.5) * r * r * (real(1) / V0 - real(1) / V1);
+    const real odds_still = (real(1) - kSosDriftPrior) / kSosDriftPrior * std::sqrt(V1 / V0);
     const real w = e > real(60) ? real(1) : real(1) / (real(1) + odds_still * std::exp(-e));
-    const real rate = w * change_mps / tau;
-    x(S) += rate * dt;
-    change_mps += rate * dt;
-    const real rho2 = kSosStillFraction * kSosStillFraction;
-    still_share = rho2 / (rho2 + w * (real(1) - rho2));
-    P(S, S) += (rho2 + w * (real(1) - rho2)) * cfg->speed_of_sound_drift_mps_per_sqrt_s *
-               cfg->speed_of_sound_drift_mps_per_sqrt_s * dt;
+    x(S) += w * r * dt;
+    sos.lead_mps += (real(1) - w) * r * dt;
+    const real w2 = w * w;
+    const real beta = P(S, S) > real(0) ? Psr / P(S, S) : real(0);  // β (1/s)
+    const real Pss = P(S, S) + w2 * (real(2) * Psr * dt + Prr * dt * dt) +
+                     cfg->speed_of_sound_drift_mps_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s * dt;
+    const real c = real(1) + w2 * beta * dt;
+    P.row(S) *= c;
+    P.col(S) *= c;
+    P(S, S) = Pss;
+    sos.rate_mps2 = r;
+    sos.rate_cov_m2ps3 = Psr + Prr * dt;
+    sos.rate_var_m2ps4 = Prr;
+}
+
+// The drift model at its start: no rate, with its prior r_d².
+void sos_drift_start(const bl_config *cfg, SosDrift &sos)
+{
+    sos.rate_mps2 = sos.rate_cov_m2ps3 = sos.lead_mps = real(0);
+    sos.rate_var_m2ps4 = sos_drift_rate_mps2(cfg) * sos_drift_rate_mps2(cfg);
 }
 
 void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2)
 {
+    bl_sos_drift &sos = f->sos_drift_;
+    const real Pss = f->P_[S * NX + S];
     // Start-up: while s is still as uncertain as a drift over a window
     // (σ_s > r_d·τ, e.g. the 5 m/s prior) its corrections are convergence
-    // from the prior, not drift: the detector starts afresh, with the
-    // convergence still to come (of variance P_ss) as D's expected spread.
+    // from the prior, not drift: the drift model starts afresh.
     const real sd = sos_drift_rate_mps2(&f->cfg_) * kSosDriftWindow_s;
-    if (f->P_[S * NX + S] > sd * sd) {
-        f->sos_drift_.change_mps = real(0);
-        f->sos_drift_.var_mps2 = f->P_[S * NX + S];
+    if (Pss > sd * sd || !(Pss > real(0))) {
+        sos_drift_start(&f->cfg_, sos);
         return;
     }
-    f->sos_drift_.change_mps += ds_mps;
-    // B is D's variance under the still-air model: while the drift model
-    // holds (weight w, its larger random walk), the drops of P_ss scale with
-    // the random walk that feeds them (steady state: drops per second =
-    // q), so they count with q_still/q = ρ² / (ρ² + w(1 - ρ²)); else the
-    // detector's own switch would raise B and switch itself off.
-    if (var_drop_mps2 > real(0)) f->sos_drift_.var_mps2 += var_drop_mps2 * f->sos_drift_.still_share;
+    // The drift model's own correction: its s is δ ahead, so its innovation
+    // is the filter's minus H_s δ, and its correction Δs - (ΔP_ss/P_ss)·δ
+    // (K_s H_s = ΔP_ss/P_ss for the scalar update); δ shrinks by as much.
+    const real k = var_drop_mps2 / Pss;
+    const real ds_drift_mps = ds_mps - k * sos.lead_mps;
+    sos.lead_mps -= k * sos.lead_mps;
+    // The rate's share of the update (two-stage augmentation, above): the
+    // full filter's gain on r is β times its gain on s, so
+    //   r̂ += β Δs,  P_rr -= β² ΔP_ss,  P_sr = β P_ss⁺  (β unchanged).
+    const real beta = sos.rate_cov_m2ps3 / Pss;
+    sos.rate_mps2 += beta * ds_drift_mps;
+    const real Prr = sos.rate_var_m2ps4 - beta * beta * var_drop_mps2;
+    sos.rate_var_m2ps4 = Prr > real(0) ? Prr : real(0);
+    sos.rate_cov_m2ps3 = beta * (Pss - var_drop_mps2);
 }
 
 namespace {
@@ -201,7 +228,7 @@ namespace {
 // linearly in time, q·dt) lets it follow slow changes without assuming a rate:
 //   σ_T² += q_T·dt,  q_T = period_drift_s_per_sqrt_s²            (s²/s)
 //   σ_k² += q_k·dt,  q_k = wheel_scale_drift_per_sqrt_s²          (1/s)
-// with dt in s. sos: the drift detector's state (D, B), updated.
+// with dt in s. sos: the drift model's rate (sos_drift_predict), updated.
 void add_parameter_noise(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
 {
     sos_drift_predict(cfg, sos, x, P, dt);
@@ -530,7 +557,7 @@ extern "C" int bl_filter_init(bl_filter *f, const bl_config *cfg)
     std::memset(f, 0, sizeof *f);
     f->cfg_ = *cfg;
     f->magic_ = kFilterMagic;
-    f->sos_drift_.still_share = real(1);
+    sos_drift_start(cfg, f->sos_drift_);
     return BL_OK;
 }
 

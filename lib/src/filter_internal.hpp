@@ -64,19 +64,22 @@ void start_wheel_scales(const bl_filter *f, VX &x, MX &P);
 // after a time gap (localizer.cpp reinit_filter).
 void reinit_keeping_wheel_scales(bl_filter *f);
 // The speed of sound's two models (filter.cpp, sos_drift_predict): the
-// prediction of s over dt (s) with the drift detector's state change_mps
-// (D, m/s) and var_mps2 (B, (m/s)²), both updated; and an accepted update's
-// correction of s, ds_mps, with the drop of P_ss it made, into the detector.
+// prediction of s over dt (s) with the drift model's rate (bl_sos_drift),
+// updated; the drift model at a start; and an accepted update's correction
+// of s, ds_mps, with the drop of P_ss it made, into the drift model.
 using SosDrift = bl_sos_drift;
 void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt);
+void sos_drift_start(const bl_config *cfg, SosDrift &sos);
 void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2);
-// Its constants (ours, docs/performance.md "Speed of sound"): the detector's
-// window τ (s); the drift model's typical rate r_d (m/s², 0.1 ≈ 10 °C per
-// minute: s moves 0.6 m/s per °C; below); its prior probability π (1 %:
-// the drift is fed forward on strong evidence only, |D| above ~4√B); the
-// still-air random walk as a fraction ρ of speed_of_sound_drift_mps_per_sqrt_s
-// (1: the same random walk in both models, docs/performance.md); a
-// floor on B ((m/s)²) so that D/√B stays defined.
+// Its constants (ours, docs/performance.md "Speed of sound"): the start-up
+// window τ (s): while σ_s exceeds the change r_d·τ the drift model waits;
+// the drift model's typical rate r_d (m/s², 0.1 ≈ 10 °C per minute: s
+// moves 0.6 m/s per °C; below); the rate's memory T_r (s: a ramp is
+// learnt over the whole of a 2-minute swing, a rate of long ago forgotten);
+// the drift model's prior probability π (0.5 %: the rate is fed forward
+// on strong evidence only; with 1 % kleeman-lab read 0.790 m/s against
+// 0.788, 20 seeds); a floor on the rate's variances ((m/s²)²) so that
+// the likelihood ratio stays defined.
 constexpr real kSosDriftWindow_s = real(20);
 constexpr real kSosDriftRate_per_sqrt_s = real(0.5);
 // r_d = kSosDriftRate_per_sqrt_s · speed_of_sound_drift_mps_per_sqrt_s
@@ -87,9 +90,9 @@ inline real sos_drift_rate_mps2(const bl_config *cfg)
 {
     return kSosDriftRate_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s;
 }
-constexpr real kSosDriftPrior = real(0.01);
-constexpr real kSosStillFraction = real(1.0);
-constexpr real kSosDriftVarFloor_mps2 = real(1e-6);
+constexpr real kSosRateTime_s = real(1000);
+constexpr real kSosDriftPrior = real(0.005);
+constexpr real kSosRateVarFloor_m2ps4 = real(1e-12);
 // Store x, P as the filter's state and update the converged flag.
 void commit(bl_filter *f, const VX &x, const MX &P);
 

@@ -147,13 +147,13 @@ enum {
     BL_IX_KR = 9     /* right wheel scale, 1 */
 };
 
-/* The speed of sound's drift detector (filter.cpp, sos_drift_predict), a
+/* The speed of sound's drift model (filter.cpp, sos_drift_predict), a
  * PRIVATE part of bl_filter. */
 typedef struct bl_sos_drift {
-    bl_real change_mps;  /* D: the recent change of the estimate s, exponentially
-                            weighted over the detector's window (m/s) */
-    bl_real var_mps2;    /* B: its variance in still air from the filter's own gains ((m/s)²) */
-    bl_real still_share; /* q_still / q of the latest predict (1 in still air) */
+    bl_real rate_mps2;      /* r: the drift model's rate of s (m/s²) */
+    bl_real rate_var_m2ps4; /* P_rr: its variance ((m/s²)²) */
+    bl_real rate_cov_m2ps3; /* P_sr: its covariance with s ((m/s)·(m/s²)) */
+    bl_real lead_mps;       /* δ: the drift model's s minus the filter's (m/s) */
 } bl_sos_drift;
 
 /* Caller-owned filter. All members are PRIVATE (storage only, so the
