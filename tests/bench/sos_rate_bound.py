@@ -11,7 +11,10 @@ sos_pcrb_mps takes the bound at the estimates' instants: within a few % of these
   .venv/bin/python tests/bench/sos_rate_bound.py [--seeds 20] [--rate-prior 0.1]
 Last lines (machine-readable), one per scenario:
   sos-rate-bound scenario=temperature-swing10 seeds=20 rate_prior_mps2=0.1 sos_pcrb_mps=..
-                 sos_rate_pcrb_mps=..
+                 sos_rate_pcrb_mps=.. pcrb_mm=.. rate_pcrb_mm=.. pos_ratio=..
+(pcrb_mm: RMS of the position's sigma, sqrt(sigma_x^2 + sigma_y^2), as the benchmark's;
+pos_ratio = rate_pcrb_mm / pcrb_mm, the least position ratio an estimator that does not know
+the rate can reach against the simulator's bound.)
 """
 from __future__ import annotations
 
@@ -28,23 +31,31 @@ SCENARIOS = ("kleeman-lab", "temperature-swing10", "temperature-swing20")
 AFTER_S = 20.0      # the benchmark's start-up, s
 
 
-def sos_bounds(name: str, seed: int, rate_prior_mps2: float) -> tuple[np.ndarray, np.ndarray]:
-    """sigma_s^2 after each event after AFTER_S, (m/s)^2: the simulator's bound, and the bound
-    with the rate unknown (prior rate_prior_mps2, m/s^2)."""
+def bounds(name: str, seed: int, rate_prior_mps2: float) -> tuple[np.ndarray, np.ndarray]:
+    """After each event after AFTER_S, (K, 2): sigma_s^2, (m/s)^2, and the position's
+    sigma_x^2 + sigma_y^2, m^2; first the simulator's bound, then the bound with the rate
+    unknown (prior rate_prior_mps2, m/s^2)."""
     scn = load_scenario(name, seed=seed)
     res = simulate.run(scn, encode=False)
     events, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(), res.rx_clock,
                                sos_rate_prior_mps2=rate_prior_mps2)
     after = res.pcrb_t_s > AFTER_S
     assert np.array_equal(events.t_s, res.pcrb_t_s)
-    return res.pcrb_cov[after, crb.IS, crb.IS], events.cov[after, crb.IS, crb.IS]
+
+    def pick(cov: np.ndarray) -> np.ndarray:
+        c = cov[after]
+        return np.stack([c[:, crb.IS, crb.IS], c[:, crb.IX, crb.IX] + c[:, crb.IY, crb.IY]], axis=1)
+
+    return pick(res.pcrb_cov), pick(events.cov)
 
 
-def figures(name: str, seeds: int, rate_prior_mps2: float) -> tuple[float, float]:
-    """RMS sigma_s over the events after AFTER_S and the seeds: (the simulator's bound, the
-    bound with the rate unknown), m/s."""
-    held, rate = zip(*(sos_bounds(name, s, rate_prior_mps2) for s in range(1, seeds + 1)))
-    return (math.sqrt(np.mean(np.concatenate(held))), math.sqrt(np.mean(np.concatenate(rate))))
+def figures(name: str, seeds: int, rate_prior_mps2: float) -> tuple[np.ndarray, np.ndarray]:
+    """RMS over the events after AFTER_S and the seeds of (sigma_s, m/s; sigma_xy, mm): the
+    simulator's bound, and the bound with the rate unknown."""
+    held, rate = zip(*(bounds(name, s, rate_prior_mps2) for s in range(1, seeds + 1)))
+    scale = np.array([1.0, 1e3])
+    return (np.sqrt(np.mean(np.concatenate(held), axis=0)) * scale,
+            np.sqrt(np.mean(np.concatenate(rate), axis=0)) * scale)
 
 
 def main() -> int:
@@ -56,8 +67,10 @@ def main() -> int:
     for name in args.scenarios.split(","):
         now, with_rate = figures(name, args.seeds, args.rate_prior)
         print(f"sos-rate-bound scenario={name} seeds={args.seeds} "
-              f"rate_prior_mps2={args.rate_prior:g} sos_pcrb_mps={now:.3f} "
-              f"sos_rate_pcrb_mps={with_rate:.3f}", flush=True)
+              f"rate_prior_mps2={args.rate_prior:g} sos_pcrb_mps={now[0]:.3f} "
+              f"sos_rate_pcrb_mps={with_rate[0]:.3f} pcrb_mm={now[1]:.1f} "
+              f"rate_pcrb_mm={with_rate[1]:.1f} pos_ratio={with_rate[1] / now[1]:.3f}",
+              flush=True)
     return 0
 
 
