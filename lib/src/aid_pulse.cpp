@@ -163,7 +163,7 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
         f->rejected_[beacon_index] += 1;
         return BL_OK;
     }
-    // The speed of sound's drift detector sees this update's correction (filter.cpp).
+    // The speed of sound's drift detector sees this update's correction (filter_sos.cpp).
     note_sos_correction(f, x(S) - f->x_[S], f->P_[S * NX + S] - P(S, S));
     int64_t epoch = f->epoch_us_;
     uint32_t ref = f->ref_beacon_;

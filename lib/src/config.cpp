@@ -107,7 +107,7 @@ extern "C" int bl_config_default(bl_config *cfg)
     // configured radius: it trades against the speed of sound (both scale
     // distances) and learning it costs the position bound 8-10 % on
     // kleeman-lab (σ 0.01-0.05), the difference 1.3 %, which the published
-    // two-hypothesis average (filter.cpp average_wheel_hypotheses) gives back
+    // two-hypothesis average (filter_estimate.cpp average_wheel_hypotheses) gives back
     // on nominal wheels. docs/performance.md "Wheel calibration".
     cfg->sigma_wheel_scale = real(0.05);
     cfg->sigma_wheel_scale_common = real(0);

@@ -1,6 +1,7 @@
 // beaconloc — Kleeman's (1992) iterated EKF: ultrasonic beacon arrival
 // times + differential-drive dead reckoning (filter.h, filter_model.h).
-// This file: init, start, the process models and predicts, the estimate.
+// This file: init, start, the process models and predicts; the speed of
+// sound's model: filter_sos.cpp; the published estimate: filter_estimate.cpp.
 // Measurements: aid_pulse.cpp (arrival times), aid_wheels.cpp (wheel
 // speeds), aid_bearing.cpp (bearings), all through the shared update
 // fuse_scalar (fusion.cpp); the snapshot (re)start: snapshot.cpp (pulses),
@@ -117,107 +118,6 @@ void cv_model(const VX &x, real dt, VX &xo, SparseEntry *d)
 
 }  // namespace
 
-// The speed of sound in moving air: two models, one filter (ours; Kleeman
-// 1992 eq. 15 holds s constant). "Still" air: s a random walk of σ_d
-// (speed_of_sound_drift_mps_per_sqrt_s). "Drifting" air (a temperature
-// swing): the same random walk plus a rate r (m/s²), s(t + dt) = s + r·dt.
-// The drift model's rate r̂, its variance P_rr and its covariance with s
-// P_sr live beside the filter (bl_sos_drift): the filter's state augmented
-// by one component that no measurement sees directly and that correlates
-// with the other states only through s (a two-stage augmentation,
-// Friedland 1969: P_r,j = β·P_s,j, β = P_sr/P_ss), so a pulse update's
-// correction of s moves r̂ by β times as much (note_sos_correction). The
-// drift model also keeps its own s, ahead of the filter's by δ = lead_mps
-// (the rate the filter did not take, below), so that its corrections are
-// its own innovations, not the filter's lag. Prediction over dt:
-//   drift model (Singer 1970, the rate a first-order Gauss–Markov process
-//   of variance r_d² and time T_r = kSosRateTime_s; the (s, r) pair
-//   propagated as a kinematic model, Bar-Shalom, Li & Kirubarajan 2001
-//   ch. 6, first order in dt):
-//     a = e^{-dt/T_r},  r̂ ← a r̂,  P_sr ← a P_sr,  P_rr ← a² P_rr + (1 - a²) r_d²,
-//   which model holds: r̂ is sufficient for r, and under each hypothesis it is
-//   zero-mean Gaussian with variance V1 = r_d² - P_rr (drift, r ~ N(0, r_d²))
-//   or V0 = V1·P_rr/r_d² (still, r = 0: the part of r̂ that is noise). With the
-//   prior π = kSosDriftPrior the drift model's posterior weight (a two-model
-//   Bayesian switch, Bar-Shalom et al. §11.6 without the mixing step) is
-//     w = π L_d / (π L_d + (1 - π) L_s),  L_s/L_d = √(V1/V0)·e^{-½ r̂² (1/V0 - 1/V1)},
-//   the filter takes the mixture's rate, the drift model the whole:
-//     s += w·r̂·dt,  δ += (1 - w)·r̂·dt,
-//   and its covariance (the rate's error carried into s with weight w², ours:
-//   measured, w instead gave kleeman-lab 0.824 m/s against 0.799, 8 seeds,
-//   prior 10 %; the random walk σ_d covers the rate the filter did not take):
-//     P_ss += w² (2 P_sr dt + P_rr dt²) + σ_d² dt,  P_s,j *= 1 + w² β dt (j ≠ s),
-//     P_sr += P_rr dt.
-// In still air r̂ stays within its noise, w ≈ π and s is the random walk
-// alone; along a temperature ramp r̂ settles on the rate and w → 1.
-void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
-{
-    const real rd2 = sos_drift_rate_mps2(cfg) * sos_drift_rate_mps2(cfg);  // r_d² ((m/s²)²)
-    // e^{-dt/T_r} to first order (dt, the predict step, is far below T_r)
-    const real a = real(1) / (real(1) + dt / kSosRateTime_s);
-    const real r = sos.rate_mps2 * a;
-    const real Prr = a * a * sos.rate_var_m2ps4 + (real(1) - a * a) * rd2;
-    real Psr = sos.rate_cov_m2ps3 * a;
-    // (s, r) stays positive semi-definite, P_sr² <= P_rr P_ss, where an
-    // update this model did not see (range, bearing) shrank P_ss.
-    const real Psr_max = std::sqrt(Prr * P(S, S));
-    Psr = Psr > Psr_max ? Psr_max : (Psr < -Psr_max ? -Psr_max : Psr);
-    // w = 1 / (1 + (1 - π)/π · L_s/L_d) (one exp, no log: make size-m4's flash)
-    const real V1 = (rd2 > Prr ? rd2 - Prr : real(0)) + kSosRateVarFloor_m2ps4;
-    const real V0 = V1 * Prr / (rd2 + kSosRateVarFloor_m2ps4) + kSosRateVarFloor_m2ps4;  // r_d = 0 too
-    const real e = real(0.5) * r * r * (real(1) / V0 - real(1) / V1);
-    const real odds_still = (real(1) - kSosDriftPrior) / kSosDriftPrior * std::sqrt(V1 / V0);
-    const real w = e > real(60) ? real(1) : real(1) / (real(1) + odds_still * std::exp(-e));
-    x(S) += w * r * dt;
-    sos.lead_mps += (real(1) - w) * r * dt;
-    const real w2 = w * w;
-    const real beta = P(S, S) > real(0) ? Psr / P(S, S) : real(0);  // β (1/s)
-    const real Pss = P(S, S) + w2 * (real(2) * Psr * dt + Prr * dt * dt) +
-                     cfg->speed_of_sound_drift_mps_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s * dt;
-    const real c = real(1) + w2 * beta * dt;
-    P.row(S) *= c;
-    P.col(S) *= c;
-    P(S, S) = Pss;
-    sos.rate_mps2 = r;
-    sos.rate_cov_m2ps3 = Psr + Prr * dt;
-    sos.rate_var_m2ps4 = Prr;
-}
-
-// The drift model at its start: no rate, with its prior r_d².
-void sos_drift_start(const bl_config *cfg, SosDrift &sos)
-{
-    sos.rate_mps2 = sos.rate_cov_m2ps3 = sos.lead_mps = real(0);
-    sos.rate_var_m2ps4 = sos_drift_rate_mps2(cfg) * sos_drift_rate_mps2(cfg);
-}
-
-void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2)
-{
-    bl_sos_drift &sos = f->sos_drift_;
-    const real Pss = f->P_[S * NX + S];
-    // Start-up: while s is still as uncertain as a drift over a window
-    // (σ_s > r_d·τ, e.g. the 5 m/s prior) its corrections are convergence
-    // from the prior, not drift: the drift model starts afresh.
-    const real sd = sos_drift_rate_mps2(&f->cfg_) * kSosDriftWindow_s;
-    if (Pss > sd * sd || !(Pss > real(0))) {
-        sos_drift_start(&f->cfg_, sos);
-        return;
-    }
-    // The drift model's own correction: its s is δ ahead, so its innovation
-    // is the filter's minus H_s δ, and its correction Δs - (ΔP_ss/P_ss)·δ
-    // (K_s H_s = ΔP_ss/P_ss for the scalar update); δ shrinks by as much.
-    const real k = var_drop_mps2 / Pss;
-    const real ds_drift_mps = ds_mps - k * sos.lead_mps;
-    sos.lead_mps -= k * sos.lead_mps;
-    // The rate's share of the update (two-stage augmentation, above): the
-    // full filter's gain on r is β times its gain on s, so
-    //   r̂ += β Δs,  P_rr -= β² ΔP_ss,  P_sr = β P_ss⁺  (β unchanged).
-    const real beta = sos.rate_cov_m2ps3 / Pss;
-    sos.rate_mps2 += beta * ds_drift_mps;
-    const real Prr = sos.rate_var_m2ps4 - beta * beta * var_drop_mps2;
-    sos.rate_var_m2ps4 = Prr > real(0) ? Prr : real(0);
-    sos.rate_cov_m2ps3 = beta * (Pss - var_drop_mps2);
-}
-
 namespace {
 
 // Random walk of T over dt (beacon clock drift) and of the wheel scales
@@ -240,7 +140,10 @@ void add_parameter_noise(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real
     }
 }
 
-// Constant-velocity prediction with white acceleration noise on v and ω.
+}  // namespace
+
+// Constant-velocity prediction with white acceleration noise on v and ω
+// (filter_internal.hpp).
 void cv_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
 {
     VX xo;
@@ -275,8 +178,6 @@ void cv_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
     add_parameter_noise(cfg, sos, x, Pn, dt);
     symmetrise(Pn);
 }
-
-}  // namespace
 
 // ------------------------------------------------------- time reference
 
@@ -325,120 +226,7 @@ bool converged_now(const bl_config *cfg, const MX &P)
     return m < cfg->converged_sigma_xy_m * cfg->converged_sigma_xy_m;
 }
 
-// The published pose of a calibrating filter: two hypotheses on the
-// wheels, one filter (ours). H0: the wheels are as configured, the scale
-// difference δ = (k_r - k_l)/2 is 0; H1: δ is unknown, prior N(0, σ_δ²),
-// σ_δ² = σ_w² - σ_c² (start_wheel_scales, eq. 1). The filter runs H1 (it
-// learns δ); H0 is nested in it (δ = 0), so
-//   - the estimate under H0 is H1's posterior conditioned on δ = 0 (exact for
-//     a linear-Gaussian model; Anderson & Moore 1979 §3.2): with c = P_{·δ} =
-//     (P_{·k_r} - P_{·k_l})/2, p = P_δδ, g = c·δ̂/p:
-//       x₀ = x - g,  P₀ = P - c cᵀ/p;
-//   - the Bayes factor of H0 against H1 is the Savage–Dickey density ratio
-//     (Dickey 1971; Verdinelli & Wasserman 1995), H1's posterior over its
-//     prior density of δ at 0:
-//       B₀₁ = N(0; δ̂, p) / N(0; 0, σ_δ²) = √(σ_δ²/p)·e^{-δ̂²/(2p)},
-//     posterior weight w₀ = π B₀₁ / (π B₀₁ + 1 - π), π = kWheelsNominalPrior;
-//   - the published estimate is the two-model average (Bar-Shalom, Li &
-//     Kirubarajan 2001 §11.6.6, the IMM's output combination):
-//       x̄ = x - w₀ g,  P̄ = P - w₀ c cᵀ/p + w₀ (1 - w₀) g gᵀ.
-// Why: the beacons learn δ only as fast as a heading drift shows it, and
-// not knowing δ costs the position bound 1.3 % on kleeman-lab (the
-// simulator's PCRB with δ an unknown state, docs/performance.md "Wheel
-// calibration"); nominal wheels keep w₀ ≈ 1 (|δ̂| within ~2.8 σ) and so the
-// uncalibrated filter's accuracy, worn ones (8 %: δ̂ at > 8 σ within 20 s)
-// get w₀ = 0, the calibrated estimate. The filter's own state, gates and
-// wheel-scale outputs stay H1's. xm, Pm: x and P's leading (x, y, θ, v, ω,
-// s) block, replaced by x̄, P̄.
-constexpr real kWheelsNominalPrior = real(0.5);  // π: prior probability of H0 (dimensionless)
-constexpr int kOut = S + 1;                      // x, y, θ, v, ω, s
-static_assert(X == 0 && Y == 1 && TH == 2 && V == 3 && W == 4 && S == 5, "published block");
-template <class XV, class PM>
-void average_wheel_hypotheses(const bl_config *cfg, const XV &x, const PM &P, real *xm, real (*Pm)[kOut])
-{
-    for (int r = 0; r < kOut; ++r) {
-        xm[r] = x(r);
-        for (int c = 0; c < kOut; ++c) Pm[r][c] = P(r, c);
-    }
-    const real sw = cfg->sigma_wheel_scale;
-    const real sc = cfg->sigma_wheel_scale_common < sw ? cfg->sigma_wheel_scale_common : sw;
-    const real p0 = sw * sw - sc * sc;                                          // σ_δ², eq. (1) (dimensionless²)
-    const real d = real(0.5) * (x(KR) - x(KL));                                 // δ̂ (dimensionless)
-    const real p = real(0.25) * (P(KL, KL) + P(KR, KR) - real(2) * P(KL, KR));  // P_δδ (dimensionless²)
-    if (!(p0 > real(0)) || !(p > real(0))) return;                              // no calibration, or δ known
-    // w₀ = 1 / (1 + (1 - π)/π / B₀₁), 1/B₀₁ = √(p/σ_δ²)·e^{δ̂²/(2p)} (one exp, no log)
-    const real e = real(0.5) * d * d / p;
-    const real w0 = e > real(60) ? real(0)
-                                 : real(1) / (real(1) + (real(1) - kWheelsNominalPrior) / kWheelsNominalPrior *
-                                                            std::sqrt(p / p0) * std::exp(e));
-    real cv[kOut];  // c = P_{·δ}, in the unit of each state (m, rad, m/s, rad/s, m/s)
-    for (int r = 0; r < kOut; ++r) cv[r] = real(0.5) * (P(r, KR) - P(r, KL));
-    for (int r = 0; r < kOut; ++r) {
-        const real gr = cv[r] * d / p;
-        xm[r] -= w0 * gr;
-        for (int c = 0; c < kOut; ++c) Pm[r][c] += -w0 * cv[r] * cv[c] / p + w0 * (real(1) - w0) * gr * (cv[c] * d / p);
-    }
-}
-
-// XV, PM: VX and MX, or Maps of the filter's own storage (no copy).
-template <class XV, class PM>
-void fill_estimate(const bl_filter *f, const XV &x, const PM &P, int64_t t_us, bl_estimate *est)
-{
-    const bl_config *cfg = &f->cfg_;
-    std::memset(est, 0, sizeof *est);
-    est->t_us = t_us;
-    est->started = started(f);
-    est->reset_counter = f->reset_count_;
-    est->wheel_speed_fused = f->wheel_fused_;
-    est->wheel_speed_refused = f->wheel_refused_;
-    for (uint32_t i = 0; i < BL_MAX_BEACONS; ++i) {
-        est->accepted[i] = f->accepted_[i];
-        est->rejected[i] = f->rejected_[i];
-#if BL_WITH_BEARINGS
-        est->bearing_accepted[i] = f->bearing_accepted_[i];
-        est->bearing_rejected[i] = f->bearing_rejected_[i];
-#endif
-#if BL_WITH_RANGES
-        est->range_accepted[i] = f->range_accepted_[i];
-        est->range_rejected[i] = f->range_rejected_[i];
-#endif
-    }
-#if BL_WITH_TEAM
-    for (uint32_t k = 0; k < BL_TEAM_MAX_BEACONS; ++k) {
-        est->team_range_accepted[k] = f->team_accepted_[k];
-        est->team_range_rejected[k] = f->team_rejected_[k];
-    }
-#endif
-#if BL_WITH_SONAR
-    est->sonar_accepted = f->sonar_accepted_;
-    est->sonar_rejected = f->sonar_rejected_;
-    est->sonar_unmatched = f->sonar_unmatched_;
-    est->sonar_dropped = f->sonar_dropped_;
-#endif
-    if (!est->started) return;
-    real xm[kOut], Pm[kOut][kOut];
-    average_wheel_hypotheses(cfg, x, P, xm, Pm);
-    est->x_m = xm[X];
-    est->y_m = xm[Y];
-    est->theta_rad = bl::wrap_angle(xm[TH]);
-    est->v_mps = xm[V];
-    est->omega_radps = xm[W];
-    est->speed_of_sound_mps = xm[S];
-    est->period_s = x(T);
-    // Firing time of beacon index 0 of the reference's cycle.
-    const double t0_b1_s = double(x(T0)) - double(f->ref_beacon_) * double(x(T));
-    est->t0_us = f->epoch_us_ + int64_t(std::llround(t0_b1_s * 1e6));
-    est->sigma_speed_of_sound_mps = std::sqrt(Pm[S][S]);
-    est->sigma_period_s = std::sqrt(P(T, T));
-    est->sigma_t0_s = std::sqrt(P(T0, T0));
-    est->wheel_scale_left = x(KL);
-    est->wheel_scale_right = x(KR);
-    est->sigma_wheel_scale_left = std::sqrt(P(KL, KL));
-    est->sigma_wheel_scale_right = std::sqrt(P(KR, KR));
-    for (int r = 0; r < 5; ++r)
-        for (int c = 0; c < 5; ++c) est->cov[r * 5 + c] = Pm[r][c];
-    est->converged = (f->flags_ & kFlagConverged) != 0;
-}
+}  // namespace
 
 int check_time(const bl_filter *f, int64_t t_us)
 {
@@ -448,8 +236,6 @@ int check_time(const bl_filter *f, int64_t t_us)
     if (!(gap <= f->cfg_.max_predict_gap_s)) return BL_ETIME;
     return BL_OK;
 }
-
-}  // namespace
 
 // Wheel scales at a (re)start: a robot property, not a pose one, so a
 // started filter keeps its calibration (and its covariance block); a first
@@ -845,40 +631,6 @@ extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
 #if BL_WITH_TEAM
     team_cross(f) = C;
 #endif
-    return BL_OK;
-}
-
-extern "C" int bl_filter_get_state(const bl_filter *f, bl_real x[BL_FILTER_NX], bl_real P[BL_FILTER_NX * BL_FILTER_NX])
-{
-    if (f == nullptr) return BL_EINVAL;
-    if (!started(f)) return BL_ENOTINIT;
-    if (x) std::memcpy(x, f->x_, sizeof f->x_);
-    if (P) std::memcpy(P, f->P_, sizeof f->P_);
-    return BL_OK;
-}
-
-extern "C" int bl_filter_estimate(const bl_filter *f, bl_estimate *est)
-{
-    if (f == nullptr || est == nullptr) return BL_EINVAL;
-    if (!initialised(f)) return BL_ENOTINIT;
-    fill_estimate(f, state(f), cov(f), f->t_us_, est);
-    return BL_OK;
-}
-
-extern "C" int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estimate *est)
-{
-    if (f == nullptr || est == nullptr) return BL_EINVAL;
-    if (!started(f)) return BL_ENOTINIT;
-    const int trc = check_time(f, t_us);
-    if (trc != BL_OK) return trc;
-    VX x = state(f);
-    MX P = cov(f);
-    SosDrift sos = f->sos_drift_;  // a copy: *f is const
-    cv_predict(&f->cfg_, sos, x, P, bl::us_to_s(t_us - f->t_us_));
-    // As bl_filter_predict: a non-finite extrapolation (a huge but finite
-    // state or P) is refused, never returned (found by fuzzing).
-    if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
-    fill_estimate(f, x, P, t_us, est);
     return BL_OK;
 }
 

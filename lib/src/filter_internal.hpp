@@ -1,5 +1,6 @@
 // beaconloc — private parts of the filter shared by its translation units:
-// filter.cpp (init, start, predict, estimate), snapshot.cpp (the snapshot
+// filter.cpp (init, start, predict), filter_sos.cpp (the speed of sound's
+// model), filter_estimate.cpp (the estimate), snapshot.cpp (the snapshot
 // (re)start and its last-pulse table), aid_pulse.cpp (pulse arrival times),
 // aid_wheels.cpp (wheel speeds), aid_bearing.cpp (bearings),
 // snapshot_bearing.cpp (the triangulation (re)start). Every measurement goes through fuse_scalar
@@ -51,7 +52,7 @@ bool all_finite(const bl_real *v, int n);
 // differential drive (χ = 1).
 inline real effective_base_m(const bl_config *cfg) { return cfg->wheels.skid_factor * cfg->wheel_base_m; }
 
-// ---- filter.cpp
+// ---- filter.cpp (and filter_sos.cpp: the speed of sound's model)
 // t0 += k·T (the reference moves k firing slots), then whole microseconds
 // move from the t0 offset into the epoch.
 void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k);
@@ -63,7 +64,7 @@ void start_wheel_scales(const bl_filter *f, VX &x, MX &P);
 // when calibration is on; nothing else survives. The localizer's restart
 // after a time gap (localizer.cpp reinit_filter).
 void reinit_keeping_wheel_scales(bl_filter *f);
-// The speed of sound's two models (filter.cpp, sos_drift_predict): the
+// The speed of sound's two models (filter_sos.cpp, sos_drift_predict): the
 // prediction of s over dt (s) with the drift model's rate (bl_sos_drift),
 // updated; the drift model at a start; and an accepted update's correction
 // of s, ds_mps, with the drop of P_ss it made, into the drift model.
@@ -95,6 +96,13 @@ constexpr real kSosDriftPrior = real(0.005);
 constexpr real kSosRateVarFloor_m2ps4 = real(1e-12);
 // Store x, P as the filter's state and update the converged flag.
 void commit(bl_filter *f, const VX &x, const MX &P);
+// The constant-velocity prediction over dt (s) with the parameters' noise
+// and the speed of sound's model (filter.cpp; bl_filter_predict and the
+// estimate's extrapolation, filter_estimate.cpp).
+void cv_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt);
+// BL_OK if t_us is not before the state's time and within the predict gap,
+// else BL_ETIME.
+int check_time(const bl_filter *f, int64_t t_us);
 
 // ---- snapshot.cpp
 // Keep a pulse in the last-pulse table (explained: it was fused).

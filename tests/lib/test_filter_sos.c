@@ -1,4 +1,4 @@
-/* The speed of sound's two models (filter.cpp sos_drift_predict; issue 14
+/* The speed of sound's two models (filter_sos.cpp sos_drift_predict; issue 14
  * item 1): in still air s stays tight, in a temperature ramp it follows,
  * one filter with the default tuning for both. Synthetic world:
  * filter_world.h. */
@@ -41,7 +41,7 @@ static void test_still_air_tight(void **state)
 
 /* A 6 m/s ramp over 60 s (0.1 m/s per s, 10 °C per minute) from 40 s, and
  * the minute after: RMS error 0.91 m/s (float 0.82) with the drift model's
- * estimated rate (filter.cpp sos_drift_predict); the model before it, the
+ * estimated rate (filter_sos.cpp sos_drift_predict); the model before it, the
  * change D over 20 s fed forward as w·D/τ: 1.21 (float 1.09); the still-air
  * random walk alone: 1.32 (float 1.18). */
 static void test_ramp_followed(void **state)

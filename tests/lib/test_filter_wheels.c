@@ -1,7 +1,7 @@
 /* cmocka tests of the online wheel-scale calibration (filter.h, config.h
  * sigma_wheel_scale, sigma_wheel_scale_common): the prior's split into a
  * common scale and a difference, the published two-hypothesis average
- * (filter.cpp average_wheel_hypotheses), and the closed loop on the
+ * (filter_estimate.cpp average_wheel_hypotheses), and the closed loop on the
  * simulated robot: nominal wheels at the uncalibrated filter's accuracy,
  * worn wheels learned without the speed of sound absorbing them.
  * World and helpers shared with the other test_filter_*.c: filter_world.h. */
@@ -52,7 +52,7 @@ static void test_wheel_scale_prior_split(void **state)
  * solved for the moving receiver (Kleeman 1992 eq. 20). At every 50th
  * encoder step the published estimate is checked against the two-hypothesis
  * average computed here, in double, from the filter's own x and P
- * (filter.cpp average_wheel_hypotheses). Returns the final H0 weight w₀
+ * (filter_estimate.cpp average_wheel_hypotheses). Returns the final H0 weight w₀
  * and the learned difference δ̂ = (k_r - k_l)/2. */
 static void drive_and_check(double kl, double kr, double *w0_end, double *delta_end)
 {

@@ -255,7 +255,7 @@ typedef struct bl_config {
                                          0.2. On top of it the filter feeds forward a
                                          rate it estimates from its own corrections of s,
                                          once they show one (typical rate 0.5/√s × this:
-                                         0.1 m/s² = 10 °C/min at 0.2; filter.cpp
+                                         0.1 m/s² = 10 °C/min at 0.2; filter_sos.cpp
                                          sos_drift_predict); 0.01 declares still air */
     bl_real period_drift_s_per_sqrt_s;           /* random walk of T, >= 0 */
     bl_real wheel_scale_drift_per_sqrt_s;        /* random walk of each wheel scale

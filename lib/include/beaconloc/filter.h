@@ -147,7 +147,7 @@ enum {
     BL_IX_KR = 9     /* right wheel scale, 1 */
 };
 
-/* The speed of sound's drift model (filter.cpp, sos_drift_predict), a
+/* The speed of sound's drift model (filter_sos.cpp, sos_drift_predict), a
  * PRIVATE part of bl_filter. */
 typedef struct bl_sos_drift {
     bl_real rate_mps2;      /* r: the drift model's rate of s (m/s²) */
@@ -254,7 +254,7 @@ typedef struct bl_filter_prior {
  * covariance are the average of two hypotheses on the wheels, "as
  * configured" (scale difference 0: the state conditioned on it) and
  * "unknown difference" (the state), weighted by the Savage–Dickey Bayes
- * factor (filter.cpp average_wheel_hypotheses; lib/README.md "Online
+ * factor (filter_estimate.cpp average_wheel_hypotheses; lib/README.md "Online
  * wheel-scale calibration"); bl_filter_get_state returns the state itself.
  * Without calibration both are the state. */
 typedef struct bl_estimate {
