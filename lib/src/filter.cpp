@@ -116,10 +116,6 @@ void cv_model(const VX &x, real dt, VX &xo, SparseEntry *d)
     }
 }
 
-}  // namespace
-
-namespace {
-
 // Random walk of T over dt (beacon clock drift) and of the wheel scales
 // (tyre wear, load), and the speed of sound's model (sos_drift_predict);
 // none on the scales when calibration is off (sigma_wheel_scale = 0: they
