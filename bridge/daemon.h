@@ -107,7 +107,7 @@ struct daemon {
     unsigned fref_next;
     uint64_t last_sent_measurement; /* measurement_seq of the last ODOMETRY sent */
     int64_t last_odom_local_us;
-    int64_t next_odom_due_us; /* next ODOMETRY slot on a fixed grid (local us) */
+    int64_t next_odom_due_us; /* start of the next ODOMETRY slot (local us): odom_grid_next */
     bool odom_sent_once;
     uint64_t odom_sent, hb_sent;
     uint64_t frames_total;
@@ -139,6 +139,8 @@ bool can_is_down(const struct daemon *d);
 
 /* ---- odometry.c ---- */
 int64_t odom_period_us(const struct daemon *d);
+int64_t odom_grid_next(const struct daemon *d, int64_t t);
+int64_t odom_timer_next(const struct daemon *d, int64_t t);
 int quality_of(const struct est_output *o);
 /* After a frame (or a tick that fused a late pulse): publish the update. */
 void after_update(struct daemon *d);

@@ -24,15 +24,36 @@ int quality_of(const struct est_output *o)
     return mav_quality_from_state_cov(o->cov);
 }
 
-/* ODOMETRY slots lie on a fixed grid (due += period), so the long-run rate is
- * the configured one whatever the phase of the sensor frames that trigger the
- * sends; after a stall of more than one period the grid restarts at now. */
-static void odom_advance_slot(struct daemon *d, int64_t now)
+/* The first cell boundary of the ODOMETRY grid after t (bridge clock, us):
+ * the grid is the multiples of the period on the bridge's clock (the log's in
+ * replay, CLOCK_MONOTONIC live), fixed by neither the first frame nor the
+ * history of sends. */
+int64_t odom_grid_next(const struct daemon *d, int64_t t)
 {
     int64_t period = odom_period_us(d);
-    d->next_odom_due_us += period;
-    if (d->next_odom_due_us <= now)
-        d->next_odom_due_us = now + period;
+    int64_t k = t / period; /* floor for t >= 0; the clocks are positive */
+    return (k + 1) * period;
+}
+
+/* The ODOMETRY timer's next expiry after t: mid-cell (the grid shifted by
+ * half a period), so that a sensor frame in a cell's first half takes the
+ * slot itself (sent at once, latency its own processing) and the timer sends
+ * only for sensors quiet that long, extrapolating (on_odom_timer). On the
+ * grid itself it would take every slot from the frames, each carrying the
+ * previous frame's update up to a frame period late. */
+int64_t odom_timer_next(const struct daemon *d, int64_t t)
+{
+    int64_t half = odom_period_us(d) / 2;
+    return odom_grid_next(d, t - half) + half;
+}
+
+/* ODOMETRY slots are the cells of that grid: at most one send per cell, so
+ * the long-run rate is the configured one whatever the phase of the sensor
+ * frames that trigger the sends, and two replays of the same frames send on
+ * the same slots wherever their logs begin (docs/soak.md "Latency"). */
+static void odom_advance_slot(struct daemon *d, int64_t now)
+{
+    d->next_odom_due_us = odom_grid_next(d, now);
 }
 
 void frame_ref_note(struct daemon *d, int64_t rx_us)

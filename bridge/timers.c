@@ -97,13 +97,17 @@ int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us)
 {
     struct timer *t = &d->timers[id];
     t->period_us = period_us;
+    /* The ODOMETRY timer in the middle of the send slots' cells (on the
+     * bridge's clock: odom_timer_next); the others a period after now. */
+    bool grid = id == T_ODOM;
     if (d->mode != MODE_LIVE) { /* replay: timers on the log's clock */
-        t->next_us = d->log_now_us + period_us;
+        t->next_us = grid ? odom_timer_next(d, d->log_now_us) : d->log_now_us + period_us;
         return 0;
     }
+    int64_t first_us = grid ? odom_timer_next(d, mono_us()) : period_us;
     struct itimerspec its = {
         .it_interval = {period_us / 1000000, (period_us % 1000000) * 1000},
-        .it_value = {period_us / 1000000, (period_us % 1000000) * 1000},
+        .it_value = {first_us / 1000000, (first_us % 1000000) * 1000},
     };
     if (t->p.fd < 0) {
         int fd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
@@ -118,7 +122,7 @@ int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us)
             return rc;
         }
     }
-    if (timerfd_settime(t->p.fd, 0, &its, NULL) < 0) {
+    if (timerfd_settime(t->p.fd, grid ? TFD_TIMER_ABSTIME : 0, &its, NULL) < 0) {
         int e = errno;
         log_error("%s timer: timerfd_settime %" PRId64 " us: %s", timer_names[id], period_us,
                   strerror(e));
@@ -151,8 +155,11 @@ void soft_timers_advance(struct daemon *d, int64_t t)
             return;
         int64_t when = d->timers[best].next_us;
         d->timers[best].next_us += d->timers[best].period_us;
-        if (d->timers[best].next_us <= t - 10 * d->timers[best].period_us)
-            d->timers[best].next_us = t; /* a gap in the log: do not replay it */
+        if (d->timers[best].next_us <= t - 10 * d->timers[best].period_us) {
+            /* a gap in the log: do not replay it (the ODOMETRY timer keeps its phase) */
+            int64_t p = d->timers[best].period_us;
+            d->timers[best].next_us = best == T_ODOM ? odom_timer_next(d, t - p) : t;
+        }
         d->log_now_us = when;
         fire_timer(d, (enum timer_id)best, when);
     }

@@ -258,6 +258,36 @@ def test_fast_replay_odometry_on_log_clock(bridge_bin, kleeman_log, tmp_path):
     assert stats["run_time_s"] < 10
 
 
+def test_odometry_slots_fixed_by_the_clock_not_the_first_frame(bridge_bin, kleeman_log, tmp_path):
+    """The ODOMETRY slots are the cells of a grid of the period on the bridge's clock
+    (docs/bridge.md "Output timing"), so two replays of the same frames send the same
+    messages wherever their logs begin: after the start-up, the same time_usec (each
+    message's estimate time) in each. Counted from the first send, as they were,
+    dropping the log's first frames moved every slot and which frame took it (and the
+    latency figure with it, docs/soak.md "Latency")."""
+    log, _ = kleeman_log
+    lines = log.read_text().splitlines(keepends=True)
+    from bridge_helpers import free_udp_port
+    sent = []
+    for drop in (0, 1, 3):
+        src = tmp_path / f"drop{drop}.log"
+        src.write_text("".join(lines[drop:]))
+        proc, msgs = run_bridge_with_listener(
+            bridge_bin, ["--site", str(SITE), "--replay", str(src), "--speed", "20"],
+            free_udp_port())
+        assert proc.returncode == 0, proc.stderr
+        t = np.array([m.time_usec for m in msgs if m.get_type() == "ODOMETRY"], dtype=np.int64)
+        assert len(t) > 1000, proc.stderr
+        rate_hz = (len(t) - 1) / ((t[-1] - t[0]) / 1e6)
+        assert 28.5 <= rate_hz <= 30.5, rate_hz  # one per slot at most
+        # after the start-up (10 s of log), the same messages at the same log times
+        sent.append(t[t > t[0] + 10_000_000])
+    for other in sent[1:]:
+        common = np.intersect1d(sent[0], other)
+        assert len(common) >= 0.99 * min(len(sent[0]), len(other)), \
+            (len(common), len(sent[0]), len(other))
+
+
 def test_record_replays_identically(bridge_bin, kleeman_log, tmp_path):
     log, _ = kleeman_log
     rec = tmp_path / "rec.log"
