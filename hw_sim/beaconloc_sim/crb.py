@@ -233,20 +233,25 @@ IR = 8      # the speed of sound's rate, m/s^2 (with_sos_rate's 9th state)
 
 
 def with_sos_rate(F: np.ndarray, Q: np.ndarray, dt_s: float, s_change_mps: float,
-                  rate_mps2: float, next_rate_mps2: float) -> tuple[np.ndarray, np.ndarray]:
+                  rate_mps2: float, next_rate_mps2: float,
+                  rate_walk_m2ps5: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """F and Q of process_model for the state extended by the speed of sound's rate r (IR):
     a drift of unknown rate (the drifting-air model of the library's sos_drift_predict, its
     rate a state here instead of a feed-forward):
         s(k+1) = s(k) + r(k) dt,   r(k+1) = r(k),
     and, as process_model prices the true change of s (Q_ss = ds^2), the true departures
     from it: Q_ss = (ds - r_true(k) dt)^2 + (1e-4 m/s)^2 (zero on a ramp), Q_rr =
-    (r_true(k+1) - r_true(k))^2 + (1e-6 m/s^2)^2 (zero but where the ramp's rate changes).
+    (r_true(k+1) - r_true(k))^2 + (1e-6 m/s^2)^2 (zero but where the ramp's rate changes:
+    the bound is told when it changes). With rate_walk_m2ps5 = q, (m/s^2)^2/s, instead
+    Q_rr = q dt + (1e-6 m/s^2)^2: the rate a random walk of that intensity, its changes
+    spread over the run, so the bound is not told when they come (an estimator is not).
     F, Q: process_model's (8, 8); rates in m/s^2, dt_s in s, s_change_mps in m/s. (9, 9)."""
     F9, Q9 = np.eye(9), np.zeros((9, 9))
     F9[:8, :8], Q9[:8, :8] = F, Q
     F9[IS, IR] = dt_s
     Q9[IS, IS] = (s_change_mps - rate_mps2 * dt_s) ** 2 + (1e-4) ** 2
-    Q9[IR, IR] = (next_rate_mps2 - rate_mps2) ** 2 + (1e-6) ** 2
+    Q9[IR, IR] = ((next_rate_mps2 - rate_mps2) ** 2 if rate_walk_m2ps5 is None
+                  else rate_walk_m2ps5 * dt_s) + (1e-6) ** 2
     return F9, Q9
 
 
@@ -302,7 +307,8 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
     start: to go on from an earlier call, its returned end (J, state, wheel_left_m,
     wheel_right_m, time after its last event); then returns (covariances, end). Without it
     the recursion starts from the prior.
-    sos_rate: (prior sigma of the rate, m/s^2; (K,) true rate ds/dt at each event, m/s^2):
+    sos_rate: (prior sigma of the rate, m/s^2; (K,) true rate ds/dt at each event, m/s^2
+    [; the rate's random-walk intensity, (m/s^2)^2/s, with_sos_rate's rate_walk_m2ps5]):
     an analysis, not the simulator's bound (docs/performance.md, "Speed of sound"): the
     state gets a 9th entry, the speed of sound's rate r (IR), unknown with that prior, and s
     follows it (with_sos_rate); returns (K, 9, 9). Only without start.
@@ -337,7 +343,7 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
             F, Q = np.eye(8), np.diag(np.full(8, 1e-20))
         if sos_rate is not None and prev is not None:
             F, Q = with_sos_rate(F, Q, dt_s, states[k, IS] - prev[0][IS], sos_rate[1][k - 1],
-                                 sos_rate[1][k])
+                                 sos_rate[1][k], *sos_rate[2:])
         elif sos_rate is not None:           # the first event: the prior, as for the others
             F, Q = with_sos_rate(F, Q, 0.0, 0.0, 0.0, 0.0)
             Q[IS, IS] = Q[IR, IR] = 1e-20

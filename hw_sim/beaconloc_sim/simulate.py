@@ -278,10 +278,19 @@ def bound_model(scn: Scenario) -> crb.BoundModel:
         sigma_range_per_m=site.sigma_range_per_m)
 
 
+def true_sos_rate(scn: Scenario, t_s: np.ndarray) -> np.ndarray:
+    """The true rate ds/dt of the speed of sound at the times t_s, m/s^2: a central difference
+    over +-1 ms of the scenario's temperature profile (physics.acoustics' s of the
+    temperature)."""
+    h = 1e-3
+    return (ac.speed_of_sound_mps(scn.temperature_c(t_s + h))
+            - ac.speed_of_sound_mps(scn.temperature_c(t_s - h))) / (2 * h)
+
+
 def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
           clock: NodeClock, start: tuple | None = None, ranged: Ranges | None = None,
-          echoed: SonarPings | None = None, sos_rate_prior_mps2: float | None = None
-          ) -> tuple[BoundEvents, tuple | None]:
+          echoed: SonarPings | None = None, sos_rate_prior_mps2: float | None = None,
+          sos_rate_walk: float | None = None) -> tuple[BoundEvents, tuple | None]:
     """Bound after each measurement event: each firing with the receivers that really
     detected its direct pulse, each instant with bearings delivered (seen), each ping whose
     direct range was delivered (ranged), each sonar ping whose reading is the specular echo
@@ -289,7 +298,9 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
     the events (times, complete times, bound) and the recursion's end (crb.pcrb_along_path)
     to go on from in the next window. clock: the time base (event times and t0 on it).
     sos_rate_prior_mps2: an analysis (crb.with_sos_rate): the bound with the speed of sound's
-    rate an unknown of that prior, m/s^2, its covariances (K, 9, 9); not the truth's bound."""
+    rate an unknown of that prior, m/s^2, its covariances (K, 9, 9); not the truth's bound.
+    sos_rate_walk: with it, the rate a random walk of that intensity, (m/s^2)^2/s, whose
+    changes the bound is not told the instants of (crb.with_sos_rate's rate_walk_m2ps5)."""
     ranged = ranged if ranged is not None else Ranges.empty()
     echoed = echoed if echoed is not None else SonarPings.empty()
     if len(firings.t_s) + len(seen.t_s) + len(ranged.t_s) + len(echoed.t_s) == 0:
@@ -339,12 +350,9 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
     kw = dict(event_time_s=t_time, fires=is_fire, bearing_beacons_m=bearing_rows,
               range_beacons_m=range_rows, sonar_rows=sonar_rows)
     if sos_rate_prior_mps2 is not None:
-        # the true rate ds/dt at each event, m/s^2: central difference over +-1 ms of the
-        # scenario's temperature profile (physics.acoustics' s of the temperature)
-        h = 1e-3
-        rate = (ac.speed_of_sound_mps(scn.temperature_c(t_ev + h))
-                - ac.speed_of_sound_mps(scn.temperature_c(t_ev - h))) / (2 * h)
-        kw["sos_rate"] = (sos_rate_prior_mps2, rate)
+        rate = true_sos_rate(scn, t_ev)
+        kw["sos_rate"] = (sos_rate_prior_mps2, rate) if sos_rate_walk is None \
+            else (sos_rate_prior_mps2, rate, sos_rate_walk)
     complete = _complete_times(scn, t_ev, firings, det, ranged, echoed)
     if start is None:
         return BoundEvents(t_ev, complete, crb.pcrb_along_path(*args, **kw)), None

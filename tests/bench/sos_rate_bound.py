@@ -31,31 +31,45 @@ SCENARIOS = ("kleeman-lab", "temperature-swing10", "temperature-swing20")
 AFTER_S = 20.0      # the benchmark's start-up, s
 
 
-def bounds(name: str, seed: int, rate_prior_mps2: float) -> tuple[np.ndarray, np.ndarray]:
+def rate_walk(scn, t_s: np.ndarray) -> float:
+    """The random-walk intensity of the rate that spreads the run's true rate changes over
+    it: q = sum of (r(k+1) - r(k))^2 over the events / their span, (m/s^2)^2/s (swing10:
+    one change of 2 x 0.097 m/s^2 at 60 s in 120 s; still air 0)."""
+    r = simulate.true_sos_rate(scn, t_s)
+    return float(np.sum(np.diff(r) ** 2) / (t_s[-1] - t_s[0]))
+
+
+def bounds(name: str, seed: int, rate_prior_mps2: float) -> tuple[np.ndarray, ...]:
     """After each event after AFTER_S, (K, 2): sigma_s^2, (m/s)^2, and the position's
-    sigma_x^2 + sigma_y^2, m^2; first the simulator's bound, then the bound with the rate
-    unknown (prior rate_prior_mps2, m/s^2)."""
+    sigma_x^2 + sigma_y^2, m^2; the simulator's bound, the bound with the rate unknown
+    (prior rate_prior_mps2, m/s^2) but told when it changes, and the bound with the rate a
+    random walk (rate_walk: not told when). Last, (1, 2): the walk's intensity q."""
     scn = load_scenario(name, seed=seed)
     res = simulate.run(scn, encode=False)
-    events, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(), res.rx_clock,
-                               sos_rate_prior_mps2=rate_prior_mps2)
+    q = rate_walk(scn, res.pcrb_t_s)
+    told, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(), res.rx_clock,
+                             sos_rate_prior_mps2=rate_prior_mps2)
+    walk, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(), res.rx_clock,
+                             sos_rate_prior_mps2=rate_prior_mps2, sos_rate_walk=q)
     after = res.pcrb_t_s > AFTER_S
-    assert np.array_equal(events.t_s, res.pcrb_t_s)
+    assert np.array_equal(told.t_s, res.pcrb_t_s) and np.array_equal(walk.t_s, res.pcrb_t_s)
 
     def pick(cov: np.ndarray) -> np.ndarray:
         c = cov[after]
         return np.stack([c[:, crb.IS, crb.IS], c[:, crb.IX, crb.IX] + c[:, crb.IY, crb.IY]], axis=1)
 
-    return pick(res.pcrb_cov), pick(events.cov)
+    return pick(res.pcrb_cov), pick(told.cov), pick(walk.cov), np.array([[q, q]])
 
 
-def figures(name: str, seeds: int, rate_prior_mps2: float) -> tuple[np.ndarray, np.ndarray]:
+def figures(name: str, seeds: int, rate_prior_mps2: float) -> tuple[np.ndarray, ...]:
     """RMS over the events after AFTER_S and the seeds of (sigma_s, m/s; sigma_xy, mm): the
-    simulator's bound, and the bound with the rate unknown."""
-    held, rate = zip(*(bounds(name, s, rate_prior_mps2) for s in range(1, seeds + 1)))
+    simulator's bound, the bound with the rate unknown, the bound with the rate a random
+    walk; and the walk's intensity q, (m/s^2)^2/s (mean over the seeds)."""
+    per_seed = [bounds(name, s, rate_prior_mps2) for s in range(1, seeds + 1)]
     scale = np.array([1.0, 1e3])
-    return (np.sqrt(np.mean(np.concatenate(held), axis=0)) * scale,
-            np.sqrt(np.mean(np.concatenate(rate), axis=0)) * scale)
+    out = [np.sqrt(np.mean(np.concatenate([b[i] for b in per_seed]), axis=0)) * scale
+           for i in range(3)]
+    return (*out, float(np.mean([b[3][0, 0] for b in per_seed])))
 
 
 def main() -> int:
@@ -65,11 +79,13 @@ def main() -> int:
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     args = ap.parse_args()
     for name in args.scenarios.split(","):
-        now, with_rate = figures(name, args.seeds, args.rate_prior)
+        now, with_rate, walk, q = figures(name, args.seeds, args.rate_prior)
         print(f"sos-rate-bound scenario={name} seeds={args.seeds} "
               f"rate_prior_mps2={args.rate_prior:g} sos_pcrb_mps={now[0]:.3f} "
               f"sos_rate_pcrb_mps={with_rate[0]:.3f} pcrb_mm={now[1]:.1f} "
-              f"rate_pcrb_mm={with_rate[1]:.1f} pos_ratio={with_rate[1] / now[1]:.3f}",
+              f"rate_pcrb_mm={with_rate[1]:.1f} pos_ratio={with_rate[1] / now[1]:.3f} "
+              f"walk_q_m2ps5={q:.3g} sos_walk_pcrb_mps={walk[0]:.3f} "
+              f"walk_pcrb_mm={walk[1]:.1f} walk_pos_ratio={walk[1] / now[1]:.3f}",
               flush=True)
     return 0
 

@@ -207,3 +207,34 @@ def test_bound_with_the_sos_rate_unknown():
         unknown = rate_bound(0.1)
         assert np.all(unknown > held)
         assert math.sqrt(np.mean(unknown)) > 1.5 * math.sqrt(np.mean(held))
+
+
+
+def test_bound_with_the_sos_rate_a_random_walk():
+    """The rate a random walk (with_sos_rate's rate_walk_m2ps5) instead of told its true
+    changes: of intensity 0 it is the same bound where the rate never changes (still air),
+    and on the swing up and back, whose rate reverses at 60 s, the walk that spreads that
+    reversal over the run (q = sum of the rate's changes squared / span) gives a larger bound
+    on s than the one told when it comes."""
+    from beaconloc_sim.nodes import Bearings
+    for name in ("kleeman-lab", "temperature-swing10"):
+        scn = load_scenario(name)
+        res = simulate.run(scn, encode=False)
+        after = res.pcrb_t_s > 20
+
+        def bound(**kw):
+            ev, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(),
+                                   res.rx_clock, sos_rate_prior_mps2=0.1, **kw)
+            return ev.cov[after, crb.IS, crb.IS]
+
+        told = bound()
+        r = simulate.true_sos_rate(scn, res.pcrb_t_s)
+        q = float(np.sum(np.diff(r) ** 2) / (res.pcrb_t_s[-1] - res.pcrb_t_s[0]))
+        if name == "kleeman-lab":
+            assert q == 0.0
+            np.testing.assert_array_equal(bound(sos_rate_walk=0.0), told)
+        else:
+            # 20 -> 30 -> 20 degC over 120 s: the rate 5.8 m/s / 60 s, reversed once
+            assert q == pytest.approx((2 * 5.8 / 60) ** 2 / 120, rel=0.05)
+            walk = bound(sos_rate_walk=q)
+            assert math.sqrt(np.mean(walk)) > 1.02 * math.sqrt(np.mean(told))
