@@ -31,7 +31,9 @@ int quality_of(const struct est_output *o)
 int64_t odom_grid_next(const struct daemon *d, int64_t t)
 {
     int64_t period = odom_period_us(d);
-    int64_t k = t / period; /* floor for t >= 0; the clocks are positive */
+    int64_t k = t / period;
+    if (t % period < 0)
+        k--; /* floor, also for t < 0 (a log that starts at 0 s, minus half a period) */
     return (k + 1) * period;
 }
 
