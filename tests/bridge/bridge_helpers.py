@@ -49,9 +49,7 @@ def free_udp_port():
 def mavlink_listener(port):
     """pymavlink UDP listener with a large receive buffer."""
     from pymavlink import mavutil
+    from beaconloc_sim.udp import widen_receive_buffer
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
-    try:
-        conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
-    except OSError:
-        pass
+    widen_receive_buffer(conn.port)
     return conn

@@ -25,6 +25,8 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402  (MAVLINK20 must be set first)
 
+from beaconloc_sim.udp import widen_receive_buffer  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[2]
 BUILD = Path(os.environ.get("BL_BUILD", REPO / "build"))
 BRIDGE = BUILD / "bridge" / "beaconloc-bridge"
@@ -86,10 +88,6 @@ class Received:
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 
 
-SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)  # socket(7)
-RCVBUF_BYTES = 16 << 20
-
-
 class MavlinkListener:
     """Receives the bridge's udpout stream on udpin:127.0.0.1:PORT in a
     thread; keeps every message with the kernel's receive time of its
@@ -107,14 +105,8 @@ class MavlinkListener:
         self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
         # Room for seconds of the stream while this process is held up (a
         # replay at 20x sends ~2400 ODOMETRY/s; the default buffer, ~200 KiB
-        # of kernel memory, held 0.1 s of it and a busy host lost a quarter):
-        # SO_RCVBUFFORCE as root goes past net.core.rmem_max, SO_RCVBUF else.
-        for opt in (SO_RCVBUFFORCE, socket.SO_RCVBUF):
-            try:
-                self.sock.setsockopt(socket.SOL_SOCKET, opt, RCVBUF_BYTES)
-                break
-            except OSError:
-                continue
+        # of kernel memory, held 0.1 s of it and a busy host lost a quarter).
+        widen_receive_buffer(self.sock)
         # CLOCK_REALTIME - CLOCK_MONOTONIC (the kernel stamps in realtime)
         self.real_minus_mono_s = time.time() - time.monotonic()
         self.received: list[Received] = []

@@ -11,6 +11,8 @@ import time
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402  (MAVLINK20 must be set first)
 
+from ..udp import widen_receive_buffer  # noqa: E402
+
 HEARTBEAT_PERIOD_S = 1.0
 
 
@@ -77,6 +79,9 @@ class Receiver:
             # a client of a router's or MAVProxy's udpin/tcp port must speak first to be
             # sent anything (as a ground station does: a HEARTBEAT a second)
             self.sends_heartbeat = endpoint.startswith(("udpout:", "tcp:"))
+            if endpoint.startswith(("udpin:", "udpout:", "udp:")):
+                # a view the machine holds up for a moment loses no message (udp.py)
+                widen_receive_buffer(self.conn.port)
         self.count = 0
         self.last_msg_s = time.monotonic()
         self._stop = threading.Event()
