@@ -46,6 +46,7 @@ struct daemon;
 struct timer {
     struct pollable p; /* timerfd (live), not in the loop in replay */
     int64_t period_us; /* on the bridge clock */
+    int64_t phase_us;  /* its deadlines are phase_us + k·period_us (bridge clock) */
     int64_t next_us;   /* replay: next deadline on the log clock */
 };
 
@@ -107,7 +108,8 @@ struct daemon {
     unsigned fref_next;
     uint64_t last_sent_measurement; /* measurement_seq of the last ODOMETRY sent */
     int64_t last_odom_local_us;
-    int64_t next_odom_due_us; /* start of the next ODOMETRY slot (local us): odom_grid_next */
+    int64_t
+        next_odom_due_us; /* start of the next ODOMETRY slot (local us), a multiple of the period */
     bool odom_sent_once;
     uint64_t odom_sent, hb_sent;
     uint64_t frames_total;
@@ -139,8 +141,6 @@ bool can_is_down(const struct daemon *d);
 
 /* ---- odometry.c ---- */
 int64_t odom_period_us(const struct daemon *d);
-int64_t odom_grid_next(const struct daemon *d, int64_t t);
-int64_t odom_timer_next(const struct daemon *d, int64_t t);
 int quality_of(const struct est_output *o);
 /* After a frame (or a tick that fused a late pulse): publish the update. */
 void after_update(struct daemon *d);
@@ -155,6 +155,8 @@ void timers_init(struct daemon *d);
 /* The three timers at their periods; 0 or -errno (logged, exit code set). */
 int arm_all_timers(struct daemon *d);
 int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us);
+/* The first time phase_us + k·period_us strictly after t (us, any sign). */
+int64_t grid_next(int64_t t, int64_t period_us, int64_t phase_us);
 /* Replay: fire every timer due up to log time t, in time order. */
 void soft_timers_advance(struct daemon *d, int64_t t);
 /* Close the timerfds. */

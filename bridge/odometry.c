@@ -24,38 +24,16 @@ int quality_of(const struct est_output *o)
     return mav_quality_from_state_cov(o->cov);
 }
 
-/* The first cell boundary of the ODOMETRY grid after t (bridge clock, us):
- * the grid is the multiples of the period on the bridge's clock (the log's in
- * replay, CLOCK_MONOTONIC live), fixed by neither the first frame nor the
- * history of sends. */
-int64_t odom_grid_next(const struct daemon *d, int64_t t)
-{
-    int64_t period = odom_period_us(d);
-    int64_t k = t / period;
-    if (t % period < 0)
-        k--; /* floor, also for t < 0 (a log that starts at 0 s, minus half a period) */
-    return (k + 1) * period;
-}
-
-/* The ODOMETRY timer's next expiry after t: mid-cell (the grid shifted by
- * half a period), so that a sensor frame in a cell's first half takes the
- * slot itself (sent at once, latency its own processing) and the timer sends
- * only for sensors quiet that long, extrapolating (on_odom_timer). On the
- * grid itself it would take every slot from the frames, each carrying the
- * previous frame's update up to a frame period late. */
-int64_t odom_timer_next(const struct daemon *d, int64_t t)
-{
-    int64_t half = odom_period_us(d) / 2;
-    return odom_grid_next(d, t - half) + half;
-}
-
-/* ODOMETRY slots are the cells of that grid: at most one send per cell, so
- * the long-run rate is the configured one whatever the phase of the sensor
- * frames that trigger the sends, and two replays of the same frames send on
- * the same slots wherever their logs begin (docs/soak.md "Latency"). */
+/* ODOMETRY slots are the cells of a grid of the period on the bridge's clock
+ * (the log's in replay, CLOCK_MONOTONIC live), fixed by neither the first
+ * frame nor the history of sends: at most one send per cell, so the long-run
+ * rate is the configured one whatever the phase of the sensor frames that
+ * trigger the sends, and two replays of the same frames send on the same
+ * slots wherever their logs begin (docs/soak.md "Latency"). The ODOMETRY
+ * timer fires mid-cell (timers.c timer_arm). */
 static void odom_advance_slot(struct daemon *d, int64_t now)
 {
-    d->next_odom_due_us = odom_grid_next(d, now);
+    d->next_odom_due_us = grid_next(now, odom_period_us(d), 0);
 }
 
 void frame_ref_note(struct daemon *d, int64_t rx_us)

@@ -93,21 +93,35 @@ void timers_init(struct daemon *d)
         d->timers[i].p = (struct pollable){.fd = -1, .on_read = timer_readable, .owner = d};
 }
 
+int64_t grid_next(int64_t t, int64_t period_us, int64_t phase_us)
+{
+    int64_t u = t - phase_us;
+    int64_t k = u / period_us;
+    if (u % period_us < 0)
+        k--; /* floor, also below zero */
+    return phase_us + (k + 1) * period_us;
+}
+
 int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us)
 {
     struct timer *t = &d->timers[id];
+    bool live = d->mode == MODE_LIVE;
+    int64_t now = live ? mono_us() : d->log_now_us; /* replay: timers on the log's clock */
     t->period_us = period_us;
-    /* The ODOMETRY timer in the middle of the send slots' cells (on the
-     * bridge's clock: odom_timer_next); the others a period after now. */
-    bool grid = id == T_ODOM;
-    if (d->mode != MODE_LIVE) { /* replay: timers on the log's clock */
-        t->next_us = grid ? odom_timer_next(d, d->log_now_us) : d->log_now_us + period_us;
+    /* The ODOMETRY timer mid-way through the send slots, which are the
+     * multiples of its period (odometry.c odom_advance_slot): a sensor frame
+     * in a slot's first half takes the slot itself (sent at once, latency its
+     * own processing) and the timer sends only for sensors quiet that long,
+     * extrapolating (on_odom_timer). On the slots' boundaries it would take
+     * every slot from the frames, each message carrying the previous frame's
+     * update up to a frame period late. The others: a period after now. */
+    t->phase_us = id == T_ODOM ? period_us / 2 : now;
+    t->next_us = grid_next(now, period_us, t->phase_us);
+    if (!live)
         return 0;
-    }
-    int64_t first_us = grid ? odom_timer_next(d, mono_us()) : period_us;
     struct itimerspec its = {
         .it_interval = {period_us / 1000000, (period_us % 1000000) * 1000},
-        .it_value = {first_us / 1000000, (first_us % 1000000) * 1000},
+        .it_value = {t->next_us / 1000000, (t->next_us % 1000000) * 1000},
     };
     if (t->p.fd < 0) {
         int fd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
@@ -122,7 +136,7 @@ int timer_arm(struct daemon *d, enum timer_id id, int64_t period_us)
             return rc;
         }
     }
-    if (timerfd_settime(t->p.fd, grid ? TFD_TIMER_ABSTIME : 0, &its, NULL) < 0) {
+    if (timerfd_settime(t->p.fd, TFD_TIMER_ABSTIME, &its, NULL) < 0) {
         int e = errno;
         log_error("%s timer: timerfd_settime %" PRId64 " us: %s", timer_names[id], period_us,
                   strerror(e));
@@ -153,13 +167,12 @@ void soft_timers_advance(struct daemon *d, int64_t t)
                 best = i;
         if (best < 0)
             return;
-        int64_t when = d->timers[best].next_us;
-        d->timers[best].next_us += d->timers[best].period_us;
-        if (d->timers[best].next_us <= t - 10 * d->timers[best].period_us) {
-            /* a gap in the log: do not replay it (the ODOMETRY timer keeps its phase) */
-            int64_t p = d->timers[best].period_us;
-            d->timers[best].next_us = best == T_ODOM ? odom_timer_next(d, t - p) : t;
-        }
+        struct timer *tm = &d->timers[best];
+        int64_t when = tm->next_us;
+        tm->next_us += tm->period_us;
+        /* a gap in the log: do not replay it; due once more, on its phase */
+        if (tm->next_us <= t - 10 * tm->period_us)
+            tm->next_us = grid_next(t - tm->period_us, tm->period_us, tm->phase_us);
         d->log_now_us = when;
         fire_timer(d, (enum timer_id)best, when);
     }
