@@ -19,7 +19,6 @@ the rate can reach against the simulator's bound.)
 from __future__ import annotations
 
 import argparse
-import math
 
 import numpy as np
 
@@ -39,11 +38,11 @@ def rate_walk(scn, t_s: np.ndarray) -> float:
     return float(np.sum(np.diff(r) ** 2) / (t_s[-1] - t_s[0]))
 
 
-def bounds(name: str, seed: int, rate_prior_mps2: float) -> tuple[np.ndarray, ...]:
+def bounds(name: str, seed: int, rate_prior_mps2: float) -> tuple:
     """After each event after AFTER_S, (K, 2): sigma_s^2, (m/s)^2, and the position's
     sigma_x^2 + sigma_y^2, m^2; the simulator's bound, the bound with the rate unknown
     (prior rate_prior_mps2, m/s^2) but told when it changes, and the bound with the rate a
-    random walk (rate_walk: not told when). Last, (1, 2): the walk's intensity q."""
+    random walk (rate_walk: not told when); last, the walk's intensity q, (m/s^2)^2/s."""
     scn = load_scenario(name, seed=seed)
     res = simulate.run(scn, encode=False)
     q = rate_walk(scn, res.pcrb_t_s)
@@ -58,7 +57,7 @@ def bounds(name: str, seed: int, rate_prior_mps2: float) -> tuple[np.ndarray, ..
         c = cov[after]
         return np.stack([c[:, crb.IS, crb.IS], c[:, crb.IX, crb.IX] + c[:, crb.IY, crb.IY]], axis=1)
 
-    return pick(res.pcrb_cov), pick(told.cov), pick(walk.cov), np.array([[q, q]])
+    return pick(res.pcrb_cov), pick(told.cov), pick(walk.cov), q
 
 
 def figures(name: str, seeds: int, rate_prior_mps2: float) -> tuple[np.ndarray, ...]:
@@ -69,7 +68,7 @@ def figures(name: str, seeds: int, rate_prior_mps2: float) -> tuple[np.ndarray, 
     scale = np.array([1.0, 1e3])
     out = [np.sqrt(np.mean(np.concatenate([b[i] for b in per_seed]), axis=0)) * scale
            for i in range(3)]
-    return (*out, float(np.mean([b[3][0, 0] for b in per_seed])))
+    return (*out, float(np.mean([b[3] for b in per_seed])))
 
 
 def main() -> int:
