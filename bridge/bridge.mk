@@ -19,14 +19,19 @@ BRIDGE_DBC      := hw_sim/beaconloc_sim/data/beaconloc.dbc
 
 # The generated codec is named beaconloc_can (not beaconloc) so that its
 # header cannot be confused with the library's umbrella header beaconloc.h.
+# Beside it, from the same DBC, the bridge's sensor kinds (gen_frame_kinds.py):
+# enum frame_kind and the payloads (frame_kinds.h), their unpackers
+# (frame_kinds.c), the sensor table's list of kinds (sensor_kinds.c).
 BRIDGE_CAN_C    := $(BRIDGE_CANGEN)/beaconloc_can.c
 BRIDGE_CAN_H    := $(BRIDGE_CANGEN)/beaconloc_can.h
+BRIDGE_GEN_NAMES := beaconloc_can frame_kinds sensor_kinds
+BRIDGE_GEN_C    := $(BRIDGE_GEN_NAMES:%=$(BRIDGE_CANGEN)/%.c)
 
 BRIDGE_SRCS     := $(sort $(wildcard bridge/*.c))
 BRIDGE_OBJS     := $(patsubst bridge/%.c,$(BRIDGE_OBJDIR)/%.o,$(BRIDGE_SRCS)) \
-                   $(BRIDGE_OBJDIR)/beaconloc_can.o
+                   $(BRIDGE_GEN_NAMES:%=$(BRIDGE_OBJDIR)/%.o)
 BRIDGE_SANOBJS  := $(patsubst bridge/%.c,$(BRIDGE_SANDIR)/%.o,$(filter-out bridge/main.c,$(BRIDGE_SRCS))) \
-                   $(BRIDGE_SANDIR)/beaconloc_can.o
+                   $(BRIDGE_GEN_NAMES:%=$(BRIDGE_SANDIR)/%.o)
 BRIDGE_TESTS_C  := $(sort $(wildcard tests/bridge/test_*.c))
 BRIDGE_TESTS    := $(patsubst tests/bridge/%.c,$(BRIDGE_TESTDIR)/%,$(BRIDGE_TESTS_C))
 
@@ -49,16 +54,19 @@ TEST_BUILDS += $(BRIDGE_TESTS) $(BRIDGE_ASAN_BIN) $(BRIDGE_FAKECAN) $(BRIDGE_SLO
 
 bridge: $(BRIDGE_BIN)
 
-$(BRIDGE_CAN_C) $(BRIDGE_CAN_H) &: $(BRIDGE_DBC) .ci/requirements.txt | $(SETUP_STAMP)
+# One recipe writes them all: whatever waits for $(BRIDGE_CAN_H) has them.
+$(BRIDGE_GEN_C) $(BRIDGE_CAN_H) $(BRIDGE_CANGEN)/frame_kinds.h &: $(BRIDGE_DBC) \
+        bridge/gen_frame_kinds.py .ci/requirements.txt | $(SETUP_STAMP)
 	@mkdir -p $(BRIDGE_CANGEN)
 	$(PY) -m cantools generate_c_source --database-name beaconloc_can \
 	    -o $(BRIDGE_CANGEN) $(BRIDGE_DBC)
+	$(PY) bridge/gen_frame_kinds.py $(BRIDGE_DBC) $(BRIDGE_CANGEN)
 
-$(BRIDGE_OBJDIR)/beaconloc_can.o: $(BRIDGE_CAN_C) $(BRIDGE_CAN_H)
+$(BRIDGE_GEN_NAMES:%=$(BRIDGE_OBJDIR)/%.o): $(BRIDGE_OBJDIR)/%.o: $(BRIDGE_CANGEN)/%.c $(BRIDGE_CAN_H)
 	@mkdir -p $(@D)
 	$(CC) $(BRIDGE_CPPFLAGS) $(BRIDGE_CFLAGS) -c -o $@ $<
 
-$(BRIDGE_SANDIR)/beaconloc_can.o: $(BRIDGE_CAN_C) $(BRIDGE_CAN_H)
+$(BRIDGE_GEN_NAMES:%=$(BRIDGE_SANDIR)/%.o): $(BRIDGE_SANDIR)/%.o: $(BRIDGE_CANGEN)/%.c $(BRIDGE_CAN_H)
 	@mkdir -p $(@D)
 	$(CC) $(BRIDGE_CPPFLAGS) $(BRIDGE_CFLAGS) $(BRIDGE_SANFLAGS) -c -o $@ $<
 
@@ -94,6 +102,9 @@ $(BRIDGE_TESTDIR)/obj/%.o: tests/bridge/%.c $(BRIDGE_CAN_H) $(BRIDGE_MAVDEP)
 $(BRIDGE_TESTDIR)/test_%: $(BRIDGE_TESTDIR)/obj/test_%.o $(BRIDGE_SANOBJS) $(BRIDGE_LIB)
 	$(CC) $(BRIDGE_SANFLAGS) -o $@ $< $(BRIDGE_SANOBJS) $(BRIDGE_LIB) \
 	    $(BRIDGE_WRAP_test_$*) -lcmocka $(BRIDGE_LDLIBS)
+
+# test_frame_kinds reads the DBC's text itself, to check the kinds against it.
+$(BRIDGE_TESTDIR)/obj/test_frame_kinds.o: BRIDGE_CPPFLAGS += -DBRIDGE_DBC_PATH='"$(abspath $(BRIDGE_DBC))"'
 
 # keep the test objects (intermediate files of the pattern chain)
 .PRECIOUS: $(BRIDGE_TESTDIR)/obj/%.o

@@ -99,7 +99,7 @@ int can_in_open(struct can_in *ci)
     struct can_filter filters[FRAME_KIND_COUNT];
     for (int k = 0; k < FRAME_KIND_COUNT; k++) {
         uint32_t id, mask;
-        sensor_filter(&sensor_kinds[k], &id, &mask);
+        sensor_filter(sensor_kinds[k], &id, &mask);
         filters[k].can_id = id;
         filters[k].can_mask = (mask & CAN_SFF_MASK) | CAN_EFF_FLAG;
     }

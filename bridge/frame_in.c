@@ -48,6 +48,6 @@ void handle_frame(struct daemon *d, const struct can_msg *msg)
     struct frame f;
     if (frame_decode(&d->fc, msg, &f) != FRAME_OK)
         return; /* counted: bad, unknown, out of range, duplicate, late */
-    sensor_kinds[f.kind].handle(&d->est, &f, msg->rx_us);
+    sensor_kinds[f.kind]->handle(&d->est, &f, msg->rx_us);
     after_update(d);
 }

@@ -1,7 +1,8 @@
 /*
  * beaconloc-bridge — CAN frame shape, rolling counters and bad-frame
- * accounting; the payloads are decoded by each kind's decoder of the
- * sensor table (sensors.h), through the cantools-generated codec.
+ * accounting; the payloads are decoded by each kind's unpacker of the
+ * sensor table (sensors.h), generated from the DBC around the cantools
+ * codec.
  */
 #include "frames.h"
 
@@ -13,7 +14,7 @@ void frame_counters_init(struct frame_counters *c)
 {
     memset(c, 0, sizeof *c);
     for (int k = 0; k < FRAME_KIND_COUNT; k++) {
-        unsigned m = sensor_counter_modulo(&sensor_kinds[k]);
+        unsigned m = sensor_counter_modulo(sensor_kinds[k]);
         /* the track's bit window holds FRAME_MODULO_MAX steps (a test
          * checks every kind of the table against it) */
         c->modulo[k] = m < 2u ? 2u : m > FRAME_MODULO_MAX ? FRAME_MODULO_MAX : m;
@@ -99,7 +100,7 @@ static enum frame_result track(struct frame_counters *c, enum frame_kind k, stru
     return FRAME_OK;
 }
 
-/* Shape and kind of a frame, then its kind's decoder and rolling counter. */
+/* Shape and kind of a frame, then its kind's unpacker and rolling counter. */
 static enum frame_result decode(struct frame_counters *c, const struct can_msg *msg,
                                 struct frame *out)
 {
@@ -112,10 +113,12 @@ static enum frame_result decode(struct frame_counters *c, const struct can_msg *
     if ((msg->flags & (CAN_MSG_RTR | CAN_MSG_FD | CAN_MSG_ERROR)) || msg->len != 8u)
         return FRAME_MALFORMED;
     struct frame_seq seq;
-    enum frame_result r = sk->decode(msg->id, msg->data, out, &seq);
+    enum frame_result r = sk->unpack(msg->data, out, &seq);
     if (r != FRAME_OK)
         return r;
-    enum frame_kind k = (enum frame_kind)(sk - sensor_kinds);
+    if (sk->track)
+        seq.track = sk->track(out);
+    enum frame_kind k = sk->kind;
     if (seq.track >= sk->tracks)
         return FRAME_OUT_OF_RANGE;
     return track(c, k, &c->track[k][seq.track], seq.counter, c->modulo[k], seq.stamp,

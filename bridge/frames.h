@@ -55,20 +55,6 @@ struct can_msg {
     int64_t rx_us; /* receive time on the bridge clock, us */
 };
 
-/* The sensor kinds, in the order of the sensor table (bridge/sensors.c:
- * frame ids, names, counter moduli, decoders, handlers). */
-enum frame_kind {
-    FRAME_PULSE = 0,
-    FRAME_ENCODERS = 1,
-    FRAME_STATUS = 2,
-    FRAME_BEARING = 3,
-    FRAME_RANGE = 4,
-    FRAME_TRACK_ENCODERS = 5,
-    FRAME_BEACON_SURVEY = 6,
-    FRAME_SONAR = 7,
-    FRAME_KIND_COUNT = 8
-};
-
 /* Result of frame_decode(). */
 enum frame_result {
     FRAME_OK = 0,
@@ -79,99 +65,17 @@ enum frame_result {
     FRAME_OUT_OF_ORDER  /* a frame delivered after a newer one */
 };
 
-struct frame_pulse {
-    uint32_t node_time_us;
-    uint8_t receiver;
-    bool double_pulse;
-    uint8_t counter;
-    uint16_t amplitude_mv;
-    double width_us;
-};
-
-struct frame_encoders {
-    uint32_t node_time_us;
-    uint16_t left_ticks;  /* cumulative, modulo 2^14 */
-    uint16_t right_ticks; /* cumulative, modulo 2^14 */
-    uint8_t counter;
-};
-
-struct frame_status {
-    uint8_t node_id;
-    uint8_t counter;
-    uint8_t flags;
-    uint32_t uptime_s;
-    uint8_t tx_errors;
-    uint8_t rx_errors;
-    uint8_t overruns;
-};
-
-/* One bearing to one bearing beacon (BEARING, bridge/sensor_bearing.c). */
-struct frame_bearing {
-    uint32_t node_time_us; /* when the bearing was taken, bearing-sensor node clock */
-    uint8_t beacon;        /* bearing beacon id 1..15 ([bearing_beaconN]); the site's
-                              count is the handler's check */
-    double bearing_deg;    /* body frame, CCW from the robot's forward axis, [0, 360) deg */
-    uint8_t quality;       /* 0 barely seen .. 255 strongest */
-    uint8_t counter;
-};
-
-/* One range: the time of flight of one range beacon's ultrasonic pulse to one
- * receiver, started by the beacon's RF sync (RANGE, bridge/sensor_range.c). */
-struct frame_range {
-    uint32_t node_time_us;      /* emission time of the pulse (the RF sync), range-receiver
-                                  node clock */
-    uint8_t beacon;             /* range beacon id 1..15 ([range_beaconN]); the site's count
-                                  is the handler's check */
-    uint8_t receiver;           /* receiver id 1..15 (the robot carrying it; 1 on one robot) */
-    uint16_t time_of_flight_us; /* 0..65534 us (DBC); the handler refuses 0 and 65534 */
-    uint8_t quality;            /* 0 barely heard .. 15 strongest */
-    uint8_t counter;
-};
-
-/* Both track encoders of one skid-steer robot of a team (TRACK_ENCODERS,
- * bridge/sensor_track_encoders.c), forwarded by the team's radio gateway. */
-struct frame_track_encoders {
-    uint32_t node_time_us; /* when the tracks were sampled, the robot's node clock */
-    uint8_t robot;         /* robot id 1..15 ([team] robots is the handler's check) */
-    uint16_t left_ticks;   /* cumulative, modulo 2^12 (forward counts up) */
-    uint16_t right_ticks;  /* cumulative, modulo 2^12 */
-    uint8_t counter;       /* the robot's own rolling counter, modulo 16 */
-};
-
-/* One range between two fixed range beacons, the range network's self-survey
- * (BEACON_SURVEY, bridge/sensor_beacon_survey.c; bridge/survey.h). */
-struct frame_survey {
-    uint32_t node_time_us;      /* emission (RF sync), range network's clock */
-    uint8_t emitter;            /* range beacon id 1..15 that pinged */
-    uint8_t listener;           /* range beacon id 1..15 that heard it */
-    uint16_t time_of_flight_us; /* 0..65534 us (DBC); the survey refuses 0 and 65534 */
-    uint8_t quality;            /* 0 barely heard .. 15 strongest */
-    uint8_t counter;
-};
-
-/* One reading of one sonar of the ring: the first echo of one sensor's ping
- * (SONAR, bridge/sensor_sonar.c; Hoppenot & Colle 1997). */
-struct frame_sonar {
-    uint32_t node_time_us; /* emission of the ping, sonar-ring node clock */
-    uint8_t sensor;        /* ring index 0..15 ([sonarN] is N-1); the site's count is the
-                              handler's check */
-    uint16_t range_mm;     /* 0..16383 mm from the sensor's mount; meaningless with a flag */
-    uint8_t amplitude;     /* echo amplitude 1..255, 0 = no echo */
-    uint8_t flags;         /* bit 0 NO_ECHO, bit 1 MAX_RANGE (DBC) */
-    uint8_t counter;
-};
+/* The sensor kinds (enum frame_kind, FRAME_KIND_COUNT) and their payloads
+ * (struct frame_<frame name>: one field per DBC signal, in its unit, a scaled
+ * signal decoded into a double), generated at build time from the DBC by
+ * bridge/gen_frame_kinds.py, with each kind's unpacker (every signal checked
+ * against its DBC range). */
+#include "frame_kinds.h"
 
 struct frame {
     enum frame_kind kind;
     union {
-        struct frame_pulse pulse;
-        struct frame_encoders enc;
-        struct frame_status status;
-        struct frame_bearing bearing;
-        struct frame_range range;
-        struct frame_track_encoders track;
-        struct frame_survey survey;
-        struct frame_sonar sonar;
+        FRAME_KIND_PAYLOADS
     } u;
 };
 

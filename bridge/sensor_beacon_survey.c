@@ -32,7 +32,7 @@ static void write_survey(FILE *f, const struct stats_report *r)
         survey_write_json(r->survey, f);
 }
 
-const struct sensor_counter sensor_beacon_survey_counters[SRV_COUNTERS + 1] = {
+static const struct sensor_counter sensor_beacon_survey_counters[SRV_COUNTERS + 1] = {
     [SRV_RANGES_BEFORE] = SENSOR_COUNTER("ranges_before_survey", SENSOR_SLOT_SITE),
     [SRV_UNEXPECTED] = SENSOR_COUNTER("survey_unexpected", SENSOR_SLOT_SITE),
     [SRV_SECTION] = {.key = "survey", .slot = SENSOR_SLOT_SITE, .write = write_survey},
@@ -48,38 +48,26 @@ bool sensor_beacon_survey_holds_range(struct estimator *e)
     return true;
 }
 
-enum frame_result sensor_beacon_survey_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                              struct frame_seq *seq)
-{
-    (void)id;
-    struct beaconloc_can_beacon_survey_t m;
-    if (beaconloc_can_beacon_survey_unpack(&m, data, 8) != 0)
-        return FRAME_MALFORMED;
-    if (!beaconloc_can_beacon_survey_node_time_is_in_range(m.node_time) ||
-        !beaconloc_can_beacon_survey_emitter_is_in_range(m.emitter) ||
-        !beaconloc_can_beacon_survey_listener_is_in_range(m.listener) ||
-        !beaconloc_can_beacon_survey_time_of_flight_is_in_range(m.time_of_flight) ||
-        !beaconloc_can_beacon_survey_quality_is_in_range(m.quality) ||
-        !beaconloc_can_beacon_survey_counter_is_in_range(m.counter))
-        return FRAME_OUT_OF_RANGE;
-    out->kind = FRAME_BEACON_SURVEY;
-    out->u.survey.node_time_us = m.node_time;
-    out->u.survey.emitter = m.emitter;
-    out->u.survey.listener = m.listener;
-    out->u.survey.time_of_flight_us = m.time_of_flight; /* scale 1 us (DBC) */
-    out->u.survey.quality = m.quality;
-    out->u.survey.counter = m.counter;
-    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = 0};
-    return FRAME_OK;
-}
-
-void sensor_beacon_survey_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
+static void sensor_beacon_survey_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
     if (!e->survey_on) {
         estimator_count(e, FRAME_BEACON_SURVEY, SRV_UNEXPECTED); /* a site without self_survey */
         return;
     }
-    const struct frame_survey *s = &f->u.survey;
+    const struct frame_beacon_survey *s = &f->u.beacon_survey;
     (void)survey_add(&e->survey, s->emitter, s->listener, s->time_of_flight_us, rx_us);
     estimator_survey_poll(e, rx_us);
 }
+
+/* The survey frames of one ping (one per listening beacon) share its NodeTime. */
+#define SURVEY_STAMP_SLACK_US 1
+
+const struct sensor_kind sensor_kind_beacon_survey = {
+    SENSOR_KIND_FRAME(BEACON_SURVEY, beacon_survey),
+    .short_name = "srv",
+    .stamp_slack_us = SURVEY_STAMP_SLACK_US,
+    .tracks = 1, /* the range network's gateway numbers them */
+    .handle = sensor_beacon_survey_handle,
+    .counters = sensor_beacon_survey_counters,
+    .status = NULL,
+};

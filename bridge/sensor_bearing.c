@@ -40,7 +40,7 @@ enum {
     BRG_COUNTERS
 };
 
-const struct sensor_counter sensor_bearing_counters[BRG_COUNTERS + 1] = {
+static const struct sensor_counter sensor_bearing_counters[BRG_COUNTERS + 1] = {
     [BRG_FUSED] = SENSOR_LOC_COUNTER("bearings_fused", SENSOR_SLOT_MEASUREMENTS, bearings_fused),
     [BRG_REJECTED] =
         SENSOR_LOC_COUNTER("bearings_rejected", SENSOR_SLOT_MEASUREMENTS, bearings_rejected),
@@ -55,7 +55,7 @@ const struct sensor_counter sensor_bearing_counters[BRG_COUNTERS + 1] = {
     {0},
 };
 
-void sensor_bearing_status(const struct stats_report *r, char *buf, size_t len)
+static void sensor_bearing_status(const struct stats_report *r, char *buf, size_t len)
 {
     snprintf(buf, len, " | bearings ok %" PRIu64 " rej %" PRIu64 " unk %" PRIu64,
              sensor_counts_get(r->counts, FRAME_BEARING, BRG_FUSED),
@@ -63,34 +63,7 @@ void sensor_bearing_status(const struct stats_report *r, char *buf, size_t len)
              sensor_counts_get(r->counts, FRAME_BEARING, BRG_UNKNOWN_BEACON));
 }
 
-enum frame_result sensor_bearing_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                        struct frame_seq *seq)
-{
-    (void)id;
-    struct beaconloc_can_bearing_t m;
-    if (beaconloc_can_bearing_unpack(&m, data, 8) != 0)
-        return FRAME_MALFORMED;
-    if (!beaconloc_can_bearing_node_time_is_in_range(m.node_time) ||
-        !beaconloc_can_bearing_beacon_is_in_range(m.beacon) ||
-        !beaconloc_can_bearing_bearing_is_in_range(m.bearing) ||
-        !beaconloc_can_bearing_quality_is_in_range(m.quality) ||
-        !beaconloc_can_bearing_counter_is_in_range(m.counter))
-        return FRAME_OUT_OF_RANGE;
-    /* deg = raw · 360/65536 (the DBC's scale) */
-    const double deg = beaconloc_can_bearing_bearing_decode(m.bearing);
-    if (!isfinite(deg) || !beaconloc_can_bearing_bearing_is_in_phys_range(deg))
-        return FRAME_OUT_OF_RANGE;
-    out->kind = FRAME_BEARING;
-    out->u.bearing.node_time_us = m.node_time;
-    out->u.bearing.beacon = m.beacon;
-    out->u.bearing.bearing_deg = deg;
-    out->u.bearing.quality = m.quality;
-    out->u.bearing.counter = m.counter;
-    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = 0};
-    return FRAME_OK;
-}
-
-void sensor_bearing_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
+static void sensor_bearing_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
     const struct frame_bearing *b = &f->u.bearing;
     if (e->blcfg.bearing_beacon_count == 0) {
@@ -123,3 +96,23 @@ void sensor_bearing_handle(struct estimator *e, const struct frame *f, int64_t r
         log_debug("localizer bearing: %s", bl_strerror(rc));
     estimator_sync(e);
 }
+
+/* Bearings of one scan of a sensor that is not rotating share their NodeTime
+ * (Vander et al. 2011: all cameras read at once): a late frame's stamp may
+ * equal the newest's (us). */
+#define BEARING_STAMP_SLACK_US 1
+
+/* The bearing sensor's clock is the filter's timebase on a site with bearing
+ * beacons and no ultrasonic ones (rank 2). */
+static bool bearing_timebase(const struct estimator *e)
+{
+    return e->blcfg.bearing_beacon_count > 0;
+}
+
+const struct sensor_kind sensor_kind_bearing = {
+    SENSOR_KIND_FRAME(BEARING, bearing),      .short_name = "brg",
+    .stamp_slack_us = BEARING_STAMP_SLACK_US, .tracks = 1,
+    .handle = sensor_bearing_handle,          .counters = sensor_bearing_counters,
+    .status = sensor_bearing_status,          .timebase_rank = 2,
+    .timebase_if = bearing_timebase,
+};

@@ -29,32 +29,12 @@ enum {
     ENC_COUNTERS
 };
 
-const struct sensor_counter sensor_encoders_counters[ENC_COUNTERS + 1] = {
+static const struct sensor_counter sensor_encoders_counters[ENC_COUNTERS + 1] = {
     [ENC_STALE] = SENSOR_COUNTER("stale_encoder_samples", SENSOR_SLOT_FRAMES),
     [ENC_JUMPS] = SENSOR_COUNTER("encoder_jumps", SENSOR_SLOT_STARTS),
     [ENC_GAPS] = SENSOR_COUNTER("encoder_gaps", SENSOR_SLOT_NUMBERING),
     {0},
 };
-
-enum frame_result sensor_encoders_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                         struct frame_seq *seq)
-{
-    (void)id;
-    struct beaconloc_can_wheel_encoders_t m;
-    if (beaconloc_can_wheel_encoders_unpack(&m, data, 8) != 0)
-        return FRAME_MALFORMED;
-    if (!beaconloc_can_wheel_encoders_left_ticks_is_in_range(m.left_ticks) ||
-        !beaconloc_can_wheel_encoders_right_ticks_is_in_range(m.right_ticks) ||
-        !beaconloc_can_wheel_encoders_counter_is_in_range(m.counter))
-        return FRAME_OUT_OF_RANGE;
-    out->kind = FRAME_ENCODERS;
-    out->u.enc.node_time_us = m.node_time;
-    out->u.enc.left_ticks = m.left_ticks;
-    out->u.enc.right_ticks = m.right_ticks;
-    out->u.enc.counter = m.counter;
-    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = 0};
-    return FRAME_OK;
-}
 
 /* Signed difference of two 14-bit wrapping tick counts. */
 static int tick_delta(uint16_t now, uint16_t before)
@@ -63,16 +43,16 @@ static int tick_delta(uint16_t now, uint16_t before)
     return d >= 0x2000 ? d - 0x4000 : d;
 }
 
-void sensor_encoders_handle(struct estimator *e, const struct frame *fr, int64_t rx_us)
+static void sensor_encoders_handle(struct estimator *e, const struct frame *fr, int64_t rx_us)
 {
-    const struct frame_encoders *f = &fr->u.enc;
-    struct node_clock *clock = &e->clock[FRAME_ENCODERS];
+    const struct frame_wheel_encoders *f = &fr->u.wheel_encoders;
+    struct node_clock *clock = &e->clock[FRAME_WHEEL_ENCODERS];
     int64_t te = node_clock_observe(clock, f->node_time_us, rx_us);
     if (clock->last_event == NODE_CLOCK_OUT_OF_ORDER || clock->last_event == NODE_CLOCK_DUPLICATE) {
         /* Not newer than a sample already used: its ticks are already in
          * the reference (cumulative counts); taking it as the reference
          * would count the distance since it twice. */
-        estimator_count(e, FRAME_ENCODERS, ENC_STALE);
+        estimator_count(e, FRAME_WHEEL_ENCODERS, ENC_STALE);
         return;
     }
     int64_t t;
@@ -88,7 +68,7 @@ void sensor_encoders_handle(struct estimator *e, const struct frame *fr, int64_t
     if (e->enc_seen && t <= e->enc_last_node_us) {
         /* mapped onto the receiver clock not after the last sample (a
          * re-fit of either clock): the localizer needs increasing times */
-        estimator_count(e, FRAME_ENCODERS, ENC_STALE);
+        estimator_count(e, FRAME_WHEEL_ENCODERS, ENC_STALE);
         return;
     }
     if (t > e->latest_node_us)
@@ -111,7 +91,7 @@ void sensor_encoders_handle(struct estimator *e, const struct frame *fr, int64_t
      * one sample period): not a wheel, a glitch or a missed restart. */
     double max_ticks = MAX_WHEEL_MPS * ((double)(gap > 10000 ? gap : 10000) / 1e6) / e->m_per_tick;
     if (had_ref && (abs(dl) > max_ticks || abs(dr) > max_ticks)) {
-        estimator_count(e, FRAME_ENCODERS, ENC_JUMPS);
+        estimator_count(e, FRAME_WHEEL_ENCODERS, ENC_JUMPS);
         log_warn("encoder counts jumped (%d, %d ticks): new reference", dl, dr);
         had_ref = false;
     }
@@ -120,7 +100,7 @@ void sensor_encoders_handle(struct estimator *e, const struct frame *fr, int64_t
     e->enc_have_ref = true;
     e->enc_last_node_us = t;
     if (e->enc_seen && gap > ENC_SILENCE_US)
-        estimator_count(e, FRAME_ENCODERS, ENC_GAPS);
+        estimator_count(e, FRAME_WHEEL_ENCODERS, ENC_GAPS);
     if (e->enc_silent) {
         e->enc_silent = false;
         estimator_eventf(e, EST_EV_NOTICE, "encoders back after %.1f s", (double)gap / 1e6);
@@ -147,3 +127,13 @@ void sensor_encoders_handle(struct estimator *e, const struct frame *fr, int64_t
     estimator_sonar_wheels(e, t, had_ref ? dl * e->m_per_tick : 0.0,
                            had_ref ? dr * e->m_per_tick : 0.0);
 }
+
+const struct sensor_kind sensor_kind_wheel_encoders = {
+    SENSOR_KIND_FRAME(WHEEL_ENCODERS, wheel_encoders),
+    .short_name = "enc",
+    .stamp_slack_us = 0,
+    .tracks = 1,
+    .handle = sensor_encoders_handle,
+    .counters = sensor_encoders_counters,
+    .status = NULL,
+};

@@ -40,7 +40,7 @@ enum {
 };
 _Static_assert(PULSE_COUNTERS <= SENSOR_COUNTERS_MAX, "SENSOR_COUNTERS_MAX");
 
-const struct sensor_counter sensor_pulse_counters[PULSE_COUNTERS + 1] = {
+static const struct sensor_counter sensor_pulse_counters[PULSE_COUNTERS + 1] = {
     [PULSE_ACCEPTED] =
         SENSOR_LOC_COUNTER("pulses_accepted", SENSOR_SLOT_MEASUREMENTS, pulses_accepted),
     [PULSE_REJECTED] =
@@ -72,44 +72,19 @@ const struct sensor_counter sensor_pulse_counters[PULSE_COUNTERS + 1] = {
     {0},
 };
 
-void sensor_pulse_status(const struct stats_report *r, char *buf, size_t len)
+static void sensor_pulse_status(const struct stats_report *r, char *buf, size_t len)
 {
     snprintf(buf, len, " | pulses ok %" PRIu64 " rej %" PRIu64,
-             sensor_counts_get(r->counts, FRAME_PULSE, PULSE_ACCEPTED),
-             sensor_counts_get(r->counts, FRAME_PULSE, PULSE_REJECTED));
+             sensor_counts_get(r->counts, FRAME_PULSE_DETECTION, PULSE_ACCEPTED),
+             sensor_counts_get(r->counts, FRAME_PULSE_DETECTION, PULSE_REJECTED));
 }
 
-enum frame_result sensor_pulse_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                      struct frame_seq *seq)
+static void sensor_pulse_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
-    (void)id;
-    struct beaconloc_can_pulse_detection_t m;
-    if (beaconloc_can_pulse_detection_unpack(&m, data, 8) != 0)
-        return FRAME_MALFORMED;
-    if (!beaconloc_can_pulse_detection_receiver_is_in_range(m.receiver) ||
-        !beaconloc_can_pulse_detection_double_pulse_is_in_range(m.double_pulse) ||
-        !beaconloc_can_pulse_detection_counter_is_in_range(m.counter) ||
-        !beaconloc_can_pulse_detection_amplitude_is_in_range(m.amplitude) ||
-        !beaconloc_can_pulse_detection_width_is_in_range(m.width))
-        return FRAME_OUT_OF_RANGE;
-    out->kind = FRAME_PULSE;
-    out->u.pulse.node_time_us = m.node_time;
-    out->u.pulse.receiver = m.receiver;
-    out->u.pulse.double_pulse = m.double_pulse != 0;
-    out->u.pulse.counter = m.counter;
-    out->u.pulse.amplitude_mv =
-        (uint16_t)beaconloc_can_pulse_detection_amplitude_decode(m.amplitude);
-    out->u.pulse.width_us = beaconloc_can_pulse_detection_width_decode(m.width);
-    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = 0};
-    return FRAME_OK;
-}
-
-void sensor_pulse_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
-{
-    const struct frame_pulse *p = &f->u.pulse;
-    struct node_clock *clock = &e->clock[FRAME_PULSE];
+    const struct frame_pulse_detection *p = &f->u.pulse_detection;
+    struct node_clock *clock = &e->clock[FRAME_PULSE_DETECTION];
     if (e->blcfg.beacon_count == 0) {
-        estimator_count(e, FRAME_PULSE, PULSE_UNEXPECTED); /* no ultrasonic beacon here */
+        estimator_count(e, FRAME_PULSE_DETECTION, PULSE_UNEXPECTED); /* no ultrasonic beacon here */
         return;
     }
     /* The clock fit sees the frame as if sent the moment the detection was
@@ -140,3 +115,28 @@ void sensor_pulse_handle(struct estimator *e, const struct frame *f, int64_t rx_
     (void)bl_localizer_advance(&e->loc, t);
     estimator_sync(e);
 }
+
+/* Pulse frames of one firing leave the receiver node out of NodeTime order
+ * by up to the firing's spread over the ring (0.2 m / 343 m/s = 0.6 ms)
+ * plus the node's latency jitter (0.3 ms): a late pulse frame may be newer
+ * than the newest by this much (us). */
+#define PULSE_STAMP_SLACK_US 2000
+
+/* The receiver array's clock is the filter's timebase on a site with
+ * ultrasonic beacons (rank 1: before any other kind's). */
+static bool pulse_timebase(const struct estimator *e)
+{
+    return e->blcfg.beacon_count > 0;
+}
+
+const struct sensor_kind sensor_kind_pulse_detection = {
+    SENSOR_KIND_FRAME(PULSE_DETECTION, pulse_detection),
+    .short_name = "pulse",
+    .stamp_slack_us = PULSE_STAMP_SLACK_US,
+    .tracks = 1,
+    .handle = sensor_pulse_handle,
+    .counters = sensor_pulse_counters,
+    .status = sensor_pulse_status,
+    .timebase_rank = 1,
+    .timebase_if = pulse_timebase,
+};

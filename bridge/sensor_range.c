@@ -43,7 +43,7 @@ enum {
     RNG_COUNTERS
 };
 
-const struct sensor_counter sensor_range_counters[RNG_COUNTERS + 1] = {
+static const struct sensor_counter sensor_range_counters[RNG_COUNTERS + 1] = {
     [RNG_FUSED] = SENSOR_LOC_COUNTER("ranges_fused", SENSOR_SLOT_MEASUREMENTS, ranges_fused),
     [RNG_REJECTED] =
         SENSOR_LOC_COUNTER("ranges_rejected", SENSOR_SLOT_MEASUREMENTS, ranges_rejected),
@@ -59,7 +59,7 @@ const struct sensor_counter sensor_range_counters[RNG_COUNTERS + 1] = {
     {0},
 };
 
-void sensor_range_status(const struct stats_report *r, char *buf, size_t len)
+static void sensor_range_status(const struct stats_report *r, char *buf, size_t len)
 {
     const struct sensor_counts *c = r->counts;
     snprintf(buf, len, " | ranges ok %" PRIu64 " rej %" PRIu64 " unk %" PRIu64 " bad %" PRIu64,
@@ -69,33 +69,6 @@ void sensor_range_status(const struct stats_report *r, char *buf, size_t len)
              sensor_counts_get(c, FRAME_RANGE, RNG_BAD_TOF) +
                  sensor_counts_get(c, FRAME_RANGE, RNG_OTHER_RECEIVER) +
                  sensor_counts_get(c, FRAME_RANGE, RNG_REFUSED));
-}
-
-enum frame_result sensor_range_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                      struct frame_seq *seq)
-{
-    (void)id;
-    struct beaconloc_can_range_t m;
-    if (beaconloc_can_range_unpack(&m, data, 8) != 0)
-        return FRAME_MALFORMED;
-    if (!beaconloc_can_range_node_time_is_in_range(m.node_time) ||
-        !beaconloc_can_range_beacon_is_in_range(m.beacon) ||
-        !beaconloc_can_range_receiver_is_in_range(m.receiver) ||
-        !beaconloc_can_range_time_of_flight_is_in_range(m.time_of_flight) ||
-        !beaconloc_can_range_quality_is_in_range(m.quality) ||
-        !beaconloc_can_range_counter_is_in_range(m.counter))
-        return FRAME_OUT_OF_RANGE;
-    out->kind = FRAME_RANGE;
-    out->u.range.node_time_us = m.node_time;
-    out->u.range.beacon = m.beacon;
-    out->u.range.receiver = m.receiver;
-    out->u.range.time_of_flight_us = m.time_of_flight; /* scale 1 us (DBC) */
-    out->u.range.quality = m.quality;
-    out->u.range.counter = m.counter;
-    /* each robot's range module keeps its own counter (a team's host hears
-     * them all through the radio gateway): one track per receiver id */
-    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = m.receiver};
-    return FRAME_OK;
 }
 
 /* One range of this robot's receiver (not a team site's). */
@@ -145,10 +118,37 @@ static void range_of_robot(struct estimator *e, const struct frame_range *r, int
     estimator_sync(e);
 }
 
-void sensor_range_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
+static void sensor_range_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
     if (e->team) /* a team site: every receiver's ranges are the team's (team.h) */
         team_range(e->team, &f->u.range, rx_us);
     else
         range_of_robot(e, &f->u.range, rx_us);
 }
+
+/* Ranges are one per ping, each ping at its own emission time, and the
+ * receiver sends them in that order: no slack (us). */
+#define RANGE_STAMP_SLACK_US 0
+
+/* The rolling-counter track: each robot's range module keeps its own counter (a team's host hears
+ * them all through the radio gateway): one track per receiver id. */
+static unsigned sensor_range_track(const struct frame *f)
+{
+    return f->u.range.receiver;
+}
+
+const struct sensor_kind sensor_kind_range = {
+    SENSOR_KIND_FRAME(RANGE, range),
+    .short_name = "rng",
+    .stamp_slack_us = RANGE_STAMP_SLACK_US,
+    .tracks = FRAME_MAX_NODES, /* one per receiver id: each robot's module counts */
+    .track = sensor_range_track,
+    .handle = sensor_range_handle,
+    .counters = sensor_range_counters,
+    .status = sensor_range_status,
+    /* The range receiver's clock is the timebase when no other kind's is
+     * (rank 4, no condition: the rule's last resort; range beacons, or a
+     * team's robots ranging each other). */
+    .timebase_rank = 4,
+    .timebase_if = NULL,
+};

@@ -28,13 +28,13 @@ static void write_sonar(FILE *f, const struct stats_report *r)
 
 /* Its counters are the ring's own (struct sonar_counters, bridge/sonar.h),
  * reported as one section. */
-const struct sensor_counter sensor_sonar_counters[2] = {
+static const struct sensor_counter sensor_sonar_counters[2] = {
     {.key = "sonar", .slot = SENSOR_SLOT_SECTIONS, .write = write_sonar},
     {0},
 };
 
 /* A sonar site's part of the status line: " | sonar ok N rej N unm N bad N corr N". */
-void sensor_sonar_status(const struct stats_report *r, char *buf, size_t len)
+static void sensor_sonar_status(const struct stats_report *r, char *buf, size_t len)
 {
     buf[0] = '\0';
     if (!r->sonar || !r->sonar->on)
@@ -47,32 +47,29 @@ void sensor_sonar_status(const struct stats_report *r, char *buf, size_t len)
         c->unknown_sensor + c->out_of_range + c->stale + c->refused, c->corrected + c->partial);
 }
 
-enum frame_result sensor_sonar_decode(uint32_t id, const uint8_t data[8], struct frame *out,
-                                      struct frame_seq *seq)
-{
-    (void)id;
-    struct beaconloc_can_sonar_t m;
-    if (beaconloc_can_sonar_unpack(&m, data, 8) != 0)
-        return FRAME_MALFORMED;
-    if (!beaconloc_can_sonar_node_time_is_in_range(m.node_time) ||
-        !beaconloc_can_sonar_sensor_is_in_range(m.sensor) ||
-        !beaconloc_can_sonar_range_is_in_range(m.range) ||
-        !beaconloc_can_sonar_amplitude_is_in_range(m.amplitude) ||
-        !beaconloc_can_sonar_flags_is_in_range(m.flags) ||
-        !beaconloc_can_sonar_counter_is_in_range(m.counter))
-        return FRAME_OUT_OF_RANGE;
-    out->kind = FRAME_SONAR;
-    out->u.sonar.node_time_us = m.node_time;
-    out->u.sonar.sensor = m.sensor;
-    out->u.sonar.range_mm = m.range; /* scale 1 mm (DBC) */
-    out->u.sonar.amplitude = m.amplitude;
-    out->u.sonar.flags = m.flags;
-    out->u.sonar.counter = m.counter;
-    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = 0};
-    return FRAME_OK;
-}
-
-void sensor_sonar_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
+static void sensor_sonar_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
     estimator_sonar(e, &f->u.sonar, rx_us);
 }
+
+/* The sonar ring fires its sensors one after the other within a burst, each
+ * frame sent when that sensor's listening window closes: NodeTime order, but
+ * sensors fired together (one NodeTime) are allowed: a late frame's stamp may
+ * equal the newest's (us). */
+#define SONAR_STAMP_SLACK_US 1
+
+/* The sonar ring's clock is the filter's timebase on a ring site without
+ * ultrasonic, bearing or range beacons (rank 3, before the range
+ * receiver's last resort). */
+static bool sonar_timebase(const struct estimator *e)
+{
+    return e->blcfg.range_beacon_count == 0 && e->sonar.on;
+}
+
+const struct sensor_kind sensor_kind_sonar = {
+    SENSOR_KIND_FRAME(SONAR, sonar),        .short_name = "snr",
+    .stamp_slack_us = SONAR_STAMP_SLACK_US, .tracks = 1, /* one ring node */
+    .handle = sensor_sonar_handle,          .counters = sensor_sonar_counters,
+    .status = sensor_sonar_status,          .timebase_rank = 3,
+    .timebase_if = sonar_timebase,
+};

@@ -22,38 +22,36 @@ enum {
     TRK_COUNTERS
 };
 
-const struct sensor_counter sensor_track_encoders_counters[TRK_COUNTERS + 1] = {
+static const struct sensor_counter sensor_track_encoders_counters[TRK_COUNTERS + 1] = {
     [TRK_UNEXPECTED] = SENSOR_COUNTER("tracks_unexpected", SENSOR_SLOT_SITE),
     {0},
 };
 
-enum frame_result sensor_track_encoders_decode(uint32_t id, const uint8_t data[8],
-                                               struct frame *out, struct frame_seq *seq)
-{
-    (void)id;
-    struct beaconloc_can_track_encoders_t m;
-    if (beaconloc_can_track_encoders_unpack(&m, data, 8) != 0)
-        return FRAME_MALFORMED;
-    if (!beaconloc_can_track_encoders_node_time_is_in_range(m.node_time) ||
-        !beaconloc_can_track_encoders_robot_is_in_range(m.robot) ||
-        !beaconloc_can_track_encoders_left_ticks_is_in_range(m.left_ticks) ||
-        !beaconloc_can_track_encoders_right_ticks_is_in_range(m.right_ticks) ||
-        !beaconloc_can_track_encoders_counter_is_in_range(m.counter))
-        return FRAME_OUT_OF_RANGE;
-    out->kind = FRAME_TRACK_ENCODERS;
-    out->u.track.node_time_us = m.node_time;
-    out->u.track.robot = m.robot;
-    out->u.track.left_ticks = m.left_ticks;
-    out->u.track.right_ticks = m.right_ticks;
-    out->u.track.counter = m.counter;
-    *seq = (struct frame_seq){.counter = m.counter, .stamp = m.node_time, .track = m.robot};
-    return FRAME_OK;
-}
-
-void sensor_track_encoders_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
+static void sensor_track_encoders_handle(struct estimator *e, const struct frame *f, int64_t rx_us)
 {
     if (e->team)
-        team_tracks(e->team, &f->u.track, rx_us);
+        team_tracks(e->team, &f->u.track_encoders, rx_us);
     else
         estimator_count(e, FRAME_TRACK_ENCODERS, TRK_UNEXPECTED);
 }
+
+/* Track samples of one robot leave it in NodeTime order, one frame each: no
+ * slack (us). */
+#define TRACK_STAMP_SLACK_US 0
+
+/* The rolling-counter track: each robot keeps its own rolling counter: one track per robot id. */
+static unsigned sensor_track_encoders_track(const struct frame *f)
+{
+    return f->u.track_encoders.robot;
+}
+
+const struct sensor_kind sensor_kind_track_encoders = {
+    SENSOR_KIND_FRAME(TRACK_ENCODERS, track_encoders),
+    .short_name = "trk",
+    .stamp_slack_us = TRACK_STAMP_SLACK_US,
+    .tracks = FRAME_MAX_NODES, /* one per robot id */
+    .track = sensor_track_encoders_track,
+    .handle = sensor_track_encoders_handle,
+    .counters = sensor_track_encoders_counters,
+    .status = NULL,
+};

@@ -18,12 +18,17 @@
  * naming them. Its handler calls the library's localizer itself, with its
  * node's clock from the estimator's per-kind clocks (estimator.h, timebase.c).
  *
- * A new kind: its frames in the DBC; its enumerator and payload in frames.h
- * (enum frame_kind, union in struct frame); a file bridge/sensor_<kind>.c
- * with its decoder, handler, counters and status-line part; one entry (and
- * its declarations) in sensors.c. Nothing else in the bridge names it,
- * unless it needs state of its own in struct estimator (estimator.h) or can
- * be the filter's timebase (timebase.c).
+ * The table assembles itself: each kind's own file, bridge/sensor_<kind>.c,
+ * defines its entry `const struct sensor_kind sensor_kind_<frame name>`
+ * (decoder, handler, counters, status-line part, timebase rank), and the
+ * list of entries, sensor_kinds[], is generated at build time from the DBC
+ * (build/gen/can/sensor_kinds.c, bridge/gen_frame_kinds.py), as are enum
+ * frame_kind and the payloads (frames.h). A new kind: its frame in the DBC
+ * with the next BridgeKind number; its file bridge/sensor_<kind>.c. Nothing
+ * else in the bridge names it, unless it needs state of its own in struct
+ * estimator (estimator.h). test_frame_kinds.c checks the table against the
+ * DBC (every frame the bridge receives has exactly one kind: its id, name,
+ * counter modulo and number).
  */
 #ifndef BRIDGE_SENSORS_H
 #define BRIDGE_SENSORS_H
@@ -104,19 +109,29 @@ typedef void (*sensor_status_fn)(const struct stats_report *r, char *buf, size_t
 
 /*
  * Decode the 8 bytes of a frame of the kind (its id in the kind's range,
- * shape checked by the caller) into *out and *seq. Returns FRAME_OK,
- * FRAME_UNKNOWN_ID (an id of the range the kind has no frame for),
- * FRAME_MALFORMED or FRAME_OUT_OF_RANGE (a signal outside its DBC range).
+ * shape checked by the caller) into *out and *seq (track 0): the kind's
+ * unpacker generated from the DBC (frame_<frame name>_unpack(), frames.h).
+ * Returns FRAME_OK, FRAME_MALFORMED or FRAME_OUT_OF_RANGE (a signal outside
+ * its DBC range).
  */
-typedef enum frame_result (*sensor_decode_fn)(uint32_t id, const uint8_t data[8], struct frame *out,
+typedef enum frame_result (*sensor_unpack_fn)(const uint8_t data[8], struct frame *out,
                                               struct frame_seq *seq);
+
+/* The rolling-counter track of a frame decoded fine (< the kind's tracks:
+ * its node id, struct frame_seq), for a kind with a track per node. */
+typedef unsigned (*sensor_track_fn)(const struct frame *f);
 
 /* Hand a frame decoded fine (rolling counter checked) to the estimator, with
  * its receive time on the bridge clock (us). */
 typedef void (*sensor_handle_fn)(struct estimator *e, const struct frame *f, int64_t rx_us);
 
+/* Whether the kind's clock is the filter's timebase on the estimator's site
+ * (timebase.c): the site has its sensors. */
+typedef bool (*sensor_timebase_fn)(const struct estimator *e);
+
 struct sensor_kind {
-    const char *name;       /* stats JSON key: "pulse_detection" */
+    enum frame_kind kind;   /* its enumerator: its index in sensor_kinds[] */
+    const char *name;       /* stats JSON key: the DBC frame's name in lower case */
     const char *short_name; /* status line: "pulse" */
     uint32_t id_first;      /* frame ids of the kind (standard 11-bit), */
     uint32_t id_last;       /* id_first..id_last, an aligned power-of-two block */
@@ -127,14 +142,36 @@ struct sensor_kind {
                                 newest by this much (frames.h) */
     unsigned tracks;        /* rolling-counter tracks: 1, or FRAME_MAX_NODES
                                 (one per node id, struct frame_seq) */
-    sensor_decode_fn decode;
+    sensor_unpack_fn unpack;
+    sensor_track_fn track; /* NULL: one track (0) */
     sensor_handle_fn handle;
     const struct sensor_counter *counters; /* its counters, ended by a NULL key (or NULL) */
     sensor_status_fn status;               /* its part of the status line, or NULL */
+    /* The filter's timebase, the one rule (timebase.c): the kinds with a rank
+     * (> 0) are asked from rank 1 up, and the first whose condition holds on
+     * the site gives its clock; a NULL condition always holds (the last
+     * resort). 0: never the timebase. */
+    unsigned timebase_rank;
+    sensor_timebase_fn timebase_if;
 };
 
-/* The table, indexed by enum frame_kind. */
-extern const struct sensor_kind sensor_kinds[FRAME_KIND_COUNT];
+/* The fields of a kind's entry that its DBC frame gives, by the frame's
+ * name (upper and lower case: SENSOR_KIND_FRAME(RANGE, range)): its
+ * enumerator, its name, its id, its Counter's range check and its unpacker,
+ * all generated from the DBC (frames.h, beaconloc_can.h). */
+#define SENSOR_KIND_FRAME(UPPER, lower)                                                            \
+    .kind = FRAME_##UPPER, .name = #lower, .id_first = BEACONLOC_CAN_##UPPER##_FRAME_ID,           \
+    .id_last = BEACONLOC_CAN_##UPPER##_FRAME_ID,                                                   \
+    .counter_in_range = beaconloc_can_##lower##_counter_is_in_range,                               \
+    .unpack = frame_##lower##_unpack
+
+/* The table, indexed by enum frame_kind (generated from the DBC: each entry
+ * is the sensor_kind_<frame name> of its kind's file). */
+extern const struct sensor_kind *const sensor_kinds[FRAME_KIND_COUNT];
+
+/* The kind whose clock is the filter's timebase on the estimator's site
+ * (the rule: struct sensor_kind, timebase_rank). */
+enum frame_kind sensor_timebase_kind(const struct estimator *e);
 
 /* The kind whose range holds standard id `id`, or NULL. */
 const struct sensor_kind *sensor_kind_of_id(uint32_t id);

@@ -88,7 +88,7 @@ static void write_by_kind(FILE *f, const uint64_t *by_kind)
 {
     fputc('{', f);
     for (int k = 0; k < FRAME_KIND_COUNT; k++)
-        fprintf(f, "%s\"%s\": %llu", k ? ", " : "", sensor_kinds[k].name,
+        fprintf(f, "%s\"%s\": %llu", k ? ", " : "", sensor_kinds[k]->name,
                 (unsigned long long)by_kind[k]);
     fputs("},\n", f);
 }
@@ -107,7 +107,7 @@ static void write_per_frame(FILE *f, const char *name, uint64_t total, const uin
 static void write_slot(FILE *f, const struct stats_report *r, enum sensor_slot slot)
 {
     for (int k = 0; k < FRAME_KIND_COUNT; k++) {
-        const struct sensor_counter *t = sensor_kinds[k].counters;
+        const struct sensor_counter *t = sensor_kinds[k]->counters;
         for (unsigned i = 0; t && t[i].key; i++) {
             if (t[i].slot != slot)
                 continue;
@@ -147,7 +147,7 @@ int stats_write_json(const struct stats_report *r, const char *path)
     /* by id: a kind's first frame id (each kind has one frame today) */
     fprintf(f, "  \"frames_received_by_id\": {");
     for (int k = 0; k < FRAME_KIND_COUNT; k++)
-        fprintf(f, "%s\"0x%03x\": %llu", k ? ", " : "", (unsigned)sensor_kinds[k].id_first,
+        fprintf(f, "%s\"0x%03x\": %llu", k ? ", " : "", (unsigned)sensor_kinds[k]->id_first,
                 (unsigned long long)fc->received[k]);
     fputs("},\n", f);
     fprintf(f, "  \"dropped_by_kernel\": %llu,\n", (unsigned long long)r->kernel_drops);
@@ -221,13 +221,13 @@ void stats_status_line(const struct stats_report *r, const char *prefix, const c
     size_t n = 0;
     for (int k = 0; k < FRAME_KIND_COUNT && n < sizeof kinds; k++)
         n += (size_t)snprintf(kinds + n, sizeof kinds - n, "%s%s %" PRIu64, k ? " " : "",
-                              sensor_kinds[k].short_name, fc->received[k]);
+                              sensor_kinds[k]->short_name, fc->received[k]);
     /* each kind's own part (" | pulses ok N rej N", ...), in table order */
     char parts[160 * FRAME_KIND_COUNT] = "";
     n = 0;
     for (int k = 0; k < FRAME_KIND_COUNT && n < sizeof parts; k++)
-        if (sensor_kinds[k].status) {
-            sensor_kinds[k].status(r, parts + n, sizeof parts - n);
+        if (sensor_kinds[k]->status) {
+            sensor_kinds[k]->status(r, parts + n, sizeof parts - n);
             n += strlen(parts + n);
         }
     log_info("%s: frames %" PRIu64 " (%s) bad %" PRIu64 " unknown %" PRIu64 " range %" PRIu64

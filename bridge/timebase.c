@@ -6,19 +6,14 @@
  */
 #include "estimator.h"
 
-/* The filter's timebase (estimator.h, "Timebases"), the one rule: the
+/* The filter's timebase (estimator.h, "Timebases"), the one rule, from the
+ * sensor table (each kind's timebase_rank and condition, sensors.h): the
  * receiver array's clock on a site with ultrasonic beacons, else the bearing
- * sensor's on a site with bearing beacons, else the range receiver's on a
- * site with range beacons, else the sonar ring's on a site with a ring. */
+ * sensor's on a site with bearing beacons, else the sonar ring's on a ring
+ * site without range beacons, else the range receiver's. */
 const struct node_clock *estimator_ref_clock(const struct estimator *e)
 {
-    if (e->blcfg.beacon_count > 0)
-        return &e->clock[FRAME_PULSE];
-    if (e->blcfg.bearing_beacon_count > 0)
-        return &e->clock[FRAME_BEARING];
-    if (e->blcfg.range_beacon_count == 0 && e->sonar.on)
-        return &e->clock[FRAME_SONAR];
-    return &e->clock[FRAME_RANGE];
+    return &e->clock[sensor_timebase_kind(e)];
 }
 
 bool estimator_ref_seen(const struct estimator *e)

@@ -123,14 +123,14 @@ static void send_pulse(struct world *w, int b, int64_t fire_us)
             int r = rx[j]; rx[j] = rx[j - 1]; rx[j - 1] = r;
         }
     for (int i = 0; i < n; i++) {
-        struct frame_pulse p = {
+        struct frame_pulse_detection p = {
             .node_time_us = (uint32_t)(ta[i] + RX_NODE_OFFSET_US),
             .receiver = (uint8_t)rx[i], .double_pulse = b == 0,
             .counter = w->pulse_counter++ & 7, .amplitude_mv = 800, .width_us = 2500,
         };
         int64_t rx_us = ta[i] + PULSE_HOLD_US + DELAY_US;
-        sensor_kinds[FRAME_PULSE].handle(&w->est, &(struct frame){.kind = FRAME_PULSE, .u.pulse = p},
-                                          rx_us);
+        sensor_kinds[FRAME_PULSE_DETECTION]->handle(
+            &w->est, &(struct frame){.kind = FRAME_PULSE_DETECTION, .u.pulse_detection = p}, rx_us);
         check_update(w, rx_us);
         w->pulse_rx[w->pulse_rx_n++ % 64] = rx_us;
     }
@@ -146,12 +146,12 @@ static void send_encoders_rx(struct world *w, int64_t t_us, int64_t rx_us)
     /* ticks = distance / (2πr) · ticks_per_rev, cumulative, modulo 2^14 */
     double ticks = w->ticks0 + d_m / (2 * M_PI * w->cfg.wheel_radius_m) * w->cfg.ticks_per_rev;
     uint16_t t14 = (uint16_t)((int64_t)floor(ticks) & 0x3fff);
-    struct frame_encoders f = {
+    struct frame_wheel_encoders f = {
         .node_time_us = (uint32_t)(t_us + ENC_NODE_OFFSET_US),
         .left_ticks = t14, .right_ticks = t14, .counter = w->enc_counter++ & 15,
     };
-    sensor_kinds[FRAME_ENCODERS].handle(&w->est, &(struct frame){.kind = FRAME_ENCODERS, .u.enc = f},
-                                        rx_us);
+    sensor_kinds[FRAME_WHEEL_ENCODERS]->handle(
+        &w->est, &(struct frame){.kind = FRAME_WHEEL_ENCODERS, .u.wheel_encoders = f}, rx_us);
 }
 
 static void send_encoders(struct world *w, int64_t t_us)
@@ -592,7 +592,7 @@ static void send_bearings(struct world *w, int64_t t_us, uint8_t *counter)
             .beacon = (uint8_t)(b + 1), .bearing_deg = deg, .quality = 100,
             .counter = (uint8_t)((*counter)++ & 15),
         };
-        sensor_kinds[FRAME_BEARING].handle(
+        sensor_kinds[FRAME_BEARING]->handle(
             &w->est, &(struct frame){.kind = FRAME_BEARING, .u.bearing = f}, t_us + DELAY_US);
     }
 }

@@ -60,14 +60,14 @@ static void test_pulse_decodes_every_field(void **state)
     struct can_msg m = pulse_msg(0xfedcba98u, 5, 1, 3, 4000, 1250);
     struct frame f;
     assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
-    assert_int_equal(f.kind, FRAME_PULSE);
-    assert_int_equal(f.u.pulse.node_time_us, 0xfedcba98u);
-    assert_int_equal(f.u.pulse.receiver, 5);
-    assert_true(f.u.pulse.double_pulse);
-    assert_int_equal(f.u.pulse.counter, 3);
-    assert_int_equal(f.u.pulse.amplitude_mv, 4000);
-    assert_true(f.u.pulse.width_us == 2500.0);
-    assert_int_equal(c.received[FRAME_PULSE], 1);
+    assert_int_equal(f.kind, FRAME_PULSE_DETECTION);
+    assert_int_equal(f.u.pulse_detection.node_time_us, 0xfedcba98u);
+    assert_int_equal(f.u.pulse_detection.receiver, 5);
+    assert_true(f.u.pulse_detection.double_pulse);
+    assert_int_equal(f.u.pulse_detection.counter, 3);
+    assert_int_equal(f.u.pulse_detection.amplitude_mv, 4000);
+    assert_true(f.u.pulse_detection.width_us == 2500.0);
+    assert_int_equal(c.received[FRAME_PULSE_DETECTION], 1);
 }
 
 static void test_encoders_and_status_decode(void **state)
@@ -78,23 +78,23 @@ static void test_encoders_and_status_decode(void **state)
     struct can_msg m = enc_msg(123456789u, 16383, 42, 15);
     struct frame f;
     assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
-    assert_int_equal(f.kind, FRAME_ENCODERS);
-    assert_int_equal(f.u.enc.node_time_us, 123456789u);
-    assert_int_equal(f.u.enc.left_ticks, 16383);
-    assert_int_equal(f.u.enc.right_ticks, 42);
-    assert_int_equal(f.u.enc.counter, 15);
+    assert_int_equal(f.kind, FRAME_WHEEL_ENCODERS);
+    assert_int_equal(f.u.wheel_encoders.node_time_us, 123456789u);
+    assert_int_equal(f.u.wheel_encoders.left_ticks, 16383);
+    assert_int_equal(f.u.wheel_encoders.right_ticks, 42);
+    assert_int_equal(f.u.wheel_encoders.counter, 15);
 
     m = status_msg(2, 4, 0x2);
     assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
-    assert_int_equal(f.kind, FRAME_STATUS);
-    assert_int_equal(f.u.status.node_id, 2);
-    assert_int_equal(f.u.status.flags, 0x2);
-    assert_int_equal(f.u.status.uptime_s, 123456);
-    assert_int_equal(f.u.status.tx_errors, 7);
-    assert_int_equal(f.u.status.rx_errors, 9);
-    assert_int_equal(f.u.status.overruns, 3);
-    assert_int_equal(c.received[FRAME_ENCODERS], 1);
-    assert_int_equal(c.received[FRAME_STATUS], 1);
+    assert_int_equal(f.kind, FRAME_NODE_STATUS);
+    assert_int_equal(f.u.node_status.node_id, 2);
+    assert_int_equal(f.u.node_status.flags, 0x2);
+    assert_int_equal(f.u.node_status.uptime_s, 123456);
+    assert_int_equal(f.u.node_status.tx_error_count, 7);
+    assert_int_equal(f.u.node_status.rx_error_count, 9);
+    assert_int_equal(f.u.node_status.overruns, 3);
+    assert_int_equal(c.received[FRAME_WHEEL_ENCODERS], 1);
+    assert_int_equal(c.received[FRAME_NODE_STATUS], 1);
 }
 
 static void test_bad_dlc_is_malformed(void **state)
@@ -116,8 +116,8 @@ static void test_bad_dlc_is_malformed(void **state)
     m.flags = CAN_MSG_RTR;
     assert_int_equal(frame_decode(&c, &m, &f), FRAME_MALFORMED);
     assert_int_equal(c.malformed, 4);
-    assert_int_equal(c.received[FRAME_PULSE] + c.received[FRAME_ENCODERS] +
-                         c.received[FRAME_STATUS], 0);
+    assert_int_equal(c.received[FRAME_PULSE_DETECTION] + c.received[FRAME_WHEEL_ENCODERS] +
+                         c.received[FRAME_NODE_STATUS], 0);
 }
 
 static void test_unknown_ids(void **state)
@@ -152,7 +152,7 @@ static void test_out_of_range(void **state)
     /* a good frame still decodes afterwards */
     m = pulse_msg(1, 7, 0, 0, 100, 100);
     assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
-    assert_int_equal(f.u.pulse.receiver, 7);
+    assert_int_equal(f.u.pulse_detection.receiver, 7);
 }
 
 static void test_rolling_counters(void **state)
@@ -168,16 +168,16 @@ static void test_rolling_counters(void **state)
         struct can_msg m = enc_msg((uint32_t)i, 0, 0, seq[i]);
         assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
     }
-    assert_int_equal(c.lost[FRAME_ENCODERS], 2 + 15);
-    assert_int_equal(c.duplicates[FRAME_ENCODERS], 0);
-    assert_int_equal(c.received[FRAME_ENCODERS], 5);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 2 + 15);
+    assert_int_equal(c.duplicates[FRAME_WHEEL_ENCODERS], 0);
+    assert_int_equal(c.received[FRAME_WHEEL_ENCODERS], 5);
     /* pulses: modulo 8; 6, 7, 0, 1 then 5 (2, 3, 4 lost) */
     static const uint8_t pseq[] = { 6, 7, 0, 1, 5 };
     for (size_t i = 0; i < sizeof pseq; i++) {
         struct can_msg m = pulse_msg((uint32_t)i, 0, 0, pseq[i], 10, 10);
         assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
     }
-    assert_int_equal(c.lost[FRAME_PULSE], 3);
+    assert_int_equal(c.lost[FRAME_PULSE_DETECTION], 3);
     /* status: counted per node; interleaved nodes lose nothing */
     static const uint8_t nodes[] = { 1, 2, 1, 2, 1 };
     static const uint8_t sc[] = { 5, 9, 6, 10, 8 };
@@ -185,7 +185,7 @@ static void test_rolling_counters(void **state)
         struct can_msg m = status_msg(nodes[i], sc[i], 0);
         assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
     }
-    assert_int_equal(c.lost[FRAME_STATUS], 1); /* node 1: 6 -> 8 */
+    assert_int_equal(c.lost[FRAME_NODE_STATUS], 1); /* node 1: 6 -> 8 */
     assert_int_equal(frame_lost_total(&c), 21);
     assert_int_equal(frame_duplicates_total(&c) + frame_out_of_order_total(&c), 0);
 }
@@ -206,10 +206,10 @@ static void test_duplicates_dropped(void **state)
     assert_int_equal(frame_decode(&c, &b, &f), FRAME_DUPLICATE);
     assert_int_equal(frame_decode(&c, &a, &f), FRAME_DUPLICATE);
     assert_int_equal(frame_decode(&c, &n, &f), FRAME_OK);
-    assert_int_equal(c.duplicates[FRAME_ENCODERS], 2);
-    assert_int_equal(c.received[FRAME_ENCODERS], 3);
-    assert_int_equal(c.lost[FRAME_ENCODERS], 0);
-    assert_int_equal(c.out_of_order[FRAME_ENCODERS], 0);
+    assert_int_equal(c.duplicates[FRAME_WHEEL_ENCODERS], 2);
+    assert_int_equal(c.received[FRAME_WHEEL_ENCODERS], 3);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 0);
+    assert_int_equal(c.out_of_order[FRAME_WHEEL_ENCODERS], 0);
     /* pulses: two receivers hearing one firing at the same microsecond are
      * two frames (receiver and counter differ), not a duplicate */
     struct can_msg p1 = pulse_msg(5000, 2, 0, 0, 900, 1250);
@@ -217,12 +217,12 @@ static void test_duplicates_dropped(void **state)
     assert_int_equal(frame_decode(&c, &p1, &f), FRAME_OK);
     assert_int_equal(frame_decode(&c, &p2, &f), FRAME_OK);
     assert_int_equal(frame_decode(&c, &p2, &f), FRAME_DUPLICATE);
-    assert_int_equal(c.duplicates[FRAME_PULSE], 1);
+    assert_int_equal(c.duplicates[FRAME_PULSE_DETECTION], 1);
     /* status: per node */
     struct can_msg s1 = status_msg(1, 3, 0);
     assert_int_equal(frame_decode(&c, &s1, &f), FRAME_OK);
     assert_int_equal(frame_decode(&c, &s1, &f), FRAME_DUPLICATE);
-    assert_int_equal(c.duplicates[FRAME_STATUS], 1);
+    assert_int_equal(c.duplicates[FRAME_NODE_STATUS], 1);
     assert_int_equal(frame_duplicates_total(&c), 4);
     assert_int_equal(frame_lost_total(&c), 0);
 }
@@ -242,24 +242,24 @@ static void test_out_of_order_dropped(void **state)
                    e5 = enc_msg(50000, 5, 5, 5), e6 = enc_msg(60000, 6, 6, 6);
     assert_int_equal(frame_decode(&c, &e3, &f), FRAME_OK);
     assert_int_equal(frame_decode(&c, &e5, &f), FRAME_OK);
-    assert_int_equal(c.lost[FRAME_ENCODERS], 1);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 1);
     assert_int_equal(frame_decode(&c, &e4, &f), FRAME_OUT_OF_ORDER);
-    assert_int_equal(c.lost[FRAME_ENCODERS], 0);
-    assert_int_equal(c.out_of_order[FRAME_ENCODERS], 1);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 0);
+    assert_int_equal(c.out_of_order[FRAME_WHEEL_ENCODERS], 1);
     assert_int_equal(frame_decode(&c, &e6, &f), FRAME_OK);
-    assert_int_equal(c.lost[FRAME_ENCODERS], 0);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 0);
     /* again, across the counter's wrap: 14, 1, 15, 0 (15 and 0 late) */
     struct can_msg w14 = enc_msg(140000, 1, 1, 14), w15 = enc_msg(150000, 1, 1, 15),
                    w0 = enc_msg(160000, 1, 1, 0), w1 = enc_msg(170000, 1, 1, 1);
     frame_counters_init(&c);
     assert_int_equal(frame_decode(&c, &w14, &f), FRAME_OK);
     assert_int_equal(frame_decode(&c, &w1, &f), FRAME_OK);
-    assert_int_equal(c.lost[FRAME_ENCODERS], 2);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 2);
     assert_int_equal(frame_decode(&c, &w15, &f), FRAME_OUT_OF_ORDER);
     assert_int_equal(frame_decode(&c, &w0, &f), FRAME_OUT_OF_ORDER);
-    assert_int_equal(c.lost[FRAME_ENCODERS], 0);
-    assert_int_equal(c.out_of_order[FRAME_ENCODERS], 2);
-    assert_int_equal(c.duplicates[FRAME_ENCODERS], 0);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 0);
+    assert_int_equal(c.out_of_order[FRAME_WHEEL_ENCODERS], 2);
+    assert_int_equal(c.duplicates[FRAME_WHEEL_ENCODERS], 0);
     /* a place that was not counted lost is no late frame: 2, 3, then 2
      * with a new stamp is a restart of the counter (15 lost), passed on */
     frame_counters_init(&c);
@@ -268,8 +268,8 @@ static void test_out_of_order_dropped(void **state)
     assert_int_equal(frame_decode(&c, &a, &f), FRAME_OK);
     assert_int_equal(frame_decode(&c, &b, &f), FRAME_OK);
     assert_int_equal(frame_decode(&c, &r, &f), FRAME_OK);
-    assert_int_equal(c.out_of_order[FRAME_ENCODERS], 0);
-    assert_int_equal(c.lost[FRAME_ENCODERS], 14);
+    assert_int_equal(c.out_of_order[FRAME_WHEEL_ENCODERS], 0);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 14);
     /* pulses (modulo 8): 6, 0, 7: the 7 was late; its NodeTime must be
      * older than the newest frame's */
     frame_counters_init(&c);
@@ -279,8 +279,8 @@ static void test_out_of_order_dropped(void **state)
     assert_int_equal(frame_decode(&c, &p6, &f), FRAME_OK);
     assert_int_equal(frame_decode(&c, &p0, &f), FRAME_OK);
     assert_int_equal(frame_decode(&c, &p7, &f), FRAME_OUT_OF_ORDER);
-    assert_int_equal(c.lost[FRAME_PULSE], 0);
-    assert_int_equal(c.out_of_order[FRAME_PULSE], 1);
+    assert_int_equal(c.lost[FRAME_PULSE_DETECTION], 0);
+    assert_int_equal(c.out_of_order[FRAME_PULSE_DETECTION], 1);
     assert_int_equal(frame_out_of_order_total(&c), 1);
     /* two receivers of one firing, swapped on the way, whose NodeTimes were
      * already out of order at the node (latency jitter): still late */
@@ -288,8 +288,8 @@ static void test_out_of_order_dropped(void **state)
                    q2 = pulse_msg(9100, 5, 0, 2, 900, 1250);
     assert_int_equal(frame_decode(&c, &q2, &f), FRAME_OK);
     assert_int_equal(frame_decode(&c, &q1, &f), FRAME_OUT_OF_ORDER);
-    assert_int_equal(c.lost[FRAME_PULSE], 0);
-    assert_int_equal(c.out_of_order[FRAME_PULSE], 2);
+    assert_int_equal(c.lost[FRAME_PULSE_DETECTION], 0);
+    assert_int_equal(c.out_of_order[FRAME_PULSE_DETECTION], 2);
     /* ... and 4 lost in a burst (6, [7, 0, 1, 2], 3) whose place 3 was
      * skipped a while before stays a gap, not a late frame: its stamp is
      * newer */
@@ -300,8 +300,8 @@ static void test_out_of_order_dropped(void **state)
         struct can_msg m = pulse_msg(pt[i], 1, 0, pc[i], 900, 1250);
         assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
     }
-    assert_int_equal(c.lost[FRAME_PULSE], 1 + 4);
-    assert_int_equal(c.out_of_order[FRAME_PULSE], 0);
+    assert_int_equal(c.lost[FRAME_PULSE_DETECTION], 1 + 4);
+    assert_int_equal(c.out_of_order[FRAME_PULSE_DETECTION], 0);
 }
 
 int main(void)

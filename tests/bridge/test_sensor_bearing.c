@@ -136,11 +136,11 @@ static void test_node_status_of_node_3(void **state)
             struct can_msg m = { .id = BEACONLOC_CAN_NODE_STATUS_FRAME_ID, .len = 8 };
             assert_int_equal(beaconloc_can_node_status_pack(m.data, &st, 8), 8);
             assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
-            assert_int_equal(f.u.status.node_id, node);
+            assert_int_equal(f.u.node_status.node_id, node);
         }
-    assert_int_equal(c.received[FRAME_STATUS], 6);
-    assert_int_equal(c.lost[FRAME_STATUS], 0);
-    assert_true(c.track[FRAME_STATUS][3].seen && c.track[FRAME_STATUS][3].last == 14);
+    assert_int_equal(c.received[FRAME_NODE_STATUS], 6);
+    assert_int_equal(c.lost[FRAME_NODE_STATUS], 0);
+    assert_true(c.track[FRAME_NODE_STATUS][3].seen && c.track[FRAME_NODE_STATUS][3].last == 14);
 }
 
 /* ---- the estimator path ----------------------------------------------- */
@@ -231,7 +231,7 @@ static enum frame_result deliver(struct world *w, struct can_msg m, int64_t rx_u
     struct frame f;
     enum frame_result r = frame_decode(&w->fc, &m, &f);
     if (r == FRAME_OK)
-        sensor_kinds[f.kind].handle(&w->est, &f, rx_us);
+        sensor_kinds[f.kind]->handle(&w->est, &f, rx_us);
     return r;
 }
 
@@ -383,7 +383,7 @@ static void test_unexpected_kinds(void **state)
     assert_int_equal(beaconloc_can_pulse_detection_pack(m.data, &p, 8), 8);
     assert_int_equal(deliver(&W, m, 1000000), FRAME_OK);
     assert_int_equal(sensor_count(&W.est.counts, "pulses_unexpected"), 1);
-    assert_false(W.est.clock[FRAME_PULSE].have_first); /* not even its clock */
+    assert_false(W.est.clock[FRAME_PULSE_DETECTION].have_first); /* not even its clock */
 
     /* kleeman-lab: ultrasonic beacons only */
     struct estimator *e = &W.est;

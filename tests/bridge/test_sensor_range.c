@@ -71,10 +71,10 @@ static void test_good_frame_decodes(void **state)
     assert_int_equal(c.out_of_range, 0);
     /* the kernel filter passes 0x130 alone */
     uint32_t id, mask;
-    sensor_filter(&sensor_kinds[FRAME_RANGE], &id, &mask);
+    sensor_filter(sensor_kinds[FRAME_RANGE], &id, &mask);
     assert_int_equal(id, 0x130);
     assert_int_equal(mask, 0x7ff);
-    assert_ptr_equal(sensor_kind_of_id(0x130), &sensor_kinds[FRAME_RANGE]);
+    assert_ptr_equal(sensor_kind_of_id(0x130), sensor_kinds[FRAME_RANGE]);
 }
 
 /* Outside the DBC's ranges: Beacon 0, Receiver 0, TimeOfFlight 65535; and
@@ -139,11 +139,11 @@ static void test_node_status_of_node_4(void **state)
             struct can_msg m = { .id = BEACONLOC_CAN_NODE_STATUS_FRAME_ID, .len = 8 };
             assert_int_equal(beaconloc_can_node_status_pack(m.data, &st, 8), 8);
             assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
-            assert_int_equal(f.u.status.node_id, node);
+            assert_int_equal(f.u.node_status.node_id, node);
         }
-    assert_int_equal(c.received[FRAME_STATUS], 6);
-    assert_int_equal(c.lost[FRAME_STATUS], 0);
-    assert_true(c.track[FRAME_STATUS][4].seen && c.track[FRAME_STATUS][4].last == 10);
+    assert_int_equal(c.received[FRAME_NODE_STATUS], 6);
+    assert_int_equal(c.lost[FRAME_NODE_STATUS], 0);
+    assert_true(c.track[FRAME_NODE_STATUS][4].seen && c.track[FRAME_NODE_STATUS][4].last == 10);
 }
 
 /* ---- the estimator path ----------------------------------------------- */
@@ -246,7 +246,7 @@ static enum frame_result deliver(struct world *w, struct can_msg m, int64_t rx_u
     if (r == FRAME_OK) {
         if (f.kind == FRAME_RANGE)
             w->ranges_sent++;
-        sensor_kinds[f.kind].handle(&w->est, &f, rx_us);
+        sensor_kinds[f.kind]->handle(&w->est, &f, rx_us);
     }
     return r;
 }

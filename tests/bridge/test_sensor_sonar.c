@@ -75,10 +75,10 @@ static void test_good_frame_decodes(void **state)
     assert_int_equal(c.malformed, 1);
     /* the kernel filter passes 0x150 alone */
     uint32_t id, mask;
-    sensor_filter(&sensor_kinds[FRAME_SONAR], &id, &mask);
+    sensor_filter(sensor_kinds[FRAME_SONAR], &id, &mask);
     assert_int_equal(id, 0x150);
     assert_int_equal(mask, 0x7ff);
-    assert_ptr_equal(sensor_kind_of_id(0x150), &sensor_kinds[FRAME_SONAR]);
+    assert_ptr_equal(sensor_kind_of_id(0x150), sensor_kinds[FRAME_SONAR]);
     assert_null(sensor_kind_of_id(0x151)); /* reserved */
 }
 
@@ -179,7 +179,7 @@ static void handle(struct can_msg *m, int64_t rx_us)
         return;
     if (f.kind == FRAME_SONAR)
         W.handed++;
-    sensor_kinds[f.kind].handle(&W.est, &f, rx_us);
+    sensor_kinds[f.kind]->handle(&W.est, &f, rx_us);
 }
 
 /* The exact range of sensor i from the standing robot: the perpendicular

@@ -55,16 +55,16 @@ static void test_decodes(void **state)
     frame_counters_init(&c);
     assert_int_equal(BEACONLOC_CAN_TRACK_ENCODERS_FRAME_ID, 0x131);
     assert_int_equal(c.modulo[FRAME_TRACK_ENCODERS], 16); /* Counter 0..15 */
-    assert_ptr_equal(sensor_kind_of_id(0x131), &sensor_kinds[FRAME_TRACK_ENCODERS]);
+    assert_ptr_equal(sensor_kind_of_id(0x131), sensor_kinds[FRAME_TRACK_ENCODERS]);
     struct can_msg m = track_msg(0xfedcba98u, 3, 4095, 17, 9);
     struct frame f;
     assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
     assert_int_equal(f.kind, FRAME_TRACK_ENCODERS);
-    assert_int_equal(f.u.track.node_time_us, 0xfedcba98u);
-    assert_int_equal(f.u.track.robot, 3);
-    assert_int_equal(f.u.track.left_ticks, 4095);
-    assert_int_equal(f.u.track.right_ticks, 17);
-    assert_int_equal(f.u.track.counter, 9);
+    assert_int_equal(f.u.track_encoders.node_time_us, 0xfedcba98u);
+    assert_int_equal(f.u.track_encoders.robot, 3);
+    assert_int_equal(f.u.track_encoders.left_ticks, 4095);
+    assert_int_equal(f.u.track_encoders.right_ticks, 17);
+    assert_int_equal(f.u.track_encoders.counter, 9);
     assert_int_equal(c.received[FRAME_TRACK_ENCODERS], 1);
     /* Robot 0 fits the 4 bits but not the DBC's 1..15 */
     m = track_msg(1000, 0, 1, 1, 0);
@@ -126,7 +126,7 @@ static void test_handler_routes(void **state)
     struct frame_counters c;
     frame_counters_init(&c);
     assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
-    sensor_kinds[f.kind].handle(&e, &f, 2000);
+    sensor_kinds[f.kind]->handle(&e, &f, 2000);
     assert_int_equal(sensor_count(&e.counts, "tracks_unexpected"), 1);
     /* a team site */
     config_defaults(&cfg);
@@ -137,13 +137,13 @@ static void test_handler_routes(void **state)
     assert_int_equal(estimator_init(&e, &cfg, err, sizeof err), 0);
     assert_int_equal(team_init(&t, &cfg, err, sizeof err), 0);
     e.team = &t;
-    sensor_kinds[f.kind].handle(&e, &f, 2000);
+    sensor_kinds[f.kind]->handle(&e, &f, 2000);
     assert_int_equal(sensor_count(&e.counts, "tracks_unexpected"), 0);
     assert_int_equal(t.c.tracks_in, 1);
     /* and a RANGE frame from receiver 3 goes to the team, not the estimator */
     m = range_msg(5000, 1, 3, 0);
     assert_int_equal(frame_decode(&c, &m, &f), FRAME_OK);
-    sensor_kinds[f.kind].handle(&e, &f, 12000);
+    sensor_kinds[f.kind]->handle(&e, &f, 12000);
     assert_int_equal(t.c.ranges_in, 1);
     assert_int_equal(sensor_count(&e.counts, "ranges_other_receiver"), 0);
 }

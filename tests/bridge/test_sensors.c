@@ -24,40 +24,42 @@
 static void test_ids_and_moduli_from_the_dbc(void **state)
 {
     (void)state;
-    assert_int_equal(sensor_kinds[FRAME_PULSE].id_first, BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID);
-    assert_int_equal(sensor_kinds[FRAME_ENCODERS].id_first, BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID);
-    assert_int_equal(sensor_kinds[FRAME_STATUS].id_first, BEACONLOC_CAN_NODE_STATUS_FRAME_ID);
+    assert_int_equal(sensor_kinds[FRAME_PULSE_DETECTION]->id_first,
+                     BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID);
+    assert_int_equal(sensor_kinds[FRAME_WHEEL_ENCODERS]->id_first,
+                     BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID);
+    assert_int_equal(sensor_kinds[FRAME_NODE_STATUS]->id_first, BEACONLOC_CAN_NODE_STATUS_FRAME_ID);
     /* the Counter's length: pack 0xff, unpack what survived the mask */
     uint8_t d[8];
     struct beaconloc_can_pulse_detection_t p = { .counter = 0xff };
     beaconloc_can_pulse_detection_pack(d, &p, 8);
     beaconloc_can_pulse_detection_unpack(&p, d, 8);
-    assert_int_equal(sensor_counter_modulo(&sensor_kinds[FRAME_PULSE]), p.counter + 1u);
+    assert_int_equal(sensor_counter_modulo(sensor_kinds[FRAME_PULSE_DETECTION]), p.counter + 1u);
     struct beaconloc_can_wheel_encoders_t e = { .counter = 0xff };
     beaconloc_can_wheel_encoders_pack(d, &e, 8);
     beaconloc_can_wheel_encoders_unpack(&e, d, 8);
-    assert_int_equal(sensor_counter_modulo(&sensor_kinds[FRAME_ENCODERS]), e.counter + 1u);
+    assert_int_equal(sensor_counter_modulo(sensor_kinds[FRAME_WHEEL_ENCODERS]), e.counter + 1u);
     struct beaconloc_can_node_status_t s = { .counter = 0xff };
     beaconloc_can_node_status_pack(d, &s, 8);
     beaconloc_can_node_status_unpack(&s, d, 8);
-    assert_int_equal(sensor_counter_modulo(&sensor_kinds[FRAME_STATUS]), s.counter + 1u);
+    assert_int_equal(sensor_counter_modulo(sensor_kinds[FRAME_NODE_STATUS]), s.counter + 1u);
     /* the DBC today: 3-bit pulse counter, 4-bit encoder and status counters */
-    assert_int_equal(sensor_counter_modulo(&sensor_kinds[FRAME_PULSE]), 8);
-    assert_int_equal(sensor_counter_modulo(&sensor_kinds[FRAME_ENCODERS]), 16);
+    assert_int_equal(sensor_counter_modulo(sensor_kinds[FRAME_PULSE_DETECTION]), 8);
+    assert_int_equal(sensor_counter_modulo(sensor_kinds[FRAME_WHEEL_ENCODERS]), 16);
     struct frame_counters c;
     frame_counters_init(&c);
     for (int k = 0; k < FRAME_KIND_COUNT; k++)
-        assert_int_equal(c.modulo[k], sensor_counter_modulo(&sensor_kinds[k]));
+        assert_int_equal(c.modulo[k], sensor_counter_modulo(sensor_kinds[k]));
 }
 
 static void test_table_is_consistent(void **state)
 {
     (void)state;
     for (int k = 0; k < FRAME_KIND_COUNT; k++) {
-        const struct sensor_kind *a = &sensor_kinds[k];
+        const struct sensor_kind *a = sensor_kinds[k];
         assert_non_null(a->name);
         assert_non_null(a->short_name);
-        assert_non_null(a->decode);
+        assert_non_null(a->unpack);
         assert_non_null(a->handle);
         assert_non_null(a->counter_in_range);
         assert_true(a->tracks >= 1 && a->tracks <= FRAME_MAX_NODES);
@@ -69,7 +71,7 @@ static void test_table_is_consistent(void **state)
         assert_int_equal(size & (size - 1u), 0);
         assert_int_equal(a->id_first % size, 0);
         for (int j = 0; j < k; j++) {
-            const struct sensor_kind *b = &sensor_kinds[j];
+            const struct sensor_kind *b = sensor_kinds[j];
             assert_true(a->id_last < b->id_first || b->id_last < a->id_first);
             assert_string_not_equal(a->name, b->name);
             assert_string_not_equal(a->short_name, b->short_name);
@@ -87,20 +89,20 @@ static void test_filters_and_lookup(void **state)
         int passing = 0;
         for (int k = 0; k < FRAME_KIND_COUNT; k++) {
             uint32_t fid, mask;
-            sensor_filter(&sensor_kinds[k], &fid, &mask);
+            sensor_filter(sensor_kinds[k], &fid, &mask);
             bool pass = (id & mask) == (fid & mask);
-            bool in = id >= sensor_kinds[k].id_first && id <= sensor_kinds[k].id_last;
+            bool in = id >= sensor_kinds[k]->id_first && id <= sensor_kinds[k]->id_last;
             assert_int_equal(pass, in);
             if (in) {
                 passing++;
-                assert_ptr_equal(found, &sensor_kinds[k]);
+                assert_ptr_equal(found, sensor_kinds[k]);
             }
         }
         if (!passing)
             assert_null(found);
     }
     uint32_t fid, mask;
-    sensor_filter(&sensor_kinds[FRAME_PULSE], &fid, &mask);
+    sensor_filter(sensor_kinds[FRAME_PULSE_DETECTION], &fid, &mask);
     assert_int_equal(fid, 0x100);
     assert_int_equal(mask, 0x7ff);
 }
@@ -110,7 +112,7 @@ static void test_counter_tables(void **state)
     (void)state;
     static struct sensor_counts c;
     for (int k = 0; k < FRAME_KIND_COUNT; k++) {
-        const struct sensor_counter *t = sensor_kinds[k].counters;
+        const struct sensor_counter *t = sensor_kinds[k]->counters;
         assert_non_null(t);
         unsigned n = 0;
         while (t[n].key) n++;

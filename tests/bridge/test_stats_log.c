@@ -120,13 +120,13 @@ static void test_json_report(void **state)
     (void)state;
     struct frame_counters fc;
     frame_counters_init(&fc);
-    fc.received[FRAME_PULSE] = 11;
-    fc.received[FRAME_ENCODERS] = 22;
+    fc.received[FRAME_PULSE_DETECTION] = 11;
+    fc.received[FRAME_WHEEL_ENCODERS] = 22;
     fc.malformed = 3;
-    fc.lost[FRAME_ENCODERS] = 4;
-    fc.duplicates[FRAME_PULSE] = 6;
-    fc.duplicates[FRAME_STATUS] = 1;
-    fc.out_of_order[FRAME_ENCODERS] = 8;
+    fc.lost[FRAME_WHEEL_ENCODERS] = 4;
+    fc.duplicates[FRAME_PULSE_DETECTION] = 6;
+    fc.duplicates[FRAME_NODE_STATUS] = 1;
+    fc.out_of_order[FRAME_WHEEL_ENCODERS] = 8;
     fc.received[FRAME_BEARING] = 33;
     fc.out_of_order[FRAME_BEARING] = 2;
     fc.received[FRAME_RANGE] = 44;
@@ -238,7 +238,7 @@ static void test_json_has_every_kind_counter(void **state)
     unlink(path);
     unsigned seen = 0;
     for (int i = 0; i < FRAME_KIND_COUNT; i++) {
-        const struct sensor_counter *t = sensor_kinds[i].counters;
+        const struct sensor_counter *t = sensor_kinds[i]->counters;
         for (unsigned j = 0; t[j].key; j++) {
             char want[96];
             if (t[j].write) /* a section of its own: absent without its source */
@@ -310,15 +310,15 @@ static void test_status_line_text(void **state)
     (void)state;
     struct frame_counters fc;
     frame_counters_init(&fc);
-    fc.received[FRAME_PULSE] = 181;
-    fc.received[FRAME_ENCODERS] = 1000;
-    fc.received[FRAME_STATUS] = 20;
+    fc.received[FRAME_PULSE_DETECTION] = 181;
+    fc.received[FRAME_WHEEL_ENCODERS] = 1000;
+    fc.received[FRAME_NODE_STATUS] = 20;
     fc.malformed = 1;
     fc.unknown_id = 2;
     fc.out_of_range = 3;
-    fc.lost[FRAME_PULSE] = 4;
-    fc.duplicates[FRAME_ENCODERS] = 5;
-    fc.out_of_order[FRAME_STATUS] = 6;
+    fc.lost[FRAME_PULSE_DETECTION] = 4;
+    fc.duplicates[FRAME_WHEEL_ENCODERS] = 5;
+    fc.out_of_order[FRAME_NODE_STATUS] = 6;
     fc.received[FRAME_BEARING] = 40;
     fc.received[FRAME_RANGE] = 50;
     static struct sensor_counts k;

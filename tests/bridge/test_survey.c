@@ -401,7 +401,7 @@ static void feed(struct estimator *e, struct frame_counters *fc, struct can_msg 
     struct frame f;
     m->rx_us = rx_us;
     assert_int_equal(frame_decode(fc, m, &f), FRAME_OK);
-    sensor_kinds[f.kind].handle(e, &f, rx_us);
+    sensor_kinds[f.kind]->handle(e, &f, rx_us);
 }
 
 static void test_robot_ranges_wait_for_the_survey(void **state)

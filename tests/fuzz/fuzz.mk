@@ -56,7 +56,7 @@ FUZZ_HARN_CFLAGS  := -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -MMD -MP -Ites
 
 FUZZ_LIB_OBJS := $(patsubst lib/src/%.cpp,$(FUZZ_DIR)/obj/lib/%.o,$(LIB_SRCS))
 FUZZ_BR_OBJS  := $(patsubst bridge/%.c,$(FUZZ_DIR)/obj/bridge/%.o,$(filter-out bridge/main.c,$(BRIDGE_SRCS))) \
-                 $(FUZZ_DIR)/obj/bridge/beaconloc_can.o
+                 $(BRIDGE_GEN_NAMES:%=$(FUZZ_DIR)/obj/bridge/%.o)
 
 .PHONY: fuzz fuzz-smoke fuzz-build fuzz-seeds fuzz-msan
 UNIT_TESTS += fuzz-smoke
@@ -70,7 +70,8 @@ $(FUZZ_DIR)/obj/bridge/%.o: bridge/%.c $(BRIDGE_CAN_H) $(BRIDGE_MAVSTAMP) tests/
 	@mkdir -p $(@D)
 	$(FUZZ_CC) $(BRIDGE_CPPFLAGS) $(FUZZ_BR_CFLAGS) $(FUZZ_SAN) -c -o $@ $<
 
-$(FUZZ_DIR)/obj/bridge/beaconloc_can.o: $(BRIDGE_CAN_C) $(BRIDGE_CAN_H) tests/fuzz/fuzz.mk
+$(BRIDGE_GEN_NAMES:%=$(FUZZ_DIR)/obj/bridge/%.o): $(FUZZ_DIR)/obj/bridge/%.o: $(BRIDGE_CANGEN)/%.c \
+        $(BRIDGE_CAN_H) $(BRIDGE_MAVSTAMP) tests/fuzz/fuzz.mk
 	@mkdir -p $(@D)
 	$(FUZZ_CC) $(BRIDGE_CPPFLAGS) $(FUZZ_BR_CFLAGS) $(FUZZ_SAN) -c -o $@ $<
 

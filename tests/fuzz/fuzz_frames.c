@@ -392,10 +392,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                        "FRAME_OK for id 0x%x len %u flags 0x%x", (unsigned)msg.id,
                        msg.len, msg.flags);
             FUZZ_CHECK(f.kind >= 0 && f.kind < FRAME_KIND_COUNT &&
-                           sensor_kind_of_id(msg.id) == &sensor_kinds[f.kind],
+                           sensor_kind_of_id(msg.id) == sensor_kinds[f.kind],
                        "kind %d for id 0x%x", (int)f.kind, (unsigned)msg.id);
             /* the sensor table's handler, as bridge/frame_in.c calls it */
-            sensor_kinds[f.kind].handle(&est, &f, msg.rx_us);
+            sensor_kinds[f.kind]->handle(&est, &f, msg.rx_us);
             int64_t rx;
             if (estimator_take_update(&est, &rx))
                 check_output(&est, now);
