@@ -3,8 +3,9 @@
  *
  * Every payload is decoded by the C that cantools generates at build time
  * from hw_sim/beaconloc_sim/data/beaconloc.dbc (build/gen/can/beaconloc_can.{c,h}),
- * called by its kind's decoder in the sensor table (sensors.h: ids, counter
- * moduli, decoders, handlers); frames.c only checks frame shape and
+ * called by its kind's unpacker, generated from the same DBC (frame_kinds.h
+ * below), from the sensor table (sensors.h: ids, counter moduli, unpackers,
+ * handlers); frames.c only checks frame shape and
  * rolling counters, for every kind alike.
  *
  * Bad data is never an error: a frame that is not one of ours, has the
@@ -83,7 +84,7 @@ struct frame {
 #define FRAME_RECENT 4      /* payloads remembered per track for duplicates */
 #define FRAME_MODULO_MAX 32 /* largest counter modulo a track follows (bit window) */
 
-/* What a kind's decoder tells the rolling-counter check about one frame. */
+/* What a kind's unpacker tells the rolling-counter check about one frame. */
 struct frame_seq {
     uint8_t counter; /* the frame's Counter signal */
     uint32_t stamp;  /* its node time, us (NODE_STATUS: uptime, s) */

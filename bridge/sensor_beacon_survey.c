@@ -1,10 +1,10 @@
 /*
  * beaconloc-bridge — sensor kind BEACON_SURVEY (the fixed range beacons
  * ranging each other while the network maps itself, Marvelmind-like):
- * decoder, handler and counters of its sensor-table entry (sensors.h), and
+ * handler and counters of its sensor-table entry (sensors.h), and
  * the survey's hold on the robot's ranges until the beacons are placed.
  *
- * The decoder checks what the DBC says (Emitter and Listener 1..15,
+ * Its unpacker, generated from the DBC, checks what the DBC says (Emitter and Listener 1..15,
  * TimeOfFlight 0..65534, by the generated checks); what the frame means for
  * the site is the handler's (a site without self_survey counts it in
  * survey_unexpected; solving and reconfiguring: bridge/estimator_survey.c;

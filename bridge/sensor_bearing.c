@@ -1,16 +1,15 @@
 /*
  * beaconloc-bridge — sensor kind BEARING (the bearing sensor, node 3:
- * bearings to self-identifying beacons, Vander et al. 2011): decoder,
- * handler, counters and status-line part of its sensor-table entry
+ * bearings to self-identifying beacons, Vander et al. 2011): handler, counters and status-line part of its sensor-table entry
  * (sensors.h). The handler maps each bearing onto the filter's timebase,
  * checks and counts it, and gives it to the localizer (estimator.h,
  * "Bearings").
  *
- * The decoder checks what the DBC says: every signal in its range by the
+ * Its unpacker, generated from the DBC, checks what the DBC says: every signal in its range by the
  * generated checks (Beacon 1..15: a 0 is FRAME_OUT_OF_RANGE), the bearing
  * finite and inside [0, 360) deg. Whether the site has that beacon is the
  * handler's check (counted in bearings_unknown_beacon):
- * the decoder is a function of the frame alone (sensor_decode_fn has no
+ * the unpacker is a function of the frame alone (sensor_unpack_fn has no
  * site), the site's count changes on SIGHUP while the frame layer's
  * counters must not depend on it, and a frame of a beacon the site does
  * not know is a well-formed frame of the bus, a different fault from a

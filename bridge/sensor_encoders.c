@@ -1,6 +1,6 @@
 /*
  * beaconloc-bridge — sensor kind WHEEL_ENCODERS (encoder node, node 2):
- * decoder, handler and counters of its sensor-table entry (sensors.h). The
+ * handler and counters of its sensor-table entry (sensors.h). The
  * handler maps each sample onto the filter's timebase, turns ticks into
  * metres and gives the wheel increment to the localizer; stale samples and
  * glitched counts are counted and dropped (estimator.h, "Ordering").

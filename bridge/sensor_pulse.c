@@ -1,6 +1,6 @@
 /*
  * beaconloc-bridge — sensor kind PULSE_DETECTION (receiver array, node 1):
- * decoder, handler, counters and status-line part of its sensor-table entry
+ * handler, counters and status-line part of its sensor-table entry
  * (sensors.h). The handler maps each detection onto the receiver's clock
  * (the filter's timebase on a site with ultrasonic beacons) and gives it to
  * the localizer (sequencer, filter and the policy between them); a site

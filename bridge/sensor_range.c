@@ -1,19 +1,19 @@
 /*
  * beaconloc-bridge — sensor kind RANGE (the range receiver, node 4: times of
  * flight of RF-synchronised ultrasonic pulses from fixed range beacons, the
- * CMU Millibots' ranging; Marvelmind-like sites): decoder, handler, counters
+ * CMU Millibots' ranging; Marvelmind-like sites): handler, counters
  * and status-line part of its sensor-table entry (sensors.h). The handler
  * maps each range onto the filter's timebase, checks and counts it, and
  * gives it to the localizer (estimator.h, "Ranges").
  *
- * The decoder checks what the DBC says: every signal in its range by the
+ * Its unpacker, generated from the DBC, checks what the DBC says: every signal in its range by the
  * generated checks (Beacon and Receiver 1..15: a 0 is FRAME_OUT_OF_RANGE;
  * TimeOfFlight 0..65534: 65535 is FRAME_OUT_OF_RANGE). What the frame means
  * for this site is the handler's (each counted and dropped): a Receiver other than 1 (one robot; on a team site every range
  * goes to the team instead, bridge/team.h), a beacon id beyond [range_beacons] count,
  * a TimeOfFlight of 0 (no flight: a receiver never sits on a beacon; a node
  * reports it when it timed nothing) or of 65534 (the counter's saturated
- * value: at least 65.5 ms, the flight itself unknown). The decoder is a
+ * value: at least 65.5 ms, the flight itself unknown). The unpacker is a
  * function of the frame alone, as for bearings (sensor_bearing.c).
  */
 #include "sensors.h"

@@ -1,14 +1,14 @@
 /*
  * beaconloc-bridge — sensor kind SONAR (the sonar ring, node 5: one frame per
  * sensor per burst, the first echo of its ping; Hoppenot & Colle 1997):
- * decoder and handler of its sensor-table entry (sensors.h).
+ * handler and table entry (sensors.h).
  *
- * The decoder checks what the DBC says: every signal in its range by the
+ * Its unpacker, generated from the DBC, checks what the DBC says: every signal in its range by the
  * generated checks (Sensor 0..15, Range 0..16383 mm, Amplitude 0..255, Flags
  * 0..3). What the frame means for this site is the handler's
  * (estimator_sonar, bridge/sonar.h: each counted where it stops): a sensor
  * beyond [sonar_ring] count, a NO_ECHO or MAX_RANGE flag, a sensor the site
- * does not use, a range outside [min_range_m, max_range_m]. The decoder is a
+ * does not use, a range outside [min_range_m, max_range_m]. The unpacker is a
  * function of the frame alone, as for bearings (sensor_bearing.c).
  */
 #include "sensors.h"

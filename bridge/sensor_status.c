@@ -1,6 +1,5 @@
 /*
- * beaconloc-bridge — sensor kind NODE_STATUS (every node, 1 Hz): decoder
- * and handler of its sensor-table entry (sensors.h). Its rolling counter
+ * beaconloc-bridge — sensor kind NODE_STATUS (every node, 1 Hz): handler and table entry (sensors.h). Its rolling counter
  * is followed per node id; a node's sensor fault flag is logged.
  */
 #include "sensors.h"

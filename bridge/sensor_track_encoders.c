@@ -1,9 +1,9 @@
 /*
  * beaconloc-bridge — sensor kind TRACK_ENCODERS (a team's skid-steer robots,
  * CMU Millibots: both track encoders of one robot, forwarded by the team's
- * radio gateway): decoder and handler of its sensor-table entry (sensors.h).
+ * radio gateway): handler and table entry (sensors.h).
  *
- * The decoder checks what the DBC says (Robot 1..15, ticks 0..4095, Counter
+ * Its unpacker, generated from the DBC, checks what the DBC says (Robot 1..15, ticks 0..4095, Counter
  * 0..15 by the generated checks); each robot keeps its own rolling counter,
  * so the frame layer follows one track per robot id. What the frame means
  * for the site is the handler's: on a team site the team glue (team.h:

@@ -4,7 +4,7 @@
  *
  * An entry holds the kind's frame id range (the kernel CAN filters of
  * can_in.c), its names (stats JSON keys, status line), the source of its
- * Counter modulo, its decoder (frames.c calls it) and its handler (the
+ * Counter modulo, its unpacker (frames.c calls it) and its handler (the
  * daemon calls it with every frame decoded fine). Ids and counter ranges
  * come from the cantools-generated header (build/gen/can/beaconloc_can.h),
  * never from literals.
@@ -20,13 +20,14 @@
  *
  * The table assembles itself: each kind's own file, bridge/sensor_<kind>.c,
  * defines its entry `const struct sensor_kind sensor_kind_<frame name>`
- * (decoder, handler, counters, status-line part, timebase rank), and the
+ * (handler, counters, status-line part, tracks, timebase rank), and the
  * list of entries, sensor_kinds[], is generated at build time from the DBC
  * (build/gen/can/sensor_kinds.c, bridge/gen_frame_kinds.py), as are enum
  * frame_kind and the payloads (frames.h). A new kind: its frame in the DBC
  * with the next BridgeKind number; its file bridge/sensor_<kind>.c. Nothing
  * else in the bridge names it, unless it needs state of its own in struct
- * estimator (estimator.h). test_frame_kinds.c checks the table against the
+ * estimator (estimator.h) or has a site section of its own (config.h,
+ * site_to_lib.c). test_frame_kinds.c checks the table against the
  * DBC (every frame the bridge receives has exactly one kind: its id, name,
  * counter modulo and number).
  */
