@@ -289,7 +289,8 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
                     bearing_beacons_m: list[np.ndarray] | None = None,
                     range_beacons_m: list[np.ndarray] | None = None,
                     sonar_rows: list[tuple[np.ndarray, np.ndarray]] | None = None,
-                    sos_rate: tuple[float, np.ndarray] | None = None
+                    sos_rate: tuple[float, np.ndarray] | None = None,
+                    steps: list | None = None
                     ) -> np.ndarray | tuple[np.ndarray, tuple]:
     """Bound covariance J_k^-1 after each measurement event k, shape (K, 8, 8).
 
@@ -312,6 +313,9 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
     an analysis, not the simulator's bound (docs/performance.md, "Speed of sound"): the
     state gets a 9th entry, the speed of sound's rate r (IR), unknown with that prior, and s
     follows it (with_sos_rate); returns (K, 9, 9). Only without start.
+    steps: a list that gets each event's (F, Q, H, R) of the recursion, in order (H and R
+    None at an event without a measurement): the linear model along the path, for analyses
+    that run it as a Kalman filter (known_worlds.py).
     """
     K = len(states)
     n = 8 if sos_rate is None else 9
@@ -390,6 +394,8 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
         R = np.diag(np.concatenate(variances)) if rows else None
         if H is not None and n > 8:
             H = np.hstack([H, np.zeros((len(H), n - 8))])     # no measurement sees the rate
+        if steps is not None:
+            steps.append((F, Q, H, R))
         J = info_step(J, F, Q, H, R)
         out[k] = np.linalg.inv(J)
     if start is None:

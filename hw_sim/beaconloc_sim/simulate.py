@@ -290,7 +290,8 @@ def true_sos_rate(scn: Scenario, t_s: np.ndarray) -> np.ndarray:
 def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
           clock: NodeClock, start: tuple | None = None, ranged: Ranges | None = None,
           echoed: SonarPings | None = None, sos_rate_prior_mps2: float | None = None,
-          sos_rate_walk: float | None = None) -> tuple[BoundEvents, tuple | None]:
+          sos_rate_walk: float | None = None, steps: list | None = None
+          ) -> tuple[BoundEvents, tuple | None]:
     """Bound after each measurement event: each firing with the receivers that really
     detected its direct pulse, each instant with bearings delivered (seen), each ping whose
     direct range was delivered (ranged), each sonar ping whose reading is the specular echo
@@ -300,7 +301,8 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
     sos_rate_prior_mps2: an analysis (crb.with_sos_rate): the bound with the speed of sound's
     rate an unknown of that prior, m/s^2, its covariances (K, 9, 9); not the truth's bound.
     sos_rate_walk: with it, the rate a random walk of that intensity, (m/s^2)^2/s, whose
-    changes the bound is not told the instants of (crb.with_sos_rate's rate_walk_m2ps5)."""
+    changes the bound is not told the instants of (crb.with_sos_rate's rate_walk_m2ps5).
+    steps: crb.pcrb_along_path's (each event's F, Q, H, R appended to it)."""
     ranged = ranged if ranged is not None else Ranges.empty()
     echoed = echoed if echoed is not None else SonarPings.empty()
     if len(firings.t_s) + len(seen.t_s) + len(ranged.t_s) + len(echoed.t_s) == 0:
@@ -348,7 +350,7 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
     args = (states, scn.site.beacons_m, beacon, [np.array(h) for h in heard], wl, wr,
             bound_model(scn))
     kw = dict(event_time_s=t_time, fires=is_fire, bearing_beacons_m=bearing_rows,
-              range_beacons_m=range_rows, sonar_rows=sonar_rows)
+              range_beacons_m=range_rows, sonar_rows=sonar_rows, steps=steps)
     if sos_rate_prior_mps2 is not None:
         rate = true_sos_rate(scn, t_ev)
         kw["sos_rate"] = (sos_rate_prior_mps2, rate) if sos_rate_walk is None \
