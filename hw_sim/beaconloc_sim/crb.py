@@ -19,34 +19,35 @@ propagated from one measurement event to the next with the odometry as input
 (Kleeman 1992 eqs. 15 and 24; wheel noise as process noise) and measured, at each
 event, by the arrival time of every direct pulse of a beacon firing actually detected
 on every receiver (Kleeman 1992 eq. 21 with the receiver's 3D position on the ring),
-by every bearing actually delivered at that instant (Vander et al. 2011 eq. 1, the
-sensor offset included: physics.bearings.bearing_jacobian), by every direct range actually
-delivered at that instant (tof = d / s to a fixed range beacon, Millibots: it observes x, y,
-theta through the receiver's mount offset and the speed of sound s;
-physics.ranges.tof_jacobian; a multipath late arrival carries no information on the direct
-path and is left out, as are dropouts) by every sonar reading that is the
-specular echo of a map wall (the perpendicular distance from the sonar to the wall's line,
-Hoppenot & Colle 1997; phantoms, obstacles and crosstalk are left out like multipath) and by
-the odometry's speed and turn rate (Kleeman 1992 eq. 25), with the wheel noise. The events are the beacon
-firings, the bearing instants and the range pings in time order; a site without ultrasonic
-beacons has bearing and range events only (T and t0 are then unobserved, and s too without
-ranges: they keep their prior, which keeps J well conditioned), a site with ultrasonic
-beacons only firings only (the bound is then exactly the firing-to-firing recursion it was
-before bearings and ranges existed).
+by the measurements every other sensor kind actually delivered at that instant (each kind's
+rows and variances: its bound_rows, with its model, in nodes/<kind>.py) and by the
+odometry's speed and turn rate (Kleeman 1992 eq. 25), with the wheel noise. The events are
+the beacon firings and the other kinds' instants in time order; a site without ultrasonic
+beacons has the other kinds' events only (T and t0 are then unobserved, and s too without a
+kind that observes it: they keep their prior, which keeps J well conditioned), a site with
+ultrasonic beacons only firings only (the bound is then exactly the firing-to-firing
+recursion it was before the other kinds existed).
 """
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from .physics.bearings import bearing_jacobian
-from .physics.ranges import (range_jacobian, range_m, receiver_position, sigma_range_m,
-                             tof_jacobian)
+from .physics.ranges import range_jacobian, receiver_position, sigma_range_m
 
 STATE = ("x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "s_mps", "T_s", "t0_s")
 IX, IY, ITH, IV, IW, IS, IT, IT0 = range(8)
+
+
+def embed(block: np.ndarray, columns: Sequence[int]) -> np.ndarray:
+    """Rows of measurements given in some state columns, block (n, len(columns)), as rows
+    over the whole state, (n, 8): the other columns 0 (a kind's bound_rows)."""
+    H = np.zeros((len(block), len(STATE)))
+    H[:, list(columns)] = block
+    return H
 
 
 def tmn_step(J: np.ndarray, F: np.ndarray, Q: np.ndarray, H: np.ndarray | None = None,
@@ -130,13 +131,7 @@ class BoundModel:
     sigma_accel_mps2: float = 0.5   # random-walk intensity of v between firings
     sigma_angacc_radps2: float = 1.0
     prior_sigma: tuple = (1.0, 1.0, 0.5, 0.5, 0.5, 5.0, 1e-4, 0.1)   # in STATE units
-    sigma_bearing_rad: float = 0.0  # σ of one bearing, rad (bearing sites)
-    bearing_offset_m: tuple = (0.0, 0.0)   # bearing sensor mount, body frame (fwd, left), m
     sigma_common_per_m: float = 0.0  # common-mode slip of both wheels, m after 1 m of mean travel
-    range_offset_m: tuple = (0.0, 0.0)   # range receiver mount, body frame (fwd, left), m
-    range_height_m: float = 0.0          # range receiver height, m
-    sigma_range_m: float = 0.0           # σ of one range at short distance, m
-    sigma_range_per_m: float = 0.0       # σ growth per metre of range
 
 
 def wheel_covariance(d_left_m: float, d_right_m: float, m: BoundModel) -> np.ndarray:
@@ -286,9 +281,7 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
                     wheel_right_m: np.ndarray, model: BoundModel, *,
                     start: tuple | None = None, event_time_s: np.ndarray | None = None,
                     fires: np.ndarray | None = None,
-                    bearing_beacons_m: list[np.ndarray] | None = None,
-                    range_beacons_m: list[np.ndarray] | None = None,
-                    sonar_rows: list[tuple[np.ndarray, np.ndarray]] | None = None,
+                    measurements: Sequence[Callable] = (),
                     sos_rate: tuple[float, np.ndarray] | None = None,
                     steps: list | None = None
                     ) -> np.ndarray | tuple[np.ndarray, tuple]:
@@ -299,12 +292,11 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
     angles of the receivers that detected firing k's direct pulse (empty: none, or not a
     firing); wheel_*_m: (K,) true cumulative wheel travel at each event (odometry input
     between events). event_time_s: (K,) time of each event, s (default states[:, IT0]: every
-    event is a firing, the bound as it was before bearings); fires: (K,) the event is a
-    beacon firing (t0 moves on by T into it; default all); bearing_beacons_m[k]: (n, 2)
-    positions of the bearing beacons whose bearing was delivered at event k (default none);
-    range_beacons_m[k]: (n, 3) positions of the range beacons whose direct range was delivered
-    at event k (default none); sonar_rows[k]: (H, var) of the sonar readings at event k, H
-    (n, 4) their derivatives in (x, y, theta, s), var (n,) their variances (default none).
+    event is a firing, the bound as it was before the other kinds); fires: (K,) the event is a
+    beacon firing (t0 moves on by T into it; default all); measurements: the other sensor
+    kinds' measurements, one function per kind (in nodes.KINDS order: the order of the rows),
+    rows(k, states[k]) -> (H (n, 8), variances (n,)) of its measurements at event k or None
+    (nodes.sensor_kind.EventRows: a kind's bound_rows; default none).
     start: to go on from an earlier call, its returned end (J, state, wheel_left_m,
     wheel_right_m, time after its last event); then returns (covariances, end). Without it
     the recursion starts from the prior.
@@ -357,35 +349,11 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
             rows.append(arrival_jacobian(states[k], beacons_m[beacon_index[k]], np.asarray(angles),
                                          model.ring_radius_m, model.rx_height_m))
             variances.append(np.full(len(angles), R_one))
-        seen = bearing_beacons_m[k] if bearing_beacons_m is not None else None
-        if seen is not None and len(seen):
-            # Vander 2011 eq. 1: d(phi_j)/d(x, y, theta) at the true pose, sensor offset included
-            H_b = np.zeros((len(seen), 8))
-            H_b[:, :3] = bearing_jacobian(states[k, IX], states[k, IY], states[k, ITH], seen,
-                                          model.bearing_offset_m)
-            rows.append(H_b)
-            variances.append(np.full(len(seen), model.sigma_bearing_rad ** 2))
-        ranged = range_beacons_m[k] if range_beacons_m is not None else None
-        if ranged is not None and len(ranged):
-            # tof = d / s (physics.ranges, Millibots): d(tof)/d(x, y, theta, s) at the true state
-            x, y, th, s = states[k, IX], states[k, IY], states[k, ITH], states[k, IS]
-            H_r = np.zeros((len(ranged), 8))
-            H_r[:, [IX, IY, ITH, IS]] = tof_jacobian(x, y, th, s, ranged, model.range_offset_m,
-                                                     model.range_height_m)
-            rows.append(H_r)
-            # range noise sigma(r) = sigma_m + sigma_per_m r in time units (/ s), plus the
-            # node clock's 1 us quantisation (uniform: variance 1 us^2 / 12)
-            r = range_m(x, y, th, ranged, model.range_offset_m, model.range_height_m)
-            sig = sigma_range_m(r, model.sigma_range_m, model.sigma_range_per_m) / s
-            variances.append(sig ** 2 + (1e-6) ** 2 / 12)
-        sonar = sonar_rows[k] if sonar_rows is not None else None
-        if sonar is not None and len(sonar[1]):
-            # sonar ranges against the map (Hoppenot & Colle; simulate._sonar_rows): their
-            # rows in (x, y, theta, s), the rest 0
-            H_s = np.zeros((len(sonar[1]), 8))
-            H_s[:, [IX, IY, ITH, IS]] = sonar[0]
-            rows.append(H_s)
-            variances.append(sonar[1])
+        for kind_rows in measurements:
+            got = kind_rows(k, states[k])
+            if got is not None and len(got[1]):
+                rows.append(got[0])
+                variances.append(got[1])
         if prev is not None and dt_s > 0:
             rows.append(odometry_rows())
             variances.append(odometry_variances(wheel_left_m[k] - prev[1],

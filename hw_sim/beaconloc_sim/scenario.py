@@ -1,7 +1,8 @@
 """Scenario files ``<name>.scenario.ini`` (the built-in ones are package data,
 beaconloc_sim/data/scenarios/, found through resources): the site they use, the path,
-temperature, echoes, clocks, encoder imperfections, faults, duration, seed.
-See docs/simulator.md for every key."""
+temperature, echoes, clocks, encoder imperfections, faults, duration, seed, and each sensor
+kind's section and clock keys, which the kind declares itself (nodes.sensor_kind.SensorKind:
+read into scn.<its name>). See docs/simulator.md for every key."""
 from __future__ import annotations
 
 import math
@@ -10,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import nodes
 from .inifile import ConfigError, IniFile
 from .path import Trajectory, first_violation, parse_segment
 from .resources import SCENARIO_SUFFIX as SUFFIX
@@ -24,19 +26,12 @@ _KNOWN = {
                   "wall_reflection", "floor_ceiling_reflection", "echo_probability",
                   "strong_reflection", "late_arrival_probability", "late_arrival_delay_s",
                   "late_arrival_gain", "double_pulse_tolerance_s", "detector_holdoff_s"},
+    # + each sensor kind's <prefix>_offset_us and <prefix>_drift_ppm (_known_sections)
     "clocks": {"beacon_period_ppm", "first_firing_s", "rx_offset_us", "rx_drift_ppm",
-               "encoder_offset_us", "encoder_drift_ppm", "bearing_offset_us", "bearing_drift_ppm",
-               "range_offset_us", "range_drift_ppm", "sonar_offset_us", "sonar_drift_ppm",
-               "node_latency_s", "bus_bitrate_bps"},
+               "encoder_offset_us", "encoder_drift_ppm", "node_latency_s", "bus_bitrate_bps"},
     "encoders": {"wheel_radius_bias", "slip_fraction", "sigma_wheel_per_m", "sigma_distance_per_m",
                  "initial_ticks"},
-    # the bearing sensor's imperfections (the site gives its sigma and scan rate)
-    "bearings": {"outage_probability", "outage_burst_s", "max_range_m"},
-    # the range receiver's imperfections (the site gives its sigma, max range, ping period)
-    "ranges": {"dropout_probability", "multipath_probability", "survey_s"},
-    # the sonar ring's physics (the site gives its mounts, beam, noise; physics/sonar.py)
-    "sonar": {"fire_interval_s", "listen_s", "critical_angle_deg", "reflection", "threshold",
-              "crosstalk", "double_bounce"},
+    # + each sensor kind's section (_known_sections)
     # a second robot (the Eurobot opponent): a disc on its own path, occluding bearings
     "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
@@ -44,6 +39,16 @@ _KNOWN = {
     "output": {"truth_rate_hz", "log_epoch_s", "channel"},
     # [obstacles]: segmentN = x1_m, y1_m, x2_m, y2_m
 }
+
+
+def _known_sections() -> dict[str, set[str]]:
+    """The sections of a single robot's scenario file and their keys: _KNOWN, each sensor
+    kind's section (its name, its keys) and its clock keys in [clocks] (nodes.KINDS)."""
+    known = {sec: set(keys) for sec, keys in _KNOWN.items()}
+    for kind in nodes.sensor_kinds():
+        known[kind.name] = set(kind.keys)
+        known["clocks"] |= set(kind.clock_key_names())
+    return known
 
 
 @dataclass
@@ -94,9 +99,6 @@ class Scenario:
     # window use these two instead of the scenario's
     echo_storms: tuple[tuple[float, float, float, float], ...]
     obstacles_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    # the bearing sensor node (nodes/bearing_sensor.py, docs/simulator.md [bearings])
-    bearing_offset_us: int = 987_654_321
-    bearing_drift_ppm: float = 20.0
     # common-mode random slip of both wheels: ground-distance error std after 1 m of mean
     # travel, m (adds to the per-wheel sigma_wheel_per_m; 0 = none)
     sigma_distance_per_m: float = 0.0
@@ -104,27 +106,11 @@ class Scenario:
     # information the estimator is given at its start (beaconloc-sim run --bound-prior);
     # None: a weak prior (1 m, 0.5 rad), the estimator finds its own start
     bound_prior: tuple[float, float] | None = None
-    bearing_outage_probability: tuple[float, ...] = ()   # per bearing beacon, share of scans
-    bearing_outage_burst_s: float = 0.0      # mean outage burst, s (0: independent scans)
-    bearing_max_range_m: float = math.inf    # beacons farther than this are not seen
     opponent: Trajectory | None = None       # the opponent robot's path (a disc), or None
     opponent_radius_m: float = 0.0
-    # the range receiver node (nodes/range_receiver.py, docs/simulator.md [ranges])
-    range_offset_us: int = 3_141_592_653
-    range_drift_ppm: float = -15.0
-    range_dropout_probability: float = 0.0   # share of pings lost
-    range_multipath_probability: float = 0.0  # share of pings whose late arrival replaces the direct
-    range_survey_s: float = 0.0              # the fixed beacons range each other this long (0: never)
-    # the sonar-ring node (nodes/sonar_ring.py, physics/sonar.py, docs/simulator.md [sonar])
-    sonar_offset_us: int = 2_718_281_828
-    sonar_drift_ppm: float = 25.0
-    sonar_fire_interval_s: float = 0.06      # between successive sonars of a burst, s
-    sonar_listen_s: float = 0.06             # each sonar's listening window after its ping, s
-    sonar_critical_rad: float = math.radians(5.0)   # largest incidence a wall still echoes at
-    sonar_reflection: float = 1.0            # amplitude reflection coefficient of every segment
-    sonar_threshold: float = 0.02            # relative echo amplitude heard
-    sonar_crosstalk: bool = True             # sonars hear the echoes of the ones fired before
-    sonar_double_bounce: bool = True         # double reflections (phantom ranges)
+    # each sensor kind's scenario keys by its name (its options: nodes.sensor_kind.KindOptions,
+    # read by the kind: scn.<name> reads one)
+    kind_options: dict[str, nodes.KindOptions] = field(default_factory=dict)
     # output
     truth_rate_hz: float = 50.0
     log_epoch_s: float = 1_700_000_000.0
@@ -133,6 +119,13 @@ class Scenario:
     # file's run and keeps its first duration_s, so a short run is the prefix of
     # the full one (same noise, same echoes) rather than another draw. None = duration_s.
     realization_s: float | None = None
+
+    def __getattr__(self, name: str):
+        """A sensor kind's options by its name (kind_options)."""
+        options = self.__dict__.get("kind_options")
+        if options is not None and name in options:
+            return options[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def temperature_c(self, t_s) -> np.ndarray:
         prof = self.temperature_profile
@@ -222,13 +215,14 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
     if ini.has("team"):
         raise ini.error("team", None, "a team scenario: load it with "
                         "team_scenario.load_team_scenario (beaconloc-sim run does)")
-    for sec, known in _KNOWN.items():
+    known_sections = _known_sections()
+    for sec, known in known_sections.items():
         if sec not in ("path", "faults", "opponent"):
             ini.check_known(sec, known)
     for sec in ini.parser.sections():
-        if sec not in _KNOWN and sec != "obstacles":
-            raise ini.error(sec, None, "unknown section (known: " + ", ".join(sorted(_KNOWN)) +
-                            ", obstacles)")
+        if sec not in known_sections and sec != "obstacles":
+            raise ini.error(sec, None, "unknown section (known: " +
+                            ", ".join(sorted(known_sections)) + ", obstacles)")
     site_file = ini.raw("scenario", "site")
     site_path = (path.parent / site_file)
     if not site_path.is_file():
@@ -274,22 +268,8 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         opponent = Trajectory(o_start[0], o_start[1], math.radians(o_start[2]), o_segments,
                               site.wheel_base_m)
         opponent_radius = ini.number("opponent", "radius_m", 0.2, positive=True, maximum=10.0)
-    n_bb = site.bearing_beacon_count
-    outage_p = ini.numbers("bearings", "outage_probability", default=[0.0])
-    if len(outage_p) not in (1, n_bb) or any(not 0 <= p < 1 for p in outage_p):
-        raise ini.error("bearings", "outage_probability",
-                        f"expected one probability in [0, 1) or one per bearing beacon ({n_bb})")
-    outage_p = tuple(float(p) for p in outage_p) * (n_bb if len(outage_p) == 1 else 1)
-    burst_s = ini.number("bearings", "outage_burst_s", 0.0, minimum=0.0)
-    scan_s = 1.0 / site.bearing_scan_rate_hz if n_bb else 0.0
-    for p in outage_p:
-        # a two-state Markov chain with outage share p and mean burst L scans needs
-        # P(in -> out) = p / (L (1 - p)) <= 1 and L >= 1 (docs/simulator.md, [bearings])
-        if burst_s > 0 and (burst_s < scan_s or p / (1 - p) > burst_s / scan_s):
-            raise ini.error("bearings", "outage_burst_s",
-                            f"a mean burst of {burst_s:g} s cannot give an outage share {p:g} "
-                            f"at {site.bearing_scan_rate_hz:g} scans/s (need >= "
-                            f"{max(scan_s, scan_s * p / (1 - p)):g} s)")
+    # each sensor kind's keys ([clocks] and its section), read and checked by the kind
+    kind_options = {kind.name: kind.options(ini, site) for kind in nodes.sensor_kinds()}
 
     obstacles, obstacle_keys = [], []
     if ini.has("obstacles"):
@@ -306,11 +286,6 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
     if opponent is not None:
         check_path(ini, "opponent", opponent, site, obstacles + walls,
                    obstacle_keys + wall_names, realization_s)
-    fire_s = ini.number("sonar", "fire_interval_s", 0.06, positive=True, maximum=1.0)
-    if site.sonar_count and site.sonar_count * fire_s > site.sonar_period_s + 1e-9:
-        raise ini.error("sonar", "fire_interval_s", f"{site.sonar_count} sonars fired "
-                        f"{fire_s:g} s apart do not fit in the burst period "
-                        f"{site.sonar_period_s:g} s ([sonar_ring] period_s)")
     outages = []
     for key in fault_keys["beacon_outage"]:
         vals = ini.numbers("faults", key)
@@ -335,9 +310,6 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
     initial_ticks = ini.numbers("encoders", "initial_ticks", 2, default=[16000, 300])
     if any(v != int(v) or not 0 <= v < 16384 for v in initial_ticks):
         raise ini.error("encoders", "initial_ticks", "ticks must be integers 0..16383")
-    if ini.has("ranges", "survey_s") and ini.number("ranges", "survey_s", 0.0) > 0 \
-            and site.range_beacon_count < 3:
-        raise ini.error("ranges", "survey_s", "a self-survey needs [range_beacons] count >= 3")
 
     def rng_pair(sec, key, default, lo=0.0):
         vals = _pair(ini, sec, key, default)
@@ -394,48 +366,16 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         beacon_outages=tuple(sorted(outages)),
         echo_storms=tuple(sorted(storms)),
         obstacles_m=np.array(obstacles, dtype=float).reshape(-1, 4),
-        bearing_offset_us=ini.integer("clocks", "bearing_offset_us", 987_654_321, minimum=0,
-                                      maximum=2**40),
-        bearing_drift_ppm=ini.number("clocks", "bearing_drift_ppm", 20.0, minimum=-1000,
-                                     maximum=1000),
         sigma_distance_per_m=ini.number("encoders", "sigma_distance_per_m",
                                         site.sigma_distance_per_m, minimum=0),
-        bearing_outage_probability=outage_p,
-        bearing_outage_burst_s=burst_s,
-        bearing_max_range_m=ini.number("bearings", "max_range_m", positive=True)
-        if ini.has("bearings", "max_range_m") else math.inf,
         opponent=opponent,
         opponent_radius_m=opponent_radius,
-        range_offset_us=ini.integer("clocks", "range_offset_us", 3_141_592_653, minimum=0,
-                                    maximum=2**40),
-        range_drift_ppm=ini.number("clocks", "range_drift_ppm", -15.0, minimum=-1000,
-                                   maximum=1000),
-        range_dropout_probability=ini.number("ranges", "dropout_probability", 0.0, minimum=0,
-                                             maximum=1),
-        range_multipath_probability=ini.number("ranges", "multipath_probability", 0.0,
-                                               minimum=0, maximum=1),
-        range_survey_s=ini.number("ranges", "survey_s", 0.0, minimum=0, maximum=3600),
-        sonar_offset_us=ini.integer("clocks", "sonar_offset_us", 2_718_281_828, minimum=0,
-                                    maximum=2**40),
-        sonar_drift_ppm=ini.number("clocks", "sonar_drift_ppm", 25.0, minimum=-1000, maximum=1000),
-        sonar_fire_interval_s=fire_s,
-        sonar_listen_s=ini.number("sonar", "listen_s", 0.06, positive=True, maximum=1.0),
-        sonar_critical_rad=math.radians(ini.number("sonar", "critical_angle_deg", 5.0, minimum=0,
-                                                   maximum=90)),
-        sonar_reflection=ini.number("sonar", "reflection", 1.0, positive=True, maximum=1),
-        sonar_threshold=ini.number("sonar", "threshold", 0.02, minimum=0, maximum=1),
-        sonar_crosstalk=_switch(ini, "sonar", "crosstalk", True),
-        sonar_double_bounce=_switch(ini, "sonar", "double_bounce", True),
+        kind_options=kind_options,
         truth_rate_hz=ini.number("output", "truth_rate_hz", 50.0, positive=True, maximum=1000),
         log_epoch_s=ini.number("output", "log_epoch_s", 1_700_000_000.0, minimum=0),
         channel=ini.raw("output", "channel", "vcan0"),
         realization_s=realization_s,
     )
-
-
-def _switch(ini: IniFile, sec: str, key: str, default: bool) -> bool:
-    """A 0/1 key."""
-    return bool(ini.integer(sec, key, int(default), minimum=0, maximum=1))
 
 
 def temperature_profile(ini: IniFile) -> np.ndarray:

@@ -4,37 +4,36 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from . import can_out, crb, nodes
 from .bus import FRAME_BITS, Bus, Frames
 from .clocks import NodeClock
-from .nodes import (ODOMETRY_COLUMNS, BearingSensor, Bearings, Node, NodeStatus, RangeReceiver,
-                    Ranges, ReceiverRing, SonarPings, SonarRing, WheelEncoders)
+from .nodes import ODOMETRY_COLUMNS, Node, NodeStatus, ReceiverRing, SensorKind, WheelEncoders
 from .path import wrap_angle
 from .physics import acoustics as ac
-from .physics.sonar import perpendicular_rows
 from .physics.pulses import KIND_DIRECT, Detections, Firings, make_firings, simulate_detections
 from .scenario import Scenario
 
-# frame ids of the nodes' frames (from the DBC)
+# frame ids of every robot's nodes' frames (from the DBC; a kind's: Kind.frame_spec())
 ID_PULSE = ReceiverRing.frame_spec().frame_id
 ID_ENCODERS = WheelEncoders.frame_spec().frame_id
 ID_STATUS = NodeStatus.frame_spec().frame_id
-ID_BEARING = BearingSensor.frame_spec().frame_id
-ID_RANGE = RangeReceiver.frame_spec().frame_id
-ID_SONAR = SonarRing.frame_spec().frame_id
 __all__ = ["FRAME_BITS", "Frames", "ODOMETRY_COLUMNS", "TRUTH_COLUMNS", "SimResult", "run",
-           "run_windows", "wrap_angle", "ID_PULSE", "ID_ENCODERS", "ID_STATUS", "ID_BEARING", "ID_RANGE",
-           "ID_SONAR"]
+           "run_windows", "wrap_angle", "ID_PULSE", "ID_ENCODERS", "ID_STATUS"]
 # child seeds of a run (or of a window): pulses 0, latency 2, firings 3, and each node kind's
-# own stream at the index its class declares (Node.stream: wheels 1, bearings 4, ranges 5,
-# the beacons' survey 6, the sonar ring 7), so the first ones draw what they drew before the
-# later existed (SeedSequence children depend only on their index).
+# own stream at the index its class declares (Node.stream of nodes.KINDS: the next free index
+# for a new kind), so the first ones draw what they drew before the later existed
+# (SeedSequence children depend only on their index).
 _SEED_PULSES, _SEED_LATENCY, _SEED_FIRINGS = 0, 2, 3
-_N_SEEDS = 1 + max(_SEED_FIRINGS, *(k.stream[1] for k in nodes.KINDS if k.stream))
+
+
+def _n_seeds() -> int:
+    """How many child seeds a run (or a window) spawns: one per index in use."""
+    return 1 + max(_SEED_FIRINGS, *(k.stream[1] for k in nodes.KINDS if k.stream))
 
 TRUTH_COLUMNS = ("t_us", "t_sim_s", "x_m", "y_m", "theta_rad", "v_mps", "omega_radps", "sos_mps",
                  "period_s", "temperature_c", "pcrb_x_m", "pcrb_y_m", "pcrb_pos_m", "pcrb_lateral_m",
@@ -50,26 +49,30 @@ class SimResult:
     firings: Firings
     detections: Detections
     rx_clock: NodeClock               # the truth's time base: the receiver array's clock, or
-                                      # the bearing sensor's (else the range receiver's, else
-                                      # the sonar ring's) on a site without ultrasonic beacons
+                                      # on a site without ultrasonic beacons the clock of the
+                                      # sensor kind of the smallest timebase there (_time_base)
     encoder_clock: NodeClock
     pcrb_cov: np.ndarray              # (K, 8, 8) bound after each event, crb.STATE order
-    pcrb_t_s: np.ndarray | None = None   # (K,) true time of each event (firings, bearings,
-                                         # range pings, informative sonar pings), s
-    bearings: Bearings | None = None     # every bearing measured (sent or not, and why not)
-    ranges: Ranges | None = None         # every range ping (sent or not, and why not)
-    sonar: SonarPings | None = None      # every sonar ping (its reading, flags, echo kind)
+    pcrb_t_s: np.ndarray | None = None   # (K,) true time of each event (firings and the sensor
+                                         # kinds' events), s
     pcrb_complete_s: np.ndarray | None = None   # (K,) true time by which each event's
                                                 # measurements all exist (_complete_times), s
+    # every sensor kind's record of its measurements (sent or not, and why not) by the kind's
+    # name, empty on a site without it: res.<name> reads one
+    records: dict[str, Any] = field(default_factory=dict)
+
+    def __getattr__(self, name: str):
+        """A sensor kind's record by its name (records)."""
+        records = self.__dict__.get("records")
+        if records is not None and name in records:
+            return records[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def measured(self) -> dict:
         """The record of every sensor kind the site has, by its name in the simulator's stats
-        (outputs.py): each counts itself (stats())."""
-        site = self.scenario.site
-        return {name: record for name, record, present in (
-            ("bearings", self.bearings, site.bearing_beacon_count),
-            ("ranges", self.ranges, site.range_beacon_count),
-            ("sonar", self.sonar, site.sonar_count)) if present}
+        (outputs.py), in nodes.KINDS order: each counts itself (stats())."""
+        return {kind.name: self.records[kind.name] for kind in nodes.sensor_kinds()
+                if kind.present(self.scenario.site)}
 
 
 def run(scn: Scenario, *, encode: bool = True) -> SimResult:
@@ -102,14 +105,12 @@ def _prefix(res: SimResult, scn: Scenario) -> SimResult:
                        for f in dataclasses.fields(Detections)))
     return SimResult(scn, frames, truth, odometry, firings, det, res.rx_clock, res.encoder_clock,
                      res.pcrb_cov[:n_event], res.pcrb_t_s[:n_event],
-                     res.bearings.select(res.bearings.t_s <= d),
-                     res.ranges.select(res.ranges.t_s <= d),
-                     res.sonar.select(res.sonar.t_s <= d),
-                     pcrb_complete_s=res.pcrb_complete_s[:n_event])
+                     res.pcrb_complete_s[:n_event],
+                     {name: rec.select(rec.t_s <= d) for name, rec in res.records.items()})
 
 
 def _run(scn: Scenario, *, encode: bool = True) -> SimResult:
-    seeds = np.random.SeedSequence(scn.seed).spawn(_N_SEEDS)
+    seeds = np.random.SeedSequence(scn.seed).spawn(_n_seeds())
     return _window(scn, seeds, None, None, encode=encode)[0]
 
 
@@ -146,17 +147,15 @@ class Carry:
     their measurements: a few at most, so memory stays bounded)."""
     ring: ReceiverRing
     wheels: WheelEncoders
-    bearing: BearingSensor | None
-    ranger: RangeReceiver | None
     nodes: list[Node]
     bus: Bus
     pcrb: tuple | None                       # crb.pcrb_along_path end
     held: BoundEvents | None = None          # the last event complete by the window's end
     waiting: BoundEvents | None = None       # the events after it (measurements still to come)
 
-    @property
-    def sonar(self) -> SonarRing | None:
-        return next((n for n in self.nodes if isinstance(n, SonarRing)), None)
+    def sensors(self) -> dict[str, SensorKind]:
+        """The sensor kinds' nodes on the bus by their kind's name, in bus order."""
+        return {node.name: node for node in self.nodes if isinstance(node, SensorKind)}
 
 
 def run_windows(scn: Scenario, window_s: float, *, encode: bool = True):
@@ -177,7 +176,7 @@ def run_windows(scn: Scenario, window_s: float, *, encode: bool = True):
     n = max(1, math.ceil(scn.duration_s / window_s - 1e-9))
     for w in range(n):
         t_a, t_b = w * window_s, min((w + 1) * window_s, scn.duration_s)
-        seeds = np.random.SeedSequence(scn.seed, spawn_key=(w,)).spawn(_N_SEEDS)
+        seeds = np.random.SeedSequence(scn.seed, spawn_key=(w,)).spawn(_n_seeds())
         result, carry = _window(scn, seeds, (t_a, t_b), carry, encode=encode)
         yield result
 
@@ -190,21 +189,12 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
     streams = {k.stream[0]: rngs[k.stream[1]] for k in nodes.KINDS if k.stream}
     t_a, t_b = win if win is not None else (0.0, scn.duration_s)
     if carry is None:
-        ring, wheels, bearing, ranger, on_bus = nodes.on_bus(scn)
-        carry = Carry(ring, wheels, bearing, ranger, on_bus, Bus(scn.bus_bitrate_bps),
+        ring, wheels, on_bus = nodes.on_bus(scn)
+        carry = Carry(ring, wheels, on_bus, Bus(scn.bus_bitrate_bps),
                       None if win is None else crb.prior_start(bound_model(scn)))
     enc_clock = carry.wheels.clock
-    # the truth's time base: the receiver array's clock (the estimator's, Kleeman's t0), or
-    # the bearing sensor's on a site without one (no receiver array there), else the range
-    # receiver's, else the sonar ring's
-    sonar = carry.sonar
-    if scn.site.beacon_count or (carry.bearing is None and carry.ranger is None
-                                 and sonar is None):
-        rx_clock = carry.ring.clock
-    elif carry.bearing is not None or carry.ranger is not None:
-        rx_clock = carry.bearing.clock if carry.bearing is not None else carry.ranger.clock
-    else:
-        rx_clock = sonar.clock
+    sensors = carry.sensors()
+    rx_clock = _time_base(scn, carry.ring, sensors.values())
 
     firings = make_firings(scn, rng_fire, win)
     det = simulate_detections(scn, firings, rng_pulse)
@@ -215,28 +205,32 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
     if encode:
         frames.data = can_out.encode_all(frames)
 
-    measured = carry.bearing.measured if carry.bearing is not None else Bearings.empty()
-    seen = carry.bearing.bound_events(t_b if win is not None else math.inf) \
-        if carry.bearing is not None else Bearings.empty()
-    pinged = carry.ranger.measured if carry.ranger is not None else Ranges.empty()
-    ranged = carry.ranger.bound_events(t_b if win is not None else math.inf) \
-        if carry.ranger is not None else Ranges.empty()
-    pinged_sonar = sonar.measured if sonar is not None else SonarPings.empty()
-    echoed = sonar.bound_events(t_b if win is not None else math.inf) \
-        if sonar is not None else SonarPings.empty()
+    # each kind's record of the interval (empty without its node) and its events for the bound
+    records = {kind.name: sensors[kind.name].measured if kind.name in sensors
+               else kind.record.empty() for kind in nodes.sensor_kinds()}
+    measured = {name: node.bound_events(until_s) for name, node in sensors.items()}
     truth = _truth(scn, rx_clock, win)
-    events, pcrb_end = _pcrb(scn, firings, det, seen, rx_clock, carry.pcrb, ranged, echoed)
+    events, pcrb_end = _pcrb(scn, firings, det, measured, rx_clock, carry.pcrb)
     waiting = carry.waiting if carry.waiting is not None else BoundEvents.empty()
     held, waiting = _attach_bound(truth, scn, BoundEvents.concat(waiting, events), carry.held,
                                   until_s)
     odometry = carry.wheels.odometry(rx_clock)
     result = SimResult(scn, frames, truth, odometry, firings, det, rx_clock, enc_clock, events.cov,
-                       events.t_s, measured, pinged, pinged_sonar,
-                       pcrb_complete_s=events.complete_s)
+                       events.t_s, events.complete_s, records)
     if win is None:
         return result, None
     carry.pcrb, carry.held, carry.waiting = pcrb_end, held, waiting
     return result, carry
+
+
+def _time_base(scn: Scenario, ring: ReceiverRing, sensors) -> NodeClock:
+    """The truth's time base: the receiver array's clock (the estimator's, Kleeman's t0), or on
+    a site without one (no receiver array there) the clock of the sensor kind of the smallest
+    timebase on the bus (SensorKind.timebase), else the ring's all the same."""
+    if scn.site.beacon_count:
+        return ring.clock
+    bases = [node for node in sensors if node.timebase is not None]
+    return min(bases, key=lambda node: node.timebase).clock if bases else ring.clock
 
 
 def _truth(scn: Scenario, rx_clock: NodeClock,
@@ -270,12 +264,7 @@ def bound_model(scn: Scenario) -> crb.BoundModel:
         rx_height_m=site.rx_height_m,
         m_per_tick=2 * math.pi * site.wheel_radius_m / site.ticks_per_rev,
         prior_sigma=(xy, xy, th, 0.5, 0.5, site.sigma_speed_of_sound_mps, 1e-4, 0.1),
-        sigma_bearing_rad=site.sigma_bearing_rad,
-        bearing_offset_m=tuple(float(v) for v in site.bearing_offset_m),
-        sigma_common_per_m=scn.sigma_distance_per_m,
-        range_offset_m=tuple(float(v) for v in site.range_offset_m),
-        range_height_m=site.range_height_m, sigma_range_m=site.sigma_range_m,
-        sigma_range_per_m=site.sigma_range_per_m)
+        sigma_common_per_m=scn.sigma_distance_per_m)
 
 
 def true_sos_rate(scn: Scenario, t_s: np.ndarray) -> np.ndarray:
@@ -287,15 +276,15 @@ def true_sos_rate(scn: Scenario, t_s: np.ndarray) -> np.ndarray:
             - ac.speed_of_sound_mps(scn.temperature_c(t_s - h))) / (2 * h)
 
 
-def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
-          clock: NodeClock, start: tuple | None = None, ranged: Ranges | None = None,
-          echoed: SonarPings | None = None, sos_rate_prior_mps2: float | None = None,
+def _pcrb(scn: Scenario, firings: Firings, det: Detections, measured: dict[str, Any],
+          clock: NodeClock, start: tuple | None = None, *,
+          sos_rate_prior_mps2: float | None = None,
           sos_rate_walk: float | None = None, steps: list | None = None
           ) -> tuple[BoundEvents, tuple | None]:
     """Bound after each measurement event: each firing with the receivers that really
-    detected its direct pulse, each instant with bearings delivered (seen), each ping whose
-    direct range was delivered (ranged), each sonar ping whose reading is the specular echo
-    of a map wall (echoed: its perpendicular distance, _sonar_rows), in time order;
+    detected its direct pulse, and each instant with measurements of the other sensor kinds
+    (measured: each kind's events for the bound by its name, SensorKind.bound_events; a kind
+    not in it has none; their rows: the kind's bound_rows), in time order;
     the events (times, complete times, bound) and the recursion's end (crb.pcrb_along_path)
     to go on from in the next window. clock: the time base (event times and t0 on it).
     sos_rate_prior_mps2: an analysis (crb.with_sos_rate): the bound with the speed of sound's
@@ -303,14 +292,14 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
     sos_rate_walk: with it, the rate a random walk of that intensity, (m/s^2)^2/s, whose
     changes the bound is not told the instants of (crb.with_sos_rate's rate_walk_m2ps5).
     steps: crb.pcrb_along_path's (each event's F, Q, H, R appended to it)."""
-    ranged = ranged if ranged is not None else Ranges.empty()
-    echoed = echoed if echoed is not None else SonarPings.empty()
-    if len(firings.t_s) + len(seen.t_s) + len(ranged.t_s) + len(echoed.t_s) == 0:
+    kinds = [(kind, measured[kind.name]) for kind in nodes.sensor_kinds()
+             if kind.name in measured and len(measured[kind.name].t_s)]
+    if len(firings.t_s) == 0 and not kinds:
         return BoundEvents.empty(), start
-    # events: the distinct instants of firings, bearings, ranges and sonar echoes (a
-    # non-rotating sensor's scan is one event); without them exactly the firings
-    t_ev = np.unique(np.concatenate([firings.t_s, seen.t_s, ranged.t_s, echoed.t_s])) \
-        if len(seen.t_s) + len(ranged.t_s) + len(echoed.t_s) else firings.t_s
+    # events: the distinct instants of firings and of the kinds' measurements (a kind's
+    # measurements at one instant are one event); without them exactly the firings
+    t_ev = np.unique(np.concatenate([firings.t_s, *(ev.t_s for _, ev in kinds)])) \
+        if kinds else firings.t_s
     k = len(t_ev)
     fire_ev = np.searchsorted(t_ev, firings.t_s)           # event of each firing
     is_fire = np.zeros(k, dtype=bool)
@@ -333,29 +322,17 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
         heard[fire_ev[f]].append(angles[r])
     beacon = np.zeros(k, dtype=np.int64)
     beacon[fire_ev] = firings.beacon
-    bearing_rows = None
-    if len(seen.t_s):
-        bearing_rows = [[] for _ in range(k)]
-        for e, j in zip(np.searchsorted(t_ev, seen.t_s).tolist(), seen.beacon.tolist()):
-            bearing_rows[e].append(scn.site.bearing_beacons_m[j])
-        bearing_rows = [np.array(r).reshape(-1, 2) for r in bearing_rows]
-    range_rows = None
-    if len(ranged.t_s):
-        range_rows = [[] for _ in range(k)]
-        for e, j in zip(np.searchsorted(t_ev, ranged.t_s).tolist(), ranged.beacon.tolist()):
-            range_rows[e].append(scn.site.range_beacons_m[j])
-        range_rows = [np.array(r).reshape(-1, 3) for r in range_rows]
-    sonar_rows = _sonar_rows(scn, echoed, t_ev, states) if len(echoed.t_s) else None
     wl, wr = scn.trajectory.wheel_travel(t_ev)
     args = (states, scn.site.beacons_m, beacon, [np.array(h) for h in heard], wl, wr,
             bound_model(scn))
-    kw = dict(event_time_s=t_time, fires=is_fire, bearing_beacons_m=bearing_rows,
-              range_beacons_m=range_rows, sonar_rows=sonar_rows, steps=steps)
+    kw = dict(event_time_s=t_time, fires=is_fire,
+              measurements=[kind.bound_rows(scn, ev, t_ev, states) for kind, ev in kinds],
+              steps=steps)
     if sos_rate_prior_mps2 is not None:
         rate = true_sos_rate(scn, t_ev)
         kw["sos_rate"] = (sos_rate_prior_mps2, rate) if sos_rate_walk is None \
             else (sos_rate_prior_mps2, rate, sos_rate_walk)
-    complete = _complete_times(scn, t_ev, firings, det, ranged, echoed)
+    complete = _complete_times(scn, t_ev, firings, det, kinds)
     if start is None:
         return BoundEvents(t_ev, complete, crb.pcrb_along_path(*args, **kw)), None
     cov, end = crb.pcrb_along_path(*args, start=start, **kw)
@@ -363,7 +340,7 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, seen: Bearings,
 
 
 def _complete_times(scn: Scenario, t_ev: np.ndarray, firings: Firings, det: Detections,
-                    ranged: Ranges, echoed: SonarPings) -> np.ndarray:
+                    kinds: list[tuple[type[SensorKind], Any]]) -> np.ndarray:
     """True time by which every measurement the bound takes at each event (_pcrb) exists, s:
     the latest of them. An estimate at an earlier instant cannot have used them. Each is the
     instant its node has the measurement ready to send (the node's processing latency and the
@@ -371,42 +348,14 @@ def _complete_times(scn: Scenario, t_ev: np.ndarray, firings: Firings, det: Dete
     - a firing: the leading edge of the last of its direct pulses the bound counts (direct,
       first burst, detected: _pcrb's `heard`), up to ~35 ms of flight after the firing; the
       receivers timestamp each edge then (nodes.receiver_ring);
-    - a bearing: its own instant (the beam crosses the beacon then; nodes.bearing_sensor
-      sends it after the processing latency only);
-    - a range: the direct pulse's arrival, emission + true_m / s (nodes.range_receiver: the
-      node times the flight and has the range when the pulse arrives);
-    - a sonar reading: the end of its listening window, ping + listen_s (nodes.sonar_ring
-      reports the first echo when the window closes, not when the echo returns)."""
-    done = t_ev.astype(float)          # bearings: their own instants, the events'
+    - another kind's measurement: its kind's complete_s (kinds: each kind with its events)."""
+    done = t_ev.astype(float)          # the events' own instants
     direct = (det.kind == KIND_DIRECT) & (det.burst == 1)
     fire_ev = np.searchsorted(t_ev, firings.t_s)
     np.maximum.at(done, fire_ev[det.firing[direct]], det.edge_s[direct])
-    if len(ranged.t_s):
-        np.maximum.at(done, np.searchsorted(t_ev, ranged.t_s),
-                      ranged.t_s + ranged.true_m / ranged.sos_mps)
-    if len(echoed.t_s):
-        np.maximum.at(done, np.searchsorted(t_ev, echoed.t_s), echoed.t_s + scn.sonar_listen_s)
+    for kind, events in kinds:
+        np.maximum.at(done, np.searchsorted(t_ev, events.t_s), kind.complete_s(scn, events))
     return done
-
-
-def _sonar_rows(scn: Scenario, echoed: SonarPings, t_ev: np.ndarray, states: np.ndarray
-                ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per event, the sonar readings' rows d(range)/d(x, y, theta, s) (n, 4) and variances (n,):
-    the specular echo of a map wall, range = r c_node / s (the node converts the round trip
-    with its own speed of sound c_node, the sound travels at the true s), r the perpendicular
-    distance from the sonar to the wall's line (physics.sonar.perpendicular_rows), variance
-    sigma(r)^2 (the site's [sonar_ring]) plus the 1 mm quantisation (1 mm^2 / 12)."""
-    site = scn.site
-    c_node = site.speed_of_sound_mps
-    rows: list[list] = [[] for _ in range(len(t_ev))]
-    variances: list[list] = [[] for _ in range(len(t_ev))]
-    for e, i in zip(np.searchsorted(t_ev, echoed.t_s).tolist(), range(len(echoed.t_s))):
-        x, y, th, s = states[e, crb.IX], states[e, crb.IY], states[e, crb.ITH], states[e, crb.IS]
-        r, grad = perpendicular_rows(x, y, th, site.sonar_mounts[echoed.sensor[i]],
-                                     site.walls_m[echoed.wall[i]])
-        rows[e].append(np.append(grad * c_node / s, -r * c_node / s ** 2))
-        variances[e].append(float(site.sonar_sigma_m(r)) ** 2 + 1e-6 / 12)
-    return [(np.array(r).reshape(-1, 4), np.array(v)) for r, v in zip(rows, variances)]
 
 
 def _true_states(scn: Scenario, t_s: np.ndarray) -> np.ndarray:

@@ -35,7 +35,6 @@ import argparse
 import numpy as np
 
 from beaconloc_sim import crb, known_worlds, simulate
-from beaconloc_sim.nodes import Bearings
 from beaconloc_sim.physics import acoustics as ac
 from beaconloc_sim.scenario import load_scenario
 
@@ -77,7 +76,7 @@ def one_seed(seed: int) -> tuple[known_worlds.Worlds, np.ndarray]:
     scn = load_scenario(PATH, seed=seed)
     res = simulate.run(scn, encode=False)
     steps: list = []
-    ev, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(), res.rx_clock,
+    ev, _ = simulate._pcrb(scn, res.firings, res.detections, {}, res.rx_clock,
                            steps=steps)
     # the air's change is each world's known input, not noise: Q_ss back to its floor
     steps = [(F, _q_ss(Q, 0.0), H, R) for F, Q, H, R in steps]

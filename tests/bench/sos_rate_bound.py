@@ -23,7 +23,6 @@ import argparse
 import numpy as np
 
 from beaconloc_sim import crb, simulate
-from beaconloc_sim.nodes import Bearings
 from beaconloc_sim.scenario import load_scenario
 
 SCENARIOS = ("kleeman-lab", "temperature-swing10", "temperature-swing20")
@@ -46,9 +45,9 @@ def bounds(name: str, seed: int, rate_prior_mps2: float) -> tuple:
     scn = load_scenario(name, seed=seed)
     res = simulate.run(scn, encode=False)
     q = rate_walk(scn, res.pcrb_t_s)
-    told, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(), res.rx_clock,
+    told, _ = simulate._pcrb(scn, res.firings, res.detections, {}, res.rx_clock,
                              sos_rate_prior_mps2=rate_prior_mps2)
-    walk, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(), res.rx_clock,
+    walk, _ = simulate._pcrb(scn, res.firings, res.detections, {}, res.rx_clock,
                              sos_rate_prior_mps2=rate_prior_mps2, sos_rate_walk=q)
     after = res.pcrb_t_s > AFTER_S
     assert np.array_equal(told.t_s, res.pcrb_t_s) and np.array_equal(walk.t_s, res.pcrb_t_s)

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from beaconloc_sim import simulate
-from beaconloc_sim.clocks import NodeClock
 from beaconloc_sim.inifile import ConfigError
-from beaconloc_sim.nodes import BeaconSurvey, Interval, RangeReceiver
+from beaconloc_sim.nodes import Interval
+from beaconloc_sim.nodes.beacon_survey import BeaconSurvey
+from beaconloc_sim.nodes.range_receiver import RangeReceiver
 from beaconloc_sim.physics import acoustics as ac
 from beaconloc_sim.resources import builtin_scenario_path, dbc_path
 from beaconloc_sim.scenario import load_scenario
@@ -91,7 +92,7 @@ def test_max_range_dropouts_and_multipath(make_scenario):
     n_rows = len(decoded(res, SURVEY))
     assert 0.7 * 240 < n_rows < 0.9 * 240             # 20 % lost
     # multipath: late arrivals are longer than the direct path, never shorter by more than noise
-    ranger = RangeReceiver(NodeClock(scn.range_offset_us, scn.range_drift_ppm), scn)
+    ranger = RangeReceiver(scn.ranges.clock(), scn)
     surv = BeaconSurvey(ranger, scn)
     rng = np.random.default_rng(5)
     iv = Interval(scn, 0.0, 4.0, None, None, rng_latency=rng,
@@ -117,7 +118,7 @@ def test_survey_needs_three_range_beacons(make_scenario):
 
 def test_marvelmind_survey_scenario():
     scn = load_scenario("marvelmind-survey", duration_s=6)
-    assert scn.range_survey_s == 4 and scn.site.range_max_m == 9.0
+    assert scn.ranges.survey_s == 4 and scn.site.range_max_m == 9.0
     res = simulate.run(scn)
     rows = decoded(res, SURVEY)
     assert len(rows) == 240                                # 80 pings x 3 listeners

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from beaconloc_sim import crb, simulate
-from beaconloc_sim.nodes.bearing_sensor import encode_bearing_deg
+from beaconloc_sim.nodes.bearing_sensor import BearingSensor, bearing_rows, encode_bearing_deg
 from beaconloc_sim.physics.bearings import bearing_jacobian, bearing_rad, wrap_rad
 from beaconloc_sim.resources import builtin_scenario_path, dbc_path
 from beaconloc_sim.scenario import load_scenario
@@ -19,6 +19,7 @@ from beaconloc_sim.scenario import load_scenario
 EUROBOT_SITE = (builtin_scenario_path("eurobot").parent / "eurobot.ini").read_text()
 DB = cantools.database.load_file(str(dbc_path()))
 BEARING = DB.get_message_by_name("BEARING")
+ID_BEARING = BearingSensor.frame_spec().frame_id
 B_M = np.array([[3.0, 2.1], [0.0, 1.05], [3.0, 0.0]])     # Vander 2011 Fig. 1
 
 
@@ -102,7 +103,7 @@ def test_outage_share_and_burst_length(make_scenario, burst_s, mean_scans):
     runs = sum((_runs(b.outage[b.beacon == j]) for j in range(3)), [])
     assert np.mean(runs) == pytest.approx(mean_scans, rel=0.15)
     # what is lost is not sent
-    assert np.sum(res.frames.arb_id == simulate.ID_BEARING) == np.sum(~b.outage)
+    assert np.sum(res.frames.arb_id == ID_BEARING) == np.sum(~b.outage)
 
 
 def test_outage_probability_per_beacon(make_scenario):
@@ -221,7 +222,7 @@ def test_eurobot_goes_lower_left_to_lower_right_in_about_10_s():
 def test_eurobot_scenarios_run_and_decode(name):
     res = simulate.run(load_scenario(name))
     ids = set(res.frames.arb_id.tolist())
-    assert simulate.ID_PULSE not in ids and simulate.ID_BEARING in ids
+    assert simulate.ID_PULSE not in ids and ID_BEARING in ids
     for fid, data in zip(res.frames.arb_id, res.frames.data):
         DB.get_message_by_frame_id(int(fid)).decode(data)
     status = DB.get_message_by_name("NODE_STATUS")
@@ -254,15 +255,15 @@ def test_pcrb_of_a_standing_robot_is_the_static_bound_closed_form():
     sigma = math.radians(1.0)
     model = crb.BoundModel(sigma_arrival_s=2e-4, sigma_wheel_per_m=0.0, wheel_base_m=0.25,
                            ring_radius_m=0.1, rx_height_m=0.3, m_per_tick=1e-12,
-                           prior_sigma=(1.0, 1.0, 0.5, 0.5, 0.5, 5.0, 1e-4, 0.1),
-                           sigma_bearing_rad=sigma, bearing_offset_m=offset)
+                           prior_sigma=(1.0, 1.0, 0.5, 0.5, 0.5, 5.0, 1e-4, 0.1))
     k = 50
     states = np.tile([*pose, 0.0, 0.0, 343.0, 0.15, 0.0], (k, 1))
     t = 0.1 * np.arange(k)
     seen = [B_M if i % 2 == 0 else B_M[:2] for i in range(k)]   # B3 every other scan
     cov = crb.pcrb_along_path(states, np.zeros((0, 3)), np.zeros(k, int), [[]] * k,
                               np.zeros(k), np.zeros(k), model, event_time_s=t,
-                              fires=np.zeros(k, bool), bearing_beacons_m=seen)
+                              fires=np.zeros(k, bool),
+                              measurements=[bearing_rows(seen, sigma, offset)])
     for n in (1, 10, 50):
         counts = (n, n, (n + 1) // 2)
         assert cov[n - 1][:3, :3] == pytest.approx(_static_bound(pose, counts, sigma,
@@ -306,7 +307,7 @@ def test_a_mixed_site_fuses_firings_and_bearings():
     pulses = simulate.run(load_scenario("kleeman-lab", duration_s=30))
     assert len(mixed.pcrb_t_s) == len(pulses.firings.t_s) + len(np.unique(mixed.bearings.t_s))
     ids = set(mixed.frames.arb_id.tolist())
-    assert {simulate.ID_PULSE, simulate.ID_BEARING} <= ids
+    assert {simulate.ID_PULSE, ID_BEARING} <= ids
     late = mixed.truth["t_sim_s"] > 5
     assert np.all(mixed.truth["pcrb_pos_m"][late] < pulses.truth["pcrb_pos_m"][late])
 

@@ -48,7 +48,7 @@ def test_builtin_scenarios_all_load():
             assert scn.duration_s == 60 and scn.site.beacon_count == 0
             assert scn.site.range_beacon_count == 4 and scn.site.bearing_beacon_count == 0
             # the self-surveyed site: its beacons range each other at start
-            assert (scn.range_survey_s > 0) == (scn.site.name == "marvelmind-survey")
+            assert (scn.ranges.survey_s > 0) == (scn.site.name == "marvelmind-survey")
         elif scn.site.name == "hoppenot-room":   # Hoppenot & Colle: sonar ring + map (issue 12)
             assert scn.duration_s == 40 and scn.site.beacon_count == 0
             assert scn.site.sonar_count == 8 and scn.site.walls_m.shape == (5, 4)

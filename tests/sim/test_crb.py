@@ -189,7 +189,6 @@ def test_bound_with_the_sos_rate_unknown():
     rate unknown with 0.1 m/s^2 of prior gives a larger one (s and its rate from the same
     pulses), and on the swing too, where the simulator's bound prices the drift as a random
     walk of the drift's size."""
-    from beaconloc_sim.nodes import Bearings
     for name in ("kleeman-lab", "temperature-swing10"):
         scn = load_scenario(name, duration_s=50)
         res = simulate.run(scn, encode=False)
@@ -197,7 +196,7 @@ def test_bound_with_the_sos_rate_unknown():
         held = res.pcrb_cov[after, crb.IS, crb.IS]
 
         def rate_bound(prior_mps2):
-            ev, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(),
+            ev, _ = simulate._pcrb(scn, res.firings, res.detections, {},
                                    res.rx_clock, sos_rate_prior_mps2=prior_mps2)
             assert ev.cov.shape[1:] == (9, 9)
             return ev.cov[after, crb.IS, crb.IS]
@@ -216,14 +215,13 @@ def test_bound_with_the_sos_rate_a_random_walk():
     and on the swing up and back, whose rate reverses at 60 s, the walk that spreads that
     reversal over the run (q = sum of the rate's changes squared / span) gives a larger bound
     on s than the one told when it comes."""
-    from beaconloc_sim.nodes import Bearings
     for name in ("kleeman-lab", "temperature-swing10"):
         scn = load_scenario(name)
         res = simulate.run(scn, encode=False)
         after = res.pcrb_t_s > 20
 
         def bound(**kw):
-            ev, _ = simulate._pcrb(scn, res.firings, res.detections, Bearings.empty(),
+            ev, _ = simulate._pcrb(scn, res.firings, res.detections, {},
                                    res.rx_clock, sos_rate_prior_mps2=0.1, **kw)
             return ev.cov[after, crb.IS, crb.IS]
 

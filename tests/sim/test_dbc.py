@@ -80,9 +80,7 @@ def test_frame_table_comes_from_the_dbc():
     db = cantools.database.load_file(str(dbc_path()))
     from beaconloc_sim.nodes.range_module import RangeModule
     from beaconloc_sim.nodes.track_encoders import TRACK_TICK_WRAP, TrackEncoders
-    from beaconloc_sim.nodes.beacon_survey import BeaconSurvey
-    kinds = {nodes.ReceiverRing, nodes.WheelEncoders, nodes.NodeStatus, RangeModule,
-             TrackEncoders, BeaconSurvey, nodes.SonarRing}
+    kinds = {*nodes.KINDS, RangeModule, TrackEncoders}
     for kind in kinds:
         msg = db.get_message_by_name(kind.message)
         counter = msg.get_signal_by_name("Counter")

@@ -74,7 +74,7 @@ def test_ping_schedule_counters_and_node_status(make_scenario):
     beacon = np.array([r["Beacon"] for r in rows])
     assert np.all(beacon[1:] == beacon[:-1] % 4 + 1)
     # pinged beacon = (node count / period) mod K + 1
-    assert np.all(beacon == ((scn.range_offset_us // 2**32 * 2**32 + node_us) // 50_000) % 4 + 1)
+    assert np.all(beacon == ((scn.ranges.offset_us // 2**32 * 2**32 + node_us) // 50_000) % 4 + 1)
     assert np.all(np.diff([r["Counter"] for r in rows]) % 16 == 1)
     status = decoded(res, STATUS)
     assert {s["NodeId"] for s in status} == {2, 4}

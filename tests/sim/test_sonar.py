@@ -12,9 +12,12 @@ import numpy as np
 import pytest
 
 from beaconloc_sim import simulate
+from beaconloc_sim.nodes.sonar_ring import SonarRing
 from beaconloc_sim.physics import sonar as so
 from beaconloc_sim.resources import builtin_site_path, dbc_path
 from beaconloc_sim.scenario import load_scenario
+
+ID_SONAR = SonarRing.frame_spec().frame_id
 
 BEAM = so.Beam.of(math.radians(30), math.radians(5), 1.0)   # 30 deg full width, 5 deg rough
 WALL = np.array([[5.0, 0.0, 5.0, 4.0]])                     # the line x = 5, 4 m long
@@ -162,7 +165,7 @@ def test_burst_schedule_flags_and_frames_round_trip(tmp_path):
     cantools to the signals the node built."""
     res = _run(tmp_path, PARKED.format(d=10, x=5.3, y=2.0, deg=0) + "[obstacles]\n")
     frames = res.frames
-    sonar = frames.arb_id == simulate.ID_SONAR
+    sonar = frames.arb_id == ID_SONAR
     assert sonar.sum() == 20 * 8
     db = cantools.database.load_file(str(dbc_path()))
     sig = [frames.signals[i] for i in np.flatnonzero(sonar)]
@@ -170,7 +173,7 @@ def test_burst_schedule_flags_and_frames_round_trip(tmp_path):
         assert db.decode_message(int(frames.arb_id[i]), frames.data[i], decode_choices=False) == s
     t = np.array([s["NodeTime"] for s in sig], dtype=np.int64)
     sensor = np.array([s["Sensor"] for s in sig])
-    offset = res.scenario.sonar_offset_us
+    offset = res.scenario.sonar.offset_us
     assert np.all((t - sensor * 60_000) % 500_000 == 0)   # the node's counts n P + i F
     assert np.all(np.diff([s["Counter"] for s in sig]) % 16 == 1)
     forward = [s for s in sig if s["Sensor"] == 0]
@@ -196,7 +199,7 @@ def test_max_range_flag(tmp_path):
     inside its 60 ms listening window: MAX_RANGE, Range 0, the echo's amplitude kept."""
     res = _run(tmp_path, PARKED.format(d=5, x=2, y=3.5, deg=0), _site_text(max_range_m=3.0))
     fwd = [s for fid, s in zip(res.frames.arb_id, res.frames.signals)
-           if fid == simulate.ID_SONAR and s["Sensor"] == 0]
+           if fid == ID_SONAR and s["Sensor"] == 0]
     assert fwd and all(s["Flags"] == 2 and s["Range"] == 0 and s["Amplitude"] == 255
                        for s in fwd)
 
@@ -349,7 +352,7 @@ def test_rough_walls_echo_off_the_normal():
     smooth = simulate.run(load_scenario("hoppenot-room")).sonar
     rough_res = simulate.run(load_scenario("hoppenot-rough"))
     rough = rough_res.sonar
-    assert rough_res.scenario.sonar_critical_rad == pytest.approx(math.radians(30))
+    assert rough_res.scenario.sonar.critical_rad == pytest.approx(math.radians(30))
     n_map = len(rough_res.scenario.site.walls_m)
     obl_smooth = int(np.sum((smooth.kind == so.KIND_OBLIQUE) & (smooth.wall < n_map)))
     obl_rough = int(np.sum((rough.kind == so.KIND_OBLIQUE) & (rough.wall < n_map)))

@@ -2,12 +2,15 @@
 its rolling counter, and frames sampled from the physics of an interval.
 
 A node kind is one module of this package: a Node subclass that names its DBC message and
-its random stream and implements sample(); nodes/__init__.py lists the kinds a run puts on
-the bus.
+its random stream and implements sample(); one that declares its kind_order is one of the
+kinds of a robot's bus, nodes.KINDS (found there, not listed). A sensor kind with scenario
+keys, a record of its measurements and a share of the bound is a SensorKind
+(nodes/sensor_kind.py).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,7 +18,9 @@ from ..bus import Released
 from ..clocks import NodeClock
 from ..dbc import COUNTER, FrameSpec, frame_spec
 from ..physics.pulses import Detections, Firings
-from ..scenario import Scenario
+
+if TYPE_CHECKING:             # scenario.py loops over nodes.KINDS: no import at run time
+    from ..scenario import Scenario
 
 
 @dataclass
@@ -56,6 +61,18 @@ class Node:
     # takes the next free index and the others draw what they drew before); None: it draws
     # nothing but its latency
     stream: tuple[str, int] | None = None
+    # its place among the kinds of one robot's bus (nodes.KINDS, in this order: the bus order
+    # of nodes.on_bus, the order of the bound's rows and of the stats); a new kind takes the
+    # next free one, after all the others, so their frames, draws and bound stay as they were.
+    # None: not one of them (the team's nodes)
+    kind_order: int | None = None
+
+    @classmethod
+    def on_bus(cls, scn: Scenario, placed: list[Node]) -> list[Node]:
+        """The nodes of this kind one robot's bus carries after `placed` (the nodes before
+        them in bus order; nodes.on_bus): none here (the receiver ring, the wheel encoders
+        and their status frames are every robot's, placed by nodes.on_bus itself)."""
+        return []
 
     @classmethod
     def frame_spec(cls) -> FrameSpec:

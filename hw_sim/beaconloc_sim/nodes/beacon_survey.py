@@ -43,7 +43,7 @@ from ..physics import acoustics as ac
 from ..physics.ranges import flight_time_s, late_arrival_m, measured_tof_us, pulse_quality
 from .base import Interval, Node
 from .bearing_sensor import occluded
-from .range_receiver import TOF_MAX_US, RangeFlags
+from .range_receiver import TOF_MAX_US, RangeFlags, RangeReceiver
 
 
 @dataclass
@@ -78,11 +78,20 @@ def _standing(xy: np.ndarray):
 class BeaconSurvey(Node):
     message = "BEACON_SURVEY"
     stream = ("survey", 6)   # the fixed beacons' survey ranges
+    kind_order = 6           # right after the range receiver and its status frame
     node_id = 4            # the range network's (DBC RANGE_RX); sends no NODE_STATUS itself
 
-    def __init__(self, ranger, scn):
+    @classmethod
+    def on_bus(cls, scn, placed: list[Node]) -> list[Node]:
+        """The survey of the range receiver on the bus, when the scenario's [ranges]
+        survey_s > 0."""
+        ranger = next((n for n in placed if isinstance(n, RangeReceiver)), None)
+        return [cls(ranger, scn)] if ranger is not None and ranger.opts.survey_s > 0 else []
+
+    def __init__(self, ranger: RangeReceiver, scn):
         super().__init__(ranger.clock)
         self.scn = scn
+        self.opts = ranger.opts          # the range receiver's scenario keys ([ranges])
         self.period_us = ranger.period_us
         self.measured = SurveyRanges.empty()   # rows of the last interval (sent or not)
 
@@ -91,7 +100,7 @@ class BeaconSurvey(Node):
         k_count = site.range_beacon_count
         ping_us = self.periodic_us(iv, self.period_us)
         t_ping = self.clock.true_time_s(ping_us)
-        keep = t_ping <= scn.range_survey_s
+        keep = t_ping <= self.opts.survey_s
         ping_us, t_ping = ping_us[keep], t_ping[keep]
         emit_of_ping = (ping_us // self.period_us) % k_count
         # rows: (ping, listener != emitter), listeners in id order
@@ -110,7 +119,7 @@ class BeaconSurvey(Node):
         src = b[emitter]
         sos = ac.speed_of_sound_mps(scn.temperature_c(t_e))
         room = (site.room_x_m, site.room_y_m, site.room_z_m)
-        multipath = u_multi < scn.range_multipath_probability
+        multipath = u_multi < self.opts.multipath_probability
         true_m, path_m = np.zeros(n), np.zeros(n)
         for k in range(k_count):
             rows = np.flatnonzero(listener == k)
@@ -128,7 +137,7 @@ class BeaconSurvey(Node):
                                  site.sigma_range_m, site.sigma_range_per_m, TOF_MAX_US)
         hidden = occluded(b[listener][:, :2], src[:, :2], scn.obstacles_m)
         rec = SurveyRanges(t_e, ping_us[row_ping], emitter, listener, true_m, tof_us, multipath,
-                           u_drop < scn.range_dropout_probability, hidden,
+                           u_drop < self.opts.dropout_probability, hidden,
                            true_m > site.range_max_m)
         self.measured = rec
         lat = iv.latency_s(n)

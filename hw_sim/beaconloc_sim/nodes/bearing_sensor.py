@@ -39,11 +39,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import crb
 from ..clocks import WRAP_US, NodeClock
 from ..dbc import database
 from ..physics import acoustics as ac
-from ..physics.bearings import bearing_rad, sensor_position, wrap_rad
-from .base import Interval, Node
+from ..physics.bearings import bearing_jacobian, bearing_rad, sensor_position, wrap_rad
+from .base import Interval
+from .sensor_kind import EventRows, KindOptions, SensorKind, by_event
 
 _CROSSING_ITERATIONS = 30    # fixed-point steps (contraction factor ~ |dphi/dt| T_k / 2 pi)
 
@@ -114,40 +116,90 @@ def occluded(sensor_xy: np.ndarray, beacon_xy: np.ndarray, obstacles_m: np.ndarr
     return hidden
 
 
-class BearingSensor(Node):
+def bearing_rows(seen: list[np.ndarray], sigma_rad: float, offset_m: tuple) -> EventRows:
+    """The bound's rows of the bearings delivered at each event k, seen[k] (n, 2) the
+    positions of their beacons: Vander 2011 eq. 1, d(phi_j)/d(x, y, theta) at the true pose,
+    the sensor's mount offset_m (fwd, left) included (physics.bearings.bearing_jacobian),
+    variance sigma_rad^2 each."""
+    def rows(k: int, state: np.ndarray):
+        if not len(seen[k]):
+            return None
+        jac = bearing_jacobian(state[crb.IX], state[crb.IY], state[crb.ITH], seen[k], offset_m)
+        return crb.embed(jac, (crb.IX, crb.IY, crb.ITH)), np.full(len(seen[k]), sigma_rad ** 2)
+    return rows
+
+
+class BearingSensor(SensorKind):
     message = "BEARING"
     node_id = 3
     stream = ("bearings", 4)   # bearing noise and outages
+    kind_order = 4
     status_phase_us = 500_000
+    name = "bearings"          # [bearings] of the scenario: the sensor's imperfections
+    keys = frozenset({"outage_probability", "outage_burst_s", "max_range_m"})
+    clock_keys = ("bearing", 987_654_321, 20.0)
+    record = Bearings
+    timebase = 1               # a site without ultrasonic beacons runs on this clock
+
+    @dataclass(frozen=True)
+    class Options(KindOptions):
+        outage_probability: tuple[float, ...] = ()   # per bearing beacon, share of scans
+        outage_burst_s: float = 0.0      # mean outage burst, s (0: independent scans)
+        max_range_m: float = math.inf    # beacons farther than this are not seen
+
+    @classmethod
+    def section_options(cls, ini, site) -> dict:
+        """[bearings] (docs/simulator.md): outage_probability one in [0, 1) or one per bearing
+        beacon, outage_burst_s a burst the scan rate can give that share with, max_range_m."""
+        n_bb = site.bearing_beacon_count
+        outage_p = ini.numbers("bearings", "outage_probability", default=[0.0])
+        if len(outage_p) not in (1, n_bb) or any(not 0 <= p < 1 for p in outage_p):
+            raise ini.error("bearings", "outage_probability", "expected one probability in "
+                            f"[0, 1) or one per bearing beacon ({n_bb})")
+        outage_p = tuple(float(p) for p in outage_p) * (n_bb if len(outage_p) == 1 else 1)
+        burst_s = ini.number("bearings", "outage_burst_s", 0.0, minimum=0.0)
+        scan_s = 1.0 / site.bearing_scan_rate_hz if n_bb else 0.0
+        for p in outage_p:
+            # a two-state Markov chain with outage share p and mean burst L scans needs
+            # P(in -> out) = p / (L (1 - p)) <= 1 and L >= 1 (docs/simulator.md, [bearings])
+            if burst_s > 0 and (burst_s < scan_s or p / (1 - p) > burst_s / scan_s):
+                raise ini.error("bearings", "outage_burst_s",
+                                f"a mean burst of {burst_s:g} s cannot give an outage share {p:g} "
+                                f"at {site.bearing_scan_rate_hz:g} scans/s (need >= "
+                                f"{max(scan_s, scan_s * p / (1 - p)):g} s)")
+        max_range_m = ini.number("bearings", "max_range_m", positive=True) \
+            if ini.has("bearings", "max_range_m") else math.inf
+        return dict(outage_probability=outage_p, outage_burst_s=burst_s, max_range_m=max_range_m)
+
+    @classmethod
+    def present(cls, site) -> bool:
+        return site.bearing_beacon_count > 0
 
     def __init__(self, clock: NodeClock, scn):
-        super().__init__(clock)
-        self.scn = scn
+        super().__init__(clock, scn)
         site = scn.site
         bearing = database().get_message_by_name(self.message).get_signal_by_name("Bearing")
         self.step_deg = float(bearing.scale)                              # 360/65536 deg
         self.period_us = int(round(1e6 / site.bearing_scan_rate_hz))
         self.out = None                       # outage state of each beacon (Markov chain)
-        self.measured = Bearings.empty()      # bearings of the last interval (all, sent or not)
-        self._bound_pending = Bearings.empty()   # sent bearings the bound has not taken yet
 
     # -- outages ------------------------------------------------------------------
     def _outages(self, rng: np.random.Generator, n_scans: int) -> np.ndarray:
         """(n_scans, M) outage state per scan and beacon, the chain carried on."""
-        scn = self.scn
-        p = np.asarray(scn.bearing_outage_probability, dtype=float)
+        opts = self.opts
+        p = np.asarray(opts.outage_probability, dtype=float)
         m = len(p)
         if self.out is None:                  # start from the stationary distribution
             self.out = rng.random(m) < p
         u = rng.random((n_scans, m))
         states = np.zeros((n_scans, m), dtype=bool)
-        if scn.bearing_outage_burst_s > 0:
-            burst_scans = scn.bearing_outage_burst_s * scn.site.bearing_scan_rate_hz
+        if opts.outage_burst_s > 0:
+            burst_scans = opts.outage_burst_s * self.scn.site.bearing_scan_rate_hz
             stay_out = 1.0 - 1.0 / burst_scans            # P(out -> out)
             go_out = p / (burst_scans * (1.0 - p))        # P(in -> out)
         out = self.out
         for k in range(n_scans):
-            if scn.bearing_outage_burst_s > 0:
+            if opts.outage_burst_s > 0:
                 out = np.where(out, u[k] < stay_out, u[k] < go_out)
             else:
                 out = u[k] < p
@@ -220,11 +272,11 @@ class BearingSensor(Node):
         hidden = occluded(sensor_xy, beacon_xy, scn.obstacles_m, disc, scn.opponent_radius_m)
         sent_deg = encode_bearing_deg(true + noise[k, b, c], self.step_deg)
         rec = Bearings(t, scan_us[k], b, true, np.radians(sent_deg), range_m,
-                       outage[k, b], hidden, range_m > scn.bearing_max_range_m)
+                       outage[k, b], hidden, range_m > self.opts.max_range_m)
         self.measured = rec
         lat = iv.latency_s(len(t))
         sent = np.flatnonzero(rec.sent)
-        self._bound_pending = Bearings.concat([self._bound_pending, rec.select(sent)])
+        self.hand_to_bound(rec.select(sent))
         node_us = self.clock.unwrapped_us(t)
         # Quality: 1/r^2 intensity of a point source, 255 within 1 m (module docstring)
         quality = np.clip(np.round(255.0 * np.minimum(1.0, 1.0 / np.maximum(range_m, 1e-9) ** 2)),
@@ -234,12 +286,11 @@ class BearingSensor(Node):
                    for i in sent.tolist()]
         return t[sent] + lat[sent], signals
 
-    def bound_events(self, until_s: float = math.inf) -> Bearings:
-        """The sent bearings measured at or before until_s not handed out yet (the posterior
-        bound's measurement events), in time order; later ones wait for the next window."""
-        pend = self._bound_pending
-        order = np.argsort(pend.t_s, kind="stable")
-        pend = pend.select(order)
-        now = pend.t_s <= until_s
-        self._bound_pending = pend.select(~now)
-        return pend.select(now)
+    @classmethod
+    def bound_rows(cls, scn, events: Bearings, t_ev: np.ndarray, states: np.ndarray) -> EventRows:
+        """The sent bearings (bearing_rows), each at its own instant."""
+        site = scn.site
+        beacons_m = [site.bearing_beacons_m[j] for j in events.beacon.tolist()]
+        seen = by_event(t_ev, events.t_s, beacons_m, 2)
+        return bearing_rows(seen, site.sigma_bearing_rad,
+                            tuple(float(v) for v in site.bearing_offset_m))

@@ -12,6 +12,7 @@ PERIOD_US = 1_000_000
 
 class NodeStatus(Node):
     message = "NODE_STATUS"
+    kind_order = 2       # one per node, placed with its node (nodes.on_bus, SensorKind.on_bus)
 
     def __init__(self, host: Node):
         super().__init__(host.clock)

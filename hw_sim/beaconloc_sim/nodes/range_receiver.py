@@ -30,17 +30,18 @@ The frame is ready at the arrival, t_e + tof, plus the node's processing latency
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from .. import crb
 from ..clocks import WRAP_US, NodeClock
 from ..physics import acoustics as ac
 from ..physics.ranges import (flight_time_s, late_arrival_m, measured_tof_us, pulse_quality,
-                              receiver_position)
-from .base import Interval, Node
+                              range_m, receiver_position, sigma_range_m, tof_jacobian)
+from .base import Interval
 from .bearing_sensor import occluded
+from .sensor_kind import EventRows, KindOptions, SensorKind, by_event
 
 TOF_MAX_US = 65534           # the DBC's TimeOfFlight range
 
@@ -98,18 +99,65 @@ class Ranges(RangeFlags):
                         for f in Ranges.__dataclass_fields__))
 
 
-class RangeReceiver(Node):
+def range_rows(ranged: list[np.ndarray], offset_m: tuple, height_m: float, sigma_m: float,
+               sigma_per_m: float) -> EventRows:
+    """The bound's rows of the direct ranges delivered at each event k, ranged[k] (n, 3) the
+    positions of their beacons: tof = d / s (physics.ranges, Millibots), d(tof)/d(x, y,
+    theta, s) at the true state through the receiver's mount offset_m (fwd, left) and
+    height_m; noise sigma(r) = sigma_m + sigma_per_m r in time units (/ s), plus the node
+    clock's 1 us quantisation (uniform: variance 1 us^2 / 12). A multipath late arrival
+    carries no information on the direct path and is left out, as are dropouts."""
+    def rows(k: int, state: np.ndarray):
+        if not len(ranged[k]):
+            return None
+        x, y, th, s = state[crb.IX], state[crb.IY], state[crb.ITH], state[crb.IS]
+        jac = tof_jacobian(x, y, th, s, ranged[k], offset_m, height_m)
+        r = range_m(x, y, th, ranged[k], offset_m, height_m)
+        sig = sigma_range_m(r, sigma_m, sigma_per_m) / s
+        return crb.embed(jac, (crb.IX, crb.IY, crb.ITH, crb.IS)), sig ** 2 + (1e-6) ** 2 / 12
+    return rows
+
+
+class RangeReceiver(SensorKind):
     message = "RANGE"
     node_id = 4
     stream = ("ranges", 5)   # range noise, dropouts, multipath
+    kind_order = 5
     status_phase_us = 0
+    name = "ranges"          # [ranges] of the scenario: the receiver's imperfections, the survey
+    keys = frozenset({"dropout_probability", "multipath_probability", "survey_s"})
+    clock_keys = ("range", 3_141_592_653, -15.0)
+    record = Ranges
+    timebase = 2             # a site without ultrasonic or bearing beacons runs on this clock
+
+    @dataclass(frozen=True)
+    class Options(KindOptions):
+        dropout_probability: float = 0.0     # share of pings lost
+        multipath_probability: float = 0.0   # share of pings whose late arrival replaces the direct
+        survey_s: float = 0.0    # the fixed beacons range each other this long (0: never;
+                                 # nodes.beacon_survey)
+
+    @classmethod
+    def section_options(cls, ini, site) -> dict:
+        """[ranges] (docs/simulator.md): two probabilities, and a self-survey only with
+        three range beacons or more."""
+        if ini.has("ranges", "survey_s") and ini.number("ranges", "survey_s", 0.0) > 0 \
+                and site.range_beacon_count < 3:
+            raise ini.error("ranges", "survey_s", "a self-survey needs [range_beacons] count >= 3")
+        return dict(
+            dropout_probability=ini.number("ranges", "dropout_probability", 0.0, minimum=0,
+                                           maximum=1),
+            multipath_probability=ini.number("ranges", "multipath_probability", 0.0, minimum=0,
+                                             maximum=1),
+            survey_s=ini.number("ranges", "survey_s", 0.0, minimum=0, maximum=3600))
+
+    @classmethod
+    def present(cls, site) -> bool:
+        return site.range_beacon_count > 0
 
     def __init__(self, clock: NodeClock, scn):
-        super().__init__(clock)
-        self.scn = scn
+        super().__init__(clock, scn)
         self.period_us = int(round(scn.site.range_ping_period_s * 1e6))
-        self.measured = Ranges.empty()        # pings of the last interval (all, sent or not)
-        self._bound_pending = Ranges.empty()  # direct ranges the bound has not taken yet
 
     def sample(self, iv: Interval) -> tuple[np.ndarray, list[dict]]:
         scn, site = self.scn, self.scn.site
@@ -129,7 +177,7 @@ class RangeReceiver(Node):
         tof = flight_time_s(pose, t_e, b, site.range_offset_m, site.range_height_m, sos)
         true_m = sos * tof
         room = (site.room_x_m, site.room_y_m, site.room_z_m)
-        multipath = u_multi < scn.range_multipath_probability
+        multipath = u_multi < self.opts.multipath_probability
         path_m = true_m.copy()
         if np.any(multipath):
             idx = np.flatnonzero(multipath)
@@ -142,11 +190,11 @@ class RangeReceiver(Node):
                               site.range_height_m)
         hidden = occluded(p[:, :2], b[:, :2], scn.obstacles_m)
         rec = Ranges(t_e, ping_us, beacon, sos, true_m, tof_us, multipath,
-                     u_drop < scn.range_dropout_probability, hidden,
+                     u_drop < self.opts.dropout_probability, hidden,
                      true_m > site.range_max_m)
         self.measured = rec
         lat = iv.latency_s(n)
-        self._bound_pending = Ranges.concat([self._bound_pending, rec.select(rec.direct)])
+        self.hand_to_bound(rec.select(rec.direct))
         sent = np.flatnonzero(rec.sent)
         quality = pulse_quality(path_m)
         signals = [{"NodeTime": int(ping_us[i] % WRAP_US), "Beacon": int(beacon[i]) + 1,
@@ -155,11 +203,17 @@ class RangeReceiver(Node):
         arrival = t_e + path_m / sos
         return arrival[sent] + lat[sent], signals
 
-    def bound_events(self, until_s: float = math.inf) -> Ranges:
-        """The direct ranges delivered at or before until_s not handed out yet (the posterior
-        bound's measurement events), in time order; later ones wait for the next window."""
-        pend = self._bound_pending
-        pend = pend.select(np.argsort(pend.t_s, kind="stable"))
-        now = pend.t_s <= until_s
-        self._bound_pending = pend.select(~now)
-        return pend.select(now)
+    @classmethod
+    def complete_s(cls, scn, events: Ranges) -> np.ndarray:
+        """The direct pulse's arrival, emission + true_m / s: the node times the flight and has
+        the range when the pulse arrives."""
+        return events.t_s + events.true_m / events.sos_mps
+
+    @classmethod
+    def bound_rows(cls, scn, events: Ranges, t_ev: np.ndarray, states: np.ndarray) -> EventRows:
+        """The direct ranges delivered (range_rows), each at its ping."""
+        site = scn.site
+        beacons_m = [site.range_beacons_m[j] for j in events.beacon.tolist()]
+        ranged = by_event(t_ev, events.t_s, beacons_m, 3)
+        return range_rows(ranged, tuple(float(v) for v in site.range_offset_m),
+                          site.range_height_m, site.sigma_range_m, site.sigma_range_per_m)

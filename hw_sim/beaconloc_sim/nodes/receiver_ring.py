@@ -12,6 +12,7 @@ from .base import Interval, Node
 class ReceiverRing(Node):
     message = "PULSE_DETECTION"
     node_id = 1
+    kind_order = 0
     status_phase_us = 250_000
 
     def __init__(self, clock: NodeClock):

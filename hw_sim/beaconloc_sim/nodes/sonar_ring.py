@@ -37,11 +37,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import crb
 from ..clocks import WRAP_US, NodeClock
 from ..dbc import signal_modulo
 from ..physics import acoustics as ac
 from ..physics import sonar as so
-from .base import Interval, Node
+from .base import Interval
+from .sensor_kind import EventRows, KindOptions, SensorKind
 
 FLAG_NO_ECHO, FLAG_MAX_RANGE = 1, 2      # DBC SONAR Flags bits
 
@@ -103,24 +105,61 @@ def world_segments(scn) -> tuple[np.ndarray, int]:
     return np.vstack([walls, scn.obstacles_m.reshape(-1, 4)]), len(walls)
 
 
-class SonarRing(Node):
+class SonarRing(SensorKind):
     message = "SONAR"
     node_id = 5
     stream = ("sonar", 7)   # the ring's range noise
+    kind_order = 7
     status_phase_us = 500_000
+    name = "sonar"          # [sonar] of the scenario: the ring's physics (physics/sonar.py)
+    keys = frozenset({"fire_interval_s", "listen_s", "critical_angle_deg", "reflection",
+                      "threshold", "crosstalk", "double_bounce"})
+    clock_keys = ("sonar", 2_718_281_828, 25.0)
+    record = SonarPings
+    timebase = 3            # a site with no beacons of any kind runs on this clock
+
+    @dataclass(frozen=True)
+    class Options(KindOptions):
+        fire_interval_s: float = 0.06      # between successive sonars of a burst, s
+        listen_s: float = 0.06             # each sonar's listening window after its ping, s
+        critical_rad: float = math.radians(5.0)   # largest incidence a wall still echoes at
+        reflection: float = 1.0            # amplitude reflection coefficient of every segment
+        threshold: float = 0.02            # relative echo amplitude heard
+        crosstalk: bool = True             # sonars hear the echoes of the ones fired before
+        double_bounce: bool = True         # double reflections (phantom ranges)
+
+    @classmethod
+    def section_options(cls, ini, site) -> dict:
+        """[sonar] (docs/simulator.md): a burst's sonars fit in the site's burst period;
+        crosstalk and double_bounce are 0/1."""
+        fire_s = ini.number("sonar", "fire_interval_s", 0.06, positive=True, maximum=1.0)
+        if site.sonar_count and site.sonar_count * fire_s > site.sonar_period_s + 1e-9:
+            raise ini.error("sonar", "fire_interval_s", f"{site.sonar_count} sonars fired "
+                            f"{fire_s:g} s apart do not fit in the burst period "
+                            f"{site.sonar_period_s:g} s ([sonar_ring] period_s)")
+        return dict(
+            fire_interval_s=fire_s,
+            listen_s=ini.number("sonar", "listen_s", 0.06, positive=True, maximum=1.0),
+            critical_rad=math.radians(ini.number("sonar", "critical_angle_deg", 5.0, minimum=0,
+                                                 maximum=90)),
+            reflection=ini.number("sonar", "reflection", 1.0, positive=True, maximum=1),
+            threshold=ini.number("sonar", "threshold", 0.02, minimum=0, maximum=1),
+            crosstalk=bool(ini.integer("sonar", "crosstalk", 1, minimum=0, maximum=1)),
+            double_bounce=bool(ini.integer("sonar", "double_bounce", 1, minimum=0, maximum=1)))
+
+    @classmethod
+    def present(cls, site) -> bool:
+        return site.sonar_count > 0
 
     def __init__(self, clock: NodeClock, scn):
-        super().__init__(clock)
-        self.scn = scn
+        super().__init__(clock, scn)
         site = scn.site
         self.period_us = int(round(site.sonar_period_s * 1e6))
-        self.fire_us = int(round(scn.sonar_fire_interval_s * 1e6))
-        self.beam = so.Beam.of(site.sonar_beam_width_rad, scn.sonar_critical_rad,
-                               scn.sonar_reflection)
+        self.fire_us = int(round(self.opts.fire_interval_s * 1e6))
+        self.beam = so.Beam.of(site.sonar_beam_width_rad, self.opts.critical_rad,
+                               self.opts.reflection)
         self.world, self.n_map = world_segments(scn)
         self.range_max_mm = signal_modulo(self.message, "Range") - 1
-        self.measured = SonarPings.empty()        # pings of the last interval
-        self._bound_pending = SonarPings.empty()  # informative pings the bound has not taken
         self._recent: list[tuple[float, np.ndarray, float]] = []   # (t_s, position, axis)
 
     def ping_counts(self, iv: Interval) -> tuple[np.ndarray, np.ndarray]:
@@ -141,7 +180,7 @@ class SonarRing(Node):
         st = scn.trajectory.state(t_f)
         sos = ac.speed_of_sound_mps(scn.temperature_c(t_f))
         c_node = site.speed_of_sound_mps
-        listen_s = scn.sonar_listen_s
+        listen_s = self.opts.listen_s
         mounts = site.sonar_mounts
         rec = {k: np.zeros(n) for k in ("x", "y", "axis", "true")}
         kind = np.zeros(n, np.int64)
@@ -152,12 +191,12 @@ class SonarRing(Node):
                                        mounts[sensor[i]])
             p, ax = pos[0], float(axis[0])
             rec["x"][i], rec["y"][i], rec["axis"][i] = p[0], p[1], ax
-            cand = so.echoes(p, ax, self.world, self.beam, double=scn.sonar_double_bounce)
+            cand = so.echoes(p, ax, self.world, self.beam, double=self.opts.double_bounce)
             tau = 2.0 * cand.range_m / sos[i]
-            if scn.sonar_crosstalk:
+            if self.opts.crosstalk:
                 tau, cand = self._with_crosstalk(t_f[i], p, ax, sos[i], tau, cand)
                 self._recent.append((float(t_f[i]), p, ax))
-            heard = (cand.amplitude >= scn.sonar_threshold) \
+            heard = (cand.amplitude >= self.opts.threshold) \
                 & (c_node * tau / 2 >= site.sonar_min_range_m) & (tau <= listen_s)
             if not heard.any():
                 rec["true"][i] = math.nan
@@ -178,8 +217,7 @@ class SonarRing(Node):
         self.measured = pings
         # the bound's: informative readings of the sonars the estimator uses ([sonarN] used)
         used = site.sonar_mounts[sensor, 3] > 0 if n else np.zeros(0, bool)
-        self._bound_pending = SonarPings.concat([self._bound_pending,
-                                                 pings.select(pings.informative & used)])
+        self.hand_to_bound(pings.select(pings.informative & used))
         signals = [{"NodeTime": int(counts[i] % WRAP_US), "Sensor": int(sensor[i]),
                     "Range": int(range_mm[i]), "Amplitude": int(amplitude[i]),
                     "Flags": int(flags[i])} for i in range(n)]
@@ -190,7 +228,7 @@ class SonarRing(Node):
         """Add to this ping's candidates the echoes of the sonars fired in the last two
         listening windows: a path of length 2 r from a ping at t_j arrives t_j + 2 r / c,
         tau = that - t_k after this ping (kept when > 0)."""
-        self._recent = [r for r in self._recent if t_k - r[0] < 2 * self.scn.sonar_listen_s]
+        self._recent = [r for r in self._recent if t_k - r[0] < 2 * self.opts.listen_s]
         taus, parts = [tau], [cand]
         for t_j, p_j, ax_j in self._recent:
             x = so.crosstalk_paths(p_j, ax_j, p, axis, self.world, self.beam)
@@ -200,11 +238,38 @@ class SonarRing(Node):
             parts.append(so.Echoes(*(getattr(x, f)[keep] for f in so.Echoes.__dataclass_fields__)))
         return np.concatenate(taus), so.Echoes.concat(parts)
 
-    def bound_events(self, until_s: float = math.inf) -> SonarPings:
-        """The informative pings at or before until_s not handed out yet (the posterior
-        bound's measurement events), in time order; later ones wait for the next window."""
-        pend = self._bound_pending
-        pend = pend.select(np.argsort(pend.t_s, kind="stable"))
-        now = pend.t_s <= until_s
-        self._bound_pending = pend.select(~now)
-        return pend.select(now)
+    @classmethod
+    def complete_s(cls, scn, events: SonarPings) -> np.ndarray:
+        """The end of its listening window, ping + listen_s: the node reports the first echo
+        when the window closes, not when the echo returns."""
+        return events.t_s + scn.kind_options[cls.name].listen_s
+
+    @classmethod
+    def bound_rows(cls, scn, events: SonarPings, t_ev: np.ndarray, states: np.ndarray
+                   ) -> EventRows:
+        """The informative readings at each event: their rows d(range)/d(x, y, theta, s) and
+        variances, the specular echo of a map wall, range = r c_node / s (the node converts the
+        round trip with its own speed of sound c_node, the sound travels at the true s), r the
+        perpendicular distance from the sonar to the wall's line
+        (physics.sonar.perpendicular_rows; Hoppenot & Colle 1997), variance sigma(r)^2 (the
+        site's [sonar_ring]) plus the 1 mm quantisation (1 mm^2 / 12). Phantoms, obstacles and
+        crosstalk carry no information on the map and are left out, like multipath."""
+        site = scn.site
+        c_node = site.speed_of_sound_mps
+        rows: list[list] = [[] for _ in range(len(t_ev))]
+        variances: list[list] = [[] for _ in range(len(t_ev))]
+        for e, i in zip(np.searchsorted(t_ev, events.t_s).tolist(), range(len(events.t_s))):
+            x, y, th, s = (states[e, crb.IX], states[e, crb.IY], states[e, crb.ITH],
+                           states[e, crb.IS])
+            r, grad = so.perpendicular_rows(x, y, th, site.sonar_mounts[events.sensor[i]],
+                                            site.walls_m[events.wall[i]])
+            rows[e].append(np.append(grad * c_node / s, -r * c_node / s ** 2))
+            variances[e].append(float(site.sonar_sigma_m(r)) ** 2 + 1e-6 / 12)
+        per_event = [(np.array(r).reshape(-1, 4), np.array(v)) for r, v in zip(rows, variances)]
+
+        def at(k: int, state: np.ndarray):
+            jac, var = per_event[k]
+            if not len(var):
+                return None
+            return crb.embed(jac, (crb.IX, crb.IY, crb.ITH, crb.IS)), var
+        return at

@@ -17,6 +17,7 @@ ODOMETRY_COLUMNS = ("t_us", "x_m", "y_m", "theta_rad")
 class WheelEncoders(Node):
     message = "WHEEL_ENCODERS"
     node_id = 2
+    kind_order = 1
     stream = ("wheels", 1)   # random wheel slip
     status_phase_us = 750_000
 
