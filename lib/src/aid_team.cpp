@@ -22,7 +22,7 @@ bool team_site_starts(const bl_config *c) { return team_site(c) != 0; }
 
 }  // namespace
 
-// The whole source but that compiles out without the team (common.h BL_WITH_TEAM).
+// The rest compiles out without the team (common.h BL_WITH_TEAM).
 #if BL_WITH_TEAM
 
 #include "linalg.hpp"

@@ -216,7 +216,7 @@ int bl_filter_start_bearings(bl_filter *f);
 
 /* Bearing model (Vander et al. 2011 eq. 3 with the sensor mount offset
  * cfg->bearing.offset_x_m/_y_m, the robot extrapolated dt_s after the state
- * time with v, ω; filter.h, bl_filter_fuse_bearing): *h_rad = predicted
+ * time with v, ω; bl_filter_fuse_bearing above): *h_rad = predicted
  * bearing of bearing beacon bearing_beacon_index, body frame, wrapped to
  * (-π, π]; H (BL_FILTER_NX, optional) = ∂h/∂x (rad per unit of each state).
  * Errors: BL_EINVAL (NULL cfg/x/h_rad, non-finite x or dt_s, sensor within
