@@ -8,6 +8,7 @@
 
 #include "beaconloc/common.h"
 #include "beaconloc/config.h"
+#include "beaconloc/kinds.h"
 #include "beaconloc/fusion.h"
 #include "beaconloc/solver.h"
 #include "beaconloc/sonar.h"

@@ -1,22 +1,83 @@
-// beaconloc — aiding source: bearings to self-identifying beacons (Vander
-// et al. 2011 eq. 3 with the sensor's mount offset). The model and its
-// Jacobian, the fusion of a started filter through the shared update
-// (fusion.hpp) with the innovation wrapped to (-π, π], keeping each bearing
-// for the triangulation (re)start (snapshot_bearing.cpp) before the start
-// and after a time gap. Its tuning: cfg.bearing (bl_bearing_params,
-// config.h); otherwise only the bearing beacons' positions.
-#include "filter_internal.hpp"
-
-// The whole source compiles out without bearings (common.h BL_WITH_BEARINGS).
-#if BL_WITH_BEARINGS
+// beaconloc — measurement kind: bearings to self-identifying beacons
+// (aid_bearing.h; Vander et al. 2011 eq. 3 with the sensor's mount offset).
+// The model and its Jacobian, the fusion of a started filter through the
+// shared update (fusion.hpp) with the innovation wrapped to (-π, π], keeping
+// each bearing (with the dead reckoning's pose at its time,
+// bl_filter_track_wheels) for the triangulation (re)start
+// (snapshot_bearing.cpp) before the start and after a time gap; the
+// localizer's input (bl_localizer_bearing); and the kind's hooks (kinds.hpp):
+// its config defaults and checks, its counters, its restart. Its tuning:
+// cfg.bearing (bl_bearing_params); otherwise only the bearing beacons'
+// positions.
+#include "kinds.hpp"
 
 #include <cstring>
-
-#include "beaconloc/filter_model.h"
 
 using namespace bl;
 
 namespace {
+
+// In every build: bl_config keeps bearing_beacon_count (aid_bearing.h).
+// Without other beacons the bearings start the filter: >= 3.
+uint32_t bearing_count(const bl_config *c) { return c->bearing_beacon_count; }
+bool bearings_start_alone(const bl_config *c) { return c->bearing_beacon_count >= 3; }
+
+}  // namespace
+
+#if BL_WITH_BEARINGS
+
+namespace {
+
+// ---- its params block and beacons (bl_config; kinds.hpp Kind)
+
+// Vander et al. 2011 §3, σφ = 1°.
+void default_bearing_params(bl_config *c)
+{
+    bl_bearing_params *b = &c->bearing;
+    b->sigma_deg = real(1.0);
+    b->gate_sigma = real(3.0);
+    b->offset_x_m = real(0);
+    b->offset_y_m = real(0);
+    b->snapshot_window_s = real(0.25);  // 2.5 sensor turns at 10 Hz
+    b->max_fix_drms_m = real(0.25);     // = converged_sigma_xy_m's default
+}
+
+// Bearing beacons: finite, in range, pairwise distinct in x-y (a bearing
+// does not see z), and spanning the plane when they alone fix the pose.
+const char *check_bearing_beacons(const bl_config *c, bool others_start)
+{
+    for (uint32_t i = 0; i < c->bearing_beacon_count; ++i) {
+        const bl_beacon *b = &c->bearing_beacons[i];
+        if (!(is_finite(b->x_m) && is_finite(b->y_m) && std::fabs(b->x_m) < real(1e5) && std::fabs(b->y_m) < real(1e5)))
+            return "bearing_beacons";
+        for (uint32_t j = 0; j < i; ++j) {
+            const real dx = b->x_m - c->bearing_beacons[j].x_m, dy = b->y_m - c->bearing_beacons[j].y_m;
+            if (!(dx * dx + dy * dy > real(1e-6))) return "bearing_beacons";
+        }
+    }
+    return others_start || beacons_span_plane(c->bearing_beacons, c->bearing_beacon_count) ? nullptr
+                                                                                           : "bearing_beacons";
+}
+
+const Rule kBearingRules[] = {
+    BL_RULE(bearing.sigma_deg, kGtLe, b0, b90),
+    BL_RULE(bearing.gate_sigma, kLoGt, b0, kNone),
+    BL_RULE(bearing.offset_x_m, kAbs | kHiLt, kNone, b100),
+    BL_RULE(bearing.offset_y_m, kAbs | kHiLt, kNone, b100),
+    BL_RULE(bearing.snapshot_window_s, kGtLe, b0, b60),
+    BL_RULE(bearing.max_fix_drms_m, kLoGt, b0, kNone),
+};
+
+// Geometry: the count, the beacons' x-y and the sensor's mount.
+bool same_bearing_geometry(const bl_config *a, const bl_config *b)
+{
+    const uint32_t nb = a->bearing_beacon_count < BL_MAX_BEACONS ? a->bearing_beacon_count : BL_MAX_BEACONS;
+    return a->bearing_beacon_count == b->bearing_beacon_count && a->bearing.offset_x_m == b->bearing.offset_x_m &&
+           a->bearing.offset_y_m == b->bearing.offset_y_m &&
+           same_beacons(a->bearing_beacons, b->bearing_beacons, nb, false);
+}
+
+// ---- the measurement
 
 // IEKF relinearisations per bearing and their stop (the bearing is mildly
 // non-linear at the distances of a site; 3 iterations take a start-up
@@ -95,6 +156,48 @@ struct BearingModel {
     int unit_state() const { return -1; }
 };
 
+// A bearing further than this from the track's last sample gets no
+// odometry pose (s): the last increment's v, ω no longer describe the path.
+constexpr real kMaxExtrapolation_s = real(0.1);
+
+// The midpoint odometry step (Kleeman 1992 eq. 24; Vander et al. 2011 eq. 2):
+// d = (d_l + d_r)/2, δ = (d_r - d_l)/b, x += d cos(θ + δ/2), y += d sin(θ + δ/2),
+// θ += δ.
+void odometry_step(real pose[3], real d_m, real dth_rad)
+{
+    const real mid = pose[2] + real(0.5) * dth_rad;
+    pose[0] += d_m * std::cos(mid);
+    pose[1] += d_m * std::sin(mid);
+    pose[2] = wrap_angle(pose[2] + dth_rad);
+}
+
+// Keep a bearing as its beacon's latest (the triangulation's input), with
+// the dead reckoning's pose at its time.
+void remember_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us, real bearing_rad)
+{
+    const uint32_t j = bearing_beacon_index;
+    f->bearing_t_us_[j] = t_us;
+    f->bearing_rad_[j] = bearing_rad;
+    f->bearing_valid_mask_ |= 1u << j;
+    // The track's pose at the bearing's time: the last sample carried by its
+    // v, ω (constant over the step, eq. 24's midpoint form) by dt (either sign).
+    f->bearing_odo_track_[j] = 0;
+    int64_t d_us;
+    if (f->odo_track_ == 0 || !sub_us(t_us, f->odo_t_us_, &d_us)) return;
+    const real dt_s = us_to_s(d_us);
+    if (!(std::fabs(dt_s) <= kMaxExtrapolation_s)) return;
+    real o[6];
+    for (int k = 0; k < 6; ++k) o[k] = f->odo_[k];
+    const real d_m = f->odo_rate_[0] * dt_s, dth_rad = f->odo_rate_[1] * dt_s;
+    odometry_step(o, d_m, dth_rad);
+    const real half_b = real(0.5) * effective_base_m(&f->cfg_);
+    o[3] += std::fabs(d_m - half_b * dth_rad);
+    o[4] += std::fabs(d_m + half_b * dth_rad);
+    o[5] += std::fabs(dth_rad);
+    for (int k = 0; k < 6; ++k) f->bearing_odo_[j][k] = o[k];
+    f->bearing_odo_track_[j] = f->odo_track_;
+}
+
 // fuse_bearing on a started filter, fresh bearing: the shared update with
 // the start-up or converged gate. Own frame (noinline), as fuse_started.
 __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t j, int64_t t_us, real z, bl_fusion_result *result)
@@ -127,6 +230,29 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t j, int64_t t_u
 // the bearing's precision.
 constexpr real kMaxBearingRad = real(1e3);
 
+// ---- its counters, the localizer's input and restart (kinds.hpp Kind)
+
+void bearing_estimate(const bl_filter *f, bl_estimate *est)
+{
+    for (uint32_t i = 0; i < BL_MAX_BEACONS; ++i) {
+        est->bearing_accepted[i] = f->bearing_accepted_[i];
+        est->bearing_rejected[i] = f->bearing_rejected_[i];
+    }
+}
+
+// Dead reckoning for the triangulation's motion compensation, on a site
+// with bearing beacons. Arguments checked by the localizer: it cannot fail.
+void track_wheel_sample(bl_filter *f, int64_t t_us, real d_left_m, real d_right_m, bool new_track)
+{
+    if (f->cfg_.bearing_beacon_count > 0) (void)bl_filter_track_wheels(f, t_us, d_left_m, d_right_m, new_track);
+}
+
+int fuse_bearing_meas(bl_filter *f, const void *meas, bl_fusion_result *res)
+{
+    const bl_bearing_meas *m = static_cast<const bl_bearing_meas *>(meas);
+    return bl_filter_fuse_bearing(f, m->beacon_index, m->t_us, m->bearing_rad, res);
+}
+
 }  // namespace
 
 extern "C" int bl_filter_fuse_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us, bl_real bearing_rad,
@@ -134,7 +260,7 @@ extern "C" int bl_filter_fuse_bearing(bl_filter *f, uint32_t bearing_beacon_inde
 {
     if (f == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
-    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // filter.h bl_filter_set_team_beacons
+    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // aid_team.h bl_filter_set_team_beacons
     const bl_config *cfg = &f->cfg_;
     const uint32_t j = bearing_beacon_index;
     if (j >= cfg->bearing_beacon_count) return BL_EBEACON;
@@ -145,7 +271,7 @@ extern "C" int bl_filter_fuse_bearing(bl_filter *f, uint32_t bearing_beacon_inde
 
     int rc;
     if (!snapshot_source_step(f, cfg->bearing_beacon_count, f->bearing_valid_mask_, f->bearing_t_us_, remember_bearing,
-                              start_from_bearings, j, t_us, z, &res, &rc))
+                              bl_filter_start_bearings, j, t_us, z, &res, &rc))
         rc = fuse_started(f, j, t_us, z, &res);
     if (rc == BL_OK && result) *result = res;
     return rc;
@@ -168,4 +294,93 @@ extern "C" int bl_model_bearing(const bl_config *cfg, const bl_real x[BL_FILTER_
     return BL_OK;
 }
 
+// Dead reckoning (aid_bearing.h).
+extern "C" int bl_filter_track_wheels(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real d_right_m,
+                                      bool reference_only)
+{
+    if (f == nullptr) return BL_EINVAL;
+    if (!initialised(f)) return BL_ENOTINIT;
+    if (!is_finite(d_left_m) || !is_finite(d_right_m) || !(std::fabs(d_left_m) <= real(10)) ||
+        !(std::fabs(d_right_m) <= real(10)))
+        return BL_EINVAL;
+    int64_t dt_us = 0;
+    if (f->odo_track_ != 0 && (!sub_us(t_us, f->odo_t_us_, &dt_us) || dt_us <= 0)) return BL_ETIME;
+    const real dt_s = us_to_s(dt_us);
+    if (f->odo_track_ == 0 || reference_only || dt_s > f->cfg_.max_predict_gap_s) {
+        // A new track: the origin at t_us, no increment known.
+        std::memset(f->odo_, 0, sizeof f->odo_);
+        f->odo_rate_[0] = f->odo_rate_[1] = 0;
+        f->odo_t_us_ = t_us;
+        f->odo_track_ = f->odo_track_ + 1 == 0 ? 1 : f->odo_track_ + 1;
+        return BL_OK;
+    }
+    // Kleeman 1992 eq. 24: d = (d_l + d_r)/2, Δθ = (d_r - d_l)/b (nominal
+    // wheel scales), the midpoint step (Vander et al. 2011 eq. 2).
+    const real d_m = real(0.5) * (d_left_m + d_right_m);
+    const real dth_rad = (d_right_m - d_left_m) / effective_base_m(&f->cfg_);
+    odometry_step(f->odo_, d_m, dth_rad);
+    f->odo_[3] += std::fabs(d_left_m);
+    f->odo_[4] += std::fabs(d_right_m);
+    f->odo_[5] += std::fabs(dth_rad);
+    f->odo_rate_[0] = d_m / dt_s;
+    f->odo_rate_[1] = dth_rad / dt_s;
+    f->odo_t_us_ = t_us;
+    return BL_OK;
+}
+
+// The localizer's input (aid_bearing.h; localizer.h's policy, kinds.hpp
+// localizer_fuse).
+extern "C" int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m, bl_fusion_result *res)
+{
+    if (m == nullptr) return BL_EINVAL;
+    const LocInput in = {KindId::bearing, m->beacon_index, m->t_us, m->tag,
+                         is_finite(m->bearing_rad) && m->bearing_rad <= 1000 && m->bearing_rad >= -1000};
+    constexpr LocCounters n = {&bl_loc_counters::bearings_fused, &bl_loc_counters::bearings_rejected,
+                               &bl_loc_counters::bearings_buffered, &bl_loc_counters::bearings_refused};
+    return localizer_fuse(loc, in, fuse_bearing_meas, m, n, res);
+}
+
+#else  // without bearings: only the count, which must be 0
+
+namespace {
+
+// A library built without bearings (common.h BL_WITH_BEARINGS 0) has no
+// bearing fusion and no triangulation start: a site with bearing beacons
+// would silently lose them (and a bearing-only site never start), so it is
+// refused. The count stays in bl_config for this check (and so a site
+// loader that sets it compiles in both builds).
+const char *refuse_bearing_beacons(const bl_config *c, bool)
+{
+    return c->bearing_beacon_count == 0 ? nullptr : "bearing_beacon_count";
+}
+bool same_bearing_count(const bl_config *a, const bl_config *b)
+{
+    return a->bearing_beacon_count == b->bearing_beacon_count;
+}
+
+}  // namespace
+
 #endif  // BL_WITH_BEARINGS
+
+// The kind's hooks (kinds.hpp).
+constexpr Kind bl::kind_bearing = [] {
+    Kind k;
+    k.present = bearing_count;
+    k.starts_alone = bearings_start_alone;
+    k.count_name = "bearing_beacon_count";
+#if BL_WITH_BEARINGS
+    k.config_default = default_bearing_params;
+    k.check_items = check_bearing_beacons;
+    k.rules = kBearingRules;
+    k.n_rules = sizeof kBearingRules / sizeof kBearingRules[0];
+    k.same_geometry = same_bearing_geometry;
+    k.estimate = bearing_estimate;
+    k.beacons = bearing_count;
+    k.restart = bl_filter_start_bearings;
+    k.wheel_sample = track_wheel_sample;
+#else
+    k.check_items = refuse_bearing_beacons;
+    k.same_geometry = same_bearing_count;
+#endif
+    return k;
+}();

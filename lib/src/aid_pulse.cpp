@@ -246,7 +246,7 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
 {
     if (f == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
-    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // filter.h bl_filter_set_team_beacons
+    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // aid_team.h bl_filter_set_team_beacons
     const bl_config *cfg = &f->cfg_;
     if (beacon_index >= cfg->beacon_count) return BL_EBEACON;
     if (receiver_index >= cfg->receiver_count) return BL_EINVAL;

@@ -1,20 +1,92 @@
-// beaconloc — aiding source: times of flight from fixed range beacons
-// (RF-synchronised ultrasonic ranging: the CMU Millibots, Marvelmind-like
-// sites). The model and its Jacobian, the fusion of a started filter
-// through the shared update (fusion.hpp), keeping each time of flight for
-// the trilateration (re)start (snapshot_range.cpp) before the start and
-// after a time gap. Its tuning: cfg.range (bl_range_params, config.h);
+// beaconloc — measurement kind: times of flight from fixed range beacons
+// (aid_range.h; RF-synchronised ultrasonic ranging: the CMU Millibots,
+// Marvelmind-like sites). The model and its Jacobian, the fusion of a
+// started filter through the shared update (fusion.hpp), keeping each time
+// of flight for the trilateration (re)start (snapshot_range.cpp) before the
+// start and after a time gap; the localizer's input (bl_localizer_range);
+// and the kind's hooks (kinds.hpp): its config defaults and checks, its
+// counters, its restart. Its tuning: cfg.range (bl_range_params);
 // otherwise only the range beacons' positions.
-#include "filter_internal.hpp"
-
-// The whole source compiles out without ranges (common.h BL_WITH_RANGES).
-#if BL_WITH_RANGES
+#include "kinds.hpp"
 
 #include <cstring>
 
 using namespace bl;
 
 namespace {
+
+// In every build: bl_config keeps range_beacon_count (aid_range.h). A
+// range-only site starts from the trilateration of its ranges: >= 3.
+uint32_t range_count(const bl_config *c) { return c->range_beacon_count; }
+bool ranges_start_alone(const bl_config *c) { return c->range_beacon_count >= 3; }
+
+}  // namespace
+
+#if BL_WITH_RANGES
+
+namespace {
+
+// ---- its params block and beacons (bl_config; kinds.hpp Kind)
+
+// The Millibots' ultrasonic module (8 mm resolution, about 3 m range);
+// Marvelmind-like sites set their own.
+void default_range_params(bl_config *c)
+{
+    bl_range_params *r = &c->range;
+    r->sigma_m = real(0.008);
+    r->sigma_per_m = real(0.005);
+    r->max_range_m = real(3.0);
+    r->gate_sigma = real(3.0);
+    r->offset_x_m = real(0);
+    r->offset_y_m = real(0);
+    r->height_m = real(0.2);
+    r->snapshot_window_s = real(0.5);
+    r->max_fix_drms_m = real(0.25);  // = converged_sigma_xy_m's default
+    r->team_site = 0;
+}
+
+// Range beacons: finite, in range, pairwise distinct in 3D, and spanning the
+// plane when they alone fix the position (a range-only site).
+const char *check_range_beacons(const bl_config *c, bool others_start)
+{
+    for (uint32_t i = 0; i < c->range_beacon_count; ++i) {
+        const bl_beacon *b = &c->range_beacons[i];
+        if (!(is_finite(b->x_m) && is_finite(b->y_m) && is_finite(b->z_m) && std::fabs(b->x_m) < real(1e5) &&
+              std::fabs(b->y_m) < real(1e5) && std::fabs(b->z_m) < real(1e5)))
+            return "range_beacons";
+        for (uint32_t j = 0; j < i; ++j) {
+            const bl_beacon *o = &c->range_beacons[j];
+            const real dx = b->x_m - o->x_m, dy = b->y_m - o->y_m, dz = b->z_m - o->z_m;
+            if (!(dx * dx + dy * dy + dz * dz > real(1e-6))) return "range_beacons";
+        }
+    }
+    return others_start || beacons_span_plane(c->range_beacons, c->range_beacon_count) ? nullptr : "range_beacons";
+}
+
+const Rule kRangeRules[] = {
+    BL_RULE(range.sigma_m, kOpen, b0, b100),
+    BL_RULE(range.sigma_per_m, kGeLe, b0, b1),
+    BL_RULE(range.max_range_m, kOpen, b0, b1e4),
+    BL_RULE(range.gate_sigma, kLoGt, b0, kNone),
+    BL_RULE(range.offset_x_m, kAbs | kHiLt, kNone, b100),
+    BL_RULE(range.offset_y_m, kAbs | kHiLt, kNone, b100),
+    BL_RULE(range.height_m, kAbs | kHiLt, kNone, b1e5),
+    BL_RULE(range.snapshot_window_s, kGtLe, b0, b60),
+    BL_RULE(range.max_fix_drms_m, kLoGt, b0, kNone),
+    // A team site (0 or 1) needs the team fusion (common.h BL_WITH_TEAM).
+    BL_RULE(range.team_site, kU32 | kHiLe, kNone, BL_WITH_TEAM ? b1 : b0),
+};
+
+// Geometry: the count, the beacons and the receiver's mount.
+bool same_range_geometry(const bl_config *a, const bl_config *b)
+{
+    const uint32_t nr = a->range_beacon_count < BL_MAX_BEACONS ? a->range_beacon_count : BL_MAX_BEACONS;
+    return a->range_beacon_count == b->range_beacon_count && a->range.offset_x_m == b->range.offset_x_m &&
+           a->range.offset_y_m == b->range.offset_y_m && a->range.height_m == b->range.height_m &&
+           same_beacons(a->range_beacons, b->range_beacons, nr, true);
+}
+
+// ---- the measurement
 
 // IEKF relinearisations per range and their stop (a range is nearly linear
 // at the distances of a site once the position is known to a few cm).
@@ -35,7 +107,7 @@ constexpr real kStartupGateFactor = real(2);
 // docs/performance.md, "Ranges").
 constexpr real kHeadingUnknown_rad = real(0.3);
 // A range beyond this many times cfg.range.max_range_m is refused as bad
-// input (filter.h: a sensor reporting a little past its rating and an
+// input (aid_range.h: a sensor reporting a little past its rating and an
 // s error of up to 50 % still pass).
 constexpr real kMaxRangeFactor = real(1.5);
 
@@ -107,6 +179,14 @@ struct RangeModel {
     int unit_state() const { return -1; }
 };
 
+// Keep a time of flight as its range beacon's latest (the trilateration's input).
+void remember_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, real time_of_flight_s)
+{
+    f->range_t_us_[range_beacon_index] = t_us;
+    f->range_tof_s_[range_beacon_index] = time_of_flight_s;
+    f->range_valid_mask_ |= 1u << range_beacon_index;
+}
+
 // fuse_range on a started filter, fresh range: the shared update with the
 // start-up or converged gate. Own frame (noinline), as the other sources.
 __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t j, int64_t t_us, real tof_s, bl_fusion_result *result)
@@ -156,7 +236,7 @@ extern "C" int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, i
 {
     if (f == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
-    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // filter.h bl_filter_set_team_beacons
+    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // aid_team.h bl_filter_set_team_beacons
     const bl_config *cfg = &f->cfg_;
     const uint32_t j = range_beacon_index;
     if (j >= cfg->range_beacon_count || j >= BL_MAX_BEACONS) return BL_EBEACON;
@@ -168,7 +248,7 @@ extern "C" int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, i
 
     int rc;
     if (!snapshot_source_step(f, cfg->range_beacon_count, f->range_valid_mask_, f->range_t_us_, remember_range,
-                              start_from_ranges, j, t_us, time_of_flight_s, &res, &rc))
+                              bl_filter_start_ranges, j, t_us, time_of_flight_s, &res, &rc))
         rc = fuse_started(f, j, t_us, time_of_flight_s, &res);
     if (rc == BL_OK && result) *result = res;
     return rc;
@@ -191,4 +271,73 @@ extern "C" int bl_model_range(const bl_config *cfg, const bl_real x[BL_FILTER_NX
     return BL_OK;
 }
 
+// ---- its counters, the localizer's input and restart (kinds.hpp Kind)
+
+namespace {
+
+void range_estimate(const bl_filter *f, bl_estimate *est)
+{
+    for (uint32_t i = 0; i < BL_MAX_BEACONS; ++i) {
+        est->range_accepted[i] = f->range_accepted_[i];
+        est->range_rejected[i] = f->range_rejected_[i];
+    }
+}
+
+int fuse_range_meas(bl_filter *f, const void *meas, bl_fusion_result *res)
+{
+    const bl_range_meas *m = static_cast<const bl_range_meas *>(meas);
+    return bl_filter_fuse_range(f, m->beacon_index, m->t_us, m->time_of_flight_s, res);
+}
+
+}  // namespace
+
+// The localizer's input (aid_range.h; localizer.h's policy, kinds.hpp
+// localizer_fuse). Refused by the filter: beyond 1.5 · max range, or a
+// non-finite update.
+extern "C" int bl_localizer_range(bl_localizer *loc, const bl_range_meas *m, bl_fusion_result *res)
+{
+    if (m == nullptr) return BL_EINVAL;
+    const LocInput in = {KindId::range, m->beacon_index, m->t_us, m->tag,
+                         is_finite(m->time_of_flight_s) && m->time_of_flight_s >= 0};
+    constexpr LocCounters n = {&bl_loc_counters::ranges_fused, &bl_loc_counters::ranges_rejected,
+                               &bl_loc_counters::ranges_buffered, &bl_loc_counters::ranges_refused};
+    return localizer_fuse(loc, in, fuse_range_meas, m, n, res);
+}
+
+#else  // without ranges: only the count, which must be 0
+
+namespace {
+
+// Without ranges (common.h BL_WITH_RANGES 0) a site with range beacons would
+// silently lose them: refused, as bearings (aid_bearing.cpp).
+const char *refuse_range_beacons(const bl_config *c, bool)
+{
+    return c->range_beacon_count == 0 ? nullptr : "range_beacon_count";
+}
+bool same_range_count(const bl_config *a, const bl_config *b) { return a->range_beacon_count == b->range_beacon_count; }
+
+}  // namespace
+
 #endif  // BL_WITH_RANGES
+
+// The kind's hooks (kinds.hpp).
+constexpr Kind bl::kind_range = [] {
+    Kind k;
+    k.present = range_count;
+    k.starts_alone = ranges_start_alone;
+    k.count_name = "range_beacon_count";
+#if BL_WITH_RANGES
+    k.config_default = default_range_params;
+    k.check_items = check_range_beacons;
+    k.rules = kRangeRules;
+    k.n_rules = sizeof kRangeRules / sizeof kRangeRules[0];
+    k.same_geometry = same_range_geometry;
+    k.estimate = range_estimate;
+    k.beacons = range_count;
+    k.restart = bl_filter_start_ranges;
+#else
+    k.check_items = refuse_range_beacons;
+    k.same_geometry = same_range_count;
+#endif
+    return k;
+}();

@@ -3,8 +3,8 @@
 // nearest-segment association; the fusion goes beyond the paper): each
 // range against its associated segment, the model and its Jacobian, gated,
 // through the shared update (fusion.hpp). Contract and the heading
-// discussion: filter.h bl_filter_set_sonar, bl_filter_fuse_sonar.
-#include "filter_internal.hpp"
+// discussion: aid_sonar.h bl_filter_set_sonar, bl_filter_fuse_sonar.
+#include "kinds.hpp"
 #include "sonar_internal.hpp"
 
 #if BL_WITH_SONAR
@@ -23,7 +23,7 @@ constexpr real kIekfTolerance_m = real(1e-4);
 // phantom from multiple reflections falls outside it.
 constexpr real kGateSigma = real(3);
 // The association's cone is the beam's half-width widened by this many σ
-// of the heading (filter.h), never beyond a right angle.
+// of the heading (aid_sonar.h), never beyond a right angle.
 constexpr real kConeHeadingSigmas = real(3);
 // A transducer within this of its segment has no defined direction (m).
 constexpr real kMinRange_m = real(1e-3);
@@ -63,7 +63,7 @@ Transducer transducer(const bl_sonar_mount &m, const VX &x, real dt_s)
     return t;
 }
 
-// What a range is associated with (filter.h): a wall's perpendicular foot
+// What a range is associated with (aid_sonar.h): a wall's perpendicular foot
 // (the specular return: Hoppenot & Colle eq. 3, the distance to the
 // segment's line) or a segment's end point (a corner return: eq. 4).
 struct Target {
@@ -111,7 +111,7 @@ struct SonarModel {
     int unit_state() const { return -1; }
 };
 
-// The association (filter.h): of the echo points inside the beam cone
+// The association (aid_sonar.h): of the echo points inside the beam cone
 // (half-width widened by the heading's σ) — each segment's perpendicular
 // foot when it lies on the segment, and its two end points — the one whose
 // distance is nearest the measured range z. False when none.
@@ -151,7 +151,7 @@ extern "C" int bl_filter_fuse_sonar(bl_filter *f, int64_t t_us, const bl_sonar_r
     if (f == nullptr || range == nullptr) return BL_EINVAL;
     if (!initialised(f) || !started(f)) return BL_ENOTINIT;
     if (f->sonar_map_ == nullptr || f->sonar_ring_ == nullptr) return BL_ECONFIG;
-    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // filter.h bl_filter_set_team_beacons
+    if (team_blocks_other_sources(f)) return BL_ECONFIG;  // aid_team.h bl_filter_set_team_beacons
     if (classify_time(f, t_us) != MeasTime::kFresh) return BL_ETIME;
     const bl_map *map = f->sonar_map_;
     const bl_sonar_ring *ring = f->sonar_ring_;
@@ -197,5 +197,42 @@ extern "C" int bl_filter_fuse_sonar(bl_filter *f, int64_t t_us, const bl_sonar_r
     if (result) *result = res;
     return BL_OK;
 }
+
+// ---- the kind's hooks (kinds.hpp): its site flag, its counters
+
+namespace {
+
+// A sonar site (aid_sonar.h sonar_site): no beacon of any kind is needed,
+// the sonar ring corrects the odometry against the map.
+uint32_t sonar_site(const bl_config *c) { return c->sonar_site == 1 ? 1u : 0u; }
+bool sonar_site_starts(const bl_config *c) { return sonar_site(c) != 0; }
+
+const Rule kSonarRules[] = {
+    BL_RULE(sonar_site, kU32 | kHiLe, kNone, b1),
+};
+
+void sonar_estimate(const bl_filter *f, bl_estimate *est)
+{
+    est->sonar_accepted = f->sonar_accepted_;
+    est->sonar_rejected = f->sonar_rejected_;
+    est->sonar_unmatched = f->sonar_unmatched_;
+    est->sonar_dropped = f->sonar_dropped_;
+}
+
+}  // namespace
+
+constexpr Kind bl::kind_sonar = [] {
+    Kind k;
+    k.present = sonar_site;
+    k.starts_alone = sonar_site_starts;
+    k.rules = kSonarRules;
+    k.n_rules = sizeof kSonarRules / sizeof kSonarRules[0];
+    k.estimate = sonar_estimate;
+    return k;
+}();
+
+#else
+
+constexpr bl::Kind bl::kind_sonar = {};  // without sonar: nothing (kinds.hpp)
 
 #endif  // BL_WITH_SONAR

@@ -4,11 +4,25 @@
 // solver_team.cpp), the range model of aid_range.cpp with the beacon's
 // position as consider states (a Schmidt update through the shared step,
 // fusion.hpp, on the state augmented with the beacons' coordinates), or,
-// for comparison, R inflated by the beacon's covariance (filter.h,
-// bl_team_mode). Its tuning: cfg.range, as the fixed-beacon ranges.
-#include "filter_internal.hpp"
+// for comparison, R inflated by the beacon's covariance (aid_team.h,
+// bl_team_mode). Its tuning: cfg.range, as the fixed-beacon ranges. And the
+// kind's hooks (kinds.hpp): its site flag, its counters.
+#include "kinds.hpp"
 
-// The whole source compiles out without the team (common.h BL_WITH_TEAM).
+namespace {
+
+// A team site (range.team_site, aid_range.h): no fixed beacon of any kind is
+// needed, the robot ranges to its teammates. Read in every build with the
+// ranges' block, so that a site that sets it without the team is refused by
+// its own rule (range.team_site), not for having no beacons.
+#if BL_WITH_RANGES
+uint32_t team_site(const bl_config *c) { return c->range.team_site == 1 ? 1u : 0u; }
+bool team_site_starts(const bl_config *c) { return team_site(c) != 0; }
+#endif
+
+}  // namespace
+
+// The rest compiles out without the team (common.h BL_WITH_TEAM).
 #if BL_WITH_TEAM
 
 #include "linalg.hpp"
@@ -259,4 +273,29 @@ extern "C" int bl_filter_fuse_team_range(bl_filter *f, uint32_t robot_id, int64_
     return BL_OK;
 }
 
+namespace {
+
+void team_estimate(const bl_filter *f, bl_estimate *est)
+{
+    for (uint32_t k = 0; k < BL_TEAM_MAX_BEACONS; ++k) {
+        est->team_range_accepted[k] = f->team_accepted_[k];
+        est->team_range_rejected[k] = f->team_rejected_[k];
+    }
+}
+
+}  // namespace
+
 #endif  // BL_WITH_TEAM
+
+// The kind's hooks (kinds.hpp).
+constexpr bl::Kind bl::kind_team = [] {
+    bl::Kind k;
+#if BL_WITH_RANGES
+    k.present = team_site;
+    k.starts_alone = team_site_starts;
+#endif
+#if BL_WITH_TEAM
+    k.estimate = team_estimate;
+#endif
+    return k;
+}();

@@ -1,17 +1,20 @@
 // beaconloc — configuration defaults and checks (config.h).
-#include "internal.hpp"
+#include "kinds.hpp"
 
 #include <cstddef>
 #include <cstring>
 #include <limits>
 
 using bl::is_finite;
+using bl::Kind;
+using bl::kKinds;
 using bl::real;
 
 namespace {
 
 // Per measurement source (config.h): its params block's defaults here, its
-// checks as rows of the rule table below (kRules).
+// checks as rows of the rule table below (kRules); the other measurement
+// kinds' (kinds.h) in their own sources (aid_<kind>.cpp: struct Kind).
 
 // Pulse arrival times (aid_pulse.cpp): Kleeman 1992 §3.11 σ, §3.9 start-up.
 void default_pulse_params(bl_pulse_params *p)
@@ -38,39 +41,6 @@ void default_wheel_params(bl_wheel_params *w)
     w->slip_heading_rad_per_sqrt_rad = real(0);
     w->slip_lateral_m_per_sqrt_m = real(0);
 }
-
-#if BL_WITH_BEARINGS
-// Bearings (aid_bearing.cpp): Vander et al. 2011 §3, σφ = 1°.
-void default_bearing_params(bl_bearing_params *b)
-{
-    b->sigma_deg = real(1.0);
-    b->gate_sigma = real(3.0);
-    b->offset_x_m = real(0);
-    b->offset_y_m = real(0);
-    b->snapshot_window_s = real(0.25);  // 2.5 sensor turns at 10 Hz
-    b->max_fix_drms_m = real(0.25);     // = converged_sigma_xy_m's default
-}
-
-#endif
-
-#if BL_WITH_RANGES
-// Ranges (aid_range.cpp): the Millibots' ultrasonic module (8 mm
-// resolution, about 3 m range); Marvelmind-like sites set their own.
-void default_range_params(bl_range_params *r)
-{
-    r->sigma_m = real(0.008);
-    r->sigma_per_m = real(0.005);
-    r->max_range_m = real(3.0);
-    r->gate_sigma = real(3.0);
-    r->offset_x_m = real(0);
-    r->offset_y_m = real(0);
-    r->height_m = real(0.2);
-    r->snapshot_window_s = real(0.5);
-    r->max_fix_drms_m = real(0.25);  // = converged_sigma_xy_m's default
-    r->team_site = 0;
-}
-
-#endif
 
 }  // namespace
 
@@ -115,14 +85,10 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->sigma_speed_of_sound_mps = real(5.0);
     default_pulse_params(&cfg->pulse);
     default_wheel_params(&cfg->wheels);
-    cfg->bearing_beacon_count = 0;  // kleeman-lab has no bearing beacons
-#if BL_WITH_BEARINGS
-    default_bearing_params(&cfg->bearing);
-#endif
-    cfg->range_beacon_count = 0;  // kleeman-lab has no range beacons
-#if BL_WITH_RANGES
-    default_range_params(&cfg->range);
-#endif
+    // The other kinds' members (kinds.h): kleeman-lab has none of their
+    // beacons (counts 0 from the fill), their blocks' defaults.
+    for (const Kind *k : kKinds)
+        if (k->config_default) k->config_default(cfg);
     // Tuning.
     cfg->sigma_period_s = real(20e-6);  // beacon controller clock: ~100 ppm of 150 ms
     cfg->converged_sigma_xy_m = real(0.25);
@@ -135,18 +101,14 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->initial_theta_rad = real(0.0);
     cfg->reset_sigma_theta_rad = real(1.0);
     cfg->ring_heading = 1;
-#if BL_WITH_SONAR
-    cfg->sonar_site = 0;  // kleeman-lab has no sonar ring
-#endif
     cfg->initial_sigma_v_mps = real(0.5);
     cfg->initial_sigma_omega_radps = real(0.5);
     cfg->max_predict_gap_s = real(2.0);
     return BL_OK;
 }
 
-namespace {
+namespace bl {
 
-// True when at least three of the n beacons b span a triangle in x-y (area > 1e-3 m²).
 bool beacons_span_plane(const bl_beacon *b, uint32_t n)
 {
     for (uint32_t i = 0; i < n; ++i)
@@ -161,203 +123,99 @@ bool beacons_span_plane(const bl_beacon *b, uint32_t n)
     return false;
 }
 
-// A sonar site (config.h sonar_site): no beacon of any kind is needed, the
-// sonar ring corrects the odometry against the map (filter.h, BL_WITH_SONAR).
-bool sonar_site(const bl_config *c)
+bool same_beacons(const bl_beacon *a, const bl_beacon *b, uint32_t n, bool z)
 {
-#if BL_WITH_SONAR
-    return c->sonar_site == 1;
-#else
-    (void)c;
-    return false;
-#endif
+    for (uint32_t i = 0; i < n; ++i)
+        if (a[i].x_m != b[i].x_m || a[i].y_m != b[i].y_m || (z && a[i].z_m != b[i].z_m)) return false;
+    return true;
 }
 
-// A team site (config.h range.team_site): no fixed beacon of any kind is
-// needed, the robot ranges to its teammates (filter.h, BL_WITH_TEAM).
-bool team_site(const bl_config *c)
-{
-#if BL_WITH_RANGES
-    return c->range.team_site == 1;
-#else
-    (void)c;
-    return false;
-#endif
-}
+}  // namespace bl
 
-#if BL_WITH_BEARINGS
-// Bearing beacons: finite, in range, pairwise distinct in x-y (a bearing
-// does not see z), and spanning the plane when they alone fix the pose.
-bool bearing_beacons_ok(const bl_config *c)
-{
-    for (uint32_t i = 0; i < c->bearing_beacon_count; ++i) {
-        const bl_beacon *b = &c->bearing_beacons[i];
-        if (!(is_finite(b->x_m) && is_finite(b->y_m) && std::fabs(b->x_m) < real(1e5) && std::fabs(b->y_m) < real(1e5)))
-            return false;
-        for (uint32_t j = 0; j < i; ++j) {
-            const real dx = b->x_m - c->bearing_beacons[j].x_m, dy = b->y_m - c->bearing_beacons[j].y_m;
-            if (!(dx * dx + dy * dy > real(1e-6))) return false;
-        }
-    }
-    // (a range-only start needs 3 range beacons: config.h, range_beacon_count)
-    return c->beacon_count > 0 || c->range_beacon_count >= 3 || team_site(c) || sonar_site(c) ||
-           beacons_span_plane(c->bearing_beacons, c->bearing_beacon_count);
-}
-#endif
+namespace {
 
-#if BL_WITH_RANGES
-// Range beacons: finite, in range, pairwise distinct in 3D, and spanning the
-// plane when they alone fix the position (a range-only site).
-bool range_beacons_ok(const bl_config *c)
-{
-    for (uint32_t i = 0; i < c->range_beacon_count; ++i) {
-        const bl_beacon *b = &c->range_beacons[i];
-        if (!(is_finite(b->x_m) && is_finite(b->y_m) && is_finite(b->z_m) && std::fabs(b->x_m) < real(1e5) &&
-              std::fabs(b->y_m) < real(1e5) && std::fabs(b->z_m) < real(1e5)))
-            return false;
-        for (uint32_t j = 0; j < i; ++j) {
-            const bl_beacon *o = &c->range_beacons[j];
-            const real dx = b->x_m - o->x_m, dy = b->y_m - o->y_m, dz = b->z_m - o->z_m;
-            if (!(dx * dx + dy * dy + dz * dz > real(1e-6))) return false;
-        }
-    }
-    return c->beacon_count > 0 || c->bearing_beacon_count >= 3 || team_site(c) || sonar_site(c) ||
-           beacons_span_plane(c->range_beacons, c->range_beacon_count);
-}
-#endif
+using namespace bl;  // the rules' flags and bounds (kinds.hpp)
 
-// One range rule of bl_config_check: the field at `field` (a bl_real, or a
-// uint32_t with kU32) is finite and lies within its bounds. A bound is a
-// constant (lo, hi) or, with kLoRef / kHiRef, the bl_real field at `ref`
-// (e.g. pulse.firing_jitter_s < beacon_period_s). kAbs bounds |v| (lo
-// unused). `name` is the field's member path, the one bl_config_check
-// reports (and the site schema's `lib` entry for the key that sets it).
-// The site schema's range of the key that sets a field lies within the
-// field's rule here (tests/lib/test_config.c, through bl_config_range_of).
-// One table checked by one loop (rule_ok) instead of ~50 inline checks:
-// 1.7 KiB less flash on the Cortex-M4 (lib/README.md, size-m4).
-enum RuleFlags : uint8_t {
-    kLoGt = 1u << 0,   // v > lo
-    kLoGe = 1u << 1,   // v >= lo
-    kHiLt = 1u << 2,   // v < hi
-    kHiLe = 1u << 3,   // v <= hi
-    kAbs = 1u << 4,    // the bounds apply to |v|
-    kU32 = 1u << 5,    // the field is a uint32_t
-    kLoRef = 1u << 6,  // lo is the bl_real field at ref
-    kHiRef = 1u << 7,  // hi is the bl_real field at ref
-};
-
-// The constant bounds, by index (a row holds two indices, not two reals).
-enum Bound : uint8_t { b0, bHalf, b1, b10, b20, b60, b90, b100, b360, b3600, b1e4, b1e5, bMaxRx, kNone = b0 };
+// The constant bounds, by index (kinds.hpp Bound).
 // clang-format off
 const real kBound[] = {real(0), real(0.5), real(1), real(10), real(20), real(60), real(90), real(100),
                        real(360), real(3600), real(1e4), real(1e5), real(BL_MAX_RECEIVERS)};
 // clang-format on
 
-struct Rule {
-    uint16_t field;  // offsetof(bl_config, member path)
-    uint16_t ref;    // offsetof the bound's field (kLoRef / kHiRef)
-    uint8_t flags;
-    Bound lo, hi;  // kBound[lo], kBound[hi] (kNone: the row has no flag for it)
-    const char *name;
-};
-
-#define BL_OFF(path) static_cast<uint16_t>(offsetof(bl_config, path))
-// A rule on bl_config.path: RULE(path, flags, lo, hi); RULE_REF(path, flags,
-// lo, hi, ref path) with kLoRef / kHiRef.
-#define RULE(path, flags, lo, hi)                                                                                      \
-    {                                                                                                                  \
-        BL_OFF(path), 0, (flags), (lo), (hi), #path                                                                    \
-    }
-#define RULE_REF(path, flags, lo, hi, ref)                                                                             \
-    {                                                                                                                  \
-        BL_OFF(path), BL_OFF(ref), (flags), (lo), (hi), #path                                                          \
-    }
-constexpr uint8_t kOpen = kLoGt | kHiLt, kGeLt = kLoGe | kHiLt, kGeLe = kLoGe | kHiLe, kGtLe = kLoGt | kHiLe;
-
 // The firing cycle, checked before the beacons.
 const Rule kCycleRules[] = {
-    RULE(beacon_period_s, kGtLe, b0, b10),
-    RULE_REF(double_pulse_spacing_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
-    RULE_REF(burst_length_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
-    RULE(hearing_range_m, kGeLe, b0, b1e4),
+    BL_RULE(beacon_period_s, kGtLe, b0, b10),
+    BL_RULE_REF(double_pulse_spacing_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
+    BL_RULE_REF(burst_length_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
+    BL_RULE(hearing_range_m, kGeLe, b0, b1e4),
 };
 
-// Everything after the beacons, in bl_config's order.
+// After the beacons, in bl_config's order: the receivers, the robot, the
+// noise, the pulse and wheel blocks (then each kind's block: its rules).
 const Rule kRules[] = {
-    RULE(receiver_count, kU32 | kGeLe, b1, bMaxRx),
-    RULE(ring_radius_m, kGeLe, b0, b10),
-    RULE(first_angle_deg, kAbs | kHiLe, kNone, b360),
-    RULE(angle_step_deg, kAbs | kHiLe, kNone, b360),
-    RULE(receiver_height_m, kAbs | kHiLt, kNone, b1e5),
-    RULE(beamwidth_deg, kGtLe, b0, b360),
-    RULE(wheel_base_m, kGtLe, b0, b100),
-    RULE(wheel_radius_m, kGtLe, b0, b100),
-    RULE(ticks_per_rev, kU32 | kLoGt, b0, kNone),
-    RULE(encoder_rate_hz, kLoGt, b0, kNone),
-    RULE(sigma_wheel_scale, kGeLe, b0, bHalf),
-    RULE(sigma_wheel_scale_common, kGeLe, b0, bHalf),
-    RULE(speed_of_sound_mps, kOpen, b1, b1e4),
-    RULE_REF(sigma_speed_of_sound_mps, kOpen | kHiRef, b0, kNone, speed_of_sound_mps),
+    BL_RULE(receiver_count, kU32 | kGeLe, b1, bMaxRx),
+    BL_RULE(ring_radius_m, kGeLe, b0, b10),
+    BL_RULE(first_angle_deg, kAbs | kHiLe, kNone, b360),
+    BL_RULE(angle_step_deg, kAbs | kHiLe, kNone, b360),
+    BL_RULE(receiver_height_m, kAbs | kHiLt, kNone, b1e5),
+    BL_RULE(beamwidth_deg, kGtLe, b0, b360),
+    BL_RULE(wheel_base_m, kGtLe, b0, b100),
+    BL_RULE(wheel_radius_m, kGtLe, b0, b100),
+    BL_RULE(ticks_per_rev, kU32 | kLoGt, b0, kNone),
+    BL_RULE(encoder_rate_hz, kLoGt, b0, kNone),
+    BL_RULE(sigma_wheel_scale, kGeLe, b0, bHalf),
+    BL_RULE(sigma_wheel_scale_common, kGeLe, b0, bHalf),
+    BL_RULE(speed_of_sound_mps, kOpen, b1, b1e4),
+    BL_RULE_REF(sigma_speed_of_sound_mps, kOpen | kHiRef, b0, kNone, speed_of_sound_mps),
     // Pulse arrival times (aid_pulse.cpp): Kleeman 1992 §3.11 σ, §3.9 start-up.
-    RULE(pulse.sigma_arrival_s, kGtLe, b0, b1),
-    RULE_REF(pulse.startup_sigma_arrival_s, kGeLe | kLoRef, kNone, b1, pulse.sigma_arrival_s),
-    RULE(pulse.gate_sigma, kLoGt, b0, kNone),
-    RULE_REF(pulse.startup_gate_sigma, kLoGe | kLoRef, kNone, kNone, pulse.gate_sigma),
-    RULE_REF(pulse.firing_jitter_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
-    RULE(pulse.iekf_max_iterations, kU32 | kGeLe, b1, b20),
-    RULE(pulse.iekf_step_tolerance, kLoGe, b0, kNone),
+    BL_RULE(pulse.sigma_arrival_s, kGtLe, b0, b1),
+    BL_RULE_REF(pulse.startup_sigma_arrival_s, kGeLe | kLoRef, kNone, b1, pulse.sigma_arrival_s),
+    BL_RULE(pulse.gate_sigma, kLoGt, b0, kNone),
+    BL_RULE_REF(pulse.startup_gate_sigma, kLoGe | kLoRef, kNone, kNone, pulse.gate_sigma),
+    BL_RULE_REF(pulse.firing_jitter_s, kGeLt | kHiRef, b0, kNone, beacon_period_s),
+    BL_RULE(pulse.iekf_max_iterations, kU32 | kGeLe, b1, b20),
+    BL_RULE(pulse.iekf_step_tolerance, kLoGe, b0, kNone),
     // Wheel encoders (odometry predict, aid_wheels.cpp): Kleeman 1992 §3.10.
-    RULE(wheels.sigma_wheel_per_m, kGeLe, b0, b10),
-    RULE(wheels.sigma_distance_per_m, kGeLe, b0, b10),
-    RULE(wheels.heading_noise_rad_per_sqrt_s, kLoGe, b0, kNone),
-    RULE(wheels.heading_noise_fraction, kGeLe, b0, b1),
-    RULE(wheels.stationary_noise_scale, kGtLe, b0, b1),
-    RULE(wheels.skid_factor, kGeLe, b1, b10),
-    RULE(wheels.slip_heading_rad_per_sqrt_rad, kGeLt, b0, b1),
-    RULE(wheels.slip_lateral_m_per_sqrt_m, kGeLt, b0, b1),
-#if BL_WITH_BEARINGS
-    // Bearings (aid_bearing.cpp).
-    RULE(bearing.sigma_deg, kGtLe, b0, b90),
-    RULE(bearing.gate_sigma, kLoGt, b0, kNone),
-    RULE(bearing.offset_x_m, kAbs | kHiLt, kNone, b100),
-    RULE(bearing.offset_y_m, kAbs | kHiLt, kNone, b100),
-    RULE(bearing.snapshot_window_s, kGtLe, b0, b60),
-    RULE(bearing.max_fix_drms_m, kLoGt, b0, kNone),
-#endif
-#if BL_WITH_RANGES
-    // Ranges (aid_range.cpp); range.team_site is checked by bl_config_check.
-    RULE(range.sigma_m, kOpen, b0, b100),
-    RULE(range.sigma_per_m, kGeLe, b0, b1),
-    RULE(range.max_range_m, kOpen, b0, b1e4),
-    RULE(range.gate_sigma, kLoGt, b0, kNone),
-    RULE(range.offset_x_m, kAbs | kHiLt, kNone, b100),
-    RULE(range.offset_y_m, kAbs | kHiLt, kNone, b100),
-    RULE(range.height_m, kAbs | kHiLt, kNone, b1e5),
-    RULE(range.snapshot_window_s, kGtLe, b0, b60),
-    RULE(range.max_fix_drms_m, kLoGt, b0, kNone),
-#endif
-    // Tuning.
-    RULE_REF(sigma_period_s, kOpen | kHiRef, b0, kNone, beacon_period_s),
-    RULE(converged_sigma_xy_m, kLoGt, b0, kNone),
-    RULE(accel_noise_mps2, kLoGe, b0, kNone),
-    RULE(angular_accel_noise_radps2, kLoGe, b0, kNone),
-    RULE(speed_of_sound_drift_mps_per_sqrt_s, kLoGe, b0, kNone),
-    RULE(period_drift_s_per_sqrt_s, kLoGe, b0, kNone),
-    RULE(wheel_scale_drift_per_sqrt_s, kGeLe, b0, b1),
-    RULE(initial_theta_rad, kAbs | kHiLe, kNone, b100),
-    RULE(reset_sigma_theta_rad, kLoGt, b0, kNone),
-    RULE(ring_heading, kU32 | kHiLe, kNone, b1),
-#if BL_WITH_SONAR
-    RULE(sonar_site, kU32 | kHiLe, kNone, b1),
-#endif
-    RULE(initial_sigma_v_mps, kLoGt, b0, kNone),
-    RULE(initial_sigma_omega_radps, kLoGt, b0, kNone),
-    RULE(max_predict_gap_s, kGtLe, b0, b3600),
+    BL_RULE(wheels.sigma_wheel_per_m, kGeLe, b0, b10),
+    BL_RULE(wheels.sigma_distance_per_m, kGeLe, b0, b10),
+    BL_RULE(wheels.heading_noise_rad_per_sqrt_s, kLoGe, b0, kNone),
+    BL_RULE(wheels.heading_noise_fraction, kGeLe, b0, b1),
+    BL_RULE(wheels.stationary_noise_scale, kGtLe, b0, b1),
+    BL_RULE(wheels.skid_factor, kGeLe, b1, b10),
+    BL_RULE(wheels.slip_heading_rad_per_sqrt_rad, kGeLt, b0, b1),
+    BL_RULE(wheels.slip_lateral_m_per_sqrt_m, kGeLt, b0, b1),
 };
-#undef RULE
-#undef RULE_REF
-#undef BL_OFF
+
+// The tuning shared by all sources, after the kinds' blocks.
+const Rule kTuningRules[] = {
+    BL_RULE_REF(sigma_period_s, kOpen | kHiRef, b0, kNone, beacon_period_s),
+    BL_RULE(converged_sigma_xy_m, kLoGt, b0, kNone),
+    BL_RULE(accel_noise_mps2, kLoGe, b0, kNone),
+    BL_RULE(angular_accel_noise_radps2, kLoGe, b0, kNone),
+    BL_RULE(speed_of_sound_drift_mps_per_sqrt_s, kLoGe, b0, kNone),
+    BL_RULE(period_drift_s_per_sqrt_s, kLoGe, b0, kNone),
+    BL_RULE(wheel_scale_drift_per_sqrt_s, kGeLe, b0, b1),
+    BL_RULE(initial_theta_rad, kAbs | kHiLe, kNone, b100),
+    BL_RULE(reset_sigma_theta_rad, kLoGt, b0, kNone),
+    BL_RULE(ring_heading, kU32 | kHiLe, kNone, b1),
+    BL_RULE(initial_sigma_v_mps, kLoGt, b0, kNone),
+    BL_RULE(initial_sigma_omega_radps, kLoGt, b0, kNone),
+    BL_RULE(max_predict_gap_s, kGtLe, b0, b3600),
+};
+
+// The rule tables of the blocks after the beacons, in bl_config_check's
+// order: the base's, each kind's (kinds.h's order), the tuning's.
+struct RuleTable {
+    const Rule *rules;
+    size_t n;
+};
+template <size_t N> constexpr RuleTable table(const Rule (&r)[N]) { return {r, N}; }
+template <class F> void for_each_block_table(F f)
+{
+    f(table(kRules));
+    for (const Kind *k : kKinds) f(RuleTable{k->rules, k->n_rules});
+    f(table(kTuningRules));
+}
 
 real field_at(const bl_config *c, uint16_t offset)
 {
@@ -387,11 +245,32 @@ bool rule_ok(const bl_config *c, const Rule &r)
     return true;
 }
 
-// The first rule of rules[0..n) that c breaks (its name), or nullptr.
-template <size_t N> const char *first_broken(const bl_config *c, const Rule (&rules)[N])
+// The first rule of t that c breaks (its name), or nullptr.
+const char *first_broken(const bl_config *c, const RuleTable &t)
 {
-    for (const Rule &r : rules)
-        if (!rule_ok(c, r)) return r.name;
+    for (size_t i = 0; i < t.n; ++i)
+        if (!rule_ok(c, t.rules[i])) return t.rules[i].name;
+    return nullptr;
+}
+
+// The kinds' site checks (kinds.hpp Kind: count_name, then check_items):
+// a site needs beacons of some kind that can start the filter.
+const char *check_kinds(const bl_config *c)
+{
+    for (const Kind *k : kKinds) {
+        if (!k->count_name) continue;
+        bool others = c->beacon_count > 0;
+        for (const Kind *o : kKinds)
+            if (o != k && o->present && o->present(c) > 0) others = true;
+        if (!(k->present(c) <= BL_MAX_BEACONS && (others || k->starts_alone(c)))) return k->count_name;
+    }
+    for (const Kind *k : kKinds) {
+        if (!k->check_items) continue;
+        bool others = c->beacon_count > 0;
+        for (const Kind *o : kKinds)
+            if (o != k && o->starts_alone && o->starts_alone(c)) others = true;
+        if (const char *bad = k->check_items(c, others)) return bad;
+    }
     return nullptr;
 }
 
@@ -411,7 +290,7 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
     if (c == nullptr) return BL_EINVAL;
     // 0 ultrasonic beacons: a bearing-only site (checked below: >= 3 bearing beacons).
     BL_CHECK(c->beacon_count == 0 || (c->beacon_count >= 3 && c->beacon_count <= BL_MAX_BEACONS), "beacon_count");
-    const char *bad = first_broken(c, kCycleRules);
+    const char *bad = first_broken(c, table(kCycleRules));
     BL_CHECK(bad == nullptr, bad);
     for (uint32_t i = 0; i < c->beacon_count; ++i) {
         const bl_beacon *b = &c->beacons[i];
@@ -425,60 +304,37 @@ extern "C" int bl_config_check(const bl_config *c, const char **bad_field)
         }
     }
     BL_CHECK(c->beacon_count == 0 || beacons_span_plane(c->beacons, c->beacon_count), "beacons");
-    // At least one kind of beacon; without pulses the bearings start the filter (>= 3).
-    BL_CHECK(c->bearing_beacon_count <= BL_MAX_BEACONS && (c->beacon_count > 0 || c->bearing_beacon_count >= 3 ||
-                                                           c->range_beacon_count > 0 || team_site(c) || sonar_site(c)),
-             "bearing_beacon_count");
-    // A range-only site (no pulse, no bearing beacons) starts from the
-    // trilateration of its ranges: >= 3 range beacons.
-    BL_CHECK(c->range_beacon_count <= BL_MAX_BEACONS && (c->beacon_count > 0 || c->bearing_beacon_count > 0 ||
-                                                         c->range_beacon_count >= 3 || team_site(c) || sonar_site(c)),
-             "range_beacon_count");
-#if !BL_WITH_RANGES
-    // Without ranges (common.h BL_WITH_RANGES 0) a site with range beacons
-    // would silently lose them: refused, as bearings above.
-    BL_CHECK(c->range_beacon_count == 0, "range_beacon_count");
-#else
-    BL_CHECK(range_beacons_ok(c), "range_beacons");
-#endif
-#if !BL_WITH_BEARINGS
-    // A library built without bearings (common.h BL_WITH_BEARINGS 0) has no
-    // bearing fusion and no triangulation start: a site with bearing beacons
-    // would silently lose them (and a bearing-only site never start), so it
-    // is refused. The count stays in bl_config for this check (and so a
-    // site loader that sets it compiles in both builds).
-    BL_CHECK(c->bearing_beacon_count == 0, "bearing_beacon_count");
-#else
-    BL_CHECK(bearing_beacons_ok(c), "bearing_beacons");
-#endif
-    bad = first_broken(c, kRules);
+    // The other kinds' counts and beacons (their sources): at least one kind
+    // of beacon, and without pulses one that can start the filter.
+    bad = check_kinds(c);
     BL_CHECK(bad == nullptr, bad);
-#if BL_WITH_RANGES
-    // A team site needs the team fusion (common.h BL_WITH_TEAM).
-    BL_CHECK(c->range.team_site == 0 || (BL_WITH_TEAM && c->range.team_site == 1), "range.team_site");
-#endif
+    // The blocks: the base's, each kind's, the tuning.
+    for_each_block_table([&](const RuleTable &t) {
+        if (bad == nullptr) bad = first_broken(c, t);
+    });
+    BL_CHECK(bad == nullptr, bad);
     return BL_OK;
 }
 
 namespace {
-const Rule *rule_at(uint16_t field)
+// The rule of the field named `name`, or else at offset `field`, or nullptr.
+const Rule *find_rule(const char *name, uint16_t field)
 {
-    for (const Rule &r : kCycleRules)
-        if (r.field == field) return &r;
-    for (const Rule &r : kRules)
-        if (r.field == field) return &r;
-    return nullptr;
+    const Rule *found = nullptr;
+    const auto search = [&](const RuleTable &t) {
+        for (size_t i = 0; i < t.n && found == nullptr; ++i)
+            if (name ? std::strcmp(t.rules[i].name, name) == 0 : t.rules[i].field == field) found = &t.rules[i];
+    };
+    search(table(kCycleRules));
+    for_each_block_table(search);
+    return found;
 }
 }  // namespace
 
 extern "C" int bl_config_range_of(const char *field, bl_config_range *out)
 {
     if (field == nullptr || out == nullptr) return BL_EINVAL;
-    const Rule *r = nullptr;
-    for (const Rule &c : kCycleRules)
-        if (std::strcmp(c.name, field) == 0) r = &c;
-    for (const Rule &c : kRules)
-        if (std::strcmp(c.name, field) == 0) r = &c;
+    const Rule *r = find_rule(field, 0);
     if (r == nullptr) return BL_EINVAL;
     const real inf = std::numeric_limits<real>::infinity(), nan = std::numeric_limits<real>::quiet_NaN();
     bl_config_range g;
@@ -488,7 +344,7 @@ extern "C" int bl_config_range_of(const char *field, bl_config_range *out)
     g.lo_open = (r->flags & kLoGt) != 0;
     g.hi_open = (r->flags & kHiLt) != 0;
     g.abs_value = (r->flags & kAbs) != 0;
-    const Rule *ref = r->flags & (kLoRef | kHiRef) ? rule_at(r->ref) : nullptr;
+    const Rule *ref = r->flags & (kLoRef | kHiRef) ? find_rule(nullptr, r->ref) : nullptr;
     if (r->flags & kLoRef) g.lo_field = ref ? ref->name : nullptr;
     if (r->flags & kHiRef) g.hi_field = ref ? ref->name : nullptr;
     *out = g;
@@ -514,31 +370,11 @@ extern "C" bool bl_config_same_geometry(const bl_config *a, const bl_config *b)
         a->receiver_count != b->receiver_count || a->ring_radius_m != b->ring_radius_m ||
         a->first_angle_deg != b->first_angle_deg || a->angle_step_deg != b->angle_step_deg ||
         a->receiver_height_m != b->receiver_height_m || a->wheel_base_m != b->wheel_base_m ||
-        (a->sigma_wheel_scale > real(0)) != (b->sigma_wheel_scale > real(0)) ||
-        a->bearing_beacon_count != b->bearing_beacon_count || a->range_beacon_count != b->range_beacon_count)
+        (a->sigma_wheel_scale > real(0)) != (b->sigma_wheel_scale > real(0)))
         return false;
-#if BL_WITH_RANGES
-    if (a->range.offset_x_m != b->range.offset_x_m || a->range.offset_y_m != b->range.offset_y_m ||
-        a->range.height_m != b->range.height_m)
-        return false;
-    const uint32_t nr = a->range_beacon_count < BL_MAX_BEACONS ? a->range_beacon_count : BL_MAX_BEACONS;
-    for (uint32_t i = 0; i < nr; ++i)
-        if (a->range_beacons[i].x_m != b->range_beacons[i].x_m || a->range_beacons[i].y_m != b->range_beacons[i].y_m ||
-            a->range_beacons[i].z_m != b->range_beacons[i].z_m)
-            return false;
-#endif
-#if BL_WITH_BEARINGS
-    if (a->bearing.offset_x_m != b->bearing.offset_x_m || a->bearing.offset_y_m != b->bearing.offset_y_m) return false;
-    const uint32_t nb = a->bearing_beacon_count < BL_MAX_BEACONS ? a->bearing_beacon_count : BL_MAX_BEACONS;
-    for (uint32_t i = 0; i < nb; ++i)
-        if (a->bearing_beacons[i].x_m != b->bearing_beacons[i].x_m ||
-            a->bearing_beacons[i].y_m != b->bearing_beacons[i].y_m)
-            return false;
-#endif
+    // The other kinds' beacons and mounts (their sources).
+    for (const Kind *k : kKinds)
+        if (k->same_geometry && !k->same_geometry(a, b)) return false;
     const uint32_t n = a->beacon_count < BL_MAX_BEACONS ? a->beacon_count : BL_MAX_BEACONS;
-    for (uint32_t i = 0; i < n; ++i)
-        if (a->beacons[i].x_m != b->beacons[i].x_m || a->beacons[i].y_m != b->beacons[i].y_m ||
-            a->beacons[i].z_m != b->beacons[i].z_m)
-            return false;
-    return true;
+    return bl::same_beacons(a->beacons, b->beacons, n, true);
 }

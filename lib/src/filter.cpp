@@ -565,7 +565,7 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     // Kleeman eq. 25: the wheel speeds measure v and ω (aid_wheels.cpp).
     symmetrise(P);  // the in-place propagation is symmetric only to rounding
 #if BL_WITH_TEAM
-    // Team beacons as consider states (filter.h bl_filter_set_team_beacons):
+    // Team beacons as consider states (aid_team.h bl_filter_set_team_beacons):
     // C = F C, then the wheel speeds fused on the augmented state, the
     // beacons' gain zero (the same update, n_solve = NX), so the
     // cross-covariance follows every change of the state.

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "filter_internal.hpp"
+#include "kinds.hpp"
 
 namespace bl {
 
@@ -81,27 +81,9 @@ void fill_estimate(const bl_filter *f, const XV &x, const PM &P, int64_t t_us, b
     for (uint32_t i = 0; i < BL_MAX_BEACONS; ++i) {
         est->accepted[i] = f->accepted_[i];
         est->rejected[i] = f->rejected_[i];
-#if BL_WITH_BEARINGS
-        est->bearing_accepted[i] = f->bearing_accepted_[i];
-        est->bearing_rejected[i] = f->bearing_rejected_[i];
-#endif
-#if BL_WITH_RANGES
-        est->range_accepted[i] = f->range_accepted_[i];
-        est->range_rejected[i] = f->range_rejected_[i];
-#endif
     }
-#if BL_WITH_TEAM
-    for (uint32_t k = 0; k < BL_TEAM_MAX_BEACONS; ++k) {
-        est->team_range_accepted[k] = f->team_accepted_[k];
-        est->team_range_rejected[k] = f->team_rejected_[k];
-    }
-#endif
-#if BL_WITH_SONAR
-    est->sonar_accepted = f->sonar_accepted_;
-    est->sonar_rejected = f->sonar_rejected_;
-    est->sonar_unmatched = f->sonar_unmatched_;
-    est->sonar_dropped = f->sonar_dropped_;
-#endif
+    for (const Kind *k : kKinds)  // the other kinds' counters (kinds.h)
+        if (k->estimate) k->estimate(f, est);
     if (!est->started) return;
     real xm[kOut], Pm[kOut][kOut];
     average_wheel_hypotheses(cfg, x, P, xm, Pm);

@@ -2,9 +2,10 @@
 // filter.cpp (init, start, predict), filter_sos.cpp (the speed of sound's
 // model), filter_estimate.cpp (the estimate), snapshot.cpp (the snapshot
 // (re)start and its last-pulse table), aid_pulse.cpp (pulse arrival times),
-// aid_wheels.cpp (wheel speeds), aid_bearing.cpp (bearings),
-// snapshot_bearing.cpp (the triangulation (re)start). Every measurement goes through fuse_scalar
-// (fusion.hpp).
+// aid_wheels.cpp (wheel speeds), and every measurement kind's sources
+// (kinds.h: aid_<kind>.cpp, its start without a prior). Every measurement
+// goes through fuse_scalar (fusion.hpp). A kind's own state is its
+// aid_<kind>.h's (BL_<KIND>_FILTER), its hooks into the shared code kinds.hpp.
 #ifndef BEACONLOC_FILTER_INTERNAL_HPP
 #define BEACONLOC_FILTER_INTERNAL_HPP
 
@@ -161,7 +162,8 @@ inline MeasTime classify_time(const bl_filter *f, int64_t t_us)
 
 // A beacon source whose filter (re)starts from a snapshot of its own kind
 // (bearings: the triangulation, snapshot_bearing.cpp; ranges: the
-// trilateration, snapshot_range.cpp): what happens to one measurement z of
+// trilateration, snapshot_range.cpp; `start`: its public start,
+// bl_filter_start_<kind>s): what happens to one measurement z of
 // beacon j at t_us before it can be fused. Before the start it is kept as
 // its beacon's latest and a start from the kept ones is tried (status
 // STARTED, else BUFFERED); one far older than a kept one (beyond
@@ -205,32 +207,17 @@ inline bool snapshot_source_step(bl_filter *f, uint32_t count, uint32_t valid_ma
     return false;
 }
 
-#if BL_WITH_BEARINGS
-// ---- snapshot_bearing.cpp
-// Keep a bearing as its beacon's latest (the triangulation's input).
-void remember_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us, real bearing_rad);
-// (Re)start from the triangulation of the kept bearings (filter.h,
-// bl_filter_start_bearings); *f untouched on failure.
-int start_from_bearings(bl_filter *f);
-#endif
-
 #if BL_WITH_RANGES
-// ---- aid_range.cpp
-// The range model (filter.h bl_filter_fuse_range) to a beacon at b: the
+// ---- aid_range.cpp, shared with aid_team.cpp (the teammates' ranges)
+// The range model (aid_range.h bl_filter_fuse_range) to a beacon at b: the
 // time of flight h (s) to the receiver dt_s after the state time, H =
 // ∂h/∂x (may be NULL), *d_m the range (may be NULL). False where undefined.
 bool range_model_at(const bl_config *cfg, const bl_beacon &b, real dt_s, const VX &x, real *h, RX *H, real *d_m);
 // The scalar measurement of a time of flight tof_s at the predicted range
-// d_m (σ, gate by the convergence and heading σ; filter.h
+// d_m (σ, gate by the convergence and heading σ; aid_range.h
 // bl_filter_fuse_range) for a filter with covariance P.
 ScalarMeasurement range_measurement(const bl_filter *f, const MX &P, real d_m, real tof_s);
 
-// ---- snapshot_range.cpp
-// Keep a time of flight as its range beacon's latest (the trilateration's input).
-void remember_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, real time_of_flight_s);
-// (Re)start from the trilateration of the kept ranges (filter.h,
-// bl_filter_start_ranges); *f untouched on failure.
-int start_from_ranges(bl_filter *f);
 #endif
 
 // ---- aid_wheels.cpp
@@ -247,7 +234,9 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
                        WheelSpeedCounts *counts, int n_solve = 0);
 
 #if BL_WITH_TEAM
-// ---- aid_team.cpp: the state augmented with the team beacons' (x, y)
+// ---- aid_team.cpp: the state augmented with the team beacons' (x, y), which the
+// predicts (filter.cpp) and the wheel speeds (aid_wheels.cpp) carry: the one kind
+// that changes the state's dimension
 constexpr int NB = 2 * BL_TEAM_MAX_BEACONS;
 constexpr int NA = NX + NB;
 static_assert(NA == kTeamNA, "fusion.cpp instantiates the shared update's Joseph form at kTeamNA");
@@ -271,7 +260,7 @@ inline void team_forget_cross(bl_filter *f)
 #endif
 }
 // Pulses, bearings and fixed-beacon ranges are refused while team beacons
-// carry a cross-covariance (filter.h bl_filter_set_team_beacons).
+// carry a cross-covariance (aid_team.h bl_filter_set_team_beacons).
 inline bool team_blocks_other_sources(const bl_filter *f)
 {
 #if BL_WITH_TEAM

@@ -1,5 +1,5 @@
 // beaconloc — replacing the filter's pose with an external corrector's
-// output (filter.h bl_filter_set_pose; sonar.h's correctors in the filter's
+// output (aid_sonar.h bl_filter_set_pose; sonar.h's correctors in the filter's
 // place, for comparing them through the same daemon).
 #include "filter_internal.hpp"
 

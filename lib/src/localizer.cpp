@@ -7,8 +7,8 @@ extern "C" {
 
 #include <cstring>
 
-#include "filter_internal.hpp"
 #include "internal.hpp"
+#include "kinds.hpp"
 #include "sequencer_internal.hpp"
 
 namespace {
@@ -110,7 +110,7 @@ void clear_hint(bl_localizer *loc)
     }
 }
 
-uint32_t window_rejected(const bl_localizer *loc, uint64_t *beacon_mask);
+uint32_t window_rejected(const bl_localizer *loc, uint32_t *beacons);
 
 NOINLINE void update_hint(bl_localizer *loc, const bl_estimate &est)
 {
@@ -173,50 +173,62 @@ void watch(bl_localizer *loc, uint32_t beacon, bool rejected)
     if (loc->win_len_ < loc->reject_w_) loc->win_len_++;
 }
 
-// The beacon mask: pulse beacons' ids 0.., bearing beacons' from
-// BL_MAX_BEACONS, range beacons' from 2·BL_MAX_BEACONS (64 bits).
-uint32_t window_rejected(const bl_localizer *loc, uint64_t *beacon_mask)
+// The window's beacon id of beacon j of a measurement kind (kinds.h): after
+// the pulse beacons' ids 0..BL_MAX_BEACONS-1, BL_MAX_BEACONS per kind.
+static_assert(BL_MAX_BEACONS * (1 + sizeof bl::kKinds / sizeof bl::kKinds[0]) <= 256,
+              "window beacon ids fit in uint8_t");
+uint8_t window_id(bl::KindId kind, uint32_t j)
 {
-    uint32_t n = 0;
-    uint64_t mask = 0;
+    return static_cast<uint8_t>(BL_MAX_BEACONS * (1 + static_cast<uint32_t>(kind)) + j);
+}
+
+// The window's rejected arrivals, and in *beacons (may be NULL) how many
+// distinct beacons (ids: pulse beacons', then window_id's) they came from.
+uint32_t window_rejected(const bl_localizer *loc, uint32_t *beacons)
+{
+    uint32_t n = 0, distinct = 0;
     for (uint32_t i = 0; i < loc->win_len_; i++)
         if (loc->win_rejected_ & (1u << i)) {
             n++;
-            mask |= uint64_t(1) << loc->win_beacon_[i];
+            bool seen = false;
+            for (uint32_t k = 0; k < i && !seen; k++)
+                seen = (loc->win_rejected_ & (1u << k)) && loc->win_beacon_[k] == loc->win_beacon_[i];
+            if (!seen) distinct++;
         }
-    if (beacon_mask) *beacon_mask = mask;
+    if (beacons) *beacons = distinct;
     return n;
 }
 
 // Restarts when the watch says so; true if restarted: from the pulse
-// snapshot, else (a bearing-only site, or the snapshot failed) from the
-// bearings' triangulation when the site has bearing beacons.
+// snapshot, else (a site without pulse beacons, or the snapshot failed)
+// from the first measurement kind (kinds.h's order) with beacons in the
+// window whose own restart succeeds (bearings: the triangulation, ranges:
+// the trilateration).
 NOINLINE bool restart_if_persistent(bl_localizer *loc)
 {
     if (loc->reject_k_ == 0 || loc->win_len_ < loc->reject_w_) return false;
-    uint64_t mask = 0;
-    const uint32_t n = window_rejected(loc, &mask);
+    uint32_t rejected_beacons = 0;
+    const uint32_t n = window_rejected(loc, &rejected_beacons);
     const bl_config &cfg = loc->filter.cfg_;
     // At least min(3, N) beacons rejected (one faulty beacon restarts
-    // nothing); with bearing beacons min(3, N - 1): a kidnap along one
-    // beacon's line of sight leaves its bearing unchanged (3 bearing beacons: 2).
-    // Range beacons likewise: a kidnap along a circle round one beacon
-    // leaves its range unchanged.
-    const uint32_t n_beacons = cfg.beacon_count + cfg.bearing_beacon_count + cfg.range_beacon_count;
-    const uint32_t cap = (cfg.bearing_beacon_count > 0 || cfg.range_beacon_count > 0) ? n_beacons - 1 : n_beacons;
-    const int need = static_cast<int>(cap < 3 ? cap : 3);
-    if (n < loc->reject_k_ || __builtin_popcountll(mask) < need) return false;
+    // nothing); with another kind's beacons in the window min(3, N - 1): a
+    // kidnap along one bearing beacon's line of sight leaves its bearing
+    // unchanged (3 bearing beacons: 2), one along a circle round a range
+    // beacon its range.
+    uint32_t n_watched = 0;
+    for (const bl::Kind *k : bl::kKinds)
+        if (k->beacons) n_watched += k->beacons(&cfg);
+    const uint32_t n_beacons = cfg.beacon_count + n_watched;
+    const uint32_t cap = n_watched > 0 ? n_beacons - 1 : n_beacons;
+    const uint32_t need = cap < 3 ? cap : 3;
+    if (n < loc->reject_k_ || rejected_beacons < need) return false;
     if (!bl::started(&loc->filter)) return false;
     // The heading kept (read in place: no state copy on this, the deepest, chain).
     const bl_real theta = bl::wrap_angle(loc->filter.x_[BL_IX_THETA]);
     int rc = BL_EDEGENERATE;
     if (cfg.beacon_count > 0) rc = bl_filter_start_snapshot(&loc->filter, theta, cfg.reset_sigma_theta_rad);
-#if BL_WITH_BEARINGS
-    if (rc != BL_OK && cfg.bearing_beacon_count > 0) rc = bl_filter_start_bearings(&loc->filter);
-#endif
-#if BL_WITH_RANGES
-    if (rc != BL_OK && cfg.range_beacon_count > 0) rc = bl_filter_start_ranges(&loc->filter);
-#endif
+    for (const bl::Kind *k : bl::kKinds)
+        if (rc != BL_OK && k->restart && k->beacons && k->beacons(&cfg) > 0) rc = k->restart(&loc->filter);
     clear_window(loc);
     if (rc != BL_OK) {
         loc->counters_.restart_failures++;
@@ -417,6 +429,61 @@ bool finite_real(bl_real v) { return bl::is_finite(v); }
 
 }  // namespace
 
+int bl::localizer_fuse(bl_localizer *loc, const LocInput &in, FuseFn fuse, const void *meas, const LocCounters &n,
+                       bl_fusion_result *res)
+{
+    if (loc == nullptr || meas == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    bl_loc_counters &c = loc->counters_;
+    const bl::Kind *k = bl::kKinds[static_cast<uint32_t>(in.kind)];
+    if (in.j >= (k->beacons ? k->beacons(&loc->filter.cfg_) : 0u)) {
+        (c.*n.refused)++;
+        return BL_EBEACON;
+    }
+    if (!in.value_ok || in.t_us > BL_SEQ_TIME_LIMIT_US || in.t_us < -BL_SEQ_TIME_LIMIT_US) {
+        (c.*n.refused)++;
+        return BL_EINVAL;
+    }
+    coast_to(loc, in.t_us);
+    bl_fusion_result &r = loc->result_;
+    int rc = fuse(&loc->filter, meas, &r);
+    if (rc == BL_ETIME) {
+        reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
+        rc = fuse(&loc->filter, meas, &r);
+    }
+    if (rc != BL_OK) {
+        (c.*n.refused)++;
+        return BL_OK;
+    }
+    const uint32_t id = window_id(in.kind, in.j);
+    bool fused = false;
+    switch (r.status) {
+    case BL_FUSION_ACCEPTED:
+    case BL_FUSION_STARTED:
+    case BL_FUSION_RESET:
+        (c.*n.fused)++;
+        watch(loc, id, false);
+        fused = true;
+        break;
+    case BL_FUSION_REJECTED:
+        (c.*n.rejected)++;
+        watch(loc, id, true);
+        fused = restart_if_persistent(loc);
+        break;
+    case BL_FUSION_BUFFERED:
+    default:
+        (c.*n.buffered)++;
+        break;
+    }
+    const bl_fusion_result out = r;
+    if (fused) {
+        measurement_fused(loc, in.tag);
+        after_update(loc, false);
+    }
+    if (res) *res = out;
+    return BL_OK;
+}
+
 // ---- public API -----------------------------------------------------------
 
 extern "C" int bl_localizer_seq_config(const bl_config *site, bl_seq_config *out, const char **why, const char **field)
@@ -573,14 +640,13 @@ extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *
     const int64_t last = loc->wheel_last_us_;
     const int64_t gap = inc->t_us - last;
     const bool had_ref = loc->wheel_ref_ && loc->wheel_seen_ && !inc->reference_only;
-#if BL_WITH_BEARINGS
-    // Dead reckoning for the triangulation's motion compensation (filter.h,
-    // bl_filter_track_wheels), started or not; a silence breaks the track.
-    // Arguments checked above: it cannot fail.
-    if (loc->filter.cfg_.bearing_beacon_count > 0)
-        (void)bl_filter_track_wheels(&loc->filter, inc->t_us, inc->d_left_m, inc->d_right_m,
-                                     !loc->wheel_seen_ || inc->reference_only || gap > BL_LOC_WHEEL_SILENCE_US);
-#endif
+    // The kinds that keep their own dead reckoning (the bearings' motion
+    // compensation, aid_bearing.h bl_filter_track_wheels), started or not; a
+    // silence breaks the track. Arguments checked above.
+    for (const bl::Kind *k : bl::kKinds)
+        if (k->wheel_sample)
+            k->wheel_sample(&loc->filter, inc->t_us, inc->d_left_m, inc->d_right_m,
+                            !loc->wheel_seen_ || inc->reference_only || gap > BL_LOC_WHEEL_SILENCE_US);
     loc->wheel_last_us_ = inc->t_us;
     loc->wheel_seen_ = true;
     loc->wheel_ref_ = true;
@@ -621,126 +687,8 @@ extern "C" int bl_localizer_wheels(bl_localizer *loc, const bl_wheel_increment *
     return BL_OK;
 }
 
-#if BL_WITH_BEARINGS || BL_WITH_RANGES
-namespace {
-// A beacon measurement kind's counters (localizer.h bl_loc_counters).
-struct BeaconCounters {
-    uint32_t *fused, *rejected, *buffered, *refused;
-};
-
-// One beacon measurement (a bearing, a range: checked by the caller) through
-// the filter, the same policy for both: coast to its time; fuse it
-// (fuse(&result) calls the filter); older than the state by more than the
-// gap: a new timeline (the filter reinitialised, fused again); refused by
-// the filter (bad data): counted, not an error. Then by status: fused
-// (accepted, started, reset) or rejected into the persistent-rejection
-// window under window_id (a restart when rejections persist), or kept for
-// the snapshot start; a fused measurement published with its tag.
-template <typename Fuse>
-int fuse_beacon_measurement(bl_localizer *loc, int64_t t_us, uint32_t window_id, uint32_t tag, Fuse fuse,
-                            const BeaconCounters &n, bl_fusion_result *res)
-{
-    coast_to(loc, t_us);
-    bl_fusion_result &r = loc->result_;
-    int rc = fuse(&r);
-    if (rc == BL_ETIME) {
-        reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
-        rc = fuse(&r);
-    }
-    if (rc != BL_OK) {
-        (*n.refused)++;
-        return BL_OK;
-    }
-    bool fused = false;
-    switch (r.status) {
-    case BL_FUSION_ACCEPTED:
-    case BL_FUSION_STARTED:
-    case BL_FUSION_RESET:
-        (*n.fused)++;
-        watch(loc, window_id, false);
-        fused = true;
-        break;
-    case BL_FUSION_REJECTED:
-        (*n.rejected)++;
-        watch(loc, window_id, true);
-        fused = restart_if_persistent(loc);
-        break;
-    case BL_FUSION_BUFFERED:
-    default:
-        (*n.buffered)++;
-        break;
-    }
-    const bl_fusion_result out = r;
-    if (fused) {
-        measurement_fused(loc, tag);
-        after_update(loc, false);
-    }
-    if (res) *res = out;
-    return BL_OK;
-}
-}  // namespace
-#endif
-
-#if BL_WITH_BEARINGS  // common.h: bl_localizer_bearing not built without bearings
-// The window's beacon id of bearing beacon j: after the pulse beacons' ids
-// (0..BL_MAX_BEACONS-1), so that the window's beacon mask counts both kinds.
-static_assert(2 * BL_MAX_BEACONS <= 32, "the window's beacon mask holds both kinds");
-
-extern "C" int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m, bl_fusion_result *res)
-{
-    if (loc == nullptr || m == nullptr) return BL_EINVAL;
-    if (!valid(loc)) return BL_ENOTINIT;
-    if (m->beacon_index >= loc->filter.cfg_.bearing_beacon_count) {
-        loc->counters_.bearings_refused++;
-        return BL_EBEACON;
-    }
-    if (!finite_real(m->bearing_rad) || m->bearing_rad > 1000 || m->bearing_rad < -1000 ||
-        m->t_us > BL_SEQ_TIME_LIMIT_US || m->t_us < -BL_SEQ_TIME_LIMIT_US) {
-        loc->counters_.bearings_refused++;
-        return BL_EINVAL;
-    }
-    // window id: after the ultrasonic beacons' ids
-    return fuse_beacon_measurement(
-        loc, m->t_us, BL_MAX_BEACONS + m->beacon_index, m->tag,
-        [&](bl_fusion_result *r) {
-            return bl_filter_fuse_bearing(&loc->filter, m->beacon_index, m->t_us, m->bearing_rad, r);
-        },
-        BeaconCounters{&loc->counters_.bearings_fused, &loc->counters_.bearings_rejected,
-                       &loc->counters_.bearings_buffered, &loc->counters_.bearings_refused},
-        res);
-}
-#endif  // BL_WITH_BEARINGS
-
-#if BL_WITH_RANGES  // common.h: bl_localizer_range not built without ranges
-// The window's beacon id of range beacon j: after the bearing beacons' ids.
-static_assert(3 * BL_MAX_BEACONS <= 64, "the window's beacon mask holds all three kinds");
-static_assert(3 * BL_MAX_BEACONS <= 256, "window beacon ids fit in uint8_t");
-
-extern "C" int bl_localizer_range(bl_localizer *loc, const bl_range_meas *m, bl_fusion_result *res)
-{
-    if (loc == nullptr || m == nullptr) return BL_EINVAL;
-    if (!valid(loc)) return BL_ENOTINIT;
-    if (m->beacon_index >= loc->filter.cfg_.range_beacon_count) {
-        loc->counters_.ranges_refused++;
-        return BL_EBEACON;
-    }
-    if (!finite_real(m->time_of_flight_s) || m->time_of_flight_s < 0 || m->t_us > BL_SEQ_TIME_LIMIT_US ||
-        m->t_us < -BL_SEQ_TIME_LIMIT_US) {
-        loc->counters_.ranges_refused++;
-        return BL_EINVAL;
-    }
-    // window id: after the bearing beacons' ids; refused by the filter:
-    // beyond 1.5 · max range, or a non-finite update
-    return fuse_beacon_measurement(
-        loc, m->t_us, 2 * BL_MAX_BEACONS + m->beacon_index, m->tag,
-        [&](bl_fusion_result *r) {
-            return bl_filter_fuse_range(&loc->filter, m->beacon_index, m->t_us, m->time_of_flight_s, r);
-        },
-        BeaconCounters{&loc->counters_.ranges_fused, &loc->counters_.ranges_rejected, &loc->counters_.ranges_buffered,
-                       &loc->counters_.ranges_refused},
-        res);
-}
-#endif  // BL_WITH_RANGES
+// Each measurement kind's input (bl_localizer_bearing, ...): its source,
+// aid_<kind>.cpp, through bl::localizer_fuse.
 
 // A known pose (localizer.h): the filter (re)started by bl_filter_start,
 // the persistent-rejection watch emptied, the event queued and counted.

@@ -1,10 +1,10 @@
-// beaconloc — the filter's triangulation (re)start from bearings (filter.h:
-// the automatic start of a site with bearing beacons, a time gap's restart,
-// bl_filter_start_bearings): the latest bearing of each bearing beacon, the
-// fix of those within cfg.bearing.snapshot_window_s of the newest
-// (bl_solve_bearings, Vander et al. 2011 eq. 1), the state from the fix;
-// and the dead reckoning (bl_filter_track_wheels) that motion-compensates
-// those bearings when they come from different instants of a moving robot.
+// beaconloc — the filter's triangulation (re)start from bearings
+// (aid_bearing.h: the automatic start of a site with bearing beacons, a time
+// gap's restart, bl_filter_start_bearings): the latest bearing of each
+// bearing beacon, the fix of those within cfg.bearing.snapshot_window_s of
+// the newest (bl_solve_bearings, Vander et al. 2011 eq. 1), the state from
+// the fix, each older bearing motion-compensated by the dead reckoning kept
+// with it (aid_bearing.cpp, bl_filter_track_wheels).
 #include "filter_internal.hpp"
 
 // The whole source compiles out without bearings (common.h BL_WITH_BEARINGS).
@@ -18,11 +18,8 @@ namespace bl {
 
 namespace {
 
-// A bearing further than this from the track's last sample gets no
-// odometry pose (s): the last increment's v, ω no longer describe the path.
-constexpr real kMaxExtrapolation_s = real(0.1);
 // Motion-compensated bearings may be this many cfg.bearing.snapshot_window_s
-// older than the newest (filter.h; 0.5 s at the default 0.25 s). Measured
+// older than the newest (aid_bearing.h; 0.5 s at the default 0.25 s). Measured
 // (tests/bench/bearing.py --self-start, 20 seeds, ratio to the bound for
 // eurobot / outage20 / outage50): 1 window 1.115 / 1.345 / 1.113, 2 windows
 // 1.115 / 1.327 / 1.065, 4 windows 1.115 / 1.313 / 1.439 (earlier starts in
@@ -33,49 +30,9 @@ constexpr int64_t kCompensatedWindow = 2;
 // Nearest distance taken for a beacon in the odometry's bearing variance (m).
 constexpr real kMinRange_m = real(0.1);
 
-// The midpoint odometry step (Kleeman 1992 eq. 24; Vander et al. 2011 eq. 2):
-// d = (d_l + d_r)/2, δ = (d_r - d_l)/b, x += d cos(θ + δ/2), y += d sin(θ + δ/2),
-// θ += δ.
-void odometry_step(real pose[3], real d_m, real dth_rad)
-{
-    const real mid = pose[2] + real(0.5) * dth_rad;
-    pose[0] += d_m * std::cos(mid);
-    pose[1] += d_m * std::sin(mid);
-    pose[2] = wrap_angle(pose[2] + dth_rad);
-}
-
-}  // namespace
-
-void remember_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us, real bearing_rad)
-{
-    const uint32_t j = bearing_beacon_index;
-    f->bearing_t_us_[j] = t_us;
-    f->bearing_rad_[j] = bearing_rad;
-    f->bearing_valid_mask_ |= 1u << j;
-    // The track's pose at the bearing's time: the last sample carried by its
-    // v, ω (constant over the step, eq. 24's midpoint form) by dt (either sign).
-    f->bearing_odo_track_[j] = 0;
-    int64_t d_us;
-    if (f->odo_track_ == 0 || !sub_us(t_us, f->odo_t_us_, &d_us)) return;
-    const real dt_s = us_to_s(d_us);
-    if (!(std::fabs(dt_s) <= kMaxExtrapolation_s)) return;
-    real o[6];
-    for (int k = 0; k < 6; ++k) o[k] = f->odo_[k];
-    const real d_m = f->odo_rate_[0] * dt_s, dth_rad = f->odo_rate_[1] * dt_s;
-    odometry_step(o, d_m, dth_rad);
-    const real half_b = real(0.5) * effective_base_m(&f->cfg_);
-    o[3] += std::fabs(d_m - half_b * dth_rad);
-    o[4] += std::fabs(d_m + half_b * dth_rad);
-    o[5] += std::fabs(dth_rad);
-    for (int k = 0; k < 6; ++k) f->bearing_odo_[j][k] = o[k];
-    f->bearing_odo_track_[j] = f->odo_track_;
-}
-
-namespace {
-
 // Bearing j's odometry in the body frame of the reference bearing r (the
 // newest): displacement (m), turn (rad), and the variance the odometry's
-// error adds to bearing j at range_m from the beacon (rad²; filter.h,
+// error adds to bearing j at range_m from the beacon (rad²; aid_bearing.h,
 // bl_filter_start_bearings). False if they are not on one track.
 bool odometry_between(const bl_filter *f, uint32_t j, uint32_t r, real disp[3], real *travel_m)
 {
@@ -95,7 +52,7 @@ bool odometry_between(const bl_filter *f, uint32_t j, uint32_t r, real disp[3], 
 }
 
 // The variance (rad²) the odometry's error over travel (Σ|d_l|, Σ|d_r| in m,
-// Σ|Δθ| in rad) and dt_s adds to a bearing of a beacon range_m away (filter.h,
+// Σ|Δθ| in rad) and dt_s adds to a bearing of a beacon range_m away (aid_bearing.h,
 // bl_filter_start_bearings; the filter's predict noise, filter.h
 // bl_filter_predict_odometry, summed along the path, first order).
 real odometry_variance(const bl_config *cfg, const real travel[3], real dt_s, real range_m)
@@ -142,7 +99,7 @@ __attribute__((noinline)) int solve_bearing_snapshot(const bl_filter *f, bl_bear
     int64_t oldest = newest;
     uint32_t m = 0;
     uint32_t used[BL_MAX_BEACONS];
-    // Two selections (filter.h, bl_filter_start_bearings): first the
+    // Two selections (aid_bearing.h, bl_filter_start_bearings): first the
     // bearings within kCompensatedWindow windows of the newest that lie on
     // its odometry track, motion-compensated; if they cover fewer than 3
     // beacons, every bearing within one window, taken as simultaneous.
@@ -184,7 +141,7 @@ __attribute__((noinline)) int solve_bearing_snapshot(const bl_filter *f, bl_bear
     if (compensated) {
         // The odometry's error over each bearing's path to the newest, first
         // order, added to that bearing's variance at its beacon's range from
-        // the fix (filter.h); solved again with those σ.
+        // the fix (aid_bearing.h); solved again with those σ.
         bool inflated = false;
         for (uint32_t k = 0; k < m; ++k) {
             const uint32_t j = used[k];
@@ -212,8 +169,8 @@ __attribute__((noinline)) int solve_bearing_snapshot(const bl_filter *f, bl_bear
     return BL_OK;
 }
 
-}  // namespace
-
+// (Re)start from the triangulation of the kept bearings (aid_bearing.h,
+// bl_filter_start_bearings); *f untouched on failure.
 int start_from_bearings(bl_filter *f)
 {
     const bl_config *cfg = &f->cfg_;
@@ -283,41 +240,9 @@ int start_from_bearings(bl_filter *f)
     return BL_OK;
 }
 
-}  // namespace bl
+}  // namespace
 
-extern "C" int bl_filter_track_wheels(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real d_right_m,
-                                      bool reference_only)
-{
-    using namespace bl;
-    if (f == nullptr) return BL_EINVAL;
-    if (!initialised(f)) return BL_ENOTINIT;
-    if (!is_finite(d_left_m) || !is_finite(d_right_m) || !(std::fabs(d_left_m) <= real(10)) ||
-        !(std::fabs(d_right_m) <= real(10)))
-        return BL_EINVAL;
-    int64_t dt_us = 0;
-    if (f->odo_track_ != 0 && (!sub_us(t_us, f->odo_t_us_, &dt_us) || dt_us <= 0)) return BL_ETIME;
-    const real dt_s = us_to_s(dt_us);
-    if (f->odo_track_ == 0 || reference_only || dt_s > f->cfg_.max_predict_gap_s) {
-        // A new track: the origin at t_us, no increment known.
-        std::memset(f->odo_, 0, sizeof f->odo_);
-        f->odo_rate_[0] = f->odo_rate_[1] = 0;
-        f->odo_t_us_ = t_us;
-        f->odo_track_ = f->odo_track_ + 1 == 0 ? 1 : f->odo_track_ + 1;
-        return BL_OK;
-    }
-    // Kleeman 1992 eq. 24: d = (d_l + d_r)/2, Δθ = (d_r - d_l)/b (nominal
-    // wheel scales), the midpoint step (Vander et al. 2011 eq. 2).
-    const real d_m = real(0.5) * (d_left_m + d_right_m);
-    const real dth_rad = (d_right_m - d_left_m) / effective_base_m(&f->cfg_);
-    odometry_step(f->odo_, d_m, dth_rad);
-    f->odo_[3] += std::fabs(d_left_m);
-    f->odo_[4] += std::fabs(d_right_m);
-    f->odo_[5] += std::fabs(dth_rad);
-    f->odo_rate_[0] = d_m / dt_s;
-    f->odo_rate_[1] = dth_rad / dt_s;
-    f->odo_t_us_ = t_us;
-    return BL_OK;
-}
+}  // namespace bl
 
 extern "C" int bl_filter_start_bearings(bl_filter *f)
 {

@@ -1,4 +1,4 @@
-// beaconloc — the filter's trilateration (re)start from ranges (filter.h:
+// beaconloc — the filter's trilateration (re)start from ranges (aid_range.h:
 // the automatic start of a site with range beacons, a time gap's restart,
 // bl_filter_start_ranges): the latest time of flight of each range beacon,
 // the fix of those within cfg.range.snapshot_window_s of the newest
@@ -14,13 +14,6 @@
 #include "beaconloc/solver.h"
 
 namespace bl {
-
-void remember_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, real time_of_flight_s)
-{
-    f->range_t_us_[range_beacon_index] = t_us;
-    f->range_tof_s_[range_beacon_index] = time_of_flight_s;
-    f->range_valid_mask_ |= 1u << range_beacon_index;
-}
 
 namespace {
 
@@ -92,7 +85,7 @@ __attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mp
     if (sol.ambiguous) return BL_EDEGENERATE;
     // The fix must explain the ranges: every residual within 3σ, σ with
     // the speed of sound's share (r·σs/s) added, as the pulse snapshot's
-    // residual test (filter.h). Checked by the rms, per range: rms <= 3σ_max.
+    // residual test (aid_range.h). Checked by the rms, per range: rms <= 3σ_max.
     real sig_max = 0;
     for (uint32_t j = 0; j < m; ++j) {
         const real ss = prob.range_m[j] * std::sqrt(var_s) / s_mps;
@@ -119,8 +112,8 @@ __attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mp
     return BL_OK;
 }
 
-}  // namespace
-
+// (Re)start from the trilateration of the kept ranges (aid_range.h,
+// bl_filter_start_ranges); *f untouched on failure.
 int start_from_ranges(bl_filter *f)
 {
     const bl_config *cfg = &f->cfg_;
@@ -214,6 +207,8 @@ int start_from_ranges(bl_filter *f)
     commit(f, x, P);  // state, covariance, converged flag from the position σ
     return BL_OK;
 }
+
+}  // namespace
 
 }  // namespace bl
 

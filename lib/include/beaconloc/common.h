@@ -41,25 +41,27 @@ typedef double bl_real;
 
 /* Aiding sources compiled in, one switch per source (as PX4 ekf2's
  * CONFIG_EKF2_RANGE_FINDER, CONFIG_EKF2_EXTERNAL_VISION...). Define with -D
- * for the library and every file that includes its headers alike (the
- * struct layouts depend on them).
- *   BL_WITH_BEARINGS  1 (default): bearings to bearing beacons (filter.h
- *                     bl_filter_fuse_bearing, bl_filter_start_bearings;
- *                     localizer.h bl_localizer_bearing, bl_bearing_meas).
+ * (0 or 1) for the library and every file that includes its headers alike
+ * (the struct layouts depend on them). Each measurement kind's header
+ * (aid_<kind>.h, kinds.h) declares what it has with its switch on and off;
+ * these four are here because solver.h and sonar.h, which do not include
+ * the kinds, test them too (a new kind may define its own in its header).
+ *   BL_WITH_BEARINGS  1 (default): bearings to bearing beacons (aid_bearing.h:
+ *                     bl_filter_fuse_bearing, bl_filter_start_bearings,
+ *                     bl_localizer_bearing, bl_bearing_meas).
  *                     0: those calls and types are not declared and their
  *                     code is not built, the filter carries no bearing
  *                     buffers, bl_estimate and bl_loc_counters no bearing
- *                     counters; bl_config keeps its bearing fields (one
- *                     config layout) but bl_config_check refuses
- *                     bearing_beacon_count > 0. For pulse-only firmware. The
+ *                     counters; bl_config keeps bearing_beacon_count, which
+ *                     bl_config_check then requires to be 0. For pulse-only firmware. The
  *                     solvers (solver.h, bl_solve_bearings*) stay: they are
  *                     independent of the filter. */
 #ifndef BL_WITH_BEARINGS
 #define BL_WITH_BEARINGS 1
 #endif
-/*   BL_WITH_RANGES    1 (default): ranges to fixed range beacons (filter.h
- *                     bl_filter_fuse_range, bl_filter_start_ranges;
- *                     localizer.h bl_localizer_range, bl_range_meas).
+/*   BL_WITH_RANGES    1 (default): ranges to fixed range beacons (aid_range.h:
+ *                     bl_filter_fuse_range, bl_filter_start_ranges,
+ *                     bl_localizer_range, bl_range_meas).
  *                     0: as BL_WITH_BEARINGS 0 for ranges: those calls and
  *                     types are not declared, the filter carries no range
  *                     buffers, bl_estimate and bl_loc_counters no range
@@ -71,7 +73,7 @@ typedef double bl_real;
 #endif
 /*   BL_WITH_TEAM      1 (default): ranges to teammates whose positions are
  *                     themselves uncertain (the CMU Millibots' stationary
- *                     beacon robots: filter.h bl_filter_set_team_beacons,
+ *                     beacon robots: aid_team.h bl_filter_set_team_beacons,
  *                     bl_filter_fuse_team_range, bl_team_beacons). Needs
  *                     BL_WITH_RANGES (its model and σ). 0: those calls and
  *                     types are not declared, the filter carries no team
@@ -89,7 +91,7 @@ typedef double bl_real;
 /*   BL_WITH_SONAR     1 (default): a sonar ring against a map of wall
  *                     segments (sonar.h: the map and ring types, the
  *                     pin-point and memory correctors of Hoppenot & Colle
- *                     1997; filter.h bl_filter_set_sonar,
+ *                     1997; aid_sonar.h bl_filter_set_sonar,
  *                     bl_filter_fuse_sonar, bl_filter_set_pose). 0: none of
  *                     it is declared or built, the filter carries no sonar
  *                     fields, bl_estimate no sonar counters, bl_config no
@@ -109,6 +111,17 @@ typedef double bl_real;
 #ifndef BL_TEAM_MAX_BEACONS
 #define BL_TEAM_MAX_BEACONS 4
 #endif
+
+/* The filter's state dimension (filter.h: the layout, BL_IX_*). */
+#define BL_FILTER_NX 10
+
+/* The library's objects, defined in config.h, filter.h and localizer.h;
+ * named here so that a measurement kind's header (aid_<kind>.h, included by
+ * config.h through kinds.h, before those structs are complete) can declare
+ * its functions on them. */
+typedef struct bl_config bl_config;
+typedef struct bl_filter bl_filter;
+typedef struct bl_localizer bl_localizer;
 
 /* Error codes: every fallible call returns BL_OK or one of these. */
 typedef enum bl_error {

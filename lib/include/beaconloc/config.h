@@ -22,6 +22,7 @@
 #define BEACONLOC_CONFIG_H
 
 #include "beaconloc/common.h"
+#include "beaconloc/kinds.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -31,8 +32,10 @@ extern "C" {
  * bl_config.wheels), read only by that source's fusion (lib/src/aid_<source>.cpp)
  * and by the prediction it drives; defaults in bl_config_default, checked in
  * bl_config_check, which names a bad member by its path ("pulse.gate_sigma").
- * A new source (bearing, range, sonar) adds its own block. The comment after
- * each member names its site-file key ([noise] or [tuning]). */
+ * The other measurement kinds (kinds.h: bearings, ranges, ...) declare their
+ * block and their site members in their own header (aid_<kind>.h), their
+ * defaults and checks in their own source. The comment after each member
+ * names its site-file key ([noise] or [tuning]). */
 
 /* Ultrasonic pulse arrival times (aid_pulse.cpp; its snapshot start,
  * snapshot.cpp; Kleeman 1992 eq. 21). */
@@ -97,64 +100,7 @@ typedef struct bl_wheel_params {
                                              < 1; default 0 */
 } bl_wheel_params;
 
-/* Bearings to self-identifying beacons (aid_bearing.cpp; its triangulation
- * start, snapshot_bearing.cpp; Vander et al. 2011 eqs. 1, 3). The sensor's
- * mount offset is geometry (bl_config_same_geometry compares it); the rest
- * is tuning. */
-typedef struct bl_bearing_params {
-    bl_real sigma_deg;         /* [bearing_sensor] sigma_deg: σ of one bearing (deg), > 0
-                                  (Vander et al. 2011 §3: 1°) */
-    bl_real gate_sigma;        /* [bearing_sensor] gate_sigma: innovation gate in σ (chi-square
-                                  with 1 dof), > 0; twice this until converged */
-    bl_real offset_x_m;        /* [bearing_sensor] offset_x_m: sensor mount, body frame, forward
-                                  of the wheel-base centre (m), |.| < 100; GEOMETRY */
-    bl_real offset_y_m;        /* [bearing_sensor] offset_y_m: sensor mount, body frame, to the
-                                  left (m), |.| < 100; GEOMETRY */
-    bl_real snapshot_window_s; /* [tuning] bearing_snapshot_window_s: buffered bearings within
-                                  this of the newest form one triangulation snapshot (s), > 0;
-                                  twice this when the wheel odometry motion-compensates
-                                  them (filter.h, bl_filter_start_bearings) */
-    bl_real max_fix_drms_m;    /* [tuning] max_fix_drms_m: a triangulation (re)start is refused
-                                  when the fix's drms sqrt(σx² + σy²) exceeds this (m), > 0 */
-} bl_bearing_params;
-
-/* Ranges to fixed range beacons (Marvelmind-like; aid_range.cpp; its
- * trilateration start, snapshot_range.cpp; the CMU Millibots' RF-synchronised
- * ultrasonic ranging, Navarro-Serment et al.: the RF sync gives the emission
- * time, the receiver times the flight). The receiver's mount (offset, height)
- * is geometry (bl_config_same_geometry compares it); the rest is tuning. */
-typedef struct bl_range_params {
-    bl_real sigma_m;           /* [range_sensor] sigma_m: σ of a range at short distance (m), > 0
-                                  (Millibots: 8 mm resolution) */
-    bl_real sigma_per_m;       /* [range_sensor] sigma_per_m: σ grows with the range:
-                                  σ = sigma_m + sigma_per_m·range (m per m), 0..1 */
-    bl_real max_range_m;       /* [range_sensor] max_range_m: the sensor's maximum range (m), > 0
-                                  (Millibots: about 3 m); a range beyond 1.5 times this is
-                                  refused as bad input (bl_filter_fuse_range) */
-    bl_real gate_sigma;        /* [range_sensor] gate_sigma: innovation gate in σ (chi-square
-                                  with 1 dof), > 0; twice this until converged */
-    bl_real offset_x_m;        /* [range_sensor] offset_x_m: receiver mount, body frame, forward
-                                  of the wheel-base centre (m), |.| < 100; GEOMETRY */
-    bl_real offset_y_m;        /* [range_sensor] offset_y_m: receiver mount, body frame, to the
-                                  left (m), |.| < 100; GEOMETRY */
-    bl_real height_m;          /* [range_sensor] height_m: the receiver's z in the site frame
-                                  (m), |.| < 1e5; GEOMETRY */
-    bl_real snapshot_window_s; /* [tuning] range_snapshot_window_s: the latest range of each
-                                  range beacon within this of the newest forms one
-                                  trilateration snapshot (s), (0, 60] */
-    bl_real max_fix_drms_m;    /* [tuning] range_max_fix_drms_m: a trilateration (re)start is
-                                  refused when the fix's drms sqrt(σx² + σy²) exceeds this (m),
-                                  > 0 (default 0.25 = converged_sigma_xy_m's default) */
-    uint32_t team_site;        /* [range_sensor] team_site (proposed key, not read by the
-                                  bridge yet): 1 = a team without fixed beacons
-                                  (the CMU Millibots): the receiver ranges to teammates
-                                  (filter.h bl_filter_set_team_beacons, BL_WITH_TEAM), so a
-                                  site with no beacon of any kind is valid (the filter starts
-                                  from bl_filter_start with the team solve's pose); 0
-                                  (default); 1 refused without BL_WITH_TEAM */
-} bl_range_params;
-
-typedef struct bl_config {
+struct bl_config { /* typedef: common.h */
     /* ---- [beacons] (ultrasonic pulse beacons) ---- */
     uint32_t beacon_count;          /* count: N, 0 (a bearing-only site: no ultrasonic
                                          beacons, the sequencer idles) or 3..BL_MAX_BEACONS */
@@ -170,28 +116,10 @@ typedef struct bl_config {
     /* ---- [beacon1] .. [beaconN] ---- */
     bl_beacon beacons[BL_MAX_BEACONS]; /* x_m, y_m, z_m of beacon i at beacons[i-1] */
 
-    /* ---- [bearing_beacons], [bearing_beacon1] .. [bearing_beaconN] ---- */
-    uint32_t bearing_beacon_count; /* [bearing_beacons] count: 0..BL_MAX_BEACONS;
-                                                  >= 3 not collinear when beacon_count is 0 */
-    /* Without bearings (common.h BL_WITH_BEARINGS 0) only the count stays,
-     * which bl_config_check then requires to be 0; the positions below and
-     * the bearing block compile out (their 124 B, with float and 8 beacons,
-     * are what kept a pulse-only localizer over its 2 KiB RAM target). */
-#if BL_WITH_BEARINGS
-    bl_beacon bearing_beacons[BL_MAX_BEACONS]; /* x_m, y_m of bearing beacon i at
-                                                  bearing_beacons[i-1] (z unused) */
-#endif
-
-    /* ---- [range_beacons], [range_beacon1] .. [range_beaconN] ---- */
-    uint32_t range_beacon_count; /* [range_beacons] count: 0..BL_MAX_BEACONS; >= 3 not
-                                    collinear in x-y when beacon_count and
-                                    bearing_beacon_count are 0 (a range-only site) */
-    /* Without ranges (common.h BL_WITH_RANGES 0) only the count stays, which
-     * bl_config_check then requires to be 0. */
-#if BL_WITH_RANGES
-    bl_beacon range_beacons[BL_MAX_BEACONS]; /* x_m, y_m, z_m of range beacon i at
-                                                range_beacons[i-1] */
-#endif
+    /* ---- each measurement kind's beacons or site flag (kinds.h, in its order; the
+     * members and their keys in its aid_<kind>.h: bearing_beacon_count,
+     * bearing_beacons[], range_beacon_count, range_beacons[], sonar_site) ---- */
+    BL_KINDS(BL_KIND_MEMBERS, CONFIG_SITE)
 
     /* ---- [receivers] ---- */
     uint32_t receiver_count;   /* count: 1..BL_MAX_RECEIVERS */
@@ -237,12 +165,8 @@ typedef struct bl_config {
     /* ---- per measurement source ([noise] and [tuning] keys; see above) ---- */
     bl_pulse_params pulse;  /* pulse arrival times (aid_pulse.cpp) */
     bl_wheel_params wheels; /* wheel encoders (odometry predict, aid_wheels.cpp) */
-#if BL_WITH_BEARINGS
-    bl_bearing_params bearing; /* bearings to the bearing beacons (aid_bearing.cpp) */
-#endif
-#if BL_WITH_RANGES
-    bl_range_params range; /* ranges to the range beacons (aid_range.cpp) */
-#endif
+    /* each measurement kind's block (kinds.h: bearing, range) */
+    BL_KINDS(BL_KIND_MEMBERS, CONFIG_PARAMS)
 
     /* ---- tuning shared by all sources: state, process noise, start-up, policy
      * ([tuning] in the bridge's site file; defaults from bl_config_default) ---- */
@@ -281,18 +205,7 @@ typedef struct bl_config {
                                          pulse further ahead finds the filter stale and
                                          it re-initialises itself from the snapshot of
                                          the fresh pulses (filter.h, "Time gaps") */
-#if BL_WITH_SONAR
-    uint32_t sonar_site; /* [sonar_ring] count > 0 (bridge): 1 = the robot has
-                                         a sonar ring and a wall map (filter.h
-                                         bl_filter_set_sonar; Hoppenot & Colle 1997), so a
-                                         site with no beacon of any kind is valid: the
-                                         filter starts from bl_filter_start with the known
-                                         start pose (as the paper's robot) and the sonar
-                                         corrects the odometry; 0 (default), 1. Only with
-                                         BL_WITH_SONAR (common.h): a build without it
-                                         (the M4 firmware) keeps its 2 KiB localizer */
-#endif
-} bl_config;
+};
 
 /* Fills *cfg with the kleeman-lab site (hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini)
  * and the default tuning. Always succeeds for a non-NULL cfg.

@@ -125,6 +125,7 @@
 #include "beaconloc/common.h"
 #include "beaconloc/config.h"
 #include "beaconloc/fusion.h"
+#include "beaconloc/kinds.h"
 #include "beaconloc/solver.h"
 #include "beaconloc/sonar.h"
 
@@ -132,8 +133,8 @@
 extern "C" {
 #endif
 
-/* State dimension and indices (documentation / tests; storage is private). */
-#define BL_FILTER_NX 10
+/* State indices (documentation / tests; storage is private); the
+ * dimension BL_FILTER_NX is common.h's. */
 enum {
     BL_IX_X = 0,     /* x_m */
     BL_IX_Y = 1,     /* y_m */
@@ -158,7 +159,7 @@ typedef struct bl_sos_drift {
 
 /* Caller-owned filter. All members are PRIVATE (storage only, so the
  * caller can place it statically): use the functions. */
-typedef struct bl_filter {
+struct bl_filter { /* typedef: common.h */
     bl_config cfg_;
     bl_real x_[BL_FILTER_NX];
     bl_real P_[BL_FILTER_NX * BL_FILTER_NX];
@@ -178,60 +179,10 @@ typedef struct bl_filter {
     uint32_t ring_mask_[BL_MAX_BEACONS]; /* receivers that heard it (bit per receiver) */
     uint32_t ring_explained_mask_;       /* beacons whose latest firing had a fused arrival */
     bl_sos_drift sos_drift_;
-#if BL_WITH_BEARINGS
-    /* bearings (aid_bearing.cpp): the latest of each bearing beacon, for the
-     * triangulation (re)start (snapshot_bearing.cpp), and the counters */
-    uint32_t bearing_valid_mask_;          /* bit j: bearing_t_us_[j] is valid */
-    int64_t bearing_t_us_[BL_MAX_BEACONS]; /* time of bearing beacon j's latest */
-    bl_real bearing_rad_[BL_MAX_BEACONS];  /* its bearing (rad, body frame) */
-    uint32_t bearing_accepted_[BL_MAX_BEACONS];
-    uint32_t bearing_rejected_[BL_MAX_BEACONS];
-    /* dead reckoning for the triangulation's motion compensation
-     * (bl_filter_track_wheels): a relative odometry pose, and with each kept
-     * bearing the track's pose at its time */
-    int64_t odo_t_us_;                           /* time of the track's last sample */
-    bl_real odo_[6];                             /* x, y (m), θ (rad) from the track's origin; Σ|d_left|,
-                                    Σ|d_right| (m), Σ|Δθ| (rad) along it */
-    bl_real odo_rate_[2];                        /* v (m/s), ω (rad/s) of the last increment */
-    uint32_t odo_track_;                         /* track number, +1 at every break; 0 = no track */
-    uint32_t bearing_odo_track_[BL_MAX_BEACONS]; /* track of bearing j's odo (0 = none) */
-    bl_real bearing_odo_[BL_MAX_BEACONS][6];     /* odo_ at bearing j's time */
-#endif
-#if BL_WITH_RANGES
-    /* ranges (aid_range.cpp): the latest time of flight of each range
-     * beacon, for the trilateration (re)start (snapshot_range.cpp), and the
-     * counters */
-    uint32_t range_valid_mask_;           /* bit j: range_t_us_[j] is valid */
-    int64_t range_t_us_[BL_MAX_BEACONS];  /* emission time of range beacon j's latest */
-    bl_real range_tof_s_[BL_MAX_BEACONS]; /* its time of flight (s) */
-    uint32_t range_accepted_[BL_MAX_BEACONS];
-    uint32_t range_rejected_[BL_MAX_BEACONS];
-#endif
-#if BL_WITH_TEAM
-    /* ranges to teammates (aid_team.cpp): the stationary beacon robots
-     * (bl_filter_set_team_beacons), their joint covariance, and the
-     * cross-covariance of this robot's state with their positions (the
-     * Schmidt "consider" block, rows BL_IX_*, columns x0, y0, x1, ...) */
-    uint32_t team_count_; /* beacon robots set (0: none) */
-    uint32_t team_mode_;  /* bl_team_mode */
-    uint32_t team_id_[BL_TEAM_MAX_BEACONS];
-    bl_beacon team_pos_[BL_TEAM_MAX_BEACONS];
-    bl_real team_Pbb_[4 * BL_TEAM_MAX_BEACONS * BL_TEAM_MAX_BEACONS];
-    bl_real team_C_[BL_FILTER_NX * 2 * BL_TEAM_MAX_BEACONS];
-    uint32_t team_accepted_[BL_TEAM_MAX_BEACONS];
-    uint32_t team_rejected_[BL_TEAM_MAX_BEACONS];
-#endif
-#if BL_WITH_SONAR
-    /* sonar ring (aid_sonar.cpp): the caller's map and ring
-     * (bl_filter_set_sonar; kept by pointer) and the counters */
-    const bl_map *sonar_map_;
-    const bl_sonar_ring *sonar_ring_;
-    uint32_t sonar_accepted_;  /* ranges fused */
-    uint32_t sonar_rejected_;  /* ranges rejected by the gate */
-    uint32_t sonar_unmatched_; /* valid ranges no segment explains (no segment in the beam) */
-    uint32_t sonar_dropped_;   /* bad ranges dropped (bl_sonar_drops' causes together) */
-#endif
-} bl_filter;
+    /* each measurement kind's buffers and counters (kinds.h, in its order; its
+     * aid_<kind>.h: BL_<KIND>_FILTER) */
+    BL_KINDS(BL_KIND_MEMBERS, FILTER)
+};
 
 /* Explicit start: a known pose and firing time. */
 typedef struct bl_filter_prior {
@@ -279,28 +230,10 @@ typedef struct bl_estimate {
     uint32_t reset_counter;            /* +1 on every (re-)initialisation after the first start */
     uint32_t accepted[BL_MAX_BEACONS]; /* per beacon index: pulses fused */
     uint32_t rejected[BL_MAX_BEACONS]; /* per beacon index: pulses rejected by the gate */
-#if BL_WITH_BEARINGS
-    uint32_t bearing_accepted[BL_MAX_BEACONS]; /* per bearing beacon index: bearings fused */
-    uint32_t bearing_rejected[BL_MAX_BEACONS]; /* per bearing beacon index: bearings rejected
-                                                  by the gate */
-#endif
-#if BL_WITH_RANGES
-    uint32_t range_accepted[BL_MAX_BEACONS]; /* per range beacon index: ranges fused */
-    uint32_t range_rejected[BL_MAX_BEACONS]; /* per range beacon index: ranges rejected by
-                                                the gate (multipath late arrivals) */
-#endif
-#if BL_WITH_TEAM
-    uint32_t team_range_accepted[BL_TEAM_MAX_BEACONS]; /* per team beacon slot (the order of
-                                                          bl_filter_set_team_beacons): fused */
-    uint32_t team_range_rejected[BL_TEAM_MAX_BEACONS]; /* ... rejected by the gate */
-#endif
-#if BL_WITH_SONAR
-    uint32_t sonar_accepted;  /* sonar ranges fused */
-    uint32_t sonar_rejected;  /* sonar ranges rejected by the gate (unknown obstacles, phantoms) */
-    uint32_t sonar_unmatched; /* valid sonar ranges with no map segment in the beam */
-    uint32_t sonar_dropped;   /* bad sonar ranges dropped (unknown or unused sensor, flags,
-                                 non-finite, outside [min_range_m, max_range_m]) */
-#endif
+    /* each measurement kind's counters (kinds.h, in its order; its aid_<kind>.h:
+     * bearing_accepted[], bearing_rejected[], range_accepted[], range_rejected[],
+     * team_range_accepted[], team_range_rejected[], sonar_accepted, ...) */
+    BL_KINDS(BL_KIND_MEMBERS, ESTIMATE)
     uint32_t wheel_speed_fused;   /* wheel-speed measurements (v and ω, each one) fused
                                      by bl_filter_predict_odometry (ungated) */
     uint32_t wheel_speed_refused; /* wheel-speed measurements refused: the update would
@@ -430,392 +363,14 @@ int bl_filter_predict(bl_filter *f, int64_t t_us);
 int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t arrival_us, uint32_t receiver_index,
                          bl_fusion_result *result);
 
-#if BL_WITH_BEARINGS /* common.h: not declared in a build without bearings */
-/* Fuse one bearing of bearing beacon bearing_beacon_index (0-based, into
- * cfg.bearing_beacons) taken at t_us: bearing_rad (rad) is the beacon's
- * direction seen from the sensor, body frame, CCW from the robot's +x axis,
- * any 2π wrap. Model (Vander et al. 2011 eq. 3 with the sensor's mount
- * offset (ox, oy) = cfg.bearing.offset_x_m/_y_m, body frame):
- *     h = atan2(yb - ys, xb - xs) - θ,
- *     (xs, ys) = (x, y) + R(θ)·(ox, oy),
- * the robot (x, y, θ) extrapolated from the state time to t_us with v, ω
- * (constant velocity and turn rate, midpoint heading as bl_filter_predict;
- * the state time is not changed), so a rotating sensor that times each
- * bearing itself is modelled at that instant. The innovation is wrapped to
- * (-π, π] in every IEKF iteration; σ = cfg.bearing.sigma_deg; gate
- * cfg.bearing.gate_sigma, twice that until converged (the start-up gate:
- * a pulse start gives a heading σ of up to 1 rad, where the linearised
- * bearing is poor); the shared update (fusion.h: IEKF, Joseph form).
- * Every bearing that returns BL_OK is kept as its beacon's latest (time
- * and value) for a triangulation (re)start.
- * Not started: kept (BL_FUSION_BUFFERED); the filter starts itself
- * (BL_FUSION_STARTED) from bl_solve_bearings (solver.h) once the kept
- * bearings within cfg.bearing.snapshot_window_s of the newest (twice
- * that when the odometry track motion-compensates them) cover >= 3
- * bearing beacons and the fix's drms is <= cfg.bearing.max_fix_drms_m
- * (see bl_filter_start_bearings). Stale (t_us more than
- * cfg.max_predict_gap_s after the state time): kept, and the same
- * triangulation restarts the filter (BL_FUSION_RESET) when possible.
- * Started and fresh: BL_FUSION_ACCEPTED or BL_FUSION_REJECTED (counted in
- * bl_estimate.bearing_rejected, state untouched).
- * *result (may be NULL): status; innovation (rad, wrapped) and its variance
- * (rad²), test ratio for ACCEPTED and REJECTED (0 otherwise); iterations.
- * Errors: BL_EINVAL (NULL f, non-finite bearing_rad, or an update that
- * would leave the state non-finite, or the sensor within 1 mm of the
- * beacon: refused), BL_ENOTINIT (not init), BL_EBEACON
- * (bearing_beacon_index >= cfg.bearing_beacon_count), BL_ETIME (t_us more
- * than cfg.max_predict_gap_s *before* the state time; before the start:
- * older than a kept bearing by more than that). On error *f is
- * byte-identical. Cost: O(NX²) per IEKF iteration (3 at most); a
- * (re)start adds one bl_solve_bearings. */
-int bl_filter_fuse_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us, bl_real bearing_rad,
-                           bl_fusion_result *result);
-
-/* Dead reckoning for the triangulation (re)start's motion compensation.
- * Call with every wheel sample, started or not (the localizer does): the
- * filter integrates a relative odometry pose (Kleeman 1992 eq. 24, the
- * midpoint form of Vander et al. 2011 eq. 2: d = (d_l + d_r)/2, δ = (d_r -
- * d_l)/wheel_base, x += d cos(θ + δ/2), y += d sin(θ + δ/2), θ += δ; nominal
- * wheel scales) from the wheel increments over (previous sample, t_us],
- * and keeps with every bearing the track's pose at the bearing's time
- * (extrapolated with the last increment's v, ω over at most 0.1 s; a
- * bearing further from the track's last sample gets none). Independent of
- * the state: bl_filter_predict_odometry does not feed it, and it changes
- * nothing but the track.
- * The track breaks (starts again at the origin, at t_us, with a new
- * number) on reference_only (no increment known: the first sample, an
- * encoder restart, a silence the caller could not bridge), or when t_us is
- * more than cfg.max_predict_gap_s after the previous sample; bearings on
- * different tracks are not compensated against each other.
- * Errors: BL_EINVAL (NULL, non-finite, |d| > 10 m), BL_ENOTINIT, BL_ETIME
- * (t_us not after the previous sample of the track). Cost: O(1). */
-int bl_filter_track_wheels(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real d_right_m, bool reference_only);
-
-/* Start (or restart) from the triangulation of the kept bearings: those
- * within cfg.bearing.snapshot_window_s of the newest, one per bearing
- * beacon (its latest), >= 3 beacons, solved by bl_solve_bearings (Vander
- * et al. 2011 eq. 1, with the sensor offset) with σ cfg.bearing.sigma_deg.
- * Motion compensation: the bearings within 2·cfg.bearing.snapshot_window_s
- * of the newest (0.5 s at the default) that have a pose on the newest one's
- * odometry track (bl_filter_track_wheels), when they cover >= 3 bearing
- * beacons; else those within one window, uncompensated (below). The fix is
- * then the pose at the newest bearing's time and each older bearing is
- * taken from where the
- * odometry puts the sensor then (solver.h: body_dx_m, body_dy_m,
- * body_dtheta_rad, the track's relative pose in the newest one's body
- * frame), so a moving robot's bearings from different scans are not
- * treated as simultaneous. The odometry's own error over the path from
- * bearing j to the newest, first order, is added to bearing j's variance:
- *     σ_j² = σ² + σθ_j² + σp_j² / r_j²,
- *     σθ_j² = sigma_wheel_per_m²·(L_l + L_r)/b² + (heading_noise_fraction·Ψ)²
- *             + heading_noise_rad_per_sqrt_s²·Δt + sigma_wheel_scale²·(L_l² + L_r²)/b²,
- *     σp_j² = (sigma_wheel_per_m²/2 + sigma_distance_per_m²)·L
- *             + (sigma_wheel_scale·L)² + L²·σθ_j²,
- * L_l, L_r each wheel's travel, L = (L_l + L_r)/2, Ψ the turn, Δt the time
- * between the two bearings, b the wheel base, r_j the beacon's distance
- * from the first fix (the filter's own odometry noise model, filter.h
- * predict_odometry, with the position σ taken whole across the line of
- * sight: conservative), then solved again.
- * Without it (no wheels, or fewer than 3 beacons on the newest bearing's
- * track) the bearings within one window are taken as simultaneous; the fix gives x, y and θ with their
- * covariance, the start's P block; when the filter runs, that block is
- * inflated by the motion over the window (variance + (|v|·span)² in x and
- * y, + (|ω|·span)² in θ, span = newest - oldest bearing used). v = ω = 0 with σ cfg.initial_sigma_v_mps,
- * cfg.initial_sigma_omega_radps. The state time becomes the newest
- * bearing's. s, T, t0 and the wheel scales: a started filter keeps them
- * (with their covariance); a first start takes s and T from cfg with their
- * σ, and t0 = the state time with σ one firing cycle (N·T; T on a
- * bearing-only site, where no measurement observes s, T or t0: nothing
- * divides by them, and convergence depends only on the position σ), so
- * the first pulse of a mixed site sets the firing time. Counts as a reset
- * if the filter was started before. This is the localizer's restart after
- * persistent rejection on a site with bearing beacons.
- * Errors: BL_EINVAL (NULL), BL_ENOTINIT, BL_EDEGENERATE (fewer than 3
- * bearing beacons in the window, or the solver refuses the geometry: the
- * sensor near the circle through the beacons, collinear beacons, or a
- * fix whose drms exceeds cfg.bearing.max_fix_drms_m), BL_ENOCONVERGE (the
- * solver did not converge, or a non-finite fix). On error *f is
- * byte-identical. */
-int bl_filter_start_bearings(bl_filter *f);
-#endif /* BL_WITH_BEARINGS */
-
-#if BL_WITH_RANGES /* common.h: not declared in a build without ranges */
-/* Fuse one time of flight from range beacon range_beacon_index (0-based,
- * into cfg.range_beacons): the beacon emitted its RF sync and ultrasonic
- * pulse at t_us (the receiver's clock: the RF sync marks the emission, as
- * in the CMU Millibots' ranging) and the receiver heard the ultrasound
- * time_of_flight_s (s) later. Model (Kleeman 1992 eq. 21's flight term,
- * without its firing time: the RF sync gives it):
- *     h = |p_rx - b| / s,
- *     p_rx = ((x, y) + R(θ)·(ox, oy), cfg.range.height_m)   (3D, m),
- * (ox, oy) = cfg.range.offset_x_m/_y_m (body frame), s the speed-of-sound
- * state (so the ranges calibrate s too), the robot (x, y, θ) extrapolated
- * from the state time to the reception instant t_us + time_of_flight_s
- * with v, ω (constant velocity and turn rate, midpoint heading as
- * bl_filter_predict; the state time is not changed). σ of the time of
- * flight = (cfg.range.sigma_m + cfg.range.sigma_per_m·d)/s, d the
- * predicted range (m); gate cfg.range.gate_sigma, twice that until
- * converged and while the heading σ exceeds 0.3 rad (a start from ranges
- * has no heading: the first motion is predicted in a wrong direction, its
- * covariance grows with the motion, and the wide gate passes the ranges
- * that show the heading; a standing robot's multipath arrivals are
- * rejected; multipath while moving in that phase can lock a wrong
- * heading: lib/README.md);
- * the shared update (fusion.h: IEKF, 2 iterations, Joseph form). Multipath late arrivals (a reflection heard instead of the direct
- * path; Millibots §3.2) fall outside the gate: BL_FUSION_REJECTED, counted
- * in bl_estimate.range_rejected, state untouched.
- * Every range that returns BL_OK is kept as its beacon's latest for a
- * trilateration (re)start. Not started: kept (BL_FUSION_BUFFERED); the
- * filter starts itself (BL_FUSION_STARTED) as bl_filter_start_ranges
- * does, once possible. Stale (t_us more than cfg.max_predict_gap_s after
- * the state time): kept, and the trilateration restarts the filter
- * (BL_FUSION_RESET) when possible.
- * *result (may be NULL): status; innovation (s) and its variance (s²),
- * test ratio for ACCEPTED and REJECTED (0 otherwise); iterations.
- * Errors (*f byte-identical): BL_EINVAL (NULL f; time_of_flight_s not
- * finite or negative; a range s·time_of_flight_s beyond
- * 1.5·cfg.range.max_range_m (s: the state's speed of sound, cfg's before
- * the start): no direct path is that long, the factor leaves room for a
- * sensor that reports a little past its rated range and for an s error
- * of up to 50 %; an update that would leave the state non-finite, or the
- * receiver within 1 mm of the beacon), BL_ENOTINIT, BL_EBEACON
- * (range_beacon_index >= cfg.range_beacon_count), BL_ETIME (t_us more than
- * cfg.max_predict_gap_s before the state time; before the start: older
- * than a kept range by more than that). Cost: O(NX²) per IEKF iteration
- * (2 at most); a (re)start adds two bl_solve_ranges_2d. */
-int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, bl_real time_of_flight_s,
-                         bl_fusion_result *result);
-
-/* Start (or restart) from the trilateration of the kept ranges: the latest
- * of each range beacon within cfg.range.snapshot_window_s of the newest,
- * covering min(4, N) range beacons (as the pulse snapshot: with 4 the fix
- * is over-determined and a multipath range shows), ranges = s·time of flight (s: the state's on a
- * running filter, cfg.speed_of_sound_mps on a first start), solved by
- * bl_solve_ranges_2d (solver.h) at the receiver height cfg.range.height_m
- * with the mount offset taken as zero for the fix: the offset turns with
- * the unknown heading, so the fix is the receiver's, and the wheel-base
- * centre is put there with the offset's length added to its σ.
- * Refused unless the fix is unambiguous (no mirror solution within the
- * beacons' collinearity: solver.h), explains the ranges (with more than 3:
- * rms residual <= 3 σ, σ the largest range σ with its speed-of-sound share
- * d·σs/s added) and its drms is <= cfg.range.max_fix_drms_m.
- * Ranges give no heading: a running filter keeps its heading (σ grown to
- * at least cfg.reset_sigma_theta_rad), a first start takes
- * cfg.initial_theta_rad with σ cfg.reset_sigma_theta_rad (large: the
- * heading is learned from the motion, ranges against odometry). Position
- * covariance from the solver plus the speed-of-sound uncertainty
- * (∂p/∂s by a second solve at s + 1 m/s: the (x, y)-s cross-covariance
- * is kept) and, on a running filter, the motion over the window
- * ((|v|·span)² per axis). v = ω = 0 with σ cfg.initial_sigma_v_mps,
- * cfg.initial_sigma_omega_radps. The state time becomes the newest range's
- * emission time t_us (the fix is the receiver's at about then: the ranges
- * of one window are a few ms of flight apart from their emissions). s, T, t0 and the wheel scales: as bl_filter_start_bearings.
- * Counts as a reset if the filter was started before.
- * Errors (*f byte-identical): BL_EINVAL (NULL), BL_ENOTINIT,
- * BL_EDEGENERATE (fewer than min(4, N) range beacons in the window,
- * singular or ambiguous geometry, or a drms above cfg.range.max_fix_drms_m),
- * BL_ENOCONVERGE (the solver did not converge, a residual above 3 σ, or a
- * non-finite fix). */
-int bl_filter_start_ranges(bl_filter *f);
-
-/* The range model at state x (tests, diagnostics): the time of flight h_s
- * (s) from range beacon range_beacon_index to the receiver at dt_s (s)
- * after the state time, and H = ∂h/∂x (s per unit of each state; may be
- * NULL). Errors: BL_EINVAL (NULL, non-finite, receiver within 1 mm of the
- * beacon, s <= 0), BL_EBEACON. */
-int bl_model_range(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t range_beacon_index, bl_real dt_s,
-                   bl_real *h_s, bl_real H[BL_FILTER_NX]);
-#endif /* BL_WITH_RANGES */
-
-#if BL_WITH_TEAM /* common.h: not declared in a build without the team */
-/* ---- Ranges to teammates whose positions are uncertain ----
- * The CMU Millibots (§3.3): no fixed beacon; three robots stand still and
- * serve as beacons while the others move, their positions known only from
- * the team's own ranges (bl_solve_team), i.e. with a covariance, and
- * correlated (they share ranges). A range to such a robot has two error
- * sources: the ping's own noise, new at every ping, and the beacon robot's
- * position error, the SAME at every ping until it moves. Three ways to
- * let the second enter (issue 13):
- *   (a) inflate R by the beacon's covariance, R + H_b P_b H_bᵀ: simple, but
- *       every ping is then treated as carrying an independent beacon error,
- *       so after n pings the filter believes it has averaged it down by
- *       √n: over-confident (measured: tests/lib/test_filter_team.c, mean
- *       NEES of (x, y) 7.9 where (b) gives 1.9, 2 expected; lib/README.md);
- *   (b) a Schmidt "consider" update (Schmidt 1966; Simon 2006, "Optimal
- *       State Estimation", §7.5): the beacons' positions are extra states
- *       that are never updated (gain rows zero) but whose covariance and
- *       cross-covariance with this robot's state are kept, through every
- *       predict and update; the robot's covariance then stays above the
- *       beacons' floor. Cost O((NX + 2K)²) per update, 2K = 2 x
- *       BL_TEAM_MAX_BEACONS extra states, and the same per predict while
- *       beacons are set; the beacons' estimates are not improved;
- *   (c) one joint filter of the whole team: the best estimate (the
- *       beacons improve too) but one state for all robots on one host,
- *       O((NX·N)²), and every robot's predict in it.
- * Chosen: (b), BL_TEAM_CONSIDER (the default): consistent (tested: mean
- * NEES of (x, y) over 200 Monte Carlo runs inside its chi-square 95 %
- * band), one robot per filter as on a Millibot, and it goes through the
- * one shared update (fusion.hpp: fuse_scalar on the augmented state with
- * n_solve = NX). (a) is kept, BL_TEAM_INFLATE, only to show the
- * difference (the test measures it). A consider update does not improve
- * the beacons' positions: the team's own estimate of them is the
- * bl_solve_team survey (repeat it with more pings to tighten it). */
-typedef enum bl_team_mode {
-    BL_TEAM_CONSIDER = 0, /* (b) Schmidt consider update (default) */
-    BL_TEAM_INFLATE = 1   /* (a) R inflated, cross-covariance dropped: over-confident */
-} bl_team_mode;
-
-typedef struct bl_team_beacons {
-    uint32_t count;                         /* K stationary beacon robots, 1..BL_TEAM_MAX_BEACONS */
-    uint32_t robot_id[BL_TEAM_MAX_BEACONS]; /* the caller's ids (e.g. the team solution's
-                                                  indices), pairwise distinct: what
-                                                  bl_filter_fuse_team_range takes */
-    bl_beacon pos[BL_TEAM_MAX_BEACONS];     /* x_m, y_m in the team frame (m); z_m the
-                                                  emitter's height (m), as range_beacons */
-    /* Joint covariance of (x0, y0, x1, y1, ...) of the K robots, row-major
-     * with row stride 2·BL_TEAM_MAX_BEACONS (m²), symmetric PSD; entries
-     * beyond 2K ignored. Zero where the gauge holds a coordinate. */
-    bl_real cov[4 * BL_TEAM_MAX_BEACONS * BL_TEAM_MAX_BEACONS];
-    /* Cross-covariance of this robot's (x, y) (rows) with the beacons'
-     * coordinates (columns x0, y0, x1, ...), row-major 2 x (2·BL_TEAM_MAX_BEACONS)
-     * (m²): non-zero when this robot's start came from the same team solve;
-     * all zero when its pose is independent of them. */
-    bl_real cross[4 * BL_TEAM_MAX_BEACONS];
-    uint32_t mode; /* bl_team_mode */
-} bl_team_beacons;
-
-/* Fill *out from a team solution (solver.h): the robots robots[0..count-1]
- * (indices into the solution) as beacons, their joint covariance, the
- * cross-covariance with robot self (BL_TEAM_NONE: zero), emitters at
- * height z_m, robot_id[k] = robots[k], mode BL_TEAM_CONSIDER.
- * Errors (*out untouched): BL_EINVAL (NULL, count outside
- * 1..BL_TEAM_MAX_BEACONS, an index >= sol->count, repeated, equal to self,
- * z_m not finite). */
-int bl_team_beacons_from_solution(const bl_team_solution *sol, const uint32_t *robots, uint32_t count, uint32_t self,
-                                  bl_real z_m, bl_team_beacons *out);
-
-/* Set (or replace: a leap-frog) the stationary beacon robots of a started
- * filter. The cross-covariance of this robot's state with a beacon that
- * was already set (same robot_id) is kept; with a new one it is b->cross
- * for (x, y), zero for the other states. The augmented covariance
- * [[P, C], [Cᵀ, cov]] must be positive semi-definite (checked). While
- * beacons are set in BL_TEAM_CONSIDER mode, every predict also carries
- * the cross-covariance (F C) and fuses the wheel speeds in the augmented
- * state; pulses, bearings and fixed-beacon ranges are refused
- * (BL_ECONFIG: their updates would not carry it). count 0 clears the team
- * (the cross-covariance is dropped). Any (re)start of the filter drops
- * the cross-covariance (the new pose is taken as independent of the
- * beacons) but keeps the beacons.
- * Errors (*f byte-identical): BL_EINVAL (NULL, count > BL_TEAM_MAX_BEACONS,
- * repeated ids, a non-finite entry, cov not symmetric, the augmented
- * covariance not PSD: a negative variance, or its correlation matrix's
- * least eigenvalue below -1e-9 (-1e-4 with float); mode unknown),
- * BL_ENOTINIT (not started). */
-int bl_filter_set_team_beacons(bl_filter *f, const bl_team_beacons *b);
-
-/* Fuse one time of flight from team beacon robot robot_id (bl_team_beacons):
- * as bl_filter_fuse_range (the same model, h = |p_rx - b|/s with the
- * robot extrapolated to the reception instant, the same σ, gates and IEKF),
- * with b the beacon robot's estimated position, whose uncertainty enters
- * by the chosen mode (above): CONSIDER: the shared update on the state
- * augmented with the beacons' coordinates (∂h/∂b = -∂h/∂p_rx), the
- * beacons as consider states; INFLATE: R += H_b P_b H_bᵀ.
- * Not started: BL_ENOTINIT (a team robot starts from the team solve:
- * bl_filter_start). No trilateration restart from team ranges.
- * *result (may be NULL): as bl_filter_fuse_range.
- * Errors (*f byte-identical): BL_EINVAL (NULL f; time_of_flight_s not
- * finite or negative, or a range s·tof beyond 1.5·cfg.range.max_range_m;
- * the model undefined, or a non-finite update), BL_ENOTINIT, BL_EBEACON
- * (robot_id not a set beacon), BL_ETIME (t_us more than
- * cfg.max_predict_gap_s before or after the state time: predict first).
- * Cost: O((NX + 2·BL_TEAM_MAX_BEACONS)²) per IEKF iteration (2 at most). */
-int bl_filter_fuse_team_range(bl_filter *f, uint32_t robot_id, int64_t t_us, bl_real time_of_flight_s,
-                              bl_fusion_result *result);
-#endif /* BL_WITH_TEAM */
-
-#if BL_WITH_SONAR /* common.h: not declared in a build without sonar */
-/* Replace the pose (x_m, y_m, theta_rad: wheel-base centre and heading in
- * the site frame) at t_us, keeping the covariance and every other state:
- * for running an external corrector's output (sonar.h: the pin-point and
- * memory correctors) in the filter's place, as the paper's robot replaces
- * its odometric pose. The state is first predicted to t_us with the
- * constant-velocity model (bl_filter_predict) if t_us is after the state
- * time. The heading is wrapped. Not a reset (the reset counter is not
- * bumped): P is kept, so the filter's σ no longer describes the pose's
- * error; for comparisons, not for fusion.
- * Errors (*f byte-identical): BL_EINVAL (NULL f, non-finite pose, |x|, |y|
- * > 1e5 m), BL_ENOTINIT (not started), BL_ETIME (t_us before the state
- * time or more than cfg.max_predict_gap_s after it). */
-int bl_filter_set_pose(bl_filter *f, int64_t t_us, bl_real x_m, bl_real y_m, bl_real theta_rad);
-
-/* ---- A sonar ring against a map of walls (sonar.h; Hoppenot & Colle
- * 1997 give the physics and the association, the fusion goes beyond the
- * paper: every range through the shared update, with a covariance) ----
- * Set (or replace, or clear with both NULL) the map and the ring whose
- * ranges bl_filter_fuse_sonar fuses. The filter keeps the POINTERS (the
- * caller owns both and their arrays, and keeps them alive and unchanged
- * while set). Any filter state; counters kept.
- * Errors (*f byte-identical): BL_EINVAL (NULL f; one of map, ring NULL and
- * the other not; a map or ring failing bl_map_check / bl_sonar_ring_check),
- * BL_ENOTINIT (f not initialised). */
-int bl_filter_set_sonar(bl_filter *f, const bl_map *map, const bl_sonar_ring *ring);
-
-/* Fuse one range of the ring, pinged at t_us (the ring node's time mapped
- * on the caller's timebase).
- * Model (one scalar, through the shared update, fusion.h): the transducer
- * at p_s = (x, y) + v·dt·(cos φm, sin φm) + R(θ + ω dt)·m_i (the state
- * extrapolated to t_us as bl_filter_fuse_range does, m_i the mount offset),
- * its beam axis θ + ω dt + θ_i. A specular wall returns the PERPENDICULAR
- * distance when its normal lies inside the beam cone, a corner (a
- * segment's end point: a room corner, a door jamb) its own distance; the
- * predicted range is the distance to the associated echo point:
- *     h = |n·(p_s − A)|   the wall's line (Hoppenot & Colle eq. 3, applied
- *                         to the transducer instead of the impact), n its
- *                         unit normal, A a point of it;
- *     h = |p_s − E|       an end point E (eq. 4);
- * ∂h/∂(x, y) = u (the unit vector from the echo point to p_s),
- * ∂h/∂θ = u·(v dt(−sin φm, cos φm) + R'(θ + ω dt) m_i), ∂h/∂v, ∂h/∂ω
- * likewise.
- * Association (the paper's nearest-segment matching, made for a beam): the
- * echo points are each segment's perpendicular foot when it lies on the
- * segment, and its two end points; a point is a candidate when it lies
- * inside the beam cone (within ring.beam_width_rad/2 of the predicted axis,
- * widened by 3 σ of the heading, at most to π/2) — a wall whose normal
- * points outside the cone gives no specular echo; of the candidates, the
- * one whose distance is nearest the measured range. No candidate: counted
- * as unmatched (bl_estimate.sonar_unmatched), state untouched.
- * σ of a range r: max(ring.sigma_range_m, ring.sigma_range_rel·r); gate: 3 σ
- * of the innovation (chi-square, 1 dof) — an unknown obstacle or a phantom
- * from multiple reflections is rejected and counted (sonar_rejected); the
- * ring's gate_m is the correctors' association gate, not used here (the
- * filter knows its own uncertainty); IEKF 2 iterations, Joseph form.
- * HEADING: a single burst does not observe the heading when the sonar
- * returns perpendicular distances: h depends on θ only through the mount
- * offset (∂h/∂θ = u·R'm_i, ~0 for a transducer on the ring's radius aimed
- * along it) and the association. The filter does not invent it: H carries
- * the true (near-zero) θ entry, so a burst of perpendicular returns leaves
- * θ's σ as predicted. Heading is observed through the motion — the
- * odometry prediction correlates position with heading (a heading error
- * displaces the robot sideways as it drives), and the walls see that
- * displacement, so successive bursts correct θ through the x-θ, y-θ
- * covariance — and through corner returns (∂h/∂θ ≠ 0). The same
- * correlation calibrates the wheel scales (BL_IX_KL, BL_IX_KR): an
- * asymmetric wheel-diameter error (the paper's degradation) is learned,
- * not only corrected.
- * Bad data (BL_OK, counted in bl_estimate.sonar_dropped, state untouched):
- * unknown sensor, unused sensor (ring.unused_mask), a flag set, non-finite
- * range, range outside [min_range_m, max_range_m].
- * *result (may be NULL): status ACCEPTED / REJECTED (innovation in m,
- * variance in m², test ratio, iterations); DROPPED with zeros for a range
- * dropped or unmatched (nothing fused).
- * Errors (*f byte-identical): BL_EINVAL (NULL f, an update that would
- * leave the state non-finite), BL_ENOTINIT (not started: a sonar site
- * starts from bl_filter_start), BL_ECONFIG (no map and ring set), BL_ETIME
- * (t_us more than cfg.max_predict_gap_s before or after the state time:
- * predict first).
- * Cost O(map.count) for the association + O(NX²) per IEKF iteration. */
-int bl_filter_fuse_sonar(bl_filter *f, int64_t t_us, const bl_sonar_range *range, bl_fusion_result *result);
-#endif /* BL_WITH_SONAR */
+/* Each measurement kind's entry points (fuse, start, model), its
+ * measurement and params: its header, aid_<kind>.h (kinds.h, included
+ * above): aid_bearing.h (bl_filter_fuse_bearing, bl_filter_track_wheels,
+ * bl_filter_start_bearings, bl_model_bearing), aid_range.h
+ * (bl_filter_fuse_range, bl_filter_start_ranges, bl_model_range),
+ * aid_team.h (bl_team_beacons, bl_filter_set_team_beacons,
+ * bl_filter_fuse_team_range), aid_sonar.h (bl_filter_set_sonar,
+ * bl_filter_fuse_sonar, bl_filter_set_pose). */
 
 /* Raw state and covariance (layout BL_IX_*; t0 relative to the internal
  * epoch; P row-major NXxNX in the units of the states, e.g. P[T0][T0] s²),

@@ -36,15 +36,8 @@ typedef struct bl_pulse_geometry {
 int bl_model_pulse(const bl_config *cfg, const bl_real x[BL_FILTER_NX], const bl_pulse_geometry *g, bl_real *h_rel_s,
                    bl_real H[BL_FILTER_NX]);
 
-/* Bearing model (Vander et al. 2011 eq. 3 with the sensor mount offset
- * cfg->bearing.offset_x_m/_y_m, the robot extrapolated dt_s after the state
- * time with v, ω; filter.h, bl_filter_fuse_bearing): *h_rad = predicted
- * bearing of bearing beacon bearing_beacon_index, body frame, wrapped to
- * (-π, π]; H (BL_FILTER_NX, optional) = ∂h/∂x (rad per unit of each state).
- * Errors: BL_EINVAL (NULL cfg/x/h_rad, non-finite x or dt_s, sensor within
- * 1 mm of the beacon), BL_EBEACON (index >= cfg->bearing_beacon_count). */
-int bl_model_bearing(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t bearing_beacon_index, bl_real dt_s,
-                     bl_real *h_rad, bl_real H[BL_FILTER_NX]);
+/* The measurement kinds' models (bl_model_bearing, bl_model_range): their
+ * headers, aid_<kind>.h (kinds.h). */
 
 /* Odometry transition (Kleeman 1992 eq. 24 input form; differential drive)
  * over measured wheel increments d_left_m, d_right_m, scaled by the state's

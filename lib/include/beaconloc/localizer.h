@@ -125,6 +125,7 @@
 #include "beaconloc/config.h"
 #include "beaconloc/filter.h"
 #include "beaconloc/fusion.h"
+#include "beaconloc/kinds.h"
 #include "beaconloc/sequencer.h"
 
 #ifdef __cplusplus
@@ -141,32 +142,6 @@ extern "C" {
  * full the oldest is dropped, counted in events_dropped). */
 #ifndef BL_LOC_EVENT_QUEUE
 #define BL_LOC_EVENT_QUEUE 4
-#endif
-
-#if BL_WITH_BEARINGS /* common.h */
-/* One bearing from the omnidirectional bearing sensor (bl_filter_fuse_bearing). */
-typedef struct bl_bearing_meas {
-    int64_t t_us;          /* time the bearing was taken (a rotating sensor times each
-                              bearing itself), us, the caller's timebase */
-    uint32_t beacon_index; /* 0-based bearing beacon (cfg.bearing_beacons), not a pulse
-                              beacon's index */
-    bl_real bearing_rad;   /* body frame, CCW from the robot's +x axis, rad, any 2π wrap
-                              (|.| <= 1000) */
-    uint32_t tag;          /* caller's tag, never read by the library */
-} bl_bearing_meas;
-#endif
-
-#if BL_WITH_RANGES /* common.h */
-/* One time of flight from a fixed range beacon (bl_filter_fuse_range; the
- * DBC RANGE frame 0x130). */
-typedef struct bl_range_meas {
-    int64_t t_us;             /* emission time of the pulse (the RF sync) on the caller's
-                                   timebase (the frame's NodeTime, unwrapped), us */
-    uint32_t beacon_index;    /* 0-based range beacon (cfg.range_beacons): the frame's
-                                   Beacon field minus 1 */
-    bl_real time_of_flight_s; /* ultrasonic time of flight (s), >= 0 */
-    uint32_t tag;             /* caller's tag, never read by the library */
-} bl_range_meas;
 #endif
 
 /* Wheel travel since the previous sample (differential drive). */
@@ -239,23 +214,9 @@ typedef struct bl_loc_counters {
     uint32_t seq_resyncs;      /* sequencer re-synchronised from the filter */
     uint32_t events_dropped;   /* events lost because the queue was full */
     uint32_t known_starts;     /* (re)starts from a known pose (bl_localizer_start) */
-#if BL_WITH_BEARINGS
-    uint32_t bearings_fused;    /* bearings fused (accepted, started, reset) */
-    uint32_t bearings_rejected; /* bearings rejected by the gate */
-    uint32_t bearings_buffered; /* bearings kept for the triangulation (not started / stale) */
-    uint32_t bearings_refused;  /* bearings refused: unknown bearing beacon, non-finite or
-                                   out of range (an error returned), or refused by the
-                                   filter (a non-finite update; BL_OK) */
-#endif
-#if BL_WITH_RANGES
-    uint32_t ranges_fused;    /* ranges fused (accepted, started, reset) */
-    uint32_t ranges_rejected; /* ranges rejected by the gate (multipath, kidnap) */
-    uint32_t ranges_buffered; /* ranges kept for the trilateration (not started / stale) */
-    uint32_t ranges_refused;  /* ranges refused: unknown range beacon, non-finite or
-                                 negative time of flight (an error returned), or refused
-                                 by the filter (beyond 1.5·range.max_range_m, a
-                                 non-finite update; BL_OK) */
-#endif
+    /* each measurement kind's counters (kinds.h, in its order; its aid_<kind>.h:
+     * bearings_fused, ..., ranges_fused, ...) */
+    BL_KINDS(BL_KIND_MEMBERS, LOC_COUNTERS)
 } bl_loc_counters;
 
 /* Summary for health reports. */
@@ -276,7 +237,7 @@ typedef struct bl_loc_status {
 /* Caller-owned localizer. Members are PRIVATE except `filter` and `seq`,
  * which may be read (not written) through their own const functions
  * (bl_filter_estimate, bl_sequencer_state, seq.counters). */
-typedef struct bl_localizer {
+struct bl_localizer { /* typedef: common.h */
     bl_filter filter;
     bl_sequencer seq;
     /* ---- private ---- */
@@ -308,7 +269,7 @@ typedef struct bl_localizer {
                                     off the stack: the fusion's snapshot start is the
                                     deepest call chain). The pulse itself is read where
                                     the sequencer keeps it (its freed pending slot). */
-} bl_localizer;
+};
 
 /* The sequencer config for a site (bl_sequencer_config_from_site with the
  * robot inside the beacons' hull; for a site with no ultrasonic beacons,
@@ -360,41 +321,8 @@ int bl_localizer_detection(bl_localizer *loc, const bl_seq_detection *det);
  * skipped, the policy above applied. Errors: BL_EINVAL (NULL), BL_ENOTINIT. */
 int bl_localizer_advance(bl_localizer *loc, int64_t now_us);
 
-#if BL_WITH_BEARINGS /* common.h: not declared in a build without bearings */
-/* One bearing (Vander et al. 2011 eq. 3; bl_filter_fuse_bearing): after a
- * constant-velocity predict when the wheels are silent (as pulses), fused
- * or gated; before the start (or when stale) kept until the bearings of one
- * window cover 3 bearing beacons and the filter starts from their
- * triangulation (event STARTED, or RESET cause SNAPSHOT). Rejections enter
- * the persistent-rejection window with the pulses (policy above). A bearing
- * older than the state by more than cfg.max_predict_gap_s re-initialises
- * the filter (cause STALE_PULSE), as a pulse does. *res (may be NULL): the
- * filter's fusion result.
- * Errors: BL_EINVAL (NULL loc or m), BL_ENOTINIT; and, counted in
- * bearings_refused (the only change to *loc then): BL_EBEACON
- * (beacon_index >= cfg.bearing_beacon_count), BL_EINVAL (bearing not
- * finite or |bearing| > 1000 rad, |t_us| > BL_SEQ_TIME_LIMIT_US). */
-int bl_localizer_bearing(bl_localizer *loc, const bl_bearing_meas *m, bl_fusion_result *res);
-#endif
-
-#if BL_WITH_RANGES /* common.h: not declared in a build without ranges */
-/* One time of flight (bl_filter_fuse_range): as bl_localizer_bearing —
- * after a constant-velocity predict when the wheels are silent, fused or
- * gated; before the start (or when stale) kept until the ranges of one
- * window (cfg.range.snapshot_window_s) cover 3 range beacons with an
- * unambiguous fix and the filter starts from their trilateration (event
- * STARTED, or RESET cause SNAPSHOT); rejections enter the
- * persistent-rejection window (policy above); a range older than the
- * state by more than cfg.max_predict_gap_s re-initialises the filter
- * (cause STALE_PULSE). A range the filter refuses (beyond
- * 1.5·cfg.range.max_range_m: no direct path is that long) is counted in
- * ranges_refused, BL_OK. *res (may be NULL): the filter's fusion result.
- * Errors: BL_EINVAL (NULL loc or m), BL_ENOTINIT; and, counted in
- * ranges_refused (the only change to *loc then): BL_EBEACON
- * (beacon_index >= cfg.range_beacon_count), BL_EINVAL (time of flight not
- * finite or negative, |t_us| > BL_SEQ_TIME_LIMIT_US). */
-int bl_localizer_range(bl_localizer *loc, const bl_range_meas *m, bl_fusion_result *res);
-#endif
+/* Each measurement kind's input (bl_localizer_bearing, bl_localizer_range)
+ * and its measurement struct: its header, aid_<kind>.h (kinds.h). */
 
 /* Start, or restart, from a known pose: a robot placed in its start zone
  * (Eurobot), or put back by hand. The filter starts from *prior

@@ -6,7 +6,7 @@
  *   - the pin-point corrector (§3.1): bl_pinpoint_correct;
  *   - the pin-point corrector with memory (§3.2): bl_memory_corrector.
  * The filter's own sonar fusion (going beyond the paper: every range through
- * the shared measurement update, with a covariance) is in filter.h:
+ * the shared measurement update, with a covariance) is in aid_sonar.h:
  * bl_filter_set_sonar, bl_filter_fuse_sonar.
  *
  * Conventions (common.h): caller-owned structs, no heap, no clock; a

@@ -7,7 +7,7 @@
  * computer (the bridge). It is built from the library's team blocks:
  * the team solve from pairwise ranges (solver.h bl_solve_team, the survey),
  * the mirror flip (bl_team_mirror), and per moving robot one bl_filter with
- * ranges to its stationary teammates as consider states (filter.h
+ * ranges to its stationary teammates as consider states (aid_team.h
  * bl_filter_set_team_beacons, bl_filter_fuse_team_range).
  *
  * Caller-owned, no heap. All times (t_us) are on ONE team timebase chosen by
