@@ -46,8 +46,9 @@ AFTER_S = 20.0                    # the benchmark's start-up, s
 RUN_S = 120.0                     # the swings' span, s
 
 
-def _ramp(kelvin: float):
-    return lambda t: 20.0 + kelvin * t / RUN_S
+def _ramp(kelvin: float, start_s: float = 0.0):
+    """kelvin over RUN_S from start_s on (before it and after it, still)."""
+    return lambda t: 20.0 + kelvin * np.clip((t - start_s) / RUN_S, 0.0, 1.0)
 
 
 def _up_and_back(kelvin: float):
@@ -57,10 +58,13 @@ def _up_and_back(kelvin: float):
 # the worlds: temperature (C) of the time (s); still air first. The swings item 1 names, "a
 # 10 C and a 20 C swing over 2 minutes", either way: ramps of 10 and 20 C over the 2 minutes
 # (temperature-swing20 is the +20 C one: 0.097 m/s^2) and the 10 C swing up and back
-# (temperature-swing10's shape: the same rate, reversed at 60 s).
+# (temperature-swing10's shape: the same rate, reversed at 60 s). With --shifted also the 20 C
+# ramps met by a run that starts 30 s into them or 30 s before them (a robot is not started
+# as the air begins to change).
 WORLDS = {"still": lambda t: np.full_like(t, 20.0)}
 WORLDS.update({f"ramp{k:+d}": _ramp(k) for k in (10, 20, -10, -20)})
 WORLDS.update({f"swing{k:+d}": _up_and_back(k) for k in (10, -10)})
+SHIFTED = {f"ramp{k:+d}@{s:+d}s": _ramp(k, s) for k in (20, -20) for s in (-30, 30)}
 COMPONENTS = {"sos": [crb.IS], "position": [crb.IX, crb.IY]}
 DRAWS = 400                       # Monte Carlo draws of the log-likelihood ratios (the search)
 FINAL_DRAWS = 8000                # the same at the prior found, each with its antithetic twin
@@ -153,7 +157,11 @@ def main() -> int:
     ap.add_argument("--final-draws", type=int, default=FINAL_DRAWS)
     ap.add_argument("--rng", type=int, default=14, help="seed of the Monte Carlo draws")
     ap.add_argument("--components", default=",".join(COMPONENTS))
+    ap.add_argument("--shifted", action="store_true", help="also the 20 C ramps met 30 s into "
+                    "them or 30 s before them")
     args = ap.parse_args()
+    if args.shifted:
+        WORLDS.update(SHIFTED)
     normal = np.random.default_rng(args.rng).standard_normal((args.draws, len(WORLDS) - 1))
     runs = [one_seed(s, args.path) for s in range(1, args.seeds + 1)]
     n = sum(w.P.shape[0] for w, _ in runs)
