@@ -481,18 +481,22 @@ static int check_team(const struct bridge_config *cfg, struct parse_ctx *ctx)
              "%d: a team needs 3..8 robots (0: not a team site)", t->robots);
         return -1;
     }
+    /* the fixed beacons: every per-item section the library holds as an
+     * array of beacons (SITE_LIB_ITEMS: [beacons], [bearing_beacons], ...) */
     static const struct {
-        const char *section;
+        const char *section, *key;
         size_t offset;
     } fixed[] = {
-        {"beacons", offsetof(struct bridge_config, beacon_count)},
-        {"bearing_beacons", offsetof(struct bridge_config, bearing_beacon_count)},
-        {"range_beacons", offsetof(struct bridge_config, range_beacon_count)},
+#define FIXED(sec, pfx, count_sec, count_member, array, k)                                         \
+    {#count_sec, SITE_ITEM_COUNT_KEY_##pfx, offsetof(struct bridge_config, count_member)},
+        SITE_LIB_ITEMS(FIXED)
+#undef FIXED
     };
     for (size_t i = 0; i < sizeof fixed / sizeof fixed[0]; i++) {
         int n = *(const int *)(const void *)((const char *)cfg + fixed[i].offset);
         if (n != 0) {
-            fail(ctx, key_line_of(ctx, fixed[i].section, "count"), fixed[i].section, "count",
+            fail(ctx, key_line_of(ctx, fixed[i].section, fixed[i].key), fixed[i].section,
+                 fixed[i].key,
                  "%d on a team site ([team] robots = %d): the robots are the beacons, count = 0", n,
                  t->robots);
             return -1;

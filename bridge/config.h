@@ -11,7 +11,11 @@
  * in the site schema hw_sim/beaconloc_sim/data/site_schema.toml; the tables
  * of config.c are generated from it at build time (site_keys.h,
  * bridge/site_schema.mk), so a key here is a member below with the schema's
- * name (a schema key without its member does not compile).
+ * name (a schema key without its member does not compile). The members of a
+ * kind's own sections are generated too: the counts of per-item sections
+ * (SITE_COUNT_MEMBERS), the items (SITE_ITEM_SECTIONS) and every group of
+ * numeric keys "<group>.<key>" as struct config_<group> (SITE_GROUPS), so a
+ * new kind's sections need no edit here.
  * Our sections are [beacons], [beaconN], [receivers], [bearing_beacons],
  * [bearing_beaconN], [bearing_sensor], [range_beacons], [range_beaconN],
  * [range_sensor], [robot], [noise], [sonar_ring], [sonarN], [map], [wallN],
@@ -49,11 +53,6 @@
 
 #include "tuning.h"
 
-/* The largest beacon and receiver counts of the site schema (site_keys.h). */
-#define CONFIG_MAX_BEACONS SITE_MAX_BEACONS
-#define CONFIG_MAX_BEARING_BEACONS SITE_MAX_BEARING_BEACONS
-#define CONFIG_MAX_RANGE_BEACONS SITE_MAX_RANGE_BEACONS
-#define CONFIG_MAX_RECEIVERS SITE_MAX_RECEIVERS
 #define CONFIG_ERR_LEN 512
 #define CONFIG_STR_LEN 128
 #define CONFIG_PATH_LEN 256
@@ -91,40 +90,18 @@ struct config_item_seen {
     uint32_t keys; /* bit i: the section's key i (schema order) given */
 };
 
-/* [bearing_sensor] (site_keys.h: SITE_KEYS_bearing_sensor) */
-struct config_bearing_sensor {
-#define CONFIG_SENSOR_MEMBER(sec, key, type, strct, member, lo, hi, open, def)                     \
-    BRIDGE_CTYPE_##type key;
-    SITE_KEYS_bearing_sensor(CONFIG_SENSOR_MEMBER)
-#undef CONFIG_SENSOR_MEMBER
-};
-
-/* [range_sensor] (site_keys.h: SITE_KEYS_range_sensor) */
-struct config_range_sensor {
-#define CONFIG_SENSOR_MEMBER(sec, key, type, strct, member, lo, hi, open, def)                     \
-    BRIDGE_CTYPE_##type key;
-    SITE_KEYS_range_sensor(CONFIG_SENSOR_MEMBER)
-#undef CONFIG_SENSOR_MEMBER
-};
-
-/* [team] (site_keys.h: SITE_KEYS_team): robots > 0 makes a team site */
-struct config_team {
-#define CONFIG_SENSOR_MEMBER(sec, key, type, strct, member, lo, hi, open, def)                     \
-    BRIDGE_CTYPE_##type key;
-    SITE_KEYS_team(CONFIG_SENSOR_MEMBER)
-#undef CONFIG_SENSOR_MEMBER
-};
-
-/* [range_beacons] self-survey keys (site_keys.h: the range_survey.* members;
- * bridge/survey.h) */
-struct config_range_survey {
-    int self_survey;  /* 1: beacon x, y from BEACON_SURVEY ranges */
-    int origin;       /* beacon id at the surveyed frame's origin */
-    int axis;         /* beacon id on its +x axis */
-    double axis_deg;  /* site-frame bearing origin -> axis beacon, CCW from +x (deg) */
-    int min_pings;    /* pings per pair before the solve */
-    double timeout_s; /* solve with what there is this long after the first range (s) */
-};
+/* One struct per group of keys whose schema member is "<group>.<key>"
+ * (SITE_GROUPS: struct config_bearing_sensor of [bearing_sensor], config_range_survey
+ * of [range_beacons]' self-survey keys, config_range_sensor, config_map, config_team;
+ * the keys' meanings are the schema's), member <group> of struct bridge_config. */
+#define CONFIG_GROUP_MEMBER(type, member) BRIDGE_CTYPE_##type member;
+#define CONFIG_GROUP_STRUCT(group)                                                                 \
+    struct config_##group {                                                                        \
+        SITE_GROUP_##group(CONFIG_GROUP_MEMBER)                                                    \
+    };
+SITE_GROUPS(CONFIG_GROUP_STRUCT)
+#undef CONFIG_GROUP_STRUCT
+#undef CONFIG_GROUP_MEMBER
 
 /* [sonar_ring] (site_keys.h: the sonar_ring.* members; bridge/sonar.h): count > 0
  * makes a sonar site, whose filter runs on the sonar ring's clock when it has
@@ -141,14 +118,18 @@ struct config_sonar_ring {
     char method[16];        /* filter | pinpoint | memory (bridge/sonar.h) */
 };
 
-/* [map] (site_keys.h: map.walls): the wall segments [wallN] the sonar ranges to */
-struct config_map {
-    int walls;
-};
-
 struct bridge_config {
+    /* the counts of the per-item sections ([beacons] count is beacon_count,
+     * [bearing_beacons] count bearing_beacon_count, ...: SITE_COUNT_MEMBERS) */
+#define CONFIG_COUNT_MEMBER(sec, member) int member;
+    SITE_COUNT_MEMBERS(CONFIG_COUNT_MEMBER)
+#undef CONFIG_COUNT_MEMBER
+    /* the groups of keys: bearing_sensor, range_survey, range_sensor, map,
+     * team (SITE_GROUPS; a team site when team.robots > 0, config_is_team) */
+#define CONFIG_GROUP(group) struct config_##group group;
+    SITE_GROUPS(CONFIG_GROUP)
+#undef CONFIG_GROUP
     /* [beacons] */
-    int beacon_count;
     double period_s;               /* nominal time between firings (T) */
     double double_pulse_spacing_s; /* beacon 1's second burst delay */
     double burst_length_s;
@@ -168,15 +149,6 @@ struct bridge_config {
     double double_pulse_tolerance_s; /* the receiver node's ± window for beacon 1's
                                         second burst; it holds each detection for
                                         double_pulse_spacing_s + this before sending */
-    /* [bearing_beacons] */
-    int bearing_beacon_count;
-    /* [bearing_sensor] */
-    struct config_bearing_sensor bearing_sensor;
-    /* [range_beacons] */
-    int range_beacon_count;
-    struct config_range_survey range_survey;
-    /* [range_sensor] */
-    struct config_range_sensor range_sensor;
     /* [robot] */
     double wheel_base_m;
     double wheel_radius_m;
@@ -194,11 +166,9 @@ struct bridge_config {
     double speed_of_sound_mps;
     double sigma_speed_of_sound_mps;
     double gate_sigma;
-    /* [sonar_ring], [map]; [sonarN] and [wallN] are the item arrays sonar[], wall[] */
+    /* [sonar_ring] (its method a string: not a group); [sonarN] and [wallN] are the
+     * item arrays sonar[], wall[] */
     struct config_sonar_ring sonar_ring;
-    struct config_map map;
-    /* [team]: a team site when team.robots > 0 (config_is_team) */
-    struct config_team team;
     /* [tuning]: the library's tuning fields (bridge/tuning.h) */
     struct bridge_tuning tuning;
     /* [bridge] */

@@ -10,9 +10,10 @@
 
 /* bl_config field -> site-file key, for the library's config check: the
  * keys of the schema that set a field, by the field's member path as
- * bl_config_check names it ("pulse.gate_sigma"), and [beacon1] x_m for
- * "beacons", [bearing_beacon1] x_m for "bearing_beacons", [range_beacon1] x_m
- * for "range_beacons" (the library names the array, not the item). */
+ * bl_config_check names it ("pulse.gate_sigma"), and for the library's
+ * arrays of beacons item 1's first key ([beacon1] x_m for "beacons",
+ * [bearing_beacon1] x_m for "bearing_beacons", ...: SITE_LIB_ITEMS; the
+ * library names the array, not the item). */
 struct field_key {
     const char *field, *section, *key;
 };
@@ -21,9 +22,9 @@ static const struct field_key field_keys[] = {
 #define FIELD_KEY(sec, k, type, member, field, geometry) {#field, #sec, #k},
     SITE_LIB_FIELDS(FIELD_KEY)
 #undef FIELD_KEY
-        {"beacons", "beacon1", "x_m"},
-    {"bearing_beacons", "bearing_beacon1", "x_m"},
-    {"range_beacons", "range_beacon1", "x_m"},
+#define ITEM_KEY(sec, pfx, count_sec, count_member, array, k) {#array, #pfx "1", #k},
+        SITE_LIB_ITEMS(ITEM_KEY)
+#undef ITEM_KEY
 };
 
 /* The site-file key that sets bl_config field `field` (NULL: not known, the
@@ -56,23 +57,14 @@ void site_to_lib(const struct bridge_config *cfg, bl_config *out)
     out->range.team_site = config_is_team(cfg) ? 1u : 0u;
     /* a sonar site (config.h config_is_sonar): may have no beacon at all */
     out->sonar_site = config_is_sonar(cfg) ? 1u : 0u;
-    for (int i = 0; i < cfg->beacon_count && i < BL_MAX_BEACONS; i++) {
-#define APPLY_BEACON(member, field) out->beacons[i].field = (bl_real)cfg->beacon[i].member;
-        SITE_LIB_BEACON_FIELDS(APPLY_BEACON)
-#undef APPLY_BEACON
-    }
-    for (int i = 0; i < cfg->bearing_beacon_count && i < BL_MAX_BEACONS; i++) {
-#define APPLY_BEARING_BEACON(member, field)                                                        \
-    out->bearing_beacons[i].field = (bl_real)cfg->bearing_beacon[i].member;
-        SITE_LIB_BEARING_BEACON_FIELDS(APPLY_BEARING_BEACON)
-#undef APPLY_BEARING_BEACON
-    }
-    for (int i = 0; i < cfg->range_beacon_count && i < BL_MAX_BEACONS; i++) {
-#define APPLY_RANGE_BEACON(member, field)                                                          \
-    out->range_beacons[i].field = (bl_real)cfg->range_beacon[i].member;
-        SITE_LIB_RANGE_BEACON_FIELDS(APPLY_RANGE_BEACON)
-#undef APPLY_RANGE_BEACON
-    }
+    /* Every per-item section the library holds as an array ([beaconN] ->
+     * beacons[], [bearing_beaconN] -> bearing_beacons[], ...: SITE_LIB_ITEM_FIELDS),
+     * item N onto element N-1, items 1..count. */
+#define APPLY_ITEM(pfx, count_member, array, member, field)                                        \
+    for (int i = 0; i < cfg->count_member && i < BL_MAX_BEACONS; i++)                              \
+        out->array[i].field = (bl_real)cfg->pfx[i].member;
+    SITE_LIB_ITEM_FIELDS(APPLY_ITEM)
+#undef APPLY_ITEM
 }
 
 int estimator_make_config(const struct bridge_config *cfg, bl_config *out, char *err, size_t errlen)

@@ -4,9 +4,9 @@
  *
  * Which key sets which bl_config field is declared once, in the site schema
  * (hw_sim/beaconloc_sim/data/site_schema.toml, `lib = ...`); the mapping
- * here is generated from it (site_keys.h: SITE_LIB_FIELDS,
- * SITE_LIB_BEACON_FIELDS, SITE_LIB_BEARING_BEACON_FIELDS,
- * SITE_LIB_RANGE_BEACON_FIELDS). A field is named by its member path in bl_config
+ * here is generated from it (site_keys.h: SITE_LIB_FIELDS, and for the
+ * per-item sections the library holds as arrays SITE_LIB_ITEM_FIELDS and
+ * SITE_LIB_ITEMS: no kind is named here). A field is named by its member path in bl_config
  * ("pulse.gate_sigma": a measurement source's params block); a complaint of
  * the library's check names that path, which maps back to the site-file key
  * that set the field, with its file and line.

@@ -312,6 +312,19 @@ def _c_macro(name: str, comment: str, rows: list[str]) -> list[str]:
     return out + [""]
 
 
+def _c_groups(sections: list[Section]) -> dict[str, list[Key]]:
+    """The bridge_config members that are structs of keys ("team" of "team.robots"), with
+    their keys in file order; [tuning] (struct bridge_tuning, tuning.h) and a struct holding
+    a string (its size is the bridge's: config_sonar_ring) are not among them."""
+    groups: dict[str, list[Key]] = {}
+    for s in sections:
+        for k in s.keys:
+            if not s.indexed_by and k.bridge and "." in k.bridge:
+                groups.setdefault(k.bridge.split(".", 1)[0], []).append(k)
+    return {g: keys for g, keys in groups.items()
+            if g != "tuning" and all(k.numeric for k in keys)}
+
+
 def c_header(schema: Schema) -> str:
     """The bridge's X-macro tables (build/gen/site/site_keys.h)."""
     bridge_sections = [s for s in schema.sections if "bridge" in s.read_by]
@@ -347,6 +360,31 @@ def c_header(schema: Schema) -> str:
                         f"X({_c_struct(item.name)} member, bl_beacon field) of [{item.name}] -> "
                         f"bl_config.{item.prefix}s[N-1]",
                         [f"X({k.bridge}, {k.lib})" for k in item.keys if k.lib])
+    lib_items = [s for s in items if any(k.lib for k in s.keys)]
+    out += _c_macro("SITE_LIB_ITEM_FIELDS", "X(prefix, bridge_config count member, bl_config "
+                    "array, item member, bl_beacon field): every key of a per-item section "
+                    "that sets a field of item N-1 of the library's array <prefix>s",
+                    [f"X({s.prefix}, {schema.count_key_of(s).bridge}, {s.prefix}s, {k.bridge}, "
+                     f"{k.lib})" for s in lib_items for k in s.keys if k.lib])
+    out += _c_macro("SITE_LIB_ITEMS", "X(item section, prefix, count section, bridge_config "
+                    "count member, bl_config array, first key with a field): the per-item "
+                    "sections the library holds as an array <prefix>s (its beacons of a kind; "
+                    "its complaint names the array, the bridge blames item 1's first key)",
+                    [f"X({s.name}, {s.prefix}, {s.indexed_by}, {schema.count_key_of(s).bridge}, "
+                     f"{s.prefix}s, {next(k.name for k in s.keys if k.lib)})"
+                     for s in lib_items])
+    flat_counts = [schema.count_key_of(s) for s in items if "." not in schema.count_key_of(s).bridge]
+    out += _c_macro("SITE_COUNT_MEMBERS", "X(count section, bridge_config member): the counts "
+                    "of per-item sections that are members of struct bridge_config itself "
+                    "(int)", [f"X({k.section}, {k.bridge})" for k in flat_counts])
+    groups = _c_groups(bridge_sections)
+    out += _c_macro("SITE_GROUPS", "X(member): the members of struct bridge_config that are a "
+                    "struct config_<member> of keys (bridge = \"<member>.<key>\"), every key a "
+                    "number; their members are SITE_GROUP_<member>",
+                    [f"X({g})" for g in groups])
+    for g, keys in groups.items():
+        out += _c_macro(f"SITE_GROUP_{g}", f"X(type, member) of struct config_{g}",
+                        [f"X({_C_TYPE[k.type]}, {k.bridge.split('.', 1)[1]})" for k in keys])
     out += _c_macro("SITE_GEOMETRY_BRIDGE", "X(bridge_config member): geometry of the bridge's "
                     "own state (the library's is bl_config_same_geometry's)",
                     [f"X({k.bridge})" for s in bridge_sections for k in s.keys
