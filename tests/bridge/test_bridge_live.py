@@ -110,23 +110,25 @@ def test_live_path_with_fake_can(bridge_bin, kleeman_log, tmp_path, udp_port):
     # grid at most, and nearly every slot. time_usec is the time of the newest
     # measurement in the estimate, so the intervals are quantised by the
     # sensor frames (quiet host: 30, 33, 35, 36, 40 ms; a median of 30 ms
-    # failed a CI run); over the whole run that quantisation is one frame
-    # interval at most, so the mean rate over all intervals is at most 30 Hz
-    # within 1 %, whatever the load. A starved host delays some ticks by a
-    # whole period (a busy loop beside it: 28.49 Hz over all intervals), so
-    # those are counted apart and bounded. (The mean over the intervals under
-    # 1.5 periods, checked before, is biased upward under load: a late
-    # measurement shortens one interval and lengthens the next past the cut;
-    # 31.9 Hz beside a compiler.)
+    # failed a CI run). Never faster: over the whole run that quantisation is
+    # one frame interval at most, so the mean rate over all intervals is at
+    # most 30 Hz within 1 %, whatever the load (the mean over the intervals
+    # under 1.5 periods, bounded above before, is biased upward under load: a
+    # late measurement shortens one interval and lengthens the next past the
+    # cut; 31.9 Hz beside a compiler). Not slower: a starved host delays some
+    # ticks by a whole period (a busy loop beside it made the mean rate over
+    # all intervals 28.49 Hz; a CPU-bound job at a higher priority than the
+    # test batch 22.3 Hz), so the rate is taken over the intervals on the grid
+    # (under 1.5 periods) and the others are counted apart and bounded.
     odo = [m for _, m in msgs if m.get_type() == "ODOMETRY"]
     assert len(odo) > 100
     t = np.array([m.time_usec for m in odo], dtype=np.int64)
     dt_us = np.diff(t)
     assert np.all(dt_us > 0)
     period_us = 1e6 / 30.0
-    rate_hz = 1e6 * len(dt_us) / float(t[-1] - t[0])
-    assert 27.0 <= rate_hz <= 30.3, rate_hz
+    assert 1e6 * len(dt_us) / float(t[-1] - t[0]) <= 30.3
     on_grid = dt_us[dt_us < 1.5 * period_us]
+    assert 1e6 * len(on_grid) / float(np.sum(on_grid)) >= 28.5
     assert len(on_grid) >= 0.9 * len(dt_us), np.sort(dt_us)[-20:]
     hb = [m for _, m in msgs if m.get_type() == "HEARTBEAT"]
     assert any(m.system_status == 5 for m in hb)  # CRITICAL while no CAN
