@@ -8,7 +8,7 @@ writes into OUTDIR (never committed):
                   in DBC order, named after the signal and its unit); the union
                   members of struct frame; the unpackers' prototypes
   frame_kinds.c   frame_<frame name>_unpack(): the cantools-generated unpack, every
-                  signal checked against its DBC range, the payload filled, and
+                  signal that can leave its DBC range checked, the payload filled, and
                   what the rolling-counter check needs (struct frame_seq: the
                   Counter signal; the stamp, the first signal in us or s)
   sensor_kinds.c  sensor_kinds[]: &sensor_kind_<frame name> of each kind, which its
@@ -51,6 +51,22 @@ def raw_type(sig) -> str:
 def is_physical(sig) -> bool:
     """A signal whose value is not its raw integer: decoded into a double."""
     return sig.is_float or sig.scale != 1 or sig.offset != 0
+
+
+def can_leave_range(sig) -> bool:
+    """Whether the signal's raw value can lie outside its DBC range: a float, or
+    a range narrower than what its bits hold. A check that cannot fail is left
+    out (it would be a call per signal per frame on the receive path)."""
+    if sig.is_float:
+        return True
+    if sig.minimum is None and sig.maximum is None:
+        return False
+    n = sig.length
+    bit_lo, bit_hi = (-(1 << (n - 1)), (1 << (n - 1)) - 1) if sig.is_signed else (0, (1 << n) - 1)
+    raw = sorted((v - sig.offset) / sig.scale for v in (
+        bit_lo * sig.scale + sig.offset if sig.minimum is None else sig.minimum,
+        bit_hi * sig.scale + sig.offset if sig.maximum is None else sig.maximum))
+    return raw[0] > bit_lo + 1e-9 or raw[1] < bit_hi - 1e-9
 
 
 def field_type(sig) -> str:
@@ -145,14 +161,19 @@ def gen_c(kinds, dbc: str) -> str:
                 "    struct frame_seq *seq)",
                 "{", f"    struct {codec}_t m;",
                 f"    if ({codec}_unpack(&m, data, 8) != 0)", "        return FRAME_MALFORMED;"]
-        checks = [f"!{codec}_{snake(s.name)}_is_in_range(m.{snake(s.name)})" for s in m.signals]
-        out.append("    if (" + " ||\n        ".join(checks) + ")")
-        out.append("        return FRAME_OUT_OF_RANGE;")
+        # the raw range of every signal that can leave it; a scaled integer
+        # signal's decoded value then lies in its decoded range too
+        checks = [f"!{codec}_{snake(s.name)}_is_in_range(m.{snake(s.name)})"
+                  for s in m.signals if can_leave_range(s)]
+        if checks:
+            out.append("    if (" + " ||\n        ".join(checks) + ")")
+            out.append("        return FRAME_OUT_OF_RANGE;")
         for s in (s for s in m.signals if is_physical(s)):
             v = snake(s.name)
-            out += [f"    const double {v} = {codec}_{v}_decode(m.{v});",
-                    f"    if (!isfinite({v}) || !{codec}_{v}_is_in_phys_range({v}))",
-                    "        return FRAME_OUT_OF_RANGE;"]
+            out.append(f"    const double {v} = {codec}_{v}_decode(m.{v});")
+            if s.is_float:
+                out += [f"    if (!isfinite({v}) || !{codec}_{v}_is_in_phys_range({v}))",
+                        "        return FRAME_OUT_OF_RANGE;"]
         out += [f"    out->kind = FRAME_{m.name};",
                 f"    out->u.{name} = (struct frame_{name}){{"]
         for s in m.signals:
