@@ -64,6 +64,8 @@ def _read_key(ini: IniFile, section: str, key: Key):
 
 @dataclass(frozen=True)
 class Site:
+    """The site as the simulator reads it: the core sections' values as fields, each sensor
+    kind's as attributes too (kind_values: site.<name>)."""
     path: Path
     name: str
     room_x_m: float
@@ -169,13 +171,15 @@ class SiteRead:
 
 
 def _kind_values(read: SiteRead) -> dict[str, Any]:
-    """Every sensor kind's site values (nodes.sensor_kinds(), looked up here: the nodes
-    import this module)."""
+    """Every sensor kind's site values (nodes.sensor_kinds(), looked up when called: a kind
+    registered later counts, and the nodes' modules may import this one); a name declared
+    twice, or a field's, is an error."""
     from . import nodes
     values: dict[str, Any] = {}
+    taken = {f.name for f in dataclasses.fields(Site)} | set(dir(Site))
     for kind in nodes.sensor_kinds():
         own = kind.site_values(read)
-        twice = set(own) & set(values)
+        twice = set(own) & (set(values) | taken)
         if twice:
             raise ValueError(f"{kind.__name__}: site values declared twice: {sorted(twice)}")
         values.update(own)
