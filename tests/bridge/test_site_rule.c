@@ -6,7 +6,6 @@
  * the library's verdict on the bl_config the bridge maps agrees with the
  * schema's rule on a grid of counts, and the error lists every way out.
  */
-#include <cmocka.h>
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -14,6 +13,8 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
+
+#include <cmocka.h>
 
 #include "beaconloc.h"
 #include "config.h"
