@@ -2,10 +2,11 @@
  * beaconloc — measurement kind: times of flight from fixed range beacons
  * (RF-synchronised ultrasonic ranging: the CMU Millibots, Marvelmind-like
  * sites), fused into the filter (aid_range.cpp) and, with no prior,
- * trilaterated to start it (snapshot_range.cpp, bl_solve_ranges_2d in
- * solver.h). Its params block, its members of the library's structs
- * (kinds.h), its measurement and its entry points; included through
- * kinds.h by config.h, filter.h and localizer.h.
+ * trilaterated to start it (snapshot_range.cpp; its solver
+ * bl_solve_ranges_2d, solver_range.cpp). Its place in the kinds' list, its
+ * params block, its members of the library's structs (kinds.h), its
+ * measurement, its entry points and its solver; included through kinds.h
+ * by config.h, filter.h, localizer.h and solver.h.
  * Build switch BL_WITH_RANGES (common.h): 0 leaves only
  * bl_config.range_beacon_count (bl_config_check then requires 0).
  */
@@ -166,12 +167,12 @@ int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us
  * covering min(4, N) range beacons (as the pulse snapshot: with 4 the fix
  * is over-determined and a multipath range shows), ranges = s·time of flight (s: the state's on a
  * running filter, cfg.speed_of_sound_mps on a first start), solved by
- * bl_solve_ranges_2d (solver.h) at the receiver height cfg.range.height_m
+ * bl_solve_ranges_2d (below) at the receiver height cfg.range.height_m
  * with the mount offset taken as zero for the fix: the offset turns with
  * the unknown heading, so the fix is the receiver's, and the wheel-base
  * centre is put there with the offset's length added to its σ.
  * Refused unless the fix is unambiguous (no mirror solution within the
- * beacons' collinearity: solver.h), explains the ranges (with more than 3:
+ * beacons' collinearity: bl_solve_ranges_2d), explains the ranges (with more than 3:
  * rms residual <= 3 σ, σ the largest range σ with its speed-of-sound share
  * d·σs/s added) and its drms is <= cfg.range.max_fix_drms_m.
  * Ranges give no heading: a running filter keeps its heading (σ grown to
@@ -218,6 +219,67 @@ int bl_model_range(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t
  * finite or negative, |t_us| > BL_SEQ_TIME_LIMIT_US). */
 int bl_localizer_range(bl_localizer *loc, const bl_range_meas *m, bl_fusion_result *res);
 #endif /* BL_WITH_RANGES */
+
+/* ==== Its solver: the trilateration without a prior (solver_range.cpp; its
+ * start, bl_filter_start_ranges above). Declared in every build, with or
+ * without BL_WITH_RANGES: it depends on nothing else and is linked only when
+ * called. */
+/* ---- Ranges: trilateration (lib/src/solver_range.cpp) ----
+ * The receiver's position in 2D from its 3D distances to N >= 3 fixed range
+ * beacons (Marvelmind-like; the CMU Millibots' RF-synchronised ultrasonic
+ * ranges), receiver height z known:
+ *     range_m[j] = |(x, y, z) - b_j|,    z = receiver_z_m.
+ * Weighted least squares (weights 1/sigma_m[j]²) by Gauss-Newton, started
+ * from the linearised closed form: subtracting beacon 0's squared range
+ * equation from each other's removes x² + y²,
+ *     2 (b_j - b_0)·p = ρ_0² - ρ_j² + |b_j|² - |b_0|²,   ρ_j² = r_j² - (z_j - z)²
+ * (2D vectors; the standard linear trilateration), solved by least squares.
+ * Covariance (JᵀWJ)⁻¹ at the fix; HDOP = sqrt(trace cov) / σ_rms.
+ * No heading: ranges to one receiver do not see it.
+ *
+ * Mirror ambiguity: beacons on one line in x-y cannot tell a point from its
+ * mirror image across that line (both have the same distances). The solver
+ * reflects its fix across the beacons' principal line (least-squares line
+ * through them), runs Gauss-Newton from there too, and reports ambiguous
+ * = true with both candidates when the second converges to a point farther
+ * than max(3·drms, 1 mm) from the first whose weighted residual sum of
+ * squares is within 9 (a 3σ difference) of the first's: the data cannot
+ * tell them apart. (x_m, y_m) is then the candidate with the smaller
+ * residual (an arbitrary choice when exactly collinear) and (mirror_x_m,
+ * mirror_y_m) the other: the caller must not use the fix without another
+ * cue (bl_filter_start_ranges refuses it). Exactly collinear beacons
+ * start from the line's own closed form: the position along the line and
+ * ±the distance from it.
+ * Errors: BL_EINVAL (NULL, count outside 3..BL_MAX_BEACONS, a non-finite
+ * input, a range < 0, σ <= 0, max_iterations > 100, tolerance_m < 0);
+ * BL_EDEGENERATE (all beacons at one point in x-y, a singular normal
+ * matrix at the fix, a non-finite result); BL_ENOCONVERGE (no step below
+ * the tolerance in max_iterations). *sol untouched on error.
+ * Reentrant; no heap; a few hundred bytes of stack; O(N) per iteration. */
+typedef struct bl_range_problem {
+    uint32_t count;                    /* N beacons, 3..BL_MAX_BEACONS */
+    bl_beacon beacons[BL_MAX_BEACONS]; /* site positions (m), 3D */
+    bl_real range_m[BL_MAX_BEACONS];   /* measured 3D distance receiver-beacon j (m), >= 0 */
+    bl_real sigma_m[BL_MAX_BEACONS];   /* σ of each range (m), > 0 (weights) */
+    bl_real receiver_z_m;              /* known receiver height (m) */
+    uint32_t max_iterations;           /* Gauss-Newton steps per start, 1..100; 0 = 20 */
+    bl_real tolerance_m;               /* stop when the step is below this (m); 0 = 1e-9 m
+                                          (1e-6 m for float) */
+} bl_range_problem;
+
+typedef struct bl_range_solution {
+    bl_real x_m, y_m;               /* receiver position (m) */
+    bl_real cov[4];                 /* covariance of (x, y), row-major 2x2, m² */
+    bl_real drms_m;                 /* sqrt(cov_xx + cov_yy) (m) */
+    bl_real hdop;                   /* drms_m / σ_rms (1), σ_rms the rms of sigma_m */
+    bl_real residual_rms_m;         /* rms of the range residuals at the fix (m) */
+    bl_real chi2;                   /* weighted residual sum of squares at the fix (1) */
+    uint32_t iterations;            /* Gauss-Newton steps to the fix */
+    bool ambiguous;                 /* a mirror fix fits as well (see above) */
+    bl_real mirror_x_m, mirror_y_m; /* the mirror candidate when ambiguous, else = x_m, y_m */
+} bl_range_solution;
+
+int bl_solve_ranges_2d(const bl_range_problem *prob, bl_range_solution *sol);
 
 #ifdef __cplusplus
 }
