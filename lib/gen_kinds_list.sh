@@ -34,7 +34,7 @@ for h in "$@"; do
         exit 1
         ;;
     *[!0-9]*)
-        echo "$h: BL_${KIND}_KIND_ORDER must be defined once, as a decimal number (found: $orders)" >&2
+        echo "$h: BL_${KIND}_KIND_ORDER must be defined once, as a decimal number (found:" $orders")" >&2
         exit 1
         ;;
     esac
@@ -43,7 +43,10 @@ for h in "$@"; do
 done
 
 printf '%s' "$entries" | sort -n -k1,1 | awk '
-    $1 == prev { printf "%s and %s: one BL_<KIND>_KIND_ORDER, %s\n", prev_h, $4, $1 > "/dev/stderr"; bad = 1 }
+    n && $1 == prev {
+        printf "%s and %s: one place in the kinds'"'"' list (BL_<KIND>_KIND_ORDER %s)\n", prev_h, $4, $1 | "cat 1>&2"
+        bad = 1
+    }
     { prev = $1; prev_h = $4; n++; order[n] = $1; kind[n] = $2; KIND[n] = $3 }
     END {
         if (bad) exit 1

@@ -14,10 +14,10 @@
 #
 # Every lib/src/*.cpp is compiled into the library (wildcard); every
 # lib/include/beaconloc/aid_*.h is one measurement kind, listed in
-# $(LIB_KINDS_H) (beaconloc/kinds_list.h, generated below; every
+# $(LIB_KINDS_H) (beaconloc/kinds_list.h, generated below); every
 # tests/lib/test_*.c except test_clink.c is a cmocka test (test_clink.c is the
 # plain C program of check-lib-clink: no cmocka, no C++ runtime).
-# LIB_INCLUDES, LIB_KINDS_H: the top-level Makefile.
+# LIB_INCLUDES (the include path), LIB_KINDS_H: the top-level Makefile.
 # Header dependencies: each object and test records the headers it includes
 # (-MMD -MP, .d files beside it, included below). Compilers: $(CC), $(CXX),
 # $(AR). Eigen: EIGEN_CFLAGS from `pkg-config --cflags eigen3` as -isystem

@@ -44,9 +44,9 @@ typedef double bl_real;
  * (0 or 1) for the library and every file that includes its headers alike
  * (the struct layouts depend on them). Each measurement kind's header
  * (aid_<kind>.h, kinds.h) declares what it has with its switch on and off;
- * these four are here because headers beside the kinds' (sonar.h, which
- * does not include the kinds, and team.h) test them too (a new kind may
- * define its own in its header).
+ * these four are here because headers beside the kinds' test them too
+ * (sonar.h, which does not include the kinds; team.h) and the team's
+ * default is the ranges' (a new kind may define its own in its header).
  *   BL_WITH_BEARINGS  1 (default): bearings to bearing beacons (aid_bearing.h:
  *                     bl_filter_fuse_bearing, bl_filter_start_bearings,
  *                     bl_localizer_bearing, bl_bearing_meas).

@@ -16,10 +16,11 @@
  * holds each kind's #include and
  *     BL_KINDS(X, arg):  X(kind, KIND, arg) for every kind, in that order;
  * kind names its sources (aid_<kind>.cpp) and its hooks, KIND its member
- * macros. Adding a kind: its aid_<kind>.h and lib/src/aid_<kind>.cpp,
- * nothing else (lib/README.md "Adding a measurement kind"). A build of the
- * library outside lib/lib.mk runs the script into a directory on its
- * include path.
+ * macros. Adding a kind: its aid_<kind>.h and lib/src/aid_<kind>.cpp, and
+ * for its own start without a prior lib/src/snapshot_<kind>.cpp and
+ * lib/src/solver_<kind>.cpp (the solver declared in its header); nothing
+ * else (lib/README.md "Adding a measurement kind"). A build of the library
+ * outside lib/lib.mk runs the script into a directory on its include path.
  *
  * A kind's header defines its members of each struct as one macro per
  * part, BL_<KIND>_<PART>, empty where it adds none (and where its build
