@@ -12,6 +12,14 @@ PY      := $(CURDIR)/$(VENV)/bin/python
 PYTEST  := $(PY) -m pytest
 SETUP_STAMP := $(VENV)/.beaconloc-setup
 
+# The library's include path: lib/include and the kinds' list that the build
+# generates from its kinds' headers (lib/lib.mk, beaconloc/kinds.h). Whatever
+# compiles against the library uses LIB_INCLUDES and waits for LIB_KINDS_H
+# (named here: lib/bench.mk and lib/firmware.mk are read before lib/lib.mk).
+LIB_GEN      := $(BUILD)/gen/lib
+LIB_KINDS_H  := $(LIB_GEN)/beaconloc/kinds_list.h
+LIB_INCLUDES := -Ilib/include -I$(LIB_GEN)
+
 CC      ?= gcc
 CXX     ?= g++
 

@@ -39,7 +39,7 @@ BRIDGE_TESTS    := $(patsubst tests/bridge/%.c,$(BRIDGE_TESTDIR)/%,$(BRIDGE_TEST
 # generated headers of bridge/mavlink.mk.
 BRIDGE_MAVDEP   := $(if $(wildcard bridge/mavlink_out.h),$(BRIDGE_MAVSTAMP))
 
-BRIDGE_CPPFLAGS := -D_GNU_SOURCE -Ibridge -Ilib/include -I$(BRIDGE_CANGEN) \
+BRIDGE_CPPFLAGS := -D_GNU_SOURCE -Ibridge $(LIB_INCLUDES) -I$(BRIDGE_CANGEN) \
                    -isystem $(BRIDGE_MAVGEN)
 BRIDGE_CFLAGS   := -std=c11 -O2 -g -Wall -Wextra -Werror -Wconversion -Wdouble-promotion -MMD -MP
 BRIDGE_SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer
@@ -69,6 +69,12 @@ $(BRIDGE_GEN_NAMES:%=$(BRIDGE_OBJDIR)/%.o): $(BRIDGE_OBJDIR)/%.o: $(BRIDGE_CANGE
 $(BRIDGE_GEN_NAMES:%=$(BRIDGE_SANDIR)/%.o): $(BRIDGE_SANDIR)/%.o: $(BRIDGE_CANGEN)/%.c $(BRIDGE_CAN_H)
 	@mkdir -p $(@D)
 	$(CC) $(BRIDGE_CPPFLAGS) $(BRIDGE_CFLAGS) $(BRIDGE_SANFLAGS) -c -o $@ $<
+
+# Objects that include the library's headers (beaconloc.h -> kinds.h) wait
+# for its generated kinds' list (lib/lib.mk); the .d files keep later
+# rebuilds exact.
+$(BRIDGE_OBJS) $(BRIDGE_SANOBJS) $(BRIDGE_SANDIR)/main.o \
+    $(patsubst tests/bridge/%.c,$(BRIDGE_TESTDIR)/obj/%.o,$(BRIDGE_TESTS_C)): | $(LIB_KINDS_H)
 
 $(BRIDGE_OBJDIR)/%.o: bridge/%.c $(BRIDGE_CAN_H) $(BRIDGE_MAVDEP)
 	@mkdir -p $(@D)

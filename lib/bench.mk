@@ -5,8 +5,8 @@
 #   speed fuse_pulse_ns=<n> predict_ns=<n> fuse_pulse_instr=<n> filterpy_ratio=<r> triangulate3_ns=<n> triangulateN_ns=<n>
 
 BENCH_DIR    := $(BUILD)/bench
-BENCH_CFLAGS := -std=c11 -O2 -Wall -Wextra -Werror -Ilib/include
-BENCH_HDRS   := $(wildcard lib/include/*.h lib/include/beaconloc/*.h)
+BENCH_CFLAGS := -std=c11 -O2 -Wall -Wextra -Werror $(LIB_INCLUDES)
+BENCH_HDRS   := $(wildcard lib/include/*.h lib/include/beaconloc/*.h) $(LIB_KINDS_H)
 
 $(BENCH_DIR)/bench_speed_double: lib/bench/bench_speed.c $(BUILD)/lib/libbeaconloc.a $(BENCH_HDRS)
 	@mkdir -p $(@D)

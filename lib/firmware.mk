@@ -36,7 +36,7 @@ FW_HOST_BIN := $(FW_HOST_DIR)/firmware_host
 M4_ARCH     := -mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard
 M4_COMMON   := $(M4_ARCH) -Os -g -ffunction-sections -fdata-sections -fstack-usage \
                -fcallgraph-info=su -DBL_USE_FLOAT=1 -DBL_MAX_BEACONS=8 -DBL_MAX_RECEIVERS=8 \
-               -DBL_WITH_BEARINGS=0 -DBL_WITH_RANGES=0 -DBL_WITH_TEAM=0 -DBL_WITH_SONAR=0 -Ilib/include
+               -DBL_WITH_BEARINGS=0 -DBL_WITH_RANGES=0 -DBL_WITH_TEAM=0 -DBL_WITH_SONAR=0 $(LIB_INCLUDES)
 # EIGEN_UNROLLING_LIMIT=0: Eigen's fixed-size expressions as loops, not
 # unrolled (Eigen's default limit is 110): on the M4 both smaller and
 # faster (size-m4 library flash 33,153 -> 29,307 B; bench-m4 fuse_pulse
@@ -58,7 +58,9 @@ M4_LIB_SRCS := $(sort $(wildcard lib/src/*.cpp))
 M4_LIB_OBJS := $(patsubst lib/src/%.cpp,$(M4_DIR)/lib/%.o,$(M4_LIB_SRCS))
 M4_EX_SRCS  := $(sort $(wildcard lib/examples/firmware_m4/*.c))
 M4_EX_OBJS  := $(patsubst lib/examples/firmware_m4/%.c,$(M4_DIR)/example/%.o,$(M4_EX_SRCS))
-M4_HDRS     := $(wildcard lib/include/*.h lib/include/beaconloc/*.h lib/src/*.hpp lib/examples/firmware_m4/*.h)
+# (with the kinds' list the build generates, lib/lib.mk)
+M4_HDRS     := $(wildcard lib/include/*.h lib/include/beaconloc/*.h lib/src/*.hpp lib/examples/firmware_m4/*.h) \
+               $(LIB_KINDS_H)
 M4_ELF      := $(M4_DIR)/firmware_m4.elf
 
 $(M4_DIR)/lib/%.o: lib/src/%.cpp $(M4_HDRS) lib/firmware.mk
@@ -169,7 +171,7 @@ endif
 #   firmware scenario=kleeman-lab seeds=20 rmse_mm=<x> bridge_rmse_mm=<x> ratio=<firmware/bridge>
 FW_HOST_CAN   := $(BUILD)/gen/can
 FW_HOST_FLAGS := -std=c11 -O2 -g -Wall -Wextra -Werror -Wdouble-promotion -DBL_USE_FLOAT=1 \
-                 -Ilib/include -Ibridge -I$(FW_HOST_CAN)
+                 $(LIB_INCLUDES) -Ibridge -I$(FW_HOST_CAN)
 
 $(FW_HOST_DIR)/main.o: lib/examples/firmware_m4/main.c $(M4_HDRS) lib/firmware.mk
 	@mkdir -p $(@D)

@@ -13,8 +13,11 @@
 #                                    libstdc++) and `nm -u` audit of both archives
 #
 # Every lib/src/*.cpp is compiled into the library (wildcard); every
+# lib/include/beaconloc/aid_*.h is one measurement kind, listed in
+# $(LIB_KINDS_H) (beaconloc/kinds_list.h, generated below); every
 # tests/lib/test_*.c except test_clink.c is a cmocka test (test_clink.c is the
 # plain C program of check-lib-clink: no cmocka, no C++ runtime).
+# LIB_INCLUDES (the include path), LIB_KINDS_H: the top-level Makefile.
 # Header dependencies: each object and test records the headers it includes
 # (-MMD -MP, .d files beside it, included below). Compilers: $(CC), $(CXX),
 # $(AR). Eigen: EIGEN_CFLAGS from `pkg-config --cflags eigen3` as -isystem
@@ -23,7 +26,8 @@
 LIB_SRCS      := $(sort $(wildcard lib/src/*.cpp))
 # Every library header (for fragments that depend on all of them, e.g.
 # tests/fuzz/fuzz.mk; the rules here use the .d files instead).
-LIB_HDRS      := $(wildcard lib/include/*.h lib/include/beaconloc/*.h lib/src/*.hpp)
+LIB_HDRS      := $(wildcard lib/include/*.h lib/include/beaconloc/*.h lib/src/*.hpp) $(LIB_KINDS_H)
+LIB_KIND_HDRS := $(sort $(wildcard lib/include/beaconloc/aid_*.h))
 EIGEN_CFLAGS  := $(patsubst -I%,-isystem %,$(shell pkg-config --cflags eigen3 2>/dev/null))
 ifeq ($(strip $(EIGEN_CFLAGS)),)
 EIGEN_CFLAGS  := -isystem /usr/include/eigen3
@@ -41,15 +45,15 @@ LIB_WARN      := -Wall -Wextra -Werror -Wconversion -Wdouble-promotion -Wshadow
 # keep fixed-size products off Eigen's GEMM kernel (which references malloc).
 LIB_CXXFLAGS  := -std=c++17 -O2 -fno-exceptions -fno-rtti -fno-threadsafe-statics \
                  -DEIGEN_NO_MALLOC -DEIGEN_GEMM_TO_COEFFBASED_THRESHOLD=1000 \
-                 $(EIGEN_CFLAGS) -Ilib/include $(LIB_WARN)
-LIB_TEST_CFLAGS := -std=c11 -O1 -g -Ilib/include -Itests/lib -Wall -Wextra -Werror \
+                 $(EIGEN_CFLAGS) $(LIB_INCLUDES) $(LIB_WARN)
+LIB_TEST_CFLAGS := -std=c11 -O1 -g $(LIB_INCLUDES) -Itests/lib -Wall -Wextra -Werror \
                    -Wno-unused-parameter
 LIB_SAN       := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all
 
 # $(1) variant dir under build/lib ('' = default), $(2) extra compile flags,
 # $(3) extra test link flags
 define LIB_VARIANT
-$(BUILD)/lib/$(1)obj/%.o: lib/src/%.cpp lib/lib.mk
+$(BUILD)/lib/$(1)obj/%.o: lib/src/%.cpp lib/lib.mk | $(LIB_KINDS_H)
 	@mkdir -p $$(@D)
 	$(CXX) $(LIB_CXXFLAGS) $(LIB_DEPFLAGS) $(2) -c $$< -o $$@
 
@@ -58,13 +62,29 @@ $(BUILD)/lib/$(1)libbeaconloc.a: $(patsubst lib/src/%.cpp,$(BUILD)/lib/$(1)obj/%
 	rm -f $$@
 	$(AR) rcs $$@ $$^
 
-$(BUILD)/lib/$(1)tests/%: tests/lib/%.c $(BUILD)/lib/$(1)libbeaconloc.a lib/lib.mk
+$(BUILD)/lib/$(1)tests/%: tests/lib/%.c $(BUILD)/lib/$(1)libbeaconloc.a lib/lib.mk | $(LIB_KINDS_H)
 	@mkdir -p $$(@D)
 	$(CC) $(LIB_TEST_CFLAGS) $(LIB_DEPFLAGS) $(2) $$< $(BUILD)/lib/$(1)libbeaconloc.a $(3) $$(LIB_TEST_LDLIBS_$$*) -lcmocka -lm -o $$@
 
 -include $(patsubst lib/src/%.cpp,$(BUILD)/lib/$(1)obj/%.d,$(LIB_SRCS)) \
          $(addprefix $(BUILD)/lib/$(1)tests/,$(addsuffix .d,$(LIB_TEST_NAMES)))
 endef
+
+# The kinds' list (beaconloc/kinds.h): each kind's header and BL_KINDS, from
+# the BL_<KIND>_KIND_ORDER of every lib/include/beaconloc/aid_<kind>.h
+# (lib/gen_kinds_list.sh: POSIX sh, sed, awk, sort; no Python, as a firmware
+# build). Made at every build (a header added or removed changes the list;
+# FORCE: no file's date shows a removal) and replaced only when it differs,
+# so nothing is rebuilt for an unchanged list. Every object that includes it
+# records it in its .d file; a clean build makes it first (order-only
+# prerequisites here and in the other fragments).
+$(LIB_KINDS_H): lib/gen_kinds_list.sh FORCE
+	@mkdir -p $(@D)
+	@sh lib/gen_kinds_list.sh $(LIB_KIND_HDRS) > $@.tmp
+	@if cmp -s $@.tmp $@; then rm -f $@.tmp; else mv $@.tmp $@; echo "gen_kinds_list: $@"; fi
+
+.PHONY: FORCE
+FORCE:
 
 $(eval $(call LIB_VARIANT,,-DEIGEN_NO_DEBUG,))
 $(eval $(call LIB_VARIANT,float/,-DBL_USE_FLOAT=1 -DEIGEN_NO_DEBUG,))
@@ -117,11 +137,11 @@ test-lib: $(LIB_TEST_BINS) check-lib-clink $(LOC_DATA) $(TEAM_DATA)
 # Pure C program, plain C compiler ($(CC)), no libstdc++: the link itself proves no C++
 # runtime is needed; nm -u proves no heap and no C++ runtime references.
 LIB_FORBIDDEN := '(__cxa_|__gxx_|_Znw|_Zna|_Zdl|_Zda|_ZSt|_Unwind_|^malloc$$|^free$$|^calloc$$|^realloc$$|operator)'
-check-lib-clink: tests/lib/test_clink.c $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
+check-lib-clink: tests/lib/test_clink.c $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a $(LIB_KINDS_H)
 	@mkdir -p $(BUILD)/lib/clink
-	$(CC) -std=c99 -pedantic -Wall -Wextra -Werror -Ilib/include tests/lib/test_clink.c \
+	$(CC) -std=c99 -pedantic -Wall -Wextra -Werror $(LIB_INCLUDES) tests/lib/test_clink.c \
 	    $(BUILD)/lib/libbeaconloc.a -lm -o $(BUILD)/lib/clink/clink_double
-	$(CC) -std=c99 -pedantic -Wall -Wextra -Werror -DBL_USE_FLOAT=1 -Ilib/include tests/lib/test_clink.c \
+	$(CC) -std=c99 -pedantic -Wall -Wextra -Werror -DBL_USE_FLOAT=1 $(LIB_INCLUDES) tests/lib/test_clink.c \
 	    $(BUILD)/lib/float/libbeaconloc.a -lm -o $(BUILD)/lib/clink/clink_float
 	$(BUILD)/lib/clink/clink_double
 	$(BUILD)/lib/clink/clink_float

@@ -1,11 +1,15 @@
-// beaconloc — the measurement kinds of kinds.h's list and the shared code:
+// beaconloc — the measurement kinds of kinds.h's list (BL_KINDS, which the
+// build generates from every lib/include/beaconloc/aid_<kind>.h in the
+// order of its BL_<KIND>_KIND_ORDER) and the shared code:
 // each kind's hooks (struct Kind), called for every kind by config.cpp
 // (defaults, checks, geometry), filter_estimate.cpp (counters) and
 // localizer.cpp (restart, wheels); and what the shared code offers a kind's
 // source: the config rule rows its params block is checked with, and the
 // localizer's path for one beacon measurement. A kind defines its hooks in
 // its own source (aid_<kind>.cpp), in every build: with its switch off,
-// only those that bl_config still needs (a count that must be 0).
+// only those that bl_config still needs (a count that must be 0). No list
+// here names a kind: a new one is its own files only (lib/README.md,
+// "Adding a measurement kind").
 #ifndef BEACONLOC_KINDS_HPP
 #define BEACONLOC_KINDS_HPP
 
@@ -74,7 +78,7 @@ bool beacons_span_plane(const bl_beacon *b, uint32_t n);
 bool same_beacons(const bl_beacon *a, const bl_beacon *b, uint32_t n, bool z);
 
 // ---- the kinds' hooks
-// Each kind's id: its place in kinds.h's list.
+// Each kind's id: its place in kinds.h's list (BL_<KIND>_KIND_ORDER's order).
 #define BL_KIND_ID(kind, KIND, arg) kind,
 enum class KindId : uint32_t { BL_KINDS(BL_KIND_ID, ) };
 #undef BL_KIND_ID

@@ -12,7 +12,7 @@
 
 #include <cstring>
 
-#include "beaconloc/solver.h"
+#include "beaconloc/aid_bearing.h"
 
 namespace bl {
 
@@ -183,7 +183,7 @@ int start_from_bearings(bl_filter *f)
     VX x = VX::Zero();
     MX P = MX::Zero();
     // Pose and its covariance from the triangulation (Vander et al. 2011
-    // eq. 1 by weighted least squares, solver.h).
+    // eq. 1 by weighted least squares, aid_bearing.h).
     x(X) = sol.x_m;
     x(Y) = sol.y_m;
     x(TH) = wrap_angle(sol.theta_rad);

@@ -11,7 +11,7 @@
 
 #include <cstring>
 
-#include "beaconloc/solver.h"
+#include "beaconloc/aid_range.h"
 
 namespace bl {
 

@@ -1,4 +1,4 @@
-// beaconloc — snapshot bearing triangulation (solver.h): the pose (x, y,
+// beaconloc — snapshot bearing triangulation (aid_bearing.h): the pose (x, y,
 // theta) from bearings to N >= 3 beacons, no prior.
 //
 // Measurement model, Vander et al. 2011 eq. 1 (eq. 3 in the filter):
@@ -19,7 +19,7 @@
 // ToTal's D = 0).
 // N beacons: weighted Gauss-Newton on the wrapped bearing residuals from
 // the closed form of the best-conditioned triple.
-// Displaced sensors (solver.h: body_dx_m, body_dy_m, body_dtheta_rad, a
+// Displaced sensors (aid_bearing.h: body_dx_m, body_dy_m, body_dtheta_rad, a
 // moving robot's bearings motion-compensated by odometry): bearing j's
 // sensor sits at s_j = s + R(theta)·e_j, e_j = d_j + R(dθ_j)·o - o (body
 // frame, from the reference pose's sensor s), and its bearing counts from
@@ -31,7 +31,7 @@
 #include <cstring>
 #include <limits>
 
-#include "beaconloc/solver.h"
+#include "beaconloc/aid_bearing.h"
 
 using bl::is_finite;
 using bl::real;
@@ -52,7 +52,7 @@ constexpr real kDefaultMaxDrms_m = real(0.5);
 // the circle (measured: tests/lib/test_solver_bearing.c, the grid across
 // the circle).
 constexpr real kLinearity = real(0.5);
-// Largest displacement of a sensor (m, rad; solver.h).
+// Largest displacement of a sensor (m, rad; aid_bearing.h).
 constexpr real kMaxDisplacement = real(1e3);
 // An exactly determined fix (N = 3) must reproduce its bearings to within
 // kConsistency·sigma_j (rounding only); else it is refused.
@@ -102,7 +102,7 @@ inline real turned_bearing(const bl_bearing_problem *p, uint32_t j)
 }
 
 // The sensors' offsets from the reference pose's sensor, body frame (m):
-// e_j = d_j + R(dθ_j)·o - o (solver.h's model with s = (x, y) + R(theta)·o).
+// e_j = d_j + R(dθ_j)·o - o (aid_bearing.h's model with s = (x, y) + R(theta)·o).
 struct Offsets {
     real ex[BL_MAX_BEACONS];
     real ey[BL_MAX_BEACONS];
@@ -325,7 +325,7 @@ real condition_of(const Mat3 &A, const Mat3 &inv)
 // The solution at the sensor fix q = (xs, ys, theta) (theta any wrap;
 // cth, sth its cosine and sine, from the caller), A = JᵀWJ there, chi2 its
 // weighted squared residuals over n bearings. Writes *out only if the fix passes
-// every check (solver.h); returns BL_OK or BL_EDEGENERATE.
+// every check (aid_bearing.h); returns BL_OK or BL_EDEGENERATE.
 int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const Mat3 &A, real chi2, uint32_t n,
            uint32_t iterations, bl_bearing_solution *out)
 {
@@ -365,7 +365,7 @@ int finish(const bl_bearing_problem *p, const Vec3 &q, real cth, real sth, const
     const real drms_s = std::sqrt(cov_s(0, 0) + cov_s(1, 1));
     if (!(drms_s <= kLinearity * std::sqrt(rmin2))) return BL_EDEGENERATE;
     // Weighted rms of the residuals with the 3 unknowns' degrees of freedom
-    // removed (solver.h): sqrt(Σ w e² / Σ w · n / (n - 3)), 0 for n = 3.
+    // removed (aid_bearing.h): sqrt(Σ w e² / Σ w · n / (n - 3)), 0 for n = 3.
     real residual_rad = 0;
     if (n > 3) {
         real wsum = 0;

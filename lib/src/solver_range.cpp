@@ -1,5 +1,5 @@
 // beaconloc — range-only snapshot solver: 2D trilateration of a receiver at
-// a known height from its 3D distances to N >= 3 fixed beacons (solver.h,
+// a known height from its 3D distances to N >= 3 fixed beacons (aid_range.h,
 // bl_solve_ranges_2d), with the mirror ambiguity of (nearly) collinear
 // beacons reported instead of guessed.
 #include <cstring>
@@ -7,7 +7,7 @@
 #include "internal.hpp"
 
 extern "C" {
-#include "beaconloc/solver.h"
+#include "beaconloc/aid_range.h"
 }
 
 using namespace bl;
@@ -132,7 +132,7 @@ void principal_line(const bl_range_problem *pr, Vec2 *c, Vec2 *e, Vec2 *n, real 
     *along_m = along;
 }
 
-// The linearised closed form (solver.h): rows 2 (b_j - b_0)·p = ρ_0² - ρ_j²
+// The linearised closed form (aid_range.h): rows 2 (b_j - b_0)·p = ρ_0² - ρ_j²
 // + |b_j|² - |b_0|², in coordinates relative to the centroid (better
 // conditioned), solved by least squares. False when the rows do not span
 // the plane (collinear beacons).

@@ -1,4 +1,4 @@
-// beaconloc — team initialisation without fixed beacons (solver.h,
+// beaconloc — team initialisation without fixed beacons (aid_team.h,
 // bl_solve_team): the CMU Millibots' start-up (Navarro-Serment et al.
 // §3.2) from the ranges between pairs of robots, by classical
 // multidimensional scaling (Torgerson 1952) refined by weighted least
@@ -17,7 +17,7 @@
 #include "linalg.hpp"
 
 extern "C" {
-#include "beaconloc/solver.h"
+#include "beaconloc/aid_team.h"
 }
 
 using namespace bl;
@@ -52,7 +52,7 @@ struct Pairs {
 
 bool measured(const bl_team_problem *pr, uint32_t i, uint32_t j) { return is_finite(pr->range_m[i][j]); }
 
-// Input checks of solver.h (BL_EINVAL).
+// Input checks of aid_team.h (BL_EINVAL).
 bool valid(const bl_team_problem *pr)
 {
     const uint32_t n = pr->count;
@@ -71,7 +71,7 @@ bool valid(const bl_team_problem *pr)
     return true;
 }
 
-// Greedy placement (solver.h): origin and axis first, then any robot with
+// Greedy placement (aid_team.h): origin and axis first, then any robot with
 // >= 2 measured ranges to placed ones. Returns BL_TEAM_NONE when every
 // robot is placed, else the robot at fault.
 uint32_t unplaceable(const bl_team_problem *pr)
@@ -101,7 +101,7 @@ uint32_t unplaceable(const bl_team_problem *pr)
 }
 
 // Classical MDS start (Torgerson 1952; Borg & Groenen 2005 §12.1) in the
-// gauge of solver.h. False when B has fewer than two positive eigenvalues
+// gauge of aid_team.h. False when B has fewer than two positive eigenvalues
 // (the team on one line: no 2D configuration).
 bool mds_start(const bl_team_problem *pr, VP *p)
 {
@@ -163,7 +163,7 @@ bool mds_start(const bl_team_problem *pr, VP *p)
     return p->allFinite();
 }
 
-// The coordinates the gauge leaves free (solver.h): all of robots < n but
+// The coordinates the gauge leaves free (aid_team.h): all of robots < n but
 // origin's x, y and axis's y.
 void free_mask(const bl_team_problem *pr, bool freec[kNP])
 {
@@ -306,7 +306,7 @@ extern "C" int bl_solve_team(const bl_team_problem *prob, bl_team_solution *sol)
         for (int c = r + 1; c < kNP; ++c) C(r, c) = C(c, r) = real(0.5) * (C(r, c) + C(c, r));
     if (!C.allFinite() || !p.allFinite()) return BL_EDEGENERATE;
 
-    // The reflection convention (solver.h): the lowest-numbered robot off
+    // The reflection convention (aid_team.h): the lowest-numbered robot off
     // the x axis by more than 3σ_y has y > 0.
     for (uint32_t i = 0; i < n; ++i) {
         const real y = p(2 * i + 1), vy = C(2 * i + 1, 2 * i + 1);
@@ -382,7 +382,7 @@ extern "C" int bl_team_resolve_mirror(const bl_team_l_manoeuvre *in, bl_team_mir
     const real ax = in->x_m[1] - in->x_m[0], ay = in->y_m[1] - in->y_m[0];
     const real bx = in->x_m[2] - in->x_m[1], by = in->y_m[2] - in->y_m[1];
     if (!(std::hypot(ax, ay) >= real(1e-3)) || !(std::hypot(bx, by) >= real(1e-3))) return BL_EDEGENERATE;
-    // c = a × b (solver.h), its gradients, σ_c² = Σ gₖᵀ Σₖ gₖ.
+    // c = a × b (aid_team.h), its gradients, σ_c² = Σ gₖᵀ Σₖ gₖ.
     const real c = ax * by - ay * bx;
     const real gk[3][2] = {{-by, bx}, {by + ay, -bx - ax}, {-ay, ax}};
     real var = 0;
@@ -405,7 +405,7 @@ extern "C" int bl_team_resolve_mirror(const bl_team_l_manoeuvre *in, bl_team_mir
     return BL_OK;
 }
 
-// One pair's mean range with multipath late arrivals dropped (solver.h):
+// One pair's mean range with multipath late arrivals dropped (aid_team.h):
 // median, robust σ = max(1.4826·MAD, σ model) (Huber 1981 §5.1), the mean of
 // the ranges within 3 robust σ of the median (Millibots §3.2).
 int bl_robust_range_mean(bl_real *v, bl_real *scratch, uint32_t m, bl_real sigma_m, bl_real sigma_per_m,

@@ -3,7 +3,7 @@
 // moved, and with the first such fit the team's hand (the mirror y -> -y the
 // survey cannot see; Millibots §3.2: the turn the odometry reports against
 // the one the ranges show, here through the whole path). The hand is
-// decided here only: solver.h's bl_team_resolve_mirror (fixes at an L's
+// decided here only: aid_team.h's bl_team_resolve_mirror (fixes at an L's
 // corners) is not used by the coordinator.
 #include "team_internal.hpp"
 

@@ -32,7 +32,7 @@ void bl::team_survey(bl_team *t, int64_t now_us)
             const int pi = pair_index(n, i, j);
             const uint32_t m = std::min<uint32_t>(t->survey_n_[pi], BL_TEAM_SURVEY_PINGS);
             if (m == 0) continue;
-            // Multipath late arrivals dropped (solver.h, bl_robust_range_mean).
+            // Multipath late arrivals dropped (aid_team.h, bl_robust_range_mean).
             real v[BL_TEAM_SURVEY_PINGS], dev[BL_TEAM_SURVEY_PINGS];
             for (uint32_t k = 0; k < m; ++k) v[k] = t->survey_r_[pi][k];
             real r = 0;

@@ -95,8 +95,9 @@ def test_probe_kind_builds_into_bridge_config(tmp_path):
     (gen / "site_keys.h").write_text(header, encoding="utf-8")
     (tmp_path / "probe.c").write_text(PROBE_C, encoding="utf-8")
     cangen = BUILD / "gen" / "can"
+    libgen = BUILD / "gen" / "lib"  # the library's generated kinds' list (lib/lib.mk)
     flags = ["-std=c11", "-D_GNU_SOURCE", "-Wall", "-Wextra", "-Werror", f"-I{gen}",
-             f"-I{REPO / 'bridge'}", f"-I{REPO / 'lib/include'}", f"-I{cangen}"]
+             f"-I{REPO / 'bridge'}", f"-I{REPO / 'lib/include'}", f"-I{libgen}", f"-I{cangen}"]
     cc = _cc()
     objs = []
     for src in (tmp_path / "probe.c", REPO / "bridge/config.c", REPO / "bridge/log.c",

@@ -79,6 +79,10 @@ $(FUZZ_DIR)/obj/fuzz_%.o: tests/fuzz/fuzz_%.c tests/fuzz/fuzz_common.h $(BRIDGE_
 	@mkdir -p $(@D)
 	$(FUZZ_CC) $(BRIDGE_CPPFLAGS) $(FUZZ_HARN_CFLAGS) $(FUZZ_SAN) -c -o $@ $<
 
+# The bridge's objects and the harnesses include the library's headers: its
+# generated kinds' list first (lib/lib.mk; the lib objects have it in LIB_HDRS).
+$(FUZZ_BR_OBJS) $(FUZZ_NAMES:%=$(FUZZ_DIR)/obj/fuzz_%.o): | $(LIB_KINDS_H)
+
 # Every harness links the whole bridge (all but main.o) and the library; the
 # linker keeps what it calls. fuzz_frames stands in for recvmsg (the CAN
 # socket's read) with its own function, as tests/bridge/test_can_in.c does.
@@ -113,7 +117,7 @@ $(FUZZ_DIR)/msan/obj/%.o: lib/src/%.cpp $(LIB_HDRS) tests/fuzz/fuzz.mk
 	$(FUZZ_CXX) $(FUZZ_LIB_CXXFLAGS) $(FUZZ_MSAN) -fsanitize=fuzzer-no-link -c $< -o $@
 
 $(FUZZ_DIR)/msan/fuzz_lib_api: tests/fuzz/fuzz_lib_api.c tests/fuzz/fuzz_common.h $(FUZZ_MSAN_OBJS)
-	$(FUZZ_CC) -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -Ilib/include -Itests/fuzz $(FUZZ_MSAN) \
+	$(FUZZ_CC) -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror $(LIB_INCLUDES) -Itests/fuzz $(FUZZ_MSAN) \
 	    -fsanitize=fuzzer -o $@ $< $(FUZZ_MSAN_OBJS) -lm
 
 fuzz-msan: $(FUZZ_DIR)/msan/fuzz_lib_api

@@ -44,8 +44,9 @@ typedef double bl_real;
  * (0 or 1) for the library and every file that includes its headers alike
  * (the struct layouts depend on them). Each measurement kind's header
  * (aid_<kind>.h, kinds.h) declares what it has with its switch on and off;
- * these four are here because solver.h and sonar.h, which do not include
- * the kinds, test them too (a new kind may define its own in its header).
+ * these four are here because headers beside the kinds' test them too
+ * (sonar.h, which does not include the kinds; team.h) and the team's
+ * default is the ranges' (a new kind may define its own in its header).
  *   BL_WITH_BEARINGS  1 (default): bearings to bearing beacons (aid_bearing.h:
  *                     bl_filter_fuse_bearing, bl_filter_start_bearings,
  *                     bl_localizer_bearing, bl_bearing_meas).
@@ -54,7 +55,7 @@ typedef double bl_real;
  *                     buffers, bl_estimate and bl_loc_counters no bearing
  *                     counters; bl_config keeps bearing_beacon_count, which
  *                     bl_config_check then requires to be 0. For pulse-only firmware. The
- *                     solvers (solver.h, bl_solve_bearings*) stay: they are
+ *                     solvers (aid_bearing.h, bl_solve_bearings*) stay: they are
  *                     independent of the filter. */
 #ifndef BL_WITH_BEARINGS
 #define BL_WITH_BEARINGS 1
@@ -67,7 +68,7 @@ typedef double bl_real;
  *                     buffers, bl_estimate and bl_loc_counters no range
  *                     counters; bl_config keeps range_beacon_count, which
  *                     bl_config_check then requires to be 0. The solver
- *                     (solver.h, bl_solve_ranges_2d) stays. */
+ *                     (aid_range.h, bl_solve_ranges_2d) stays. */
 #ifndef BL_WITH_RANGES
 #define BL_WITH_RANGES 1
 #endif
@@ -78,7 +79,7 @@ typedef double bl_real;
  *                     BL_WITH_RANGES (its model and σ). 0: those calls and
  *                     types are not declared, the filter carries no team
  *                     block, bl_estimate no team counters, and the team
- *                     solvers (solver.h bl_solve_team, bl_team_resolve_mirror,
+ *                     solvers (aid_team.h bl_solve_team, bl_team_resolve_mirror,
  *                     bl_team_mirror) are not built either: unlike the other
  *                     solvers, bl_solve_team's ~5 KiB stack frame would
  *                     dominate a small board's stack report. */
@@ -102,7 +103,7 @@ typedef double bl_real;
 #ifndef BL_WITH_SONAR
 #define BL_WITH_SONAR 1
 #endif
-/* Team sizes: robots in one team solve (solver.h bl_solve_team), and
+/* Team sizes: robots in one team solve (aid_team.h bl_solve_team), and
  * stationary beacon robots one filter ranges to at a time (the Millibots
  * keep three; one more lets a leap-frog hand over without a gap). */
 #ifndef BL_MAX_TEAM

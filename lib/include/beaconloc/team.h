@@ -5,7 +5,7 @@
  * (emitter or listener, the leader's schedule) and skid-steer track
  * encoders. One bl_team per team, on the team leader or the team's host
  * computer (the bridge). It is built from the library's team blocks:
- * the team solve from pairwise ranges (solver.h bl_solve_team, the survey),
+ * the team solve from pairwise ranges (aid_team.h bl_solve_team, the survey),
  * the mirror flip (bl_team_mirror), and per moving robot one bl_filter with
  * ranges to its stationary teammates as consider states (aid_team.h
  * bl_filter_set_team_beacons, bl_filter_fuse_team_range).
@@ -62,7 +62,7 @@
  *     against the one the ranges show — here through the whole path),
  *     flipping the anchors with bl_team_mirror if needed, and the robot's
  *     filter starts at the fitted pose (BL_TEAM_EV_ROBOT_STARTED). This
- *     path fit is the ONE hand decision: bl_team_resolve_mirror (solver.h)
+ *     path fit is the ONE hand decision: bl_team_resolve_mirror (aid_team.h)
  *     is not used here. A robot that stood after its filter ran keeps its
  *     heading (heading_known) and restarts without a fit when it moves.
  *  5. Lost robots: no odometry and no range to/from it for lost_s -> LOST
