@@ -175,7 +175,7 @@ static void fail(struct parse_ctx *ctx, int line, const char *section, const cha
     if (ctx->failed)
         return; /* keep the first error */
     ctx->failed = true;
-    char why[256];
+    char why[CONFIG_ERR_LEN];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(why, sizeof why, fmt, ap);
@@ -567,28 +567,100 @@ static int check_survey(const struct bridge_config *cfg, struct parse_ctx *ctx)
     return 0;
 }
 
+/* The site-validity rule, the schema's (its sections' starts_alone,
+ * SITE_STARTS_ALONE): the conditions "member >= minimum" of each clause, in
+ * clause order. */
+static const struct start_condition {
+    int clause;
+    const char *section, *key;
+    size_t offset; /* of the int member in struct bridge_config */
+    int minimum;
+} start_conditions[] = {
+#define START_CONDITION(clause, sec, k, member, lo)                                                \
+    {clause, #sec, #k, offsetof(struct bridge_config, member), lo},
+    SITE_STARTS_ALONE(START_CONDITION)
+#undef START_CONDITION
+};
+#define START_CONDITIONS (sizeof start_conditions / sizeof start_conditions[0])
+
+static int start_value(const struct bridge_config *cfg, const struct start_condition *s)
+{
+    return *(const int *)(const void *)((const char *)cfg + s->offset);
+}
+
+bool config_site_starts(const struct bridge_config *cfg)
+{
+    bool holds[SITE_STARTS_ALONE_CLAUSES];
+    for (int c = 0; c < SITE_STARTS_ALONE_CLAUSES; c++) holds[c] = true;
+    for (size_t i = 0; i < START_CONDITIONS; i++)
+        if (start_value(cfg, &start_conditions[i]) < start_conditions[i].minimum)
+            holds[start_conditions[i].clause] = false;
+    for (int c = 0; c < SITE_STARTS_ALONE_CLAUSES; c++)
+        if (holds[c])
+            return true;
+    return false;
+}
+
+/* Append to out[len] at *n (vsnprintf; the text is cut at len). */
+static void append(char *out, size_t len, size_t *n, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static void append(char *out, size_t len, size_t *n, const char *fmt, ...)
+{
+    if (*n >= len)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    int w = vsnprintf(out + *n, len - *n, fmt, ap);
+    va_end(ap);
+    *n = w < 0 ? len : *n + (size_t)w;
+}
+
+/* The rule's clauses from clause `first` on, with their values now, into
+ * out: "[bearing_beacons] count >= 3 (now 2), ..., [sonar_ring] count >= 1
+ * and [map] walls >= 1 (now 0 and 0) or [team] robots >= 1 (now 0)" (the
+ * simulator's words: site_schema.py Schema.site_rule_error). */
+static void format_clauses(const struct bridge_config *cfg, int first, char *out, size_t len)
+{
+    size_t n = 0, e;
+    out[0] = '\0';
+    for (size_t b = 0; b < START_CONDITIONS; b = e) {
+        const int clause = start_conditions[b].clause;
+        for (e = b + 1; e < START_CONDITIONS && start_conditions[e].clause == clause; e++) {}
+        if (clause < first)
+            continue;
+        append(out, len, &n, "%s",
+               clause == first                           ? ""
+               : clause == SITE_STARTS_ALONE_CLAUSES - 1 ? " or "
+                                                         : ", ");
+        for (size_t i = b; i < e; i++)
+            append(out, len, &n, "%s[%s] %s >= %d", i == b ? "" : " and ",
+                   start_conditions[i].section, start_conditions[i].key,
+                   start_conditions[i].minimum);
+        for (size_t i = b; i < e; i++)
+            append(out, len, &n, "%s%d", i == b ? " (now " : " and ",
+                   start_value(cfg, &start_conditions[i]));
+        append(out, len, &n, ")");
+    }
+}
+
 /* Check with line numbers when ctx is given. */
 static int check(const struct bridge_config *cfg, struct parse_ctx *ctx)
 {
     size_t ki = 0;
-    /* A site needs its beacons: ultrasonic ones (the library wants >= 3),
-     * or none and >= 3 bearing beacons (their triangulation starts the
-     * filter, Vander et al. 2011 eq. 1) or >= 3 range beacons (their
-     * trilateration starts it). */
-    if (cfg->beacon_count < 1 && cfg->bearing_beacon_count < 3 && cfg->range_beacon_count < 3 &&
-        !config_is_team(cfg) && !config_is_sonar(cfg)) {
-        int line = key_line_of(ctx, "beacons", "count");
+    /* A site needs beacons of a kind that can start the filter: one clause of
+     * the schema's site-validity rule (config_site_starts); the error names
+     * the first clause's key, [beacons] count, and every way out. */
+    if (!config_site_starts(cfg)) {
+        const struct start_condition *blamed = &start_conditions[0];
+        const int line = key_line_of(ctx, blamed->section, blamed->key);
+        char ways[CONFIG_ERR_LEN];
+        format_clauses(cfg, line > 0 ? 1 : 0, ways, sizeof ways);
         if (line > 0)
-            fail(ctx, line, "beacons", "count",
-                 "0 allowed only with [bearing_beacons] count >= 3 or [range_beacons] count >= 3 "
-                 "(they are %d and %d), on a team site ([team] robots >= 3), or with a sonar ring "
-                 "and its map ([sonar_ring] count >= 1, [map] walls >= 1)",
-                 cfg->bearing_beacon_count, cfg->range_beacon_count);
+            fail(ctx, line, blamed->section, blamed->key, "%d allowed only with %s",
+                 start_value(cfg, blamed), ways);
         else
-            fail(ctx, line, "beacons", "count",
-                 "not set: the site file must give the beacons ([beacons] count >= 3, "
-                 "[bearing_beacons] count >= 3, [range_beacons] count >= 3, [team] robots >= 3 "
-                 "or [sonar_ring] count >= 1 with [map] walls >= 1)");
+            fail(ctx, line, blamed->section, blamed->key,
+                 "not set: the site file must give the beacons: %s", ways);
         return -1;
     }
     if (check_items(cfg, ctx))

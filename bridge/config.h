@@ -218,6 +218,13 @@ static inline bool config_is_sonar(const struct bridge_config *cfg)
     return cfg->sonar_ring.count > 0 && cfg->map.walls > 0;
 }
 
+/* The site-validity rule, declared once in the site schema (its sections'
+ * starts_alone; the simulator's site.py applies the same): true when the
+ * site has beacons of a kind that can start the filter ([beacons] count >= 1,
+ * [bearing_beacons] count >= 3, ... in the generated SITE_STARTS_ALONE);
+ * config_check refuses a site without. */
+bool config_site_starts(const struct bridge_config *cfg);
+
 /* Built-in defaults (the kleeman-lab daemon settings, no beacons). */
 void config_defaults(struct bridge_config *cfg);
 

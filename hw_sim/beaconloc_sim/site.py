@@ -8,12 +8,21 @@ checks (``sim``, ``sim_range``) and skips the others (``[bridge]``,
 ``[tuning]``: the daemon's settings and the estimator's tuning, checked by the
 bridge); any other section is an error, as in the bridge (bridge/config.c), so
 a misspelt one cannot drop its keys silently.
+
+The core sections (the room, the ultrasonic beacons and receiver ring, the robot and
+its wheels, the noise) are fields of :class:`Site`; each sensor kind's values are
+declared by its node module (the kind's ``SensorKind.site_values``, nodes/<kind>.py),
+which :func:`load_site` asks every kind of ``nodes.KINDS`` for, and read as attributes
+like the fields (``site.<name>``). The site-validity rule (a site needs beacons of a
+kind that can start the filter) is the schema's, the bridge's too (``starts_alone``).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -55,6 +64,8 @@ def _read_key(ini: IniFile, section: str, key: Key):
 
 @dataclass(frozen=True)
 class Site:
+    """The site as the simulator reads it: the core sections' values as fields, each sensor
+    kind's as attributes too (kind_values: site.<name>)."""
     path: Path
     name: str
     room_x_m: float
@@ -81,50 +92,26 @@ class Site:
     speed_of_sound_mps: float
     sigma_speed_of_sound_mps: float
     gate_sigma: float
-    # the bearing sensor and its beacons (Vander et al. 2011); none when the count is 0
-    bearing_beacons_m: np.ndarray    # (M, 2) bearing beacon positions, site frame, m
-    bearing_offset_m: np.ndarray     # (2,) sensor mount, body frame (forward, left), m
-    sigma_bearing_rad: float         # σ of one bearing, rad
-    bearing_scan_rate_hz: float      # scans per second
-    bearing_rotating: bool           # each bearing timed at its own instant within the scan
-    # the range receiver and its fixed beacons (Millibots; Marvelmind-like); none when 0
-    range_beacons_m: np.ndarray      # (K, 3) range beacon positions, site frame, m
-    range_offset_m: np.ndarray       # (2,) receiver mount, body frame (forward, left), m
-    range_height_m: float            # receiver height, site frame z, m
-    sigma_range_m: float             # σ of one range at short distance, m
-    sigma_range_per_m: float         # σ growth per metre of range (σ = sigma_m + this · r)
-    range_max_m: float               # no pulse heard beyond, m
-    range_ping_period_s: float       # the leader pings one beacon every this long, s
-    # the sonar ring (Hoppenot & Colle 1997) and the map it is corrected against; none when 0
-    sonar_mounts: np.ndarray         # (S, 4): x_m, y_m (body frame), axis angle rad (CCW), used 0/1
-    sonar_period_s: float            # burst period, s
-    sonar_beam_width_rad: float      # full beam width, rad
-    sonar_min_range_m: float         # blanking, m
-    sonar_max_range_m: float         # largest range, m
-    sonar_sigma_range_m: float       # range σ floor, m: σ(r) = max(this, rel · r)
-    sonar_sigma_range_rel: float     # range σ relative to the range
-    walls_m: np.ndarray              # (W, 4): x1, y1, x2, y2 of each map segment, site frame, m
+    # each sensor kind's values, by attribute (its SensorKind.site_values), read as
+    # site.<name> like the fields
+    kind_values: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def attributes(self) -> dict[str, Any]:
+        """Every value of the site by its attribute: the core fields and every kind's."""
+        core = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.name != "kind_values"}
+        return core | self.kind_values
+
+    def __getattr__(self, name: str):
+        """A sensor kind's site value (kind_values), as if it were a field."""
+        values = self.__dict__.get("kind_values")
+        if values is None or name not in values:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        return values[name]
 
     @property
     def beacon_count(self) -> int:
         return int(self.beacons_m.shape[0])
-
-    @property
-    def bearing_beacon_count(self) -> int:
-        return int(self.bearing_beacons_m.shape[0])
-
-    @property
-    def range_beacon_count(self) -> int:
-        return int(self.range_beacons_m.shape[0])
-
-    @property
-    def sonar_count(self) -> int:
-        return int(self.sonar_mounts.shape[0])
-
-    def sonar_sigma_m(self, range_m):
-        """σ of a sonar range, m: σ(r) = max(sigma_range_m, sigma_range_rel · r) (issue 12;
-        Polaroid-class: about 1 % of the range with a few cm floor)."""
-        return np.maximum(self.sonar_sigma_range_m, self.sonar_sigma_range_rel * np.asarray(range_m))
 
     def receiver_angles_rad(self) -> np.ndarray:
         """Body-frame angle of each receiver: first_angle + index * 2*pi/count (DBC comment)."""
@@ -148,25 +135,61 @@ def _read_items(ini: IniFile, schema: Schema, section: Section) -> np.ndarray:
     return np.array(rows, dtype=float).reshape(count, len(section.keys))
 
 
-def _sonar_mounts(rows: np.ndarray) -> np.ndarray:
-    """[sonarN] rows (x_m, y_m, angle_deg, used) -> (x_m, y_m, angle_rad, used)."""
-    out = rows.copy()
-    out[:, 2] = np.radians(rows[:, 2])
-    return out
+class SiteRead:
+    """The site file as load_site read it by the schema, for a kind's site values
+    (SensorKind.site_values): its keys' values and its per-item sections' rows."""
+
+    def __init__(self, ini: IniFile, values: dict[tuple[str, str], object],
+                 items: dict[str, np.ndarray]):
+        self.ini, self._values, self._items = ini, values, items
+
+    def value(self, section: str, key: str):
+        """[section] key as read and checked (schema: sim, sim_range, default)."""
+        return self._values[section, key]
+
+    def section(self, section: str):
+        """The key -> value function of one section."""
+        return lambda key: self._values[section, key]
+
+    def items(self, section: str) -> np.ndarray:
+        """A per-item section's rows (by its name, "<prefix>N"): (count, keys) array."""
+        return self._items[section]
+
+    def beacons_and_mount(self, beacons: str, sensor: str, prefix: str) -> dict[str, Any]:
+        """A kind's beacons and the sensor on the robot that measures them, as its site values
+        <prefix>_beacons_m (the rows of the per-item section beacons: (count, keys) positions,
+        site frame, m), <prefix>_beacon_count and <prefix>_offset_m (the sensor section's mount
+        offset_x_m, offset_y_m: body frame (forward, left), m)."""
+        rows = self.items(beacons)
+        return {f"{prefix}_beacons_m": rows, f"{prefix}_beacon_count": int(rows.shape[0]),
+                f"{prefix}_offset_m": np.array([self.value(sensor, "offset_x_m"),
+                                                self.value(sensor, "offset_y_m")])}
+
+    def error(self, section: str, key: str | None, why: str) -> ConfigError:
+        """An error naming the file, the line, the section and the key."""
+        return self.ini.error(section, key, why)
 
 
-def _check_walls(ini: IniFile, walls_m: np.ndarray) -> None:
-    """A map segment must have a length (its ends are finite: the reader refuses others).
-    The error names the segment's second end, the key that would have to change."""
-    for i, (x1, y1, x2, y2) in enumerate(walls_m, start=1):
-        if math.hypot(x2 - x1, y2 - y1) < 1e-6:
-            raise ini.error(f"wall{i}", "x2_m", f"zero-length segment ({x1:g}, {y1:g}) to "
-                            f"({x2:g}, {y2:g}): a wall needs two distinct ends")
+def _kind_values(read: SiteRead) -> dict[str, Any]:
+    """Every sensor kind's site values (nodes.sensor_kinds(), looked up when called: a kind
+    registered later counts, and the nodes' modules may import this one); a name declared
+    twice, or a field's, is an error."""
+    from . import nodes
+    values: dict[str, Any] = {}
+    taken = {f.name for f in dataclasses.fields(Site)} | set(dir(Site))
+    for kind in nodes.sensor_kinds():
+        own = kind.site_values(read)
+        twice = set(own) & (set(values) | taken)
+        if twice:
+            raise ValueError(f"{kind.__name__}: site values declared twice: {sorted(twice)}")
+        values.update(own)
+    return values
 
 
 def load_site(path: str | Path, *, team: bool = False) -> Site:
     """The site file at path. team: the site of a team of robots (team_scenario.py), whose
-    beacons are the robots themselves: it may have no fixed beacons of any kind."""
+    beacons are the robots themselves: it may have no fixed beacons of any kind (the
+    site-validity rule's clause over [team], which the simulator does not read, holds)."""
     ini = IniFile(path)
     schema = load_schema()
     ours = [s for s in schema.sections if "sim" in s.read_by]
@@ -193,6 +216,13 @@ def load_site(path: str | Path, *, team: bool = False) -> Site:
             for key in section.keys:
                 value[section.name, key.name] = _read_key(ini, section.name, key)
     v = value.__getitem__
+    kind_values = _kind_values(SiteRead(ini, value, items))
+    # the site-validity rule, the schema's: a count of a section the simulator does not
+    # read ([team]) holds on a team's site only
+    why = schema.site_rule_error(lambda c: value.get((c.section, c.key)), unread_holds=team)
+    if why is not None:
+        blamed = schema.site_rule()[0][0]
+        raise ini.error(blamed.section, blamed.key, why)
     site = Site(
         path=Path(path),
         name=v(("site", "name")) or Path(path).stem,
@@ -220,40 +250,8 @@ def load_site(path: str | Path, *, team: bool = False) -> Site:
         speed_of_sound_mps=v(("noise", "speed_of_sound_mps")),
         sigma_speed_of_sound_mps=v(("noise", "sigma_speed_of_sound_mps")),
         gate_sigma=v(("noise", "gate_sigma")),
-        bearing_beacons_m=items["bearing_beaconN"],
-        bearing_offset_m=np.array([v(("bearing_sensor", "offset_x_m")),
-                                   v(("bearing_sensor", "offset_y_m"))]),
-        sigma_bearing_rad=math.radians(v(("bearing_sensor", "sigma_deg"))),
-        bearing_scan_rate_hz=v(("bearing_sensor", "scan_rate_hz")),
-        bearing_rotating=bool(v(("bearing_sensor", "rotating"))),
-        range_beacons_m=items["range_beaconN"],
-        range_offset_m=np.array([v(("range_sensor", "offset_x_m")),
-                                 v(("range_sensor", "offset_y_m"))]),
-        range_height_m=v(("range_sensor", "height_m")),
-        sigma_range_m=v(("range_sensor", "sigma_m")),
-        sigma_range_per_m=v(("range_sensor", "sigma_per_m")),
-        range_max_m=v(("range_sensor", "max_range_m")),
-        range_ping_period_s=v(("range_sensor", "ping_period_s")),
-        sonar_mounts=_sonar_mounts(items["sonarN"]),
-        sonar_period_s=v(("sonar_ring", "period_s")),
-        sonar_beam_width_rad=math.radians(v(("sonar_ring", "beam_width_deg"))),
-        sonar_min_range_m=v(("sonar_ring", "min_range_m")),
-        sonar_max_range_m=v(("sonar_ring", "max_range_m")),
-        sonar_sigma_range_m=v(("sonar_ring", "sigma_range_m")),
-        sonar_sigma_range_rel=v(("sonar_ring", "sigma_range_rel")),
-        walls_m=items["wallN"],
+        kind_values=kind_values,
     )
-    _check_walls(ini, site.walls_m)
-    if site.sonar_min_range_m >= site.sonar_max_range_m:
-        raise ini.error("sonar_ring", "min_range_m", "must be below max_range_m")
-    if site.beacon_count == 0 and site.bearing_beacon_count == 0 and \
-            site.range_beacon_count == 0 and site.sonar_count == 0 and not team:
-        raise ini.error("beacons", "count", "a site needs beacons: ultrasonic ([beacons] count), "
-                        "bearing ([bearing_beacons] count) or range ([range_beacons] count); "
-                        "or a sonar ring ([sonar_ring] count) and its [map]")
-    if site.sonar_count > 0 and site.walls_m.shape[0] == 0:
-        raise ini.error("map", "walls", "a sonar ring ([sonar_ring] count > 0) needs a map: "
-                        "walls > 0")
     if site.double_pulse_spacing_s <= site.burst_length_s:
         raise ini.error("beacons", "double_pulse_spacing_s",
                         "must exceed burst_length_s (the two bursts would merge)")

@@ -15,6 +15,7 @@ import math
 import re
 import sys
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
@@ -97,6 +98,17 @@ class Key:
 
 
 @dataclass(frozen=True)
+class Condition:
+    """One condition of a clause of the site-validity rule: [section] key >= minimum."""
+    section: str
+    key: str
+    minimum: int
+
+    def __str__(self) -> str:
+        return f"[{self.section}] {self.key} >= {self.minimum}"
+
+
+@dataclass(frozen=True)
 class Section:
     name: str
     read_by: tuple[str, ...]
@@ -104,6 +116,8 @@ class Section:
     keys: tuple[Key, ...]
     indexed_by: str | None = None   # per-item "<prefix>N": the section whose count says how many
     count_key: str = "count"        # per-item: that section's key giving the count ([map] walls)
+    # its clause of the site-validity rule (schema header: starts_alone); () = none
+    starts_alone: tuple[Condition, ...] = ()
 
     @property
     def prefix(self) -> str:
@@ -161,6 +175,41 @@ class Schema:
                     and header[len(p)] != "0":
                 return sec, int(header[len(p):])
         return None
+
+    def site_rule(self) -> list[tuple[Condition, ...]]:
+        """The site-validity rule's clauses (the sections' starts_alone, in file order): a
+        site needs one clause whose every condition holds."""
+        return [s.starts_alone for s in self.sections if s.starts_alone]
+
+    def site_rule_error(self, value: Callable[[Condition], int | None], *,
+                        unread_holds: bool = False, given: bool = True) -> str | None:
+        """None when one clause of the site-validity rule holds for the counts value(c) gives,
+        else why not, for an error about the first clause's key ([beacons] count): its value
+        and every other clause with the values now (bridge/config.c check() writes the same
+        words). value(c) None: a key this reader does not read (the simulator's [team]),
+        whose condition holds when unread_holds. given False: the blamed key is not in the
+        file (the bridge's built-in defaults): every clause is listed."""
+        clauses = self.site_rule()
+
+        def holds(c: Condition) -> bool:
+            v = value(c)
+            return unread_holds if v is None else v >= c.minimum
+        if any(all(holds(c) for c in clause) for clause in clauses):
+            return None
+        if not given:
+            return f"not set: the site file must give the beacons: {self._ways(clauses, value)}"
+        return f"{value(clauses[0][0])} allowed only with {self._ways(clauses[1:], value)}"
+
+    @staticmethod
+    def _ways(clauses: list[tuple[Condition, ...]], value) -> str:
+        """'[bearing_beacons] count >= 3 (now 2), ... or [team] robots >= 1 (now 0)'."""
+        parts = []
+        for clause in clauses:
+            values = [value(c) for c in clause]
+            now = "not simulated" if None in values else \
+                "now " + " and ".join(str(v) for v in values)
+            parts.append(" and ".join(str(c) for c in clause) + f" ({now})")
+        return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " or " + parts[-1]
 
     def sections_phrase(self, max_item: str | None = None) -> str:
         """'[site], [beacons], [beacon1]..[beacon16], ...' for error messages; max_item
@@ -243,8 +292,9 @@ def parse_schema(text: str) -> Schema:
         count_key = raw.get("count_key", "count")
         if count_key != "count" and indexed_by is None:
             raise ValueError(f"[{raw['name']}]: count_key without indexed_by")
+        starts = tuple(_condition(raw["name"], c) for c in raw.get("starts_alone", ()))
         sections.append(Section(raw["name"], read_by, raw.get("doc", ""), keys, indexed_by,
-                                count_key))
+                                count_key, starts))
     if len({s.name for s in sections}) != len(sections):
         raise ValueError("a section declared twice")
     for s in sections:
@@ -264,7 +314,42 @@ def parse_schema(text: str) -> Schema:
             raise ValueError(f"[{s.indexed_by}] {s.count_key}: a range is needed (the largest N)")
         if count.type != "int":
             raise ValueError(f"[{s.indexed_by}] {s.count_key}: a count is an int")
+    _check_site_rule(schema)
     return schema
+
+
+_CONDITION_RE = re.compile(r"^\s*(?:\[(\w+)\]\s+)?(\w+)\s*>=\s*(\d+)\s*$")
+
+
+def _condition(section: str, text: str) -> Condition:
+    """'count >= 3' (a key of section) or '[map] walls >= 1'."""
+    m = _CONDITION_RE.match(text)
+    if not m:
+        raise ValueError(f"[{section}] starts_alone: not 'KEY >= N' or '[SECTION] KEY >= N': "
+                         f"{text!r}")
+    return Condition(m.group(1) or section, m.group(2), int(m.group(3)))
+
+
+def _check_site_rule(schema: Schema) -> None:
+    """Each condition is on an int key of a section the bridge reads, not a per-item one;
+    the first clause, whose key the error names, is one condition on its own section."""
+    clauses = schema.site_rule()
+    if not clauses:
+        raise ValueError("no section declares starts_alone (the site-validity rule)")
+    for clause in clauses:
+        for c in clause:
+            try:
+                section = schema.section(c.section)
+                key = section.key(c.key)
+            except KeyError:
+                raise ValueError(f"starts_alone: {c}: no such key") from None
+            if key.type != "int" or section.indexed_by or "bridge" not in section.read_by:
+                raise ValueError(f"starts_alone: {c}: not an int key of a section the bridge "
+                                 "reads")
+    first = next(s for s in schema.sections if s.starts_alone)
+    if len(clauses[0]) != 1 or clauses[0][0].section != first.name:
+        raise ValueError(f"[{first.name}] starts_alone: the first clause is one key of its "
+                         "own section (the key the error names)")
 
 
 @lru_cache(maxsize=1)
@@ -397,6 +482,15 @@ def c_header(schema: Schema) -> str:
                      f"{_c_number(k, k.range.lo)}, {_c_number(k, k.range.hi)}, "
                      f"{'true' if k.range.lo_open else 'false'})" for k in params])
     out += [f"#define SITE_PARAM_COUNT {len(params)}", ""]
+    rule = schema.site_rule()
+    out += _c_macro("SITE_STARTS_ALONE", "X(clause, section, key, bridge_config member (int), "
+                    "minimum): the site-validity rule (the sections' starts_alone): a site "
+                    "needs one clause (0..SITE_STARTS_ALONE_CLAUSES-1) whose every condition "
+                    "member >= minimum holds; clause 0's key is the one its error names",
+                    [f"X({i}, {c.section}, {c.key}, "
+                     f"{schema.section(c.section).key(c.key).bridge}, {c.minimum})"
+                     for i, clause in enumerate(rule) for c in clause])
+    out += [f"#define SITE_STARTS_ALONE_CLAUSES {len(rule)}", ""]
     out += _c_macro("SITE_SIM_SECTIONS", "X(section): the simulator's alone (the bridge skips them)",
                     [f"X({s.name})" for s in schema.sections if "bridge" not in s.read_by])
     out += [f"#define SITE_MAX_{s.prefix.upper()}S {schema.max_items(s)}"

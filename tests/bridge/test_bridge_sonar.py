@@ -199,9 +199,9 @@ def test_sonar_frames_need_a_ring_and_a_start_pose(bridge_bin, room_log, tmp_pat
     (lambda t: t.replace("min_range_m = 0.15", "min_range_m = 10", 1),
      "[sonar_ring] min_range_m: 10 m not below max_range_m 10 m"),
     (lambda t: t.replace("walls = ", "walls = 0\n; ", 1),
-     "[beacons] count: 0 allowed only with [bearing_beacons] count >= 3 or [range_beacons] "
-     "count >= 3 (they are 0 and 0), on a team site ([team] robots >= 3), or with a sonar "
-     "ring and its map ([sonar_ring] count >= 1, [map] walls >= 1)"),
+     "[beacons] count: 0 allowed only with [bearing_beacons] count >= 3 (now 0), "
+     "[range_beacons] count >= 3 (now 0), [sonar_ring] count >= 1 and [map] walls >= 1 "
+     "(now 8 and 0) or [team] robots >= 1 (now 0)"),
 ])
 def test_bad_sonar_keys_exit_78_naming_the_key(bridge_bin, tmp_path, edit, expect):
     site = site_with(tmp_path, edit)

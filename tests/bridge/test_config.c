@@ -409,7 +409,8 @@ static void test_zero_beacons_needs_bearing_beacons(void **state)
     p = strstr(body, "[bearing_beacon3]");
     *p = '\0';
     expect_error(body, ":2: [beacons] count: 0 allowed only with [bearing_beacons] count >= 3 "
-                       "or [range_beacons] count >= 3 (they are 2 and 0)");
+                       "(now 2), [range_beacons] count >= 3 (now 0), [sonar_ring] count >= 1 "
+                       "and [map] walls >= 1 (now 0 and 0) or [team] robots >= 1 (now 0)");
     /* and a site of both kinds is fine */
     struct bridge_config cfg;
     config_defaults(&cfg);
@@ -517,7 +518,8 @@ static void test_range_sections_errors(void **state)
     p = strstr(body, "[range_beacon3]");
     memmove(p, strstr(p, "[range_sensor]"), strlen(strstr(p, "[range_sensor]")) + 1);
     expect_error(body, ":2: [beacons] count: 0 allowed only with [bearing_beacons] count >= 3 "
-                       "or [range_beacons] count >= 3 (they are 0 and 2)");
+                       "(now 0), [range_beacons] count >= 3 (now 2), [sonar_ring] count >= 1 "
+                       "and [map] walls >= 1 (now 0 and 0) or [team] robots >= 1 (now 0)");
     /* a beacon site with range beacons beyond their count (0) */
     snprintf(body, sizeof body, "%s[range_beacon1]\nx_m = 1\n", good_body);
     expect_error(body, ":23: [range_beacon1] x_m: range beacon beyond [range_beacons] "

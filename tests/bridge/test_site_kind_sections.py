@@ -1,7 +1,8 @@
 """A new kind's site sections reach the bridge from the site schema alone (issue 10).
 
 A throwaway kind, "probe", is added to a copy of the schema: its count section
-[probe_beacons], its per-item section [probe_beaconN] and its sensor section
+[probe_beacons] (with its clause of the site-validity rule: 2 beacons start the
+filter alone), its per-item section [probe_beaconN] and its sensor section
 [probe_sensor] (keys "probe_sensor.<key>"). The header generated from that copy
 must give struct bridge_config its members (probe_beacon_count, probe_beacon[],
 probe_sensor) and the bridge's config.c and site_to_lib.c must compile against it
@@ -34,7 +35,8 @@ def _key(name: str, type_: str, rng: str, **extra) -> str:
 
 # The throwaway kind: [probe_beacons] count, [probe_beaconN] x_m (required),
 # [probe_sensor] gain, channels (with defaults).
-PROBE = (_toml("section", name="probe_beacons", read_by=["bridge"], doc="test only")
+PROBE = (_toml("section", name="probe_beacons", read_by=["bridge"], doc="test only",
+               starts_alone=["count >= 2"])
          + _key("count", "int", "[0, 5]", default=0, bridge="probe_beacon_count")
          + _toml("section", name="probe_beaconN", read_by=["bridge"],
                  indexed_by="probe_beacons", doc="test only")
@@ -45,6 +47,7 @@ PROBE = (_toml("section", name="probe_beacons", read_by=["bridge"], doc="test on
 
 PROBE_C = r'''
 #include <stddef.h>
+#include <string.h>
 #include "config.h"
 
 _Static_assert(sizeof(((struct bridge_config *)0)->probe_beacon) ==
@@ -61,8 +64,17 @@ int main(void)
     struct bridge_config c;
     config_defaults(&c);
     /* the schema's defaults, set by config.c's generated table */
-    return !(c.probe_sensor.gain == 2.5 && c.probe_sensor.channels == 1 &&
-             c.probe_beacon_count == 0);
+    if (!(c.probe_sensor.gain == 2.5 && c.probe_sensor.channels == 1 &&
+          c.probe_beacon_count == 0))
+        return 1;
+    /* its clause of the site-validity rule: 2 probe beacons start the filter alone */
+    char err[CONFIG_ERR_LEN];
+    c.probe_beacon_count = 1;
+    if (config_site_starts(&c) || config_check(&c, err, sizeof err) == 0 ||
+        !strstr(err, "[team] robots >= 1 (now 0) or [probe_beacons] count >= 2 (now 1)"))
+        return 2;
+    c.probe_beacon_count = 2;
+    return config_site_starts(&c) ? 0 : 3;
 }
 '''
 

@@ -112,6 +112,15 @@ def test_max_range_dropouts_and_multipath(make_scenario):
 def test_survey_needs_three_range_beacons(make_scenario):
     text = SURVEY_SITE.replace("[range_beacons]\ncount = 4", "[range_beacons]\ncount = 2")
     text = re.sub(r"\[range_beacon3\][^\[]*\[range_beacon4\][^\[]*", "", text)
+    # two range beacons alone start nothing: the site is refused (the site-validity rule)
+    with pytest.raises(ConfigError, match=r"\[beacons\] count: 0 allowed only with "
+                       r"\[bearing_beacons\] count >= 3 \(now 0\), \[range_beacons\] count >= 3 "
+                       r"\(now 2\)"):
+        load_scenario(make_scenario(standing(4, "survey_s = 4"), text))
+    # with bearing beacons to start from, the survey is what two range beacons cannot do
+    text += "[bearing_beacons]\ncount = 3\n" + "".join(
+        f"[bearing_beacon{i}]\nx_m = {x}\ny_m = {y}\n"
+        for i, (x, y) in enumerate([(0.5, 0.5), (5.5, 0.5), (3.0, 5.5)], start=1))
     with pytest.raises(ConfigError, match="survey_s"):
         load_scenario(make_scenario(standing(4, "survey_s = 4"), text))
 

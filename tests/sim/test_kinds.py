@@ -1,9 +1,9 @@
 """The node kinds of a robot's bus are found, not listed (issue 10): each declares its scenario
 section, its place on the bus, its record, its events and rows for the bound and its timebase
-priority itself (nodes.sensor_kind.SensorKind), and scenario.py, simulate.py, crb.py and
-nodes/__init__.py loop over nodes.KINDS. A toy kind registered here, in a test, gets its
-scenario section, its frames on the bus, its record and its rows in the bound without an
-edit anywhere else."""
+priority itself (nodes.sensor_kind.SensorKind), and its values of the site file, and
+scenario.py, simulate.py, crb.py, site.py and nodes/__init__.py loop over nodes.KINDS. A toy
+kind registered here, in a test, gets its site value, its scenario section, its frames on the
+bus, its record and its rows in the bound without an edit anywhere else."""
 from __future__ import annotations
 
 import math
@@ -18,10 +18,16 @@ from beaconloc_sim import crb, nodes, outputs, simulate
 from beaconloc_sim.dbc import FrameSpec
 from beaconloc_sim.inifile import ConfigError
 from beaconloc_sim.nodes import KindOptions, SensorKind
+from beaconloc_sim.resources import builtin_site_path
 from beaconloc_sim.scenario import load_scenario
+from beaconloc_sim.site import load_site
+from beaconloc_sim.site_schema import load_schema
 
 PACKAGE = Path(simulate.__file__).parent
 BASE = (nodes.ReceiverRing, nodes.WheelEncoders, nodes.NodeStatus)   # every robot's, named
+# the site file's sections every site has (site.Site's fields), and the ones site.py skips
+CORE_SECTIONS = ("site", "beacons", "beaconN", "receivers", "robot", "noise", "team", "tuning",
+                 "bridge")
 
 
 def test_the_kinds_are_found_in_their_modules():
@@ -39,11 +45,17 @@ def test_the_kinds_are_found_in_their_modules():
 
 
 def test_no_kind_is_named_outside_its_own_module():
-    """scenario.py, simulate.py, crb.py, outputs.py and nodes/__init__.py name no kind beyond
-    every robot's: not its class, its record, its module, its name as a string nor its clock
-    keys (a new kind edits none of them)."""
+    """scenario.py, simulate.py, crb.py, outputs.py, site.py and nodes/__init__.py name no kind
+    beyond every robot's: not its class, its record, its module, its name as a string nor its
+    clock keys, and site.py none of its site values nor its sections (a new kind edits none
+    of them)."""
     files = {name: (PACKAGE / name).read_text() for name in
-             ("scenario.py", "simulate.py", "crb.py", "outputs.py", "nodes/__init__.py")}
+             ("scenario.py", "simulate.py", "crb.py", "outputs.py", "site.py",
+              "nodes/__init__.py")}
+    site = load_site(builtin_site_path("kleeman-lab"))
+    assert site.kind_values      # the kinds' values, on a site without them too
+    kind_sections = [s.name.removesuffix("N") for s in load_schema().sections
+                     if s.name not in CORE_SECTIONS]
     for kind in nodes.KINDS:
         if kind in BASE:
             continue
@@ -53,6 +65,8 @@ def test_no_kind_is_named_outside_its_own_module():
         for name, text in files.items():
             for word in words:
                 assert not re.search(rf"\b{re.escape(word)}", text), (name, word)
+    for word in [*site.kind_values, *kind_sections]:
+        assert not re.search(rf"\b{re.escape(word)}", files["site.py"]), word
 
 
 # -- a toy kind: a compass measuring the heading ------------------------------------------------
@@ -106,6 +120,11 @@ class Compass(SensorKind):
                     rate_hz=ini.number("compass", "rate_hz", 5.0, positive=True, maximum=100))
 
     @classmethod
+    def site_values(cls, read) -> dict:
+        """The compass sits half a wheel base ahead of the wheels' centre."""
+        return {"compass_ahead_m": read.value("robot", "wheel_base_m") / 2}
+
+    @classmethod
     def present(cls, site) -> bool:
         return True
 
@@ -148,9 +167,14 @@ def test_a_kind_registered_in_a_test_needs_no_other_edit(make_scenario, monkeypa
         load_scenario(str(make_scenario(BODY + "[compass]\nsigma_deg = 0.5\n")))
     plain = simulate.run(load_scenario(str(make_scenario(BODY))), encode=False)
 
+    with pytest.raises(AttributeError, match="compass_ahead_m"):
+        load_site(builtin_site_path("kleeman-lab")).compass_ahead_m
     monkeypatch.setattr(nodes, "KINDS", (*nodes.KINDS, Compass))
     # its scenario section and clock keys, read and checked by the kind
     scn = load_scenario(str(scn_path))
+    # its site value, from the site's keys as load_site read them
+    assert scn.site.compass_ahead_m == scn.site.wheel_base_m / 2 > 0
+    assert scn.site.attributes()["compass_ahead_m"] == scn.site.compass_ahead_m
     assert scn.compass == Compass.Options(42_000_000, -5.0, math.radians(0.5), 5.0)
     bad = make_scenario(BODY + "[compass]\nrate_hz = 500\n", name="bad")
     with pytest.raises(ConfigError,

@@ -129,7 +129,10 @@ def test_a_sonar_site_needs_no_beacons(tmp_path):
     assert "[beacon1]" not in text and "count = 6" not in text
     site = load_site(_write(tmp_path, text))
     assert site.beacon_count == 0 and site.sonar_count == 3
-    with pytest.raises(ConfigError, match="a site needs beacons"):
+    with pytest.raises(ConfigError, match=re.escape(
+            "[beacons] count: 0 allowed only with [bearing_beacons] count >= 3 (now 0), "
+            "[range_beacons] count >= 3 (now 0), [sonar_ring] count >= 1 and [map] walls >= 1 "
+            "(now 0 and 0) or [team] robots >= 1 (not simulated)")):
         load_site(_write(tmp_path, text[:text.index("[sonar_ring]")]))
 
 

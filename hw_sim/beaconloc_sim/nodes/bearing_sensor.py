@@ -172,6 +172,18 @@ class BearingSensor(SensorKind):
         return dict(outage_probability=outage_p, outage_burst_s=burst_s, max_range_m=max_range_m)
 
     @classmethod
+    def site_values(cls, read) -> dict:
+        """The bearing beacons and the sensor ([bearing_beaconN], [bearing_sensor]); none when
+        [bearing_beacons] count is 0."""
+        sensor = read.section("bearing_sensor")
+        # bearing_beacons_m (M, 2), bearing_beacon_count, bearing_offset_m (the mount)
+        return read.beacons_and_mount("bearing_beaconN", "bearing_sensor", "bearing") | dict(
+            sigma_bearing_rad=math.radians(sensor("sigma_deg")),   # σ of one bearing, rad
+            bearing_scan_rate_hz=sensor("scan_rate_hz"),           # scans per second
+            # each bearing timed at its own instant within the scan
+            bearing_rotating=bool(sensor("rotating")))
+
+    @classmethod
     def present(cls, site) -> bool:
         return site.bearing_beacon_count > 0
 

@@ -152,6 +152,20 @@ class RangeReceiver(SensorKind):
             survey_s=ini.number("ranges", "survey_s", 0.0, minimum=0, maximum=3600))
 
     @classmethod
+    def site_values(cls, read) -> dict:
+        """The fixed range beacons and the receiver ([range_beaconN], [range_sensor]); none
+        when [range_beacons] count is 0."""
+        sensor = read.section("range_sensor")
+        # range_beacons_m (K, 3), range_beacon_count, range_offset_m (the mount)
+        return read.beacons_and_mount("range_beaconN", "range_sensor", "range") | dict(
+            range_height_m=sensor("height_m"),       # receiver height, site frame z, m
+            sigma_range_m=sensor("sigma_m"),         # σ of one range at short distance, m
+            # σ growth per metre of range (σ = sigma_m + this · r)
+            sigma_range_per_m=sensor("sigma_per_m"),
+            range_max_m=sensor("max_range_m"),       # no pulse heard beyond, m
+            range_ping_period_s=sensor("ping_period_s"))   # the leader pings one beacon every
+
+    @classmethod
     def present(cls, site) -> bool:
         return site.range_beacon_count > 0
 

@@ -10,6 +10,8 @@ A SensorKind declares
 - its scenario keys: its node clock's in [clocks] (clock_keys: <prefix>_offset_us and
   <prefix>_drift_ppm with their defaults) and its section's (keys; section_options() reads
   and checks them, errors naming the file, section and key), read into its Options;
+- its values of the site file (site_values(): the Site attributes it adds, site.<name>,
+  from the keys of its sections as site.py reads them, with its own checks);
 - whether a site has it (present(): its node on the bus, its record in the stats);
 - its place on the bus (Node.kind_order; on_bus(): its node and the node's status frame);
 - its record of the measurements (record: a class with empty(), concat(), select(),
@@ -35,7 +37,7 @@ from .node_status import NodeStatus
 if TYPE_CHECKING:
     from ..inifile import IniFile
     from ..scenario import Scenario
-    from ..site import Site
+    from ..site import Site, SiteRead
 
 # the bound's rows of a kind at event k of the true state (8,): d(measurement)/d(state)
 # (n, 8) and the variances (n,) of the measurements at that event, or None (crb.pcrb_along_path)
@@ -83,6 +85,16 @@ class SensorKind(Node):
     def section_options(cls, ini: IniFile, site: Site) -> dict[str, Any]:
         """Its section's keys read and checked, by their Options field (none here); errors
         name the file, section and key (ini.error)."""
+        return {}
+
+    # -- its site values (site.load_site) --------------------------------------------------------
+    @classmethod
+    def site_values(cls, read: SiteRead) -> dict[str, Any]:
+        """Its values of the site file, by the Site attribute that gives each (site.<name>):
+        from its sections' keys and items as site.load_site reads and checks them by the schema
+        (read.value(), read.items()), with its own checks (errors by read.error() naming the
+        file, section and key); on a site without the kind, its empty values (count 0). None
+        here."""
         return {}
 
     @classmethod

@@ -98,6 +98,27 @@ class SonarPings:
         return (self.flags == 0) & (self.kind == so.KIND_SPECULAR) & self.in_map
 
 
+@dataclass(frozen=True)
+class SonarSigma:
+    """σ of a sonar range, m: σ(r) = max(sigma_range_m, sigma_range_rel · r) (issue 12;
+    Polaroid-class: about 1 % of the range with a few cm floor); the site's is
+    site.sonar_sigma_m(range_m)."""
+    sigma_range_m: float       # floor, m
+    sigma_range_rel: float     # relative to the range
+
+    def __call__(self, range_m):
+        return np.maximum(self.sigma_range_m, self.sigma_range_rel * np.asarray(range_m))
+
+
+def _check_walls(read, walls_m: np.ndarray) -> None:
+    """A map segment must have a length (its ends are finite: the reader refuses others).
+    The error names the segment's second end, the key that would have to change."""
+    for i, (x1, y1, x2, y2) in enumerate(walls_m, start=1):
+        if math.hypot(x2 - x1, y2 - y1) < 1e-6:
+            raise read.error(f"wall{i}", "x2_m", f"zero-length segment ({x1:g}, {y1:g}) to "
+                             f"({x2:g}, {y2:g}): a wall needs two distinct ends")
+
+
 def world_segments(scn) -> tuple[np.ndarray, int]:
     """What the sound meets: the site's map walls, then the scenario's obstacles (K, 4); and
     how many of the first rows are map walls."""
@@ -146,6 +167,33 @@ class SonarRing(SensorKind):
             threshold=ini.number("sonar", "threshold", 0.02, minimum=0, maximum=1),
             crosstalk=bool(ini.integer("sonar", "crosstalk", 1, minimum=0, maximum=1)),
             double_bounce=bool(ini.integer("sonar", "double_bounce", 1, minimum=0, maximum=1)))
+
+    @classmethod
+    def site_values(cls, read) -> dict:
+        """The ring ([sonar_ring], [sonarN]) and the map it is corrected against ([map],
+        [wallN]); none when [sonar_ring] count is 0. A wall has a length, the blanking is below
+        the largest range and a ring needs a map."""
+        ring = read.section("sonar_ring")
+        walls_m = read.items("wallN")    # (W, 4): x1, y1, x2, y2 of each map segment, site frame
+        _check_walls(read, walls_m)
+        if ring("min_range_m") >= ring("max_range_m"):
+            raise read.error("sonar_ring", "min_range_m", "must be below max_range_m")
+        mounts = read.items("sonarN").copy()   # [sonarN] x_m, y_m, angle_deg, used
+        mounts[:, 2] = np.radians(mounts[:, 2])
+        if mounts.shape[0] > 0 and walls_m.shape[0] == 0:
+            raise read.error("map", "walls", "a sonar ring ([sonar_ring] count > 0) needs a map: "
+                             "walls > 0")
+        return dict(
+            sonar_mounts=mounts,     # (S, 4): x_m, y_m (body frame), axis angle rad (CCW), used 0/1
+            sonar_count=int(mounts.shape[0]),
+            sonar_period_s=ring("period_s"),              # burst period, s
+            sonar_beam_width_rad=math.radians(ring("beam_width_deg")),   # full beam width, rad
+            sonar_min_range_m=ring("min_range_m"),        # blanking, m
+            sonar_max_range_m=ring("max_range_m"),        # largest range, m
+            sonar_sigma_range_m=ring("sigma_range_m"),    # range σ floor, m
+            sonar_sigma_range_rel=ring("sigma_range_rel"),   # range σ relative to the range
+            sonar_sigma_m=SonarSigma(ring("sigma_range_m"), ring("sigma_range_rel")),
+            walls_m=walls_m)
 
     @classmethod
     def present(cls, site) -> bool:
