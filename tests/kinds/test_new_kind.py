@@ -81,12 +81,14 @@ C_CHECKS = ["build/tests/bridge/test_frame_kinds", "build/tests/bridge/test_sens
 COMPASS_ID = 0x160
 SIGMA_DEG = 1.0          # [compass] sigma_deg of the run
 DURATION_S = 30
-GIT = ["git", "-c", "user.name=test", "-c", "user.email=test@localhost", "-c", "commit.gpgsign=false"]
+GIT = ["git", "-c", "user.name=test", "-c", "user.email=test@localhost",
+       "-c", "commit.gpgsign=false"]
 
 
 def _run(cmd, cwd: Path, timeout: float, env=None) -> subprocess.CompletedProcess:
     p = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
-    assert p.returncode == 0, f"{' '.join(map(str, cmd))} failed:\n{p.stdout[-3000:]}\n{p.stderr[-6000:]}"
+    assert p.returncode == 0, \
+        f"{' '.join(map(str, cmd))} failed:\n{p.stdout[-3000:]}\n{p.stderr[-6000:]}"
     return p
 
 
@@ -163,9 +165,13 @@ def kind_tree(tmp_path_factory):
     # The build: the tree's own .venv is this test's interpreter's (made by .ci/setup);
     # its setup stamp is not remade (-o: the copied files are newer than it).
     (tree / ".venv").symlink_to(Path(sys.prefix), target_is_directory=True)
+    # the copy's simulator (before the editable install's), and none of an enclosing make's
+    # settings (make test runs this under make: its jobserver, its BUILD)
     env = dict(os.environ, PYTHONPATH=str(tree / "hw_sim"))
-    env.pop("BL_BUILD", None)
-    make = ["nice", "-n", "19", "make", "--no-print-directory", "-j2", "-o", ".venv/.beaconloc-setup"]
+    for name in ("BL_BUILD", "BUILD", "VENV", "MAKEFLAGS", "MFLAGS", "MAKELEVEL", "MAKEFILES"):
+        env.pop(name, None)
+    make = ["nice", "-n", "19", "make", "--no-print-directory", "-j2",
+            "-o", ".venv/.beaconloc-setup"]
     _run(make + ["build/bridge/beaconloc-bridge", *C_CHECKS], tree, 1800, env)
     # the generated docs: docs/bridge.md's key table from the schema
     _run(make + ["docs-site-keys"], tree, 300, env)
@@ -199,8 +205,9 @@ def kind_tree(tmp_path_factory):
                   "--stats", str(stats)], run_dir, 600, env)
         replays[name] = dict(est=read_csv(est), stats=json.loads(stats.read_text()),
                              stderr=p.stderr)
-    return dict(tree=tree, env=env, changed=changed, stat=stat, after_docs=after_docs, log=log,
-                truth=read_csv(truth), sim=sim, sim_module=where, replays=replays)
+    yield dict(tree=tree, env=env, changed=changed, stat=stat, after_docs=after_docs, log=log,
+               truth=read_csv(truth), sim=sim, sim_module=where, replays=replays)
+    shutil.rmtree(tree, ignore_errors=True)   # its build: tens of MB
 
 
 def test_the_kind_is_six_files(kind_tree):
@@ -224,7 +231,8 @@ def cmocka_failures(exe: str, cwd: Path) -> set[str]:
     """The failed tests of one cmocka executable (its path in the tree), as '<path>::<test>'."""
     env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1",
                UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1")
-    p = subprocess.run([str(cwd / exe)], cwd=cwd, capture_output=True, text=True, timeout=300, env=env)
+    p = subprocess.run([str(cwd / exe)], cwd=cwd, capture_output=True, text=True, timeout=300,
+                       env=env)
     out = p.stdout + p.stderr
     failed = {f"{exe}::{m}" for m in re.findall(r"(?m)^\[  FAILED  \] (\w+)$", out)}
     assert p.returncode == 0 or failed, f"{exe} crashed:\n{out[-4000:]}"

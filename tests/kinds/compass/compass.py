@@ -86,7 +86,7 @@ class Compass(SensorKind):
         self.measured = rec
         self.hand_to_bound(rec)
         signals = [{"NodeTime": int(u % WRAP_US), "Heading": float(h)}
-                   for u, h in zip(self.clock.unwrapped_us(t).tolist(), rec.sent_deg.tolist())]
+                   for u, h in zip(node_us.tolist(), rec.sent_deg.tolist())]
         return t + iv.latency_s(len(t)), signals
 
     @classmethod
