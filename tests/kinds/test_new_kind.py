@@ -8,6 +8,7 @@ heading), kept as fixtures in tests/kinds/compass/, never in the product tree:
   compass.py                       the simulator: its node (a SensorKind)
   beaconloc.dbc.add                its frame COMPASS (0x160, BridgeKind 8) and node
   site_schema.toml.add             its section [compass] (count, sigma_deg, gate_sigma, rate_hz)
+and, as its test, check_compass.c (its fusion against the closed form, no cmocka).
 
 The test copies the tracked tree (the working tree's version of every file `git ls-files`
 lists) into a temporary git repository, adds the four files and the two additions, checks
@@ -261,6 +262,20 @@ def test_the_trees_own_checks_pass_but_for_the_pins(kind_tree):
                         *(NEW_FILES[f] for f in NEW_FILES if not f.endswith(".py"))],
                        cwd=tree, capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
+
+
+def test_compass_fusion_is_the_closed_form(kind_tree):
+    """check_compass.c (no cmocka) against the copy's library, linked as a pure C program
+    (gcc ... -lm): the heading's update across the ±π wrap is the scalar Kalman update on θ,
+    a later heading is compared with θ + ω·dt, the gate, the counters, the refusals."""
+    tree = kind_tree["tree"]
+    exe = tree / "build" / "check_compass"
+    cc = os.environ.get("CC", "gcc")
+    _run([cc, "-std=c11", "-D_GNU_SOURCE", "-Wall", "-Wextra", "-Werror", "-Ilib/include",
+          "-Ibuild/gen/lib", str(FIXTURES / "check_compass.c"), "build/lib/libbeaconloc.a", "-lm",
+          "-o", str(exe)], tree, 120)
+    p = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0 and "check_compass: 0 failed" in p.stdout, p.stdout + p.stderr
 
 
 def compass_frames(log: Path) -> int:
