@@ -288,6 +288,20 @@ bool all_finite(const bl_real *v, int n)
     return true;
 }
 
+// The bookkeeping of every (re)start (bl_filter_start's prior, the TDOA
+// snapshot, a kind's own start without a prior): the reference firing and
+// the state's time, the restart counted, started (converged cleared until
+// the caller judges it), the team beacons' cross-covariance forgotten.
+void mark_started(bl_filter *f, int64_t epoch_us, uint32_t ref_beacon, int64_t t_us)
+{
+    f->epoch_us_ = epoch_us;
+    f->ref_beacon_ = ref_beacon;
+    f->t_us_ = t_us;
+    if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
+    f->flags_ = kFlagStarted | kFlagEverStarted;
+    team_forget_cross(f);
+}
+
 void commit(bl_filter *f, const VX &x, const MX &P)
 {
     state(f) = x;
@@ -425,12 +439,7 @@ extern "C" int bl_filter_start(bl_filter *f, const bl_filter_prior *p)
 
     state(f) = x;
     cov(f) = P;
-    f->epoch_us_ = epoch;
-    f->ref_beacon_ = ref;
-    f->t_us_ = p->t_us;
-    if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
-    f->flags_ = kFlagStarted | kFlagEverStarted;
-    team_forget_cross(f);
+    mark_started(f, epoch, ref, p->t_us);
     if (converged_now(cfg, P)) f->flags_ |= kFlagConverged;
     return BL_OK;
 }

@@ -97,6 +97,11 @@ constexpr real kSosDriftPrior = real(0.005);
 constexpr real kSosRateVarFloor_m2ps4 = real(1e-12);
 // Store x, P as the filter's state and update the converged flag.
 void commit(bl_filter *f, const VX &x, const MX &P);
+// A (re)start's bookkeeping, shared by every start: epoch_us (us) and
+// ref_beacon the reference firing, t_us (us) the state's time; the restart
+// counted, the filter started and not converged, the team's cross-covariance
+// forgotten (filter.cpp).
+void mark_started(bl_filter *f, int64_t epoch_us, uint32_t ref_beacon, int64_t t_us);
 // The constant-velocity prediction over dt (s) with the parameters' noise
 // and the speed of sound's model (filter.cpp; bl_filter_predict and the
 // estimate's extrapolation, filter_estimate.cpp).

@@ -116,12 +116,7 @@ __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_soluti
 
     state(f) = x;
     cov(f) = P;
-    f->epoch_us_ = epoch;
-    f->ref_beacon_ = ref;
-    f->t_us_ = ref_arrival_us;
-    if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
-    f->flags_ = kFlagStarted | kFlagEverStarted;
-    team_forget_cross(f);
+    mark_started(f, epoch, ref, ref_arrival_us);
 }
 
 // The last-pulse table the snapshot (re)start reads: every pulse fuse_pulse

@@ -198,12 +198,7 @@ int start_from_ranges(bl_filter *f)
     symmetrise(P);
     if (!x.allFinite() || !P.allFinite()) return BL_ENOCONVERGE;
     shift_reference(cfg, x, P, epoch, ref, 0);
-    f->epoch_us_ = epoch;
-    f->ref_beacon_ = ref;
-    f->t_us_ = snap.newest_us;
-    if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
-    f->flags_ = kFlagStarted | kFlagEverStarted;
-    team_forget_cross(f);
+    mark_started(f, epoch, ref, snap.newest_us);
     commit(f, x, P);  // state, covariance, converged flag from the position σ
     return BL_OK;
 }
