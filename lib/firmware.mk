@@ -20,11 +20,12 @@
 #                       library archive references any (nm -u), as
 #                       check-lib-clink does for the host builds.
 #
-# The example is a pulse-only board: built with BL_WITH_BEARINGS=0,
-# BL_WITH_SONAR=0 (the sonar ring's correctors and fusion, sonar.h: with them
-# the library was 32.9 KiB and a localizer 2,088 B, over both targets) and
-# BL_WITH_RANGES=0 (common.h; no bearing or range fusion, no triangulation or
-# trilateration start, no bearing or range buffers).
+# The example is a pulse-only board: built with BL_WITH_KINDS=0 (common.h),
+# every measurement kind's switch off, those of kinds added later too: no
+# bearing, range, team or sonar fusion, no triangulation or trilateration
+# start, no buffers of theirs (with the sonar ring's correctors and fusion,
+# sonar.h, the library was 32.9 KiB and a localizer 2,088 B, over both
+# targets). A board that wants a kind sets its switch to 1 beside it.
 #
 # Targets (issue 2): library <= 32 KiB flash, one localizer (filter +
 # sequencer + policy) <= 2 KiB RAM, stack <= 2 KiB. Reported, not enforced.
@@ -36,7 +37,7 @@ FW_HOST_BIN := $(FW_HOST_DIR)/firmware_host
 M4_ARCH     := -mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard
 M4_COMMON   := $(M4_ARCH) -Os -g -ffunction-sections -fdata-sections -fstack-usage \
                -fcallgraph-info=su -DBL_USE_FLOAT=1 -DBL_MAX_BEACONS=8 -DBL_MAX_RECEIVERS=8 \
-               -DBL_WITH_BEARINGS=0 -DBL_WITH_RANGES=0 -DBL_WITH_TEAM=0 -DBL_WITH_SONAR=0 $(LIB_INCLUDES)
+               -DBL_WITH_KINDS=0 $(LIB_INCLUDES)
 # EIGEN_UNROLLING_LIMIT=0: Eigen's fixed-size expressions as loops, not
 # unrolled (Eigen's default limit is 110): on the M4 both smaller and
 # faster (size-m4 library flash 33,153 -> 29,307 B; bench-m4 fuse_pulse

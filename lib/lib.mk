@@ -3,8 +3,8 @@
 #   build/lib/libbeaconloc.a         double (default; what the bridge links)
 #   build/lib/float/libbeaconloc.a   -DBL_USE_FLOAT=1
 #   build/lib/san/libbeaconloc.a     double with ASan/UBSan (tests only)
-#   build/lib/nobearing/libbeaconloc.a  double, -DBL_WITH_BEARINGS=0
-#                                    -DBL_WITH_RANGES=0 -DBL_WITH_TEAM=0 -DBL_WITH_SONAR=0 (tests
+#   build/lib/nobearing/libbeaconloc.a  double, -DBL_WITH_KINDS=0 (every kind
+#                                    off: bearings, ranges, team, sonar; tests
 #                                    only: LIB_NOBEARING_TESTS below)
 #   make test-lib                    every tests/lib/test_*.c as its own cmocka
 #                                    executable against the double, float and
@@ -93,7 +93,7 @@ $(eval $(call LIB_VARIANT,san/,$(LIB_SAN) -g,$(LIB_SAN)))
 # as the M4 example builds): the library and the few tests that build that
 # way, so the switches cannot rot (every other test uses the bearing or range
 # API and runs in the three above).
-$(eval $(call LIB_VARIANT,nobearing/,-DBL_WITH_BEARINGS=0 -DBL_WITH_RANGES=0 -DBL_WITH_TEAM=0 -DBL_WITH_SONAR=0 -DEIGEN_NO_DEBUG,))
+$(eval $(call LIB_VARIANT,nobearing/,-DBL_WITH_KINDS=0 -DEIGEN_NO_DEBUG,))
 LIB_NOBEARING_TESTS := test_build_switch test_filter_pulse test_filter_errors test_solver_bearing test_solver_range
 
 LIB_TEST_BINS := $(foreach v,/ /float/ /san/,$(addprefix $(BUILD)/lib$(v)tests/,$(LIB_TEST_NAMES))) \

@@ -47,7 +47,11 @@ typedef double bl_real;
  * these four are here because headers beside the kinds' test them too
  * (sonar.h, which does not include the kinds; team.h) and the team's
  * default is the ranges' (a new kind may define its own in its header).
- *   BL_WITH_BEARINGS  1 (default): bearings to bearing beacons (aid_bearing.h:
+ * Every kind's switch defaults to BL_WITH_KINDS (1 unless defined): a build
+ * that wants only the pulses and the wheels (the M4 example,
+ * lib/firmware.mk) sets -DBL_WITH_KINDS=0 and then also leaves out a kind
+ * added later, until it switches that one on by name.
+ *   BL_WITH_BEARINGS  1 (default: BL_WITH_KINDS): bearings to bearing beacons (aid_bearing.h:
  *                     bl_filter_fuse_bearing, bl_filter_start_bearings,
  *                     bl_localizer_bearing, bl_bearing_meas).
  *                     0: those calls and types are not declared and their
@@ -57,10 +61,13 @@ typedef double bl_real;
  *                     bl_config_check then requires to be 0. For pulse-only firmware. The
  *                     solvers (aid_bearing.h, bl_solve_bearings*) stay: they are
  *                     independent of the filter. */
-#ifndef BL_WITH_BEARINGS
-#define BL_WITH_BEARINGS 1
+#ifndef BL_WITH_KINDS
+#define BL_WITH_KINDS 1
 #endif
-/*   BL_WITH_RANGES    1 (default): ranges to fixed range beacons (aid_range.h:
+#ifndef BL_WITH_BEARINGS
+#define BL_WITH_BEARINGS BL_WITH_KINDS
+#endif
+/*   BL_WITH_RANGES    1 (default: BL_WITH_KINDS): ranges to fixed range beacons (aid_range.h:
  *                     bl_filter_fuse_range, bl_filter_start_ranges,
  *                     bl_localizer_range, bl_range_meas).
  *                     0: as BL_WITH_BEARINGS 0 for ranges: those calls and
@@ -70,7 +77,7 @@ typedef double bl_real;
  *                     bl_config_check then requires to be 0. The solver
  *                     (aid_range.h, bl_solve_ranges_2d) stays. */
 #ifndef BL_WITH_RANGES
-#define BL_WITH_RANGES 1
+#define BL_WITH_RANGES BL_WITH_KINDS
 #endif
 /*   BL_WITH_TEAM      1 (default): ranges to teammates whose positions are
  *                     themselves uncertain (the CMU Millibots' stationary
@@ -89,7 +96,7 @@ typedef double bl_real;
 #if BL_WITH_TEAM && !BL_WITH_RANGES
 #error "BL_WITH_TEAM needs BL_WITH_RANGES (the teammate range model is the range model)"
 #endif
-/*   BL_WITH_SONAR     1 (default): a sonar ring against a map of wall
+/*   BL_WITH_SONAR     1 (default: BL_WITH_KINDS): a sonar ring against a map of wall
  *                     segments (sonar.h: the map and ring types, the
  *                     pin-point and memory correctors of Hoppenot & Colle
  *                     1997; aid_sonar.h bl_filter_set_sonar,
@@ -101,7 +108,7 @@ typedef double bl_real;
  *                     flash and localizer RAM were already at their
  *                     targets. */
 #ifndef BL_WITH_SONAR
-#define BL_WITH_SONAR 1
+#define BL_WITH_SONAR BL_WITH_KINDS
 #endif
 /* Team sizes: robots in one team solve (aid_team.h bl_solve_team), and
  * stationary beacon robots one filter ranges to at a time (the Millibots

@@ -7,7 +7,7 @@
  * library's structs (expanded from kinds.h's list), its measurement and
  * its entry points. Included through kinds.h by config.h, filter.h and
  * localizer.h.
- * Build switch BL_WITH_COMPASS (here, default 1): 0 leaves only
+ * Build switch BL_WITH_COMPASS (here, default BL_WITH_KINDS, common.h): 0 leaves only
  * bl_config.compass_count (bl_config_check then requires 0).
  */
 #ifndef BEACONLOC_AID_COMPASS_H
@@ -22,7 +22,7 @@
 #define BL_COMPASS_KIND_ORDER 5
 
 #ifndef BL_WITH_COMPASS
-#define BL_WITH_COMPASS 1
+#define BL_WITH_COMPASS BL_WITH_KINDS
 #endif
 
 #ifdef __cplusplus
