@@ -29,7 +29,9 @@ the seeds:
   heading_nees and heading_within_3sigma_pct the same for the heading alone
   (1 dof, interval chi2(seeds)/seeds); on a scenario with a kidnap the
   estimates from the kidnap to the filter's next reset are left out of these)
-Options: --scenarios, --seeds, and --tuning KEY=VALUE (repeatable) to run the
+Options: --scenarios, --seeds, --first-seed (default 1: seeds 1..20; e.g. 21 for
+20 others, to see whether a figure holds beyond the seeds it was tuned on), and
+--tuning KEY=VALUE (repeatable) to run the
 bridge with the site file's [tuning] section set so (docs/bridge.md), e.g. a
 smaller speed-of-sound random walk; the figures are then of that tuning.
 Last two lines (machine-readable):
@@ -257,6 +259,8 @@ def main() -> int:
     ap.add_argument("--bridge", default=str(h.BRIDGE))
     ap.add_argument("--out", default=str(REPO / "build" / "bench" / "accuracy"))
     ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=1,
+                    help="the first seed (seeds first..first+seeds-1; default 1)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--tuning", action="append", default=[], metavar="KEY=VALUE",
@@ -274,7 +278,7 @@ def main() -> int:
         site = tuned_site(scenario, args.tuning, out)
         with ThreadPoolExecutor(max_workers=args.jobs) as pool:
             runs = list(pool.map(lambda s: one_run(bridge, scenario, s, out, site),
-                                 range(1, args.seeds + 1)))
+                                 range(args.first_seed, args.first_seed + args.seeds)))
         for r in runs:
             if not r["ok"]:
                 print(f"  {scenario} seed {r['seed']}: FAILED {r['why']}")

@@ -57,8 +57,10 @@ bench-bus: $(SETUP_STAMP) $(IT_BRIDGE) $(UML_SHIM)
 	$(VM_RUN) --results $(BUILD)/bench-bus --tail script.log \
 	    $(PY) tests/vm/bench_bus.py
 
+# ACCURACY_ARGS: accuracy.py's options, e.g. --first-seed 21 (20 other seeds), --scenarios kleeman-lab
+ACCURACY_ARGS ?=
 bench-accuracy: $(SETUP_STAMP) $(IT_BRIDGE)
-	$(PY) tests/bench/accuracy.py --bridge $(IT_BRIDGE) --out $(BUILD)/bench/accuracy
+	$(PY) tests/bench/accuracy.py --bridge $(IT_BRIDGE) --out $(BUILD)/bench/accuracy $(ACCURACY_ARGS)
 
 # The filter vs odometry vs the library's triangulation on the eurobot
 # scenarios (tests/bench/bearing.py; lib/bench/triangulate.c in lib/bench.mk).
