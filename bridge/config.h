@@ -14,8 +14,9 @@
  * name (a schema key without its member does not compile). The members of a
  * kind's own sections are generated too: the counts of per-item sections
  * (SITE_COUNT_MEMBERS), the items (SITE_ITEM_SECTIONS) and every group of
- * numeric keys "<group>.<key>" as struct config_<group> (SITE_GROUPS), so a
- * new kind's sections need no edit here.
+ * keys "<group>.<key>" as struct config_<group> (SITE_GROUPS; a string key
+ * with the buffer its schema size gives), so a new kind's sections need no
+ * edit here.
  * Our sections are [beacons], [beaconN], [receivers], [bearing_beacons],
  * [bearing_beaconN], [bearing_sensor], [range_beacons], [range_beaconN],
  * [range_sensor], [robot], [noise], [sonar_ring], [sonarN], [map], [wallN],
@@ -92,8 +93,10 @@ struct config_item_seen {
 
 /* One struct per group of keys whose schema member is "<group>.<key>"
  * (SITE_GROUPS: struct config_bearing_sensor of [bearing_sensor], config_range_survey
- * of [range_beacons]' self-survey keys, config_range_sensor, config_map, config_team;
- * the keys' meanings are the schema's), member <group> of struct bridge_config. */
+ * of [range_beacons]' self-survey keys, config_range_sensor, config_sonar_ring (its
+ * count > 0 makes a sonar site; its method a string, bridge/sonar.h), config_map,
+ * config_team; the keys' meanings are the schema's), member <group> of struct
+ * bridge_config. */
 #define CONFIG_GROUP_MEMBER(type, member) BRIDGE_CTYPE_##type member;
 #define CONFIG_GROUP_STRUCT(group)                                                                 \
     struct config_##group {                                                                        \
@@ -103,21 +106,6 @@ SITE_GROUPS(CONFIG_GROUP_STRUCT)
 #undef CONFIG_GROUP_STRUCT
 #undef CONFIG_GROUP_MEMBER
 
-/* [sonar_ring] (site_keys.h: the sonar_ring.* members; bridge/sonar.h): count > 0
- * makes a sonar site, whose filter runs on the sonar ring's clock when it has
- * no beacons (bridge/timebase.c, estimator_ref_clock) */
-struct config_sonar_ring {
-    int count;              /* sonars on the ring, 0 = none ([sonarN] N = 1..count) */
-    double period_s;        /* burst period (s) */
-    double beam_width_deg;  /* full beam width (deg) */
-    double min_range_m;     /* blanking (m) */
-    double max_range_m;     /* largest range (m) */
-    double sigma_range_m;   /* range sigma floor (m) */
-    double sigma_range_rel; /* range sigma relative to the range (1) */
-    double gate_m;          /* the correctors' association gate (m) */
-    char method[16];        /* filter | pinpoint | memory (bridge/sonar.h) */
-};
-
 struct bridge_config {
     /* the counts of the per-item sections ([beacons] count is beacon_count,
      * [bearing_beacons] count bearing_beacon_count, ...: SITE_COUNT_MEMBERS) */
@@ -125,7 +113,8 @@ struct bridge_config {
     SITE_COUNT_MEMBERS(CONFIG_COUNT_MEMBER)
 #undef CONFIG_COUNT_MEMBER
     /* the groups of keys: bearing_sensor, range_survey, range_sensor, map,
-     * team (SITE_GROUPS; a team site when team.robots > 0, config_is_team) */
+     * team, sonar_ring (SITE_GROUPS; a team site when team.robots > 0,
+     * config_is_team; a sonar site when sonar_ring.count > 0, config_is_sonar) */
 #define CONFIG_GROUP(group) struct config_##group group;
     SITE_GROUPS(CONFIG_GROUP)
 #undef CONFIG_GROUP
@@ -166,9 +155,6 @@ struct bridge_config {
     double speed_of_sound_mps;
     double sigma_speed_of_sound_mps;
     double gate_sigma;
-    /* [sonar_ring] (its method a string: not a group); [sonarN] and [wallN] are the
-     * item arrays sonar[], wall[] */
-    struct config_sonar_ring sonar_ring;
     /* [tuning]: the library's tuning fields (bridge/tuning.h) */
     struct bridge_tuning tuning;
     /* [bridge] */

@@ -25,6 +25,7 @@
 /* C type of a key's value in the bridge's structs, by its type. */
 #define BRIDGE_CTYPE_K_REAL double
 #define BRIDGE_CTYPE_K_INT int
+#define BRIDGE_CTYPE_K_STR char /* its member carries its buffer: method[16] (schema size) */
 
 struct bridge_tuning {
 #define BRIDGE_TUNING_MEMBER(sec, key, type, strct, member, lo, hi, open, def)                     \

@@ -91,6 +91,7 @@ class Key:
     lib: str | None            # bl_config field: member path ("pulse.gate_sigma")
     geometry: str | None       # "library", "bridge" or None
     param: str | None = None   # MAVLink parameter name (<= 16 characters); None: not one
+    size: int | None = None    # a group's string key: the bridge's buffer, bytes (NUL included)
 
     @property
     def numeric(self) -> bool:
@@ -222,7 +223,7 @@ class Schema:
 def _key(section: str, read_by: tuple[str, ...], raw: dict) -> Key:
     where = f"[{section}] {raw.get('name')}"
     allowed = {"name", "type", "unit", "doc", "range", "sim_range", "default", "sim", "bridge",
-               "lib", "geometry", "param"}
+               "lib", "geometry", "param", "size"}
     if set(raw) - allowed:
         raise ValueError(f"{where}: unknown schema fields {sorted(set(raw) - allowed)}")
     for field in ("name", "type", "unit", "doc"):
@@ -269,9 +270,18 @@ def _key(section: str, read_by: tuple[str, ...], raw: dict) -> Key:
     member = None
     if in_bridge:
         member = raw.get("bridge", f"tuning.{raw['name']}" if section == "tuning" else raw["name"])
+    size = raw.get("size")
+    in_group = member is not None and "." in member and not member.startswith("tuning.")
+    if (size is not None) != (raw["type"] == "string" and in_group):
+        raise ValueError(f"{where}: size is given exactly for a string key of a group "
+                         "(bridge = \"<group>.<key>\")")
+    if size is not None and (not isinstance(size, int) or isinstance(size, bool) or
+                             not 2 <= size <= 256 or len(default or "") >= size):
+        raise ValueError(f"{where}: size must be an integer in 2..256 above the default's length")
     return Key(section=section, name=raw["name"], type=raw["type"], unit=raw["unit"],
                doc=raw["doc"], range=rng, sim_range=sim_rng, default=default, sim=sim,
-               bridge=member, lib=raw.get("lib"), geometry=raw.get("geometry"), param=param)
+               bridge=member, lib=raw.get("lib"), geometry=raw.get("geometry"), param=param,
+               size=size)
 
 
 def parse_schema(text: str) -> Schema:
@@ -399,15 +409,14 @@ def _c_macro(name: str, comment: str, rows: list[str]) -> list[str]:
 
 def _c_groups(sections: list[Section]) -> dict[str, list[Key]]:
     """The bridge_config members that are structs of keys ("team" of "team.robots"), with
-    their keys in file order; [tuning] (struct bridge_tuning, tuning.h) and a struct holding
-    a string (its size is the bridge's: config_sonar_ring) are not among them."""
+    their keys in file order, numbers and strings (a string's buffer is its key's size);
+    [tuning] (struct bridge_tuning, tuning.h) is not among them."""
     groups: dict[str, list[Key]] = {}
     for s in sections:
         for k in s.keys:
             if not s.indexed_by and k.bridge and "." in k.bridge:
                 groups.setdefault(k.bridge.split(".", 1)[0], []).append(k)
-    return {g: keys for g, keys in groups.items()
-            if g != "tuning" and all(k.numeric for k in keys)}
+    return {g: keys for g, keys in groups.items() if g != "tuning"}
 
 
 def c_header(schema: Schema) -> str:
@@ -464,12 +473,14 @@ def c_header(schema: Schema) -> str:
                     "(int)", [f"X({k.section}, {k.bridge})" for k in flat_counts])
     groups = _c_groups(bridge_sections)
     out += _c_macro("SITE_GROUPS", "X(member): the members of struct bridge_config that are a "
-                    "struct config_<member> of keys (bridge = \"<member>.<key>\"), every key a "
-                    "number; their members are SITE_GROUP_<member>",
+                    "struct config_<member> of keys (bridge = \"<member>.<key>\"); their members "
+                    "are SITE_GROUP_<member>",
                     [f"X({g})" for g in groups])
     for g, keys in groups.items():
-        out += _c_macro(f"SITE_GROUP_{g}", f"X(type, member) of struct config_{g}",
-                        [f"X({_C_TYPE[k.type]}, {k.bridge.split('.', 1)[1]})" for k in keys])
+        out += _c_macro(f"SITE_GROUP_{g}", f"X(type, member) of struct config_{g} (a string "
+                        "member with its buffer: method[16])",
+                        [f"X({_C_TYPE[k.type]}, {k.bridge.split('.', 1)[1]}"
+                         f"{'' if k.size is None else f'[{k.size}]'})" for k in keys])
     out += _c_macro("SITE_GEOMETRY_BRIDGE", "X(bridge_config member): geometry of the bridge's "
                     "own state (the library's is bl_config_same_geometry's)",
                     [f"X({k.bridge})" for s in bridge_sections for k in s.keys

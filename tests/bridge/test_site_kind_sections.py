@@ -34,7 +34,7 @@ def _key(name: str, type_: str, rng: str, **extra) -> str:
 
 
 # The throwaway kind: [probe_beacons] count, [probe_beaconN] x_m (required),
-# [probe_sensor] gain, channels (with defaults).
+# [probe_sensor] gain, channels, mode (a string of 12 bytes; with defaults).
 PROBE = (_toml("section", name="probe_beacons", read_by=["bridge"], doc="test only",
                starts_alone=["count >= 2"])
          + _key("count", "int", "[0, 5]", default=0, bridge="probe_beacon_count")
@@ -43,7 +43,9 @@ PROBE = (_toml("section", name="probe_beacons", read_by=["bridge"], doc="test on
          + _key("x_m", "real", "[-100, 100]")
          + _toml("section", name="probe_sensor", read_by=["bridge"], doc="test only")
          + _key("gain", "real", "(0, 10]", default=2.5, bridge="probe_sensor.gain")
-         + _key("channels", "int", "[1, 4]", default=1, bridge="probe_sensor.channels"))
+         + _key("channels", "int", "[1, 4]", default=1, bridge="probe_sensor.channels")
+         + _toml("section.key", name="mode", type="string", unit="", doc="mode",
+                 default="fast", bridge="probe_sensor.mode", size=12))
 
 PROBE_C = r'''
 #include <stddef.h>
@@ -58,6 +60,8 @@ _Static_assert(sizeof(((struct bridge_config *)0)->probe_sensor.gain) == sizeof(
                "[probe_sensor] gain");
 _Static_assert(sizeof(((struct bridge_config *)0)->probe_sensor.channels) == sizeof(int),
                "[probe_sensor] channels");
+_Static_assert(sizeof(((struct bridge_config *)0)->probe_sensor.mode) == 12,
+               "[probe_sensor] mode: a string of the schema's size");
 
 int main(void)
 {
@@ -65,7 +69,7 @@ int main(void)
     config_defaults(&c);
     /* the schema's defaults, set by config.c's generated table */
     if (!(c.probe_sensor.gain == 2.5 && c.probe_sensor.channels == 1 &&
-          c.probe_beacon_count == 0))
+          c.probe_beacon_count == 0 && strcmp(c.probe_sensor.mode, "fast") == 0))
         return 1;
     /* its clause of the site-validity rule: 2 probe beacons start the filter alone */
     char err[CONFIG_ERR_LEN];

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +19,8 @@ from beaconloc_sim.inifile import ConfigError
 from beaconloc_sim.resources import builtin_site_path
 from beaconloc_sim.site import load_site
 from beaconloc_sim.site_schema import (BEACON_SECTION, DOCS_BEGIN, DOCS_END, PARAMS_BEGIN,
-                                       PARAMS_END, Range, c_header, docs_table, load_schema,
-                                       params_table, parse_schema)
+                                       PARAMS_END, SCHEMA_RESOURCE, Range, c_header, docs_table,
+                                       load_schema, params_table, parse_schema)
 
 from conftest import SITE_TEXT
 
@@ -176,6 +177,33 @@ _KEY = '[[section.key]]\nname = "period_s"\ntype = "real"\nunit = "s"\ndoc = "T"
 def test_bad_schema_is_refused(extra, why):
     with pytest.raises(ValueError, match=why):
         parse_schema(_SECTION + _KEY + extra)
+
+
+_STRING = ('[[section.key]]\nname = "mode"\ntype = "string"\nunit = ""\ndoc = "m"\n'
+           'sim = "ignored"\ndefault = "filter"\n')
+
+
+@pytest.mark.parametrize("extra, why", [
+    ('bridge = "ring.mode"\n', "size is given exactly for a string key of a group"),
+    ('size = 16\n', "size is given exactly for a string key of a group"),
+    ('bridge = "ring.mode"\nsize = 6\n', "above the default's length"),
+    ('bridge = "ring.mode"\nsize = 16.5\n', "must be an integer"),
+])
+def test_bad_string_size_is_refused(extra, why):
+    """A group's string key gives its buffer (the generated struct's member), and only it."""
+    with pytest.raises(ValueError, match=why):
+        parse_schema(_SECTION + _STRING + extra)
+
+
+def test_group_string_key_has_its_buffer():
+    """The sonar ring's method (a string in a group): its struct member with its buffer."""
+    header = c_header(SCHEMA)
+    assert "X(sonar_ring)" in header and "X(K_STR, method[16])" in header
+    extra = ('\n[[section]]\nname = "probe"\nread_by = ["bridge"]\ndoc = "p"\n'
+             '[[section.key]]\nname = "mode"\ntype = "string"\nunit = ""\ndoc = "m"\n'
+             'default = "fast"\nbridge = "probe.mode"\nsize = 12\n')
+    text = resources.files("beaconloc_sim").joinpath(SCHEMA_RESOURCE).read_text(encoding="utf-8")
+    assert "X(K_STR, mode[12])" in c_header(parse_schema(text + extra))
 
 
 def test_key_declared_twice_is_refused():
