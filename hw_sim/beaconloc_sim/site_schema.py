@@ -276,8 +276,8 @@ def _key(section: str, read_by: tuple[str, ...], raw: dict) -> Key:
         raise ValueError(f"{where}: size is given exactly for a string key of a group "
                          "(bridge = \"<group>.<key>\")")
     if size is not None and (not isinstance(size, int) or isinstance(size, bool) or
-                             not 2 <= size <= 256 or len(default or "") >= size):
-        raise ValueError(f"{where}: size must be an integer in 2..256 above the default's length")
+                             not 2 <= size <= 255 or len(default or "") >= size):
+        raise ValueError(f"{where}: size must be an integer in 2..255 above the default's length")
     return Key(section=section, name=raw["name"], type=raw["type"], unit=raw["unit"],
                doc=raw["doc"], range=rng, sim_range=sim_rng, default=default, sim=sim,
                bridge=member, lib=raw.get("lib"), geometry=raw.get("geometry"), param=param,
