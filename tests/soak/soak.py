@@ -279,9 +279,9 @@ def replay(bridge: Path, site: Path, log: Path, out: Path, name: str, hours: lis
                             stderr=subprocess.PIPE, text=True, errors="replace",
                             start_new_session=priority)
     # A driver put at a low priority on purpose (make test's batch half, tests/vm/batch.sh,
-    # nice 19) keeps its replays there: two CPU-bound bridges at nice -10 beside the vcan
-    # suite's UML guests (nice -10 too) starved a live case of a fresh-clone CI run (eurobot's
-    # bearings, 62 ms latency p99 in its guest, 82 % of ODOMETRY inside 3 sigma). Its light
+    # nice 19) keeps its replays there: two CPU-bound bridges at nice -10 compete with the vcan
+    # suite's UML guests (nice -10 too), the likely cause of a live case lost in a fresh-clone
+    # CI run (eurobot's bearings, 62 ms latency p99 in its guest, 82 % inside 3 sigma). Its light
     # RSS sampler is still raised (below): starved, it once took no sample in an hour.
     low = os.getpriority(os.PRIO_PROCESS, 0) > 0
     prio = ("normal priority (--normal-priority)" if not priority
