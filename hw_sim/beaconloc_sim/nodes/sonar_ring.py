@@ -190,8 +190,7 @@ class SonarRing(SensorKind):
             sonar_beam_width_rad=math.radians(ring("beam_width_deg")),   # full beam width, rad
             sonar_min_range_m=ring("min_range_m"),        # blanking, m
             sonar_max_range_m=ring("max_range_m"),        # largest range, m
-            sonar_sigma_range_m=ring("sigma_range_m"),    # range σ floor, m
-            sonar_sigma_range_rel=ring("sigma_range_rel"),   # range σ relative to the range
+            # σ(r) of a range, m, from the σ floor (m) and the σ relative to the range
             sonar_sigma_m=SonarSigma(ring("sigma_range_m"), ring("sigma_range_rel")),
             walls_m=walls_m)
 
