@@ -128,8 +128,7 @@ class Scenario:
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def temperature_c(self, t_s) -> np.ndarray:
-        prof = self.temperature_profile
-        return np.interp(np.asarray(t_s, dtype=float), prof[:, 0], prof[:, 1])
+        return profile_temperature_c(self.temperature_profile, t_s)
 
     # The first window of each kind (None without one): the form of a scenario with one fault.
     @property
@@ -376,6 +375,12 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         channel=ini.raw("output", "channel", "vcan0"),
         realization_s=realization_s,
     )
+
+
+def profile_temperature_c(profile: np.ndarray, t_s) -> np.ndarray:
+    """The temperature (C) at the times t_s (s) of a profile of rows t_s, temperature_c:
+    piecewise linear between its rows, held before the first and after the last."""
+    return np.interp(np.asarray(t_s, dtype=float), profile[:, 0], profile[:, 1])
 
 
 def temperature_profile(ini: IniFile) -> np.ndarray:

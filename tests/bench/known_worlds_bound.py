@@ -39,42 +39,58 @@ import numpy as np
 
 from beaconloc_sim import crb, known_worlds, simulate
 from beaconloc_sim.physics import acoustics as ac
-from beaconloc_sim.scenario import load_scenario
+from beaconloc_sim.scenario import load_scenario, profile_temperature_c
 
 PATH = "temperature-swing20"      # the worlds' common path, events and detections
 AFTER_S = 20.0                    # the benchmark's start-up, s
 RUN_S = 120.0                     # the swings' span, s
 
 
-def _ramp(kelvin: float, start_s: float = 0.0):
-    """kelvin over RUN_S from start_s on (before it and after it, still)."""
-    return lambda t: 20.0 + kelvin * np.clip((t - start_s) / RUN_S, 0.0, 1.0)
+def ramp(kelvin: float, start_s: float = 0.0) -> np.ndarray:
+    """The air kelvin warmer over RUN_S from start_s on, across 20 C, still before and after:
+    a temperature profile as a scenario's [environment] temperature_profile (rows t_s,
+    temperature_c; temperature-swing20's is ramp(20): 10 -> 30 C)."""
+    return np.array([[start_s, 20.0 - kelvin / 2], [start_s + RUN_S, 20.0 + kelvin / 2]])
 
 
-def _up_and_back(kelvin: float):
-    return lambda t: 20.0 + kelvin * (1.0 - np.abs(t - RUN_S / 2) / (RUN_S / 2))
+def up_and_back(kelvin: float, start_s: float = 0.0) -> np.ndarray:
+    """kelvin up from 20 C over RUN_S / 2 from start_s on and back over the next RUN_S / 2
+    (temperature-swing10's is up_and_back(10): 20 -> 30 -> 20 C)."""
+    return np.array([[start_s, 20.0], [start_s + RUN_S / 2, 20.0 + kelvin],
+                     [start_s + RUN_S, 20.0]])
 
 
-# the worlds: temperature (C) of the time (s); still air first. The swings item 1 names, "a
-# 10 C and a 20 C swing over 2 minutes", either way: ramps of 10 and 20 C over the 2 minutes
+# the worlds (temperature profiles), still air first. The swings item 1 names, "a 10 C and a
+# 20 C swing over 2 minutes", either way: ramps of 10 and 20 C over the 2 minutes
 # (temperature-swing20 is the +20 C one: 0.097 m/s^2) and the 10 C swing up and back
 # (temperature-swing10's shape: the same rate, reversed at 60 s). With --shifted also the 20 C
 # ramps met by a run that starts 30 s into them or 30 s before them (a robot is not started
 # as the air begins to change).
-WORLDS = {"still": lambda t: np.full_like(t, 20.0)}
-WORLDS.update({f"ramp{k:+d}": _ramp(k) for k in (10, 20, -10, -20)})
-WORLDS.update({f"swing{k:+d}": _up_and_back(k) for k in (10, -10)})
-SHIFTED = {f"ramp{k:+d}@{s:+d}s": _ramp(k, s) for k in (20, -20) for s in (-30, 30)}
+WORLDS = {"still": np.array([[0.0, 20.0]])}
+WORLDS.update({f"ramp{k:+d}": ramp(k) for k in (10, 20, -10, -20)})
+WORLDS.update({f"swing{k:+d}": up_and_back(k) for k in (10, -10)})
+SHIFTED = {f"ramp{k:+d}@{s:+d}s": ramp(k, s) for k in (20, -20) for s in (-30, 30)}
+# --worlds named: every swing item 1 names in both of the benchmark's shapes, so the 20 C swing
+# up and back too (0.19 m/s^2 up, then down), as the 10 C one is run. --worlds family: every
+# swing of 10 to 20 C over the 2 minutes the words cover: also ramps of 15 C, and each ramp
+# and swing met by a run started 30 s before it or 30 s into it.
+NAMED = {f"swing{k:+d}": up_and_back(k) for k in (20, -20)}
+FAMILY = {f"ramp{k:+d}": ramp(k) for k in (15, -15)}
+FAMILY.update({f"ramp{k:+d}@{s:+d}s": ramp(k, s) for k in (10, 15, 20, -10, -15, -20)
+               for s in (-30, 30)})
+FAMILY.update({f"swing{k:+d}@{s:+d}s": up_and_back(k, s) for k in (10, 20, -10, -20)
+               for s in (-30, 30)})
 COMPONENTS = {"sos": [crb.IS], "position": [crb.IX, crb.IY]}
 DRAWS = 400                       # Monte Carlo draws of the log-likelihood ratios (the search)
 FINAL_DRAWS = 8000                # the same at the prior found, each with its antithetic twin
 STEPS = 60                        # exponentiated-gradient steps on the prior
 
 
-def s_change(temperature, t_s: np.ndarray) -> np.ndarray:
-    """The change of the speed of sound into each event in a world's air, m/s (0 into the
-    first)."""
-    return np.concatenate([[0.0], np.diff(ac.speed_of_sound_mps(temperature(t_s)))])
+def s_change(profile: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """The change of the speed of sound into each event in a world's air (its temperature
+    profile), m/s (0 into the first)."""
+    temp = profile_temperature_c(profile, t_s)
+    return np.concatenate([[0.0], np.diff(ac.speed_of_sound_mps(temp))])
 
 
 def one_seed(seed: int, path: str = PATH) -> tuple[known_worlds.Worlds, np.ndarray]:
@@ -159,9 +175,17 @@ def main() -> int:
     ap.add_argument("--components", default=",".join(COMPONENTS))
     ap.add_argument("--shifted", action="store_true", help="also the 20 C ramps met 30 s into "
                     "them or 30 s before them")
+    ap.add_argument("--worlds", choices=("bench", "named", "family"), default="bench",
+                    help="bench: still air, the 10 and 20 C ramps and the 10 C swing up and back, "
+                    "either way; named: also the 20 C swing up and back; family: also the 15 C "
+                    "ramps and every ramp and swing met 30 s early or late")
     args = ap.parse_args()
     if args.shifted:
         WORLDS.update(SHIFTED)
+    if args.worlds in ("named", "family"):
+        WORLDS.update(NAMED)
+    if args.worlds == "family":
+        WORLDS.update(FAMILY)
     normal = np.random.default_rng(args.rng).standard_normal((args.draws, len(WORLDS) - 1))
     runs = [one_seed(s, args.path) for s in range(1, args.seeds + 1)]
     n = sum(w.P.shape[0] for w, _ in runs)

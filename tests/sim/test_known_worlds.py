@@ -2,10 +2,14 @@
 checked against a brute-force simulation of the same linear-Gaussian worlds."""
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from beaconloc_sim import known_worlds
+from beaconloc_sim.scenario import load_scenario, profile_temperature_c
 
 K = 30                       # events
 U = np.array([0.0, 0.05, -0.08])    # each world's input on the second state per event
@@ -90,3 +94,45 @@ def test_a_world_told_for_certain_costs_nothing():
     sure = known_worlds.mixture_mse(worlds, np.array([1 - 2e-12, 1e-12, 1e-12]), [1], nodes,
                                     weights)
     np.testing.assert_allclose(sure[0], worlds.P[:, 1, 1], rtol=1e-6)
+
+
+def _bound_script():
+    """tests/bench/known_worlds_bound.py, the worlds it names."""
+    path = Path(__file__).resolve().parents[1] / "bench" / "known_worlds_bound.py"
+    spec = importlib.util.spec_from_file_location("known_worlds_bound", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("world,scenario", [("still", "kleeman-lab"),
+                                            ("ramp+20", "temperature-swing20"),
+                                            ("swing+10", "temperature-swing10")])
+def test_the_bounds_worlds_include_the_benchmarks_airs(world, scenario):
+    """The worlds the bound is told of include the benchmark's own airs: its speed of sound
+    at every instant of the run equal to the scenario's."""
+    kw = _bound_script()
+    scn = load_scenario(scenario, seed=1)
+    t = np.linspace(-30.0, scn.duration_s + 30.0, 2001)
+    np.testing.assert_allclose(profile_temperature_c(kw.WORLDS[world], t), scn.temperature_c(t),
+                               atol=1e-9)
+
+
+def test_the_named_and_family_worlds_are_swings_of_10_to_20_c_over_2_minutes():
+    """Every drifting world moves the air by 10 to 20 C in 2 minutes and is still outside
+    them; the 20 C swing up and back peaks at the middle of its 2 minutes."""
+    kw = _bound_script()
+    worlds = {**kw.WORLDS, **kw.SHIFTED, **kw.NAMED, **kw.FAMILY}
+    assert len(worlds) == 31
+    for name, prof in worlds.items():
+        if name == "still":
+            continue
+        t0, t1 = prof[0, 0], prof[-1, 0]
+        assert t1 - t0 == pytest.approx(kw.RUN_S), name
+        t = np.linspace(t0 - 60.0, t1 + 60.0, 4001)
+        temp = profile_temperature_c(prof, t)
+        swing = np.ptp(temp)
+        assert 10.0 - 1e-9 <= swing <= 20.0 + 1e-9, name
+        assert np.ptp(temp[t <= t0]) == 0.0 and np.ptp(temp[t >= t1]) == 0.0, name
+    peak = profile_temperature_c(kw.NAMED["swing+20"], np.array([0.0, 60.0, 120.0]))
+    np.testing.assert_allclose(peak, [20.0, 40.0, 20.0])
