@@ -26,6 +26,7 @@ the achievable mean squared errors form a convex set), so they are not excluded.
 
   .venv/bin/python tests/bench/known_worlds_bound.py [--seeds 20] [--path kleeman-lab]
                                                       [--draws 400] [--rng 14]
+                                                      [--worlds bench|named|family] [--shifted]
 Last lines (machine-readable), one per component:
   known-worlds component=sos path=.. seeds=20 draws=400 worlds=7 oracle=<sigma0>
                still=<rms>/<target>@<pi> ramp+10=.. ... margin=<risk/target> reachable=no

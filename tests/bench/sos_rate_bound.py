@@ -8,7 +8,7 @@ along the same true paths with the same detections (simulate._pcrb). Both figure
 over the events after 20 s and over the seeds of the bound's sigma_s, m/s (the benchmark's
 sos_pcrb_mps takes the bound at the estimates' instants: within a few % of these).
 
-  .venv/bin/python tests/bench/sos_rate_bound.py [--seeds 20] [--rate-prior 0.1]
+  .venv/bin/python tests/bench/sos_rate_bound.py [--seeds 20] [--first-seed 1] [--rate-prior 0.1]
 Last lines (machine-readable), one per scenario:
   sos-rate-bound scenario=temperature-swing10 seeds=20 rate_prior_mps2=0.1 sos_pcrb_mps=..
                  sos_rate_pcrb_mps=.. pcrb_mm=.. rate_pcrb_mm=.. pos_ratio=..
@@ -59,11 +59,12 @@ def bounds(name: str, seed: int, rate_prior_mps2: float) -> tuple:
     return pick(res.pcrb_cov), pick(told.cov), pick(walk.cov), q
 
 
-def figures(name: str, seeds: int, rate_prior_mps2: float) -> tuple[np.ndarray, ...]:
+def figures(name: str, seeds: int, rate_prior_mps2: float, first: int = 1
+            ) -> tuple[np.ndarray, ...]:
     """RMS over the events after AFTER_S and the seeds of (sigma_s, m/s; sigma_xy, mm): the
     simulator's bound, the bound with the rate unknown, the bound with the rate a random
     walk; and the walk's intensity q, (m/s^2)^2/s (mean over the seeds)."""
-    per_seed = [bounds(name, s, rate_prior_mps2) for s in range(1, seeds + 1)]
+    per_seed = [bounds(name, s, rate_prior_mps2) for s in range(first, first + seeds)]
     scale = np.array([1.0, 1e3])
     out = [np.sqrt(np.mean(np.concatenate([b[i] for b in per_seed]), axis=0)) * scale
            for i in range(3)]
@@ -73,12 +74,16 @@ def figures(name: str, seeds: int, rate_prior_mps2: float) -> tuple[np.ndarray, 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=1,
+                    help="seeds FIRST..FIRST+N-1 (the bench: 1; its held-out check: 21)")
     ap.add_argument("--rate-prior", type=float, default=0.1, help="sigma of the rate, m/s^2")
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     args = ap.parse_args()
     for name in args.scenarios.split(","):
-        now, with_rate, walk, q = figures(name, args.seeds, args.rate_prior)
-        print(f"sos-rate-bound scenario={name} seeds={args.seeds} "
+        now, with_rate, walk, q = figures(name, args.seeds, args.rate_prior, args.first_seed)
+        seeds = (f"{args.seeds}" if args.first_seed == 1 else
+                 f"{args.first_seed}..{args.first_seed + args.seeds - 1}")
+        print(f"sos-rate-bound scenario={name} seeds={seeds} "
               f"rate_prior_mps2={args.rate_prior:g} sos_pcrb_mps={now[0]:.3f} "
               f"sos_rate_pcrb_mps={with_rate[0]:.3f} pcrb_mm={now[1]:.1f} "
               f"rate_pcrb_mm={with_rate[1]:.1f} pos_ratio={with_rate[1] / now[1]:.3f} "
