@@ -116,7 +116,7 @@ static void pair_means(struct survey *s, bl_team_problem *prob)
             if (m == 0)
                 continue;
             /* multipath late arrivals dropped: the library's robust mean
-             * (solver.h, bl_robust_range_mean), as the team's survey */
+             * (aid_team.h, bl_robust_range_mean), as the team's survey */
             bl_real v[SURVEY_PINGS], dev[SURVEY_PINGS];
             for (int q = 0; q < m; q++) v[q] = (bl_real)s->r_m[k][q];
             bl_real mean = 0;

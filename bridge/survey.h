@@ -25,7 +25,7 @@
  *     surveyed map is exact in those units. The pair's range in the floor
  *     plane (the solve is 2D): r_xy = √(r² − Δz²), Δz the difference of the
  *     two beacons' z_m, σ_xy = σ·r/r_xy (first order). Then bl_solve_team
- *     (solver.h: MDS start, Levenberg–Marquardt, gauge-fixed covariance, χ²
+ *     (aid_team.h: MDS start, Levenberg–Marquardt, gauge-fixed covariance, χ²
  *     test) with the gauge survey_origin at (0, 0), survey_axis on +x; the
  *     residual χ² tested against its 99.9 % quantile (survey.c CHI2_Z: one
  *     good survey in a thousand refused, not bl_solve_team's one in twenty);

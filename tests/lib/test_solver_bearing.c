@@ -1,4 +1,4 @@
-/* cmocka tests of the bearing triangulation solvers (solver.h:
+/* cmocka tests of the bearing triangulation solvers (aid_bearing.h:
  * bl_solve_bearings_3, bl_solve_bearings). Bearings synthesised here from
  * Vander et al. 2011 eq. 1 with a seeded RNG; built against the double,
  * float and sanitized libraries. */
@@ -524,7 +524,7 @@ static void test_wls_weights(void **state)
     assert_true((double)s.residual_rms_rad > 5.0 * 0.5 * DEG);
 }
 
-/* ---- displaced sensors (solver.h: body_dx_m, body_dy_m, body_dtheta_rad) ----
+/* ---- displaced sensors (aid_bearing.h: body_dx_m, body_dy_m, body_dtheta_rad) ----
  * A moving robot: bearing j taken with the robot displaced by d_j and turned
  * by dθ_j from the reference pose (its body frame), the sensor mount
  * turning with it. */

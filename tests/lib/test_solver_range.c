@@ -1,4 +1,4 @@
-/* The range-only snapshot solver (solver.h, bl_solve_ranges_2d): exact
+/* The range-only snapshot solver (aid_range.h, bl_solve_ranges_2d): exact
  * recovery without noise, the mirror ambiguity of collinear beacons
  * reported (not guessed), DOP against Monte Carlo, and the errors. Built
  * in every library variant (also without bearings and ranges: the solver

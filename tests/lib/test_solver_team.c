@@ -1,4 +1,4 @@
-/* Team initialisation without fixed beacons (solver.h, bl_solve_team; the
+/* Team initialisation without fixed beacons (aid_team.h, bl_solve_team; the
  * CMU Millibots' start-up): exact recovery in the origin/axis gauge, the
  * reported covariance and chi-square against Monte Carlo, ranges missing
  * (shortest-path start), a multipath range caught by the chi-square test,
