@@ -70,17 +70,24 @@ def up_and_back(kelvin: float, start_s: float = 0.0) -> np.ndarray:
 WORLDS = {"still": np.array([[0.0, 20.0]])}
 WORLDS.update({f"ramp{k:+d}": ramp(k) for k in (10, 20, -10, -20)})
 WORLDS.update({f"swing{k:+d}": up_and_back(k) for k in (10, -10)})
-SHIFTED = {f"ramp{k:+d}@{s:+d}s": ramp(k, s) for k in (20, -20) for s in (-30, 30)}
+
+
+def met_early_or_late(shape, kelvins) -> dict:
+    """Each world of `shape` (ramp or up_and_back) met by a run started 30 s before it or 30 s
+    into it."""
+    name = "ramp" if shape is ramp else "swing"
+    return {f"{name}{k:+d}@{s:+d}s": shape(k, s) for k in kelvins for s in (-30, 30)}
+
+
+SHIFTED = met_early_or_late(ramp, (20, -20))
 # --worlds named: every swing item 1 names in both of the benchmark's shapes, so the 20 C swing
 # up and back too (0.19 m/s^2 up, then down), as the 10 C one is run. --worlds family: every
 # swing of 10 to 20 C over the 2 minutes the words cover: also ramps of 15 C, and each ramp
 # and swing met by a run started 30 s before it or 30 s into it.
 NAMED = {f"swing{k:+d}": up_and_back(k) for k in (20, -20)}
 FAMILY = {f"ramp{k:+d}": ramp(k) for k in (15, -15)}
-FAMILY.update({f"ramp{k:+d}@{s:+d}s": ramp(k, s) for k in (10, 15, 20, -10, -15, -20)
-               for s in (-30, 30)})
-FAMILY.update({f"swing{k:+d}@{s:+d}s": up_and_back(k, s) for k in (10, 20, -10, -20)
-               for s in (-30, 30)})
+FAMILY.update(met_early_or_late(ramp, (10, 15, 20, -10, -15, -20)))
+FAMILY.update(met_early_or_late(up_and_back, (10, 20, -10, -20)))
 COMPONENTS = {"sos": [crb.IS], "position": [crb.IX, crb.IY]}
 DRAWS = 400                       # Monte Carlo draws of the log-likelihood ratios (the search)
 FINAL_DRAWS = 8000                # the same at the prior found, each with its antithetic twin
