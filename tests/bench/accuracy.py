@@ -29,6 +29,10 @@ the seeds:
   heading_nees and heading_within_3sigma_pct the same for the heading alone
   (1 dof, interval chi2(seeds)/seeds); on a scenario with a kidnap the
   estimates from the kidnap to the filter's next reset are left out of these)
+  (and a `spread ...` line: how much ratio, lateral_std_mm and sos_err_mps move with
+  the seeds drawn, the bootstrap over the seeds: ratio_se and the ratio's 5 % and 95 %
+  points, lateral_std_se_mm, sos_err_se_mps; a figure within about one ratio_se of a
+  target is not told apart from it by these seeds)
 Options: --scenarios, --seeds, --first-seed (default 1: seeds 1..20; e.g. 21 for
 20 others, to see whether a figure holds beyond the seeds it was tuned on), and
 --tuning KEY=VALUE (repeatable) to run the
@@ -165,6 +169,42 @@ def kidnap_time_s(scenario: str | None) -> float | None:
     return float(cp.get("faults", "kidnap").split(",")[0])
 
 
+SPREAD_RESAMPLES = 2000  # bootstrap resamples of the seeds (spread)
+
+
+def spread(good: list[dict], resamples: int = SPREAD_RESAMPLES, rng: int = 14) -> dict:
+    """How much the pooled figures move with the seeds drawn: the bootstrap over the runs
+    (Efron & Tibshirani 1993 ch. 6: the seeds resampled with replacement, each run whole,
+    since a run's estimates are correlated with one another), the standard error of
+    ratio, lateral_std_mm and sos_err_mps and the ratio's 5 % and 95 % points. A figure
+    within about one ratio_se of a target is not told apart from it by these seeds."""
+    n = len(good)
+    if n < 2:
+        return {}
+    # per run: the sums the pooled figures are made of
+    s_e = np.array([np.nansum(r["err2"]) for r in good])
+    s_p = np.array([np.nansum(r["pcrb2"]) for r in good])
+    n_e = np.array([np.isfinite(r["err2"]).sum() for r in good], dtype=float)
+    n_p = np.array([np.isfinite(r["pcrb2"]).sum() for r in good], dtype=float)
+    s_s = np.array([np.nansum(r["sos2"]) for r in good])
+    n_s = np.array([np.isfinite(r["sos2"]).sum() for r in good], dtype=float)
+    l1 = np.array([np.sum(r["lat"]) for r in good])
+    l2 = np.array([np.sum(r["lat"] ** 2) for r in good])
+    n_l = np.array([r["lat"].size for r in good], dtype=float)
+    pick = np.random.default_rng(rng).integers(0, n, size=(resamples, n))
+    w = np.zeros((resamples, n))
+    np.add.at(w, (np.arange(resamples)[:, None], pick), 1.0)     # times each run is drawn
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.sqrt((w @ s_e / (w @ n_e)) / (w @ s_p / (w @ n_p)))
+        sos = np.sqrt(w @ s_s / (w @ n_s))
+        mean_l = w @ l1 / (w @ n_l)
+        lat = np.sqrt(np.clip(w @ l2 / (w @ n_l) - mean_l ** 2, 0.0, None)) * 1e3
+    return {"ratio_se": float(np.nanstd(ratio)),
+            "ratio_p05": float(np.nanpercentile(ratio, 5)),
+            "ratio_p95": float(np.nanpercentile(ratio, 95)),
+            "lateral_std_se_mm": float(np.nanstd(lat)), "sos_err_se_mps": float(np.nanstd(sos))}
+
+
 def judge(seed: int, truth_p: Path, est_p: Path, scenario: str | None = None) -> dict:
     """One run's figures from its truth and estimates CSVs (also used by
     tests/bench/firmware.py on the firmware's estimates)."""
@@ -246,6 +286,7 @@ def summarise(scenario: str, runs: list[dict]) -> tuple[str, dict]:
         [r["lat_pcrb2"] for r in good])))) * 1e3
     fig["sos_pcrb_mps"] = math.sqrt(float(np.nanmean(np.concatenate([r["sos_pcrb2"] for r in good]))))
     fig.update(honesty(good, len(runs)))
+    fig.update(spread(good))
     line = (f"accuracy scenario={scenario} seeds={len(runs)} rmse_mm={fig['rmse_mm']:.1f} "
             f"pcrb_mm={fig['pcrb_mm']:.1f} ratio={fig['ratio']:.3f} "
             f"lateral_std_mm={fig['lateral_std_mm']:.1f} sos_err_mps={fig['sos_err_mps']:.3f} "
@@ -299,6 +340,11 @@ def main() -> int:
                   f"heading_nees={fig['heading_nees']:.2f} heading_nees_lo={fig['heading_nees_lo']:.2f} "
                   f"heading_nees_hi={fig['heading_nees_hi']:.2f} "
                   f"heading_within_3sigma_pct={fig['heading_within_3sigma_pct']:.1f}")
+        if "ratio_se" in fig:
+            print(f"spread scenario={scenario} seeds={len(runs)} ratio_se={fig['ratio_se']:.3f} "
+                  f"ratio_p05={fig['ratio_p05']:.3f} ratio_p95={fig['ratio_p95']:.3f} "
+                  f"lateral_std_se_mm={fig['lateral_std_se_mm']:.1f} "
+                  f"sos_err_se_mps={fig['sos_err_se_mps']:.3f}")
     (out / "accuracy.json").write_text(json.dumps(report, indent=1))
     for line in lines:
         print(line)
