@@ -78,22 +78,26 @@ void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2);
 // the drift model's typical rate r_d (m/s², 0.1 ≈ 10 °C per minute: s
 // moves 0.6 m/s per °C; below); the rate's memory T_r (s: a ramp is
 // learnt over the whole of a 2-minute swing, a rate of long ago forgotten);
-// the drift model's prior probability π (0.5 %: the rate is fed forward
-// on strong evidence only; with 1 % kleeman-lab read 0.790 m/s against
-// 0.788, 20 seeds); a floor on the rate's variances ((m/s²)²) so that
-// the likelihood ratio stays defined.
+// the drift model's prior probability π (30 %, with the random walk σ_d
+// of 0.15 m/s/√s by default: measured on the bench's three airs, seeds
+// 1–20 and 21–40, against π 0.5 % and σ_d 0.2 before, the 20 °C swing's
+// position ratio 1.236 → 1.166 and 1.279 → 1.207, the 10 °C swing's
+// 1.097 → 1.090 and 1.169 → 1.164, still air's 1.027 → 1.024 and 1.045 →
+// 1.045, its speed of sound 0.794 → 0.811 m/s; docs/performance.md
+// "Retuned"); a floor on the rate's variances ((m/s²)²) so that the
+// likelihood ratio stays defined.
 constexpr real kSosDriftWindow_s = real(20);
-constexpr real kSosDriftRate_per_sqrt_s = real(0.5);
+constexpr real kSosDriftRate_per_sqrt_s = real(2) / real(3);
 // r_d = kSosDriftRate_per_sqrt_s · speed_of_sound_drift_mps_per_sqrt_s
 // (m/s²): one key sets how fast the air may change, 0.1 m/s² at the
-// default 0.2 m/s/√s; a site that declares still air (e.g. 0.01) gets a
+// default 0.15 m/s/√s; a site that declares still air (e.g. 0.01) gets a
 // drift model too small to matter.
 inline real sos_drift_rate_mps2(const bl_config *cfg)
 {
     return kSosDriftRate_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s;
 }
 constexpr real kSosRateTime_s = real(1000);
-constexpr real kSosDriftPrior = real(0.005);
+constexpr real kSosDriftPrior = real(0.3);
 constexpr real kSosRateVarFloor_m2ps4 = real(1e-12);
 // Store x, P as the filter's state and update the converged flag.
 void commit(bl_filter *f, const VX &x, const MX &P);

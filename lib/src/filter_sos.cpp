@@ -40,8 +40,9 @@ namespace bl {
 //   prior 10 %; the random walk σ_d covers the rate the filter did not take):
 //     P_ss += w² (2 P_sr dt + P_rr dt²) + σ_d² dt,  P_s,j *= 1 + w² β dt (j ≠ s),
 //     P_sr += P_rr dt.
-// In still air r̂ stays within its noise, w ≈ π and s is the random walk
-// alone; along a temperature ramp r̂ settles on the rate and w → 1.
+// In still air r̂ stays within its noise and w falls from π as P_rr
+// shrinks (the factor √(V1/V0)), s nearly the random walk alone; along a
+// temperature ramp r̂ settles on the rate and w → 1.
 void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
 {
     const real rd2 = sos_drift_rate_mps2(cfg) * sos_drift_rate_mps2(cfg);  // r_d² ((m/s²)²)
