@@ -52,6 +52,10 @@ def test_builtin_scenarios_all_load():
             assert scn.duration_s == 40 and scn.site.beacon_count == 0
             assert scn.site.sonar_count == 8 and scn.site.walls_m.shape == (5, 4)
             assert scn.obstacles_m.shape[0] >= 3      # beyond the door: not in the map
+        elif name == "ceiling":             # issue 14: kleeman-lab's beacons at the ceiling
+            assert scn.duration_s == 120 and scn.site.beacon_count == 6
+            assert np.all(scn.site.beacons_m[:, 2] == 2.95) and scn.site.rx_height_m == 1.0
+            assert scn.site.room_z_m > 2.95
         elif name in SITES_OF_ISSUE_14:     # sites as large and as dense as the hardware allows
             duration_s, count, hearing_m = SITES_OF_ISSUE_14[name]
             assert scn.duration_s == duration_s and scn.site.beacon_count == count
