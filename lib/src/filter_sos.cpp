@@ -2,12 +2,29 @@
 // sos_drift_predict, sos_drift_start, note_sos_correction): still air and a
 // drifting one, one filter; the rate of the drift kept beside the state
 // (bl_sos_drift). Called from the predicts (filter.cpp add_parameter_noise)
-// and from each accepted pulse update (aid_pulse.cpp).
+// and from each accepted pulse update (aid_pulse.cpp). On a site with a kind
+// that measures the air's change (the thermometer) the drift model is idle.
 #include <cmath>
 
 #include "filter_internal.hpp"
+#include "kinds.hpp"
 
 namespace bl {
+
+namespace {
+
+// True when a kind on the site measures the air's change of s (a
+// thermometer, aid_thermometer.cpp): that input carries a swing, and the
+// drift model, which would learn a rate from the pulses' corrections (from
+// the start's convergence too), stays idle.
+bool sos_change_measured(const bl_config *cfg)
+{
+    for (const Kind *k : kKinds)
+        if (k->measures_sos_change && k->measures_sos_change(cfg)) return true;
+    return false;
+}
+
+}  // namespace
 
 // The speed of sound in moving air: two models, one filter (ours; Kleeman
 // 1992 eq. 15 holds s constant). "Still" air: s a random walk of σ_d
@@ -45,6 +62,12 @@ namespace bl {
 // temperature ramp r̂ settles on the rate and w → 1.
 void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
 {
+    if (sos_change_measured(cfg)) {
+        // s a random walk of σ_d alone (Kleeman 1992 eq. 15's constant s
+        // with process noise), the air's change the thermometer's input.
+        P(S, S) += cfg->speed_of_sound_drift_mps_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s * dt;
+        return;
+    }
     const real rd2 = sos_drift_rate_mps2(cfg) * sos_drift_rate_mps2(cfg);  // r_d² ((m/s²)²)
     // e^{-dt/T_r} to first order (dt, the predict step, is far below T_r)
     const real a = real(1) / (real(1) + dt / kSosRateTime_s);
@@ -85,6 +108,7 @@ void sos_drift_start(const bl_config *cfg, SosDrift &sos)
 
 void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2)
 {
+    if (sos_change_measured(&f->cfg_)) return;  // the drift model idle (above)
     bl_sos_drift &sos = f->sos_drift_;
     const real Pss = f->P_[S * NX + S];
     // Start-up: while s is still as uncertain as a drift over a window

@@ -107,6 +107,10 @@ struct Kind {
     size_t n_rules = 0;
     // Its part of bl_config_same_geometry.
     bool (*same_geometry)(const bl_config *a, const bl_config *b) = nullptr;
+    // Whether it measures the air's change of the speed of sound (the
+    // thermometer): then the speed of sound's drift model stays idle, s a
+    // random walk beside that input (filter_sos.cpp).
+    bool (*measures_sos_change)(const bl_config *c) = nullptr;
     // ---- bl_filter (filter_estimate.cpp)
     // Its counters into the published estimate.
     void (*estimate)(const bl_filter *f, bl_estimate *est) = nullptr;
@@ -115,6 +119,12 @@ struct Kind {
     // against it (localizer_fuse), and each is a beacon of its own in the
     // persistent-rejection window (localizer.h, policy: the min(3, N - 1) rule).
     uint32_t (*beacons)(const bl_config *c) = nullptr;
+    // Whether its measurements fix the pose: then its beacons are beacons of
+    // that window (a rejection of one may restart the filter) and a fused
+    // one is fresh data (a new estimate published with its tag). Not a
+    // thermometer's: the window neither counts nor holds its readings, and
+    // they publish nothing (a thermometer alone does not keep a pose fresh).
+    bool fixes_position = true;
     // Its restart without a prior after persistent rejection, when the pulse
     // snapshot is not possible or fails (the kinds tried in list order).
     int (*restart)(bl_filter *f) = nullptr;

@@ -217,7 +217,7 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     // beacon its range.
     uint32_t n_watched = 0;
     for (const bl::Kind *k : bl::kKinds)
-        if (k->beacons) n_watched += k->beacons(&cfg);
+        if (k->beacons && k->fixes_position) n_watched += k->beacons(&cfg);
     const uint32_t n_beacons = cfg.beacon_count + n_watched;
     const uint32_t cap = n_watched > 0 ? n_beacons - 1 : n_beacons;
     const uint32_t need = cap < 3 ? cap : 3;
@@ -462,13 +462,15 @@ int bl::localizer_fuse(bl_localizer *loc, const LocInput &in, FuseFn fuse, const
     case BL_FUSION_STARTED:
     case BL_FUSION_RESET:
         (c.*n.fused)++;
-        watch(loc, id, false);
+        if (k->fixes_position) watch(loc, id, false);
         fused = true;
         break;
     case BL_FUSION_REJECTED:
         (c.*n.rejected)++;
-        watch(loc, id, true);
-        fused = restart_if_persistent(loc);
+        if (k->fixes_position) {
+            watch(loc, id, true);
+            fused = restart_if_persistent(loc);
+        }
         break;
     case BL_FUSION_BUFFERED:
     default:
@@ -477,7 +479,7 @@ int bl::localizer_fuse(bl_localizer *loc, const LocInput &in, FuseFn fuse, const
     }
     const bl_fusion_result out = r;
     if (fused) {
-        measurement_fused(loc, in.tag);
+        if (k->fixes_position) measurement_fused(loc, in.tag);
         after_update(loc, false);
     }
     if (res) *res = out;

@@ -165,6 +165,89 @@ def test_temperature_ramp_speed_of_sound_followed(bridge_bin, tmp_path):
     assert stats["estimator_resets"] == 0
 
 
+def _rewrite_frames(log, can_id: str, every: int, rewrite) -> int:
+    """Every `every`-th frame of id `can_id` (hex, as candump writes it) of the candump log
+    gets its payload changed in place by rewrite(bytearray): returns how many were changed."""
+    lines = log.read_text().splitlines()
+    changed = seen = 0
+    for i, line in enumerate(lines):
+        parts = line.split()
+        if len(parts) < 3 or not parts[2].startswith(can_id + "#"):
+            continue
+        seen += 1
+        if seen % every:
+            continue
+        data = bytearray.fromhex(parts[2][len(can_id) + 1:])
+        rewrite(data)
+        parts[2] = can_id + "#" + data.hex().upper()
+        lines[i] = " ".join(parts)
+        changed += 1
+    log.write_text("\n".join(lines) + "\n")
+    return changed
+
+
+# --------------------------------------------------------------------------
+# The air thermometer: AIR_TEMPERATURE frames move the speed of sound by the
+# air's change (lib aid_thermometer.h).
+# --------------------------------------------------------------------------
+
+THERMO_SITE = SITE.parent / "kleeman-thermometer.ini"
+
+
+def _sos_rms_after(est, truth, t0_s: float) -> float:
+    t_sim = np.interp(est["t_us"], truth["t_us"], truth["t_sim_s"])
+    err = est["sos_mps"] - np.interp(est["t_us"], truth["t_us"], truth["sos_mps"])
+    return float(np.sqrt(np.mean(err[t_sim > t0_s] ** 2)))
+
+
+def _glitch_air_temperature(log, every: int) -> int:
+    """Every `every`-th AIR_TEMPERATURE frame of the candump log reads 85 C (a DS18B20's
+    power-on value): returns how many were changed."""
+    def to_85c(data: bytearray) -> None:
+        data[4:6] = (85 * 128).to_bytes(2, "little", signed=True)  # Temperature: bits 32..47
+    return _rewrite_frames(log, "170", every, to_85c)
+
+
+def test_thermometer_carries_a_swing(bridge_bin, tmp_path):
+    """thermometer-swing20's first 90 s (10 -> 25 C), replayed twice: on its site the
+    thermometer's readings move s with the air (every frame accounted for, none refused) and
+    the speed of sound stays within 1 m/s rms after 20 s; on kleeman-lab, which has no
+    thermometer, the same frames are counted unexpected and dropped and s lags the swing."""
+    log, truth_path = run_sim(tmp_path, "thermometer-swing20", 90)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    p, est, stats = replay(bridge_bin, log, tmp_path, site=THERMO_SITE)
+    received = stats["frames_received"]["air_temperature"]
+    assert received == pytest.approx(180, abs=2)  # 2 readings a second
+    assert (stats["thermometer_fused"] + stats["thermometer_rejected"]
+            + stats["thermometer_buffered"] + stats["thermometer_refused"]
+            + stats["thermometer_unexpected"] + stats["stale_thermometer_samples"]
+            + stats["unmapped_thermometer"]) == received
+    assert stats["thermometer_fused"] >= received - 3
+    assert stats["thermometer_refused"] == stats["thermometer_rejected"] == 0
+    assert "thermo ok" in p.stderr
+    with_thermo = _sos_rms_after(est, truth, 20)
+    assert with_thermo < 1.0, with_thermo
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    assert stats["thermometer_unexpected"] == received
+    assert stats["thermometer_fused"] == 0
+    without = _sos_rms_after(est, truth, 20)
+    assert without > 1.5 * with_thermo, (without, with_thermo)
+
+
+def test_thermometer_glitches_rejected(bridge_bin, tmp_path):
+    """One reading in 20 replaced by 85 C: the step there and the step back are both
+    rejected (the glitch becomes the reference), nothing restarts, s still follows."""
+    log, truth_path = run_sim(tmp_path, "thermometer-swing20", 60)
+    glitches = _glitch_air_temperature(log, 20)
+    assert glitches >= 5
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    p, est, stats = replay(bridge_bin, log, tmp_path, site=THERMO_SITE)
+    assert stats["thermometer_rejected"] == 2 * glitches
+    assert stats["thermometer_refused"] == 0
+    assert stats["estimator_resets"] == 0
+    assert _sos_rms_after(est, truth, 20) < 1.0
+
+
 # --------------------------------------------------------------------------
 # Bearings (issue 11): the eurobot table of Vander et al. 2011, a site of
 # three bearing beacons and no ultrasonic one.
@@ -176,22 +259,9 @@ EUROBOT = SITE.parent / "eurobot.ini"
 def _bearing_lines_to_unknown_beacon(log, every: int) -> int:
     """Every `every`-th BEARING frame of the candump log names bearing beacon 7
     (the site has 3; the DBC allows 1..15): returns how many were changed."""
-    lines = log.read_text().splitlines()
-    changed = seen = 0
-    for i, line in enumerate(lines):
-        parts = line.split()
-        if len(parts) < 3 or not parts[2].startswith("140#"):
-            continue
-        seen += 1
-        if seen % every:
-            continue
-        data = bytearray.fromhex(parts[2][4:])
+    def beacon_7(data: bytearray) -> None:
         data[4] = (data[4] & 0xF0) | 7  # Beacon: bits 32..35
-        parts[2] = "140#" + data.hex().upper()
-        lines[i] = " ".join(parts)
-        changed += 1
-    log.write_text("\n".join(lines) + "\n")
-    return changed
+    return _rewrite_frames(log, "140", every, beacon_7)
 
 
 def test_eurobot_bearings_only(bridge_bin, tmp_path):

@@ -38,7 +38,7 @@ static bool if_up;             /* SIOCGIFFLAGS reports IFF_UP */
 static int flags_errno;        /* SIOCGIFFLAGS fails with this when set */
 static int sockets_open;
 static int closes;
-static struct can_filter seen_filters[8];
+static struct can_filter seen_filters[16]; /* room beyond today's kinds: a new one fails below */
 static int seen_filter_count;
 static can_err_mask_t seen_err_mask;
 static int seen_timestamp, seen_ovfl, seen_rcvbuf, seen_fd_frames;
@@ -80,6 +80,7 @@ int __wrap_setsockopt(int fd, int level, int name, const void *val, socklen_t le
     assert_int_equal(fd, FAKE_FD);
     if (level == SOL_CAN_RAW && name == CAN_RAW_FILTER) {
         seen_filter_count = (int)(len / sizeof(struct can_filter));
+        assert_true(len <= sizeof seen_filters);
         memcpy(seen_filters, val, len);
     } else if (level == SOL_CAN_RAW && name == CAN_RAW_ERR_FILTER) {
         memcpy(&seen_err_mask, val, sizeof seen_err_mask);
@@ -237,20 +238,14 @@ static void test_open_sets_up_socket(void **state)
     assert_int_equal(can_in_open(&ci), 0);
     assert_int_equal(ci.fd, FAKE_FD);
     assert_int_equal(bound_ifindex, 42);
-    assert_int_equal(seen_filter_count, 8);
-    canid_t ids[8] = { seen_filters[0].can_id, seen_filters[1].can_id,
-                       seen_filters[2].can_id, seen_filters[3].can_id, seen_filters[4].can_id,
-                       seen_filters[5].can_id, seen_filters[6].can_id, seen_filters[7].can_id };
-    assert_int_equal(ids[0], 0x100);
-    assert_int_equal(ids[1], 0x110);
-    assert_int_equal(ids[2], 0x120);
-    assert_int_equal(ids[3], 0x140); /* BEARING */
-    assert_int_equal(ids[4], 0x130); /* RANGE */
-    assert_int_equal(ids[5], 0x131); /* TRACK_ENCODERS */
-    assert_int_equal(ids[6], 0x133); /* BEACON_SURVEY */
-    assert_int_equal(ids[7], 0x150); /* SONAR */
-    for (int i = 0; i < 8; i++)
+    assert_int_equal(seen_filter_count, 9);
+    const canid_t ids[9] = {0x100, 0x110, 0x120, 0x140 /* BEARING */, 0x130 /* RANGE */,
+                            0x131 /* TRACK_ENCODERS */, 0x133 /* BEACON_SURVEY */,
+                            0x150 /* SONAR */, 0x170 /* AIR_TEMPERATURE */};
+    for (int i = 0; i < 9; i++) {
+        assert_int_equal(seen_filters[i].can_id, ids[i]);
         assert_int_equal(seen_filters[i].can_mask, CAN_SFF_MASK | CAN_EFF_FLAG);
+    }
     assert_int_equal(seen_err_mask, CAN_ERR_BUSOFF | CAN_ERR_CRTL | CAN_ERR_RESTARTED);
     assert_int_equal(seen_timestamp, 1);
     assert_int_equal(seen_ovfl, 1);

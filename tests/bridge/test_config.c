@@ -152,7 +152,7 @@ static void test_unknown_section(void **state)
                        "[bearing_beacon1]..[bearing_beacon15], [bearing_sensor], [range_beacons], "
                        "[range_beacon1]..[range_beacon15], [range_sensor], [robot], "
                        "[noise], [sonar_ring], [sonar1]..[sonar15], [map], [wall1]..[wall64], "
-                       "[team], [tuning], [bridge])");
+                       "[thermometer], [team], [tuning], [bridge])");
     snprintf(body, sizeof body, "%s[beacon0]\n\nx_m = 1\n", good_body);
     expect_error(body, ":22: [beacon0] unknown section");
     snprintf(body, sizeof body, "%s[bearing_beacon01]\nx_m = 1\n", good_body);

@@ -156,7 +156,8 @@ static void test_numbers_stay(void **state) {
   assert_int_equal(FRAME_TRACK_ENCODERS, 5);
   assert_int_equal(FRAME_BEACON_SURVEY, 6);
   assert_int_equal(FRAME_SONAR, 7);
-  assert_int_equal(FRAME_KIND_COUNT, 8);
+  assert_int_equal(FRAME_AIR_TEMPERATURE, 8);
+  assert_int_equal(FRAME_KIND_COUNT, 9);
 }
 
 /* The ranks are distinct, and exactly one kind, of the largest rank, has no

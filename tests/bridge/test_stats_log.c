@@ -183,15 +183,15 @@ static void test_json_report(void **state)
     assert_non_null(strstr(buf, "\"duplicates_per_frame\": {\"pulse_detection\": 6, "
                                 "\"wheel_encoders\": 0, \"node_status\": 1, \"bearing\": 0, "
                                 "\"range\": 3, \"track_encoders\": 0, \"beacon_survey\": 0, "
-                                "\"sonar\": 0}"));
+                                "\"sonar\": 0, \"air_temperature\": 0}"));
     assert_non_null(strstr(buf, "\"frames_received_by_id\": {\"0x100\": 11, \"0x110\": 22, "
                                 "\"0x120\": 0, \"0x140\": 33, \"0x130\": 44, \"0x131\": 0, \"0x133\": 0, "
-                                "\"0x150\": 0}"));
+                                "\"0x150\": 0, \"0x170\": 0}"));
     assert_non_null(strstr(buf, "\"out_of_order\": 10,"));
     assert_non_null(strstr(buf, "\"out_of_order_per_frame\": {\"pulse_detection\": 0, "
                                 "\"wheel_encoders\": 8, \"node_status\": 0, \"bearing\": 2, "
                                 "\"range\": 0, \"track_encoders\": 0, \"beacon_survey\": 0, "
-                                "\"sonar\": 0}"));
+                                "\"sonar\": 0, \"air_temperature\": 0}"));
     assert_non_null(strstr(buf, "\"bearings_fused\": 30,"));
     assert_non_null(strstr(buf, "\"bearings_rejected\": 3,"));
     assert_non_null(strstr(buf, "\"bearings_buffered\": 4,"));
@@ -345,11 +345,11 @@ static void test_status_line_text(void **state)
     captured_log(f, text, sizeof text);
     assert_string_equal(text,
                         "info: final: frames 1291 (pulse 181 enc 1000 status 20 brg 40 rng 50 trk 0 srv 0 "
-                        "snr 0) "
+                        "snr 0 thm 0) "
                         "bad 1 "
                         "unknown 2 range 3 lost 4 dup 5 late 6 kdrop 7 errfr 8 | pulses ok 69 "
                         "rej 9 | bearings ok 35 rej 2 unk 3 | ranges ok 44 rej 1 unk 2 bad 3 | "
-                        "x=5.369 y=2.848 | odom 284 werr 11 | latency p50 8 p99 21 us "
+                        "thermo ok 0 rej 0 | x=5.369 y=2.848 | odom 284 werr 11 | latency p50 8 p99 21 us "
                         "(interval p50 7 p99 -1 us)\n");
     /* a sonar site adds its part after the ranges' (sonar.h counters) */
     static struct sonar s;
@@ -362,7 +362,7 @@ static void test_status_line_text(void **state)
     stats_status_line(&r, "final", "x=5.369 y=2.848");
     captured_log(f, text, sizeof text);
     assert_non_null(strstr(text, "| ranges ok 44 rej 1 unk 2 bad 3 | sonar ok 120 rej 7 unm 30 "
-                                 "bad 10 corr 10 | x=5.369 y=2.848 |"));
+                                 "bad 10 corr 10 | thermo ok 0 rej 0 | x=5.369 y=2.848 |"));
 }
 
 /* The "sonar" object of the JSON: method, counters, time per correction. */

@@ -6,7 +6,7 @@ heading), kept as fixtures in tests/kinds/compass/, never in the product tree:
                                    fuse_scalar, counters, hooks, its place in the kinds' list
   sensor_compass.c                 the bridge: handler, counters, status part
   compass.py                       the simulator: its node (a SensorKind)
-  beaconloc.dbc.add                its frame COMPASS (0x160, BridgeKind 8) and node
+  beaconloc.dbc.add                its frame COMPASS (0x160, BridgeKind 9) and node
   site_schema.toml.add             its section [compass] (count, sigma_deg, gate_sigma, rate_hz)
 and, as its test, check_compass.c (its fusion against the closed form, no cmocka).
 
@@ -63,7 +63,7 @@ KNOWN_PINS = {
     "tests/sim/test_kinds.py::test_a_kind_registered_in_a_test_needs_no_other_edit",
     # the frame ids: 0x160 COMPASS
     "tests/sim/test_dbc.py::test_frame_table_comes_from_the_dbc",
-    # FRAME_KIND_COUNT == 8
+    # FRAME_KIND_COUNT == 10
     "build/tests/bridge/test_frame_kinds::test_numbers_stay",
     # the stats JSON and the status line byte for byte, every kind's keys and parts in them
     "build/tests/bridge/test_stats_log::test_json_report",

@@ -85,6 +85,8 @@ typedef struct sim_params {
                                             radius; 1.03 = wheel 3 % larger than configured) */
     double s_rate_mps2;        /* the speed of sound changes at this rate (m/s per s) ... */
     double s_ramp_from_s, s_ramp_to_s; /* ... from this time to this (s): a temperature ramp */
+    double thermometer_hz;     /* > 0: an air thermometer read this often (bl_filter_fuse_thermometer) */
+    double thermometer_sigma_c; /* its noise (°C), and a constant offset of +0.4 °C */
     uint64_t seed;
 } sim_params;
 
@@ -161,6 +163,7 @@ static inline sim_pulse sim_pulse_of(const sim_params *sp, const bl_config *cfg,
 
 typedef struct sim_stats {
     int samples;        /* estimates compared after settle_s */
+    int thermometer_fused; /* thermometer readings whose change moved s */
     int within_3sigma;  /* |ex| <= 3σx and |ey| <= 3σy */
     double sum_e2;      /* position error² sum */
     double sum_nees;    /* 2D position NEES sum (chi-square, 2 dof if consistent) */
@@ -309,6 +312,16 @@ static inline void sim_run(const sim_params *sp, const bl_config *cfg_in, double
         }
         prev_l = ticks_l;
         prev_r = ticks_r;
+#if BL_WITH_THERMOMETER
+        if (sp->thermometer_hz > 0 && (i % lround(1.0 / (sp->thermometer_hz * SIM_DT))) == 0) {
+            /* the air's temperature of the true s (s = 331.3·√(1 + T/273.15), inverted) */
+            const double q = sim_sos_at(sp, t) / 331.3;
+            const double temp_c = 273.15 * (q * q - 1) + 0.4 + sp->thermometer_sigma_c * rng_gauss();
+            bl_fusion_result res;
+            assert_int_equal(bl_filter_fuse_thermometer(&f, to_us(sp, t), (bl_real)temp_c, &res), BL_OK);
+            if (res.status == BL_FUSION_ACCEPTED) st->thermometer_fused++;
+        }
+#endif
         while (next.arrival_s <= t) {
             if (next.missed) {
                 next = sim_pulse_of(sp, &cfg, ++next_fire);

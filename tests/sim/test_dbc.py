@@ -89,7 +89,7 @@ def test_frame_table_comes_from_the_dbc():
     assert dbc.message_names() == {0x100: "PULSE_DETECTION", 0x110: "WHEEL_ENCODERS",
                                    0x120: "NODE_STATUS", 0x130: "RANGE", 0x131: "TRACK_ENCODERS",
                                    0x132: "TEAM_COMMAND", 0x133: "BEACON_SURVEY", 0x140: "BEARING",
-                                   0x150: "SONAR"}
+                                   0x150: "SONAR", 0x170: "AIR_TEMPERATURE"}
     assert TRACK_TICK_WRAP == dbc.signal_modulo("TRACK_ENCODERS", "RightTicks") == 1 << 12
     from beaconloc_sim.clocks import WRAP_US
     from beaconloc_sim.encoders import TICK_WRAP

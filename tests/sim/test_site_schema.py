@@ -89,12 +89,12 @@ def test_schema_sections_in_file_order():
     assert [s.name for s in SCHEMA.sections] == [
         "site", "beacons", BEACON_SECTION, "receivers", "bearing_beacons", "bearing_beaconN",
         "bearing_sensor", "range_beacons", "range_beaconN", "range_sensor", "robot", "noise",
-        "sonar_ring", "sonarN", "map", "wallN", "team", "tuning", "bridge"]
+        "sonar_ring", "sonarN", "map", "wallN", "thermometer", "team", "tuning", "bridge"]
     assert SCHEMA.sections_phrase("N") == (
         "[site], [beacons], [beacon1]..[beaconN], [receivers], [bearing_beacons], "
         "[bearing_beacon1]..[bearing_beaconN], [bearing_sensor], [range_beacons], "
         "[range_beacon1]..[range_beaconN], [range_sensor], [robot], [noise], [sonar_ring], "
-        "[sonar1]..[sonarN], [map], [wall1]..[wallN], [team], [tuning], [bridge]")
+        "[sonar1]..[sonarN], [map], [wall1]..[wallN], [thermometer], [team], [tuning], [bridge]")
     assert "[beacon1]..[beacon16]" in SCHEMA.sections_phrase()
     assert "[bearing_beacon1]..[bearing_beacon15]" in SCHEMA.sections_phrase()
     assert "[sonar1]..[sonar15]" in SCHEMA.sections_phrase()

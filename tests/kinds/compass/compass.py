@@ -48,9 +48,9 @@ class Headings:
 
 class Compass(SensorKind):
     message = "COMPASS"
-    node_id = 6
-    stream = ("compass", 8)    # heading noise: the next free child seed
-    kind_order = 8             # the next free place on the bus
+    node_id = 7
+    stream = ("compass", 9)    # heading noise: the next free child seed
+    kind_order = 9             # the next free place on the bus
     status_phase_us = 250_000
     name = "compass"           # no scenario keys of its own beyond its clock's
     clock_keys = ("compass", 555_000_000, -15.0)

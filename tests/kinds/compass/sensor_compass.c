@@ -1,5 +1,5 @@
 /*
- * beaconloc-bridge — sensor kind COMPASS (the compass, node 6: the robot's
+ * beaconloc-bridge — sensor kind COMPASS (the compass, node 7: the robot's
  * heading from an absolute heading sensor): handler, counters and
  * status-line part of its sensor-table entry (sensors.h). A test fixture of
  * issue 10's claim (tests/kinds/test_new_kind.py), never in the product

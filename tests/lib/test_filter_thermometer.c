@@ -1,0 +1,246 @@
+/* The air thermometer (aid_thermometer.h: bl_filter_fuse_thermometer,
+ * bl_localizer_thermometer): the change of s between two readings against
+ * its closed form (s_T = 331.3·√(1 + T/273.15), the variance 2(∂s_T/∂T·σ)²),
+ * nothing else of the state moved; references (first reading, not
+ * started); the gate on a glitch; the errors leaving the filter
+ * byte-identical; the speed of sound's drift model idle; the localizer's
+ * counters, its readings neither new measurements nor beacons of the
+ * persistent-rejection window. Its effect on a ramp and in still air:
+ * test_filter_sos.c. */
+#include "filter_world.h"
+
+#if BL_WITH_THERMOMETER
+
+static double sos_of(double temp_c) { return 331.3 * sqrt(1.0 + temp_c / 273.15); }
+
+/* A converged filter on the default site with a thermometer (count 1). */
+static bl_filter F;
+static int64_t T_US;
+static bl_config thermo_config(void)
+{
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.thermometer_count = 1;
+    assert_int_equal(bl_config_check(&cfg, NULL), BL_OK);
+    return cfg;
+}
+
+static void test_config_rules(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    assert_int_equal(cfg.thermometer_count, 0);
+    assert_true(fabs((double)cfg.thermometer.sigma_c - 0.05) < 1e-7);
+    assert_true(fabs((double)cfg.thermometer.max_step_c - 2.0) < 1e-7);
+    const char *bad = NULL;
+    cfg.thermometer_count = 2;
+    assert_int_equal(bl_config_check(&cfg, &bad), BL_ECONFIG);
+    assert_string_equal(bad, "thermometer_count");
+    cfg.thermometer_count = 1;
+    cfg.thermometer.sigma_c = 0;
+    assert_int_equal(bl_config_check(&cfg, &bad), BL_ECONFIG);
+    assert_string_equal(bad, "thermometer.sigma_c");
+    cfg.thermometer.sigma_c = (bl_real)0.05;
+    cfg.thermometer.max_step_c = (bl_real)-1;
+    assert_int_equal(bl_config_check(&cfg, &bad), BL_ECONFIG);
+    assert_string_equal(bad, "thermometer.max_step_c");
+}
+
+/* The errors: *f byte-identical. */
+static void test_errors_leave_the_filter(void **state)
+{
+    (void)state;
+    bl_config cfg = thermo_config();
+    converged_filter(&F, &cfg, &T_US, 6, 3);
+    bl_fusion_result r;
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, 20, &r), BL_OK); /* the reference */
+    static bl_filter before;
+    before = F;
+    assert_int_equal(bl_filter_fuse_thermometer(NULL, T_US, 20, &r), BL_EINVAL);
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)NAN, &r), BL_EINVAL);
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, 130, &r), BL_EINVAL);
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, -60, &r), BL_EINVAL);
+    /* more than the predict gap before the state: too old */
+    const int64_t old_us = T_US - (int64_t)((double)cfg.max_predict_gap_s * 1e6) - 1000000;
+    assert_int_equal(bl_filter_fuse_thermometer(&F, old_us, 21, &r), BL_ETIME);
+    assert_memory_equal(&before, &F, sizeof F);
+    /* a site without a thermometer */
+    static bl_filter g;
+    bl_config plain;
+    assert_int_equal(bl_config_default(&plain), BL_OK);
+    assert_int_equal(bl_filter_init(&g, &plain), BL_OK);
+    before = g;
+    assert_int_equal(bl_filter_fuse_thermometer(&g, T_US, 20, &r), BL_ECONFIG);
+    assert_memory_equal(&before, &g, sizeof g);
+    /* not initialised */
+    static bl_filter z;
+    assert_int_equal(bl_filter_fuse_thermometer(&z, T_US, 20, &r), BL_ENOTINIT);
+}
+
+/* A reading's change moves s by exactly the air's change and P_ss by its
+ * variance; nothing else of x or P. */
+static void test_change_moves_s_alone(void **state)
+{
+    (void)state;
+    bl_config cfg = thermo_config();
+    converged_filter(&F, &cfg, &T_US, 6, 3);
+    bl_real x0[NX], P0[NX * NX], x1[NX], P1[NX * NX];
+    bl_fusion_result r;
+    /* the first reading: a reference, the state untouched */
+    assert_int_equal(bl_filter_get_state(&F, x0, P0), BL_OK);
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)18.0, &r), BL_OK);
+    assert_int_equal(r.status, BL_FUSION_BUFFERED);
+    assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
+    assert_memory_equal(x0, x1, sizeof x0);
+    assert_memory_equal(P0, P1, sizeof P0);
+    /* the next, 1.5 °C warmer */
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)19.5, &r), BL_OK);
+    assert_int_equal(r.status, BL_FUSION_ACCEPTED);
+    assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
+    const double ds = sos_of(19.5) - sos_of(18.0); /* 0.90 m/s */
+    const double dsdt = sos_of(19.5) / (2 * (273.15 + 19.5));
+    const double var = 2 * pow(dsdt * (double)cfg.thermometer.sigma_c, 2);
+    /* tolerances: bl_real's rounding of s (~343 m/s) and of P_ss (~0.5 (m/s)²) */
+    const double tol_s = IS_FLOAT ? 1e-4 : 1e-9, tol_var = IS_FLOAT ? 1e-8 : 1e-14;
+    const double tol_pss = IS_FLOAT ? 2e-6 : 1e-12;
+    assert_true(fabs((double)r.innovation - ds) < tol_s);
+    assert_true(fabs((double)r.innovation_var - var) < tol_var);
+    assert_true(fabs((double)(x1[BL_IX_S] - x0[BL_IX_S]) - ds) < tol_s);
+    assert_true(fabs((double)(P1[BL_IX_S * NX + BL_IX_S] - P0[BL_IX_S * NX + BL_IX_S]) - var) < tol_pss);
+    for (int i = 0; i < NX; i++) {
+        if (i != BL_IX_S) assert_true(x1[i] == x0[i]);
+        for (int j = 0; j < NX; j++)
+            if (i != BL_IX_S || j != BL_IX_S) assert_true(P1[i * NX + j] == P0[i * NX + j]);
+    }
+    bl_estimate e;
+    assert_int_equal(bl_filter_estimate(&F, &e), BL_OK);
+    assert_int_equal(e.thermometer_accepted, 1);
+    assert_int_equal(e.thermometer_rejected, 0);
+}
+
+/* A glitch (a change above max_step_c) is rejected, the state untouched;
+ * the glitch becomes the reference, so the way back is rejected too and the
+ * reading after it is taken against the last. */
+static void test_glitch_rejected(void **state)
+{
+    (void)state;
+    bl_config cfg = thermo_config();
+    converged_filter(&F, &cfg, &T_US, 6, 3);
+    bl_fusion_result r;
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, 20, &r), BL_OK);
+    bl_real x0[NX], P0[NX * NX], x1[NX], P1[NX * NX];
+    assert_int_equal(bl_filter_get_state(&F, x0, P0), BL_OK);
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, 85, &r), BL_OK); /* a DS18B20's power-on value */
+    assert_int_equal(r.status, BL_FUSION_REJECTED);
+    assert_true(r.test_ratio > 1);
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, 20, &r), BL_OK);
+    assert_int_equal(r.status, BL_FUSION_REJECTED);
+    assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
+    assert_memory_equal(x0, x1, sizeof x0);
+    assert_memory_equal(P0, P1, sizeof P0);
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)20.5, &r), BL_OK);
+    assert_int_equal(r.status, BL_FUSION_ACCEPTED);
+    assert_true(fabs((double)r.innovation - (sos_of(20.5) - sos_of(20))) < (IS_FLOAT ? 1e-4 : 1e-9));
+    bl_estimate e;
+    assert_int_equal(bl_filter_estimate(&F, &e), BL_OK);
+    assert_int_equal(e.thermometer_accepted, 1);
+    assert_int_equal(e.thermometer_rejected, 2);
+}
+
+/* With a thermometer the drift model is idle: a predict adds σ_d²·dt to
+ * P_ss and nothing more; without it the drift model's rate adds more. */
+static void test_drift_model_idle(void **state)
+{
+    (void)state;
+    double grow[2];
+    for (int with = 0; with < 2; with++) {
+        bl_config cfg = thermo_config();
+        cfg.thermometer_count = (uint32_t)with;
+        converged_filter(&F, &cfg, &T_US, 6, 3);
+        bl_real x0[NX], P0[NX * NX], x1[NX], P1[NX * NX];
+        assert_int_equal(bl_filter_get_state(&F, x0, P0), BL_OK);
+        assert_int_equal(bl_filter_predict_odometry(&F, T_US + 1000000, 0, 0), BL_OK);
+        assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
+        grow[with] = (double)(P1[BL_IX_S * NX + BL_IX_S] - P0[BL_IX_S * NX + BL_IX_S]);
+        const double walk = pow((double)cfg.speed_of_sound_drift_mps_per_sqrt_s, 2) * 1.0;
+        if (with) {
+            assert_true(fabs(grow[1] - walk) < (IS_FLOAT ? 1e-5 : 1e-12));
+        } else {
+            assert_true(grow[0] > walk * 1.001);
+        }
+    }
+    print_message("P_ss over 1 s: %.5f without a thermometer, %.5f with\n", grow[0], grow[1]);
+}
+
+/* The localizer: counted; a reading is no new measurement (nothing to
+ * publish) and no beacon of the persistent-rejection window (glitches
+ * restart nothing). */
+static bl_localizer LOC;
+static void test_localizer(void **state)
+{
+    (void)state;
+    bl_config cfg = thermo_config();
+    bl_seq_config sc;
+    assert_int_equal(bl_localizer_seq_config(&cfg, &sc, NULL, NULL), BL_OK);
+    assert_int_equal(bl_localizer_init(&LOC, &cfg, &sc), BL_OK);
+    bl_thermometer_meas m = {.t_us = 1000000, .temperature_c = 20, .tag = 7};
+    bl_fusion_result r;
+    assert_int_equal(bl_localizer_thermometer(&LOC, &m, &r), BL_OK); /* not started */
+    assert_int_equal(r.status, BL_FUSION_BUFFERED);
+    m.temperature_c = (bl_real)NAN;
+    assert_int_equal(bl_localizer_thermometer(&LOC, &m, &r), BL_EINVAL);
+    assert_int_equal(bl_localizer_thermometer(&LOC, NULL, &r), BL_EINVAL);
+    const bl_filter_prior pr = prior_at(1000000, 6, 3, 0.05, 0.05, 0.1, 1000000, 1e-3);
+    assert_int_equal(bl_localizer_start(&LOC, &pr), BL_OK);
+    bl_loc_status st0, st1;
+    assert_int_equal(bl_localizer_status(&LOC, &st0), BL_OK);
+    /* a reading 0.5 °C warmer, then glitches: many times more than the window's rejections */
+    m.temperature_c = (bl_real)20.5;
+    m.t_us = 1100000;
+    assert_int_equal(bl_localizer_thermometer(&LOC, &m, &r), BL_OK);
+    assert_int_equal(r.status, BL_FUSION_ACCEPTED);
+    for (int k = 0; k < 40; k++) {
+        m.t_us += 100000;
+        m.temperature_c = (bl_real)(k % 2 ? 20.5 : 85.0);
+        assert_int_equal(bl_localizer_thermometer(&LOC, &m, &r), BL_OK);
+        assert_int_equal(r.status, BL_FUSION_REJECTED);
+    }
+    assert_int_equal(bl_localizer_status(&LOC, &st1), BL_OK);
+    assert_int_equal(st1.measurements, st0.measurements);
+    assert_int_equal(st1.window_len, st0.window_len);
+    assert_int_equal(st1.reset_counter, st0.reset_counter);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    assert_int_equal(c.thermometer_fused, 1);
+    assert_int_equal(c.thermometer_rejected, 40);
+    assert_int_equal(c.thermometer_buffered, 1);
+    assert_int_equal(c.thermometer_refused, 1);
+    assert_int_equal(c.snapshot_restarts, 0);
+    /* a site without a thermometer: refused, BL_EBEACON */
+    bl_config plain;
+    assert_int_equal(bl_config_default(&plain), BL_OK);
+    assert_int_equal(bl_localizer_seq_config(&plain, &sc, NULL, NULL), BL_OK);
+    assert_int_equal(bl_localizer_init(&LOC, &plain, &sc), BL_OK);
+    m.temperature_c = 20;
+    assert_int_equal(bl_localizer_thermometer(&LOC, &m, &r), BL_EBEACON);
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    assert_int_equal(c.thermometer_refused, 1);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_config_rules),
+        cmocka_unit_test(test_errors_leave_the_filter),
+        cmocka_unit_test(test_change_moves_s_alone),
+        cmocka_unit_test(test_glitch_rejected),
+        cmocka_unit_test(test_drift_model_idle),
+        cmocka_unit_test(test_localizer),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
+
+#else /* a build without the thermometer (BL_WITH_KINDS=0): nothing to test */
+int main(void) { return 0; }
+#endif
