@@ -50,8 +50,9 @@ const Rule kThermometerRules[] = {
 constexpr real kMinTemperatureC = real(-55);
 constexpr real kMaxTemperatureC = real(125);
 // 0 °C in kelvin, and the speed of sound of dry air at 0 °C (m/s): s_T =
-// 331.3·√(1 + T/273.15) (the ideal gas, Kinsler et al., Fundamentals of
-// Acoustics, 4th ed., eq. 5.6.10; the simulator's physics/acoustics.py).
+// 331.3·√(1 + T/273.15) (the ideal-gas law for dry air, s ∝ √T_K; Kleeman
+// 1992 §3.5 estimates s online because it follows the temperature; the
+// simulator's physics/acoustics.py).
 constexpr real kZeroCelsiusK = real(273.15);
 constexpr real kSosAtZeroCelsiusMps = real(331.3);
 

@@ -55,6 +55,24 @@ static void test_pulse_site_with_range_beacons(void **state)
 #endif
 }
 
+/* A pulse site with a thermometer (BL_WITH_THERMOMETER): fine with the kind,
+ * refused by name without it (its readings could not move s). */
+static void test_pulse_site_with_thermometer(void **state)
+{
+    (void)state;
+    bl_config c;
+    assert_int_equal(bl_config_default(&c), BL_OK);
+    const char *field = "untouched";
+    c.thermometer_count = 1;
+#if BL_WITH_THERMOMETER
+    assert_int_equal(bl_config_check(&c, &field), BL_OK);
+#else
+    assert_int_equal(bl_config_check(&c, &field), BL_ECONFIG);
+    assert_non_null(field);
+    assert_string_equal(field, "thermometer_count");
+#endif
+}
+
 /* A pulse-only localizer inits in either build; the bearing counters are
  * there only with bearings (a compile-time check: this file builds in both). */
 static void test_pulse_localizer_inits(void **state)
@@ -143,6 +161,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_pulse_site_with_bearing_beacons),
         cmocka_unit_test(test_pulse_site_with_range_beacons),
+        cmocka_unit_test(test_pulse_site_with_thermometer),
         cmocka_unit_test(test_pulse_localizer_inits),
         cmocka_unit_test(test_team_site),
         cmocka_unit_test(test_sonar_site),

@@ -82,11 +82,12 @@ typedef struct bl_thermometer_meas {
 } bl_thermometer_meas;
 
 /* Take one reading taken at t_us. The speed of sound of dry air at the
- * reading, s_T = 331.3·√(1 + T/273.15) m/s (the ideal gas, Kinsler et al.,
- * Fundamentals of Acoustics, 4th ed., eq. 5.6.10; the simulator's
- * physics/acoustics.py), is compared with the previous reading's s_T0: the
- * air's change moves the state's s by as much, an input to the speed of
- * sound's model as the wheels' travel is to the pose's:
+ * reading, s_T = 331.3·√(1 + T/273.15) m/s (the ideal-gas law for dry
+ * air, s ∝ √T_K; Kleeman 1992 §3.5 estimates s online because it follows
+ * the temperature; the simulator's physics/acoustics.py), is compared with
+ * the previous reading's s_T0: the air's change moves the state's s by as
+ * much, an input to the speed of sound's model as the wheels' travel is to
+ * the pose's:
  *     s += s_T - s_T0,   P_ss += 2 (∂s_T/∂T · σ_T)²    (σ_T = sigma_c)
  * (the change of two readings, each with its noise; ∂s_T/∂T = s_T / (2
  * (273.15 + T)) m/s per °C, ≈ 0.6). Nothing else of the state moves: the
