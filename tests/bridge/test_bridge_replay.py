@@ -336,10 +336,12 @@ def test_duplicate_and_late_frames_dropped(bridge_bin, kleeman_log, tmp_path):
     assert s["frames_total"] == len(lines) + 2
     assert s["duplicates_per_frame"] == {"pulse_detection": 1, "wheel_encoders": 1,
                                          "node_status": 0, "bearing": 0, "range": 0,
-                                         "track_encoders": 0, "beacon_survey": 0, "sonar": 0}
+                                         "track_encoders": 0, "beacon_survey": 0, "sonar": 0,
+                                         "air_temperature": 0}
     assert s["out_of_order_per_frame"] == {"pulse_detection": 1, "wheel_encoders": 1,
                                            "node_status": 0, "bearing": 0, "range": 0,
-                                           "track_encoders": 0, "beacon_survey": 0, "sonar": 0}
+                                           "track_encoders": 0, "beacon_survey": 0, "sonar": 0,
+                                           "air_temperature": 0}
     assert s["duplicates"] == 2 and s["out_of_order"] == 2
     assert s["lost_by_counter"] == 0
     counts = log_frame_counts(log)
