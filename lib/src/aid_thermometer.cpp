@@ -27,13 +27,15 @@ bool thermometer_starts_alone(const bl_config *) { return false; }
 namespace {
 
 // A thermometer's noise (the SHT3x class: ±0.2 °C accuracy, 0.01 °C
-// resolution, noise of a few hundredths) and the largest change between two
-// readings taken as the air's (2 °C: a hall's air changes by a few °C a
-// minute; readings come a few times a second).
+// resolution, noise of a few hundredths), the largest difference between a
+// reading and the one expected taken as the air's (2 °C: a hall's air changes
+// by a few °C a minute; readings come a few times a second) and its response
+// time (a small sensor in moving air; a housed one is slower, tens of s).
 void default_thermometer_params(bl_config *c)
 {
     c->thermometer.sigma_c = real(0.05);
     c->thermometer.max_step_c = real(2.0);
+    c->thermometer.time_constant_s = real(2.0);
 }
 
 // Its readings carry the air's change of s: the drift model stays idle.
@@ -43,6 +45,7 @@ const Rule kThermometerRules[] = {
     BL_RULE(thermometer_count, kU32 | kHiLe, kNone, b1),
     BL_RULE(thermometer.sigma_c, kGtLe, b0, b10),
     BL_RULE(thermometer.max_step_c, kGtLe, b0, b100),
+    BL_RULE(thermometer.time_constant_s, kGeLe, b0, b600),
 };
 
 // The readings a thermometer can give (°C): the DBC's AIR_TEMPERATURE range
@@ -55,6 +58,18 @@ constexpr real kMaxTemperatureC = real(125);
 // simulator's physics/acoustics.py).
 constexpr real kZeroCelsiusK = real(273.15);
 constexpr real kSosAtZeroCelsiusMps = real(331.3);
+// The air's model (below): its rate's σ when the model starts (°C/s: a 10 °C
+// swing in a minute is 0.17), the intensity of the rate's random walk in
+// each of its two modes ((°C/s)²/s; steady air: a rate that drifts by 0.01
+// °C/s in 10 s; changing air, a door opened, a robot driven into another
+// hall: by 0.3 °C/s within 10 s), the mean time the air stays in a mode (s)
+// and the modes' probabilities when the model starts. Chosen on the
+// benchmark's airs with sensors of 2, 10 and 30 s (docs/performance.md,
+// "A slow thermometer").
+constexpr real kAirRateSigmaCps = real(0.2);
+constexpr real kAirRateWalkC2ps3[2] = {real(1e-5), real(1e-2)};
+constexpr real kAirModeSojourn_s = real(120);
+constexpr real kAirModeStartProb[2] = {real(0.5), real(0.5)};
 
 bool reading_ok(real temperature_c)
 {
@@ -65,6 +80,158 @@ bool reading_ok(real temperature_c)
 real sos_of_temperature(real temperature_c)
 {
     return kSosAtZeroCelsiusMps * std::sqrt(real(1) + temperature_c / kZeroCelsiusK);
+}
+
+// The sensor and the air it sits in, a three-state Kalman filter of its own
+// (ours), z = (T_a, r, T_m): the air's temperature T_a (°C) an integrated
+// random walk, its rate r (°C/s) a random walk of intensity q (the
+// continuous white-noise acceleration model, Bar-Shalom, Li & Kirubarajan
+// 2001 §6.2.2), and the sensor's own temperature T_m (°C) its first-order
+// response, τ dT_m/dt = T_a - T_m (Doebelin, Measurement Systems, §3.3; the
+// simulator's nodes/thermometer.py). Over dt with T_a a ramp of slope r,
+// exactly, a = e^{-dt/τ} (0 when τ = 0: the reading is the air's):
+//   T_a ← T_a + r dt,   T_m ← a T_m + (1 - a) T_a + (dt - τ (1 - a)) r,
+// the process noise Q = G q [dt³/3 dt²/2; dt²/2 dt] Gᵀ with G's third row
+// (1 - a, 0) (the air's noise reaches the sensor as its mean does, to first
+// order). A reading y = T_m + offset + noise σ_T: the offset is constant, so
+// it moves T_a and T_m alike and no change of T_a.
+// Steady air wants a small q (a slow sensor's readings de-lagged, T_a ≈ T_m
+// + τ r, amplify the noise of r by τ), changing air a large one: two modes
+// of the model, q_0 and q_1, as an interacting multiple model (Blom &
+// Bar-Shalom 1988; Bar-Shalom et al. 2001 §11.6.6), switching with
+// probability 1 - e^{-dt/T} between two readings (T = kAirModeSojourn_s).
+// Stored in bl_filter (thermometer_air_, thermometer_air_cov_,
+// thermometer_mode_prob_).
+using Z3 = Mat<3, 1>;
+using P3 = Mat<3, 3>;
+constexpr int kTa = 0, kRate = 1, kTm = 2;
+constexpr int kModes = 2;
+
+struct AirModel {
+    Z3 z[kModes];
+    P3 P[kModes];
+    real mu[kModes];
+};
+
+AirModel load_air(const bl_filter *f)
+{
+    AirModel m;
+    for (int j = 0; j < kModes; j++) {
+        m.z[j] = Eigen::Map<const Z3>(f->thermometer_air_[j]);
+        m.P[j] = Eigen::Map<const P3>(f->thermometer_air_cov_[j]);
+        m.mu[j] = f->thermometer_mode_prob_[j];
+    }
+    return m;
+}
+
+void store_air(bl_filter *f, const AirModel &m)
+{
+    for (int j = 0; j < kModes; j++) {
+        Eigen::Map<Z3>(f->thermometer_air_[j]) = m.z[j];
+        Eigen::Map<P3>(f->thermometer_air_cov_[j]) = m.P[j];
+        f->thermometer_mode_prob_[j] = m.mu[j];
+    }
+}
+
+// The combined estimate of T_a (°C): Σ μ_j T_a,j (§11.6.6, step 5).
+real air_estimate(const AirModel &m)
+{
+    real t = 0;
+    for (int j = 0; j < kModes; j++) t += m.mu[j] * m.z[j](kTa);
+    return t;
+}
+
+// The model's start at reading y: the sensor settled in air of unknown rate,
+// T_a = T_m + r τ (a steady ramp's lag), r ~ N(0, σ_r²), T_m = y ± σ_T; both
+// modes alike.
+void air_model_start(bl_filter *f, real y, int64_t t_us)
+{
+    const real s2 = f->cfg_.thermometer.sigma_c * f->cfg_.thermometer.sigma_c;
+    const real tau = f->cfg_.thermometer.time_constant_s;
+    const real r2 = kAirRateSigmaCps * kAirRateSigmaCps;
+    AirModel m;
+    for (int j = 0; j < kModes; j++) {
+        m.z[j] = Z3(y, real(0), y);
+        m.P[j] << s2 + r2 * tau * tau, r2 * tau, s2, r2 * tau, r2, real(0), s2, real(0), s2;
+        m.mu[j] = kAirModeStartProb[j];
+    }
+    store_air(f, m);
+    f->thermometer_t_us_ = t_us;
+    f->thermometer_in_row_ = 0;
+    f->thermometer_ref_mps_ = sos_of_temperature(y);
+}
+
+// One reading y through the model over dt (s): mixing, each mode's
+// prediction and update, the modes' probabilities, into m. Returns the
+// innovation of the combined prediction (°C); *var_change the variance of
+// the change of T_a's estimate error over the step (°C²). For one Kalman
+// filter, with e_k its error, e_k = A e_{k-1} + (noise of step k), A = (I -
+// K H) F, so
+//   Var(e_k - e_{k-1}) = P_k,aa + P_{k-1},aa - 2 (A P_{k-1})_aa;
+// for the modes, Σ μ_j of theirs plus the spread of their changes (ours).
+// (The changes are an input to s: their sum is the last estimate minus the
+// first, whose error stays bounded; the sum of these variances bounds it
+// from above.)
+real air_model_step(const bl_config *cfg, real dt, real y, AirModel &m, real *var_change)
+{
+    const real tau = cfg->thermometer.time_constant_s;
+    const real s2 = cfg->thermometer.sigma_c * cfg->thermometer.sigma_c;
+    const real a = tau > real(0) ? std::exp(-dt / tau) : real(0);
+    P3 F;
+    F << real(1), dt, real(0), real(0), real(1), real(0), real(1) - a, dt - tau * (real(1) - a), a;
+    Mat<3, 2> G;
+    G << real(1), real(0), real(0), real(1), real(1) - a, real(0);
+    Mat<2, 2> Qar;
+    const real dt2 = dt * dt;
+    Qar << dt2 * dt / real(3), dt2 / real(2), dt2 / real(2), dt;
+    const P3 GQG = G * Qar * G.transpose();
+    // Mixing (§11.6.6, steps 1-2): p_ij = 1 - p_sw (i = j), p_sw else.
+    const real p_sw = real(1) - std::exp(-dt / kAirModeSojourn_s);
+    real c[kModes];
+    Z3 z0[kModes];
+    P3 P0[kModes];
+    for (int j = 0; j < kModes; j++) {
+        c[j] = 0;
+        for (int i = 0; i < kModes; i++) c[j] += (i == j ? real(1) - p_sw : p_sw) * m.mu[i];
+        z0[j].setZero();
+        for (int i = 0; i < kModes; i++) z0[j] += (i == j ? real(1) - p_sw : p_sw) * m.mu[i] / c[j] * m.z[i];
+        P0[j].setZero();
+        for (int i = 0; i < kModes; i++) {
+            const Z3 d = m.z[i] - z0[j];
+            P0[j] += (i == j ? real(1) - p_sw : p_sw) * m.mu[i] / c[j] * (m.P[i] + d * d.transpose());
+        }
+    }
+    const real ta_before = air_estimate(m);
+    // Each mode's filter (step 3) and likelihood N(ν_j; 0, S_j).
+    real nu = y;
+    real lik[kModes], var_j[kModes], dta[kModes];
+    for (int j = 0; j < kModes; j++) {
+        const P3 FP = F * P0[j];
+        const Z3 zp = F * z0[j];
+        const P3 Pp = FP * F.transpose() + kAirRateWalkC2ps3[j] * GQG;
+        const real nu_j = y - zp(kTm);
+        nu -= c[j] * zp(kTm);
+        const real S = Pp(kTm, kTm) + s2;
+        const Z3 K = Pp.col(kTm) / S;
+        m.z[j] = zp + K * nu_j;
+        m.P[j] = Pp - K * K.transpose() * S;
+        m.P[j] = real(0.5) * (m.P[j] + m.P[j].transpose());
+        // (A P_{k-1})_aa = (F P)_aa - K_a (F P)_ma
+        const real v = m.P[j](kTa, kTa) + P0[j](kTa, kTa) - real(2) * (FP(kTa, kTa) - K(kTa) * FP(kTm, kTa));
+        var_j[j] = v > real(0) ? v : real(0);
+        dta[j] = m.z[j](kTa) - z0[j](kTa);
+        lik[j] = std::exp(-real(0.5) * nu_j * nu_j / S) / std::sqrt(S);
+    }
+    // The modes' probabilities (step 4); all likelihoods underflowed (a
+    // reading far from both): kept as predicted.
+    real norm = 0;
+    for (int j = 0; j < kModes; j++) norm += lik[j] * c[j];
+    for (int j = 0; j < kModes; j++) m.mu[j] = norm > real(0) ? lik[j] * c[j] / norm : c[j];
+    const real dta_mean = air_estimate(m) - ta_before;
+    real v = 0;
+    for (int j = 0; j < kModes; j++) v += m.mu[j] * (var_j[j] + (dta[j] - dta_mean) * (dta[j] - dta_mean));
+    *var_change = v;
+    return nu;
 }
 
 void thermometer_estimate(const bl_filter *f, bl_estimate *est)
@@ -89,9 +256,8 @@ extern "C" int bl_filter_fuse_thermometer(bl_filter *f, int64_t t_us, bl_real te
     if (!reading_ok(temperature_c)) return BL_EINVAL;
     bl_fusion_result res;
     std::memset(&res, 0, sizeof res);
-    const real s_t = sos_of_temperature(temperature_c);
-    const real s_ref = f->thermometer_ref_mps_;
-    bool reference_only = !started(f) || !(s_ref > real(0));
+    const bl_config *cfg = &f->cfg_;
+    bool reference_only = !started(f);
     if (!reference_only) {
         switch (classify_time(f, t_us)) {
         case MeasTime::kTooOld:
@@ -103,35 +269,62 @@ extern "C" int bl_filter_fuse_thermometer(bl_filter *f, int64_t t_us, bl_real te
             break;
         }
     }
+    const bool have_model = f->thermometer_ref_mps_ > real(0);
+    if (have_model && t_us < f->thermometer_t_us_) return BL_ETIME;  // before the last reading
+    const real dt = real(t_us - f->thermometer_t_us_) * real(1e-6);
+    if (!have_model || dt > cfg->max_predict_gap_s) {
+        // The first reading, or one after a silence longer than a predict
+        // may span: the model starts at it, a reference only.
+        air_model_start(f, temperature_c, t_us);
+        res.status = BL_FUSION_BUFFERED;
+        if (result) *result = res;
+        return BL_OK;
+    }
+    AirModel m = load_air(f);
+    real var_c2 = 0;
+    const real nu = air_model_step(cfg, dt, temperature_c, m, &var_c2);
+    if (!(std::fabs(nu) <= cfg->thermometer.max_step_c)) {
+        // A fault (a glitch, a sensor restarting): rejected, the model
+        // untouched; a second in a row is a real step, where the model starts
+        // again (the reading a reference).
+        res.status = BL_FUSION_REJECTED;
+        res.test_ratio = std::fabs(nu) / cfg->thermometer.max_step_c;
+        f->thermometer_rejected_ += 1;
+        if (f->thermometer_in_row_ >= 1) {
+            air_model_start(f, temperature_c, t_us);
+        } else {
+            f->thermometer_in_row_ = 1;
+        }
+        if (result) *result = res;
+        return BL_OK;
+    }
+    // The change of the air's estimate moves s by as much (an input), its
+    // variance (∂s_T/∂T)² Var(Δe) into P_ss, ∂s_T/∂T = s_T / (2 (273.15 + T))
+    // (m/s per °C).
+    const real ta = air_estimate(m);
+    const real s_t = sos_of_temperature(ta);
+    const real ds = s_t - f->thermometer_ref_mps_;
+    const real dsdt = s_t / (real(2) * (kZeroCelsiusK + ta));
+    res.innovation = ds;
+    res.innovation_var = dsdt * dsdt * var_c2;
+    res.test_ratio = std::fabs(nu) / cfg->thermometer.max_step_c;
+    VX x = state(f);
+    MX P = cov(f);
+    if (!reference_only) {
+        x(S) += ds;
+        P(S, S) += res.innovation_var;
+    }
+    bool finite = is_finite(x(S)) && is_finite(P(S, S)) && is_finite(s_t);
+    for (int j = 0; j < kModes; j++) finite = finite && m.P[j].allFinite() && is_finite(m.mu[j]);
+    if (!finite) return BL_EINVAL;  // numerically impossible: state untouched
+    store_air(f, m);
+    f->thermometer_t_us_ = t_us;
+    f->thermometer_in_row_ = 0;
     f->thermometer_ref_mps_ = s_t;
     if (reference_only) {
         res.status = BL_FUSION_BUFFERED;
         if (result) *result = res;
         return BL_OK;
-    }
-    const bl_config *cfg = &f->cfg_;
-    // The change of s and its variance: two readings' noise, each σ_T·∂s_T/∂T
-    // with ∂s_T/∂T = s_T / (2 (273.15 + T)) (m/s per °C).
-    const real ds = s_t - s_ref;
-    const real dsdt = s_t / (real(2) * (kZeroCelsiusK + temperature_c));
-    const real sigma_mps = dsdt * cfg->thermometer.sigma_c;
-    const real max_mps = dsdt * cfg->thermometer.max_step_c;
-    res.innovation = ds;
-    res.innovation_var = real(2) * sigma_mps * sigma_mps;
-    res.test_ratio = std::fabs(ds) / max_mps;
-    if (!(std::fabs(ds) <= max_mps)) {
-        res.status = BL_FUSION_REJECTED;
-        f->thermometer_rejected_ += 1;
-        if (result) *result = res;
-        return BL_OK;
-    }
-    VX x = state(f);
-    MX P = cov(f);
-    x(S) += ds;
-    P(S, S) += res.innovation_var;
-    if (!is_finite(x(S)) || !is_finite(P(S, S))) {
-        f->thermometer_ref_mps_ = s_ref;  // numerically impossible: state untouched
-        return BL_EINVAL;
     }
     commit(f, x, P);
     f->thermometer_accepted_ += 1;

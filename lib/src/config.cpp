@@ -139,7 +139,7 @@ using namespace bl;  // the rules' flags and bounds (kinds.hpp)
 // The constant bounds, by index (kinds.hpp Bound).
 // clang-format off
 const real kBound[] = {real(0), real(0.5), real(1), real(10), real(20), real(60), real(90), real(100),
-                       real(360), real(3600), real(1e4), real(1e5), real(BL_MAX_RECEIVERS)};
+                       real(360), real(600), real(3600), real(1e4), real(1e5), real(BL_MAX_RECEIVERS)};
 // clang-format on
 
 // The firing cycle, checked before the beacons.

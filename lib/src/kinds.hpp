@@ -48,7 +48,7 @@ constexpr uint8_t kOpen = kLoGt | kHiLt, kGeLt = kLoGe | kHiLt, kGeLe = kLoGe | 
 
 // The constant bounds, by index into config.cpp's kBound (a row holds two
 // indices, not two reals).
-enum Bound : uint8_t { b0, bHalf, b1, b10, b20, b60, b90, b100, b360, b3600, b1e4, b1e5, bMaxRx, kNone = b0 };
+enum Bound : uint8_t { b0, bHalf, b1, b10, b20, b60, b90, b100, b360, b600, b3600, b1e4, b1e5, bMaxRx, kNone = b0 };
 
 struct Rule {
     uint16_t field;  // offsetof(bl_config, member path)

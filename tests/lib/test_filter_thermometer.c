@@ -1,12 +1,15 @@
 /* The air thermometer (aid_thermometer.h: bl_filter_fuse_thermometer,
- * bl_localizer_thermometer): the change of s between two readings against
- * its closed form (s_T = 331.3·√(1 + T/273.15), the variance 2(∂s_T/∂T·σ)²),
- * nothing else of the state moved; references (first reading, not
- * started); the gate on a glitch; the errors leaving the filter
- * byte-identical; the speed of sound's drift model idle; the localizer's
- * counters, its readings neither new measurements nor beacons of the
- * persistent-rejection window. Its effect on a ramp and in still air:
- * test_filter_sos.c. */
+ * bl_localizer_thermometer): the first change of s against its closed form
+ * (s_T = 331.3·√(1 + T/273.15); the sensor's model's first update, the air's
+ * estimate half-way to the reading, its change's variance σ²/2), nothing
+ * else of the state moved; references (first reading, not started, after a
+ * silence); a slow sensor's lag taken out (s follows the air, not the
+ * readings, and within its reported variance); the gate on a glitch (one
+ * reading lost) and on a real step (the model starts again); the errors
+ * leaving the filter byte-identical; the speed of sound's drift model idle;
+ * the localizer's counters, its readings neither new measurements nor
+ * beacons of the persistent-rejection window. Its effect on a ramp and in
+ * still air: test_filter_sos.c. */
 #include "filter_world.h"
 
 #if BL_WITH_THERMOMETER
@@ -33,6 +36,7 @@ static void test_config_rules(void **state)
     assert_int_equal(cfg.thermometer_count, 0);
     assert_true(fabs((double)cfg.thermometer.sigma_c - 0.05) < 1e-7);
     assert_true(fabs((double)cfg.thermometer.max_step_c - 2.0) < 1e-7);
+    assert_true(fabs((double)cfg.thermometer.time_constant_s - 2.0) < 1e-7);
     const char *bad = NULL;
     cfg.thermometer_count = 2;
     assert_int_equal(bl_config_check(&cfg, &bad), BL_ECONFIG);
@@ -45,6 +49,15 @@ static void test_config_rules(void **state)
     cfg.thermometer.max_step_c = (bl_real)-1;
     assert_int_equal(bl_config_check(&cfg, &bad), BL_ECONFIG);
     assert_string_equal(bad, "thermometer.max_step_c");
+    cfg.thermometer.max_step_c = 2;
+    cfg.thermometer.time_constant_s = 0; /* 0: the readings are the air's */
+    assert_int_equal(bl_config_check(&cfg, &bad), BL_OK);
+    const bl_real bad_tau[] = {(bl_real)-0.1, (bl_real)600.5, (bl_real)NAN};
+    for (int i = 0; i < 3; i++) {
+        cfg.thermometer.time_constant_s = bad_tau[i];
+        assert_int_equal(bl_config_check(&cfg, &bad), BL_ECONFIG);
+        assert_string_equal(bad, "thermometer.time_constant_s");
+    }
 }
 
 /* The errors: *f byte-identical. */
@@ -64,6 +77,8 @@ static void test_errors_leave_the_filter(void **state)
     /* more than the predict gap before the state: too old */
     const int64_t old_us = T_US - (int64_t)((double)cfg.max_predict_gap_s * 1e6) - 1000000;
     assert_int_equal(bl_filter_fuse_thermometer(&F, old_us, 21, &r), BL_ETIME);
+    /* before the last reading (within the predict gap): out of order */
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US - 1, 21, &r), BL_ETIME);
     assert_memory_equal(&before, &F, sizeof F);
     /* a site without a thermometer */
     static bl_filter g;
@@ -78,50 +93,133 @@ static void test_errors_leave_the_filter(void **state)
     assert_int_equal(bl_filter_fuse_thermometer(&z, T_US, 20, &r), BL_ENOTINIT);
 }
 
-/* A reading's change moves s by exactly the air's change and P_ss by its
- * variance; nothing else of x or P. */
+/* The sensor's model's first update, the two readings at one instant (no
+ * prediction between them): the air's estimate moves half-way to the
+ * second (P_am/S = σ²/2σ² at the model's start, whatever τ), the change of
+ * its error has variance σ²/2 (Var(e_1 - e_0) = P_am²/S); s moves by the
+ * change of s_T, P_ss by (∂s_T/∂T)² σ²/2; nothing else of x or P. */
 static void test_change_moves_s_alone(void **state)
 {
     (void)state;
-    bl_config cfg = thermo_config();
-    converged_filter(&F, &cfg, &T_US, 6, 3);
-    bl_real x0[NX], P0[NX * NX], x1[NX], P1[NX * NX];
-    bl_fusion_result r;
-    /* the first reading: a reference, the state untouched */
-    assert_int_equal(bl_filter_get_state(&F, x0, P0), BL_OK);
-    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)18.0, &r), BL_OK);
-    assert_int_equal(r.status, BL_FUSION_BUFFERED);
-    assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
-    assert_memory_equal(x0, x1, sizeof x0);
-    assert_memory_equal(P0, P1, sizeof P0);
-    /* the next, 1.5 °C warmer */
-    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)19.5, &r), BL_OK);
-    assert_int_equal(r.status, BL_FUSION_ACCEPTED);
-    assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
-    const double ds = sos_of(19.5) - sos_of(18.0); /* 0.90 m/s */
-    const double dsdt = sos_of(19.5) / (2 * (273.15 + 19.5));
-    const double var = 2 * pow(dsdt * (double)cfg.thermometer.sigma_c, 2);
-    /* tolerances: bl_real's rounding of s (~343 m/s) and of P_ss (~0.5 (m/s)²) */
-    const double tol_s = IS_FLOAT ? 1e-4 : 1e-9, tol_var = IS_FLOAT ? 1e-8 : 1e-14;
-    const double tol_pss = IS_FLOAT ? 2e-6 : 1e-12;
-    assert_true(fabs((double)r.innovation - ds) < tol_s);
-    assert_true(fabs((double)r.innovation_var - var) < tol_var);
-    assert_true(fabs((double)(x1[BL_IX_S] - x0[BL_IX_S]) - ds) < tol_s);
-    assert_true(fabs((double)(P1[BL_IX_S * NX + BL_IX_S] - P0[BL_IX_S * NX + BL_IX_S]) - var) < tol_pss);
-    for (int i = 0; i < NX; i++) {
-        if (i != BL_IX_S) assert_true(x1[i] == x0[i]);
-        for (int j = 0; j < NX; j++)
-            if (i != BL_IX_S || j != BL_IX_S) assert_true(P1[i * NX + j] == P0[i * NX + j]);
+    const double taus[] = {0.0, 2.0, 30.0};
+    for (int it = 0; it < 3; it++) {
+        bl_config cfg = thermo_config();
+        cfg.thermometer.time_constant_s = (bl_real)taus[it];
+        converged_filter(&F, &cfg, &T_US, 6, 3);
+        bl_real x0[NX], P0[NX * NX], x1[NX], P1[NX * NX];
+        bl_fusion_result r;
+        /* the first reading: a reference, the state untouched */
+        assert_int_equal(bl_filter_get_state(&F, x0, P0), BL_OK);
+        assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)18.0, &r), BL_OK);
+        assert_int_equal(r.status, BL_FUSION_BUFFERED);
+        assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
+        assert_memory_equal(x0, x1, sizeof x0);
+        assert_memory_equal(P0, P1, sizeof P0);
+        /* the next, 1.5 °C warmer: the air's estimate 18.75 °C */
+        assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)19.5, &r), BL_OK);
+        assert_int_equal(r.status, BL_FUSION_ACCEPTED);
+        assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
+        const double ds = sos_of(18.75) - sos_of(18.0); /* 0.45 m/s */
+        const double dsdt = sos_of(18.75) / (2 * (273.15 + 18.75));
+        const double var = dsdt * dsdt * pow((double)cfg.thermometer.sigma_c, 2) / 2;
+        /* tolerances: bl_real's rounding of s (~343 m/s), of the model's
+         * covariance (σ² = 0.0025 beside τ²σ_r² = 36 °C² at τ = 30 s) and of
+         * P_ss (~0.5 (m/s)²) */
+        const double tol_s = IS_FLOAT ? 1e-4 : 1e-9, tol_var = IS_FLOAT ? 2e-6 : 1e-12;
+        const double tol_pss = IS_FLOAT ? 4e-6 : 1e-12;
+        assert_true(fabs((double)r.innovation - ds) < tol_s);
+        assert_true(fabs((double)r.innovation_var - var) < tol_var);
+        assert_true(fabs((double)(x1[BL_IX_S] - x0[BL_IX_S]) - ds) < tol_s);
+        assert_true(fabs((double)(P1[BL_IX_S * NX + BL_IX_S] - P0[BL_IX_S * NX + BL_IX_S]) - var) < tol_pss);
+        for (int i = 0; i < NX; i++) {
+            if (i != BL_IX_S) assert_true(x1[i] == x0[i]);
+            for (int j = 0; j < NX; j++)
+                if (i != BL_IX_S || j != BL_IX_S) assert_true(P1[i * NX + j] == P0[i * NX + j]);
+        }
+        bl_estimate e;
+        assert_int_equal(bl_filter_estimate(&F, &e), BL_OK);
+        assert_int_equal(e.thermometer_accepted, 1);
+        assert_int_equal(e.thermometer_rejected, 0);
     }
-    bl_estimate e;
-    assert_int_equal(bl_filter_estimate(&F, &e), BL_OK);
-    assert_int_equal(e.thermometer_accepted, 1);
-    assert_int_equal(e.thermometer_rejected, 0);
 }
 
-/* A glitch (a change above max_step_c) is rejected, the state untouched;
- * the glitch becomes the reference, so the way back is rejected too and the
- * reading after it is taken against the last. */
+/* The air: 20 °C, from 20 s a ramp of 0.2 °C/s to 30 °C, back down at the same
+ * rate from 70 s, then still (°C at t_s). */
+static double air_c(double t_s)
+{
+    if (t_s < 20) return 20;
+    if (t_s < 70) return 20 + 0.2 * (t_s - 20) > 30 ? 30 : 20 + 0.2 * (t_s - 20);
+    if (t_s < 120) return 30 - 0.2 * (t_s - 70) < 20 ? 20 : 30 - 0.2 * (t_s - 70);
+    return 20;
+}
+
+/* A sensor of time constant tau_true (s) in that air read at 2 Hz (noise
+ * σ 0.05 °C) by a filter configured with tau_cfg: the RMS (m/s) over 150 s of
+ * s's change from the first reading against the air's; *worst the largest
+ * |error| / √(Σ of the variances the readings added to P_ss). */
+static double follow_air(double tau_true, double tau_cfg, double *worst)
+{
+    bl_config cfg = thermo_config();
+    cfg.thermometer.time_constant_s = (bl_real)tau_cfg;
+    converged_filter(&F, &cfg, &T_US, 6, 3);
+    rng_seed(11);
+    const double dt = 0.5, sub = 0.01;
+    double y = air_c(0), sum2 = 0, var = 0, s0 = 0;
+    int n = 0;
+    *worst = 0;
+    bl_real x[NX], P[NX * NX];
+    for (int k = 0; k <= 300; k++) {
+        const double t = k * dt;
+        if (k > 0) /* the sensor's response, integrated finely */
+            for (double u = t - dt; u < t - 1e-9; u += sub) {
+                const double a = tau_true > 0 ? exp(-sub / tau_true) : 0;
+                y = a * y + (1 - a) * air_c(u + sub);
+            }
+        const int64_t t_us = T_US + (int64_t)(t * 1e6);
+        assert_int_equal(bl_filter_predict_odometry(&F, t_us, 0, 0), BL_OK);
+        bl_fusion_result r;
+        assert_int_equal(bl_filter_fuse_thermometer(&F, t_us, (bl_real)(y + 0.05 * rng_gauss()), &r), BL_OK);
+        assert_int_equal(r.status, k == 0 ? BL_FUSION_BUFFERED : BL_FUSION_ACCEPTED);
+        assert_int_equal(bl_filter_get_state(&F, x, P), BL_OK);
+        if (k == 0) {
+            s0 = (double)x[BL_IX_S];
+            continue;
+        }
+        var += (double)r.innovation_var;
+        const double err = ((double)x[BL_IX_S] - s0) - (sos_of(air_c(t)) - sos_of(air_c(0)));
+        sum2 += err * err;
+        n++;
+        if (fabs(err) / sqrt(var) > *worst) *worst = fabs(err) / sqrt(var);
+    }
+    return sqrt(sum2 / n);
+}
+
+/* A slow sensor (τ 20 s) on a swing up and back: with its time constant
+ * configured s follows the air; taken as the air's (τ 0), s follows the
+ * readings, 4 °C behind on the ramps (2.4 m/s). Each error lies within 3σ of
+ * the variance the readings added; a fast sensor configured fast is as
+ * good. */
+static void test_slow_sensor_lag_taken_out(void **state)
+{
+    (void)state;
+    double worst_model, worst_raw, worst_fast;
+    const double rms_model = follow_air(20, 20, &worst_model);
+    const double rms_raw = follow_air(20, 0, &worst_raw);
+    const double rms_fast = follow_air(0, 0, &worst_fast);
+    print_message("s against the air, RMS: tau 20 s modelled %.3f m/s (worst %.2f sigma), taken as the air's "
+                  "%.3f m/s; a sensor of tau 0 %.3f m/s (worst %.2f sigma)\n",
+                  rms_model, worst_model, rms_raw, rms_fast, worst_fast);
+    assert_true(rms_model < 0.35);
+    assert_true(rms_raw > 1.0);
+    assert_true(rms_fast < 0.2);
+    assert_true(worst_model < 3.0);
+    assert_true(worst_fast < 3.0);
+}
+
+/* A glitch (a reading more than max_step_c from the one expected) is
+ * rejected, the state untouched, and costs that reading alone; two in a row
+ * are a real step: the second starts the model again at it (a reference),
+ * and the reading after it is taken against it. */
 static void test_glitch_rejected(void **state)
 {
     (void)state;
@@ -133,19 +231,36 @@ static void test_glitch_rejected(void **state)
     assert_int_equal(bl_filter_get_state(&F, x0, P0), BL_OK);
     assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, 85, &r), BL_OK); /* a DS18B20's power-on value */
     assert_int_equal(r.status, BL_FUSION_REJECTED);
-    assert_true(r.test_ratio > 1);
-    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, 20, &r), BL_OK);
-    assert_int_equal(r.status, BL_FUSION_REJECTED);
+    assert_true(r.test_ratio > 30);
     assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
     assert_memory_equal(x0, x1, sizeof x0);
     assert_memory_equal(P0, P1, sizeof P0);
+    /* the next reading, against the model as it was: the closed form above */
     assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)20.5, &r), BL_OK);
     assert_int_equal(r.status, BL_FUSION_ACCEPTED);
-    assert_true(fabs((double)r.innovation - (sos_of(20.5) - sos_of(20))) < (IS_FLOAT ? 1e-4 : 1e-9));
+    const double tol = IS_FLOAT ? 1e-4 : 1e-9;
+    assert_true(fabs((double)r.innovation - (sos_of(20.25) - sos_of(20))) < tol);
+    /* a real step of 5 °C: rejected twice, the model starts at the second */
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)25.5, &r), BL_OK);
+    assert_int_equal(r.status, BL_FUSION_REJECTED);
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)25.5, &r), BL_OK);
+    assert_int_equal(r.status, BL_FUSION_REJECTED);
+    assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, 26, &r), BL_OK);
+    assert_int_equal(r.status, BL_FUSION_ACCEPTED);
+    assert_true(fabs((double)r.innovation - (sos_of(25.75) - sos_of(25.5))) < tol);
     bl_estimate e;
     assert_int_equal(bl_filter_estimate(&F, &e), BL_OK);
-    assert_int_equal(e.thermometer_accepted, 1);
-    assert_int_equal(e.thermometer_rejected, 2);
+    assert_int_equal(e.thermometer_accepted, 2);
+    assert_int_equal(e.thermometer_rejected, 3);
+    /* a reading after a silence longer than a predict may span: a reference */
+    const int64_t later_us = T_US + (int64_t)((double)cfg.max_predict_gap_s * 1e6) + 1000000;
+    for (int64_t t = T_US + 1000000; t <= later_us; t += 1000000)
+        assert_int_equal(bl_filter_predict_odometry(&F, t, 0, 0), BL_OK);
+    assert_int_equal(bl_filter_get_state(&F, x0, P0), BL_OK);
+    assert_int_equal(bl_filter_fuse_thermometer(&F, later_us, 40, &r), BL_OK);
+    assert_int_equal(r.status, BL_FUSION_BUFFERED);
+    assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
+    assert_memory_equal(x0, x1, sizeof x0);
 }
 
 /* With a thermometer the drift model is idle: a predict adds σ_d²·dt to
@@ -195,7 +310,8 @@ static void test_localizer(void **state)
     assert_int_equal(bl_localizer_start(&LOC, &pr), BL_OK);
     bl_loc_status st0, st1;
     assert_int_equal(bl_localizer_status(&LOC, &st0), BL_OK);
-    /* a reading 0.5 °C warmer, then glitches: many times more than the window's rejections */
+    /* a reading 0.5 °C warmer, then glitches between good readings: many
+     * times more than the window's rejections */
     m.temperature_c = (bl_real)20.5;
     m.t_us = 1100000;
     assert_int_equal(bl_localizer_thermometer(&LOC, &m, &r), BL_OK);
@@ -204,7 +320,7 @@ static void test_localizer(void **state)
         m.t_us += 100000;
         m.temperature_c = (bl_real)(k % 2 ? 20.5 : 85.0);
         assert_int_equal(bl_localizer_thermometer(&LOC, &m, &r), BL_OK);
-        assert_int_equal(r.status, BL_FUSION_REJECTED);
+        assert_int_equal(r.status, k % 2 ? BL_FUSION_ACCEPTED : BL_FUSION_REJECTED);
     }
     assert_int_equal(bl_localizer_status(&LOC, &st1), BL_OK);
     assert_int_equal(st1.measurements, st0.measurements);
@@ -212,8 +328,8 @@ static void test_localizer(void **state)
     assert_int_equal(st1.reset_counter, st0.reset_counter);
     bl_loc_counters c;
     assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
-    assert_int_equal(c.thermometer_fused, 1);
-    assert_int_equal(c.thermometer_rejected, 40);
+    assert_int_equal(c.thermometer_fused, 21);
+    assert_int_equal(c.thermometer_rejected, 20);
     assert_int_equal(c.thermometer_buffered, 1);
     assert_int_equal(c.thermometer_refused, 1);
     assert_int_equal(c.snapshot_restarts, 0);
@@ -234,6 +350,7 @@ int main(void)
         cmocka_unit_test(test_config_rules),
         cmocka_unit_test(test_errors_leave_the_filter),
         cmocka_unit_test(test_change_moves_s_alone),
+        cmocka_unit_test(test_slow_sensor_lag_taken_out),
         cmocka_unit_test(test_glitch_rejected),
         cmocka_unit_test(test_drift_model_idle),
         cmocka_unit_test(test_localizer),

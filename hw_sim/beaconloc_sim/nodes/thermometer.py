@@ -1,6 +1,7 @@
 """The thermometer node: an air thermometer on the robot, one AIR_TEMPERATURE frame per reading
-([thermometer] of the site file). The library moves its speed of sound by the change between two
-readings (lib aid_thermometer.h); the node gives the readings a real sensor would.
+([thermometer] of the site file). The library moves its speed of sound by the change of the air's
+temperature between two readings, the sensor's lag taken out with the same time_constant_s (lib
+aid_thermometer.h); the node gives the readings a real sensor would.
 
 Every 1/rate_hz of the node's own clock, the air's temperature (the scenario's
 [environment] profile, the same air the pulses fly through) as the sensor sees it: through its

@@ -1,8 +1,8 @@
 /*
  * beaconloc — measurement kind: an air thermometer on the robot. The speed
  * of sound follows the air's temperature (0.6 m/s per °C near 20 °C), so the
- * change of a reading between two instants is the change of s between them
- * (aid_thermometer.cpp): a thermometer turns a temperature swing, which
+ * change of the air's temperature between two readings is the change of s
+ * between them (aid_thermometer.cpp): a thermometer turns a temperature swing, which
  * the pulses alone learn only slowly (docs/performance.md, "Speed of sound
  * with a thermometer"), into a known input. Only changes are used: the
  * sensor's constant offset, and the difference between the air at the
@@ -35,9 +35,13 @@ extern "C" {
 
 /* The thermometer's tuning ([thermometer] of the site file). */
 typedef struct bl_thermometer_params {
-    bl_real sigma_c;    /* [thermometer] sigma_c: σ of one reading (°C), > 0, <= 10 */
-    bl_real max_step_c; /* [thermometer] max_step_c: largest change between two
-                           readings taken as the air's (°C), > 0, <= 100 */
+    bl_real sigma_c;         /* [thermometer] sigma_c: σ of one reading (°C), > 0, <= 10 */
+    bl_real max_step_c;      /* [thermometer] max_step_c: largest difference between a
+                                reading and the one expected taken as the air's (°C),
+                                > 0, <= 100 */
+    bl_real time_constant_s; /* [thermometer] time_constant_s: the sensor's response
+                                time (s, first order; 63 % of a step), >= 0, <= 600;
+                                0: each reading is the air's */
 } bl_thermometer_params;
 
 /* ---- Its members of the library's structs (kinds.h, BL_KIND_MEMBERS) ----
@@ -48,21 +52,29 @@ typedef struct bl_thermometer_params {
 #define BL_THERMOMETER_CONFIG_SITE uint32_t thermometer_count;
 /* bl_config after the wheels' block: the tuning above. */
 #define BL_THERMOMETER_CONFIG_PARAMS bl_thermometer_params thermometer; /* the thermometer (aid_thermometer.cpp) */
-/* bl_filter (private): the last reading's speed of sound (m/s; 0: none yet,
- * or the filter re-initialised) and the counters. */
+/* bl_filter (private): the speed of sound of the air's last estimate (m/s;
+ * 0: no reading yet, or the filter re-initialised), the sensor's model, two
+ * modes of it (each: the air's temperature °C, its rate °C/s, the sensor's own
+ * temperature °C, their covariance row-major; each mode's probability), the
+ * last reading's time (us), rejections in a row and the counters. */
 #define BL_THERMOMETER_FILTER                                                                                          \
     bl_real thermometer_ref_mps_;                                                                                      \
+    bl_real thermometer_air_[2][3];                                                                                    \
+    bl_real thermometer_air_cov_[2][9];                                                                                \
+    bl_real thermometer_mode_prob_[2];                                                                                 \
+    int64_t thermometer_t_us_;                                                                                         \
+    uint32_t thermometer_in_row_;                                                                                      \
     uint32_t thermometer_accepted_;                                                                                    \
     uint32_t thermometer_rejected_;
 /* bl_estimate: the counters. */
 #define BL_THERMOMETER_ESTIMATE                                                                                        \
     uint32_t thermometer_accepted; /* readings whose change moved s */                                                 \
-    uint32_t thermometer_rejected; /* readings whose change exceeded max_step_c */
+    uint32_t thermometer_rejected; /* readings farther than max_step_c from the one expected */
 /* bl_loc_counters: the localizer's counters; refused: non-finite or out of
  * range (an error returned), or refused by the filter (BL_OK). */
 #define BL_THERMOMETER_LOC_COUNTERS                                                                                    \
     uint32_t thermometer_fused;    /* readings whose change moved s */                                                 \
-    uint32_t thermometer_rejected; /* readings whose change exceeded max_step_c */                                     \
+    uint32_t thermometer_rejected; /* readings farther than max_step_c from the one expected */                        \
     uint32_t thermometer_buffered; /* references only: first, before the start, stale filter */                        \
     uint32_t thermometer_refused;  /* readings refused (above) */
 #else
@@ -81,37 +93,48 @@ typedef struct bl_thermometer_meas {
     uint32_t tag;          /* caller's tag, never read by the library */
 } bl_thermometer_meas;
 
-/* Take one reading taken at t_us. The speed of sound of dry air at the
- * reading, s_T = 331.3·√(1 + T/273.15) m/s (the ideal-gas law for dry
+/* Take one reading taken at t_us. The speed of sound of dry air at a
+ * temperature, s_T = 331.3·√(1 + T/273.15) m/s (the ideal-gas law for dry
  * air, s ∝ √T_K; Kleeman 1992 §3.5 estimates s online because it follows
- * the temperature; the simulator's physics/acoustics.py), is compared with
- * the previous reading's s_T0: the air's change moves the state's s by as
- * much, an input to the speed of sound's model as the wheels' travel is to
- * the pose's:
- *     s += s_T - s_T0,   P_ss += 2 (∂s_T/∂T · σ_T)²    (σ_T = sigma_c)
- * (the change of two readings, each with its noise; ∂s_T/∂T = s_T / (2
- * (273.15 + T)) m/s per °C, ≈ 0.6). Nothing else of the state moves: the
- * thermometer's offset and the air between the beacons stay in s for the
- * pulses to learn (the speed of sound's random walk, [tuning]
+ * the temperature; the simulator's physics/acoustics.py), is taken of the
+ * air's temperature T_a as the sensor's model estimates it from the readings
+ * (below), and compared with the last estimate's s_T0: the air's change
+ * moves the state's s by as much, an input to the speed of sound's model as
+ * the wheels' travel is to the pose's:
+ *     s += s_T - s_T0,   P_ss += (∂s_T/∂T)² Var(change of T_a's error)
+ * (∂s_T/∂T = s_T / (2 (273.15 + T)) m/s per °C, ≈ 0.6). Nothing else of the
+ * state moves: the thermometer's offset and the air between the beacons stay
+ * in s for the pulses to learn (the speed of sound's random walk, [tuning]
  * speed_of_sound_drift_mps_per_sqrt_s, covers what the thermometer does not
  * see; with a thermometer it can be set low: 0.05 m/s/√s in the benchmark's
  * thermometer sites).
- * The first reading, one after a re-initialisation, and every reading while
- * not started or stale (t_us more than cfg.max_predict_gap_s after the state
- * time) are references only: status BL_FUSION_BUFFERED, state untouched. A
- * change larger than cfg.thermometer.max_step_c (a fault: a glitch, a
- * sensor restarting) is BL_FUSION_REJECTED, counted, x and P untouched; the
- * reading still becomes the reference, so a single glitch costs two
- * changes and a real step one. Else BL_FUSION_ACCEPTED. The reading's time
- * only orders it: the change is applied at the state's time (the localizer
- * coasts to t_us first).
+ * The sensor's model (aid_thermometer.cpp): the sensor's first-order
+ * response of time constant cfg.thermometer.time_constant_s to air whose
+ * temperature changes at a rate that itself changes, slowly (steady air) or
+ * fast (a door opened), a three-state Kalman filter in two modes; so a slow
+ * sensor's lag is taken out (a housed sensor of 30 s on a 10 °C change in 10
+ * s: docs/performance.md, "A slow thermometer"); 0: each reading is the
+ * air's, smoothed.
+ * The first reading, one after a re-initialisation or a silence longer than
+ * cfg.max_predict_gap_s, starts the model: a reference only. Readings while
+ * the filter is not started or stale (t_us more than cfg.max_predict_gap_s
+ * after the state time) update the model only. Both are status
+ * BL_FUSION_BUFFERED, x and P untouched. A reading more than
+ * cfg.thermometer.max_step_c from the one the model expects (a fault: a
+ * glitch, a sensor restarting) is BL_FUSION_REJECTED, counted, x, P and the
+ * model untouched, so a glitch costs that reading alone; a second in a row
+ * is taken as a real step: the model starts again at it. Else
+ * BL_FUSION_ACCEPTED. The reading's time orders it and times the model; the
+ * change is applied at the state's time (the localizer coasts to t_us
+ * first).
  * *result (may be NULL): status; innovation: the change of s (m/s), its
- * variance the P_ss added ((m/s)²); test_ratio: |change| / the largest
- * allowed; iterations 0.
+ * variance the P_ss added ((m/s)²); test_ratio: |reading - expected| / the
+ * largest allowed; iterations 0.
  * Errors: BL_EINVAL (NULL f, non-finite or outside [-55, 125] °C),
  * BL_ENOTINIT (not init), BL_ECONFIG (cfg.thermometer_count is 0, or the
  * team's ranges are set), BL_ETIME (t_us more than cfg.max_predict_gap_s
- * *before* the state time). On error *f is byte-identical. Cost: O(1). */
+ * *before* the state time, or before the last reading). On error *f is
+ * byte-identical. Cost: O(1) (two 3×3 Kalman steps). */
 int bl_filter_fuse_thermometer(bl_filter *f, int64_t t_us, bl_real temperature_c, bl_fusion_result *result);
 
 /* The localizer's input (localizer.h's policy, as every kind): the reading
