@@ -60,16 +60,35 @@ constexpr real kZeroCelsiusK = real(273.15);
 constexpr real kSosAtZeroCelsiusMps = real(331.3);
 // The air's model (below): its rate's σ when the model starts (°C/s: a 10 °C
 // swing in a minute is 0.17), the intensity of the rate's random walk in
-// each of its two modes ((°C/s)²/s; steady air: a rate that drifts by 0.01
-// °C/s in 10 s; changing air, a door opened, a robot driven into another
-// hall: by 0.3 °C/s within 10 s), the mean time the air stays in a mode (s)
-// and the modes' probabilities when the model starts. Chosen on the
-// benchmark's airs with sensors of 2, 10 and 30 s (docs/performance.md,
-// "A slow thermometer").
+// each of its two rate modes ((°C/s)²/s; steady air: a rate that drifts by
+// 0.01 °C/s in 10 s; changing air, a door opened, a robot driven into
+// another hall: by 0.3 °C/s within 10 s), the mean time the air stays in a
+// rate mode (s) and their probabilities when the model starts. Chosen on the
+// benchmark's airs with sensors of 2 and 30 s (docs/performance.md, "A slow
+// thermometer").
 constexpr real kAirRateSigmaCps = real(0.2);
-constexpr real kAirRateWalkC2ps3[2] = {real(1e-5), real(1e-2)};
+constexpr int kRates = 2;
+constexpr real kAirRateWalkC2ps3[kRates] = {real(1e-5), real(1e-2)};
 constexpr real kAirModeSojourn_s = real(120);
-constexpr real kAirModeStartProb[2] = {real(0.5), real(0.5)};
+constexpr real kAirRateStartProb[kRates] = {real(0.5), real(0.5)};
+// The sensor's time constant is the site's (time_constant_s), but an
+// overstated one is dangerous: the model would read a fast sensor's answer to
+// a step as a step several times larger (a 2 s sensor configured as 30 s on
+// thermometer-door's air: ratio 3.067, the speed of sound 5.0 m/s RMS, 8
+// seeds; s 4.4 m/s RMS off in test_filter_thermometer.c). So the model also
+// carries the hypothesis of an instant sensor (τ = 0), at a small prior
+// probability; the readings rule the configured τ out where it would need an
+// air that jumps, and that hypothesis takes over (ratio 1.025, 0.695 m/s). An
+// understated τ costs little (the lag partly left in); τ configured right,
+// the hypothesis stays near its prior (more weight on it, 0.2, followed an
+// overstated τ on slow swings better, 1.219 -> 1.170, and cost the right one
+// on the door, 0.868 -> 0.956 m/s; 8 seeds). τ is a property of the sensor:
+// it changes between hypotheses only with a mean time of kTauSojourn_s, which
+// keeps the one the readings ruled out from vanishing for good.
+constexpr int kTaus = 2;
+constexpr real kTauFactor[kTaus] = {real(0), real(1)};
+constexpr real kTauStartProb[kTaus] = {real(0.02), real(0.98)};
+constexpr real kTauSojourn_s = real(3600);
 
 bool reading_ok(real temperature_c)
 {
@@ -96,16 +115,20 @@ real sos_of_temperature(real temperature_c)
 // order). A reading y = T_m + offset + noise σ_T: the offset is constant, so
 // it moves T_a and T_m alike and no change of T_a.
 // Steady air wants a small q (a slow sensor's readings de-lagged, T_a ≈ T_m
-// + τ r, amplify the noise of r by τ), changing air a large one: two modes
-// of the model, q_0 and q_1, as an interacting multiple model (Blom &
-// Bar-Shalom 1988; Bar-Shalom et al. 2001 §11.6.6), switching with
-// probability 1 - e^{-dt/T} between two readings (T = kAirModeSojourn_s).
+// + τ r, amplify the noise of r by τ), changing air a large one; and τ is
+// known only roughly (above). So the model runs in kTaus × kRates modes, one
+// Kalman filter each, as an interacting multiple model (Blom & Bar-Shalom
+// 1988; Bar-Shalom et al. 2001 §11.6.6): between two readings the rate mode
+// switches with probability 1 - e^{-dt/T} (T = kAirModeSojourn_s), the τ
+// hypothesis with 1 - e^{-dt/kTauSojourn_s}, shared among the others.
 // Stored in bl_filter (thermometer_air_, thermometer_air_cov_,
-// thermometer_mode_prob_).
+// thermometer_mode_prob_); mode j = (τ hypothesis j / kRates, rate mode j %
+// kRates).
 using Z3 = Mat<3, 1>;
 using P3 = Mat<3, 3>;
 constexpr int kTa = 0, kRate = 1, kTm = 2;
-constexpr int kModes = 2;
+constexpr int kModes = kTaus * kRates;
+static_assert(kModes == BL_THERMOMETER_MODES, "aid_thermometer.h sizes the modes' storage");
 
 struct AirModel {
     Z3 z[kModes];
@@ -133,6 +156,9 @@ void store_air(bl_filter *f, const AirModel &m)
     }
 }
 
+// τ of mode j (s).
+real tau_of(const bl_config *cfg, int j) { return kTauFactor[j / kRates] * cfg->thermometer.time_constant_s; }
+
 // The combined estimate of T_a (°C): Σ μ_j T_a,j (§11.6.6, step 5).
 real air_estimate(const AirModel &m)
 {
@@ -142,23 +168,32 @@ real air_estimate(const AirModel &m)
 }
 
 // The model's start at reading y: the sensor settled in air of unknown rate,
-// T_a = T_m + r τ (a steady ramp's lag), r ~ N(0, σ_r²), T_m = y ± σ_T; both
-// modes alike.
+// T_a = T_m + r τ (a steady ramp's lag), r ~ N(0, σ_r²), T_m = y ± σ_T; each
+// mode with its τ, at its prior probability.
 void air_model_start(bl_filter *f, real y, int64_t t_us)
 {
     const real s2 = f->cfg_.thermometer.sigma_c * f->cfg_.thermometer.sigma_c;
-    const real tau = f->cfg_.thermometer.time_constant_s;
     const real r2 = kAirRateSigmaCps * kAirRateSigmaCps;
     AirModel m;
     for (int j = 0; j < kModes; j++) {
+        const real tau = tau_of(&f->cfg_, j);
         m.z[j] = Z3(y, real(0), y);
         m.P[j] << s2 + r2 * tau * tau, r2 * tau, s2, r2 * tau, r2, real(0), s2, real(0), s2;
-        m.mu[j] = kAirModeStartProb[j];
+        m.mu[j] = kTauStartProb[j / kRates] * kAirRateStartProb[j % kRates];
     }
     store_air(f, m);
     f->thermometer_t_us_ = t_us;
     f->thermometer_in_row_ = 0;
     f->thermometer_ref_mps_ = sos_of_temperature(y);
+}
+
+// The probability of going from mode i to mode j over one step, given the
+// rate modes' and the τ hypotheses' switching probabilities.
+real transition(int i, int j, real p_rate, real p_tau)
+{
+    const real pr = i % kRates == j % kRates ? real(1) - p_rate : p_rate / real(kRates - 1);
+    const real pt = i / kRates == j / kRates ? real(1) - p_tau : p_tau / real(kTaus - 1);
+    return pr * pt;
 }
 
 // One reading y through the model over dt (s): mixing, each mode's
@@ -174,31 +209,30 @@ void air_model_start(bl_filter *f, real y, int64_t t_us)
 // from above.)
 real air_model_step(const bl_config *cfg, real dt, real y, AirModel &m, real *var_change)
 {
-    const real tau = cfg->thermometer.time_constant_s;
     const real s2 = cfg->thermometer.sigma_c * cfg->thermometer.sigma_c;
-    const real a = tau > real(0) ? std::exp(-dt / tau) : real(0);
-    P3 F;
-    F << real(1), dt, real(0), real(0), real(1), real(0), real(1) - a, dt - tau * (real(1) - a), a;
-    Mat<3, 2> G;
-    G << real(1), real(0), real(0), real(1), real(1) - a, real(0);
     Mat<2, 2> Qar;
     const real dt2 = dt * dt;
     Qar << dt2 * dt / real(3), dt2 / real(2), dt2 / real(2), dt;
-    const P3 GQG = G * Qar * G.transpose();
-    // Mixing (§11.6.6, steps 1-2): p_ij = 1 - p_sw (i = j), p_sw else.
-    const real p_sw = real(1) - std::exp(-dt / kAirModeSojourn_s);
+    // Mixing (§11.6.6, steps 1-2).
+    const real p_rate = real(1) - std::exp(-dt / kAirModeSojourn_s);
+    const real p_tau = real(1) - std::exp(-dt / kTauSojourn_s);
     real c[kModes];
     Z3 z0[kModes];
     P3 P0[kModes];
     for (int j = 0; j < kModes; j++) {
         c[j] = 0;
-        for (int i = 0; i < kModes; i++) c[j] += (i == j ? real(1) - p_sw : p_sw) * m.mu[i];
+        for (int i = 0; i < kModes; i++) c[j] += transition(i, j, p_rate, p_tau) * m.mu[i];
         z0[j].setZero();
-        for (int i = 0; i < kModes; i++) z0[j] += (i == j ? real(1) - p_sw : p_sw) * m.mu[i] / c[j] * m.z[i];
         P0[j].setZero();
+        if (!(c[j] > real(0))) {
+            z0[j] = m.z[j];
+            P0[j] = m.P[j];
+            continue;
+        }
+        for (int i = 0; i < kModes; i++) z0[j] += transition(i, j, p_rate, p_tau) * m.mu[i] / c[j] * m.z[i];
         for (int i = 0; i < kModes; i++) {
             const Z3 d = m.z[i] - z0[j];
-            P0[j] += (i == j ? real(1) - p_sw : p_sw) * m.mu[i] / c[j] * (m.P[i] + d * d.transpose());
+            P0[j] += transition(i, j, p_rate, p_tau) * m.mu[i] / c[j] * (m.P[i] + d * d.transpose());
         }
     }
     const real ta_before = air_estimate(m);
@@ -206,9 +240,15 @@ real air_model_step(const bl_config *cfg, real dt, real y, AirModel &m, real *va
     real nu = y;
     real lik[kModes], var_j[kModes], dta[kModes];
     for (int j = 0; j < kModes; j++) {
+        const real tau = tau_of(cfg, j);
+        const real a = tau > real(0) ? std::exp(-dt / tau) : real(0);
+        P3 F;
+        F << real(1), dt, real(0), real(0), real(1), real(0), real(1) - a, dt - tau * (real(1) - a), a;
+        Mat<3, 2> G;
+        G << real(1), real(0), real(0), real(1), real(1) - a, real(0);
         const P3 FP = F * P0[j];
         const Z3 zp = F * z0[j];
-        const P3 Pp = FP * F.transpose() + kAirRateWalkC2ps3[j] * GQG;
+        const P3 Pp = FP * F.transpose() + kAirRateWalkC2ps3[j % kRates] * (G * Qar * G.transpose());
         const real nu_j = y - zp(kTm);
         nu -= c[j] * zp(kTm);
         const real S = Pp(kTm, kTm) + s2;
@@ -223,7 +263,7 @@ real air_model_step(const bl_config *cfg, real dt, real y, AirModel &m, real *va
         lik[j] = std::exp(-real(0.5) * nu_j * nu_j / S) / std::sqrt(S);
     }
     // The modes' probabilities (step 4); all likelihoods underflowed (a
-    // reading far from both): kept as predicted.
+    // reading far from every mode): kept as predicted.
     real norm = 0;
     for (int j = 0; j < kModes; j++) norm += lik[j] * c[j];
     for (int j = 0; j < kModes; j++) m.mu[j] = norm > real(0) ? lik[j] * c[j] / norm : c[j];

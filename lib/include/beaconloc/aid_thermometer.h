@@ -53,15 +53,17 @@ typedef struct bl_thermometer_params {
 /* bl_config after the wheels' block: the tuning above. */
 #define BL_THERMOMETER_CONFIG_PARAMS bl_thermometer_params thermometer; /* the thermometer (aid_thermometer.cpp) */
 /* bl_filter (private): the speed of sound of the air's last estimate (m/s;
- * 0: no reading yet, or the filter re-initialised), the sensor's model, two
- * modes of it (each: the air's temperature °C, its rate °C/s, the sensor's own
- * temperature °C, their covariance row-major; each mode's probability), the
- * last reading's time (us), rejections in a row and the counters. */
+ * 0: no reading yet, or the filter re-initialised), the sensor's model in
+ * BL_THERMOMETER_MODES modes (each: the air's temperature °C, its rate °C/s,
+ * the sensor's own temperature °C, their covariance row-major; each mode's
+ * probability), the last reading's time (us), rejections in a row and the
+ * counters. */
+#define BL_THERMOMETER_MODES 4 /* two hypotheses of τ × two of the air's rate */
 #define BL_THERMOMETER_FILTER                                                                                          \
     bl_real thermometer_ref_mps_;                                                                                      \
-    bl_real thermometer_air_[2][3];                                                                                    \
-    bl_real thermometer_air_cov_[2][9];                                                                                \
-    bl_real thermometer_mode_prob_[2];                                                                                 \
+    bl_real thermometer_air_[BL_THERMOMETER_MODES][3];                                                                 \
+    bl_real thermometer_air_cov_[BL_THERMOMETER_MODES][9];                                                             \
+    bl_real thermometer_mode_prob_[BL_THERMOMETER_MODES];                                                              \
     int64_t thermometer_t_us_;                                                                                         \
     uint32_t thermometer_in_row_;                                                                                      \
     uint32_t thermometer_accepted_;                                                                                    \
@@ -111,10 +113,13 @@ typedef struct bl_thermometer_meas {
  * The sensor's model (aid_thermometer.cpp): the sensor's first-order
  * response of time constant cfg.thermometer.time_constant_s to air whose
  * temperature changes at a rate that itself changes, slowly (steady air) or
- * fast (a door opened), a three-state Kalman filter in two modes; so a slow
+ * fast (a door opened), three-state Kalman filters in four modes (those two,
+ * each with the configured time constant and with an instant sensor, which
+ * takes over where the readings rule an overstated one out); so a slow
  * sensor's lag is taken out (a housed sensor of 30 s on a 10 °C change in 10
  * s: docs/performance.md, "A slow thermometer"); 0: each reading is the
- * air's, smoothed.
+ * air's, smoothed. If unsure of the time constant, understate it: too long
+ * a one is the costlier error.
  * The first reading, one after a re-initialisation or a silence longer than
  * cfg.max_predict_gap_s, starts the model: a reference only. Readings while
  * the filter is not started or stale (t_us more than cfg.max_predict_gap_s
@@ -134,7 +139,7 @@ typedef struct bl_thermometer_meas {
  * BL_ENOTINIT (not init), BL_ECONFIG (cfg.thermometer_count is 0, or the
  * team's ranges are set), BL_ETIME (t_us more than cfg.max_predict_gap_s
  * *before* the state time, or before the last reading). On error *f is
- * byte-identical. Cost: O(1) (two 3×3 Kalman steps). */
+ * byte-identical. Cost: O(1) (four 3×3 Kalman steps and their mixing). */
 int bl_filter_fuse_thermometer(bl_filter *f, int64_t t_us, bl_real temperature_c, bl_fusion_result *result);
 
 /* The localizer's input (localizer.h's policy, as every kind): the reading
