@@ -25,7 +25,7 @@
 /* Its counters: the index of each in its table below. */
 enum {
     THM_FUSED,      /* localizer: the change moved s */
-    THM_REJECTED,   /* localizer: a change larger than max_step_c (a fault) */
+    THM_REJECTED,   /* localizer: off the expected by > max_step_c (a fault) */
     THM_BUFFERED,   /* localizer: a reference only (first, before the start, stale filter) */
     THM_REFUSED,    /* localizer: refused (bad value; an error) */
     THM_UNEXPECTED, /* thermometer frames on a site without a thermometer */

@@ -4,7 +4,8 @@
  * estimate half-way to the reading, its change's variance σ²/2), nothing
  * else of the state moved; references (first reading, not started, after a
  * silence); a slow sensor's lag taken out (s follows the air, not the
- * readings, and within its reported variance); the gate on a glitch (one
+ * readings, and within its reported variance); an overstated time constant
+ * caught by the instant sensor's hypothesis; the gate on a glitch (one
  * reading lost) and on a real step (the model starts again); the errors
  * leaving the filter byte-identical; the speed of sound's drift model idle;
  * the localizer's counters, its readings neither new measurements nor
