@@ -184,7 +184,6 @@ void air_model_start(bl_filter *f, real y, int64_t t_us)
     store_air(f, m);
     f->thermometer_t_us_ = t_us;
     f->thermometer_in_row_ = 0;
-    f->thermometer_ref_mps_ = sos_of_temperature(y);
 }
 
 // The probability of going from mode i to mode j over one step, given the
@@ -220,8 +219,12 @@ real air_model_step(const bl_config *cfg, real dt, real y, AirModel &m, real *va
     Z3 z0[kModes];
     P3 P0[kModes];
     for (int j = 0; j < kModes; j++) {
+        real w[kModes];  // p_ij μ_i, then the mixing weights μ_i|j = p_ij μ_i / c_j
         c[j] = 0;
-        for (int i = 0; i < kModes; i++) c[j] += transition(i, j, p_rate, p_tau) * m.mu[i];
+        for (int i = 0; i < kModes; i++) {
+            w[i] = transition(i, j, p_rate, p_tau) * m.mu[i];
+            c[j] += w[i];
+        }
         z0[j].setZero();
         P0[j].setZero();
         if (!(c[j] > real(0))) {
@@ -229,10 +232,11 @@ real air_model_step(const bl_config *cfg, real dt, real y, AirModel &m, real *va
             P0[j] = m.P[j];
             continue;
         }
-        for (int i = 0; i < kModes; i++) z0[j] += transition(i, j, p_rate, p_tau) * m.mu[i] / c[j] * m.z[i];
+        for (int i = 0; i < kModes; i++) w[i] /= c[j];
+        for (int i = 0; i < kModes; i++) z0[j] += w[i] * m.z[i];
         for (int i = 0; i < kModes; i++) {
             const Z3 d = m.z[i] - z0[j];
-            P0[j] += transition(i, j, p_rate, p_tau) * m.mu[i] / c[j] * (m.P[i] + d * d.transpose());
+            P0[j] += w[i] * (m.P[i] + d * d.transpose());
         }
     }
     const real ta_before = air_estimate(m);
@@ -309,7 +313,10 @@ extern "C" int bl_filter_fuse_thermometer(bl_filter *f, int64_t t_us, bl_real te
             break;
         }
     }
-    const bool have_model = f->thermometer_ref_mps_ > real(0);
+    AirModel m = load_air(f);
+    real have = 0;  // Σ μ: 0 before the first reading (the filter's zeroed state)
+    for (int j = 0; j < kModes; j++) have += m.mu[j];
+    const bool have_model = have > real(0);
     if (have_model && t_us < f->thermometer_t_us_) return BL_ETIME;  // before the last reading
     const real dt = real(t_us - f->thermometer_t_us_) * real(1e-6);
     if (!have_model || dt > cfg->max_predict_gap_s) {
@@ -320,7 +327,7 @@ extern "C" int bl_filter_fuse_thermometer(bl_filter *f, int64_t t_us, bl_real te
         if (result) *result = res;
         return BL_OK;
     }
-    AirModel m = load_air(f);
+    const real s_t0 = sos_of_temperature(air_estimate(m));  // the last estimate's
     real var_c2 = 0;
     const real nu = air_model_step(cfg, dt, temperature_c, m, &var_c2);
     if (!(std::fabs(nu) <= cfg->thermometer.max_step_c)) {
@@ -343,7 +350,7 @@ extern "C" int bl_filter_fuse_thermometer(bl_filter *f, int64_t t_us, bl_real te
     // (m/s per °C).
     const real ta = air_estimate(m);
     const real s_t = sos_of_temperature(ta);
-    const real ds = s_t - f->thermometer_ref_mps_;
+    const real ds = s_t - s_t0;
     const real dsdt = s_t / (real(2) * (kZeroCelsiusK + ta));
     res.innovation = ds;
     res.innovation_var = dsdt * dsdt * var_c2;
@@ -360,7 +367,6 @@ extern "C" int bl_filter_fuse_thermometer(bl_filter *f, int64_t t_us, bl_real te
     store_air(f, m);
     f->thermometer_t_us_ = t_us;
     f->thermometer_in_row_ = 0;
-    f->thermometer_ref_mps_ = s_t;
     if (reference_only) {
         res.status = BL_FUSION_BUFFERED;
         if (result) *result = res;

@@ -52,15 +52,13 @@ typedef struct bl_thermometer_params {
 #define BL_THERMOMETER_CONFIG_SITE uint32_t thermometer_count;
 /* bl_config after the wheels' block: the tuning above. */
 #define BL_THERMOMETER_CONFIG_PARAMS bl_thermometer_params thermometer; /* the thermometer (aid_thermometer.cpp) */
-/* bl_filter (private): the speed of sound of the air's last estimate (m/s;
- * 0: no reading yet, or the filter re-initialised), the sensor's model in
- * BL_THERMOMETER_MODES modes (each: the air's temperature °C, its rate °C/s,
- * the sensor's own temperature °C, their covariance row-major; each mode's
- * probability), the last reading's time (us), rejections in a row and the
- * counters. */
+/* bl_filter (private): the sensor's model in BL_THERMOMETER_MODES modes
+ * (each: the air's temperature °C, its rate °C/s, the sensor's own
+ * temperature °C, their covariance row-major; each mode's probability, all 0
+ * before the first reading or after a re-initialisation), the last reading's
+ * time (us), rejections in a row and the counters. */
 #define BL_THERMOMETER_MODES 4 /* two hypotheses of τ × two of the air's rate */
 #define BL_THERMOMETER_FILTER                                                                                          \
-    bl_real thermometer_ref_mps_;                                                                                      \
     bl_real thermometer_air_[BL_THERMOMETER_MODES][3];                                                                 \
     bl_real thermometer_air_cov_[BL_THERMOMETER_MODES][9];                                                             \
     bl_real thermometer_mode_prob_[BL_THERMOMETER_MODES];                                                              \
