@@ -125,10 +125,14 @@ void status_line(struct daemon *d, const char *prefix)
     char est[200] = "estimate: none yet";
     if (team_site(d))
         team_status_text(&d->team, est, sizeof est);
-    else if (estimator_output(&d->est, 0, &o) == 0)
-        snprintf(est, sizeof est, "x=%.3f y=%.3f th=%.3f sigma=%.3fm sos=%.1f q=%d resets=%u",
-                 o.x_m, o.y_m, o.theta_rad, state_cov_sigma_xy_m(o.cov), o.sos_mps, quality_of(&o),
-                 o.reset_counter);
+    else if (estimator_output(&d->est, 0, &o) == 0) {
+        char air[24] = ""; /* a site with a thermometer: the air its model estimates */
+        if (o.air_valid)
+            snprintf(air, sizeof air, " air=%.1fC", o.air_c);
+        snprintf(est, sizeof est, "x=%.3f y=%.3f th=%.3f sigma=%.3fm sos=%.1f%s q=%d resets=%u",
+                 o.x_m, o.y_m, o.theta_rad, state_cov_sigma_xy_m(o.cov), o.sos_mps, air,
+                 quality_of(&o), o.reset_counter);
+    }
     /* each status line closes a latency interval and starts the next */
     latency_interval_close(&d->lat_interval, &d->lat_interval_last);
     struct stats_report rep;

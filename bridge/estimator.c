@@ -461,6 +461,8 @@ int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_
     out->omega_radps = est.omega_radps;
     out->sos_mps = est.speed_of_sound_mps;
     out->period_s = est.period_s;
+    out->air_valid = est.air_valid;
+    out->air_c = est.air_temperature_c;
     for (int i = 0; i < 25; i++) out->cov[i] = est.cov[i];
     out->reset_counter = est.reset_counter;
     out->converged = est.converged;

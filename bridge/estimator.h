@@ -136,6 +136,11 @@ struct est_output {
     int64_t t_local_us; /* bridge clock */
     double x_m, y_m, theta_rad, v_mps, omega_radps;
     double sos_mps, period_s;
+    /* The air's temperature as the thermometer's model estimates it (°C,
+     * lib aid_thermometer.h): air_valid false on a site without a
+     * thermometer and until its model has a reading. */
+    bool air_valid;
+    double air_c;
     double cov[25]; /* x, y, theta, v, omega (row-major) */
     uint32_t reset_counter;
     bool converged;

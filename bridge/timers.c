@@ -41,6 +41,8 @@ void heartbeat_send(struct daemon *d, int64_t now)
         uint32_t ms = (uint32_t)((uint64_t)(since > 0 ? since : 0) / 1000u);
         mav_links_send_named_float(&d->links, "sos_mps", (float)o.sos_mps, ms);
         mav_links_send_named_float(&d->links, "period_s", (float)o.period_s, ms);
+        if (o.air_valid) /* a site with a thermometer, its model started */
+            mav_links_send_named_float(&d->links, "air_c", (float)o.air_c, ms);
     }
     sync_mav_fds(d);
 }

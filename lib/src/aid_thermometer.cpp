@@ -167,6 +167,15 @@ real air_estimate(const AirModel &m)
     return t;
 }
 
+// Has the model started? Its probabilities sum to 1 once it has, to 0
+// before the first reading (the filter's zeroed state).
+bool model_started(const AirModel &m)
+{
+    real have = 0;
+    for (int j = 0; j < kModes; j++) have += m.mu[j];
+    return have > real(0);
+}
+
 // The model's start at reading y: the sensor settled in air of unknown rate,
 // T_a = T_m + r τ (a steady ramp's lag), r ~ N(0, σ_r²), T_m = y ± σ_T; each
 // mode with its τ, at its prior probability.
@@ -278,10 +287,15 @@ real air_model_step(const bl_config *cfg, real dt, real y, AirModel &m, real *va
     return nu;
 }
 
+// The estimate's part (aid_thermometer.h): the counters and the model's
+// combined estimate of the air's temperature.
 void thermometer_estimate(const bl_filter *f, bl_estimate *est)
 {
     est->thermometer_accepted = f->thermometer_accepted_;
     est->thermometer_rejected = f->thermometer_rejected_;
+    const AirModel m = load_air(f);
+    est->air_valid = model_started(m);
+    est->air_temperature_c = air_estimate(m);
 }
 
 int fuse_thermometer_meas(bl_filter *f, const void *meas, bl_fusion_result *res)
@@ -314,9 +328,7 @@ extern "C" int bl_filter_fuse_thermometer(bl_filter *f, int64_t t_us, bl_real te
         }
     }
     AirModel m = load_air(f);
-    real have = 0;  // Σ μ: 0 before the first reading (the filter's zeroed state)
-    for (int j = 0; j < kModes; j++) have += m.mu[j];
-    const bool have_model = have > real(0);
+    const bool have_model = model_started(m);
     if (have_model && t_us < f->thermometer_t_us_) return BL_ETIME;  // before the last reading
     const real dt = real(t_us - f->thermometer_t_us_) * real(1e-6);
     if (!have_model || dt > cfg->max_predict_gap_s) {

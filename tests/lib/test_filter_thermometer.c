@@ -4,7 +4,8 @@
  * estimate half-way to the reading, its change's variance σ²/2), nothing
  * else of the state moved; references (first reading, not started, after a
  * silence); a slow sensor's lag taken out (s follows the air, not the
- * readings, and within its reported variance); an overstated time constant
+ * readings, and within its reported variance; so does the estimate's air
+ * temperature); an overstated time constant
  * caught by the instant sensor's hypothesis; the gate on a glitch (one
  * reading lost) and on a real step (the model starts again); the errors
  * leaving the filter byte-identical; the speed of sound's drift model idle;
@@ -109,6 +110,11 @@ static void test_change_moves_s_alone(void **state)
         converged_filter(&F, &cfg, &T_US, 6, 3);
         bl_real x0[NX], P0[NX * NX], x1[NX], P1[NX * NX];
         bl_fusion_result r;
+        /* no reading yet: no air in the estimate */
+        bl_estimate e;
+        assert_int_equal(bl_filter_estimate(&F, &e), BL_OK);
+        assert_false(e.air_valid);
+        assert_true(e.air_temperature_c == 0);
         /* the first reading: a reference, the state untouched */
         assert_int_equal(bl_filter_get_state(&F, x0, P0), BL_OK);
         assert_int_equal(bl_filter_fuse_thermometer(&F, T_US, (bl_real)18.0, &r), BL_OK);
@@ -137,10 +143,11 @@ static void test_change_moves_s_alone(void **state)
             for (int j = 0; j < NX; j++)
                 if (i != BL_IX_S || j != BL_IX_S) assert_true(P1[i * NX + j] == P0[i * NX + j]);
         }
-        bl_estimate e;
         assert_int_equal(bl_filter_estimate(&F, &e), BL_OK);
         assert_int_equal(e.thermometer_accepted, 1);
         assert_int_equal(e.thermometer_rejected, 0);
+        assert_true(e.air_valid); /* the air half-way, 18.75 °C */
+        assert_true(fabs((double)e.air_temperature_c - 18.75) < (IS_FLOAT ? 1e-5 : 1e-12));
     }
 }
 
@@ -157,22 +164,29 @@ static double air_c(double t_s)
 /* A door opened at 20 s: 20 °C, 30 °C 10 s later, then steady. */
 static double door_c(double t_s) { return t_s < 20 ? 20 : t_s < 30 ? 20 + (t_s - 20) : 30; }
 
+/* What follow() measured of a run. */
+struct followed {
+    double rms_mps;      /* s's change from the first reading against the air's, RMS (m/s) */
+    double worst_sigma;  /* largest |that error| / √(growth of P_ss since the first reading) */
+    double air_rms_c;    /* the estimate's air temperature against the air's, RMS (°C) */
+};
+
 /* A sensor of time constant tau_true (s) in the air air(t) read at 2 Hz
- * (noise σ 0.05 °C) by a filter configured with tau_cfg: the RMS (m/s) over
- * 150 s of s's change from the first reading against the air's; *worst the
- * largest |error| / √(growth of P_ss since the first reading): the filter's
- * own account of what it no longer knows of s (no pulses here: the
- * readings' variances and the speed of sound's random walk). */
-static double follow(double (*air)(double), double tau_true, double tau_cfg, double *worst)
+ * (noise σ 0.05 °C) over 150 s by a filter configured with tau_cfg. The
+ * speed of sound's error is judged against the filter's own account of what
+ * it no longer knows of s (no pulses here: the readings' variances and the
+ * speed of sound's random walk); the estimate's air temperature against the
+ * air's from 5 s on (the model's start takes the sensor as settled). */
+static struct followed follow(double (*air)(double), double tau_true, double tau_cfg)
 {
     bl_config cfg = thermo_config();
     cfg.thermometer.time_constant_s = (bl_real)tau_cfg;
     converged_filter(&F, &cfg, &T_US, 6, 3);
     rng_seed(11);
     const double dt = 0.5, sub = 0.01;
-    double y = air(0), sum2 = 0, var = 0, s0 = 0; /* var: P_ss at the first reading */
-    int n = 0;
-    *worst = 0;
+    double y = air(0), sum2 = 0, air2 = 0, var = 0, s0 = 0; /* var: P_ss at the first reading */
+    int n = 0, n_air = 0;
+    struct followed o = {0};
     bl_real x[NX], P[NX * NX];
     for (int k = 0; k <= 300; k++) {
         const double t = k * dt;
@@ -187,6 +201,14 @@ static double follow(double (*air)(double), double tau_true, double tau_cfg, dou
         assert_int_equal(bl_filter_fuse_thermometer(&F, t_us, (bl_real)(y + 0.05 * rng_gauss()), &r), BL_OK);
         assert_int_equal(r.status, k == 0 ? BL_FUSION_BUFFERED : BL_FUSION_ACCEPTED);
         assert_int_equal(bl_filter_get_state(&F, x, P), BL_OK);
+        bl_estimate e;
+        assert_int_equal(bl_filter_estimate(&F, &e), BL_OK);
+        assert_true(e.air_valid);
+        if (t >= 5) {
+            const double air_err = (double)e.air_temperature_c - air(t);
+            air2 += air_err * air_err;
+            n_air++;
+        }
         if (k == 0) {
             s0 = (double)x[BL_IX_S];
             var = (double)P[BL_IX_S * NX + BL_IX_S];
@@ -196,32 +218,39 @@ static double follow(double (*air)(double), double tau_true, double tau_cfg, dou
         sum2 += err * err;
         n++;
         const double grown = (double)P[BL_IX_S * NX + BL_IX_S] - var;
-        if (fabs(err) / sqrt(grown) > *worst) *worst = fabs(err) / sqrt(grown);
+        if (fabs(err) / sqrt(grown) > o.worst_sigma) o.worst_sigma = fabs(err) / sqrt(grown);
     }
-    return sqrt(sum2 / n);
+    o.rms_mps = sqrt(sum2 / n);
+    o.air_rms_c = sqrt(air2 / n_air);
+    return o;
 }
-static double follow_air(double tau_true, double tau_cfg, double *worst) { return follow(air_c, tau_true, tau_cfg, worst); }
+
+static void print_followed(const char *what, struct followed o)
+{
+    print_message("%s: s %.3f m/s RMS (worst %.2f sigma), the air %.3f C RMS\n", what, o.rms_mps, o.worst_sigma,
+                  o.air_rms_c);
+}
 
 /* A slow sensor (τ 20 s) on a swing up and back: with its time constant
- * configured s follows the air; taken as the air's (τ 0), s follows the
- * readings, 4 °C behind on the ramps (2.4 m/s). Each error lies within 3σ of
- * the variance the readings added; a fast sensor configured fast is as
- * good. */
+ * configured s follows the air, and so does the estimate's air temperature;
+ * taken as the air's (τ 0), s follows the readings, 4 °C behind on the ramps
+ * (2.4 m/s). Each error lies within 3σ of the variance the readings added; a
+ * fast sensor configured fast is as good. */
 static void test_slow_sensor_lag_taken_out(void **state)
 {
     (void)state;
-    double worst_model, worst_raw, worst_fast;
-    const double rms_model = follow_air(20, 20, &worst_model);
-    const double rms_raw = follow_air(20, 0, &worst_raw);
-    const double rms_fast = follow_air(0, 0, &worst_fast);
-    print_message("s against the air, RMS: tau 20 s modelled %.3f m/s (worst %.2f sigma), taken as the air's "
-                  "%.3f m/s; a sensor of tau 0 %.3f m/s (worst %.2f sigma)\n",
-                  rms_model, worst_model, rms_raw, rms_fast, worst_fast);
-    assert_true(rms_model < 0.35);
-    assert_true(rms_raw > 1.0);
-    assert_true(rms_fast < 0.2);
-    assert_true(worst_model < 3.0);
-    assert_true(worst_fast < 3.0);
+    const struct followed model = follow(air_c, 20, 20), raw = follow(air_c, 20, 0), fast = follow(air_c, 0, 0);
+    print_followed("swing, tau 20 s modelled", model);
+    print_followed("swing, tau 20 s taken as the air's", raw);
+    print_followed("swing, a sensor of tau 0", fast);
+    assert_true(model.rms_mps < 0.35);
+    assert_true(raw.rms_mps > 1.0);
+    assert_true(fast.rms_mps < 0.2);
+    assert_true(model.worst_sigma < 3.0);
+    assert_true(fast.worst_sigma < 3.0);
+    /* the estimate's air: the lag (up to 4 °C) taken out */
+    assert_true(model.air_rms_c < 0.5);
+    assert_true(raw.air_rms_c > 2.0);
 }
 
 /* The sensor's τ overstated: a 2 s sensor configured as 30 s on the door.
@@ -232,15 +261,13 @@ static void test_slow_sensor_lag_taken_out(void **state)
 static void test_overstated_time_constant(void **state)
 {
     (void)state;
-    double worst_over, worst_right;
-    const double rms_over = follow(door_c, 2, 30, &worst_over);
-    const double rms_right = follow(door_c, 2, 2, &worst_right);
-    print_message("the door, a 2 s sensor: configured 30 s %.3f m/s RMS (worst %.2f sigma), 2 s %.3f m/s (%.2f)\n",
-                  rms_over, worst_over, rms_right, worst_right);
-    assert_true(rms_over < 0.6);
-    assert_true(rms_right < 0.3);
-    assert_true(worst_over < 3.0);
-    assert_true(worst_right < 3.0);
+    const struct followed over = follow(door_c, 2, 30), right = follow(door_c, 2, 2);
+    print_followed("door, a 2 s sensor configured 30 s", over);
+    print_followed("door, a 2 s sensor configured 2 s", right);
+    assert_true(over.rms_mps < 0.6);
+    assert_true(right.rms_mps < 0.3);
+    assert_true(over.worst_sigma < 3.0);
+    assert_true(right.worst_sigma < 3.0);
 }
 
 /* A glitch (a reading more than max_step_c from the one expected) is
@@ -288,6 +315,10 @@ static void test_glitch_rejected(void **state)
     assert_int_equal(r.status, BL_FUSION_BUFFERED);
     assert_int_equal(bl_filter_get_state(&F, x1, P1), BL_OK);
     assert_memory_equal(x0, x1, sizeof x0);
+    /* the model started again at it: the estimate's air is that reading */
+    assert_int_equal(bl_filter_estimate(&F, &e), BL_OK);
+    assert_true(e.air_valid);
+    assert_true(e.air_temperature_c == 40);
 }
 
 /* With a thermometer the drift model is idle: a predict adds σ_d²·dt to

@@ -66,10 +66,18 @@ typedef struct bl_thermometer_params {
     uint32_t thermometer_in_row_;                                                                                      \
     uint32_t thermometer_accepted_;                                                                                    \
     uint32_t thermometer_rejected_;
-/* bl_estimate: the counters. */
+/* bl_estimate: the counters, and the air's temperature as the sensor's
+ * model estimates it (the sensor's lag taken out; the sensor's constant
+ * offset left in): air_valid false, the temperature 0, before the first
+ * reading and after a re-initialisation. No σ is given: the model's own is
+ * overconfident where the air's rate jumps (a door opened), while the
+ * variances of its changes, summed into P_ss, stay honest
+ * (aid_thermometer.cpp). */
 #define BL_THERMOMETER_ESTIMATE                                                                                        \
     uint32_t thermometer_accepted; /* readings whose change moved s */                                                 \
-    uint32_t thermometer_rejected; /* readings farther than max_step_c from the one expected */
+    uint32_t thermometer_rejected; /* readings farther than max_step_c from the one expected */                        \
+    bool air_valid;                /* the sensor's model has a reading */                                              \
+    bl_real air_temperature_c;     /* the air's temperature (°C) */
 /* bl_loc_counters: the localizer's counters; refused: non-finite or out of
  * range (an error returned), or refused by the filter (BL_OK). */
 #define BL_THERMOMETER_LOC_COUNTERS                                                                                    \
