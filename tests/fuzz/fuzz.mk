@@ -51,6 +51,7 @@ FUZZ_HARN_CFLAGS  := -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -MMD -MP -Ites
                      -DFUZZ_SITE='"$(CURDIR)/hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"' \
                      -DFUZZ_BEARING_SITE='"$(CURDIR)/hw_sim/beaconloc_sim/data/scenarios/eurobot.ini"' \
                      -DFUZZ_RANGE_SITE='"$(CURDIR)/hw_sim/beaconloc_sim/data/scenarios/marvelmind.ini"' \
+                     -DFUZZ_THERMOMETER_SITE='"$(CURDIR)/hw_sim/beaconloc_sim/data/scenarios/kleeman-thermometer.ini"' \
                      -DFUZZ_TEAM_SITE='"$(CURDIR)/hw_sim/beaconloc_sim/data/scenarios/millibots-room.ini"' \
                      -DFUZZ_SONAR_SITE='"$(CURDIR)/hw_sim/beaconloc_sim/data/scenarios/hoppenot-room.ini"'
 

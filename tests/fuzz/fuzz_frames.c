@@ -13,7 +13,10 @@
  * against the map's walls, started from its scenario's start pose as
  * --initial-pose starts it, bridge/estimator_sonar.c) when bit 5 is set and
  * bit 4 not, its [sonar_ring] method chosen by bits 6-7 (0 filter,
- * 1 pinpoint, 2 memory, 3 filter); the first opcode reads only bits 0-1.
+ * 1 pinpoint, 2 memory, 3 filter), or on kleeman-thermometer (kleeman-lab with
+ * an air thermometer: AIR_TEMPERATURE frames reach the library's sensor
+ * model) when bit 6 is set and bits 2-5 not; the first opcode reads only
+ * bits 0-1.
  *
  * Input: a sequence of records, each one opcode byte then its fields:
  *   op 0, 1  socket read: size selector (CAN_MTU, CANFD_MTU, any size, a
@@ -30,8 +33,9 @@
  * Invariants checked after every frame:
  *   - can_in_read: a length within the classic/FD maximum, counters add up
  *     (frames + error frames + bad sizes = reads of data);
- *   - frame_decode: FRAME_OK only for our six ids, classic, 8 bytes; the
- *     result counters add up to the frames decoded;
+ *   - frame_decode: FRAME_OK only for the sensor table's ids (the DBC's
+ *     input frames), classic, 8 bytes; the result counters add up to the
+ *     frames decoded;
  *   - the estimator's output, when valid, is finite with a covariance whose
  *     diagonal is >= 0; its health says finite; on a team site every valid
  *     robot estimate is finite with a diagonal >= 0, and every team frame
@@ -126,6 +130,7 @@ static struct bridge_config site;
 static struct estimator est_template; /* estimator_init'ed once, copied per input */
 static struct estimator est_bearing_template; /* the same on the bearing-only site */
 static struct estimator est_range_template;   /* the same on the range-only site */
+static struct estimator est_thermometer_template; /* on kleeman-lab with a thermometer */
 /* the same on the sonar site, one per [sonar_ring] method (enum sonar_method) */
 static struct estimator est_sonar_template[3];
 static struct estimator est;
@@ -150,6 +155,13 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
     config_defaults(&bearing_site);
     if (config_load_file(&bearing_site, FUZZ_BEARING_SITE, err, sizeof err) != 0 ||
         estimator_init(&est_bearing_template, &bearing_site, err, sizeof err) != 0) {
+        fprintf(stderr, "fuzz_frames: %s\n", err);
+        abort();
+    }
+    struct bridge_config thermometer_site;
+    config_defaults(&thermometer_site);
+    if (config_load_file(&thermometer_site, FUZZ_THERMOMETER_SITE, err, sizeof err) != 0 ||
+        estimator_init(&est_thermometer_template, &thermometer_site, err, sizeof err) != 0) {
         fprintf(stderr, "fuzz_frames: %s\n", err);
         abort();
     }
@@ -269,6 +281,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         tmpl = &est_bearing_template;
     else if (size > 0 && (data[0] & 8))
         tmpl = &est_range_template;
+    else if (size > 0 && (data[0] & 64) && !(data[0] & 48))
+        tmpl = &est_thermometer_template;
     const bool on_team = size > 0 && (data[0] & 16);
     const bool on_sonar = !on_team && size > 0 && (data[0] & 32);
     if (on_team)
@@ -379,18 +393,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         enum frame_result r = frame_decode(&fc, &msg, &f);
         decoded++;
         if (r == FRAME_OK) {
+            /* the ids: the sensor table's (generated from the DBC's input
+             * frames; a hand-written list here missed AIR_TEMPERATURE, the
+             * ninth kind, and failed its first frame), checked below */
             FUZZ_CHECK(msg.len == 8 && !(msg.flags & (CAN_MSG_EXTENDED | CAN_MSG_RTR |
-                                                      CAN_MSG_FD | CAN_MSG_ERROR)) &&
-                           (msg.id == BEACONLOC_CAN_PULSE_DETECTION_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_WHEEL_ENCODERS_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_NODE_STATUS_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_BEARING_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_RANGE_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_TRACK_ENCODERS_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_BEACON_SURVEY_FRAME_ID ||
-                            msg.id == BEACONLOC_CAN_SONAR_FRAME_ID),
+                                                      CAN_MSG_FD | CAN_MSG_ERROR)),
                        "FRAME_OK for id 0x%x len %u flags 0x%x", (unsigned)msg.id,
                        msg.len, msg.flags);
+            FUZZ_CHECK(sensor_kind_of_id(msg.id) != NULL && msg.id != BEACONLOC_CAN_TEAM_COMMAND_FRAME_ID,
+                       "FRAME_OK for id 0x%x, no input frame of ours", (unsigned)msg.id);
             FUZZ_CHECK(f.kind >= 0 && f.kind < FRAME_KIND_COUNT &&
                            sensor_kind_of_id(msg.id) == sensor_kinds[f.kind],
                        "kind %d for id 0x%x", (int)f.kind, (unsigned)msg.id);

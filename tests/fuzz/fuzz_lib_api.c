@@ -11,7 +11,12 @@
  * predict, fuse_pulse, estimate / estimate_at / expected_arrival /
  * get_state, sequencer push / pop (popped pulses fused, every member, as
  * the bridge does) / set_hint / hint_from_estimate / clear_hint / reset /
- * init, snapshot solvers 2D/3D, the models.
+ * init, snapshot solvers 2D/3D, the models, and an air thermometer's
+ * readings (bl_filter_fuse_thermometer: opcode 239 on a site with one; its
+ * count and tuning are perturbed config fields 251-254, so an init or
+ * update_config gives the site one. Opcode 239 on a site without one is the
+ * models' as before, and fields 251-254 set other fields before: every
+ * committed seed's trace is the same as before the thermometer).
  *
  * Invariants, checked after every call:
  *   - an error return leaves the filter (sequencer) byte-identical
@@ -20,7 +25,8 @@
  *   - a started filter's state and P are finite; P is symmetric and
  *     positive semi-definite (Jacobi eigenvalues of the correlation matrix
  *     D^-1/2 P D^-1/2, which is scale-free: the states' units differ by
- *     10 orders of magnitude); every estimate returned is finite;
+ *     10 orders of magnitude); every estimate returned is finite, the
+ *     thermometer's air too once it has one;
  *   - solver results flagged BL_OK are finite.
  * Times: the harness clock moves by signed steps (backwards too), and the
  * filter's own calls take times around it.
@@ -126,6 +132,10 @@ static void check_covariance(const bl_real *P, int n, const char *what)
 
 static void check_estimate(const bl_estimate *e, const char *what)
 {
+#if BL_WITH_THERMOMETER
+    FUZZ_CHECK(!e->air_valid || isfinite(e->air_temperature_c), "%s: the air not finite: %g", what,
+               (double)e->air_temperature_c);
+#endif
     if (!e->started)
         return;
     bl_real v[] = { e->x_m, e->y_m, e->theta_rad, e->v_mps, e->omega_radps,
@@ -227,6 +237,20 @@ static void perturb_config(struct fz *z, bl_config *c)
     uint8_t k = fz_u8(z);
     if (k == 255)
         return; /* unchanged */
+#if BL_WITH_THERMOMETER
+    if (k >= 251) { /* the thermometer: its count (a site gets one), then its tuning */
+        if (k == 251) {
+            c->thermometer_count = fz_u8(z) % 3;
+        } else {
+            bl_real *t[] = {&c->thermometer.sigma_c, &c->thermometer.max_step_c,
+                            &c->thermometer.time_constant_s};
+            *t[k - 252] = (bl_real)fz_real(z, fabs((double)*t[k - 252]) > 0 ? (double)*t[k - 252] : 1.0);
+        }
+        if (trace)
+            fprintf(stderr, "config thermometer #%u\n", (unsigned)(k - 251));
+        return;
+    }
+#endif
     k = (uint8_t)(k % (nr + ni + 1));
     if (k < nr) {
         double v = fz_real(z, fabs((double)*reals[k]) > 0 ? (double)*reals[k] : 1.0);
@@ -533,7 +557,25 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         case 18:
             solver_op(&z);
             break;
-        default: { /* the models at the current state */
+        default:
+#if BL_WITH_THERMOMETER
+            if (op == 239 && cfg.thermometer_count > 0) { /* a reading, near now or at any time */
+                const int64_t t = (fz_u8(&z) & 1) ? fuzz_time(&z) : now_us + (int64_t)fz_u16(&z) * 8 - 20000;
+                const bl_real temp = (bl_real)(20.0 + fz_real(&z, 10.0));
+                bl_fusion_result res;
+                f_before = f;
+                rc = bl_filter_fuse_thermometer(&f, t, temp, &res);
+                after_filter_call(rc, "fuse_thermometer", false);
+                if (rc == BL_OK)
+                    FUZZ_CHECK(isfinite(res.innovation) && isfinite(res.innovation_var) &&
+                                   res.innovation_var >= 0 && !(res.test_ratio < 0),
+                               "thermometer result: innov %g var %g ratio %g", (double)res.innovation,
+                               (double)res.innovation_var, (double)res.test_ratio);
+                break;
+            }
+#endif
+            {
+            /* the models at the current state */
             bl_real x[NX], xo[NX], F[NX * NX], G[NX * 2], h, H[NX];
             if (bl_filter_get_state(&f, x, NULL) != BL_OK)
                 break;

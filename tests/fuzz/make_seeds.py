@@ -6,12 +6,15 @@ tests/fuzz/corpus/<name>/ (committed; `make fuzz-seeds` rewrites it).
            scenarios), plus every line syntax replay.c accepts
   frames   the same logs as fuzz_frames records: replayed frames (op 2) and
            SocketCAN reads (op 0); and hoppenot-room's (SONAR frames) on the sonar
-           site, once per [sonar_ring] method
+           site, once per [sonar_ring] method, thermometer-swing20's
+           (AIR_TEMPERATURE frames) on the thermometer site
   site     the site file, and one with a [tuning] section
   mavlink  TIMESYNC and HEARTBEAT packed by pymavlink (MAVLink 2 and 1),
            truncated, glued to garbage, oversized datagrams, a serial stream
   lib_api  a log as library calls: pulse frames -> sequencer push, encoder
-           frames -> predict_odometry, pops fused into the filter
+           frames -> predict_odometry, pops fused into the filter; kleeman-lab's
+           once more on a site given an air thermometer (an init with the
+           count perturbed to 1), its readings twice a second (op 239)
 The record formats are the harnesses' (see the comment at the top of each).
 """
 import argparse
@@ -28,8 +31,9 @@ DBC = ROOT / "hw_sim/beaconloc_sim/data/beaconloc.dbc"
 SITE = ROOT / "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"
 SCENARIOS = [("kleeman-lab", 4.0), ("echo-storm", 3.0), ("encoder-silence", 3.0), ("kidnap", 3.0),
              ("eurobot", 3.0), ("marvelmind", 3.0)]
-# frames only (fuzz_frames' sonar site): SONAR frames, one per sensor per 0.5 s burst
-FRAME_SCENARIOS = [("hoppenot-room", 4.0)]
+# frames only: fuzz_frames' sonar site (SONAR frames, one per sensor per 0.5 s burst) and its
+# thermometer site (AIR_TEMPERATURE frames twice a second, the air warming)
+FRAME_SCENARIOS = [("hoppenot-room", 4.0), ("thermometer-swing20", 4.0)]
 SONAR_METHODS = ("filter", "pinpoint", "memory")   # fuzz_frames: first byte's bits 6-7
 
 
@@ -100,6 +104,8 @@ def seeds_frames(out: Path, logs: dict) -> None:
             blob[0] |= 4  # fuzz_frames: the eurobot site for this input
         if scn.startswith("marvelmind") and blob:
             blob[0] |= 8  # fuzz_frames: the marvelmind site for this input
+        if scn.startswith("thermometer") and blob:
+            blob[0] |= 64  # fuzz_frames: the thermometer site
         if scn.startswith("hoppenot") and blob:
             blob[0] |= 32  # fuzz_frames: the sonar site, each method (bits 6-7)
             for m, method in enumerate(SONAR_METHODS):
@@ -117,6 +123,8 @@ def seeds_frames(out: Path, logs: dict) -> None:
             blob[0] |= 4
         if scn.startswith("marvelmind") and blob:
             blob[0] |= 8
+        if scn.startswith("thermometer") and blob:
+            blob[0] |= 64
         write(out, f"{scn}.socket", bytes(blob))
     # error frame, FD, RTR, extended and short frames through the socket path
     blob = bytearray()
@@ -166,7 +174,10 @@ def seeds_mavlink(out: Path) -> None:
     write(out, "serial-stream", bytes([1]) + now + b"\x55\xfd" + ts + hb + ts[:5] + b"junk" + ts + ts1)
 
 
-# fuzz_lib_api opcodes (op % 20): 4 predict_odometry (ticks), 12 seq push, 14 pop+fuse
+# fuzz_lib_api opcodes (op % 20): 0 init (one config field perturbed), 4 predict_odometry
+# (ticks), 12 seq push, 14 pop+fuse; 239 a thermometer reading
+# the perturbed field of thermometer_count (fuzz_lib_api.c perturb_config)
+THERMOMETER_COUNT_FIELD = 251
 def clock_to(cur: int, target: int):
     """Trailing clock byte(s) moving the harness clock from cur towards
     target (forward, 500 us steps or i32); returns (bytes, new clock)."""
@@ -178,9 +189,17 @@ def clock_to(cur: int, target: int):
     return bytes([240, 230]) + struct.pack("<i", min(d, 2**31 - 1)), cur + min(d, 2**31 - 1)
 
 
+def thermometer_reading(now: int, t_s: float) -> bytes:
+    """fuzz_lib_api op 239: a reading at the harness clock, the air 20 C warming 0.05 C/s
+    (fz_real's ordinary form: 20 + int16 / 4096 * 10)."""
+    temp_c = 20.0 + 0.05 * t_s
+    return bytes([239, 0]) + struct.pack("<H", 20_000 // 8) + bytes([10]) + \
+        struct.pack("<h", round((temp_c - 20.0) / 10.0 * 4096))
+
+
 def seeds_lib_api(out: Path, logs: dict) -> None:
     db = cantools.database.load_file(str(DBC))
-    for scn in ("kleeman-lab", "echo-storm"):
+    for scn, thermometer in (("kleeman-lab", False), ("echo-storm", False), ("kleeman-lab", True)):
         frames = [parse(l) for l in logs[scn]]
         pulses = [(t, db.decode_message(i, d)) for t, i, d in frames if i == 0x100]
         encs = [(t, db.decode_message(i, d)) for t, i, d in frames if i == 0x110]
@@ -195,30 +214,35 @@ def seeds_lib_api(out: Path, logs: dict) -> None:
         events.sort(key=lambda e: e[0])
         now = 1_000_000
         blob = bytearray()
+        if thermometer:  # init with thermometer_count = 1
+            blob += bytes([0, THERMOMETER_COUNT_FIELD, 1, 0])
+        next_reading = now
         last = None
+        # Each record: the opcode, its arguments, then the harness clock's byte(s) (0: it
+        # stays). The clock moves to each event by the clock bytes of a const call (op 11,
+        # its three argument bytes 0: estimates at now), so that the ops' times are the
+        # log's; odometry (op 4) is taken at the clock (its own step 0: the clock moves
+        # only where the seed says).
         for t, kind, m in events:
-            mv, now = clock_to(now, t - 10_000)
-            blob += mv
+            mv, now = clock_to(now, t)
+            blob += bytes([11, 0, 0, 0]) + mv
+            if thermometer and now >= next_reading:
+                blob += thermometer_reading(now, (now - 1_000_000) / 1e6) + bytes([0])
+                next_reading += 500_000
             if kind == "p":
                 off = (t - now + 20_000) // 4
                 if not 0 <= off < 65536:
                     continue
                 blob += bytes([12]) + struct.pack("<H", off) + bytes([m["Receiver"], m["DoublePulse"],
-                                                                      min(int(m["Width"]) // 40, 255)])
+                                                                      min(int(m["Width"]) // 40, 255), 0])
             else:
-                if last is None:
-                    last = m
-                    blob += bytes([11, 0, 0, 0, 0])  # a const call while the clock moves
-                    continue
-                dl = (m["LeftTicks"] - last["LeftTicks"] + 8192) % 16384 - 8192
-                dr = (m["RightTicks"] - last["RightTicks"] + 8192) % 16384 - 8192
+                if last is not None:
+                    dl = (m["LeftTicks"] - last["LeftTicks"] + 8192) % 16384 - 8192
+                    dr = (m["RightTicks"] - last["RightTicks"] + 8192) % 16384 - 8192
+                    blob += bytes([4, 0]) + struct.pack("<hh", dl, dr) + bytes([0])
+                    blob += bytes([14, 0, 200]) + struct.pack("<H", 5000) + bytes([0])  # pop at now - 5 ms
                 last = m
-                b = max(0, min(255, (t - now) // 100))
-                blob += bytes([4, b]) + struct.pack("<hh", dl, dr)
-                now += b * 100
-                blob += bytes([0, 14, 0, 200]) + struct.pack("<H", 5000)  # pop at now - 5 ms
-            blob += bytes([0])
-        write(out, f"{scn}.calls", bytes(blob))
+        write(out, f"{scn}{'-thermometer' if thermometer else ''}.calls", bytes(blob))
 
 
 def main() -> int:
