@@ -139,39 +139,28 @@ static struct team team;
 static struct estimator est_team_template;
 static int dummy_fd = -1;             /* a real descriptor for can_in to own */
 
+/* A site file into *cfg and an estimator on it into *tmpl; a failure aborts. */
+static void load_site(const char *path, struct bridge_config *cfg, struct estimator *tmpl)
+{
+    char err[CONFIG_ERR_LEN];
+    config_defaults(cfg);
+    if (config_load_file(cfg, path, err, sizeof err) != 0 || estimator_init(tmpl, cfg, err, sizeof err) != 0) {
+        fprintf(stderr, "fuzz_frames: %s: %s\n", path, err);
+        abort();
+    }
+}
+
 int LLVMFuzzerInitialize(int *argc, char ***argv)
 {
     (void)argc;
     (void)argv;
     log_set_level(LOG_ERROR);
     char err[CONFIG_ERR_LEN];
-    config_defaults(&site);
-    if (config_load_file(&site, FUZZ_SITE, err, sizeof err) != 0 ||
-        estimator_init(&est_template, &site, err, sizeof err) != 0) {
-        fprintf(stderr, "fuzz_frames: %s\n", err);
-        abort();
-    }
-    struct bridge_config bearing_site;
-    config_defaults(&bearing_site);
-    if (config_load_file(&bearing_site, FUZZ_BEARING_SITE, err, sizeof err) != 0 ||
-        estimator_init(&est_bearing_template, &bearing_site, err, sizeof err) != 0) {
-        fprintf(stderr, "fuzz_frames: %s\n", err);
-        abort();
-    }
-    struct bridge_config thermometer_site;
-    config_defaults(&thermometer_site);
-    if (config_load_file(&thermometer_site, FUZZ_THERMOMETER_SITE, err, sizeof err) != 0 ||
-        estimator_init(&est_thermometer_template, &thermometer_site, err, sizeof err) != 0) {
-        fprintf(stderr, "fuzz_frames: %s\n", err);
-        abort();
-    }
-    struct bridge_config range_site;
-    config_defaults(&range_site);
-    if (config_load_file(&range_site, FUZZ_RANGE_SITE, err, sizeof err) != 0 ||
-        estimator_init(&est_range_template, &range_site, err, sizeof err) != 0) {
-        fprintf(stderr, "fuzz_frames: %s\n", err);
-        abort();
-    }
+    load_site(FUZZ_SITE, &site, &est_template);
+    struct bridge_config bearing_site, thermometer_site, range_site;
+    load_site(FUZZ_BEARING_SITE, &bearing_site, &est_bearing_template);
+    load_site(FUZZ_THERMOMETER_SITE, &thermometer_site, &est_thermometer_template);
+    load_site(FUZZ_RANGE_SITE, &range_site, &est_range_template);
     for (int m = 0; m < 3; m++) {
         struct bridge_config sonar_site;
         config_defaults(&sonar_site);
@@ -192,10 +181,8 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
         estimator_set_initial_pose(&est_sonar_template[m], &pose);
     }
     struct bridge_config team_site;
-    config_defaults(&team_site);
-    if (config_load_file(&team_site, FUZZ_TEAM_SITE, err, sizeof err) != 0 ||
-        estimator_init(&est_team_template, &team_site, err, sizeof err) != 0 ||
-        team_init(&team_template, &team_site, err, sizeof err) != 0) {
+    load_site(FUZZ_TEAM_SITE, &team_site, &est_team_template);
+    if (team_init(&team_template, &team_site, err, sizeof err) != 0) {
         fprintf(stderr, "fuzz_frames: %s\n", err);
         abort();
     }
