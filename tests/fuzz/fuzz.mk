@@ -34,7 +34,7 @@ FUZZ_SECONDS  ?= 60
 # it passes or fails by the code alone: about 5 s each here; the seconds
 # only bound it on a starved machine. Finding new defects is `make fuzz`.
 FUZZ_SMOKE_SECONDS ?= 60
-FUZZ_SMOKE_RUNS ?= replay:80000 frames:600 site:30000 mavlink:60000 lib_api:800
+FUZZ_SMOKE_RUNS ?= replay:80000 frames:600 site:30000 mavlink:60000 lib_api:500
 FUZZ_NAMES    := replay frames site mavlink lib_api
 FUZZ_BINS     := $(addprefix $(FUZZ_DIR)/fuzz_,$(FUZZ_NAMES))
 

@@ -11,12 +11,16 @@
  * predict, fuse_pulse, estimate / estimate_at / expected_arrival /
  * get_state, sequencer push / pop (popped pulses fused, every member, as
  * the bridge does) / set_hint / hint_from_estimate / clear_hint / reset /
- * init, snapshot solvers 2D/3D, the models, and an air thermometer's
- * readings (bl_filter_fuse_thermometer: opcode 239 on a site with one; its
- * count and tuning are perturbed config fields 251-254, so an init or
- * update_config gives the site one. Opcode 239 on a site without one is the
- * models' as before, and fields 251-254 set other fields before: every
- * committed seed's trace is the same as before the thermometer).
+ * init, snapshot solvers 2D/3D, the models; and the other kinds' inputs
+ * where an init or update_config gave the site that kind (perturbed config
+ * fields 249-254): bearings to beacons (bl_filter_fuse_bearing, opcode 219;
+ * field 249: 0-5 bearing beacons at the ultrasonic beacons' places), ranges
+ * (bl_filter_fuse_range, opcode 199; field 250: 0-5 range beacons there,
+ * heard to 15 m), an
+ * air thermometer's readings (bl_filter_fuse_thermometer, opcode 239; field
+ * 251 its count, 252-254 its tuning). On a site without the kind the opcode
+ * is the models' as before, and fields 249-254 set other fields before:
+ * every committed seed's trace is the same as before them.
  *
  * Invariants, checked after every call:
  *   - an error return leaves the filter (sequencer) byte-identical
@@ -237,6 +241,27 @@ static void perturb_config(struct fz *z, bl_config *c)
     uint8_t k = fz_u8(z);
     if (k == 255)
         return; /* unchanged */
+#if BL_WITH_BEARINGS
+    if (k == 249) { /* bearing beacons where the ultrasonic ones are */
+        c->bearing_beacon_count = fz_u8(z) % 6;
+        for (uint32_t i = 0; i < c->bearing_beacon_count; i++)
+            c->bearing_beacons[i] = c->beacons[i % BL_MAX_BEACONS];
+        if (trace)
+            fprintf(stderr, "config bearing beacons %u\n", (unsigned)c->bearing_beacon_count);
+        return;
+    }
+#endif
+#if BL_WITH_RANGES
+    if (k == 250) { /* range beacons where the ultrasonic ones are, heard across the room */
+        c->range_beacon_count = fz_u8(z) % 6;
+        for (uint32_t i = 0; i < c->range_beacon_count; i++)
+            c->range_beacons[i] = c->beacons[i % BL_MAX_BEACONS];
+        c->range.max_range_m = 15;
+        if (trace)
+            fprintf(stderr, "config range beacons %u\n", (unsigned)c->range_beacon_count);
+        return;
+    }
+#endif
 #if BL_WITH_THERMOMETER
     if (k >= 251) { /* the thermometer: its count (a site gets one), then its tuning */
         if (k == 251) {
@@ -266,6 +291,20 @@ static void perturb_config(struct fz *z, bl_config *c)
         c->beacons[b].x_m = (bl_real)fz_real(z, 6.0);
         c->beacons[b].y_m = (bl_real)fz_real(z, 6.0);
     }
+}
+
+/* A measurement's result, when the call took it: finite, a variance >= 0. */
+static void check_result(int rc, const bl_fusion_result *res, const char *what)
+{
+    if (rc != BL_OK)
+        return;
+    if (trace)
+        fprintf(stderr, "  %s status %d\n", what, (int)res->status);
+    FUZZ_CHECK(res->status <= BL_FUSION_RESET, "%s: status %d", what, (int)res->status);
+    FUZZ_CHECK(isfinite(res->innovation) && isfinite(res->innovation_var) && res->innovation_var >= 0 &&
+                   !(res->test_ratio < 0),
+               "%s result: innov %g var %g ratio %g", what, (double)res->innovation,
+               (double)res->innovation_var, (double)res->test_ratio);
 }
 
 static void fuse_one(uint32_t beacon, int64_t t, uint32_t rx)
@@ -558,6 +597,32 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             solver_op(&z);
             break;
         default:
+#if BL_WITH_BEARINGS
+            if (op == 219 && cfg.bearing_beacon_count > 0) { /* a bearing, near now or at any time */
+                const uint32_t b = fz_u8(&z) % (cfg.bearing_beacon_count + 1);
+                const int64_t t = (fz_u8(&z) & 1) ? fuzz_time(&z) : now_us + (int64_t)fz_u16(&z) * 8 - 20000;
+                const bl_real bearing = (bl_real)fz_real(&z, 3.2);
+                bl_fusion_result res;
+                f_before = f;
+                rc = bl_filter_fuse_bearing(&f, b, t, bearing, &res);
+                after_filter_call(rc, "fuse_bearing", false);
+                check_result(rc, &res, "bearing");
+                break;
+            }
+#endif
+#if BL_WITH_RANGES
+            if (op == 199 && cfg.range_beacon_count > 0) { /* a range, near now or at any time */
+                const uint32_t b = fz_u8(&z) % (cfg.range_beacon_count + 1);
+                const int64_t t = (fz_u8(&z) & 1) ? fuzz_time(&z) : now_us + (int64_t)fz_u16(&z) * 8 - 20000;
+                const bl_real tof = (bl_real)(0.01 + fz_real(&z, 0.01)); /* s: 3.4 m give or take */
+                bl_fusion_result res;
+                f_before = f;
+                rc = bl_filter_fuse_range(&f, b, t, tof, &res);
+                after_filter_call(rc, "fuse_range", false);
+                check_result(rc, &res, "range");
+                break;
+            }
+#endif
 #if BL_WITH_THERMOMETER
             if (op == 239 && cfg.thermometer_count > 0) { /* a reading, near now or at any time */
                 const int64_t t = (fz_u8(&z) & 1) ? fuzz_time(&z) : now_us + (int64_t)fz_u16(&z) * 8 - 20000;
@@ -566,11 +631,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 f_before = f;
                 rc = bl_filter_fuse_thermometer(&f, t, temp, &res);
                 after_filter_call(rc, "fuse_thermometer", false);
-                if (rc == BL_OK)
-                    FUZZ_CHECK(isfinite(res.innovation) && isfinite(res.innovation_var) &&
-                                   res.innovation_var >= 0 && !(res.test_ratio < 0),
-                               "thermometer result: innov %g var %g ratio %g", (double)res.innovation,
-                               (double)res.innovation_var, (double)res.test_ratio);
+                check_result(rc, &res, "thermometer");
                 break;
             }
 #endif

@@ -14,10 +14,15 @@ tests/fuzz/corpus/<name>/ (committed; `make fuzz-seeds` rewrites it).
   lib_api  a log as library calls: pulse frames -> sequencer push, encoder
            frames -> predict_odometry, pops fused into the filter; kleeman-lab's
            once more on a site given an air thermometer (an init with the
-           count perturbed to 1), its readings twice a second (op 239)
+           count perturbed to 1), its readings twice a second (op 239), then
+           given four bearing beacons and four range beacons at the
+           ultrasonic beacons' places (ops 219, 199), each measured twice a
+           second from the run's truth
 The record formats are the harnesses' (see the comment at the top of each).
 """
 import argparse
+import configparser
+import math
 import os
 import struct
 import subprocess
@@ -38,13 +43,24 @@ SONAR_METHODS = ("filter", "pinpoint", "memory")   # fuzz_frames: first byte's b
 
 
 def sim_log(work: Path, scenario: str, seconds: float) -> list:
-    """Simulated candump log lines of `scenario` (seed 1)."""
+    """Simulated candump log lines of `scenario` (seed 1); its truth beside it (truth())."""
     log = work / f"{scenario}.log"
     sim = Path(sys.executable).with_name("beaconloc-sim")
     subprocess.run([str(sim), "run", scenario, "--log", str(log), "--no-realtime",
+                    "--truth", str(work / f"{scenario}.truth.csv"),
                     "--duration", str(seconds), "--seed", "1"], check=True,
                    stdout=subprocess.DEVNULL)
     return log.read_text().splitlines()
+
+
+def truth(work: Path, scenario: str):
+    """The pose of sim_log's run at a log time (us): a function of it, (x m, y m, theta rad)."""
+    import numpy as np
+    from beaconloc_sim.scenario import load_scenario
+    epoch_s = load_scenario(scenario).log_epoch_s
+    rows = np.genfromtxt(work / f"{scenario}.truth.csv", delimiter=",", names=True)
+    return lambda t_us: tuple(float(np.interp(t_us / 1e6 - epoch_s, rows["t_sim_s"], rows[k]))
+                              for k in ("x_m", "y_m", "theta_rad"))
 
 
 def parse(line: str):
@@ -197,9 +213,39 @@ def thermometer_reading(now: int, t_s: float) -> bytes:
         struct.pack("<h", round((temp_c - 20.0) / 10.0 * 4096))
 
 
-def seeds_lib_api(out: Path, logs: dict) -> None:
+# fuzz_lib_api's perturbed fields giving the site bearing beacons and range beacons at the
+# ultrasonic beacons' places (kleeman-lab's: z 1 m, as the receivers), and their opcodes
+BEARING_FIELD, RANGE_FIELD = 249, 250
+BEARING_OP, RANGE_OP = 219, 199
+SPEED_OF_SOUND_MPS = 343.2   # kleeman-lab's air, 20 C
+
+
+def kind_measurements(now: int, pose, beacons, kind: str) -> bytes:
+    """fuzz_lib_api records of one bearing (rad, in the robot's frame) or one time of flight (s)
+    to each beacon, at the harness clock, from the true pose; each with its clock byte 0."""
+    x, y, theta = pose
+    blob = bytearray()
+    for i, (bx, by) in enumerate(beacons):
+        if kind == "bearing":
+            value = math.remainder(math.atan2(by - y, bx - x) - theta, 2 * math.pi) / 3.2
+            op = BEARING_OP
+        else:
+            value = (math.hypot(bx - x, by - y) / SPEED_OF_SOUND_MPS - 0.01) / 0.01
+            op = RANGE_OP
+        # index, "near now" (flag 0, offset 20 ms: the clock), fz_real's ordinary form
+        blob += bytes([op, i, 0]) + struct.pack("<H", 20_000 // 8) + bytes([10])
+        blob += struct.pack("<h", max(-32768, min(32767, round(value * 4096)))) + bytes([0])
+    return bytes(blob)
+
+
+def seeds_lib_api(out: Path, logs: dict, work: Path) -> None:
     db = cantools.database.load_file(str(DBC))
-    for scn, thermometer in (("kleeman-lab", False), ("echo-storm", False), ("kleeman-lab", True)):
+    site = configparser.ConfigParser(inline_comment_prefixes=(";",))
+    site.read(SITE)
+    beacons = [(float(site[f"beacon{i}"]["x_m"]), float(site[f"beacon{i}"]["y_m"])) for i in range(1, 5)]
+    pose_at = truth(work, "kleeman-lab")
+    for scn, aid in (("kleeman-lab", None), ("echo-storm", None), ("kleeman-lab", "thermometer"),
+                     ("kleeman-lab", "bearing"), ("kleeman-lab", "range")):
         frames = [parse(l) for l in logs[scn]]
         pulses = [(t, db.decode_message(i, d)) for t, i, d in frames if i == 0x100]
         encs = [(t, db.decode_message(i, d)) for t, i, d in frames if i == 0x110]
@@ -214,8 +260,10 @@ def seeds_lib_api(out: Path, logs: dict) -> None:
         events.sort(key=lambda e: e[0])
         now = 1_000_000
         blob = bytearray()
-        if thermometer:  # init with thermometer_count = 1
+        if aid == "thermometer":  # an init with thermometer_count = 1
             blob += bytes([0, THERMOMETER_COUNT_FIELD, 1, 0])
+        elif aid is not None:  # an init with four bearing (range) beacons
+            blob += bytes([0, BEARING_FIELD if aid == "bearing" else RANGE_FIELD, len(beacons), 0])
         next_reading = now
         last = None
         # Each record: the opcode, its arguments, then the harness clock's byte(s) (0: it
@@ -226,8 +274,11 @@ def seeds_lib_api(out: Path, logs: dict) -> None:
         for t, kind, m in events:
             mv, now = clock_to(now, t)
             blob += bytes([11, 0, 0, 0]) + mv
-            if thermometer and now >= next_reading:
-                blob += thermometer_reading(now, (now - 1_000_000) / 1e6) + bytes([0])
+            if aid is not None and now >= next_reading:
+                if aid == "thermometer":
+                    blob += thermometer_reading(now, (now - 1_000_000) / 1e6) + bytes([0])
+                else:
+                    blob += kind_measurements(now, pose_at(now + base), beacons, aid)
                 next_reading += 500_000
             if kind == "p":
                 off = (t - now + 20_000) // 4
@@ -242,7 +293,7 @@ def seeds_lib_api(out: Path, logs: dict) -> None:
                     blob += bytes([4, 0]) + struct.pack("<hh", dl, dr) + bytes([0])
                     blob += bytes([14, 0, 200]) + struct.pack("<H", 5000) + bytes([0])  # pop at now - 5 ms
                 last = m
-        write(out, f"{scn}{'-thermometer' if thermometer else ''}.calls", bytes(blob))
+        write(out, f"{scn}{'-' + aid if aid else ''}.calls", bytes(blob))
 
 
 def main() -> int:
@@ -256,7 +307,7 @@ def main() -> int:
     seeds_frames(a.out / "frames", {**logs, **{scn: sim_log(a.work, scn, s) for scn, s in FRAME_SCENARIOS}})
     seeds_site(a.out / "site")
     seeds_mavlink(a.out / "mavlink")
-    seeds_lib_api(a.out / "lib_api", logs)
+    seeds_lib_api(a.out / "lib_api", logs, a.work)
     for d in sorted(a.out.iterdir()):
         print(f"make_seeds: {d}: {len(list(d.iterdir()))} files")
     return 0
