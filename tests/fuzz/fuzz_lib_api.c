@@ -216,6 +216,24 @@ static int64_t fuzz_time(struct fz *z)
     return now_us + d;
 }
 
+#if BL_WITH_BEARINGS || BL_WITH_RANGES
+/* 0-5 beacons of another kind at the ultrasonic beacons' places. */
+static void place_beacons(struct fz *z, const bl_config *c, bl_beacon *beacons, uint32_t *count)
+{
+    *count = fz_u8(z) % 6;
+    for (uint32_t i = 0; i < *count; i++)
+        beacons[i] = c->beacons[i % BL_MAX_BEACONS];
+    if (trace)
+        fprintf(stderr, "config %u beacons of another kind\n", (unsigned)*count);
+}
+#endif
+
+/* A measurement's time: near the harness clock, or any. */
+static int64_t measurement_time(struct fz *z)
+{
+    return (fz_u8(z) & 1) ? fuzz_time(z) : now_us + (int64_t)fz_u16(z) * 8 - 20000;
+}
+
 /* One config field set to a fuzzed value (index by the next byte). */
 static void perturb_config(struct fz *z, bl_config *c)
 {
@@ -243,22 +261,14 @@ static void perturb_config(struct fz *z, bl_config *c)
         return; /* unchanged */
 #if BL_WITH_BEARINGS
     if (k == 249) { /* bearing beacons where the ultrasonic ones are */
-        c->bearing_beacon_count = fz_u8(z) % 6;
-        for (uint32_t i = 0; i < c->bearing_beacon_count; i++)
-            c->bearing_beacons[i] = c->beacons[i % BL_MAX_BEACONS];
-        if (trace)
-            fprintf(stderr, "config bearing beacons %u\n", (unsigned)c->bearing_beacon_count);
+        place_beacons(z, c, c->bearing_beacons, &c->bearing_beacon_count);
         return;
     }
 #endif
 #if BL_WITH_RANGES
-    if (k == 250) { /* range beacons where the ultrasonic ones are, heard across the room */
-        c->range_beacon_count = fz_u8(z) % 6;
-        for (uint32_t i = 0; i < c->range_beacon_count; i++)
-            c->range_beacons[i] = c->beacons[i % BL_MAX_BEACONS];
+    if (k == 250) { /* range beacons there, heard across the room */
+        place_beacons(z, c, c->range_beacons, &c->range_beacon_count);
         c->range.max_range_m = 15;
-        if (trace)
-            fprintf(stderr, "config range beacons %u\n", (unsigned)c->range_beacon_count);
         return;
     }
 #endif
@@ -600,11 +610,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 #if BL_WITH_BEARINGS
             if (op == 219 && cfg.bearing_beacon_count > 0) { /* a bearing, near now or at any time */
                 const uint32_t b = fz_u8(&z) % (cfg.bearing_beacon_count + 1);
-                const int64_t t = (fz_u8(&z) & 1) ? fuzz_time(&z) : now_us + (int64_t)fz_u16(&z) * 8 - 20000;
-                const bl_real bearing = (bl_real)fz_real(&z, 3.2);
+                const int64_t t = measurement_time(&z);
                 bl_fusion_result res;
                 f_before = f;
-                rc = bl_filter_fuse_bearing(&f, b, t, bearing, &res);
+                rc = bl_filter_fuse_bearing(&f, b, t, (bl_real)fz_real(&z, 3.2), &res);
                 after_filter_call(rc, "fuse_bearing", false);
                 check_result(rc, &res, "bearing");
                 break;
@@ -613,11 +622,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 #if BL_WITH_RANGES
             if (op == 199 && cfg.range_beacon_count > 0) { /* a range, near now or at any time */
                 const uint32_t b = fz_u8(&z) % (cfg.range_beacon_count + 1);
-                const int64_t t = (fz_u8(&z) & 1) ? fuzz_time(&z) : now_us + (int64_t)fz_u16(&z) * 8 - 20000;
-                const bl_real tof = (bl_real)(0.01 + fz_real(&z, 0.01)); /* s: 3.4 m give or take */
+                const int64_t t = measurement_time(&z);
                 bl_fusion_result res;
-                f_before = f;
-                rc = bl_filter_fuse_range(&f, b, t, tof, &res);
+                f_before = f; /* a time of flight (s): 3.4 m give or take */
+                rc = bl_filter_fuse_range(&f, b, t, (bl_real)(0.01 + fz_real(&z, 0.01)), &res);
                 after_filter_call(rc, "fuse_range", false);
                 check_result(rc, &res, "range");
                 break;
@@ -625,7 +633,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 #endif
 #if BL_WITH_THERMOMETER
             if (op == 239 && cfg.thermometer_count > 0) { /* a reading, near now or at any time */
-                const int64_t t = (fz_u8(&z) & 1) ? fuzz_time(&z) : now_us + (int64_t)fz_u16(&z) * 8 - 20000;
+                const int64_t t = measurement_time(&z);
                 const bl_real temp = (bl_real)(20.0 + fz_real(&z, 10.0));
                 bl_fusion_result res;
                 f_before = f;
