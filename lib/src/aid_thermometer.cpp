@@ -126,7 +126,7 @@ real sos_of_temperature(real temperature_c)
 // kRates).
 using Z3 = Mat<3, 1>;
 using P3 = Mat<3, 3>;
-constexpr int kTa = 0, kRate = 1, kTm = 2;
+constexpr int kTa = 0, kTm = 2;  // z = (T_a, r, T_m): the rate (index 1) enters through F alone
 constexpr int kModes = kTaus * kRates;
 static_assert(kModes == BL_THERMOMETER_MODES, "aid_thermometer.h sizes the modes' storage");
 

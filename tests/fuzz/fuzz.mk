@@ -86,8 +86,9 @@ $(FUZZ_BR_OBJS) $(FUZZ_NAMES:%=$(FUZZ_DIR)/obj/fuzz_%.o): | $(LIB_KINDS_H)
 
 # Every harness links the whole bridge (all but main.o) and the library; the
 # linker keeps what it calls. fuzz_frames stands in for recvmsg (the CAN
-# socket's read) with its own function, as tests/bridge/test_can_in.c does.
-FUZZ_LDFLAGS_frames := -Wl,--wrap=recvmsg
+# socket's read) with its own function, as tests/bridge/test_can_in.c does,
+# and for clock_gettime with a clock that moves by the input alone.
+FUZZ_LDFLAGS_frames := -Wl,--wrap=recvmsg -Wl,--wrap=clock_gettime
 
 $(FUZZ_DIR)/fuzz_%: $(FUZZ_DIR)/obj/fuzz_%.o $(FUZZ_BR_OBJS) $(FUZZ_LIB_OBJS)
 	$(FUZZ_CXX) $(FUZZ_LDSAN) -o $@ $< $(FUZZ_BR_OBJS) $(FUZZ_LIB_OBJS) \
