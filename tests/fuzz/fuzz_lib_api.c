@@ -303,9 +303,11 @@ static void perturb_config(struct fz *z, bl_config *c)
     }
 }
 
-/* A measurement's result, when the call took it: finite, a variance >= 0. */
-static void check_result(int rc, const bl_fusion_result *res, const char *what)
+/* After a measurement's call: the filter's checks (after_filter_call), and
+ * its result, when the call took it: finite, a variance >= 0. */
+static void after_measurement(int rc, const bl_fusion_result *res, const char *what)
 {
+    after_filter_call(rc, what, false);
     if (rc != BL_OK)
         return;
     if (trace)
@@ -614,8 +616,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 bl_fusion_result res;
                 f_before = f;
                 rc = bl_filter_fuse_bearing(&f, b, t, (bl_real)fz_real(&z, 3.2), &res);
-                after_filter_call(rc, "fuse_bearing", false);
-                check_result(rc, &res, "bearing");
+                after_measurement(rc, &res, "fuse_bearing");
                 break;
             }
 #endif
@@ -626,8 +627,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 bl_fusion_result res;
                 f_before = f; /* a time of flight (s): 3.4 m give or take */
                 rc = bl_filter_fuse_range(&f, b, t, (bl_real)(0.01 + fz_real(&z, 0.01)), &res);
-                after_filter_call(rc, "fuse_range", false);
-                check_result(rc, &res, "range");
+                after_measurement(rc, &res, "fuse_range");
                 break;
             }
 #endif
@@ -638,8 +638,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 bl_fusion_result res;
                 f_before = f;
                 rc = bl_filter_fuse_thermometer(&f, t, temp, &res);
-                after_filter_call(rc, "fuse_thermometer", false);
-                check_result(rc, &res, "thermometer");
+                after_measurement(rc, &res, "fuse_thermometer");
                 break;
             }
 #endif

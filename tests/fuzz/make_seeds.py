@@ -205,7 +205,7 @@ def clock_to(cur: int, target: int):
     return bytes([240, 230]) + struct.pack("<i", min(d, 2**31 - 1)), cur + min(d, 2**31 - 1)
 
 
-def thermometer_reading(now: int, t_s: float) -> bytes:
+def thermometer_reading(t_s: float) -> bytes:
     """fuzz_lib_api op 239: a reading at the harness clock, the air 20 C warming 0.05 C/s
     (fz_real's ordinary form: 20 + int16 / 4096 * 10)."""
     temp_c = 20.0 + 0.05 * t_s
@@ -220,7 +220,7 @@ BEARING_OP, RANGE_OP = 219, 199
 SPEED_OF_SOUND_MPS = 343.2   # kleeman-lab's air, 20 C
 
 
-def kind_measurements(now: int, pose, beacons, kind: str) -> bytes:
+def kind_measurements(pose, beacons, kind: str) -> bytes:
     """fuzz_lib_api records of one bearing (rad, in the robot's frame) or one time of flight (s)
     to each beacon, at the harness clock, from the true pose; each with its clock byte 0."""
     x, y, theta = pose
@@ -276,9 +276,9 @@ def seeds_lib_api(out: Path, logs: dict, work: Path) -> None:
             blob += bytes([11, 0, 0, 0]) + mv
             if aid is not None and now >= next_reading:
                 if aid == "thermometer":
-                    blob += thermometer_reading(now, (now - 1_000_000) / 1e6) + bytes([0])
+                    blob += thermometer_reading((now - 1_000_000) / 1e6) + bytes([0])
                 else:
-                    blob += kind_measurements(now, pose_at(now + base), beacons, aid)
+                    blob += kind_measurements(pose_at(now + base), beacons, aid)
                 next_reading += 500_000
             if kind == "p":
                 off = (t - now + 20_000) // 4
