@@ -256,6 +256,9 @@ int estimator_init(struct estimator *e, const struct bridge_config *site, char *
     int rc = bl_localizer_init(&e->loc, &e->blcfg, &e->seqcfg);
     if (rc == BL_OK)
         rc = sonar_attach(&e->sonar, &e->loc.filter);
+    beacon_check_init(&e->beacon_check, &e->blcfg);
+    if (rc == BL_OK)
+        rc = bl_localizer_observe_pulses(&e->loc, beacon_check_observe, &e->beacon_check);
     if (rc != BL_OK) {
         snprintf(err, errlen, "%s: estimator initialisation failed: %s",
                  cfg->path[0] ? cfg->path : "defaults", bl_strerror(rc));
@@ -361,12 +364,54 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
     e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
     e->pulse_hold_us = estimator_pulse_hold_us(cfg);
     (void)sonar_attach(&e->sonar, &e->loc.filter);
+    beacon_check_init(&e->beacon_check, &e->blcfg); /* new geometry: checked afresh */
     sync(e);
     reset_runtime(e);
     return 1;
 }
 
 /* ---- periodic --------------------------------------------------------- */
+
+/* The site's beacon positions against the pulses (beacon_check.h): once
+ * inconsistent, reported once, in the log with the site file's keys of
+ * every beacon over the rule, and as a STATUSTEXT. */
+static void check_beacon_positions(struct estimator *e)
+{
+    unsigned over[BL_MAX_BEACONS];
+    const unsigned n = beacon_check_poll(&e->beacon_check, over);
+    if (n == 0)
+        return;
+    char list[512];
+    size_t len = 0;
+    double worst_chi2 = 0.0;
+    unsigned worst = over[0];
+    for (unsigned i = 0; i < n && len < sizeof list; i++) {
+        bl_beacon_offset o;
+        bool misplaced;
+        if (!beacon_check_fit(&e->beacon_check, over[i], &o, &misplaced))
+            continue;
+        const bl_beacon *site = &e->beacon_check.site[over[i]];
+        int w = snprintf(
+            list + len, sizeof list - len,
+            "%s[beacon%u] at (%.3f, %.3f) the pulses say (%.3f, %.3f) +- %.3f m, chi2 %.0f",
+            i ? "; " : "", over[i] + 1, (double)site->x_m, (double)site->y_m,
+            (double)(site->x_m + o.offset_m[0]), (double)(site->y_m + o.offset_m[1]),
+            fmax((double)o.sigma_m[0], (double)o.sigma_m[1]), (double)o.chi2);
+        if (w > 0)
+            len += (size_t)w;
+        if ((double)o.chi2 > worst_chi2) {
+            worst_chi2 = (double)o.chi2;
+            worst = over[i];
+        }
+    }
+    log_warn("%s: the beacons' positions disagree with the pulses: %s. One misplaced beacon "
+             "moves its neighbours' fits too: find it with `beaconloc-sim check-beacons %s "
+             "RECORDING` (a --record of this run)",
+             e->cfg.path[0] ? e->cfg.path : "defaults", list,
+             e->cfg.path[0] ? e->cfg.path : "SITE");
+    event(e, EST_EV_WARNING, "beacon positions disagree with pulses (b%u chi2 %.0f)", worst + 1,
+          worst_chi2);
+}
 
 void estimator_tick(struct estimator *e, int64_t local_now_us)
 {
@@ -387,6 +432,7 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
             event(e, EST_EV_WARNING, "beacon %u lost", b + 1);
         }
     }
+    check_beacon_positions(e);
     /* encoders silent (reported once; "back" when they resume) */
     if (e->enc_seen && !e->enc_silent && now - e->enc_last_node_us > ENC_REPORT_US) {
         e->enc_silent = true;

@@ -79,6 +79,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "beacon_check.h"
 #include "beaconloc.h"
 #include "config.h"
 #include "frames.h"
@@ -228,6 +229,10 @@ struct estimator {
     struct survey survey;
     /* the sonar ring and its map (bridge/sonar.h, bridge/estimator_sonar.c) */
     struct sonar sonar;
+    /* the ultrasonic beacons' site positions checked against the pulses
+     * (bridge/beacon_check.h; the localizer's pulse observer writes it: the
+     * estimator does not move once initialised) */
+    struct beacon_check_set beacon_check;
 };
 
 /*

@@ -36,9 +36,18 @@ enum {
     PULSE_REPEATS_SKIPPED,
     PULSE_NUMBERING_ERRORS,
     PULSE_SEQ_RESYNCS,
+    PULSE_BEACON_CHECK, /* the section "beacon_check" (beacon_check.h) */
     PULSE_COUNTERS
 };
 _Static_assert(PULSE_COUNTERS <= SENSOR_COUNTERS_MAX, "SENSOR_COUNTERS_MAX");
+
+/* The JSON's "beacon_check" object (beacon_check.h; a site with ultrasonic
+ * beacons, not a team site). */
+static void write_beacon_check(FILE *f, const struct stats_report *r)
+{
+    if (r->beacon_check)
+        beacon_check_write_json(r->beacon_check, f);
+}
 
 static const struct sensor_counter sensor_pulse_counters[PULSE_COUNTERS + 1] = {
     [PULSE_ACCEPTED] =
@@ -69,6 +78,9 @@ static const struct sensor_counter sensor_pulse_counters[PULSE_COUNTERS + 1] = {
         SENSOR_LOC_COUNTER("numbering_errors", SENSOR_SLOT_NUMBERING, numbering_errors),
     [PULSE_SEQ_RESYNCS] =
         SENSOR_LOC_COUNTER("sequencer_resyncs", SENSOR_SLOT_NUMBERING, seq_resyncs),
+    [PULSE_BEACON_CHECK] = {.key = "beacon_check",
+                            .slot = SENSOR_SLOT_SECTIONS,
+                            .write = write_beacon_check},
     {0},
 };
 

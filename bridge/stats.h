@@ -13,6 +13,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "beacon_check.h"
 #include "frames.h"
 #include "mavlink_out.h"
 
@@ -74,6 +75,9 @@ struct stats_report {
     /* the sonar ring (bridge/sonar.h): its section "sonar" of the JSON, and
      * its part of the status line; NULL on a team site */
     const struct sonar *sonar;
+    /* the ultrasonic beacons' positions checked (bridge/beacon_check.h): its
+     * section "beacon_check"; NULL on a site without them and on a team site */
+    const struct beacon_check_set *beacon_check;
     /* a team site (bridge/team.h): its section "team" of the JSON; NULL elsewhere */
     const struct team *team;
     uint64_t team_odometry_sent; /* ODOMETRY sent as the robots' system ids */

@@ -306,6 +306,34 @@ def _cmd_map(args) -> int:
     return 0
 
 
+def _cmd_check_beacons(args) -> int:
+    """check-beacons SITE LOG: which beacon is misplaced (beacon_check.py); exit 0 when the site
+    is consistent, 1 when it is not (the answer, or none), 2 on a usage error."""
+    from pathlib import Path
+
+    from . import beacon_check
+    site, log = Path(args.site), Path(args.log)
+    if args.iterations < 1:
+        print("beaconloc-sim check-beacons: --iterations must be >= 1", file=sys.stderr)
+        return EX_USAGE
+    for p in (site, log):
+        if not p.is_file():
+            print(f"beaconloc-sim check-beacons: {p}: no such file", file=sys.stderr)
+            return EX_USAGE
+    try:
+        as_written, hyps = beacon_check.check(site, log, beacon_check.find_bridge(args.bridge),
+                                              args.iterations)
+    except (RuntimeError, FileNotFoundError, ValueError) as exc:
+        print(f"beaconloc-sim check-beacons: {exc}", file=sys.stderr)
+        return 2
+    lines, answer = beacon_check.report(as_written, hyps)
+    print("\n".join(lines))
+    if answer is not None and args.out:
+        Path(args.out).write_text(beacon_check.site_with_beacon(
+            site.read_text(), answer.beacon, *answer.position_m))
+    return 0 if lines[-1].startswith("beacon-check consistent") else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="beaconloc-sim", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -370,6 +398,22 @@ def build_parser() -> argparse.ArgumentParser:
     mp.add_argument("--halves", action="store_true",
                     help="also print Vander Fig. 5's figures for x below / above half the room")
     mp.set_defaults(func=_cmd_map)
+    cb = sub.add_parser("check-beacons", help="which beacon of a site file is misplaced (a recording)",
+                        description="Replay a recording (beaconloc-bridge --record, or a simulator "
+                                    "log) through the daemon with each ultrasonic beacon alone "
+                                    "moved to where its pulses put it, and say which one explains "
+                                    "the pulses (beacon_check.py). Last line: 'beacon-check "
+                                    "consistent', 'beacon-check misplaced beacon=N x_m=.. y_m=.. "
+                                    "moved_m=..' (exit 1) or 'beacon-check unresolved' (exit 1).")
+    cb.add_argument("site", help="site file path")
+    cb.add_argument("log", help="candump -L recording of a run on that site")
+    cb.add_argument("--bridge", metavar="PATH", help="beaconloc-bridge binary (default: on PATH, "
+                                                      "else this checkout's build)")
+    cb.add_argument("--iterations", type=int, default=5, metavar="N",
+                    help="replays per beacon (default 5)")
+    cb.add_argument("--out", metavar="FILE", help="write the site file with the misplaced beacon "
+                                                   "moved here")
+    cb.set_defaults(func=_cmd_check_beacons)
     return p
 
 

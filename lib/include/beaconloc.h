@@ -10,6 +10,7 @@
 #include "beaconloc/config.h"
 #include "beaconloc/kinds.h"
 #include "beaconloc/fusion.h"
+#include "beaconloc/beacon_check.h"
 #include "beaconloc/solver.h"
 #include "beaconloc/sonar.h"
 #include "beaconloc/filter.h"

@@ -25,8 +25,10 @@ real receiver_angle(const bl_config *cfg, uint32_t k)
 
 // Kleeman 1992 eq. 21 with the receiver on the ring and 3D distance.
 // Times relative to the state time t_s. Returns false where undefined.
+// *dh_db (optional): ∂h/∂(beacon x, y, z) (s/m), the same chain rule in the
+// beacon's position (delta = receiver - beacon: -∂g/∂delta).
 bool pulse_model(const bl_config *cfg, const VX &x, const bl_pulse_geometry &g, real *h, RX *H,
-                 bool ring_centre = false)
+                 bool ring_centre = false, bl::Vec3 *dh_db = nullptr)
 {
     const bl_beacon &b = cfg->beacons[g.beacon_index];
     const real c = std::cos(x(TH)), sn = std::sin(x(TH));
@@ -53,13 +55,17 @@ bool pulse_model(const bl_config *cfg, const VX &x, const bl_pulse_geometry &g, 
     const real D = x(S) - vel.dot(u);
     if (!(D > real(1e-3))) return false;
     *h = dt_fire + d / D;
-    if (H == nullptr) return true;
-
     // Jacobian by the chain rule (Kleeman eq. 22; eq. 23 is the x entry:
     // ∂t/∂x = (u_x + v·(e_x - u_x u)/D)/D — as printed, eq. 23 carries an extra
     // 1/d_i that is dimensionally inconsistent; tests check these numerically).
     // g = d/D: ∂g/∂delta = uᵀ/D + velᵀ(I - u uᵀ)/D²;  ∂g/∂vel = d uᵀ/D²;  ∂g/∂s = -d/D².
     const bl::Vec3 dg_ddelta = u / D + (vel - u * vel.dot(u)) / (D * D);
+    if (dh_db) {
+        *dh_db = -dg_ddelta;
+        if (!dh_db->allFinite()) return false;
+    }
+    if (H == nullptr) return true;
+
     const bl::Vec3 dg_dvel = u * (d / (D * D));
     bl::Vec3 e_dir;  // ∂vel/∂v = ∂delta/∂t_f / v
     e_dir << c, sn, real(0);
@@ -344,6 +350,34 @@ extern "C" int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_in
         !(std::fabs(fire_rel) < real(1e6)))
         return BL_EINVAL;
     *out = e;
+    return BL_OK;
+}
+
+extern "C" int bl_filter_pulse_beacon_gradient(const bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
+                                               uint32_t receiver_index, bl_real d_arrival_d_beacon_s_per_m[3])
+{
+    if (f == nullptr || d_arrival_d_beacon_s_per_m == nullptr) return BL_EINVAL;
+    if (!started(f)) return BL_ENOTINIT;
+    const bl_config *cfg = &f->cfg_;
+    if (beacon_index >= cfg->beacon_count) return BL_EBEACON;
+    if (receiver_index >= cfg->receiver_count) return BL_EINVAL;
+    if (classify_arrival(f, arrival_us) != Arrival::kFresh) return BL_ETIME;
+    const VX x = state(f);
+    // The firing as fuse_started numbers it: nearest to arrival - flight.
+    bl_pulse_geometry g;
+    g.beacon_index = beacon_index;
+    g.receiver_index = receiver_index;
+    g.arrival_rel_s = bl::us_to_s(arrival_us - f->t_us_);
+    g.epoch_rel_s = bl::us_to_s(f->epoch_us_ - f->t_us_);
+    int64_t base;
+    real flight_s;
+    const real cycles = firing_cycles(f, x, beacon_index, g.arrival_rel_s, &base, &flight_s);
+    if (!is_finite(cycles) || std::fabs(cycles) > real(1e6)) return BL_EINVAL;
+    g.slot = int32_t(base + int64_t(std::lround(cycles)) * int64_t(cfg->beacon_count));
+    real h;
+    bl::Vec3 db;
+    if (!pulse_model(cfg, x, g, &h, nullptr, false, &db)) return BL_EINVAL;
+    for (int i = 0; i < 3; ++i) d_arrival_d_beacon_s_per_m[i] = db(i);
     return BL_OK;
 }
 

@@ -312,6 +312,20 @@ NOINLINE Fused classify(bl_localizer *loc)
     }
 }
 
+// The caller's observer (bl_localizer_observe_pulses) sees the arrival just
+// fused or gated out. Its own frame: the bl_loc_pulse is not on the
+// fusion's stack chain.
+NOINLINE void notify_observer(const bl_localizer *loc, uint32_t beacon, int64_t arrival_us, uint32_t receiver)
+{
+    bl_loc_pulse p;
+    p.beacon_index = beacon;
+    p.receiver_index = receiver;
+    p.arrival_us = arrival_us;
+    p.converged = loc->was_converged_;
+    p.result = loc->result_;
+    loc->observer_(loc->observer_ctx_, loc, &p);
+}
+
 // One arrival (beacon, time, receiver) of a firing.
 INLINE Fused fuse_one(bl_localizer *loc, uint32_t beacon, int64_t arrival_us, uint32_t receiver)
 {
@@ -325,7 +339,11 @@ INLINE Fused fuse_one(bl_localizer *loc, uint32_t beacon, int64_t arrival_us, ui
         loc->counters_.fuse_errors++;
         return Fused::kNo;
     }
-    return classify(loc);
+    const Fused fused = classify(loc);
+    if (loc->observer_ != nullptr &&
+        (fused == Fused::kRejected || (fused == Fused::kAccepted && loc->result_.status == BL_FUSION_ACCEPTED)))
+        notify_observer(loc, beacon, arrival_us, receiver);
+    return fused;
 }
 
 // Bookkeeping after a state change: events from the filter's flags; the
@@ -585,6 +603,15 @@ extern "C" int bl_localizer_reinit(bl_localizer *loc, const bl_config *cfg, cons
     reinit_filter(loc, BL_LOC_CAUSE_CONFIG);
     set_window(loc, cfg->reset_reject_count);
     loc->wheel_seen_ = false;
+    return BL_OK;
+}
+
+extern "C" int bl_localizer_observe_pulses(bl_localizer *loc, bl_loc_pulse_observer fn, void *ctx)
+{
+    if (loc == nullptr) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    loc->observer_ = fn;
+    loc->observer_ctx_ = fn != nullptr ? ctx : nullptr;
     return BL_OK;
 }
 

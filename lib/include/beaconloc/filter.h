@@ -397,6 +397,21 @@ int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estimate *est);
  * BL_EBEACON, BL_ETIME (|after_us - state time| > cfg.max_predict_gap_s). */
 int bl_filter_expected_arrival(const bl_filter *f, uint32_t beacon_index, int64_t after_us, bl_expected_pulse *out);
 
+/* How the arrival of a pulse moves with its beacon's position, at the
+ * filter's state: ∂t/∂(x_b, y_b, z_b) (s/m) for beacon beacon_index's
+ * firing nearest arrival_us - its flight, heard by receiver receiver_index
+ * (the firing the pulse's update numbers it to): the pulse model of
+ * bl_model_pulse (Kleeman 1992 eq. 21, eq. 22's chain rule) differentiated
+ * in the beacon's position instead of the state; for a standing robot -u/s,
+ * u the unit vector from the beacon to the receiver, s the speed of sound.
+ * With an arrival's innovation it tells where the beacon's pulses say it
+ * stands (beacon_check.h). Changes nothing.
+ * Errors: BL_EINVAL (NULL, receiver_index >= receiver_count, the model
+ * undefined there), BL_ENOTINIT (not started), BL_EBEACON, BL_ETIME
+ * (|arrival_us - state time| > cfg.max_predict_gap_s). */
+int bl_filter_pulse_beacon_gradient(const bl_filter *f, uint32_t beacon_index, int64_t arrival_us,
+                                    uint32_t receiver_index, bl_real d_arrival_d_beacon_s_per_m[3]);
+
 #ifdef __cplusplus
 }
 #endif

@@ -188,6 +188,22 @@ typedef struct bl_loc_event {
     bl_real x_m, y_m;       /* position after the event (STARTED, RESET from a snapshot) */
 } bl_loc_event;
 
+/* One arrival the filter fused or gated out, as the localizer hands it to an
+ * observer (bl_localizer_observe_pulses): the caller's window on the
+ * pulses, e.g. to check the site's beacon positions (beacon_check.h). */
+typedef struct bl_loc_pulse {
+    uint32_t beacon_index;   /* 0-based */
+    uint32_t receiver_index; /* the receiver that heard it */
+    int64_t arrival_us;      /* its arrival time */
+    bool converged;          /* the filter was converged before this arrival */
+    bl_fusion_result result; /* ACCEPTED (fused into a running filter) or REJECTED (gated
+                                out; a numbering error is not passed on) */
+} bl_loc_pulse;
+/* Called after the arrival's update, the filter's state already updated
+ * (read it through loc->filter's const functions, e.g.
+ * bl_filter_pulse_beacon_gradient); must not call back into *loc. */
+typedef void (*bl_loc_pulse_observer)(void *ctx, const bl_localizer *loc, const bl_loc_pulse *pulse);
+
 /* Counters: uint32, wrapping; zero at init (bl_localizer_reinit keeps them). */
 typedef struct bl_loc_counters {
     uint32_t pulses_in;         /* pulses popped from the sequencer (any status) */
@@ -265,6 +281,8 @@ struct bl_localizer { /* typedef: common.h */
     bool wheel_ref_;  /* the last sample is a valid increment start */
     bl_loc_counters counters_;
     bl_loc_event events_[BL_LOC_EVENT_QUEUE];
+    bl_loc_pulse_observer observer_; /* bl_localizer_observe_pulses (NULL: none) */
+    void *observer_ctx_;
     bl_fusion_result result_; /* the fusion result of the arrival being processed (kept
                                     off the stack: the fusion's snapshot start is the
                                     deepest call chain). The pulse itself is read where
@@ -377,6 +395,13 @@ int bl_localizer_status(const bl_localizer *loc, bl_loc_status *out);
 /* Takes the oldest event: returns 1 and fills *ev, or 0 (BL_OK) when none.
  * Errors: BL_EINVAL, BL_ENOTINIT. */
 int bl_localizer_next_event(bl_localizer *loc, bl_loc_event *ev);
+
+/* Hand every arrival the filter fuses or gates out (bl_loc_pulse above) to
+ * fn(ctx, loc, pulse), from inside bl_localizer_detection and
+ * bl_localizer_advance; fn NULL stops it. Kept by bl_localizer_reinit and
+ * bl_localizer_update_config; bl_localizer_init clears it. Costs nothing
+ * without an observer. Errors: BL_EINVAL (NULL loc), BL_ENOTINIT. */
+int bl_localizer_observe_pulses(bl_localizer *loc, bl_loc_pulse_observer fn, void *ctx);
 
 #ifdef __cplusplus
 }

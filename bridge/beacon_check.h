@@ -1,0 +1,67 @@
+/*
+ * beaconloc-bridge — the site's ultrasonic beacon positions checked against
+ * the pulses (lib beaconloc/beacon_check.h: the fit and its statistic).
+ * Every pulse the filter fuses while converged adds its innovation, its
+ * variance and how its arrival would move with its beacon's position
+ * (bl_filter_pulse_beacon_gradient) to that beacon's accumulator, through
+ * the localizer's pulse observer. A beacon whose pulses put it more than
+ * BEACON_CHECK_MIN_OFFSET_M (horizontally) from its site position, with a
+ * score statistic above BEACON_CHECK_CHI2 (chi-square, 3 dof: 1e-6 of false
+ * alarms for a beacon where the file says), makes the site inconsistent,
+ * reported once: a warning naming the site file's [beaconN] of every such
+ * beacon, and a STATUSTEXT. Which beacon is wrong it does not say: the
+ * filter meets a misplaced beacon half-way, so its neighbours' fits move
+ * too (measured: one beacon 11 cm off, two others' fits 3-5 cm and over the
+ * limit); `beaconloc-sim check-beacons` on a recording tries each beacon
+ * alone (docs/bridge.md). The stats JSON's "beacon_check" shows every fit.
+ */
+#ifndef BRIDGE_BEACON_CHECK_H
+#define BRIDGE_BEACON_CHECK_H
+
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "beaconloc.h"
+
+/* The fit's prior on a beacon's offset, per axis (m): a tape measure's
+ * worst, not a constraint on what the pulses show. */
+#define BEACON_CHECK_PRIOR_SIGMA_M 0.5
+/* Reported when the horizontal offset exceeds this (m) ... */
+#define BEACON_CHECK_MIN_OFFSET_M 0.03
+/* ... and the score statistic this (chi-square, 3 dof: P = 1.4e-6) */
+#define BEACON_CHECK_CHI2 30.0
+/* A beacon's fit is looked at again after this many more pulses. */
+#define BEACON_CHECK_EVERY 50u
+
+struct beacon_check_set {
+    unsigned count;                 /* ultrasonic beacons of the site (0: nothing to check) */
+    bl_beacon site[BL_MAX_BEACONS]; /* their site positions */
+    bl_beacon_check acc[BL_MAX_BEACONS];
+    uint32_t looked_at[BL_MAX_BEACONS]; /* acc[b].count when last looked at */
+    bool reported;                      /* the site reported inconsistent (once) */
+    uint64_t pulses;                    /* pulses added */
+    uint64_t skipped;                   /* fused pulses not added: not converged, or no gradient */
+};
+
+/* Empty, for the site's beacons (cfg->beacon_count of them). */
+void beacon_check_init(struct beacon_check_set *s, const bl_config *cfg);
+
+/* The localizer's pulse observer (bl_loc_pulse_observer); ctx: the set. */
+void beacon_check_observe(void *ctx, const bl_localizer *loc, const bl_loc_pulse *pulse);
+
+/* Beacon b's fit (0-based); *misplaced by the rule above. false when it has
+ * none (no pulse yet, or the library refused). */
+bool beacon_check_fit(const struct beacon_check_set *s, unsigned b, bl_beacon_offset *out,
+                      bool *misplaced);
+
+/* When a beacon's fit newly breaks the rule and the site was not reported
+ * yet: every beacon over the rule now, each index into out[] (at most
+ * BL_MAX_BEACONS), and the site marked reported; returns how many (0:
+ * nothing to report). */
+unsigned beacon_check_poll(struct beacon_check_set *s, unsigned out[BL_MAX_BEACONS]);
+
+/* The stats JSON's "beacon_check" member (a line ending ",\n"). */
+void beacon_check_write_json(const struct beacon_check_set *s, FILE *f);
+
+#endif /* BRIDGE_BEACON_CHECK_H */
