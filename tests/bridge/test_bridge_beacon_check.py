@@ -1,0 +1,90 @@
+"""The site's beacon positions checked against the pulses (bridge/beacon_check.h,
+lib beacon_check.h): a kleeman-lab run whose beacon 3 stands 11 cm from where
+the site file says (the simulator's site has it moved, the daemon is given
+kleeman-lab.ini). The daemon warns once and its stats show the fits; given the
+true positions it stays quiet; `beaconloc-sim check-beacons` names beacon 3 and
+writes a site file with it moved to where the pulses put it."""
+import json
+import re
+import subprocess
+
+import pytest
+
+from bridge_helpers import SITE, run_sim, sim_command
+
+TRUE_B3 = (6.05, 11.85)  # kleeman-lab.ini says (6.0, 11.95)
+WARNING = "the beacons' positions disagree with the pulses"
+
+
+@pytest.fixture(scope="module")
+def moved(tmp_path_factory):
+    """(log, true site): kleeman-lab with beacon 3 moved, 120 s, seed 2."""
+    d = tmp_path_factory.mktemp("moved")
+    text = SITE.read_text()
+    true_site = d / "moved.ini"
+    true_site.write_text(text.replace("[beacon3]\nx_m = 6.0\ny_m = 11.95",
+                                      f"[beacon3]\nx_m = {TRUE_B3[0]}\ny_m = {TRUE_B3[1]}"))
+    assert true_site.read_text() != text
+    scen = (SITE.parent / "kleeman-lab.scenario.ini").read_text()
+    scen_path = d / "moved.scenario.ini"
+    scen_path.write_text(scen.replace("site = kleeman-lab.ini", f"site = {true_site}"))
+    log, _ = run_sim(d, str(scen_path), 120, seed=2)
+    return log, true_site
+
+
+def replay(bridge_bin, site, log, tmp_path):
+    stats = tmp_path / f"{site.stem}.json"
+    proc = subprocess.run([str(bridge_bin), "--site", str(site), "--replay", str(log), "--stats",
+                           str(stats), "--mavlink", "udpout:127.0.0.1:9", "--status-interval", "0"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc.stderr, json.loads(stats.read_text())["beacon_check"]
+
+
+def test_misplaced_beacon_reported(bridge_bin, moved, tmp_path):
+    log, _ = moved
+    err, check = replay(bridge_bin, SITE, log, tmp_path)
+    warnings = [line for line in err.splitlines() if WARNING in line]
+    assert len(warnings) == 1, err[-3000:]  # once
+    assert str(SITE) in warnings[0] and "[beacon3]" in warnings[0]
+    assert "beacon positions disagree with pulses" in err  # the STATUSTEXT's event
+    b3 = check["beacons"][2]
+    assert b3["beacon"] == 3 and b3["misplaced"] and b3["chi2"] > check["chi2_limit"]
+    # the fit points the way the beacon moved (+x, -y), if short of it
+    assert b3["offset_m"][0] > 0.01 and b3["offset_m"][1] < -0.02
+    assert check["pulses"] > 1500
+
+
+def test_true_site_is_quiet(bridge_bin, moved, kleeman_log, tmp_path):
+    log, true_site = moved
+    for site, run in ((true_site, log), (SITE, kleeman_log[0])):
+        err, check = replay(bridge_bin, site, run, tmp_path)
+        assert WARNING not in err
+        assert not any(b.get("misplaced") for b in check["beacons"])
+        assert max(b["chi2"] for b in check["beacons"]) < check["chi2_limit"]
+        assert check["pulses"] > 500
+
+
+def test_check_beacons_finds_it(bridge_bin, moved, tmp_path):
+    log, true_site = moved
+    fixed = tmp_path / "fixed.ini"
+    cmd = sim_command() + ["check-beacons", str(SITE), str(log), "--bridge", str(bridge_bin),
+                           "--out", str(fixed)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    last = proc.stdout.strip().splitlines()[-1]
+    m = re.fullmatch(r"beacon-check misplaced beacon=(\d+) x_m=(\S+) y_m=(\S+) moved_m=(\S+)", last)
+    assert m and m.group(1) == "3", proc.stdout
+    x, y = float(m.group(2)), float(m.group(3))
+    assert abs(x - TRUE_B3[0]) < 0.05 and abs(y - TRUE_B3[1]) < 0.05, last
+    # the written site file: kleeman-lab.ini with [beacon3] x_m, y_m changed, nothing else
+    old, new = SITE.read_text().splitlines(), fixed.read_text().splitlines()
+    changed = [(a, b) for a, b in zip(old, new) if a != b]
+    assert len(old) == len(new) and [a for a, _ in changed] == ["x_m = 6.0", "y_m = 11.95"]
+    err, check = replay(bridge_bin, fixed, log, tmp_path)
+    assert WARNING not in err and not any(b.get("misplaced") for b in check["beacons"])
+    # the true site: consistent, exit 0
+    ok = subprocess.run(sim_command() + ["check-beacons", str(true_site), str(log), "--bridge",
+                                         str(bridge_bin)], capture_output=True, text=True, timeout=300)
+    assert ok.returncode == 0 and ok.stdout.strip().endswith(
+        "beacon-check consistent: every beacon where the site file says"), ok.stdout + ok.stderr
