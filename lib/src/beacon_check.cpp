@@ -55,16 +55,16 @@ extern "C" int bl_beacon_check_solve(const bl_beacon_check *c, bl_real prior_sig
 {
     if (c == nullptr || out == nullptr || !usable_sigma(prior_sigma_m)) return BL_EINVAL;
     // (N + I/σ_p²) δ = y, cov = (N + I/σ_p²)⁻¹ (beacon_check.h): positive
-    // definite by the prior, solved by Cholesky (LLT).
+    // definite by the prior; 3x3, inverted in closed form (Eigen's
+    // cofactors: no heap, where its LLT would link malloc).
     Mat3 A;
     for (int r = 0; r < 3; ++r)
         for (int k = 0; k < 3; ++k) A(r, k) = c->info[kUpper[r][k]];
     A.diagonal().array() += real(1) / (prior_sigma_m * prior_sigma_m);
     const Vec3 y(c->score[0], c->score[1], c->score[2]);
-    const Eigen::LLT<Mat3> llt(A);
-    if (llt.info() != Eigen::Success) return BL_EINVAL;
-    const Vec3 delta = llt.solve(y);
-    const Mat3 cov = llt.solve(Mat3::Identity());
+    const Mat3 cov = A.inverse();
+    if (!cov.allFinite() || !(cov.diagonal().minCoeff() > real(0))) return BL_EINVAL;
+    const Vec3 delta = cov * y;
     bl_beacon_offset o;
     for (int i = 0; i < 3; ++i) {
         o.offset_m[i] = delta(i);
