@@ -1,9 +1,9 @@
 """The site's beacon positions checked against the pulses (bridge/beacon_check.h,
-lib beacon_check.h): a kleeman-lab run whose beacon 3 stands 11 cm from where
-the site file says (the simulator's site has it moved, the daemon is given
-kleeman-lab.ini). The daemon warns once and its stats show the fits; given the
-true positions it stays quiet; `beaconloc-sim check-beacons` names beacon 3 and
-writes a site file with it moved to where the pulses put it."""
+lib beacon_check.h) on misplaced-beacon: kleeman-lab where beacon 3 stands 11 cm
+from where the site file says ([faults] beacon_misplaced; the daemon is given
+kleeman-lab.ini as written). The daemon warns once and its stats show the fits;
+given the true positions it stays quiet; `beaconloc-sim check-beacons` names
+beacon 3 and writes a site file with it moved to where the pulses put it."""
 import json
 import re
 import subprocess
@@ -18,17 +18,15 @@ WARNING = "the beacons' positions disagree with the pulses"
 
 @pytest.fixture(scope="module")
 def moved(tmp_path_factory):
-    """(log, true site): kleeman-lab with beacon 3 moved, 120 s, seed 2."""
+    """(log, true site): misplaced-beacon, 120 s, seed 2; the site file with beacon 3 where
+    it stands."""
     d = tmp_path_factory.mktemp("moved")
     text = SITE.read_text()
     true_site = d / "moved.ini"
     true_site.write_text(text.replace("[beacon3]\nx_m = 6.0\ny_m = 11.95",
                                       f"[beacon3]\nx_m = {TRUE_B3[0]}\ny_m = {TRUE_B3[1]}"))
     assert true_site.read_text() != text
-    scen = (SITE.parent / "kleeman-lab.scenario.ini").read_text()
-    scen_path = d / "moved.scenario.ini"
-    scen_path.write_text(scen.replace("site = kleeman-lab.ini", f"site = {true_site}"))
-    log, _ = run_sim(d, str(scen_path), 120, seed=2)
+    log, _ = run_sim(d, "misplaced-beacon", 120, seed=2)
     return log, true_site
 
 

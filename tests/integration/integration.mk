@@ -36,7 +36,7 @@ IT_ARGS      ?=
 IT_GUESTS    ?= $(shell n=$$(nproc); [ $$n -gt 4 ] && n=4; echo $$n)
 DEMO_S       ?= 120
 
-.PHONY: test-integration bench-accuracy bench-bearing demo vm-check test-vm-runner bench-bus
+.PHONY: test-integration bench-accuracy bench-bearing bench-beacon-check demo vm-check test-vm-runner bench-bus
 
 # The runner's own logic (host side, no VM): part of `make test-py`.
 PY_TESTS += test-vm-runner
@@ -61,6 +61,12 @@ bench-bus: $(SETUP_STAMP) $(IT_BRIDGE) $(UML_SHIM)
 ACCURACY_ARGS ?=
 bench-accuracy: $(SETUP_STAMP) $(IT_BRIDGE)
 	$(PY) tests/bench/accuracy.py --bridge $(IT_BRIDGE) --out $(BUILD)/bench/accuracy $(ACCURACY_ARGS)
+
+# The beacon positions' check on 20 seeds of kleeman-lab and misplaced-beacon: the daemon's
+# warning, check-beacons' answer, the ratio to the bound before and after the fix
+# (tests/bench/beacon_check.py; docs/bridge.md).
+bench-beacon-check: $(SETUP_STAMP) $(IT_BRIDGE)
+	$(PY) tests/bench/beacon_check.py --bridge $(IT_BRIDGE) --out $(BUILD)/bench/beacon-check
 
 # The filter vs odometry vs the library's triangulation on the eurobot
 # scenarios (tests/bench/bearing.py; lib/bench/triangulate.c in lib/bench.mk).

@@ -216,3 +216,21 @@ def test_soak_scenario_has_one_fault_an_hour_in_turn():
     assert st["x_m"].min() > 0.5 and st["x_m"].max() < 11.5
     assert st["y_m"].min() > 0.5 and st["y_m"].max() < 11.5
     assert scn.site.path.resolve() == builtin_site_path().resolve()
+
+
+def test_misplaced_beacon_moves_the_physics_not_the_site_file(make_scenario):
+    """[faults] beacon_misplaced: the beacon stands elsewhere than the site file says; the
+    physics and the bound take it there, the file (the bridge's) keeps the written position."""
+    from beaconloc_sim.site import load_site
+    scn = load_scenario(str(make_scenario(body(10, "beacon_misplaced = 3, 0.05, -0.10\n"
+                                                   "beacon_misplaced2 = 5, 0, 0, -0.2\n"))))
+    written = load_site(scn.site.path).beacons_m
+    moved = scn.site.beacons_m - written
+    assert np.allclose(moved[2], [0.05, -0.10, 0.0]) and np.allclose(moved[4], [0, 0, -0.2])
+    assert np.allclose(np.delete(moved, [2, 4], axis=0), 0.0)
+    # the arrivals follow the moved beacon: beacon 3's flight times from the same path differ
+    nominal = load_scenario(str(make_scenario(body(10, ""))))
+    a, b = simulate.run(nominal), simulate.run(scn)
+    assert np.array_equal(a.truth["x_m"], b.truth["x_m"])   # the same path
+    assert not np.array_equal(a.frames.t_s, b.frames.t_s)   # other arrivals
+
