@@ -40,8 +40,12 @@ bool beacon_check_fit(const struct beacon_check_set *s, unsigned b, bl_beacon_of
     if (b >= s->count || s->acc[b].count == 0 ||
         bl_beacon_check_solve(&s->acc[b], (bl_real)BEACON_CHECK_PRIOR_SIGMA_M, out) != BL_OK)
         return false;
-    const double horizontal = hypot((double)out->offset_m[0], (double)out->offset_m[1]);
-    *misplaced = horizontal > BEACON_CHECK_MIN_OFFSET_M && (double)out->chi2 > BEACON_CHECK_CHI2;
+    /* the offset's length: z stays near the prior's 0 where no pulse sees it (every beacon at
+     * the receivers' height), and counts where one does (a ceiling's beacon too low) */
+    const double length =
+        sqrt((double)(out->offset_m[0] * out->offset_m[0] + out->offset_m[1] * out->offset_m[1] +
+                      out->offset_m[2] * out->offset_m[2]));
+    *misplaced = length > BEACON_CHECK_MIN_OFFSET_M && (double)out->chi2 > BEACON_CHECK_CHI2;
     return true;
 }
 

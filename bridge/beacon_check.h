@@ -5,7 +5,7 @@
  * variance and how its arrival would move with its beacon's position
  * (bl_filter_pulse_beacon_gradient) to that beacon's accumulator, through
  * the localizer's pulse observer. A beacon whose pulses put it more than
- * BEACON_CHECK_MIN_OFFSET_M (horizontally) from its site position, with a
+ * BEACON_CHECK_MIN_OFFSET_M from its site position, with a
  * score statistic above BEACON_CHECK_CHI2 (chi-square, 3 dof: 1e-6 of false
  * alarms for a beacon where the file says), makes the site inconsistent,
  * reported once: a warning naming the site file's [beaconN] of every such
@@ -27,7 +27,7 @@
 /* The fit's prior on a beacon's offset, per axis (m): a tape measure's
  * worst, not a constraint on what the pulses show. */
 #define BEACON_CHECK_PRIOR_SIGMA_M 0.5
-/* Reported when the horizontal offset exceeds this (m) ... */
+/* Reported when the fitted offset's length exceeds this (m) ... */
 #define BEACON_CHECK_MIN_OFFSET_M 0.03
 /* ... and the score statistic this (chi-square, 3 dof: P = 1.4e-6) */
 #define BEACON_CHECK_CHI2 30.0

@@ -393,10 +393,12 @@ static void check_beacon_positions(struct estimator *e)
         const bl_beacon *site = &e->beacon_check.site[over[i]];
         int w = snprintf(
             list + len, sizeof list - len,
-            "%s[beacon%u] at (%.3f, %.3f) the pulses say (%.3f, %.3f) +- %.3f m, chi2 %.0f",
-            i ? "; " : "", over[i] + 1, (double)site->x_m, (double)site->y_m,
+            "%s[beacon%u] at (%.3f, %.3f, %.3f) the pulses say (%.3f, %.3f, %.3f) +- %.3f m "
+            "(z +- %.3f), chi2 %.0f",
+            i ? "; " : "", over[i] + 1, (double)site->x_m, (double)site->y_m, (double)site->z_m,
             (double)(site->x_m + o.offset_m[0]), (double)(site->y_m + o.offset_m[1]),
-            fmax((double)o.sigma_m[0], (double)o.sigma_m[1]), (double)o.chi2);
+            (double)(site->z_m + o.offset_m[2]), fmax((double)o.sigma_m[0], (double)o.sigma_m[1]),
+            (double)o.sigma_m[2], (double)o.chi2);
         if (w > 0)
             len += (size_t)w;
         if ((double)o.chi2 > worst_chi2) {

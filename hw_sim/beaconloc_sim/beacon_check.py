@@ -10,9 +10,11 @@ on a recording of a run (`beaconloc-bridge --record`, or a simulator log):
 for each beacon alone it moves that beacon by its fit and replays again,
 a few times (the filter takes part of the offset into its state, so each
 fit finds part of what is left), every other beacon where the file says.
-The hypothesis that leaves every beacon within the rule is the answer; its
-beacon's position is written into a copy of the site file. When none does,
-or more than one, it says so: two beacons wrong, or something else (the
+The hypothesis that leaves every beacon within the rule is the answer (of
+several, the one that leaves the least disagreement, the sum of every beacon's
+chi2, if by CHI2_MARGIN); its beacon's position is written into a copy of the
+site file (its height only where the pulses moved it). When none does, or
+several do alike, it says so: two beacons wrong, or something else (the
 receiver ring, the room's echoes) disagrees.
 """
 from __future__ import annotations
@@ -29,15 +31,18 @@ from pathlib import Path
 # The daemon's rule (bridge/beacon_check.h): a beacon's fit over it disagrees.
 CHI2_LIMIT = 30.0
 MIN_OFFSET_M = 0.03
+# Two hypotheses within the rule: the better one is taken when its total chi2 (every beacon's)
+# is at least this much lower (about a likelihood ratio of e^5 for Gaussian innovations)
+CHI2_MARGIN = 10.0
 
 
 @dataclass
 class Hypothesis:
     beacon: int              # 1-based
-    moved_m: tuple[float, float]  # the beacon's move from its site position (x, y), m
-    position_m: tuple[float, float]
+    moved_m: tuple[float, float, float]     # the beacon's move from its site position (x, y, z), m
+    position_m: tuple[float, float, float]  # where it is moved to, m
     chi2: list[float]        # every beacon's score statistic after the move
-    offsets_m: list[float]   # every beacon's horizontal fit after the move, m
+    offsets_m: list[float]   # every beacon's fitted offset after the move (its length), m
 
     @property
     def consistent(self) -> bool:
@@ -58,23 +63,31 @@ def find_bridge(explicit: str | None = None) -> str:
     raise FileNotFoundError("beaconloc-bridge: not on PATH and not built here (--bridge PATH)")
 
 
-def site_with_beacon(text: str, beacon: int, x_m: float, y_m: float) -> str:
-    """The site file's text with [beaconN] x_m and y_m replaced (the rest kept
-    as written, comments too)."""
+def site_with_beacon(text: str, beacon: int, x_m: float, y_m: float, z_m: float | None = None) -> str:
+    """The site file's text with [beaconN] x_m, y_m (and z_m when given) replaced (the rest
+    kept as written, comments too)."""
+    values = {"x_m": x_m, "y_m": y_m} | ({} if z_m is None else {"z_m": z_m})
     out, section, done = [], None, set()
     for line in text.splitlines(keepends=True):
         m = re.match(r"\s*\[([^\]]+)\]", line)
         if m:
             section = m.group(1).strip()
-        key = re.match(r"\s*(x_m|y_m)\s*=", line)
-        if section == f"beacon{beacon}" and key:
-            value = x_m if key.group(1) == "x_m" else y_m
-            line = f"{key.group(1)} = {value:.4f}\n"
+        key = re.match(r"\s*(x_m|y_m|z_m)\s*=", line)
+        if section == f"beacon{beacon}" and key and key.group(1) in values:
+            line = f"{key.group(1)} = {values[key.group(1)]:.4f}\n"
             done.add(key.group(1))
         out.append(line)
-    if done != {"x_m", "y_m"}:
-        raise ValueError(f"[beacon{beacon}] x_m, y_m: not both in the site file")
+    if done != set(values):
+        raise ValueError(f"[beacon{beacon}] {', '.join(sorted(set(values) - done))}: "
+                         "not in the site file")
     return "".join(out)
+
+
+def site_with_move(text: str, beacon: int, site_xyz, xyz) -> str:
+    """The site file's text with the beacon at xyz; its z_m line left as written where the move
+    has no z (no pulse sees the beacon's height: every beacon at the receivers')."""
+    moves_z = abs(xyz[2] - site_xyz[2]) > 1e-4
+    return site_with_beacon(text, beacon, xyz[0], xyz[1], xyz[2] if moves_z else None)
 
 
 def replay_fits(bridge: str, site: Path, log: Path, work: Path) -> list[dict]:
@@ -91,8 +104,10 @@ def replay_fits(bridge: str, site: Path, log: Path, work: Path) -> list[dict]:
     return beacons
 
 
-def horizontal(fit: dict) -> float:
-    return math.hypot(*fit.get("offset_m", [0.0, 0.0])[:2])
+def offset(fit: dict) -> float:
+    """The length of a beacon's fitted offset, m (z stays near 0 where no pulse sees it: every
+    beacon at the receivers' height)."""
+    return math.hypot(*fit.get("offset_m", [0.0, 0.0, 0.0]))
 
 
 def check(site_path: Path, log: Path, bridge: str, iterations: int = 5) -> tuple[list[dict], list[Hypothesis]]:
@@ -103,22 +118,20 @@ def check(site_path: Path, log: Path, bridge: str, iterations: int = 5) -> tuple
         as_written = replay_fits(bridge, site_path, log, work)
         hyps = []
         for fit in as_written:
-            b = fit["beacon"]
-            site_xy = [fit["fitted_m"][i] - fit["offset_m"][i] for i in range(2)] if "offset_m" in fit \
-                else None
-            if site_xy is None:
+            if "offset_m" not in fit:
                 continue
-            xy = list(site_xy)
+            b = fit["beacon"]
+            site_xyz = [fit["fitted_m"][i] - fit["offset_m"][i] for i in range(3)]
+            xyz = list(site_xyz)
             fits = as_written
             trial = work / site_path.name  # a site file names no other file
             for _ in range(iterations):
                 mine = next(f for f in fits if f["beacon"] == b)
-                xy = [xy[i] + mine.get("offset_m", [0, 0])[i] for i in range(2)]
-                trial.write_text(site_with_beacon(text, b, xy[0], xy[1]))
+                xyz = [xyz[i] + mine.get("offset_m", [0, 0, 0])[i] for i in range(3)]
+                trial.write_text(site_with_move(text, b, site_xyz, xyz))
                 fits = replay_fits(bridge, trial, log, work)
-            hyps.append(Hypothesis(b, (xy[0] - site_xy[0], xy[1] - site_xy[1]), (xy[0], xy[1]),
-                                   [f.get("chi2", 0.0) for f in fits],
-                                   [horizontal(f) for f in fits]))
+            hyps.append(Hypothesis(b, tuple(xyz[i] - site_xyz[i] for i in range(3)), tuple(xyz),
+                                   [f.get("chi2", 0.0) for f in fits], [offset(f) for f in fits]))
     return as_written, hyps
 
 
@@ -126,24 +139,29 @@ def report(as_written: list[dict], hyps: list[Hypothesis]) -> tuple[list[str], H
     """Lines for the user, and the one hypothesis that explains the pulses
     (None when the site is consistent as written, or no single beacon does)."""
     lines = ["# as written: " + ", ".join(
-        f"beacon {f['beacon']} chi2 {f.get('chi2', 0):.1f} fit {horizontal(f) * 1e3:.0f} mm"
+        f"beacon {f['beacon']} chi2 {f.get('chi2', 0):.1f} fit {offset(f) * 1e3:.0f} mm"
         for f in as_written)]
-    over = [f for f in as_written if f.get("chi2", 0) > CHI2_LIMIT and horizontal(f) > MIN_OFFSET_M]
+    over = [f for f in as_written if f.get("chi2", 0) > CHI2_LIMIT and offset(f) > MIN_OFFSET_M]
     for h in hyps:
-        lines.append(f"# beacon {h.beacon} moved by ({h.moved_m[0]:+.3f}, {h.moved_m[1]:+.3f}) m: "
+        lines.append(f"# beacon {h.beacon} moved by ({h.moved_m[0]:+.3f}, {h.moved_m[1]:+.3f}, "
+                     f"{h.moved_m[2]:+.3f}) m: "
                      f"chi2 total {sum(h.chi2):.1f}, worst {max(h.chi2):.1f}"
                      f"{' (every beacon within the rule)' if h.consistent else ''}")
     if not over:
         lines.append("beacon-check consistent: every beacon where the site file says")
         return lines, None
-    good = [h for h in hyps if h.consistent]
-    if len(good) == 1:
+    good = sorted((h for h in hyps if h.consistent), key=lambda h: sum(h.chi2))
+    # More than one within the rule: the one whose move leaves the least disagreement, if
+    # clearly (its total chi2 at least CHI2_MARGIN below the next one's)
+    if len(good) == 1 or (len(good) > 1 and sum(good[1].chi2) - sum(good[0].chi2) >= CHI2_MARGIN):
         h = good[0]
         lines.append(f"beacon-check misplaced beacon={h.beacon} x_m={h.position_m[0]:.3f} "
-                     f"y_m={h.position_m[1]:.3f} moved_m={math.hypot(*h.moved_m):.3f}")
+                     f"y_m={h.position_m[1]:.3f} z_m={h.position_m[2]:.3f} "
+                     f"moved_m={math.hypot(*h.moved_m):.3f}")
         return lines, h
     why = "no single beacon" if not good else \
-        "beacons " + ", ".join(str(h.beacon) for h in good) + " each"
+        "beacons " + ", ".join(str(h.beacon) for h in sorted(good, key=lambda h: h.beacon)) + \
+        " each, none clearly best,"
     lines.append(f"beacon-check unresolved: {why} explains the pulses (two beacons wrong, or "
                  "the receivers' geometry)")
     return lines, None

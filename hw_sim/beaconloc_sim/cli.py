@@ -329,8 +329,9 @@ def _cmd_check_beacons(args) -> int:
     lines, answer = beacon_check.report(as_written, hyps)
     print("\n".join(lines))
     if answer is not None and args.out:
-        Path(args.out).write_text(beacon_check.site_with_beacon(
-            site.read_text(), answer.beacon, *answer.position_m))
+        site_xyz = [p - m for p, m in zip(answer.position_m, answer.moved_m)]
+        Path(args.out).write_text(beacon_check.site_with_move(
+            site.read_text(), answer.beacon, site_xyz, answer.position_m))
     return 0 if lines[-1].startswith("beacon-check consistent") else 1
 
 

@@ -2,14 +2,16 @@
 the pulses"), 20 seeds each: the real bridge in --replay on simulator logs, and
 `beaconloc-sim check-beacons` (hw_sim/beaconloc_sim/beacon_check.py) on the same logs.
 
-  kleeman-lab        every beacon where the site file says: how often the daemon
-                     warns (false alarms) and what check-beacons says
-  misplaced-beacon   beacon 3 11 cm from where kleeman-lab.ini says ([faults]
-                     beacon_misplaced): how often the daemon warns, how often
-                     check-beacons names beacon 3, how far its position is from
-                     where the beacon stands, and the position ratio to the bound
-                     (accuracy.py's judge, after 20 s) with the site file as
-                     written, as check-beacons rewrote it, and with the truth
+  kleeman-lab, ceiling          every beacon where the site file says: how often the
+                                daemon warns (false alarms) and what check-beacons says
+  misplaced-ceiling-beacon      ceiling's beacon 2 hanging 10 cm lower than the file says
+  misplaced-beacon              kleeman-lab's beacon 3 11 cm from where the file says
+                                ([faults] beacon_misplaced): how often the daemon warns, how
+                                often check-beacons names the beacon, how far its position
+                                is from where the beacon stands, and the position ratio to the
+                                bound (accuracy.py's judge, after 20 s) with the site file as
+                                written, as check-beacons rewrote it (its runs only), and with
+                                the truth
 
 Options: --seeds, --first-seed, --jobs. Last line (machine-readable):
   beacon-check scenario=misplaced-beacon seeds=20 warned=.. found=.. fit_err_mm_median=..
@@ -66,16 +68,17 @@ def one_seed(bridge: Path, scenario: str, seed: int, out: Path) -> dict:
     moved = np.flatnonzero(np.any(scn.site.beacons_m != _written_beacons(site), axis=1))
     if moved.size:  # where the beacon stands: the fit's error, and the runs with the fix, the truth
         b = int(moved[0]) + 1
-        true_xy = scn.site.beacons_m[b - 1][:2]
+        true_xyz = scn.site.beacons_m[b - 1]
         if answer is not None and answer.beacon == b:
-            r["fit_err_m"] = math.hypot(answer.position_m[0] - true_xy[0],
-                                        answer.position_m[1] - true_xy[1])
+            r["fit_err_m"] = float(np.linalg.norm(np.array(answer.position_m) - true_xyz))
             fixed = d / "fixed.ini"
-            fixed.write_text(beacon_check.site_with_beacon(site.read_text(), b, *answer.position_m))
+            written_xyz = [p - m for p, m in zip(answer.position_m, answer.moved_m)]
+            fixed.write_text(beacon_check.site_with_move(site.read_text(), b, written_xyz,
+                                                         answer.position_m))
             replay(bridge, fixed, log, d / "fixed.csv")
             r["fixed"] = accuracy.judge(seed, truth, d / "fixed.csv", scenario)
         true_site = d / "true.ini"
-        true_site.write_text(beacon_check.site_with_beacon(site.read_text(), b, *true_xy))
+        true_site.write_text(beacon_check.site_with_beacon(site.read_text(), b, *true_xyz))
         replay(bridge, true_site, log, d / "true.csv")
         r["true"] = accuracy.judge(seed, truth, d / "true.csv", scenario)
         r["beacon"] = b
@@ -103,21 +106,22 @@ def main() -> int:
     out.mkdir(parents=True, exist_ok=True)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     lines = []
-    for scenario in ("kleeman-lab", "misplaced-beacon"):
+    for scenario in ("kleeman-lab", "ceiling", "misplaced-ceiling-beacon", "misplaced-beacon"):
         with ThreadPoolExecutor(max_workers=args.jobs) as pool:
             runs = list(pool.map(lambda s: one_seed(bridge, scenario, s, out), seeds))
         for r in runs:
             print(f"  {scenario} seed {r['seed']:2d}: warned {r['warned']}; {r['verdict']}")
         warned = sum(r["warned"] for r in runs)
-        if scenario == "kleeman-lab":
+        if not scenario.startswith("misplaced"):
             consistent = sum(r["verdict"].startswith("beacon-check consistent") for r in runs)
             lines.append(f"beacon-check scenario={scenario} seeds={len(runs)} warned={warned} "
                          f"consistent={consistent}")
             continue
         found = [r for r in runs if r["found"] == r.get("beacon")]
         err_mm = np.array([r["fit_err_m"] for r in found]) * 1e3
+        nan = {"ratio": math.nan, "within_3sigma_pct": math.nan}
         figs = {k: accuracy.summarise(scenario, [r[k] for r in runs if k in r])[1]
-                for k in ("written", "fixed", "true")}
+                if any(k in r for r in runs) else nan for k in ("written", "fixed", "true")}
         lines.append(
             f"beacon-check scenario={scenario} seeds={len(runs)} warned={warned} found={len(found)} "
             f"fit_err_mm_median={np.median(err_mm) if err_mm.size else math.nan:.1f} "

@@ -71,10 +71,13 @@ def test_check_beacons_finds_it(bridge_bin, moved, tmp_path):
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1, proc.stdout + proc.stderr
     last = proc.stdout.strip().splitlines()[-1]
-    m = re.fullmatch(r"beacon-check misplaced beacon=(\d+) x_m=(\S+) y_m=(\S+) moved_m=(\S+)", last)
+    m = re.fullmatch(r"beacon-check misplaced beacon=(\d+) x_m=(\S+) y_m=(\S+) z_m=(\S+) "
+                     r"moved_m=(\S+)", last)
     assert m and m.group(1) == "3", proc.stdout
     x, y = float(m.group(2)), float(m.group(3))
     assert abs(x - TRUE_B3[0]) < 0.05 and abs(y - TRUE_B3[1]) < 0.05, last
+    # z: no pulse sees it (every beacon and receiver at 1 m): it stays where the file says
+    assert abs(float(m.group(4)) - 1.0) < 0.005, last
     # the written site file: kleeman-lab.ini with [beacon3] x_m, y_m changed, nothing else
     old, new = SITE.read_text().splitlines(), fixed.read_text().splitlines()
     changed = [(a, b) for a, b in zip(old, new) if a != b]
