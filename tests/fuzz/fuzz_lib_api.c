@@ -31,7 +31,11 @@
  *     D^-1/2 P D^-1/2, which is scale-free: the states' units differ by
  *     10 orders of magnitude); every estimate returned is finite, the
  *     thermometer's air too once it has one;
- *   - solver results flagged BL_OK are finite.
+ *   - solver results flagged BL_OK are finite;
+ *   - after every accepted pulse, the beacon position check as the bridge
+ *     runs it (bl_filter_pulse_beacon_gradient, a const call, finite;
+ *     bl_beacon_check_add byte-identical on an error; bl_beacon_check_solve
+ *     finite with sigma > 0).
  * Times: the harness clock moves by signed steps (backwards too), and the
  * filter's own calls take times around it.
  */
@@ -319,6 +323,43 @@ static void after_measurement(int rc, const bl_fusion_result *res, const char *w
                (double)res->innovation_var, (double)res->test_ratio);
 }
 
+/* Each beacon's position check (beacon_check.h), fed as the bridge feeds it:
+ * an accepted pulse's gradient in its beacon's position, innovation and
+ * variance. */
+static bl_beacon_check checks[BL_MAX_BEACONS];
+
+/* The beacon check after an accepted pulse: the gradient (a const call:
+ * the filter unchanged; finite when BL_OK), the accumulator (unchanged on
+ * an error), the fit (finite, sigma > 0, chi2 >= 0 when BL_OK). Adds no
+ * call to the trace: the committed seeds trace as before. */
+static void check_beacon(uint32_t beacon, int64_t t, uint32_t rx, const bl_fusion_result *res)
+{
+    bl_real g[3];
+    f_before = f;
+    int rc = bl_filter_pulse_beacon_gradient(&f, beacon, t, rx, g);
+    FUZZ_CHECK(!memcmp(&f, &f_before, sizeof f), "pulse_beacon_gradient returned %d but changed the filter",
+               rc);
+    if (rc != BL_OK)
+        return;
+    FUZZ_CHECK(all_finite(g, 3), "pulse_beacon_gradient: not finite: %g %g %g", (double)g[0], (double)g[1],
+               (double)g[2]);
+    bl_beacon_check *c = &checks[beacon % BL_MAX_BEACONS];
+    const bl_beacon_check before = *c;
+    rc = bl_beacon_check_add(c, g, res->innovation, res->innovation_var);
+    if (rc != BL_OK) {
+        FUZZ_CHECK(!memcmp(c, &before, sizeof *c), "beacon_check_add returned %d but changed it", rc);
+        return;
+    }
+    bl_beacon_offset o;
+    if (bl_beacon_check_solve(c, (bl_real)0.5, &o) == BL_OK) {
+        bl_real v[7] = { o.offset_m[0], o.offset_m[1], o.offset_m[2], o.sigma_m[0], o.sigma_m[1], o.sigma_m[2],
+                         o.chi2 };
+        FUZZ_CHECK(all_finite(v, 7) && o.sigma_m[0] > 0 && o.sigma_m[1] > 0 && o.sigma_m[2] > 0 && o.chi2 >= 0,
+                   "beacon_check_solve: offset %g %g %g sigma %g %g %g chi2 %g", (double)v[0], (double)v[1],
+                   (double)v[2], (double)v[3], (double)v[4], (double)v[5], (double)v[6]);
+    }
+}
+
 static void fuse_one(uint32_t beacon, int64_t t, uint32_t rx)
 {
     bl_fusion_result res;
@@ -333,6 +374,8 @@ static void fuse_one(uint32_t beacon, int64_t t, uint32_t rx)
                        "pulse result: innov %g var %g ratio %g", (double)res.innovation,
                        (double)res.innovation_var, (double)res.test_ratio);
         }
+        if (res.status == BL_FUSION_ACCEPTED)
+            check_beacon(beacon, t, rx, &res);
     }
 }
 
@@ -387,6 +430,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     struct fz z = { data, size };
     trace = getenv("FUZZ_TRACE") != NULL;
     now_us = 1000000;
+    memset(checks, 0, sizeof checks);
     bl_config_default(&cfg);
     memset(&f, 0, sizeof f);
     f_before = f;
