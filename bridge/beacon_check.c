@@ -15,6 +15,29 @@ void beacon_check_init(struct beacon_check_set *s, const bl_config *cfg)
     for (unsigned b = 0; b < s->count; b++) (void)bl_beacon_check_reset(&s->acc[b]);
 }
 
+bool beacon_check_add(struct beacon_check_set *s, unsigned b, int64_t arrival_us,
+                      const bl_real g[3], bl_real innovation, bl_real innovation_var)
+{
+    if (b >= s->count) {
+        s->skipped++;
+        return false;
+    }
+    if (s->last_us[b] != 0 && arrival_us > s->last_us[b]) {
+        /* fading memory: e^(-dt/tau) since this beacon's previous pulse */
+        const double keep =
+            exp(-(double)(arrival_us - s->last_us[b]) * 1e-6 / BEACON_CHECK_MEMORY_S);
+        (void)bl_beacon_check_fade(&s->acc[b], (bl_real)(keep > 0.0 ? keep : 1e-30));
+    }
+    if (bl_beacon_check_add(&s->acc[b], g, innovation, innovation_var) != BL_OK) {
+        s->skipped++;
+        return false;
+    }
+    if (arrival_us > s->last_us[b])
+        s->last_us[b] = arrival_us;
+    s->pulses++;
+    return true;
+}
+
 void beacon_check_observe(void *ctx, const bl_localizer *loc, const bl_loc_pulse *p)
 {
     struct beacon_check_set *s = ctx;
@@ -25,13 +48,21 @@ void beacon_check_observe(void *ctx, const bl_localizer *loc, const bl_loc_pulse
     bl_real g[3];
     if (!p->converged ||
         bl_filter_pulse_beacon_gradient(&loc->filter, p->beacon_index, p->arrival_us,
-                                        p->receiver_index, g) != BL_OK ||
-        bl_beacon_check_add(&s->acc[p->beacon_index], g, p->result.innovation,
-                            p->result.innovation_var) != BL_OK) {
+                                        p->receiver_index, g) != BL_OK) {
         s->skipped++;
         return;
     }
-    s->pulses++;
+    (void)beacon_check_add(s, p->beacon_index, p->arrival_us, g, p->result.innovation,
+                           p->result.innovation_var);
+}
+
+/* The offset's length, m: z stays near the prior's 0 where no pulse sees it
+ * (every beacon at the receivers' height), and counts where one does (a
+ * ceiling's beacon too low). */
+static double offset_length(const bl_beacon_offset *o)
+{
+    return sqrt((double)(o->offset_m[0] * o->offset_m[0] + o->offset_m[1] * o->offset_m[1] +
+                         o->offset_m[2] * o->offset_m[2]));
 }
 
 bool beacon_check_fit(const struct beacon_check_set *s, unsigned b, bl_beacon_offset *out,
@@ -40,39 +71,48 @@ bool beacon_check_fit(const struct beacon_check_set *s, unsigned b, bl_beacon_of
     if (b >= s->count || s->acc[b].count == 0 ||
         bl_beacon_check_solve(&s->acc[b], (bl_real)BEACON_CHECK_PRIOR_SIGMA_M, out) != BL_OK)
         return false;
-    /* the offset's length: z stays near the prior's 0 where no pulse sees it (every beacon at
-     * the receivers' height), and counts where one does (a ceiling's beacon too low) */
-    const double length =
-        sqrt((double)(out->offset_m[0] * out->offset_m[0] + out->offset_m[1] * out->offset_m[1] +
-                      out->offset_m[2] * out->offset_m[2]));
-    *misplaced = length > BEACON_CHECK_MIN_OFFSET_M && (double)out->chi2 > BEACON_CHECK_CHI2;
+    *misplaced =
+        offset_length(out) > BEACON_CHECK_MIN_OFFSET_M && (double)out->chi2 > BEACON_CHECK_CHI2;
     return true;
 }
 
 unsigned beacon_check_poll(struct beacon_check_set *s, unsigned out[BL_MAX_BEACONS])
 {
-    if (s->reported)
-        return 0;
     bool news = false;
     for (unsigned b = 0; b < s->count; b++) {
         if (s->acc[b].count < s->looked_at[b] + BEACON_CHECK_EVERY)
             continue;
         s->looked_at[b] = s->acc[b].count;
+        s->rechecked[b] = true;
         bl_beacon_offset o;
         bool misplaced;
         if (beacon_check_fit(s, b, &o, &misplaced) && misplaced)
             news = true;
     }
-    if (!news)
-        return 0;
     unsigned n = 0;
+    bool all_quiet = s->count > 0; /* every beacon looked at again and well within the rule */
     for (unsigned b = 0; b < s->count; b++) {
         bl_beacon_offset o;
-        bool misplaced;
-        if (beacon_check_fit(s, b, &o, &misplaced) && misplaced)
+        bool misplaced = false;
+        const bool have = beacon_check_fit(s, b, &o, &misplaced);
+        if (have && misplaced)
             out[n++] = b;
+        all_quiet = all_quiet && s->rechecked[b] && have &&
+                    (double)o.chi2 < BEACON_CHECK_REARM_CHI2 &&
+                    offset_length(&o) < 0.5 * BEACON_CHECK_MIN_OFFSET_M;
     }
+    if (s->reported) {
+        /* re-armed once every beacon has been looked at again and is well within the rule */
+        if (all_quiet) {
+            s->reported = false;
+            s->agrees_again = true;
+        }
+        return 0;
+    }
+    if (!news)
+        return 0;
     s->reported = true;
+    memset(s->rechecked, 0, sizeof s->rechecked);
     return n;
 }
 

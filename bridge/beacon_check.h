@@ -31,15 +31,27 @@
 #define BEACON_CHECK_MIN_OFFSET_M 0.03
 /* ... and the score statistic this (chi-square, 3 dof: P = 1.4e-6) */
 #define BEACON_CHECK_CHI2 30.0
+/* A reported site is re-armed only when every beacon's fit is back under this
+ * (chi-square, 3 dof: its 98 % point) and half the offset: hysteresis, or a
+ * site hovering at the rule would say so again and again. */
+#define BEACON_CHECK_REARM_CHI2 10.0
 /* A beacon's fit is looked at again after this many more pulses. */
 #define BEACON_CHECK_EVERY 50u
+/* The fits' memory (s): each beacon's sums fade by e^(-dt/tau) between its
+ * pulses (bl_beacon_check_fade), so a beacon bumped after months of running
+ * shows in minutes, not after months more. */
+#define BEACON_CHECK_MEMORY_S 600.0
 
 struct beacon_check_set {
     unsigned count;                 /* ultrasonic beacons of the site (0: nothing to check) */
     bl_beacon site[BL_MAX_BEACONS]; /* their site positions */
     bl_beacon_check acc[BL_MAX_BEACONS];
     uint32_t looked_at[BL_MAX_BEACONS]; /* acc[b].count when last looked at */
-    bool reported;                      /* the site reported inconsistent (once) */
+    int64_t last_us[BL_MAX_BEACONS];    /* arrival of beacon b's last pulse added (0: none) */
+    bool rechecked[BL_MAX_BEACONS];     /* looked at since the site was reported */
+    bool reported;                      /* the site reported inconsistent, not yet agreeing again */
+    bool agrees_again;                  /* set by beacon_check_poll when every beacon is back
+                                           within the rule after a report (the caller says so) */
     uint64_t pulses;                    /* pulses added */
     uint64_t skipped;                   /* fused pulses not added: not converged, or no gradient */
 };
@@ -47,8 +59,15 @@ struct beacon_check_set {
 /* Empty, for the site's beacons (cfg->beacon_count of them). */
 void beacon_check_init(struct beacon_check_set *s, const bl_config *cfg);
 
-/* The localizer's pulse observer (bl_loc_pulse_observer); ctx: the set. */
+/* The localizer's pulse observer (bl_loc_pulse_observer); ctx: the set.
+ * Takes the gradient and calls beacon_check_add. */
 void beacon_check_observe(void *ctx, const bl_localizer *loc, const bl_loc_pulse *pulse);
+
+/* One fused pulse of beacon b (0-based) at arrival_us: the sums faded by
+ * the time since its previous one (BEACON_CHECK_MEMORY_S), then g, nu, S
+ * added. false (counted in skipped) when the library refuses them. */
+bool beacon_check_add(struct beacon_check_set *s, unsigned b, int64_t arrival_us,
+                      const bl_real g[3], bl_real innovation, bl_real innovation_var);
 
 /* Beacon b's fit (0-based); *misplaced by the rule above. false when it has
  * none (no pulse yet, or the library refused). */
@@ -58,7 +77,9 @@ bool beacon_check_fit(const struct beacon_check_set *s, unsigned b, bl_beacon_of
 /* When a beacon's fit newly breaks the rule and the site was not reported
  * yet: every beacon over the rule now, each index into out[] (at most
  * BL_MAX_BEACONS), and the site marked reported; returns how many (0:
- * nothing to report). */
+ * nothing to report). A reported site whose beacons are all back within the
+ * rule (each looked at since) is re-armed: agrees_again set for the caller
+ * to say, and a later disagreement is reported anew. */
 unsigned beacon_check_poll(struct beacon_check_set *s, unsigned out[BL_MAX_BEACONS]);
 
 /* The stats JSON's "beacon_check" member (a line ending ",\n"). */

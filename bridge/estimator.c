@@ -379,6 +379,12 @@ static void check_beacon_positions(struct estimator *e)
 {
     unsigned over[BL_MAX_BEACONS];
     const unsigned n = beacon_check_poll(&e->beacon_check, over);
+    if (e->beacon_check.agrees_again) {
+        e->beacon_check.agrees_again = false;
+        log_info("%s: the beacons' positions agree with the pulses again",
+                 e->cfg.path[0] ? e->cfg.path : "defaults");
+        event(e, EST_EV_INFO, "beacon positions agree with pulses again");
+    }
     if (n == 0)
         return;
     char list[512];

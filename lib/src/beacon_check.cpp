@@ -51,6 +51,15 @@ extern "C" int bl_beacon_check_add(bl_beacon_check *c, const bl_real gradient[3]
     return BL_OK;
 }
 
+extern "C" int bl_beacon_check_fade(bl_beacon_check *c, bl_real keep)
+{
+    if (c == nullptr || !(keep > real(0) && keep <= real(1))) return BL_EINVAL;
+    for (real &v : c->info) v *= keep;
+    for (real &v : c->score) v *= keep;
+    c->nis *= keep;
+    return BL_OK;
+}
+
 extern "C" int bl_beacon_check_solve(const bl_beacon_check *c, bl_real prior_sigma_m, bl_beacon_offset *out)
 {
     if (c == nullptr || out == nullptr || !usable_sigma(prior_sigma_m)) return BL_EINVAL;

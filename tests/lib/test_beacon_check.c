@@ -1,7 +1,7 @@
 /* The site's beacon positions checked against the pulses (beacon_check.h,
  * bl_filter_pulse_beacon_gradient): the fit of a beacon's offset from
  * innovations that a known offset made, in closed form; the prior on an
- * axis no measurement sees; the error contract; the pulse's gradient in its
+ * axis no measurement sees; the fading memory; the error contract; the pulse's gradient in its
  * beacon's position against -u/s for a standing robot. */
 #include "filter_world.h"
 
@@ -59,6 +59,41 @@ static void test_prior_holds_unseen_axis(void **state)
     assert_true(fabs((double)o.offset_m[2]) < 1e-6);
     assert_true(fabs((double)o.sigma_m[2] - 0.5) < 1e-6);
     assert_true((double)o.sigma_m[0] < 0.01);
+}
+
+/* Fading: every sum scaled, the count kept; the fit of a faded accumulator
+ * is the same offset (N and y alike scaled) with sigma grown by 1/sqrt(keep). */
+static void test_fade_scales_the_sums(void **state)
+{
+    (void)state;
+    bl_beacon_check c;
+    assert_int_equal(bl_beacon_check_reset(&c), BL_OK);
+    for (int k = 0; k < 300; ++k) {
+        const double a = 2 * PI * k / 300.0;
+        const bl_real g[3] = {(bl_real)(-cos(a) / S_MPS), (bl_real)(-sin(a) / S_MPS), (bl_real)(-0.3 / S_MPS)};
+        const double nu = (double)g[0] * 0.05 + (double)g[2] * 0.02;
+        assert_int_equal(bl_beacon_check_add(&c, g, (bl_real)nu, (bl_real)4e-8), BL_OK);
+    }
+    bl_beacon_offset before, after;
+    assert_int_equal(bl_beacon_check_solve(&c, (bl_real)1e3, &before), BL_OK);
+    const bl_beacon_check kept = c;
+    assert_int_equal(bl_beacon_check_fade(&c, (bl_real)0.25), BL_OK);
+    for (int i = 0; i < 6; ++i) assert_true(fabs((double)c.info[i] - 0.25 * (double)kept.info[i]) <= 1e-6 * fabs((double)kept.info[i]) + 1e-30);
+    for (int i = 0; i < 3; ++i) assert_true(fabs((double)c.score[i] - 0.25 * (double)kept.score[i]) <= 1e-6 * fabs((double)kept.score[i]) + 1e-30);
+    assert_int_equal(c.count, kept.count);
+    assert_int_equal(bl_beacon_check_solve(&c, (bl_real)1e3, &after), BL_OK);
+    for (int i = 0; i < 3; ++i) {
+        assert_true(fabs((double)after.offset_m[i] - (double)before.offset_m[i]) < (IS_FLOAT ? 1e-3 : 1e-8));
+        assert_true(fabs((double)after.sigma_m[i] - 2.0 * (double)before.sigma_m[i]) < 1e-3 * (double)before.sigma_m[i]);
+    }
+    assert_true(fabs((double)after.chi2 - 0.25 * (double)before.chi2) < 1e-3 * (double)before.chi2);
+    /* keep outside (0, 1]: refused, untouched */
+    const bl_beacon_check faded = c;
+    assert_int_equal(bl_beacon_check_fade(&c, 0), BL_EINVAL);
+    assert_int_equal(bl_beacon_check_fade(&c, (bl_real)1.5), BL_EINVAL);
+    assert_int_equal(bl_beacon_check_fade(&c, (bl_real)NAN), BL_EINVAL);
+    assert_int_equal(bl_beacon_check_fade(NULL, (bl_real)0.5), BL_EINVAL);
+    assert_memory_equal(&c, &faded, sizeof c);
 }
 
 /* Bad input: BL_EINVAL and nothing changed. */
@@ -148,6 +183,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_fit_recovers_offset),
         cmocka_unit_test(test_prior_holds_unseen_axis),
+        cmocka_unit_test(test_fade_scales_the_sums),
         cmocka_unit_test(test_errors_leave_state),
         cmocka_unit_test(test_gradient_is_minus_u_over_s),
     };

@@ -59,6 +59,14 @@ int bl_beacon_check_reset(bl_beacon_check *c);
  * Errors: BL_EINVAL (NULL, a value not finite, S <= 0): *c untouched. */
 int bl_beacon_check_add(bl_beacon_check *c, const bl_real gradient[3], bl_real innovation, bl_real innovation_var);
 
+/* Forget: every sum scaled by keep (0 < keep <= 1), e.g. keep = e^(-dt/tau)
+ * before each measurement for a memory of tau seconds (an exponentially
+ * fading window: a beacon moved after a month shows within minutes). Under
+ * a fading window chi2 is about half a chi-square (its weights enter y's
+ * variance squared): the rule stays on the safe side. count is kept.
+ * Errors: BL_EINVAL (NULL, keep not in (0, 1]): *c untouched. */
+int bl_beacon_check_fade(bl_beacon_check *c, bl_real keep);
+
 /* The offset that explains the accumulated innovations (above), with the
  * prior sigma_p = prior_sigma_m (> 0, m) per axis.
  * Errors: BL_EINVAL (NULL, prior_sigma_m not > 0 or not finite, a result not finite). */
