@@ -22,7 +22,7 @@ bool beacon_check_add(struct beacon_check_set *s, unsigned b, int64_t arrival_us
         s->skipped++;
         return false;
     }
-    if (s->last_us[b] != 0 && arrival_us > s->last_us[b]) {
+    if (s->have_last[b] && arrival_us > s->last_us[b]) {
         /* fading memory: e^(-dt/tau) since this beacon's previous pulse */
         const double keep =
             exp(-(double)(arrival_us - s->last_us[b]) * 1e-6 / BEACON_CHECK_MEMORY_S);
@@ -32,8 +32,10 @@ bool beacon_check_add(struct beacon_check_set *s, unsigned b, int64_t arrival_us
         s->skipped++;
         return false;
     }
-    if (arrival_us > s->last_us[b])
-        s->last_us[b] = arrival_us;
+    /* the next fade counts from here (a clock that went back, e.g. a node
+     * restart, starts the count afresh instead of stopping the fading) */
+    s->last_us[b] = arrival_us;
+    s->have_last[b] = true;
     s->pulses++;
     return true;
 }

@@ -47,7 +47,8 @@ struct beacon_check_set {
     bl_beacon site[BL_MAX_BEACONS]; /* their site positions */
     bl_beacon_check acc[BL_MAX_BEACONS];
     uint32_t looked_at[BL_MAX_BEACONS]; /* acc[b].count when last looked at */
-    int64_t last_us[BL_MAX_BEACONS];    /* arrival of beacon b's last pulse added (0: none) */
+    int64_t last_us[BL_MAX_BEACONS];    /* arrival of beacon b's last pulse added ... */
+    bool have_last[BL_MAX_BEACONS];     /* ... when there is one */
     bool rechecked[BL_MAX_BEACONS];     /* looked at since the site was reported */
     bool reported;                      /* the site reported inconsistent, not yet agreeing again */
     bool agrees_again;                  /* set by beacon_check_poll when every beacon is back

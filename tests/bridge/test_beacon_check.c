@@ -131,7 +131,27 @@ static void test_refused_input_counted(void **state)
     assert_int_equal(s.skipped, 3);
     assert_int_equal(s.pulses, 0);
     assert_int_equal(s.acc[0].count, 0);
-    assert_int_equal(s.last_us[0], 0);
+    assert_false(s.have_last[0]);
+}
+
+/* The fading counts from each beacon's previous pulse, and from the new
+ * time after a clock that went back (a node restart) instead of stopping. */
+static void test_fading_follows_the_clock(void **state)
+{
+    (void)state;
+    static struct beacon_check_set s;
+    init_site(&s);
+    const bl_real g[3] = {(bl_real)(-1 / S_MPS), 0, 0};
+    const double one = 1.0 / (S_MPS * S_MPS * VAR_S2); /* one pulse's g g^T / S, xx */
+    assert_true(beacon_check_add(&s, 0, 1000000000, g, 0, (bl_real)VAR_S2));
+    assert_true(beacon_check_add(&s, 0, 1000000000 + 600000000, g, 0, (bl_real)VAR_S2));
+    assert_true(fabs((double)s.acc[0].info[0] - one * (1.0 + exp(-1.0))) < 1e-9 * one);
+    /* back to 10 s: no fade for the step back, then 600 s on from there */
+    assert_true(beacon_check_add(&s, 0, 10000000, g, 0, (bl_real)VAR_S2));
+    assert_true(fabs((double)s.acc[0].info[0] - one * (2.0 + exp(-1.0))) < 1e-9 * one);
+    assert_true(beacon_check_add(&s, 0, 610000000, g, 0, (bl_real)VAR_S2));
+    assert_true(fabs((double)s.acc[0].info[0] - one * (1.0 + exp(-1.0) * (2.0 + exp(-1.0)))) < 1e-9 * one);
+    assert_int_equal(s.acc[1].count, 0); /* per beacon */
 }
 
 int main(void)
@@ -140,6 +160,7 @@ int main(void)
         cmocka_unit_test(test_consistent_site_not_reported),
         cmocka_unit_test(test_moved_beacon_reported_in_minutes),
         cmocka_unit_test(test_refused_input_counted),
+        cmocka_unit_test(test_fading_follows_the_clock),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
