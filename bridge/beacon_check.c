@@ -7,11 +7,13 @@
 #include <math.h>
 #include <string.h>
 
-void beacon_check_init(struct beacon_check_set *s, const bl_config *cfg)
+void beacon_check_init(struct beacon_check_set *s, unsigned count, const bl_beacon *beacons,
+                       const char *section)
 {
     memset(s, 0, sizeof *s);
-    s->count = cfg->beacon_count <= BL_MAX_BEACONS ? cfg->beacon_count : BL_MAX_BEACONS;
-    memcpy(s->site, cfg->beacons, sizeof s->site);
+    s->section = section;
+    s->count = count <= BL_MAX_BEACONS ? count : BL_MAX_BEACONS;
+    memcpy(s->site, beacons, s->count * sizeof s->site[0]);
     for (unsigned b = 0; b < s->count; b++) (void)bl_beacon_check_reset(&s->acc[b]);
 }
 
@@ -118,12 +120,12 @@ unsigned beacon_check_poll(struct beacon_check_set *s, unsigned out[BL_MAX_BEACO
     return n;
 }
 
-void beacon_check_write_json(const struct beacon_check_set *s, FILE *f)
+void beacon_check_write_json(const struct beacon_check_set *s, const char *key, FILE *f)
 {
     fprintf(f,
-            "  \"beacon_check\": {\"pulses\": %llu, \"skipped\": %llu, \"prior_sigma_m\": %g, "
+            "  \"%s\": {\"pulses\": %llu, \"skipped\": %llu, \"prior_sigma_m\": %g, "
             "\"min_offset_m\": %g, \"chi2_limit\": %g, \"beacons\": [",
-            (unsigned long long)s->pulses, (unsigned long long)s->skipped,
+            key, (unsigned long long)s->pulses, (unsigned long long)s->skipped,
             BEACON_CHECK_PRIOR_SIGMA_M, BEACON_CHECK_MIN_OFFSET_M, BEACON_CHECK_CHI2);
     for (unsigned b = 0; b < s->count; b++) {
         bl_beacon_offset o;

@@ -43,7 +43,9 @@
 #define BEACON_CHECK_MEMORY_S 600.0
 
 struct beacon_check_set {
-    unsigned count;                 /* ultrasonic beacons of the site (0: nothing to check) */
+    const char *section; /* the site file's per-beacon section: "beacon" ([beaconN], ultrasonic)
+                            or "range_beacon" ([range_beaconN]); a static string */
+    unsigned count;      /* beacons of that kind on the site (0: nothing to check) */
     bl_beacon site[BL_MAX_BEACONS]; /* their site positions */
     bl_beacon_check acc[BL_MAX_BEACONS];
     uint32_t looked_at[BL_MAX_BEACONS]; /* acc[b].count when last looked at */
@@ -57,16 +59,19 @@ struct beacon_check_set {
     uint64_t skipped;                   /* fused pulses not added: not converged, or no gradient */
 };
 
-/* Empty, for the site's beacons (cfg->beacon_count of them). */
-void beacon_check_init(struct beacon_check_set *s, const bl_config *cfg);
+/* Empty, for count beacons at beacons[] (positions), named [<section>N] in
+ * the site file. */
+void beacon_check_init(struct beacon_check_set *s, unsigned count, const bl_beacon *beacons,
+                       const char *section);
 
 /* The localizer's pulse observer (bl_loc_pulse_observer); ctx: the set.
  * Takes the gradient and calls beacon_check_add. */
 void beacon_check_observe(void *ctx, const bl_localizer *loc, const bl_loc_pulse *pulse);
 
-/* One fused pulse of beacon b (0-based) at arrival_us: the sums faded by
- * the time since its previous one (BEACON_CHECK_MEMORY_S), then g, nu, S
- * added. false (counted in skipped) when the library refuses them. */
+/* One fused measurement of beacon b (0-based) at arrival_us (a pulse's
+ * arrival, a range's emission): the sums faded by the time since its
+ * previous one (BEACON_CHECK_MEMORY_S), then g, nu, S added. false (counted
+ * in skipped) when the library refuses them. */
 bool beacon_check_add(struct beacon_check_set *s, unsigned b, int64_t arrival_us,
                       const bl_real g[3], bl_real innovation, bl_real innovation_var);
 
@@ -83,7 +88,7 @@ bool beacon_check_fit(const struct beacon_check_set *s, unsigned b, bl_beacon_of
  * to say, and a later disagreement is reported anew. */
 unsigned beacon_check_poll(struct beacon_check_set *s, unsigned out[BL_MAX_BEACONS]);
 
-/* The stats JSON's "beacon_check" member (a line ending ",\n"). */
-void beacon_check_write_json(const struct beacon_check_set *s, FILE *f);
+/* The stats JSON's member `key` (a line ending ",\n"). */
+void beacon_check_write_json(const struct beacon_check_set *s, const char *key, FILE *f);
 
 #endif /* BRIDGE_BEACON_CHECK_H */

@@ -169,6 +169,8 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->survey = d->est.survey_on ? &d->est.survey : NULL;
     r->sonar = team_site(d) ? NULL : &d->est.sonar;
     r->beacon_check = team_site(d) || d->est.beacon_check.count == 0 ? NULL : &d->est.beacon_check;
+    r->range_beacon_check =
+        team_site(d) || d->est.range_beacon_check.count == 0 ? NULL : &d->est.range_beacon_check;
     r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;

@@ -237,6 +237,16 @@ void estimator_counts_refresh(struct estimator *e)
         sensor_counts_from_library(&e->counts, &lc, &e->loc.seq.counters);
 }
 
+/* The beacon positions' checks (beacon_check.h), empty: the ultrasonic
+ * beacons', and the range beacons' where they are typed in (a self-surveyed
+ * site's come from the survey, which has its own chi-square test). */
+static void init_beacon_checks(struct estimator *e)
+{
+    beacon_check_init(&e->beacon_check, e->blcfg.beacon_count, e->blcfg.beacons, "beacon");
+    beacon_check_init(&e->range_beacon_check, e->survey_on ? 0u : e->blcfg.range_beacon_count,
+                      e->blcfg.range_beacons, "range_beacon");
+}
+
 int estimator_init(struct estimator *e, const struct bridge_config *site, char *err, size_t errlen)
 {
     memset(e, 0, sizeof *e);
@@ -256,7 +266,7 @@ int estimator_init(struct estimator *e, const struct bridge_config *site, char *
     int rc = bl_localizer_init(&e->loc, &e->blcfg, &e->seqcfg);
     if (rc == BL_OK)
         rc = sonar_attach(&e->sonar, &e->loc.filter);
-    beacon_check_init(&e->beacon_check, &e->blcfg);
+    init_beacon_checks(e);
     if (rc == BL_OK)
         rc = bl_localizer_observe_pulses(&e->loc, beacon_check_observe, &e->beacon_check);
     if (rc != BL_OK) {
@@ -364,7 +374,7 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
     e->m_per_tick = 2.0 * M_PI * cfg->wheel_radius_m / cfg->ticks_per_rev;
     e->pulse_hold_us = estimator_pulse_hold_us(cfg);
     (void)sonar_attach(&e->sonar, &e->loc.filter);
-    beacon_check_init(&e->beacon_check, &e->blcfg); /* new geometry: checked afresh */
+    init_beacon_checks(e); /* new geometry: checked afresh */
     sync(e);
     reset_runtime(e);
     return 1;
@@ -372,18 +382,24 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
 
 /* ---- periodic --------------------------------------------------------- */
 
-/* The site's beacon positions against the pulses (beacon_check.h): once
- * inconsistent, reported once, in the log with the site file's keys of
- * every beacon over the rule, and as a STATUSTEXT. */
-static void check_beacon_positions(struct estimator *e)
+/* The site's beacon positions against the measurements (beacon_check.h):
+ * once inconsistent, reported once, in the log with the site file's keys of
+ * every beacon over the rule, and as a STATUSTEXT; said again when they
+ * agree again. what: the measurements' name ("pulses", "ranges"); tag: the
+ * STATUSTEXT's name of a beacon ("b", "rb"). */
+static void check_beacon_set(struct estimator *e, struct beacon_check_set *set, const char *what,
+                             const char *tag)
 {
+    const char *site_path = e->cfg.path[0] ? e->cfg.path : "defaults";
+    const bool ranges = set->section[0] == 'r';
+    const char *kind = ranges ? "range beacons'" : "beacons'";
+    const char *noun = ranges ? "range beacon" : "beacon"; /* the STATUSTEXT's */
     unsigned over[BL_MAX_BEACONS];
-    const unsigned n = beacon_check_poll(&e->beacon_check, over);
-    if (e->beacon_check.agrees_again) {
-        e->beacon_check.agrees_again = false;
-        log_info("%s: the beacons' positions agree with the pulses again",
-                 e->cfg.path[0] ? e->cfg.path : "defaults");
-        event(e, EST_EV_INFO, "beacon positions agree with pulses again");
+    const unsigned n = beacon_check_poll(set, over);
+    if (set->agrees_again) {
+        set->agrees_again = false;
+        log_info("%s: the %s positions agree with the %s again", site_path, kind, what);
+        event(e, EST_EV_INFO, "%s positions agree with %s again", noun, what);
     }
     if (n == 0)
         return;
@@ -394,17 +410,17 @@ static void check_beacon_positions(struct estimator *e)
     for (unsigned i = 0; i < n && len < sizeof list; i++) {
         bl_beacon_offset o;
         bool misplaced;
-        if (!beacon_check_fit(&e->beacon_check, over[i], &o, &misplaced))
+        if (!beacon_check_fit(set, over[i], &o, &misplaced))
             continue;
-        const bl_beacon *site = &e->beacon_check.site[over[i]];
+        const bl_beacon *site = &set->site[over[i]];
         int w = snprintf(
             list + len, sizeof list - len,
-            "%s[beacon%u] at (%.3f, %.3f, %.3f) the pulses say (%.3f, %.3f, %.3f) +- %.3f m "
+            "%s[%s%u] at (%.3f, %.3f, %.3f) the %s say (%.3f, %.3f, %.3f) +- %.3f m "
             "(z +- %.3f), chi2 %.0f",
-            i ? "; " : "", over[i] + 1, (double)site->x_m, (double)site->y_m, (double)site->z_m,
-            (double)(site->x_m + o.offset_m[0]), (double)(site->y_m + o.offset_m[1]),
-            (double)(site->z_m + o.offset_m[2]), fmax((double)o.sigma_m[0], (double)o.sigma_m[1]),
-            (double)o.sigma_m[2], (double)o.chi2);
+            i ? "; " : "", set->section, over[i] + 1, (double)site->x_m, (double)site->y_m,
+            (double)site->z_m, what, (double)(site->x_m + o.offset_m[0]),
+            (double)(site->y_m + o.offset_m[1]), (double)(site->z_m + o.offset_m[2]),
+            fmax((double)o.sigma_m[0], (double)o.sigma_m[1]), (double)o.sigma_m[2], (double)o.chi2);
         if (w > 0)
             len += (size_t)w;
         if ((double)o.chi2 > worst_chi2) {
@@ -412,13 +428,32 @@ static void check_beacon_positions(struct estimator *e)
             worst = over[i];
         }
     }
-    log_warn("%s: the beacons' positions disagree with the pulses: %s. One misplaced beacon "
-             "moves its neighbours' fits too: find it with `beaconloc-sim check-beacons %s "
-             "RECORDING` (a --record of this run)",
-             e->cfg.path[0] ? e->cfg.path : "defaults", list,
-             e->cfg.path[0] ? e->cfg.path : "SITE");
-    event(e, EST_EV_WARNING, "beacon positions disagree with pulses (b%u chi2 %.0f)", worst + 1,
-          worst_chi2);
+    log_warn("%s: the %s positions disagree with the %s: %s. One misplaced beacon moves its "
+             "neighbours' fits too: find it with `beaconloc-sim check-beacons %s RECORDING` (a "
+             "--record of this run)",
+             site_path, kind, what, list, e->cfg.path[0] ? e->cfg.path : "SITE");
+    event(e, EST_EV_WARNING, "%s positions disagree with %s (%s%u chi2 %.0f)", noun, what, tag,
+          worst + 1, worst_chi2);
+}
+
+void estimator_check_range(struct estimator *e, const bl_range_meas *m, const bl_fusion_result *res)
+{
+    bl_real g[3];
+    if (res->status != BL_FUSION_ACCEPTED || m->beacon_index >= e->range_beacon_check.count)
+        return;
+    if (bl_filter_range_beacon_gradient(&e->loc.filter, m->beacon_index, m->t_us,
+                                        m->time_of_flight_s, g) != BL_OK) {
+        e->range_beacon_check.skipped++;
+        return;
+    }
+    (void)beacon_check_add(&e->range_beacon_check, m->beacon_index, m->t_us, g, res->innovation,
+                           res->innovation_var);
+}
+
+static void check_beacon_positions(struct estimator *e)
+{
+    check_beacon_set(e, &e->beacon_check, "pulses", "b");
+    check_beacon_set(e, &e->range_beacon_check, "ranges", "rb");
 }
 
 void estimator_tick(struct estimator *e, int64_t local_now_us)

@@ -40,8 +40,17 @@ enum {
     RNG_BAD_TOF,        /* TimeOfFlight 0 or 65534 (saturated): dropped */
     RNG_STALE,          /* ranges older than the newest on the receiver's clock */
     RNG_UNMAPPED,       /* ranges before the reference clock (mixed site) */
+    RNG_BEACON_CHECK,   /* the section "range_beacon_check" (beacon_check.h) */
     RNG_COUNTERS
 };
+
+/* The JSON's "range_beacon_check" object (beacon_check.h; typed-in range
+ * beacons, not a team site). */
+static void write_range_beacon_check(FILE *f, const struct stats_report *r)
+{
+    if (r->range_beacon_check)
+        beacon_check_write_json(r->range_beacon_check, "range_beacon_check", f);
+}
 
 static const struct sensor_counter sensor_range_counters[RNG_COUNTERS + 1] = {
     [RNG_FUSED] = SENSOR_LOC_COUNTER("ranges_fused", SENSOR_SLOT_MEASUREMENTS, ranges_fused),
@@ -56,6 +65,9 @@ static const struct sensor_counter sensor_range_counters[RNG_COUNTERS + 1] = {
     [RNG_BAD_TOF] = SENSOR_COUNTER("ranges_bad_tof", SENSOR_SLOT_MEASUREMENTS),
     [RNG_STALE] = SENSOR_COUNTER("stale_range_samples", SENSOR_SLOT_MEASUREMENTS),
     [RNG_UNMAPPED] = SENSOR_COUNTER("unmapped_ranges", SENSOR_SLOT_MEASUREMENTS),
+    [RNG_BEACON_CHECK] = {.key = "range_beacon_check",
+                          .slot = SENSOR_SLOT_SECTIONS,
+                          .write = write_range_beacon_check},
     {0},
 };
 
@@ -112,9 +124,14 @@ static void range_of_robot(struct estimator *e, const struct frame_range *r, int
         .time_of_flight_s = (bl_real)((double)r->time_of_flight_us * 1e-6), /* us -> s */
         .tag = (uint32_t)rx_us,
     };
-    int rc = bl_localizer_range(&e->loc, &m, NULL);
+    bl_loc_status st; /* converged before this range: its innovation checks its beacon */
+    const bool converged = bl_localizer_status(&e->loc, &st) == BL_OK && st.converged;
+    bl_fusion_result res;
+    int rc = bl_localizer_range(&e->loc, &m, &res);
     if (rc != BL_OK)
         log_debug("localizer range: %s", bl_strerror(rc));
+    else if (converged)
+        estimator_check_range(e, &m, &res);
     estimator_sync(e);
 }
 

@@ -331,7 +331,7 @@ def _cmd_check_beacons(args) -> int:
     if answer is not None and args.out:
         site_xyz = [p - m for p, m in zip(answer.position_m, answer.moved_m)]
         Path(args.out).write_text(beacon_check.site_with_move(
-            site.read_text(), answer.beacon, site_xyz, answer.position_m))
+            site.read_text(), answer.section, site_xyz, answer.position_m))
     return 0 if lines[-1].startswith("beacon-check consistent") else 1
 
 
@@ -401,11 +401,12 @@ def build_parser() -> argparse.ArgumentParser:
     mp.set_defaults(func=_cmd_map)
     cb = sub.add_parser("check-beacons", help="which beacon of a site file is misplaced (a recording)",
                         description="Replay a recording (beaconloc-bridge --record, or a simulator "
-                                    "log) through the daemon with each ultrasonic beacon alone "
-                                    "moved to where its pulses put it, and say which one explains "
-                                    "the pulses (beacon_check.py). Last line: 'beacon-check "
-                                    "consistent', 'beacon-check misplaced beacon=N x_m=.. y_m=.. "
-                                    "moved_m=..' (exit 1) or 'beacon-check unresolved' (exit 1).")
+                                    "log) through the daemon with each ultrasonic or typed-in "
+                                    "range beacon alone moved to where its measurements put it, "
+                                    "and say which one explains them (beacon_check.py). Last "
+                                    "line: 'beacon-check consistent: ...' (exit 0), 'beacon-check "
+                                    "misplaced [SECTION] x_m=.. y_m=.. z_m=.. moved_m=..' (exit 1) "
+                                    "or 'beacon-check unresolved: ...' (exit 1).")
     cb.add_argument("site", help="site file path")
     cb.add_argument("log", help="candump -L recording of a run on that site")
     cb.add_argument("--bridge", metavar="PATH", help="beaconloc-bridge binary (default: on PATH, "

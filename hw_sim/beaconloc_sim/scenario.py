@@ -36,7 +36,8 @@ _KNOWN = {
     # a second robot (the Eurobot opponent): a disc on its own path, occluding bearings
     "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
-    "faults": {"encoder_silence", "kidnap", "beacon_outage", "echo_storm", "beacon_misplaced"},
+    "faults": {"encoder_silence", "kidnap", "beacon_outage", "echo_storm", "beacon_misplaced",
+               "range_beacon_misplaced"},
     "output": {"truth_rate_hz", "log_epoch_s", "channel"},
     # [obstacles]: segmentN = x1_m, y1_m, x2_m, y2_m
 }
@@ -294,7 +295,8 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
             raise ini.error("faults", key,
                             f"expected 'start_s, duration_s, id[, id...]' with ids 1..{site.beacon_count}")
         outages.append((vals[0], vals[1], tuple(int(v) for v in vals[2:])))
-    site = _misplace_beacons(ini, site, fault_keys["beacon_misplaced"])
+    site = _misplace_beacons(ini, site, fault_keys["beacon_misplaced"], "beacons_m")
+    site = _misplace_beacons(ini, site, fault_keys["range_beacon_misplaced"], "range_beacons_m")
     silences = []
     for key in fault_keys["encoder_silence"]:
         s = ini.numbers("faults", key, 2)
@@ -473,21 +475,23 @@ def _repeated(ini: IniFile, sec: str, segments: list, realization_s: float) -> l
     return segments
 
 
-def _misplace_beacons(ini: IniFile, site, keys: list[str]):
-    """[faults] beacon_misplaced = id, dx_m, dy_m[, dz_m]: the ultrasonic beacon stands that far
-    from where the site file says. The physics (and the truth's bound) take the moved beacon; the
-    site file, which the bridge reads, keeps the written one: a tape-measure error of the site
-    (docs/bridge.md, "Beacon positions checked against the pulses")."""
+def _misplace_beacons(ini: IniFile, site, keys: list[str], attr: str):
+    """[faults] beacon_misplaced = id, dx_m, dy_m[, dz_m] (attr beacons_m: an ultrasonic beacon)
+    or range_beacon_misplaced (attr range_beacons_m: a range beacon): the beacon stands that far
+    from where the site file says. The physics (and the truth's bound) take the moved beacon;
+    the site file, which the bridge reads, keeps the written one: a tape-measure error of the
+    site (docs/bridge.md, "Beacon positions checked against the measurements")."""
     if not keys:
         return site
-    moved = site.beacons_m.copy()
+    moved = np.array(getattr(site, attr), dtype=float).copy()
+    count = len(moved)
     seen = set()
     for key in keys:
         vals = ini.numbers("faults", key)
-        if len(vals) not in (3, 4) or vals[0] != int(vals[0]) or \
-                not 1 <= vals[0] <= site.beacon_count:
-            raise ini.error("faults", key, "expected 'id, dx_m, dy_m[, dz_m]' with id "
-                            f"1..{site.beacon_count}")
+        if len(vals) not in (3, 4) or vals[0] != int(vals[0]) or not 1 <= vals[0] <= count:
+            why = (f"expected 'id, dx_m, dy_m[, dz_m]' with id 1..{count}" if count
+                   else "the site has no such beacons")
+            raise ini.error("faults", key, why)
         b = int(vals[0])
         if b in seen:
             raise ini.error("faults", key, f"beacon {b} misplaced twice")
@@ -497,7 +501,9 @@ def _misplace_beacons(ini: IniFile, site, keys: list[str]):
         if not (0 <= x <= site.room_x_m and 0 <= y <= site.room_y_m and 0 <= z <= site.room_z_m):
             raise ini.error("faults", key, f"beacon {b} moved to ({x:g}, {y:g}, {z:g}) m: "
                             "outside the room")
-    return dataclasses.replace(site, beacons_m=moved)
+    if attr == "beacons_m":
+        return dataclasses.replace(site, beacons_m=moved)
+    return dataclasses.replace(site, kind_values={**site.kind_values, attr: moved})
 
 
 def _fault_keys(ini: IniFile, known=None) -> dict[str, list[str]]:

@@ -254,6 +254,34 @@ extern "C" int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, i
     return rc;
 }
 
+extern "C" int bl_filter_range_beacon_gradient(const bl_filter *f, uint32_t range_beacon_index, int64_t t_us,
+                                               bl_real time_of_flight_s, bl_real d_tof_d_beacon_s_per_m[3])
+{
+    if (f == nullptr || d_tof_d_beacon_s_per_m == nullptr) return BL_EINVAL;
+    if (!started(f)) return BL_ENOTINIT;
+    const bl_config *cfg = &f->cfg_;
+    const uint32_t j = range_beacon_index;
+    if (j >= cfg->range_beacon_count || j >= BL_MAX_BEACONS) return BL_EBEACON;
+    if (!is_finite(time_of_flight_s) || time_of_flight_s < real(0)) return BL_EINVAL;
+    int64_t d_us;
+    if (!bl::sub_us(t_us, f->t_us_, &d_us) || d_us > int64_t(1e12) || d_us < -int64_t(1e12)) return BL_ETIME;
+    const real dt_s = bl::us_to_s(d_us) + time_of_flight_s;  // the reception, as fuse_started
+    if (!(std::fabs(dt_s) <= cfg->max_predict_gap_s)) return BL_ETIME;
+    const VX x = state(f);
+    real h;
+    RX H;
+    if (!range_model(cfg, j, dt_s, x, &h, &H, nullptr)) return BL_EINVAL;
+    // h = d/s: ∂h/∂b = -∂h/∂(receiver) = -(dx, dy, dz)/(d s); the receiver's
+    // x, y rows are H's (range_model_at), its z row -dz/(d s) with d s = h s².
+    const real ds = h * x(S) * x(S);
+    const real dz = cfg->range.height_m - cfg->range_beacons[j].z_m;
+    const real g[3] = {-H(X), -H(Y), -dz / ds};
+    for (real v : g)
+        if (!is_finite(v)) return BL_EINVAL;
+    for (int i = 0; i < 3; ++i) d_tof_d_beacon_s_per_m[i] = g[i];
+    return BL_OK;
+}
+
 extern "C" int bl_model_range(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t range_beacon_index,
                               bl_real dt_s, bl_real *h_s, bl_real H[BL_FILTER_NX])
 {

@@ -30,13 +30,14 @@ def moved(tmp_path_factory):
     return log, true_site
 
 
-def replay(bridge_bin, site, log, tmp_path):
+def replay(bridge_bin, site, log, tmp_path, key="beacon_check"):
+    """The daemon's stderr and its stats' check `key` of one replay."""
     stats = tmp_path / f"{site.stem}.json"
     proc = subprocess.run([str(bridge_bin), "--site", str(site), "--replay", str(log), "--stats",
                            str(stats), "--mavlink", "udpout:127.0.0.1:9", "--status-interval", "0"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    return proc.stderr, json.loads(stats.read_text())["beacon_check"]
+    return proc.stderr, json.loads(stats.read_text())[key]
 
 
 def test_misplaced_beacon_reported(bridge_bin, moved, tmp_path):
@@ -45,7 +46,7 @@ def test_misplaced_beacon_reported(bridge_bin, moved, tmp_path):
     warnings = [line for line in err.splitlines() if WARNING in line]
     assert len(warnings) == 1, err[-3000:]  # once
     assert str(SITE) in warnings[0] and "[beacon3]" in warnings[0]
-    assert "beacon positions disagree with pulses" in err  # the STATUSTEXT's event
+    assert "warning: beacon positions disagree with pulses (b" in err  # the STATUSTEXT's event
     b3 = check["beacons"][2]
     assert b3["beacon"] == 3 and b3["misplaced"] and b3["chi2"] > check["chi2_limit"]
     # the fit points the way the beacon moved (+x, -y), if short of it
@@ -71,9 +72,9 @@ def test_check_beacons_finds_it(bridge_bin, moved, tmp_path):
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1, proc.stdout + proc.stderr
     last = proc.stdout.strip().splitlines()[-1]
-    m = re.fullmatch(r"beacon-check misplaced beacon=(\d+) x_m=(\S+) y_m=(\S+) z_m=(\S+) "
+    m = re.fullmatch(r"beacon-check misplaced \[(\w+)\] x_m=(\S+) y_m=(\S+) z_m=(\S+) "
                      r"moved_m=(\S+)", last)
-    assert m and m.group(1) == "3", proc.stdout
+    assert m and m.group(1) == "beacon3", proc.stdout
     x, y = float(m.group(2)), float(m.group(3))
     assert abs(x - TRUE_B3[0]) < 0.05 and abs(y - TRUE_B3[1]) < 0.05, last
     # z: no pulse sees it (every beacon and receiver at 1 m): it stays where the file says
@@ -89,3 +90,32 @@ def test_check_beacons_finds_it(bridge_bin, moved, tmp_path):
                                          str(bridge_bin)], capture_output=True, text=True, timeout=300)
     assert ok.returncode == 0 and ok.stdout.strip().endswith(
         "beacon-check consistent: every beacon where the site file says"), ok.stdout + ok.stderr
+
+
+def test_misplaced_range_beacon(bridge_bin, tmp_path):
+    """misplaced-range-beacon (marvelmind's range beacon 2 11 cm from where the file says):
+    the daemon's range check warns once naming [range_beaconN], quiet on marvelmind itself;
+    check-beacons finds range beacon 2 (seed 1; on other seeds it may leave two candidates,
+    docs/bridge.md)."""
+    site = SITE.parent / "marvelmind.ini"
+    (tmp_path / "moved").mkdir()
+    (tmp_path / "nominal").mkdir()
+    log, _ = run_sim(tmp_path / "moved", "misplaced-range-beacon", 60, seed=1)
+    err, check = replay(bridge_bin, site, log, tmp_path, "range_beacon_check")
+    warnings = [line for line in err.splitlines()
+                if "the range beacons' positions disagree with the ranges" in line]
+    assert len(warnings) == 1 and "[range_beacon" in warnings[0], err[-3000:]
+    assert "warning: range beacon positions disagree with ranges (rb" in err
+    assert check["pulses"] > 500 and check["beacons"][1]["chi2"] > check["chi2_limit"]
+    proc = subprocess.run(sim_command() + ["check-beacons", str(site), str(log), "--bridge",
+                                           str(bridge_bin)], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    m = re.fullmatch(r"beacon-check misplaced \[range_beacon2\] x_m=(\S+) y_m=(\S+) z_m=(\S+) "
+                     r"moved_m=\S+", proc.stdout.strip().splitlines()[-1])
+    assert m, proc.stdout
+    assert abs(float(m.group(1)) - 5.82) < 0.05 and abs(float(m.group(2)) - 0.17) < 0.05
+    nominal, _ = run_sim(tmp_path / "nominal", "marvelmind", 60, seed=1)
+    err, check = replay(bridge_bin, site, nominal, tmp_path, "range_beacon_check")
+    assert "positions disagree" not in err
+    assert max(b["chi2"] for b in check["beacons"]) < check["chi2_limit"]

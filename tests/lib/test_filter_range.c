@@ -480,6 +480,56 @@ static void test_errors_leave_state_identical(void **state)
     assert_memory_equal(&g, &gref, sizeof g);
 }
 
+/* A range's gradient in its beacon's position (bl_filter_range_beacon_gradient,
+ * the beacon positions' check): against central differences of the range
+ * model with the beacon moved (bl_model_range), at every beacon; the filter
+ * unchanged; its errors. */
+static void test_beacon_gradient_vs_finite_differences(void **state)
+{
+    (void)state;
+    static bl_filter f, ref;
+    bl_config cfg;
+    converged_range_filter(&f, &cfg);
+    bl_real x[NX];
+    assert_int_equal(bl_filter_get_state(&f, x, NULL), BL_OK);
+    bl_estimate est;
+    assert_int_equal(bl_filter_estimate(&f, &est), BL_OK);
+    const int64_t t = est.t_us + 20000; /* emitted 20 ms after the state time */
+    const double eps = IS_FLOAT ? 1e-2 : 1e-5;
+    ref = f;
+    for (uint32_t j = 0; j < MM_BEACONS; ++j) {
+        const bl_real tof = (bl_real)mm_tof(&cfg, 5.0, (int)j);
+        bl_real g[3];
+        assert_int_equal(bl_filter_range_beacon_gradient(&f, j, t, tof, g), BL_OK);
+        assert_memory_equal(&f, &ref, sizeof f);
+        const bl_real dt_s = (bl_real)(0.02 + (double)tof);
+        for (int i = 0; i < 3; ++i) {
+            bl_config c = cfg;
+            bl_real *coord = i == 0 ? &c.range_beacons[j].x_m : i == 1 ? &c.range_beacons[j].y_m
+                                                                  : &c.range_beacons[j].z_m;
+            const bl_real b0 = *coord;
+            bl_real hp, hm;
+            *coord = (bl_real)(b0 + eps);
+            assert_int_equal(bl_model_range(&c, x, j, dt_s, &hp, NULL), BL_OK);
+            *coord = (bl_real)(b0 - eps);
+            assert_int_equal(bl_model_range(&c, x, j, dt_s, &hm, NULL), BL_OK);
+            const double fd = ((double)hp - (double)hm) / (2 * eps);
+            assert_true(fabs((double)g[i] - fd) < (IS_FLOAT ? 2e-2 : 1e-6) * (1.0 / 343.0));
+        }
+    }
+    bl_real g[3];
+    assert_int_equal(bl_filter_range_beacon_gradient(NULL, 0, t, (bl_real)0.01, g), BL_EINVAL);
+    assert_int_equal(bl_filter_range_beacon_gradient(&f, 0, t, (bl_real)0.01, NULL), BL_EINVAL);
+    assert_int_equal(bl_filter_range_beacon_gradient(&f, MM_BEACONS, t, (bl_real)0.01, g), BL_EBEACON);
+    assert_int_equal(bl_filter_range_beacon_gradient(&f, 0, t, (bl_real)NAN, g), BL_EINVAL);
+    assert_int_equal(bl_filter_range_beacon_gradient(&f, 0, t, (bl_real)-0.01, g), BL_EINVAL);
+    assert_int_equal(bl_filter_range_beacon_gradient(&f, 0, t + 3600000000LL, (bl_real)0.01, g), BL_ETIME);
+    assert_memory_equal(&f, &ref, sizeof f);
+    static bl_filter g0;
+    assert_int_equal(bl_filter_init(&g0, &cfg), BL_OK);
+    assert_int_equal(bl_filter_range_beacon_gradient(&g0, 0, t, (bl_real)0.01, g), BL_ENOTINIT);
+}
+
 /* The trilateration start: a fix from the 4 beacons, heading from
  * cfg, the speed of sound's uncertainty in the position covariance (its
  * cross-covariance with s kept), and a window that leaves out an old range. */
@@ -731,6 +781,7 @@ int main(void)
         cmocka_unit_test(test_multipath_rejected_and_counted),
         cmocka_unit_test(test_standing_unknown_heading_rejects_multipath),
         cmocka_unit_test(test_errors_leave_state_identical),
+        cmocka_unit_test(test_beacon_gradient_vs_finite_differences),
         cmocka_unit_test(test_start_from_ranges),
         cmocka_unit_test(test_mixed_site_pulses_and_ranges),
         cmocka_unit_test(test_config_errors_named),

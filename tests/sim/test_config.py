@@ -145,6 +145,8 @@ def test_bridge_and_tuning_sections_are_left_to_the_bridge(tmp_path):
      "beacon 3 moved to (6, 12.15, 1) m: outside the room"),
     (GOOD_BODY + "[faults]\nbeacon_misplaced = 3, 0, -0.1\nbeacon_misplaced2 = 3, 0.1, 0\n", 9,
      "faults", "beacon_misplaced2", "beacon 3 misplaced twice"),
+    (GOOD_BODY + "[faults]\nrange_beacon_misplaced = 1, 0.1, 0\n", 8, "faults",
+     "range_beacon_misplaced", "the site has no such beacons"),
     (GOOD_BODY + "[acoustics]\nechoes = 3\n", 8, "acoustics", "echoes", "unknown key"),
     (GOOD_BODY + "[environment]\ntemperature_profile = 0:20, 10\n", 8, "environment",
      "temperature_profile", "expected 't_s:temperature_c"),

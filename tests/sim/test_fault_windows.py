@@ -234,3 +234,15 @@ def test_misplaced_beacon_moves_the_physics_not_the_site_file(make_scenario):
     assert np.array_equal(a.truth["x_m"], b.truth["x_m"])   # the same path
     assert not np.array_equal(a.frames.t_s, b.frames.t_s)   # other arrivals
 
+
+def test_misplaced_range_beacon_moves_the_physics_not_the_site_file():
+    """[faults] range_beacon_misplaced (the built-in misplaced-range-beacon): the range beacon
+    stands elsewhere than marvelmind.ini says, the written site keeps it."""
+    from beaconloc_sim.site import load_site
+    scn = load_scenario("misplaced-range-beacon")
+    written = load_site(scn.site.path)
+    moved = np.asarray(scn.site.range_beacons_m) - np.asarray(written.range_beacons_m)
+    assert np.allclose(moved[1], [-0.08, 0.07, 0.0])
+    assert np.allclose(np.delete(moved, 1, axis=0), 0.0)
+    assert np.array_equal(scn.site.beacons_m, written.beacons_m)
+

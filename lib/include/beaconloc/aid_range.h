@@ -194,6 +194,18 @@ int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us
  * non-finite fix). */
 int bl_filter_start_ranges(bl_filter *f);
 
+/* How a time of flight moves with its range beacon's position, at the
+ * filter's state: ∂h/∂(x_b, y_b, z_b) (s/m) of the range from beacon
+ * range_beacon_index emitted at t_us and heard time_of_flight_s later (the
+ * range model above, h = d/s, differentiated in the beacon: -(receiver -
+ * beacon)/(d s)). For checking the site's range beacon positions
+ * (beacon_check.h). Changes nothing. Errors: BL_EINVAL (NULL, time of
+ * flight not finite or negative, the model undefined there), BL_ENOTINIT
+ * (not started), BL_EBEACON, BL_ETIME (the reception more than
+ * cfg.max_predict_gap_s from the state time). */
+int bl_filter_range_beacon_gradient(const bl_filter *f, uint32_t range_beacon_index, int64_t t_us,
+                                    bl_real time_of_flight_s, bl_real d_tof_d_beacon_s_per_m[3]);
+
 /* The range model at state x (tests, diagnostics): the time of flight h_s
  * (s) from range beacon range_beacon_index to the receiver at dt_s (s)
  * after the state time, and H = ∂h/∂x (s per unit of each state; may be
