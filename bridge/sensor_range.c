@@ -126,7 +126,8 @@ static void range_of_robot(struct estimator *e, const struct frame_range *r, int
     };
     bl_loc_status st; /* converged before this range: its innovation checks its beacon */
     const bool converged = bl_localizer_status(&e->loc, &st) == BL_OK && st.converged;
-    bl_fusion_result res;
+    /* a range the filter refuses returns BL_OK without a result: none, then */
+    bl_fusion_result res = {.status = BL_FUSION_DROPPED};
     int rc = bl_localizer_range(&e->loc, &m, &res);
     if (rc != BL_OK)
         log_debug("localizer range: %s", bl_strerror(rc));
