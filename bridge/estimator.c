@@ -399,7 +399,7 @@ static void check_beacon_set(struct estimator *e, struct beacon_check_set *set, 
     if (set->agrees_again) {
         set->agrees_again = false;
         log_info("%s: the %s positions agree with the %s again", site_path, kind, what);
-        event(e, EST_EV_INFO, "%s positions agree with %s again", noun, what);
+        event(e, EST_EV_INFO, "%s positions agree again", noun); /* STATUSTEXT: <= 50 chars */
     }
     if (n == 0)
         return;
@@ -432,8 +432,8 @@ static void check_beacon_set(struct estimator *e, struct beacon_check_set *set, 
              "neighbours' fits too: find it with `beaconloc-sim check-beacons %s RECORDING` (a "
              "--record of this run)",
              site_path, kind, what, list, e->cfg.path[0] ? e->cfg.path : "SITE");
-    event(e, EST_EV_WARNING, "%s positions disagree with %s (%s%u chi2 %.0f)", noun, what, tag,
-          worst + 1, worst_chi2);
+    event(e, EST_EV_WARNING, "%s positions disagree: %s%u chi2 %.0f", noun, tag, worst + 1,
+          worst_chi2); /* STATUSTEXT: <= 50 characters (docs/mavlink.md) */
 }
 
 void estimator_check_range(struct estimator *e, const bl_range_meas *m, const bl_fusion_result *res)
