@@ -378,6 +378,63 @@ static void test_misnumbering_resyncs(void **state) {
     unload(&r);
 }
 
+/* The pulse observer (bl_localizer_observe_pulses): every arrival fused
+ * into a running filter or gated out, numbering errors not; the filter
+ * already updated (its beacon gradient taken there); cleared by init. */
+typedef struct {
+    slip_ctx slip;
+    unsigned accepted, rejected, converged, gradients, bad;
+} observe_ctx;
+
+static void observed(void *ctx, const bl_localizer *loc, const bl_loc_pulse *p) {
+    observe_ctx *o = ctx;
+    if (p->beacon_index >= 6 || p->receiver_index >= 8) o->bad++;
+    if (p->result.status == BL_FUSION_ACCEPTED) {
+        o->accepted++;
+        bl_real g[3];
+        if (bl_filter_pulse_beacon_gradient(&loc->filter, p->beacon_index, p->arrival_us, p->receiver_index, g) ==
+                BL_OK &&
+            fabs(hypot((double)g[0], (double)g[1]) * 343.0 - 1.0) < 0.05)  /* |g| = 1/s, the ring and beacons at 1 m */
+            o->gradients++;
+    } else if (p->result.status == BL_FUSION_REJECTED) {
+        o->rejected++;
+    } else {
+        o->bad++;
+    }
+    if (p->converged) o->converged++;
+}
+
+static void observe_hook(bl_localizer *loc, const run_t *r, size_t i, void *ctx) {
+    if (i == 0) assert_int_equal(bl_localizer_observe_pulses(loc, observed, ctx), BL_OK);
+    slip_hook(loc, r, i, &((observe_ctx *)ctx)->slip);
+}
+
+static void test_pulse_observer(void **state) {
+    (void)state;
+    run_t r;
+    load(&r, "encoder-silence");
+    stats_t s;
+    observe_ctx o = {{21.5, false}, 0, 0, 0, 0, 0};
+    feed(&LOC, &r, &s, observe_hook, &o);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    assert_true(c.numbering_errors >= 2); /* the slip: misnumbered arrivals, not passed on */
+    assert_int_equal(o.bad, 0);
+    assert_int_equal(o.rejected + c.numbering_errors, c.pulses_rejected);
+    /* pulses_accepted also counts the one that started the filter (STARTED) */
+    assert_int_equal(s.events[BL_LOC_EV_RESET], 0);
+    assert_int_equal(o.accepted + 1, c.pulses_accepted);
+    assert_int_equal(o.gradients, o.accepted);
+    assert_true(o.converged > o.accepted / 2 && o.converged <= o.accepted + o.rejected);
+    /* NULL stops it; init clears it */
+    const unsigned before = o.accepted;
+    assert_int_equal(bl_localizer_observe_pulses(&LOC, NULL, &o), BL_OK);
+    assert_int_equal(bl_localizer_observe_pulses(NULL, observed, &o), BL_EINVAL);
+    feed(&LOC, &r, &s, NULL, NULL);
+    assert_int_equal(o.accepted, before);
+    unload(&r);
+}
+
 /* Errors are bad arguments only, and leave the object byte-identical. */
 static void test_errors_leave_it_untouched(void **state) {
     (void)state;
@@ -834,6 +891,7 @@ int main(void) {
         cmocka_unit_test(test_kidnap_restarts_once),
         cmocka_unit_test(test_silence_coasts),
         cmocka_unit_test(test_misnumbering_resyncs),
+        cmocka_unit_test(test_pulse_observer),
         cmocka_unit_test(test_mixed_site_counts_both),
         cmocka_unit_test(test_bearing_only_site),
         cmocka_unit_test(test_bearing_only_kidnap_restarts),
