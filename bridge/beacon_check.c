@@ -1,5 +1,5 @@
 /*
- * beaconloc-bridge — the site's beacon positions checked against the pulses
+ * beaconloc-bridge — the site's beacon positions checked against the measurements
  * (beacon_check.h).
  */
 #include "beacon_check.h"
@@ -38,26 +38,34 @@ bool beacon_check_add(struct beacon_check_set *s, unsigned b, int64_t arrival_us
      * restart, starts the count afresh instead of stopping the fading) */
     s->last_us[b] = arrival_us;
     s->have_last[b] = true;
-    s->pulses++;
+    s->measurements++;
     return true;
+}
+
+void beacon_check_measurement(struct beacon_check_set *s, unsigned b, int64_t t_us, bool converged,
+                              int gradient_rc, const bl_real g[3], const bl_fusion_result *res)
+{
+    if (res->status != BL_FUSION_ACCEPTED || b >= s->count)
+        return;
+    /* Converged only: the start-up's wide sigma and its large corrections
+     * say more about the start than about the beacon. */
+    if (!converged || gradient_rc != BL_OK) {
+        s->skipped++;
+        return;
+    }
+    (void)beacon_check_add(s, b, t_us, g, res->innovation, res->innovation_var);
 }
 
 void beacon_check_observe(void *ctx, const bl_localizer *loc, const bl_loc_pulse *p)
 {
     struct beacon_check_set *s = ctx;
-    if (p->result.status != BL_FUSION_ACCEPTED || p->beacon_index >= s->count)
-        return;
-    /* Converged only: the start-up's wide sigma and its large corrections
-     * say more about the start than about the beacon. */
-    bl_real g[3];
-    if (!p->converged ||
-        bl_filter_pulse_beacon_gradient(&loc->filter, p->beacon_index, p->arrival_us,
-                                        p->receiver_index, g) != BL_OK) {
-        s->skipped++;
-        return;
-    }
-    (void)beacon_check_add(s, p->beacon_index, p->arrival_us, g, p->result.innovation,
-                           p->result.innovation_var);
+    bl_real g[3] = {0, 0, 0};
+    const int grc =
+        p->result.status == BL_FUSION_ACCEPTED && p->converged && p->beacon_index < s->count
+            ? bl_filter_pulse_beacon_gradient(&loc->filter, p->beacon_index, p->arrival_us,
+                                              p->receiver_index, g)
+            : BL_EINVAL;
+    beacon_check_measurement(s, p->beacon_index, p->arrival_us, p->converged, grc, g, &p->result);
 }
 
 /* The offset's length, m: z stays near the prior's 0 where no pulse sees it
@@ -123,15 +131,16 @@ unsigned beacon_check_poll(struct beacon_check_set *s, unsigned out[BL_MAX_BEACO
 void beacon_check_write_json(const struct beacon_check_set *s, const char *key, FILE *f)
 {
     fprintf(f,
-            "  \"%s\": {\"pulses\": %llu, \"skipped\": %llu, \"prior_sigma_m\": %g, "
+            "  \"%s\": {\"measurements\": %llu, \"skipped\": %llu, \"prior_sigma_m\": %g, "
             "\"min_offset_m\": %g, \"chi2_limit\": %g, \"beacons\": [",
-            key, (unsigned long long)s->pulses, (unsigned long long)s->skipped,
+            key, (unsigned long long)s->measurements, (unsigned long long)s->skipped,
             BEACON_CHECK_PRIOR_SIGMA_M, BEACON_CHECK_MIN_OFFSET_M, BEACON_CHECK_CHI2);
     for (unsigned b = 0; b < s->count; b++) {
         bl_beacon_offset o;
         bool misplaced = false;
         const bool have = beacon_check_fit(s, b, &o, &misplaced);
-        fprintf(f, "%s\n    {\"beacon\": %u, \"pulses\": %u", b ? "," : "", b + 1, s->acc[b].count);
+        fprintf(f, "%s\n    {\"beacon\": %u, \"measurements\": %u", b ? "," : "", b + 1,
+                s->acc[b].count);
         if (have)
             fprintf(
                 f,

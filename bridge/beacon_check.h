@@ -55,8 +55,8 @@ struct beacon_check_set {
     bool reported;                      /* the site reported inconsistent, not yet agreeing again */
     bool agrees_again;                  /* set by beacon_check_poll when every beacon is back
                                            within the rule after a report (the caller says so) */
-    uint64_t pulses;                    /* pulses added */
-    uint64_t skipped;                   /* fused pulses not added: not converged, or no gradient */
+    uint64_t measurements;              /* measurements added */
+    uint64_t skipped;                   /* fused ones not added: not converged, or no gradient */
 };
 
 /* Empty, for count beacons at beacons[] (positions), named [<section>N] in
@@ -74,6 +74,14 @@ void beacon_check_observe(void *ctx, const bl_localizer *loc, const bl_loc_pulse
  * in skipped) when the library refuses them. */
 bool beacon_check_add(struct beacon_check_set *s, unsigned b, int64_t arrival_us,
                       const bl_real g[3], bl_real innovation, bl_real innovation_var);
+
+/* A measurement of beacon b the localizer returned (*res) while the filter
+ * was converged before it (converged), with the library's gradient of it in
+ * the beacon's position (gradient_rc its return, g the gradient): added when
+ * ACCEPTED and the gradient BL_OK, counted in skipped when ACCEPTED without
+ * one, else nothing. The ranges' and bearings' handlers call it. */
+void beacon_check_measurement(struct beacon_check_set *s, unsigned b, int64_t t_us, bool converged,
+                              int gradient_rc, const bl_real g[3], const bl_fusion_result *res);
 
 /* Beacon b's fit (0-based); *misplaced by the rule above. false when it has
  * none (no pulse yet, or the library refused). */

@@ -171,6 +171,9 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->beacon_check = team_site(d) || d->est.beacon_check.count == 0 ? NULL : &d->est.beacon_check;
     r->range_beacon_check =
         team_site(d) || d->est.range_beacon_check.count == 0 ? NULL : &d->est.range_beacon_check;
+    r->bearing_beacon_check = team_site(d) || d->est.bearing_beacon_check.count == 0
+                                  ? NULL
+                                  : &d->est.bearing_beacon_check;
     r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;

@@ -245,6 +245,8 @@ static void init_beacon_checks(struct estimator *e)
     beacon_check_init(&e->beacon_check, e->blcfg.beacon_count, e->blcfg.beacons, "beacon");
     beacon_check_init(&e->range_beacon_check, e->survey_on ? 0u : e->blcfg.range_beacon_count,
                       e->blcfg.range_beacons, "range_beacon");
+    beacon_check_init(&e->bearing_beacon_check, e->blcfg.bearing_beacon_count,
+                      e->blcfg.bearing_beacons, "bearing_beacon");
 }
 
 int estimator_init(struct estimator *e, const struct bridge_config *site, char *err, size_t errlen)
@@ -391,9 +393,12 @@ static void check_beacon_set(struct estimator *e, struct beacon_check_set *set, 
                              const char *tag)
 {
     const char *site_path = e->cfg.path[0] ? e->cfg.path : "defaults";
-    const bool ranges = set->section[0] == 'r';
-    const char *kind = ranges ? "range beacons'" : "beacons'";
-    const char *noun = ranges ? "range beacon" : "beacon"; /* the STATUSTEXT's */
+    const bool ranges = strncmp(set->section, "range", 5) == 0;
+    const bool bearings = strncmp(set->section, "bearing", 7) == 0;
+    const char *kind = ranges ? "range beacons'" : bearings ? "bearing beacons'" : "beacons'";
+    const char *noun = ranges     ? "range beacon"
+                       : bearings ? "bearing beacon"
+                                  : "beacon"; /* STATUSTEXT */
     unsigned over[BL_MAX_BEACONS];
     const unsigned n = beacon_check_poll(set, over);
     if (set->agrees_again) {
@@ -436,24 +441,11 @@ static void check_beacon_set(struct estimator *e, struct beacon_check_set *set, 
           worst_chi2); /* STATUSTEXT: <= 50 characters (docs/mavlink.md) */
 }
 
-void estimator_check_range(struct estimator *e, const bl_range_meas *m, const bl_fusion_result *res)
-{
-    bl_real g[3];
-    if (res->status != BL_FUSION_ACCEPTED || m->beacon_index >= e->range_beacon_check.count)
-        return;
-    if (bl_filter_range_beacon_gradient(&e->loc.filter, m->beacon_index, m->t_us,
-                                        m->time_of_flight_s, g) != BL_OK) {
-        e->range_beacon_check.skipped++;
-        return;
-    }
-    (void)beacon_check_add(&e->range_beacon_check, m->beacon_index, m->t_us, g, res->innovation,
-                           res->innovation_var);
-}
-
 static void check_beacon_positions(struct estimator *e)
 {
     check_beacon_set(e, &e->beacon_check, "pulses", "b");
     check_beacon_set(e, &e->range_beacon_check, "ranges", "rb");
+    check_beacon_set(e, &e->bearing_beacon_check, "bearings", "bb");
 }
 
 void estimator_tick(struct estimator *e, int64_t local_now_us)

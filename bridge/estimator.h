@@ -233,9 +233,9 @@ struct estimator {
      * (bridge/beacon_check.h; the localizer's pulse observer writes it: the
      * estimator does not move once initialised) */
     struct beacon_check_set beacon_check;
-    /* the same for typed-in range beacons, fed by the range handler
-     * (sensor_range.c: estimator_check_range) */
-    struct beacon_check_set range_beacon_check;
+    /* the same for typed-in range beacons and for bearing beacons, fed by
+     * their handlers (sensor_range.c, sensor_bearing.c: beacon_check_measurement) */
+    struct beacon_check_set range_beacon_check, bearing_beacon_check;
 };
 
 /*
@@ -376,11 +376,6 @@ int64_t estimator_pulse_hold_us(const struct bridge_config *cfg);
 /* The current estimate at the filter's state time (at_local_us = 0) or
  * extrapolated to local time at_local_us (constant velocity). */
 int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_output *out);
-
-/* A range the localizer fused (*res, its result), while the filter was
- * converged before it: into its range beacon's position check. */
-void estimator_check_range(struct estimator *e, const bl_range_meas *m,
-                           const bl_fusion_result *res);
 
 /* Queue an event (STATUSTEXT) with this text, or with text from fmt. */
 void estimator_event(struct estimator *e, enum est_event_severity sev, const char *text);

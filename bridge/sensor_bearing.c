@@ -36,8 +36,17 @@ enum {
     BRG_UNEXPECTED,     /* bearing frames on a site without bearing beacons */
     BRG_STALE,          /* bearings older than the newest on the sensor's clock */
     BRG_UNMAPPED,       /* bearings before the reference clock (mixed site) */
+    BRG_BEACON_CHECK,   /* the section "bearing_beacon_check" (beacon_check.h) */
     BRG_COUNTERS
 };
+
+/* The JSON's "bearing_beacon_check" object (beacon_check.h; a site with
+ * bearing beacons). */
+static void write_bearing_beacon_check(FILE *f, const struct stats_report *r)
+{
+    if (r->bearing_beacon_check)
+        beacon_check_write_json(r->bearing_beacon_check, "bearing_beacon_check", f);
+}
 
 static const struct sensor_counter sensor_bearing_counters[BRG_COUNTERS + 1] = {
     [BRG_FUSED] = SENSOR_LOC_COUNTER("bearings_fused", SENSOR_SLOT_MEASUREMENTS, bearings_fused),
@@ -51,6 +60,9 @@ static const struct sensor_counter sensor_bearing_counters[BRG_COUNTERS + 1] = {
     [BRG_UNEXPECTED] = SENSOR_COUNTER("bearings_unexpected", SENSOR_SLOT_MEASUREMENTS),
     [BRG_STALE] = SENSOR_COUNTER("stale_bearing_samples", SENSOR_SLOT_MEASUREMENTS),
     [BRG_UNMAPPED] = SENSOR_COUNTER("unmapped_bearings", SENSOR_SLOT_MEASUREMENTS),
+    [BRG_BEACON_CHECK] = {.key = "bearing_beacon_check",
+                          .slot = SENSOR_SLOT_SECTIONS,
+                          .write = write_bearing_beacon_check},
     {0},
 };
 
@@ -90,9 +102,20 @@ static void sensor_bearing_handle(struct estimator *e, const struct frame *f, in
         .bearing_rad = (bl_real)(b->bearing_deg * (M_PI / 180.0)),
         .tag = (uint32_t)rx_us,
     };
-    int rc = bl_localizer_bearing(&e->loc, &m, NULL);
-    if (rc != BL_OK)
+    bl_loc_status st; /* converged before this bearing: its innovation checks its beacon */
+    const bool converged = bl_localizer_status(&e->loc, &st) == BL_OK && st.converged;
+    /* a bearing the filter refuses returns BL_OK without a result: none, then */
+    bl_fusion_result res = {.status = BL_FUSION_DROPPED};
+    int rc = bl_localizer_bearing(&e->loc, &m, &res);
+    if (rc != BL_OK) {
         log_debug("localizer bearing: %s", bl_strerror(rc));
+    } else if (res.status == BL_FUSION_ACCEPTED) {
+        bl_real g[3];
+        const int grc =
+            bl_filter_bearing_beacon_gradient(&e->loc.filter, m.beacon_index, m.t_us, g);
+        beacon_check_measurement(&e->bearing_beacon_check, m.beacon_index, m.t_us, converged, grc,
+                                 g, &res);
+    }
     estimator_sync(e);
 }
 

@@ -129,10 +129,15 @@ static void range_of_robot(struct estimator *e, const struct frame_range *r, int
     /* a range the filter refuses returns BL_OK without a result: none, then */
     bl_fusion_result res = {.status = BL_FUSION_DROPPED};
     int rc = bl_localizer_range(&e->loc, &m, &res);
-    if (rc != BL_OK)
+    if (rc != BL_OK) {
         log_debug("localizer range: %s", bl_strerror(rc));
-    else if (converged)
-        estimator_check_range(e, &m, &res);
+    } else if (res.status == BL_FUSION_ACCEPTED) {
+        bl_real g[3];
+        const int grc = bl_filter_range_beacon_gradient(&e->loc.filter, m.beacon_index, m.t_us,
+                                                        m.time_of_flight_s, g);
+        beacon_check_measurement(&e->range_beacon_check, m.beacon_index, m.t_us, converged, grc, g,
+                                 &res);
+    }
     estimator_sync(e);
 }
 

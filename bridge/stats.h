@@ -81,6 +81,9 @@ struct stats_report {
     /* the typed-in range beacons' (bridge/beacon_check.h): "range_beacon_check";
      * NULL on a site without them, a self-surveyed one and a team site */
     const struct beacon_check_set *range_beacon_check;
+    /* the bearing beacons' (bridge/beacon_check.h): "bearing_beacon_check"; NULL
+     * on a site without them and on a team site */
+    const struct beacon_check_set *bearing_beacon_check;
     /* a team site (bridge/team.h): its section "team" of the JSON; NULL elsewhere */
     const struct team *team;
     uint64_t team_odometry_sent; /* ODOMETRY sent as the robots' system ids */

@@ -1,7 +1,8 @@
 """Which beacon of a site file is misplaced? (`beaconloc-sim check-beacons`).
 
 The daemon checks the site's ultrasonic beacon positions against the pulses,
-and typed-in range beacons' against the ranges, as it runs
+typed-in range beacons' against the ranges and bearing beacons' against the
+bearings, as it runs
 (bridge/beacon_check.h: each beacon's fit of its offset from the innovations
 of its measurements, and a score statistic, chi-square with 3 dof, over 30
 for a beacon the measurements disagree with) and says when they disagree;
@@ -38,7 +39,8 @@ CHI2_MARGIN = 10.0
 
 
 # The daemon's stats JSON member of each kind's check, and the site file's section prefix
-CHECKS = (("beacon_check", "beacon"), ("range_beacon_check", "range_beacon"))
+CHECKS = (("beacon_check", "beacon"), ("range_beacon_check", "range_beacon"),
+          ("bearing_beacon_check", "bearing_beacon"))
 
 
 @dataclass
@@ -108,7 +110,7 @@ def replay_fits(bridge: str, site: Path, log: Path, work: Path) -> list[dict]:
             for key, prefix in CHECKS for fit in stats_json.get(key, {}).get("beacons", [])]
     if not any("offset_m" in f for f in fits):
         raise RuntimeError("the replay fused no measurement of a beacon while converged (the "
-                           "daemon checks ultrasonic and typed-in range beacons)")
+                           "daemon checks ultrasonic, bearing and typed-in range beacons)")
     return fits
 
 

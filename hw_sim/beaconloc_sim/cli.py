@@ -401,7 +401,7 @@ def build_parser() -> argparse.ArgumentParser:
     mp.set_defaults(func=_cmd_map)
     cb = sub.add_parser("check-beacons", help="which beacon of a site file is misplaced (a recording)",
                         description="Replay a recording (beaconloc-bridge --record, or a simulator "
-                                    "log) through the daemon with each ultrasonic or typed-in "
+                                    "log) through the daemon with each ultrasonic, bearing or typed-in "
                                     "range beacon alone moved to where its measurements put it, "
                                     "and say which one explains them (beacon_check.py). Last "
                                     "line: 'beacon-check consistent: ...' (exit 0), 'beacon-check "

@@ -37,7 +37,7 @@ _KNOWN = {
     "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
     "faults": {"encoder_silence", "kidnap", "beacon_outage", "echo_storm", "beacon_misplaced",
-               "range_beacon_misplaced"},
+               "range_beacon_misplaced", "bearing_beacon_misplaced"},
     "output": {"truth_rate_hz", "log_epoch_s", "channel"},
     # [obstacles]: segmentN = x1_m, y1_m, x2_m, y2_m
 }
@@ -297,6 +297,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         outages.append((vals[0], vals[1], tuple(int(v) for v in vals[2:])))
     site = _misplace_beacons(ini, site, fault_keys["beacon_misplaced"], "beacons_m")
     site = _misplace_beacons(ini, site, fault_keys["range_beacon_misplaced"], "range_beacons_m")
+    site = _misplace_beacons(ini, site, fault_keys["bearing_beacon_misplaced"], "bearing_beacons_m")
     silences = []
     for key in fault_keys["encoder_silence"]:
         s = ini.numbers("faults", key, 2)
@@ -476,31 +477,34 @@ def _repeated(ini: IniFile, sec: str, segments: list, realization_s: float) -> l
 
 
 def _misplace_beacons(ini: IniFile, site, keys: list[str], attr: str):
-    """[faults] beacon_misplaced = id, dx_m, dy_m[, dz_m] (attr beacons_m: an ultrasonic beacon)
-    or range_beacon_misplaced (attr range_beacons_m: a range beacon): the beacon stands that far
+    """[faults] beacon_misplaced = id, dx_m, dy_m[, dz_m] (attr beacons_m: an ultrasonic beacon),
+    range_beacon_misplaced (range_beacons_m: a range beacon) or bearing_beacon_misplaced
+    (bearing_beacons_m: a bearing beacon, x and y only): the beacon stands that far
     from where the site file says. The physics (and the truth's bound) take the moved beacon;
     the site file, which the bridge reads, keeps the written one: a tape-measure error of the
     site (docs/bridge.md, "Beacon positions checked against the measurements")."""
     if not keys:
         return site
     moved = np.array(getattr(site, attr), dtype=float).copy()
-    count = len(moved)
+    count, dims = moved.shape if moved.ndim == 2 else (0, 3)
     seen = set()
     for key in keys:
         vals = ini.numbers("faults", key)
-        if len(vals) not in (3, 4) or vals[0] != int(vals[0]) or not 1 <= vals[0] <= count:
-            why = (f"expected 'id, dx_m, dy_m[, dz_m]' with id 1..{count}" if count
+        if len(vals) not in ((3, 4) if dims == 3 else (3,)) or vals[0] != int(vals[0]) or \
+                not 1 <= vals[0] <= count:
+            shape = "dx_m, dy_m[, dz_m]" if dims == 3 else "dx_m, dy_m"
+            why = (f"expected 'id, {shape}' with id 1..{count}" if count
                    else "the site has no such beacons")
             raise ini.error("faults", key, why)
         b = int(vals[0])
         if b in seen:
             raise ini.error("faults", key, f"beacon {b} misplaced twice")
         seen.add(b)
-        moved[b - 1] += np.array(list(vals[1:]) + [0.0] * (4 - len(vals)))
-        x, y, z = moved[b - 1]
+        moved[b - 1] += np.array(list(vals[1:]) + [0.0] * (dims + 1 - len(vals)))
+        x, y, z = (list(moved[b - 1]) + [0.0])[:3]
         if not (0 <= x <= site.room_x_m and 0 <= y <= site.room_y_m and 0 <= z <= site.room_z_m):
-            raise ini.error("faults", key, f"beacon {b} moved to ({x:g}, {y:g}, {z:g}) m: "
-                            "outside the room")
+            where = f"({x:g}, {y:g}, {z:g})" if dims == 3 else f"({x:g}, {y:g})"
+            raise ini.error("faults", key, f"beacon {b} moved to {where} m: outside the room")
     if attr == "beacons_m":
         return dataclasses.replace(site, beacons_m=moved)
     return dataclasses.replace(site, kind_values={**site.kind_values, attr: moved})

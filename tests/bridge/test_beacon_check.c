@@ -77,7 +77,7 @@ static void test_consistent_site_not_reported(void **state)
     unsigned named[BL_MAX_BEACONS], n = 0;
     assert_true(run(&s, 1.0, 3000.0, -1, 0.0, named, &n) < 0);
     assert_false(s.reported);
-    assert_true(s.pulses > 3000u * s.count / 1u - 10u * s.count); /* every pulse added */
+    assert_true(s.measurements > 3000u * s.count / 1u - 10u * s.count); /* every pulse added */
     for (unsigned b = 0; b < s.count; b++) {
         bl_beacon_offset o;
         bool misplaced = true;
@@ -129,7 +129,7 @@ static void test_refused_input_counted(void **state)
     assert_false(beacon_check_add(&s, 0, 1000000, g, 0, 0));
     assert_false(beacon_check_add(&s, s.count, 1000000, g, 0, (bl_real)VAR_S2));
     assert_int_equal(s.skipped, 3);
-    assert_int_equal(s.pulses, 0);
+    assert_int_equal(s.measurements, 0);
     assert_int_equal(s.acc[0].count, 0);
     assert_false(s.have_last[0]);
 }

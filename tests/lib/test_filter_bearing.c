@@ -249,6 +249,57 @@ static void start_at(bl_filter *f, const bl_config *cfg, eb_pose p, double sigma
     assert_int_equal(bl_filter_start(f, &pr), BL_OK);
 }
 
+/* A bearing's gradient in its beacon's position (bl_filter_bearing_beacon_gradient,
+ * the beacon positions' check): (-(y_b - y), x_b - x, 0)/r² at a standing
+ * robot on the wheel-base centre's sensor, against central differences of
+ * the model with the beacon moved; the filter unchanged; its errors. */
+static void test_beacon_gradient(void **state)
+{
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(eurobot_config(&cfg), BL_OK);
+    cfg.bearing.offset_x_m = 0; /* the sensor on the wheel-base centre: the closed form's (x, y) */
+    static bl_filter f, ref;
+    const eb_pose p = {1.2, 0.7, 0.4};
+    start_at(&f, &cfg, p, 0.01, 0.01);
+    bl_real x[NX];
+    assert_int_equal(bl_filter_get_state(&f, x, NULL), BL_OK);
+    ref = f;
+    const double eps = IS_FLOAT ? 1e-3 : 1e-6;
+    for (uint32_t j = 0; j < cfg.bearing_beacon_count; ++j) {
+        bl_real g[3];
+        assert_int_equal(bl_filter_bearing_beacon_gradient(&f, j, eb_us(0), g), BL_OK);
+        assert_memory_equal(&f, &ref, sizeof f);
+        const double dx = (double)cfg.bearing_beacons[j].x_m - (double)x[BL_IX_X];
+        const double dy = (double)cfg.bearing_beacons[j].y_m - (double)x[BL_IX_Y];
+        const double r2 = dx * dx + dy * dy;
+        assert_true(fabs((double)g[0] + dy / r2) < (IS_FLOAT ? 1e-4 : 1e-9) / sqrt(r2));
+        assert_true(fabs((double)g[1] - dx / r2) < (IS_FLOAT ? 1e-4 : 1e-9) / sqrt(r2));
+        assert_true(g[2] == 0);
+        for (int i = 0; i < 2; ++i) {
+            bl_config c = cfg;
+            bl_real *coord = i == 0 ? &c.bearing_beacons[j].x_m : &c.bearing_beacons[j].y_m;
+            const bl_real b0 = *coord;
+            bl_real hp, hm;
+            *coord = (bl_real)(b0 + eps);
+            assert_int_equal(bl_model_bearing(&c, x, j, 0, &hp, NULL), BL_OK);
+            *coord = (bl_real)(b0 - eps);
+            assert_int_equal(bl_model_bearing(&c, x, j, 0, &hm, NULL), BL_OK);
+            const double fd = eb_wrap((double)hp - (double)hm) / (2 * eps);
+            assert_true(fabs((double)g[i] - fd) < (IS_FLOAT ? 2e-2 : 1e-6) / sqrt(r2));
+        }
+    }
+    bl_real g[3];
+    assert_int_equal(bl_filter_bearing_beacon_gradient(NULL, 0, eb_us(0), g), BL_EINVAL);
+    assert_int_equal(bl_filter_bearing_beacon_gradient(&f, 0, eb_us(0), NULL), BL_EINVAL);
+    assert_int_equal(bl_filter_bearing_beacon_gradient(&f, cfg.bearing_beacon_count, eb_us(0), g), BL_EBEACON);
+    assert_int_equal(bl_filter_bearing_beacon_gradient(&f, 0, eb_us(0) + 3600000000LL, g), BL_ETIME);
+    assert_memory_equal(&f, &ref, sizeof f);
+    static bl_filter g0;
+    assert_int_equal(bl_filter_init(&g0, &cfg), BL_OK);
+    assert_int_equal(bl_filter_bearing_beacon_gradient(&g0, 0, eb_us(0), g), BL_ENOTINIT);
+}
+
 /* A bearing 30° off is rejected by the gate and counted for its beacon;
  * the state is untouched. */
 static void test_outlier_rejected(void **state)
@@ -527,6 +578,7 @@ int main(void)
         cmocka_unit_test(test_errors_leave_filter_untouched),
         cmocka_unit_test(test_stale_restart),
         cmocka_unit_test(test_mixed_site),
+        cmocka_unit_test(test_beacon_gradient),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

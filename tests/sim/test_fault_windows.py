@@ -246,3 +246,20 @@ def test_misplaced_range_beacon_moves_the_physics_not_the_site_file():
     assert np.allclose(np.delete(moved, 1, axis=0), 0.0)
     assert np.array_equal(scn.site.beacons_m, written.beacons_m)
 
+
+def test_misplaced_bearing_beacon_x_and_y_only(make_scenario):
+    """[faults] bearing_beacon_misplaced (the built-in misplaced-bearing-beacon): a bearing beacon
+    has no height, so the key takes x and y only."""
+    from beaconloc_sim.site import load_site
+    scn = load_scenario("misplaced-bearing-beacon")
+    written = load_site(scn.site.path)
+    moved = np.asarray(scn.site.bearing_beacons_m) - np.asarray(written.bearing_beacons_m)
+    assert np.allclose(moved[1], [0.0, 0.05]) and np.allclose(np.delete(moved, 1, axis=0), 0.0)
+    text = (scn.site.path.parent / "misplaced-bearing-beacon.scenario.ini").read_text()
+    bad = make_scenario(text.split("[scenario]", 1)[1].split("\n", 2)[2].replace(
+        "bearing_beacon_misplaced = 2, 0, 0.05", "bearing_beacon_misplaced = 2, 0, 0.05, 0.1"),
+        site_text=scn.site.path.read_text())
+    with pytest.raises(ConfigError, match=r"\[faults\] bearing_beacon_misplaced: expected 'id, "
+                                          r"dx_m, dy_m' with id 1\.\.3"):
+        load_scenario(str(bad))
+

@@ -220,6 +220,18 @@ int bl_filter_track_wheels(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real
  * byte-identical. */
 int bl_filter_start_bearings(bl_filter *f);
 
+/* How a bearing moves with its beacon's position, at the filter's state:
+ * ∂h/∂(x_b, y_b, z_b) (rad/m) of the bearing to bearing beacon
+ * bearing_beacon_index taken at t_us (the bearing model below, Vander et
+ * al. 2011 eq. 3, differentiated in the beacon: (-(y_b - y_s), x_b - x_s,
+ * 0)/r², r the horizontal distance from the sensor). For checking the
+ * site's bearing beacon positions (beacon_check.h). Changes nothing.
+ * Errors: BL_EINVAL (NULL, the model undefined there), BL_ENOTINIT (not
+ * started), BL_EBEACON, BL_ETIME (t_us more than cfg.max_predict_gap_s from
+ * the state time). */
+int bl_filter_bearing_beacon_gradient(const bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us,
+                                      bl_real d_bearing_d_beacon_rad_per_m[3]);
+
 /* Bearing model (Vander et al. 2011 eq. 3 with the sensor mount offset
  * cfg->bearing.offset_x_m/_y_m, the robot extrapolated dt_s after the state
  * time with v, ω; bl_filter_fuse_bearing above): *h_rad = predicted
