@@ -7,11 +7,17 @@
 #include <math.h>
 #include <string.h>
 
+const struct beacon_check_names beacon_check_pulses = {"beacon", "pulses", "beacon", "b"};
+const struct beacon_check_names beacon_check_ranges = {"range_beacon", "ranges", "range beacon",
+                                                       "rb"};
+const struct beacon_check_names beacon_check_bearings = {"bearing_beacon", "bearings",
+                                                         "bearing beacon", "bb"};
+
 void beacon_check_init(struct beacon_check_set *s, unsigned count, const bl_beacon *beacons,
-                       const char *section)
+                       const struct beacon_check_names *names)
 {
     memset(s, 0, sizeof *s);
-    s->section = section;
+    s->names = names;
     s->count = count <= BL_MAX_BEACONS ? count : BL_MAX_BEACONS;
     memcpy(s->site, beacons, s->count * sizeof s->site[0]);
     for (unsigned b = 0; b < s->count; b++) (void)bl_beacon_check_reset(&s->acc[b]);

@@ -42,10 +42,19 @@
  * shows in minutes, not after months more. */
 #define BEACON_CHECK_MEMORY_S 600.0
 
+/* How a kind's beacons and measurements are named (one per kind, below). */
+struct beacon_check_names {
+    const char *section; /* the site file's per-beacon section prefix ([<section>N]) */
+    const char *what;    /* the measurements, in the log: "pulses" */
+    const char *noun;    /* a beacon of the kind, in the log and the STATUSTEXT: "beacon" */
+    const char *tag;     /* its short name in the STATUSTEXT: "b" (b3) */
+};
+extern const struct beacon_check_names beacon_check_pulses, beacon_check_ranges,
+    beacon_check_bearings;
+
 struct beacon_check_set {
-    const char *section; /* the site file's per-beacon section: "beacon" ([beaconN], ultrasonic)
-                            or "range_beacon" ([range_beaconN]); a static string */
-    unsigned count;      /* beacons of that kind on the site (0: nothing to check) */
+    const struct beacon_check_names *names; /* the kind's (above) */
+    unsigned count;                 /* beacons of that kind on the site (0: nothing to check) */
     bl_beacon site[BL_MAX_BEACONS]; /* their site positions */
     bl_beacon_check acc[BL_MAX_BEACONS];
     uint32_t looked_at[BL_MAX_BEACONS]; /* acc[b].count when last looked at */
@@ -59,10 +68,9 @@ struct beacon_check_set {
     uint64_t skipped;                   /* fused ones not added: not converged, or no gradient */
 };
 
-/* Empty, for count beacons at beacons[] (positions), named [<section>N] in
- * the site file. */
+/* Empty, for count beacons of a kind (names) at beacons[] (positions). */
 void beacon_check_init(struct beacon_check_set *s, unsigned count, const bl_beacon *beacons,
-                       const char *section);
+                       const struct beacon_check_names *names);
 
 /* The localizer's pulse observer (bl_loc_pulse_observer); ctx: the set.
  * Takes the gradient and calls beacon_check_add. */

@@ -242,11 +242,12 @@ void estimator_counts_refresh(struct estimator *e)
  * site's come from the survey, which has its own chi-square test). */
 static void init_beacon_checks(struct estimator *e)
 {
-    beacon_check_init(&e->beacon_check, e->blcfg.beacon_count, e->blcfg.beacons, "beacon");
+    beacon_check_init(&e->beacon_check, e->blcfg.beacon_count, e->blcfg.beacons,
+                      &beacon_check_pulses);
     beacon_check_init(&e->range_beacon_check, e->survey_on ? 0u : e->blcfg.range_beacon_count,
-                      e->blcfg.range_beacons, "range_beacon");
+                      e->blcfg.range_beacons, &beacon_check_ranges);
     beacon_check_init(&e->bearing_beacon_check, e->blcfg.bearing_beacon_count,
-                      e->blcfg.bearing_beacons, "bearing_beacon");
+                      e->blcfg.bearing_beacons, &beacon_check_bearings);
 }
 
 int estimator_init(struct estimator *e, const struct bridge_config *site, char *err, size_t errlen)
@@ -387,24 +388,17 @@ int estimator_reconfigure(struct estimator *e, const struct bridge_config *site,
 /* The site's beacon positions against the measurements (beacon_check.h):
  * once inconsistent, reported once, in the log with the site file's keys of
  * every beacon over the rule, and as a STATUSTEXT; said again when they
- * agree again. what: the measurements' name ("pulses", "ranges"); tag: the
- * STATUSTEXT's name of a beacon ("b", "rb"). */
-static void check_beacon_set(struct estimator *e, struct beacon_check_set *set, const char *what,
-                             const char *tag)
+ * agree again. */
+static void check_beacon_set(struct estimator *e, struct beacon_check_set *set)
 {
     const char *site_path = e->cfg.path[0] ? e->cfg.path : "defaults";
-    const bool ranges = strncmp(set->section, "range", 5) == 0;
-    const bool bearings = strncmp(set->section, "bearing", 7) == 0;
-    const char *kind = ranges ? "range beacons'" : bearings ? "bearing beacons'" : "beacons'";
-    const char *noun = ranges     ? "range beacon"
-                       : bearings ? "bearing beacon"
-                                  : "beacon"; /* STATUSTEXT */
+    const struct beacon_check_names *nm = set->names;
     unsigned over[BL_MAX_BEACONS];
     const unsigned n = beacon_check_poll(set, over);
     if (set->agrees_again) {
         set->agrees_again = false;
-        log_info("%s: the %s positions agree with the %s again", site_path, kind, what);
-        event(e, EST_EV_INFO, "%s positions agree again", noun); /* STATUSTEXT: <= 50 chars */
+        log_info("%s: the %ss' positions agree with the %s again", site_path, nm->noun, nm->what);
+        event(e, EST_EV_INFO, "%s positions agree again", nm->noun); /* STATUSTEXT: <= 50 chars */
     }
     if (n == 0)
         return;
@@ -422,8 +416,8 @@ static void check_beacon_set(struct estimator *e, struct beacon_check_set *set, 
             list + len, sizeof list - len,
             "%s[%s%u] at (%.3f, %.3f, %.3f) the %s say (%.3f, %.3f, %.3f) +- %.3f m "
             "(z +- %.3f), chi2 %.0f",
-            i ? "; " : "", set->section, over[i] + 1, (double)site->x_m, (double)site->y_m,
-            (double)site->z_m, what, (double)(site->x_m + o.offset_m[0]),
+            i ? "; " : "", nm->section, over[i] + 1, (double)site->x_m, (double)site->y_m,
+            (double)site->z_m, nm->what, (double)(site->x_m + o.offset_m[0]),
             (double)(site->y_m + o.offset_m[1]), (double)(site->z_m + o.offset_m[2]),
             fmax((double)o.sigma_m[0], (double)o.sigma_m[1]), (double)o.sigma_m[2], (double)o.chi2);
         if (w > 0)
@@ -433,19 +427,19 @@ static void check_beacon_set(struct estimator *e, struct beacon_check_set *set, 
             worst = over[i];
         }
     }
-    log_warn("%s: the %s positions disagree with the %s: %s. One misplaced beacon moves its "
+    log_warn("%s: the %ss' positions disagree with the %s: %s. One misplaced beacon moves its "
              "neighbours' fits too: find it with `beaconloc-sim check-beacons %s RECORDING` (a "
              "--record of this run)",
-             site_path, kind, what, list, e->cfg.path[0] ? e->cfg.path : "SITE");
-    event(e, EST_EV_WARNING, "%s positions disagree: %s%u chi2 %.0f", noun, tag, worst + 1,
+             site_path, nm->noun, nm->what, list, e->cfg.path[0] ? e->cfg.path : "SITE");
+    event(e, EST_EV_WARNING, "%s positions disagree: %s%u chi2 %.0f", nm->noun, nm->tag, worst + 1,
           worst_chi2); /* STATUSTEXT: <= 50 characters (docs/mavlink.md) */
 }
 
 static void check_beacon_positions(struct estimator *e)
 {
-    check_beacon_set(e, &e->beacon_check, "pulses", "b");
-    check_beacon_set(e, &e->range_beacon_check, "ranges", "rb");
-    check_beacon_set(e, &e->bearing_beacon_check, "bearings", "bb");
+    check_beacon_set(e, &e->beacon_check);
+    check_beacon_set(e, &e->range_beacon_check);
+    check_beacon_set(e, &e->bearing_beacon_check);
 }
 
 void estimator_tick(struct estimator *e, int64_t local_now_us)

@@ -285,13 +285,10 @@ extern "C" int bl_filter_bearing_beacon_gradient(const bl_filter *f, uint32_t be
     const bl_config *cfg = &f->cfg_;
     const uint32_t j = bearing_beacon_index;
     if (j >= cfg->bearing_beacon_count || j >= BL_MAX_BEACONS) return BL_EBEACON;
-    int64_t d_us;
-    if (!bl::sub_us(t_us, f->t_us_, &d_us) || d_us > int64_t(1e12) || d_us < -int64_t(1e12)) return BL_ETIME;
-    const real dt_s = bl::us_to_s(d_us);
-    if (!(std::fabs(dt_s) <= cfg->max_predict_gap_s)) return BL_ETIME;
+    if (classify_time(f, t_us) != MeasTime::kFresh) return BL_ETIME;
     real h;
     RX H;
-    if (!bearing_model(cfg, j, dt_s, state(f), &h, &H)) return BL_EINVAL;
+    if (!bearing_model(cfg, j, bl::us_to_s(t_us - f->t_us_), state(f), &h, &H)) return BL_EINVAL;
     // β = atan2(y_b - y_s, x_b - x_s): ∂β/∂b = -∂β/∂(sensor), whose x, y are
     // H's (bearing_model); the height does not enter.
     d_bearing_d_beacon_rad_per_m[0] = -H(X);

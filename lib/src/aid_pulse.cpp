@@ -112,6 +112,27 @@ real firing_cycles(const bl_filter *f, const VX &x, uint32_t b, real t_rel_s, in
     return (t_rel_s - *flight_s - t0_rel - real(*base) * x(T)) / (real(n) * x(T));
 }
 
+// The pulse's geometry for the model: the firing of beacon b nearest
+// (arrival - predicted flight) at state x, the one a fused arrival is
+// numbered to. False when that firing is out of reach (more than 1e6
+// cycles, or not finite). Inlined: fuse_started keeps its one frame (make
+// size-m4: outlined, 68 B more flash).
+inline __attribute__((always_inline)) bool nearest_firing(const bl_filter *f, const VX &x, uint32_t beacon_index,
+                                                          uint32_t receiver_index, int64_t arrival_us,
+                                                          bl_pulse_geometry *g)
+{
+    g->beacon_index = beacon_index;
+    g->receiver_index = receiver_index;
+    g->arrival_rel_s = bl::us_to_s(arrival_us - f->t_us_);
+    g->epoch_rel_s = bl::us_to_s(f->epoch_us_ - f->t_us_);
+    int64_t base;
+    real flight_s;
+    const real cycles = firing_cycles(f, x, beacon_index, g->arrival_rel_s, &base, &flight_s);
+    if (!is_finite(cycles) || std::fabs(cycles) > real(1e6)) return false;
+    g->slot = int32_t(base + int64_t(std::lround(cycles)) * int64_t(f->cfg_.beacon_count));
+    return true;
+}
+
 // The pulse's measurement model for fuse_scalar: its arrival time (s after
 // the state time), Kleeman eq. 21; the update must keep the model's
 // parameters physical (s > 0 with a variance, T > 0).
@@ -132,7 +153,6 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
 {
     const bl_config *cfg = &f->cfg_;
     // The caller (classify_arrival) checked |arrival - state time| <= max_predict_gap_s.
-    const int64_t dts_us = arrival_us - f->t_us_;
     VX x = state(f);
     MX P = cov(f);
 
@@ -140,15 +160,7 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     ArrivalModel model;
     model.cfg = cfg;
     bl_pulse_geometry &g = model.g;
-    g.beacon_index = beacon_index;
-    g.receiver_index = receiver_index;
-    g.arrival_rel_s = bl::us_to_s(dts_us);
-    g.epoch_rel_s = bl::us_to_s(f->epoch_us_ - f->t_us_);
-    int64_t base;
-    real flight_s;
-    const real cycles = firing_cycles(f, x, beacon_index, g.arrival_rel_s, &base, &flight_s);
-    if (!is_finite(cycles) || std::fabs(cycles) > real(1e6)) return BL_ETIME;
-    g.slot = int32_t(base + int64_t(std::lround(cycles)) * int64_t(cfg->beacon_count));
+    if (!nearest_firing(f, x, beacon_index, receiver_index, arrival_us, &g)) return BL_ETIME;
 
     // Measurement noise: Kleeman §3.11 constant σ; §3.9 high variance while
     // converging; plus the beacon controller's firing jitter.
@@ -363,17 +375,9 @@ extern "C" int bl_filter_pulse_beacon_gradient(const bl_filter *f, uint32_t beac
     if (receiver_index >= cfg->receiver_count) return BL_EINVAL;
     if (classify_arrival(f, arrival_us) != Arrival::kFresh) return BL_ETIME;
     const VX x = state(f);
-    // The firing as fuse_started numbers it: nearest to arrival - flight.
+    // The firing as fuse_started numbers it.
     bl_pulse_geometry g;
-    g.beacon_index = beacon_index;
-    g.receiver_index = receiver_index;
-    g.arrival_rel_s = bl::us_to_s(arrival_us - f->t_us_);
-    g.epoch_rel_s = bl::us_to_s(f->epoch_us_ - f->t_us_);
-    int64_t base;
-    real flight_s;
-    const real cycles = firing_cycles(f, x, beacon_index, g.arrival_rel_s, &base, &flight_s);
-    if (!is_finite(cycles) || std::fabs(cycles) > real(1e6)) return BL_EINVAL;
-    g.slot = int32_t(base + int64_t(std::lround(cycles)) * int64_t(cfg->beacon_count));
+    if (!nearest_firing(f, x, beacon_index, receiver_index, arrival_us, &g)) return BL_EINVAL;
     real h;
     bl::Vec3 db;
     if (!pulse_model(cfg, x, g, &h, nullptr, false, &db)) return BL_EINVAL;

@@ -263,10 +263,8 @@ extern "C" int bl_filter_range_beacon_gradient(const bl_filter *f, uint32_t rang
     const uint32_t j = range_beacon_index;
     if (j >= cfg->range_beacon_count || j >= BL_MAX_BEACONS) return BL_EBEACON;
     if (!is_finite(time_of_flight_s) || time_of_flight_s < real(0)) return BL_EINVAL;
-    int64_t d_us;
-    if (!bl::sub_us(t_us, f->t_us_, &d_us) || d_us > int64_t(1e12) || d_us < -int64_t(1e12)) return BL_ETIME;
-    const real dt_s = bl::us_to_s(d_us) + time_of_flight_s;  // the reception, as fuse_started
-    if (!(std::fabs(dt_s) <= cfg->max_predict_gap_s)) return BL_ETIME;
+    if (classify_time(f, t_us) != MeasTime::kFresh) return BL_ETIME;
+    const real dt_s = bl::us_to_s(t_us - f->t_us_) + time_of_flight_s;  // the reception, as fuse_started
     const VX x = state(f);
     real h;
     RX H;

@@ -65,7 +65,7 @@ static void init_site(struct beacon_check_set *s)
 {
     bl_config cfg;
     assert_int_equal(bl_config_default(&cfg), BL_OK);
-    beacon_check_init(s, cfg.beacon_count, cfg.beacons, "beacon");
+    beacon_check_init(s, cfg.beacon_count, cfg.beacons, &beacon_check_pulses);
     assert_true(s->count >= 4);
 }
 

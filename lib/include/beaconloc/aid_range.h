@@ -201,7 +201,7 @@ int bl_filter_start_ranges(bl_filter *f);
  * beacon)/(d s)). For checking the site's range beacon positions
  * (beacon_check.h). Changes nothing. Errors: BL_EINVAL (NULL, time of
  * flight not finite or negative, the model undefined there), BL_ENOTINIT
- * (not started), BL_EBEACON, BL_ETIME (the reception more than
+ * (not started), BL_EBEACON, BL_ETIME (the emission more than
  * cfg.max_predict_gap_s from the state time). */
 int bl_filter_range_beacon_gradient(const bl_filter *f, uint32_t range_beacon_index, int64_t t_us,
                                     bl_real time_of_flight_s, bl_real d_tof_d_beacon_s_per_m[3]);
