@@ -1,4 +1,4 @@
-"""Which beacon of a site file is misplaced? (`beaconloc-sim check-beacons`).
+"""Which beacons of a site file are misplaced? (`beaconloc-sim check-beacons`).
 
 The daemon checks the site's ultrasonic beacon positions against the pulses,
 typed-in range beacons' against the ranges and bearing beacons' against the
@@ -14,19 +14,29 @@ a few times (the filter takes part of the offset into its state, so each
 fit finds part of what is left), every other beacon where the file says.
 The hypothesis that leaves every beacon within the rule is the answer (of
 several, the one that leaves the least disagreement, the sum of every beacon's
-chi2, if by CHI2_MARGIN); its beacon's position is written into a copy of the
-site file (its height only where the pulses moved it). When none does, or
-several do alike, it says so: two beacons wrong, or something else (the
-receiver ring, the room's echoes) disagrees.
+chi2, if by CHI2_MARGIN). Every pair of beacons is tried the same way, both
+moved by their fits at each replay (up to max_beacons at once, and fewer than
+half the site's: most_moved()): the fewest
+beacons that explain the measurements are the answer, by the same rule, unless
+moving one more leaves clearly less disagreement (CHI2_PER_BEACON). (Every beacon moved
+at once is no answer: the fits are relative to the filter's own frame, which
+moves with them, and end consistent but away from the truth.) The answer's
+beacons are written into a copy of the site file (a height only where the
+pulses moved it). When no set explains the measurements, or several do alike,
+it says so: more beacons wrong, or something else (the receiver ring, the
+room's echoes) disagrees.
 """
 from __future__ import annotations
 
+import itertools
 import json
 import math
+import os
 import re
 import shutil
 import subprocess
 import tempfile
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,6 +46,11 @@ MIN_OFFSET_M = 0.03
 # Two hypotheses within the rule: the better one is taken when its total chi2 (every beacon's)
 # is at least this much lower (about a likelihood ratio of e^5 for Gaussian innovations)
 CHI2_MARGIN = 10.0
+# A hypothesis that moves one beacon more is taken over the best with fewer when it lowers the total
+# chi2 by at least this much: moving a beacon that stands right by its fit takes up its own noise,
+# chi-square of about 3 dof (beyond 20 with probability 2e-4; on 20 seeds of misplaced-beacon the
+# best pair took at most 7 off its single's total, on two-misplaced-beacons 55-95 off the best single's)
+CHI2_PER_BEACON = 20.0
 
 
 # The daemon's stats JSON member of each kind's check, and the site file's section prefix
@@ -44,17 +59,30 @@ CHECKS = (("beacon_check", "beacon"), ("range_beacon_check", "range_beacon"),
 
 
 @dataclass
+class Move:
+    section: str                             # the site file's section: beacon3, range_beacon2, ...
+    site_m: tuple[float, float, float]       # where the site file says it stands (x, y, z), m
+    position_m: tuple[float, float, float]   # where it is moved to, m
+
+    @property
+    def moved_m(self) -> tuple[float, float, float]:
+        return tuple(p - s for p, s in zip(self.position_m, self.site_m))
+
+
+@dataclass
 class Hypothesis:
-    section: str             # the site file's section: beacon3, range_beacon2, ...
-    moved_m: tuple[float, float, float]     # the beacon's move from its site position (x, y, z), m
-    position_m: tuple[float, float, float]  # where it is moved to, m
-    chi2: list[float]        # every beacon's score statistic after the move
-    offsets_m: list[float]   # every beacon's fitted offset after the move (its length), m
+    moves: tuple[Move, ...]  # the beacons it moves (one, or several at once)
+    chi2: list[float]        # every beacon's score statistic after the moves
+    offsets_m: list[float]   # every beacon's fitted offset after the moves (its length), m
 
     @property
     def consistent(self) -> bool:
         return not any(c > CHI2_LIMIT and o > MIN_OFFSET_M
                        for c, o in zip(self.chi2, self.offsets_m))
+
+    @property
+    def name(self) -> str:
+        return " + ".join(f"[{m.section}]" for m in self.moves)
 
 
 def find_bridge(explicit: str | None = None) -> str:
@@ -120,57 +148,103 @@ def offset(fit: dict) -> float:
     return math.hypot(*fit.get("offset_m", [0.0, 0.0, 0.0]))
 
 
-def check(site_path: Path, log: Path, bridge: str, iterations: int = 5) -> tuple[list[dict], list[Hypothesis]]:
-    """The fits of the site as written, and each beacon's hypothesis."""
+def _try(bridge: str, text: str, name: str, log: Path, as_written: list[dict], sections,
+         iterations: int) -> Hypothesis:
+    """The beacons of sections moved together by their fits, iterations replays."""
+    fits = as_written
+    site_m = {f["section"]: tuple(f["fitted_m"][i] - f["offset_m"][i] for i in range(3))
+              for f in as_written if f["section"] in sections}
+    xyz = {b: list(site_m[b]) for b in sections}
+    with tempfile.TemporaryDirectory(prefix="beacon-check-") as tmp:
+        trial = Path(tmp) / name  # a site file names no other file
+        for _ in range(iterations):
+            moved = text
+            for b in sections:
+                mine = next(f for f in fits if f["section"] == b)
+                xyz[b] = [xyz[b][i] + mine.get("offset_m", [0, 0, 0])[i] for i in range(3)]
+                moved = site_with_move(moved, b, site_m[b], xyz[b])
+            trial.write_text(moved)
+            fits = replay_fits(bridge, trial, log, Path(tmp))
+    return Hypothesis(tuple(Move(b, site_m[b], tuple(xyz[b])) for b in sections),
+                      [f.get("chi2", 0.0) for f in fits], [offset(f) for f in fits])
+
+
+def check(site_path: Path, log: Path, bridge: str, iterations: int = 5, max_beacons: int = 2,
+          jobs: int | None = None) -> tuple[list[dict], list[Hypothesis]]:
+    """The fits of the site as written, and the hypotheses tried: each beacon alone, then every
+    pair, up to most_moved() at once; none where the site is consistent as written. jobs:
+    replays run at once (default: the CPUs)."""
     text = site_path.read_text()
     with tempfile.TemporaryDirectory(prefix="beacon-check-") as tmp:
-        work = Path(tmp)
-        as_written = replay_fits(bridge, site_path, log, work)
-        hyps = []
-        for fit in as_written:
-            if "offset_m" not in fit:
-                continue
-            b = fit["section"]
-            site_xyz = [fit["fitted_m"][i] - fit["offset_m"][i] for i in range(3)]
-            xyz = list(site_xyz)
-            fits = as_written
-            trial = work / site_path.name  # a site file names no other file
-            for _ in range(iterations):
-                mine = next(f for f in fits if f["section"] == b)
-                xyz = [xyz[i] + mine.get("offset_m", [0, 0, 0])[i] for i in range(3)]
-                trial.write_text(site_with_move(text, b, site_xyz, xyz))
-                fits = replay_fits(bridge, trial, log, work)
-            hyps.append(Hypothesis(b, tuple(xyz[i] - site_xyz[i] for i in range(3)), tuple(xyz),
-                                   [f.get("chi2", 0.0) for f in fits], [offset(f) for f in fits]))
+        as_written = replay_fits(bridge, site_path, log, Path(tmp))
+    if not _over(as_written):
+        return as_written, []
+    fitted = [f["section"] for f in as_written if "offset_m" in f]
+    hyps: list[Hypothesis] = []
+    with ThreadPoolExecutor(max_workers=jobs or os.cpu_count() or 1) as pool:
+        for k in range(1, most_moved(len(fitted), max_beacons) + 1):
+            hyps += pool.map(lambda sections: _try(bridge, text, site_path.name, log, as_written,
+                                                   sections, iterations),
+                             itertools.combinations(fitted, k))
     return as_written, hyps
+
+
+def most_moved(count: int, max_beacons: int) -> int:
+    """The most beacons moved at once of count checked ones: each alone, and sets of fewer than
+    half of them (the beacons left where the file says outnumber those moved and fix the frame
+    the fits are measured in; on marvelmind's four range beacons any pair explained the ranges,
+    the wrong pairs as well as the true beacon alone), at most max_beacons."""
+    return min(max_beacons, max(1, (count - 1) // 2))
+
+
+def _over(fits: list[dict]) -> list[dict]:
+    """The beacons whose fits break the daemon's rule."""
+    return [f for f in fits if f.get("chi2", 0) > CHI2_LIMIT and offset(f) > MIN_OFFSET_M]
 
 
 def report(as_written: list[dict], hyps: list[Hypothesis]) -> tuple[list[str], Hypothesis | None]:
     """Lines for the user, and the one hypothesis that explains the measurements
-    (None when the site is consistent as written, or no single beacon does)."""
+    (None when the site is consistent as written, or no set of beacons does)."""
     lines = ["# as written: " + ", ".join(
         f"[{f['section']}] chi2 {f.get('chi2', 0):.1f} fit {offset(f) * 1e3:.0f} mm"
         for f in as_written)]
-    over = [f for f in as_written if f.get("chi2", 0) > CHI2_LIMIT and offset(f) > MIN_OFFSET_M]
     for h in hyps:
-        lines.append(f"# [{h.section}] moved by ({h.moved_m[0]:+.3f}, {h.moved_m[1]:+.3f}, "
-                     f"{h.moved_m[2]:+.3f}) m: "
-                     f"chi2 total {sum(h.chi2):.1f}, worst {max(h.chi2):.1f}"
+        moves = ", ".join(f"[{m.section}] moved by ({m.moved_m[0]:+.3f}, {m.moved_m[1]:+.3f}, "
+                          f"{m.moved_m[2]:+.3f}) m" for m in h.moves)
+        lines.append(f"# {moves}: chi2 total {sum(h.chi2):.1f}, worst {max(h.chi2):.1f}"
                      f"{' (every beacon within the rule)' if h.consistent else ''}")
-    if not over:
+    if not _over(as_written):
         lines.append("beacon-check consistent: every beacon where the site file says")
         return lines, None
-    good = sorted((h for h in hyps if h.consistent), key=lambda h: sum(h.chi2))
-    # More than one within the rule: the one whose move leaves the least disagreement, if
-    # clearly (its total chi2 at least CHI2_MARGIN below the next one's)
-    if len(good) == 1 or (len(good) > 1 and sum(good[1].chi2) - sum(good[0].chi2) >= CHI2_MARGIN):
-        h = good[0]
-        lines.append(f"beacon-check misplaced [{h.section}] x_m={h.position_m[0]:.3f} "
-                     f"y_m={h.position_m[1]:.3f} z_m={h.position_m[2]:.3f} "
-                     f"moved_m={math.hypot(*h.moved_m):.3f}")
-        return lines, h
-    why = "no single beacon" if not good else \
-        ", ".join(f"[{h.section}]" for h in good) + " each, none clearly best,"
-    lines.append(f"beacon-check unresolved: {why} explains the measurements (two beacons wrong, "
+    # At each number of beacons moved, the hypothesis that explains the measurements and leaves
+    # the least disagreement, if clearly (its total chi2 at least CHI2_MARGIN below the next
+    # one's). The answer: the fewest beacons with such a hypothesis, unless moving more takes
+    # off at least CHI2_PER_BEACON a beacon more of the total.
+    answer, candidates = None, []
+    for k in sorted({len(h.moves) for h in hyps if h.consistent}):
+        good = sorted((h for h in hyps if h.consistent and len(h.moves) == k), key=lambda h: sum(h.chi2))
+        candidates = candidates or good
+        if len(good) > 1 and sum(good[1].chi2) - sum(good[0].chi2) < CHI2_MARGIN:
+            continue
+        if answer is None or sum(good[0].chi2) <= \
+                sum(answer.chi2) - CHI2_PER_BEACON * (k - len(answer.moves)):
+            answer = good[0]
+    if answer is not None:
+        lines.append("beacon-check misplaced " + " ".join(
+            f"[{m.section}] x_m={m.position_m[0]:.3f} y_m={m.position_m[1]:.3f} "
+            f"z_m={m.position_m[2]:.3f} moved_m={math.hypot(*m.moved_m):.3f}" for m in answer.moves))
+        return lines, answer
+    # none clearly: the candidates of the fewest beacons that explain the measurements
+    most = max((len(h.moves) for h in hyps), default=0)
+    why = (f"no set of up to {most} beacons" if most > 1 else "no single beacon") if not candidates \
+        else ", ".join(h.name for h in candidates) + " each, none clearly best,"
+    lines.append(f"beacon-check unresolved: {why} explains the measurements (more beacons wrong, "
                  "or the receivers' geometry)")
     return lines, None
+
+
+def write_fixed(site_text: str, answer: Hypothesis) -> str:
+    """The site file's text with the answer's beacons where it moved them."""
+    for m in answer.moves:
+        site_text = site_with_move(site_text, m.section, m.site_m, m.position_m)
+    return site_text

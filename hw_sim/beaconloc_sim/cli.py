@@ -5,6 +5,7 @@ import argparse
 import contextlib
 import dataclasses
 import math
+import os
 import signal
 import sys
 import time
@@ -307,31 +308,31 @@ def _cmd_map(args) -> int:
 
 
 def _cmd_check_beacons(args) -> int:
-    """check-beacons SITE LOG: which beacon is misplaced (beacon_check.py); exit 0 when the site
-    is consistent, 1 when it is not (the answer, or none), 2 on a usage error."""
+    """check-beacons SITE LOG: which beacons are misplaced (beacon_check.py); exit 0 when the
+    site is consistent, 1 when it is not (the answer, or none), 2 on a usage error."""
     from pathlib import Path
 
     from . import beacon_check
     site, log = Path(args.site), Path(args.log)
-    if args.iterations < 1:
-        print("beaconloc-sim check-beacons: --iterations must be >= 1", file=sys.stderr)
-        return EX_USAGE
+    for name, value in (("--iterations", args.iterations), ("--max-beacons", args.max_beacons),
+                        ("--jobs", args.jobs)):
+        if value < 1:
+            print(f"beaconloc-sim check-beacons: {name} must be >= 1", file=sys.stderr)
+            return EX_USAGE
     for p in (site, log):
         if not p.is_file():
             print(f"beaconloc-sim check-beacons: {p}: no such file", file=sys.stderr)
             return EX_USAGE
     try:
         as_written, hyps = beacon_check.check(site, log, beacon_check.find_bridge(args.bridge),
-                                              args.iterations)
+                                              args.iterations, args.max_beacons, args.jobs)
     except (RuntimeError, FileNotFoundError, ValueError) as exc:
         print(f"beaconloc-sim check-beacons: {exc}", file=sys.stderr)
         return 2
     lines, answer = beacon_check.report(as_written, hyps)
     print("\n".join(lines))
     if answer is not None and args.out:
-        site_xyz = [p - m for p, m in zip(answer.position_m, answer.moved_m)]
-        Path(args.out).write_text(beacon_check.site_with_move(
-            site.read_text(), answer.section, site_xyz, answer.position_m))
+        Path(args.out).write_text(beacon_check.write_fixed(site.read_text(), answer))
     return 0 if lines[-1].startswith("beacon-check consistent") else 1
 
 
@@ -399,21 +400,27 @@ def build_parser() -> argparse.ArgumentParser:
     mp.add_argument("--halves", action="store_true",
                     help="also print Vander Fig. 5's figures for x below / above half the room")
     mp.set_defaults(func=_cmd_map)
-    cb = sub.add_parser("check-beacons", help="which beacon of a site file is misplaced (a recording)",
+    cb = sub.add_parser("check-beacons", help="which beacons of a site file are misplaced (a recording)",
                         description="Replay a recording (beaconloc-bridge --record, or a simulator "
                                     "log) through the daemon with each ultrasonic, bearing or typed-in "
-                                    "range beacon alone moved to where its measurements put it, "
-                                    "and say which one explains them (beacon_check.py). Last "
+                                    "range beacon alone moved to where its measurements put it "
+                                    "(then every pair, up to --max-beacons at once, where no single "
+                                    "beacon does), and say which explain them (beacon_check.py). Last "
                                     "line: 'beacon-check consistent: ...' (exit 0), 'beacon-check "
-                                    "misplaced [SECTION] x_m=.. y_m=.. z_m=.. moved_m=..' (exit 1) "
-                                    "or 'beacon-check unresolved: ...' (exit 1).")
+                                    "misplaced [SECTION] x_m=.. y_m=.. z_m=.. moved_m=..' (one "
+                                    "such group per beacon; exit 1) or 'beacon-check unresolved: ...' "
+                                    "(exit 1).")
     cb.add_argument("site", help="site file path")
     cb.add_argument("log", help="candump -L recording of a run on that site")
     cb.add_argument("--bridge", metavar="PATH", help="beaconloc-bridge binary (default: on PATH, "
                                                       "else this checkout's build)")
     cb.add_argument("--iterations", type=int, default=5, metavar="N",
-                    help="replays per beacon (default 5)")
-    cb.add_argument("--out", metavar="FILE", help="write the site file with the misplaced beacon "
+                    help="replays per hypothesis (default 5)")
+    cb.add_argument("--max-beacons", type=int, default=2, metavar="N",
+                    help="most beacons moved at once (default 2: each alone, then every pair)")
+    cb.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N",
+                    help="replays run at once (default: the CPUs)")
+    cb.add_argument("--out", metavar="FILE", help="write the site file with the misplaced beacons "
                                                    "moved here")
     cb.set_defaults(func=_cmd_check_beacons)
     return p

@@ -152,7 +152,7 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
                                            uint32_t receiver_index, bl_fusion_result *result)
 {
     const bl_config *cfg = &f->cfg_;
-    // The caller (classify_arrival) checked |arrival - state time| <= max_predict_gap_s.
+    // The caller (classify_time) checked |arrival - state time| <= max_predict_gap_s.
     VX x = state(f);
     MX P = cov(f);
 
@@ -193,24 +193,6 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     f->ref_beacon_ = ref;
     f->accepted_[beacon_index] += 1;
     return BL_OK;
-}
-
-// Where an arrival lies against the state time t_s.
-enum class Arrival {
-    kFresh,  // |arrival - t_s| <= max_predict_gap_s: fused (fuse_started)
-    kStale,  // arrival > t_s + max_predict_gap_s: no predict for that long (fuse_stale)
-    kTooOld  // arrival < t_s - max_predict_gap_s: time went backwards (BL_ETIME)
-};
-Arrival classify_arrival(const bl_filter *f, int64_t arrival_us)
-{
-    int64_t d_us;
-    if (!bl::sub_us(arrival_us, f->t_us_, &d_us)) return arrival_us < f->t_us_ ? Arrival::kTooOld : Arrival::kStale;
-    if (d_us > int64_t(1e12)) return Arrival::kStale;
-    if (d_us < -int64_t(1e12)) return Arrival::kTooOld;
-    const real d_s = bl::us_to_s(d_us);
-    if (d_s > f->cfg_.max_predict_gap_s) return Arrival::kStale;
-    if (-d_s > f->cfg_.max_predict_gap_s) return Arrival::kTooOld;
-    return Arrival::kFresh;
 }
 
 // Variance of a random-walk parameter after gap_s (s) without updates:
@@ -297,14 +279,14 @@ extern "C" int bl_filter_fuse_pulse(bl_filter *f, uint32_t beacon_index, int64_t
         return BL_OK;
     }
 
-    switch (classify_arrival(f, arrival_us)) {
-    case Arrival::kTooOld:
+    switch (bl::classify_time(f, arrival_us)) {
+    case bl::MeasTime::kTooOld:
         return BL_ETIME;  // a caller error: state untouched
-    case Arrival::kStale:
+    case bl::MeasTime::kStale:
         res.status = fuse_stale(f, beacon_index, arrival_us, receiver_index);
         if (result) *result = res;
         return BL_OK;
-    case Arrival::kFresh:
+    case bl::MeasTime::kFresh:
         break;
     }
     const int rc = fuse_started(f, beacon_index, arrival_us, receiver_index, &res);
@@ -373,7 +355,7 @@ extern "C" int bl_filter_pulse_beacon_gradient(const bl_filter *f, uint32_t beac
     const bl_config *cfg = &f->cfg_;
     if (beacon_index >= cfg->beacon_count) return BL_EBEACON;
     if (receiver_index >= cfg->receiver_count) return BL_EINVAL;
-    if (classify_arrival(f, arrival_us) != Arrival::kFresh) return BL_ETIME;
+    if (bl::classify_time(f, arrival_us) != bl::MeasTime::kFresh) return BL_ETIME;
     const VX x = state(f);
     // The firing as fuse_started numbers it.
     bl_pulse_geometry g;

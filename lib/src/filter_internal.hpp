@@ -150,8 +150,8 @@ template <int N> struct StateModel {
     int unit_state() const { return i; }
 };
 
-// Where a measurement time lies against the state time t_s (bearings;
-// aid_pulse.cpp classifies pulses the same way).
+// Where a measurement time lies against the state time t_s (every kind's
+// measurement: pulses, bearings, ranges, sonar, thermometer, poses).
 enum class MeasTime {
     kFresh,  // |t - t_s| <= max_predict_gap_s: fused
     kStale,  // t > t_s + max_predict_gap_s: no predict for that long (kept, restart)

@@ -5,6 +5,7 @@ kleeman-lab.ini as written). The daemon warns once and its stats show the fits;
 given the true positions it stays quiet; `beaconloc-sim check-beacons` names
 beacon 3 and writes a site file with it moved to where the pulses put it."""
 import json
+import math
 import re
 import subprocess
 
@@ -92,6 +93,35 @@ def test_check_beacons_finds_it(bridge_bin, moved, tmp_path):
                                          str(bridge_bin)], capture_output=True, text=True, timeout=300)
     assert ok.returncode == 0 and ok.stdout.strip().endswith(
         "beacon-check consistent: every beacon where the site file says"), ok.stdout + ok.stderr
+
+
+def test_check_beacons_finds_two(bridge_bin, tmp_path):
+    """two-misplaced-beacons (kleeman-lab's beacons 1 and 4 each 10 cm off): no single beacon
+    explains the pulses, or one alone does with clearly more disagreement; check-beacons names
+    the pair, each within 5 cm of where it stands, and --out writes both. With --max-beacons 1
+    (each alone only, as before pairs were tried) it names beacon 4 alone or none."""
+    log, _ = run_sim(tmp_path, "two-misplaced-beacons", 120, seed=6)
+    fixed = tmp_path / "fixed.ini"
+    proc = subprocess.run(sim_command() + ["check-beacons", str(SITE), str(log), "--bridge",
+                                           str(bridge_bin), "--out", str(fixed)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    last = proc.stdout.strip().splitlines()[-1]
+    m = re.fullmatch(r"beacon-check misplaced \[beacon1\] x_m=(\S+) y_m=(\S+) z_m=\S+ moved_m=\S+ "
+                     r"\[beacon4\] x_m=(\S+) y_m=(\S+) z_m=\S+ moved_m=\S+", last)
+    assert m, proc.stdout
+    found = [float(v) for v in m.groups()]
+    for (x, y), (tx, ty) in zip((found[:2], found[2:]), ((0.05, 3.10), (11.87, 8.94))):
+        assert math.hypot(x - tx, y - ty) < 0.05, last
+    old, new = SITE.read_text().splitlines(), fixed.read_text().splitlines()
+    changed = [a for a, b in zip(old, new) if a != b]
+    assert changed == ["x_m = 0.05", "y_m = 3.0", "x_m = 11.95", "y_m = 9.0"], changed
+    err, check = replay(bridge_bin, fixed, log, tmp_path)
+    assert WARNING not in err and not any(b.get("misplaced") for b in check["beacons"])
+    single = subprocess.run(sim_command() + ["check-beacons", str(SITE), str(log), "--bridge",
+                                             str(bridge_bin), "--max-beacons", "1"],
+                            capture_output=True, text=True, timeout=300)
+    assert single.returncode == 1 and "[beacon1]" not in single.stdout.strip().splitlines()[-1]
 
 
 def test_misplaced_range_beacon(bridge_bin, tmp_path):
