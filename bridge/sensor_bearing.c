@@ -104,8 +104,7 @@ static void sensor_bearing_handle(struct estimator *e, const struct frame *f, in
     };
     bl_loc_status st; /* converged before this bearing: its innovation checks its beacon */
     const bool converged = bl_localizer_status(&e->loc, &st) == BL_OK && st.converged;
-    /* a bearing the filter refuses returns BL_OK without a result: none, then */
-    bl_fusion_result res = {.status = BL_FUSION_DROPPED};
+    bl_fusion_result res; /* written on BL_OK (BL_FUSION_DROPPED where the filter refused it) */
     int rc = bl_localizer_bearing(&e->loc, &m, &res);
     if (rc != BL_OK) {
         log_debug("localizer bearing: %s", bl_strerror(rc));

@@ -126,8 +126,7 @@ static void range_of_robot(struct estimator *e, const struct frame_range *r, int
     };
     bl_loc_status st; /* converged before this range: its innovation checks its beacon */
     const bool converged = bl_localizer_status(&e->loc, &st) == BL_OK && st.converged;
-    /* a range the filter refuses returns BL_OK without a result: none, then */
-    bl_fusion_result res = {.status = BL_FUSION_DROPPED};
+    bl_fusion_result res; /* written on BL_OK (BL_FUSION_DROPPED where the filter refused it) */
     int rc = bl_localizer_range(&e->loc, &m, &res);
     if (rc != BL_OK) {
         log_debug("localizer range: %s", bl_strerror(rc));

@@ -470,7 +470,10 @@ int bl::localizer_fuse(bl_localizer *loc, const LocInput &in, FuseFn fuse, const
         rc = fuse(&loc->filter, meas, &r);
     }
     if (rc != BL_OK) {
+        // Refused by the filter (its error contract: nothing of it changed):
+        // counted, and said to the caller as dropped
         (c.*n.refused)++;
+        if (res) *res = bl_fusion_result{BL_FUSION_DROPPED, 0, 0, 0, 0};
         return BL_OK;
     }
     const uint32_t id = window_id(in.kind, in.j);

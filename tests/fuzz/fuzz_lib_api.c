@@ -324,26 +324,26 @@ static void after_measurement(int rc, const bl_fusion_result *res, const char *w
 }
 
 /* Each beacon's position check (beacon_check.h), fed as the bridge feeds it:
- * an accepted pulse's gradient in its beacon's position, innovation and
- * variance. */
-static bl_beacon_check checks[BL_MAX_BEACONS];
+ * an accepted measurement's gradient in its beacon's position, innovation
+ * and variance; one set per kind (pulses, ranges, bearings). */
+enum { CHECK_PULSE, CHECK_RANGE, CHECK_BEARING, CHECK_KINDS };
+static bl_beacon_check checks[CHECK_KINDS][BL_MAX_BEACONS];
 
-/* The beacon check after an accepted pulse: the gradient (a const call:
- * the filter unchanged; finite when BL_OK), the accumulator (unchanged on
- * an error), the fit (finite, sigma > 0, chi2 >= 0 when BL_OK). Adds no
- * call to the trace: the committed seeds trace as before. */
-static void check_beacon(uint32_t beacon, int64_t t, uint32_t rx, const bl_fusion_result *res)
+/* A kind's gradient call just made (rc, g; f_before taken before it) and,
+ * for an accepted measurement (res not NULL), its beacon's check: the
+ * gradient a const call (the filter unchanged; finite when BL_OK), the
+ * accumulator unchanged on an error, the fit finite with sigma > 0 and
+ * chi2 >= 0 when BL_OK. Adds no call to the trace: the committed seeds
+ * trace as before. */
+static void check_beacon(bl_beacon_check *c, int rc, const bl_real g[3], const bl_fusion_result *res,
+                         const char *what)
 {
-    bl_real g[3];
-    f_before = f;
-    int rc = bl_filter_pulse_beacon_gradient(&f, beacon, t, rx, g);
-    FUZZ_CHECK(!memcmp(&f, &f_before, sizeof f), "pulse_beacon_gradient returned %d but changed the filter",
-               rc);
+    FUZZ_CHECK(!memcmp(&f, &f_before, sizeof f), "%s returned %d but changed the filter", what, rc);
     if (rc != BL_OK)
         return;
-    FUZZ_CHECK(all_finite(g, 3), "pulse_beacon_gradient: not finite: %g %g %g", (double)g[0], (double)g[1],
-               (double)g[2]);
-    bl_beacon_check *c = &checks[beacon % BL_MAX_BEACONS];
+    FUZZ_CHECK(all_finite(g, 3), "%s: not finite: %g %g %g", what, (double)g[0], (double)g[1], (double)g[2]);
+    if (res == NULL)
+        return;
     const bl_beacon_check before = *c;
     rc = bl_beacon_check_add(c, g, res->innovation, res->innovation_var);
     if (rc != BL_OK) {
@@ -374,8 +374,12 @@ static void fuse_one(uint32_t beacon, int64_t t, uint32_t rx)
                        "pulse result: innov %g var %g ratio %g", (double)res.innovation,
                        (double)res.innovation_var, (double)res.test_ratio);
         }
-        if (res.status == BL_FUSION_ACCEPTED)
-            check_beacon(beacon, t, rx, &res);
+        if (res.status == BL_FUSION_ACCEPTED) {
+            bl_real g[3];
+            f_before = f;
+            rc = bl_filter_pulse_beacon_gradient(&f, beacon, t, rx, g);
+            check_beacon(&checks[CHECK_PULSE][beacon % BL_MAX_BEACONS], rc, g, &res, "pulse_beacon_gradient");
+        }
     }
 }
 
@@ -661,6 +665,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 f_before = f;
                 rc = bl_filter_fuse_bearing(&f, b, t, (bl_real)fz_real(&z, 3.2), &res);
                 after_measurement(rc, &res, "fuse_bearing");
+                /* the bearing's gradient in its beacon's position, at the
+                 * same arguments whatever the fusion said (its beacon's
+                 * check only for an accepted one) */
+                const bool accepted = rc == BL_OK && res.status == BL_FUSION_ACCEPTED;
+                bl_real g[3];
+                f_before = f;
+                rc = bl_filter_bearing_beacon_gradient(&f, b, t, g);
+                check_beacon(&checks[CHECK_BEARING][b % BL_MAX_BEACONS], rc, g, accepted ? &res : NULL,
+                             "bearing_beacon_gradient");
                 break;
             }
 #endif
@@ -670,8 +683,17 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 const int64_t t = measurement_time(&z);
                 bl_fusion_result res;
                 f_before = f; /* a time of flight (s): 3.4 m give or take */
-                rc = bl_filter_fuse_range(&f, b, t, (bl_real)(0.01 + fz_real(&z, 0.01)), &res);
+                const bl_real tof = (bl_real)(0.01 + fz_real(&z, 0.01));
+                rc = bl_filter_fuse_range(&f, b, t, tof, &res);
                 after_measurement(rc, &res, "fuse_range");
+                /* the range's gradient in its beacon's position, as the
+                 * bearing's above */
+                const bool accepted = rc == BL_OK && res.status == BL_FUSION_ACCEPTED;
+                bl_real g[3];
+                f_before = f;
+                rc = bl_filter_range_beacon_gradient(&f, b, t, tof, g);
+                check_beacon(&checks[CHECK_RANGE][b % BL_MAX_BEACONS], rc, g, accepted ? &res : NULL,
+                             "range_beacon_gradient");
                 break;
             }
 #endif

@@ -771,6 +771,16 @@ static void test_localizer_ranges_and_kidnap(void **state)
     assert_int_equal(bl_localizer_range(&loc, &bad, NULL), BL_EINVAL);
     assert_int_equal(bl_localizer_counters(&loc, &k), BL_OK);
     assert_int_equal(k.ranges_refused, 2);
+    /* refused by the filter (no direct path is longer than 1.5 x max range): BL_OK, counted,
+     * and the result says dropped (it is written: the caller's garbage is gone) */
+    bad.time_of_flight_s = (bl_real)(2.0 * cfg.range.max_range_m / MM_TRUE_SPEED_OF_SOUND);
+    bl_fusion_result res;
+    memset(&res, 0x5a, sizeof res);
+    assert_int_equal(bl_localizer_range(&loc, &bad, &res), BL_OK);
+    assert_int_equal(res.status, BL_FUSION_DROPPED);
+    assert_true(res.innovation == 0 && res.innovation_var == 0 && res.test_ratio == 0 && res.iterations == 0);
+    assert_int_equal(bl_localizer_counters(&loc, &k), BL_OK);
+    assert_int_equal(k.ranges_refused, 3);
 }
 
 int main(void)

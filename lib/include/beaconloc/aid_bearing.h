@@ -250,7 +250,8 @@ int bl_model_bearing(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32
  * the persistent-rejection window with the pulses (localizer.h, policy). A bearing
  * older than the state by more than cfg.max_predict_gap_s re-initialises
  * the filter (cause STALE_PULSE), as a pulse does. *res (may be NULL): the
- * filter's fusion result.
+ * filter's fusion result (for a bearing the filter refused, counted in
+ * bearings_refused with BL_OK: BL_FUSION_DROPPED, every other field 0).
  * Errors: BL_EINVAL (NULL loc or m), BL_ENOTINIT; and, counted in
  * bearings_refused (the only change to *loc then): BL_EBEACON
  * (beacon_index >= cfg.bearing_beacon_count), BL_EINVAL (bearing not

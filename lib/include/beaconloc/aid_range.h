@@ -225,7 +225,7 @@ int bl_model_range(const bl_config *cfg, const bl_real x[BL_FILTER_NX], uint32_t
  * (cause STALE_PULSE). A range the filter refuses (beyond
  * 1.5·cfg.range.max_range_m: no direct path is that long) is counted in
  * ranges_refused, BL_OK. *res (may be NULL): the filter's fusion result
- * (not written for a range the filter refused).
+ * (for a range the filter refused: BL_FUSION_DROPPED, every other field 0).
  * Errors: BL_EINVAL (NULL loc or m), BL_ENOTINIT; and, counted in
  * ranges_refused (the only change to *loc then): BL_EBEACON
  * (beacon_index >= cfg.range_beacon_count), BL_EINVAL (time of flight not

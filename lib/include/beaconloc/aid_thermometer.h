@@ -156,7 +156,8 @@ int bl_filter_fuse_thermometer(bl_filter *f, int64_t t_us, bl_real temperature_c
  * and the newest tag stay; nothing new to publish). Errors:
  * BL_EINVAL (NULL loc or m), BL_ENOTINIT; counted as refused: BL_EBEACON (a
  * site without a thermometer), BL_EINVAL (non-finite or outside [-55, 125]
- * °C). *res (may be NULL): the result. */
+ * °C). *res (may be NULL): the result (for a reading the filter refused,
+ * counted as refused with BL_OK: BL_FUSION_DROPPED, every other field 0). */
 int bl_localizer_thermometer(bl_localizer *loc, const bl_thermometer_meas *m, bl_fusion_result *res);
 #endif /* BL_WITH_THERMOMETER */
 
