@@ -88,3 +88,18 @@ def test_write_fixed_moves_every_beacon():
                             bc.Move("beacon4", (11.95, 9.0, 1.0), (11.87, 8.94, 1.2))), [0.0], [0.0])
     assert bc.write_fixed(text, answer) == ("[beacon1]\nx_m = 0.0500\ny_m = 3.1000\nz_m = 1.0\n\n"
                                             "[beacon4]\nx_m = 11.8700\ny_m = 8.9400\nz_m = 1.2000\n")
+
+
+def test_cli_usage_errors(tmp_path, capsys):
+    """check-beacons' counts below 1 and missing files: usage errors (64) naming the option or
+    file, before any replay (no bridge needed)."""
+    from beaconloc_sim import cli
+    log = tmp_path / "run.log"
+    log.write_text("")
+    site = tmp_path / "site.ini"
+    site.write_text("")
+    for option in ("--iterations", "--max-beacons", "--jobs"):
+        assert cli.main(["check-beacons", str(site), str(log), option, "0"]) == cli.EX_USAGE
+        assert f"{option} must be >= 1" in capsys.readouterr().err
+    assert cli.main(["check-beacons", str(site), str(tmp_path / "none.log")]) == cli.EX_USAGE
+    assert "none.log: no such file" in capsys.readouterr().err
