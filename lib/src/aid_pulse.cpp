@@ -175,7 +175,10 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
     const int rc = fuse_scalar(model, m, x, P, result);
     if (rc != BL_OK) return rc;  // undefined or numerically impossible: state untouched
 
-    if (result->status == BL_FUSION_REJECTED) {
+    // A beacon the start's fault exclusion left out: not fused until
+    // converged (filter_internal.hpp kExcludedMask), as if gated out.
+    if (result->status == BL_FUSION_REJECTED || (!conv && startup_excluded(f, beacon_index))) {
+        result->status = BL_FUSION_REJECTED;
         // Kept for a snapshot restart and counted; the state is untouched.
         remember_pulse(f, beacon_index, arrival_us, receiver_index);
         f->rejected_[beacon_index] += 1;

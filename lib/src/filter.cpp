@@ -307,7 +307,7 @@ void commit(bl_filter *f, const VX &x, const MX &P)
     state(f) = x;
     cov(f) = P;
     if (converged_now(&f->cfg_, P)) {
-        f->flags_ |= kFlagConverged;
+        f->flags_ = (f->flags_ | kFlagConverged) & ~kExcludedMask;  // a start's exclusion ends
     } else {
         // Lost again (a long coast without pulses: P grew): back to the
         // start-up variance and gate of Kleeman §3.9 until it re-converges,

@@ -23,6 +23,18 @@ constexpr uint32_t kFlagEverStarted = 4u;
 // a re-initialised filter's (reinit_keeping_wheel_scales): the next start
 // takes them.
 constexpr uint32_t kFlagScalesKept = 8u;
+// Bits 8-13: 1 + the beacon a snapshot start's fault exclusion left out
+// (snapshot.cpp solve_excluding: heard through an echo), 0 for none. Its
+// pulses are not fused until the filter converges: while the start-up σ
+// and gate are wide, that beacon's echo, the same every cycle, would pull
+// the fix away again. Cleared at convergence (commit) and by every start.
+constexpr uint32_t kExcludedShift = 8u;
+constexpr uint32_t kExcludedMask = 63u << kExcludedShift;
+static_assert(BL_MAX_BEACONS < 63, "flags_ bits 8-13 hold 1 + a beacon index");
+inline bool startup_excluded(const bl_filter *f, uint32_t beacon_index)
+{
+    return ((f->flags_ & kExcludedMask) >> kExcludedShift) == beacon_index + 1u;
+}
 
 // State indices (filter.h BL_IX_*), short.
 enum : int {

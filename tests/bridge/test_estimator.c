@@ -534,9 +534,9 @@ static void test_reconfigure_tuning_keeps_filter(void **state)
     assert_true(after.x_m == before.x_m && after.reset_counter == before.reset_counter);
     /* one the library refuses: nothing changes */
     struct bridge_config bad = c;
-    bad.tuning.startup_gate_sigma = 1.0; /* below gate_sigma 3 */
+    bad.tuning.startup_sigma_arrival_s = 1e-4; /* below [noise] sigma_arrival_s 2e-4 */
     assert_int_equal(estimator_reconfigure(&W.est, &bad, err, sizeof err), -1);
-    assert_non_null(strstr(err, "[tuning] startup_gate_sigma: rejected by the estimator"));
+    assert_non_null(strstr(err, "[tuning] startup_sigma_arrival_s: rejected by the estimator"));
     assert_int_equal(W.est.blcfg.pulse.iekf_max_iterations, 2);
     /* geometry: the wheel radius */
     struct bridge_config g = c;

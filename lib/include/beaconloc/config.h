@@ -47,7 +47,7 @@ typedef struct bl_pulse_params {
                                         >= sigma_arrival_s */
     bl_real gate_sigma;              /* [noise] gate_sigma: innovation gate in σ (chi-square
                                         with 1 dof: reject if |innov| > gate_sigma·σ_innov), > 0 */
-    bl_real startup_gate_sigma;      /* [tuning]: gate (σ) used until converged, >= gate_sigma */
+    bl_real startup_gate_sigma;      /* [tuning]: gate (σ) used until converged, > 0 */
     bl_real firing_jitter_s;         /* [tuning]: σ of firing-time jitter per beacon slot (s),
                                         >= 0, < beacon_period_s */
     uint32_t iekf_max_iterations;    /* [tuning]: IEKF relinearisations per pulse, 1..20 */

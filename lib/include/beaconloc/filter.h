@@ -79,6 +79,15 @@
  * cfg.pulse.gate_sigma. The flag is cleared again when the position σ grows
  * above 2·cfg.converged_sigma_xy_m (a long coast without pulses), which
  * brings back the start-up σ and gate until it re-converges.
+ * A snapshot (re)start checks its fix (fault detection and exclusion, the
+ * residual test of Parkinson & Axelrad 1988): a fix of 5 or more beacons
+ * whose residual RMS exceeds 3·cfg.pulse.sigma_arrival_s is solved again
+ * without each beacon in turn, and a beacon whose absence leaves at most a
+ * third of the residual is left out (a beacon hidden from the robot and
+ * heard through its wall echo, late by metres); its pulses are then
+ * rejected until the filter converges. A fix of 4 that fails the test is
+ * refused when the site has more beacons (the automatic start waits for
+ * the fifth of the cycle).
  * Persistent rejection is not the filter's: a gated-out pulse is counted
  * (bl_estimate.rejected) and leaves the state untouched, however many come
  * in a row. The caller (the library's localizer) keeps the one window of
