@@ -5,6 +5,7 @@
 #include "filter_internal.hpp"
 
 #include <cstring>
+#include <utility>
 
 #include "beaconloc/solver.h"
 
@@ -72,24 +73,16 @@ bool build_snapshot(const bl_filter *f, real s_mps, real T_s, real sigma_s, uint
 void swap_entries(Snapshot &sn, uint32_t a, uint32_t b)
 {
     bl_tdoa_problem &p = sn.prob;
-    const bl_beacon pb = p.beacons[a];
-    p.beacons[a] = p.beacons[b];
-    p.beacons[b] = pb;
-    const real t = p.arrival_s[a], o = p.fire_offset_s[a], g = p.sigma_s[a];
-    p.arrival_s[a] = p.arrival_s[b];
-    p.fire_offset_s[a] = p.fire_offset_s[b];
-    p.sigma_s[a] = p.sigma_s[b];
-    p.arrival_s[b] = t;
-    p.fire_offset_s[b] = o;
-    p.sigma_s[b] = g;
-    const uint8_t k = sn.beacon[a];
-    sn.beacon[a] = sn.beacon[b];
-    sn.beacon[b] = k;
+    std::swap(p.beacons[a], p.beacons[b]);
+    std::swap(p.arrival_s[a], p.arrival_s[b]);
+    std::swap(p.fire_offset_s[a], p.fire_offset_s[b]);
+    std::swap(p.sigma_s[a], p.sigma_s[b]);
+    std::swap(sn.beacon[a], sn.beacon[b]);
 }
 
 // Fault detection and exclusion of one arrival (the residual test of
-// receiver autonomous integrity monitoring: Parkinson & Axelrad 1988, "
-// Autonomous GPS integrity monitoring using the pseudorange residual"):
+// receiver autonomous integrity monitoring: Parkinson & Axelrad 1988,
+// "Autonomous GPS integrity monitoring using the pseudorange residual"):
 // a beacon hidden from the robot (a pillar, a shelf) may still be heard
 // through its wall echo, late by metres of path, and one such arrival pulls
 // the whole fix (on the pillars scenario 1.8 m off, its residual RMS 3.6 ms

@@ -294,8 +294,11 @@ int bl_filter_start(bl_filter *f, const bl_filter_prior *prior);
  * buffered arrival. A started
  * filter keeps its s, T (with their variances) and wheel scales.
  * Errors: BL_EINVAL, BL_ENOTINIT, BL_EDEGENERATE (fewer than 3 beacons in
- * the last cycle or singular geometry), BL_ENOCONVERGE (no convergence, or
- * with > 3 beacons a residual above 3σ of cfg.pulse.startup_sigma_arrival_s). */
+ * the last cycle or singular geometry), BL_ENOCONVERGE (no convergence,
+ * with > 3 beacons a residual above 3σ of cfg.pulse.startup_sigma_arrival_s,
+ * or 4 beacons of a site that has more whose residual fails the fault
+ * detection: "Start-up" above). With 5 or more, one beacon may be left out
+ * of the fix (the fault exclusion, "Start-up"). */
 int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real sigma_theta_rad);
 
 /* Predict to t_us with wheel increments since the previous predict:
