@@ -307,11 +307,12 @@ def summarise(scenario: str, runs: list[dict]) -> tuple[str, dict]:
     fig["sos_pcrb_mps"] = math.sqrt(float(np.nanmean(np.concatenate([r["sos_pcrb2"] for r in good]))))
     fig.update(honesty(good, len(runs)))
     fig.update(spread(good))
-    converged = sum(r["early_converged"] for r in good)
-    fig.update({"restarts": sum(r["resets"] for r in good), "early_converged": converged,
-                "early_outside_3sigma_pct": 100.0 * sum(r["early_out"] for r in good) / converged
-                if converged else math.nan,
-                "early_worst_outside_mm": 1e3 * max(r["early_worst_m"] for r in good)})
+    if all("early_converged" in r for r in good):  # judge()'s runs (not the team bench's)
+        converged = sum(r["early_converged"] for r in good)
+        fig.update({"restarts": sum(r["resets"] for r in good), "early_converged": converged,
+                    "early_outside_3sigma_pct": 100.0 * sum(r["early_out"] for r in good) / converged
+                    if converged else math.nan,
+                    "early_worst_outside_mm": 1e3 * max(r["early_worst_m"] for r in good)})
     line = (f"accuracy scenario={scenario} seeds={len(runs)} rmse_mm={fig['rmse_mm']:.1f} "
             f"pcrb_mm={fig['pcrb_mm']:.1f} ratio={fig['ratio']:.3f} "
             f"lateral_std_mm={fig['lateral_std_mm']:.1f} sos_err_mps={fig['sos_err_mps']:.3f} "
