@@ -134,12 +134,12 @@ unsigned beacon_check_poll(struct beacon_check_set *s, unsigned out[BL_MAX_BEACO
     return n;
 }
 
-void beacon_check_write_json(const struct beacon_check_set *s, const char *key, FILE *f)
+void beacon_check_write_json(const struct beacon_check_set *s, FILE *f)
 {
     fprintf(f,
-            "  \"%s\": {\"measurements\": %llu, \"skipped\": %llu, \"prior_sigma_m\": %g, "
+            "  \"%s_check\": {\"measurements\": %llu, \"skipped\": %llu, \"prior_sigma_m\": %g, "
             "\"min_offset_m\": %g, \"chi2_limit\": %g, \"beacons\": [",
-            key, (unsigned long long)s->measurements, (unsigned long long)s->skipped,
+            s->names->section, (unsigned long long)s->measurements, (unsigned long long)s->skipped,
             BEACON_CHECK_PRIOR_SIGMA_M, BEACON_CHECK_MIN_OFFSET_M, BEACON_CHECK_CHI2);
     for (unsigned b = 0; b < s->count; b++) {
         bl_beacon_offset o;

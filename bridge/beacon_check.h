@@ -104,7 +104,8 @@ bool beacon_check_fit(const struct beacon_check_set *s, unsigned b, bl_beacon_of
  * to say, and a later disagreement is reported anew. */
 unsigned beacon_check_poll(struct beacon_check_set *s, unsigned out[BL_MAX_BEACONS]);
 
-/* The stats JSON's member `key` (a line ending ",\n"). */
-void beacon_check_write_json(const struct beacon_check_set *s, const char *key, FILE *f);
+/* The stats JSON's member "<section>_check" (beacon_check, range_beacon_check,
+ * bearing_beacon_check; a line ending ",\n"). */
+void beacon_check_write_json(const struct beacon_check_set *s, FILE *f);
 
 #endif /* BRIDGE_BEACON_CHECK_H */

@@ -140,6 +140,14 @@ void status_line(struct daemon *d, const char *prefix)
     stats_status_line(&rep, prefix, est);
 }
 
+/* A beacon positions' check for the report: NULL on a team site and where
+ * the site has none of its beacons (bridge/stats.h). */
+static const struct beacon_check_set *checked_set(const struct daemon *d,
+                                                  const struct beacon_check_set *set)
+{
+    return team_site(d) || set->count == 0 ? NULL : set;
+}
+
 void fill_report(struct daemon *d, struct stats_report *r)
 {
     memset(r, 0, sizeof *r);
@@ -168,12 +176,9 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->counts = &d->est.counts;
     r->survey = d->est.survey_on ? &d->est.survey : NULL;
     r->sonar = team_site(d) ? NULL : &d->est.sonar;
-    r->beacon_check = team_site(d) || d->est.beacon_check.count == 0 ? NULL : &d->est.beacon_check;
-    r->range_beacon_check =
-        team_site(d) || d->est.range_beacon_check.count == 0 ? NULL : &d->est.range_beacon_check;
-    r->bearing_beacon_check = team_site(d) || d->est.bearing_beacon_check.count == 0
-                                  ? NULL
-                                  : &d->est.bearing_beacon_check;
+    r->beacon_check = checked_set(d, &d->est.beacon_check);
+    r->range_beacon_check = checked_set(d, &d->est.range_beacon_check);
+    r->bearing_beacon_check = checked_set(d, &d->est.bearing_beacon_check);
     r->predict_errors = d->est.c.predict_errors + d->est.c.fuse_errors;
     r->estimates = d->csv.rows;
     r->odometry_sent = d->odom_sent;

@@ -45,7 +45,7 @@ enum {
 static void write_bearing_beacon_check(FILE *f, const struct stats_report *r)
 {
     if (r->bearing_beacon_check)
-        beacon_check_write_json(r->bearing_beacon_check, "bearing_beacon_check", f);
+        beacon_check_write_json(r->bearing_beacon_check, f);
 }
 
 static const struct sensor_counter sensor_bearing_counters[BRG_COUNTERS + 1] = {

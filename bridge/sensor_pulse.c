@@ -46,7 +46,7 @@ _Static_assert(PULSE_COUNTERS <= SENSOR_COUNTERS_MAX, "SENSOR_COUNTERS_MAX");
 static void write_beacon_check(FILE *f, const struct stats_report *r)
 {
     if (r->beacon_check)
-        beacon_check_write_json(r->beacon_check, "beacon_check", f);
+        beacon_check_write_json(r->beacon_check, f);
 }
 
 static const struct sensor_counter sensor_pulse_counters[PULSE_COUNTERS + 1] = {

@@ -49,7 +49,7 @@ enum {
 static void write_range_beacon_check(FILE *f, const struct stats_report *r)
 {
     if (r->range_beacon_check)
-        beacon_check_write_json(r->range_beacon_check, "range_beacon_check", f);
+        beacon_check_write_json(r->range_beacon_check, f);
 }
 
 static const struct sensor_counter sensor_range_counters[RNG_COUNTERS + 1] = {

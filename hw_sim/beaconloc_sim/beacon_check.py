@@ -43,6 +43,13 @@ from pathlib import Path
 # The daemon's rule (bridge/beacon_check.h): a beacon's fit over it disagrees.
 CHI2_LIMIT = 30.0
 MIN_OFFSET_M = 0.03
+
+
+def breaks_rule(chi2: float, offset_m: float) -> bool:
+    """A beacon's fit over the daemon's rule: its measurements disagree with its position."""
+    return chi2 > CHI2_LIMIT and offset_m > MIN_OFFSET_M
+
+
 # Two hypotheses within the rule: the better one is taken when its total chi2 (every beacon's)
 # is at least this much lower (about a likelihood ratio of e^5 for Gaussian innovations)
 CHI2_MARGIN = 10.0
@@ -77,8 +84,7 @@ class Hypothesis:
 
     @property
     def consistent(self) -> bool:
-        return not any(c > CHI2_LIMIT and o > MIN_OFFSET_M
-                       for c, o in zip(self.chi2, self.offsets_m))
+        return not any(breaks_rule(c, o) for c, o in zip(self.chi2, self.offsets_m))
 
     @property
     def name(self) -> str:
@@ -199,7 +205,7 @@ def most_moved(count: int, max_beacons: int) -> int:
 
 def _over(fits: list[dict]) -> list[dict]:
     """The beacons whose fits break the daemon's rule."""
-    return [f for f in fits if f.get("chi2", 0) > CHI2_LIMIT and offset(f) > MIN_OFFSET_M]
+    return [f for f in fits if breaks_rule(f.get("chi2", 0), offset(f))]
 
 
 def report(as_written: list[dict], hyps: list[Hypothesis]) -> tuple[list[str], Hypothesis | None]:
