@@ -295,8 +295,9 @@ void track_period(bl_sequencer *s, int32_t beacon, int64_t t_us)
     s->beacon_seen_mask |= bit;
 }
 
-// Numbers one closed pulse and updates the model.
-void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
+// Numbers one closed pulse and updates the model. unsigned_rx: receivers
+// that heard the pulse without beacon 1's signature.
+void number_pulse(bl_sequencer *s, bl::SeqNumbered *p, uint32_t unsigned_rx)
 {
     const bl_seq_config &c = s->cfg;
     const int64_t t = p->arrival_us;
@@ -415,7 +416,12 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p)
         } else {
             track_period(s, a.beacon, t);
             if (!p->double_pulse) own_follow(s, a.beacon, t);  // (a double pulse anchored above)
-            if (!p->double_pulse && a.beacon == 0) s->one_single_seen = true;
+            // Beacon 1 heard without its signature is evidence against the
+            // model only where its second burst would have been heard: by two
+            // receivers or more, neither of which heard it. One receiver alone
+            // is a beacon at the edge of hearing (through a door, far off),
+            // whose weaker second burst is missed as often as not.
+            if (!p->double_pulse && a.beacon == 0 && unsigned_rx >= 2) s->one_single_seen = true;
         }
         s->have_last = true;
         s->last_beacon = static_cast<int8_t>(a.beacon);
@@ -720,7 +726,7 @@ int sequencer_close(bl_sequencer *seq, int64_t now_us, SeqNumbered *out, const b
     seq->pending[seq->n_pending] = closed;
     *held = &seq->pending[seq->n_pending];
     if (close_us > seq->horizon_us) seq->horizon_us = close_us;
-    number_pulse(seq, &n);
+    number_pulse(seq, &n, either - signed_rx);
     seq->counters.pulses_out++;
     *out = n;
     return 1;

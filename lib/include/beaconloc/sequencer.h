@@ -29,10 +29,12 @@
  *      the locked model expects another beacon (or no firing) is numbered as
  *      expected and counted in double_conflicts; only a second conflicting
  *      double whole cycles later, with no consistent beacon 1 in between and
- *      the model's own beacon 1 heard without its signature since (evidence
- *      against the model: echoes 3 ms late mimic a double pulse for several
- *      cycles, and beacon 1 may be out of hearing range), drops the hint and
- *      relocks on it.
+ *      the model's own beacon 1 heard since by two receivers or more, none
+ *      with its signature (evidence against the model: echoes 3 ms late
+ *      mimic a double pulse for several cycles, beacon 1 may be out of
+ *      hearing range, and at its edge, heard by one receiver through a door,
+ *      it misses its weaker second burst as often as not), drops the hint
+ *      and relocks on it.
  *   3. Numbering (Kleeman 1992 eq. 19: arrival = firing + flight, flight in
  *      [0, max_flight_us]; max_flight_us from the site's hearing range, the
  *      distance beyond which a beacon is not heard, or the beacons' spread:
@@ -313,7 +315,8 @@ typedef struct bl_sequencer {
     bool hint_valid;
     bool have_last; /* last_* valid */
     bool hint_flights;
-    bool one_single_seen; /* beacon 1 numbered without its signature since the last anchor */
+    bool one_single_seen; /* beacon 1 numbered since the last anchor, heard by two or more
+                             receivers none of which showed its signature */
 } bl_sequencer;
 
 /* Model summary for logs and health reports. */
