@@ -193,6 +193,10 @@ static void sync(struct estimator *e)
         case BL_LOC_EV_RESYNC:
             event(e, EST_EV_WARNING, "beacon numbering re-synchronised");
             break;
+        case BL_LOC_EV_RENUMBERED:
+            /* beacon 1's double pulse not heard, an echo taken for it */
+            event(e, EST_EV_WARNING, "beacons numbered %u off: renumbered by geometry", ev.count);
+            break;
         default:
             break;
         }

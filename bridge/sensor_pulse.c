@@ -24,7 +24,7 @@ enum {
     PULSE_BUFFERED,
     PULSE_UNASSIGNED,
     PULSE_SPURIOUS,
-    PULSE_SEQUENCER, /* the object "sequencer": the next 7 */
+    PULSE_SEQUENCER, /* the object "sequencer": the next 8 */
     PULSE_SEQ_DETECTIONS,
     PULSE_SEQ_MERGED,
     PULSE_SEQ_DOUBLE_PULSES,
@@ -32,6 +32,7 @@ enum {
     PULSE_SEQ_LOCKS_ACQUIRED,
     PULSE_SEQ_LOCKS_LOST,
     PULSE_SEQ_REPEATS,
+    PULSE_SEQ_RENUMBERED,
     PULSE_UNEXPECTED, /* pulse frames on a site without ultrasonic beacons: dropped */
     PULSE_REPEATS_SKIPPED,
     PULSE_NUMBERING_ERRORS,
@@ -60,7 +61,7 @@ static const struct sensor_counter sensor_pulse_counters[PULSE_COUNTERS + 1] = {
         SENSOR_LOC_COUNTER("pulses_unassigned", SENSOR_SLOT_MEASUREMENTS, pulses_unassigned),
     [PULSE_SPURIOUS] =
         SENSOR_LOC_COUNTER("sequencer_spurious", SENSOR_SLOT_MEASUREMENTS, pulses_spurious),
-    [PULSE_SEQUENCER] = {.key = "sequencer", .slot = SENSOR_SLOT_MEASUREMENTS, .group = 7},
+    [PULSE_SEQUENCER] = {.key = "sequencer", .slot = SENSOR_SLOT_MEASUREMENTS, .group = 8},
     [PULSE_SEQ_DETECTIONS] = SENSOR_SEQ_COUNTER("detections", SENSOR_SLOT_MEASUREMENTS, detections),
     [PULSE_SEQ_MERGED] = SENSOR_SEQ_COUNTER("merged", SENSOR_SLOT_MEASUREMENTS, merged),
     [PULSE_SEQ_DOUBLE_PULSES] =
@@ -71,6 +72,7 @@ static const struct sensor_counter sensor_pulse_counters[PULSE_COUNTERS + 1] = {
         SENSOR_SEQ_COUNTER("locks_acquired", SENSOR_SLOT_MEASUREMENTS, locks_acquired),
     [PULSE_SEQ_LOCKS_LOST] = SENSOR_SEQ_COUNTER("locks_lost", SENSOR_SLOT_MEASUREMENTS, locks_lost),
     [PULSE_SEQ_REPEATS] = SENSOR_SEQ_COUNTER("repeats", SENSOR_SLOT_MEASUREMENTS, repeats),
+    [PULSE_SEQ_RENUMBERED] = SENSOR_SEQ_COUNTER("renumbered", SENSOR_SLOT_MEASUREMENTS, renumbered),
     [PULSE_UNEXPECTED] = SENSOR_COUNTER("pulses_unexpected", SENSOR_SLOT_MEASUREMENTS),
     [PULSE_REPEATS_SKIPPED] =
         SENSOR_LOC_COUNTER("repeats_skipped", SENSOR_SLOT_REPEATS, repeats_skipped),

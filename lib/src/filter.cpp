@@ -271,7 +271,9 @@ void reinit_keeping_wheel_scales(bl_filter *f)
     const real kl = f->x_[KL], kr = f->x_[KR];
     const real pll = f->P_[KL * NX + KL], plr = f->P_[KL * NX + KR], prr = f->P_[KR * NX + KR];
     const bl_config c = f->cfg_;
+    const uint32_t renumber = f->flags_ & kFlagRenumber;
     (void)bl_filter_init(f, &c);  // c passed its check when f was initialised
+    f->flags_ |= renumber;
     if (!keep) return;
     f->x_[KL] = kl;
     f->x_[KR] = kr;
@@ -298,7 +300,7 @@ void mark_started(bl_filter *f, int64_t epoch_us, uint32_t ref_beacon, int64_t t
     f->ref_beacon_ = ref_beacon;
     f->t_us_ = t_us;
     if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
-    f->flags_ = kFlagStarted | kFlagEverStarted;
+    f->flags_ = kFlagStarted | kFlagEverStarted | (f->flags_ & kFlagRenumber);
     team_forget_cross(f);
 }
 
@@ -462,9 +464,16 @@ extern "C" int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real
     // a running filter's turn rate carries the ring's bearings to the snapshot time
     // a restart uses the firings the running state could not explain when
     // they cover min(4, N) beacons (restart_mask), else every beacon
+    // A running filter's restart (the localizer's, after a kidnap) keeps the
+    // numbering the running state verified: no renumbering (snapshot.cpp
+    // renumber_fix) and three beacons suffice, as for every caller.
     const uint32_t n = cfg->beacon_count;
-    return start_from_snapshot(f, theta_rad, sigma_theta_rad, started(f) ? f->x_[W] : real(0), s, vs, Tp, vT, 3,
-                               started(f) ? restart_mask(f, n < 4 ? n : 4) : ~0u);
+    const uint32_t renumber = f->flags_ & kFlagRenumber;
+    if (started(f)) f->flags_ &= ~kFlagRenumber;
+    const int rc = start_from_snapshot(f, theta_rad, sigma_theta_rad, started(f) ? f->x_[W] : real(0), s, vs, Tp, vT, 3,
+                                       started(f) ? restart_mask(f, n < 4 ? n : 4) : ~0u);
+    f->flags_ |= renumber;
+    return rc;
 }
 
 extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_left_m, bl_real d_right_m)

@@ -35,6 +35,23 @@ inline bool startup_excluded(const bl_filter *f, uint32_t beacon_index)
 {
     return ((f->flags_ & kExcludedMask) >> kExcludedShift) == beacon_index + 1u;
 }
+// Bit 14: the caller numbers the pulses with a sequencer that may be a whole
+// number of slots off (the localizer): a snapshot start may renumber them
+// from their geometry (snapshot.cpp renumber_fix). Kept by every start and
+// by reinit_keeping_wheel_scales.
+// Bits 16-19: the shift a start applied (the table's beacon j is beacon
+// (j + shift) mod N), for the localizer to apply to its sequencer and clear
+// (take_renumbered); 0 for none.
+constexpr uint32_t kFlagRenumber = 1u << 14;
+constexpr uint32_t kRenumberedShift = 16u;
+constexpr uint32_t kRenumberedMask = 15u << kRenumberedShift;
+static_assert(BL_MAX_BEACONS <= 16, "flags_ bits 16-19 hold a shift < BL_MAX_BEACONS");
+inline uint32_t take_renumbered(bl_filter *f)
+{
+    const uint32_t k = (f->flags_ & kRenumberedMask) >> kRenumberedShift;
+    f->flags_ &= ~kRenumberedMask;
+    return k;
+}
 
 // State indices (filter.h BL_IX_*), short.
 enum : int {

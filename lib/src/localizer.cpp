@@ -326,15 +326,31 @@ NOINLINE void notify_observer(const bl_localizer *loc, uint32_t beacon, int64_t 
     loc->observer_(loc->observer_ctx_, loc, &p);
 }
 
-// One arrival (beacon, time, receiver) of a firing.
-INLINE Fused fuse_one(bl_localizer *loc, uint32_t beacon, int64_t arrival_us, uint32_t receiver)
+// The filter's start found the pulses numbered k places off (snapshot.cpp
+// renumber_fix: beacon 1's double pulse not heard, an echo taken for it):
+// the sequencer follows. Returns the beacon's new number.
+NOINLINE uint32_t follow_renumbering(bl_localizer *loc, uint32_t beacon)
+{
+    const uint32_t k = bl::take_renumbered(&loc->filter);
+    bl::sequencer_renumber(&loc->seq, k);
+    push_event(loc, BL_LOC_EV_RENUMBERED, BL_LOC_CAUSE_NONE, static_cast<uint8_t>(k));  // k < 16
+    return (beacon + k) % loc->filter.cfg_.beacon_count;
+}
+
+// One arrival (beacon, time, receiver) of a firing. *beacon: renumbered
+// when the filter's start renumbered the pulses (the firing's other members
+// follow).
+INLINE Fused fuse_one(bl_localizer *loc, uint32_t *beacon, int64_t arrival_us, uint32_t receiver)
 {
     coast_to(loc, arrival_us);
-    int rc = bl_filter_fuse_pulse(&loc->filter, beacon, arrival_us, receiver, &loc->result_);
+    // a restart's renumbering since the last arrival (restart_if_persistent), then this arrival's start's
+    if (loc->filter.flags_ & bl::kRenumberedMask) *beacon = follow_renumbering(loc, *beacon);
+    int rc = bl_filter_fuse_pulse(&loc->filter, *beacon, arrival_us, receiver, &loc->result_);
     if (rc == BL_ETIME) {
         reinit_filter(loc, BL_LOC_CAUSE_STALE_PULSE);
-        rc = bl_filter_fuse_pulse(&loc->filter, beacon, arrival_us, receiver, &loc->result_);
+        rc = bl_filter_fuse_pulse(&loc->filter, *beacon, arrival_us, receiver, &loc->result_);
     }
+    if (loc->filter.flags_ & bl::kRenumberedMask) *beacon = follow_renumbering(loc, *beacon);
     if (rc != BL_OK) {
         loc->counters_.fuse_errors++;
         return Fused::kNo;
@@ -342,7 +358,7 @@ INLINE Fused fuse_one(bl_localizer *loc, uint32_t beacon, int64_t arrival_us, ui
     const Fused fused = classify(loc);
     if (loc->observer_ != nullptr &&
         (fused == Fused::kRejected || (fused == Fused::kAccepted && loc->result_.status == BL_FUSION_ACCEPTED)))
-        notify_observer(loc, beacon, arrival_us, receiver);
+        notify_observer(loc, *beacon, arrival_us, receiver);
     return fused;
 }
 
@@ -381,13 +397,13 @@ NOINLINE void after_update(bl_localizer *loc, bool pulse)
 // (bl_seq_pulse.members), read from the sequencer's slot *g.
 INLINE void fuse_firing(bl_localizer *loc, const bl::SeqNumbered &pl, const bl_seq_pending &g)
 {
-    const uint32_t beacon = static_cast<uint32_t>(pl.beacon);
+    uint32_t beacon = static_cast<uint32_t>(pl.beacon);
     uint8_t order[BL_MAX_RECEIVERS];
     const uint32_t n = bl::sequencer_member_order(g, order);
     bool any_accepted = false, any_rejected = false;
     for (uint32_t m = 0; m < n; m++) {
         const uint32_t rx = order[m];
-        const Fused r = fuse_one(loc, beacon, g.start_us + g.rx_offset_us[rx], rx);
+        const Fused r = fuse_one(loc, &beacon, g.start_us + g.rx_offset_us[rx], rx);
         if (r == Fused::kMisnumbered) break;  // one numbering error, not one per receiver
         bool fused = r == Fused::kAccepted;
         if (r == Fused::kAccepted || r == Fused::kRejected) {
@@ -573,6 +589,9 @@ extern "C" int bl_localizer_init(bl_localizer *loc, const bl_config *cfg, const 
         std::memset(loc, 0, sizeof *loc);
         return BL_ECONFIG;
     }
+    // The sequencer numbers the pulses: a snapshot start may renumber them
+    // (kept by every start and re-initialisation).
+    if (has_sequencer(cfg)) loc->filter.flags_ |= bl::kFlagRenumber;
     set_window(loc, cfg->reset_reject_count);
     loc->magic_ = kMagic;
     return BL_OK;

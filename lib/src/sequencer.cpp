@@ -433,6 +433,24 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p, uint32_t unsigned_rx)
 
 }  // namespace
 
+namespace bl {
+
+void sequencer_renumber(bl_sequencer *s, uint32_t k)
+{
+    s->ref_beacon = static_cast<int8_t>((static_cast<uint32_t>(s->ref_beacon) + k) % s->cfg.beacon_count);
+    // What was kept per beacon number starts again: the period's per-beacon
+    // arrivals (track_period), the last pulse (repeats) and a pending
+    // conflict. (A hint is not set: the filter has just (re)started, and the
+    // localizer clears the hint of a filter not converged.)
+    s->beacon_seen_mask = 0;
+    s->have_last = false;
+    s->conflict_pending = false;
+    s->one_single_seen = false;
+    s->counters.renumbered++;
+}
+
+}  // namespace bl
+
 extern "C" {
 
 int bl_sequencer_init(bl_sequencer *seq, const bl_seq_config *cfg)

@@ -63,6 +63,14 @@ struct SeqNumbered {
 // BL_EINVAL / BL_ENOTINIT.
 int sequencer_close(bl_sequencer *seq, int64_t now_us, SeqNumbered *out, const bl_seq_pending **held);
 
+// The model's numbering moved k slots on (mod N): the beacon it called b is
+// beacon (b + k) mod N (the localizer, after the filter's start found the
+// pulses' geometry k places off: snapshot.cpp renumber_fix; 0 < k < N).
+// Its firing-time interval, period and lock are kept; what it kept per
+// beacon number (the period's last arrivals, the last pulse, a pending
+// double-pulse conflict) starts again. The caller clears a hint first.
+void sequencer_renumber(bl_sequencer *seq, uint32_t k);
+
 // The receivers of a pending pulse in member order (bl_seq_pulse.members):
 // by arrival, on equal times the pulse's earliest receiver first, then by
 // receiver index. Returns the member count (receivers in rx_mask).

@@ -26,8 +26,9 @@ static_assert(BL_MAX_BEACONS <= 256, "Snapshot::beacon holds an index in a byte"
 // from the arrival spacing (flight-time differences < T/2). Each beacon's
 // arrival is the earliest of its latest firing (ring_t_us_: the direct path;
 // a later echo of the same firing does not replace it). Only the beacons in
-// use_mask take part.
-bool build_snapshot(const bl_filter *f, real s_mps, real T_s, real sigma_s, uint32_t use_mask, Snapshot &out)
+// use_mask take part. shift: the table's entry j is taken as beacon
+// (j + shift) mod N (renumber_fix below; 0: as numbered).
+bool build_snapshot(const bl_filter *f, real s_mps, real T_s, uint32_t use_mask, uint32_t shift, Snapshot &out)
 {
     const bl_config *cfg = &f->cfg_;
     const uint32_t n = cfg->beacon_count;
@@ -50,21 +51,22 @@ bool build_snapshot(const bl_filter *f, real s_mps, real T_s, real sigma_s, uint
         const real dt = bl::us_to_s(d_us);  // <= 0
         const real slot_r = std::round(dt / T_s);
         if (!(slot_r > -real(n)) || slot_r > real(0)) continue;
-        const int64_t slot = int64_t(slot_r);
-        const int64_t expect = int64_t(j) - int64_t(L);
-        if (((slot - expect) % int64_t(n)) != 0) continue;  // not this beacon's slot
-        out.prob.beacons[m] = cfg->beacons[j];
+        const int32_t slot = int32_t(slot_r);  // in (-n, 0]
+        const int32_t expect = int32_t(j) - int32_t(L);
+        if (((slot - expect) % int32_t(n)) != 0) continue;  // not this beacon's slot
+        const uint32_t b = (j + shift) % n;
+        out.prob.beacons[m] = cfg->beacons[b];
         out.prob.arrival_s[m] = dt;
         out.prob.fire_offset_s[m] = real(slot) * T_s;
-        out.prob.sigma_s[m] = sigma_s;
-        out.beacon[m] = uint8_t(j);
+        out.prob.sigma_s[m] = cfg->pulse.startup_sigma_arrival_s;
+        out.beacon[m] = uint8_t(b);
         ++m;
     }
     out.prob.count = m;
     out.prob.speed_of_sound_mps = s_mps;
     out.prob.receiver_z_m = cfg->receiver_height_m;
     out.ref_arrival_us = latest;
-    out.ref_beacon = L;
+    out.ref_beacon = (L + shift) % n;
     return true;
 }
 
@@ -129,17 +131,76 @@ int solve_excluding(const bl_config *cfg, Snapshot &sn, bl_tdoa_solution *sol, u
     return bl_solve_tdoa_2d(&sn.prob, sol);
 }
 
+// The numbering from the pulses' geometry, where the localizer numbers them
+// (kFlagRenumber). The sequencer numbers a cycle from beacon 1's double
+// pulse (Kleeman 1992 s. 2); where beacon 1 is not heard (another room) an
+// echo 3 ms behind another beacon's direct path (a floor echo at 1.4 m, a
+// wall echo) passes for it, and every beacon of the cycle is numbered k
+// places off: timing alone cannot tell, every slot is T from the next. The
+// geometry can: the fix of a wrongly numbered cycle puts its arrivals on the
+// wrong beacons and does not explain them (two-rooms, robot in the east
+// room: residual RMS 0.9-4.7 ms for every wrong shift, 0.14 ms for the
+// true one, timing noise 0.2 ms). So when the fix as numbered fails the
+// fault detection's test (kFdeDetect σ), each other shift k is solved. The
+// best one is taken when it passes the test and explains the m arrivals
+// clearly better than every other numbering: the least-squares cost
+// m·RMS² / σ² (a χ² of m - 3 degrees of freedom) of the next best exceeds
+// its own by kRenumberChi2, a likelihood ratio of e^(kRenumberChi2 / 2).
+// Where another numbering comes close (a site near symmetric: kleeman-lab's
+// shift of 3 is its half-turn, and five wall beacons of a room often fit a
+// shift within 0.25 ms), the fix is refused and the start waits for a cycle
+// that tells them apart; where none passes, the pulses are as numbered and
+// the fault exclusion has them (an echo). Five beacons at least (two
+// redundant): four leave one residual degree of freedom, too few to tell a
+// wrong shift. sn: the cycle with the kept shift. Returns the shift, or
+// BL_MAX_BEACONS to refuse the fix.
+constexpr real kRenumberChi2 = 25;
+uint32_t renumber_fix(const bl_filter *f, real s_mps, real T_s, uint32_t use_mask, Snapshot &sn, bl_tdoa_solution *sol)
+{
+    const bl_config *cfg = &f->cfg_;
+    const real sigma = cfg->pulse.sigma_arrival_s;
+    const uint32_t m = sn.prob.count;
+    if (!(f->flags_ & kFlagRenumber) || m < 5) return 0;
+    real best = real(1e30), second = real(1e30);
+    uint32_t found = 0;
+    for (uint32_t k = 0; k < cfg->beacon_count; ++k) {
+        if (k > 0) (void)build_snapshot(f, s_mps, T_s, use_mask, k, sn);
+        const real rms = bl_solve_tdoa_2d(&sn.prob, sol) == BL_OK ? sol->residual_rms_s : real(1e30);
+        if (k == 0 && rms <= kFdeDetect * sigma) return 0;  // as numbered (sn unchanged)
+        if (rms < best) {
+            second = best;
+            best = rms;
+            found = k;
+        } else if (rms < second) {
+            second = rms;
+        }
+    }
+    if (!(best <= kFdeDetect * sigma))
+        found = 0;  // none explains it: an echo, as numbered
+    else if (real(m) * (second * second - best * best) < kRenumberChi2 * sigma * sigma)
+        found = BL_MAX_BEACONS;
+    (void)build_snapshot(f, s_mps, T_s, use_mask, found % BL_MAX_BEACONS, sn);
+    return found;
+}
+
 // The snapshot fix of the last cycle (the problem lives only in this frame;
 // noinline keeps it off the callers' stacks). *excluded: the beacon the
-// fault exclusion left out, or BL_MAX_BEACONS.
+// fault exclusion left out, or BL_MAX_BEACONS; *shift: the numbering shift
+// renumber_fix found (0: as numbered).
 __attribute__((noinline)) int solve_snapshot(const bl_filter *f, real s_mps, real T_s, uint32_t min_beacons,
                                              uint32_t use_mask, bl_tdoa_solution *sol, int64_t *ref_arrival_us,
-                                             uint32_t *ref_beacon, uint32_t *excluded)
+                                             uint32_t *ref_beacon, uint32_t *excluded, uint32_t *shift)
 {
     const bl_config *cfg = &f->cfg_;
     Snapshot snap;
-    if (!build_snapshot(f, s_mps, T_s, cfg->pulse.startup_sigma_arrival_s, use_mask, snap)) return BL_EDEGENERATE;
-    if (snap.prob.count < min_beacons) return BL_EDEGENERATE;
+    if (!build_snapshot(f, s_mps, T_s, use_mask, 0, snap)) return BL_EDEGENERATE;
+    // Pulses a sequencer numbered: five beacons where the site has them (one
+    // redundant beacon cannot tell a wrong numbering: on two-rooms a cycle
+    // of four numbered six places off passed the test with a fix 7 m outside the room).
+    const uint32_t need = (f->flags_ & kFlagRenumber) && cfg->beacon_count >= 5 && min_beacons < 5 ? 5 : min_beacons;
+    if (snap.prob.count < need) return BL_EDEGENERATE;
+    *shift = renumber_fix(f, s_mps, T_s, use_mask, snap, sol);
+    if (*shift >= BL_MAX_BEACONS) return BL_ENOCONVERGE;  // numberings too alike: the next cycle
     const int rc = solve_excluding(cfg, snap, sol, excluded);
     if (rc != BL_OK) return rc;
     // An overdetermined fix must explain its pulses (an echo-polluted or
@@ -202,14 +263,14 @@ int64_t ring_window_us(const bl_config *cfg)
     // 2 r / s: flight time across the ring (s nominal); 4 σ: the timing noise
     // of two arrivals (√2 · 2.8 σ).
     const real w_s = real(2) * cfg->ring_radius_m / cfg->speed_of_sound_mps + real(4) * cfg->pulse.sigma_arrival_s;
-    return int64_t(std::llround(double(w_s) * 1e6));
+    return int64_t(std::lround(w_s * real(1e6)));  // <= 5 s by the config rules: a long anywhere
 }
 
 void remember_ring(bl_filter *f, uint32_t b, int64_t arrival_us, uint32_t receiver_index, bool explained)
 {
     const bl_config *cfg = &f->cfg_;
     const uint32_t bit = 1u << receiver_index;
-    const int64_t half_T_us = int64_t(std::llround(double(cfg->beacon_period_s) * 0.5e6));
+    const int64_t half_T_us = int64_t(std::lround(cfg->beacon_period_s * real(0.5e6)));
     const int64_t w_us = ring_window_us(cfg);
     int64_t d_us = 0;  // this arrival - the firing's earliest, us
     const bool same_timeline = f->ring_mask_[b] != 0 && bl::sub_us(arrival_us, f->ring_t_us_[b], &d_us);
@@ -275,15 +336,16 @@ namespace {
 // False (no heading) with fewer than min(3, N) beacons
 // whose receivers give a bearing, a spread above 0.6 rad (the sets do not
 // agree: echoes, or a robot turning through the cycle), or receivers too
-// wide (beamwidth_deg > 180) to point.
+// wide (beamwidth_deg > 180) to point. shift: the table's entry b is beacon
+// (b + shift) mod N (renumber_fix).
 bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, real omega_radps, uint32_t use_mask,
-                  real *theta_rad, real *sigma_rad)
+                  uint32_t shift, real *theta_rad, real *sigma_rad)
 {
     const bl_config *cfg = &f->cfg_;
     if (cfg->beamwidth_deg > real(180) || cfg->receiver_count < 2) return false;
     const uint32_t n = cfg->beacon_count;
     const int64_t cycle_us =
-        int64_t(std::llround(double(cfg->beacon_period_s) * double(n) * 1e6)) + ring_window_us(cfg);
+        int64_t(std::lround(cfg->beacon_period_s * real(n) * real(1e6))) + ring_window_us(cfg);  // <= 160 s
     real sum_c = 0, sum_s = 0;
     uint32_t used = 0;
     for (uint32_t b = 0; b < n; ++b) {
@@ -304,7 +366,7 @@ bool ring_heading(const bl_filter *f, real x_m, real y_m, int64_t latest_us, rea
         // receivers on opposite sides point nowhere
         if (heard == 0 || std::sqrt(rc * rc + rs * rs) < real(0.3) * real(heard)) continue;
         const real phi = std::atan2(rs, rc);
-        const bl_beacon &bc = cfg->beacons[b];
+        const bl_beacon &bc = cfg->beacons[(b + shift) % n];
         const real beta = std::atan2(bc.y_m - y_m, bc.x_m - x_m);
         // Vander et al. 2011 eq. 3: phi = beta - theta; carried to latest_us
         // (Kleeman 1992 eq. 15, constant turn rate)
@@ -341,7 +403,7 @@ void aid_ring_heading(bl_filter *f, int64_t latest_us)
     // The firings used are those the state explained (fused): after a
     // restart, the ones heard at the new place.
     if (!(var_th > real(0)) ||
-        !ring_heading(f, f->x_[X], f->x_[Y], latest_us, f->x_[W], f->ring_explained_mask_, &th, &sg))
+        !ring_heading(f, f->x_[X], f->x_[Y], latest_us, f->x_[W], f->ring_explained_mask_, 0, &th, &sg))
         return;
     if (!(var_th > sg * sg)) return;
     VX x = state(f);
@@ -364,20 +426,32 @@ int start_from_snapshot(bl_filter *f, real theta, real sigma_theta, real omega_r
     bl_tdoa_solution sol;
     int64_t ref_arrival_us = 0;
     uint32_t ref_beacon = 0;
-    uint32_t excluded = BL_MAX_BEACONS;
-    const int rc = solve_snapshot(f, s_mps, T_s, min_beacons, use_mask, &sol, &ref_arrival_us, &ref_beacon, &excluded);
+    uint32_t excluded = BL_MAX_BEACONS, shift = 0;
+    const int rc =
+        solve_snapshot(f, s_mps, T_s, min_beacons, use_mask, &sol, &ref_arrival_us, &ref_beacon, &excluded, &shift);
     if (rc != BL_OK) return rc;
+    const uint32_t n = f->cfg_.beacon_count;
     if (f->cfg_.ring_heading) {
         real th, sg;
-        // not from a beacon the fix left out (heard through an echo: its receivers face the wall)
-        const uint32_t heading_mask = excluded < BL_MAX_BEACONS ? use_mask & ~(1u << excluded) : use_mask;
-        if (ring_heading(f, sol.x_m, sol.y_m, ref_arrival_us, omega_radps, heading_mask, &th, &sg)) {
+        // not from a beacon the fix left out (heard through an echo: its receivers face the wall;
+        // excluded is a beacon, the mask the table's numbering)
+        const uint32_t heading_mask =
+            excluded < BL_MAX_BEACONS ? use_mask & ~(1u << (excluded + n - shift) % n) : use_mask;
+        if (ring_heading(f, sol.x_m, sol.y_m, ref_arrival_us, omega_radps, heading_mask, shift, &th, &sg)) {
             theta = th;
             sigma_theta = sg;
         }
     }
     apply_snapshot(f, sol, ref_arrival_us, ref_beacon, theta, sigma_theta, s_mps, var_s, T_s, var_T);
     if (excluded < BL_MAX_BEACONS && !(f->flags_ & kFlagConverged)) f->flags_ |= (excluded + 1u) << kExcludedShift;
+    if (shift != 0) {
+        // The last-pulse table holds the old numbers: it starts again (the
+        // next cycle fills it, under the numbers the sequencer now gives; an
+        // entry's ring set is a new firing's, more than half a period on).
+        f->last_valid_mask_ = 0;
+        f->ring_explained_mask_ = 0;
+        f->flags_ |= shift << kRenumberedShift;  // for the localizer (take_renumbered)
+    }
     return BL_OK;
 }
 

@@ -72,7 +72,7 @@ import harness as h  # noqa: E402
 # end-to-end issue.
 SCENARIOS = ("temperature-swing10", "temperature-swing20", "thermometer-still", "thermometer-swing10",
              "thermometer-swing20", "thermometer-door", "wheel-worn", "standing-restart", "four-beacons",
-             "dense-room", "hall", "big-site", "ceiling", "pillars", "two-rooms", "fast-turns", "echo-storm",
+             "dense-room", "hall", "big-site", "ceiling", "pillars", "two-rooms", "two-rooms-east", "fast-turns", "echo-storm",
              "kleeman-lab")
 # The two the firmware is judged on against the bridge (issue 10, make bench-firmware).
 FIRMWARE_SCENARIOS = ("echo-storm", "kleeman-lab")

@@ -56,7 +56,7 @@ def test_builtin_scenarios_all_load():
             assert scn.duration_s == 120 and scn.site.beacon_count == 6
             assert np.all(scn.site.beacons_m[:, 2] == 2.95) and scn.site.rx_height_m == 1.0
             assert scn.site.room_z_m > 2.95
-        elif name == "two-rooms":           # two rooms, a partition with a door between them
+        elif name in ("two-rooms", "two-rooms-east"):  # two rooms, a partition with a door between them
             assert scn.duration_s == 120 and scn.site.beacon_count == 10
             assert scn.site.hearing_range_m == 12.5 and len(scn.obstacles_m) == 2
             west = scn.site.beacons_m[:, 0] < 8.0

@@ -88,6 +88,20 @@
  * rejected until the filter converges. A fix of 4 that fails the test is
  * refused when the site has more beacons (the automatic start waits for
  * the fifth of the cycle).
+ * Numbering from geometry: the pulses the library's localizer fuses are
+ * numbered by its sequencer, which beacon 1's double pulse anchors; an echo
+ * taken for it numbers every beacon k places off. For those (only: pulses
+ * given to this API directly keep the caller's numbers) the automatic start
+ * and a stale filter's restart need 5 beacons where the site has them, and
+ * when the fix as numbered fails the test above, the cycle is solved with
+ * every cyclic renumbering (beacon j taken as beacon (j + k) mod N): the
+ * best is taken when it passes the test and its cost (m·RMS²/σ²) is at
+ * least 25 below every other numbering's; when another comes that close
+ * the fix is refused (the start waits); when none passes, as numbered. The
+ * last-pulse table (old numbers) then starts again and the localizer
+ * renumbers its sequencer (localizer.h, event RENUMBERED). A running
+ * filter's restart (bl_filter_start_snapshot on a started filter) keeps the
+ * numbering its state verified.
  * Persistent rejection is not the filter's: a gated-out pulse is counted
  * (bl_estimate.rejected) and leaves the state untouched, however many come
  * in a row. The caller (the library's localizer) keeps the one window of

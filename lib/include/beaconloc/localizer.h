@@ -45,6 +45,17 @@
  *     from a pose error: the sequencer gave the wrong beacon number. Two in
  *     a row re-synchronise the sequencer from the filter's firing times
  *     (event RESYNC); they do not enter the rejection watch.
+ *   - Numbering from geometry: where beacon 1 is not heard (another room)
+ *     an echo 3 ms behind another beacon's direct path can pass for its
+ *     double pulse, and the sequencer numbers the whole cycle k places off.
+ *     The filter's start (and a stale filter's restart) from pulses
+ *     numbered here needs five beacons where the site has them and, when
+ *     the fix as numbered does not explain its pulses, tries every cyclic
+ *     shift and takes the one that explains them clearly best; the start
+ *     waits while two come close (filter.h, "Numbering from geometry").
+ *     The sequencer follows (its model renumbered, counter renumbered),
+ *     and so does the firing being fused; event RENUMBERED, count = k. A
+ *     restart after persistent rejection keeps the numbering.
  *   - Sequencer hint: while the filter is converged, its firing time of
  *     beacon 1 and period (with σ) are handed to the sequencer after every
  *     update (tighter windows; numbering survives a silent beacon 1); the
@@ -96,7 +107,8 @@
  * node_clock_unwrap_near), so it finds its own context without searching.
  *
  * Events: a queue of BL_LOC_EVENT_QUEUE structured events (started, reset
- * with its cause, converged / not converged, numbering re-synchronised);
+ * with its cause, converged / not converged, numbering re-synchronised,
+ * renumbered from geometry);
  * when full the oldest is dropped (counted in events_dropped). Text is the
  * caller's business.
  *
@@ -161,7 +173,12 @@ typedef enum bl_loc_event_kind {
     BL_LOC_EV_RESET = 2,   /* re-initialised; see cause */
     BL_LOC_EV_CONVERGED = 3,
     BL_LOC_EV_NOT_CONVERGED = 4,
-    BL_LOC_EV_RESYNC = 5 /* beacon numbering re-synchronised from the filter */
+    BL_LOC_EV_RESYNC = 5,    /* beacon numbering re-synchronised from the filter */
+    BL_LOC_EV_RENUMBERED = 6 /* the filter's snapshot start found the pulses numbered count
+                                places off (beacon 1's double pulse not heard, an echo 3 ms
+                                behind another beacon taken for it): the beacon the sequencer
+                                called b is beacon (b + count) mod N, and it numbers so from
+                                now on (sequencer counter renumbered) */
 } bl_loc_event_kind;
 
 typedef enum bl_loc_reset_cause {

@@ -253,6 +253,8 @@ typedef struct bl_seq_counters {
     uint32_t hint_rejections;  /* hints dropped because double pulses contradicted them */
     uint32_t tracking_dropped; /* hint tracking windows dropped: min(N, 6) pulses in a row outside
                                   them but inside the start-up window (robot carried, filter lost) */
+    uint32_t renumbered;       /* numbering shifted by the localizer: the filter's start found the
+                                  pulses' geometry a whole number of slots off (localizer.h) */
 } bl_seq_counters;
 
 /* Private: one pulse whose merge window is open. */
