@@ -465,8 +465,8 @@ extern "C" int bl_filter_start_snapshot(bl_filter *f, bl_real theta_rad, bl_real
     // a restart uses the firings the running state could not explain when
     // they cover min(4, N) beacons (restart_mask), else every beacon
     // A running filter's restart (the localizer's, after a kidnap) keeps the
-    // numbering the running state verified: no renumbering (snapshot.cpp
-    // renumber_fix) and three beacons suffice, as for every caller.
+    // numbering the running state verified: kFlagRenumber off for it, so no
+    // renumbering (snapshot.cpp renumber_fix) and three beacons suffice.
     const uint32_t n = cfg->beacon_count;
     const uint32_t renumber = f->flags_ & kFlagRenumber;
     if (started(f)) f->flags_ &= ~kFlagRenumber;
