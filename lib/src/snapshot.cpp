@@ -150,23 +150,27 @@ int solve_excluding(const bl_config *cfg, Snapshot &sn, bl_tdoa_solution *sol, u
 // shift of 3 is its half-turn, and five wall beacons of a room often fit a
 // shift within 0.25 ms), the fix is refused and the start waits for a cycle
 // that tells them apart; where none passes, the pulses are as numbered and
-// the fault exclusion has them (an echo). Five beacons at least (two
-// redundant): four leave one residual degree of freedom, too few to tell a
-// wrong shift. sn: the cycle with the kept shift. Returns the shift, or
-// BL_MAX_BEACONS to refuse the fix.
+// the fault exclusion has them (an echo). A cycle of five beacons or more
+// (two redundant) that passes the test as numbered is taken as numbered; a
+// cycle of four (one residual degree of freedom) only when it is also
+// clearly the best numbering (two-rooms: four beacons numbered six places
+// off passed the test at 0.33 ms with a fix 7 m outside the room, the true
+// numbering fitting them too), or when the site has no more beacons. sn: the cycle with the kept shift. Returns
+// the shift, or BL_MAX_BEACONS to refuse the fix.
 constexpr real kRenumberChi2 = 25;
 uint32_t renumber_fix(const bl_filter *f, real s_mps, real T_s, uint32_t use_mask, Snapshot &sn, bl_tdoa_solution *sol)
 {
     const bl_config *cfg = &f->cfg_;
     const real sigma = cfg->pulse.sigma_arrival_s;
     const uint32_t m = sn.prob.count;
-    if (!(f->flags_ & kFlagRenumber) || m < 5) return 0;
+    // four of four: nothing more to come that could tell, as numbered
+    if (!(f->flags_ & kFlagRenumber) || m < 4 || cfg->beacon_count == 4) return 0;
     real best = real(1e30), second = real(1e30);
     uint32_t found = 0;
     for (uint32_t k = 0; k < cfg->beacon_count; ++k) {
         if (k > 0) (void)build_snapshot(f, s_mps, T_s, use_mask, k, sn);
         const real rms = bl_solve_tdoa_2d(&sn.prob, sol) == BL_OK ? sol->residual_rms_s : real(1e30);
-        if (k == 0 && rms <= kFdeDetect * sigma) return 0;  // as numbered (sn unchanged)
+        if (k == 0 && m >= 5 && rms <= kFdeDetect * sigma) return 0;  // as numbered (sn unchanged)
         if (rms < best) {
             second = best;
             best = rms;
@@ -194,11 +198,7 @@ __attribute__((noinline)) int solve_snapshot(const bl_filter *f, real s_mps, rea
     const bl_config *cfg = &f->cfg_;
     Snapshot snap;
     if (!build_snapshot(f, s_mps, T_s, use_mask, 0, snap)) return BL_EDEGENERATE;
-    // Pulses a sequencer numbered: five beacons where the site has them (one
-    // redundant beacon cannot tell a wrong numbering: on two-rooms a cycle
-    // of four numbered six places off passed the test, 0.33 ms, with a fix 7 m outside the room).
-    const uint32_t need = (f->flags_ & kFlagRenumber) && cfg->beacon_count >= 5 && min_beacons < 5 ? 5 : min_beacons;
-    if (snap.prob.count < need) return BL_EDEGENERATE;
+    if (snap.prob.count < min_beacons) return BL_EDEGENERATE;
     *shift = renumber_fix(f, s_mps, T_s, use_mask, snap, sol);
     if (*shift >= BL_MAX_BEACONS) return BL_ENOCONVERGE;  // numberings too alike: the next cycle
     const int rc = solve_excluding(cfg, snap, sol, excluded);

@@ -144,8 +144,8 @@ def test_switched_on_where_beacon1_is_not_heard(bridge_bin, tmp_path, seed):
     every beacon six places off (seven on some seeds). The filter's start renumbers from the
     pulses' geometry (one STATUSTEXT saying so, sequencer.renumbered 1), starts within 0.2 m
     and stays on the robot. Before it: started 10 m off on every seed, 2 of 4 runs lost for
-    good; seed 5 then started from four beacons, whose wrong fix passed the residual test 7 m
-    outside the room, until a start needed five."""
+    good; seed 5 started from four beacons, whose wrong fix passed the residual test 7 m outside
+    the room, until a start of four was checked for its numbering too."""
     log, truth_path = run_sim(tmp_path, "two-rooms-east", 60, seed=seed)
     site = SITE.parent / "two-rooms.ini"
     p, est, stats = replay(bridge_bin, log, tmp_path, site=site)

@@ -92,12 +92,13 @@
  * numbered by its sequencer, which beacon 1's double pulse anchors; an echo
  * taken for it numbers every beacon k places off. For those (only: pulses
  * given to this API directly keep the caller's numbers) the automatic start
- * and a stale filter's restart need 5 beacons where the site has them, and
- * when the fix as numbered fails the test above, the cycle is solved with
- * every cyclic renumbering (beacon j taken as beacon (j + k) mod N): the
- * best is taken when it passes the test and its cost (m·RMS²/σ²) is at
- * least 25 below every other numbering's; when another comes that close
- * the fix is refused (the start waits); when none passes, as numbered. The
+ * and a stale filter's restart, when the fix as numbered fails the test
+ * above or has four beacons only (one redundant: too few to tell a wrong
+ * numbering that passes it), solve the cycle with every cyclic renumbering
+ * (beacon j taken as beacon (j + k) mod N): the best is taken when it
+ * passes the test and its cost (m·RMS²/σ²) is at least 25 below every
+ * other numbering's; when another comes that close the fix is refused (the
+ * start waits, e.g. for a fifth beacon); when none passes, as numbered. The
  * last-pulse table (old numbers) then starts again and the localizer
  * renumbers its sequencer (localizer.h, event RENUMBERED). A running
  * filter's restart (bl_filter_start_snapshot on a started filter) keeps the

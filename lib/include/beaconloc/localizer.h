@@ -49,10 +49,10 @@
  *     an echo 3 ms behind another beacon's direct path can pass for its
  *     double pulse, and the sequencer numbers the whole cycle k places off.
  *     The filter's start (and a stale filter's restart) from pulses
- *     numbered here needs five beacons where the site has them and, when
- *     the fix as numbered does not explain its pulses, tries every cyclic
- *     shift and takes the one that explains them clearly best; the start
- *     waits while two come close (filter.h, "Numbering from geometry").
+ *     numbered here, when the fix as numbered does not explain its pulses
+ *     (or comes from four beacons only), tries every cyclic shift and takes
+ *     the one that explains them clearly best; the start waits while two
+ *     come close (filter.h, "Numbering from geometry").
  *     The sequencer follows (its model renumbered, counter renumbered),
  *     and so does the firing being fused; event RENUMBERED, count = k. A
  *     restart after persistent rejection keeps the numbering.
