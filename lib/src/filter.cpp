@@ -271,9 +271,7 @@ void reinit_keeping_wheel_scales(bl_filter *f)
     const real kl = f->x_[KL], kr = f->x_[KR];
     const real pll = f->P_[KL * NX + KL], plr = f->P_[KL * NX + KR], prr = f->P_[KR * NX + KR];
     const bl_config c = f->cfg_;
-    const uint32_t renumber = f->flags_ & kFlagRenumber;
     (void)bl_filter_init(f, &c);  // c passed its check when f was initialised
-    f->flags_ |= renumber;
     if (!keep) return;
     f->x_[KL] = kl;
     f->x_[KR] = kr;

@@ -37,8 +37,9 @@ inline bool startup_excluded(const bl_filter *f, uint32_t beacon_index)
 }
 // Bit 14: the caller numbers the pulses with a sequencer that may be a whole
 // number of slots off (the localizer): a snapshot start may renumber them
-// from their geometry (snapshot.cpp renumber_fix). Kept by every start and
-// by reinit_keeping_wheel_scales.
+// from their geometry (snapshot.cpp renumber_fix). Kept by every start; set
+// by the localizer at its init and every re-initialisation (which may
+// change the site: a site without a sequencer leaves it clear).
 // Bits 16-19: the shift a start applied (the table's beacon j is beacon
 // (j + shift) mod N), for the localizer to apply to its sequencer and clear
 // (take_renumbered); 0 for none.

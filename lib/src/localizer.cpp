@@ -142,7 +142,10 @@ NOINLINE void reinit_filter(bl_localizer *loc, bl_loc_reset_cause cause)
     const bool was = bl::started(&loc->filter);
     if (was) loc->reset_base_ += loc->filter.reset_count_ + 1;
     bl::reinit_keeping_wheel_scales(&loc->filter);  // the wheels' calibration kept
-    if (has_sequencer(loc)) (void)bl_sequencer_clear_hint(&loc->seq);
+    if (has_sequencer(loc)) {
+        (void)bl_sequencer_clear_hint(&loc->seq);
+        loc->filter.flags_ |= bl::kFlagRenumber;  // the sequencer numbers its pulses (bl_localizer_init)
+    }
     loc->hint_set_ = false;
     loc->counters_.reinits++;
     loc->last_reset_seen_ = 0;
@@ -590,7 +593,7 @@ extern "C" int bl_localizer_init(bl_localizer *loc, const bl_config *cfg, const 
         return BL_ECONFIG;
     }
     // The sequencer numbers the pulses: a snapshot start may renumber them
-    // (kept by every start and re-initialisation).
+    // (kept by every start; reinit_filter sets it again).
     if (has_sequencer(cfg)) loc->filter.flags_ |= bl::kFlagRenumber;
     set_window(loc, cfg->reset_reject_count);
     loc->magic_ = kMagic;
