@@ -176,6 +176,10 @@ static void sync(struct estimator *e)
             case BL_LOC_CAUSE_KNOWN_POSE:
                 event(e, EST_EV_NOTICE, "restarted from a known pose (reset %u)", ev.reset_counter);
                 break;
+            case BL_LOC_CAUSE_NUMBERING:
+                event(e, EST_EV_WARNING,
+                      "beacon 1 heard without its double pulse: numbering wrong, re-initialised");
+                break;
             default:
                 event(e, EST_EV_WARNING, "re-initialised: new geometry or command");
                 break;

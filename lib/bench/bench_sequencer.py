@@ -95,8 +95,11 @@ def run_scenario(name, replay, seed, duration):
 
 # Built-in scenarios no sequencer can number alone, and why: they run and print their own rows
 # (and a `beyond` line each) but stay out of the total. Their numbering is the localizer's
-# (the filter's start renumbers from the pulses' geometry), measured by make bench-accuracy.
+# (the filter's start renumbers from beacon 1's signature and the pulses' geometry), measured by make
+# bench-accuracy.
 BEYOND_TIMING = {
+    "beacon1-dead": "beacon 1 dead: its double pulse, which marks the cycle, never heard; every slot is one "
+                    "period from the next",
     "two-rooms-east": "beacon 1 never heard and a floor echo 3 ms behind beacon 7 passes for its double "
                       "pulse: every slot is one period from the next, timing alone cannot tell which is 1",
 }

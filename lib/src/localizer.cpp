@@ -401,6 +401,18 @@ NOINLINE void after_update(bl_localizer *loc, bool pulse)
 INLINE void fuse_firing(bl_localizer *loc, const bl::SeqNumbered &pl, const bl_seq_pending &g)
 {
     uint32_t beacon = static_cast<uint32_t>(pl.beacon);
+    // Beacon 1's signature, its double pulse (Kleeman 1992 s. 2): a firing
+    // two receivers or more heard without it (and fewer with it) is not
+    // beacon 1's; the filter's start takes none such for beacon 1
+    // (snapshot.cpp renumber_fix). Numbered beacon 1 all the same (by the
+    // running filter's hint), the filter's numbering is wrong: an echo taken
+    // for the double pulse started it on a point-symmetric site's twin pose,
+    // which every pulse fits. A fresh start.
+    const uint32_t plain_rx = static_cast<uint32_t>(__builtin_popcount(g.rx_mask & ~g.double_mask));
+    const bool signless = plain_rx >= 2 && plain_rx > static_cast<uint32_t>(__builtin_popcount(g.double_mask));
+    if (signless && beacon == 0 && bl::started(&loc->filter)) reinit_filter(loc, BL_LOC_CAUSE_NUMBERING);
+    const uint32_t bit = 1u << beacon;
+    loc->filter.signless_mask_ = signless ? loc->filter.signless_mask_ | bit : loc->filter.signless_mask_ & ~bit;
     uint8_t order[BL_MAX_RECEIVERS];
     const uint32_t n = bl::sequencer_member_order(g, order);
     bool any_accepted = false, any_rejected = false;
@@ -431,6 +443,11 @@ INLINE void process_pulse(bl_localizer *loc, const bl::SeqNumbered &pl, const bl
     loc->counters_.pulses_in++;
     if (pl.status == BL_SEQ_UNLOCKED) {
         loc->counters_.pulses_unassigned++;
+        // No lock for two cycles' pulses (beacon 1 silent, no echo taken for
+        // its double pulse): numbered from this one as if it were beacon 1;
+        // the filter's start finds the true numbering (renumber_fix).
+        if (loc->seq.unlocked_run >= 2 * loc->filter.cfg_.beacon_count && !bl::started(&loc->filter))
+            bl::sequencer_acquire(&loc->seq, pl.arrival_us);
         return;
     }
     if (pl.status != BL_SEQ_ASSIGNED || pl.beacon < 0 ||

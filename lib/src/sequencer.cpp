@@ -266,6 +266,16 @@ void anchor_at(bl_sequencer *s, int64_t t_us, bool fresh)
     s->anchor_us = t_us;
     s->conflict_pending = false;
     s->one_single_seen = false;
+    s->unlocked_run = 0;
+}
+
+// The lock acquired on a pulse taken for beacon 1's (its double pulse, or
+// bl::sequencer_acquire's).
+void acquire(bl_sequencer *s, int64_t t_us)
+{
+    s->have_last = false;
+    s->beacon_seen_mask = 0;
+    anchor_at(s, t_us, true);
 }
 
 // Tracks T from successive first arrivals of the same beacon:
@@ -372,9 +382,7 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p, uint32_t unsigned_rx)
             a.assigned = true;
             a.beacon = 0;
             a.fire_us = t - c.max_flight_us / 2;
-            s->have_last = false;
-            s->beacon_seen_mask = 0;
-            anchor_at(s, t, true);
+            acquire(s, t);
             numbered = true;
         }
     } else {
@@ -398,6 +406,7 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p, uint32_t unsigned_rx)
     if (!numbered) {
         p->status = BL_SEQ_UNLOCKED;
         s->counters.unassigned++;
+        if (s->unlocked_run < UINT8_MAX) s->unlocked_run++;
     } else if (!a.assigned) {
         p->status = BL_SEQ_SPURIOUS;
         s->counters.spurious++;
@@ -434,6 +443,12 @@ void number_pulse(bl_sequencer *s, bl::SeqNumbered *p, uint32_t unsigned_rx)
 }  // namespace
 
 namespace bl {
+
+void sequencer_acquire(bl_sequencer *s, int64_t t_us)
+{
+    acquire(s, t_us);
+    s->counters.locks_acquired++;
+}
 
 void sequencer_renumber(bl_sequencer *s, uint32_t k)
 {

@@ -71,6 +71,13 @@ int sequencer_close(bl_sequencer *seq, int64_t now_us, SeqNumbered *out, const b
 // double-pulse conflict) starts again. The caller clears a hint first.
 void sequencer_renumber(bl_sequencer *seq, uint32_t k);
 
+// A lock without beacon 1: the model numbers the pulse that arrived at t_us
+// as beacon 1's, the next ones from it (the localizer, where beacon 1's
+// double pulse has not been heard for two cycles' pulses: its filter's start
+// renumbers them from their geometry and signatures, snapshot.cpp
+// renumber_fix). Counted as a lock acquired.
+void sequencer_acquire(bl_sequencer *seq, int64_t t_us);
+
 // The receivers of a pending pulse in member order (bl_seq_pulse.members):
 // by arrival, on equal times the pulse's earliest receiver first, then by
 // receiver index. Returns the member count (receivers in rx_mask).

@@ -18,6 +18,7 @@ struct Snapshot {
     uint8_t beacon[BL_MAX_BEACONS];  // the site's beacon index of each of prob's entries
     int64_t ref_arrival_us;
     uint32_t ref_beacon;
+    uint32_t entries;  // the table's entries taken (bit per entry)
 };
 static_assert(BL_MAX_BEACONS <= 256, "Snapshot::beacon holds an index in a byte");
 
@@ -60,6 +61,7 @@ bool build_snapshot(const bl_filter *f, real s_mps, real T_s, uint32_t use_mask,
         out.prob.fire_offset_s[m] = real(slot) * T_s;
         out.prob.sigma_s[m] = cfg->pulse.startup_sigma_arrival_s;
         out.beacon[m] = uint8_t(b);
+        out.entries |= 1u << j;
         ++m;
     }
     out.prob.count = m;
@@ -163,13 +165,23 @@ uint32_t renumber_fix(const bl_filter *f, real s_mps, real T_s, uint32_t use_mas
     const bl_config *cfg = &f->cfg_;
     const real sigma = cfg->pulse.sigma_arrival_s;
     const uint32_t m = sn.prob.count;
+    const uint32_t n = cfg->beacon_count;
+    if (!(f->flags_ & kFlagRenumber)) return 0;
+    // Entries heard without beacon 1's signature by two receivers or more:
+    // none of them is beacon 1 (of every live beacon 1 in make
+    // bench-sequencer's scenarios, none was so heard; docs/bridge.md
+    // "Beacon numbering"). A numbering that makes one beacon 1 is not tried.
+    const uint32_t signless = sn.entries & f->signless_mask_;
     // four of four: nothing more to come that could tell, as numbered
-    if (!(f->flags_ & kFlagRenumber) || m < 4 || cfg->beacon_count == 4) return 0;
+    if (m < 4 || n == 4) return (signless & 1u) ? BL_MAX_BEACONS : 0;
     real best = real(1e30), second = real(1e30);
     uint32_t found = 0;
-    for (uint32_t k = 0; k < cfg->beacon_count; ++k) {
+    for (uint32_t k = 0; k < n; ++k) {
         if (k > 0) (void)build_snapshot(f, s_mps, T_s, use_mask, k, sn);
-        const real rms = bl_solve_tdoa_2d(&sn.prob, sol) == BL_OK ? sol->residual_rms_s : real(1e30);
+        // shift k makes the table's entry (N - k) mod N beacon 1
+        const real rms = !((signless >> ((n - k) % n)) & 1u) && bl_solve_tdoa_2d(&sn.prob, sol) == BL_OK
+                             ? sol->residual_rms_s
+                             : real(1e30);
         if (k == 0 && m >= 5 && rms <= kFdeDetect * sigma) return 0;  // as numbered (sn unchanged)
         if (rms < best) {
             second = best;
@@ -180,7 +192,7 @@ uint32_t renumber_fix(const bl_filter *f, real s_mps, real T_s, uint32_t use_mas
         }
     }
     if (!(best <= kFdeDetect * sigma))
-        found = 0;  // none explains it: an echo, as numbered
+        found = (signless & 1u) ? BL_MAX_BEACONS : 0;  // none explains it: an echo, as numbered where it may be
     else if (real(m) * (second * second - best * best) < kRenumberChi2 * sigma * sigma)
         found = BL_MAX_BEACONS;
     (void)build_snapshot(f, s_mps, T_s, use_mask, found % BL_MAX_BEACONS, sn);

@@ -68,11 +68,12 @@ import harness as h  # noqa: E402
 # Printed in this order; the last two lines stay echo-storm and kleeman-lab.
 # Issue 14's classes: air (temperature swings), wheels (worn), honesty after a
 # restart, sites (four beacons, many beacons, a hall, a large site with a hearing
-# range, ceiling beacons, pillars hiding beacons, two rooms joined by a door), a fast robot, then the two of the
-# end-to-end issue.
+# range, ceiling beacons, pillars hiding beacons, two rooms joined by a door), beacon 1 dead from power-on,
+# a fast robot, then the two of the end-to-end issue.
 SCENARIOS = ("temperature-swing10", "temperature-swing20", "thermometer-still", "thermometer-swing10",
              "thermometer-swing20", "thermometer-door", "wheel-worn", "standing-restart", "four-beacons",
-             "dense-room", "hall", "big-site", "ceiling", "pillars", "two-rooms", "two-rooms-east", "fast-turns", "echo-storm",
+             "dense-room", "hall", "big-site", "ceiling", "pillars", "two-rooms", "two-rooms-east", "beacon1-dead", "fast-turns",
+             "echo-storm",
              "kleeman-lab")
 # The two the firmware is judged on against the bridge (issue 10, make bench-firmware).
 FIRMWARE_SCENARIOS = ("echo-storm", "kleeman-lab")

@@ -1,12 +1,12 @@
 /*
- * cmocka tests of the localizer's numbering from geometry (localizer.h,
- * "Numbering from geometry"; snapshot.cpp renumber_fix): a robot switched on
- * where beacon 1 is not heard, and another beacon's echo 3 ms behind its
- * direct path flagged as a double pulse by the receiver node, so that the
- * sequencer numbers every beacon of the cycle the same number of places off.
- * A standing robot, six wall beacons in a 12 m room, arrival noise 0.1 ms;
- * beacon 1 never heard, beacon 3 (index 2) always flagged double: the
- * sequencer calls beacon 3 "beacon 1", every beacon two places off.
+ * cmocka tests of the localizer's numbering from geometry and from beacon
+ * 1's signature (localizer.h, "Numbering from geometry"; snapshot.cpp
+ * renumber_fix): a robot switched on where beacon 1 is not heard (another
+ * room, or beacon 1 dead), and another beacon's echo 3 ms behind its direct
+ * path flagged as a double pulse by the receiver node, so that the sequencer
+ * numbers every beacon of the cycle the same number of places off; or no
+ * double pulse at all, so that the sequencer never locks by itself.
+ * A standing robot, six wall beacons in a 12 m room, arrival noise 0.1 ms.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -39,17 +39,28 @@ static const double hall_xy[NB][2] = {{0.05, 1.5}, {0.05, 4.5}, {5.0, 5.95}, {11
 
 typedef struct {
     int renumbered_events;
-    int renumbered_by; /* the last RENUMBERED event's count */
+    int renumbered_by;   /* the last RENUMBERED event's count */
+    int numbering_resets; /* RESET events of cause NUMBERING */
     bool started;
     bl_estimate est; /* when started */
 } outcome;
 
+/* What the robot hears: beacon 1 or not; which beacon (0-based, -1: none)
+ * the receiver node flags double (beacon 1's own double pulse when 0, else
+ * an echo 3 ms behind its direct path), in the first flag_cycles cycles
+ * (-1: all); each firing heard by at most max_rx receivers (those facing
+ * it, in receiver order; 0: all that face it). */
+typedef struct {
+    bool silent_one;
+    int flagged;
+    int flag_cycles;
+    uint32_t max_rx;
+} hearing;
+
 /* Feeds `cycles` firing cycles of the nb beacons at xy, heard by a robot
  * standing at (x, y), heading 0, the way the bridge does (each detection,
- * then the pulses closed at its time), and collects the localizer's events.
- * Beacon 1 is not heard when silent_one; beacon `flagged` (0-based) is
- * flagged double by the receiver node (beacon 1's own double pulse when 0). */
-static outcome run_site(const double xy[][2], int nb, bool silent_one, int flagged, double x, double y, int cycles) {
+ * then the pulses closed at its time), and collects the localizer's events. */
+static outcome run_heard(const double xy[][2], int nb, hearing h, double x, double y, int cycles) {
     bl_config cfg;
     bl_seq_config sc;
     assert_int_equal(bl_config_default(&cfg), BL_OK);
@@ -66,9 +77,11 @@ static outcome run_site(const double xy[][2], int nb, bool silent_one, int flagg
     const int64_t t0 = 1000000;
     for (int i = 0; i < cycles * nb; ++i) {
         const int b = i % nb;
-        if (b == 0 && silent_one) continue; /* beacon 1: not heard here */
+        if (b == 0 && h.silent_one) continue; /* beacon 1: not heard here */
         const int64_t fire = t0 + (int64_t)i * PERIOD_US;
-        for (uint32_t r = 0; r < NRX; ++r) {
+        const bool flag = b == h.flagged && (h.flag_cycles < 0 || i / nb < h.flag_cycles);
+        uint32_t heard = 0;
+        for (uint32_t r = 0; r < NRX && (h.max_rx == 0 || heard < h.max_rx); ++r) {
             const double a = r * (2 * PI_RAD / NRX);
             const double rx = x + 0.10 * cos(a), ry = y + 0.10 * sin(a);
             const double dx = xy[b][0] - rx, dy = xy[b][1] - ry, d = hypot(dx, dy);
@@ -77,19 +90,22 @@ static outcome run_site(const double xy[][2], int nb, bool silent_one, int flagg
             memset(&det, 0, sizeof det);
             det.time_us = fire + (int64_t)llround((d / SOUND + 1e-4 * rng_gauss()) * 1e6);
             det.receiver = r;
-            det.double_pulse = b == flagged; /* an echo 3 ms later, or beacon 1's second burst */
+            det.double_pulse = flag; /* an echo 3 ms later, or beacon 1's second burst */
             det.amplitude_mv = 1000;
             det.width_us = 2500;
             det.tag = (uint32_t)i;
             assert_int_equal(bl_localizer_advance(&LOC, det.time_us), BL_OK);
             assert_int_equal(bl_localizer_detection(&LOC, &det), BL_OK);
+            heard++;
         }
         bl_loc_event ev;
-        while (bl_localizer_next_event(&LOC, &ev) == 1)
+        while (bl_localizer_next_event(&LOC, &ev) == 1) {
             if (ev.kind == BL_LOC_EV_RENUMBERED) {
                 o.renumbered_events++;
                 o.renumbered_by = ev.count;
             }
+            if (ev.kind == BL_LOC_EV_RESET && ev.cause == BL_LOC_CAUSE_NUMBERING) o.numbering_resets++;
+        }
     }
     assert_int_equal(bl_localizer_advance(&LOC, t0 + (int64_t)(cycles * nb + 1) * PERIOD_US), BL_OK);
     bl_loc_status st;
@@ -97,6 +113,11 @@ static outcome run_site(const double xy[][2], int nb, bool silent_one, int flagg
     o.started = st.started;
     if (o.started) assert_int_equal(bl_localizer_estimate(&LOC, &o.est), BL_OK);
     return o;
+}
+
+static outcome run_site(const double xy[][2], int nb, bool silent_one, int flagged, double x, double y, int cycles) {
+    const hearing h = {silent_one, flagged, -1, 0};
+    return run_heard(xy, nb, h, x, y, cycles);
 }
 
 /* Beacon 1 silent, beacon 3 (FAKE_ONE) flagged double: every beacon numbered
@@ -127,16 +148,77 @@ static void test_renumbered_from_geometry(void **state) {
 
 /* Kleeman's point-symmetric site: the numbering two places on and the one
  * five places on (its half-turn) explain the pulses equally well, at poses
- * half a turn apart, and the one as numbered does not: the geometry cannot
- * choose, and the filter does not start (no pose rather than a wrong one)
- * until beacon 1 is heard. */
+ * half a turn apart, and the one as numbered does not. Beacon 1's signature
+ * tells them apart: the half-turn would make beacon 4 beacon 1, and three
+ * receivers heard beacon 4 without a double pulse. Renumbered by two, at
+ * the robot (without the signatures: not started, the geometry alone
+ * cannot choose). */
+static void test_symmetric_site_renumbered_by_signature(void **state) {
+    (void)state;
+    const outcome o = run(kleeman_xy, 8.0, 3.5, 40);
+    printf("kleeman-lab: renumbered %d time(s) by %d, started %d at (%.3f, %.3f)\n", o.renumbered_events,
+           o.renumbered_by, (int)o.started, o.est.x_m, o.est.y_m);
+    assert_int_equal(o.renumbered_events, 1);
+    assert_int_equal(o.renumbered_by, FAKE_ONE);
+    assert_true(o.started && o.est.converged);
+    assert_true(hypot(o.est.x_m - 8.0, o.est.y_m - 3.5) < 0.03);
+}
+
+/* The same, each firing heard by one receiver only (a narrow ring): no
+ * firing shows that it is not beacon 1's, and the geometry cannot choose
+ * between the two numberings: the filter does not start (no pose rather
+ * than a wrong one) until beacon 1 is heard. */
 static void test_symmetric_site_not_renumbered(void **state) {
     (void)state;
-    const outcome o = run(kleeman_xy, 8.0, 3.5, 20);
-    printf("kleeman-lab: renumbered %d time(s), started %d\n", o.renumbered_events, (int)o.started);
+    const hearing h = {true, FAKE_ONE, -1, 1};
+    const outcome o = run_heard(kleeman_xy, NB, h, 8.0, 3.5, 40);
+    printf("kleeman-lab, one receiver per firing: renumbered %d time(s), started %d\n", o.renumbered_events,
+           (int)o.started);
     assert_int_equal(o.renumbered_events, 0);
     assert_int_equal(LOC.seq.counters.renumbered, 0);
     assert_false(o.started);
+}
+
+/* Beacon 1 dead and nothing flagged double: the sequencer never locks by
+ * itself. After two cycles' pulses unlocked the localizer locks it on a
+ * pulse (sequencer_acquire); the start finds the numbering from the
+ * signatures (every heard beacon is not beacon 1: only the numberings that
+ * give beacon 1 to the silent slot remain) and the geometry, on the
+ * point-symmetric site too. Before: never started. */
+static void test_beacon1_dead_started(void **state) {
+    (void)state;
+    const hearing h = {true, -1, -1, 0};
+    const outcome o = run_heard(kleeman_xy, NB, h, 8.0, 3.5, 40);
+    printf("kleeman-lab, beacon 1 dead: renumbered %d time(s) by %d, started %d at (%.3f, %.3f), locks %u\n",
+           o.renumbered_events, o.renumbered_by, (int)o.started, o.est.x_m, o.est.y_m,
+           LOC.seq.counters.locks_acquired);
+    assert_int_equal(o.renumbered_events, 1);
+    assert_true(o.started && o.est.converged);
+    assert_true(hypot(o.est.x_m - 8.0, o.est.y_m - 3.5) < 0.03);
+    assert_int_equal(o.numbering_resets, 0);
+    bl_loc_counters c;
+    assert_int_equal(bl_localizer_counters(&LOC, &c), BL_OK);
+    assert_int_equal(c.pulses_rejected, 0);
+}
+
+/* Beacon 1 dead, and in the first cycle only beacon 4's echo flagged double
+ * (its half-turn twin): the sequencer numbers the cycle three places off,
+ * which fits at the twin pose half a turn away, and the filter starts
+ * there. The next cycle's beacon 4, three receivers without a double pulse,
+ * is numbered beacon 1: the filter's numbering is wrong. It is
+ * re-initialised (cause NUMBERING) and restarts renumbered by three, at the
+ * robot. Before: held at the twin pose, 6.4 m off, for good. */
+static void test_twin_start_reset(void **state) {
+    (void)state;
+    const hearing h = {true, 3, 1, 0};
+    const outcome o = run_heard(kleeman_xy, NB, h, 8.0, 3.5, 40);
+    printf("kleeman-lab, twin start: numbering resets %d, renumbered %d time(s) by %d, at (%.3f, %.3f)\n",
+           o.numbering_resets, o.renumbered_events, o.renumbered_by, o.est.x_m, o.est.y_m);
+    assert_int_equal(o.numbering_resets, 1);
+    assert_int_equal(o.renumbered_events, 1);
+    assert_int_equal(o.renumbered_by, 3);
+    assert_true(o.started && o.est.converged);
+    assert_true(hypot(o.est.x_m - 8.0, o.est.y_m - 3.5) < 0.03);
 }
 
 /* A site of four beacons, all heard, beacon 1 with its own double pulse: a
@@ -157,7 +239,10 @@ static void test_four_beacon_site_starts_as_numbered(void **state) {
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_renumbered_from_geometry),
+        cmocka_unit_test(test_symmetric_site_renumbered_by_signature),
         cmocka_unit_test(test_symmetric_site_not_renumbered),
+        cmocka_unit_test(test_beacon1_dead_started),
+        cmocka_unit_test(test_twin_start_reset),
         cmocka_unit_test(test_four_beacon_site_starts_as_numbered),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -202,6 +202,9 @@ struct bl_filter { /* typedef: common.h */
     int64_t ring_t_us_[BL_MAX_BEACONS];  /* earliest arrival of the latest firing */
     uint32_t ring_mask_[BL_MAX_BEACONS]; /* receivers that heard it (bit per receiver) */
     uint32_t ring_explained_mask_;       /* beacons whose latest firing had a fused arrival */
+    uint32_t signless_mask_;             /* beacons whose latest firing two receivers or more heard
+                                            without beacon 1's signature: not beacon 1 (set by the
+                                            localizer; snapshot.cpp renumber_fix) */
     bl_sos_drift sos_drift_;
     /* each measurement kind's buffers and counters (kinds.h, in its order; its
      * aid_<kind>.h: BL_<KIND>_FILTER) */

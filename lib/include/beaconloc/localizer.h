@@ -191,7 +191,12 @@ typedef enum bl_loc_reset_cause {
                                               (the wheel scales learned so far kept) */
     BL_LOC_CAUSE_STALE_PULSE = 4,          /* a pulse too old for the state: fresh filter (the same) */
     BL_LOC_CAUSE_CONFIG = 5,               /* bl_localizer_reinit (new geometry): fresh filter */
-    BL_LOC_CAUSE_KNOWN_POSE = 6            /* bl_localizer_start: restarted from a known pose */
+    BL_LOC_CAUSE_KNOWN_POSE = 6,           /* bl_localizer_start: restarted from a known pose */
+    BL_LOC_CAUSE_NUMBERING = 7             /* the firing numbered beacon 1 came without its double
+                                              pulse to two receivers or more: the filter's numbering
+                                              is wrong (started from an echo taken for the double
+                                              pulse, on a site whose beacons are point-symmetric):
+                                              fresh filter, whose start renumbers */
 } bl_loc_reset_cause;
 
 typedef struct bl_loc_event {

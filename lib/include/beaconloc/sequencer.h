@@ -312,6 +312,7 @@ typedef struct bl_sequencer {
     int8_t ref_beacon;       /* own model's reference beacon */
     uint8_t tracking_misses; /* pulses in a row outside the tracking windows (start-up: inside);
                                 <= 6, then the windows are dropped */
+    uint8_t unlocked_run;    /* pulses in a row closed unlocked (saturates at 255) */
     bool conflict_pending;   /* a double pulse contradicted the model (conflict_us valid) */
     bool locked;
     bool hint_valid;
