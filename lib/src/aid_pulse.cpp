@@ -49,8 +49,9 @@ bool pulse_model(const bl_config *cfg, const VX &x, const bl_pulse_geometry &g, 
     const real d = delta.norm();
     if (!(d > real(1e-6))) return false;
     const bl::Vec3 u = delta / d;
-    bl::Vec3 vel;
-    vel << x(V) * c, x(V) * sn, real(0);
+    // (The 3-vectors here are constructed, not comma-initialised: at -Os
+    // Eigen's CommaInitializer stays out of line, make size-m4: 152 B more.)
+    const bl::Vec3 vel(x(V) * c, x(V) * sn, real(0));
     // Kleeman eq. 21: t_i = t0 + d_i / (s - v(cos θ, sin θ)·u_i).
     const real D = x(S) - vel.dot(u);
     if (!(D > real(1e-3))) return false;
@@ -67,12 +68,9 @@ bool pulse_model(const bl_config *cfg, const VX &x, const bl_pulse_geometry &g, 
     if (H == nullptr) return true;
 
     const bl::Vec3 dg_dvel = u * (d / (D * D));
-    bl::Vec3 e_dir;  // ∂vel/∂v = ∂delta/∂t_f / v
-    e_dir << c, sn, real(0);
-    bl::Vec3 e_perp;
-    e_perp << -sn, c, real(0);
-    bl::Vec3 e_ring;  // ∂(ring offset)/∂phi
-    e_ring << -rho * std::sin(phi), rho * std::cos(phi), real(0);
+    const bl::Vec3 e_dir(c, sn, real(0));  // ∂vel/∂v = ∂delta/∂t_f / v
+    const bl::Vec3 e_perp(-sn, c, real(0));
+    const bl::Vec3 e_ring(-rho * std::sin(phi), rho * std::cos(phi), real(0));  // ∂(ring offset)/∂phi
 
     RX J = RX::Zero();
     J(X) = dg_ddelta(0);

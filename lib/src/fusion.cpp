@@ -55,13 +55,20 @@ template <int N> void store_symmetric(const real *up, MN<N> &P)
         for (int c = r + 1; c < N; ++c) P(r, c) = P(c, r) = *in++;
     }
 }
+template <int N> real project(const MN<N> &P, const RN<N> &H, int unit, real R, VN<N> *PHt)
+{
+    *PHt = unit >= 0 ? VN<N>(P.col(unit)) : VN<N>(P.lazyProduct(H.transpose()));
+    return (unit >= 0 ? P(unit, unit) : H.dot(*PHt)) + R;
+}
 
 template bool joseph_upper<NX>(const MX &, const VX &, const VX &, real, real *, VX *);
 template void store_symmetric<NX>(const real *, MX &);
+template real project<NX>(const MX &, const RX &, int, real, VX *);
 #if BL_WITH_TEAM
 template bool joseph_upper<kTeamNA>(const MN<kTeamNA> &, const VN<kTeamNA> &, const VN<kTeamNA> &, real, real *,
                                     VN<kTeamNA> *);
 template void store_symmetric<kTeamNA>(const real *, MN<kTeamNA> &);
+template real project<kTeamNA>(const MN<kTeamNA> &, const RN<kTeamNA> &, int, real, VN<kTeamNA> *);
 #endif
 
 }  // namespace bl

@@ -167,10 +167,9 @@ uint32_t renumber_fix(const bl_filter *f, real s_mps, real T_s, uint32_t use_mas
     const uint32_t m = sn.prob.count;
     const uint32_t n = cfg->beacon_count;
     if (!(f->flags_ & kFlagRenumber)) return 0;
-    // Entries heard without beacon 1's signature by two receivers or more:
-    // none of them is beacon 1 (of every live beacon 1 in make
-    // bench-sequencer's scenarios, none was so heard; docs/bridge.md
-    // "Beacon numbering"). A numbering that makes one beacon 1 is not tried.
+    // Entries heard without beacon 1's signature by three receivers or more
+    // (localizer.h, "Beacon 1's signature"): none of them is beacon 1. A
+    // numbering that makes one beacon 1 is not tried.
     const uint32_t signless = sn.entries & f->signless_mask_;
     // four of four: nothing more to come that could tell, as numbered
     if (m < 4 || n == 4) return (signless & 1u) ? BL_MAX_BEACONS : 0;

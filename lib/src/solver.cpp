@@ -94,10 +94,9 @@ template <int D> int solve(const bl_tdoa_problem *prob, bl_tdoa_solution *out)
     for (uint32_t j = 0; j < N; ++j) sig2_sum += prob->sigma_s[j] * prob->sigma_s[j];
     const real sigma_rms_s = std::sqrt(sig2_sum / real(N));
 
+    // (constructed, not comma-initialised: make size-m4, 58 B less flash)
     auto beacon = [&](uint32_t j) {
-        bl::Vec3 b;
-        b << prob->beacons[j].x_m, prob->beacons[j].y_m, prob->beacons[j].z_m;
-        return b;
+        return bl::Vec3(prob->beacons[j].x_m, prob->beacons[j].y_m, prob->beacons[j].z_m);
     };
     // Receiver position as a 3-vector (2D: z fixed).
     auto point3 = [&](const VecD &p) {

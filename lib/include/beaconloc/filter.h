@@ -100,7 +100,11 @@
  * other numbering's; when another comes that close the fix is refused (the
  * start waits, e.g. for a fifth beacon); when none passes, as numbered. The
  * last-pulse table (old numbers) then starts again and the localizer
- * renumbers its sequencer (localizer.h, event RENUMBERED). A running
+ * renumbers its sequencer (localizer.h, event RENUMBERED). No numbering is
+ * tried that makes beacon 1 of a firing three receivers or more heard
+ * without beacon 1's double pulse (the localizer marks them: localizer.h,
+ * "Beacon 1's signature"); where the numbering as it is does so, the fix is refused
+ * rather than taken as numbered. A running
  * filter's restart (bl_filter_start_snapshot on a started filter) keeps the
  * numbering its state verified.
  * Persistent rejection is not the filter's: a gated-out pulse is counted
@@ -202,7 +206,7 @@ struct bl_filter { /* typedef: common.h */
     int64_t ring_t_us_[BL_MAX_BEACONS];  /* earliest arrival of the latest firing */
     uint32_t ring_mask_[BL_MAX_BEACONS]; /* receivers that heard it (bit per receiver) */
     uint32_t ring_explained_mask_;       /* beacons whose latest firing had a fused arrival */
-    uint32_t signless_mask_;             /* beacons whose latest firing two receivers or more heard
+    uint32_t signless_mask_;             /* beacons whose latest firing three receivers or more heard
                                             without beacon 1's signature: not beacon 1 (set by the
                                             localizer; snapshot.cpp renumber_fix) */
     bl_sos_drift sos_drift_;
