@@ -164,10 +164,11 @@ def test_beacon1_dead_from_power_on(bridge_bin, tmp_path, seed):
     """beacon1-dead: kleeman-lab with beacon 1 silent from power-on, so its double pulse, which
     marks the cycle, is never heard; kleeman-lab's beacons are point-symmetric (a numbering three
     places off fits every pulse half a turn away). The localizer numbers the pulses from beacon
-    1's signature (a firing two receivers heard without the double pulse is not beacon 1's) and
-    their geometry: one STATUSTEXT saying so, no re-initialisation, within 0.2 m at the start and
-    0.1 m after 10 s. Before it: seed 2 started at the half-turn twin, 9.5 m off at the end,
-    confident (converged); seed 3 never started."""
+    1's signature (a firing three receivers heard without the double pulse is not beacon 1's) and
+    their geometry: one STATUSTEXT saying so, no re-initialisation, within 0.3 m at the start (it
+    starts on the move, about 10 s in: 0.11-0.29 m over 20 seeds), then on the robot (from 3 s
+    after the start: RMS under 40 mm, never 0.15 m off). Before it: seed 2 started at the
+    half-turn twin, 9.5 m off at the end, confident (converged); seed 3 never started."""
     log, truth_path = run_sim(tmp_path, "beacon1-dead", 60, seed=seed)
     p, est, stats = replay(bridge_bin, log, tmp_path)
     truth = np.genfromtxt(truth_path, delimiter=",", names=True)
@@ -177,8 +178,10 @@ def test_beacon1_dead_from_power_on(bridge_bin, tmp_path, seed):
     assert stats["sequencer"]["renumbered"] == 1
     assert stats["estimator_resets"] == 0
     assert np.all(est["reset_counter"] == 0)
-    assert err[0] < 0.2, float(err[0])
-    assert np.all(err[t_sim > 10] < 0.1), float(err[t_sim > 10].max())
+    assert err[0] < 0.3, float(err[0])
+    settled = t_sim > t_sim[0] + 3
+    assert np.sqrt(np.mean(err[settled] ** 2)) < 0.04, float(np.sqrt(np.mean(err[settled] ** 2)))
+    assert np.all(err[settled] < 0.15), float(err[settled].max())
 
 
 def test_temperature_ramp_speed_of_sound_followed(bridge_bin, tmp_path):
