@@ -176,11 +176,6 @@ static void sync(struct estimator *e)
             case BL_LOC_CAUSE_KNOWN_POSE:
                 event(e, EST_EV_NOTICE, "restarted from a known pose (reset %u)", ev.reset_counter);
                 break;
-            case BL_LOC_CAUSE_NUMBERING:
-                /* beacon 1's firing heard without its double pulse by two receivers: the
-                 * filter was started from a wrong numbering (localizer.h) */
-                event(e, EST_EV_WARNING, "numbering wrong (beacon 1 single): re-initialised");
-                break;
             default:
                 event(e, EST_EV_WARNING, "re-initialised: new geometry or command");
                 break;

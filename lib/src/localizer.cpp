@@ -403,18 +403,14 @@ INLINE void fuse_firing(bl_localizer *loc, const bl::SeqNumbered &pl, const bl_s
     uint32_t beacon = static_cast<uint32_t>(pl.beacon);
     // Beacon 1's signature, its double pulse (Kleeman 1992 s. 2): a firing
     // three receivers or more heard without it, more than twice as many as
-    // with it, is not beacon 1's (none of 65,197 live beacon-1 firings of
-    // make bench-accuracy's and -sequencer's scenarios, 20 seeds, was so
-    // heard; 37 % of the other beacons' were; two receivers without it were
-    // 905 per million: a weak burst's second edge misses the node's window);
-    // the filter's start takes none such for beacon 1 (snapshot.cpp
-    // renumber_fix). Numbered beacon 1 all the same (by the running filter's
-    // hint), the filter's numbering is wrong: an echo taken for the double
-    // pulse started it on a point-symmetric site's twin pose, which every
-    // pulse fits. A fresh start.
+    // with it, is not beacon 1's, where beacon 1 doubles (none of 65,197 live
+    // beacon-1 firings of make bench-accuracy's and -sequencer's scenarios,
+    // 20 seeds, was so heard; 37 % of the other beacons' were; two receivers
+    // without it were 905 per million: a weak burst's second edge misses the
+    // node's window). The filter's start, in a cycle that misses a beacon,
+    // takes none such for beacon 1 (snapshot.cpp renumber_fix).
     const uint32_t plain_rx = static_cast<uint32_t>(__builtin_popcount(g.rx_mask & ~g.double_mask));
     const bool signless = plain_rx >= 3 && plain_rx > 2u * static_cast<uint32_t>(__builtin_popcount(g.double_mask));
-    if (signless && beacon == 0 && bl::started(&loc->filter)) reinit_filter(loc, BL_LOC_CAUSE_NUMBERING);
     const uint32_t bit = 1u << beacon;
     loc->filter.signless_mask_ = signless ? loc->filter.signless_mask_ | bit : loc->filter.signless_mask_ & ~bit;
     uint8_t order[BL_MAX_RECEIVERS];

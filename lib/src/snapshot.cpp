@@ -168,9 +168,13 @@ uint32_t renumber_fix(const bl_filter *f, real s_mps, real T_s, uint32_t use_mas
     const uint32_t n = cfg->beacon_count;
     if (!(f->flags_ & kFlagRenumber)) return 0;
     // Entries heard without beacon 1's signature by three receivers or more
-    // (localizer.h, "Beacon 1's signature"): none of them is beacon 1. A
-    // numbering that makes one beacon 1 is not tried.
-    const uint32_t signless = sn.entries & f->signless_mask_;
+    // (localizer.h, "Beacon 1's signature"): where the cycle misses a beacon
+    // (beacon 1 dead, or out of hearing), none of them is beacon 1, and a
+    // numbering that makes one beacon 1 is not tried. Where every beacon is
+    // heard, beacon 1 is among them: if its double pulse is not made (a
+    // beacon controller without it), every numbering would make a signless
+    // firing beacon 1 and none would be tried; the geometry numbers alone.
+    const uint32_t signless = m < n ? sn.entries & f->signless_mask_ : 0u;
     // four of four: nothing more to come that could tell, as numbered
     if (m < 4 || n == 4) return (signless & 1u) ? BL_MAX_BEACONS : 0;
     real best = real(1e30), second = real(1e30);

@@ -100,11 +100,12 @@
  * other numbering's; when another comes that close the fix is refused (the
  * start waits, e.g. for a fifth beacon); when none passes, as numbered. The
  * last-pulse table (old numbers) then starts again and the localizer
- * renumbers its sequencer (localizer.h, event RENUMBERED). No numbering is
- * tried that makes beacon 1 of a firing three receivers or more heard
- * without beacon 1's double pulse (the localizer marks them: localizer.h,
- * "Beacon 1's signature"); where the numbering as it is does so, the fix is refused
- * rather than taken as numbered. A running
+ * renumbers its sequencer (localizer.h, event RENUMBERED). In a cycle that
+ * misses a beacon, no numbering is tried that makes beacon 1 of a firing
+ * three receivers or more heard without beacon 1's double pulse (the
+ * localizer marks them: localizer.h, "Beacon 1's signature"); where the
+ * numbering as it is does so, the fix is refused rather than taken as
+ * numbered. A running
  * filter's restart (bl_filter_start_snapshot on a started filter) keeps the
  * numbering its state verified.
  * Persistent rejection is not the filter's: a gated-out pulse is counted

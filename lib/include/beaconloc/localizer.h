@@ -58,18 +58,17 @@
  *     restart after persistent rejection keeps the numbering.
  *   - Beacon 1's signature: a firing three receivers or more heard without
  *     the double pulse, more than twice as many as with it, is not beacon
- *     1's (none of 65,197 live beacon-1 firings of the benchmarks'
- *     scenarios, 20 seeds, was so heard; two receivers without it were, 905
- *     per million): the start's renumbering takes none such for beacon 1
- *     (filter.h), which on a point-symmetric site tells the true numbering
- *     from the half-turn's.
- *     A started filter whose beacon 1 so arrives was started from a wrong
- *     numbering (an echo taken for the double pulse, on a symmetric site):
- *     re-initialised, event RESET, cause NUMBERING; its next start
- *     renumbers. Beacon 1 dead, nothing taken for its double pulse: a
- *     sequencer that numbered nothing for two cycles' pulses (2N) is locked
- *     on the next pulse as if it were beacon 1's (counted in
- *     locks_acquired; the filter not started), and the start renumbers.
+ *     1's where beacon 1 makes its double pulse (none of 65,197 live
+ *     beacon-1 firings of the benchmarks' scenarios, 20 seeds, was so heard;
+ *     two receivers without it were, 905 per million): the start's
+ *     renumbering, in a cycle that misses a beacon, takes none such for
+ *     beacon 1 (filter.h), which on a point-symmetric site with beacon 1
+ *     dead tells the true numbering from the half-turn's. Beacon 1 dead,
+ *     nothing taken for its double pulse: a sequencer that numbered nothing
+ *     for two cycles' pulses (2N) is locked on the next pulse as if it were
+ *     beacon 1's (counted in locks_acquired; the filter not started), and
+ *     the start renumbers. A beacon controller that makes no double pulse
+ *     at all breaks the assumption: docs/performance.md, "Beacon 1 dead".
  *   - Sequencer hint: while the filter is converged, its firing time of
  *     beacon 1 and period (with σ) are handed to the sequencer after every
  *     update (tighter windows; numbering survives a silent beacon 1); the
@@ -205,12 +204,7 @@ typedef enum bl_loc_reset_cause {
                                               (the wheel scales learned so far kept) */
     BL_LOC_CAUSE_STALE_PULSE = 4,          /* a pulse too old for the state: fresh filter (the same) */
     BL_LOC_CAUSE_CONFIG = 5,               /* bl_localizer_reinit (new geometry): fresh filter */
-    BL_LOC_CAUSE_KNOWN_POSE = 6,           /* bl_localizer_start: restarted from a known pose */
-    BL_LOC_CAUSE_NUMBERING = 7             /* the firing numbered beacon 1 came without its double
-                                              pulse to two receivers or more: the filter's numbering
-                                              is wrong (started from an echo taken for the double
-                                              pulse, on a site whose beacons are point-symmetric):
-                                              fresh filter, whose start renumbers */
+    BL_LOC_CAUSE_KNOWN_POSE = 6            /* bl_localizer_start: restarted from a known pose */
 } bl_loc_reset_cause;
 
 typedef struct bl_loc_event {
