@@ -152,7 +152,12 @@ int solve_excluding(const bl_config *cfg, Snapshot &sn, bl_tdoa_solution *sol, u
 // shift of 3 is its half-turn, and five wall beacons of a room often fit a
 // shift within 0.25 ms), the fix is refused and the start waits for a cycle
 // that tells them apart; where none passes, the pulses are as numbered and
-// the fault exclusion has them (an echo). A cycle of five beacons or more
+// the fault exclusion has them (an echo), unless beacon 1's signature ruled
+// numberings out (below) and the cycle's beacon 1 as numbered is ruled out
+// too or was not heard: then the numbering is the sequencer's guess (the
+// first cycle of a lock without beacon 1, whose own pulse is not in the
+// table: as numbered, the exclusion started a 16 m hall 8 m outside it), and
+// the fix is refused. A cycle of five beacons or more
 // (two redundant) that passes the test as numbered is taken as numbered; a
 // cycle of four (one residual degree of freedom) only when it is also
 // clearly the best numbering (two-rooms: four beacons numbered six places
@@ -195,7 +200,7 @@ uint32_t renumber_fix(const bl_filter *f, real s_mps, real T_s, uint32_t use_mas
         }
     }
     if (!(best <= kFdeDetect * sigma))
-        found = (signless & 1u) ? BL_MAX_BEACONS : 0;  // none explains it: an echo, as numbered where it may be
+        found = (signless & 1u) || (signless && !(sn.entries & 1u)) ? BL_MAX_BEACONS : 0;  // none explains it: an echo
     else if (real(m) * (second * second - best * best) < kRenumberChi2 * sigma * sigma)
         found = BL_MAX_BEACONS;
     (void)build_snapshot(f, s_mps, T_s, use_mask, found % BL_MAX_BEACONS, sn);
