@@ -156,8 +156,8 @@ int solve_excluding(const bl_config *cfg, Snapshot &sn, bl_tdoa_solution *sol, u
 // numberings out (below) and the cycle's beacon 1 as numbered is ruled out
 // too or was not heard: then the numbering is the sequencer's guess (the
 // first cycle of a lock without beacon 1, whose own pulse is not in the
-// table: as numbered, the exclusion started a 16 m hall 8 m outside it), and
-// the fix is refused. A cycle of five beacons or more
+// table: as numbered, the exclusion started a 16 m hall 8.6 m off, 5 m
+// outside it), and the fix is refused. A cycle of five beacons or more
 // (two redundant) that passes the test as numbered is taken as numbered; a
 // cycle of four (one residual degree of freedom) only when it is also
 // clearly the best numbering (two-rooms: four beacons numbered six places
