@@ -107,8 +107,6 @@ class MavlinkListener:
         # replay at 20x sends ~2400 ODOMETRY/s; the default buffer, ~200 KiB
         # of kernel memory, held 0.1 s of it and a busy host lost a quarter).
         widen_receive_buffer(self.sock)
-        # CLOCK_REALTIME - CLOCK_MONOTONIC (the kernel stamps in realtime)
-        self.real_minus_mono_s = time.time() - time.monotonic()
         self.received: list[Received] = []
         self.bad_data = 0
         self._lock = threading.Lock()
@@ -120,7 +118,7 @@ class MavlinkListener:
         for level, kind, data in ancdata:
             if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
                 sec, nsec = struct.unpack("qq", data[:16])
-                return sec + nsec * 1e-9 - self.real_minus_mono_s
+                return sec + nsec * 1e-9 - real_minus_mono_s()
         return None
 
     def _run(self) -> None:
@@ -175,6 +173,16 @@ def rate_hz(times_s: list[float]) -> float:
     return (len(times_s) - 1) / (times_s[-1] - times_s[0])
 
 
+def real_minus_mono_s() -> float:
+    """CLOCK_REALTIME - CLOCK_MONOTONIC now. The kernel (SO_TIMESTAMPNS, python-can)
+    stamps receptions in realtime; a stamp is moved onto the monotonic clock by the
+    difference of the two clocks read when it is handled, not once at the start: a
+    step of the realtime clock during a case (a guest's time sync: 0.12 s seen in a
+    UML guest) would otherwise shift every later stamp and the clock map built from
+    them (the bridge does the same, can_in.c)."""
+    return time.time() - time.monotonic()
+
+
 def max_gap_s(times_s: list[float]) -> float:
     if len(times_s) < 2:
         return math.inf
@@ -218,11 +226,9 @@ class NodeClockProbe:
                            receive_own_messages=False)
         self.first_rx_mono_s: float | None = None  # first frame of any of our ids
         self.by = by
-        self.rx_real_s: list[float] = []
+        self.rx_mono_s: list[float] = []
         self.node_us: list[int] = []
         self.keys: list[int | None] = []
-        # CLOCK_REALTIME - CLOCK_MONOTONIC (python-can stamps in realtime).
-        self.real_minus_mono_s = time.time() - time.monotonic()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -233,7 +239,7 @@ class NodeClockProbe:
             if msg is None:
                 continue
             if self.first_rx_mono_s is None:
-                self.first_rx_mono_s = msg.timestamp - self.real_minus_mono_s
+                self.first_rx_mono_s = msg.timestamp - real_minus_mono_s()
                 # From now on only the frames the clock map needs: the kernel
                 # drops the rest before they wake this thread (every wake-up
                 # costs about a millisecond of the UML guest's one CPU).
@@ -244,7 +250,8 @@ class NodeClockProbe:
                 sig = self._pulse.decode(msg.data)
             except Exception:  # a malformed frame of a fault test
                 continue
-            self.rx_real_s.append(msg.timestamp - float(sig.get("TimeOfFlight", 0)) * 1e-6)
+            tof_s = float(sig.get("TimeOfFlight", 0)) * 1e-6
+            self.rx_mono_s.append(msg.timestamp - tof_s - real_minus_mono_s())
             self.node_us.append(int(sig["NodeTime"]))
             self.keys.append(int(sig[self.by]) if self.by else None)
 
@@ -263,7 +270,7 @@ class NodeClockProbe:
         node = np.asarray(self.node_us, dtype=np.int64)[mine]
         wraps = np.concatenate([[0], np.cumsum(np.diff(node) < -(NODE_CLOCK_WRAP_US // 2))])
         node = node + wraps * NODE_CLOCK_WRAP_US
-        rx_us = (np.asarray(self.rx_real_s)[mine] - self.real_minus_mono_s) * 1e6
+        rx_us = np.asarray(self.rx_mono_s)[mine] * 1e6
         # Lower envelope: per 5 s window the smallest (rx - node) is the
         # frame with the least queueing; a line through those minima gives
         # offset and drift.
