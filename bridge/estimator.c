@@ -197,6 +197,11 @@ static void sync(struct estimator *e)
             /* beacon 1's double pulse not heard, an echo taken for it */
             event(e, EST_EV_WARNING, "beacons numbered %u off: renumbered by geometry", ev.count);
             break;
+        case BL_LOC_EV_RETIMED:
+            /* every beacon fires on from a new time: the pose kept */
+            event(e, EST_EV_WARNING,
+                  "beacon firing times jumped (controller restart): t0 re-anchored");
+            break;
         default:
             break;
         }

@@ -37,6 +37,7 @@ enum {
     PULSE_REPEATS_SKIPPED,
     PULSE_NUMBERING_ERRORS,
     PULSE_SEQ_RESYNCS,
+    PULSE_TIMING_JUMPS,
     PULSE_BEACON_CHECK, /* the section "beacon_check" (beacon_check.h) */
     PULSE_COUNTERS
 };
@@ -80,6 +81,7 @@ static const struct sensor_counter sensor_pulse_counters[PULSE_COUNTERS + 1] = {
         SENSOR_LOC_COUNTER("numbering_errors", SENSOR_SLOT_NUMBERING, numbering_errors),
     [PULSE_SEQ_RESYNCS] =
         SENSOR_LOC_COUNTER("sequencer_resyncs", SENSOR_SLOT_NUMBERING, seq_resyncs),
+    [PULSE_TIMING_JUMPS] = SENSOR_LOC_COUNTER("timing_jumps", SENSOR_SLOT_NUMBERING, timing_jumps),
     [PULSE_BEACON_CHECK] = {.key = "beacon_check",
                             .slot = SENSOR_SLOT_SECTIONS,
                             .write = write_beacon_check},

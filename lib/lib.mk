@@ -110,7 +110,7 @@ lib: $(BUILD)/lib/libbeaconloc.a $(BUILD)/lib/float/libbeaconloc.a
 # localizer's inputs (tests/lib/localizer_input.py), made here, never
 # committed. Scenario and seconds simulated:
 LOC_DATA_DIR := $(BUILD)/tests/lib/data
-LOC_RUNS     := kleeman-lab:40 echo-storm:40 kidnap:75 encoder-silence:40
+LOC_RUNS     := kleeman-lab:40 echo-storm:40 kidnap:75 encoder-silence:40 controller-restart:90
 LOC_DATA     := $(foreach r,$(LOC_RUNS),$(LOC_DATA_DIR)/$(word 1,$(subst :, ,$(r))).txt)
 $(LOC_DATA_DIR)/%.txt: tests/lib/localizer_input.py hw_sim/beaconloc_sim/data/beaconloc.dbc \
                        hw_sim/beaconloc_sim/data/scenarios/%.scenario.ini \

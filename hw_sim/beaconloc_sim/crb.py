@@ -148,9 +148,11 @@ def wheel_covariance(d_left_m: float, d_right_m: float, m: BoundModel) -> np.nda
 
 def process_model(state: np.ndarray, next_state: np.ndarray, d_left_m: float, d_right_m: float,
                   dt_s: float, s_change_mps: float, m: BoundModel,
-                  fires: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                  fires: bool = True, t0_restarts: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """F and Q of one event-to-event step with odometry input (Kleeman 1992 eqs. 15, 24);
-    fires: the step ends at a beacon firing (t0 moves on by T), else t0 stays."""
+    fires: the step ends at a beacon firing (t0 moves on by T), else t0 stays; t0_restarts:
+    that firing is the first after a restart of the beacon controller, whose t0 is unknown
+    again (the prior's variance of t0 as process noise)."""
     b = m.wheel_base_m
     # differential-drive increments (Vander 2011 eq. 2): ds = (dL + dR)/2, dth = (dR - dL)/b
     ds = (d_left_m + d_right_m) / 2
@@ -173,7 +175,7 @@ def process_model(state: np.ndarray, next_state: np.ndarray, d_left_m: float, d_
     Q[IW, IW] = (m.sigma_angacc_radps2 * dt_s) ** 2 + (next_state[IW] - state[IW]) ** 2
     Q[IS, IS] = s_change_mps ** 2 + (1e-4) ** 2
     Q[IT, IT] = 1e-20
-    Q[IT0, IT0] = 1e-16
+    Q[IT0, IT0] = m.prior_sigma[IT0] ** 2 if t0_restarts else 1e-16
     return F, Q
 
 
@@ -281,6 +283,7 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
                     wheel_right_m: np.ndarray, model: BoundModel, *,
                     start: tuple | None = None, event_time_s: np.ndarray | None = None,
                     fires: np.ndarray | None = None,
+                    t0_restarts: np.ndarray | None = None,
                     measurements: Sequence[Callable] = (),
                     sos_rate: tuple[float, np.ndarray] | None = None,
                     steps: list | None = None
@@ -293,7 +296,9 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
     firing); wheel_*_m: (K,) true cumulative wheel travel at each event (odometry input
     between events). event_time_s: (K,) time of each event, s (default states[:, IT0]: every
     event is a firing, the bound as it was before the other kinds); fires: (K,) the event is a
-    beacon firing (t0 moves on by T into it; default all); measurements: the other sensor
+    beacon firing (t0 moves on by T into it; default all); t0_restarts: (K,) the event is the
+    first firing after a restart of the beacon controller (t0 unknown again: process_model;
+    default none); measurements: the other sensor
     kinds' measurements, one function per kind (in nodes.KINDS order: the order of the rows),
     rows(k, states[k]) -> (H (n, 8), variances (n,)) of its measurements at event k or None
     (nodes.sensor_kind.EventRows: a kind's bound_rows; default none).
@@ -334,7 +339,8 @@ def pcrb_along_path(states: np.ndarray, beacons_m: np.ndarray, beacon_index: np.
             F, Q = process_model(prev[0], states[k], wheel_left_m[k] - prev[1],
                                  wheel_right_m[k] - prev[2], dt_s,
                                  states[k, IS] - prev[0][IS], model,
-                                 fires=True if fires is None else bool(fires[k]))
+                                 fires=True if fires is None else bool(fires[k]),
+                                 t0_restarts=t0_restarts is not None and bool(t0_restarts[k]))
         else:
             F, Q = np.eye(8), np.diag(np.full(8, 1e-20))
         if sos_rate is not None and prev is not None:

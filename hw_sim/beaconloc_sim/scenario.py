@@ -37,7 +37,7 @@ _KNOWN = {
     "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
     "faults": {"encoder_silence", "kidnap", "beacon_outage", "echo_storm", "beacon_misplaced",
-               "range_beacon_misplaced", "bearing_beacon_misplaced"},
+               "range_beacon_misplaced", "bearing_beacon_misplaced", "controller_restart"},
     "output": {"truth_rate_hz", "log_epoch_s", "channel"},
     # [obstacles]: segmentN = x1_m, y1_m, x2_m, y2_m
 }
@@ -100,6 +100,9 @@ class Scenario:
     # start_s, duration_s, echo_probability, late_arrival_probability: the firings in the
     # window use these two instead of the scenario's
     echo_storms: tuple[tuple[float, float, float, float], ...]
+    # the beacon controller restarts (a power cut, a watchdog): no beacon fires from time_s
+    # for pause_s, then beacon 1 fires and the cycle goes on from it (physics.pulses)
+    controller_restarts: tuple[tuple[float, float], ...] = ()   # time_s, pause_s
     obstacles_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     # common-mode random slip of both wheels: ground-distance error std after 1 m of mean
     # travel, m (adds to the per-wheel sigma_wheel_per_m; 0 = none)
@@ -311,6 +314,17 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
             raise ini.error("faults", key, "expected 'start_s, duration_s, echo_probability, "
                             "late_arrival_probability' with duration_s > 0, probabilities 0..1")
         storms.append(tuple(s))
+    restarts = []
+    for key in fault_keys["controller_restart"]:
+        s = ini.numbers("faults", key, 2)
+        if s[0] < 0 or s[1] < 0:
+            raise ini.error("faults", key, "expected 'time_s, pause_s' with both >= 0")
+        restarts.append((s[0], s[1], key))
+    restarts.sort()
+    for (t_a, p_a, _), (t_b, _, key_b) in zip(restarts, restarts[1:]):
+        if t_b < t_a + p_a:
+            raise ini.error("faults", key_b, f"a restart at {t_b:g} s during the pause of the "
+                            f"one at {t_a:g} s")
     initial_ticks = ini.numbers("encoders", "initial_ticks", 2, default=[16000, 300])
     if any(v != int(v) or not 0 <= v < 16384 for v in initial_ticks):
         raise ini.error("encoders", "initial_ticks", "ticks must be integers 0..16383")
@@ -369,6 +383,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         kidnaps=tuple(kidnaps),
         beacon_outages=tuple(sorted(outages)),
         echo_storms=tuple(sorted(storms)),
+        controller_restarts=tuple((t, p) for t, p, _ in restarts),
         obstacles_m=np.array(obstacles, dtype=float).reshape(-1, 4),
         sigma_distance_per_m=ini.number("encoders", "sigma_distance_per_m",
                                         site.sigma_distance_per_m, minimum=0),

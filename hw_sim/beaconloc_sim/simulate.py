@@ -325,7 +325,12 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, measured: dict[str, 
     wl, wr = scn.trajectory.wheel_travel(t_ev)
     args = (states, scn.site.beacons_m, beacon, [np.array(h) for h in heard], wl, wr,
             bound_model(scn))
-    kw = dict(event_time_s=t_time, fires=is_fire,
+    # the first firing after each restart of the beacon controller (its run's start exactly,
+    # physics.pulses): t0 unknown again
+    restarted = np.zeros(k, dtype=bool)
+    for t_r, pause in scn.controller_restarts:
+        restarted[fire_ev[firings.t_s == t_r + pause]] = True
+    kw = dict(event_time_s=t_time, fires=is_fire, t0_restarts=restarted,
               measurements=[kind.bound_rows(scn, ev, t_ev, states) for kind, ev in kinds],
               steps=steps)
     if sos_rate_prior_mps2 is not None:

@@ -87,6 +87,16 @@ inline real effective_base_m(const bl_config *cfg) { return cfg->wheels.skid_fac
 // t0 += k·T (the reference moves k firing slots), then whole microseconds
 // move from the t0 offset into the epoch.
 void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k);
+// The beacons' firing times jumped by dt_s (s): the beacon controller
+// restarted and fires on from a new time (localizer.cpp, timing_jump).
+// Kleeman 1992 eq. 15's t0 moves by the jump, its variance grows by var_s2
+// (s²); the pose, the speeds and every other state are kept. (The next
+// predict moves the whole microseconds into the epoch: shift_reference.)
+inline void shift_firing_times(bl_filter *f, real dt_s, real var_s2)
+{
+    f->x_[BL_IX_T0] += dt_s;
+    f->P_[BL_IX_T0 * BL_FILTER_NX + BL_IX_T0] += var_s2;
+}
 // Wheel scales at a (re)start: kept by a started filter (or one
 // re-initialised with them kept), else 1 ± σ.
 void start_wheel_scales(const bl_filter *f, VX &x, MX &P);

@@ -225,7 +225,11 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     const uint32_t cap = n_watched > 0 ? n_beacons - 1 : n_beacons;
     const uint32_t need = cap < 3 ? cap : 3;
     if (n < loc->reject_k_ || rejected_beacons < need) return false;
-    if (!bl::started(&loc->filter)) return false;
+    // Not while the sequencer holds a double pulse that contradicts its
+    // model (beacon 1 heard where another beacon is expected: the numbering
+    // itself in doubt until the next cycle confirms or clears it; a snapshot
+    // of such pulses would fit a wrong numbering).
+    if (!bl::started(&loc->filter) || loc->seq.conflict_pending) return false;
     // The heading kept (read in place: no state copy on this, the deepest, chain).
     const bl_real theta = bl::wrap_angle(loc->filter.x_[BL_IX_THETA]);
     int rc = BL_EDEGENERATE;
@@ -283,19 +287,75 @@ NOINLINE void coast_to(bl_localizer *loc, int64_t arrival_us)
     }
 }
 
-// The fusion's result (loc->result_) counted and classified.
-NOINLINE Fused classify(bl_localizer *loc)
+// ---- timing watch --------------------------------------------------------
+
+// Innovations within this many of their σ agree (a run of the timing watch).
+constexpr bl_real kJumpGate = 4;
+
+// The beacon controller restarted (a power cut, a watchdog): every beacon
+// fires on, in its order, from a new time. The sequencer locks again on
+// beacon 1's double pulse (Kleeman 1992 s. 2) and numbers the pulses right,
+// but each arrival is then off the filter's prediction (eq. 21) by one
+// common time, the jump of t0: rejected by the gate, or beyond the longest
+// flight taken for a numbering error. The watch keeps a run of arrivals
+// none of which was fused, whose innovations agree with the run's first
+// within kJumpGate of their σ (a new run starts at one that does not); when
+// the run holds min(3, N) beacons, beacon 1's firing heard with its double
+// pulse among them, t0 moves by the last arrival's innovation, its variance
+// grows by that innovation's, and the pose stays (shift_firing_times; the
+// next arrivals refine t0). A kidnap's innovations differ from beacon to
+// beacon (each its own change of distance), an echo storm's rejections come
+// between fused arrivals: neither makes such a run. True if re-anchored.
+INLINE bool timing_jump(bl_localizer *loc, uint32_t beacon, bool signature)
 {
     const bl_fusion_result &res = loc->result_;
+    const bl_real d = res.innovation - loc->jump_s_;
+    if (loc->jump_n_ == 0 || d * d > kJumpGate * kJumpGate * res.innovation_var) {  // a new run
+        loc->jump_n_ = 0;
+        loc->jump_s_ = res.innovation;
+        loc->jump_beacons_ = 0;
+        loc->jump_signed_ = false;
+    }
+    loc->jump_n_++;  // (past 255 it wraps to 0: the next arrival starts a run)
+    loc->jump_beacons_ = static_cast<uint16_t>(loc->jump_beacons_ | (1u << beacon));
+    loc->jump_signed_ = loc->jump_signed_ || (beacon == 0 && signature);
+    const uint32_t n = loc->filter.cfg_.beacon_count;
+    if (!loc->jump_signed_ || static_cast<uint32_t>(__builtin_popcount(loc->jump_beacons_)) < (n < 3 ? n : 3))
+        return false;
+    bl::shift_firing_times(&loc->filter, res.innovation, res.innovation_var);
+    loc->counters_.timing_jumps++;
+    clear_window(loc);
+    loc->misnumbered_in_row_ = 0;
+    push_event(loc, BL_LOC_EV_RETIMED, BL_LOC_CAUSE_NONE, loc->jump_n_);
+    loc->jump_n_ = 0;
+    return true;
+}
+
+// The fusion's result (loc->result_) counted and classified; beacon and
+// signature (its firing heard with beacon 1's double pulse) for the timing
+// watch.
+NOINLINE Fused classify(bl_localizer *loc, uint32_t beacon, bool signature)
+{
+    const bl_fusion_result &res = loc->result_;
+    if (res.status != BL_FUSION_REJECTED) {
+        loc->jump_n_ = 0;  // a fused arrival ends the timing watch's run
+    } else if (loc->was_converged_ && timing_jump(loc, beacon, signature)) {
+        loc->counters_.pulses_rejected++;
+        return Fused::kRejected;  // the next arrival fuses on the new t0 (and moves the hint)
+    }
     // An innovation longer than the longest flight: a numbering error, not a
-    // pose error (see localizer.h). Two in a row while converged re-sync.
+    // pose error (see localizer.h). Two in a row while converged re-sync,
+    // unless the timing watch's run holds this one and beacon 1's signature
+    // (the sequencer's numbering is right, the firing times jumped) and is
+    // not yet two cycles' firings long.
     const bool misnumbered =
         res.status == BL_FUSION_REJECTED && loc->was_converged_ &&
         (res.innovation < 0 ? -res.innovation : res.innovation) * bl_real(1e6) > bl_real(loc->seq.cfg.max_flight_us);
     if (misnumbered) {
         loc->counters_.numbering_errors++;
         loc->counters_.pulses_rejected++;
-        if (++loc->misnumbered_in_row_ >= 2) resync(loc);
+        const bool held = loc->jump_signed_ && loc->jump_n_ < 2 * loc->filter.cfg_.beacon_count;
+        if (++loc->misnumbered_in_row_ >= 2 && !held) resync(loc);
         return Fused::kMisnumbered;
     }
     if (res.status == BL_FUSION_ACCEPTED) loc->misnumbered_in_row_ = 0;
@@ -340,10 +400,11 @@ NOINLINE uint32_t follow_renumbering(bl_localizer *loc, uint32_t beacon)
     return (beacon + k) % loc->filter.cfg_.beacon_count;
 }
 
-// One arrival (beacon, time, receiver) of a firing. *beacon: renumbered
-// when the filter's start renumbered the pulses (the firing's other members
-// follow).
-INLINE Fused fuse_one(bl_localizer *loc, uint32_t *beacon, int64_t arrival_us, uint32_t receiver)
+// One arrival (beacon, time, receiver) of a firing; signature: the firing
+// was heard with beacon 1's double pulse (the timing watch). *beacon:
+// renumbered when the filter's start renumbered the pulses (the firing's
+// other members follow).
+INLINE Fused fuse_one(bl_localizer *loc, uint32_t *beacon, int64_t arrival_us, uint32_t receiver, bool signature)
 {
     coast_to(loc, arrival_us);
     // a restart's renumbering since the last arrival (restart_if_persistent), then this arrival's start's
@@ -358,7 +419,7 @@ INLINE Fused fuse_one(bl_localizer *loc, uint32_t *beacon, int64_t arrival_us, u
         loc->counters_.fuse_errors++;
         return Fused::kNo;
     }
-    const Fused fused = classify(loc);
+    const Fused fused = classify(loc, *beacon, signature);
     if (loc->observer_ != nullptr &&
         (fused == Fused::kRejected || (fused == Fused::kAccepted && loc->result_.status == BL_FUSION_ACCEPTED)))
         notify_observer(loc, *beacon, arrival_us, receiver);
@@ -410,7 +471,11 @@ INLINE void fuse_firing(bl_localizer *loc, const bl::SeqNumbered &pl, const bl_s
     // node's window). The filter's start, in a cycle that misses a beacon,
     // takes none such for beacon 1 (snapshot.cpp renumber_fix).
     const uint32_t plain_rx = static_cast<uint32_t>(__builtin_popcount(g.rx_mask & ~g.double_mask));
-    const bool signless = plain_rx >= 3 && plain_rx > 2u * static_cast<uint32_t>(__builtin_popcount(g.double_mask));
+    const uint32_t double_rx = static_cast<uint32_t>(__builtin_popcount(g.double_mask));
+    const bool signless = plain_rx >= 3 && plain_rx > 2u * double_rx;
+    // and heard with it, by two receivers or more and most of them: the
+    // timing watch's evidence that the sequencer's lock is beacon 1's
+    const bool signature = double_rx >= 2 && double_rx >= plain_rx;
     const uint32_t bit = 1u << beacon;
     loc->filter.signless_mask_ = signless ? loc->filter.signless_mask_ | bit : loc->filter.signless_mask_ & ~bit;
     uint8_t order[BL_MAX_RECEIVERS];
@@ -418,7 +483,7 @@ INLINE void fuse_firing(bl_localizer *loc, const bl::SeqNumbered &pl, const bl_s
     bool any_accepted = false, any_rejected = false;
     for (uint32_t m = 0; m < n; m++) {
         const uint32_t rx = order[m];
-        const Fused r = fuse_one(loc, &beacon, g.start_us + g.rx_offset_us[rx], rx);
+        const Fused r = fuse_one(loc, &beacon, g.start_us + g.rx_offset_us[rx], rx, signature);
         if (r == Fused::kMisnumbered) break;  // one numbering error, not one per receiver
         bool fused = r == Fused::kAccepted;
         if (r == Fused::kAccepted || r == Fused::kRejected) {

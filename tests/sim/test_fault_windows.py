@@ -47,6 +47,9 @@ def test_numbered_fault_keys_give_every_window_in_time_order(make_scenario):
     ("echo_storm3 = 10, 5, 0.3\n", "echo_storm3", "expected 4 comma-separated numbers"),
     ("kidnap = 10, 0, 1\nkidnap2 = 10, 1, 0\n", "kidnap2", "two kidnaps at the same time"),
     ("encoder_silence4 = 10, 0\n", "encoder_silence4", "duration_s must be > 0"),
+    ("controller_restart = 10, -1\n", "controller_restart", "both >= 0"),
+    ("controller_restart = 10, 5\ncontroller_restart2 = 12, 1\n", "controller_restart2",
+     "during the pause of the one at 10 s"),
 ])
 def test_bad_fault_windows_name_their_key(make_scenario, faults, key, why):
     with pytest.raises(ConfigError) as err:
@@ -107,6 +110,55 @@ def test_every_outage_and_silence_window_is_applied(make_scenario):
     big = t[:-1][gaps > 0.5]
     assert big.tolist() == pytest.approx([20.0, 40.0], abs=0.02)
     assert gaps[gaps > 0.5].tolist() == pytest.approx([2.0, 3.0], abs=0.02)
+
+
+def test_controller_restart_starts_the_cycle_again_from_beacon_1(make_scenario):
+    """[faults] controller_restart: no beacon fires in the pause; then beacon 1, and the cycle
+    goes on in order, one period apart, from its firing. Before the restart the firings are
+    those of the run without it (the same times and beacons)."""
+    faults = "controller_restart = 20.0, 0.7\ncontroller_restart2 = 40.0, 1.234\n"
+    scn = load_scenario(str(make_scenario(body(60, faults))))
+    plain = load_scenario(str(make_scenario(body(60, ""))))
+    assert scn.controller_restarts == ((20.0, 0.7), (40.0, 1.234))
+    rng = np.random.default_rng(0)
+    from beaconloc_sim.physics import pulses
+    f, g = pulses.make_firings(scn, rng), pulses.make_firings(plain, np.random.default_rng(0))
+    before = f.t_s < 20.0
+    assert np.array_equal(f.t_s[before], g.t_s[g.t_s < 20.0])
+    assert np.array_equal(f.beacon[before], g.beacon[g.t_s < 20.0])
+    assert not np.any((f.t_s >= 20.0) & (f.t_s < 20.7)) and not np.any((f.t_s >= 40.0) & (f.t_s < 41.234))
+    T = scn.true_period_s
+    for start, end in ((20.7, 40.0), (41.234, 60.0)):
+        run = (f.t_s >= start) & (f.t_s < end)
+        assert f.t_s[run][0] == start and f.beacon[run][0] == 0
+        assert np.allclose(np.diff(f.t_s[run]), T, rtol=0, atol=1e-9)
+        assert np.array_equal(f.beacon[run], np.arange(run.sum()) % scn.site.beacon_count)
+    # the windows the live run takes (firings_until) hold the same firings
+    parts = [pulses.make_firings(scn, rng, (a, min(a + 7.0, 60.0))) for a in np.arange(0.0, 60.0, 7.0)]
+    assert np.array_equal(np.concatenate([p.t_s for p in parts]), f.t_s)
+    assert np.array_equal(np.concatenate([p.beacon for p in parts]), f.beacon)
+
+
+def test_controller_restart_makes_t0_unknown_to_the_bound(make_scenario):
+    """The bound takes the firing time t0 as unknown again at the first firing after a restart
+    (the prior's variance as process noise): the bound's t0 sigma there is the prior's
+    (0.1 s) until that firing's pulses pin it again, while the position's stays where it was
+    (the pose is not what the restart loses). Without the restart t0 is never let go."""
+    from beaconloc_sim import crb
+    scn = load_scenario(str(make_scenario(body(40, "controller_restart = 20.0, 0.7\n"))))
+    res = simulate.run(scn)
+    k = int(np.searchsorted(res.pcrb_t_s, 20.7))
+    assert res.pcrb_t_s[k] == 20.7
+    sd_t0 = np.sqrt(res.pcrb_cov[:, crb.IT0, crb.IT0])
+    sd_pos = np.sqrt(res.pcrb_cov[:, crb.IX, crb.IX] + res.pcrb_cov[:, crb.IY, crb.IY])
+    assert sd_t0[k - 1] < 1e-4                   # pinned before the restart
+    assert sd_t0[k] < 1e-3                       # pinned again by the first firing's pulses
+    # the first firing's pulses pin t0 only through the pose: the pose barely grows
+    assert sd_pos[k] < 2 * sd_pos[k - 1]
+    plain = simulate.run(load_scenario(str(make_scenario(body(40, "")))))
+    j = int(np.searchsorted(plain.pcrb_t_s, 20.7))
+    # without a restart the same instant keeps the bound's t0 far tighter than one firing gives
+    assert np.sqrt(plain.pcrb_cov[j, crb.IT0, crb.IT0]) < sd_t0[k]
 
 
 def windows(scn, window_s):

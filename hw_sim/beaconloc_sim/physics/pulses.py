@@ -2,6 +2,7 @@
 receiver-array node's detector: what PULSE_DETECTION frames the node sends."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,11 +41,29 @@ class Detections:
     saturated: np.ndarray
 
 
-def firings_until(scn, t_s: float) -> int:
-    """Number of firings at or before t_s (firing k is at first_firing_s + k T_true)."""
-    if not t_s > scn.first_firing_s:
+def _cycles(scn) -> list[tuple[float, float]]:
+    """The beacon controller's runs of firing cycles: (start_s, end_s), firing j of a run at
+    start_s + j T_true while before end_s; each controller restart ends one run and starts
+    the next with beacon 1 after its pause ([faults] controller_restart)."""
+    starts = [scn.first_firing_s] + [t + pause for t, pause in scn.controller_restarts]
+    ends = [t for t, _ in scn.controller_restarts] + [math.inf]
+    return list(zip(starts, ends))
+
+
+def _run_count(start_s: float, end_s: float, period_s: float, t_s: float) -> int:
+    """Firings of a run (start_s, end_s) at or before t_s."""
+    if not t_s > start_s:
         return 0
-    return max(int(np.floor((t_s - scn.first_firing_s) / scn.true_period_s)) + 1, 0)
+    n = int(np.floor((t_s - start_s) / period_s)) + 1
+    if end_s < math.inf:
+        n = min(n, max(int(np.ceil((end_s - start_s) / period_s)), 0))
+    return max(n, 0)
+
+
+def firings_until(scn, t_s: float) -> int:
+    """Number of firings at or before t_s (firing k is at first_firing_s + k T_true until a
+    controller restart, _cycles)."""
+    return sum(_run_count(a, b, scn.true_period_s, t_s) for a, b in _cycles(scn))
 
 
 def make_firings(scn, rng: np.random.Generator,
@@ -61,9 +80,14 @@ def make_firings(scn, rng: np.random.Generator,
         k = np.arange(firings_until(scn, scn.duration_s))
     else:
         k = np.arange(firings_until(scn, window_s[0]), firings_until(scn, window_s[1]))
-    # beacon controller: beacon (k mod N) + 1 fires at t_first + k T_true (Kleeman 1992 s. 2, eq. 15)
-    t = scn.first_firing_s + k * period
-    beacon = k % site.beacon_count
+    # beacon controller: beacon (k mod N) + 1 fires at t_first + k T_true (Kleeman 1992 s. 2,
+    # eq. 15); after a restart, firing j of the new run at its start + j T_true, beacon j mod N
+    runs = _cycles(scn)
+    first_k = np.cumsum([0] + [_run_count(a, b, period, b) for a, b in runs[:-1]])
+    run = np.searchsorted(first_k, k, side="right") - 1
+    j = k - first_k[run]
+    t = np.array([a for a, _ in runs])[run] + j * period
+    beacon = j % site.beacon_count
     alive = np.ones(len(k), dtype=bool)
     for start, dur, ids in scn.beacon_outages:
         dead = np.isin(beacon + 1, ids) & (t >= start) & (t < start + dur)

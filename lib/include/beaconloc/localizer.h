@@ -186,12 +186,16 @@ typedef enum bl_loc_event_kind {
     BL_LOC_EV_RESET = 2,   /* re-initialised; see cause */
     BL_LOC_EV_CONVERGED = 3,
     BL_LOC_EV_NOT_CONVERGED = 4,
-    BL_LOC_EV_RESYNC = 5,    /* beacon numbering re-synchronised from the filter */
-    BL_LOC_EV_RENUMBERED = 6 /* the filter's snapshot start found the pulses numbered count
+    BL_LOC_EV_RESYNC = 5,     /* beacon numbering re-synchronised from the filter */
+    BL_LOC_EV_RENUMBERED = 6, /* the filter's snapshot start found the pulses numbered count
                                 places off (beacon 1's double pulse not heard, an echo 3 ms
                                 behind another beacon taken for it): the beacon the sequencer
                                 called b is beacon (b + count) mod N, and it numbers so from
                                 now on (sequencer counter renumbered) */
+    BL_LOC_EV_RETIMED = 7     /* the beacons' firing times jumped (the beacon controller
+                                restarted: every beacon fires on from a new time): the
+                                filter's t0 moved by the arrivals' common offset, the pose
+                                kept; count = the arrivals that showed it (<= 255) */
 } bl_loc_event_kind;
 
 typedef enum bl_loc_reset_cause {
@@ -260,6 +264,8 @@ typedef struct bl_loc_counters {
     uint32_t seq_resyncs;      /* sequencer re-synchronised from the filter */
     uint32_t events_dropped;   /* events lost because the queue was full */
     uint32_t known_starts;     /* (re)starts from a known pose (bl_localizer_start) */
+    uint32_t timing_jumps;     /* firing times re-anchored (the beacon controller restarted;
+                                  event RETIMED) */
     /* each measurement kind's counters (kinds.h, in its order; its aid_<kind>.h:
      * bearings_fused, ..., ranges_fused, ...) */
     BL_KINDS(BL_KIND_MEMBERS, LOC_COUNTERS)
@@ -294,6 +300,7 @@ struct bl_localizer { /* typedef: common.h */
     uint32_t last_reset_seen_;
     uint32_t measurements_;
     uint32_t newest_tag_;
+    bl_real jump_s_; /* the timing watch's run: its first arrival's innovation (s) */
     /* (bytes last: the window's counts are <= BL_LOC_REJECT_WINDOW_MAX, the
        queue's <= BL_LOC_EVENT_QUEUE, misnumbered_in_row_ <= 2) */
     uint8_t reject_k_; /* K */
@@ -301,6 +308,9 @@ struct bl_localizer { /* typedef: common.h */
     uint8_t win_len_, win_next_;
     uint8_t ev_head_, ev_len_;
     uint8_t misnumbered_in_row_;
+    uint8_t jump_n_;        /* arrivals in the timing watch's run */
+    uint16_t jump_beacons_; /* their beacons (bit per beacon) */
+    bool jump_signed_;      /* beacon 1's firing with its double pulse among them */
     uint8_t win_beacon_[BL_LOC_REJECT_WINDOW_MAX];
     bool have_tag_;
     bool was_started_;
