@@ -102,6 +102,9 @@ BEYOND_TIMING = {
                     "period from the next",
     "two-rooms-east": "beacon 1 never heard and a floor echo 3 ms behind beacon 7 passes for its double "
                       "pulse: every slot is one period from the next, timing alone cannot tell which is 1",
+    "controller-restart": "the beacon controller restarts with beacon 1 where another beacon is due: its "
+                          "double pulse there is what an echo 3 ms behind that beacon makes too, until a "
+                          "second one a cycle later confirms the restart",
 }
 
 

@@ -193,7 +193,7 @@ def test_controller_restarts_keep_the_pose(bridge_bin, tmp_path, seed):
     (one STATUSTEXT each, stats timing_jumps 2) and the pose is kept: no re-initialisation, no
     re-synchronisation from the stale firing times, RMS under 40 mm after the start and never
     0.15 m off (the robot runs on its wheels from the restart until the sequencer locks again,
-    about 2 s after the beacons resume: 0.117 m at most on seed 1, 0.176 m over seeds 1-20).
+    about 2 s after the beacons resume: 0.117 m at most on seed 1, 0.166 m over seeds 1-20).
     Before the watch: on seed 1 the first restart's wrongly numbered pulses restarted the filter
     3.5 m off (two restarts, 3 s lost); on 20 seeds ratio 10.8 against 1.10 with it."""
     log, truth_path = run_sim(tmp_path, "controller-restart", 90, seed=seed)
