@@ -57,7 +57,7 @@ void fuse_wheel_speeds(const bl_config *cfg, real left_m, real right_m, real dt_
     const real rw = (k2 * (dl_pred_m + dr_pred_m) / (effective_base_m(cfg) * effective_base_m(cfg))) / (dt_s * dt_s) +
                     floor_v * floor_v;
     const real rs[2] = {rv, rw};
-    const int idx[2] = {V, W};
+    static constexpr int idx[2] = {V, W};  // (static: not copied to the stack)
     // b above is the effective base χ·b (config.h wheels.skid_factor: the
     // ICR model of skid steering, Mandow et al. 2007), b for a differential
     // drive.

@@ -292,37 +292,86 @@ NOINLINE void coast_to(bl_localizer *loc, int64_t arrival_us)
 // Innovations within this many of their σ agree (a run of the timing watch).
 constexpr bl_real kJumpGate = 4;
 
+// The flight of beacon a's pulse minus beacon b's at the filter's state (s;
+// bl_filter_expected_arrival, Kleeman 1992 eqs. 20-21); 0 where unknown.
+NOINLINE bl_real flight_difference_s(const bl_filter *f, uint32_t a, uint32_t b)
+{
+    bl_expected_pulse ea, eb;
+    if (bl_filter_expected_arrival(f, a, f->t_us_, &ea) != BL_OK ||
+        bl_filter_expected_arrival(f, b, f->t_us_, &eb) != BL_OK)
+        return 0;
+    return ea.flight_s - eb.flight_s;
+}
+
 // The beacon controller restarted (a power cut, a watchdog): every beacon
 // fires on, in its order, from a new time. The sequencer locks again on
 // beacon 1's double pulse (Kleeman 1992 s. 2) and numbers the pulses right,
 // but each arrival is then off the filter's prediction (eq. 21) by one
 // common time, the jump of t0: rejected by the gate, or beyond the longest
 // flight taken for a numbering error. The watch keeps a run of arrivals
-// none of which was fused, whose innovations agree with the run's first
-// within kJumpGate of their σ (a new run starts at one that does not); when
-// the run holds min(3, N) beacons, beacon 1's firing heard with its double
-// pulse among them, t0 moves by the last arrival's innovation, its variance
-// grows by that innovation's, and the pose stays (shift_firing_times; the
-// next arrivals refine t0). A kidnap's innovations differ from beacon to
-// beacon (each its own change of distance), an echo storm's rejections come
-// between fused arrivals: neither makes such a run. True if re-anchored.
+// none of which was fused, whose jumps agree with the run's first within
+// kJumpGate of their σ (a new run starts at one that does not); when the
+// run holds min(3, N) beacons, beacon 1's firing heard with its double
+// pulse among them, t0 moves by the last arrival's jump, its variance grows
+// by that innovation's, and the pose stays (shift_firing_times; the next
+// arrivals refine t0). Where the restart put beacon 1 inside another beacon
+// k's tracking window, the filter's hint numbers it k: a firing numbered
+// k != 0 with beacon 1's signature starts a run that takes the arrival
+// numbered b for beacon b - k's (its jump: the innovation plus b's flight
+// less b - k's), and t0 moves by k slots and the jump. A kidnap's jumps
+// differ from beacon to beacon (each its own change of distance), an echo
+// storm's rejections come between fused arrivals: neither makes such a
+// run. True if re-anchored.
 INLINE bool timing_jump(bl_localizer *loc, uint32_t beacon, bool signature)
 {
     const bl_fusion_result &res = loc->result_;
-    const bl_real d = res.innovation - loc->jump_s_;
-    if (loc->jump_n_ == 0 || d * d > kJumpGate * kJumpGate * res.innovation_var) {  // a new run
+    const uint32_t n = loc->filter.cfg_.beacon_count;
+    // The run's numbering k: the arrival numbered b is beacon b - k's, fired
+    // at its prediction plus the innovation plus b's flight less b - k's.
+    uint32_t k = loc->jump_n_ ? loc->jump_k_ : 0;
+    uint32_t truth = (beacon + n - k) % n;
+    bl_real jump = res.innovation + (k ? flight_difference_s(&loc->filter, beacon, truth) : bl_real(0));
+    const bl_real d = jump - loc->jump_s_;
+    const bool agrees = loc->jump_n_ != 0 && d * d <= kJumpGate * kJumpGate * res.innovation_var;
+    const bool other_one = signature && truth != 0;
+    if (other_one) {
+        // Beacon 1's signature on a firing numbered as another beacon: a new
+        // run takes it for beacon 1's (the restart put beacon 1 in beacon
+        // k's slot, where the filter's hint numbered it)
+        k = beacon;
+        truth = 0;
+        jump = res.innovation + flight_difference_s(&loc->filter, beacon, 0);
+    } else if (!agrees) {
+        k = 0;  // a new run as numbered
+        truth = beacon;
+        jump = res.innovation;
+    }
+    if (other_one || !agrees) {
         loc->jump_n_ = 0;
-        loc->jump_s_ = res.innovation;
+        loc->jump_k_ = static_cast<uint8_t>(k);
+        loc->jump_s_ = jump;
         loc->jump_beacons_ = 0;
         loc->jump_signed_ = false;
     }
     loc->jump_n_++;  // (past 255 it wraps to 0: the next arrival starts a run)
     loc->jump_beacons_ = static_cast<uint16_t>(loc->jump_beacons_ | (1u << beacon));
-    loc->jump_signed_ = loc->jump_signed_ || (beacon == 0 && signature);
-    const uint32_t n = loc->filter.cfg_.beacon_count;
+    loc->jump_signed_ = loc->jump_signed_ || (truth == 0 && signature);
     if (!loc->jump_signed_ || static_cast<uint32_t>(__builtin_popcount(loc->jump_beacons_)) < (n < 3 ? n : 3))
         return false;
-    bl::shift_firing_times(&loc->filter, res.innovation, res.innovation_var);
+    // t0 of the beacon numbered b moves to beacon b - k's firing: k slots on
+    // (Kleeman 1992 eq. 15, t0 + k·T) and the jump. Where that is no move
+    // (within the gate) the firing times are right and only the numbering
+    // is not: the re-synchronisation's case, not held (classify).
+    const bl_real cycle_s = bl_real(n) * loc->filter.x_[BL_IX_T];
+    bl_real shift = jump + bl_real(k) * loc->filter.x_[BL_IX_T];
+    while (shift > cycle_s / 2) shift -= cycle_s;  // whole cycles move nothing
+    while (shift < -cycle_s / 2) shift += cycle_s;
+    if (shift * shift <= kJumpGate * kJumpGate * res.innovation_var) {
+        loc->jump_n_ = 0;
+        loc->jump_signed_ = false;
+        return false;
+    }
+    bl::shift_firing_times(&loc->filter, shift, res.innovation_var);
     loc->counters_.timing_jumps++;
     clear_window(loc);
     loc->misnumbered_in_row_ = 0;

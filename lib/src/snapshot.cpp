@@ -246,8 +246,8 @@ __attribute__((noinline)) void apply_snapshot(bl_filter *f, const bl_tdoa_soluti
     x(TH) = bl::wrap_angle(theta);
     x(S) = s_mps;
     x(T) = T_s;
-    x(T0) = sol.t0_s;  // firing of ref_beacon relative to its arrival
-    const int idx[3] = {X, Y, T0};
+    x(T0) = sol.t0_s;                          // firing of ref_beacon relative to its arrival
+    static constexpr int idx[3] = {X, Y, T0};  // (static: not copied to the stack)
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c) P(idx[r], idx[c]) = sol.cov[r * 4 + c];
     P(TH, TH) = sigma_theta * sigma_theta;

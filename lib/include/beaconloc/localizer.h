@@ -300,7 +300,7 @@ struct bl_localizer { /* typedef: common.h */
     uint32_t last_reset_seen_;
     uint32_t measurements_;
     uint32_t newest_tag_;
-    bl_real jump_s_; /* the timing watch's run: its first arrival's innovation (s) */
+    bl_real jump_s_; /* the timing watch's run: its first arrival's jump of the firing times (s) */
     /* (bytes last: the window's counts are <= BL_LOC_REJECT_WINDOW_MAX, the
        queue's <= BL_LOC_EVENT_QUEUE, misnumbered_in_row_ <= 2) */
     uint8_t reject_k_; /* K */
@@ -311,6 +311,7 @@ struct bl_localizer { /* typedef: common.h */
     uint8_t jump_n_;        /* arrivals in the timing watch's run */
     uint16_t jump_beacons_; /* their beacons (bit per beacon) */
     bool jump_signed_;      /* beacon 1's firing with its double pulse among them */
+    uint8_t jump_k_;        /* the run's numbering: the beacon numbered b is beacon b - k's */
     uint8_t win_beacon_[BL_LOC_REJECT_WINDOW_MAX];
     bool have_tag_;
     bool was_started_;
