@@ -22,6 +22,24 @@ def replay(bridge_bin, log, tmp_path, *extra, site=SITE):
     return p, np.genfromtxt(est, delimiter=",", names=True), json.loads(stats.read_text())
 
 
+def scenario_with(tmp_path, name, keys):
+    """The built-in scenario `name` with its lines of the given keys replaced ("key = value"; a
+    value None drops the line) and its site the repository's site file; returns its path."""
+    lines = []
+    for line in (SITE.parent / f"{name}.scenario.ini").read_text().splitlines():
+        key = line.split("=")[0].strip()
+        if key in keys:
+            if keys[key] is None:
+                continue
+            line = f"{key} = {keys[key]}"
+        elif key == "site":
+            line = f"site = {SITE}"
+        lines.append(line)
+    path = tmp_path / f"{name}-edited.scenario.ini"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
 def errors(est, truth):
     xt = np.interp(est["t_us"], truth["t_us"], truth["x_m"])
     yt = np.interp(est["t_us"], truth["t_us"], truth["y_m"])
@@ -115,18 +133,7 @@ def test_beacon1_outage_numbering_holds(bridge_bin, tmp_path):
     """Beacon 1 (the double pulse that anchors the sequencer) and beacon 4
     silent from 40 s to 60 s: the numbering is kept from the filter's
     firing times, no re-initialisation, the error stays small."""
-    src = (SITE.parent / "beacon-outage.scenario.ini").read_text()
-    lines = []
-    for line in src.splitlines():
-        if line.startswith("beacon_outage"):
-            line = "beacon_outage = 40, 20, 1, 4"
-        elif line.startswith("site ="):
-            line = f"site = {SITE}"
-        elif line.startswith("duration_s"):
-            line = "duration_s = 70"
-        lines.append(line)
-    scn = tmp_path / "beacon1-outage.scenario.ini"
-    scn.write_text("\n".join(lines) + "\n")
+    scn = scenario_with(tmp_path, "beacon-outage", {"beacon_outage": "40, 20, 1, 4", "duration_s": "70"})
     log, truth_path = run_sim(tmp_path, str(scn), 70)
     p, est, stats = replay(bridge_bin, log, tmp_path)
     truth = np.genfromtxt(truth_path, delimiter=",", names=True)
@@ -218,18 +225,8 @@ def test_controller_restart_into_another_beacons_window(bridge_bin, tmp_path, se
     flights from the filter's pose), and moves t0 by five slots and the jump: one STATUSTEXT, no
     re-initialisation, never 0.15 m off (0.125 m and 0.093 m on these seeds). Before that
     hypothesis these two seeds restarted 3 and 6 times (and 3 of 6 seeds at that pause)."""
-    src = (SITE.parent / "controller-restart.scenario.ini").read_text()
-    lines = []
-    for line in src.splitlines():
-        if line.startswith("controller_restart ="):
-            line = "controller_restart = 60, 2.0"
-        elif line.startswith("controller_restart2"):
-            continue
-        elif line.startswith("site ="):
-            line = f"site = {SITE}"
-        lines.append(line)
-    scn = tmp_path / "restart-2s.scenario.ini"
-    scn.write_text("\n".join(lines) + "\n")
+    scn = scenario_with(tmp_path, "controller-restart",
+                        {"controller_restart": "60, 2.0", "controller_restart2": None})
     log, truth_path = run_sim(tmp_path, str(scn), 70, seed=seed)
     p, est, stats = replay(bridge_bin, log, tmp_path)
     truth = np.genfromtxt(truth_path, delimiter=",", names=True)
