@@ -154,8 +154,7 @@ static void sync(struct estimator *e)
             event(e, EST_EV_INFO, "filter started at x=%.2f y=%.2f", (double)ev.x_m,
                   (double)ev.y_m);
             e->was_started = true;
-            for (uint32_t b = 0; b < e->blcfg.beacon_count; b++)
-                e->beacon_last_ok_us[b] = e->latest_node_us;
+            estimator_restart_beacon_watch(e, e->latest_node_us);
             break;
         case BL_LOC_EV_RESET:
             switch (ev.cause) {
@@ -451,6 +450,17 @@ static void check_beacon_positions(struct estimator *e)
     check_beacon_set(e, &e->bearing_beacon_check);
 }
 
+int64_t estimator_cycle_us(const struct estimator *e)
+{
+    return (int64_t)((double)e->blcfg.beacon_count * (double)e->blcfg.beacon_period_s * 1e6);
+}
+
+void estimator_restart_beacon_watch(struct estimator *e, int64_t t_us)
+{
+    for (uint32_t b = 0; b < e->blcfg.beacon_count && b < BL_MAX_BEACONS; b++)
+        e->beacon_last_ok_us[b] = t_us;
+}
+
 void estimator_tick(struct estimator *e, int64_t local_now_us)
 {
     estimator_survey_poll(e, local_now_us); /* a survey's timeout */
@@ -462,9 +472,18 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
     sync(e);
     if (!e->was_started)
         return;
-    /* beacon lost: no accepted pulse for beacon_lost_s */
+    /* no pulse at all for a whole beacon cycle: not one beacon's doing (the
+     * receiver array or the beacon controller is off): no beacon is called
+     * lost, and after beacon_lost_s one warning; the beacons' watch starts
+     * again when pulses come (sensor_pulse.c) */
     int64_t lost_us = (int64_t)(e->beacon_lost_s * 1e6);
-    for (uint32_t b = 0; b < e->blcfg.beacon_count; b++) {
+    const int64_t quiet_us = now - e->pulse_last_us;
+    if (!e->pulses_silent && e->blcfg.beacon_count > 0 && quiet_us > lost_us) {
+        e->pulses_silent = true;
+        event(e, EST_EV_WARNING, "no pulse heard for %.1f s", e->beacon_lost_s);
+    }
+    /* beacon lost: no accepted pulse for beacon_lost_s */
+    for (uint32_t b = 0; b < e->blcfg.beacon_count && quiet_us <= estimator_cycle_us(e); b++) {
         if (!e->beacon_lost[b] && now - e->beacon_last_ok_us[b] > lost_us) {
             e->beacon_lost[b] = true;
             event(e, EST_EV_WARNING, "beacon %u lost", b + 1);

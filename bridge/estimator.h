@@ -202,6 +202,8 @@ struct estimator {
     bool was_started; /* "filter started" seen (beacon-lost watch on) */
     double beacon_lost_s, echo_storm_ratio;
     int64_t beacon_last_ok_us[BL_MAX_BEACONS];
+    int64_t pulse_last_us; /* the newest pulse frame, receiver-node time */
+    bool pulses_silent;    /* "no pulse heard" reported (none for beacon_lost_s) */
     bool beacon_lost[BL_MAX_BEACONS];
     bool beacon_ever[BL_MAX_BEACONS];
     uint32_t beacon_accepted[BL_MAX_BEACONS]; /* filter's accepted count, last seen */
@@ -360,6 +362,14 @@ void estimator_survey_poll(struct estimator *e, int64_t now_us);
 /* Periodic work at local time now (pops pulses whose merge window closed
  * while no later frame came, health checks). */
 void estimator_tick(struct estimator *e, int64_t local_now_us);
+
+/* The beacon-lost watch counts from t_us (receiver-node time) for every
+ * beacon: at the filter's start, and when the receiver node restarted (the
+ * beacons went unheard because the receiver was off, not they). */
+void estimator_restart_beacon_watch(struct estimator *e, int64_t t_us);
+
+/* One beacon cycle (every beacon fired once), us. */
+int64_t estimator_cycle_us(const struct estimator *e);
 
 /* True (once) when a filter update happened since the last call; *rx_us
  * gets the local receive time of the frame that carried the newest

@@ -6,6 +6,7 @@
  */
 #include "frames.h"
 
+#include <stdlib.h>
 #include <string.h>
 
 #include "sensors.h"
@@ -62,18 +63,23 @@ static uint32_t low_bits(unsigned n)
  * counters of kind k updated. */
 static enum frame_result track(struct frame_counters *c, enum frame_kind k, struct frame_track *t,
                                uint8_t counter, unsigned modulo, uint32_t stamp, int32_t slack,
-                               const uint8_t *data)
+                               const struct can_msg *msg)
 {
+    const uint8_t *data = msg->data;
     for (uint32_t i = 0; i < t->recent_len; i++)
         if (!memcmp(t->recent[i], data, sizeof t->recent[0])) {
             c->duplicates[k]++;
             return FRAME_DUPLICATE;
         }
     remember(t, data);
-    if (!t->seen) {
+    const int64_t advance_us = (int32_t)(stamp - t->newest_stamp);
+    const int64_t rx_advance_us = msg->rx_us - t->newest_rx_us;
+    if (!t->seen || llabs(advance_us - rx_advance_us) > FRAME_RESTART_US) {
+        /* the first frame, or the first after a node restart: a new sequence */
         t->seen = true;
         t->last = counter;
         t->newest_stamp = stamp;
+        t->newest_rx_us = msg->rx_us;
         t->missing = 0;
         return FRAME_OK;
     }
@@ -97,6 +103,7 @@ static enum frame_result track(struct frame_counters *c, enum frame_kind k, stru
     t->missing = (shifted | (low_bits(step) & ~1u)) & window;
     t->last = counter;
     t->newest_stamp = stamp;
+    t->newest_rx_us = msg->rx_us;
     return FRAME_OK;
 }
 
@@ -122,7 +129,7 @@ static enum frame_result decode(struct frame_counters *c, const struct can_msg *
     if (seq.track >= sk->tracks)
         return FRAME_OUT_OF_RANGE;
     return track(c, k, &c->track[k][seq.track], seq.counter, c->modulo[k], seq.stamp,
-                 sk->stamp_slack_us, msg->data);
+                 sk->stamp_slack_us, msg);
 }
 
 enum frame_result frame_decode(struct frame_counters *c, const struct can_msg *msg,

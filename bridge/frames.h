@@ -31,6 +31,12 @@
  *   Pulse frames of one firing from different receivers leave the node in
  *   the order of their own latency, so their NodeTimes need not increase;
  *   their counters (transmit order) do, and only the counter decides here.
+ *   - a node restart (a brown-out, a watchdog: its clock and its counters
+ *     start over) is a frame whose node time (uptime for NODE_STATUS, in us)
+ *     advanced by more than FRAME_RESTART_US more or less than its receive
+ *     time since the newest frame of its track: its counter starts a new
+ *     sequence there and nothing is counted lost (the node sent nothing
+ *     while it was off). node_clock.h decides the same for the clock fit.
  */
 #ifndef BRIDGE_FRAMES_H
 #define BRIDGE_FRAMES_H
@@ -81,13 +87,16 @@ struct frame {
 };
 
 #define FRAME_MAX_NODES 16
-#define FRAME_RECENT 4      /* payloads remembered per track for duplicates */
+#define FRAME_RECENT 4 /* payloads remembered per track for duplicates */
+/* A node time that disagrees with the receive time by more than this is a
+ * node restart (node_clock's default max_jump_us, node_clock.h). */
+#define FRAME_RESTART_US 500000
 #define FRAME_MODULO_MAX 32 /* largest counter modulo a track follows (bit window) */
 
 /* What a kind's unpacker tells the rolling-counter check about one frame. */
 struct frame_seq {
     uint8_t counter; /* the frame's Counter signal */
-    uint32_t stamp;  /* its node time, us (NODE_STATUS: uptime, s) */
+    uint32_t stamp;  /* its node time, us (NODE_STATUS: uptime in us), wrapping */
     unsigned track;  /* which track of its kind: 0, or the node id for a
                           kind with a track per node (< FRAME_MAX_NODES) */
 };
@@ -96,7 +105,8 @@ struct frame_seq {
 struct frame_track {
     bool seen;
     uint8_t last;                    /* counter of the newest frame */
-    uint32_t newest_stamp;           /* its node time (NODE_STATUS: uptime, s) */
+    uint32_t newest_stamp;           /* its node time, us (NODE_STATUS: uptime) */
+    int64_t newest_rx_us;            /* its receive time, us */
     uint32_t missing;                /* bit b set: the frame b counter steps behind the
                               newest was counted lost (b = 1..modulo-1) */
     uint8_t recent[FRAME_RECENT][8]; /* payloads of the last frames */

@@ -43,6 +43,11 @@
 extern "C" {
 #endif
 
+/* How far a restart's new timeline may lie from the old one (us): it is
+ * anchored on one frame's receive time, late by that frame's delay over the
+ * clock's lower envelope (node latency 0.1-0.4 ms plus bus queuing,
+ * docs/protocol.md "Node clocks"); a generous one sigma. */
+#define NODE_CLOCK_RESTART_SIGMA_US 1000
 #define NODE_CLOCK_MAX_BUCKETS 128 /* capacity of the sliding window */
 #define NODE_CLOCK_RECENT 16       /* recent stamps remembered for duplicate detection */
 

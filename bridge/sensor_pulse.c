@@ -108,11 +108,21 @@ static void sensor_pulse_handle(struct estimator *e, const struct frame *f, int6
     int64_t t = node_clock_observe(clock, p->node_time_us, rx_us - e->pulse_hold_us);
     if (clock->last_event == NODE_CLOCK_RESTART) {
         e->c.node_restarts++;
-        (void)bl_localizer_sequencer_reset(&e->loc);
+        (void)bl_localizer_receiver_restarted(&e->loc, NODE_CLOCK_RESTART_SIGMA_US * 1e-6);
+        estimator_restart_beacon_watch(e, t);
         estimator_event(e, EST_EV_WARNING, "receiver node clock restarted");
     }
     if (t > e->latest_node_us)
         e->latest_node_us = t;
+    if (t - e->pulse_last_us > estimator_cycle_us(e)) /* nothing heard for a cycle */
+        estimator_restart_beacon_watch(e, t);
+    if (e->pulses_silent) {
+        e->pulses_silent = false;
+        estimator_eventf(e, EST_EV_NOTICE, "pulses heard again after %.1f s",
+                         (double)(t - e->pulse_last_us) / 1e6);
+    }
+    if (t > e->pulse_last_us)
+        e->pulse_last_us = t;
     bl_seq_detection d = {
         .time_us = t,
         .receiver = p->receiver,

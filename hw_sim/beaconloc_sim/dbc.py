@@ -35,6 +35,15 @@ def signal_modulo(message: str, signal: str) -> int:
 
 
 @functools.lru_cache(maxsize=None)
+def node_names() -> dict[int, str]:
+    """NODE_STATUS NodeId -> the node's name, from the signal's DBC comment ("Sending node:
+    1 receiver array, 2 wheel encoders, ...")."""
+    comment = database().get_message_by_name("NODE_STATUS").get_signal_by_name("NodeId").comment
+    items = comment.split(":", 1)[1].strip().rstrip(".").split(",")
+    return {int(num): name.strip() for num, name in (item.strip().split(" ", 1) for item in items)}
+
+
+@functools.lru_cache(maxsize=None)
 def frame_spec(message: str) -> FrameSpec:
     msg = database().get_message_by_name(message)
     has_counter = any(s.name == COUNTER for s in msg.signals)

@@ -37,7 +37,8 @@ _KNOWN = {
     "opponent": {"radius_m", "start", "speed_mps", "turn_rate_degps", "repeat"},  # + segmentN
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
     "faults": {"encoder_silence", "kidnap", "beacon_outage", "echo_storm", "beacon_misplaced",
-               "range_beacon_misplaced", "bearing_beacon_misplaced", "controller_restart"},
+               "range_beacon_misplaced", "bearing_beacon_misplaced", "controller_restart",
+               "node_restart"},
     "output": {"truth_rate_hz", "log_epoch_s", "channel"},
     # [obstacles]: segmentN = x1_m, y1_m, x2_m, y2_m
 }
@@ -103,6 +104,9 @@ class Scenario:
     # the beacon controller restarts (a power cut, a watchdog): no beacon fires from time_s
     # for pause_s, then beacon 1 fires and the cycle goes on from it (physics.pulses)
     controller_restarts: tuple[tuple[float, float], ...] = ()   # time_s, pause_s
+    # a sensor node restarts (a brown-out, a watchdog): it is off from time_s for pause_s,
+    # then counts its clock, its rolling counters and its wheel ticks from 0 again (nodes.base)
+    node_restarts: tuple[tuple[float, float, int], ...] = ()     # time_s, pause_s, NodeId
     obstacles_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     # common-mode random slip of both wheels: ground-distance error std after 1 m of mean
     # travel, m (adds to the per-wheel sigma_wheel_per_m; 0 = none)
@@ -157,6 +161,19 @@ class Scenario:
             inside = (t >= start) & (t < start + dur)
             echo[inside], late[inside] = p_echo, p_late
         return echo, late
+
+    def node_down(self, node_id: int, t_s) -> np.ndarray:
+        """True where the node NodeId is off (inside a node_restart's pause), at true times t_s."""
+        t = np.asarray(t_s, dtype=float)
+        down = np.zeros(t.shape, dtype=bool)
+        for start, pause, node in self.node_restarts:
+            if node == node_id:
+                down |= (t >= start) & (t < start + pause)
+        return down
+
+    def node_resumes_s(self, node_id: int) -> list[float]:
+        """The instants the node NodeId starts again after its restarts, s, in time order."""
+        return [start + pause for start, pause, node in self.node_restarts if node == node_id]
 
     def encoder_silent(self, t_s) -> np.ndarray:
         """True where the encoder node is silent (any encoder_silence window)."""
@@ -325,6 +342,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         if t_b < t_a + p_a:
             raise ini.error("faults", key_b, f"a restart at {t_b:g} s during the pause of the "
                             f"one at {t_a:g} s")
+    node_restarts = _node_restarts(ini, site, fault_keys["node_restart"])
     initial_ticks = ini.numbers("encoders", "initial_ticks", 2, default=[16000, 300])
     if any(v != int(v) or not 0 <= v < 16384 for v in initial_ticks):
         raise ini.error("encoders", "initial_ticks", "ticks must be integers 0..16383")
@@ -384,6 +402,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         beacon_outages=tuple(sorted(outages)),
         echo_storms=tuple(sorted(storms)),
         controller_restarts=tuple((t, p) for t, p, _ in restarts),
+        node_restarts=node_restarts,
         obstacles_m=np.array(obstacles, dtype=float).reshape(-1, 4),
         sigma_distance_per_m=ini.number("encoders", "sigma_distance_per_m",
                                         site.sigma_distance_per_m, minimum=0),
@@ -523,6 +542,30 @@ def _misplace_beacons(ini: IniFile, site, keys: list[str], attr: str):
     if attr == "beacons_m":
         return dataclasses.replace(site, beacons_m=moved)
     return dataclasses.replace(site, kind_values={**site.kind_values, attr: moved})
+
+
+def _node_restarts(ini: IniFile, site, keys: list[str]) -> tuple[tuple[float, float, int], ...]:
+    """[faults] node_restart = time_s, pause_s, node (its NODE_STATUS NodeId, a node on the
+    site's bus): (time_s, pause_s, node) in time order; two restarts of one node that overlap
+    are an error naming the later key."""
+    on_bus = nodes.node_ids(site)
+    restarts = []
+    for key in keys:
+        s = ini.numbers("faults", key, 3)
+        if s[0] < 0 or s[1] <= 0 or s[2] != int(s[2]):
+            raise ini.error("faults", key, "expected 'time_s, pause_s, node' with time_s >= 0, "
+                            "pause_s > 0 and node a NodeId")
+        if int(s[2]) not in on_bus:
+            raise ini.error("faults", key, f"node {int(s[2])} is not on this site's bus (its "
+                            "nodes: " + ", ".join(f"{i} {n}" for i, n in on_bus.items()) + ")")
+        restarts.append((s[0], s[1], int(s[2]), key))
+    restarts.sort()
+    for i, (t_b, _, node, key_b) in enumerate(restarts):
+        for t_a, p_a, other, _ in restarts[:i]:
+            if other == node and t_b < t_a + p_a:
+                raise ini.error("faults", key_b, f"node {node} restarts at {t_b:g} s during the "
+                                f"pause of its restart at {t_a:g} s")
+    return tuple((t, p, n) for t, p, n, _ in restarts)
 
 
 def _fault_keys(ini: IniFile, known=None) -> dict[str, list[str]]:

@@ -15,7 +15,8 @@ from .clocks import NodeClock
 from .nodes import ODOMETRY_COLUMNS, Node, NodeStatus, ReceiverRing, SensorKind, WheelEncoders
 from .path import wrap_angle
 from .physics import acoustics as ac
-from .physics.pulses import KIND_DIRECT, Detections, Firings, make_firings, simulate_detections
+from .physics.pulses import (KIND_DIRECT, RECEIVER_NODE_ID, Detections, Firings, make_firings,
+                             simulate_detections)
 from .scenario import Scenario
 
 # frame ids of every robot's nodes' frames (from the DBC; a kind's: Kind.frame_spec())
@@ -330,6 +331,14 @@ def _pcrb(scn: Scenario, firings: Firings, det: Detections, measured: dict[str, 
     restarted = np.zeros(k, dtype=bool)
     for t_r, pause in scn.controller_restarts:
         restarted[fire_ev[firings.t_s == t_r + pause]] = True
+    # and the first firing heard after each restart of the receiver array (its clock starts
+    # over: t0 on it is unknown again): the firing of the first detection after the node is
+    # back, if it fired within one slot of that (a later window's first detection is not)
+    for resume in scn.node_resumes_s(RECEIVER_NODE_ID):
+        after = det.edge_s >= resume
+        if np.any(after):
+            f = int(det.firing[after][np.argmin(det.edge_s[after])])
+            restarted[fire_ev[f]] |= firings.t_s[f] < resume + scn.site.period_s
     kw = dict(event_time_s=t_time, fires=is_fire, t0_restarts=restarted,
               measurements=[kind.bound_rows(scn, ev, t_ev, states) for kind, ev in kinds],
               steps=steps)

@@ -771,12 +771,13 @@ extern "C" int bl_localizer_observe_pulses(bl_localizer *loc, bl_loc_pulse_obser
     return BL_OK;
 }
 
-extern "C" int bl_localizer_sequencer_reset(bl_localizer *loc)
+extern "C" int bl_localizer_receiver_restarted(bl_localizer *loc, bl_real t0_sigma_s)
 {
-    if (loc == nullptr) return BL_EINVAL;
+    if (loc == nullptr || !(t0_sigma_s >= 0) || !finite_real(t0_sigma_s)) return BL_EINVAL;
     if (!valid(loc)) return BL_ENOTINIT;
     if (has_sequencer(loc)) (void)bl_sequencer_reset(&loc->seq);
     loc->hint_set_ = false;
+    if (bl::started(&loc->filter)) bl::shift_firing_times(&loc->filter, 0, t0_sigma_s * t0_sigma_s);
     return BL_OK;
 }
 

@@ -72,7 +72,7 @@ import harness as h  # noqa: E402
 # a fast robot, then the two of the end-to-end issue.
 SCENARIOS = ("temperature-swing10", "temperature-swing20", "thermometer-still", "thermometer-swing10",
              "thermometer-swing20", "thermometer-door", "wheel-worn", "standing-restart", "four-beacons",
-             "dense-room", "hall", "big-site", "ceiling", "pillars", "two-rooms", "two-rooms-east", "beacon1-dead", "controller-restart",
+             "dense-room", "hall", "big-site", "ceiling", "pillars", "two-rooms", "two-rooms-east", "beacon1-dead", "controller-restart", "node-restart",
              "fast-turns",
              "echo-storm",
              "kleeman-lab")

@@ -40,6 +40,11 @@ def scenario_with(tmp_path, name, keys):
     return path
 
 
+def warnings(p):
+    """The daemon's warnings, in order, without their "warning: " prefix."""
+    return [line[len("warning: "):] for line in p.stderr.splitlines() if line.startswith("warning: ")]
+
+
 def errors(est, truth):
     xt = np.interp(est["t_us"], truth["t_us"], truth["x_m"])
     yt = np.interp(est["t_us"], truth["t_us"], truth["y_m"])
@@ -214,6 +219,49 @@ def test_controller_restarts_keep_the_pose(bridge_bin, tmp_path, seed):
     late = t_sim > 20
     assert np.sqrt(np.mean(err[late] ** 2)) < 0.04, float(np.sqrt(np.mean(err[late] ** 2)))
     assert np.all(err[late] < 0.15), float(err[late].max())
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_sensor_node_restarts_keep_the_pose(bridge_bin, tmp_path, seed):
+    """node-restart: the robot's receiver array restarts at 40 s (0.3 s off) and 100 s (1.5 s
+    off), its wheel encoders at 80 s (0.2 s off): each comes back with its clock, its rolling
+    counters and (the encoders) its ticks from 0. The daemon warns of each restart, carries the
+    receiver clock's timeline on (the localizer told the firing times are known to 1 ms), takes
+    the encoders' new counts as a new reference, counts no frame lost (the counters started over,
+    nothing went missing) and calls no beacon lost (no pulse at all came: the receiver was off);
+    the pose is kept: no re-initialisation, RMS under 40 mm after the start, never 0.12 m off
+    (0.069 and 0.098 m on these seeds). Before: 18 and 19 frames counted lost, beacons 2-4 (and
+    5) called lost in the 1.5 s pause."""
+    log, truth_path = run_sim(tmp_path, "node-restart", 110, seed=seed)
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    t_sim, err = errors(est, truth)
+    assert warnings(p) == ["receiver node clock restarted", "encoder node clock restarted",
+                           "receiver node clock restarted"], p.stderr
+    assert stats["node_restarts"] == 3 and stats["lost_by_counter"] == 0, stats
+    assert stats["estimator_resets"] == 0 and stats["timing_jumps"] == 0
+    assert stats["sequencer_resyncs"] == 0
+    assert np.all(est["reset_counter"] == 0)
+    late = t_sim > 20
+    assert np.sqrt(np.mean(err[late] ** 2)) < 0.04, float(np.sqrt(np.mean(err[late] ** 2)))
+    assert np.all(err[late] < 0.12), float(err[late].max())
+
+
+def test_receiver_off_for_seconds_is_one_warning(bridge_bin, tmp_path):
+    """The receiver array off for 5 s (node-restart's second restart made longer): one warning
+    that no pulse came, none of the six beacons called lost (it was not they), a notice when
+    pulses come again, and the pose back within 0.1 m 3 s after the receiver is back (the wheels
+    carried it 5 s). Before: beacons 2-6 called lost one by one."""
+    scn = scenario_with(tmp_path, "node-restart", {"node_restart3": "100, 5, 1"})
+    log, truth_path = run_sim(tmp_path, str(scn), 110, seed=1)
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
+    t_sim, err = errors(est, truth)
+    assert warnings(p) == ["receiver node clock restarted", "encoder node clock restarted",
+                           "no pulse heard for 2.0 s", "receiver node clock restarted"], p.stderr
+    assert p.stderr.count("info: pulses heard again after 5.") == 1, p.stderr
+    assert stats["estimator_resets"] == 0 and stats["lost_by_counter"] == 0
+    assert np.all(err[t_sim > 108] < 0.1), float(err[t_sim > 108].max())
 
 
 @pytest.mark.parametrize("seed", [3, 6])

@@ -40,15 +40,20 @@ static struct can_msg enc_msg(uint32_t node_time, uint16_t l, uint16_t r,
     return m;
 }
 
-static struct can_msg status_msg(uint8_t node, uint8_t counter, uint8_t flags)
+static struct can_msg status_msg_up(uint8_t node, uint8_t counter, uint8_t flags, uint32_t uptime_s)
 {
     struct beaconloc_can_node_status_t s = {
-        .node_id = node, .counter = counter, .flags = flags, .uptime = 123456,
+        .node_id = node, .counter = counter, .flags = flags, .uptime = uptime_s,
         .tx_error_count = 7, .rx_error_count = 9, .overruns = 3,
     };
     struct can_msg m = { .id = BEACONLOC_CAN_NODE_STATUS_FRAME_ID, .len = 8 };
     assert_int_equal(beaconloc_can_node_status_pack(m.data, &s, 8), 8);
     return m;
+}
+
+static struct can_msg status_msg(uint8_t node, uint8_t counter, uint8_t flags)
+{
+    return status_msg_up(node, counter, flags, 123456);
 }
 
 static void test_pulse_decodes_every_field(void **state)
@@ -190,6 +195,55 @@ static void test_rolling_counters(void **state)
     assert_int_equal(frame_duplicates_total(&c) + frame_out_of_order_total(&c), 0);
 }
 
+/* Frames m[0..n) received at rx_us[i], each decoded fine. */
+static void decode_received_at(struct frame_counters *c, struct can_msg *m, const int64_t *rx_us,
+                               size_t n)
+{
+    struct frame f;
+    for (size_t i = 0; i < n; i++) {
+        m[i].rx_us = rx_us[i];
+        assert_int_equal(frame_decode(c, &m[i], &f), FRAME_OK);
+    }
+}
+
+/* A node restart (a brown-out, a watchdog): its clock and its counters
+ * start over after a pause in which it sent nothing. The node time's
+ * advance disagrees with the receive time's: a new sequence, nothing lost;
+ * the same counter step with the clock going on counts its frames lost. */
+static void test_node_restart_loses_nothing(void **state)
+{
+    (void)state;
+    struct frame_counters c;
+    frame_counters_init(&c);
+    /* encoders at 100 Hz: 13, 14 on a node 1000 s old, then off 0.3 s and
+     * back with its clock at 0.005 s and its counter at 0, then 1 */
+    struct can_msg m[] = {enc_msg(1000000000u, 1, 1, 13), enc_msg(1000010000u, 2, 2, 14),
+                          enc_msg(5000, 0, 0, 0), enc_msg(15000, 1, 1, 1)};
+    const int64_t rx[] = {0, 10000, 315000, 325000};
+    decode_received_at(&c, m, rx, 4);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 0);
+    /* its clock a node's age beyond 2^31 us (its difference wraps): the same */
+    frame_counters_init(&c);
+    m[0] = enc_msg(3000000000u, 1, 1, 13), m[1] = enc_msg(3000010000u, 2, 2, 14);
+    decode_received_at(&c, m, rx, 4);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 0);
+    /* the same counters with the clock going on through the pause: the
+     * frame numbered 15 was lost, counted */
+    frame_counters_init(&c);
+    m[0] = enc_msg(1000000000u, 1, 1, 13), m[1] = enc_msg(1000010000u, 2, 2, 14);
+    m[2] = enc_msg(1000315000u, 0, 0, 0), m[3] = enc_msg(1000325000u, 1, 1, 1);
+    decode_received_at(&c, m, rx, 4);
+    assert_int_equal(c.lost[FRAME_WHEEL_ENCODERS], 1);
+    /* NODE_STATUS: uptime 40 s, 41 s, then (1.3 s later) 0 s with counter 0 */
+    frame_counters_init(&c);
+    struct can_msg s[] = {status_msg_up(1, 7, 0, 40), status_msg_up(1, 8, 0, 41),
+                          status_msg_up(1, 0, 2, 0), status_msg_up(1, 1, 2, 1),
+                          status_msg_up(1, 4, 2, 4)};
+    const int64_t srx[] = {0, 1000000, 2300000, 3300000, 6300000};
+    decode_received_at(&c, s, srx, 5);
+    assert_int_equal(c.lost[FRAME_NODE_STATUS], 2); /* 1 -> 4 on the new clock: 2 lost */
+}
+
 /* The same frame twice (a re-delivery): dropped, counted as a duplicate,
  * not as lost, and the next frame is in order; also a repeat of a frame
  * two back. */
@@ -313,6 +367,7 @@ int main(void)
         cmocka_unit_test(test_unknown_ids),
         cmocka_unit_test(test_out_of_range),
         cmocka_unit_test(test_rolling_counters),
+        cmocka_unit_test(test_node_restart_loses_nothing),
         cmocka_unit_test(test_duplicates_dropped),
         cmocka_unit_test(test_out_of_order_dropped),
     };

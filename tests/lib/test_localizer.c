@@ -371,6 +371,77 @@ static void test_controller_restart_retimes(void **state) {
     unload(&r);
 }
 
+/* The receiver node restarted: the bridge carries the receiver clock's
+ * timeline on from its clock fit, anchored on one frame's receive time, so
+ * every arrival after it is late by that frame's delay over the fit (here
+ * 0.4 ms, 14 cm of sound), and the sequencer starts over. Told how well the
+ * timeline is known (bl_localizer_receiver_restarted, 1 ms), the filter
+ * re-anchors t0 on the next arrivals, none rejected; told nothing (0), it
+ * rejects the first and fuses the rest into the pose and the speed of sound
+ * (too small a jump for the timing watch). */
+#define RX_RESTART_S 25.0
+#define RX_ANCHOR_ERROR_US 400
+
+typedef struct {
+    bl_real sigma_s;
+    bool done;
+    counters_ctx c; /* counters just before the restart and 1.5 s after */
+} rx_restart_ctx;
+
+static void rx_restart_hook(bl_localizer *loc, const run_t *r, size_t i, void *ctx) {
+    rx_restart_ctx *k = ctx;
+    counters_hook(loc, r, i, &k->c);
+    if (k->done || i + 1 >= r->n || input_s(r, i + 1) < RX_RESTART_S) return;
+    k->done = true; /* before the first input on the new timeline */
+    assert_int_equal(bl_localizer_receiver_restarted(loc, k->sigma_s), BL_OK);
+}
+
+static void run_rx_restart(run_t *r, bl_real sigma_s, rx_restart_ctx *k, stats_t *s, bl_loc_counters *c) {
+    *k = (rx_restart_ctx){sigma_s, false, counters_at(RX_RESTART_S, RX_RESTART_S + 1.5)};
+    feed(&LOC, r, s, rx_restart_hook, k);
+    assert_true(k->done);
+    assert_int_equal(bl_localizer_counters(&LOC, c), BL_OK);
+}
+
+static void test_receiver_restart_reanchors(void **state) {
+    (void)state;
+    run_t r;
+    load(&r, "kleeman-lab");
+    for (size_t i = 0; i < r.n; i++)
+        if (r.in[i].kind == 'D' && seconds(&r, r.in[i].d.time_us) >= RX_RESTART_S)
+            r.in[i].d.time_us += RX_ANCHOR_ERROR_US;
+    stats_t s;
+    rx_restart_ctx k;
+    bl_loc_counters c;
+    run_rx_restart(&r, (bl_real)1e-3, &k, &s, &c);
+    const unsigned told_acc = k.c.at[1].pulses_accepted - k.c.at[0].pulses_accepted;
+    const unsigned told_rej = k.c.at[1].pulses_rejected - k.c.at[0].pulses_rejected;
+    print_message("receiver restart, told: %u accepted %u rejected in 1.5 s, timing jumps %u, rmse %.1f mm\n",
+                  told_acc, told_rej, c.timing_jumps, 1e3 * rmse(&s));
+    assert_int_equal(c.timing_jumps, 0);
+    assert_int_equal(s.events[BL_LOC_EV_RESET], 0);
+    assert_true(told_rej <= 2);
+    assert_true(told_acc >= 20);
+    const double told_rmse = rmse(&s);
+    if (told_rmse > 0.03) fail_msg("rmse %.3f m", told_rmse);
+    /* the same run told nothing: the arrivals are gated out until the watch */
+    run_rx_restart(&r, 0, &k, &s, &c);
+    const unsigned blind_acc = k.c.at[1].pulses_accepted - k.c.at[0].pulses_accepted;
+    const unsigned blind_rej = k.c.at[1].pulses_rejected - k.c.at[0].pulses_rejected;
+    print_message("receiver restart, blind: %u accepted %u rejected in 1.5 s, timing jumps %u, rmse %.1f mm\n",
+                  blind_acc, blind_rej, c.timing_jumps, 1e3 * rmse(&s));
+    /* the timeline's error is taken for the pose's and the speed of sound's */
+    if (rmse(&s) < told_rmse + 0.005) fail_msg("blind rmse %.4f m, told %.4f m", rmse(&s), told_rmse);
+    assert_true(blind_rej > told_rej);
+    /* bad input: an error, the localizer untouched */
+    bl_localizer before = LOC;
+    assert_int_equal(bl_localizer_receiver_restarted(&LOC, (bl_real)-1e-3), BL_EINVAL);
+    assert_int_equal(bl_localizer_receiver_restarted(&LOC, (bl_real)NAN), BL_EINVAL);
+    assert_int_equal(bl_localizer_receiver_restarted(NULL, 0), BL_EINVAL);
+    assert_memory_equal(&LOC, &before, sizeof LOC);
+    unload(&r);
+}
+
 /* Encoder silence (20.5 s for 5 s): pulses are fused after constant-velocity
  * predicts, no wheel increment spans the silence, nothing re-initialises,
  * and the pose stays close. */
@@ -759,7 +830,7 @@ static void test_bearing_only_site(void **state) {
     assert_int_equal(c.seq_errors, 1);
     before.counters_.seq_errors++;
     assert_memory_equal(&LOC, &before, sizeof LOC);
-    assert_int_equal(bl_localizer_sequencer_reset(&LOC), BL_OK);
+    assert_int_equal(bl_localizer_receiver_restarted(&LOC, 0), BL_OK);
 }
 
 /* Kidnapped on a bearing-only site: the bearings are rejected, the window
@@ -951,6 +1022,7 @@ int main(void) {
         cmocka_unit_test(test_echo_repeats_not_fused),
         cmocka_unit_test(test_kidnap_restarts_once),
         cmocka_unit_test(test_controller_restart_retimes),
+        cmocka_unit_test(test_receiver_restart_reanchors),
         cmocka_unit_test(test_silence_coasts),
         cmocka_unit_test(test_misnumbering_resyncs),
         cmocka_unit_test(test_pulse_observer),

@@ -315,3 +315,99 @@ def test_misplaced_bearing_beacon_x_and_y_only(make_scenario):
                                           r"dx_m, dy_m' with id 1\.\.3"):
         load_scenario(str(bad))
 
+
+
+PULSE, ENCODERS, STATUS = 0x100, 0x110, 0x120
+
+
+def node_frames(res, arb_id, node_id=None):
+    """(receive time s, signals) of one frame id (NODE_STATUS: of one NodeId), bus order."""
+    return [(t, s) for t, i, s in zip(res.frames.t_s.tolist(), res.frames.arb_id.tolist(),
+                                      res.frames.signals)
+            if i == arb_id and (node_id is None or s["NodeId"] == node_id)]
+
+
+def test_node_restart_starts_the_nodes_clock_counters_and_ticks_from_zero(make_scenario):
+    """[faults] node_restart = time_s, pause_s, NodeId: the node sends nothing in the pause
+    (no status frame either) and hears nothing (no detection in it reaches the bound); after
+    it, its NodeTime counts from 0 at the restart, its rolling counters start at 0, the wheel
+    encoders' ticks from 0 at their first sample, NODE_STATUS carries Uptime from 0 and Flags
+    bit 1 for 10 s. The other nodes go on as in the run without it."""
+    faults = "node_restart = 20.0, 0.3, 1\nnode_restart2 = 30.0, 0.2, 2\n"
+    scn = load_scenario(str(make_scenario(body(45, faults))))
+    assert scn.node_restarts == ((20.0, 0.3, 1), (30.0, 0.2, 2))
+    res = simulate.run(scn)
+    plain = simulate.run(load_scenario(str(make_scenario(body(45, "")))))
+    for arb_id, node, (t_r, pause) in ((PULSE, 1, (20.0, 0.3)), (ENCODERS, 2, (30.0, 0.2))):
+        frames = node_frames(res, arb_id)
+        times = np.array([t for t, _ in frames])
+        assert not np.any((times >= t_r) & (times < t_r + pause))
+        after = int(np.searchsorted(times, t_r + pause))
+        before_sig, first_t, first = frames[after - 1][1], times[after], frames[after][1]
+        assert before_sig["NodeTime"] > 1_000_000        # the old clock: the node's age
+        # the new clock read 0 at t_r + pause (the frame is received within 5 ms of its NodeTime)
+        assert 0 <= first["NodeTime"] <= (first_t - t_r - pause) * 1e6
+        assert first_t - t_r - pause - first["NodeTime"] * 1e-6 < 0.005
+        assert first["Counter"] == 0 and frames[after + 1][1]["Counter"] == 1
+        status = node_frames(res, STATUS, node)
+        st_t = np.array([t for t, _ in status])
+        assert not np.any((st_t >= t_r) & (st_t < t_r + pause))
+        flagged = [(t, s) for t, s in status if s["Flags"] & 2]
+        assert flagged and all(t_r + pause < t < t_r + pause + 10.5 for t, _ in flagged)
+        assert flagged[0][1]["Uptime"] == 0 and flagged[0][1]["Counter"] == 0
+        assert [s["Uptime"] for _, s in flagged] == list(range(len(flagged)))
+    enc = node_frames(res, ENCODERS)
+    k = next(i for i, (t, _) in enumerate(enc) if t > 30.2)
+    assert (enc[k][1]["LeftTicks"], enc[k][1]["RightTicks"]) == (0, 0)
+    # then they count the wheels on: 1 s later the robot has rolled 0.45 m
+    later = next(s for t, s in enc if t > enc[k][0] + 1.0)
+    m_per_tick = 2 * math.pi * scn.site.wheel_radius_m / scn.site.ticks_per_rev
+    assert later["LeftTicks"] * m_per_tick == pytest.approx(0.45, abs=0.03)
+    # the receiver heard nothing while off, and only then differs from the plain run
+    assert not np.any((res.detections.edge_s >= 20.0) & (res.detections.edge_s < 20.3))
+    same = (plain.detections.edge_s < 20.0) | (plain.detections.edge_s >= 20.3 + 0.03)
+    keep = (res.detections.edge_s < 20.0) | (res.detections.edge_s >= 20.3 + 0.03)
+    assert np.array_equal(res.detections.edge_s[keep], plain.detections.edge_s[same])
+    # the encoder frames around the receiver's restart are the plain run's
+    assert [s for t, s in enc if 19 < t < 21] == [s for t, s in node_frames(plain, ENCODERS)
+                                                  if 19 < t < 21]
+
+
+def test_receiver_restart_makes_t0_unknown_to_the_bound(make_scenario):
+    """The receiver array's clock is the time base of t0: after its restart the bound takes
+    t0 as unknown again at the first firing it hears (as after a controller restart), not at
+    an encoder node's restart."""
+    from beaconloc_sim import crb
+    res = simulate.run(load_scenario(str(make_scenario(body(40, "node_restart = 20, 0.3, 1\n")))))
+    enc = simulate.run(load_scenario(str(make_scenario(body(40, "node_restart = 20, 0.3, 2\n")))))
+    plain = simulate.run(load_scenario(str(make_scenario(body(40, "")))))
+    first = res.detections.firing[res.detections.edge_s >= 20.3].min()
+    t_first = res.firings.t_s[first]
+    assert 20.3 - 0.05 < t_first < 20.3 + res.scenario.site.period_s
+    sd_t0 = {name: np.sqrt(r.pcrb_cov[:, crb.IT0, crb.IT0])[int(np.searchsorted(r.pcrb_t_s, t_first))]
+             for name, r in (("receiver", res), ("encoders", enc), ("plain", plain))}
+    assert sd_t0["plain"] < 1e-4 and sd_t0["encoders"] == pytest.approx(sd_t0["plain"])
+    assert sd_t0["receiver"] > 2 * sd_t0["plain"]     # one firing pins t0 only through the pose
+
+
+@pytest.mark.parametrize("faults, why", [
+    ("node_restart = 10, 0.5\n", "expected 3 comma-separated numbers"),
+    ("node_restart = 10, 0, 1\n", "pause_s > 0"),
+    ("node_restart = 10, 0.5, 1.5\n", "node a NodeId"),
+    ("node_restart = 10, 0.5, 3\n", "node 3 is not on this site's bus (its nodes: 1 receiver "
+                                    "array, 2 wheel encoders)"),
+    ("node_restart = 10, 1, 1\nnode_restart2 = 10.5, 1, 1\n",
+     "node 1 restarts at 10.5 s during the pause of its restart at 10 s"),
+])
+def test_bad_node_restarts_name_their_key(make_scenario, faults, why):
+    with pytest.raises(ConfigError) as err:
+        load_scenario(str(make_scenario(body(60, faults))))
+    assert "[faults] node_restart" in str(err.value) and why in str(err.value)
+
+
+def test_node_restarts_of_two_nodes_may_overlap(make_scenario):
+    scn = load_scenario(str(make_scenario(body(60, "node_restart = 10, 1, 1\n"
+                                                   "node_restart2 = 10.5, 1, 2\n"))))
+    assert scn.node_down(1, [10.9, 11.0]).tolist() == [True, False]
+    assert scn.node_down(2, [10.4, 11.4, 11.5]).tolist() == [False, True, False]
+    assert scn.node_resumes_s(1) == [11.0] and scn.node_resumes_s(6) == []

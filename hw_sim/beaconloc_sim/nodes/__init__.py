@@ -20,6 +20,7 @@ import pkgutil
 from typing import TYPE_CHECKING
 
 from ..clocks import NodeClock
+from ..dbc import node_names
 from .base import Interval, Node
 from .node_status import NodeStatus
 from .receiver_ring import ReceiverRing
@@ -30,7 +31,7 @@ if TYPE_CHECKING:
     from ..scenario import Scenario
 
 __all__ = ["Interval", "Node", "NodeStatus", "ReceiverRing", "WheelEncoders", "SensorKind",
-           "KindOptions", "ODOMETRY_COLUMNS", "KINDS", "sensor_kinds", "on_bus"]
+           "KindOptions", "ODOMETRY_COLUMNS", "KINDS", "sensor_kinds", "on_bus", "node_ids"]
 
 
 def _found_kinds() -> tuple[type[Node], ...]:
@@ -75,3 +76,15 @@ def on_bus(scn: Scenario) -> tuple[ReceiverRing, WheelEncoders, list[Node]]:
     for kind in KINDS:
         nodes += kind.on_bus(scn, nodes)
     return ring, wheels, nodes
+
+
+def node_ids(site) -> dict[int, str]:
+    """The NodeIds of the sensor nodes on one robot's bus at this site and their DBC names:
+    the receiver ring (with ultrasonic beacons), the wheel encoders, each present kind's node."""
+    names = node_names()
+    nodes = ([ReceiverRing] if site.beacon_count else []) + [WheelEncoders]
+    ids = {node.node_id: names[node.node_id] for node in nodes}
+    # a kind whose NodeId the DBC's comment does not name (one registered by a test): its name
+    ids.update({kind.node_id: names.get(kind.node_id, kind.name)
+                for kind in sensor_kinds() if kind.present(site)})
+    return dict(sorted(ids.items()))

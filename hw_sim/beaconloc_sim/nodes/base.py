@@ -9,13 +9,14 @@ keys, a record of its measurements and a share of the bound is a SensorKind
 """
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..bus import Released
-from ..clocks import NodeClock
+from ..clocks import WRAP_US, NodeClock
 from ..dbc import COUNTER, FrameSpec, frame_spec
 from ..physics.pulses import Detections, Firings
 
@@ -44,6 +45,9 @@ class Interval:
     def rng(self, node: Node) -> np.random.Generator:
         """The node's own random stream (its kind's Node.stream)."""
         return self.streams[node.stream[0]]
+
+
+_EPOCH = "_restarts"   # a frame's restart count, between _restarted() and release()
 
 
 class Node:
@@ -85,6 +89,7 @@ class Node:
         self.frame_id = spec.frame_id
         self.counter_modulo = spec.counter_modulo
         self.counter = 0
+        self._epoch = 0        # restarts of the node before its last queued frame
         self._waiting: tuple[np.ndarray, list[dict]] = (np.zeros(0), [])
 
     def sample(self, iv: Interval) -> tuple[np.ndarray, list[dict]]:
@@ -95,7 +100,7 @@ class Node:
     def release(self, iv: Interval, until_s: float) -> Released:
         """Sample the interval and queue, in ready order, every frame ready before until_s
         (numbered by the rolling counter); the rest waits for the next interval."""
-        ready, signals = self.sample(iv)
+        ready, signals = self._restarted(getattr(iv, "scn", None), *self.sample(iv))
         ready = np.concatenate([self._waiting[0], np.asarray(ready, dtype=float)])
         signals = self._waiting[1] + signals
         order = np.argsort(ready, kind="stable")
@@ -103,10 +108,51 @@ class Node:
         now, later = order[:n].tolist(), order[n:]
         self._waiting = (ready[later], [signals[i] for i in later.tolist()])
         out = Released(ready[now].tolist(), [self.frame_id] * n, [signals[i] for i in now])
-        for sig in out.signals if self.counter_modulo else []:
-            sig[COUNTER] = self.counter
-            self.counter = (self.counter + 1) % self.counter_modulo
+        for sig in out.signals:
+            epoch = sig.pop(_EPOCH, 0)
+            if epoch != self._epoch:       # the first frame after a restart: counters from 0
+                self.counter, self._epoch = 0, epoch
+            if self.counter_modulo:
+                sig[COUNTER] = self.counter
+                self.counter = (self.counter + 1) % self.counter_modulo
         return out
+
+    # -- a restart of the node ([faults] node_restart) -----------------------------------
+    def resumes_s(self, scn) -> list[float]:
+        """The instants, s, this node starts again after its restarts (scenario node_restarts
+        of its NodeId; a team's scenario has none)."""
+        resumes = getattr(scn, "node_resumes_s", None)
+        return resumes(self.node_id) if resumes is not None else []
+
+    def _restarted(self, scn, ready, signals: list[dict]) -> tuple[np.ndarray, list[dict]]:
+        """The frames of sample() as the restarting node sends them: none measured or ready
+        while it is off (scn.node_down), and those measured after a restart on its new
+        clock (restarted()), each tagged with its restart count for the rolling counter."""
+        resumes = self.resumes_s(scn)
+        ready = np.asarray(ready, dtype=float)
+        if not resumes or len(ready) == 0:
+            return ready, signals
+        # each frame's measurement instant: its NodeTime unwrapped against the node's count
+        # when it was ready (a frame is ready within ms of its NodeTime); else the ready time
+        count = self.clock.unwrapped_us(ready)
+        node_us = np.array([c - (c - sig["NodeTime"]) % WRAP_US if "NodeTime" in sig else c
+                            for c, sig in zip(count.tolist(), signals)], dtype=np.int64)
+        t_s = self.clock.true_time_s(node_us)
+        on = ~(scn.node_down(self.node_id, t_s) | scn.node_down(self.node_id, ready))
+        kept = np.flatnonzero(on).tolist()
+        for i in kept:
+            epoch = bisect.bisect_right(resumes, t_s[i])
+            if epoch:
+                boot_us = int(self.clock.unwrapped_us(resumes[epoch - 1]))
+                self.restarted(signals[i], int(node_us[i]) - boot_us, epoch)
+            signals[i][_EPOCH] = epoch
+        return ready[kept], [signals[i] for i in kept]
+
+    def restarted(self, sig: dict, since_boot_us: int, epoch: int) -> None:
+        """Rewrite one frame's signals measured since_boot_us after the node's restart number
+        epoch (1, 2, ...): its clock counts from 0 at the restart."""
+        if "NodeTime" in sig:
+            sig["NodeTime"] = since_boot_us % WRAP_US
 
     # -- what a node's health frame (nodes.node_status) reports about it -------------------
     status_phase_us = 0   # NODE_STATUS is sent at phase + k s of the node clock

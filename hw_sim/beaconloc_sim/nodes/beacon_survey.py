@@ -81,6 +81,10 @@ class BeaconSurvey(Node):
     kind_order = 6           # right after the range receiver and its status frame
     node_id = 4            # the range network's (DBC RANGE_RX); sends no NODE_STATUS itself
 
+    def resumes_s(self, scn) -> list[float]:
+        """The fixed beacons' survey is not the range receiver: its restarts are not theirs."""
+        return []
+
     @classmethod
     def on_bus(cls, scn, placed: list[Node]) -> list[Node]:
         """The survey of the range receiver on the bus, when the scenario's [ranges]

@@ -8,6 +8,8 @@ from ..dbc import signal_modulo
 from .base import Interval, Node
 
 PERIOD_US = 1_000_000
+FLAG_CLOCK_RESTARTED = 0x2     # DBC NODE_STATUS Flags bit 1
+RESTARTED_FLAG_S = 10          # the flag stays on this long after a restart, s
 
 
 class NodeStatus(Node):
@@ -31,3 +33,9 @@ class NodeStatus(Node):
                     "TxErrorCount": 0, "RxErrorCount": 0, "Overruns": 0}
                    for i, f in zip(sent.tolist(), flags.tolist())]
         return t_st[sent] + lat[sent], signals
+
+    def restarted(self, sig: dict, since_boot_us: int, epoch: int) -> None:
+        """Uptime from the restart, and the clock-restarted flag for its first seconds."""
+        sig["Uptime"] = (since_boot_us // PERIOD_US) % self.uptime_modulo
+        if since_boot_us < RESTARTED_FLAG_S * PERIOD_US:
+            sig["Flags"] |= FLAG_CLOCK_RESTARTED

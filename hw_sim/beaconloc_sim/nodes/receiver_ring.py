@@ -6,12 +6,13 @@ import numpy as np
 
 from ..clocks import NodeClock
 from ..dbc import database
+from ..physics.pulses import RECEIVER_NODE_ID
 from .base import Interval, Node
 
 
 class ReceiverRing(Node):
     message = "PULSE_DETECTION"
-    node_id = 1
+    node_id = RECEIVER_NODE_ID
     kind_order = 0
     status_phase_us = 250_000
 

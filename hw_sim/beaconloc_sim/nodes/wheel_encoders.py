@@ -28,6 +28,7 @@ class WheelEncoders(Node):
         self.rotation_rad = (0.0, 0.0)        # wheel rotation at the last sample
         self.last_sent: tuple | None = None   # ticks (l, r) and odometry pose (x, y, th) of the last frame
         self.sent = (np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64))  # t_s, ticks l, r
+        self.boot_ticks: dict[int, tuple[int, int]] = {}   # restart -> counts of its first frame
 
     def silent(self, t_s: np.ndarray) -> np.ndarray:
         return self.scn.encoder_silent(t_s)
@@ -61,6 +62,13 @@ class WheelEncoders(Node):
                     "RightTicks": int(ticks_r[i] % TICK_WRAP)} for i in idx]
         self.sent = (t_enc[sent], ticks_l[sent], ticks_r[sent])
         return t_enc[idx] + lat[idx], signals
+
+    def restarted(self, sig: dict, since_boot_us: int, epoch: int) -> None:
+        """The node's counters start from 0 again at its restart: its first sample reads 0."""
+        super().restarted(sig, since_boot_us, epoch)
+        zero = self.boot_ticks.setdefault(epoch, (sig["LeftTicks"], sig["RightTicks"]))
+        sig["LeftTicks"] = (sig["LeftTicks"] - zero[0]) % TICK_WRAP
+        sig["RightTicks"] = (sig["RightTicks"] - zero[1]) % TICK_WRAP
 
     def odometry(self, time_base: NodeClock) -> dict[str, np.ndarray]:
         """Dead reckoning from the samples of the last interval that were sent, nominal

@@ -9,6 +9,7 @@ import numpy as np
 
 from . import acoustics as ac
 
+RECEIVER_NODE_ID = 1   # DBC NODE_STATUS NodeId of the receiver array (nodes.receiver_ring)
 KIND_DIRECT, KIND_WALL, KIND_FLOOR_CEILING, KIND_LATE = 0, 1, 2, 3
 _SOURCE_KIND = np.array([KIND_DIRECT, KIND_WALL, KIND_WALL, KIND_WALL, KIND_WALL,
                          KIND_FLOOR_CEILING, KIND_FLOOR_CEILING])
@@ -232,6 +233,10 @@ def _node_detector(scn, edge, arrival, rx, amp, width, fire, kind, burst) -> Det
     spacing = scn.site.double_pulse_spacing_s
     tol = scn.double_pulse_tolerance_s
     holdoff = scn.detector_holdoff_s
+    # the node is off during its restarts' pauses ([faults] node_restart): hears nothing
+    on = ~scn.node_down(RECEIVER_NODE_ID, edge)
+    edge, arrival, rx, amp, width = edge[on], arrival[on], rx[on], amp[on], width[on]
+    fire, kind, burst = fire[on], kind[on], burst[on]
     order = np.lexsort((arrival, rx))
     keep, double = [], []
     prev_rx, pending, pending_double = -1, -1, False

@@ -360,9 +360,13 @@ int bl_localizer_update_config(bl_localizer *loc, const bl_config *cfg, const bl
 int bl_localizer_reinit(bl_localizer *loc, const bl_config *cfg, const bl_seq_config *seq_cfg);
 
 /* The receiver node restarted (its clock and stream start over): the
- * sequencer forgets its lock, hint and pending pulses; the filter goes on.
- * Errors: BL_EINVAL, BL_ENOTINIT. */
-int bl_localizer_sequencer_reset(bl_localizer *loc);
+ * sequencer forgets its lock, hint and pending pulses; the filter goes on,
+ * its firing times (Kleeman 1992 eq. 15's t0) known only within t0_sigma_s
+ * (s) on the caller's new timeline: their variance grows by its square, so
+ * the next arrivals re-anchor t0 instead of pulling the pose or the speed of
+ * sound (0: the timeline carried on exactly). Errors: BL_EINVAL (NULL, or
+ * t0_sigma_s negative or not finite), BL_ENOTINIT. */
+int bl_localizer_receiver_restarted(bl_localizer *loc, bl_real t0_sigma_s);
 
 /* One receiver detection (det->tag is carried to the pulse's members).
  * A site without ultrasonic beacons (cfg.beacon_count 0) has no sequencer:
