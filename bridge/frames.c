@@ -62,17 +62,19 @@ static uint32_t low_bits(unsigned n)
  * Returns FRAME_OK, FRAME_DUPLICATE or FRAME_OUT_OF_ORDER, with the
  * counters of kind k updated. */
 static enum frame_result track(struct frame_counters *c, enum frame_kind k, struct frame_track *t,
-                               uint8_t counter, unsigned modulo, uint32_t stamp, int32_t slack,
+                               const struct frame_seq *seq, unsigned modulo, int32_t slack,
                                const struct can_msg *msg)
 {
     const uint8_t *data = msg->data;
+    const uint8_t counter = seq->counter;
+    const uint32_t stamp = seq->stamp;
     for (uint32_t i = 0; i < t->recent_len; i++)
         if (!memcmp(t->recent[i], data, sizeof t->recent[0])) {
             c->duplicates[k]++;
             return FRAME_DUPLICATE;
         }
     remember(t, data);
-    const int64_t advance_us = (int32_t)(stamp - t->newest_stamp);
+    const int64_t advance_us = (int64_t)(int32_t)(stamp - t->newest_stamp) * seq->stamp_tick_us;
     const int64_t rx_advance_us = msg->rx_us - t->newest_rx_us;
     if (!t->seen || llabs(advance_us - rx_advance_us) > FRAME_RESTART_US) {
         /* the first frame, or the first after a node restart: a new sequence */
@@ -84,8 +86,7 @@ static enum frame_result track(struct frame_counters *c, enum frame_kind k, stru
         return FRAME_OK;
     }
     unsigned behind = (t->last + modulo - counter) % modulo;
-    if (behind >= 1 && behind <= modulo / 2 && (t->missing >> behind & 1u) &&
-        (int32_t)(stamp - t->newest_stamp) < slack) {
+    if (behind >= 1 && behind <= modulo / 2 && (t->missing >> behind & 1u) && advance_us < slack) {
         /* A frame counted lost has come after all, late. */
         t->missing &= ~(1u << behind);
         if (c->lost[k] > 0)
@@ -128,8 +129,7 @@ static enum frame_result decode(struct frame_counters *c, const struct can_msg *
     enum frame_kind k = sk->kind;
     if (seq.track >= sk->tracks)
         return FRAME_OUT_OF_RANGE;
-    return track(c, k, &c->track[k][seq.track], seq.counter, c->modulo[k], seq.stamp,
-                 sk->stamp_slack_us, msg);
+    return track(c, k, &c->track[k][seq.track], &seq, c->modulo[k], sk->stamp_slack_us, msg);
 }
 
 enum frame_result frame_decode(struct frame_counters *c, const struct can_msg *msg,

@@ -32,7 +32,7 @@
  *   the order of their own latency, so their NodeTimes need not increase;
  *   their counters (transmit order) do, and only the counter decides here.
  *   - a node restart (a brown-out, a watchdog: its clock and its counters
- *     start over) is a frame whose node time (uptime for NODE_STATUS, in us)
+ *     start over) is a frame whose node time (uptime for NODE_STATUS)
  *     advanced by more than FRAME_RESTART_US more or less than its receive
  *     time since the newest frame of its track: its counter starts a new
  *     sequence there and nothing is counted lost (the node sent nothing
@@ -95,9 +95,10 @@ struct frame {
 
 /* What a kind's unpacker tells the rolling-counter check about one frame. */
 struct frame_seq {
-    uint8_t counter; /* the frame's Counter signal */
-    uint32_t stamp;  /* its node time, us (NODE_STATUS: uptime in us), wrapping */
-    unsigned track;  /* which track of its kind: 0, or the node id for a
+    uint8_t counter;        /* the frame's Counter signal */
+    uint32_t stamp;         /* its node time, us (NODE_STATUS: uptime, s) */
+    uint32_t stamp_tick_us; /* us per unit of stamp: 1 (NODE_STATUS: 1000000) */
+    unsigned track;         /* which track of its kind: 0, or the node id for a
                           kind with a track per node (< FRAME_MAX_NODES) */
 };
 
@@ -105,7 +106,7 @@ struct frame_seq {
 struct frame_track {
     bool seen;
     uint8_t last;                    /* counter of the newest frame */
-    uint32_t newest_stamp;           /* its node time, us (NODE_STATUS: uptime) */
+    uint32_t newest_stamp;           /* its node time (NODE_STATUS: uptime, s) */
     int64_t newest_rx_us;            /* its receive time, us */
     uint32_t missing;                /* bit b set: the frame b counter steps behind the
                               newest was counted lost (b = 1..modulo-1) */

@@ -83,7 +83,7 @@ def number(v) -> str:
 
 def stamp_of(msg):
     """The frame's node time for the rolling-counter check: its first signal in
-    us or s (NodeTime; NODE_STATUS: Uptime), handed on in us (wrapping at 2^32)."""
+    us or s (NodeTime; NODE_STATUS: Uptime), handed on with its unit in us."""
     for s in msg.signals:
         if s.unit in ("us", "s") and not is_physical(s):
             return s
@@ -181,10 +181,9 @@ def gen_c(kinds, dbc: str) -> str:
             value = v if is_physical(s) else f"m.{v} != 0" if field_type(s) == "bool" else f"m.{v}"
             out.append(f"        .{field_name(s)} = {value},")
         stamp = stamp_of(m)
-        stamp_us = f"m.{snake(stamp.name)}" if stamp.unit == "us" else \
-            f"(uint32_t)((uint64_t)m.{snake(stamp.name)} * 1000000u)"   # s -> us, wrapping
+        tick_us = 1 if stamp.unit == "us" else 1000000
         out += ["    };", f"    *seq = (struct frame_seq){{.counter = m.counter, "
-                f".stamp = {stamp_us}, .track = 0}};",
+                f".stamp = m.{snake(stamp.name)}, .stamp_tick_us = {tick_us}u, .track = 0}};",
                 "    return FRAME_OK;", "}", ""]
     return "\n".join(out)
 

@@ -27,8 +27,9 @@ def sim_command():
     return [sys.executable, "-m", "beaconloc_sim.cli"]
 
 
-def run_sim(out_dir: Path, scenario: str, duration_s: float, seed=None):
-    """Simulate a scenario into a candump log; returns (log, truth CSV)."""
+def run_sim(out_dir: Path, scenario: str, duration_s: float, seed=None, sim_args=()):
+    """Simulate a scenario into a candump log (sim_args: more options of `run`, e.g. --set);
+    returns (log, truth CSV)."""
     name = Path(scenario).name.replace(".scenario.ini", "")  # name or path
     log = out_dir / f"{name}.log"
     truth = out_dir / f"{name}.truth.csv"
@@ -36,6 +37,7 @@ def run_sim(out_dir: Path, scenario: str, duration_s: float, seed=None):
                            "--duration", str(duration_s)]
     if seed is not None:
         cmd += ["--seed", str(seed)]
+    cmd += list(sim_args)
     subprocess.run(cmd, check=True, capture_output=True, timeout=300)
     return log, truth
 

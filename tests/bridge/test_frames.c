@@ -242,6 +242,14 @@ static void test_node_restart_loses_nothing(void **state)
     const int64_t srx[] = {0, 1000000, 2300000, 3300000, 6300000};
     decode_received_at(&c, s, srx, 5);
     assert_int_equal(c.lost[FRAME_NODE_STATUS], 2); /* 1 -> 4 on the new clock: 2 lost */
+    /* an uptime of 4294 s: in microseconds that is 2^32 us less 0.97 s, a wrap
+     * of a node time away from 0; uptime is seconds and does not wrap there */
+    frame_counters_init(&c);
+    struct can_msg u[] = {status_msg_up(3, 3, 0, 4293), status_msg_up(3, 4, 0, 4294),
+                          status_msg_up(3, 0, 2, 0)};
+    const int64_t urx[] = {0, 1000000, 2000000};
+    decode_received_at(&c, u, urx, 3);
+    assert_int_equal(c.lost[FRAME_NODE_STATUS], 0);
 }
 
 /* The same frame twice (a re-delivery): dropped, counted as a duplicate,
