@@ -191,6 +191,7 @@ static void sync(struct estimator *e)
             break;
         case BL_LOC_EV_RESYNC:
             event(e, EST_EV_WARNING, "beacon numbering re-synchronised");
+            e->storm_window_start_us = 0; /* the rejections were the numbering's, not echoes */
             break;
         case BL_LOC_EV_RENUMBERED:
             /* beacon 1's double pulse not heard, an echo taken for it */
@@ -200,6 +201,7 @@ static void sync(struct estimator *e)
             /* every beacon fires on from a new time: the pose kept */
             event(e, EST_EV_WARNING,
                   "beacon firing times jumped (controller restart): t0 re-anchored");
+            e->storm_window_start_us = 0; /* the rejections were the jump's, not echoes */
             break;
         default:
             break;
