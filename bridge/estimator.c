@@ -217,6 +217,11 @@ static void sync(struct estimator *e)
             e->beacon_accepted[b] = est.accepted[b];
             if (!est.started || est.accepted[b] == 0)
                 continue;
+            if (e->fusion_silent) { /* the first fusion after none: every beacon's watch anew */
+                e->fusion_silent = false;
+                estimator_restart_beacon_watch(e, e->latest_node_us);
+                event(e, EST_EV_NOTICE, "pulses fused again");
+            }
             e->beacon_last_ok_us[b] = e->latest_node_us;
             e->beacon_ever[b] = true;
             if (e->beacon_lost[b]) {
@@ -484,8 +489,24 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
         e->pulses_silent = true;
         event(e, EST_EV_WARNING, "no pulse heard for %.1f s", e->beacon_lost_s);
     }
-    /* beacon lost: no accepted pulse for beacon_lost_s */
-    for (uint32_t b = 0; b < e->blcfg.beacon_count && quiet_us <= estimator_cycle_us(e); b++) {
+    /* pulses heard but none fused for a whole cycle (firing times gone stale,
+     * a kidnap, the numbering lost): not one beacon's doing either; after
+     * beacon_lost_s one warning, and the beacons' watch starts again at the
+     * next fusion (sync) */
+    int64_t newest_ok_us = INT64_MIN;
+    for (uint32_t b = 0; b < e->blcfg.beacon_count && b < BL_MAX_BEACONS; b++)
+        if (e->beacon_last_ok_us[b] > newest_ok_us)
+            newest_ok_us = e->beacon_last_ok_us[b];
+    const int64_t cycle_us = estimator_cycle_us(e);
+    const int64_t unfused_us = now - newest_ok_us;
+    if (!e->fusion_silent && e->blcfg.beacon_count > 0 && quiet_us <= cycle_us &&
+        unfused_us > lost_us) {
+        e->fusion_silent = true;
+        event(e, EST_EV_WARNING, "no pulse fused for %.1f s", e->beacon_lost_s);
+    }
+    /* beacon lost: no accepted pulse for beacon_lost_s while the others are */
+    for (uint32_t b = 0;
+         b < e->blcfg.beacon_count && quiet_us <= cycle_us && unfused_us <= cycle_us; b++) {
         if (!e->beacon_lost[b] && now - e->beacon_last_ok_us[b] > lost_us) {
             e->beacon_lost[b] = true;
             event(e, EST_EV_WARNING, "beacon %u lost", b + 1);

@@ -204,6 +204,7 @@ struct estimator {
     int64_t beacon_last_ok_us[BL_MAX_BEACONS];
     int64_t pulse_last_us; /* the newest pulse frame, receiver-node time */
     bool pulses_silent;    /* "no pulse heard" reported (none for beacon_lost_s) */
+    bool fusion_silent;    /* "no pulse fused" reported (heard, none fused for beacon_lost_s) */
     bool beacon_lost[BL_MAX_BEACONS];
     bool beacon_ever[BL_MAX_BEACONS];
     uint32_t beacon_accepted[BL_MAX_BEACONS]; /* filter's accepted count, last seen */

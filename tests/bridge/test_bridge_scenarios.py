@@ -2,6 +2,7 @@
 estimator glue's re-initialisation, encoder-silence handling and health
 events (the same events go to the log and to STATUSTEXT)."""
 import json
+import re
 import subprocess
 
 import numpy as np
@@ -216,6 +217,12 @@ def test_controller_restarts_keep_the_pose(bridge_bin, tmp_path, seed):
     # the arrivals rejected before each re-anchoring are not an echo storm (before: two storm
     # warnings on seed 1, one on seed 2; seed 1 keeps one, from rejections after the first)
     assert p.stderr.count("warning: echo storm") == (1 if seed == 1 else 0), p.stderr
+    # the second restart: pulses heard, none fused for 2 s (every beacon at once): one warning,
+    # not six beacons called lost (before: beacons 1-6 lost one by one)
+    second = p.stderr[p.stderr.index("t0 re-anchored") + 1:]
+    assert second.count("warning: no pulse fused for 2.0 s") == 1, p.stderr
+    assert second.count("info: pulses fused again") == 1, p.stderr
+    assert not re.search(r"beacon \d+ lost", second), p.stderr
     assert stats["timing_jumps"] == 2
     assert stats["estimator_resets"] == 0 and stats["sequencer_resyncs"] == 0
     assert np.all(est["reset_counter"] == 0)

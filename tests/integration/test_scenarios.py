@@ -4,6 +4,8 @@ what happened (STATUSTEXT), and the accuracy comes back afterwards.
     echo-storm        30 % of the firings also give a strong wall echo
     beacon-outage     2 of 6 beacons dead for 20 s
     encoder-silence   the encoder node sends nothing for a while (scenario file)
+    node-restart      the receiver array restarts: off 0.3 s, then its clock and
+                      counters from 0 (the filter's time base carried on)
     eurobot           bearings to 3 beacons and encoders, no ultrasonic beacon
                       (Vander et al. 2011, issue 11)
     marvelmind        ranges to 4 fixed range beacons and encoders, no other
@@ -29,6 +31,9 @@ CASES = {
     "echo-storm": (re.compile(r"echo", re.I), 50.0),
     "beacon-outage": (re.compile(r"beacon\s*\d.*(lost|silent|missing|dead|out)", re.I), 80.0),
     "encoder-silence": (re.compile(r"encoder", re.I), 55.0),
+    # the receiver array off 0.3 s at 40 s, its clock and counters from 0 again (its later
+    # restarts are past the live run)
+    "node-restart": (re.compile(r"receiver node clock restarted"), 65.0),
 }
 
 
@@ -39,6 +44,8 @@ def _event_window(sc) -> tuple[float, float] | None:
         return sc.beacon_outage[0], sc.beacon_outage[0] + sc.beacon_outage[1]
     if sc.encoder_silence is not None:
         return sc.encoder_silence[0], sc.encoder_silence[0] + sc.encoder_silence[1]
+    if sc.node_restarts:
+        return sc.node_restarts[0][0], sc.node_restarts[0][0] + sc.node_restarts[0][1]
     return None
 
 
