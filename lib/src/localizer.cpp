@@ -318,7 +318,10 @@ NOINLINE bl_real flight_difference_s(const bl_filter *f, uint32_t a, uint32_t b)
 // k's tracking window, the filter's hint numbers it k: a firing numbered
 // k != 0 with beacon 1's signature starts a run that takes the arrival
 // numbered b for beacon b - k's (its jump: the innovation plus b's flight
-// less b - k's), and t0 moves by k slots and the jump. A kidnap's jumps
+// less b - k's), and t0 moves by k slots and the jump; fused or not (beacon
+// 1's arrival can fit beacon k's prediction), and a signed firing that
+// agrees with a signed run is its member (an echo 3 ms behind another
+// beacon can carry the signature). A kidnap's jumps
 // differ from beacon to beacon (each its own change of distance), an echo
 // storm's rejections come between fused arrivals: neither makes such a
 // run. True if re-anchored.
@@ -333,7 +336,9 @@ INLINE bool timing_jump(bl_localizer *loc, uint32_t beacon, bool signature)
     bl_real jump = res.innovation + (k ? flight_difference_s(&loc->filter, beacon, truth) : bl_real(0));
     const bl_real d = jump - loc->jump_s_;
     const bool agrees = loc->jump_n_ != 0 && d * d <= kJumpGate * kJumpGate * res.innovation_var;
-    const bool other_one = signature && truth != 0;
+    // (a member of a signed run that agrees is one, signed or not: an echo 3 ms
+    // behind another beacon can carry the signature too)
+    const bool other_one = signature && truth != 0 && !(agrees && loc->jump_signed_);
     if (other_one) {
         // Beacon 1's signature on a firing numbered as another beacon: a new
         // run takes it for beacon 1's (the restart put beacon 1 in beacon
@@ -386,9 +391,12 @@ INLINE bool timing_jump(bl_localizer *loc, uint32_t beacon, bool signature)
 NOINLINE Fused classify(bl_localizer *loc, uint32_t beacon, bool signature)
 {
     const bl_fusion_result &res = loc->result_;
-    if (res.status != BL_FUSION_REJECTED) {
-        loc->jump_n_ = 0;  // a fused arrival ends the timing watch's run
-    } else if (loc->was_converged_ && timing_jump(loc, beacon, signature)) {
+    // A fused arrival ends the timing watch's run, but beacon 1's signature
+    // on a firing numbered as another beacon starts one even so: beacon 1's
+    // arrival can fit that beacon's prediction (a run of one never moves t0).
+    const bool rejected = res.status == BL_FUSION_REJECTED;
+    if (!rejected) loc->jump_n_ = 0;
+    if ((rejected || (signature && beacon != 0)) && loc->was_converged_ && timing_jump(loc, beacon, signature)) {
         loc->counters_.pulses_rejected++;
         return Fused::kRejected;  // the next arrival fuses on the new t0 (and moves the hint)
     }
