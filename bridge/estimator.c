@@ -457,6 +457,14 @@ static void check_beacon_positions(struct estimator *e)
     check_beacon_set(e, &e->bearing_beacon_check);
 }
 
+int64_t estimator_elapsed_us(int64_t now_us, int64_t then_us)
+{
+    int64_t d;
+    if (__builtin_sub_overflow(now_us, then_us, &d))
+        return now_us > then_us ? INT64_MAX : INT64_MIN;
+    return d;
+}
+
 int64_t estimator_cycle_us(const struct estimator *e)
 {
     return (int64_t)((double)e->blcfg.beacon_count * (double)e->blcfg.beacon_period_s * 1e6);
@@ -484,7 +492,7 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
      * lost, and after beacon_lost_s one warning; the beacons' watch starts
      * again when pulses come (sensor_pulse.c) */
     int64_t lost_us = (int64_t)(e->beacon_lost_s * 1e6);
-    const int64_t quiet_us = now - e->pulse_last_us;
+    const int64_t quiet_us = estimator_elapsed_us(now, e->pulse_last_us);
     if (!e->pulses_silent && e->blcfg.beacon_count > 0 && quiet_us > lost_us) {
         e->pulses_silent = true;
         event(e, EST_EV_WARNING, "no pulse heard for %.1f s", e->beacon_lost_s);
@@ -498,7 +506,7 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
         if (e->beacon_last_ok_us[b] > newest_ok_us)
             newest_ok_us = e->beacon_last_ok_us[b];
     const int64_t cycle_us = estimator_cycle_us(e);
-    const int64_t unfused_us = now - newest_ok_us;
+    const int64_t unfused_us = estimator_elapsed_us(now, newest_ok_us);
     if (!e->fusion_silent && e->blcfg.beacon_count > 0 && quiet_us <= cycle_us &&
         unfused_us > lost_us) {
         e->fusion_silent = true;
@@ -507,7 +515,7 @@ void estimator_tick(struct estimator *e, int64_t local_now_us)
     /* beacon lost: no accepted pulse for beacon_lost_s while the others are */
     for (uint32_t b = 0;
          b < e->blcfg.beacon_count && quiet_us <= cycle_us && unfused_us <= cycle_us; b++) {
-        if (!e->beacon_lost[b] && now - e->beacon_last_ok_us[b] > lost_us) {
+        if (!e->beacon_lost[b] && estimator_elapsed_us(now, e->beacon_last_ok_us[b]) > lost_us) {
             e->beacon_lost[b] = true;
             event(e, EST_EV_WARNING, "beacon %u lost", b + 1);
         }

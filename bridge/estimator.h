@@ -369,6 +369,10 @@ void estimator_tick(struct estimator *e, int64_t local_now_us);
  * beacons went unheard because the receiver was off, not they). */
 void estimator_restart_beacon_watch(struct estimator *e, int64_t t_us);
 
+/* now_us - then_us, saturated at INT64_MIN / INT64_MAX (times from a
+ * replayed log or a node clock can be anything). */
+int64_t estimator_elapsed_us(int64_t now_us, int64_t then_us);
+
 /* One beacon cycle (every beacon fired once), us. */
 int64_t estimator_cycle_us(const struct estimator *e);
 

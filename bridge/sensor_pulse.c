@@ -114,12 +114,13 @@ static void sensor_pulse_handle(struct estimator *e, const struct frame *f, int6
     }
     if (t > e->latest_node_us)
         e->latest_node_us = t;
-    if (t - e->pulse_last_us > estimator_cycle_us(e)) /* nothing heard for a cycle */
+    const int64_t quiet_us = estimator_elapsed_us(t, e->pulse_last_us);
+    if (quiet_us > estimator_cycle_us(e)) /* nothing heard for a cycle */
         estimator_restart_beacon_watch(e, t);
     if (e->pulses_silent) {
         e->pulses_silent = false;
         estimator_eventf(e, EST_EV_NOTICE, "pulses heard again after %.1f s",
-                         (double)(t - e->pulse_last_us) / 1e6);
+                         (double)quiet_us / 1e6);
     }
     if (t > e->pulse_last_us)
         e->pulse_last_us = t;
