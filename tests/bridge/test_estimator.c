@@ -369,6 +369,19 @@ static void test_beacon_lost_and_back(void **state)
     assert_true(hypot(o.x_m - W.x0, o.y_m - W.y0) < 0.03);
 }
 
+/* The health watches' elapsed times saturate instead of overflowing: a
+ * replayed log's or a node's times can be anything (fuzz_frames found
+ * "now - newest fusion" from INT64_MIN on a sonar site in estimator_tick). */
+static void test_elapsed_saturates(void **state)
+{
+    (void)state;
+    assert_int_equal(estimator_elapsed_us(5000000, 3000000), 2000000);
+    assert_int_equal(estimator_elapsed_us(-3, 4), -7);
+    assert_true(estimator_elapsed_us(1000, INT64_MIN) == INT64_MAX);
+    assert_true(estimator_elapsed_us(INT64_MIN, 1) == INT64_MIN);
+    assert_true(estimator_elapsed_us(INT64_MAX, -1) == INT64_MAX);
+}
+
 static void test_reconfigure(void **state)
 {
     (void)state;
@@ -639,6 +652,7 @@ int main(void)
         cmocka_unit_test_setup(test_moving_robot_wrapping_ticks, setup),
         cmocka_unit_test_setup(test_encoders_before_receiver_clock, setup),
         cmocka_unit_test_setup(test_beacon_lost_and_back, setup),
+        cmocka_unit_test(test_elapsed_saturates),
         cmocka_unit_test_setup(test_reconfigure, setup),
         cmocka_unit_test_setup(test_encoder_glitch_ignored, setup),
         cmocka_unit_test_setup(test_every_receiver_of_a_pulse_fused, setup),
