@@ -108,19 +108,40 @@ static void sensor_pulse_handle(struct estimator *e, const struct frame *f, int6
     int64_t t = node_clock_observe(clock, p->node_time_us, rx_us - e->pulse_hold_us);
     if (clock->last_event == NODE_CLOCK_RESTART) {
         e->c.node_restarts++;
-        (void)bl_localizer_receiver_restarted(&e->loc, NODE_CLOCK_RESTART_SIGMA_US * 1e-6);
+        (void)bl_localizer_timing_lost(&e->loc, NODE_CLOCK_RESTART_SIGMA_US * 1e-6);
         estimator_restart_beacon_watch(e, t);
         estimator_event(e, EST_EV_WARNING, "receiver node clock restarted");
     }
     if (t > e->latest_node_us)
         e->latest_node_us = t;
     const int64_t quiet_us = estimator_elapsed_us(t, e->pulse_last_us);
-    if (quiet_us > estimator_cycle_us(e)) /* nothing heard for a cycle */
+    const int64_t cycle_us = estimator_cycle_us(e);
+    bool relearnt = false;
+    if (quiet_us > cycle_us) {
+        /* No beacon heard for a whole cycle: not one beacon's doing, and
+         * the beacon controller may have restarted at a new time (the
+         * receiver's own restart is handled above): the firing times are
+         * known to half a cycle, re-learnt from the next arrivals, which
+         * the sequencer numbers from beacon 1's double pulse again. Only
+         * where beacon 1 was fused in the two cycles before the silence:
+         * where it is not heard, nothing else numbers the arrivals once
+         * the firing times are lost (measured: a 1.5 s outage of every
+         * beacon in two-rooms-east, 3 runs of 6 lost), and the timing
+         * watch needs it too. Every beacon's lost-watch starts again. */
+        relearnt = e->was_started && clock->last_event != NODE_CLOCK_RESTART &&
+                   estimator_elapsed_us(e->pulse_last_us, e->beacon_last_ok_us[0]) <= 2 * cycle_us;
         estimator_restart_beacon_watch(e, t);
+        if (relearnt)
+            (void)bl_localizer_timing_lost(&e->loc, 0.5 * (double)cycle_us * 1e-6);
+    }
+    const char *relearn_text = relearnt ? ": firing times re-learnt" : "";
     if (e->pulses_silent) {
         e->pulses_silent = false;
-        estimator_eventf(e, EST_EV_NOTICE, "pulses heard again after %.1f s",
-                         (double)quiet_us / 1e6);
+        estimator_eventf(e, EST_EV_NOTICE, "pulses again after %.1f s%s", (double)quiet_us / 1e6,
+                         relearn_text);
+    } else if (relearnt) {
+        estimator_eventf(e, EST_EV_NOTICE, "beacons silent %.1f s%s", (double)quiet_us / 1e6,
+                         relearn_text);
     }
     if (t > e->pulse_last_us)
         e->pulse_last_us = t;

@@ -779,7 +779,7 @@ extern "C" int bl_localizer_observe_pulses(bl_localizer *loc, bl_loc_pulse_obser
     return BL_OK;
 }
 
-extern "C" int bl_localizer_receiver_restarted(bl_localizer *loc, bl_real t0_sigma_s)
+extern "C" int bl_localizer_timing_lost(bl_localizer *loc, bl_real t0_sigma_s)
 {
     if (loc == nullptr || !(t0_sigma_s >= 0) || !finite_real(t0_sigma_s)) return BL_EINVAL;
     if (!valid(loc)) return BL_ENOTINIT;

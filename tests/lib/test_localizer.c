@@ -375,7 +375,7 @@ static void test_controller_restart_retimes(void **state) {
  * timeline on from its clock fit, anchored on one frame's receive time, so
  * every arrival after it is late by that frame's delay over the fit (here
  * 0.4 ms, 14 cm of sound), and the sequencer starts over. Told how well the
- * timeline is known (bl_localizer_receiver_restarted, 1 ms), the filter
+ * timeline is known (bl_localizer_timing_lost, 1 ms), the filter
  * re-anchors t0 on the next arrivals, none rejected; told nothing (0), it
  * rejects the first and fuses the rest into the pose and the speed of sound
  * (too small a jump for the timing watch). */
@@ -393,7 +393,7 @@ static void rx_restart_hook(bl_localizer *loc, const run_t *r, size_t i, void *c
     counters_hook(loc, r, i, &k->c);
     if (k->done || i + 1 >= r->n || input_s(r, i + 1) < RX_RESTART_S) return;
     k->done = true; /* before the first input on the new timeline */
-    assert_int_equal(bl_localizer_receiver_restarted(loc, k->sigma_s), BL_OK);
+    assert_int_equal(bl_localizer_timing_lost(loc, k->sigma_s), BL_OK);
 }
 
 static void run_rx_restart(run_t *r, bl_real sigma_s, rx_restart_ctx *k, stats_t *s, bl_loc_counters *c) {
@@ -435,9 +435,9 @@ static void test_receiver_restart_reanchors(void **state) {
     assert_true(blind_rej > told_rej);
     /* bad input: an error, the localizer untouched */
     bl_localizer before = LOC;
-    assert_int_equal(bl_localizer_receiver_restarted(&LOC, (bl_real)-1e-3), BL_EINVAL);
-    assert_int_equal(bl_localizer_receiver_restarted(&LOC, (bl_real)NAN), BL_EINVAL);
-    assert_int_equal(bl_localizer_receiver_restarted(NULL, 0), BL_EINVAL);
+    assert_int_equal(bl_localizer_timing_lost(&LOC, (bl_real)-1e-3), BL_EINVAL);
+    assert_int_equal(bl_localizer_timing_lost(&LOC, (bl_real)NAN), BL_EINVAL);
+    assert_int_equal(bl_localizer_timing_lost(NULL, 0), BL_EINVAL);
     assert_memory_equal(&LOC, &before, sizeof LOC);
     unload(&r);
 }
@@ -830,7 +830,7 @@ static void test_bearing_only_site(void **state) {
     assert_int_equal(c.seq_errors, 1);
     before.counters_.seq_errors++;
     assert_memory_equal(&LOC, &before, sizeof LOC);
-    assert_int_equal(bl_localizer_receiver_restarted(&LOC, 0), BL_OK);
+    assert_int_equal(bl_localizer_timing_lost(&LOC, 0), BL_OK);
 }
 
 /* Kidnapped on a bearing-only site: the bearings are rejected, the window

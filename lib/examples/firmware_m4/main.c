@@ -7,6 +7,7 @@
  * encoder silences, the sequencer hint), and publishes every update.
  *
  *   bursts (EXTI ISR, TIM2 stamps)        -> bl_localizer_detection
+ *   no burst for a whole beacon cycle     -> bl_localizer_timing_lost
  *   now - DETECTION_LATENCY_US            -> bl_localizer_advance (closes merge windows)
  *   encoder latch every 10 ms (TIM3/TIM4) -> bl_localizer_wheels (metres per wheel)
  *   new measurement fused                 -> board_publish (debugger buffer here;
@@ -88,6 +89,9 @@ int main(void)
     const float m_per_tick = TWO_PI * fw_cfg.wheel_radius_m / (float)fw_cfg.ticks_per_rev;
     bool have_counts = false;
     uint16_t last_left = 0, last_right = 0;
+    /* one beacon cycle (us), and the latest burst's time */
+    const int64_t cycle_us = (int64_t)((float)fw_cfg.beacon_count * fw_cfg.beacon_period_s * 1e6f);
+    int64_t last_burst_us = INT64_MIN;
     uint32_t published = 0;
 
     for (;;) {
@@ -104,6 +108,14 @@ int main(void)
             d.amplitude_mv = b.amplitude_mv;
             d.double_pulse = b.double_pulse;
             d.tag = (uint32_t)now_us; /* when the loop took it, low 32 bits (latency figure) */
+            /* No burst for a whole cycle: the beacon controller may have
+             * restarted at a new time (a power cut, a watchdog): the firing
+             * times are known to half a cycle, re-learnt from the next
+             * arrivals (the bridge does the same; docs/bridge.md "Beacon
+             * controller restarts") */
+            if (last_burst_us != INT64_MIN && d.time_us - last_burst_us > cycle_us)
+                (void)bl_localizer_timing_lost(&fw_loc, 0.5e-6f * (float)cycle_us);
+            if (d.time_us > last_burst_us) last_burst_us = d.time_us;
             if (bl_localizer_detection(&fw_loc, &d) != BL_OK) fw_out.errors++;
         }
 

@@ -359,14 +359,17 @@ int bl_localizer_update_config(bl_localizer *loc, const bl_config *cfg, const bl
  * had started). Errors: BL_EINVAL, BL_ENOTINIT, BL_ECONFIG. */
 int bl_localizer_reinit(bl_localizer *loc, const bl_config *cfg, const bl_seq_config *seq_cfg);
 
-/* The receiver node restarted (its clock and stream start over): the
- * sequencer forgets its lock, hint and pending pulses; the filter goes on,
- * its firing times (Kleeman 1992 eq. 15's t0) known only within t0_sigma_s
- * (s) on the caller's new timeline: their variance grows by its square, so
- * the next arrivals re-anchor t0 instead of pulling the pose or the speed of
- * sound (0: the timeline carried on exactly). Errors: BL_EINVAL (NULL, or
+/* The beacons' firing times (Kleeman 1992 eq. 15's t0) are known only
+ * within t0_sigma_s (s): the receiver node restarted and the caller carried
+ * its timeline on, anchored on one frame (that anchor's error); or every
+ * beacon fell silent for a cycle or more (the beacon controller may have
+ * restarted at a new time: half a cycle). The sequencer forgets its lock,
+ * hint and pending pulses (it locks again on beacon 1's double pulse); the
+ * filter goes on, the variance of its t0 grown by t0_sigma_s², so the next
+ * arrivals re-anchor t0 instead of pulling the pose or the speed of sound
+ * (0: the sequencer alone starts over). Errors: BL_EINVAL (NULL, or
  * t0_sigma_s negative or not finite), BL_ENOTINIT. */
-int bl_localizer_receiver_restarted(bl_localizer *loc, bl_real t0_sigma_s);
+int bl_localizer_timing_lost(bl_localizer *loc, bl_real t0_sigma_s);
 
 /* One receiver detection (det->tag is carried to the pulse's members).
  * A site without ultrasonic beacons (cfg.beacon_count 0) has no sequencer:
