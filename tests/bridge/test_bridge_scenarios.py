@@ -228,6 +228,17 @@ def test_controller_restarts_keep_the_pose(bridge_bin, tmp_path, seed):
     assert np.all(err[late] < 0.15), float(err[late].max())
 
 
+def one_controller_restart(bridge_bin, tmp_path, pause_s, duration_s, seed):
+    """controller-restart with one restart, at 60 s for pause_s, replayed: (the daemon's run,
+    its stats, each estimate's simulation time and position error)."""
+    scn = scenario_with(tmp_path, "controller-restart",
+                        {"controller_restart": f"60, {pause_s}", "controller_restart2": None})
+    log, truth_path = run_sim(tmp_path, str(scn), duration_s, seed=seed)
+    p, est, stats = replay(bridge_bin, log, tmp_path)
+    t_sim, err = errors(est, np.genfromtxt(truth_path, delimiter=",", names=True))
+    return p, stats, t_sim, err
+
+
 @pytest.mark.parametrize("seed", [10, 16])
 def test_controller_restart_after_seconds_relearns_the_firing_times(bridge_bin, tmp_path, seed):
     """The beacon controller off for 5 s at 60 s (a slow reboot): one warning that no pulse came,
@@ -237,12 +248,7 @@ def test_controller_restart_after_seconds_relearns_the_firing_times(bridge_bin, 
     carried the pose 5 s: 0.124 and 0.144 m). Before (the timing watch alone) both seeds restarted
     the filter from wrongly numbered pulses, 3.5 and 5.5 m off for the rest of the run; on 20
     seeds 3 such runs (6 before the watch took fused signed firings), none now."""
-    scn = scenario_with(tmp_path, "controller-restart",
-                        {"controller_restart": "60, 5.0", "controller_restart2": None})
-    log, truth_path = run_sim(tmp_path, str(scn), 90, seed=seed)
-    p, est, stats = replay(bridge_bin, log, tmp_path)
-    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
-    t_sim, err = errors(est, truth)
+    p, stats, t_sim, err = one_controller_restart(bridge_bin, tmp_path, 5.0, 90, seed)
     assert "no pulse heard for 2.0 s" in warnings(p), p.stderr
     assert re.search(r"info: pulses again after 5\.\d s: firing times re-learnt", p.stderr), p.stderr
     assert stats["estimator_resets"] == 0 and stats["sequencer_resyncs"] == 0, stats
@@ -344,12 +350,7 @@ def test_controller_restart_into_another_beacons_window(bridge_bin, tmp_path, se
     off (0.077 m and 0.099 m on these seeds). (At 2.0 s, the case this test had before the
     firing times were re-learnt after a cycle of silence, the watch without that hypothesis
     restarted seeds 3 and 6 three and six times.)"""
-    scn = scenario_with(tmp_path, "controller-restart",
-                        {"controller_restart": "60, 0.8", "controller_restart2": None})
-    log, truth_path = run_sim(tmp_path, str(scn), 75, seed=seed)
-    p, est, stats = replay(bridge_bin, log, tmp_path)
-    truth = np.genfromtxt(truth_path, delimiter=",", names=True)
-    t_sim, err = errors(est, truth)
+    p, stats, t_sim, err = one_controller_restart(bridge_bin, tmp_path, 0.8, 75, seed)
     assert p.stderr.count("beacon firing times jumped") == 1, p.stderr
     assert "firing times re-learnt" not in p.stderr, p.stderr
     assert stats["timing_jumps"] == 1 and stats["estimator_resets"] == 0
