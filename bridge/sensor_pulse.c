@@ -128,8 +128,8 @@ static void sensor_pulse_handle(struct estimator *e, const struct frame *f, int6
          * the firing times are lost (measured: a 1.5 s outage of every
          * beacon in two-rooms-east, 3 runs of 6 lost), and the timing
          * watch needs it too. Every beacon's lost-watch starts again. */
-        relearnt = e->was_started && clock->last_event != NODE_CLOCK_RESTART &&
-                   estimator_elapsed_us(e->pulse_last_us, e->beacon_last_ok_us[0]) <= 2 * cycle_us;
+        relearnt = e->was_started && clock->last_event != NODE_CLOCK_RESTART && e->beacon_ever[0] &&
+                   estimator_elapsed_us(e->pulse_last_us, e->beacon1_fused_us) <= 2 * cycle_us;
         estimator_restart_beacon_watch(e, t);
         if (relearnt)
             (void)bl_localizer_timing_lost(&e->loc, 0.5 * (double)cycle_us * 1e-6);
