@@ -164,12 +164,8 @@ class Scenario:
 
     def node_down(self, node_id: int, t_s) -> np.ndarray:
         """True where the node NodeId is off (inside a node_restart's pause), at true times t_s."""
-        t = np.asarray(t_s, dtype=float)
-        down = np.zeros(t.shape, dtype=bool)
-        for start, pause, node in self.node_restarts:
-            if node == node_id:
-                down |= (t >= start) & (t < start + pause)
-        return down
+        return in_windows(t_s, [(start, pause) for start, pause, node in self.node_restarts
+                                if node == node_id])
 
     def node_resumes_s(self, node_id: int) -> list[float]:
         """The instants the node NodeId starts again after its restarts, s, in time order."""
@@ -177,16 +173,33 @@ class Scenario:
 
     def encoder_silent(self, t_s) -> np.ndarray:
         """True where the encoder node is silent (any encoder_silence window)."""
-        t = np.asarray(t_s, dtype=float)
-        silent = np.zeros(t.shape, dtype=bool)
-        for start, dur in self.encoder_silences:
-            silent |= (t >= start) & (t < start + dur)
-        return silent
+        return in_windows(t_s, self.encoder_silences)
 
     @property
     def true_period_s(self) -> float:
         """Beacon controller's real firing interval: nominal T off by its clock drift."""
         return self.site.period_s * (1.0 + self.beacon_period_ppm * 1e-6)
+
+
+def in_windows(t_s, windows) -> np.ndarray:
+    """True at the true times t_s inside any of the windows (start_s, duration_s): start
+    included, end not."""
+    t = np.asarray(t_s, dtype=float)
+    inside = np.zeros(t.shape, dtype=bool)
+    for start, dur in windows:
+        inside |= (t >= start) & (t < start + dur)
+    return inside
+
+
+def _overlap(windows: list[tuple]) -> tuple[tuple, tuple] | None:
+    """The first pair (earlier, later) of windows (start_s, duration_s, ...) in time order whose
+    later one starts inside the earlier one, or None."""
+    ordered = sorted(windows)
+    for i, later in enumerate(ordered):
+        for earlier in ordered[:i]:
+            if later[0] < earlier[0] + earlier[1]:
+                return earlier, later
+    return None
 
 
 def builtin_names() -> list[str]:
@@ -338,10 +351,11 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
             raise ini.error("faults", key, "expected 'time_s, pause_s' with both >= 0")
         restarts.append((s[0], s[1], key))
     restarts.sort()
-    for (t_a, p_a, _), (t_b, _, key_b) in zip(restarts, restarts[1:]):
-        if t_b < t_a + p_a:
-            raise ini.error("faults", key_b, f"a restart at {t_b:g} s during the pause of the "
-                            f"one at {t_a:g} s")
+    pair = _overlap(restarts)
+    if pair is not None:
+        (t_a, _, _), (t_b, _, key_b) = pair
+        raise ini.error("faults", key_b, f"a restart at {t_b:g} s during the pause of the "
+                        f"one at {t_a:g} s")
     node_restarts = _node_restarts(ini, site, fault_keys["node_restart"])
     initial_ticks = ini.numbers("encoders", "initial_ticks", 2, default=[16000, 300])
     if any(v != int(v) or not 0 <= v < 16384 for v in initial_ticks):
@@ -560,11 +574,12 @@ def _node_restarts(ini: IniFile, site, keys: list[str]) -> tuple[tuple[float, fl
                             "nodes: " + ", ".join(f"{i} {n}" for i, n in on_bus.items()) + ")")
         restarts.append((s[0], s[1], int(s[2]), key))
     restarts.sort()
-    for i, (t_b, _, node, key_b) in enumerate(restarts):
-        for t_a, p_a, other, _ in restarts[:i]:
-            if other == node and t_b < t_a + p_a:
-                raise ini.error("faults", key_b, f"node {node} restarts at {t_b:g} s during the "
-                                f"pause of its restart at {t_a:g} s")
+    for node in sorted(set(n for _, _, n, _ in restarts)):
+        pair = _overlap([r for r in restarts if r[2] == node])
+        if pair is not None:
+            (t_a, _, _, _), (t_b, _, _, key_b) = pair
+            raise ini.error("faults", key_b, f"node {node} restarts at {t_b:g} s during the "
+                            f"pause of its restart at {t_a:g} s")
     return tuple((t, p, n) for t, p, n, _ in restarts)
 
 
