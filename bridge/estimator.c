@@ -223,8 +223,7 @@ static void sync(struct estimator *e)
                 event(e, EST_EV_NOTICE, "pulses fused again");
             }
             e->beacon_last_ok_us[b] = e->latest_node_us;
-            if (b == 0)
-                e->beacon1_fused_us = e->latest_node_us;
+            e->beacon_fused_us[b] = e->latest_node_us;
             e->beacon_ever[b] = true;
             if (e->beacon_lost[b]) {
                 e->beacon_lost[b] = false;

@@ -202,10 +202,11 @@ struct estimator {
     bool was_started; /* "filter started" seen (beacon-lost watch on) */
     double beacon_lost_s, echo_storm_ratio;
     int64_t beacon_last_ok_us[BL_MAX_BEACONS];
-    int64_t pulse_last_us;    /* the newest pulse frame, receiver-node time */
-    int64_t beacon1_fused_us; /* beacon 1's latest fused arrival (the watches' restarts keep it) */
-    bool pulses_silent;       /* "no pulse heard" reported (none for beacon_lost_s) */
-    bool fusion_silent;       /* "no pulse fused" reported (heard, none fused for beacon_lost_s) */
+    int64_t pulse_last_us;                   /* the newest pulse frame, receiver-node time */
+    int64_t beacon_fused_us[BL_MAX_BEACONS]; /* each beacon's latest fusion, receiver-node time
+                                                (the watches' restarts keep it) */
+    bool pulses_silent; /* "no pulse heard" reported (none for beacon_lost_s) */
+    bool fusion_silent; /* "no pulse fused" reported (heard, none fused for beacon_lost_s) */
     bool beacon_lost[BL_MAX_BEACONS];
     bool beacon_ever[BL_MAX_BEACONS];
     uint32_t beacon_accepted[BL_MAX_BEACONS]; /* filter's accepted count, last seen */
