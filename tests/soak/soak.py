@@ -1,7 +1,7 @@
 """Soak: hours of simulated time of the kleeman-lab site through the real bridge
 binary in --replay, one fault an hour (tests/soak/kleeman-lab-24h.scenario.ini:
 kidnap, encoder silence, beacon outage, echo storm, 10 degC temperature swing,
-in turn). docs/soak.md says what is measured and how.
+beacon controller restart, sensor node restarts, in turn). docs/soak.md says what is measured and how.
 
   1. the simulator writes the log and the truth window by window
      (beaconloc-sim run --window 600: bounded memory for 24 h);
@@ -538,12 +538,13 @@ def main() -> int:
         return f"{min(v)}-{max(v)}" if v else "-"
 
     lat_all = int(stats["latency_p99_us"])
-    # the last hour's fault comes back every 5 hours: its earlier hours, like for like
-    same_fault = [hr.lat_p99_us for hr in hours[len(hours) - 1::-5]][::-1]
-
-    kinds = {0: "kidnap", 1: "enc-silence", 2: "beacon-out", 3: "echo-storm", 4: "temp-swing"}
+    # one fault an hour, in turn (the scenario's [faults])
+    kinds = {0: "kidnap", 1: "enc-silence", 2: "beacon-out", 3: "echo-storm", 4: "temp-swing",
+             5: "ctl-restart", 6: "node-restart"}
+    # the last hour's fault comes back every len(kinds) hours: its earlier hours, like for like
+    same_fault = [hr.lat_p99_us for hr in hours[len(hours) - 1::-len(kinds)]][::-1]
     print()
-    print(f"{'hour':>4} {'fault':<11} {'frames':>8} {'estimates':>9} {'nan':>4} {'resets':>6} "
+    print(f"{'hour':>4} {'fault':<12} {'frames':>8} {'estimates':>9} {'nan':>4} {'resets':>6} "
           f"{'in_3sig_%':>9} {'rss_max_kib':>11} {'lat_p50_us':>10} {'lat_p99_us':>10} "
           f"{'p99_min':>7} {'p99_max':>7} {'wall_s':>6} {'us/frame':>8} {'cpu_us/frame':>12} {'cpu_%':>5} {'others':>6}")
     prev_resets = 0
@@ -551,7 +552,7 @@ def main() -> int:
         resets = hr.reset_max if hr.reset_max >= 0 else prev_resets
         us_per_frame = hr.wall_s / hr.frames * 1e6 if hr.frames else math.nan
         cpu_us_per_frame = hr.cpu_s / hr.frames * 1e6 if hr.frames else math.nan
-        print(f"{k:>4} {kinds[k % 5]:<11} {hr.frames:>8} {hr.estimates:>9} {hr.nan:>4} "
+        print(f"{k:>4} {kinds[k % len(kinds)]:<12} {hr.frames:>8} {hr.estimates:>9} {hr.nan:>4} "
               f"{resets - prev_resets:>6} {hr.inside_pct:>9.2f} "
               f"{max(hr.rss_kib) if hr.rss_kib else -1:>11} {hr.lat_p50_us:>10} "
               f"{hr.lat_p99_us:>10} {min(hr.lat_p99s_us, default=-1):>7} "
@@ -577,7 +578,7 @@ def main() -> int:
           f"(its minutes {spread(hours[-1])}), whole run {lat_all} us, max "
           f"{stats['latency_max_us']} us over "
           f"{stats['latency_samples']} samples; p99 of the hours with the last hour's fault "
-          f"({kinds[(len(hours) - 1) % 5]}): {' '.join(str(v) for v in same_fault)} us")
+          f"({kinds[(len(hours) - 1) % len(kinds)]}): {' '.join(str(v) for v in same_fault)} us")
     print(f"status intervals: {intervals_note}")
     print(f"lat_p50_us, lat_p99_us: the medians of the bridge's p50s and p99s over each "
           f"{args.status_interval} s interval of the hour; p99_min, p99_max: the lowest and "
