@@ -107,6 +107,7 @@ static void reset_runtime(struct estimator *e)
     memset(e->beacon_ever, 0, sizeof e->beacon_ever);
     memset(e->beacon_accepted, 0, sizeof e->beacon_accepted);
     e->storm = false;
+    timing_vote_clear(&e->vote);
     e->enc_seen = false;
     e->enc_silent = false;
     e->was_started = false;
@@ -124,6 +125,8 @@ static void sync(struct estimator *e)
     struct est_counters *c = &e->c;
     const bool pulses_fused = lc.pulses_accepted != e->pulses_accepted_seen;
     e->pulses_accepted_seen = lc.pulses_accepted;
+    if (pulses_fused)
+        timing_vote_clear(&e->vote); /* the firing times hold */
     c->pulses_in = lc.pulses_in;
     c->snapshot_restarts = lc.snapshot_restarts;
     c->known_starts = lc.known_starts;

@@ -87,6 +87,7 @@
 #include "sensors.h"
 #include "sonar.h"
 #include "survey.h"
+#include "timing_vote.h"
 
 #define EST_EVENT_QUEUE 16
 #define EST_EVENT_LEN 64
@@ -214,6 +215,9 @@ struct estimator {
     uint32_t storm_base_acc, storm_base_rej, storm_base_echo; /* localizer counters at
                                                                  the window's start */
     bool storm;
+    /* the firings heard since the last fused pulse, voting where the beacon
+     * controller fires on after a restart (timing_vote.h) */
+    struct timing_vote vote;
     int64_t latest_node_us;     /* newest receiver-node time seen */
     int64_t pulse_hold_us;      /* the receiver node's hold of a detection (us) */
     uint32_t measurements_seen; /* localizer's measurement count, last seen */

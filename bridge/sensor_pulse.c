@@ -203,6 +203,10 @@ static void sensor_pulse_handle(struct estimator *e, const struct frame *f, int6
     }
     (void)bl_localizer_advance(&e->loc, t);
     estimator_sync(e);
+    /* beacon 1 not heard: the firings after a controller restart vote where
+     * it fires on (the localizer's own watch needs beacon 1's double pulse) */
+    if (timing_vote_detection(&e->vote, &e->loc, e->blcfg.beacon_count, t))
+        estimator_sync(e); /* its RETIMED event */
 }
 
 /* Pulse frames of one firing leave the receiver node out of NodeTime order

@@ -789,6 +789,23 @@ extern "C" int bl_localizer_timing_lost(bl_localizer *loc, bl_real t0_sigma_s)
     return BL_OK;
 }
 
+extern "C" int bl_localizer_retime(bl_localizer *loc, bl_real shift_s, bl_real sigma_s)
+{
+    if (loc == nullptr || !finite_real(shift_s) || !(sigma_s >= 0) || !finite_real(sigma_s)) return BL_EINVAL;
+    if (!valid(loc)) return BL_ENOTINIT;
+    if (!has_sequencer(loc)) return BL_EBEACON;
+    if (!bl::started(&loc->filter)) return BL_ENOTINIT;
+    (void)bl_localizer_timing_lost(loc, sigma_s);  // the sequencer starts over, t0's variance grows
+    // the timing watch's re-anchoring (timing_jump), told the jump: Kleeman 1992 eq. 15's t0 moves
+    bl::shift_firing_times(&loc->filter, shift_s, 0);
+    loc->counters_.timing_jumps++;
+    clear_window(loc);
+    loc->misnumbered_in_row_ = 0;
+    loc->jump_n_ = 0;
+    push_event(loc, BL_LOC_EV_RETIMED, BL_LOC_CAUSE_NONE, 0);
+    return BL_OK;
+}
+
 extern "C" int bl_localizer_detection(bl_localizer *loc, const bl_seq_detection *det)
 {
     if (loc == nullptr || det == nullptr) return BL_EINVAL;

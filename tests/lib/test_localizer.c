@@ -382,38 +382,50 @@ static void test_controller_restart_retimes(void **state) {
 #define RX_RESTART_S 25.0
 #define RX_ANCHOR_ERROR_US 400
 
+/* The localizer told, before the first input from at_s on, that its firing
+ * times are known only to sigma_s (bl_localizer_timing_lost), or that they
+ * moved by shift_s, known to sigma_s (bl_localizer_retime). */
 typedef struct {
-    bl_real sigma_s;
+    double at_s;
+    bool retime;
+    bl_real shift_s, sigma_s;
     bool done;
-    counters_ctx c; /* counters just before the restart and 1.5 s after */
-} rx_restart_ctx;
+    counters_ctx c; /* counters just before at_s and 1.5 s after */
+} told_ctx;
 
-static void rx_restart_hook(bl_localizer *loc, const run_t *r, size_t i, void *ctx) {
-    rx_restart_ctx *k = ctx;
+static void told_hook(bl_localizer *loc, const run_t *r, size_t i, void *ctx) {
+    told_ctx *k = ctx;
     counters_hook(loc, r, i, &k->c);
-    if (k->done || i + 1 >= r->n || input_s(r, i + 1) < RX_RESTART_S) return;
+    if (k->done || i + 1 >= r->n || input_s(r, i + 1) < k->at_s) return;
     k->done = true; /* before the first input on the new timeline */
-    assert_int_equal(bl_localizer_timing_lost(loc, k->sigma_s), BL_OK);
+    assert_int_equal(k->retime ? bl_localizer_retime(loc, k->shift_s, k->sigma_s)
+                               : bl_localizer_timing_lost(loc, k->sigma_s),
+                     BL_OK);
 }
 
-static void run_rx_restart(run_t *r, bl_real sigma_s, rx_restart_ctx *k, stats_t *s, bl_loc_counters *c) {
-    *k = (rx_restart_ctx){sigma_s, false, counters_at(RX_RESTART_S, RX_RESTART_S + 1.5)};
-    feed(&LOC, r, s, rx_restart_hook, k);
+static void run_told(run_t *r, told_ctx *k, stats_t *s, bl_loc_counters *c) {
+    k->done = false;
+    k->c = counters_at(k->at_s, k->at_s + 1.5);
+    feed(&LOC, r, s, told_hook, k);
     assert_true(k->done);
     assert_int_equal(bl_localizer_counters(&LOC, c), BL_OK);
+}
+
+/* kleeman-lab with every detection from from_s on later by late_us */
+static void load_late_from(run_t *r, double from_s, int64_t late_us) {
+    load(r, "kleeman-lab");
+    for (size_t i = 0; i < r->n; i++)
+        if (r->in[i].kind == 'D' && seconds(r, r->in[i].d.time_us) >= from_s) r->in[i].d.time_us += late_us;
 }
 
 static void test_receiver_restart_reanchors(void **state) {
     (void)state;
     run_t r;
-    load(&r, "kleeman-lab");
-    for (size_t i = 0; i < r.n; i++)
-        if (r.in[i].kind == 'D' && seconds(&r, r.in[i].d.time_us) >= RX_RESTART_S)
-            r.in[i].d.time_us += RX_ANCHOR_ERROR_US;
+    load_late_from(&r, RX_RESTART_S, RX_ANCHOR_ERROR_US);
     stats_t s;
-    rx_restart_ctx k;
+    told_ctx k = {.at_s = RX_RESTART_S, .sigma_s = (bl_real)1e-3};
     bl_loc_counters c;
-    run_rx_restart(&r, (bl_real)1e-3, &k, &s, &c);
+    run_told(&r, &k, &s, &c);
     const unsigned told_acc = k.c.at[1].pulses_accepted - k.c.at[0].pulses_accepted;
     const unsigned told_rej = k.c.at[1].pulses_rejected - k.c.at[0].pulses_rejected;
     print_message("receiver restart, told: %u accepted %u rejected in 1.5 s, timing jumps %u, rmse %.1f mm\n",
@@ -425,7 +437,8 @@ static void test_receiver_restart_reanchors(void **state) {
     const double told_rmse = rmse(&s);
     if (told_rmse > 0.03) fail_msg("rmse %.3f m", told_rmse);
     /* the same run told nothing: the arrivals are gated out until the watch */
-    run_rx_restart(&r, 0, &k, &s, &c);
+    k.sigma_s = 0;
+    run_told(&r, &k, &s, &c);
     const unsigned blind_acc = k.c.at[1].pulses_accepted - k.c.at[0].pulses_accepted;
     const unsigned blind_rej = k.c.at[1].pulses_rejected - k.c.at[0].pulses_rejected;
     print_message("receiver restart, blind: %u accepted %u rejected in 1.5 s, timing jumps %u, rmse %.1f mm\n",
@@ -440,6 +453,55 @@ static void test_receiver_restart_reanchors(void **state) {
     assert_int_equal(bl_localizer_timing_lost(NULL, 0), BL_EINVAL);
     assert_memory_equal(&LOC, &before, sizeof LOC);
     unload(&r);
+}
+
+/* The beacon controller restarted and fires on 37.3 ms later than the
+ * filter's firing times (every arrival from RETIME_S on moved by it), and
+ * the caller found that move (the bridge's vote, where beacon 1's double
+ * pulse is not heard): told it (bl_localizer_retime, 0.5 ms), the filter's
+ * t0 moves, the pose is kept, one RETIMED event, and the arrivals fuse at
+ * once; bad input is an error and leaves the localizer untouched. */
+#define RETIME_S 30.0
+#define RETIME_JUMP_US 37300
+
+static void test_retime_told_the_move(void **state) {
+    (void)state;
+    run_t r;
+    load_late_from(&r, RETIME_S, RETIME_JUMP_US);
+    stats_t s;
+    told_ctx k = {.at_s = RETIME_S, .retime = true, .shift_s = (bl_real)(RETIME_JUMP_US * 1e-6), .sigma_s = (bl_real)0.5e-3};
+    bl_loc_counters c;
+    run_told(&r, &k, &s, &c);
+    const unsigned acc = k.c.at[1].pulses_accepted - k.c.at[0].pulses_accepted;
+    const unsigned rej = k.c.at[1].pulses_rejected - k.c.at[0].pulses_rejected;
+    print_message("retime told: %u accepted %u rejected in 1.5 s, timing jumps %u, rmse %.1f mm\n", acc, rej,
+                  c.timing_jumps, 1e3 * rmse(&s));
+    assert_int_equal(c.timing_jumps, 1);
+    assert_int_equal(s.events[BL_LOC_EV_RETIMED], 1);
+    assert_int_equal(s.events[BL_LOC_EV_RESET], 0);
+    assert_int_equal(c.seq_resyncs, 0);
+    assert_true(rej <= 2);
+    assert_true(acc >= 20);
+    if (rmse(&s) > 0.03) fail_msg("rmse %.3f m", rmse(&s));
+    /* bad input: an error, the localizer untouched */
+    bl_localizer before = LOC;
+    assert_int_equal(bl_localizer_retime(&LOC, (bl_real)NAN, (bl_real)1e-3), BL_EINVAL);
+    assert_int_equal(bl_localizer_retime(&LOC, (bl_real)INFINITY, (bl_real)1e-3), BL_EINVAL);
+    assert_int_equal(bl_localizer_retime(&LOC, (bl_real)0.01, (bl_real)-1e-3), BL_EINVAL);
+    assert_int_equal(bl_localizer_retime(&LOC, (bl_real)0.01, (bl_real)NAN), BL_EINVAL);
+    assert_int_equal(bl_localizer_retime(NULL, (bl_real)0.01, (bl_real)1e-3), BL_EINVAL);
+    assert_memory_equal(&LOC, &before, sizeof LOC);
+    unload(&r);
+    /* a localizer whose filter has not started has no firing times to move */
+    static bl_localizer fresh;
+    bl_config cfg;
+    bl_seq_config seq;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    assert_int_equal(bl_sequencer_config_from_site(&cfg, 0, &seq), BL_OK);
+    assert_int_equal(bl_localizer_init(&fresh, &cfg, &seq), BL_OK);
+    before = fresh;
+    assert_int_equal(bl_localizer_retime(&fresh, (bl_real)0.01, (bl_real)1e-3), BL_ENOTINIT);
+    assert_memory_equal(&fresh, &before, sizeof fresh);
 }
 
 /* Encoder silence (20.5 s for 5 s): pulses are fused after constant-velocity
@@ -1023,6 +1085,7 @@ int main(void) {
         cmocka_unit_test(test_kidnap_restarts_once),
         cmocka_unit_test(test_controller_restart_retimes),
         cmocka_unit_test(test_receiver_restart_reanchors),
+        cmocka_unit_test(test_retime_told_the_move),
         cmocka_unit_test(test_silence_coasts),
         cmocka_unit_test(test_misnumbering_resyncs),
         cmocka_unit_test(test_pulse_observer),

@@ -371,6 +371,19 @@ int bl_localizer_reinit(bl_localizer *loc, const bl_config *cfg, const bl_seq_co
  * t0_sigma_s negative or not finite), BL_ENOTINIT. */
 int bl_localizer_timing_lost(bl_localizer *loc, bl_real t0_sigma_s);
 
+/* The beacons' firing times moved by shift_s (s), known within sigma_s (s):
+ * the caller found where the beacon controller fires on after a restart (the
+ * bridge, from the arrivals and the filter's pose, where beacon 1's double
+ * pulse is not heard and the timing watch cannot tell). As the timing
+ * watch's re-anchoring: the filter's t0 moves by shift_s, its variance grows
+ * by sigma_s², the pose, speeds and speed of sound are kept (timing_jumps
+ * counted, event RETIMED); the sequencer forgets its lock and follows the
+ * filter's new firing times. Errors: BL_EINVAL (NULL, shift_s not finite,
+ * sigma_s negative or not finite), BL_ENOTINIT (not initialised, or the
+ * filter not started), BL_EBEACON (no ultrasonic beacon); the localizer
+ * untouched. */
+int bl_localizer_retime(bl_localizer *loc, bl_real shift_s, bl_real sigma_s);
+
 /* One receiver detection (det->tag is carried to the pulse's members).
  * A site without ultrasonic beacons (cfg.beacon_count 0) has no sequencer:
  * BL_EBEACON, counted in seq_errors (the only change to *loc).
