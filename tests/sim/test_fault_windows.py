@@ -255,14 +255,21 @@ def test_soak_scenario_has_one_fault_an_hour_in_turn():
               "beacon_outage": [o[0] for o in scn.beacon_outages],
               "echo_storm": [s[0] for s in scn.echo_storms],
               # the swing: where the profile leaves 20 C
-              "temperature": [t for t, c in scn.temperature_profile[1:] if c == 20][::2]}
+              "temperature": [t for t, c in scn.temperature_profile[1:] if c == 20][::2],
+              "controller_restart": [r[0] for r in scn.controller_restarts],
+              # the receiver array (node 1) first, the encoders (node 2) a minute later
+              "node_restart": [r[0] for r in scn.node_restarts if r[2] == 1]}
     silences = [s[0] for s in scn.encoder_silences if s[1] > 1.0]
+    kinds = ["kidnap", "silence", "beacon_outage", "echo_storm", "temperature",
+             "controller_restart", "node_restart"]
     for hour in range(24):
         t = 3600 * hour + 1800
-        kind = ["kidnap", "silence", "beacon_outage", "echo_storm", "temperature"][hour % 5]
+        kind = kinds[hour % len(kinds)]
         found = silences if kind == "silence" else starts[kind]
         assert t in found, (hour, kind)
     assert sum(len(v) for v in starts.values()) + len(silences) == 24
+    assert sorted((r[0], r[2]) for r in scn.node_restarts if r[2] == 2) == [
+        (t + 60, 2) for t in starts["node_restart"]]
     # the robot stays in the room all day (kidnaps alternate north and back)
     st = scn.trajectory.state(np.arange(0, 86400, 7.0))
     assert st["x_m"].min() > 0.5 and st["x_m"].max() < 11.5
