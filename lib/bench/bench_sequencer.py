@@ -105,6 +105,8 @@ BEYOND_TIMING = {
     "controller-restart": "the beacon controller restarts with beacon 1 where another beacon is due: its "
                           "double pulse there is what an echo 3 ms behind that beacon makes too, until a "
                           "second one a cycle later confirms the restart",
+    "big-site-restart": "the beacon controller restarts while the robot is out of beacon 1's hearing: no "
+                        "double pulse says which beacon fires; the daemon votes it from the pose",
 }
 
 

@@ -61,6 +61,9 @@ def test_builtin_scenarios_all_load():
             assert scn.site.hearing_range_m == 12.5 and len(scn.obstacles_m) == 2
             west = scn.site.beacons_m[:, 0] < 8.0
             assert west.sum() == 5 and west[0]   # beacon 1 in the west room
+        elif name == "big-site-restart":    # big-site with two controller restarts out of beacon 1's hearing
+            assert scn.site.name == "big-site" and scn.duration_s == 120
+            assert scn.controller_restarts == ((40.0, 0.3), (80.0, 1.0))
         elif name in SITES_OF_ISSUE_14:     # sites as large and as dense as the hardware allows
             duration_s, count, hearing_m = SITES_OF_ISSUE_14[name]
             assert scn.duration_s == duration_s and scn.site.beacon_count == count
