@@ -91,7 +91,8 @@ bool timing_vote_detection(struct timing_vote *v, bl_localizer *loc, uint32_t co
     if (v->n > 0 && (double)(t_us - v->arrival_us[v->n - 1]) <= period_us / 4)
         return false;
     if (v->n == VOTE_MAX_FIRINGS) { /* the oldest out */
-        memmove(&v->arrival_us[0], &v->arrival_us[1], sizeof v->arrival_us[0] * (VOTE_MAX_FIRINGS - 1));
+        memmove(&v->arrival_us[0], &v->arrival_us[1],
+                sizeof v->arrival_us[0] * (VOTE_MAX_FIRINGS - 1));
         memmove(&v->move_us[0], &v->move_us[1], sizeof v->move_us[0] * (VOTE_MAX_FIRINGS - 1));
         v->n--;
     }
@@ -101,7 +102,8 @@ bool timing_vote_detection(struct timing_vote *v, bl_localizer *loc, uint32_t co
         bl_expected_pulse ep;
         if (bl_filter_expected_arrival(&loc->filter, j, t_us, &ep) != BL_OK)
             return false;
-        const double fire1_us = (double)(t_us - est.t0_us) - (double)ep.flight_s * 1e6 - j * period_us;
+        const double fire1_us =
+            (double)(t_us - est.t0_us) - (double)ep.flight_s * 1e6 - j * period_us;
         v->move_us[v->n][j] = (float)wrap(fire1_us, cycle);
     }
     v->arrival_us[v->n++] = t_us;

@@ -32,8 +32,8 @@
 #define VOTE_MAX_FIRINGS 16
 
 struct timing_vote {
-    unsigned n;                                    /* firings held */
-    int64_t arrival_us[VOTE_MAX_FIRINGS];          /* each firing's first detection */
+    unsigned n;                                      /* firings held */
+    int64_t arrival_us[VOTE_MAX_FIRINGS];            /* each firing's first detection */
     float move_us[VOTE_MAX_FIRINGS][BL_MAX_BEACONS]; /* the move of the firing times it
                                                       asks for, were it beacon j's (us) */
 };
