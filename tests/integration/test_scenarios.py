@@ -6,6 +6,9 @@ what happened (STATUSTEXT), and the accuracy comes back afterwards.
     encoder-silence   the encoder node sends nothing for a while (scenario file)
     node-restart      the receiver array restarts: off 0.3 s, then its clock and
                       counters from 0 (the filter's time base carried on)
+    big-site-restart  the 30 m site's beacon controller restarts (off 0.3 s) while
+                      the robot is out of beacon 1's hearing: the firings vote
+                      where the firing times moved
     eurobot           bearings to 3 beacons and encoders, no ultrasonic beacon
                       (Vander et al. 2011, issue 11)
     marvelmind        ranges to 4 fixed range beacons and encoders, no other
@@ -34,6 +37,9 @@ CASES = {
     # the receiver array off 0.3 s at 40 s, its clock and counters from 0 again (its later
     # restarts are past the live run)
     "node-restart": (re.compile(r"receiver node clock restarted"), 65.0),
+    # the 30 m site's beacon controller off 0.3 s at 40 s, the robot out of beacon 1's hearing: the
+    # firings vote where the firing times moved (its second restart is past the live run)
+    "big-site-restart": (re.compile(r"beacon firing times jumped"), 65.0),
 }
 
 
@@ -46,6 +52,8 @@ def _event_window(sc) -> tuple[float, float] | None:
         return sc.encoder_silence[0], sc.encoder_silence[0] + sc.encoder_silence[1]
     if sc.node_restarts:
         return sc.node_restarts[0][0], sc.node_restarts[0][0] + sc.node_restarts[0][1]
+    if sc.controller_restarts:
+        return sc.controller_restarts[0][0], sc.controller_restarts[0][0] + sc.controller_restarts[0][1]
     return None
 
 
@@ -59,7 +67,7 @@ def test_scenario_output_never_stops_and_recovers(rig, scenario):
     if window is not None:
         assert window[1] + 20.0 <= duration, (
             f"{scenario}: its event ends at {window[1]} s, too late for a {duration} s live run")
-    run = h.run_live(rig, scenario, duration)
+    run = h.run_live(rig, scenario, duration, site=sc.site.path)
     assert run.bridge_rc == 0, rig.logs()
 
     # 1. The output never stops, not even during the fault.
