@@ -75,6 +75,12 @@ bool timing_vote_detection(struct timing_vote *v, bl_localizer *loc, uint32_t co
 {
     if (count == 0 || count > BL_MAX_BEACONS)
         return false;
+    /* a detection of the newest firing: another receiver, an echo (a floor
+     * echo a few ms behind would vote for a move that much later); the next
+     * firing's arrive a period later, less the spread of the flights. Told
+     * apart first: most detections are, and need no estimate. */
+    if (v->n > 0 && t_us - v->arrival_us[v->n - 1] <= loc->seq.cfg.period_us / 4)
+        return false;
     bl_estimate est;
     if (bl_filter_estimate(&loc->filter, &est) != BL_OK || !est.started ||
         !(est.cov[0] + est.cov[6] <= VOTE_MAX_SIGMA_M * VOTE_MAX_SIGMA_M)) {
@@ -84,11 +90,6 @@ bool timing_vote_detection(struct timing_vote *v, bl_localizer *loc, uint32_t co
     const double period_us = (double)est.period_s * 1e6;
     const double cycle = period_us * count;
     if (!(cycle > 0.0) || !isfinite(cycle))
-        return false;
-    /* a detection of the newest firing: another receiver, an echo (a floor
-     * echo a few ms behind would vote for a move that much later); the next
-     * firing's arrive a period later, less the spread of the flights */
-    if (v->n > 0 && (double)(t_us - v->arrival_us[v->n - 1]) <= period_us / 4)
         return false;
     if (v->n == VOTE_MAX_FIRINGS) { /* the oldest out */
         memmove(&v->arrival_us[0], &v->arrival_us[1],
