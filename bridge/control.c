@@ -172,6 +172,7 @@ void fill_report(struct daemon *d, struct stats_report *r)
     r->snapshot_restarts = d->est.c.snapshot_restarts;
     r->known_starts = d->est.c.known_starts;
     r->node_restarts = d->est.c.node_restarts;
+    for (int k = 0; k < FRAME_KIND_COUNT; k++) r->late_frames[k] = d->est.clock[k].late;
     estimator_counts_refresh(&d->est); /* the kinds' counters, the library's current values */
     r->counts = &d->est.counts;
     r->survey = d->est.survey_on ? &d->est.survey : NULL;

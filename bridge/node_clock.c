@@ -70,6 +70,7 @@ void node_clock_reset(struct node_clock *nc)
     nc->have_first = false;
     nc->newest_node_us = nc->newest_rx_us = nc->base_us = 0;
     nc->recent_len = nc->recent_next = 0;
+    nc->late_run = false;
     nc->last_event = NODE_CLOCK_NONE;
 }
 
@@ -227,6 +228,27 @@ static void remember(struct node_clock *nc, int64_t node_us)
         nc->recent_len++;
 }
 
+/* Node restart / clock jump: start a new node timeline that continues where
+ * the old fit puts this receive time (monotonic, never back). */
+static int64_t restart(struct node_clock *nc, uint32_t node_time_us, int64_t rx_mono_us)
+{
+    int64_t cont = nc->have_fit ? node_clock_to_node(nc, rx_mono_us)
+                                : nc->newest_node_us + (rx_mono_us - nc->newest_rx_us);
+    if (cont <= nc->newest_node_us)
+        cont = nc->newest_node_us + 1;
+    nc->base_us = cont - (int64_t)node_time_us;
+    reset_fit(nc);
+    nc->recent_len = nc->recent_next = 0;
+    nc->late_run = false;
+    nc->newest_node_us = cont;
+    nc->newest_rx_us = rx_mono_us;
+    nc->restarts++;
+    remember(nc, cont);
+    add_point(nc, cont, rx_mono_us);
+    nc->last_event = NODE_CLOCK_RESTART;
+    return cont;
+}
+
 int64_t node_clock_observe(struct node_clock *nc, uint32_t node_time_us, int64_t rx_mono_us)
 {
     if (!nc)
@@ -260,24 +282,16 @@ int64_t node_clock_observe(struct node_clock *nc, uint32_t node_time_us, int64_t
      * 10 ppm of residual error once synced) can accumulate over the gap. */
     double elapsed_us = fabs((double)(rx_mono_us - nc->newest_rx_us));
     double tol_us = (double)nc->p.max_jump_us + (nc->synced ? 10e-6 : nc->p.max_drift) * elapsed_us;
-    if (fabs(disagreement_us) > tol_us) {
-        /* Node restart / clock jump: start a new node timeline that continues
-         * where the old fit puts this receive time (monotonic, never back). */
-        int64_t cont = nc->have_fit ? node_clock_to_node(nc, rx_mono_us)
-                                    : nc->newest_node_us + (rx_mono_us - nc->newest_rx_us);
-        if (cont <= nc->newest_node_us)
-            cont = nc->newest_node_us + 1;
-        nc->base_us = cont - (int64_t)node_time_us;
-        reset_fit(nc);
-        nc->recent_len = nc->recent_next = 0;
-        nc->newest_node_us = cont;
-        nc->newest_rx_us = rx_mono_us;
-        nc->restarts++;
-        remember(nc, cont);
-        add_point(nc, cont, rx_mono_us);
-        nc->last_event = NODE_CLOCK_RESTART;
-        return cont;
-    }
+    /* A stamp that continues the node's sequence but arrived later than the
+     * elapsed receive time says (delay >= 0 in the model above): a backlog,
+     * frames held up (a stalled node or gateway, a starved sender) and
+     * delivered at once. Its own stamp is right; taking it for a restart
+     * would re-anchor the timeline on a receive time late by the whole
+     * backlog. */
+    bool behind = disagreement_us < -tol_us && cand_own >= newest_own &&
+                  -disagreement_us <= (double)NODE_CLOCK_MAX_LATE_US;
+    if (fabs(disagreement_us) > tol_us && !behind)
+        return restart(nc, node_time_us, rx_mono_us);
 
     int64_t u = cand_own + nc->base_us;
     if (seen_recently(nc, u)) {
@@ -285,18 +299,59 @@ int64_t node_clock_observe(struct node_clock *nc, uint32_t node_time_us, int64_t
         nc->last_event = NODE_CLOCK_DUPLICATE;
         return u;
     }
-    if (u > nc->newest_node_us) {
-        int64_t wraps = floor_div(cand_own, WRAP_US) - floor_div(newest_own, WRAP_US);
-        nc->wraps += (uint64_t)wraps;
-        nc->last_event = wraps > 0 ? NODE_CLOCK_WRAPPED : NODE_CLOCK_IN_ORDER;
-        nc->newest_node_us = u;
-        nc->newest_rx_us = rx_mono_us;
-    } else {
+    if (u <= nc->newest_node_us) {
         nc->out_of_order++;
         nc->last_event = NODE_CLOCK_OUT_OF_ORDER;
+        remember(nc, u);
+        add_point(nc, u, rx_mono_us);
+        return u;
     }
+    if (behind && !nc->late_run) {
+        /* The first frame of a backlog: lateness counts from the last frame
+         * on time. */
+        nc->late_run = true;
+        nc->late_since_rx_us = rx_mono_us;
+        nc->late_paced_node_us = u;
+        nc->late_undrained = 0;
+        nc->ontime_node_us = nc->newest_node_us;
+        nc->ontime_rx_us = nc->newest_rx_us;
+    }
+    bool late = false;
+    if (nc->late_run) {
+        double lateness_us = (double)(rx_mono_us - nc->ontime_rx_us) / (1.0 + nc->drift) -
+                             (double)(u - nc->ontime_node_us);
+        /* A backlog drains: its frames come faster than their stamps advance
+         * (held, then sent at bus speed, or stalled again and sent on). Late
+         * frames that keep pace with the receive clock, stamp after stamp
+         * (NODE_CLOCK_DRAIN_STEPS of them, over NODE_CLOCK_DRAIN_CHECK_US), are
+         * a clock that restarted or stopped, whatever their stamps. */
+        double stamp_gap_us = (double)(u - nc->newest_node_us);
+        double rx_gap_us = (double)(rx_mono_us - nc->newest_rx_us) / (1.0 + nc->drift);
+        if (rx_gap_us < NODE_CLOCK_DRAIN_PACE * stamp_gap_us) {
+            nc->late_paced_node_us = u; /* draining */
+            nc->late_undrained = 0;
+        } else if (stamp_gap_us > 0.0) {
+            nc->late_undrained++;
+        }
+        if (lateness_us <= tol_us)
+            nc->late_run = false; /* caught up */
+        else if ((nc->late_undrained >= NODE_CLOCK_DRAIN_STEPS &&
+                  u - nc->late_paced_node_us >= NODE_CLOCK_DRAIN_CHECK_US) ||
+                 rx_mono_us - nc->late_since_rx_us > NODE_CLOCK_MAX_LATE_US)
+            return restart(nc, node_time_us, rx_mono_us);
+        else
+            late = true;
+    }
+    int64_t wraps = floor_div(cand_own, WRAP_US) - floor_div(newest_own, WRAP_US);
+    nc->wraps += (uint64_t)wraps;
+    nc->last_event = wraps > 0 ? NODE_CLOCK_WRAPPED : NODE_CLOCK_IN_ORDER;
+    nc->newest_node_us = u;
+    nc->newest_rx_us = rx_mono_us;
     remember(nc, u);
-    add_point(nc, u, rx_mono_us);
+    if (late)
+        nc->late++; /* on its own stamp, but not in the fit: it lies above the envelope */
+    else
+        add_point(nc, u, rx_mono_us);
     return u;
 }
 

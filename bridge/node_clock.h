@@ -29,6 +29,12 @@
  * elapsed receive time by more than `max_jump_us` is a node restart (or clock
  * jump): the fit is reset and the unwrapped timeline continues monotonically
  * from where the old fit put this frame, so downstream times never go back.
+ * But a stamp that continues the node's sequence and only arrived late (a
+ * backlog: a stalled node, gateway or sender delivering its frames at once,
+ * up to NODE_CLOCK_MAX_LATE_US late) keeps its own stamp and stays out of the
+ * fit, as long as its frames drain (their stamps gain on their receive
+ * times); late frames that keep pace with the receive clock are a clock
+ * that restarted or stopped: a restart then.
  *
  * Caller owns the struct; no heap, no clock reads, no I/O. Not thread-safe.
  * Units: *_us microseconds; drift is dimensionless (1e-6 = 1 ppm).
@@ -50,6 +56,21 @@ extern "C" {
 #define NODE_CLOCK_RESTART_SIGMA_US 1000
 #define NODE_CLOCK_MAX_BUCKETS 128 /* capacity of the sliding window */
 #define NODE_CLOCK_RECENT 16       /* recent stamps remembered for duplicate detection */
+/* A backlog: frames late by up to this (us) that continue the node's stamps
+ * are late, not a restart; more is a clock jump. */
+#define NODE_CLOCK_MAX_LATE_US 10000000
+/* A backlog drains: its frames come faster than their stamps advance (a
+ * frame whose receive time gained less than NODE_CLOCK_DRAIN_PACE of its
+ * stamp's advance on the frame before it drains; a CAN bus or a gateway
+ * sends a backlog at many times the pace it was made, a sender stalled
+ * again on the way does so between its stalls), and it is over within
+ * NODE_CLOCK_MAX_LATE_US of receive time. Late frames of which none drains
+ * for NODE_CLOCK_DRAIN_STEPS advances of their stamps, and at least
+ * NODE_CLOCK_DRAIN_CHECK_US (us) of them, keep pace with the receive clock:
+ * a clock that restarted or stopped, a restart. */
+#define NODE_CLOCK_DRAIN_PACE 0.9
+#define NODE_CLOCK_DRAIN_STEPS 4
+#define NODE_CLOCK_DRAIN_CHECK_US 100000
 
 /* Tuning (node_clock_init with NULL uses the defaults in brackets). */
 struct node_clock_params {
@@ -89,6 +110,13 @@ struct node_clock {
     int64_t recent[NODE_CLOCK_RECENT];
     uint32_t recent_len, recent_next;
 
+    /* a backlog being delivered: late since late_since_rx_us, counted from
+     * the last frame on time (ontime_*); late_paced_node_us: the stamp of
+     * its last frame that drained (NODE_CLOCK_DRAIN_PACE) */
+    bool late_run;
+    uint32_t late_undrained; /* stamp advances since that one, none draining */
+    int64_t late_since_rx_us, late_paced_node_us, ontime_node_us, ontime_rx_us;
+
     /* sliding window of bucket minima, ring buffer ordered by bucket index */
     struct node_clock_bucket b[NODE_CLOCK_MAX_BUCKETS];
     uint32_t b_head, b_len;
@@ -104,6 +132,7 @@ struct node_clock {
 
     /* counters */
     uint64_t observed, wraps, out_of_order, duplicates, restarts;
+    uint64_t late; /* frames of a backlog (on their own stamps, not in the fit) */
 };
 
 /* Fill `p` with the defaults. */

@@ -177,6 +177,9 @@ int stats_write_json(const struct stats_report *r, const char *path)
     fprintf(f, "  \"known_starts\": %llu,\n", (unsigned long long)r->known_starts);
     write_slot(f, r, SENSOR_SLOT_STARTS);
     fprintf(f, "  \"node_restarts\": %llu,\n", (unsigned long long)r->node_restarts);
+    uint64_t late_total = 0;
+    for (int k = 0; k < FRAME_KIND_COUNT; k++) late_total += r->late_frames[k];
+    write_per_frame(f, "late_frames", late_total, r->late_frames);
     write_slot(f, r, SENSOR_SLOT_NUMBERING);
     fprintf(f, "  \"estimator_errors\": %llu,\n", (unsigned long long)r->predict_errors);
     fprintf(f, "  \"estimates\": %llu,\n", (unsigned long long)r->estimates);

@@ -64,6 +64,9 @@ struct stats_report {
     uint64_t record_write_errors, estimates_write_errors; /* --record, --estimates */
     uint64_t estimator_resets, snapshot_restarts, known_starts, node_restarts, predict_errors,
         estimates;
+    /* frames of a backlog: delivered late at once, used on their own stamps
+     * (node_clock.h), per kind of the sensor table */
+    uint64_t late_frames[FRAME_KIND_COUNT];
     uint64_t odometry_sent, heartbeat_sent, mavlink_tx_errors, timesync_answered;
     /* each sensor kind's counters, written from the kinds' tables
      * (sensors.h); NULL: all 0 */

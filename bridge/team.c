@@ -396,6 +396,8 @@ void team_write_json(const struct team *t, uint64_t odometry_sent, FILE *f)
     bl_team_status st;
     team_status(t, &st);
     const struct team_counters *c = &t->c;
+    uint64_t late = 0; /* frames of a backlog, every robot's clock (node_clock.h) */
+    for (uint32_t i = 0; i < t->robots && i < TEAM_MAX_ROBOTS; i++) late += t->r[i].clock.late;
     fprintf(f, "  \"team\": {\"robots\": %u, \"phase\": %u, \"surveyed\": %s, ", t->robots,
             st.phase, t->surveyed ? "true" : "false");
     fprintf(f, "\"survey_chi2\": %.4f, \"surveys\": %u, \"surveys_failed\": %u, ", t->survey_chi2,
@@ -411,11 +413,11 @@ void team_write_json(const struct team *t, uint64_t odometry_sent, FILE *f)
             "\"ranges_refused\": %llu, \"ranges_used\": %llu, \"tracks_in\": %llu, "
             "\"tracks_unknown_robot\": %llu, \"stale_tracks\": %llu, \"track_jumps\": %llu, "
             "\"tracks_first\": %llu, \"odometry_refused\": %llu, \"odometry_used\": %llu, "
-            "\"node_restarts\": %llu, \"queue_overflows\": %llu},\n",
+            "\"node_restarts\": %llu, \"late_frames\": %llu, \"queue_overflows\": %llu},\n",
             U(c->ranges_in), U(c->ranges_unknown_robot), U(c->ranges_self), U(c->ranges_bad_tof),
             U(c->stale_ranges), U(c->ranges_refused), U(c->ranges_used), U(c->tracks_in),
             U(c->tracks_unknown_robot), U(c->stale_tracks), U(c->track_jumps), U(c->tracks_first),
-            U(c->odometry_refused), U(c->odometry_used), U(c->node_restarts),
+            U(c->odometry_refused), U(c->odometry_used), U(c->node_restarts), U(late),
             U(c->queue_overflows));
     fprintf(f,
             "    \"library\": {\"ranges_in\": %u, \"ranges_survey\": %u, "

@@ -110,3 +110,33 @@ class Bus:
             starts.append(free)
             free += self.frame_s
         return np.asarray(sent, dtype=np.int64), np.asarray(starts, dtype=float)
+
+
+class Gateway:
+    """Between the robot's bus and the bridge: an interface (a USB or Ethernet CAN gateway,
+    a starved process relaying frames) that holds every frame received in [start_s,
+    start_s + hold_s) and delivers them at the hold's end, one frame time apart, the frames
+    after queued behind them ([faults] backlog). The nodes' stamps are untouched: only the
+    bridge's receive times move. Keeps the last delivery from one window to the next."""
+
+    def __init__(self, holds: tuple[tuple[float, float], ...], frame_s: float):
+        self.holds = tuple(holds)                     # (start_s, hold_s), sim seconds
+        self.frame_s = frame_s                        # one frame's transmission time, s
+        self.last_s = -math.inf                       # the last frame's delivery, s
+
+    def deliver(self, frames: Frames) -> Frames:
+        """frames (bus order) with their receive times at the bridge."""
+        if not self.holds or not len(frames):
+            return frames
+        floor = np.asarray(frames.t_s, dtype=float).copy()
+        for start, hold in self.holds:
+            floor[(frames.t_s >= start) & (frames.t_s < start + hold)] = start + hold
+        # delivered in bus order, no two closer than a frame time: a running maximum of
+        # floor_i - i * frame (as the bus's own first-ready-first schedule)
+        idx = np.arange(len(floor))
+        t = np.maximum(np.maximum.accumulate(floor - idx * self.frame_s) + idx * self.frame_s,
+                       self.last_s + (idx + 1) * self.frame_s)
+        t = np.where(t > floor + 1e-9, t, floor)   # a frame not held up keeps its time exactly
+        self.last_s = float(t[-1])
+        return Frames(t, frames.arb_id, frames.signals, frames.data)
+

@@ -38,7 +38,7 @@ _KNOWN = {
     # each fault key may be given once or numbered (kidnap, kidnap2, kidnap3, ...): one window each
     "faults": {"encoder_silence", "kidnap", "beacon_outage", "echo_storm", "beacon_misplaced",
                "range_beacon_misplaced", "bearing_beacon_misplaced", "controller_restart",
-               "node_restart"},
+               "node_restart", "backlog"},
     "output": {"truth_rate_hz", "log_epoch_s", "channel"},
     # [obstacles]: segmentN = x1_m, y1_m, x2_m, y2_m
 }
@@ -107,6 +107,9 @@ class Scenario:
     # a sensor node restarts (a brown-out, a watchdog): it is off from time_s for pause_s,
     # then counts its clock, its rolling counters and its wheel ticks from 0 again (nodes.base)
     node_restarts: tuple[tuple[float, float, int], ...] = ()     # time_s, pause_s, NodeId
+    # the bridge's interface holds every frame from start_s for hold_s and delivers them at
+    # once (a gateway, a starved relay): only the receive times move (bus.Gateway)
+    backlogs: tuple[tuple[float, float], ...] = ()                # start_s, hold_s
     obstacles_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     # common-mode random slip of both wheels: ground-distance error std after 1 m of mean
     # travel, m (adds to the per-wheel sigma_wheel_per_m; 0 = none)
@@ -344,19 +347,16 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
             raise ini.error("faults", key, "expected 'start_s, duration_s, echo_probability, "
                             "late_arrival_probability' with duration_s > 0, probabilities 0..1")
         storms.append(tuple(s))
-    restarts = []
-    for key in fault_keys["controller_restart"]:
-        s = ini.numbers("faults", key, 2)
-        if s[0] < 0 or s[1] < 0:
-            raise ini.error("faults", key, "expected 'time_s, pause_s' with both >= 0")
-        restarts.append((s[0], s[1], key))
-    restarts.sort()
-    pair = _overlap(restarts)
-    if pair is not None:
-        (t_a, _, _), (t_b, _, key_b) = pair
-        raise ini.error("faults", key_b, f"a restart at {t_b:g} s during the pause of the "
-                        f"one at {t_a:g} s")
+    restarts = _windows_apart(ini, fault_keys["controller_restart"],
+                              lambda t, p: t >= 0 and p >= 0,
+                              "expected 'time_s, pause_s' with both >= 0",
+                              lambda t_a, t_b: f"a restart at {t_b:g} s during the pause of the "
+                                               f"one at {t_a:g} s")
     node_restarts = _node_restarts(ini, site, fault_keys["node_restart"])
+    backlogs = _windows_apart(ini, fault_keys["backlog"], lambda t, h: t >= 0 and h > 0,
+                              "expected 'start_s, hold_s' with start_s >= 0, hold_s > 0",
+                              lambda t_a, t_b: f"a backlog from {t_b:g} s inside the one from "
+                                               f"{t_a:g} s")
     initial_ticks = ini.numbers("encoders", "initial_ticks", 2, default=[16000, 300])
     if any(v != int(v) or not 0 <= v < 16384 for v in initial_ticks):
         raise ini.error("encoders", "initial_ticks", "ticks must be integers 0..16383")
@@ -415,8 +415,9 @@ def load_scenario(name_or_path: str, *, seed: int | None = None,
         kidnaps=tuple(kidnaps),
         beacon_outages=tuple(sorted(outages)),
         echo_storms=tuple(sorted(storms)),
-        controller_restarts=tuple((t, p) for t, p, _ in restarts),
+        controller_restarts=restarts,
         node_restarts=node_restarts,
+        backlogs=backlogs,
         obstacles_m=np.array(obstacles, dtype=float).reshape(-1, 4),
         sigma_distance_per_m=ini.number("encoders", "sigma_distance_per_m",
                                         site.sigma_distance_per_m, minimum=0),
@@ -556,6 +557,25 @@ def _misplace_beacons(ini: IniFile, site, keys: list[str], attr: str):
     if attr == "beacons_m":
         return dataclasses.replace(site, beacons_m=moved)
     return dataclasses.replace(site, kind_values={**site.kind_values, attr: moved})
+
+
+def _windows_apart(ini: IniFile, keys: list[str], valid, usage: str,
+                   overlapping) -> tuple[tuple[float, float], ...]:
+    """[faults] KEY = time_s, length_s for each of keys: (time_s, length_s) in time order; a
+    value valid(time_s, length_s) refuses is an error with `usage`, a window that starts inside
+    another an error naming its key with overlapping(earlier time_s, its time_s)."""
+    windows = []
+    for key in keys:
+        s = ini.numbers("faults", key, 2)
+        if not valid(s[0], s[1]):
+            raise ini.error("faults", key, usage)
+        windows.append((s[0], s[1], key))
+    windows.sort()
+    pair = _overlap(windows)
+    if pair is not None:
+        (t_a, _, _), (t_b, _, key_b) = pair
+        raise ini.error("faults", key_b, overlapping(t_a, t_b))
+    return tuple((t, length) for t, length, _ in windows)
 
 
 def _node_restarts(ini: IniFile, site, keys: list[str]) -> tuple[tuple[float, float, int], ...]:

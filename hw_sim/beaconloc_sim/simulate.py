@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from . import can_out, crb, nodes
-from .bus import FRAME_BITS, Bus, Frames
+from .bus import FRAME_BITS, Bus, Frames, Gateway
 from .clocks import NodeClock
 from .nodes import ODOMETRY_COLUMNS, Node, NodeStatus, ReceiverRing, SensorKind, WheelEncoders
 from .path import wrap_angle
@@ -151,6 +151,7 @@ class Carry:
     nodes: list[Node]
     bus: Bus
     pcrb: tuple | None                       # crb.pcrb_along_path end
+    gateway: Gateway | None = None           # the bridge's interface ([faults] backlog)
     held: BoundEvents | None = None          # the last event complete by the window's end
     waiting: BoundEvents | None = None       # the events after it (measurements still to come)
 
@@ -191,8 +192,10 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
     t_a, t_b = win if win is not None else (0.0, scn.duration_s)
     if carry is None:
         ring, wheels, on_bus = nodes.on_bus(scn)
-        carry = Carry(ring, wheels, on_bus, Bus(scn.bus_bitrate_bps),
-                      None if win is None else crb.prior_start(bound_model(scn)))
+        bus = Bus(scn.bus_bitrate_bps)
+        carry = Carry(ring, wheels, on_bus, bus,
+                      None if win is None else crb.prior_start(bound_model(scn)),
+                      gateway=Gateway(scn.backlogs, bus.frame_s))
     enc_clock = carry.wheels.clock
     sensors = carry.sensors()
     rx_clock = _time_base(scn, carry.ring, sensors.values())
@@ -203,6 +206,7 @@ def _window(scn: Scenario, seeds, win: tuple[float, float] | None, carry: Carry 
     # a window sends what is ready before its end; the rest waits in its node for the next one
     until_s = t_b if win is not None else math.inf
     frames = carry.bus.transmit([node.release(iv, until_s) for node in carry.nodes], until_s)
+    frames = carry.gateway.deliver(frames)
     if encode:
         frames.data = can_out.encode_all(frames)
 

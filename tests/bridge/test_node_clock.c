@@ -1,6 +1,7 @@
 /*
  * cmocka tests of bridge/node_clock: unwrapping (wrap, out of order,
- * duplicates, long silence, restart) and the lower-envelope clock fit
+ * duplicates, long silence, restart, a backlog delivered late, late frames
+ * keeping pace) and the lower-envelope clock fit
  * against a synthetic node with offset, drift (+-100 ppm), exponential
  * queueing delay and a counter wrap.
  */
@@ -398,6 +399,117 @@ static void test_forward_jump_is_restart(void **state)
     assert_true(u > newest && u - newest < 20000);
 }
 
+/* A backlog: the node (or a gateway, or the sender) holds its frames for
+ * `hold_us` and then delivers them `spacing_us` apart (at bus speed, or a
+ * sender only twice as fast as it makes them), the frames made meanwhile
+ * queued behind, and (again_us) stalls again before it has drained. Every frame keeps its own stamp (no restart: the old
+ * bridge re-anchored the timeline on the first late receive time, a whole
+ * backlog off), the late ones stay out of the fit, and the frames after it
+ * map as exactly as before. */
+static void backlog_case(int64_t hold_us, int64_t spacing_us, int64_t again_us)
+{
+    rng_state = 7;
+    struct sim_node s = {.node0_us = 2000000000, .local0_us = 5000000000LL, .drift = -35e-6, .delay_mean_us = 250.0};
+    struct node_clock nc;
+    assert_int_equal(node_clock_init(&nc, NULL), 0);
+    int64_t local = s.local0_us;
+    for (; local < s.local0_us + 20000000; local += 10000) /* 20 s at 100 Hz */
+        node_clock_observe(&nc, (uint32_t)sim_node_time(&s, local), local + sim_delay(&s));
+    assert_true(node_clock_synced(&nc));
+    const int64_t release = local + hold_us;
+    /* late: more than max_jump_us behind the clock's line; within 2 ms of
+     * that either way a frame's queueing delay decides */
+    uint64_t surely_late = 0, maybe_late = 0;
+    int64_t rx = 0;
+    for (const int64_t end = release + 3000000; local < end; local += 10000) {
+        int64_t n = sim_node_time(&s, local);
+        int64_t earliest = local < release ? release : local + sim_delay(&s);
+        rx = rx + spacing_us > earliest ? rx + spacing_us : earliest;
+        /* stalled again for again_us 20 ms after the release, the backlog not drained */
+        if (rx >= release + 20000 && rx < release + 20000 + again_us)
+            rx = release + 20000 + again_us;
+        assert_int_equal(node_clock_observe(&nc, (uint32_t)n, rx), n);
+        assert_int_not_equal(nc.last_event, NODE_CLOCK_RESTART);
+        const double lateness_us = (double)rx - sim_true_local(&s, n);
+        surely_late += lateness_us > (double)nc.p.max_jump_us + 2000.0;
+        maybe_late += lateness_us > (double)nc.p.max_jump_us - 2000.0;
+    }
+    assert_int_equal(nc.restarts, 0);
+    assert_true(surely_late > 0);
+    assert_true(nc.late >= surely_late && nc.late <= maybe_late);
+    assert_false(nc.late_run); /* drained: on time again */
+    const uint64_t late_frames = nc.late;
+    /* the frames after it: on their stamps, mapped as before the hold */
+    for (int64_t end = local + 5000000; local < end; local += 10000) {
+        int64_t n = sim_node_time(&s, local);
+        assert_int_equal(node_clock_observe(&nc, (uint32_t)n, local + sim_delay(&s)), n);
+        assert_true(fabs((double)node_clock_to_local(&nc, n) - sim_true_local(&s, n)) < 20.0);
+    }
+    assert_int_equal(nc.restarts, 0);
+    assert_int_equal(nc.late, late_frames);
+}
+
+static void test_backlog_is_late_not_a_restart(void **state)
+{
+    (void)state;
+    backlog_case(600000, 100, 0);  /* just over max_jump_us, drained at bus speed */
+    backlog_case(1500000, 100, 0); /* the live suite's stopped simulator: 1 s and more */
+    backlog_case(8000000, 100, 0); /* within NODE_CLOCK_MAX_LATE_US */
+    backlog_case(1500000, 5000, 0); /* drained at twice the pace the frames are made */
+    backlog_case(1500000, 5000, 700000); /* stalled again while draining, for 0.7 s */
+}
+
+/* Late frames that keep pace with the receive clock are no backlog: a clock
+ * that stopped and went on where it stopped (a node halted, its counter
+ * frozen), or a node that restarted while its old stamp was just past a
+ * wrap, so that its new one lies a little ahead of the old. A restart once
+ * their stamps have advanced NODE_CLOCK_DRAIN_CHECK_US, and the map
+ * converges again; a clock frozen for longer than NODE_CLOCK_MAX_LATE_US is
+ * a restart at once. */
+static void test_late_frames_keeping_pace_are_a_restart(void **state)
+{
+    (void)state;
+    for (int c = 0; c < 3; c++) {
+        struct sim_node s = {.node0_us = 40000000, .local0_us = 9000000000LL, .drift = 20e-6, .delay_mean_us = 0.0};
+        if (c == 2) /* the old clock wraps 1 s before the restart */
+            s.node0_us = WRAP - 19000000;
+        struct node_clock nc;
+        assert_int_equal(node_clock_init(&nc, NULL), 0);
+        int64_t local = s.local0_us;
+        for (; local < s.local0_us + 20000000; local += 10000)
+            node_clock_observe(&nc, (uint32_t)sim_node_time(&s, local), local + 200);
+        assert_true(node_clock_synced(&nc));
+        const int64_t off_us = c == 1 ? NODE_CLOCK_MAX_LATE_US + 5000000 : 600000;
+        struct sim_node s2 = s;
+        if (c == 2) { /* restarted: its new clock from 0 at the end of the pause */
+            s2.node0_us = 0;
+            s2.local0_us = local + off_us - 1010000;
+        } else { /* frozen: the node's clock loses off_us, then runs on */
+            s2.local0_us += off_us;
+        }
+        int64_t restart_after_us = -1;
+        const int64_t resume = local + off_us;
+        if (c == 2) /* its first new stamp lies ahead of its last old one, late by the pause */
+            assert_true((uint32_t)sim_node_time(&s2, resume) > (uint32_t)sim_node_time(&s, local - 10000));
+        for (local = resume; local < resume + 12000000; local += 10000) {
+            node_clock_observe(&nc, (uint32_t)sim_node_time(&s2, local), local + 200);
+            if (nc.last_event == NODE_CLOCK_RESTART) {
+                assert_int_equal(restart_after_us, -1);
+                restart_after_us = local - resume;
+            }
+        }
+        assert_int_equal(nc.restarts, 1);
+        if (c == 1)
+            assert_int_equal(restart_after_us, 0);
+        else
+            assert_int_equal(restart_after_us, NODE_CLOCK_DRAIN_CHECK_US);
+        /* on the new timeline the map is right again */
+        assert_true(node_clock_synced(&nc));
+        int64_t n = nc.newest_node_us;
+        assert_true(fabs((double)node_clock_to_local(&nc, n) - (double)(local - 10000 + 200)) < 20.0);
+    }
+}
+
 /* A time kept in its low 32 bits comes back against a nearby clock: on
  * either side of the reference, across a 2^32 boundary, at the limits of
  * the +-2^31 us range, for negative times, and not beyond the range. */
@@ -434,6 +546,8 @@ int main(void)
         cmocka_unit_test(test_fit_with_reordering_and_duplicates),
         cmocka_unit_test(test_restart),
         cmocka_unit_test(test_forward_jump_is_restart),
+        cmocka_unit_test(test_backlog_is_late_not_a_restart),
+        cmocka_unit_test(test_late_frames_keeping_pace_are_a_restart),
         cmocka_unit_test(test_unwrap_near),
     };
     return cmocka_run_group_tests_name("node_clock", tests, NULL, NULL);

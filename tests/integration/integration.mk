@@ -4,6 +4,7 @@
 #                                                  the pytest suite in N UML guests
 #   make bench-accuracy                            20 seeds x 11 scenarios, --replay
 #   make bench-bearing                             Vander 2011 Fig. 7: eurobot, 20 seeds, --replay
+#   make bench-backlog                             frames held and delivered at once, 20 seeds x 3, --replay
 #   make demo [DEMO_S=120]                         kleeman-lab live, plot in build/demo/
 #   make vm-check                                  boot, python-can round trip on vcan0
 #   make bench-bus                                 simulator pacing + bridge latency on the bus
@@ -36,7 +37,7 @@ IT_ARGS      ?=
 IT_GUESTS    ?= $(shell n=$$(nproc); [ $$n -gt 4 ] && n=4; echo $$n)
 DEMO_S       ?= 120
 
-.PHONY: test-integration bench-accuracy bench-bearing bench-beacon-check demo vm-check test-vm-runner bench-bus
+.PHONY: test-integration bench-accuracy bench-backlog bench-bearing bench-beacon-check demo vm-check test-vm-runner bench-bus
 
 # The runner's own logic (host side, no VM): part of `make test-py`.
 PY_TESTS += test-vm-runner
@@ -61,6 +62,12 @@ bench-bus: $(SETUP_STAMP) $(IT_BRIDGE) $(UML_SHIM)
 ACCURACY_ARGS ?=
 bench-accuracy: $(SETUP_STAMP) $(IT_BRIDGE)
 	$(PY) tests/bench/accuracy.py --bridge $(IT_BRIDGE) --out $(BUILD)/bench/accuracy $(ACCURACY_ARGS)
+
+# Backlogs (every node's frames held up to 1.5 s and delivered at once) on 20 seeds of
+# kleeman-lab, marvelmind and eurobot, held and as sent (tests/bench/backlog.py;
+# docs/mavlink.md "Node clocks"). BACKLOG_ARGS: its options, e.g. --seeds 6.
+bench-backlog: $(SETUP_STAMP) $(IT_BRIDGE)
+	$(PY) tests/bench/backlog.py --bridge $(IT_BRIDGE) --out $(BUILD)/bench/backlog $(BACKLOG_ARGS)
 
 # The beacon positions' check on 20 seeds of kleeman-lab and misplaced-beacon: the daemon's
 # warning, check-beacons' answer, the ratio to the bound before and after the fix

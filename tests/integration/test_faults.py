@@ -78,6 +78,51 @@ def test_interface_down_and_up_mid_run(rig):
     assert rms < RECOVERED_RMS_M, f"rms error at the end {rms * 1e3:.0f} mm"
 
 
+EUROBOT_RUN_S = 12.0   # the eurobot scenario's duration_s
+STALL_AT_S, STALL_S = 5.0, 1.0
+
+
+@pytest.mark.live_s(EUROBOT_RUN_S)
+def test_stalled_sender_delivers_a_backlog(rig):
+    """The simulator stopped (SIGSTOP) for 1 s while the robot drives, then
+    continued: every node's frames of that second reach the bus at once,
+    late (a starved sending process, a gateway holding frames). The bridge
+    goes on publishing through the stall (constant-velocity prediction) and
+    takes the backlog on its own stamps: no node clock restarts, the frames
+    are counted late, and no ODOMETRY leaves its 3 sigma or the table.
+    Before, the backlog was read as every node restarting, re-anchored a
+    second late: one ODOMETRY 5.1 m off (Mahalanobis distance 32)."""
+    def sim(r):
+        return next(p for p in r.procs if p.name == "sim")
+
+    sc = h.scenario_events("eurobot")
+    assert sc.duration_s == EUROBOT_RUN_S
+    run = h.run_live(rig, "eurobot", sc.duration_s, site=h.SCENARIOS / "eurobot.ini",
+                     clock_frame="BEARING",
+                     actions=[(STALL_AT_S, lambda r: sim(r).popen.send_signal(signal.SIGSTOP)),
+                              (STALL_AT_S + STALL_S,
+                               lambda r: sim(r).popen.send_signal(signal.SIGCONT))])
+    assert run.bridge_rc == 0, rig.logs()
+    times = [x.t_mono_s for x in run.odometry
+             if run.t_sim_start_mono_s + 2.0 <= x.t_mono_s <= run.t_sim_end_mono_s]
+    gap = h.max_gap_s(times)
+    assert gap < 0.5, f"ODOMETRY stopped for {gap:.2f} s around the stall"
+    restarted = [t for t in run.statustext_lines() if "restarted" in t]
+    assert not restarted, restarted
+    stats = run.bridge_stats
+    assert stats["node_restarts"] == 0, stats
+    assert stats["late_frames_per_frame"]["bearing"] > 0, stats["late_frames_per_frame"]
+    assert stats["late_frames_per_frame"]["wheel_encoders"] > 0, stats["late_frames_per_frame"]
+    t_s, err, mahal, _quality = run.odometry_vs_truth()
+    ok = (t_s >= 2.0) & np.isfinite(err) & np.isfinite(mahal)
+    assert ok.sum() > 100, ok.sum()
+    print(f"stalled sender: odometry={int(ok.sum())} max_mm={float(np.max(err[ok])) * 1e3:.1f} "
+          f"max_mahal={float(np.max(mahal[ok])):.2f} inside_3sigma={float(np.mean(mahal[ok] <= 3)):.3f}")
+    assert float(np.max(err[ok])) < 0.10, f"an ODOMETRY {float(np.max(err[ok])):.2f} m off"
+    inside = float(np.mean(mahal[ok] <= 3.0))
+    assert inside >= 0.95, f"only {inside:.1%} of ODOMETRY inside their 3 sigma"
+
+
 @pytest.mark.live_s(RUN_S)
 def test_flood_of_malformed_and_unknown_frames(rig):
     """Thousands of bad frames among the good ones: each kind counted where

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from beaconloc_sim import simulate
+from beaconloc_sim.bus import FRAME_BITS
 from beaconloc_sim.cli import main as cli_main
 from beaconloc_sim.encoders import unwrap_ticks
 from beaconloc_sim.inifile import ConfigError
@@ -418,3 +419,50 @@ def test_node_restarts_of_two_nodes_may_overlap(make_scenario):
     assert scn.node_down(1, [10.9, 11.0]).tolist() == [True, False]
     assert scn.node_down(2, [10.4, 11.4, 11.5]).tolist() == [False, True, False]
     assert scn.node_resumes_s(1) == [11.0] and scn.node_resumes_s(6) == []
+
+
+def test_backlog_moves_only_the_receive_times(make_scenario):
+    """[faults] backlog = start_s, hold_s: the bridge's interface holds every frame received in
+    the window and delivers them at its end, one frame time apart in bus order, the frames
+    after queued behind; the frames themselves (ids, payloads, stamps) are the plain run's, and a
+    windowed run (a live one, a soak) holds the same frames across its window boundary."""
+    plain = simulate.run(load_scenario(str(make_scenario(body(30, "")))))
+    held = load_scenario(str(make_scenario(body(30, "backlog = 11, 1.5\nbacklog2 = 20, 0.4\n"))))
+    assert held.backlogs == ((11.0, 1.5), (20.0, 0.4))
+    res = simulate.run(held)
+    t0, t1 = plain.frames.t_s, res.frames.t_s
+    assert np.array_equal(res.frames.arb_id, plain.frames.arb_id)
+    assert res.frames.data == plain.frames.data
+    frame_s = FRAME_BITS / held.bus_bitrate_bps
+    assert np.all(np.diff(t1) >= frame_s - 1e-12)
+    for start, hold in held.backlogs:
+        inside = np.flatnonzero((t0 >= start) & (t0 < start + hold))
+        assert len(inside) > 20
+        # delivered at the hold's end, back to back
+        assert t1[inside[0]] == pytest.approx(start + hold)
+        assert np.allclose(np.diff(t1[inside]), frame_s)
+        # and the queue drains: soon after, frames are on time again
+        after = np.flatnonzero(t0 >= start + hold + 0.05)[:5]
+        assert np.array_equal(t1[after], t0[after])
+    outside = (t1 == t0)
+    assert outside.sum() > 0.9 * len(t0)
+    assert np.all(t1 >= t0)
+    # windows of 4 s: the first backlog is held across the boundary at 12 s (its frames of
+    # both windows delivered together at 12.5 s), the second within one window
+    windowed = np.concatenate([w.frames.t_s for w in simulate.run_windows(held, 4.0)])
+    plain_w = np.concatenate([w.frames.t_s for w in simulate.run_windows(
+        load_scenario(str(make_scenario(body(30, "")))), 4.0)])
+    for start, hold in held.backlogs:
+        inside = (plain_w >= start) & (plain_w < start + hold)
+        assert np.allclose(windowed[inside] - (start + hold), np.arange(inside.sum()) * frame_s)
+
+
+@pytest.mark.parametrize("faults, why", [
+    ("backlog = 10\n", "expected 2 comma-separated numbers"),
+    ("backlog = 10, 0\n", "hold_s > 0"),
+    ("backlog = 10, 2\nbacklog2 = 11, 1\n", "a backlog from 11 s inside the one from 10 s"),
+])
+def test_bad_backlogs_name_their_key(make_scenario, faults, why):
+    with pytest.raises(ConfigError) as err:
+        load_scenario(str(make_scenario(body(60, faults))))
+    assert "[faults] backlog" in str(err.value) and why in str(err.value)
