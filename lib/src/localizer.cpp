@@ -228,8 +228,14 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     // Not while the sequencer holds a double pulse that contradicts its
     // model (beacon 1 heard where another beacon is expected: the numbering
     // itself in doubt until the next cycle confirms or clears it; a snapshot
-    // of such pulses would fit a wrong numbering).
-    if (!bl::started(&loc->filter) || loc->seq.conflict_pending) return false;
+    // of such pulses would fit a wrong numbering) from the cycle the snapshot
+    // takes. An older one is not in it: where beacon 1 is out of hearing (a
+    // large site) nothing clears a pending conflict, and another beacon's
+    // floor echo raises one every few cycles.
+    if (!bl::started(&loc->filter)) return false;
+    if (loc->seq.conflict_pending &&
+        state_time_us(&loc->filter) - loc->seq.conflict_us < loc->seq.period_ns / 1000 * cfg.beacon_count)
+        return false;
     // The heading kept (read in place: no state copy on this, the deepest, chain).
     const bl_real theta = bl::wrap_angle(loc->filter.x_[BL_IX_THETA]);
     int rc = BL_EDEGENERATE;
