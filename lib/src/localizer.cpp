@@ -231,9 +231,12 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     // of such pulses would fit a wrong numbering) from the cycle the snapshot
     // takes. An older one is not in it: where beacon 1 is out of hearing (a
     // large site) nothing clears a pending conflict, and another beacon's
-    // floor echo raises one every few cycles.
+    // floor echo raises one every few cycles. And not once every arrival of
+    // the window is rejected: then the filter is wrong, whatever double pulse
+    // is pending (a floor echo at a carried robot's new place can mimic beacon
+    // 1's every cycle; docs/bridge.md).
     if (!bl::started(&loc->filter)) return false;
-    if (loc->seq.conflict_pending &&
+    if (loc->seq.conflict_pending && n < loc->win_len_ &&
         state_time_us(&loc->filter) - loc->seq.conflict_us < loc->seq.period_ns / 1000 * cfg.beacon_count)
         return false;
     // The heading kept (read in place: no state copy on this, the deepest, chain).

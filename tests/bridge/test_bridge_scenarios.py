@@ -70,22 +70,25 @@ def test_kidnap_resets_and_recovers(bridge_bin, tmp_path):
     assert "re-initialised" in p.stderr or "restarted" in p.stderr
 
 
-@pytest.mark.parametrize("seed", [1, 4])
-def test_kidnap_on_the_30_m_site_restarts_within_seconds(bridge_bin, tmp_path, seed):
-    """big-site (30 m, 12 beacons heard to 15 m, beacon 1 mostly out of hearing), carried 2 m at
-    60 s: the persistent-rejection watch restarts the filter within 3 s and it is back under
-    0.1 m. Before, a double pulse of another beacon's floor echo (taken for beacon 1's
-    signature where that beacon was expected) left a conflict pending that nothing cleared
-    with beacon 1 unheard, and it held the restart off: the filter coasted 2 m off for 8 s,
-    published converged, then walked in; back under 0.1 m after 11-28 s (20 seeds), 27 s on
-    seed 4."""
-    scenario = tmp_path / "big-site-kidnap.scenario.ini"
-    text = (SITE.parent / "big-site.scenario.ini").read_text()
-    assert "[faults]" not in text
-    scenario.write_text(text.replace("site = big-site.ini", f"site = {SITE.parent / 'big-site.ini'}")
+@pytest.mark.parametrize("site, seed", [("big-site", 1), ("big-site", 4), ("hall", 13), ("hall", 15)])
+def test_kidnap_on_a_large_site_restarts_within_seconds(bridge_bin, tmp_path, site, seed):
+    """The 30 m site (12 beacons heard to 15 m, beacon 1 mostly out of hearing) and the 24 m hall,
+    carried 2 m at 60 s: the persistent-rejection watch restarts the filter within 2 s and it
+    stays within 0.2 m from 65 s on (0.02-0.10 m measured on these seeds).
+    Before, a pending double-pulse conflict held the restart off. On the 30 m site it was
+    another beacon's floor echo, which nothing cleared with beacon 1 unheard: the filter coasted
+    2 m off for 8 s, published converged, then walked in (back under 0.1 m after 11-28 s on 20
+    seeds; 27 s on seed 4). In the hall a floor echo at the robot's new place mimicked beacon 1's
+    double pulse in another beacon's slot every cycle, until every arrival of the watch's window
+    was rejected (then it restarts): seed 13 restarted after 10.9 s and was 1.3 m off after
+    65 s, seed 15 never restarted."""
+    scenario = tmp_path / f"{site}-kidnap.scenario.ini"
+    text = (SITE.parent / f"{site}.scenario.ini").read_text()
+    assert "[faults]" not in text and f"site = {site}.ini" in text
+    scenario.write_text(text.replace(f"site = {site}.ini", f"site = {SITE.parent / f'{site}.ini'}")
                         + "[faults]\nencoder_silence = 59.5, 1.0\nkidnap = 60, 0.0, 2.0\n")
     log, truth_path = run_sim(tmp_path, str(scenario), 75, seed=seed)
-    p, est, stats = replay(bridge_bin, log, tmp_path, site=SITE.parent / "big-site.ini")
+    p, est, stats = replay(bridge_bin, log, tmp_path, site=SITE.parent / f"{site}.ini")
     truth = np.genfromtxt(truth_path, delimiter=",", names=True)
     t_sim, err = errors(est, truth)
     before = (t_sim > 40) & (t_sim < 59.5)
@@ -93,9 +96,9 @@ def test_kidnap_on_the_30_m_site_restarts_within_seconds(bridge_bin, tmp_path, s
     assert np.percentile(err[before], 95) < 0.1
     assert stats["snapshot_restarts"] == 1 and est["reset_counter"][-1] == 1, stats
     restarted = t_sim[np.flatnonzero(est["reset_counter"] == 1)[0]]
-    assert 60.0 < restarted < 63.0, restarted
-    back = t_sim > 64.0
-    assert np.all(err[back] < 0.1), float(err[back].max())
+    assert 60.0 < restarted < 62.0, restarted
+    back = t_sim > 65.0
+    assert np.all(err[back] < 0.2), float(err[back].max())
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
