@@ -97,7 +97,7 @@ $(BRIDGE_ASAN_BIN): $(BRIDGE_SANOBJS) $(BRIDGE_SANDIR)/main.o $(BRIDGE_LIB)
 # cmocka tests: one executable per tests/bridge/test_*.c, built with
 # ASan/UBSan against sanitized bridge objects (all but main.o). A test that
 # stands in for syscalls lists its wraps in BRIDGE_WRAP_<name>.
-BRIDGE_WRAP_test_can_in := -Wl,--wrap=socket,--wrap=bind,--wrap=ioctl,--wrap=setsockopt,--wrap=getsockopt,--wrap=recvmsg,--wrap=close
+BRIDGE_WRAP_test_can_in := -Wl,--wrap=socket,--wrap=bind,--wrap=ioctl,--wrap=setsockopt,--wrap=getsockopt,--wrap=recvmsg,--wrap=close,--wrap=clock_gettime
 # test_resolver stands a few names in for a name server (slow, failing).
 BRIDGE_WRAP_test_resolver := -Wl,--wrap=getaddrinfo
 

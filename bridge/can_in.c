@@ -293,10 +293,17 @@ int can_in_read(struct can_in *ci, struct can_msg *msg)
                 ci->have_ovfl = true;
             }
         }
-        int64_t mono = can_in_mono_us();
         /* SO_TIMESTAMP is CLOCK_REALTIME: move it onto the monotonic clock
-         * by the current difference of the two clocks. */
-        msg->rx_us = have_ts ? mono - (real_us() - rx_real) : mono;
+         * by the current difference of the two clocks, realtime read FIRST.
+         * A process descheduled between the two reads (likely where a clock
+         * read is a system call, as in a UML guest) then makes the stamp
+         * late, which the node clocks' lower envelope ignores; read the other
+         * way round it made the stamp early by the whole pause, and one such
+         * point moved a clock's envelope, and every time mapped through it,
+         * by up to 0.3 s for its window (docs/mavlink.md "Node clocks"). */
+        int64_t real = real_us();
+        int64_t mono = can_in_mono_us();
+        msg->rx_us = have_ts ? mono - (real - rx_real) : mono;
         if (msg->rx_us > mono)
             msg->rx_us = mono;
         msg->flags = 0;

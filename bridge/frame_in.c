@@ -33,7 +33,13 @@ void handle_frame(struct daemon *d, const struct can_msg *msg)
     if (d->mode != MODE_LIVE)
         frame_ref_note(d, msg->rx_us);
     if (d->recording) {
-        int64_t t = d->mode == MODE_LIVE ? msg->rx_us + (real_us() - mono_us()) : msg->rx_us;
+        int64_t t = msg->rx_us;
+        if (d->mode == MODE_LIVE) {
+            /* back onto CLOCK_REALTIME, monotonic read first: a pause between
+             * the reads makes the recorded stamp late, never early (can_in.c) */
+            const int64_t mono = mono_us();
+            t += real_us() - mono;
+        }
         int rc = record_write(&d->rec, msg, t);
         if (rc != 0)
             write_failed("--record", d->opt.record, rc, &d->record_err_logged);

@@ -19,6 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <sys/time.h>
+#include <time.h>
 #include <cmocka.h>
 
 #include <linux/can.h>
@@ -159,6 +160,21 @@ int __wrap_close(int fd)
         return 0;
     }
     return __real_close(fd);
+}
+
+/* The clocks, with a pause after every read when pause_after_read_us is set
+ * (the process descheduled between two reads): each later read, of either
+ * clock, is that much later. */
+int __real_clock_gettime(clockid_t clk, struct timespec *ts);
+static int64_t pause_after_read_us, paused_us;
+int __wrap_clock_gettime(clockid_t clk, struct timespec *ts)
+{
+    int rc = __real_clock_gettime(clk, ts);
+    int64_t ns = (int64_t)ts->tv_nsec + paused_us * 1000;
+    ts->tv_sec += (time_t)(ns / 1000000000);
+    ts->tv_nsec = (long)(ns % 1000000000);
+    paused_us += pause_after_read_us;
+    return rc;
 }
 
 ssize_t __wrap_recvmsg(int fd, struct msghdr *mh, int flags)
@@ -369,6 +385,33 @@ static void test_read_frames_timestamps_and_drops(void **state)
     can_in_close(&ci);
 }
 
+/* A pause between the two clock reads that move the kernel's realtime stamp
+ * onto the monotonic clock makes the stamp late (the node clocks' lower
+ * envelope ignores a late point), never early (one early point set the
+ * envelope off by the whole pause: docs/mavlink.md "Node clocks"). */
+static void test_paused_between_clock_reads_stamps_late(void **state)
+{
+    (void)state;
+    struct can_in ci;
+    can_in_init(&ci, "can7");
+    assert_int_equal(can_in_open(&ci), 0);
+    struct timespec real, mono;
+    __real_clock_gettime(CLOCK_REALTIME, &real);
+    __real_clock_gettime(CLOCK_MONOTONIC, &mono);
+    struct rx_item *a = push_frame(0x100, 8, CAN_MTU);
+    a->has_ts = true;
+    a->ts.tv_sec = real.tv_sec - 1; /* received one second ago */
+    a->ts.tv_usec = real.tv_nsec / 1000;
+    const int64_t true_us = ((int64_t)mono.tv_sec - 1) * 1000000 + mono.tv_nsec / 1000;
+    pause_after_read_us = 300000;
+    struct can_msg m;
+    assert_int_equal(can_in_read(&ci, &m), 1);
+    pause_after_read_us = paused_us = 0;
+    /* late by the pause (and the few us between the reads above), not early */
+    assert_in_range(m.rx_us - true_us, 290000, 320000);
+    can_in_close(&ci);
+}
+
 static void test_error_frames_and_bad_sizes(void **state)
 {
     (void)state;
@@ -498,6 +541,7 @@ int main(void)
         cmocka_unit_test_setup(test_setup_shortfalls_reported, reset),
         cmocka_unit_test_setup(test_missing_interface_not_fatal, reset),
         cmocka_unit_test_setup(test_read_frames_timestamps_and_drops, reset),
+        cmocka_unit_test_setup(test_paused_between_clock_reads_stamps_late, reset),
         cmocka_unit_test_setup(test_error_frames_and_bad_sizes, reset),
         cmocka_unit_test_setup(test_enetdown_then_back, reset),
         cmocka_unit_test_setup(test_open_on_down_interface, reset),
