@@ -160,17 +160,6 @@ struct BearingModel {
 // odometry pose (s): the last increment's v, ω no longer describe the path.
 constexpr real kMaxExtrapolation_s = real(0.1);
 
-// The midpoint odometry step (Kleeman 1992 eq. 24; Vander et al. 2011 eq. 2):
-// d = (d_l + d_r)/2, δ = (d_r - d_l)/b, x += d cos(θ + δ/2), y += d sin(θ + δ/2),
-// θ += δ.
-void odometry_step(real pose[3], real d_m, real dth_rad)
-{
-    const real mid = pose[2] + real(0.5) * dth_rad;
-    pose[0] += d_m * std::cos(mid);
-    pose[1] += d_m * std::sin(mid);
-    pose[2] = wrap_angle(pose[2] + dth_rad);
-}
-
 // Keep a bearing as its beacon's latest (the triangulation's input), with
 // the dead reckoning's pose at its time.
 void remember_bearing(bl_filter *f, uint32_t bearing_beacon_index, int64_t t_us, real bearing_rad)

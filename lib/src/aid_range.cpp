@@ -187,10 +187,251 @@ void remember_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, rea
     f->range_valid_mask_ |= 1u << range_beacon_index;
 }
 
+// ---- the heading from the track
+//
+// A range does not see the heading: a start from ranges has none (σ
+// cfg.reset_sigma_theta_rad, snapshot_range.cpp), and the filter learnt it
+// from the first motion through the odometry's linearised ∂(x, y)/∂θ. With
+// σ 1 rad that fails two ways (measured on marvelmind, 20 seeds: lib/README.md
+// "Heading from the track"): the update's correction along the track is
+// second order in the heading error and always forward (8 mm on the first
+// metre, 14 % of the estimates outside their 3σ); and a robot placed facing
+// more than ~90° away from the assumed heading drives the other way from its
+// prediction, which the linearised update cannot turn round (metres off,
+// published as converged, until a restart).
+// So, from the first wheel sample that moves a started filter whose heading
+// σ exceeds kHeadingUnknown_rad (a site with range beacons, not a team's):
+// the anchor is where the robot's receiver stood (its position and
+// covariance: what the ranges fixed), the dead reckoning since it in the
+// anchor's body frame is D = (dx, dy) and ψ (odometry_step with the filter's
+// wheel scales), L its length. Every range is then scored against each of
+// BL_RANGE_TRACK_HEADINGS headings θk of the anchor: the robot's centre at
+// anchor + R(θk)(D - o), o the receiver's mount, carried to the reception with the
+// filter's v and ω (as range_model_at), its range residual r = s·tof - d and
+//   cost_k += min(r²/σ², kTrackTermCap),
+//   σ² = σ_r(d)² + uᵀ A u + σ_D² + (d σ_s/s)²
+// (u the direction to the beacon, A the anchor's covariance, σ_D² the dead
+// reckoning's, track_variance). The filter is not converged meanwhile and
+// does not fuse these ranges (BL_FUSION_BUFFERED): its pose is re-set at the
+// decision. Decided once every heading two or more steps (30°) from the best
+// costs kTrackDecide more: the heading is the parabola's minimum through the
+// best and its two neighbours, its variance 2/(the cost's curvature) (the
+// cost is -2 log of the likelihood); the pose is anchor + R(θ)(D - o) with that
+// variance carried through ∂/∂θ (its other covariances zero), BL_FUSION_RESET,
+// counted in range_heading_fixes, and in the reset counter when the position
+// jumped by more than 3σ of its new covariance (a heading far from the assumed one). A silence of the wheels (new track)
+// or kTrackMaxLength_m without a decision leaves the heading to the filter.
+constexpr real kTrackDecide = real(36);
+constexpr real kTrackTermCap = real(16);  // a 4σ residual (a multipath late arrival) adds no more
+constexpr real kTrackMaxLength_m = real(10);
+enum TrackIndex : int { kAx, kAy, kAxx, kAxy, kAyy, kDx, kDy, kPsi, kLen };  // range_track_ (aid_range.h)
+
+// Variance of the dead reckoning's position after L (m) driven, m²: each
+// wheel's σ_w²|d| and the common σ_c²|d| along it (bl_filter_predict_odometry's
+// wheel noise), and the heading's random walk 2σ_w²L/b² carried across it
+// (∫(L - l)²·2σ_w²/b² dl = 2σ_w²L³/(3b²)).
+real track_variance(const bl_config *cfg, real L)
+{
+    const real sw2 = cfg->wheels.sigma_wheel_per_m * cfg->wheels.sigma_wheel_per_m;
+    const real sc2 = cfg->wheels.sigma_distance_per_m * cfg->wheels.sigma_distance_per_m;
+    const real b = effective_base_m(cfg);
+    return (sw2 + sc2) * L + real(2) * sw2 * L * L * L / (real(3) * b * b);
+}
+
+// Every wheel sample (kinds.hpp wheel_sample): starts the track, extends it.
+void track_wheel_sample(bl_filter *f, int64_t t_us, real d_left_m, real d_right_m, bool new_track)
+{
+    const bl_config *cfg = &f->cfg_;
+    real *tr = f->range_track_;
+    if (learning_heading(f)) {
+        int64_t dt_us = 0;
+        if (new_track || !started(f) || !sub_us(t_us, f->range_track_t_us_, &dt_us) || dt_us <= 0 ||
+            tr[kLen] > kTrackMaxLength_m) {
+            f->flags_ &= ~kFlagHeadingTrack;  // the filter's own heading from here
+            return;
+        }
+    } else {
+        const bool moving = std::fabs(d_left_m) > real(1e-6) || std::fabs(d_right_m) > real(1e-6);
+        if (new_track || !moving || !started(f) || cfg->range_beacon_count < 3 || cfg->range.team_site != 0 ||
+            !(cov(f)(TH, TH) > kHeadingUnknown_rad * kHeadingUnknown_rad))
+            return;
+        // It starts to move, its heading unknown: the anchor is where its
+        // receiver stood (what the ranges fixed, whatever the heading: the
+        // wheel-base centre is that less R(θ)(ox, oy)), its covariance
+        // through J = [I, g], g = R'(θ)(ox, oy).
+        const auto P = cov(static_cast<const bl_filter *>(f));
+        const real c = std::cos(f->x_[TH]), s = std::sin(f->x_[TH]);
+        const real ox = cfg->range.offset_x_m, oy = cfg->range.offset_y_m;
+        const real gx = -s * ox - c * oy, gy = c * ox - s * oy;
+        const real a[9] = {f->x_[X] + c * ox - s * oy,
+                           f->x_[Y] + s * ox + c * oy,
+                           P(X, X) + real(2) * gx * P(X, TH) + gx * gx * P(TH, TH),
+                           P(X, Y) + gx * P(Y, TH) + gy * P(X, TH) + gx * gy * P(TH, TH),
+                           P(Y, Y) + real(2) * gy * P(Y, TH) + gy * gy * P(TH, TH),
+                           0,
+                           0,
+                           0,
+                           0};
+        std::memcpy(tr, a, sizeof a);
+        for (real &k : f->range_track_cost_) k = 0;
+        f->flags_ = (f->flags_ | kFlagHeadingTrack) & ~kFlagConverged;
+    }
+    const real cl = f->x_[KL] * d_left_m, cr = f->x_[KR] * d_right_m;  // calibrated (m)
+    odometry_step(&tr[kDx], real(0.5) * (cl + cr), (cr - cl) / effective_base_m(cfg));
+    tr[kLen] += real(0.5) * (std::fabs(cl) + std::fabs(cr));
+    f->range_track_t_us_ = t_us;
+}
+
+// The robot's centre (x, y) and heading for the anchor's heading th_rad:
+// the anchor's receiver less R(th)(ox, oy), plus R(th) D, carried dt_s (s)
+// past the track's last sample with the filter's v, ω (midpoint heading, as
+// range_model_at); g = ∂(x, y)/∂th (m/rad).
+void track_pose(const bl_filter *f, real th_rad, real dt_s, real p[3], real g[2])
+{
+    const real *tr = f->range_track_;
+    const real c = std::cos(th_rad), s = std::sin(th_rad);
+    const real dx = tr[kDx] - f->cfg_.range.offset_x_m, dy = tr[kDy] - f->cfg_.range.offset_y_m;
+    const real vdt = f->x_[V] * dt_s, mid = th_rad + tr[kPsi] + real(0.5) * f->x_[W] * dt_s;
+    p[0] = tr[kAx] + c * dx - s * dy + vdt * std::cos(mid);
+    p[1] = tr[kAy] + s * dx + c * dy + vdt * std::sin(mid);
+    p[2] = th_rad + tr[kPsi] + f->x_[W] * dt_s;
+    g[0] = -s * dx - c * dy - vdt * std::sin(mid);
+    g[1] = c * dx - s * dy + vdt * std::cos(mid);
+}
+
+// The decision (above): the best heading, its variance; false while undecided.
+bool track_decided(const real *cost, real *th_rad, real *var_rad2)
+{
+    constexpr int K = BL_RANGE_TRACK_HEADINGS;
+    constexpr real step = real(2) * real(kPi) / real(K);
+    int best = 0;
+    for (int k = 1; k < K; ++k)
+        if (cost[k] < cost[best]) best = k;
+    for (int k = 0; k < K; ++k) {
+        const int d = k > best ? k - best : best - k;
+        if ((d < K - d ? d : K - d) >= 2 && !(cost[k] - cost[best] >= kTrackDecide)) return false;
+    }
+    const real cm = cost[(best + K - 1) % K], c0 = cost[best], cp = cost[(best + 1) % K];
+    const real curv = cm - real(2) * c0 + cp;  // >= 0: the best is the least
+    real frac = curv > real(0) ? real(0.5) * (cm - cp) / curv : real(0);
+    frac = frac > real(0.5) ? real(0.5) : (frac < real(-0.5) ? real(-0.5) : frac);
+    *th_rad = (real(best) + frac) * step;
+    const real var = curv > real(0) ? real(2) * step * step / curv : step * step;
+    *var_rad2 = var < step * step ? var : step * step;
+    return true;
+}
+
+// A range while the heading is learnt from the track: scored, kept for a
+// restart, and at the decision the pose re-set (above). *f untouched on an
+// error (a non-finite score).
+__attribute__((noinline)) int track_range(bl_filter *f, uint32_t j, int64_t t_us, real tof_s, bl_fusion_result *result)
+{
+    const bl_config *cfg = &f->cfg_;
+    const real *tr = f->range_track_;
+    int64_t d_us;
+    if (!sub_us(t_us, f->range_track_t_us_, &d_us)) return BL_EINVAL;
+    // The receiver hears the pulse tof_s after the emission t_us.
+    const real dt_s = us_to_s(d_us) + tof_s;
+    const real s_mps = f->x_[S];
+    const real z_m = s_mps * tof_s;
+    const real var_s = cov(f)(S, S);
+    const real var_track = track_variance(cfg, tr[kLen]);
+    const bl_beacon &b = cfg->range_beacons[j];
+    const real ox = cfg->range.offset_x_m, oy = cfg->range.offset_y_m, dz = cfg->range.height_m - b.z_m;
+    constexpr int K = BL_RANGE_TRACK_HEADINGS;
+    real cost[K];
+    for (int k = 0; k < K; ++k) {
+        real p[3], g[2];
+        track_pose(f, real(k) * real(2) * real(kPi) / real(K), dt_s, p, g);
+        const real ct = std::cos(p[2]), st = std::sin(p[2]);
+        const real dx = p[0] + ct * ox - st * oy - b.x_m, dy = p[1] + st * ox + ct * oy - b.y_m;
+        const real d = std::sqrt(dx * dx + dy * dy + dz * dz);
+        const real ux = dx / d, uy = dy / d;
+        const real sr = cfg->range.sigma_m + cfg->range.sigma_per_m * d;
+        const real var = sr * sr + ux * ux * tr[kAxx] + real(2) * ux * uy * tr[kAxy] + uy * uy * tr[kAyy] + var_track +
+                         d * d * var_s / (s_mps * s_mps);
+        const real r = z_m - d;
+        const real term = r * r / var;
+        cost[k] = f->range_track_cost_[k] + (term < kTrackTermCap ? term : kTrackTermCap);
+        if (!is_finite(cost[k])) return BL_EINVAL;
+    }
+    std::memcpy(f->range_track_cost_, cost, sizeof cost);
+    remember_range(f, j, t_us, tof_s);
+    std::memset(result, 0, sizeof *result);
+    result->status = BL_FUSION_BUFFERED;
+    real th, var_th;
+    if (!track_decided(cost, &th, &var_th)) return BL_OK;
+    // The cost took the anchor's and the dead reckoning's errors as if each
+    // range had its own; they are common to the track (a shift of its end
+    // across D turns the heading by it over |D|): their share added.
+    const real dx = tr[kDx] - cfg->range.offset_x_m, dy = tr[kDy] - cfg->range.offset_y_m;
+    const real d2 = dx * dx + dy * dy;
+    if (d2 > real(1e-6)) var_th += (real(0.5) * (tr[kAxx] + tr[kAyy]) + var_track) / d2;
+    // The pose at the state's time from the anchor's heading th.
+    VX x = state(f);
+    MX P = cov(f);
+    int64_t ds_us;
+    if (!sub_us(f->t_us_, f->range_track_t_us_, &ds_us)) return BL_OK;
+    real p[3], g[2];
+    track_pose(f, th, us_to_s(ds_us), p, g);
+    const real var_psi = real(2) * cfg->wheels.sigma_wheel_per_m * cfg->wheels.sigma_wheel_per_m * tr[kLen] /
+                         (effective_base_m(cfg) * effective_base_m(cfg));
+    const real jx = p[0] - x(X), jy = p[1] - x(Y);  // the position's jump (m)
+    // The pose's covariances with the wheel scales: the filter's own dead
+    // reckoning since the anchor carried them (the same wheels moved it),
+    // its position's turned by the heading's change; every other one zero.
+    const real turn = wrap_angle(p[2] - x(TH)), ct = std::cos(turn), st = std::sin(turn);
+    real ck[3][2];
+    for (int a = 0; a < 2; ++a) {
+        const int k = a == 0 ? int(KL) : int(KR);
+        ck[0][a] = ct * P(X, k) - st * P(Y, k);
+        ck[1][a] = st * P(X, k) + ct * P(Y, k);
+        ck[2][a] = P(TH, k);
+    }
+    for (int i : {int(X), int(Y), int(TH)}) {
+        P.row(i).setZero();
+        P.col(i).setZero();
+    }
+    x(X) = p[0];
+    x(Y) = p[1];
+    x(TH) = wrap_angle(p[2]);
+    P(X, X) = tr[kAxx] + g[0] * g[0] * var_th + var_track;
+    P(X, Y) = P(Y, X) = tr[kAxy] + g[0] * g[1] * var_th;
+    P(Y, Y) = tr[kAyy] + g[1] * g[1] * var_th + var_track;
+    P(X, TH) = P(TH, X) = g[0] * var_th;
+    P(Y, TH) = P(TH, Y) = g[1] * var_th;
+    P(TH, TH) = var_th + var_psi;
+    // The pose's uncertainty the scales explain (C K⁻¹ Cᵀ, K their 2x2) added
+    // to the track's, which took the scales as known: P stays positive.
+    const real k00 = P(KL, KL), k01 = P(KL, KR), k11 = P(KR, KR), kdet = k00 * k11 - k01 * k01;
+    if (kdet > real(0)) {
+        const int pose[3] = {X, Y, TH};
+        const real ki[2][2] = {{k11 / kdet, -k01 / kdet}, {-k01 / kdet, k00 / kdet}};
+        for (int r = 0; r < 3; ++r) {
+            for (int c = 0; c < 3; ++c)
+                for (int a = 0; a < 2; ++a)
+                    for (int b2 = 0; b2 < 2; ++b2) P(pose[r], pose[c]) += ck[r][a] * ki[a][b2] * ck[c][b2];
+            P(pose[r], KL) = P(KL, pose[r]) = ck[r][0];
+            P(pose[r], KR) = P(KR, pose[r]) = ck[r][1];
+        }
+    }
+    if (!x.allFinite() || !P.allFinite()) return BL_OK;
+    const real det = P(X, X) * P(Y, Y) - P(X, Y) * P(X, Y);
+    const bool jumped = (P(Y, Y) * jx * jx - real(2) * P(X, Y) * jx * jy + P(X, X) * jy * jy) > real(9) * det;
+    f->flags_ &= ~kFlagHeadingTrack;
+    commit(f, x, P);
+    f->range_track_fixes_ += 1;
+    if (jumped) f->reset_count_ += 1;
+    result->status = BL_FUSION_RESET;
+    return BL_OK;
+}
+
 // fuse_range on a started filter, fresh range: the shared update with the
-// start-up or converged gate. Own frame (noinline), as the other sources.
+// start-up or converged gate (or, while the heading is learnt from the
+// track, track_range). Own frame (noinline), as the other sources.
 __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t j, int64_t t_us, real tof_s, bl_fusion_result *result)
 {
+    if (learning_heading(f)) return track_range(f, j, t_us, tof_s, result);
     const bl_config *cfg = &f->cfg_;
     VX x = state(f);
     MX P = cov(f);
@@ -307,6 +548,7 @@ void range_estimate(const bl_filter *f, bl_estimate *est)
         est->range_accepted[i] = f->range_accepted_[i];
         est->range_rejected[i] = f->range_rejected_[i];
     }
+    est->range_heading_fixes = f->range_track_fixes_;
 }
 
 int fuse_range_meas(bl_filter *f, const void *meas, bl_fusion_result *res)
@@ -361,6 +603,7 @@ constexpr Kind bl::kind_range = [] {
     k.estimate = range_estimate;
     k.beacons = range_count;
     k.restart = bl_filter_start_ranges;
+    k.wheel_sample = track_wheel_sample;
 #else
     k.check_items = refuse_range_beacons;
     k.same_geometry = same_range_count;

@@ -306,7 +306,8 @@ void commit(bl_filter *f, const VX &x, const MX &P)
 {
     state(f) = x;
     cov(f) = P;
-    if (converged_now(&f->cfg_, P)) {
+    // (Not while the heading is learnt from the track: aid_range.cpp.)
+    if (converged_now(&f->cfg_, P) && !learning_heading(f)) {
         f->flags_ = (f->flags_ | kFlagConverged) & ~kExcludedMask;  // a start's exclusion ends
     } else {
         // Lost again (a long coast without pulses: P grew): back to the

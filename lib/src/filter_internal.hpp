@@ -44,6 +44,11 @@ inline bool startup_excluded(const bl_filter *f, uint32_t beacon_index)
 // (j + shift) mod N), for the localizer to apply to its sequencer and clear
 // (take_renumbered); 0 for none.
 constexpr uint32_t kFlagRenumber = 1u << 14;
+// Bit 20: a site with range beacons is learning the heading from the track
+// (aid_range.cpp): the robot moves with its heading unknown, the ranges go to
+// the tried headings, and the filter is not converged. Cleared by every start.
+constexpr uint32_t kFlagHeadingTrack = 1u << 20;
+inline bool learning_heading(const bl_filter *f) { return BL_WITH_RANGES && (f->flags_ & kFlagHeadingTrack) != 0; }
 constexpr uint32_t kRenumberedShift = 16u;
 constexpr uint32_t kRenumberedMask = 15u << kRenumberedShift;
 static_assert(BL_MAX_BEACONS <= 16, "flags_ bits 16-19 hold a shift < BL_MAX_BEACONS");
@@ -82,6 +87,19 @@ bool all_finite(const bl_real *v, int n);
 // (Mandow et al. 2007; config.h wheels.skid_factor), χ·b; b for a
 // differential drive (χ = 1).
 inline real effective_base_m(const bl_config *cfg) { return cfg->wheels.skid_factor * cfg->wheel_base_m; }
+
+// The midpoint odometry step of a dead reckoning (the bearings' motion
+// compensation, aid_bearing.cpp; the ranges' heading from the track,
+// aid_range.cpp) (Kleeman 1992 eq. 24; Vander et al. 2011 eq. 2):
+// d = (d_l + d_r)/2, δ = (d_r - d_l)/b, x += d cos(θ + δ/2), y += d sin(θ + δ/2),
+// θ += δ (pose: x, y in m, θ in rad; d_m in m, dth_rad in rad).
+inline void odometry_step(real pose[3], real d_m, real dth_rad)
+{
+    const real mid = pose[2] + real(0.5) * dth_rad;
+    pose[0] += d_m * std::cos(mid);
+    pose[1] += d_m * std::sin(mid);
+    pose[2] = wrap_angle(pose[2] + dth_rad);
+}
 
 // ---- filter.cpp (and filter_sos.cpp: the speed of sound's model)
 // t0 += k·T (the reference moves k firing slots), then whole microseconds

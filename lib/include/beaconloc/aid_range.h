@@ -76,18 +76,30 @@ typedef struct bl_range_params {
     bl_beacon range_beacons[BL_MAX_BEACONS];
 /* bl_config after the bearing block: the tuning above. */
 #define BL_RANGE_CONFIG_PARAMS bl_range_params range; /* ranges to the range beacons (aid_range.cpp) */
+/* Headings the heading from the track tries (aid_range.cpp): one every
+ * 360°/BL_RANGE_TRACK_HEADINGS (15°). */
+#define BL_RANGE_TRACK_HEADINGS 24
 /* bl_filter (private): the latest time of flight of each range beacon, for
- * the trilateration (re)start (snapshot_range.cpp), and the counters. */
+ * the trilateration (re)start (snapshot_range.cpp), the counters, and the
+ * heading from the track (aid_range.cpp; while the filter's flag says so):
+ * the pose where the robot started to move with its heading unknown, the
+ * dead reckoning since, and each tried heading's cost. */
 #define BL_RANGE_FILTER                                                                                                \
     uint32_t range_valid_mask_;           /* bit j: range_t_us_[j] is valid */                                         \
     int64_t range_t_us_[BL_MAX_BEACONS];  /* emission time of range beacon j's latest */                               \
     bl_real range_tof_s_[BL_MAX_BEACONS]; /* its time of flight (s) */                                                 \
     uint32_t range_accepted_[BL_MAX_BEACONS];                                                                          \
-    uint32_t range_rejected_[BL_MAX_BEACONS];
+    uint32_t range_rejected_[BL_MAX_BEACONS];                                                                          \
+    int64_t range_track_t_us_; /* time of the track's last wheel sample */                                             \
+    bl_real range_track_[9];   /* anchor x, y (m), its covariance xx, xy, yy (m²); since it, in the anchor's       \
+                                     body frame: dx, dy (m), ψ (rad); path length (m) */  \
+    bl_real range_track_cost_[BL_RANGE_TRACK_HEADINGS]; /* Σ r²/σ² of each tried heading (1) */                    \
+    uint32_t range_track_fixes_;                        /* headings taken from the track */
 /* bl_estimate: the counters, per range beacon index. */
 #define BL_RANGE_ESTIMATE                                                                                              \
     uint32_t range_accepted[BL_MAX_BEACONS]; /* ranges fused */                                                        \
-    uint32_t range_rejected[BL_MAX_BEACONS]; /* ranges rejected by the gate (multipath late arrivals) */
+    uint32_t range_rejected[BL_MAX_BEACONS]; /* ranges rejected by the gate (multipath late arrivals) */               \
+    uint32_t range_heading_fixes;            /* headings taken from the track (aid_range.cpp) */
 /* bl_loc_counters: the localizer's counters; refused: unknown range beacon,
  * non-finite or negative time of flight (an error returned), or refused by
  * the filter (beyond 1.5·range.max_range_m, a non-finite update; BL_OK). */
@@ -145,7 +157,12 @@ typedef struct bl_range_meas {
  * filter starts itself (BL_FUSION_STARTED) as bl_filter_start_ranges
  * does, once possible. Stale (t_us more than cfg.max_predict_gap_s after
  * the state time): kept, and the trilateration restarts the filter
- * (BL_FUSION_RESET) when possible.
+ * (BL_FUSION_RESET) when possible. While the heading is learnt from the
+ * track (the localizer's wheel hook starts it: the robot moves with its
+ * heading σ above 0.3 rad; lib/README.md "Heading from the track"): scored
+ * against the tried headings, not fused (BL_FUSION_BUFFERED), the filter
+ * not converged; the range that decides it re-sets the pose
+ * (BL_FUSION_RESET, bl_estimate.range_heading_fixes + 1).
  * *result (may be NULL): status; innovation (s) and its variance (s²),
  * test ratio for ACCEPTED and REJECTED (0 otherwise); iterations.
  * Errors (*f byte-identical): BL_EINVAL (NULL f; time_of_flight_s not
