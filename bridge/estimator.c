@@ -178,12 +178,17 @@ static void sync(struct estimator *e)
             case BL_LOC_CAUSE_KNOWN_POSE:
                 event(e, EST_EV_NOTICE, "restarted from a known pose (reset %u)", ev.reset_counter);
                 break;
+            case BL_LOC_CAUSE_HEADING_FROM_TRACK:
+                event(e, EST_EV_NOTICE, "heading from the track: pose re-set (reset %u)",
+                      ev.reset_counter);
+                break;
             default:
                 event(e, EST_EV_WARNING, "re-initialised: new geometry or command");
                 break;
             }
             if (ev.cause != BL_LOC_CAUSE_PERSISTENT_REJECTION &&
-                ev.cause != BL_LOC_CAUSE_SNAPSHOT && ev.cause != BL_LOC_CAUSE_KNOWN_POSE)
+                ev.cause != BL_LOC_CAUSE_SNAPSHOT && ev.cause != BL_LOC_CAUSE_KNOWN_POSE &&
+                ev.cause != BL_LOC_CAUSE_HEADING_FROM_TRACK)
                 e->was_started = false; /* fresh filter: beacons wait for it */
             break;
         case BL_LOC_EV_CONVERGED:

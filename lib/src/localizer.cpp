@@ -630,6 +630,7 @@ int bl::localizer_fuse(bl_localizer *loc, const LocInput &in, FuseFn fuse, const
         return BL_EINVAL;
     }
     coast_to(loc, in.t_us);
+    const bool tracking = bl::learning_heading(&loc->filter);  // aid_range.cpp: the heading from the track
     bl_fusion_result &r = loc->result_;
     int rc = fuse(&loc->filter, meas, &r);
     if (rc == BL_ETIME) {
@@ -668,6 +669,12 @@ int bl::localizer_fuse(bl_localizer *loc, const LocInput &in, FuseFn fuse, const
     const bl_fusion_result out = r;
     if (fused) {
         if (k->fixes_position) measurement_fused(loc, in.tag);
+        // The heading learnt from the track re-set the pose, which jumped:
+        // that cause, not a snapshot's (after_update's).
+        if (tracking && r.status == BL_FUSION_RESET && loc->filter.reset_count_ != loc->last_reset_seen_) {
+            loc->last_reset_seen_ = loc->filter.reset_count_;
+            push_event(loc, BL_LOC_EV_RESET, BL_LOC_CAUSE_HEADING_FROM_TRACK, 0);
+        }
         after_update(loc, false);
     }
     if (res) *res = out;

@@ -810,7 +810,8 @@ static void test_localizer_ranges_and_kidnap(void **state)
  * truth; the robot stands 1 s, then drives its 1 m circle. From the first
  * motion the ranges go to the tried headings (buffered, the estimate not
  * converged) until one is decided, within 2 s: then the pose is re-set from
- * it (once; the reset counter says so when the position jumped), the heading
+ * it (once; the reset counter says so when the position jumped, with the
+ * event's cause BL_LOC_CAUSE_HEADING_FROM_TRACK), the heading
  * within 3σ of the truth, and the converged estimates of the 2 s after it
  * near the truth and, pooled over the four starts, inside their own 3σ
  * (98.9 % for an exact covariance; 99.7 % over 48 such starts, 12 seeds:
@@ -834,11 +835,17 @@ static void test_localizer_heading_from_the_track(void **state)
         bl_wheel_increment inc;
         mm_loc_wheels_start(&loc, &inc);
         double t_fix = -1, max_e = 0, fix_z = 0;
-        int buffered_moving = 0, converged_n = 0;
+        int buffered_moving = 0, converged_n = 0, track_resets = 0;
         for (long i = 1; i <= 1000; ++i) {
             const double t = (double)i * 0.01;
             const int nb = mm_loc_tick(&loc, &cfg, &inc, t, &next_ping, 1e9, 0, 0, MM_STILL_S + 0.05);
             if (t_fix < 0) buffered_moving += nb;
+            bl_loc_event ev;
+            while (bl_localizer_next_event(&loc, &ev) == 1)
+                if (ev.kind == BL_LOC_EV_RESET) {
+                    assert_int_equal(ev.cause, BL_LOC_CAUSE_HEADING_FROM_TRACK);
+                    track_resets++;
+                }
             bl_estimate est;
             const int erc = bl_localizer_estimate(&loc, &est);
             if (erc == BL_ENOTINIT && t < 0.5) continue; /* not started: the first window */
@@ -876,6 +883,7 @@ static void test_localizer_heading_from_the_track(void **state)
         assert_true(eth < 0.1);
         /* the reset counter tells the position jumped: a heading far from the assumed one */
         assert_int_equal(est.reset_counter, fabs(offs[n]) > 1.0 ? 1u : 0u);
+        assert_int_equal(track_resets, (int)est.reset_counter); /* said with its own cause */
         converged += converged_n;
     }
     print_message("heading from the track: %.1f %% of %d estimates inside their 3 sigma\n", 100.0 * inside / converged,

@@ -208,7 +208,9 @@ typedef enum bl_loc_reset_cause {
                                               (the wheel scales learned so far kept) */
     BL_LOC_CAUSE_STALE_PULSE = 4,          /* a pulse too old for the state: fresh filter (the same) */
     BL_LOC_CAUSE_CONFIG = 5,               /* bl_localizer_reinit (new geometry): fresh filter */
-    BL_LOC_CAUSE_KNOWN_POSE = 6            /* bl_localizer_start: restarted from a known pose */
+    BL_LOC_CAUSE_KNOWN_POSE = 6,           /* bl_localizer_start: restarted from a known pose */
+    BL_LOC_CAUSE_HEADING_FROM_TRACK = 7    /* ranges: the heading learnt from the track re-set the
+                                              pose, which jumped beyond 3 sigma (aid_range.h) */
 } bl_loc_reset_cause;
 
 typedef struct bl_loc_event {
