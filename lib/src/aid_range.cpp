@@ -216,11 +216,15 @@ void remember_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us, rea
 // decision. Decided once every heading two or more steps (30°) from the best
 // costs kTrackDecide more: the heading is the parabola's minimum through the
 // best and its two neighbours, its variance 2/(the cost's curvature) (the
-// cost is -2 log of the likelihood); the pose is anchor + R(θ)(D - o) with that
-// variance carried through ∂/∂θ (its other covariances zero), BL_FUSION_RESET,
-// counted in range_heading_fixes, and in the reset counter when the position
-// jumped by more than 3σ of its new covariance (a heading far from the assumed one). A silence of the wheels (new track)
-// or kTrackMaxLength_m without a decision leaves the heading to the filter.
+// cost is -2 log of the likelihood) plus the anchor's and the dead
+// reckoning's share; the pose is anchor + R(θ)(D - o) with that variance
+// carried through ∂/∂θ, its covariances with the wheel scales kept from the
+// filter's own dead reckoning, the others zero; BL_FUSION_RESET, counted in
+// range_heading_fixes, and in the reset counter when the position jumped by
+// more than 3σ of its new covariance (a heading far from the assumed one). A
+// silence of the wheels (new track) or kTrackMaxLength_m without a decision
+// leaves the heading to the filter.
+constexpr real kTrackStep_rad = real(2) * kPi / real(BL_RANGE_TRACK_HEADINGS);  // between tried headings
 constexpr real kTrackDecide = real(36);
 constexpr real kTrackTermCap = real(16);  // a 4σ residual (a multipath late arrival) adds no more
 constexpr real kTrackMaxLength_m = real(10);
@@ -285,7 +289,7 @@ void track_wheel_sample(bl_filter *f, int64_t t_us, real d_left_m, real d_right_
 // The robot's centre (x, y) and heading for the anchor's heading th_rad:
 // the anchor's receiver less R(th)(ox, oy), plus R(th) D, carried dt_s (s)
 // past the track's last sample with the filter's v, ω (midpoint heading, as
-// range_model_at); g = ∂(x, y)/∂th (m/rad).
+// range_model_at); g (may be NULL) = ∂(x, y)/∂th (m/rad).
 void track_pose(const bl_filter *f, real th_rad, real dt_s, real p[3], real g[2])
 {
     const real *tr = f->range_track_;
@@ -295,6 +299,7 @@ void track_pose(const bl_filter *f, real th_rad, real dt_s, real p[3], real g[2]
     p[0] = tr[kAx] + c * dx - s * dy + vdt * std::cos(mid);
     p[1] = tr[kAy] + s * dx + c * dy + vdt * std::sin(mid);
     p[2] = th_rad + tr[kPsi] + f->x_[W] * dt_s;
+    if (g == nullptr) return;
     g[0] = -s * dx - c * dy - vdt * std::sin(mid);
     g[1] = c * dx - s * dy + vdt * std::cos(mid);
 }
@@ -303,7 +308,7 @@ void track_pose(const bl_filter *f, real th_rad, real dt_s, real p[3], real g[2]
 bool track_decided(const real *cost, real *th_rad, real *var_rad2)
 {
     constexpr int K = BL_RANGE_TRACK_HEADINGS;
-    constexpr real step = real(2) * real(kPi) / real(K);
+    constexpr real step = kTrackStep_rad;
     int best = 0;
     for (int k = 1; k < K; ++k)
         if (cost[k] < cost[best]) best = k;
@@ -341,8 +346,8 @@ __attribute__((noinline)) int track_range(bl_filter *f, uint32_t j, int64_t t_us
     constexpr int K = BL_RANGE_TRACK_HEADINGS;
     real cost[K];
     for (int k = 0; k < K; ++k) {
-        real p[3], g[2];
-        track_pose(f, real(k) * real(2) * real(kPi) / real(K), dt_s, p, g);
+        real p[3];
+        track_pose(f, real(k) * kTrackStep_rad, dt_s, p, nullptr);
         const real ct = std::cos(p[2]), st = std::sin(p[2]);
         const real dx = p[0] + ct * ox - st * oy - b.x_m, dy = p[1] + st * ox + ct * oy - b.y_m;
         const real d = std::sqrt(dx * dx + dy * dy + dz * dz);
