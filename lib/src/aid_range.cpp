@@ -106,6 +106,17 @@ constexpr real kStartupGateFactor = real(2);
 // of a metre and more (marvelmind-multipath: 3 of 8 runs lost for good;
 // docs/performance.md, "Ranges").
 constexpr real kHeadingUnknown_rad = real(0.3);
+// A robot known to stand (the wheels measure its v and ω: within these of
+// zero at 3σ) moves no receiver, whatever its heading: an unknown heading
+// does not widen the gate then (our choice). Widened, a standing robot
+// fused multipath late arrivals of up to 6σ, pulling its fix off.
+constexpr real kStandingSpeed_mps = real(0.01);
+constexpr real kStandingTurn_radps = real(0.02);
+bool standing(const bl_filter *f, const MX &P)
+{
+    return std::fabs(f->x_[V]) + real(3) * std::sqrt(P(V, V)) <= kStandingSpeed_mps &&
+           std::fabs(f->x_[W]) + real(3) * std::sqrt(P(W, W)) <= kStandingTurn_radps;
+}
 // A range beyond this many times cfg.range.max_range_m is refused as bad
 // input (aid_range.h: a sensor reporting a little past its rating and an
 // s error of up to 50 % still pass).
@@ -471,7 +482,8 @@ ScalarMeasurement bl::range_measurement(const bl_filter *f, const MX &P, real d_
     m.z = tof_s;
     m.R = sigma_s * sigma_s;
     const bool heading_unknown = P(TH, TH) > kHeadingUnknown_rad * kHeadingUnknown_rad;
-    m.gate_sigma = conv && !heading_unknown ? cfg->range.gate_sigma : kStartupGateFactor * cfg->range.gate_sigma;
+    m.gate_sigma = conv && !(heading_unknown && !standing(f, P)) ? cfg->range.gate_sigma
+                                                                 : kStartupGateFactor * cfg->range.gate_sigma;
     m.max_iterations = kIekfIterations;
     m.step_tolerance_m = kIekfTolerance_m;
     return m;
@@ -494,7 +506,7 @@ extern "C" int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, i
 
     int rc;
     if (!snapshot_source_step(f, cfg->range_beacon_count, f->range_valid_mask_, f->range_t_us_, remember_range,
-                              bl_filter_start_ranges, j, t_us, time_of_flight_s, &res, &rc))
+                              start_ranges_confirmed, j, t_us, time_of_flight_s, &res, &rc))
         rc = fuse_started(f, j, t_us, time_of_flight_s, &res);
     if (rc == BL_OK && result) *result = res;
     return rc;

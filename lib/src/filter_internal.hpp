@@ -275,6 +275,10 @@ inline bool snapshot_source_step(bl_filter *f, uint32_t count, uint32_t valid_ma
 }
 
 #if BL_WITH_RANGES
+// ---- snapshot_range.cpp: the automatic start from ranges, a first start
+// confirmed by two rounds (a running filter's restart as
+// bl_filter_start_ranges). BL_ENOCONVERGE while a round awaits the next.
+int start_ranges_confirmed(bl_filter *f);
 // ---- aid_range.cpp, shared with aid_team.cpp (the teammates' ranges)
 // The range model (aid_range.h bl_filter_fuse_range) to a beacon at b: the
 // time of flight h (s) to the receiver dt_s after the state time, H =

@@ -26,6 +26,7 @@ struct RangeSnapshot {
     real cov[4];        // its covariance from the ranges' noise (m²)
     real dx_ds, dy_ds;  // ∂(x, y)/∂s (m per m/s)
     int64_t newest_us;  // newest range's emission time
+    int64_t oldest_us;  // oldest range's emission time
     real span_s;        // newest - oldest range used (s)
 };
 
@@ -65,7 +66,7 @@ uint32_t fill_problem(const bl_filter *f, real s_mps, bl_range_problem *prob, in
     return m;
 }
 
-// The trilateration of the kept ranges at s_mps and at s_mps + kDs_mps (the
+// The trilateration of the kept ranges at s_mps and at s_mps ± kDs_mps (the
 // problem lives only in this frame; noinline keeps it off the callers'
 // stacks).
 __attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mps, real var_s, RangeSnapshot *out)
@@ -83,16 +84,6 @@ __attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mp
     if (rc != BL_OK) return rc;
     // Mirror ambiguity (collinear beacons): refuse rather than guess.
     if (sol.ambiguous) return BL_EDEGENERATE;
-    // The fix must explain the ranges: every residual within 3σ, σ with
-    // the speed of sound's share (r·σs/s) added, as the pulse snapshot's
-    // residual test (aid_range.h). Checked by the rms, per range: rms <= 3σ_max.
-    real sig_max = 0;
-    for (uint32_t j = 0; j < m; ++j) {
-        const real ss = prob.range_m[j] * std::sqrt(var_s) / s_mps;
-        const real sj = std::sqrt(prob.sigma_m[j] * prob.sigma_m[j] + ss * ss);
-        if (sj > sig_max) sig_max = sj;
-    }
-    if (m > 3 && !(sol.residual_rms_m <= real(3) * sig_max)) return BL_ENOCONVERGE;
     bl_range_problem prob2;
     int64_t n2 = 0, o2 = 0;
     fill_problem(f, s_mps + kDs_mps, &prob2, &n2, &o2);
@@ -100,30 +91,66 @@ __attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mp
     rc = bl_solve_ranges_2d(&prob2, &sol2);
     if (rc == BL_EINVAL) rc = BL_EDEGENERATE;
     if (rc != BL_OK) return rc;
+    out->dx_ds = (sol2.x_m - sol.x_m) / kDs_mps;
+    out->dy_ds = (sol2.y_m - sol.y_m) / kDs_mps;
+    // The fix must explain the ranges (a late, multipath range shows in the
+    // residual). A wrong s scales every range alike (r_j·δs/s), so s is an
+    // unknown of the test with its prior var_s, as in a least-squares fit
+    // of (x, y, δs) with the prior as one more measurement (our test):
+    //   χ²(δs) = χ²_fix(s + δs) + δs²/var_s,
+    // m + 1 - 3 = m - 2 degrees of freedom (m ranges and the prior; x, y, δs
+    // unknown), refused beyond χ²'s 99.73 % point (3σ). The ranges are
+    // linear in s, so χ²_fix is near a parabola in δs, known from the fixes
+    // at s - 1, s, s + 1 m/s (χ₋, χ₀, χ₊): b = (χ₊ - χ₋)/2, c = (χ₊ + χ₋)/2
+    // - χ₀, its minimum at δs* = -b/(2 (c + 1/var_s)). χ²(δs*) is taken from
+    // a fix at s + δs*, not from the parabola: with two late ranges the
+    // fixes move far from linear, and the parabola's minimum went below 0.
+    // Any δs gives χ²(δs) >= the minimum, so a set refused by the parabola's
+    // error is refused, never one passed. Before, the residual RMS against
+    // 3σ of the largest range's σ with the whole prior's share r·σ_s/s
+    // (65 mm at 4 m) passed a range 0.51 m late and started
+    // marvelmind-multipath 0.33 m off (docs/performance.md).
+    if (m > 3) {
+        const real chi2_plus = sol2.chi2;
+        fill_problem(f, s_mps - kDs_mps, &prob2, &n2, &o2);  // the same frame: the stack
+        if (bl_solve_ranges_2d(&prob2, &sol2) != BL_OK) return BL_ENOCONVERGE;
+        const real inv_var_s = var_s > real(0) ? real(1) / var_s : real(0);
+        const real b = real(0.5) * (chi2_plus - sol2.chi2) / kDs_mps;
+        const real c = (real(0.5) * (chi2_plus + sol2.chi2) - sol.chi2) / (kDs_mps * kDs_mps) + inv_var_s;
+        real chi2 = sol.chi2;
+        if (c > real(0) && var_s > real(0)) {  // var_s 0: s known, δs = 0
+            const real ds = -b / (real(2) * c);
+            fill_problem(f, s_mps + ds, &prob2, &n2, &o2);
+            if (bl_solve_ranges_2d(&prob2, &sol2) == BL_OK && sol2.chi2 + ds * ds * inv_var_s < chi2)
+                chi2 = sol2.chi2 + ds * ds * inv_var_s;
+        }
+        if (!(chi2 <= chi2_quantile(m - 2, kZ3Sigma))) return BL_ENOCONVERGE;
+    }
     out->x_m = sol.x_m;
     out->y_m = sol.y_m;
     for (int k = 0; k < 4; ++k) out->cov[k] = sol.cov[k];
-    out->dx_ds = (sol2.x_m - sol.x_m) / kDs_mps;
-    out->dy_ds = (sol2.y_m - sol.y_m) / kDs_mps;
     out->newest_us = newest;
+    out->oldest_us = oldest;
     out->span_s = us_to_s(newest - oldest);
     const real v[] = {out->x_m, out->y_m, out->cov[0], out->cov[3], out->dx_ds, out->dy_ds};
     if (!all_finite(v, int(sizeof v / sizeof v[0]))) return BL_ENOCONVERGE;
     return BL_OK;
 }
 
-// (Re)start from the trilateration of the kept ranges (aid_range.h,
-// bl_filter_start_ranges); *f untouched on failure.
-int start_from_ranges(bl_filter *f)
+// s and its variance for a snapshot: a running filter's, else the configured.
+void snapshot_sos(const bl_filter *f, real *s_mps, real *var_s)
+{
+    const bool was_started = started(f);
+    *s_mps = was_started ? f->x_[S] : f->cfg_.speed_of_sound_mps;
+    *var_s = was_started ? cov(f)(S, S) : f->cfg_.sigma_speed_of_sound_mps * f->cfg_.sigma_speed_of_sound_mps;
+}
+
+// (Re)start from a trilateration snap at s_mps, var_s (snapshot_sos);
+// *f untouched on failure.
+int start_from_snapshot(bl_filter *f, const RangeSnapshot &snap, real s_mps, real var_s)
 {
     const bl_config *cfg = &f->cfg_;
     const bool was_started = started(f);
-    // s and its variance: a running filter's, else the configured.
-    const real s_mps = was_started ? f->x_[S] : cfg->speed_of_sound_mps;
-    const real var_s = was_started ? cov(f)(S, S) : cfg->sigma_speed_of_sound_mps * cfg->sigma_speed_of_sound_mps;
-    RangeSnapshot snap;
-    const int rc = solve_range_snapshot(f, s_mps, var_s, &snap);
-    if (rc != BL_OK) return rc;
     VX x = VX::Zero();
     MX P = MX::Zero();
     // Heading: ranges do not see it. A running filter keeps its own, σ at
@@ -200,10 +227,71 @@ int start_from_ranges(bl_filter *f)
     shift_reference(cfg, x, P, epoch, ref, 0);
     mark_started(f, epoch, ref, snap.newest_us);
     commit(f, x, P);  // state, covariance, converged flag from the position σ
+    f->range_fix_tries_ = 0;
     return BL_OK;
 }
 
+// (Re)start from the trilateration of the kept ranges (aid_range.h,
+// bl_filter_start_ranges); *f untouched on failure.
+int start_from_ranges(bl_filter *f)
+{
+    real s_mps, var_s;
+    snapshot_sos(f, &s_mps, &var_s);
+    RangeSnapshot snap;
+    const int rc = solve_range_snapshot(f, s_mps, var_s, &snap);
+    return rc != BL_OK ? rc : start_from_snapshot(f, snap, s_mps, var_s);
+}
+
 }  // namespace
+
+// The automatic first start confirmed (our rule): the fix of one round of
+// ranges must agree with the fix of the round before, from other ranges of
+// the same beacons: |p₂ - p₁|² in the metric (C₁ + C₂)⁻¹ (the ranges'
+// noise; both fixes at the same s, whose error moves them alike) within χ²(2)'s 3σ
+// point. One late range in a round of four shows in its residual
+// (solve_range_snapshot); two late ranges from two beacons on one wall can
+// fit a fix that passes it: on x-mmp-f180 (marvelmind-multipath facing
+// away) seed 20 the ranges to beacons 1 and 2 were 0.43 and 0.51 m late in
+// one round, the fix 0.44 m off with a residual χ² of 0.7, and the filter
+// started there held it for 5 s (the ranges of beacons 1 and 2 rejected,
+// those of 3 and 4 fused, so no persistent-rejection restart). Until two
+// rounds agree the ranges are buffered; a robot that moves while not
+// started has rounds that differ by its motion, so after kStartTries
+// disagreeing rounds in a row the newest fix starts the filter, unconfirmed.
+// A pending fix older than kStartFixAge_s is dropped.
+namespace {
+constexpr uint32_t kStartTries = 3;
+constexpr real kStartFixAge_s = real(1);
+}  // namespace
+
+int start_ranges_confirmed(bl_filter *f)
+{
+    if (started(f)) return start_from_ranges(f);  // a running filter's restart: its own covariance
+    real s_mps, var_s;
+    snapshot_sos(f, &s_mps, &var_s);
+    RangeSnapshot snap;
+    const int rc = solve_range_snapshot(f, s_mps, var_s, &snap);
+    if (rc != BL_OK) return rc;
+    real *p = f->range_fix_;  // the pending fix: x, y (m), covariance xx, xy, yy (m²)
+    int64_t age_us = 0;
+    if (f->range_fix_tries_ > 0 &&
+        (!sub_us(snap.newest_us, f->range_fix_t_us_, &age_us) || us_to_s(age_us) > kStartFixAge_s))
+        f->range_fix_tries_ = 0;
+    if (f->range_fix_tries_ > 0) {
+        if (snap.oldest_us <= f->range_fix_t_us_) return BL_ENOCONVERGE;  // shares a range: wait for the next round
+        const real dx = snap.x_m - p[0], dy = snap.y_m - p[1];
+        const real a = snap.cov[0] + p[2], b = snap.cov[1] + p[3], c = snap.cov[3] + p[4];
+        const real det = a * c - b * b;
+        const real d2 = det > real(0) ? (c * dx * dx - real(2) * b * dx * dy + a * dy * dy) / det : real(1e30);
+        if (d2 <= chi2_quantile(2, kZ3Sigma) || f->range_fix_tries_ >= kStartTries)
+            return start_from_snapshot(f, snap, s_mps, var_s);
+    }
+    const real q[5] = {snap.x_m, snap.y_m, snap.cov[0], snap.cov[1], snap.cov[3]};
+    std::memcpy(p, q, sizeof q);
+    f->range_fix_t_us_ = snap.newest_us;
+    f->range_fix_tries_ += 1;
+    return BL_ENOCONVERGE;
+}
 
 }  // namespace bl
 

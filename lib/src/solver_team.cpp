@@ -209,16 +209,6 @@ bool normal_equations(const Pairs &pairs, const bool freec[kNP], const VP &p, re
     return is_finite(c2);
 }
 
-// Chi-square quantile by Wilson & Hilferty (1931): χ²_q(k) ≈ k (1 - 2/(9k)
-// + z_q sqrt(2/(9k)))³, z_0.95 = 1.6449 (within 1 % for k >= 3).
-real chi2_quantile95(uint32_t k)
-{
-    if (k == 0) return real(0);
-    const real kk = real(k), t = real(2) / (real(9) * kk);
-    const real c = real(1) - t + real(1.6448536) * std::sqrt(t);
-    return kk * c * c * c;
-}
-
 }  // namespace
 
 extern "C" int bl_solve_team(const bl_team_problem *prob, bl_team_solution *sol)
@@ -338,7 +328,7 @@ extern "C" int bl_solve_team(const bl_team_problem *prob, bl_team_solution *sol)
     out.dof = dof > 0 ? uint32_t(dof) : 0u;
     out.residual_rms_m = std::sqrt(ssr / real(pairs.n));
     out.chi2 = chi2;
-    out.chi2_limit = chi2_quantile95(out.dof);
+    out.chi2_limit = chi2_quantile(out.dof, kZ95);
     out.chi2_ok = out.dof == 0 || chi2 <= out.chi2_limit;
     out.iterations = it;
     out.mirror_unresolved = true;

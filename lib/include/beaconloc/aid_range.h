@@ -83,7 +83,8 @@ typedef struct bl_range_params {
  * the trilateration (re)start (snapshot_range.cpp), the counters, and the
  * heading from the track (aid_range.cpp; while the filter's flag says so):
  * the pose where the robot started to move with its heading unknown, the
- * dead reckoning since, and each tried heading's cost. */
+ * dead reckoning since, and each tried heading's cost; the first start's
+ * fix awaiting the next round's (snapshot_range.cpp). */
 #define BL_RANGE_FILTER                                                                                                \
     uint32_t range_valid_mask_;           /* bit j: range_t_us_[j] is valid */                                         \
     int64_t range_t_us_[BL_MAX_BEACONS];  /* emission time of range beacon j's latest */                               \
@@ -94,7 +95,10 @@ typedef struct bl_range_params {
     bl_real range_track_[9];   /* anchor x, y (m), its covariance xx, xy, yy (m²); since it, in the anchor's       \
                                      body frame: dx, dy (m), ψ (rad); path length (m) */  \
     bl_real range_track_cost_[BL_RANGE_TRACK_HEADINGS]; /* Σ r²/σ² of each tried heading (1) */                    \
-    uint32_t range_track_fixes_;                        /* headings taken from the track */
+    uint32_t range_track_fixes_;                        /* headings taken from the track */                            \
+    int64_t range_fix_t_us_;   /* the first start's pending fix (snapshot_range.cpp): its newest range's time */       \
+    bl_real range_fix_[5];     /* its receiver x, y (m), covariance xx, xy, yy (m²) */                                \
+    uint32_t range_fix_tries_; /* rounds fixed and not yet confirmed (0: none pending) */
 /* bl_estimate: the counters, per range beacon index. */
 #define BL_RANGE_ESTIMATE                                                                                              \
     uint32_t range_accepted[BL_MAX_BEACONS]; /* ranges fused */                                                        \
@@ -143,11 +147,13 @@ typedef struct bl_range_meas {
  * bl_filter_predict; the state time is not changed). σ of the time of
  * flight = (cfg.range.sigma_m + cfg.range.sigma_per_m·d)/s, d the
  * predicted range (m); gate cfg.range.gate_sigma, twice that until
- * converged and while the heading σ exceeds 0.3 rad (a start from ranges
- * has no heading: the first motion is predicted in a wrong direction, its
- * covariance grows with the motion, and the wide gate passes the ranges
- * that show the heading; a standing robot's multipath arrivals are
- * rejected; multipath while moving in that phase can lock a wrong
+ * converged and while the heading σ exceeds 0.3 rad with the robot not
+ * known to stand (a start from ranges has no heading: the first motion is
+ * predicted in a wrong direction, its covariance grows with the motion,
+ * and the wide gate passes the ranges that show the heading; a robot whose
+ * v and ω are within 0.01 m/s and 0.02 rad/s of zero at 3σ moves no
+ * receiver whatever its heading, and keeps the converged gate against
+ * multipath; multipath while moving in that phase can lock a wrong
  * heading: lib/README.md);
  * the shared update (fusion.h: IEKF, 2 iterations, Joseph form). Multipath late arrivals (a reflection heard instead of the direct
  * path; Millibots §3.2) fall outside the gate: BL_FUSION_REJECTED, counted
@@ -155,7 +161,11 @@ typedef struct bl_range_meas {
  * Every range that returns BL_OK is kept as its beacon's latest for a
  * trilateration (re)start. Not started: kept (BL_FUSION_BUFFERED); the
  * filter starts itself (BL_FUSION_STARTED) as bl_filter_start_ranges
- * does, once possible. Stale (t_us more than cfg.max_predict_gap_s after
+ * does, once the fix of a round agrees with the fix of the round before
+ * from other ranges (within 3σ of the two fixes' noise; two late ranges
+ * from one wall can fit a wrong fix that passes its residual test), or,
+ * after three rounds in a row that disagree (a robot moving before its
+ * start), from the newest. Stale (t_us more than cfg.max_predict_gap_s after
  * the state time): kept, and the trilateration restarts the filter
  * (BL_FUSION_RESET) when possible. While the heading is learnt from the
  * track (the localizer's wheel hook starts it: the robot moves with its
@@ -189,9 +199,11 @@ int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us
  * the unknown heading, so the fix is the receiver's, and the wheel-base
  * centre is put there with the offset's length added to its σ.
  * Refused unless the fix is unambiguous (no mirror solution within the
- * beacons' collinearity: bl_solve_ranges_2d), explains the ranges (with more than 3:
- * rms residual <= 3 σ, σ the largest range σ with its speed-of-sound share
- * d·σs/s added) and its drms is <= cfg.range.max_fix_drms_m.
+ * beacons' collinearity: bl_solve_ranges_2d), explains the ranges (with
+ * m > 3: the least χ² of the ranges over s with its prior, the fixes'
+ * Σ r²/σ² at s + δs plus δs²/σs², within χ²(m - 2)'s 99.73 % point: a
+ * multipath range late by a few σ of the fix shows) and its drms is
+ * <= cfg.range.max_fix_drms_m.
  * Ranges give no heading: a running filter keeps its heading (σ grown to
  * at least cfg.reset_sigma_theta_rad), a first start takes
  * cfg.initial_theta_rad with σ cfg.reset_sigma_theta_rad (large: the
@@ -207,8 +219,8 @@ int bl_filter_fuse_range(bl_filter *f, uint32_t range_beacon_index, int64_t t_us
  * Errors (*f byte-identical): BL_EINVAL (NULL), BL_ENOTINIT,
  * BL_EDEGENERATE (fewer than min(4, N) range beacons in the window,
  * singular or ambiguous geometry, or a drms above cfg.range.max_fix_drms_m),
- * BL_ENOCONVERGE (the solver did not converge, a residual above 3 σ, or a
- * non-finite fix). */
+ * BL_ENOCONVERGE (the solver did not converge, a χ² above its 3σ point, or
+ * a non-finite fix). */
 int bl_filter_start_ranges(bl_filter *f);
 
 /* How a time of flight moves with its range beacon's position, at the
