@@ -258,10 +258,11 @@ int start_from_ranges(bl_filter *f)
 // rounds agree the ranges are buffered; a robot that moves while not
 // started has rounds that differ by its motion, so after kStartTries
 // disagreeing rounds in a row the newest fix starts the filter, unconfirmed.
-// A pending fix older than kStartFixAge_s is dropped.
+// A pending fix is dropped when the next round's is more than two snapshot
+// windows newer (cfg.range.snapshot_window_s: a round fits in one, so the
+// next disjoint round comes within two however slowly the site pings).
 namespace {
 constexpr uint32_t kStartTries = 3;
-constexpr real kStartFixAge_s = real(1);
 }  // namespace
 
 int start_ranges_confirmed(bl_filter *f)
@@ -274,8 +275,8 @@ int start_ranges_confirmed(bl_filter *f)
     if (rc != BL_OK) return rc;
     real *p = f->range_fix_;  // the pending fix: x, y (m), covariance xx, xy, yy (m²)
     int64_t age_us = 0;
-    if (f->range_fix_tries_ > 0 &&
-        (!sub_us(snap.newest_us, f->range_fix_t_us_, &age_us) || us_to_s(age_us) > kStartFixAge_s))
+    if (f->range_fix_tries_ > 0 && (!sub_us(snap.newest_us, f->range_fix_t_us_, &age_us) ||
+                                    us_to_s(age_us) > real(2) * f->cfg_.range.snapshot_window_s))
         f->range_fix_tries_ = 0;
     if (f->range_fix_tries_ > 0) {
         if (snap.oldest_us <= f->range_fix_t_us_) return BL_ENOCONVERGE;  // shares a range: wait for the next round

@@ -643,17 +643,22 @@ static void test_start_from_ranges(void **state)
     assert_true(hypot(pxs, pys) > 1e-3); /* the position moves with s */
 }
 
-/* One round of ranges (beacons 0..3 in turn from t, 50 ms apart) to the
+/* One round of ranges (beacons 0..3 in turn from t, ping_s apart) to the
  * receiver of pose p, beacon late_j's late by late_m (a reflection). */
-static void mm_round(bl_filter *f, const bl_config *cfg, double t, mm_pose p, int late_j, double late_m,
-                     bl_fusion_result *res)
+static void mm_round_every(bl_filter *f, const bl_config *cfg, double t, double ping_s, mm_pose p, int late_j,
+                           double late_m, bl_fusion_result *res)
 {
     for (int j = 0; j < MM_BEACONS; ++j) {
         const double d = mm_distance(cfg, p, j) + (j == late_j ? late_m : 0.0);
-        assert_int_equal(
-            bl_filter_fuse_range(f, (uint32_t)j, mm_us(t + 0.05 * j), (bl_real)(d / MM_TRUE_SPEED_OF_SOUND), res),
-            BL_OK);
+        assert_int_equal(bl_filter_fuse_range(f, (uint32_t)j, mm_us(t + ping_s * j),
+                                              (bl_real)(d / MM_TRUE_SPEED_OF_SOUND), res),
+                         BL_OK);
     }
+}
+static void mm_round(bl_filter *f, const bl_config *cfg, double t, mm_pose p, int late_j, double late_m,
+                     bl_fusion_result *res)
+{
+    mm_round_every(f, cfg, t, MM_PING_PERIOD_S, p, late_j, late_m, res);
 }
 
 /* The start refuses what multipath makes of a round (snapshot_range.cpp):
@@ -661,9 +666,9 @@ static void mm_round(bl_filter *f, const bl_config *cfg, double t, mm_pose p, in
  * with its prior (the test before, the residual RMS against the prior's
  * whole share of s, passed it: marvelmind-multipath's 0.33 m start); a
  * round that fits a fix 0.4 m off is not started from until the next
- * round, from other ranges, agrees; a robot that moves before the start
- * (its rounds differ by its motion) starts after three rounds that
- * disagree, from the newest. */
+ * round, from other ranges, agrees (on a slow site too); a robot that
+ * moves before the start (its rounds differ by its motion) starts after
+ * three rounds that disagree, from the newest. */
 static void test_start_refuses_multipath(void **state)
 {
     (void)state;
@@ -702,6 +707,16 @@ static void test_start_refuses_multipath(void **state)
     const double ex = (double)est.x_m + 0.05 - rx, ey = (double)est.y_m - ry;
     assert_true(hypot(ex, ey) < 3 * sqrt((double)est.cov[0] + (double)est.cov[6]));
     assert_true(fabs((double)est.y_m - p.y) < 0.1);
+
+    /* a slow site: one ping every 0.35 s, rounds of 1.4 s (its snapshot
+     * window 1.5 s): the second round confirms the first */
+    bl_config slow = cfg;
+    slow.range.snapshot_window_s = (bl_real)1.5;
+    assert_int_equal(bl_filter_init(&f, &slow), BL_OK);
+    mm_round_every(&f, &slow, 0.0, 0.35, p, -1, 0.0, &res);
+    assert_int_equal(res.status, BL_FUSION_BUFFERED);
+    mm_round_every(&f, &slow, 1.4, 0.35, p, -1, 0.0, &res);
+    assert_int_equal(res.status, BL_FUSION_STARTED);
 
     /* a robot driving 0.75 m/s before its start: every round 0.15 m on */
     assert_int_equal(bl_filter_init(&f, &cfg), BL_OK);
