@@ -250,9 +250,10 @@ int start_from_ranges(bl_filter *f)
 // noise; both fixes at the same s, whose error moves them alike) within χ²(2)'s 3σ
 // point. One late range in a round of four shows in its residual
 // (solve_range_snapshot); two late ranges from two beacons on one wall can
-// fit a fix that passes it: on x-mmp-f180 (marvelmind-multipath facing
-// away) seed 20 the ranges to beacons 1 and 2 were 0.43 and 0.51 m late in
-// one round, the fix 0.44 m off with a residual χ² of 0.7, and the filter
+// fit a fix that passes it: with marvelmind-multipath's pings and its drive
+// turned 180° (seed 20; docs/performance.md "Ranges: multipath at the
+// start") the ranges to beacons 1 and 2 were 0.43 and 0.51 m late in one
+// round, the fix 0.44 m off with a residual χ² of 0.7, and the filter
 // started there held it for 5 s (the ranges of beacons 1 and 2 rejected,
 // those of 3 and 4 fused, so no persistent-rejection restart). Until two
 // rounds agree the ranges are buffered; a robot that moves while not
