@@ -410,12 +410,21 @@ NOINLINE Fused classify(bl_localizer *loc, uint32_t beacon, bool signature)
         return Fused::kRejected;  // the next arrival fuses on the new t0 (and moves the hint)
     }
     // An innovation longer than the longest flight: a numbering error, not a
-    // pose error (see localizer.h). Two in a row while converged re-sync,
-    // unless the timing watch's run holds this one and beacon 1's signature
-    // (the sequencer's numbering is right, the firing times jumped) and is
-    // not yet two cycles' firings long.
+    // pose error (see localizer.h). Two in a row re-sync, unless the timing
+    // watch's run holds this one and beacon 1's signature (the sequencer's
+    // numbering is right, the firing times jumped) and is not yet two
+    // cycles' firings long. Once the firing time is known: while converged,
+    // or after a start that fixed t0 within a quarter period (a snapshot's)
+    // while its position converges. Converged only, as before, a restart
+    // after a kidnap in the hall that was right, 0.03 m off, met the
+    // sequencer numbering three slots off without its hint (innovations
+    // -0.44 to -0.49 s): plain rejections, and the next restart fitted them
+    // 13.7 m away (docs/bridge.md).
+    const bl_filter &f = loc->filter;
+    const bl_real quarter = bl_real(0.25) * f.x_[BL_IX_T];
+    const bool t0_known = loc->was_converged_ || f.P_[BL_IX_T0 * BL_FILTER_NX + BL_IX_T0] < quarter * quarter;
     const bool misnumbered =
-        res.status == BL_FUSION_REJECTED && loc->was_converged_ &&
+        res.status == BL_FUSION_REJECTED && t0_known &&
         (res.innovation < 0 ? -res.innovation : res.innovation) * bl_real(1e6) > bl_real(loc->seq.cfg.max_flight_us);
     if (misnumbered) {
         loc->counters_.numbering_errors++;

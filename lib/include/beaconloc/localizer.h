@@ -41,10 +41,13 @@
  *     This is the one persistent-rejection mechanism (the filter has none of
  *     its own). Event RESET, cause PERSISTENT_REJECTION.
  *   - Numbering errors: a rejected arrival whose innovation is longer than
- *     the longest flight (seq cfg max_flight_us) while converged cannot come
- *     from a pose error: the sequencer gave the wrong beacon number. Two in
- *     a row re-synchronise the sequencer from the filter's firing times
- *     (event RESYNC); they do not enter the rejection watch.
+ *     the longest flight (seq cfg max_flight_us) once the firing time is
+ *     known (converged, or after a start that fixed t0 within a quarter
+ *     period while the position converges) cannot come from a pose error:
+ *     the sequencer gave the wrong beacon number. Two in a row
+ *     re-synchronise the sequencer from the filter's firing times (event
+ *     RESYNC; while not converged it has no hint and locks again on its
+ *     own); they do not enter the rejection watch.
  *   - Numbering from geometry: where beacon 1 is not heard (another room)
  *     an echo 3 ms behind another beacon's direct path can pass for its
  *     double pulse, and the sequencer numbers the whole cycle k places off.
