@@ -2,7 +2,7 @@
 # tests/demo). The bus lives in User-Mode Linux where the host has no vcan.
 #   make test-integration [IT_ARGS='-k nominal'] [IT_GUESTS=N]
 #                                                  the pytest suite in N UML guests
-#   make bench-accuracy                            20 seeds x 11 scenarios, --replay
+#   make bench-accuracy                            20 seeds x 26 scenarios, --replay
 #   make bench-bearing                             Vander 2011 Fig. 7: eurobot, 20 seeds, --replay
 #   make bench-backlog                             frames held and delivered at once, 20 seeds x 3, --replay
 #   make demo [DEMO_S=120]                         kleeman-lab live, plot in build/demo/
