@@ -432,8 +432,7 @@ __attribute__((noinline)) int track_range(bl_filter *f, uint32_t j, int64_t t_us
         }
     }
     if (!x.allFinite() || !P.allFinite()) return BL_OK;
-    const real det = P(X, X) * P(Y, Y) - P(X, Y) * P(X, Y);
-    const bool jumped = (P(Y, Y) * jx * jx - real(2) * P(X, Y) * jx * jy + P(X, X) * jy * jy) > real(9) * det;
+    const bool jumped = mahalanobis2_xy(jx, jy, P(X, X), P(X, Y), P(Y, Y)) > real(9);
     f->flags_ &= ~kFlagHeadingTrack;
     commit(f, x, P);
     f->range_track_fixes_ += 1;

@@ -66,6 +66,15 @@ __attribute__((noinline)) inline real us_to_s(int64_t dt_us) { return real(dt_us
 //   χ²_q(k) ≈ k (1 - 2/(9k) + z sqrt(2/(9k)))³  (within 1 % for k >= 3;
 // 11.98 against 11.83 for k = 2 at 3σ). kZ95: q = 0.95; kZ3Sigma: q =
 // 0.9973, the two-sided 3σ of a normal.
+// The squared Mahalanobis distance of (dx, dy) in the covariance
+// [[cxx, cxy], [cxy, cyy]] (its closed-form inverse); 1e30 where that is not
+// positive definite.
+inline real mahalanobis2_xy(real dx, real dy, real cxx, real cxy, real cyy)
+{
+    const real det = cxx * cyy - cxy * cxy;
+    return det > real(0) ? (cyy * dx * dx - real(2) * cxy * dx * dy + cxx * dy * dy) / det : real(1e30);
+}
+
 constexpr real kZ95 = real(1.6448536);
 constexpr real kZ3Sigma = real(2.7822);
 inline real chi2_quantile(uint32_t k, real z)

@@ -26,7 +26,6 @@ struct RangeSnapshot {
     real cov[4];        // its covariance from the ranges' noise (m²)
     real dx_ds, dy_ds;  // ∂(x, y)/∂s (m per m/s)
     int64_t newest_us;  // newest range's emission time
-    int64_t oldest_us;  // oldest range's emission time
     real span_s;        // newest - oldest range used (s)
 };
 
@@ -68,8 +67,10 @@ uint32_t fill_problem(const bl_filter *f, real s_mps, bl_range_problem *prob, in
 
 // The trilateration of the kept ranges at s_mps and at s_mps ± kDs_mps (the
 // problem lives only in this frame; noinline keeps it off the callers'
-// stacks).
-__attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mps, real var_s, RangeSnapshot *out)
+// stacks). BL_ENOCONVERGE, unsolved, when a range of the window is not
+// newer than after_us (INT64_MIN: any window).
+__attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mps, real var_s, int64_t after_us,
+                                                   RangeSnapshot *out)
 {
     bl_range_problem prob;
     int64_t newest = 0, oldest = 0;
@@ -78,6 +79,7 @@ __attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mp
     const uint32_t n_site = f->cfg_.range_beacon_count;
     const uint32_t m = fill_problem(f, s_mps, &prob, &newest, &oldest);
     if (m < 3 || m < (n_site < 4 ? n_site : 4u)) return BL_EDEGENERATE;
+    if (oldest <= after_us) return BL_ENOCONVERGE;  // a range not newer than after_us: not solved
     bl_range_solution sol;
     int rc = bl_solve_ranges_2d(&prob, &sol);
     if (rc == BL_EINVAL) rc = BL_EDEGENERATE;  // the problem is well-formed: the geometry is at fault
@@ -130,7 +132,6 @@ __attribute__((noinline)) int solve_range_snapshot(const bl_filter *f, real s_mp
     out->y_m = sol.y_m;
     for (int k = 0; k < 4; ++k) out->cov[k] = sol.cov[k];
     out->newest_us = newest;
-    out->oldest_us = oldest;
     out->span_s = us_to_s(newest - oldest);
     const real v[] = {out->x_m, out->y_m, out->cov[0], out->cov[3], out->dx_ds, out->dy_ds};
     if (!all_finite(v, int(sizeof v / sizeof v[0]))) return BL_ENOCONVERGE;
@@ -238,7 +239,7 @@ int start_from_ranges(bl_filter *f)
     real s_mps, var_s;
     snapshot_sos(f, &s_mps, &var_s);
     RangeSnapshot snap;
-    const int rc = solve_range_snapshot(f, s_mps, var_s, &snap);
+    const int rc = solve_range_snapshot(f, s_mps, var_s, INT64_MIN, &snap);
     return rc != BL_OK ? rc : start_from_snapshot(f, snap, s_mps, var_s);
 }
 
@@ -272,7 +273,10 @@ int start_ranges_confirmed(bl_filter *f)
     real s_mps, var_s;
     snapshot_sos(f, &s_mps, &var_s);
     RangeSnapshot snap;
-    const int rc = solve_range_snapshot(f, s_mps, var_s, &snap);
+    // A window that shares a range with the pending fix waits for the next
+    // round, unsolved (such a window is within two windows of it: not stale).
+    const int rc =
+        solve_range_snapshot(f, s_mps, var_s, f->range_fix_tries_ > 0 ? f->range_fix_t_us_ : INT64_MIN, &snap);
     if (rc != BL_OK) return rc;
     real *p = f->range_fix_;  // the pending fix: x, y (m), covariance xx, xy, yy (m²)
     int64_t age_us = 0;
@@ -280,11 +284,8 @@ int start_ranges_confirmed(bl_filter *f)
                                     us_to_s(age_us) > real(2) * f->cfg_.range.snapshot_window_s))
         f->range_fix_tries_ = 0;
     if (f->range_fix_tries_ > 0) {
-        if (snap.oldest_us <= f->range_fix_t_us_) return BL_ENOCONVERGE;  // shares a range: wait for the next round
-        const real dx = snap.x_m - p[0], dy = snap.y_m - p[1];
-        const real a = snap.cov[0] + p[2], b = snap.cov[1] + p[3], c = snap.cov[3] + p[4];
-        const real det = a * c - b * b;
-        const real d2 = det > real(0) ? (c * dx * dx - real(2) * b * dx * dy + a * dy * dy) / det : real(1e30);
+        const real d2 = mahalanobis2_xy(snap.x_m - p[0], snap.y_m - p[1], snap.cov[0] + p[2], snap.cov[1] + p[3],
+                                        snap.cov[3] + p[4]);
         if (d2 <= chi2_quantile(2, kZ3Sigma) || f->range_fix_tries_ >= kStartTries)
             return start_from_snapshot(f, snap, s_mps, var_s);
     }
