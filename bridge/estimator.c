@@ -11,6 +11,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "health.h"
 #include "log.h"
 #include "site_to_lib.h"
 
@@ -609,6 +610,9 @@ int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_
     for (int i = 0; i < 25; i++) out->cov[i] = est.cov[i];
     out->reset_counter = est.reset_counter;
     out->converged = est.converged;
+    bl_loc_status st;
+    out->rejecting = bl_localizer_status(&e->loc, &st) == BL_OK &&
+                     health_rejecting(st.window_len, st.window_rejected);
     out->source_rx_us = e->last_update_rx_us;
     out->measurement_seq = e->measurements_seen;
     return 0;

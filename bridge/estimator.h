@@ -146,6 +146,10 @@ struct est_output {
     double cov[25]; /* x, y, theta, v, omega (row-major) */
     uint32_t reset_counter;
     bool converged;
+    /* More than half of the persistent-rejection watch's window rejected
+     * (health_rejecting): the estimate is not trusted, whatever its
+     * covariance says (ODOMETRY quality -1, odometry.c). */
+    bool rejecting;
     /* The newest measurement fused into this estimate (an extrapolation
      * carries the same one): the local receive time of the frame that
      * carried it (pulse or encoder frame; 0 = not known), and the number of

@@ -33,4 +33,10 @@
 
 enum mav_out_state health_state(const struct est_health *h, bool can_down);
 
+/* The persistent-rejection watch says the estimate cannot be trusted: of
+ * window_len first arrivals (at least HEALTH_REJECT_MIN_WINDOW) more than
+ * half were rejected by the gate. HEARTBEAT's EMERGENCY and ODOMETRY's
+ * quality -1 (odometry.c) both follow it. */
+bool health_rejecting(unsigned window_len, unsigned window_rejected);
+
 #endif /* BRIDGE_HEALTH_H */

@@ -19,7 +19,7 @@ int64_t odom_period_us(const struct daemon *d)
 
 int quality_of(const struct est_output *o)
 {
-    if (!o->converged)
+    if (!o->converged || o->rejecting)
         return -1;
     return mav_quality_from_state_cov(o->cov);
 }

@@ -27,6 +27,18 @@ def sim_command():
     return [sys.executable, "-m", "beaconloc_sim.cli"]
 
 
+def hall_kidnap75_scenario(out_dir: Path) -> Path:
+    """The hall carried 2 m at 60 s, the run cut to 75 s (so the simulator draws other noise than
+    hall's 120 s runs): a scenario file in out_dir, its site the repository's hall.ini."""
+    scenario = out_dir / "hall-kidnap75.scenario.ini"
+    text = (SITE.parent / "hall.scenario.ini").read_text()
+    assert "[faults]" not in text and "duration_s = 120" in text
+    scenario.write_text(text.replace("site = hall.ini", f"site = {SITE.parent / 'hall.ini'}")
+                        .replace("duration_s = 120", "duration_s = 75")
+                        + "[faults]\nencoder_silence = 59.5, 1.0\nkidnap = 60, 0.0, 2.0\n")
+    return scenario
+
+
 def run_sim(out_dir: Path, scenario: str, duration_s: float, seed=None, sim_args=()):
     """Simulate a scenario into a candump log (sim_args: more options of `run`, e.g. --set);
     returns (log, truth CSV)."""

@@ -8,7 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from bridge_helpers import SITE, run_sim
+from bridge_helpers import SITE, hall_kidnap75_scenario, run_sim
 
 BEACON_CYCLE_S = 6 * 0.150
 
@@ -110,12 +110,7 @@ def test_kidnap_in_the_hall_restart_is_not_undone_by_a_misnumbering_sequencer(br
     filter converges: one restart, and the robot stays within 0.25 m from 62 s on.
     Before, they were plain rejections: a second restart fitted them 13.7 m away, published
     converged 13 m off for 4.5 s, and a third ended 5 m off."""
-    scenario = tmp_path / "hall-kidnap75.scenario.ini"
-    text = (SITE.parent / "hall.scenario.ini").read_text()
-    assert "[faults]" not in text and "duration_s = 120" in text
-    scenario.write_text(text.replace("site = hall.ini", f"site = {SITE.parent / 'hall.ini'}")
-                        .replace("duration_s = 120", "duration_s = 75")
-                        + "[faults]\nencoder_silence = 59.5, 1.0\nkidnap = 60, 0.0, 2.0\n")
+    scenario = hall_kidnap75_scenario(tmp_path)
     log, truth_path = run_sim(tmp_path, str(scenario), 75, seed=5)
     p, est, stats = replay(bridge_bin, log, tmp_path, site=SITE.parent / "hall.ini")
     truth = np.genfromtxt(truth_path, delimiter=",", names=True)

@@ -1,6 +1,7 @@
 /*
  * cmocka: the HEARTBEAT system_status decision (bridge/health.c), every
- * state and the precedence between them (docs/mavlink.md, HEARTBEAT).
+ * state and the precedence between them (docs/mavlink.md, HEARTBEAT), and
+ * ODOMETRY's quality, which follows the same rejection test.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -8,6 +9,7 @@
 #include <stdint.h>
 #include <cmocka.h>
 
+#include "daemon.h"
 #include "health.h"
 
 /* A converged filter with fresh data, nothing wrong. */
@@ -73,10 +75,36 @@ static void test_emergency(void **state)
     assert_int_equal(health_state(&h, false), MAV_OUT_STATE_BOOT);
 }
 
+/* ODOMETRY's quality is -1 whenever the HEARTBEAT's rejection test says
+ * EMERGENCY, whatever the covariance: a kidnapped filter keeps a small one
+ * (docs/mavlink.md, quality). */
+static void test_quality_follows_the_rejection_test(void **state)
+{
+    (void)state;
+    struct est_output o = {.valid = true, .converged = true};
+    o.cov[0] = o.cov[6] = 0.01 * 0.01; /* var x, var y: sigma 1 cm (m^2) */
+    o.cov[12] = o.cov[18] = o.cov[24] = 1e-4;
+    assert_int_equal(quality_of(&o), 100);
+    struct est_health h = good();
+    h.window_rejected = 7; /* more than half of 12 */
+    assert_true(health_rejecting(h.window_len, h.window_rejected));
+    assert_int_equal(health_state(&h, false), MAV_OUT_STATE_EMERGENCY);
+    o.rejecting = health_rejecting(h.window_len, h.window_rejected);
+    assert_int_equal(quality_of(&o), -1);
+    /* half, or too few to judge: trusted */
+    assert_false(health_rejecting(12, 6));
+    assert_false(health_rejecting(HEALTH_REJECT_MIN_WINDOW - 1, HEALTH_REJECT_MIN_WINDOW - 1));
+    assert_true(health_rejecting(HEALTH_REJECT_MIN_WINDOW, HEALTH_REJECT_MIN_WINDOW / 2 + 1));
+    o.rejecting = false;
+    o.converged = false;
+    assert_int_equal(quality_of(&o), -1);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_boot_before_the_first_estimate),
+        cmocka_unit_test(test_quality_follows_the_rejection_test),
         cmocka_unit_test(test_standby_active),
         cmocka_unit_test(test_critical),
         cmocka_unit_test(test_emergency),
