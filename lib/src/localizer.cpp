@@ -209,9 +209,8 @@ uint32_t window_rejected(const bl_localizer *loc, uint32_t *beacons)
 // the trilateration).
 NOINLINE bool restart_if_persistent(bl_localizer *loc)
 {
-    if (loc->reject_k_ == 0 || loc->win_len_ < loc->reject_w_) return false;
     uint32_t rejected_beacons = 0;
-    const uint32_t n = window_rejected(loc, &rejected_beacons);
+    const uint32_t n = loc->win_len_ < loc->reject_w_ ? 0 : window_rejected(loc, &rejected_beacons);
     const bl_config &cfg = loc->filter.cfg_;
     // At least min(3, N) beacons rejected (one faulty beacon restarts
     // nothing); with another kind's beacons in the window min(3, N - 1): a
@@ -224,7 +223,10 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     const uint32_t n_beacons = cfg.beacon_count + n_watched;
     const uint32_t cap = n_watched > 0 ? n_beacons - 1 : n_beacons;
     const uint32_t need = cap < 3 ? cap : 3;
-    if (n < loc->reject_k_ || rejected_beacons < need) return false;
+    if (loc->reject_k_ == 0 || n < loc->reject_k_ || rejected_beacons < need) {
+        loc->held_ = 0;
+        return false;
+    }
     // Not while the sequencer holds a double pulse that contradicts its
     // model (beacon 1 heard where another beacon is expected: the numbering
     // itself in doubt until the next cycle confirms or clears it; a snapshot
@@ -233,12 +235,18 @@ NOINLINE bool restart_if_persistent(bl_localizer *loc)
     // large site) nothing clears a pending conflict, and another beacon's
     // floor echo raises one every few cycles. And not once every arrival of
     // the window is rejected: then the filter is wrong, whatever double pulse
-    // is pending (a floor echo at a carried robot's new place can mimic beacon
-    // 1's every cycle; docs/bridge.md).
+    // is pending. Nor for more than a window of arrivals (W): a beacon
+    // controller's restart, what the wait is for, is confirmed or cleared by
+    // the next beacon 1, while a floor echo at a carried robot's new place
+    // can mimic beacon 1's double pulse every cycle (in the hall it held the
+    // restart for 10 s while one or two arrivals in twelve still fused;
+    // docs/bridge.md).
     if (!bl::started(&loc->filter)) return false;
-    if (loc->seq.conflict_pending && n < loc->win_len_ &&
-        state_time_us(&loc->filter) - loc->seq.conflict_us < loc->seq.period_ns / 1000 * cfg.beacon_count)
+    if (loc->seq.conflict_pending && n < loc->win_len_ && loc->held_ < loc->win_len_ &&
+        state_time_us(&loc->filter) - loc->seq.conflict_us < loc->seq.period_ns / 1000 * cfg.beacon_count) {
+        loc->held_++;
         return false;
+    }
     // The heading kept (read in place: no state copy on this, the deepest, chain).
     const bl_real theta = bl::wrap_angle(loc->filter.x_[BL_IX_THETA]);
     int rc = BL_EDEGENERATE;

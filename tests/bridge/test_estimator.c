@@ -19,7 +19,10 @@
 #include <cmocka.h>
 
 #include "config.h"
+#include "covariance.h"
+#include "daemon.h"
 #include "estimator.h"
+#include "health.h"
 #include "log.h"
 
 #define SITE "hw_sim/beaconloc_sim/data/scenarios/kleeman-lab.ini"
@@ -581,6 +584,49 @@ static void test_health_figures(void **state)
     assert_true(h.since_update_us > 2400000);
 }
 
+/* A converged filter whose arrivals the gate rejects (the robot carried 1 m
+ * sideways, its encoders unaware) keeps its small covariance. Once more than
+ * half of the persistent-rejection watch's window is rejected the output says
+ * so (rejecting: ODOMETRY quality -1) exactly when the HEARTBEAT says
+ * EMERGENCY, and not before; the restart clears it. [tuning]
+ * reset_reject_count 32 (a window of 32) keeps that state for a few seconds
+ * before the restart (at the default 8 of 12 it lasts one arrival). */
+static void test_rejecting_withdraws_quality(void **state)
+{
+    (void)state;
+    char err[CONFIG_ERR_LEN];
+    W.cfg.tuning.reset_reject_count = 32;
+    assert_int_equal(estimator_init(&W.est, &W.cfg, err, sizeof err), 0);
+    run(&W, 1000000, 12000000);
+    struct est_output o;
+    assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+    assert_true(o.converged && !o.rejecting && quality_of(&o) > 50);
+    W.y0 += 1.0; /* carried: the encoders count the distance from (x0, y0), unchanged */
+    int withdrawn = 0, published = 0;
+    for (int64_t t = 12000000; t < 20000000; t += 50000) {
+        run(&W, t, t + 50000);
+        assert_int_equal(estimator_output(&W.est, 0, &o), 0);
+        struct est_health h;
+        estimator_health(&W.est, t + 50000, &h);
+        const bool emergency = health_state(&h, false) == MAV_OUT_STATE_EMERGENCY;
+        assert_true(o.rejecting == emergency);
+        if (o.converged && o.reset_counter == 0) {
+            double x, y;
+            pose_at(&W, o.t_node_us - RX_NODE_OFFSET_US, &x, &y);
+            assert_true(hypot(o.x_m - x, o.y_m - y) > 0.8); /* still where it was */
+            assert_true(state_cov_sigma_xy_m(o.cov) < 0.1); /* and sure of it */
+            if (quality_of(&o) == -1)
+                withdrawn++;
+            else
+                published++;
+        }
+    }
+    /* the first rejections publish (half the window is not yet rejected),
+     * then about 2 s withdrawn until the restart */
+    assert_true(published > 0 && withdrawn >= 20);
+    assert_true(o.reset_counter >= 1 && !o.rejecting);
+}
+
 /* A site of both kinds: bearings (BEARING, node 3, its own clock) are mapped
  * bearing node -> bridge clock -> receiver node, as encoder samples are, and
  * fused beside the pulses; a bearing before the receiver clock is known is
@@ -661,6 +707,7 @@ int main(void)
         cmocka_unit_test_setup(test_held_pulse_reports_its_own_frame, setup),
         cmocka_unit_test_setup(test_reconfigure_tuning_keeps_filter, setup),
         cmocka_unit_test_setup(test_health_figures, setup),
+        cmocka_unit_test_setup(test_rejecting_withdraws_quality, setup),
         cmocka_unit_test_setup(test_mixed_site_bearings_on_receiver_clock, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -325,6 +325,8 @@ struct bl_localizer { /* typedef: common.h */
     bool hint_set_;
     bool wheel_seen_; /* a wheel sample came */
     bool wheel_ref_;  /* the last sample is a valid increment start */
+    uint8_t held_;    /* arrivals the persistent-rejection restart has waited on a pending
+                         double pulse (<= W; 0 while the watch wants no restart) */
     bl_loc_counters counters_;
     bl_loc_event events_[BL_LOC_EVENT_QUEUE];
     bl_loc_pulse_observer observer_; /* bl_localizer_observe_pulses (NULL: none) */
