@@ -38,6 +38,10 @@
  *     the snapshot solver (bl_filter_start_snapshot, heading kept with σ
  *     cfg.reset_sigma_theta_rad unless the ring gives one). K is
  *     cfg.reset_reject_count (default 8: 8 of 12); 0 switches the watch off.
+ *     While the sequencer holds a double pulse that contradicts its model
+ *     (a beacon controller's restart, until the next beacon 1 confirms or
+ *     clears it) the restart waits, for at most W rejected arrivals, and
+ *     not once every arrival of the window is rejected.
  *     This is the one persistent-rejection mechanism (the filter has none of
  *     its own). Event RESET, cause PERSISTENT_REJECTION.
  *   - Numbering errors: a rejected arrival whose innovation is longer than
