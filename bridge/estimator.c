@@ -11,7 +11,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "health.h"
 #include "log.h"
 #include "site_to_lib.h"
 
@@ -611,8 +610,7 @@ int estimator_output(const struct estimator *e, int64_t at_local_us, struct est_
     out->reset_counter = est.reset_counter;
     out->converged = est.converged;
     bl_loc_status st;
-    out->rejecting = bl_localizer_status(&e->loc, &st) == BL_OK &&
-                     health_rejecting(st.window_len, st.window_rejected);
+    out->rejecting = bl_localizer_status(&e->loc, &st) == BL_OK && bl_loc_status_rejecting(&st);
     out->source_rx_us = e->last_update_rx_us;
     out->measurement_seq = e->measurements_seen;
     return 0;
@@ -635,6 +633,7 @@ void estimator_health(const struct estimator *e, int64_t local_now_us, struct es
         h->ever_started = st.ever_started || h->started;
         h->window_len = st.window_len;
         h->window_rejected = st.window_rejected;
+        h->rejecting = bl_loc_status_rejecting(&st);
     }
     h->since_update_us = e->last_data_rx_us > 0 ? local_now_us - e->last_data_rx_us : INT64_MAX;
 }

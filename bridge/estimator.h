@@ -147,7 +147,7 @@ struct est_output {
     uint32_t reset_counter;
     bool converged;
     /* More than half of the persistent-rejection watch's window rejected
-     * (health_rejecting): the estimate is not trusted, whatever its
+     * (bl_loc_status_rejecting): the estimate is not trusted, whatever its
      * covariance says (ODOMETRY quality -1, odometry.c). */
     bool rejecting;
     /* The newest measurement fused into this estimate (an extrapolation
@@ -169,6 +169,7 @@ struct est_health {
                                  frame was received (INT64_MAX: none yet) */
     unsigned window_len;      /* first arrivals in the persistent-rejection watch */
     unsigned window_rejected; /* of those, rejected by the gate */
+    bool rejecting;           /* the watch distrusts the estimate (bl_loc_status_rejecting) */
 };
 
 /* A known start pose (--initial-pose): the localizer is started from it at

@@ -3,14 +3,9 @@
  */
 #include "health.h"
 
-bool health_rejecting(unsigned window_len, unsigned window_rejected)
-{
-    return window_len >= HEALTH_REJECT_MIN_WINDOW && 2 * window_rejected > window_len;
-}
-
 enum mav_out_state health_state(const struct est_health *h, bool can_down)
 {
-    if (h->started && (!h->finite || health_rejecting(h->window_len, h->window_rejected)))
+    if (h->started && (!h->finite || h->rejecting))
         return MAV_OUT_STATE_EMERGENCY;
     if (can_down || (h->ever_started && !h->started) ||
         (h->started && h->since_update_us > HEALTH_STALE_US))

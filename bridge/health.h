@@ -5,10 +5,10 @@
  *
  * In order of precedence:
  *   EMERGENCY  the filter runs but its output cannot be trusted: the state
- *              or covariance is not finite, or of the last first arrivals
- *              watched (at least HEALTH_REJECT_MIN_WINDOW) more than half
- *              were rejected by the gate (diverged, or kidnapped and not
- *              yet restarted);
+ *              or covariance is not finite, or the persistent-rejection
+ *              watch says so (bl_loc_status_rejecting: of the last first
+ *              arrivals watched, at least 8, more than half were rejected by
+ *              the gate; diverged, or kidnapped and not yet restarted);
  *   CRITICAL   the CAN interface is down, or the filter had a state and
  *              lost it (re-initialised, waiting for a snapshot start), or no
  *              measurement was fused for HEALTH_STALE_US (coasting on
@@ -28,15 +28,7 @@
 /* No measurement fused this long: coasting (us). Pulses come every beacon
  * period (150 ms), encoder samples every 10 ms. */
 #define HEALTH_STALE_US 1000000
-/* The rejection share is judged once this many first arrivals are watched. */
-#define HEALTH_REJECT_MIN_WINDOW 8
 
 enum mav_out_state health_state(const struct est_health *h, bool can_down);
-
-/* The persistent-rejection watch says the estimate cannot be trusted: of
- * window_len first arrivals (at least HEALTH_REJECT_MIN_WINDOW) more than
- * half were rejected by the gate. HEARTBEAT's EMERGENCY and ODOMETRY's
- * quality -1 (odometry.c) both follow it. */
-bool health_rejecting(unsigned window_len, unsigned window_rejected);
 
 #endif /* BRIDGE_HEALTH_H */

@@ -54,18 +54,25 @@ static void test_critical(void **state)
     assert_int_equal(health_state(&h, false), MAV_OUT_STATE_CRITICAL);
 }
 
+/* The watch's verdict (the library's bl_loc_status_rejecting), which
+ * estimator_health copies into est_health.rejecting. */
+static bool rejecting(uint32_t window_len, uint32_t window_rejected)
+{
+    bl_loc_status st = {.window_len = window_len, .window_rejected = window_rejected};
+    return bl_loc_status_rejecting(&st);
+}
+
 static void test_emergency(void **state)
 {
     (void)state;
+    assert_true(rejecting(12, 7)); /* more than half of 12 */
+    assert_false(rejecting(12, 6)); /* half: not yet */
+    assert_false(rejecting(BL_LOC_REJECTING_MIN_WINDOW - 1, BL_LOC_REJECTING_MIN_WINDOW - 1)); /* too few */
+    assert_true(rejecting(BL_LOC_REJECTING_MIN_WINDOW, BL_LOC_REJECTING_MIN_WINDOW / 2 + 1));
     struct est_health h = good();
-    h.window_rejected = 7; /* more than half of 12 */
+    h.rejecting = true;
     assert_int_equal(health_state(&h, false), MAV_OUT_STATE_EMERGENCY);
     assert_int_equal(health_state(&h, true), MAV_OUT_STATE_EMERGENCY);
-    h.window_rejected = 6; /* half: not yet */
-    assert_int_equal(health_state(&h, false), MAV_OUT_STATE_ACTIVE);
-    h.window_len = HEALTH_REJECT_MIN_WINDOW - 1; /* too few to judge */
-    h.window_rejected = HEALTH_REJECT_MIN_WINDOW - 1;
-    assert_int_equal(health_state(&h, false), MAV_OUT_STATE_ACTIVE);
     h = good();
     h.finite = false;
     assert_int_equal(health_state(&h, false), MAV_OUT_STATE_EMERGENCY);
@@ -86,15 +93,9 @@ static void test_quality_follows_the_rejection_test(void **state)
     o.cov[12] = o.cov[18] = o.cov[24] = 1e-4;
     assert_int_equal(quality_of(&o), 100);
     struct est_health h = good();
-    h.window_rejected = 7; /* more than half of 12 */
-    assert_true(health_rejecting(h.window_len, h.window_rejected));
+    h.rejecting = o.rejecting = rejecting(12, 7); /* more than half of 12 */
     assert_int_equal(health_state(&h, false), MAV_OUT_STATE_EMERGENCY);
-    o.rejecting = health_rejecting(h.window_len, h.window_rejected);
     assert_int_equal(quality_of(&o), -1);
-    /* half, or too few to judge: trusted */
-    assert_false(health_rejecting(12, 6));
-    assert_false(health_rejecting(HEALTH_REJECT_MIN_WINDOW - 1, HEALTH_REJECT_MIN_WINDOW - 1));
-    assert_true(health_rejecting(HEALTH_REJECT_MIN_WINDOW, HEALTH_REJECT_MIN_WINDOW / 2 + 1));
     o.rejecting = false;
     o.converged = false;
     assert_int_equal(quality_of(&o), -1);

@@ -325,6 +325,61 @@ static void test_kidnap_restarts_once(void **state) {
     unload(&r);
 }
 
+/* The watch's verdict a caller publishes (bl_loc_status_rejecting: the
+ * bridge's HEARTBEAT EMERGENCY and ODOMETRY quality -1, the firmware
+ * example's flag). The kidnap (carried 2 m at 60 s) with a restart that
+ * needs K = W = 32 rejections, every arrival of the window: the filter, which
+ * some arrivals still fit, never restarts and stays 2 m off. Before the carry
+ * the verdict is never "rejecting"; from 1.5 s after it, it is at every
+ * input, while the filter still says converged and its covariance is small. */
+typedef struct {
+    unsigned before, before_rejecting, after, after_rejecting;
+    double after_sigma_max_m, after_err_min_m;
+} rejecting_ctx;
+
+static void rejecting_hook(bl_localizer *loc, const run_t *r, size_t i, void *ctx) {
+    rejecting_ctx *k = ctx;
+    bl_loc_status st;
+    bl_estimate est;
+    assert_int_equal(bl_localizer_status(loc, &st), BL_OK);
+    if (!st.converged || bl_localizer_estimate(loc, &est) != BL_OK) return;
+    const double t = input_s(r, i);
+    if (t > 30.0 && t < 59.5) {
+        k->before++;
+        k->before_rejecting += bl_loc_status_rejecting(&st);
+    }
+    double x, y;
+    if (t > 61.5 && truth_at(r, est.t_us, &x, &y)) {
+        k->after++;
+        k->after_rejecting += bl_loc_status_rejecting(&st);
+        const double sigma = sqrt((double)(est.cov[0] > est.cov[6] ? est.cov[0] : est.cov[6])); /* m */
+        if (sigma > k->after_sigma_max_m) k->after_sigma_max_m = sigma;
+        const double err = hypot(est.x_m - x, est.y_m - y);
+        if (k->after == 1 || err < k->after_err_min_m) k->after_err_min_m = err;
+    }
+}
+
+static void test_rejecting_after_a_kidnap(void **state) {
+    (void)state;
+    bl_config cfg;
+    assert_int_equal(bl_config_default(&cfg), BL_OK);
+    cfg.reset_reject_count = 32;
+    feed_site = &cfg;
+    run_t r;
+    load(&r, "kidnap");
+    stats_t s;
+    rejecting_ctx k = {0};
+    feed(&LOC, &r, &s, rejecting_hook, &k);
+    feed_site = NULL;
+    print_message("rejecting: before %u of %u, after %u of %u, sigma <= %.3f m, error >= %.2f m\n",
+                  k.before_rejecting, k.before, k.after_rejecting, k.after, k.after_sigma_max_m, k.after_err_min_m);
+    assert_true(k.before > 1000 && k.before_rejecting == 0);
+    assert_true(k.after > 100 && k.after_rejecting == k.after);
+    assert_true(k.after_err_min_m > 1.5 && k.after_sigma_max_m < 0.2); /* far off, and sure of it */
+    assert_int_equal(s.events[BL_LOC_EV_RESET], 0);
+    unload(&r);
+}
+
 /* The beacon controller restarts twice (controller-restart: at 40 s, 0.7 s
  * off, beacon 1 then firing 163 ms after the slot the filter expects, beyond
  * any flight; at 80 s, 1.234 s off, 32 ms after it, inside the flights):
@@ -1083,6 +1138,7 @@ int main(void) {
         cmocka_unit_test(test_nominal_tracks),
         cmocka_unit_test(test_echo_repeats_not_fused),
         cmocka_unit_test(test_kidnap_restarts_once),
+        cmocka_unit_test(test_rejecting_after_a_kidnap),
         cmocka_unit_test(test_controller_restart_retimes),
         cmocka_unit_test(test_receiver_restart_reanchors),
         cmocka_unit_test(test_retime_told_the_move),

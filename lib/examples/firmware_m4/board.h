@@ -67,6 +67,9 @@ typedef struct board_pose {
     uint32_t pulses_fused, pulses_rejected, repeats_skipped, sequencer_spurious, snapshot_restarts, burst_overruns,
         errors;
     bool converged;
+    bool rejecting; /* the persistent-rejection watch distrusts the pose (bl_loc_status_rejecting:
+                       more than half of its window gated out, a robot carried off): steer by it
+                       only when converged and not rejecting */
 } board_pose;
 
 /* Hands the latest pose to the outside world (here: a debugger-visible

@@ -43,7 +43,7 @@ static board_pose fw_out;
 static bl_config fw_cfg;
 static bl_localizer fw_loc;
 
-static void publish(void)
+static void publish(const bl_loc_status *st)
 {
     bl_estimate est;
     bl_loc_counters c;
@@ -61,6 +61,7 @@ static void publish(void)
     fw_out.var_y_m2 = est.cov[6];
     fw_out.var_theta_rad2 = est.cov[12];
     fw_out.converged = est.converged;
+    fw_out.rejecting = bl_loc_status_rejecting(st);
     fw_out.reset_counter = est.reset_counter;
     fw_out.pulses_fused = c.pulses_accepted;
     fw_out.pulses_rejected = c.pulses_rejected;
@@ -151,7 +152,7 @@ int main(void)
         bl_loc_status st;
         if (bl_localizer_status(&fw_loc, &st) == BL_OK && st.measurements != published) {
             published = st.measurements;
-            publish();
+            publish(&st);
         }
     }
 }

@@ -464,6 +464,20 @@ int bl_localizer_estimate_at(const bl_localizer *loc, int64_t t_us, bl_estimate 
 int bl_localizer_counters(const bl_localizer *loc, bl_loc_counters *out);
 int bl_localizer_status(const bl_localizer *loc, bl_loc_status *out);
 
+/* The watch's window is judged from this many first arrivals on. */
+#define BL_LOC_REJECTING_MIN_WINDOW 8
+
+/* The persistent-rejection watch says the estimate cannot be trusted,
+ * whatever its covariance: of the window's first arrivals (at least
+ * BL_LOC_REJECTING_MIN_WINDOW) more than half were rejected by the gate (a
+ * robot carried off and not yet restarted, a diverged filter). Inline, no
+ * library flash. The bridge's HEARTBEAT EMERGENCY and ODOMETRY quality -1,
+ * and the firmware example's published flag, all follow it. */
+static inline bool bl_loc_status_rejecting(const bl_loc_status *st)
+{
+    return st->window_len >= BL_LOC_REJECTING_MIN_WINDOW && 2 * st->window_rejected > st->window_len;
+}
+
 /* Takes the oldest event: returns 1 and fills *ev, or 0 (BL_OK) when none.
  * Errors: BL_EINVAL, BL_ENOTINIT. */
 int bl_localizer_next_event(bl_localizer *loc, bl_loc_event *ev);

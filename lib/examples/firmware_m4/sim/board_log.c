@@ -225,13 +225,14 @@ bool board_odometry_pop(board_odometry *out)
 uint32_t board_burst_overruns(void) { return (uint32_t)dropped; }
 
 /* One row per update, as bridge/estimates_csv.c writes it; quality -1 while
- * not converged, else 0 (the firmware computes no MAVLink quality). */
+ * not converged or while the watch distrusts the pose (rejecting), else 0
+ * (the firmware computes no MAVLink quality). */
 void board_publish(const board_pose *p)
 {
     fprintf(csv_f, "%lld,%.6f,%.6f,%.7f,%.6f,%.7f,%.4f,%.9f,%.6e,%.6e,%.6e,%.6e,%u,%d\n", (long long)p->t_us,
             (double)p->x_m, (double)p->y_m, (double)p->theta_rad, (double)p->v_mps, (double)p->omega_radps,
             (double)p->sos_mps, (double)p->period_s, (double)p->var_x_m2, (double)p->cov_xy_m2, (double)p->var_y_m2,
-            (double)p->var_theta_rad2, p->reset_counter, p->converged ? 0 : -1);
+            (double)p->var_theta_rad2, p->reset_counter, p->converged && !p->rejecting ? 0 : -1);
     rows++;
 }
 

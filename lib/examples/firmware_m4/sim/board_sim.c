@@ -268,7 +268,7 @@ static char *put_fixed(char *out, double v, int decimals)
     return out;
 }
 
-/* One CSV row per update (quality -1 while not converged, else 0). */
+/* One CSV row per update (quality -1 while not converged or rejecting, else 0). */
 void board_publish(const board_pose *p)
 {
     last = *p;
@@ -289,7 +289,7 @@ void board_publish(const board_pose *p)
     s = fmt_uint(buf + sizeof buf, p->reset_counter);
     while (*s) *o++ = *s++;
     *o++ = ',';
-    if (p->converged) {
+    if (p->converged && !p->rejecting) {
         *o++ = '0';
     } else {
         *o++ = '-';
