@@ -432,8 +432,13 @@ def test_paced_latency_counts_held_pulses(bridge_bin, kleeman_log, tmp_path):
     # one sample per send that carries a newly fused pulse: about one per
     # firing after the start (6.7 per s over ~6 s)
     assert 25 <= s["latency_samples"] <= s["odometry_sent"]
-    assert s["latency_p50_us"] >= 12000, s
-    assert s["latency_p99_us"] < 150000, s
+    # measured from the pulse frame's own receive time: the median is at least
+    # the slack less the hold, and below the slack plus a tick plus the merge
+    # window (a latency taken from anything earlier, the log's start or the
+    # firing, would be seconds). The median, not p99: of ~40 samples p99 is the
+    # largest, one scheduling stall of the process (397 ms once, in a fresh-clone
+    # CI run with the vcan guest and three pytest workers on two cores).
+    assert 12000 <= s["latency_p50_us"] < 150000, s
 
 
 def replay_with_tuning(bridge_bin, log, tmp_path, name, tuning=None):
