@@ -61,11 +61,6 @@ inline bool sub_us(int64_t a, int64_t b, int64_t *out) { return !__builtin_sub_o
 // every call site it cost 140 B more flash (make size-m4).
 __attribute__((noinline)) inline real us_to_s(int64_t dt_us) { return real(dt_us) * real(1e-6); }
 
-// Chi-square quantile by Wilson & Hilferty (1931): the q point of χ²(k),
-// z the standard normal's q point,
-//   χ²_q(k) ≈ k (1 - 2/(9k) + z sqrt(2/(9k)))³  (within 1 % for k >= 3;
-// 11.98 against 11.83 for k = 2 at 3σ). kZ95: q = 0.95; kZ3Sigma: q =
-// 0.9973, the two-sided 3σ of a normal.
 // The squared Mahalanobis distance of (dx, dy) in the covariance
 // [[cxx, cxy], [cxy, cyy]] (its closed-form inverse); 1e30 where that is not
 // positive definite.
@@ -75,6 +70,11 @@ inline real mahalanobis2_xy(real dx, real dy, real cxx, real cxy, real cyy)
     return det > real(0) ? (cyy * dx * dx - real(2) * cxy * dx * dy + cxx * dy * dy) / det : real(1e30);
 }
 
+// Chi-square quantile by Wilson & Hilferty (1931): the q point of χ²(k),
+// z the standard normal's q point,
+//   χ²_q(k) ≈ k (1 - 2/(9k) + z sqrt(2/(9k)))³  (within 1 % for k >= 3;
+// 11.98 against 11.83 for k = 2 at 3σ). kZ95: q = 0.95; kZ3Sigma: q =
+// 0.9973, the two-sided 3σ of a normal.
 constexpr real kZ95 = real(1.6448536);
 constexpr real kZ3Sigma = real(2.7822);
 inline real chi2_quantile(uint32_t k, real z)

@@ -27,15 +27,17 @@ def sim_command():
     return [sys.executable, "-m", "beaconloc_sim.cli"]
 
 
-def hall_kidnap75_scenario(out_dir: Path) -> Path:
-    """The hall carried 2 m at 60 s, the run cut to 75 s (so the simulator draws other noise than
-    hall's 120 s runs): a scenario file in out_dir, its site the repository's hall.ini."""
-    scenario = out_dir / "hall-kidnap75.scenario.ini"
-    text = (SITE.parent / "hall.scenario.ini").read_text()
-    assert "[faults]" not in text and "duration_s = 120" in text
-    scenario.write_text(text.replace("site = hall.ini", f"site = {SITE.parent / 'hall.ini'}")
-                        .replace("duration_s = 120", "duration_s = 75")
-                        + "[faults]\nencoder_silence = 59.5, 1.0\nkidnap = 60, 0.0, 2.0\n")
+def kidnap_scenario(out_dir: Path, site: str, cut_s: int | None = None) -> Path:
+    """The built-in scenario of `site` (hall, big-site, ...) carried 2 m at 60 s, its encoders silent
+    around it: a scenario file in out_dir, its site the repository's. cut_s: the scenario's own
+    duration_s set so (the simulator then draws other noise than the 120 s runs); None keeps it."""
+    scenario = out_dir / f"{site}-kidnap{cut_s or ''}.scenario.ini"
+    text = (SITE.parent / f"{site}.scenario.ini").read_text()
+    assert "[faults]" not in text and f"site = {site}.ini" in text and "duration_s = 120" in text
+    text = text.replace(f"site = {site}.ini", f"site = {SITE.parent / f'{site}.ini'}")
+    if cut_s is not None:
+        text = text.replace("duration_s = 120", f"duration_s = {cut_s}")
+    scenario.write_text(text + "[faults]\nencoder_silence = 59.5, 1.0\nkidnap = 60, 0.0, 2.0\n")
     return scenario
 
 

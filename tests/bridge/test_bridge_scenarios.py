@@ -8,7 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from bridge_helpers import SITE, hall_kidnap75_scenario, run_sim
+from bridge_helpers import SITE, kidnap_scenario, run_sim
 
 BEACON_CYCLE_S = 6 * 0.150
 
@@ -82,12 +82,7 @@ def test_kidnap_on_a_large_site_restarts_within_seconds(bridge_bin, tmp_path, si
     double pulse in another beacon's slot every cycle, until every arrival of the watch's window
     was rejected (then it restarts): seed 13 restarted after 10.9 s and was 1.3 m off after
     65 s, seed 15 never restarted (seed 12: test_kidnap_in_the_hall_restarts_whatever_double_pulse_is_pending)."""
-    scenario = tmp_path / f"{site}-kidnap.scenario.ini"
-    text = (SITE.parent / f"{site}.scenario.ini").read_text()
-    assert "[faults]" not in text and f"site = {site}.ini" in text
-    scenario.write_text(text.replace(f"site = {site}.ini", f"site = {SITE.parent / f'{site}.ini'}")
-                        + "[faults]\nencoder_silence = 59.5, 1.0\nkidnap = 60, 0.0, 2.0\n")
-    log, truth_path = run_sim(tmp_path, str(scenario), 75, seed=seed)
+    log, truth_path = run_sim(tmp_path, str(kidnap_scenario(tmp_path, site)), 75, seed=seed)
     p, est, stats = replay(bridge_bin, log, tmp_path, site=SITE.parent / f"{site}.ini")
     truth = np.genfromtxt(truth_path, delimiter=",", names=True)
     t_sim, err = errors(est, truth)
@@ -112,13 +107,7 @@ def test_kidnap_in_the_hall_restarts_whatever_double_pulse_is_pending(bridge_bin
     0.22 m measured). Before, it waited until every arrival of the window was rejected: 10.4,
     8.5 and 10.4 s, while the filter, sigma 5 cm, walked in from 2 m off on the one or two
     arrivals in twelve it still fused (1.27, 0.58 and 0.66 m off after 65 s)."""
-    if cut:
-        scenario = hall_kidnap75_scenario(tmp_path)
-    else:
-        scenario = tmp_path / "hall-kidnap.scenario.ini"
-        scenario.write_text((SITE.parent / "hall.scenario.ini").read_text()
-                            .replace("site = hall.ini", f"site = {SITE.parent / 'hall.ini'}")
-                            + "[faults]\nencoder_silence = 59.5, 1.0\nkidnap = 60, 0.0, 2.0\n")
+    scenario = kidnap_scenario(tmp_path, "hall", 75 if cut else None)
     log, truth_path = run_sim(tmp_path, str(scenario), 75, seed=seed)
     p, est, stats = replay(bridge_bin, log, tmp_path, site=SITE.parent / "hall.ini")
     truth = np.genfromtxt(truth_path, delimiter=",", names=True)
@@ -139,7 +128,7 @@ def test_kidnap_in_the_hall_restart_is_not_undone_by_a_misnumbering_sequencer(br
     filter converges: one restart, and the robot stays within 0.25 m from 62 s on.
     Before, they were plain rejections: a second restart fitted them 13.7 m away, published
     converged 13 m off for 4.5 s, and a third ended 5 m off."""
-    scenario = hall_kidnap75_scenario(tmp_path)
+    scenario = kidnap_scenario(tmp_path, "hall", 75)
     log, truth_path = run_sim(tmp_path, str(scenario), 75, seed=5)
     p, est, stats = replay(bridge_bin, log, tmp_path, site=SITE.parent / "hall.ini")
     truth = np.genfromtxt(truth_path, delimiter=",", names=True)
