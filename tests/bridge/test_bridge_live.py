@@ -10,13 +10,17 @@ import signal
 import socket
 import struct
 import subprocess
-import threading
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bridge_helpers import BRIDGE, SITE, mavlink_listener
+from bridge_helpers import BRIDGE, SITE
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integration"))
+from harness import MavlinkListener  # noqa: E402
 
 SHIM = BRIDGE.parents[1] / "tests" / "bridge" / "fake_can_preload.so"
 FEED_S = 12.0
@@ -43,17 +47,7 @@ def test_live_path_with_fake_can(bridge_bin, kleeman_log, tmp_path, udp_port):
     sock_path = tmp_path / "can.sock"
     stats_path, est_path = tmp_path / "stats.json", tmp_path / "est.csv"
     rec_path = tmp_path / "rec.log"
-    conn = mavlink_listener(udp_port)
-    msgs, stop = [], threading.Event()
-
-    def collect():
-        while not stop.is_set():
-            m = conn.recv_match(blocking=True, timeout=0.2)
-            if m is not None:
-                msgs.append((time.monotonic(), m))
-
-    th = threading.Thread(target=collect, daemon=True)
-    th.start()
+    listener = MavlinkListener(udp_port)
     env = {"LD_PRELOAD": str(SHIM), "FAKE_CAN_SOCKET": str(sock_path), "PATH": "/usr/bin:/bin"}
     # started before the "interface" exists: not fatal, retried every second
     proc = subprocess.Popen([str(bridge_bin), "--site", str(SITE), "--can", "fake0",
@@ -86,9 +80,7 @@ def test_live_path_with_fake_can(bridge_bin, kleeman_log, tmp_path, udp_port):
     finally:
         if proc.poll() is None:
             proc.kill()
-        stop.set()
-        th.join(2)
-        conn.close()
+        listener.close()
     assert proc.returncode == 0, err
     assert "fake0:" in err and "retrying every second" in err
     assert "fake0: up again" in err
@@ -120,7 +112,7 @@ def test_live_path_with_fake_can(bridge_bin, kleeman_log, tmp_path, udp_port):
     # all intervals 28.49 Hz; a CPU-bound job at a higher priority than the
     # test batch 22.3 Hz), so the rate is taken over the intervals on the grid
     # (under 1.5 periods) and the others are counted apart and bounded.
-    odo = [m for _, m in msgs if m.get_type() == "ODOMETRY"]
+    odo = [r.msg for r in listener.messages("ODOMETRY")]
     assert len(odo) > 100
     t = np.array([m.time_usec for m in odo], dtype=np.int64)
     dt_us = np.diff(t)
@@ -130,7 +122,7 @@ def test_live_path_with_fake_can(bridge_bin, kleeman_log, tmp_path, udp_port):
     on_grid = dt_us[dt_us < 1.5 * period_us]
     assert 1e6 * len(on_grid) / float(np.sum(on_grid)) >= 28.5
     assert len(on_grid) >= 0.9 * len(dt_us), np.sort(dt_us)[-20:]
-    hb = [m for _, m in msgs if m.get_type() == "HEARTBEAT"]
+    hb = [r.msg for r in listener.messages("HEARTBEAT")]
     assert any(m.system_status == 5 for m in hb)  # CRITICAL while no CAN
     assert hb[-1].system_status in (3, 4)         # STANDBY / ACTIVE with CAN
     # the estimate on the receiver-node clock matches the truth
