@@ -54,9 +54,13 @@ test-py: $(PY_TESTS)
 # at the lowest CPU priority (tests/vm/batch.sh), in the time the guests leave
 # (docs/testing.md "How long make test takes").
 .PHONY: test-rest test-rest-batch
+# On a failure the vcan suite's failed cases are shown again last: its output
+# comes first in the log, before the other suites', and a log's tail is what
+# a CI report keeps.
 test: setup
 	$(MAKE) -j$(NPROC) $(IT_BUILDS)
-	$(MAKE) -j2 --output-sync=recurse test-integration test-rest-batch
+	$(MAKE) -j2 --output-sync=recurse test-integration test-rest-batch || \
+	    { $(VM_RUN) --results $(IT_RESULTS) --junit junit.xml --max-chars 1500 --report; exit 1; }
 test-rest-batch:
 	setsid -w sh tests/vm/batch.sh $(MAKE) test-rest
 test-rest:

@@ -3,6 +3,7 @@ otherwise inside one User-Mode Linux guest (Debian's user-mode-linux: the
 guest kernel runs as host processes at native speed and boots in seconds).
 
     run_in_vm.py [options] COMMAND [ARGS...]
+    run_in_vm.py --results DIR [--junit FILE] --report   (the last run's failures, again)
 
 COMMAND runs with the repository as working directory, vcan0 up, and the
 results folder in $BL_RESULTS. The guest shares the host's file system
@@ -288,6 +289,47 @@ def report_junit(path: Path, max_chars: int) -> tuple[int, int, str]:
     return tests, failures + errors, summary
 
 
+def failed_cases(path: Path) -> list[tuple[str, str]]:
+    """(classname::name, failure or error message) of each failed case of a junit report."""
+    if not path.exists():
+        return []
+    out = []
+    for case in ET.parse(path).getroot().iter("testcase"):
+        bad = case.find("failure")
+        if bad is None:
+            bad = case.find("error")
+        if bad is not None:
+            out.append((f"{case.get('classname', '')}::{case.get('name', '')}", bad.get("message") or ""))
+    return out
+
+
+def report_again(results: Path, junit: str, max_chars: int) -> int:
+    """The failures of the run whose results are in `results` (one folder, or
+    guest0..N-1 in it), shown again without running anything: `make test` runs
+    the vcan suite beside the other suites and prints it first, so a CI log's
+    tail would otherwise show only the others. Returns 1 if a case failed or a
+    report is missing, else 0."""
+    folders = sorted(results.glob("guest*")) or [results]
+    counts, missing = [0, 0, 0], []
+    print("\n=============== the vcan suite's failures, again ===============")
+    for folder in folders:
+        tests, bad, summary = report_junit(folder / junit, max_chars)
+        if tests == 0:
+            missing.append(folder.name)
+            continue
+        n_skipped = int(summary.split(", ")[2].split()[0])
+        counts = [a + b for a, b in zip(counts, (tests - bad - n_skipped, bad, n_skipped))]
+    # last, one line per failed case (a CI report may keep only a few lines)
+    for folder in folders:
+        for name, message in failed_cases(folder / junit):
+            first = message.strip().splitlines()[0] if message.strip() else "(no message)"
+            print(f"FAILED {folder.name}: {name}: {first[:300]}")
+    if missing:
+        print(f"no junit report in: {', '.join(missing)} (the suite did not run to its end there)")
+    print(f"vcan suite: {counts[0]} passed, {counts[1]} failed, {counts[2]} skipped")
+    return int(counts[1] > 0 or bool(missing))
+
+
 def judge(args: argparse.Namespace, results: Path, how: str, code: int | None,
           label: str) -> tuple[int, list[int]]:
     """Print what one run left in its results folder; return (status: 0 ok,
@@ -362,8 +404,13 @@ def main() -> int:
     ap.add_argument("--tail", default="", help="file in results to show live")
     ap.add_argument("--max-chars", type=int, default=6000,
                     help="characters of each failure's log to print")
+    ap.add_argument("--report", action="store_true",
+                    help="run nothing: show again the failures the last run left in --results "
+                         "(each guest's --junit report), e.g. at the end of a long log")
     ap.add_argument("command", nargs=argparse.REMAINDER)
     args = ap.parse_args()
+    if args.report:
+        return report_again(Path(args.results).resolve(), args.junit or "junit.xml", args.max_chars)
     if not args.command:
         ap.error("no command")
     if args.guests < 1:

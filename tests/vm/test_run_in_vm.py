@@ -44,6 +44,35 @@ def test_report_missing_junit_counts_zero_tests(tmp_path):
     assert run_in_vm.report_junit(tmp_path / "none.xml", 100) == (0, 0, "no junit report")
 
 
+def test_report_again_shows_every_guests_failures_last(tmp_path):
+    """`make test` shows the vcan suite's failures again at its end (--report):
+    each guest's failed cases by name with their message, the totals, and a
+    non-zero exit; a guest without its report is named and counts as a failure;
+    nothing is run and nothing in the results is removed."""
+    r = tmp_path / "r"
+    for g in ("guest0", "guest1", "guest2"):
+        (r / g).mkdir(parents=True)
+    _junit(r / "guest0" / "junit.xml", ['<testcase classname="t" name="ok"/>'])
+    _junit(r / "guest1" / "junit.xml",
+           ['<testcase classname="test_faults" name="test_stall">'
+            '<failure message="AssertionError: ODOMETRY stopped for 0.61 s">trace</failure></testcase>',
+            '<testcase classname="t" name="ok2"/>'], failures=1)
+    report = [sys.executable, str(RUNNER), "--results", str(r), "--junit", "junit.xml", "--report"]
+    p = subprocess.run(report, capture_output=True, text=True, timeout=60)
+    assert p.returncode == 1, p.stdout + p.stderr
+    assert "FAILED test_faults::test_stall" in p.stdout
+    assert "ODOMETRY stopped for 0.61 s" in p.stdout
+    assert "no junit report in: guest2" in p.stdout
+    assert "FAILED guest1: test_faults::test_stall: AssertionError: ODOMETRY stopped for 0.61 s" in p.stdout
+    assert p.stdout.rstrip().endswith("vcan suite: 2 passed, 1 failed, 0 skipped")
+    assert (r / "guest1" / "junit.xml").exists()
+    (r / "guest2").rmdir()
+    _junit(r / "guest1" / "junit.xml", ['<testcase classname="t" name="ok2"/>'])
+    p = subprocess.run(report, capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "FAILED" not in p.stdout and "vcan suite: 2 passed, 0 failed, 0 skipped" in p.stdout
+
+
 def _run(tmp_path, *args) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, str(RUNNER), "--results", str(tmp_path / "r"),
                            "--mode", "direct", *args], capture_output=True, text=True, timeout=120)
