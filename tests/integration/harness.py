@@ -640,17 +640,18 @@ def run_live(rig: Rig, scenario: str, duration_s: float, *, seed: int | None = N
 def write_received(path: Path, run: LiveRun) -> None:
     """The case's record of what the listener got: per message the kernel's
     receive time and the time this process parsed it (s after the
-    simulator's first frame), its type and, for ODOMETRY, the bridge's
-    time_usec; the simulator's end as the last row."""
+    simulator's first frame), its type, for ODOMETRY the bridge's time_usec,
+    and the sender's MAVLink system id (a team's bridge sends one stream per
+    robot); the simulator's end as the last row."""
     t0 = run.t_sim_start_mono_s
     with open(path, "w") as f:
-        f.write("t_rx_s,t_parsed_s,type,time_usec\n")
+        f.write("t_rx_s,t_parsed_s,type,time_usec,sysid\n")
         for r in list(run.rig.listener.received):
             kind = r.msg.get_type()
             tu = r.msg.time_usec if kind == "ODOMETRY" else ""
-            f.write(f"{r.t_mono_s - t0:.6f},{r.t_parsed_s - t0:.6f},{kind},{tu}\n")
+            f.write(f"{r.t_mono_s - t0:.6f},{r.t_parsed_s - t0:.6f},{kind},{tu},{r.msg.get_srcSystem()}\n")
         end = run.t_sim_end_mono_s - t0
-        f.write(f"{end:.6f},{end:.6f},SIM_END,\n")
+        f.write(f"{end:.6f},{end:.6f},SIM_END,,\n")
 
 
 def scenario_events(name: str, duration_s: float | None = None):
