@@ -7,6 +7,7 @@ every file goes to the test's own folder.
 from __future__ import annotations
 
 import csv
+import importlib
 import json
 import math
 import os
@@ -101,6 +102,15 @@ class MavlinkListener:
         self.port = port
         self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}",
                                                source_system=255, source_component=190)
+        # MAVLink 2 whatever MAVLINK20 was when pymavlink was first imported in
+        # this process (a test module collected before this one may have done
+        # it without): parse_buffer below, unlike recv_match, never switches
+        # (mavutil's auto_mavlink_version), and a MAVLink 1 parser reads the
+        # bridge's MAVLink 2 frames as BAD_DATA.
+        if self.conn.WIRE_PROTOCOL_VERSION != "2.0":
+            v2 = importlib.import_module(f"pymavlink.dialects.v20.{mavutil.current_dialect}")
+            self.conn.mav = v2.MAVLink(self.conn, srcSystem=255, srcComponent=190)
+            self.conn.WIRE_PROTOCOL_VERSION = "2.0"
         self.sock = self.conn.port
         self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
         # Room for seconds of the stream while this process is held up (a
