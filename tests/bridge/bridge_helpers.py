@@ -27,6 +27,17 @@ def sim_command():
     return [sys.executable, "-m", "beaconloc_sim.cli"]
 
 
+def kernel_stamped_listener(port: int):
+    """The integration suite's MAVLink listener (tests/integration/harness.py
+    MavlinkListener) on udpin:127.0.0.1:port: every message with its datagram's
+    kernel receive time, so a stall of the test process is not taken for one of
+    the daemon. Imported here when first asked for, so that only the tests that
+    use it load the harness."""
+    sys.path.insert(0, str(REPO / "tests" / "integration"))
+    from harness import MavlinkListener
+    return MavlinkListener(port)
+
+
 def kidnap_scenario(out_dir: Path, site: str, cut_s: int | None = None) -> Path:
     """The built-in scenario of `site` (hall, big-site, ...) carried 2 m at 60 s, its encoders silent
     around it: a scenario file in out_dir, its site the repository's. cut_s: the scenario's own

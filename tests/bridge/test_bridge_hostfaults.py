@@ -18,18 +18,13 @@ import os
 import select
 import signal
 import subprocess
-import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bridge_helpers import BRIDGE, SITE, free_udp_port
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integration"))
-from harness import MavlinkListener  # noqa: E402
+from bridge_helpers import BRIDGE, SITE, free_udp_port, kernel_stamped_listener
 
 SLOW_DNS = BRIDGE.parents[1] / "tests" / "bridge" / "slow_dns_preload.so"
 ODOM_HZ = 30.0
@@ -50,21 +45,22 @@ def log_head(log, seconds, out):
     return out, len(lines)
 
 
-class Listener(MavlinkListener):
+class Listener:
     """The integration suite's listener on a free port: every message with the
     kernel's receive time of its datagram (SO_TIMESTAMPNS). A stall of this
     Python process (three pytest workers and the vcan guest on two cores held
     it up for over a second in CI) is not taken for a stall of the daemon."""
 
     def __init__(self):
-        super().__init__(free_udp_port())
+        self.port = free_udp_port()
+        self.rx = kernel_stamped_listener(self.port)
 
     def close(self):
         time.sleep(0.3)  # what is in flight
-        super().close()
+        self.rx.close()
 
     def odometry_times(self):
-        return np.array([r.t_mono_s for r in self.messages("ODOMETRY")])
+        return np.array([r.t_mono_s for r in self.rx.messages("ODOMETRY")])
 
 
 def run_bridge(args, stats, env=None, timeout=60):

@@ -10,17 +10,12 @@ import signal
 import socket
 import struct
 import subprocess
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bridge_helpers import BRIDGE, SITE
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integration"))
-from harness import MavlinkListener  # noqa: E402
+from bridge_helpers import BRIDGE, SITE, kernel_stamped_listener
 
 SHIM = BRIDGE.parents[1] / "tests" / "bridge" / "fake_can_preload.so"
 FEED_S = 12.0
@@ -47,7 +42,7 @@ def test_live_path_with_fake_can(bridge_bin, kleeman_log, tmp_path, udp_port):
     sock_path = tmp_path / "can.sock"
     stats_path, est_path = tmp_path / "stats.json", tmp_path / "est.csv"
     rec_path = tmp_path / "rec.log"
-    listener = MavlinkListener(udp_port)
+    listener = kernel_stamped_listener(udp_port)
     env = {"LD_PRELOAD": str(SHIM), "FAKE_CAN_SOCKET": str(sock_path), "PATH": "/usr/bin:/bin"}
     # started before the "interface" exists: not fatal, retried every second
     proc = subprocess.Popen([str(bridge_bin), "--site", str(SITE), "--can", "fake0",

@@ -251,6 +251,22 @@ def _shquote(s: str) -> str:
     return "'" + s.replace("'", "'\"'\"'") + "'"
 
 
+def failed_cases(root: ET.Element):
+    """(classname::name, the case, its failure or error element) of each failed case under root."""
+    for case in root.iter("testcase"):
+        bad = case.find("failure")
+        if bad is None:
+            bad = case.find("error")
+        if bad is not None:
+            yield f"{case.get('classname', '')}::{case.get('name', '')}", case, bad
+
+
+def counts_of(tests: int, bad: int, summary: str) -> list[int]:
+    """[passed, failed, skipped] from report_junit's result."""
+    skipped = int(summary.split(", ")[2].split()[0]) if tests else 0
+    return [tests - bad - skipped, bad, skipped]
+
+
 def report_junit(path: Path, max_chars: int) -> tuple[int, int, str]:
     """Print failures with their logs and the summary; return (tests, bad, summary)."""
     if not path.exists():
@@ -264,13 +280,7 @@ def report_junit(path: Path, max_chars: int) -> tuple[int, int, str]:
         failures += int(s.get("failures", 0))
         errors += int(s.get("errors", 0))
         skipped += int(s.get("skipped", 0))
-        for case in s.iter("testcase"):
-            bad = case.find("failure")
-            if bad is None:
-                bad = case.find("error")
-            if bad is None:
-                continue
-            name = f"{case.get('classname', '')}::{case.get('name', '')}"
+        for name, case, bad in failed_cases(s):
             print(f"\n=============== FAILED {name} ===============")
             key = (bad.get("message") or "") + (bad.text or "")
             if key in shown:  # a module fixture's failure, once per case
@@ -289,20 +299,6 @@ def report_junit(path: Path, max_chars: int) -> tuple[int, int, str]:
     return tests, failures + errors, summary
 
 
-def failed_cases(path: Path) -> list[tuple[str, str]]:
-    """(classname::name, failure or error message) of each failed case of a junit report."""
-    if not path.exists():
-        return []
-    out = []
-    for case in ET.parse(path).getroot().iter("testcase"):
-        bad = case.find("failure")
-        if bad is None:
-            bad = case.find("error")
-        if bad is not None:
-            out.append((f"{case.get('classname', '')}::{case.get('name', '')}", bad.get("message") or ""))
-    return out
-
-
 def report_again(results: Path, junit: str, max_chars: int) -> int:
     """The failures of the run whose results are in `results` (one folder, or
     guest0..N-1 in it), shown again without running anything: `make test` runs
@@ -317,12 +313,14 @@ def report_again(results: Path, junit: str, max_chars: int) -> int:
         if tests == 0:
             missing.append(folder.name)
             continue
-        n_skipped = int(summary.split(", ")[2].split()[0])
-        counts = [a + b for a, b in zip(counts, (tests - bad - n_skipped, bad, n_skipped))]
+        counts = [a + b for a, b in zip(counts, counts_of(tests, bad, summary))]
     # last, one line per failed case (a CI report may keep only a few lines)
     for folder in folders:
-        for name, message in failed_cases(folder / junit):
-            first = message.strip().splitlines()[0] if message.strip() else "(no message)"
+        if not (folder / junit).exists():
+            continue
+        for name, _case, bad in failed_cases(ET.parse(folder / junit).getroot()):
+            message = (bad.get("message") or "").strip()
+            first = message.splitlines()[0] if message else "(no message)"
             print(f"FAILED {folder.name}: {name}: {first[:300]}")
     if missing:
         print(f"no junit report in: {', '.join(missing)} (the suite did not run to its end there)")
@@ -359,8 +357,7 @@ def judge(args: argparse.Namespace, results: Path, how: str, code: int | None,
         failed = True
     if args.junit:
         tests, bad, summary = report_junit(results / args.junit, args.max_chars)
-        n_skipped = int(summary.split(", ")[2].split()[0]) if tests else 0
-        counts = [tests - bad - n_skipped, bad, n_skipped]
+        counts = counts_of(tests, bad, summary)
         script_log = results / "script.log"
         if tests == 0:
             log(f"{label}FAILED: {summary}: zero tests ran")
