@@ -189,12 +189,15 @@ __attribute__((noinline)) int fuse_started(bl_filter *f, uint32_t beacon_index, 
         f->rejected_[beacon_index] += 1;
         return BL_OK;
     }
-    // The speed of sound's drift detector sees this update's correction (filter_sos.cpp).
-    note_sos_correction(f, x(S) - f->x_[S], f->P_[S * NX + S] - P(S, S));
+    // The air's modes weigh this pulse (filter_sos.cpp): its Jacobian at the
+    // prior, where its innovation was taken.
+    real h;
+    RX H;
+    if (model.measure(state(f), &h, &H)) sos_bank_update(f, H, m.R, result->innovation);
     int64_t epoch = f->epoch_us_;
     uint32_t ref = f->ref_beacon_;
     // The reference follows the newest firing (Kleeman eq. 15: t0 += T per beacon).
-    shift_reference(cfg, x, P, epoch, ref, g.slot > 0 ? g.slot : 0);
+    shift_reference(cfg, x, P, epoch, ref, g.slot > 0 ? g.slot : 0, &f->sos_drift_);
     remember_pulse(f, beacon_index, arrival_us, receiver_index, true);
     commit(f, x, P);
     f->epoch_us_ = epoch;

@@ -98,7 +98,7 @@ extern "C" int bl_config_default(bl_config *cfg)
     cfg->converged_sigma_xy_m = real(0.25);
     cfg->accel_noise_mps2 = real(0.5);
     cfg->angular_accel_noise_radps2 = real(1.0);
-    cfg->speed_of_sound_drift_mps_per_sqrt_s = real(0.15);
+    cfg->speed_of_sound_drift_mps_per_sqrt_s = real(0.05);
     cfg->period_drift_s_per_sqrt_s = real(1e-8);
     cfg->wheel_scale_drift_per_sqrt_s = real(1e-5);  // 6e-4 per hour: tyre wear / load change
     cfg->reset_reject_count = 8;

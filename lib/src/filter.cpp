@@ -46,6 +46,16 @@ void propagate(MX &P, const SparseEntry *d, int nd)
     for (int k = 0; k < nd; ++k) P.col(d[k].r) += d[k].v * P.col(d[k].c);
 }
 
+// The air's modes' offsets under the same transition: d_m = F d_m (the row
+// updates of propagate(), same order; filter_sos.cpp). The offsets have no
+// wheel-scale states: an entry from one (d(c) = 0 there) adds nothing.
+void sos_bank_propagate(SosDrift &sos, const SparseEntry *d, int nd)
+{
+    for (auto &off : sos.offset)
+        for (int k = 0; k < nd; ++k)
+            if (d[k].c < BL_SOS_OFFSET_STATES) off[d[k].r] += d[k].v * off[d[k].c];
+}
+
 #if BL_WITH_TEAM
 // The cross-covariance of the state with static consider states (the team
 // beacons, aid_team.cpp) under the same transition: C = F C (the row
@@ -148,6 +158,7 @@ void cv_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
     // Kleeman eq. 6: P = Φ P Φᵀ + Q (Φ = I + the 7 entries of cv_model).
     MX &Pn = P;
     propagate(Pn, d, kCvEntries);
+    sos_bank_propagate(sos, d, kCvEntries);
     // Q: our model (Kleeman §3.10 assigns Q by motion type but gives no
     // formula): the piecewise-constant white acceleration model (the
     // "discrete white noise acceleration" model of Bar-Shalom, Li &
@@ -180,7 +191,7 @@ void cv_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt)
 // t0 += k·T (the reference moves k firing slots; Kleeman eq. 15/16 row t0:
 // t0(k+1) = t0(k) + T), then whole microseconds move from the offset into
 // the int64 epoch so the offset stays below 1 µs in magnitude.
-void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k)
+void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k, SosDrift *sos)
 {
     // A bearing-only site (no ultrasonic beacons) has no firing slots: t0 is
     // a state no measurement observes and the reference stays where it is.
@@ -192,6 +203,8 @@ void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint
         const real kr = real(k);
         for (int j = 0; j < NX; ++j) P(T0, j) += kr * P(T, j);
         for (int j = 0; j < NX; ++j) P(j, T0) += kr * P(j, T);
+        if (sos)
+            for (auto &off : sos->offset) off[T0] += kr * off[T];  // the air's modes alike (filter_sos.cpp)
         const int64_t n = int64_t(cfg->beacon_count);
         ref = uint32_t(((int64_t(ref) + k) % n + n) % n);
     }
@@ -205,7 +218,8 @@ namespace {
 
 // Move the reference to the latest firing at or before t_us (keeps every
 // relative time in the filter small).
-void advance_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t t_us)
+void advance_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t t_us,
+                       SosDrift *sos = nullptr)
 {
     const double since = double(epoch_us - t_us) * -1e-6 - double(x(T0));  // t - t0 (s)
     if (since <= 0) {
@@ -213,7 +227,7 @@ void advance_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, ui
         return;
     }
     const int64_t k = int64_t(std::floor(since / double(x(T))));
-    shift_reference(cfg, x, P, epoch_us, ref, k > 0 ? k : 0);
+    shift_reference(cfg, x, P, epoch_us, ref, k > 0 ? k : 0, sos);
 }
 
 bool converged_now(const bl_config *cfg, const MX &P)
@@ -300,6 +314,12 @@ void mark_started(bl_filter *f, int64_t epoch_us, uint32_t ref_beacon, int64_t t
     if (f->flags_ & kFlagEverStarted) f->reset_count_ += 1;
     f->flags_ = kFlagStarted | kFlagEverStarted | (f->flags_ & kFlagRenumber);
     team_forget_cross(f);
+    // The air's modes: their offsets of the pose, the speeds and the firing
+    // times were of the old state; s and their weights carry on (a restart
+    // keeps s: aid_pulse.cpp fuse_stale, the localizer's).
+    for (auto &off : f->sos_drift_.offset)
+        for (int j = 0; j < BL_SOS_OFFSET_STATES; ++j)
+            if (j != S) off[j] = real(0);
 }
 
 void commit(bl_filter *f, const VX &x, const MX &P)
@@ -324,15 +344,17 @@ namespace {
 
 // The end of every predict to t_us: heading wrapped, a non-finite result
 // refused (BL_EINVAL, *f untouched), the reference moved to the latest
-// firing at or before t_us; then x, P at t_us are the filter's state.
-int commit_predict(bl_filter *f, VX &x, MX &P, int64_t t_us)
+// firing at or before t_us (the air's modes' offsets alike); then x, P and
+// the bank sos at t_us are the filter's state.
+int commit_predict(bl_filter *f, VX &x, MX &P, SosDrift &sos, int64_t t_us)
 {
     x(TH) = wrap_angle(x(TH));
     if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
     int64_t epoch = f->epoch_us_;
     uint32_t ref = f->ref_beacon_;
-    advance_reference(&f->cfg_, x, P, epoch, ref, t_us);
+    advance_reference(&f->cfg_, x, P, epoch, ref, t_us, &sos);
     commit(f, x, P);
+    f->sos_drift_ = sos;
     f->epoch_us_ = epoch;
     f->ref_beacon_ = ref;
     f->t_us_ = t_us;
@@ -507,6 +529,8 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
                              {TH, KR, J.g[2][1] * d_right_m}};
     // Without calibration (σ 0) the scale rows/columns of P are zero: skip them.
     propagate(Pn, d, cfg->sigma_wheel_scale > real(0) ? 8 : 2);
+    SosDrift sos = f->sos_drift_;   // stored with the state, on success only
+    sos_bank_propagate(sos, d, 2);  // the heading entries (no wheel scales in the offsets)
     // Wheel noise (Kleeman eq. 6's Q through the input Jacobian; the wheel
     // model is ours: each wheel's measured distance has variance
     // sigma_wheel_per_m² · |d| (m²) — grows linearly with the distance
@@ -576,7 +600,6 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
     Pn(V, V) += sa * sa;
     Pn(W, W) += sw * sw;
     x = xo;
-    SosDrift sos = f->sos_drift_;  // stored with the state, on success only
     add_parameter_noise(cfg, sos, x, Pn, dt);
     WheelSpeedCounts wheel = {0, 0};
     // Kleeman eq. 25: the wheel speeds measure v and ω (aid_wheels.cpp).
@@ -597,19 +620,17 @@ extern "C" int bl_filter_predict_odometry(bl_filter *f, int64_t t_us, bl_real d_
         P = Pa.topLeftCorner<NX, NX>();
         C = Pa.topRightCorner<NX, NB>();
         if (!C.allFinite()) return BL_EINVAL;
-        const int rc = commit_predict(f, x, P, t_us);
+        const int rc = commit_predict(f, x, P, sos, t_us);
         if (rc != BL_OK) return rc;
         team_cross(f) = C;
-        f->sos_drift_ = sos;
         f->wheel_fused_ += wheel.fused;
         f->wheel_refused_ += wheel.refused;
         return BL_OK;
     }
 #endif
     if (dt > real(0)) fuse_wheel_speeds<NX>(cfg, cl, cr, dt, x, P, &wheel);
-    const int rc = commit_predict(f, x, P, t_us);
+    const int rc = commit_predict(f, x, P, sos, t_us);
     if (rc != BL_OK) return rc;
-    f->sos_drift_ = sos;
     f->wheel_fused_ += wheel.fused;
     f->wheel_refused_ += wheel.refused;
     return BL_OK;
@@ -638,9 +659,8 @@ extern "C" int bl_filter_predict(bl_filter *f, int64_t t_us)
 #endif
     SosDrift sos = f->sos_drift_;  // stored with the state, on success only
     cv_predict(cfg, sos, x, P, dt);
-    const int rc = commit_predict(f, x, P, t_us);
+    const int rc = commit_predict(f, x, P, sos, t_us);
     if (rc != BL_OK) return rc;
-    f->sos_drift_ = sos;
 #if BL_WITH_TEAM
     team_cross(f) = C;
 #endif

@@ -38,7 +38,6 @@ namespace {
 // wheel-scale outputs stay H1's. xm, Pm: x and P's leading (x, y, θ, v, ω,
 // s) block, replaced by x̄, P̄.
 constexpr real kWheelsNominalPrior = real(0.5);  // π: prior probability of H0 (dimensionless)
-constexpr int kOut = S + 1;                      // x, y, θ, v, ω, s
 static_assert(X == 0 && Y == 1 && TH == 2 && V == 3 && W == 4 && S == 5, "published block");
 template <class XV, class PM>
 void average_wheel_hypotheses(const bl_config *cfg, const XV &x, const PM &P, real *xm, real (*Pm)[kOut])
@@ -69,7 +68,7 @@ void average_wheel_hypotheses(const bl_config *cfg, const XV &x, const PM &P, re
 
 // XV, PM: VX and MX, or Maps of the filter's own storage (no copy).
 template <class XV, class PM>
-void fill_estimate(const bl_filter *f, const XV &x, const PM &P, int64_t t_us, bl_estimate *est)
+void fill_estimate(const bl_filter *f, const XV &x, const PM &P, const SosDrift &sos, int64_t t_us, bl_estimate *est)
 {
     const bl_config *cfg = &f->cfg_;
     std::memset(est, 0, sizeof *est);
@@ -87,6 +86,7 @@ void fill_estimate(const bl_filter *f, const XV &x, const PM &P, int64_t t_us, b
     if (!est->started) return;
     real xm[kOut], Pm[kOut][kOut];
     average_wheel_hypotheses(cfg, x, P, xm, Pm);
+    sos_bank_estimate(sos, xm, Pm);  // the air's modes (filter_sos.cpp)
     est->x_m = xm[X];
     est->y_m = xm[Y];
     est->theta_rad = bl::wrap_angle(xm[TH]);
@@ -128,7 +128,7 @@ extern "C" int bl_filter_estimate(const bl_filter *f, bl_estimate *est)
 {
     if (f == nullptr || est == nullptr) return BL_EINVAL;
     if (!initialised(f)) return BL_ENOTINIT;
-    fill_estimate(f, state(f), cov(f), f->t_us_, est);
+    fill_estimate(f, state(f), cov(f), f->sos_drift_, f->t_us_, est);
     return BL_OK;
 }
 
@@ -145,6 +145,6 @@ extern "C" int bl_filter_estimate_at(const bl_filter *f, int64_t t_us, bl_estima
     // As bl_filter_predict: a non-finite extrapolation (a huge but finite
     // state or P) is refused, never returned (found by fuzzing).
     if (!x.allFinite() || !P.allFinite()) return BL_EINVAL;
-    fill_estimate(f, x, P, t_us, est);
+    fill_estimate(f, x, P, sos, t_us, est);
     return BL_OK;
 }

@@ -104,7 +104,9 @@ inline void odometry_step(real pose[3], real d_m, real dth_rad)
 // ---- filter.cpp (and filter_sos.cpp: the speed of sound's model)
 // t0 += k·T (the reference moves k firing slots), then whole microseconds
 // move from the t0 offset into the epoch.
-void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k);
+// sos (optional): the air's modes' offsets of t0 moved alike (filter_sos.cpp).
+void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint32_t &ref, int64_t k,
+                     bl_sos_drift *sos = nullptr);
 // The beacons' firing times jumped by dt_s (s): the beacon controller
 // restarted and fires on from a new time (localizer.cpp, timing_jump).
 // Kleeman 1992 eq. 15's t0 moves by the jump, its variance grows by var_s2
@@ -123,46 +125,44 @@ void start_wheel_scales(const bl_filter *f, VX &x, MX &P);
 // when calibration is on; nothing else survives. The localizer's restart
 // after a time gap (localizer.cpp reinit_filter).
 void reinit_keeping_wheel_scales(bl_filter *f);
-// The speed of sound's two models (filter_sos.cpp, sos_drift_predict): the
-// prediction of s over dt (s) with the drift model's rate (bl_sos_drift),
-// updated; the drift model at a start; and an accepted update's correction
-// of s, ds_mps, with the drop of P_ss it made, into the drift model.
+// The speed of sound's bank of air rates (filter_sos.cpp): the prediction
+// of s over dt (s) with the bank (bl_sos_drift), updated, the filter's state
+// moved by still air's share of the modes' switch; the bank at a start; an
+// accepted pulse update into the bank (H at the prior, R in s², nu = z - h(x̄)
+// in s; before the commit, f's covariance the prior's); and the bank's
+// mixture on the published estimate's first kOut states (x, y, θ, v, ω, s).
 using SosDrift = bl_sos_drift;
+constexpr int kOut = S + 1;
 void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt);
 void sos_drift_start(const bl_config *cfg, SosDrift &sos);
-void note_sos_correction(bl_filter *f, real ds_mps, real var_drop_mps2);
-// Its constants (ours, docs/performance.md "Speed of sound"): the start-up
-// window τ (s): while σ_s exceeds the change r_d·τ the drift model waits;
-// the drift model's typical rate r_d (m/s², 0.1 ≈ 10 °C per minute: s
-// moves 0.6 m/s per °C; below); the rate's memory T_r (s: a ramp is
-// learnt over the whole of a 2-minute swing, a rate of long ago forgotten);
-// the drift model's prior probability π (30 %, with the random walk σ_d
-// of 0.15 m/s/√s by default: measured on the bench's three airs, seeds
-// 1–20 and 21–40, against π 0.5 % and σ_d 0.2 before, the 20 °C swing's
-// position ratio 1.236 → 1.166 and 1.279 → 1.207, the 10 °C swing's
-// 1.097 → 1.090 and 1.169 → 1.164, still air's 1.027 → 1.024 and 1.045 →
-// 1.045, its speed of sound 0.794 → 0.811 m/s; docs/performance.md
-// "Retuned"); a floor on the rate's variances ((m/s²)²) so that the
-// likelihood ratio stays defined.
-constexpr real kSosDriftWindow_s = real(20);
-constexpr real kSosDriftRate_per_sqrt_s = real(2) / real(3);
+void sos_bank_update(bl_filter *f, const RX &H, real R, real nu);
+void sos_bank_estimate(const SosDrift &sos, real *xm, real (*Pm)[kOut]);
+// Its constants (ours, docs/performance.md "Speed of sound", "A bank of air
+// rates"): the bank's largest rate r_d (m/s², 0.1 ≈ 10 °C per minute: s
+// moves 0.6 m/s per °C) as a multiple of the still-air random walk σ_d, the
+// modes at ±r_d/2 and ±r_d (a grid over the rate at half its spacing: the
+// two rates alone followed a ramp at half their rate worse than no bank);
+// the modes' switching time T_s (s: a rate is kept for about a quarter of
+// an hour, a swing that turns back is a switch); still air's prior.
+constexpr real kSosDriftRate_per_sqrt_s = real(2);
 // r_d = kSosDriftRate_per_sqrt_s · speed_of_sound_drift_mps_per_sqrt_s
 // (m/s²): one key sets how fast the air may change, 0.1 m/s² at the
-// default 0.15 m/s/√s; a site that declares still air (e.g. 0.01) gets a
-// drift model too small to matter.
+// default 0.05 m/s/√s; a site that declares still air (e.g. 0.01) gets a
+// bank too small to matter.
 inline real sos_drift_rate_mps2(const bl_config *cfg)
 {
     return kSosDriftRate_per_sqrt_s * cfg->speed_of_sound_drift_mps_per_sqrt_s;
 }
 constexpr real kSosRateTime_s = real(1000);
-constexpr real kSosDriftPrior = real(0.3);
-constexpr real kSosRateVarFloor_m2ps4 = real(1e-12);
+constexpr real kSosStillPrior = real(0.5);
+static_assert(BL_SOS_OFFSET_STATES == BL_IX_T0 + 1 && kOut <= BL_SOS_OFFSET_STATES,
+              "the bank's offsets are the states x .. t0");
 // Store x, P as the filter's state and update the converged flag.
 void commit(bl_filter *f, const VX &x, const MX &P);
 // A (re)start's bookkeeping, shared by every start: epoch_us (us) and
 // ref_beacon the reference firing, t_us (us) the state's time; the restart
 // counted, the filter started and not converged, the team's cross-covariance
-// forgotten (filter.cpp).
+// forgotten, the air's modes' offsets but of s zeroed (filter.cpp).
 void mark_started(bl_filter *f, int64_t epoch_us, uint32_t ref_beacon, int64_t t_us);
 // The constant-velocity prediction over dt (s) with the parameters' noise
 // and the speed of sound's model (filter.cpp; bl_filter_predict and the

@@ -185,6 +185,7 @@ typedef struct sim_stats {
     double final_kl, final_kr, final_sigma_kl, final_sigma_kr; /* wheel scales */
     double sum_sos_e2;  /* speed-of-sound error² sum ((m/s)², samples after settle_s) */
     double sum_sos_nees; /* its error² / its variance */
+    double sum_sos_state_e2; /* the filter's own s (still air's mode, bl_filter_get_state) error² sum ((m/s)²) */
     /* inputs (kept by sim_run): */
     int check_cov;      /* check P at every sampled frame (cov_* below) */
     double first_until_s, last_from_s; /* > 0: also sum the errors of samples in
@@ -379,6 +380,8 @@ static inline void sim_run(const sim_params *sp, const bl_config *cfg_in, double
                 const double es = e.speed_of_sound_mps - sim_sos_at(sp, t);
                 st->sum_sos_e2 += es * es;
                 st->sum_sos_nees += es * es / ((double)e.sigma_speed_of_sound_mps * e.sigma_speed_of_sound_mps);
+                const double ess = (double)xs[BL_IX_S] - sim_sos_at(sp, t);
+                st->sum_sos_state_e2 += ess * ess;
             }
             {
                 const double a = e.cov[0], b = e.cov[1], c = e.cov[6];

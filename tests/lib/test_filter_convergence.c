@@ -35,12 +35,13 @@ static void test_moving_robot_consistent(void **state)
     /* covariance neither far too optimistic nor far too conservative:
      * mean NEES of a consistent filter is 2 (2 dof) */
     assert_true(st.sum_nees / st.samples > 0.7 && st.sum_nees / st.samples < 3.5);
-    /* the speed of sound converged from the 3 m/s-off start (σ 5 m/s) to
-     * about 1 m/s, and its error is inside its own 3σ: 1.41 m/s against σ 1.08
-     * on this seed (0.92 against 1.10 with the drift model's earlier prior;
-     * over 20 seeds the final error's RMS is 0.79 m/s: test_filter_sos.c has
-     * the speed of sound's figures over seeds) */
-    assert_true(st.final_sigma_sos < 1.5);
+    /* the speed of sound converged from the 3 m/s-off start (σ 5 m/s), and
+     * its error is inside its own 3σ: on this seed 347.78 m/s, σ 1.50, the
+     * published σ carrying the spread of the bank of air rates over still
+     * air (filter_sos.cpp; 1.41 m/s off against σ 1.08 with the drift model
+     * before 7 December 2026; test_filter_sos.c has the speed of sound's
+     * figures over seeds) */
+    assert_true(st.final_sigma_sos < 2.0);
     assert_true(fabs(st.final_sos - sp.s_true_mps) < 3 * st.final_sigma_sos);
     assert_true(fabs(st.final_T - sp.T_true_s) < 2e-6);
     assert_true(st.final_theta_err < 0.05);
@@ -95,15 +96,17 @@ static void test_wheel_scale_calibration(void **state)
 
 /* Kleeman 1992 Fig. 8: from 330, 343 and 360 m/s (σ 5 m/s) the speed of
  * sound converges to the truth. The air here is still (constant s, as in
- * Kleeman's experiment), so the filter is told so: the default random walk
- * of s (0.2 m/s/√s, to follow temperature changes of several °C a minute)
- * would hold σ_s near 1 m/s by design. */
+ * Kleeman's experiment), so the filter is told so: s a constant (Kleeman eq.
+ * 15), no random walk and no bank of air rates (both scale with this key:
+ * filter_sos.cpp). The default (0.05 m/s/√s and rates up to 0.1 m/s², to
+ * follow temperature changes of several °C a minute) would hold σ_s near
+ * 1 m/s by design. */
 static void test_speed_of_sound_convergence(void **state)
 {
     (void)state;
     bl_config cfg;
     assert_int_equal(bl_config_default(&cfg), BL_OK);
-    cfg.speed_of_sound_drift_mps_per_sqrt_s = 0.01;
+    cfg.speed_of_sound_drift_mps_per_sqrt_s = 0;
     const double guesses[3] = {330, 343, 360};
     double final[3];
     for (int g = 0; g < 3; ++g) {

@@ -176,11 +176,11 @@ struct bl_config { /* typedef: common.h */
                                          (constant-velocity predict; odometry v/ω states), >= 0 */
     bl_real angular_accel_noise_radps2;          /* process noise: σ of angular acceleration, >= 0 */
     bl_real speed_of_sound_drift_mps_per_sqrt_s; /* random walk of s (m/s/√s), >= 0; default
-                                         0.15. On top of it the filter feeds forward a
-                                         rate it estimates from its own corrections of s,
-                                         once they show one (typical rate 2/3/√s × this:
-                                         0.1 m/s² = 10 °C/min at 0.15; filter_sos.cpp
-                                         sos_drift_predict); 0.01 declares still air */
+                                         0.05. Beside it the filter weighs a bank of air
+                                         warming or cooling at ±1/√s and ±2/√s × this
+                                         (±0.05 and ±0.1 m/s², 10 °C/min, at 0.05;
+                                         filter_sos.cpp) against still air; 0 declares s
+                                         constant (Kleeman 1992 eq. 15) */
     bl_real period_drift_s_per_sqrt_s;           /* random walk of T, >= 0 */
     bl_real wheel_scale_drift_per_sqrt_s;        /* random walk of each wheel scale
                                                     (1/√s: σ² grows by this² per s), >= 0 */

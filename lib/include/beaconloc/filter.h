@@ -177,13 +177,16 @@ enum {
     BL_IX_KR = 9     /* right wheel scale, 1 */
 };
 
-/* The speed of sound's drift model (filter_sos.cpp, sos_drift_predict), a
- * PRIVATE part of bl_filter. */
+/* The speed of sound's bank of air rates (filter_sos.cpp, sos_drift_predict),
+ * a PRIVATE part of bl_filter: still air (the filter itself) and
+ * BL_SOS_RATES constant rates of the air's change, each mode's estimate the
+ * filter's plus its offset (the first BL_SOS_OFFSET_STATES states: x .. t0),
+ * and the modes' posterior weights (still air's 1 - their sum). */
+#define BL_SOS_RATES 4
+#define BL_SOS_OFFSET_STATES 8
 typedef struct bl_sos_drift {
-    bl_real rate_mps2;      /* r: the drift model's rate of s (m/s²) */
-    bl_real rate_var_m2ps4; /* P_rr: its variance ((m/s²)²) */
-    bl_real rate_cov_m2ps3; /* P_sr: its covariance with s ((m/s)·(m/s²)) */
-    bl_real lead_mps;       /* δ: the drift model's s minus the filter's (m/s) */
+    bl_real offset[BL_SOS_RATES][BL_SOS_OFFSET_STATES]; /* d_m, in each state's unit */
+    bl_real weight[BL_SOS_RATES];                       /* w_m, 1 */
 } bl_sos_drift;
 
 /* Caller-owned filter. All members are PRIVATE (storage only, so the
