@@ -67,7 +67,9 @@ void bank_mean(const SosDrift &sos, real *D)
 //   offset is taken again from it (d_m ← d̄_m - d̄_0);
 //   update (sos_bank_update): each mode's innovation ν_m = ν - H d_m, its
 //   likelihood ∝ e^{-ν_m²/2S} (S = H P Hᵀ + R), so w_m ∝ w_m e^{-(ν_m² - ν²)/2S},
-//   and d_m ← (I - K H) d_m with the filter's gain K = P Hᵀ/S;
+//   and d_m ← (I - K H) d_m with the filter's gain K = P Hᵀ/S (the pulses
+//   only: with every update of the state also correcting the offsets, a
+//   scratch build read the same figures on the bench's three airs);
 //   output (sos_bank_estimate): the weighted mean Σ w_m d_m added to the
 //   filter's estimate, the modes' spread Σ w_m (d_m - d̄)(d_m - d̄)ᵀ to its
 //   covariance.
