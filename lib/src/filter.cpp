@@ -199,12 +199,9 @@ void shift_reference(const bl_config *cfg, VX &x, MX &P, int64_t &epoch_us, uint
     if (k != 0) {
         const double t0 = double(x(T0)) + double(k) * double(x(T));
         x(T0) = real(t0);
-        // P = F P Fᵀ with F = I + k e_t0 e_Tᵀ.
-        const real kr = real(k);
-        for (int j = 0; j < NX; ++j) P(T0, j) += kr * P(T, j);
-        for (int j = 0; j < NX; ++j) P(j, T0) += kr * P(j, T);
-        if (sos)
-            for (auto &off : sos->offset) off[T0] += kr * off[T];  // the air's modes alike (filter_sos.cpp)
+        const SparseEntry e = {T0, T, real(k)};
+        propagate(P, &e, 1);                       // P = F P Fᵀ with F = I + k e_t0 e_Tᵀ
+        if (sos) sos_bank_propagate(*sos, &e, 1);  // the air's modes alike (filter_sos.cpp)
         const int64_t n = int64_t(cfg->beacon_count);
         ref = uint32_t(((int64_t(ref) + k) % n + n) % n);
     }
@@ -376,7 +373,7 @@ extern "C" int bl_filter_init(bl_filter *f, const bl_config *cfg)
     std::memset(f, 0, sizeof *f);
     f->cfg_ = *cfg;
     f->magic_ = kFilterMagic;
-    sos_drift_start(cfg, f->sos_drift_);
+    sos_drift_start(f->sos_drift_);
     return BL_OK;
 }
 

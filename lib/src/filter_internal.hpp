@@ -134,7 +134,7 @@ void reinit_keeping_wheel_scales(bl_filter *f);
 using SosDrift = bl_sos_drift;
 constexpr int kOut = S + 1;
 void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real dt);
-void sos_drift_start(const bl_config *cfg, SosDrift &sos);
+void sos_drift_start(SosDrift &sos);
 void sos_bank_update(bl_filter *f, const RX &H, real R, real nu);
 void sos_bank_estimate(const SosDrift &sos, real *xm, real (*Pm)[kOut]);
 // Its constants (ours, docs/performance.md "Speed of sound", "A bank of air

@@ -102,9 +102,8 @@ void sos_drift_predict(const bl_config *cfg, SosDrift &sos, VX &x, MX &P, real d
 
 // The bank at a start: every offset zero, still air's prior kSosStillPrior,
 // the rest spread evenly over the modes.
-void sos_drift_start(const bl_config *cfg, SosDrift &sos)
+void sos_drift_start(SosDrift &sos)
 {
-    (void)cfg;
     for (int m = 0; m < BL_SOS_RATES; ++m) {
         sos.weight[m] = (real(1) - kSosStillPrior) / real(BL_SOS_RATES);
         for (int j = 0; j < BL_SOS_OFFSET_STATES; ++j) sos.offset[m][j] = real(0);
